@@ -1,0 +1,47 @@
+"""Hardware drivers behind two small protocols, created from configuration.
+
+``open_camera(cfg)`` and ``open_turntable(cfg)`` take a mapping whose
+``driver`` key names the driver (see ``CAMERA_DRIVERS`` /
+``TURNTABLE_DRIVERS``); the other keys are that driver's settings, passed to
+its ``from_config(cfg, **context)`` class method. The returned object is not
+yet opened: use it as a context manager.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Mapping
+
+from drivers.errors import (  # noqa: F401  (re-exported)
+    CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout,
+    DriverError, ProtocolError,
+)
+from drivers.protocols import Camera, CameraIdentity, Frame, Turntable  # noqa: F401
+
+CAMERA_DRIVERS = {
+    "v4l2": "drivers.v4l2_camera:V4L2Camera",
+    "aravis": "drivers.aravis_camera:AravisCamera",
+    "sim": "drivers.sim.camera:SimulatedCamera",
+}
+TURNTABLE_DRIVERS = {
+    "zaber": "drivers.zaber:ZaberTurntable",
+    "grbl": "drivers.grbl:GrblTurntable",
+}
+
+
+def _driver_class(table: Mapping[str, str], kind: str, cfg: Mapping[str, Any]):
+    name = cfg.get("driver") if isinstance(cfg, Mapping) else None
+    if name not in table:
+        raise ValueError(f"unknown {kind} driver {name!r}; expected one of {', '.join(sorted(table))}")
+    module, cls = table[name].split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def open_camera(cfg: Mapping[str, Any], **context) -> Camera:
+    """Create (not open) the camera driver named by ``cfg["driver"]``."""
+    return _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(dict(cfg), **context)
+
+
+def open_turntable(cfg: Mapping[str, Any], **context) -> Turntable:
+    """Create (not open) the turntable driver named by ``cfg["driver"]``."""
+    return _driver_class(TURNTABLE_DRIVERS, "turntable", cfg).from_config(dict(cfg), **context)

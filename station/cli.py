@@ -1,0 +1,57 @@
+"""The ``harp`` command line.
+
+Each sub-command lives in its own module ``station.cmd_<name>`` exposing
+``register(subparsers)``; the parser it adds sets ``func(args) -> int``.
+Exit codes: 0 success, 1 a verdict of FAIL (``harp qa``), 2 bad input or an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from station import __version__
+
+COMMAND_MODULES = [
+    "station.cmd_measure",
+    "station.cmd_calibrate",
+    "station.cmd_undistort",
+    "station.cmd_evaluate",
+    "station.cmd_export",
+    "station.cmd_session",
+    "station.cmd_profile",
+    "station.cmd_qa",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="harp", description="calibration-harp lens distortion station")
+    parser.add_argument("--version", action="version", version=f"harp station {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:  # sub-command not present in this build
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("harp: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
