@@ -1,0 +1,548 @@
+"""GenICam cameras (GigE Vision, USB3 Vision, Aravis' own fakes) through Aravis 0.8.
+
+:class:`AravisCamera` speaks the :class:`drivers.protocols.Camera` protocol
+through Aravis' GObject introspection bindings (``gi.repository.Aravis``,
+Debian packages ``gir1.2-aravis-0.8`` + ``libaravis-0.8-0``; pip
+``PyGObject<3.51``).
+
+GenICam features used, chosen by what the device's XML declares:
+
+* exposure: ``ExposureTime`` (SFNC, float, µs) else ``ExposureTimeAbs``
+  (older float name); ``ExposureAuto`` is switched ``Off`` when present;
+* gain: ``Gain`` (SFNC, float, dB) else ``GainRaw`` (integer device units,
+  converted with ``gain_db_per_raw`` dB per unit); ``GainAuto`` -> ``Off``;
+* pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``);
+* trigger: ``software`` (``TriggerSource=Software`` + ``TriggerSoftware``),
+  ``off`` (free running; frames older than the ``capture()`` call are
+  dropped) or any other ``TriggerSource`` name such as ``Line0`` (capture
+  waits for the external pulse);
+* focus is not standardised: ``focus_feature`` names it (Integer or Float
+  node, ``focus_type`` ``auto``/``integer``/``float``) and the optional
+  ``autofocus_feature`` (Enumeration/String set to ``autofocus_off``, default
+  ``"Off"``; Boolean set to false; Integer set to ``autofocus_off``, default 0).
+
+Every setter writes with Aravis' range checking on and returns the value
+read back from the device. A buffer that does not arrive within the
+``capture`` timeout raises :class:`~drivers.errors.DeviceTimeout`; a buffer
+with a non-success status raises :class:`~drivers.errors.CaptureError`.
+
+Device ids are what ``arv-tool-0.8`` lists (``"<vendor>-<model>-<serial>"``),
+an IP address for GigE Vision, or ``"Fake_1"`` for Aravis' in-process fake
+camera (the ``Fake`` interface is enabled automatically; ``fake_genicam_xml``
+replaces its GenICam description, see ``drivers/data/fake-focus.xml``).
+
+Configuration (``drivers.open_camera``), e.g.::
+
+    camera:
+      driver: aravis
+      device: "192.168.10.20"      # or "Basler-acA2440-40123456", "Fake_1"
+      pixel_format: Mono16
+      exposure_us: 20000
+      gain_db: 0
+      trigger: software            # or "off", "Line0", ...
+      focus_feature: FocusPos      # vendor feature name (Integer or Float)
+      autofocus_feature: FocusAuto # optional, set to autofocus_off ("Off")
+      focus: 412                   # optional: locked at open
+
+Unknown keys raise ``ValueError`` naming the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import (
+    CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError,
+)
+from drivers.frames import to_grey
+from drivers.protocols import CameraIdentity, Frame
+
+#: GenICam XML for Aravis' fake camera with SFNC exposure/gain names and focus features
+FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
+
+PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
+EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
+GAIN_FEATURES = ("Gain", "GainRaw")
+
+_CONFIG_KEYS = {
+    "driver", "device", "pixel_format", "exposure_us", "gain_db", "focus", "trigger", "roi",
+    "focus_feature", "focus_type", "autofocus_feature", "autofocus_off", "gain_db_per_raw",
+    "buffers", "fake_genicam_xml", "packet_size",
+}
+
+_ARAVIS = None
+_FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
+
+
+def _aravis():
+    """Import ``gi.repository.Aravis`` 0.8 once, with an installation hint on failure."""
+    global _ARAVIS
+    if _ARAVIS is None:
+        try:
+            import gi
+
+            gi.require_version("Aravis", "0.8")
+            from gi.repository import Aravis
+        except (ImportError, ValueError) as exc:
+            raise DriverError(
+                "Aravis 0.8 is not available (install gir1.2-aravis-0.8 and PyGObject<3.51; "
+                f"see scripts/setup.sh): {exc}") from None
+        _ARAVIS = Aravis
+    return _ARAVIS
+
+
+def _gerror_text(exc: BaseException) -> str:
+    return getattr(exc, "message", None) or str(exc)
+
+
+def _select_fake_xml(Aravis, path: str | None) -> None:
+    """Make the next ``Fake_*`` device use ``path`` (or Aravis' embedded XML when None).
+
+    ``arv_set_fake_camera_genicam_filename`` is process-global and cannot be
+    reset to NULL from Python, so "embedded" is restored by writing the
+    embedded resource to a temporary file once.
+    """
+    if path is None:
+        if _FAKE_XML_STATE["current"] is None:
+            return
+        if _FAKE_XML_STATE["embedded"] is None:
+            from gi.repository import Gio
+
+            data = Gio.resources_lookup_data("/org/aravis/arv-fake-camera.xml",
+                                             Gio.ResourceLookupFlags.NONE).get_data()
+            with tempfile.NamedTemporaryFile("wb", prefix="harp-arv-fake-", suffix=".xml",
+                                             delete=False) as fh:
+                fh.write(data)
+            _FAKE_XML_STATE["embedded"] = fh.name
+        path = _FAKE_XML_STATE["embedded"]
+    else:
+        path = str(Path(path).resolve())
+        if not Path(path).is_file():
+            raise ValueError(f"fake_genicam_xml: no such file {path}")
+    if _FAKE_XML_STATE["current"] != path:
+        Aravis.set_fake_camera_genicam_filename(path)
+        _FAKE_XML_STATE["current"] = path
+
+
+class AravisCamera:
+    """A GenICam camera opened through Aravis; satisfies :class:`drivers.protocols.Camera`.
+
+    Parameters
+    ----------
+    device : str or None
+        Aravis device id (``"Fake_1"``, ``"192.168.1.20"``,
+        ``"Basler-acA1300-12345678"``); None opens the first device found.
+    pixel_format : {"Mono8", "Mono16", "Mono10", "Mono12"}
+    exposure_us, gain_db, focus : float, optional
+        Applied at ``open()`` (focus via :meth:`lock_focus`).
+    trigger : str
+        ``"software"`` (default), ``"off"`` (free running) or a
+        ``TriggerSource`` name such as ``"Line0"``.
+    roi : (x, y, width, height), optional
+        Image region; default the full sensor.
+    focus_feature, focus_type, autofocus_feature, autofocus_off
+        Vendor focus features (see module docstring).
+    gain_db_per_raw : float
+        dB per unit when the device only has ``GainRaw``.
+    buffers : int
+        Stream buffers queued to Aravis.
+    fake_genicam_xml : str, optional
+        GenICam XML for ``Fake_*`` devices (Aravis' embedded XML when None).
+    packet_size : int, optional
+        GigE Vision stream packet size in bytes.
+    """
+
+    def __init__(self, device: str | None = None, *, pixel_format: str = "Mono8",
+                 exposure_us: float | None = None, gain_db: float | None = None,
+                 focus: float | None = None, trigger: str = "software",
+                 roi: tuple[int, int, int, int] | None = None,
+                 focus_feature: str | None = None, focus_type: str = "auto",
+                 autofocus_feature: str | None = None, autofocus_off: Any = None,
+                 gain_db_per_raw: float = 1.0, buffers: int = 3,
+                 fake_genicam_xml: str | None = None, packet_size: int | None = None):
+        if pixel_format not in PIXEL_FORMATS:
+            raise ValueError(f"pixel_format {pixel_format!r}: expected one of {', '.join(PIXEL_FORMATS)}")
+        if focus_type not in ("auto", "integer", "float"):
+            raise ValueError(f"focus_type {focus_type!r}: expected auto, integer or float")
+        if not isinstance(trigger, str) or not trigger:
+            raise ValueError(f"trigger {trigger!r}: expected 'software', 'off' or a TriggerSource name")
+        if roi is not None:
+            roi = tuple(int(v) for v in roi)
+            if len(roi) != 4 or roi[2] <= 0 or roi[3] <= 0 or roi[0] < 0 or roi[1] < 0:
+                raise ValueError(f"roi {roi!r}: expected [x, y, width, height] with positive size")
+        if int(buffers) < 1:
+            raise ValueError(f"buffers {buffers!r}: expected >= 1")
+        if not (gain_db_per_raw > 0):
+            raise ValueError(f"gain_db_per_raw {gain_db_per_raw!r}: expected > 0")
+        if autofocus_feature and not focus_feature:
+            raise ValueError("autofocus_feature given without focus_feature")
+        self.device_id = device
+        self._pixel_format = pixel_format
+        self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus}
+        self.trigger = trigger
+        self._roi = roi
+        self.focus_feature = focus_feature
+        self._focus_type = focus_type
+        self.autofocus_feature = autofocus_feature
+        self.autofocus_off = autofocus_off
+        self.gain_db_per_raw = float(gain_db_per_raw)
+        self.n_buffers = int(buffers)
+        self.fake_genicam_xml = fake_genicam_xml
+        self.packet_size = packet_size
+        self._camera = None
+        self._device = None
+        self._stream = None
+        self._identity: CameraIdentity | None = None
+        self._size: tuple[int, int] | None = None
+        self._counter = 0
+        self._exposure_feature = self._gain_feature = None
+        self._focus_kind: str | None = None
+
+    # -- construction ---------------------------------------------------------------
+    @classmethod
+    def from_config(cls, cfg: dict, **ctx) -> "AravisCamera":
+        """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
+        unknown = sorted(set(cfg) - _CONFIG_KEYS)
+        if unknown:
+            raise ValueError(f"aravis camera: unknown config key {unknown[0]!r}; "
+                             f"expected some of {', '.join(sorted(_CONFIG_KEYS))}")
+        kw = {k: v for k, v in cfg.items() if k != "driver"}
+        return cls(kw.pop("device", None), **kw)
+
+    @property
+    def name(self) -> str:
+        return f"aravis camera {self.device_id or '<first>'}"
+
+    def __repr__(self) -> str:
+        return f"<AravisCamera {self.device_id!r} {'open' if self._camera else 'closed'}>"
+
+    # -- open / close ---------------------------------------------------------------
+    def __enter__(self) -> "AravisCamera":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def is_open(self) -> bool:
+        return self._camera is not None
+
+    def open(self) -> None:
+        if self._camera is not None:
+            return
+        Aravis = _aravis()
+        if self.device_id and self.device_id.startswith("Fake_"):
+            Aravis.enable_interface("Fake")
+            _select_fake_xml(Aravis, self.fake_genicam_xml)
+        try:
+            camera = Aravis.Camera.new(self.device_id)
+        except Exception as exc:  # GLib.Error
+            raise DeviceDisconnected(f"{self.name}: cannot open: {_gerror_text(exc)}") from None
+        self._camera = camera
+        self._device = camera.get_device()
+        try:
+            self._device.set_range_check_policy(Aravis.RangeCheckPolicy.ENABLE)
+            self._configure(Aravis)
+            self._start_stream(Aravis)
+        except BaseException:
+            self.close()
+            raise
+
+    def _has(self, feature: str) -> bool:
+        try:
+            return bool(self._device.is_feature_available(feature))
+        except Exception:
+            return False
+
+    def _call(self, what: str, fn, *args):
+        """Call an Aravis function, mapping GLib errors to :class:`DeviceRejected`."""
+        try:
+            return fn(*args)
+        except DriverError:
+            raise
+        except Exception as exc:
+            raise DeviceRejected(f"{self.name}: {what}: {_gerror_text(exc)}") from None
+
+    def _configure(self, Aravis) -> None:
+        cam, dev = self._camera, self._device
+        self._identity = CameraIdentity(
+            vendor=str(cam.get_vendor_name() or ""),
+            model=str(cam.get_model_name() or ""),
+            serial=str(cam.get_device_serial_number() or cam.get_device_id() or ""),
+        )
+        self._exposure_feature = next((f for f in EXPOSURE_FEATURES if self._has(f)), None)
+        self._gain_feature = next((f for f in GAIN_FEATURES if self._has(f)), None)
+        if self._exposure_feature is None:
+            raise DeviceRejected(f"{self.name}: device has no {' / '.join(EXPOSURE_FEATURES)} feature")
+        if self._gain_feature is None:
+            raise DeviceRejected(f"{self.name}: device has no {' / '.join(GAIN_FEATURES)} feature")
+        for auto in ("ExposureAuto", "GainAuto"):  # automatic control would defeat set values
+            if self._has(auto) and dev.get_string_feature_value(auto) != "Off":
+                self._call(f"{auto}=Off", dev.set_string_feature_value, auto, "Off")
+        self._check_focus_features(Aravis)
+
+        # image format: pixel format, region (full sensor unless configured)
+        pf = getattr(Aravis, f"PIXEL_FORMAT_{self._pixel_format.upper().replace('MONO', 'MONO_')}")
+        self._call(f"PixelFormat={self._pixel_format}", cam.set_pixel_format, pf)
+        got = cam.get_pixel_format_as_string()
+        if got != self._pixel_format:
+            raise DeviceRejected(f"{self.name}: PixelFormat {self._pixel_format} not accepted (device has {got})")
+        if self._roi is None:
+            sensor = cam.get_sensor_size()
+            sw, sh = (sensor.width, sensor.height) if hasattr(sensor, "width") else sensor
+            roi = (0, 0, int(sw), int(sh))
+        else:
+            roi = self._roi
+        self._call(f"region {roi}", cam.set_region, *roi)
+        region = cam.get_region()
+        rx, ry, rw, rh = ((region.x, region.y, region.width, region.height)
+                          if hasattr(region, "width") else region)
+        if (rw, rh) != roi[2:]:
+            raise DeviceRejected(f"{self.name}: region {roi} not accepted (device has {rx},{ry},{rw},{rh})")
+        self._size = (int(rw), int(rh))
+
+        # acquisition: continuous, trigger as configured
+        self._call("AcquisitionMode=Continuous", cam.set_acquisition_mode, Aravis.AcquisitionMode.CONTINUOUS)
+        trig = self.trigger.lower()
+        if trig == "software":
+            if not cam.is_software_trigger_supported():
+                raise DeviceRejected(f"{self.name}: software trigger not supported")
+            self._call("trigger Software", cam.set_trigger, "Software")
+        elif trig == "off":
+            self._call("clear triggers", cam.clear_triggers)
+        else:
+            self._call(f"trigger {self.trigger}", cam.set_trigger, self.trigger)
+        if self.packet_size is not None and cam.is_gv_device():
+            self._call(f"packet size {self.packet_size}", cam.gv_set_packet_size, int(self.packet_size))
+
+        if self._initial["exposure_us"] is not None:
+            self.set_exposure(self._initial["exposure_us"])
+        if self._initial["gain_db"] is not None:
+            self.set_gain(self._initial["gain_db"])
+        if self._initial["focus"] is not None:
+            self.lock_focus(self._initial["focus"])
+
+    def _check_focus_features(self, Aravis) -> None:
+        if not self.focus_feature:
+            return
+        if not self._has(self.focus_feature):
+            raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} not found on device")
+        node = self._device.get_feature(self.focus_feature)
+        kind = ("float" if isinstance(node, Aravis.GcFloat)
+                else "integer" if isinstance(node, Aravis.GcInteger) else None)
+        if kind is None:
+            raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} is a "
+                                 f"{type(node).__name__}, not an Integer or Float")
+        if self._focus_type not in ("auto", kind):
+            raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} is {kind}, "
+                                 f"configured focus_type is {self._focus_type}")
+        self._focus_kind = kind
+        if self.autofocus_feature and not self._has(self.autofocus_feature):
+            raise DeviceRejected(f"{self.name}: autofocus_feature {self.autofocus_feature!r} not found on device")
+
+    def _start_stream(self, Aravis) -> None:
+        cam = self._camera
+        stream = self._call("create stream", cam.create_stream, None, None)
+        if stream is None:
+            raise DriverError(f"{self.name}: cannot create stream")
+        payload = cam.get_payload()
+        for _ in range(self.n_buffers):
+            stream.push_buffer(Aravis.Buffer.new_allocate(payload))
+        self._stream = stream
+        self._payload = payload
+        self._call("start acquisition", cam.start_acquisition)
+        self._counter = 0
+
+    def close(self) -> None:
+        cam, self._camera = self._camera, None
+        if cam is not None:
+            try:
+                cam.stop_acquisition()
+            except Exception:
+                pass
+        self._stream = None  # drops the stream thread (joined on finalize)
+        self._device = None
+
+    def _require_open(self) -> None:
+        if self._camera is None:
+            raise DriverError(f"{self.name}: camera is not open")
+
+    # -- properties -----------------------------------------------------------------
+    # Properties never raise (``isinstance(cam, Camera)`` reads them on Python 3.11):
+    # before the first open they report what is known from the configuration.
+    @property
+    def identity(self) -> CameraIdentity:
+        """Vendor, model and serial read from the device (placeholders before the first open)."""
+        return self._identity or CameraIdentity("", "", self.device_id or "")
+
+    @property
+    def sensor_size(self) -> tuple[int, int]:
+        """(width, height) of the delivered images (the region; full sensor by default).
+
+        Before the first open: the configured region size, or (0, 0) if unknown.
+        """
+        if self._size is not None:
+            return self._size
+        return (self._roi[2], self._roi[3]) if self._roi else (0, 0)
+
+    @property
+    def pixel_format(self) -> str:
+        """The PFNC pixel format name (``Mono8`` ...), as read back from the device when open."""
+        if self._camera is None:
+            return self._pixel_format
+        return str(self._camera.get_pixel_format_as_string())
+
+    @property
+    def exposure_feature(self) -> str | None:
+        return self._exposure_feature
+
+    @property
+    def gain_feature(self) -> str | None:
+        return self._gain_feature
+
+    # -- exposure / gain ------------------------------------------------------------
+    def set_exposure(self, microseconds: float) -> float:
+        self._require_open()
+        us = float(microseconds)
+        if not math.isfinite(us) or us <= 0:
+            raise ValueError(f"{self.name}: exposure must be a positive number of µs, got {microseconds!r}")
+        f = self._exposure_feature
+        self._call(f"{f}={us:g}", self._device.set_float_feature_value, f, us)
+        return self.get_exposure()
+
+    def get_exposure(self) -> float:
+        self._require_open()
+        f = self._exposure_feature
+        return float(self._call(f"read {f}", self._device.get_float_feature_value, f))
+
+    def set_gain(self, db: float) -> float:
+        self._require_open()
+        db = float(db)
+        if not math.isfinite(db):
+            raise ValueError(f"{self.name}: gain must be finite, got {db!r}")
+        f, dev = self._gain_feature, self._device
+        if f == "GainRaw":
+            raw = int(round(db / self.gain_db_per_raw))
+            self._call(f"GainRaw={raw}", dev.set_integer_feature_value, f, raw)
+        else:
+            self._call(f"{f}={db:g}", dev.set_float_feature_value, f, db)
+        return self.get_gain()
+
+    def get_gain(self) -> float:
+        self._require_open()
+        f, dev = self._gain_feature, self._device
+        if f == "GainRaw":
+            return float(self._call("read GainRaw", dev.get_integer_feature_value, f)) * self.gain_db_per_raw
+        return float(self._call(f"read {f}", dev.get_float_feature_value, f))
+
+    # -- focus ----------------------------------------------------------------------
+    def lock_focus(self, position: float) -> float:
+        """Switch the configured autofocus feature off, then set the focus feature."""
+        self._require_open()
+        if not self.focus_feature:
+            raise DeviceRejected(f"{self.name}: no focus feature configured (set focus_feature)")
+        pos = float(position)
+        if not math.isfinite(pos):
+            raise ValueError(f"{self.name}: focus position must be finite, got {position!r}")
+        dev = self._device
+        if self.autofocus_feature:
+            self._autofocus_off()
+        f = self.focus_feature
+        if self._focus_kind == "integer":
+            self._call(f"{f}={round(pos)}", dev.set_integer_feature_value, f, int(round(pos)))
+        else:
+            self._call(f"{f}={pos:g}", dev.set_float_feature_value, f, pos)
+        return self.get_focus()
+
+    def _autofocus_off(self) -> None:
+        Aravis = _aravis()
+        dev, f = self._device, self.autofocus_feature
+        node = dev.get_feature(f)
+        if isinstance(node, Aravis.GcBoolean):
+            want = bool(self.autofocus_off) if self.autofocus_off is not None else False
+            self._call(f"{f}={want}", dev.set_boolean_feature_value, f, want)
+            ok = dev.get_boolean_feature_value(f) == want
+        elif isinstance(node, Aravis.GcInteger) and not isinstance(node, Aravis.GcEnumeration):
+            want = int(self.autofocus_off) if self.autofocus_off is not None else 0
+            self._call(f"{f}={want}", dev.set_integer_feature_value, f, want)
+            ok = dev.get_integer_feature_value(f) == want
+        else:  # Enumeration / String
+            want = str(self.autofocus_off) if self.autofocus_off is not None else "Off"
+            self._call(f"{f}={want}", dev.set_string_feature_value, f, want)
+            ok = dev.get_string_feature_value(f) == want
+        if not ok:
+            raise DeviceRejected(f"{self.name}: {f} did not switch to {want!r}")
+
+    def get_focus(self) -> float | None:
+        self._require_open()
+        if not self.focus_feature:
+            return None
+        dev, f = self._device, self.focus_feature
+        if self._focus_kind == "integer":
+            return float(self._call(f"read {f}", dev.get_integer_feature_value, f))
+        return float(self._call(f"read {f}", dev.get_float_feature_value, f))
+
+    # -- capture --------------------------------------------------------------------
+    def capture(self, timeout: float = 5.0) -> Frame:
+        """Trigger (if software-triggered) and return the next frame.
+
+        Frames already waiting in the stream are discarded first, so the
+        image is exposed after this call started.
+        """
+        self._require_open()
+        Aravis = _aravis()
+        stream, cam = self._stream, self._camera
+        while (old := stream.try_pop_buffer()) is not None:  # drop frames taken before now
+            stream.push_buffer(old)
+        t0_ns = time.time_ns()
+        deadline = time.monotonic() + float(timeout)
+        if self.trigger.lower() == "software":
+            self._call("TriggerSoftware", cam.software_trigger)
+        while True:
+            remaining = deadline - time.monotonic()
+            buf = stream.timeout_pop_buffer(max(1, int(remaining * 1e6))) if remaining > 0 else None
+            if buf is None:
+                raise DeviceTimeout(f"{self.name}: no frame within {timeout:g} s (trigger {self.trigger})")
+            status = buf.get_status()
+            if status != Aravis.BufferStatus.SUCCESS:
+                stream.push_buffer(buf)
+                raise CaptureError(f"{self.name}: buffer status {status.value_nick}")
+            sys_ts = buf.get_system_timestamp()
+            if self.trigger.lower() == "off" and sys_ts and sys_ts < t0_ns:
+                stream.push_buffer(buf)  # free-running frame exposed before the call
+                continue
+            try:
+                image = self._to_array(Aravis, buf)
+                extra = {"frame_id": int(buf.get_frame_id()),
+                         "device_timestamp_ns": int(buf.get_timestamp()),
+                         "pixel_format": self._pixel_format}
+            finally:
+                stream.push_buffer(buf)
+            break
+        frame = Frame(
+            image=image,
+            timestamp=(sys_ts / 1e9) if sys_ts else time.time(),
+            exposure_us=self.get_exposure(),
+            gain_db=self.get_gain(),
+            focus=self.get_focus(),
+            camera=self._identity,
+            counter=self._counter,
+            extra=extra,
+        )
+        self._counter += 1
+        return frame
+
+    def _to_array(self, Aravis, buf) -> np.ndarray:
+        w, h = buf.get_image_width(), buf.get_image_height()
+        pf = buf.get_image_pixel_format()
+        names = {getattr(Aravis, f"PIXEL_FORMAT_{n.upper().replace('MONO', 'MONO_')}"): n for n in PIXEL_FORMATS}
+        if pf not in names:
+            raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
+        return to_grey(buf.get_data(), names[pf], w, h)

@@ -1,0 +1,111 @@
+"""Raw camera buffers -> 2-D grey ``numpy`` arrays (``image[y, x]``).
+
+One function per wire format, plus :func:`to_grey` that dispatches on the
+format name. Names are the V4L2 fourcc (``GREY``, ``Y16``, ``YUYV``,
+``MJPG``) or the GenICam PFNC name (``Mono8``, ``Mono10``, ``Mono12``,
+``Mono16``). Every function copies: the result never aliases a driver
+buffer that will be re-queued.
+
+``bytes_per_line`` is the row stride in bytes (V4L2 ``bytesperline``); rows
+may be padded beyond ``width * bytes_per_pixel``. ``0``/``None`` means
+unpadded.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivers.errors import CaptureError
+
+__all__ = [
+    "GREY_FORMATS", "grey8", "grey16", "yuyv_luma", "mjpeg_grey", "to_grey", "bytes_per_pixel",
+]
+
+#: format name -> (numpy dtype, bytes per pixel); MJPG is compressed (no fixed size)
+_PACKED = {
+    "GREY": ("u1", 1), "Mono8": ("u1", 1),
+    "Y16": ("<u2", 2), "Mono16": ("<u2", 2),
+    # GenICam unpacked Mono10/Mono12: one little-endian 16-bit word per pixel
+    "Mono10": ("<u2", 2), "Mono12": ("<u2", 2),
+    "YUYV": ("u1", 2),
+}
+GREY_FORMATS = tuple(_PACKED) + ("MJPG",)
+
+
+def bytes_per_pixel(fmt: str) -> int:
+    """Bytes per pixel on the wire (``YUYV`` is 2: Y and one chroma byte)."""
+    try:
+        return _PACKED[fmt][1]
+    except KeyError:
+        raise ValueError(f"pixel format {fmt!r} has no fixed pixel size; expected one of "
+                         f"{', '.join(_PACKED)}") from None
+
+
+def _rows(data, width: int, height: int, bpp: int, bytes_per_line: int | None, fmt: str) -> np.ndarray:
+    """View ``data`` as ``height`` rows of ``width * bpp`` bytes (stride-aware)."""
+    if width <= 0 or height <= 0:
+        raise CaptureError(f"{fmt} frame has invalid size {width}x{height}")
+    row = width * bpp
+    stride = bytes_per_line or row
+    if stride < row:
+        raise CaptureError(f"{fmt} frame: bytes_per_line {stride} < width*{bpp} = {row}")
+    buf = np.frombuffer(data, dtype=np.uint8)
+    need = stride * (height - 1) + row
+    if buf.size < need:
+        raise CaptureError(f"{fmt} frame truncated: {buf.size} bytes for {width}x{height} "
+                           f"(stride {stride}) needs {need}")
+    return np.lib.stride_tricks.as_strided(buf, shape=(height, row), strides=(stride, 1))
+
+
+def grey8(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+    """8-bit grey (V4L2 ``GREY``, GenICam ``Mono8``) -> ``uint8`` (height, width)."""
+    return np.ascontiguousarray(_rows(data, width, height, 1, bytes_per_line, "GREY"))
+
+
+def grey16(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+    """16-bit little-endian grey (``Y16``, ``Mono16``, unpacked ``Mono10/12``) -> ``uint16``."""
+    rows = np.ascontiguousarray(_rows(data, width, height, 2, bytes_per_line, "Y16"))
+    return rows.view("<u2").astype(np.uint16, copy=False).reshape(height, width)
+
+
+def yuyv_luma(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+    """Packed 4:2:2 ``YUYV`` (Y0 U Y1 V) -> its luma plane, ``uint8``.
+
+    The luma samples are every even byte; chroma is discarded (no colour
+    conversion, so no interpolation error enters the grey image).
+    """
+    if width % 2:
+        raise CaptureError(f"YUYV frame width {width} is odd")
+    rows = _rows(data, width, height, 2, bytes_per_line, "YUYV")
+    return np.ascontiguousarray(rows[:, 0::2])
+
+
+def mjpeg_grey(data, width: int | None = None, height: int | None = None) -> np.ndarray:
+    """Motion-JPEG frame -> decoded grey ``uint8`` (luma as decoded by libjpeg).
+
+    ``width``/``height``, when given, are checked against the decoded size.
+    """
+    import cv2
+
+    buf = np.frombuffer(data, dtype=np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE) if buf.size else None
+    if img is None:
+        raise CaptureError(f"MJPG frame of {buf.size} bytes does not decode")
+    if width is not None and height is not None and img.shape != (height, width):
+        raise CaptureError(f"MJPG frame decodes to {img.shape[1]}x{img.shape[0]}, "
+                           f"expected {width}x{height}")
+    return img
+
+
+def to_grey(data, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+    """Convert one raw frame in format ``fmt`` to a 2-D grey array (a copy)."""
+    if fmt in ("GREY", "Mono8"):
+        return grey8(data, width, height, bytes_per_line)
+    if fmt in ("Y16", "Mono16", "Mono10", "Mono12"):
+        return grey16(data, width, height, bytes_per_line)
+    if fmt == "YUYV":
+        return yuyv_luma(data, width, height, bytes_per_line)
+    if fmt == "MJPG":
+        return mjpeg_grey(data, width, height)
+    raise CaptureError(f"pixel format {fmt!r} cannot be converted to grey; "
+                       f"supported: {', '.join(GREY_FORMATS)}")

@@ -1,0 +1,215 @@
+"""AravisCamera against Aravis' own fakes (real libaravis, no mocks).
+
+* ``Fake_1``: the in-process Fake camera, with Aravis' embedded GenICam XML
+  (older feature names ExposureTimeAbs / GainRaw) or with our
+  ``drivers/data/fake-focus.xml`` (SFNC ExposureTime / Gain plus focus features);
+* ``127.0.0.1``: ``Aravis.GvFakeCamera`` served on loopback, reached through
+  the real GigE Vision control (GVCP) and stream (GVSP) protocols.
+
+The fake fills frames with a diagonal ramp whose exact value is known::
+
+    Mono8:  min(255,   ((x + y + frame_id) % 255)         * s)
+    Mono16: min(65535, ((256 * (x + y + frame_id)) % 65535) * s)
+    s = 1 + gain_raw + log10(exposure_us / 10000)
+
+so the tests check pixel values (orientation, dtype, exposure and gain
+reaching the sensor) exactly.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import time
+
+import numpy as np
+import pytest
+
+import drivers
+from drivers.aravis_camera import FAKE_FOCUS_XML, AravisCamera, _aravis
+from drivers.errors import DeviceRejected, DeviceTimeout, DriverError
+
+W, H = 64, 48
+FOCUS_CFG = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusPosition",
+             "autofocus_feature": "FocusAuto"}
+
+
+def expected_ramp(frame_id: int, exposure_us: float, gain_raw: int, fmt: str = "Mono8") -> np.ndarray:
+    y, x = np.mgrid[0:H, 0:W]
+    scale = 1.0 + gain_raw + math.log10(exposure_us / 10000.0)
+    if fmt == "Mono8":
+        return np.clip(((x + y + frame_id) % 255) * scale, 0, 255).astype(np.uint8)
+    return np.clip(((256 * (x + y + frame_id)) % 65535) * scale, 0, 65535).astype(np.uint16)
+
+
+def fake(**cfg) -> AravisCamera:
+    return AravisCamera.from_config({"driver": "aravis", "device": "Fake_1", "roi": [0, 0, W, H], **cfg})
+
+
+@pytest.fixture(scope="module")
+def gige_fake():
+    """Aravis' GigE Vision fake camera on 127.0.0.1, with the focus XML."""
+    Aravis = _aravis()
+    gv = Aravis.GvFakeCamera.new_full("127.0.0.1", "HARPGV01", str(FAKE_FOCUS_XML))
+    assert gv.is_running(), "GigE Vision fake camera did not start on 127.0.0.1"
+    yield gv
+    del gv
+    gc.collect()
+
+
+def test_embedded_fake_xml_uses_the_older_feature_names():
+    with fake() as cam:
+        assert (cam.exposure_feature, cam.gain_feature) == ("ExposureTimeAbs", "GainRaw")
+        assert cam.identity.vendor == "Aravis" and cam.identity.model == "Fake"
+        assert cam.sensor_size == (W, H) and cam.pixel_format == "Mono8"
+        assert cam.set_exposure(100_000) == 100_000.0
+        assert cam.set_gain(0.0) == 0.0
+        f = cam.capture(timeout=2.0)
+        # exposure x10 doubles the ramp (scale 2): the setting reached the sensor
+        assert np.array_equal(f.image, expected_ramp(f.extra["frame_id"], 100_000, 0))
+        assert cam.set_gain(1.4) == 1.0  # GainRaw is an integer: read back what was accepted
+        f = cam.capture(timeout=2.0)
+        assert f.gain_db == 1.0
+        assert np.array_equal(f.image, expected_ramp(f.extra["frame_id"], 100_000, 1))
+
+
+def test_gain_raw_scaled_to_db():
+    with fake(gain_db_per_raw=0.5) as cam:
+        assert cam.set_gain(3.0) == 3.0
+        assert cam._device.get_integer_feature_value("GainRaw") == 6
+
+
+def test_focus_xml_uses_sfnc_names_and_mono16_is_exact():
+    with fake(pixel_format="Mono16", exposure_us=10_000, gain_db=0, **FOCUS_CFG) as cam:
+        assert (cam.exposure_feature, cam.gain_feature) == ("ExposureTime", "Gain")
+        assert cam.pixel_format == "Mono16"
+        f = cam.capture(timeout=2.0)
+        assert f.image.dtype == np.uint16 and f.image.shape == (H, W)
+        assert np.array_equal(f.image, expected_ramp(f.extra["frame_id"], 10_000, 0, "Mono16"))
+        assert f.exposure_us == 10_000.0 and f.gain_db == 0.0
+
+
+def test_lock_focus_integer_feature_turns_enumeration_autofocus_off():
+    with fake(**FOCUS_CFG) as cam:
+        dev = cam._device
+        dev.set_string_feature_value("FocusAuto", "Continuous")
+        assert cam.lock_focus(417.4) == 417.0
+        assert dev.get_string_feature_value("FocusAuto") == "Off"
+        assert dev.get_integer_feature_value("FocusPosition") == 417
+        assert cam.get_focus() == 417.0
+        assert cam.capture(timeout=2.0).focus == 417.0
+
+
+def test_lock_focus_float_feature_turns_boolean_autofocus_off():
+    cfg = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusDistance",
+           "focus_type": "float", "autofocus_feature": "LensAutoFocusEnable"}
+    with fake(**cfg) as cam:
+        dev = cam._device
+        dev.set_boolean_feature_value("LensAutoFocusEnable", True)
+        assert cam.lock_focus(1234.5) == 1234.5
+        assert dev.get_boolean_feature_value("LensAutoFocusEnable") is False
+        assert dev.get_float_feature_value("FocusDistance") == 1234.5
+
+
+def test_focus_from_config_is_locked_at_open():
+    with fake(focus=250, **FOCUS_CFG) as cam:
+        assert cam.get_focus() == 250.0
+
+
+def test_focus_out_of_range_is_rejected_and_unchanged():
+    with fake(**FOCUS_CFG) as cam:
+        cam.lock_focus(300)
+        with pytest.raises(DeviceRejected, match="FocusPosition"):
+            cam.lock_focus(5000)
+        assert cam.get_focus() == 300.0
+
+
+def test_exposure_and_gain_out_of_range_are_rejected():
+    with fake(**FOCUS_CFG) as cam:
+        cam.set_exposure(15_000)
+        with pytest.raises(DeviceRejected, match="ExposureTime"):
+            cam.set_exposure(5.0)  # min 10 µs
+        with pytest.raises(DeviceRejected, match="Gain"):
+            cam.set_gain(50.0)  # max 10
+        assert cam.get_exposure() == 15_000.0
+        with pytest.raises(ValueError):
+            cam.set_exposure(float("nan"))
+
+
+def test_focus_without_configured_feature():
+    with fake() as cam:
+        assert cam.get_focus() is None
+        with pytest.raises(DeviceRejected, match="no focus feature"):
+            cam.lock_focus(10)
+
+
+@pytest.mark.parametrize("cfg, match", [
+    ({"focus_feature": "NoSuchFocus"}, "NoSuchFocus"),
+    ({"focus_feature": "FocusPosition", "focus_type": "float"}, "is integer"),
+    ({"focus_feature": "FocusPosition", "autofocus_feature": "NoAF"}, "NoAF"),
+    ({"pixel_format": "Mono12"}, "Mono12"),
+])
+def test_misconfiguration_fails_at_open_and_closes(cfg, match):
+    cam = fake(fake_genicam_xml=str(FAKE_FOCUS_XML), **cfg)
+    with pytest.raises(DeviceRejected, match=match):
+        cam.open()
+    assert not cam.is_open
+
+
+def test_free_running_returns_a_frame_taken_after_the_call():
+    with fake(trigger="off") as cam:  # embedded XML again, after tests that used the focus XML
+        assert cam.exposure_feature == "ExposureTimeAbs"
+        time.sleep(0.1)  # let the 25 fps fake queue frames
+        t0 = time.time()
+        f = cam.capture(timeout=2.0)
+        assert f.timestamp >= t0
+        assert np.array_equal(f.image, expected_ramp(f.extra["frame_id"], cam.get_exposure(), 0))
+
+
+def test_gige_fake_over_loopback(gige_fake):
+    cfg = {"device": "127.0.0.1", "exposure_us": 10_000, "gain_db": 1, **FOCUS_CFG}
+    with fake(**cfg) as cam:
+        assert cam.identity.serial == "HARPGV01"
+        assert cam._camera.is_gv_device()
+        assert cam.lock_focus(42) == 42.0
+        f0 = cam.capture(timeout=2.0)
+        f1 = cam.capture(timeout=2.0)
+        assert (f0.counter, f1.counter) == (0, 1)
+        assert f1.extra["frame_id"] == f0.extra["frame_id"] + 1  # one frame per software trigger
+        for f in (f0, f1):
+            assert np.array_equal(f.image, expected_ramp(f.extra["frame_id"], 10_000, 1))
+            assert (f.exposure_us, f.gain_db, f.focus) == (10_000.0, 1.0, 42.0)
+
+
+def test_gige_buffer_timeout_is_reported_not_hung_on(gige_fake):
+    # hardware trigger on Line0 that never fires: no frame can arrive
+    with fake(device="127.0.0.1", trigger="Line0", **FOCUS_CFG) as cam:
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeout, match=r"no frame within 0.3 s \(trigger Line0\)"):
+            cam.capture(timeout=0.3)
+        assert 0.25 <= time.monotonic() - t0 < 1.5
+
+
+def test_capture_after_close_raises():
+    cam = fake()
+    with cam:
+        cam.capture(timeout=2.0)
+    with pytest.raises(DriverError, match="not open"):
+        cam.capture()
+    with pytest.raises(DriverError, match="not open"):
+        cam.set_exposure(1000)
+
+
+def test_from_config_rejects_unknown_key_and_registry_opens_it():
+    with pytest.raises(ValueError, match="'exposure'"):
+        AravisCamera.from_config({"driver": "aravis", "exposure": 100})
+    with pytest.raises(ValueError, match="pixel_format"):
+        AravisCamera.from_config({"driver": "aravis", "pixel_format": "RGB8"})
+    cam = drivers.open_camera({"driver": "aravis", "device": "Fake_1"})
+    assert isinstance(cam, AravisCamera) and not cam.is_open
+
+
+def test_packaged_fake_xml_is_shipped():
+    text = FAKE_FOCUS_XML.read_text()
+    for feature in ("ExposureTime", "Gain", "FocusPosition", "FocusDistance", "FocusAuto"):
+        assert f'Name="{feature}"' in text

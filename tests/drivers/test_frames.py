@@ -1,0 +1,50 @@
+"""Raw buffer -> grey array conversions (drivers/frames.py), including bad input."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from drivers.errors import CaptureError
+from drivers.frames import to_grey
+
+
+def test_grey8_with_stride_padding_drops_the_padding():
+    img = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    raw = np.pad(img, ((0, 0), (0, 2)), constant_values=255).tobytes()
+    out = to_grey(raw, "GREY", 4, 3, bytes_per_line=6)
+    assert np.array_equal(out, img) and out.flags.c_contiguous
+
+
+def test_y16_is_little_endian():
+    raw = bytes([0x34, 0x12, 0xFF, 0x00])
+    assert to_grey(raw, "Mono16", 2, 1).tolist() == [[0x1234, 0x00FF]]
+
+
+def test_yuyv_keeps_luma_only():
+    raw = bytes([10, 200, 20, 100, 30, 0, 40, 255])  # Y0 U Y1 V Y2 U Y3 V
+    assert to_grey(raw, "YUYV", 4, 1).tolist() == [[10, 20, 30, 40]]
+
+
+def test_mjpg_decodes_and_checks_size():
+    img = np.full((8, 16), 77, np.uint8)
+    jpg = cv2.imencode(".jpg", img)[1].tobytes()
+    assert np.array_equal(to_grey(jpg, "MJPG", 16, 8), img)
+    with pytest.raises(CaptureError, match="decodes to 16x8, expected 8x16"):
+        to_grey(jpg, "MJPG", 8, 16)
+
+
+@pytest.mark.parametrize("raw, fmt, w, h, match", [
+    (b"\x00" * 11, "GREY", 4, 3, "truncated"),
+    (b"\x00" * 8, "YUYV", 3, 1, "odd"),
+    (b"not a jpeg", "MJPG", 4, 4, "does not decode"),
+    (b"\x00" * 12, "RGB3", 2, 2, "cannot be converted"),
+    (b"\x00" * 12, "GREY", 4, 3, None),
+])
+def test_bad_buffers_raise_capture_error(raw, fmt, w, h, match):
+    if match is None:
+        assert to_grey(raw, fmt, w, h).shape == (h, w)
+    else:
+        with pytest.raises(CaptureError, match=match):
+            to_grey(raw, fmt, w, h)
