@@ -1,0 +1,423 @@
+"""A GRBL-controlled turntable (common DIY photo turntables), via pyserial.
+
+The turntable is one GRBL axis (``X`` by default) whose units are mapped to
+degrees by ``units_per_degree`` (1 when ``$100`` is set in steps per degree).
+Bytes on the wire::
+
+    0x18                      \\r\\nGrbl 1.1h ['$' for help]\\r\\n   (soft reset on open)
+    $H\\n                      ok                                  (after homing)
+    G90 G0 X45.000\\n          ok                                  (buffered only!)
+    ?                         <Run|MPos:20.512,0.000,0.000|FS:21600,0>
+    ?                         <Idle|MPos:45.000,0.000,0.000|FS:0,0>
+    $X\\n                      [MSG:Caution: Unlocked] ok
+
+``ok`` only means the planner took the line, so :meth:`move_to` polls the
+realtime status ``?`` until the state is ``Idle`` at the target.
+
+Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
+``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
+meaning (recover with :meth:`recover`: soft reset if needed, then ``$X``;
+re-home after a hard-limit alarm, position is lost); no answer ->
+:class:`DeviceTimeout`; unparsable line -> :class:`ProtocolError`; port gone
+-> :class:`DeviceDisconnected`.
+
+References
+----------
+gnea/grbl, "Grbl v1.1 Interface" and "Grbl v1.1 Commands" (doc/markdown),
+and the error/alarm code tables (doc/csv/error_codes_en_US.csv,
+alarm_codes_en_US.csv).
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+
+from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.transport import SerialTransport
+
+ERROR_CODES = {
+    1: "G-code words consist of a letter and a value; letter was not found",
+    2: "numeric value format is not valid or missing an expected value",
+    3: "'$' system command was not recognized or supported",
+    4: "negative value received for an expected positive value",
+    5: "homing cycle is not enabled via settings",
+    6: "minimum step pulse time must be greater than 3 us",
+    7: "EEPROM read failed; reset and restored to default values",
+    8: "'$' command cannot be used unless Grbl is IDLE",
+    9: "G-code locked out during alarm or jog state",
+    10: "soft limits cannot be enabled without homing also enabled",
+    11: "max characters per line exceeded; line was not processed",
+    12: "'$' setting value exceeds the maximum step rate supported",
+    13: "safety door detected as opened and door state initiated",
+    14: "build info or startup line exceeded EEPROM line length limit",
+    15: "jog target exceeds machine travel; command ignored",
+    16: "jog command with no '=' or contains prohibited g-code",
+    17: "laser mode requires PWM output",
+    20: "unsupported or invalid g-code command found in block",
+    21: "more than one g-code command from the same modal group found in block",
+    22: "feed rate has not yet been set or is undefined",
+    23: "g-code command in block requires an integer value",
+    24: "two g-code commands that both require the use of axis words were detected",
+    25: "a g-code word was repeated in the block",
+    26: "a g-code command implicitly or explicitly requires axis words but none were detected",
+    27: "N line number value is not within the valid range",
+    28: "a g-code command was sent, but is missing some required value words",
+    33: "the motion command has an invalid target",
+}
+
+ALARM_CODES = {
+    1: "hard limit triggered; machine position is likely lost, re-homing is recommended",
+    2: "soft limit alarm: target exceeds machine travel; position retained",
+    3: "reset while in motion; position is likely lost, re-homing is recommended",
+    4: "probe fail: probe is not in the expected initial state",
+    5: "probe fail: probe did not contact the workpiece",
+    6: "homing fail: reset during active homing cycle",
+    7: "homing fail: safety door was opened during homing",
+    8: "homing fail: pull off failed to clear the limit switch",
+    9: "homing fail: could not find the limit switch within the search distance",
+}
+
+_STATUS = re.compile(r"^<(?P<state>[A-Za-z]+)(?::(?P<sub>\d+))?\|(?P<fields>.*)>$")
+_ERROR = re.compile(r"^error:(\d+)$")
+_ALARM = re.compile(r"^ALARM:(\d+)$")
+_AXES = "XYZABC"
+
+_CONFIG_KEYS = {"driver", "port", "baudrate", "axis", "units_per_degree", "steps_per_degree",
+                "steps_per_unit", "feed", "limits",
+                "reply_timeout", "poll_interval", "move_timeout", "home_timeout",
+                "startup_timeout", "tolerance_deg", "name"}
+
+
+def error_text(code: int) -> str:
+    return f"error:{code} ({ERROR_CODES.get(code, 'unknown error')})"
+
+
+def alarm_text(code: int) -> str:
+    return f"ALARM:{code} ({ALARM_CODES.get(code, 'unknown alarm')})"
+
+
+class GrblTurntable:
+    """A turntable on one GRBL axis; satisfies :class:`drivers.protocols.Turntable`.
+
+    Parameters
+    ----------
+    port : str
+        Serial device or pyserial URL.
+    baudrate : int
+        115200 (GRBL 1.1 default).
+    axis : str
+        GRBL axis letter carrying the turntable (``"X"``).
+    units_per_degree : float
+        GRBL units (mm as GRBL sees them) per degree of the table.
+    feed : float or None
+        None: rapid moves ``G0``; else ``G1`` at this feed (units/min).
+    limits : (float, float)
+        Allowed ``move_to`` range in degrees (``ValueError`` outside).
+    reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
+        Seconds.
+    tolerance_deg : float
+        How far from the target an idle axis may be (status has 3 decimals).
+    """
+
+    def __init__(self, port: str, *, baudrate: int = 115200, axis: str = "X",
+                 units_per_degree: float = 1.0, feed: float | None = None,
+                 limits: tuple[float, float] = (0.0, 360.0), reply_timeout: float = 1.0,
+                 poll_interval: float = 0.05, move_timeout: float = 60.0,
+                 home_timeout: float = 120.0, startup_timeout: float = 3.0,
+                 tolerance_deg: float = 0.002, name: str | None = None):
+        axis = str(axis).upper()
+        if axis not in _AXES:
+            raise ValueError(f"grbl turntable: axis must be one of {', '.join(_AXES)}, got {axis!r}")
+        if units_per_degree == 0:
+            raise ValueError("grbl turntable: units_per_degree must not be 0")
+        if feed is not None and feed <= 0:
+            raise ValueError(f"grbl turntable: feed must be positive, got {feed}")
+        lo, hi = (float(v) for v in limits)
+        if not lo < hi:
+            raise ValueError(f"grbl turntable: limits must be (min, max) with min < max, got {limits}")
+        self.axis = axis
+        self.units_per_degree = float(units_per_degree)
+        self.feed = feed
+        self._limits = (lo, hi)
+        self.reply_timeout = float(reply_timeout)
+        self.poll_interval = float(poll_interval)
+        self.move_timeout = float(move_timeout)
+        self.home_timeout = float(home_timeout)
+        self.startup_timeout = float(startup_timeout)
+        self.tolerance_deg = float(tolerance_deg)
+        self.name = name or f"grbl {port} axis {axis}"
+        self.transport = SerialTransport(port, baudrate, name=self.name)
+        self.messages: list[str] = []  # [MSG:...] and other feedback lines seen
+        self.version: str | None = None
+        self.last_alarm: int | None = None
+        self._lock = threading.RLock()
+        self._target: float | None = None
+
+    @classmethod
+    def from_config(cls, cfg: dict, **ctx) -> "GrblTurntable":
+        unknown = sorted(set(cfg) - _CONFIG_KEYS)
+        if unknown:
+            raise ValueError(f"grbl turntable: unknown config key {unknown[0]!r}"
+                             f" (known: {', '.join(sorted(_CONFIG_KEYS - {'driver'}))})")
+        if not cfg.get("port"):
+            raise ValueError("grbl turntable: missing config key 'port' (device name or pyserial URL)")
+        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
+        if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
+            raise ValueError("grbl turntable: 'steps_per_unit' needs 'steps_per_degree'")
+        if "steps_per_degree" in cfg:
+            # motor steps per table degree, and GRBL's own $10x steps per unit
+            # (default: GRBL is set up in degrees, one unit = one degree)
+            if "units_per_degree" in cfg:
+                raise ValueError("grbl turntable: give 'units_per_degree' or 'steps_per_degree', not both")
+            spd = float(cfg["steps_per_degree"])
+            spu = float(cfg.get("steps_per_unit", spd))
+            if spd <= 0 or spu <= 0:
+                raise ValueError("grbl turntable: 'steps_per_degree' and 'steps_per_unit' must be positive")
+            kw["units_per_degree"] = spd / spu
+        if "limits" in kw:
+            kw["limits"] = tuple(kw["limits"])
+        return cls(kw.pop("port"), **kw)
+
+    # -- life cycle --------------------------------------------------------------
+    def open(self) -> None:
+        """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner."""
+        self.transport.open()
+        try:
+            with self._lock:
+                self.transport.pending()
+                self.transport.write(b"\x18")
+                self._wait_banner(self.startup_timeout)
+        except Exception:
+            self.transport.close()
+            raise
+
+    def _wait_banner(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DeviceTimeout(f"{self.name}: no GRBL banner within {timeout:.2f} s after reset")
+            line = self.transport.readline(remaining, "GRBL banner after reset", total=timeout).strip()
+            text = line.decode("ascii", "replace")
+            if text.startswith("Grbl "):
+                self.version = text.split()[1]
+                return
+            if text.startswith("ALARM:"):
+                self.last_alarm = int(text[6:]) if text[6:].isdigit() else None
+
+    def close(self) -> None:
+        self.transport.close()
+
+    def __enter__(self) -> "GrblTurntable":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- wire level ----------------------------------------------------------------
+    def _decode(self, line: bytes) -> str:
+        try:
+            return line.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise ProtocolError(f"{self.name}: garbage on the line: {line!r}") from None
+
+    def _classify(self, text: str) -> None:
+        """Record a feedback line; raise on garbage. Returns None for ignorable lines."""
+        if text.startswith("[") and text.endswith("]"):
+            self.messages.append(text)
+            return
+        if text.startswith("Grbl "):
+            self.messages.append(text)  # an unexpected reset
+            return
+        m = _ALARM.match(text)
+        if m:
+            self.last_alarm = int(m.group(1))
+            raise DeviceFault(f"{self.name}: {alarm_text(self.last_alarm)}; use recover()")
+        raise ProtocolError(f"{self.name}: not a GRBL message: {text!r}")
+
+    def _drain(self) -> None:
+        for line in self.transport.pending().splitlines():
+            text = line.decode("ascii", "replace").strip()
+            if _ALARM.match(text):
+                self.last_alarm = int(text[6:])
+
+    def send(self, line: str, timeout: float | None = None) -> list[str]:
+        """Send one line and wait for ``ok``; returns the feedback lines before it.
+
+        Raises :class:`DeviceRejected` on ``error:N`` and :class:`DeviceFault`
+        on ``ALARM:N``.
+        """
+        timeout = self.reply_timeout if timeout is None else timeout
+        what = f"reply to {line!r}"
+        with self._lock:
+            self._drain()
+            self.transport.write(line.encode("ascii") + b"\n")
+            deadline = time.monotonic() + timeout
+            feedback = []
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise DeviceTimeout(f"{self.name}: no {what} within {timeout:.2f} s")
+                text = self._decode(self.transport.readline(remaining, what, total=timeout))
+                if not text or text.startswith("<"):
+                    continue
+                if text == "ok":
+                    return feedback
+                m = _ERROR.match(text)
+                if m:
+                    raise DeviceRejected(f"{self.name}: {line!r} rejected: {error_text(int(m.group(1)))}")
+                n_messages = len(self.messages)
+                self._classify(text)
+                feedback.extend(self.messages[n_messages:])
+
+    def query_status(self) -> dict:
+        """Realtime ``?``: ``{"state", "substate", "position" (deg), "fields"}``."""
+        with self._lock:
+            self._drain()
+            self.transport.write(b"?")
+            deadline = time.monotonic() + self.reply_timeout
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise DeviceTimeout(f"{self.name}: no status report within {self.reply_timeout:.2f} s")
+                text = self._decode(self.transport.readline(remaining, "status report",
+                                                            total=self.reply_timeout))
+                if not text or text == "ok":
+                    continue
+                if text.startswith("<"):
+                    return self._parse_status(text)
+                self._classify(text)
+
+    def _parse_status(self, text: str) -> dict:
+        m = _STATUS.match(text)
+        if not m:
+            raise ProtocolError(f"{self.name}: malformed status report {text!r}")
+        fields = {}
+        for part in m["fields"].split("|"):
+            key, sep, value = part.partition(":")
+            if not sep:
+                raise ProtocolError(f"{self.name}: malformed status field {part!r} in {text!r}")
+            fields[key] = value
+        coords = fields.get("MPos", fields.get("WPos"))
+        if coords is None:
+            raise ProtocolError(f"{self.name}: status report without MPos/WPos: {text!r}")
+        try:
+            values = [float(v) for v in coords.split(",")]
+            units = values[_AXES.index(self.axis)]
+        except (ValueError, IndexError):
+            raise ProtocolError(f"{self.name}: bad coordinates in {text!r}") from None
+        return {"state": m["state"], "substate": int(m["sub"]) if m["sub"] else None,
+                "position": units / self.units_per_degree, "fields": fields, "raw": text}
+
+    # -- Turntable protocol ----------------------------------------------------------
+    @property
+    def limits(self) -> tuple[float, float]:
+        return self._limits
+
+    def position(self) -> float:
+        return self.query_status()["position"]
+
+    def status(self) -> dict:
+        st = self.query_status()
+        warnings = []
+        if st["state"] == "Alarm":
+            warnings.append(alarm_text(self.last_alarm) if self.last_alarm else "Alarm (locked: home or unlock)")
+        elif st["state"] in ("Hold", "Door"):
+            warnings.append(f"{st['state']}:{st['substate']}")
+        return {"busy": st["state"] in ("Run", "Home", "Jog"), "warnings": warnings,
+                "state": st["state"], "position": st["position"], "fault": st["state"] == "Alarm"}
+
+    def home(self, timeout: float | None = None) -> None:
+        timeout = self.home_timeout if timeout is None else timeout
+        with self._lock:
+            self._target = None
+            self.send("$H", timeout=timeout)  # GRBL answers ok when the cycle is over
+            self.last_alarm = None
+            self._wait_idle(timeout, "home", None)
+
+    def start_move(self, degrees: float) -> float:
+        """Queue the move (``ok`` = buffered) and return without waiting."""
+        lo, hi = self._limits
+        if not lo <= degrees <= hi:
+            raise ValueError(f"{self.name}: target {degrees}° outside limits [{lo}, {hi}]°")
+        if self.last_alarm is not None:
+            raise DeviceFault(f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)};"
+                              f" call recover() (then home())")
+        units = degrees * self.units_per_degree
+        cmd = (f"G90 G0 {self.axis}{units:.3f}" if self.feed is None
+               else f"G90 G1 {self.axis}{units:.3f} F{self.feed:g}")
+        with self._lock:
+            self.send(cmd)
+            self._target = round(units, 3) / self.units_per_degree
+        return self._target
+
+    def move_to(self, degrees: float, timeout: float | None = None) -> float:
+        timeout = self.move_timeout if timeout is None else timeout
+        with self._lock:
+            target = self.start_move(degrees)
+            return self._wait_idle(timeout, f"move to {degrees}°", target)
+
+    def wait_idle(self, timeout: float | None = None) -> float:
+        timeout = self.move_timeout if timeout is None else timeout
+        return self._wait_idle(timeout, "wait", self._target)
+
+    def _wait_idle(self, timeout: float, what: str, target: float | None) -> float:
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.query_status()
+            state, pos = st["state"], st["position"]
+            if state == "Alarm":
+                cause = alarm_text(self.last_alarm) if self.last_alarm else "alarm state"
+                raise DeviceFault(f"{self.name}: {what} failed at {pos:.3f}°: {cause}; use recover()")
+            if state == "Idle":
+                if target is not None and abs(pos - target) > self.tolerance_deg:
+                    raise DeviceFault(f"{self.name}: {what} ended idle at {pos:.3f}°, not at {target:.3f}°")
+                return pos
+            if time.monotonic() >= deadline:
+                try:
+                    self.stop()
+                finally:
+                    raise DeviceTimeout(f"{self.name}: {what} not finished within {timeout:.2f} s"
+                                        f" (state {state} at {pos:.3f}°); feed hold + reset sent")
+            time.sleep(self.poll_interval)
+
+    def stop(self) -> None:
+        """Feed hold, then soft reset to flush the planner (position kept)."""
+        with self._lock:
+            self._target = None
+            self.transport.write(b"!")
+            deadline = time.monotonic() + self.reply_timeout
+            while time.monotonic() < deadline:
+                st = self.query_status()
+                if st["state"] in ("Idle", "Alarm") or (st["state"] == "Hold" and st["substate"] == 0):
+                    break
+                time.sleep(self.poll_interval)
+            self.transport.write(b"\x18")
+            self._wait_banner(self.startup_timeout)
+
+    def unlock(self) -> None:
+        """``$X``: leave the alarm state."""
+        self.send("$X")
+
+    def recover(self) -> list[str]:
+        """Leave an alarm: soft reset if GRBL waits for one, then ``$X``.
+
+        Returns the alarm descriptions that were cleared. After a hard-limit
+        alarm the position is lost: call :meth:`home` before moving.
+        """
+        with self._lock:
+            cleared = [alarm_text(self.last_alarm)] if self.last_alarm else []
+            self._drain()
+            self.transport.write(b"\x18")
+            self._wait_banner(self.startup_timeout)
+            st = self.query_status()
+            if st["state"] == "Alarm":
+                self.unlock()
+            self.last_alarm = None
+            return cleared
+
+    def __repr__(self) -> str:
+        return f"GrblTurntable({self.transport.port!r}, axis={self.axis!r})"

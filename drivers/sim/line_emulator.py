@@ -1,0 +1,147 @@
+"""Common machinery of the line-oriented device emulators (Zaber, GRBL).
+
+Bytes from the driver are cut into lines at ``\\r`` or ``\\n``; a subclass
+handles each line (``handle_line``) and may claim single realtime bytes
+(``handle_realtime``, used by GRBL's ``?``, ``!``, ``~`` and Ctrl-X).
+Faults are injected with :meth:`LineEmulator.inject`:
+
+``"reject"``   the next ``count`` commands are refused (device-specific reply)
+``"no_reply"`` the next ``count`` commands get no answer at all
+``"garbage"``  the next ``count`` replies are replaced by random bytes
+``"stall"``    the next move stops at fraction ``at`` of its way with a fault
+``"vanish"``   the device disappears (pty master closed) at fraction ``at``
+              of the next move
+
+``count=None`` makes a counted fault permanent until :meth:`clear_faults`.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+
+
+class LineEmulator:
+    """Base class; see the module docstring. ``world`` is an optional SimWorld."""
+
+    COUNTED = ("reject", "no_reply", "garbage")
+    MOTION = ("stall", "vanish")
+    NAME = "device"
+
+    def __init__(self, world=None, seed: int = 0):
+        self.world = world
+        self.server = None
+        self._inbuf = bytearray()
+        self._rng = random.Random(seed)
+        self._faults: dict[str, dict] = {}
+        self._lock = threading.RLock()
+        self.received: list[bytes] = []  # every complete line / realtime byte, for tests
+        self._last_world: float | None = None
+
+    # -- server hooks ------------------------------------------------------
+    def attach(self, server) -> None:
+        self.server = server
+
+    def on_bytes(self, data: bytes, now: float) -> None:
+        with self._lock:
+            for b in data:
+                byte = bytes([b])
+                if self.handle_realtime(byte, now):
+                    self.received.append(byte)
+                    continue
+                if byte in (b"\r", b"\n"):
+                    line = bytes(self._inbuf)
+                    self._inbuf.clear()
+                    if line:
+                        self.received.append(line)
+                        self._dispatch(line, now)
+                else:
+                    self._inbuf += byte
+
+    def tick(self, now: float) -> None:
+        with self._lock:
+            self.update(now)
+            if self.world is not None:
+                deg = self.stage_degrees(now)
+                if deg != self._last_world:
+                    self.world.set_stage(deg)
+                    self._last_world = deg
+
+    # -- faults --------------------------------------------------------------
+    def inject(self, fault: str, count: int | None = 1, at: float = 0.5, **params) -> None:
+        """Arm a fault (see module docstring); extra ``params`` are device-specific."""
+        allowed = self.COUNTED + self.MOTION
+        if fault not in allowed:
+            raise ValueError(f"unknown fault {fault!r} for {self.NAME}; expected one of {', '.join(allowed)}")
+        if fault in self.MOTION and not 0.0 <= at <= 1.0:
+            raise ValueError(f"fault position 'at' must be in [0, 1], got {at}")
+        with self._lock:
+            self._faults[fault] = {"count": count, "at": float(at), **params}
+
+    def clear_faults(self) -> None:
+        with self._lock:
+            self._faults.clear()
+
+    def _take_counted(self, fault: str) -> dict | None:
+        spec = self._faults.get(fault)
+        if spec is None:
+            return None
+        if spec["count"] is not None:
+            spec["count"] -= 1
+            if spec["count"] <= 0:
+                del self._faults[fault]
+        return spec
+
+    def motion_fault(self) -> tuple[str, dict] | None:
+        """The armed motion fault (consumed by the subclass when it fires)."""
+        for name in self.MOTION:
+            if name in self._faults:
+                return name, self._faults[name]
+        return None
+
+    def consume(self, fault: str) -> None:
+        self._faults.pop(fault, None)
+
+    def garbage(self) -> bytes:
+        """A line of random bytes that no driver can parse."""
+        body = bytes(self._rng.choice([0x00, 0x07, 0x1b, 0x7f, 0x80, 0xa5, 0xfe, 0xff, 0x3f, 0x5e])
+                     for _ in range(10))
+        return b"\xff" + body + b"\r\n"
+
+    def _dispatch(self, line: bytes, now: float) -> None:
+        if self._take_counted("no_reply") is not None:
+            return
+        spec = self._take_counted("garbage")
+        if spec is not None:
+            self.write(self.garbage())
+            return
+        spec = self._take_counted("reject")
+        if spec is not None:
+            self.reject(line, spec, now)
+            return
+        self.handle_line(line, now)
+
+    # -- output ----------------------------------------------------------------
+    def write(self, data: bytes) -> None:
+        if self.server is not None:
+            self.server.write(data)
+
+    def vanish(self) -> None:
+        if self.server is not None:
+            self.server.vanish()
+
+    # -- subclass interface ------------------------------------------------
+    def handle_realtime(self, byte: bytes, now: float) -> bool:
+        return False
+
+    def handle_line(self, line: bytes, now: float) -> None:
+        raise NotImplementedError
+
+    def reject(self, line: bytes, spec: dict, now: float) -> None:
+        raise NotImplementedError
+
+    def update(self, now: float) -> None:
+        pass
+
+    def stage_degrees(self, now: float) -> float:
+        raise NotImplementedError

@@ -1,0 +1,235 @@
+"""A Zaber ASCII rotary stage (one device, one axis) that speaks the real bytes.
+
+Commands (``/`` + device + axis + command, ended by ``\\n`` or ``\\r``)::
+
+    /1                      -> @01 0 OK IDLE -- 0
+    /1 1 home               -> @01 1 OK BUSY WR 0     (moves to 0, clears WR)
+    /1 1 move abs 1000      -> @01 1 OK BUSY -- 0
+    /1 1 move rel -50       -> @01 1 OK BUSY -- 0
+    /1 1 get pos            -> @01 1 OK BUSY -- 417   (reported while moving)
+    /1 1 stop               -> @01 1 OK IDLE -- 0
+    /1 warnings             -> @01 0 OK IDLE FS 01 FS
+    /1 warnings clear       -> @01 0 OK IDLE FS 01 FS (then cleared)
+    /1 1 get limit.max | limit.min | maxspeed | comm.alert
+    /1 set comm.alert 1     (alerts ``!01 1 IDLE --`` when a move ends)
+    /1 1 move abs 9e9       -> @01 1 RJ IDLE -- BADDATA
+    /1 1 fly                -> @01 1 RJ IDLE -- BADCOMMAND
+    /1 2 get pos            -> @01 2 RJ IDLE -- BADAXIS
+
+Replies end with ``\\r\\n``; the warning field shows the most severe active
+flag (faults ``F*`` before warnings ``W*`` before notices ``N*``). An
+optional message id after the axis is echoed; with ``checksums=True`` every
+reply carries ``:XX`` (Zaber's LRC: the bytes after the type character, plus
+the checksum, sum to 0 mod 256). Commands addressed to another device get no
+reply, as on a daisy chain where that device is absent.
+
+Faults (:meth:`inject`): ``"reject"`` (``RJ ... BADDATA``), ``"no_reply"``,
+``"garbage"``, ``"stall"`` (stops mid-move and raises flag ``flag``, default
+``FS``; use ``flag="WL"`` for an unexpected limit, ``"FQ"`` encoder error),
+``"vanish"``.
+"""
+
+from __future__ import annotations
+
+from drivers.sim.line_emulator import LineEmulator
+from drivers.sim.motion import Axis
+
+X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0  # 0.000234375 deg per microstep
+
+_FLAG_ORDER = {"F": 0, "W": 1, "N": 2}
+
+
+def zaber_checksum(body: bytes) -> int:
+    """LRC of a message body (after the type character, before ``:``)."""
+    return (-sum(body)) & 0xFF
+
+
+class ZaberEmulator(LineEmulator):
+    NAME = "Zaber emulator"
+
+    def __init__(self, world=None, *, address: int = 1,
+                 microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+                 speed_deg_s: float = 360.0, accel_deg_s2: float = 3600.0,
+                 limit_min: int | None = None, limit_max: int | None = None,
+                 position_deg: float = 0.0, homed: bool = False, alerts: bool = False,
+                 checksums: bool = False, seed: int = 0):
+        super().__init__(world, seed)
+        self.address = int(address)
+        self.mspd = float(microsteps_per_degree)
+        self.axis = Axis(position_deg * self.mspd, speed_deg_s * self.mspd, accel_deg_s2 * self.mspd)
+        self.limit_min = 0 if limit_min is None else int(limit_min)
+        self.limit_max = round(360 * self.mspd) if limit_max is None else int(limit_max)
+        self.homed = bool(homed)
+        self.alerts = bool(alerts)
+        self.checksums = bool(checksums)
+        self.flags: list[str] = [] if homed else ["WR"]
+        self._homing = False
+        self._was_busy = False
+
+    # -- helpers --------------------------------------------------------------
+    def stage_degrees(self, now: float) -> float:
+        return self.axis.position(now) / self.mspd
+
+    def position_steps(self, now: float) -> int:
+        return int(round(self.axis.position(now)))
+
+    def flag(self) -> str:
+        if not self.flags:
+            return "--"
+        return sorted(self.flags, key=lambda f: _FLAG_ORDER.get(f[0], 3))[0]
+
+    def _send(self, kind: str, body: str) -> None:
+        raw = body.encode("ascii")
+        if self.checksums:
+            raw += b":%02X" % zaber_checksum(raw)
+        self.write(kind.encode() + raw + b"\r\n")
+
+    def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float,
+               flag: str | None = None) -> None:
+        status = "BUSY" if self.axis.busy(now) else "IDLE"
+        ident = f" {msg_id}" if msg_id is not None else ""
+        flag = self.flag() if flag is None else flag
+        self._send("@", f"{self.address:02d} {axis}{ident} {'OK' if ok else 'RJ'} {status} {flag} {data}")
+
+    @staticmethod
+    def _parse(line: bytes):
+        """(device, axis, id, words) or None if the line is not a command."""
+        try:
+            text = line.decode("ascii").strip()
+        except UnicodeDecodeError:
+            return None
+        if not text.startswith("/"):
+            return None
+        if ":" in text:  # checksummed command: verify, drop if wrong
+            body, _, cs = text[1:].rpartition(":")
+            try:
+                if (sum(body.encode()) + int(cs, 16)) & 0xFF:
+                    return None
+            except ValueError:
+                return None
+            text = "/" + body
+        words = text[1:].split()
+        nums = []
+        while words and words[0].isdigit() and len(nums) < 3:
+            nums.append(int(words.pop(0)))
+        device = nums[0] if nums else 0
+        axis = nums[1] if len(nums) > 1 else 0
+        msg_id = f"{nums[2]:02d}" if len(nums) > 2 else None
+        return device, axis, msg_id, words
+
+    # -- LineEmulator interface -----------------------------------------------
+    def reject(self, line: bytes, spec: dict, now: float) -> None:
+        parsed = self._parse(line)
+        if parsed is None or parsed[0] not in (0, self.address):
+            return
+        _, axis, msg_id, _ = parsed
+        self._reply(axis, msg_id, False, spec.get("reason", "BADDATA"), now)
+
+    def handle_line(self, line: bytes, now: float) -> None:
+        parsed = self._parse(line)
+        if parsed is None:
+            return  # real devices ignore what is not a command
+        device, axis, msg_id, words = parsed
+        if device not in (0, self.address):
+            return
+        if axis not in (0, 1):
+            self._reply(axis, msg_id, False, "BADAXIS", now)
+            return
+        flag_before = self.flag()
+        ok, data = self._execute(words, now)
+        # "warnings clear" reports the flags as they were before clearing
+        self._reply(axis, msg_id, ok, data, now, flag_before if words[:2] == ["warnings", "clear"] else None)
+
+    def _execute(self, words: list[str], now: float) -> tuple[bool, str]:
+        cmd = " ".join(words)
+        if not words:
+            return True, "0"
+        if cmd == "home":
+            self.axis.start_move(0, now)
+            self._homing = True
+            self._arm_motion(now)
+            return True, "0"
+        if words[0] == "move" and len(words) == 3 and words[1] in ("abs", "rel"):
+            try:
+                value = int(words[2])
+            except ValueError:
+                return False, "BADDATA"
+            target = value if words[1] == "abs" else self.position_steps(now) + value
+            if not self.limit_min <= target <= self.limit_max:
+                return False, "BADDATA"
+            self.axis.start_move(target, now)
+            self._homing = False
+            self._arm_motion(now)
+            return True, "0"
+        if cmd == "stop":
+            self.axis.halt(now)
+            self._homing = False
+            return True, "0"
+        if cmd == "get pos":
+            return True, str(self.position_steps(now))
+        if words[0] == "get" and len(words) == 2:
+            values = {"limit.max": self.limit_max, "limit.min": self.limit_min,
+                      "maxspeed": round(self.axis.vmax * 1.6384), "comm.alert": int(self.alerts)}
+            if words[1] in values:
+                return True, str(values[words[1]])
+            return False, "BADCOMMAND"
+        if words[0] == "set" and len(words) == 3 and words[1] in ("comm.alert", "maxspeed"):
+            try:
+                value = int(words[2])
+            except ValueError:
+                return False, "BADDATA"
+            if words[1] == "comm.alert" and value in (0, 1):
+                self.alerts = bool(value)
+                return True, "0"
+            if words[1] == "maxspeed" and value > 0:
+                self.axis.vmax = value / 1.6384
+                return True, "0"
+            return False, "BADDATA"
+        if words[0] == "warnings" and len(words) <= 2:
+            if len(words) == 2 and words[1] != "clear":
+                return False, "BADDATA"
+            data = " ".join([f"{len(self.flags):02d}"] + self.flags)
+            if len(words) == 2:  # WR stays until the stage is homed
+                self.flags = [] if self.homed else ["WR"]
+            return True, data
+        return False, "BADCOMMAND"
+
+    def _arm_motion(self, now: float) -> None:
+        self._was_busy = True
+
+    def update(self, now: float) -> None:
+        move = self.axis.move
+        if move is not None:
+            armed = self.motion_fault()
+            if armed is not None:
+                name, spec = armed
+                if move.fraction(now) >= spec["at"]:
+                    self.consume(name)
+                    if name == "vanish":
+                        self.axis.halt(now)
+                        self.vanish()
+                        return
+                    self.axis.halt(now)
+                    self._homing = False
+                    flag = spec.get("flag", "FS")
+                    if flag not in self.flags:
+                        self.flags.append(flag)
+        busy = self.axis.busy(now)
+        if self._was_busy and not busy:
+            self._was_busy = False
+            if self._homing:
+                self._homing = False
+                self.homed = True
+                self.axis.set_position(0)
+                if "WR" in self.flags:
+                    self.flags.remove("WR")
+            if self.alerts:
+                self._send("!", f"{self.address:02d} 1 IDLE {self.flag()}")
+
+
+def start_zaber_emulator(world=None, **opts):
+    """Start a :class:`ZaberEmulator` (``opts`` are its keyword arguments) on a
+    new pty; returns an :class:`~drivers.sim.pty_server.EmulatorHandle`."""
+    from drivers.sim.pty_server import serve
+
+    return serve(ZaberEmulator(world, **opts), name="zaber")

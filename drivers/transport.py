@@ -1,0 +1,153 @@
+"""Line-oriented serial transport shared by the turntable drivers.
+
+A :class:`SerialTransport` opens a pyserial port from a device name
+(``/dev/ttyUSB0``, ``/dev/pts/3``, ``COM3``) or from any pyserial URL
+(``socket://host:port``, ``rfc2217://...``, ``loop://``) through
+:func:`serial.serial_for_url`, reads lines against a deadline and turns every
+low-level failure into one of the driver errors of :mod:`drivers.errors`:
+
+- no complete line before the deadline -> :class:`~drivers.errors.DeviceTimeout`
+- EOF, ``OSError`` or a pyserial ``SerialException`` while reading or
+  writing (port closed, cable pulled, pty master gone) ->
+  :class:`~drivers.errors.DeviceDisconnected`
+- the port cannot be opened -> :class:`~drivers.errors.DeviceDisconnected`
+"""
+
+from __future__ import annotations
+
+import termios
+import threading
+import time
+
+import serial
+
+from drivers.errors import DeviceDisconnected, DeviceTimeout
+
+# pyserial read() poll period: read(1) returns as soon as one byte is there,
+# so this only bounds how late a deadline is noticed.
+_POLL = 0.02
+# what pyserial lets through when the device disappears (termios.error is
+# not an OSError: tcdrain/tcflush on a hung-up pty raise it)
+_IO_ERRORS = (serial.SerialException, OSError, termios.error)
+
+
+class SerialTransport:
+    """A serial port read line by line with deadlines.
+
+    Parameters
+    ----------
+    port : str
+        Device name or pyserial URL.
+    baudrate : int
+        Line speed (ignored by ptys and sockets, honoured by real UARTs).
+    name : str
+        Short device description used at the start of every error message.
+    serial_options : dict, optional
+        Extra pyserial settings (``bytesize``, ``parity``, ``stopbits``,
+        ``rtscts``, ...), applied before opening.
+    """
+
+    def __init__(self, port: str, baudrate: int = 115200, name: str = "device",
+                 serial_options: dict | None = None):
+        if not port or not isinstance(port, str):
+            raise ValueError(f"{name}: port must be a device name or pyserial URL, got {port!r}")
+        self.port = port
+        self.baudrate = int(baudrate)
+        self.name = name
+        self.serial_options = dict(serial_options or {})
+        self._ser: serial.SerialBase | None = None
+        self._buf = bytearray()
+        self._lock = threading.RLock()
+
+    # -- life cycle -------------------------------------------------------
+    @property
+    def is_open(self) -> bool:
+        return self._ser is not None and self._ser.is_open
+
+    def open(self) -> None:
+        if self.is_open:
+            return
+        try:
+            ser = serial.serial_for_url(self.port, do_not_open=True)
+            ser.baudrate = self.baudrate
+            ser.timeout = _POLL
+            ser.write_timeout = 2.0
+            for key, value in self.serial_options.items():
+                setattr(ser, key, value)
+            ser.open()
+        except (*_IO_ERRORS, ValueError) as exc:
+            raise DeviceDisconnected(f"{self.name}: cannot open {self.port}: {exc}") from exc
+        self._ser = ser
+        self._buf.clear()
+
+    def close(self) -> None:
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except _IO_ERRORS:
+                pass
+
+    def _port(self) -> serial.SerialBase:
+        if self._ser is None or not self._ser.is_open:
+            raise DeviceDisconnected(f"{self.name}: port {self.port} is not open")
+        return self._ser
+
+    # -- I/O ----------------------------------------------------------------
+    def write(self, data: bytes) -> None:
+        ser = self._port()
+        try:
+            ser.write(data)
+            ser.flush()
+        except _IO_ERRORS as exc:
+            self.close()
+            raise DeviceDisconnected(f"{self.name}: write to {self.port} failed, device gone ({exc})") from exc
+
+    def _read_some(self) -> bytes:
+        ser = self._port()
+        try:
+            waiting = ser.in_waiting
+            return ser.read(max(1, waiting))
+        except _IO_ERRORS as exc:
+            self.close()
+            raise DeviceDisconnected(f"{self.name}: read from {self.port} failed, device gone ({exc})") from exc
+
+    def readline(self, timeout: float, what: str = "a reply", eol: bytes = b"\n",
+                 total: float | None = None) -> bytes:
+        """Return the next line, without its terminator (``\\r\\n`` or ``\\n``).
+
+        Raises :class:`DeviceTimeout` naming ``what`` if no complete line
+        arrives within ``timeout`` seconds (the message quotes ``total``
+        instead, when the caller's deadline started earlier).
+        """
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while True:
+                idx = self._buf.find(eol)
+                if idx >= 0:
+                    line = bytes(self._buf[:idx])
+                    del self._buf[:idx + len(eol)]
+                    return line.rstrip(b"\r")
+                if time.monotonic() >= deadline:
+                    partial = f" (got only {bytes(self._buf)!r})" if self._buf else ""
+                    raise DeviceTimeout(
+                        f"{self.name}: no {what} within {timeout if total is None else total:.2f} s"
+                        f" on {self.port}{partial}")
+                self._buf += self._read_some()
+
+    def pending(self) -> bytes:
+        """Return and remove whatever has arrived and not been read yet."""
+        with self._lock:
+            ser = self._port()
+            try:
+                while ser.in_waiting:
+                    self._buf += ser.read(ser.in_waiting)
+            except _IO_ERRORS as exc:
+                self.close()
+                raise DeviceDisconnected(f"{self.name}: read from {self.port} failed, device gone ({exc})") from exc
+            data = bytes(self._buf)
+            self._buf.clear()
+            return data
+
+    def __repr__(self) -> str:
+        return f"SerialTransport({self.port!r}, baudrate={self.baudrate})"

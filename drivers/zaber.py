@@ -1,0 +1,400 @@
+"""Zaber rotary stage over the Zaber ASCII protocol (firmware 6/7), via pyserial.
+
+Bytes on the wire (``\\n`` ends a command, ``\\r\\n`` a reply)::
+
+    /1                      @01 0 OK IDLE -- 0
+    /1 1 home               @01 1 OK BUSY WR 0
+    /1 1 move abs 192000    @01 1 OK BUSY -- 0
+    /1 1 get pos            @01 1 OK BUSY -- 96117      (while moving)
+    /1 warnings             @01 0 OK IDLE FS 01 FS
+    /1 warnings clear       @01 0 OK IDLE FS 01 FS
+
+A reply is ``@`` device axis [message id] flag (``OK``/``RJ``) status
+(``IDLE``/``BUSY``) warning (``--`` or the most severe flag) data, optionally
+followed by ``:XX`` (LRC checksum, verified here). Info lines (``#...``) and
+alerts (``!01 1 IDLE --``, sent when a move ends if ``comm.alert`` is on) are
+read and set aside while waiting for a reply.
+
+Angles are converted with ``microsteps_per_degree`` (X-RSW60: 1 536 000
+microsteps per turn, 4266.67 per degree). ``move_to`` sends ``move abs`` and
+then polls ``get pos`` until the axis is ``IDLE`` at the target.
+
+Errors: ``RJ`` -> :class:`DeviceRejected` (with the reason, e.g. BADDATA);
+a fault flag (``F*``) or an unexpected-limit ``WL`` -> :class:`DeviceFault`
+naming the flag and its meaning (clear with :meth:`clear_warnings`, or
+:meth:`recover`); no reply -> :class:`DeviceTimeout`; a line that is not a
+Zaber message, a bad checksum or a reply from another device ->
+:class:`ProtocolError`; port gone -> :class:`DeviceDisconnected`.
+
+References
+----------
+Zaber Technologies, "ASCII Protocol Manual" (firmware 6.x and 7.x):
+message format, reply fields, warning flags, checksums.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from dataclasses import dataclass
+
+from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.transport import SerialTransport
+
+X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0
+
+# Warning flags of the Zaber ASCII protocol: F* faults, W* warnings, N* notices.
+WARNING_FLAGS = {
+    "FD": "driver disabled",
+    "FQ": "encoder error",
+    "FS": "stalled and stopped",
+    "FT": "excessive twist",
+    "FB": "stream bounds error",
+    "FP": "interpolated path deviation",
+    "FE": "limit error",
+    "FM": "unexpected motion / motor fault",
+    "WH": "device not homed",
+    "WL": "unexpected limit trigger",
+    "WP": "invalid calibration / settings",
+    "WV": "voltage out of range",
+    "WT": "controller temperature high",
+    "WM": "displaced when stationary",
+    "WR": "no reference position (home the stage)",
+    "NC": "manual control",
+    "NI": "command interrupted",
+    "ND": "stream discontinuity",
+    "NU": "setting update pending",
+    "NJ": "joystick calibrating",
+}
+
+# Flags that stop a move: every fault, and an unexpected limit switch.
+FATAL_WARNINGS = ("WL",)
+
+_REPLY = re.compile(
+    r"^@(?P<dev>\d+) (?P<axis>\d+)(?: (?P<id>\d+))? (?P<flag>OK|RJ) (?P<status>IDLE|BUSY)"
+    r" (?P<warn>--|[A-Z]{2})(?: (?P<data>.*?))?$")
+_ALERT = re.compile(r"^!(?P<dev>\d+) (?P<axis>\d+) (?P<status>IDLE|BUSY) (?P<warn>--|[A-Z]{2})(?: .*)?$")
+_INFO = re.compile(r"^#(?P<dev>\d+) (?P<axis>\d+)(?: .*)?$")
+
+_CONFIG_KEYS = {"driver", "port", "baudrate", "device", "device_address", "axis", "microsteps_per_degree",
+                "steps_per_degree", "limits", "reply_timeout", "poll_interval",
+                "move_timeout", "home_timeout", "tolerance_microsteps", "name"}
+
+
+def describe_flag(flag: str) -> str:
+    return f"{flag} ({WARNING_FLAGS.get(flag, 'unknown warning')})"
+
+
+def is_fatal(flag: str) -> bool:
+    return flag.startswith("F") or flag in FATAL_WARNINGS
+
+
+def strip_checksum(text: str, source: str) -> str:
+    """Verify and remove a trailing ``:XX`` checksum, if present."""
+    m = re.search(r":([0-9A-Fa-f]{2})$", text)
+    if not m:
+        return text
+    body = text[1:m.start()]
+    if (sum(body.encode("ascii")) + int(m.group(1), 16)) & 0xFF:
+        raise ProtocolError(f"{source}: bad checksum in {text!r}")
+    return text[:m.start()]
+
+
+@dataclass(frozen=True)
+class ZaberReply:
+    """One decoded ``@`` reply."""
+
+    device: int
+    axis: int
+    message_id: int | None
+    ok: bool
+    busy: bool
+    warning: str  # "--" or a flag such as "FS"
+    data: str
+    raw: str
+
+
+class ZaberTurntable:
+    """Zaber ASCII rotary stage; satisfies :class:`drivers.protocols.Turntable`.
+
+    Parameters
+    ----------
+    port : str
+        Serial device or pyserial URL.
+    baudrate : int
+        115200 (Zaber default for ASCII).
+    device, axis : int
+        Device address on the chain and axis number (1, 1).
+    microsteps_per_degree : float
+        Conversion of angles (default: X-RSW60, 1536000/360).
+    limits : (float, float)
+        Allowed range of ``move_to`` in degrees; outside it, ``ValueError``
+        before anything is sent.
+    reply_timeout : float
+        Seconds to wait for each reply.
+    poll_interval : float
+        Seconds between ``get pos`` polls while waiting for a move.
+    tolerance_microsteps : int
+        How far from the target an idle axis may be and count as arrived.
+    """
+
+    def __init__(self, port: str, *, baudrate: int = 115200, device: int = 1, axis: int = 1,
+                 microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+                 limits: tuple[float, float] = (0.0, 360.0), reply_timeout: float = 1.0,
+                 poll_interval: float = 0.05, move_timeout: float = 60.0,
+                 home_timeout: float = 120.0, tolerance_microsteps: int = 1, name: str | None = None):
+        if microsteps_per_degree <= 0:
+            raise ValueError(f"microsteps_per_degree must be positive, got {microsteps_per_degree}")
+        lo, hi = (float(v) for v in limits)
+        if not lo < hi:
+            raise ValueError(f"limits must be (min, max) with min < max, got {limits}")
+        if device < 0 or axis < 0:
+            raise ValueError(f"device and axis must be >= 0, got {device}, {axis}")
+        self.device = int(device)
+        self.axis_number = int(axis)
+        self.microsteps_per_degree = float(microsteps_per_degree)
+        self._limits = (lo, hi)
+        self.reply_timeout = float(reply_timeout)
+        self.poll_interval = float(poll_interval)
+        self.move_timeout = float(move_timeout)
+        self.home_timeout = float(home_timeout)
+        self.tolerance = int(tolerance_microsteps)
+        self.name = name or f"zaber {port} device {device} axis {axis}"
+        self.transport = SerialTransport(port, baudrate, name=self.name)
+        self.alerts: list[str] = []  # alert lines seen (most recent last)
+        self.infos: list[str] = []
+        self._lock = threading.RLock()
+        self._target: int | None = None
+
+    @classmethod
+    def from_config(cls, cfg: dict, **ctx) -> "ZaberTurntable":
+        unknown = sorted(set(cfg) - _CONFIG_KEYS)
+        if unknown:
+            raise ValueError(f"zaber turntable: unknown config key {unknown[0]!r}"
+                             f" (known: {', '.join(sorted(_CONFIG_KEYS - {'driver'}))})")
+        if not cfg.get("port"):
+            raise ValueError("zaber turntable: missing config key 'port' (device name or pyserial URL)")
+        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
+        if "device_address" in cfg:
+            if "device" in cfg:
+                raise ValueError("zaber turntable: give 'device' or 'device_address', not both")
+            kw["device"] = int(cfg["device_address"])
+        if "steps_per_degree" in cfg:
+            if "microsteps_per_degree" in cfg:
+                raise ValueError("zaber turntable: give 'microsteps_per_degree' or 'steps_per_degree', not both")
+            kw["microsteps_per_degree"] = cfg["steps_per_degree"]
+        if "limits" in kw:
+            kw["limits"] = tuple(kw["limits"])
+        port = kw.pop("port")
+        return cls(port, **kw)
+
+    # -- life cycle -----------------------------------------------------------
+    def open(self) -> None:
+        self.transport.open()
+        try:
+            reply = self.command("", axis_scope=False)  # "/1": is the device there?
+            if not reply.ok:  # warnings do not stop opening: recover() needs an open port
+                raise DeviceRejected(f"{self.name}: status request rejected: {reply.raw!r}")
+        except Exception:
+            self.transport.close()
+            raise
+
+    def close(self) -> None:
+        self.transport.close()
+
+    def __enter__(self) -> "ZaberTurntable":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- wire level ------------------------------------------------------------
+    def _format(self, command: str, axis_scope: bool) -> bytes:
+        parts = [f"/{self.device}"]
+        if axis_scope:
+            parts.append(str(self.axis_number))
+        if command:
+            parts.append(command)
+        return (" ".join(parts) + "\n").encode("ascii")
+
+    def parse_line(self, line: bytes) -> ZaberReply | None:
+        """Decode one line: a reply, or None for info/alert lines (recorded)."""
+        try:
+            text = line.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise ProtocolError(f"{self.name}: garbage on the line: {line!r}") from None
+        text = strip_checksum(text, self.name) if text else text
+        m = _REPLY.match(text)
+        if m:
+            return ZaberReply(int(m["dev"]), int(m["axis"]), int(m["id"]) if m["id"] else None,
+                              m["flag"] == "OK", m["status"] == "BUSY", m["warn"], m["data"] or "", text)
+        if _ALERT.match(text):
+            self.alerts.append(text)
+            return None
+        if _INFO.match(text):
+            self.infos.append(text)
+            return None
+        raise ProtocolError(f"{self.name}: not a Zaber ASCII message: {line!r}")
+
+    def command(self, command: str, axis_scope: bool = True) -> ZaberReply:
+        """Send one command (``"get pos"``, ``"warnings"``, ...) and return its reply.
+
+        ``axis_scope=False`` addresses the device (``/1 warnings``) rather
+        than the axis (``/1 1 get pos``). An ``RJ`` reply is returned, not
+        raised; see :meth:`_check`.
+        """
+        data = self._format(command, axis_scope)
+        what = f"reply to {data.decode().strip()!r}"
+        with self._lock:
+            stale = self.transport.pending()
+            for line in stale.splitlines():
+                if line.strip():
+                    try:
+                        self.parse_line(line)
+                    except ProtocolError:
+                        pass  # leftovers of an earlier failure
+            self.transport.write(data)
+            deadline = time.monotonic() + self.reply_timeout
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise DeviceTimeout(f"{self.name}: no {what} within {self.reply_timeout:.2f} s")
+                line = self.transport.readline(remaining, what, total=self.reply_timeout)
+                if not line.strip():
+                    continue
+                reply = self.parse_line(line)
+                if reply is None:
+                    continue
+                if reply.device != self.device:
+                    raise ProtocolError(f"{self.name}: reply from device {reply.device}, "
+                                        f"expected {self.device}: {reply.raw!r}")
+                return reply
+
+    def _check(self, reply: ZaberReply, what: str, fault: bool = True) -> ZaberReply:
+        if not reply.ok:
+            raise DeviceRejected(f"{self.name}: {what!r} rejected: {reply.data or 'no reason'}"
+                                 f" (reply {reply.raw!r})")
+        if fault and reply.warning != "--" and is_fatal(reply.warning):
+            raise DeviceFault(f"{self.name}: warning {describe_flag(reply.warning)} during {what!r};"
+                              f" clear it with clear_warnings() / recover()")
+        return reply
+
+    # -- conversions -------------------------------------------------------------
+    def to_microsteps(self, degrees: float) -> int:
+        return int(round(degrees * self.microsteps_per_degree))
+
+    def to_degrees(self, microsteps: int) -> float:
+        return microsteps / self.microsteps_per_degree
+
+    # -- Turntable protocol ----------------------------------------------------
+    @property
+    def limits(self) -> tuple[float, float]:
+        return self._limits
+
+    def _get_pos(self, fault: bool = True) -> ZaberReply:
+        reply = self._check(self.command("get pos"), "get pos", fault)
+        try:
+            int(reply.data)
+        except ValueError:
+            raise ProtocolError(f"{self.name}: position is not an integer: {reply.raw!r}") from None
+        return reply
+
+    def position(self) -> float:
+        return self.to_degrees(int(self._get_pos(fault=False).data))
+
+    def home(self, timeout: float | None = None) -> None:
+        timeout = self.home_timeout if timeout is None else timeout
+        with self._lock:
+            self._check(self.command("home"), "home")
+            self._target = None
+            self._wait_idle(timeout, "home", target=None)
+
+    def start_move(self, degrees: float) -> int:
+        """Send ``move abs`` and return the target in microsteps, without waiting."""
+        lo, hi = self._limits
+        if not lo <= degrees <= hi:
+            raise ValueError(f"{self.name}: target {degrees}° outside limits [{lo}, {hi}]°")
+        steps = self.to_microsteps(degrees)
+        with self._lock:
+            self._check(self.command(f"move abs {steps}"), f"move abs {steps}")
+            self._target = steps
+        return steps
+
+    def move_to(self, degrees: float, timeout: float | None = None) -> float:
+        timeout = self.move_timeout if timeout is None else timeout
+        with self._lock:
+            steps = self.start_move(degrees)
+            return self._wait_idle(timeout, f"move to {degrees}°", target=steps)
+
+    def wait_idle(self, timeout: float | None = None) -> float:
+        """Wait until the axis stops (at the last target, if any); returns degrees."""
+        timeout = self.move_timeout if timeout is None else timeout
+        return self._wait_idle(timeout, "wait", target=self._target)
+
+    def _wait_idle(self, timeout: float, what: str, target: int | None) -> float:
+        deadline = time.monotonic() + timeout
+        while True:
+            reply = self._get_pos(fault=False)
+            pos = int(reply.data)
+            if reply.warning != "--" and is_fatal(reply.warning):
+                raise DeviceFault(f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}°:"
+                                  f" warning {describe_flag(reply.warning)};"
+                                  f" clear it with clear_warnings() / recover()")
+            if not reply.busy:
+                if target is not None and abs(pos - target) > self.tolerance:
+                    raise DeviceFault(
+                        f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}° short of the target"
+                        f" {self.to_degrees(target):.4f}° (warning {reply.warning})")
+                return self.to_degrees(pos)
+            if time.monotonic() >= deadline:
+                try:
+                    self.stop()
+                finally:
+                    raise DeviceTimeout(f"{self.name}: {what} not finished within {timeout:.2f} s"
+                                        f" (at {self.to_degrees(pos):.4f}°); stage stopped")
+            time.sleep(self.poll_interval)
+
+    def stop(self) -> None:
+        with self._lock:
+            self._target = None
+            reply = self.command("stop")
+            if not reply.ok:
+                raise DeviceRejected(f"{self.name}: 'stop' rejected: {reply.data}")
+
+    def warnings(self) -> list[str]:
+        """Active warning flags (``/1 warnings``), e.g. ``["FS", "WR"]``."""
+        return self._parse_warnings(self.command("warnings", axis_scope=False), "warnings")
+
+    def clear_warnings(self) -> list[str]:
+        """Clear warnings (``/1 warnings clear``); returns the flags that were set."""
+        return self._parse_warnings(self.command("warnings clear", axis_scope=False), "warnings clear")
+
+    def recover(self) -> list[str]:
+        """Clear the device's warnings so that it can move again; returns what was cleared."""
+        return self.clear_warnings()
+
+    def _parse_warnings(self, reply: ZaberReply, what: str) -> list[str]:
+        if not reply.ok:
+            raise DeviceRejected(f"{self.name}: {what!r} rejected: {reply.data}")
+        words = reply.data.split()
+        try:
+            count = int(words[0])
+        except (IndexError, ValueError):
+            raise ProtocolError(f"{self.name}: bad reply to {what!r}: {reply.raw!r}") from None
+        flags = words[1:]
+        if count != len(flags):
+            raise ProtocolError(f"{self.name}: {what!r} announced {count} flags, got {flags}: {reply.raw!r}")
+        return flags
+
+    def status(self) -> dict:
+        reply = self._get_pos(fault=False)
+        flags = self.warnings()
+        return {"busy": reply.busy, "warnings": flags,
+                "descriptions": [describe_flag(f) for f in flags],
+                "position": self.to_degrees(int(reply.data)),
+                "fault": any(is_fatal(f) for f in flags)}
+
+    def __repr__(self) -> str:
+        return f"ZaberTurntable({self.transport.port!r}, device={self.device}, axis={self.axis_number})"

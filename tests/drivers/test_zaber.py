@@ -1,0 +1,272 @@
+"""Zaber ASCII driver: byte-exact command sequences, and the real driver over a
+real pty against the emulator (motion, faults, recovery)."""
+
+import time
+
+import pytest
+
+from drivers import open_turntable
+from drivers.errors import (DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout,
+                            ProtocolError)
+from drivers.sim.world import SimWorld
+from drivers.sim.zaber_emulator import ZaberEmulator, start_zaber_emulator, zaber_checksum
+from drivers.testing import ScriptedDevice
+from drivers.zaber import ZaberTurntable
+
+MSPD = 1536000 / 360.0  # X-RSW60 microsteps per degree
+FAST = dict(speed_deg_s=3600.0, accel_deg_s2=72000.0)
+
+
+@pytest.fixture
+def emu():
+    handle = start_zaber_emulator(**FAST)
+    yield handle
+    handle.stop()
+
+
+def driver(port, **kw):
+    kw.setdefault("poll_interval", 0.005)
+    kw.setdefault("reply_timeout", 0.5)
+    return ZaberTurntable(port, **kw)
+
+
+# -- byte-exact ------------------------------------------------------------
+
+def test_home_move_and_position_bytes():
+    script = [
+        (b"/1\n", b"@01 0 OK IDLE WR 0\r\n"),
+        (b"/1 1 home\n", b"@01 1 OK BUSY WR 0\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK BUSY WR 51200\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 0\r\n"),
+        (b"/1 1 move abs 192000\n", b"@01 1 OK BUSY -- 0\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK BUSY -- 96117\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
+        (b"/1 1 stop\n", b"@01 1 OK IDLE -- 0\r\n"),
+        (b"/1 warnings clear\n", b"@01 0 OK IDLE FS 01 FS\r\n"),
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port) as tt:
+            tt.home()
+            assert tt.move_to(45.0) == 45.0
+            assert tt.position() == 45.0
+            tt.stop()
+            assert tt.clear_warnings() == ["FS"]
+
+
+def test_checksummed_replies_and_info_and_alert_lines_are_understood():
+    body = b"01 1 OK IDLE -- 4267"
+    reply = b"@" + body + b":%02X\r\n" % zaber_checksum(body)
+    script = [
+        (b"/1\n", b"#01 0 an info line\r\n!01 1 IDLE --\r\n@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 1 get pos\n", reply),
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port) as tt:
+            assert tt.position() == pytest.approx(4267 / MSPD)
+            assert tt.alerts == ["!01 1 IDLE --"] and tt.infos == ["#01 0 an info line"]
+
+
+def test_bad_checksum_is_a_protocol_error():
+    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+              (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port) as tt:
+            with pytest.raises(ProtocolError, match="bad checksum in '@01 1 OK IDLE -- 4267:00'"):
+                tt.position()
+
+
+def test_reply_from_another_device_is_a_protocol_error():
+    script = [(b"/1\n", b"@02 0 OK IDLE -- 0\r\n")]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with pytest.raises(ProtocolError, match="reply from device 2, expected 1"):
+            driver(dev.port).open()
+
+
+# -- against the emulator --------------------------------------------------
+
+def test_moves_around_the_circle_read_back_and_drive_the_world():
+    world = SimWorld()
+    with start_zaber_emulator(world=world, **FAST) as h, driver(h.port_path) as tt:
+        assert "WR" in tt.warnings()  # powered up without a reference position
+        tt.home()
+        assert tt.warnings() == []
+        for angle in range(0, 360, 45):
+            got = tt.move_to(float(angle))
+            assert abs(got - angle) <= 0.5 / MSPD
+            assert tt.position() == got
+            assert world.stage_deg == pytest.approx(got, abs=1e-9)
+        assert h.emulator.position_steps(time.monotonic()) == round(315 * MSPD)
+
+
+def test_position_is_reported_while_moving():
+    with start_zaber_emulator(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, driver(h.port_path) as tt:
+        tt.home()
+        tt.start_move(300.0)
+        seen = []
+        while True:
+            st = tt.status()
+            if not st["busy"]:
+                break
+            seen.append(st["position"])
+            time.sleep(0.03)
+        assert len(seen) >= 5
+        assert all(0.0 <= p < 300.0 for p in seen)
+        assert all(b > a for a, b in zip(seen, seen[1:])), seen
+        assert tt.wait_idle(timeout=2.0) == pytest.approx(300.0, abs=1e-3)
+
+
+def test_rejected_command_raises_and_the_next_one_works(emu):
+    with driver(emu.port_path) as tt:
+        tt.home()
+        emu.emulator.inject("reject")
+        with pytest.raises(DeviceRejected, match=r"'move abs 384000' rejected: BADDATA"):
+            tt.move_to(90.0)
+        assert tt.move_to(90.0) == 90.0
+
+
+def test_target_beyond_the_device_limit_is_rejected_by_the_device():
+    with start_zaber_emulator(limit_max=round(180 * MSPD), **FAST) as h, driver(h.port_path) as tt:
+        with pytest.raises(DeviceRejected, match="BADDATA"):
+            tt.move_to(270.0)
+        reply = tt.command("fly")
+        assert not reply.ok and reply.data == "BADCOMMAND"
+        assert tt.move_to(170.0) == pytest.approx(170.0, abs=1e-3)
+
+
+def test_out_of_limits_target_is_refused_before_sending(emu):
+    with driver(emu.port_path, limits=(0.0, 180.0)) as tt:
+        n = len(emu.emulator.received)
+        with pytest.raises(ValueError, match=r"target 200.0° outside limits \[0.0, 180.0\]°"):
+            tt.move_to(200.0)
+        assert len(emu.emulator.received) == n
+
+
+@pytest.mark.parametrize("flag, meaning", [("FS", "stalled and stopped"), ("WL", "unexpected limit trigger"),
+                                           ("FQ", "encoder error")])
+def test_fault_flag_raises_and_clearing_warnings_recovers(emu, flag, meaning):
+    with driver(emu.port_path) as tt:
+        tt.home()
+        emu.emulator.inject("stall", at=0.4, flag=flag)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceFault, match=rf"move to 180.0° stopped at .*warning {flag} \({meaning}\)"):
+            tt.move_to(180.0, timeout=2.0)
+        assert time.monotonic() - t0 < 1.0
+        stopped = tt.position()
+        assert 0.0 < stopped < 180.0
+        assert tt.status()["warnings"] == [flag] and tt.status()["fault"]
+        with pytest.raises(DeviceFault, match=flag):  # the flag stays until cleared
+            tt.move_to(180.0)
+        tt.close()
+        tt.open()  # a faulted device can still be opened, to recover it
+        assert tt.recover() == [flag]
+        assert tt.move_to(180.0) == 180.0
+        assert tt.status()["warnings"] == []
+
+
+def test_no_reply_times_out_within_the_reply_timeout_then_recovers(emu):
+    with driver(emu.port_path, reply_timeout=0.3) as tt:
+        tt.home()
+        emu.emulator.inject("no_reply")
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeout, match=r"no reply to '/1 1 move abs 192000' within 0.30 s"):
+            tt.move_to(45.0)
+        assert 0.29 <= time.monotonic() - t0 < 0.6
+        assert tt.move_to(45.0) == 45.0
+
+
+def test_garbage_bytes_are_a_protocol_error_then_recovers(emu):
+    with driver(emu.port_path) as tt:
+        tt.home()
+        emu.emulator.inject("garbage")
+        with pytest.raises(ProtocolError, match="garbage on the line"):
+            tt.position()
+        assert tt.move_to(45.0) == 45.0
+
+
+def test_device_vanishing_mid_move_is_a_disconnect_within_the_timeout():
+    h = start_zaber_emulator(speed_deg_s=600.0, accel_deg_s2=6000.0)
+    try:
+        with driver(h.port_path) as tt:
+            tt.home()
+            h.emulator.inject("vanish", at=0.3)
+            t0 = time.monotonic()
+            with pytest.raises(DeviceDisconnected, match="device gone"):
+                tt.move_to(270.0, timeout=5.0)
+            assert time.monotonic() - t0 < 1.0
+            with pytest.raises(DeviceDisconnected):
+                tt.position()
+    finally:
+        h.stop()
+
+
+def test_move_that_does_not_finish_times_out_and_stops_the_stage():
+    with start_zaber_emulator(speed_deg_s=90.0, accel_deg_s2=900.0) as h, driver(h.port_path) as tt:
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeout, match=r"move to 270.0° not finished within 0.30 s .*stage stopped"):
+            tt.move_to(270.0, timeout=0.3)
+        assert time.monotonic() - t0 < 0.8
+        st = tt.status()
+        assert not st["busy"] and 0.0 < st["position"] < 270.0
+
+
+def test_alerts_and_checksums_from_the_emulator_do_not_disturb_the_driver():
+    with start_zaber_emulator(alerts=True, checksums=True, **FAST) as h, driver(h.port_path) as tt:
+        tt.home()
+        assert tt.move_to(90.0) == 90.0
+        tt.position()  # reads past the alert sent when the move ended
+        assert tt.alerts and tt.alerts[-1] == "!01 1 IDLE --"
+
+
+def test_emulator_ignores_other_addresses_and_refuses_other_axes(emu):
+    with pytest.raises(DeviceTimeout, match="no reply to '/2'"):
+        driver(emu.port_path, reply_timeout=0.2, device=2).open()
+    with driver(emu.port_path, axis=2) as tt:
+        with pytest.raises(DeviceRejected, match="BADAXIS"):
+            tt.position()
+
+
+# -- configuration -------------------------------------------------------------
+
+def test_from_config_through_the_registry(emu):
+    tt = open_turntable({"driver": "zaber", "port": emu.port_path, "device_address": 1,
+                         "steps_per_degree": MSPD / 2, "limits": [0, 720], "poll_interval": 0.005})
+    assert isinstance(tt, ZaberTurntable) and tt.limits == (0.0, 720.0)
+    with tt:
+        tt.home()
+        assert tt.move_to(450.0) == pytest.approx(450.0, abs=1e-9)
+        assert emu.emulator.position_steps(time.monotonic()) == round(225 * MSPD)
+
+
+@pytest.mark.parametrize("cfg, message", [
+    ({"driver": "zaber"}, "missing config key 'port'"),
+    ({"driver": "zaber", "port": "/dev/null", "speed": 3}, "unknown config key 'speed'"),
+    ({"driver": "zaber", "port": "x", "steps_per_degree": 1, "microsteps_per_degree": 1}, "not both"),
+    ({"driver": "zaber", "port": "x", "limits": [10, 0]}, "min < max"),
+])
+def test_bad_config_names_the_problem(cfg, message):
+    with pytest.raises(ValueError, match=message):
+        open_turntable(cfg)
+
+
+def test_unopenable_port_and_url_ports():
+    with pytest.raises(DeviceDisconnected, match="cannot open /nonexistent/tty"):
+        ZaberTurntable("/nonexistent/tty").open()
+    # any pyserial URL opens; loop:// echoes the command, which is no Zaber reply
+    with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'/1'"):
+        driver("loop://").open()
+
+
+def test_emulator_fault_names_are_checked():
+    with pytest.raises(ValueError, match="unknown fault 'explode'"):
+        ZaberEmulator().inject("explode")
+
+
+def test_reply_parsing_with_message_id_and_garbage():
+    tt = ZaberTurntable("loop://")
+    reply = tt.parse_line(b"@01 1 05 OK BUSY FS 12\r")
+    assert (reply.device, reply.axis, reply.message_id, reply.ok, reply.busy, reply.warning, reply.data) == \
+        (1, 1, 5, True, True, "FS", "12")
+    assert tt.parse_line(b"@01 0 RJ IDLE -- BADCOMMAND").ok is False
+    with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'@01 1 OK'"):
+        tt.parse_line(b"@01 1 OK")
