@@ -1,0 +1,293 @@
+"""A simulated grey camera looking at the calibration harp.
+
+:class:`SimulatedCamera` satisfies :class:`drivers.protocols.Camera`. Each
+:meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
+at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
+that moment* (stage angle + harp offset), through the demo lens at the
+world's current focus (:func:`drivers.sim.lens.lens_for_focus`), with the
+camera's exposure and gain, and noise seeded by ``seed + frame counter`` (so
+successive frames differ and a session replays identically).
+
+Brightness: the rendered intensities are multiplied by
+``(exposure_us / reference_exposure_us) * 10 ** (gain_db / 20)`` and saturate
+at the top of the pixel format. Gain also lowers the number of electrons per
+grey level, so shot noise (when enabled) grows with gain like on a sensor;
+the read noise ``noise_sigma`` is in output grey levels (8-bit scale).
+
+Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections import deque
+
+import numpy as np
+
+from drivers.errors import DeviceDisconnected, DeviceTimeout
+from drivers.protocols import CameraIdentity, Frame
+from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
+from drivers.sim.world import SimWorld
+from pipeline.render import HarpScene, Rendered, render_harp
+
+EXPOSURE_RANGE_US = (20.0, 1_000_000.0)
+GAIN_RANGE_DB = (0.0, 24.0)
+FAULT_KINDS = ("timeout", "corrupt", "disconnect")
+_TIMEOUT_WAIT_S = 0.05  # an injected timeout waits min(timeout, this) before raising
+
+_SCENE_KEYS = ("spacing_px", "string_width_px", "phase_px", "background", "string_level", "blur_px",
+               "vignetting", "dust", "dust_seed", "frame", "frame_level", "frame_depth_px", "frame_side")
+_CAMERA_KEYS = ("width", "height", "bit_depth", "pixel_format", "seed", "noise_sigma", "shot_noise",
+                "electrons_per_level", "exposure_us", "gain_db", "reference_exposure_us", "serial",
+                "focus", "harp_offset_deg")
+CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
+"""Keys accepted by :meth:`SimulatedCamera.from_config`."""
+
+
+def _clamp(v: float, lo_hi: tuple[float, float]) -> float:
+    return float(min(max(float(v), lo_hi[0]), lo_hi[1]))
+
+
+class SimulatedCamera:
+    """Simulated harp camera (see the module docstring).
+
+    Parameters
+    ----------
+    world : the shared simulated world (a new one if None).
+    width, height : sensor size (default 1280 x 960).
+    bit_depth : 8 (``Mono8``) or 16 (``Mono16``).
+    seed : base seed of the noise; frame ``i`` uses ``seed + i``.
+    noise_sigma, shot_noise, electrons_per_level : noise model of
+        :func:`pipeline.render.render_harp` (at 0 dB gain).
+    scene : the harp; its ``angle_deg`` is ignored (taken from the world).
+    exposure_us, gain_db : initial settings (clamped to the ranges).
+    reference_exposure_us : exposure at which the scene has its nominal levels.
+    serial : reported in :attr:`identity`.
+    """
+
+    def __init__(self, world: SimWorld | None = None, *, width: int = 1280, height: int = 960,
+                 bit_depth: int = 8, seed: int = 0, noise_sigma: float = 1.5, shot_noise: bool = False,
+                 electrons_per_level: float = 40.0, scene: HarpScene = HarpScene(),
+                 exposure_us: float = 10_000.0, gain_db: float = 0.0,
+                 reference_exposure_us: float = 10_000.0, serial: str = "SIM-0001"):
+        if int(width) != width or int(height) != height or width < 16 or height < 16:
+            raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
+        if bit_depth not in (8, 16):
+            raise ValueError(f"sim camera: bit_depth must be 8 or 16, got {bit_depth!r}")
+        if not noise_sigma >= 0 or not electrons_per_level > 0 or not reference_exposure_us > 0:
+            raise ValueError("sim camera: noise_sigma must be >= 0, electrons_per_level and "
+                             "reference_exposure_us > 0")
+        self.world = world if world is not None else SimWorld()
+        self._size = (int(width), int(height))
+        self._bit_depth = int(bit_depth)
+        self.seed = int(seed)
+        self.noise_sigma = float(noise_sigma)
+        self.shot_noise = bool(shot_noise)
+        self.electrons_per_level = float(electrons_per_level)
+        self.scene = scene
+        self.reference_exposure_us = float(reference_exposure_us)
+        self._identity = CameraIdentity("harp station", "SimulatedCamera", str(serial))
+        self._exposure = _clamp(exposure_us, EXPOSURE_RANGE_US)
+        self._gain = _clamp(gain_db, GAIN_RANGE_DB)
+        self._open = False
+        self._counter = 0
+        self._faults: deque[str] = deque()
+        #: the :class:`pipeline.render.Rendered` behind the last frame (exact truth), or None
+        self.last_rendered: Rendered | None = None
+        # render once with the scene at angle 0 to validate it now, not at the first capture
+        render_harp(16, 16, dataclasses.replace(scene, angle_deg=0.0), noise_sigma=0.0)
+
+    # ------------------------------------------------------------ config
+    @classmethod
+    def from_config(cls, cfg: dict, world: SimWorld | None = None, **context) -> "SimulatedCamera":
+        """Create from a configuration mapping (keys: :data:`CONFIG_KEYS`).
+
+        ``driver`` is ignored (it selected this class). ``pixel_format``
+        (``Mono8``/``Mono16``) is an alternative to ``bit_depth``. ``focus``
+        and ``harp_offset_deg`` set the (given or new) world. Other context
+        passed by :func:`drivers.open_camera` is ignored. An unknown key or a
+        bad value raises ValueError naming the key.
+        """
+        cfg = dict(cfg)
+        for key in cfg:
+            if key not in CONFIG_KEYS:
+                raise ValueError(f"sim camera: unknown config key {key!r}; known: {', '.join(CONFIG_KEYS)}")
+        world = world if world is not None else SimWorld()
+        kw: dict = {}
+        scene_kw: dict = {}
+        try:
+            for key, value in cfg.items():
+                if key in ("width", "height", "bit_depth", "seed", "dust", "dust_seed", "frame_side"):
+                    if isinstance(value, bool) or int(value) != value:
+                        raise ValueError(f"must be an integer, got {value!r}")
+                    value = int(value)
+                elif key in ("shot_noise", "frame"):
+                    if not isinstance(value, bool):
+                        raise ValueError(f"must be true or false, got {value!r}")
+                elif key in ("serial", "pixel_format", "driver"):
+                    value = str(value)
+                else:
+                    value = float(value)
+                if key in _SCENE_KEYS:
+                    scene_kw[key] = value
+                elif key == "pixel_format":
+                    if value not in ("Mono8", "Mono16"):
+                        raise ValueError(f"must be Mono8 or Mono16, got {value!r}")
+                    bd = 8 if value == "Mono8" else 16
+                    if "bit_depth" in cfg and cfg["bit_depth"] != bd:
+                        raise ValueError(f"{value} contradicts bit_depth {cfg['bit_depth']}")
+                    kw["bit_depth"] = bd
+                elif key == "focus":
+                    world.focus = _clamp(value, FOCUS_RANGE)
+                elif key == "harp_offset_deg":
+                    world.harp_offset_deg = value
+                elif key != "driver":
+                    kw[key] = value
+            scene = HarpScene(**scene_kw)
+        except (TypeError, ValueError) as exc:
+            bad = key if "key" in locals() else "?"
+            raise ValueError(f"sim camera: config key {bad!r}: {exc}") from None
+        try:
+            return cls(world, scene=scene, **kw)
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+
+    # ------------------------------------------------------------ lifecycle
+    def open(self) -> None:
+        self._open = True
+        self._counter = 0
+
+    def close(self) -> None:
+        self._open = False
+
+    def __enter__(self) -> "SimulatedCamera":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def is_open(self) -> bool:
+        return self._open
+
+    def _require_open(self, what: str) -> None:
+        if not self._open:
+            raise DeviceDisconnected(f"sim camera {self._identity.serial}: cannot {what}, camera is not open")
+
+    # ------------------------------------------------------------ properties
+    @property
+    def identity(self) -> CameraIdentity:
+        return self._identity
+
+    @property
+    def sensor_size(self) -> tuple[int, int]:
+        return self._size
+
+    @property
+    def pixel_format(self) -> str:
+        return "Mono8" if self._bit_depth == 8 else "Mono16"
+
+    # ------------------------------------------------------------ settings
+    def set_exposure(self, microseconds: float) -> float:
+        """Set the exposure time, clamped to :data:`EXPOSURE_RANGE_US`; returns the read-back."""
+        self._require_open("set exposure")
+        self._exposure = _clamp(microseconds, EXPOSURE_RANGE_US)
+        return self._exposure
+
+    def get_exposure(self) -> float:
+        return self._exposure
+
+    def set_gain(self, db: float) -> float:
+        """Set the gain, clamped to :data:`GAIN_RANGE_DB`; returns the read-back."""
+        self._require_open("set gain")
+        self._gain = _clamp(db, GAIN_RANGE_DB)
+        return self._gain
+
+    def get_gain(self) -> float:
+        return self._gain
+
+    def lock_focus(self, position: float) -> float:
+        """Set the world's focus (clamped to :data:`drivers.sim.lens.FOCUS_RANGE`); returns it."""
+        self._require_open("lock focus")
+        self.world.focus = _clamp(position, FOCUS_RANGE)
+        return self.world.focus
+
+    def get_focus(self) -> float | None:
+        return float(self.world.focus)
+
+    # ------------------------------------------------------------ faults
+    def fail_next(self, n: int = 1, kind: str = "timeout") -> None:
+        """Make the next ``n`` captures fail.
+
+        ``kind``: ``"timeout"`` (wait ``min(timeout, 0.05 s)`` then raise
+        :class:`~drivers.errors.DeviceTimeout`), ``"corrupt"`` (return a frame
+        whose rows from a random row on are garbage, flagged by
+        ``extra["corrupt"] = True`` and ``extra["corrupt_rows"] = [first, end)``)
+        or ``"disconnect"`` (the camera closes and raises
+        :class:`~drivers.errors.DeviceDisconnected`).
+        """
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {kind!r}")
+        if int(n) != n or n < 0:
+            raise ValueError(f"fault count must be a non-negative integer, got {n!r}")
+        self._faults.extend([kind] * int(n))
+
+    # ------------------------------------------------------------ capture
+    def render(self, counter: int | None = None, angle_deg: float | None = None,
+               focus: float | None = None) -> Rendered:
+        """Render what the camera sees (no fault, no counter change).
+
+        ``angle_deg`` and ``focus`` default to the world's current string
+        angle and focus; ``counter`` (default: the next frame's) selects the noise.
+        """
+        w, h = self._size
+        counter = self._counter if counter is None else counter
+        angle_deg = self.world.string_angle_deg() if angle_deg is None else angle_deg
+        focus = self.world.focus if focus is None else focus
+        gain_lin = 10.0 ** (self._gain / 20.0)
+        scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
+        return render_harp(w, h, scene, lens=lens_for_focus(focus, w, h),
+                           noise_sigma=self.noise_sigma, shot_noise=self.shot_noise,
+                           bit_depth=self._bit_depth, seed=self.seed + counter,
+                           exposure=self._exposure / self.reference_exposure_us * gain_lin,
+                           electrons_per_level=self.electrons_per_level / gain_lin)
+
+    def capture(self, timeout: float = 5.0) -> Frame:
+        """Render one frame now; raises DeviceTimeout/DeviceDisconnected on injected faults."""
+        self._require_open("capture")
+        fault = self._faults.popleft() if self._faults else None
+        if fault == "timeout":
+            time.sleep(max(0.0, min(float(timeout), _TIMEOUT_WAIT_S)))
+            raise DeviceTimeout(f"sim camera {self._identity.serial}: no frame within {timeout:g} s "
+                                "(injected timeout)")
+        if fault == "disconnect":
+            self._open = False
+            raise DeviceDisconnected(f"sim camera {self._identity.serial}: device vanished during capture "
+                                     "(injected disconnect)")
+        stamp = time.time()
+        # one consistent snapshot of the world for this exposure
+        with self.world._lock:
+            stage, offset, focus = self.world.stage_deg, self.world.harp_offset_deg, self.world.focus
+        angle = (stage + offset) % 180.0
+        r = self.render(angle_deg=angle, focus=focus)
+        self.last_rendered = r
+        image = r.image
+        extra = {
+            "sim": {"string_angle_deg": angle, "stage_deg": float(stage), "harp_offset_deg": float(offset),
+                    "lens": r.lens.to_dict(), "seed": self.seed + self._counter},
+        }
+        if fault == "corrupt":
+            h = image.shape[0]
+            rng = np.random.default_rng(self.seed + self._counter + 1_000_003)
+            first = int(rng.integers(h // 4, 3 * h // 4))
+            image = image.copy()
+            image[first:] = rng.integers(0, np.iinfo(image.dtype).max, size=image[first:].shape,
+                                         dtype=image.dtype)
+            extra["corrupt"] = True
+            extra["corrupt_rows"] = [first, h]
+        frame = Frame(image=image, timestamp=stamp, exposure_us=self._exposure, gain_db=self._gain,
+                      focus=float(focus), camera=self._identity, counter=self._counter, extra=extra)
+        self._counter += 1
+        return frame

@@ -1,0 +1,190 @@
+"""The simulated camera: Camera protocol, settings, focus-dependent lens, angle coupling, faults."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import drivers
+from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
+from drivers.protocols import Camera, CameraIdentity, Frame
+from drivers.sim.camera import EXPOSURE_RANGE_US, GAIN_RANGE_DB, SimulatedCamera
+from drivers.sim.lens import lens_for_focus
+from drivers.sim.world import SimWorld
+from pipeline.render import true_edge_curves
+from tests.pipeline.scanline_fit import scanline_errors
+
+SMALL = {"width": 480, "height": 360}
+
+
+def string_angle(img: np.ndarray, crop: int = 300, sigma: float = 1.5) -> float:
+    """Independent estimate: string direction from the structure tensor of a central crop.
+
+    The dominant gradient direction (Gaussian-derivative gradients) is the
+    normal of the strings; near the centre the lens is locally the identity.
+    """
+    h, w = img.shape
+    y0, x0 = (h - crop) // 2, (w - crop) // 2
+    a = img[y0:y0 + crop, x0:x0 + crop].astype(float)
+    gx = ndimage.gaussian_filter(a, sigma, order=(0, 1))
+    gy = ndimage.gaussian_filter(a, sigma, order=(1, 0))
+    b = int(4 * sigma) + 1
+    gx, gy = gx[b:-b, b:-b], gy[b:-b, b:-b]
+    normal = 0.5 * np.degrees(np.arctan2(2 * (gx * gy).sum(), (gx * gx).sum() - (gy * gy).sum()))
+    return float((normal + 90.0) % 180.0)
+
+
+def test_satisfies_camera_protocol_and_opens_from_config():
+    world = SimWorld()
+    cam = drivers.open_camera({"driver": "sim", **SMALL, "bit_depth": 16, "seed": 5}, world=world)
+    assert isinstance(cam, SimulatedCamera) and isinstance(cam, Camera)
+    assert cam.world is world
+    assert cam.sensor_size == (480, 360)
+    assert cam.pixel_format == "Mono16"
+    assert isinstance(cam.identity, CameraIdentity) and cam.identity.model == "SimulatedCamera"
+    with cam as c:
+        assert c is cam
+        f0, f1 = cam.capture(), cam.capture()
+    assert isinstance(f0, Frame)
+    assert f0.image.shape == (360, 480) and f0.image.dtype == np.uint16
+    assert (f0.counter, f1.counter) == (0, 1)
+    assert abs(f0.timestamp - time.time()) < 60
+    assert f0.camera == cam.identity and f0.focus == world.focus
+    assert f0.exposure_us == cam.get_exposure() and f0.gain_db == cam.get_gain()
+    assert not np.array_equal(f0.image, f1.image)  # noise seeded by seed + counter
+    with pytest.raises(DeviceDisconnected, match="not open"):
+        cam.capture()
+    # reopening restarts the counter and replays the same frames
+    with cam:
+        again = cam.capture()
+    assert again.counter == 0 and np.array_equal(again.image, f0.image)
+
+
+def test_config_errors_name_the_key():
+    with pytest.raises(ValueError, match="'exposure'"):
+        SimulatedCamera.from_config({"driver": "sim", "exposure": 100})
+    with pytest.raises(ValueError, match="'width'"):
+        SimulatedCamera.from_config({"width": 640.5})
+    with pytest.raises(ValueError, match="'pixel_format'"):
+        SimulatedCamera.from_config({"pixel_format": "RGB8"})
+    with pytest.raises(ValueError, match="'shot_noise'"):
+        SimulatedCamera.from_config({"shot_noise": "yes"})
+    with pytest.raises(ValueError, match="spacing_px"):
+        SimulatedCamera.from_config({"spacing_px": 2.0})
+    cam = SimulatedCamera.from_config({"pixel_format": "Mono8", "focus": 0.4, "harp_offset_deg": 7.0,
+                                       "string_width_px": 8, "dust": 3})
+    assert cam.pixel_format == "Mono8" and cam.get_focus() == 0.4
+    assert cam.world.harp_offset_deg == 7.0 and cam.scene.string_width_px == 8.0 and cam.scene.dust == 3
+    assert cam.sensor_size == (1280, 960)
+
+
+def test_exposure_and_gain_read_back_clamp_and_scale_brightness():
+    cam = SimulatedCamera(width=320, height=240, noise_sigma=0.0, bit_depth=16)
+    with pytest.raises(DriverError):
+        cam.set_exposure(5000)  # not open
+    with cam:
+        assert cam.set_exposure(5000) == 5000 == cam.get_exposure()
+        dim = cam.capture().image.astype(float)
+        assert cam.set_gain(6.0) == 6.0 == cam.get_gain()
+        gained = cam.capture().image.astype(float)
+        assert cam.set_gain(0.0) == 0.0 and cam.set_exposure(10_000) == 10_000
+        ref = cam.capture().image.astype(float)
+        assert cam.set_exposure(1e9) == EXPOSURE_RANGE_US[1]
+        assert cam.set_exposure(-3) == EXPOSURE_RANGE_US[0]
+        assert cam.set_gain(99) == GAIN_RANGE_DB[1] and cam.set_gain(-1) == GAIN_RANGE_DB[0]
+        cam.set_gain(24.0)
+        cam.set_exposure(1e6)
+        saturated = cam.capture().image
+    assert abs(dim.mean() / ref.mean() - 0.5) < 1e-3
+    assert abs(gained.mean() / dim.mean() - 10 ** (6 / 20)) < 1e-3
+    assert (saturated == 65535).mean() > 0.9
+
+
+def test_focus_changes_the_lens_as_predicted():
+    world = SimWorld(stage_deg=80.0)
+    cam = SimulatedCamera(world, width=480, height=360, noise_sigma=0.0, bit_depth=16)
+    with cam:
+        assert cam.lock_focus(0.0) == 0.0 == cam.get_focus()
+        near = cam.capture()
+        r_near = cam.last_rendered
+        assert cam.lock_focus(1.7) == 1.0 == world.focus  # clamped to the lens's range
+        far = cam.capture()
+        r_far = cam.last_rendered
+    assert near.focus == 0.0 and far.focus == 1.0
+    assert r_near.lens == lens_for_focus(0.0, 480, 360) and r_far.lens == lens_for_focus(1.0, 480, 360)
+    assert near.extra["sim"]["lens"] == r_near.lens.to_dict()
+    # the predicted edges differ between the two foci by a measurable amount ...
+    pts = np.concatenate(true_edge_curves(r_near, margin=12))
+    moved = r_far.lens.distort_points(r_near.lens.undistort_points(pts))
+    assert np.hypot(*(moved - pts).T).max() > 0.2
+    # ... and each frame's edges sit on its own focus's prediction, not on the other one's
+    own = np.concatenate([scanline_errors(r_near), scanline_errors(r_far)])
+    crossed = scanline_errors(r_far, truth=r_near)
+    assert len(own) >= 40
+    assert np.abs(own).max() < 0.005
+    assert np.abs(crossed).max() > 0.1
+
+
+@pytest.mark.parametrize("offset", [0.0, 12.5])
+def test_string_angle_tracks_the_stage(offset):
+    world = SimWorld(harp_offset_deg=offset)
+    cam = SimulatedCamera.from_config({**SMALL, "seed": 11, "dust": 4}, world=world)
+    with cam:
+        cam.lock_focus(0.5)
+        for stage in (0.0, 30.0, 45.0, 90.0, 137.0, 200.0, 315.0):
+            world.set_stage(stage)
+            frame = cam.capture()
+            expected = (stage + offset) % 180.0
+            assert frame.extra["sim"]["string_angle_deg"] == pytest.approx(expected)
+            err = (string_angle(frame.image) - expected + 90.0) % 180.0 - 90.0
+            assert abs(err) < 0.1, (stage, err)
+
+
+def test_injected_faults_raise_quickly_then_recover():
+    cam = SimulatedCamera(width=160, height=120)
+    with pytest.raises(ValueError, match="fault kind"):
+        cam.fail_next(1, "explode")
+    with cam:
+        cam.fail_next(2, "timeout")
+        for _ in range(2):
+            t = time.perf_counter()
+            with pytest.raises(DeviceTimeout, match="within 3 s"):
+                cam.capture(timeout=3.0)
+            assert time.perf_counter() - t < 0.5
+        ok = cam.capture()
+        assert ok.counter == 0 and "corrupt" not in ok.extra
+        cam.fail_next(1, "corrupt")
+        bad = cam.capture()
+        first, end = bad.extra["corrupt_rows"]
+        assert bad.extra["corrupt"] is True and 0 < first < end == 120
+        clean = cam.render(counter=1).image
+        assert np.array_equal(bad.image[:first], clean[:first])
+        assert np.mean(bad.image[first:] != clean[first:]) > 0.9
+        assert "corrupt" not in cam.capture().extra
+        cam.fail_next(1, "disconnect")
+        with pytest.raises(DeviceDisconnected):
+            cam.capture()
+        assert not cam.is_open
+        with pytest.raises(DeviceDisconnected, match="not open"):
+            cam.capture()
+
+
+def test_demo_lens_is_barrel_and_weakens_smoothly_with_focus():
+    corner = np.array([[0.0, 0.0], [1279.0, 959.0], [1279.0, 0.0], [0.0, 959.0]])
+    shifts = []
+    for f in np.linspace(0.0, 1.0, 6):
+        lens = lens_for_focus(f, 1280, 960)
+        ideal = lens.undistort_points(corner)
+        centre = np.array(lens.center)
+        # barrel: the ideal corner lies farther from the distortion centre than the recorded one
+        gain = np.hypot(*(ideal - centre).T) - np.hypot(*(corner - centre).T)
+        assert np.all(gain > 1.2) and np.all(gain < 3.5)
+        shifts.append(gain.mean())
+    steps = np.diff(shifts)
+    assert np.all(steps < 0) and np.ptp(steps) < 0.05  # monotonic and near-linear in focus
+    assert 0.25 < 1 - shifts[-1] / shifts[0] < 0.4
+    with pytest.raises(ValueError, match="focus"):
+        lens_for_focus(1.2, 1280, 960)
