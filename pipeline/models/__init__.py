@@ -5,11 +5,21 @@ Every model has ``undistort_points``, ``distort_points``, ``undistortion_maps``,
 """
 
 from pipeline.models.base import DistortionModel, IdentityModel
+from pipeline.models.grid_field import GridFieldModel
+from pipeline.models.homography import HomographyModel
+from pipeline.models.polynomial import PolynomialModel
+from pipeline.models.lensfun_model import LensfunModel
+from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.radial import RadialModel
 
 MODEL_TYPES: dict[str, type[DistortionModel]] = {
     IdentityModel.name: IdentityModel,
     "radial": RadialModel,
+    "poly": PolynomialModel,
+    "homography": HomographyModel,
+    "opencv": OpenCVModel,
+    "lensfun": LensfunModel,
+    "grid_field": GridFieldModel,
 }
 
 
@@ -22,7 +32,7 @@ def model_from_dict(d: dict) -> DistortionModel:
 
 
 def load_model(path):
-    """Load a saved model file (see :mod:`pipeline.model_file`)."""
+    """Load the model of a saved model file (see :mod:`pipeline.model_file`); ValueError if bad."""
     from pipeline.model_file import read_model_file  # file I/O lives outside the pure core
 
-    return read_model_file(path)
+    return read_model_file(path).model

@@ -1,0 +1,79 @@
+"""OpenCV FileStorage calibration files (``camera_matrix`` + ``distortion_coefficients``).
+
+Written and read with ``cv2.FileStorage`` itself (in memory), so OpenCV
+loads the export unchanged; the conversion error is stored as fields
+``conversion_rms_px`` / ``conversion_max_px`` (and modulo-homography
+variants, and the straightness ``conversion_d_px`` / ``conversion_d_max_px``
+it leaves on a full-field harp) and as a comment. Also reads OpenCV calibrations made elsewhere
+(YAML or XML; names ``camera_matrix``/``distortion_coefficients``, or
+``cameraMatrix``/``distCoeffs``, ``K``/``D``).
+"""
+
+from __future__ import annotations
+
+import cv2
+
+from pipeline.exports.fit import ConversionError
+from pipeline.models.opencv_model import OpenCVModel
+
+CAMERA_MATRIX_NAMES = ("camera_matrix", "cameraMatrix", "K")
+DIST_NAMES = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
+
+
+def opencv_text(model: OpenCVModel, width: int, height: int, error: ConversionError | None = None,
+                *, xml: bool = False, comment: str | None = None) -> str:
+    """FileStorage YAML (or XML) text of an OpenCV calibration."""
+    fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.writeComment(comment or "OpenCV pinhole distortion exported by harp station")
+    if error is not None:
+        fs.writeComment(f"conversion error vs the harp correction (4-corner normalised): "
+                        f"RMS {error.rms_px:.4f} px, max {error.max_px:.4f} px; modulo best homography: "
+                        f"RMS {error.rms_mod_h_px:.4f} px, max {error.max_mod_h_px:.4f} px")
+        fs.writeComment(f"residual it leaves on a noise-free full-field harp: d {error.d_px:.4f} px, "
+                        f"d_max {error.d_max_px:.4f} px")
+    fs.write("image_width", int(width))
+    fs.write("image_height", int(height))
+    fs.write("camera_matrix", model.camera_matrix)
+    fs.write("distortion_coefficients", model.dist_coeffs.reshape(1, -1))
+    if error is not None:
+        fs.write("conversion_rms_px", float(error.rms_px))
+        fs.write("conversion_max_px", float(error.max_px))
+        fs.write("conversion_rms_mod_h_px", float(error.rms_mod_h_px))
+        fs.write("conversion_max_mod_h_px", float(error.max_mod_h_px))
+        fs.write("conversion_d_px", float(error.d_px))
+        fs.write("conversion_d_max_px", float(error.d_max_px))
+    return fs.releaseAndGetString()
+
+
+def read_opencv_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tuple[int, int] | None]:
+    """Parse an OpenCV FileStorage calibration: ``(model, (width, height) or None)``.
+
+    Raises ValueError('<name>: <reason>') if it has no camera matrix / coefficients.
+    """
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except cv2.error as exc:
+        raise ValueError(f"{name}: not an OpenCV FileStorage file ({str(exc).strip().splitlines()[-1]})") from None
+    try:
+        if not fs.isOpened():
+            raise ValueError(f"{name}: not an OpenCV FileStorage file")
+        k = next((fs.getNode(n).mat() for n in CAMERA_MATRIX_NAMES
+                  if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
+        d = next((fs.getNode(n).mat() for n in DIST_NAMES
+                  if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
+        if k is None or d is None:
+            raise ValueError(f"{name}: OpenCV file without camera_matrix and distortion_coefficients matrices")
+        size = None
+        wn, hn = fs.getNode("image_width"), fs.getNode("image_height")
+        if not wn.empty() and not hn.empty():
+            size = (int(wn.real()), int(hn.real()))
+        else:
+            sn = fs.getNode("image_size")  # e.g. [w, h] sequences written by some tools
+            if not sn.empty() and sn.isSeq() and sn.size() == 2:
+                size = (int(sn.at(0).real()), int(sn.at(1).real()))
+    finally:
+        fs.release()
+    try:
+        return OpenCVModel.from_matrices(k, d), size
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None

@@ -1,0 +1,210 @@
+"""The harp model file: a readable YAML record of a fitted distortion model.
+
+This module is the one place of :mod:`pipeline` that touches files (it is
+imported lazily by :func:`pipeline.load_model`). Layout (format version 1)::
+
+    format: harp-distortion-model
+    format_version: 1
+    model: {model: radial, center: [..], k: [..], scale: ..}   # model.to_dict()
+    image: {width: 1761, height: 1174}
+    merit: {fit: {d: .., d_max: ..}, holdout: {d: .., d_max: ..}, ...}
+    provenance: {created_utc: .., software: harp-station 0.1.0, t: 30,
+                 command: .., images: [{path: .., sha256: ..}, ..]}
+
+Files are written atomically (temporary file in the same directory, fsync,
+rename), so a reader never sees a half-written model. Any defect (not YAML,
+not our format, unknown version, unknown model, bad parameters) raises
+:class:`ValueError` with a one-line message naming the file and the reason.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from pipeline.models import model_from_dict
+from pipeline.models.base import DistortionModel
+
+FORMAT_NAME = "harp-distortion-model"
+FORMAT_VERSION = 1
+SUPPORTED_VERSIONS = (1,)
+
+
+@dataclass(frozen=True)
+class ModelFile:
+    """Contents of a model file."""
+
+    model: DistortionModel
+    width: int
+    height: int
+    merit: dict = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
+    path: str | None = None
+
+
+def software_version() -> str:
+    """``harp-station <version>`` of the running software."""
+    try:
+        from station import __version__
+
+        return f"harp-station {__version__}"
+    except Exception:  # pragma: no cover - station not importable
+        try:
+            from importlib.metadata import version
+
+            return f"harp-station {version('harp-station')}"
+        except Exception:
+            return "harp-station unknown"
+
+
+def sha256_file(path, chunk: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def make_provenance(images=(), *, t=None, command=None, **extra) -> dict:
+    """Provenance record: UTC time, software version, input images with sha256, t, command line."""
+    prov = {
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "software": software_version(),
+    }
+    if t is not None:
+        prov["t"] = t
+    if command is not None:
+        prov["command"] = command if isinstance(command, str) else " ".join(map(str, command))
+    prov["images"] = [{"path": str(p), "sha256": sha256_file(p)} for p in images]
+    prov.update(extra)
+    return prov
+
+
+def _plain(obj):
+    """Convert numpy scalars/arrays and tuples into plain YAML-safe data."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float):
+        return float(obj)
+    return obj
+
+
+def atomic_write_text(path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (tmp in same dir + fsync + rename)."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    try:  # make the rename itself durable
+        dfd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:  # pragma: no cover - platform without directory fsync
+        pass
+
+
+def model_file_text(model: DistortionModel, *, width: int, height: int,
+                    merit: dict | None = None, provenance: dict | None = None) -> str:
+    """The YAML text :func:`write_model_file` writes."""
+    doc = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "model": _plain(model.to_dict()),
+        "image": {"width": int(width), "height": int(height)},
+        "merit": _plain(merit or {}),
+        "provenance": _plain(provenance or {}),
+    }
+    header = ("# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
+              "# pixel centres at integers). Load with pipeline.load_model(path).\n")
+    return header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
+
+
+def write_model_file(path, model: DistortionModel, *, width: int, height: int,
+                     merit: dict | None = None, provenance: dict | None = None) -> Path:
+    """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
+    if not isinstance(model, DistortionModel):
+        raise TypeError(f"write_model_file needs a DistortionModel, got {type(model).__name__}")
+    if int(width) <= 0 or int(height) <= 0:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    text = model_file_text(model, width=width, height=height, merit=merit, provenance=provenance)
+    atomic_write_text(path, text)
+    return Path(path)
+
+
+def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
+    """Parse model-file text; ``ValueError('<name>: <reason>')`` on any defect."""
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"{name}: not a valid YAML model file ({reason})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME:
+        raise ValueError(f"{name}: not a harp model file (no 'format: {FORMAT_NAME}')")
+    version = doc.get("format_version")
+    if version not in SUPPORTED_VERSIONS:
+        raise ValueError(f"{name}: unknown model file format version {version!r} "
+                         f"(this software reads {', '.join(map(str, SUPPORTED_VERSIONS))})")
+    image = doc.get("image")
+    try:
+        width, height = int(image["width"]), int(image["height"])
+        if width <= 0 or height <= 0:
+            raise ValueError
+    except (TypeError, KeyError, ValueError):
+        raise ValueError(f"{name}: missing or invalid image size (image: {{width, height}})") from None
+    try:
+        model = model_from_dict(doc.get("model"))
+    except ValueError as exc:
+        raise ValueError(f"{name}: {str(exc).splitlines()[0]}") from None
+    except (TypeError, KeyError, IndexError) as exc:
+        raise ValueError(f"{name}: invalid parameters for model "
+                         f"{(doc.get('model') or {}).get('model')!r} ({type(exc).__name__}: {exc})") from None
+    merit = doc.get("merit") or {}
+    prov = doc.get("provenance") or {}
+    if not isinstance(merit, dict) or not isinstance(prov, dict):
+        raise ValueError(f"{name}: 'merit' and 'provenance' must be mappings")
+    return ModelFile(model=model, width=width, height=height, merit=merit, provenance=prov, path=name)
+
+
+def read_model_file(path) -> ModelFile:
+    """Read a model file written by :func:`write_model_file`.
+
+    Raises
+    ------
+    ValueError
+        One line naming the file and the reason: unreadable, corrupt YAML,
+        not a harp model file, unknown format version, unknown model.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"{path}: model file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read model file ({exc.__class__.__name__}: {exc})") from None
+    return parse_model_text(text, str(path))

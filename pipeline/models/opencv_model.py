@@ -1,0 +1,163 @@
+"""OpenCV's pinhole distortion model as a harp :class:`DistortionModel`.
+
+Lets a calibration made with OpenCV (camera matrix + distortion coefficients)
+be used, compared and evaluated like any harp correction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from pipeline.models.base import DistortionModel
+
+#: accuracy (px) to which :meth:`OpenCVModel.undistort_points` inverts the projection
+OPENCV_INVERSE_TOL_PX = 1e-8
+_VALID_NCOEFFS = (4, 5, 8, 12, 14)
+
+
+@dataclass(frozen=True)
+class OpenCVModel(DistortionModel):
+    r"""OpenCV's pinhole camera distortion (``cv::projectPoints`` convention).
+
+    OpenCV's coefficients describe the *projection* ideal -> distorted. With
+    the camera matrix :math:`K = [[f_x, 0, c_x], [0, f_y, c_y], [0, 0, 1]]`,
+    an ideal pixel :math:`(x_u, y_u)` has normalised coordinates
+    :math:`x = (x_u - c_x)/f_x`, :math:`y = (y_u - c_y)/f_y`,
+    :math:`r^2 = x^2 + y^2`, and is recorded at
+
+    .. math::
+        x'' &= x \frac{1 + k_1 r^2 + k_2 r^4 + k_3 r^6}{1 + k_4 r^2 + k_5 r^4 + k_6 r^6}
+               + 2 p_1 x y + p_2 (r^2 + 2x^2) + s_1 r^2 + s_2 r^4 \\
+        y'' &= y \frac{1 + k_1 r^2 + k_2 r^4 + k_3 r^6}{1 + k_4 r^2 + k_5 r^4 + k_6 r^6}
+               + p_1 (r^2 + 2y^2) + 2 p_2 x y + s_3 r^2 + s_4 r^4 \\
+        x_d &= f_x\, x''' + c_x, \quad y_d = f_y\, y''' + c_y
+
+    where :math:`(x''', y''')` is :math:`(x'', y'')` after the sensor tilt
+    :math:`(\tau_x, \tau_y)` (14-coefficient form only). Coefficient order as
+    in OpenCV: ``k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, taux, tauy]]]]``.
+
+    :meth:`distort_points` is this closed form (in numpy, tested equal to
+    ``cv2.projectPoints`` to 1e-9 px; by ``cv2.projectPoints`` itself with tilt);
+    :meth:`undistort_points` (the correction, distorted -> ideal, pixels in the
+    same camera matrix) starts from ``cv2.undistortPoints(Iter)`` (OpenCV's iterative inverse) and finishes
+    with Newton steps on the closed form, to ``OPENCV_INVERSE_TOL_PX`` (1e-8 px)
+    wherever the projection is invertible (NaN where it does not converge).
+
+    References
+    ----------
+    .. [1] OpenCV, "Camera Calibration and 3D Reconstruction" (calib3d),
+       https://docs.opencv.org/master/d9/d0c/group__calib3d.html
+    .. [2] D. C. Brown, "Close-range camera calibration", Photogrammetric
+       Engineering 37(8), 1971.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    name: str = field(default="opencv", init=False, repr=False)
+
+    def __post_init__(self):
+        for a in ("fx", "fy", "cx", "cy"):
+            object.__setattr__(self, a, float(getattr(self, a)))
+        dist = tuple(float(v) for v in np.asarray(self.dist, dtype=np.float64).ravel())
+        if len(dist) not in _VALID_NCOEFFS:
+            raise ValueError(f"OpenCV distortion needs 4, 5, 8, 12 or 14 coefficients, got {len(dist)}")
+        object.__setattr__(self, "dist", dist)
+        if not (self.fx > 0 and self.fy > 0):
+            raise ValueError(f"OpenCV camera matrix needs fx, fy > 0, got {self.fx}, {self.fy}")
+
+    # ------------------------------------------------------------- matrices
+    @classmethod
+    def from_matrices(cls, camera_matrix, dist_coeffs) -> "OpenCVModel":
+        """From a 3x3 camera matrix and a coefficient vector (skew must be 0)."""
+        k = np.asarray(camera_matrix, dtype=np.float64)
+        if k.shape != (3, 3):
+            raise ValueError(f"camera matrix must be 3x3, got shape {k.shape}")
+        if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]) or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-12):
+            raise ValueError("camera matrix with skew or a non-[0 0 1] last row is not supported")
+        return cls(fx=k[0, 0], fy=k[1, 1], cx=k[0, 2], cy=k[1, 2],
+                   dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()))
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        return np.asarray(self.dist, dtype=np.float64)
+
+    # ----------------------------------------------------------------- maps
+    def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
+        """Closed form ideal -> distorted pixels (OpenCV's projection)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(xy) == 0:
+            return xy.copy()
+        if len(self.dist) < 14:  # closed form in numpy (tested equal to cv2.projectPoints)
+            d = np.zeros(12)
+            d[:len(self.dist)] = self.dist
+            k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
+            x = (xy[:, 0] - self.cx) / self.fx
+            y = (xy[:, 1] - self.cy) / self.fy
+            r2 = x * x + y * y
+            r4 = r2 * r2
+            rad = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+            yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+            return np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=1)
+        obj = np.empty((len(xy), 1, 3))
+        obj[:, 0, 0] = (xy[:, 0] - self.cx) / self.fx
+        obj[:, 0, 1] = (xy[:, 1] - self.cy) / self.fy
+        obj[:, 0, 2] = 1.0
+        out, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), self.camera_matrix, self.dist_coeffs)
+        return out.reshape(-1, 2)
+
+    def undistort_points(self, xy: np.ndarray, max_iter: int = 20) -> np.ndarray:
+        """Distorted -> ideal pixels: cv2.undistortPoints(Iter) then Newton to 1e-8 px."""
+        target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(target) == 0:
+            return target.copy()
+        k = self.camera_matrix
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-14)
+        undist = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4; OpenCV 5 takes criteria directly
+        if undist is not None:
+            x = undist(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, k, crit)
+        else:
+            x = cv2.undistortPoints(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, None, k, crit)
+        x = x.reshape(-1, 2).astype(np.float64)
+        h = 1e-3
+        done = np.zeros(len(x), bool)
+        for _ in range(max_iter):
+            r = self.distort_points(x) - target
+            done = np.all(np.abs(r) < OPENCV_INVERSE_TOL_PX, axis=1)
+            if done.all():
+                break
+            jx = (self.distort_points(x + [h, 0]) - self.distort_points(x - [h, 0])) / (2 * h)
+            jy = (self.distort_points(x + [0, h]) - self.distort_points(x - [0, h])) / (2 * h)
+            a, b, c, d = jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]
+            det = a * d - b * c
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = np.stack([(d * r[:, 0] - b * r[:, 1]) / det, (-c * r[:, 0] + a * r[:, 1]) / det], axis=1)
+            step[done] = 0.0
+            x = x - step
+        x[~done] = np.nan
+        return x
+
+    def undistortion_maps(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """``cv2.initUndistortRectifyMap`` with the same camera matrix (OpenCV's own maps)."""
+        k = self.camera_matrix
+        return cv2.initUndistortRectifyMap(k, self.dist_coeffs, None, k, (int(width), int(height)),
+                                           cv2.CV_32FC1)
+
+    # ------------------------------------------------------------ file form
+    def to_dict(self) -> dict:
+        return {"model": self.name, "camera_matrix": self.camera_matrix.tolist(),
+                "distortion_coefficients": list(self.dist)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "OpenCVModel":
+        return cls.from_matrices(d["camera_matrix"], d["distortion_coefficients"])

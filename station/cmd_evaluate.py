@@ -1,0 +1,181 @@
+"""``harp evaluate CORRECTION IMAGE... [--json]``: residual distortion left by any correction.
+
+CORRECTION is a harp model file, an OpenCV calibration (FileStorage YAML or
+XML with ``camera_matrix`` + ``distortion_coefficients``), a ROS camera_info
+YAML, or a lensfun XML (``<lensdatabase>``). The string edges of the harp
+shots (taken through the lens, uncorrected) are measured, corrected by
+CORRECTION, normalised by the homography of the 4 corrected image corners and
+their straightness reported before and after (:mod:`pipeline.evaluate`).
+
+``--already-corrected``: the images were corrected by other software; they
+are only measured (CORRECTION may be ``none``; when it is known, the
+measured points are put in the same 4-corner normalised frame).
+Exit 0 on success, 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+from pipeline.evaluate import corrected_points
+from pipeline.measure import measure_image
+from pipeline.models.base import DistortionModel
+from pipeline.models.homography import apply_homography
+from pipeline.normalise import corner_homography
+from pipeline.straightness import straightness
+
+
+class EvaluateError(Exception):
+    """One-line message for the user."""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("evaluate", help="measure the residual distortion left by any correction",
+                              description=(
+                                  "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
+                                  "camera_info YAML or lensfun XML), measured on harp shots: d and d_max before "
+                                  "and after, 4-corner normalised."))
+    p.add_argument("correction", metavar="CORRECTION",
+                   help="harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML ('none' with "
+                        "--already-corrected)")
+    p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots")
+    p.add_argument("--already-corrected", action="store_true",
+                   help="images were corrected by other software: only measure them")
+    p.add_argument("--focal", type=float, default=None,
+                   help="lensfun: focal length (mm) of the calibration entry to use")
+    p.add_argument("-t", type=int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def load_correction(path, width: int, height: int, focal: float | None = None) -> tuple[DistortionModel, str]:
+    """Any supported correction file as a model for ``width`` x ``height`` images: ``(model, kind)``.
+
+    kind is ``harp:<model name>``, ``opencv``, ``ros`` or ``lensfun:<model>``.
+    Raises EvaluateError (one line, naming the file) on any problem.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise EvaluateError(f"{p}: correction file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise EvaluateError(f"{p}: cannot read correction file ({type(exc).__name__})") from None
+    try:
+        head = text.lstrip()[:4096]
+        if "harp-distortion-model" in head:
+            from pipeline.model_file import parse_model_text
+
+            mf = parse_model_text(text, str(p))
+            if (mf.width, mf.height) != (width, height):
+                raise EvaluateError(f"{p}: model is for {mf.width}x{mf.height} images, the shots are "
+                                    f"{width}x{height}")
+            return mf.model, f"harp:{mf.model.name}"
+        if "<lensdatabase" in head:
+            from pipeline.exports.lensfun import read_lensfun_text
+
+            m = read_lensfun_text(text, width, height, str(p), focal=focal)
+            return m, f"lensfun:{m.kind}"
+        if "opencv-matrix" in text or "<opencv_storage" in head:
+            from pipeline.exports.opencv import read_opencv_text
+
+            m, size = read_opencv_text(text, str(p))
+            kind = "opencv"
+        elif "camera_matrix" in text and "distortion_coefficients" in text:
+            from pipeline.exports.ros import read_ros_text
+
+            m, size = read_ros_text(text, str(p))
+            kind = "ros"
+        else:
+            raise EvaluateError(f"{p}: not a recognised correction (harp model, OpenCV YAML/XML, "
+                                f"ROS camera_info YAML or lensfun XML)")
+    except ValueError as exc:
+        raise EvaluateError(str(exc)) from None
+    if size is not None and tuple(size) != (width, height):
+        raise EvaluateError(f"{p}: calibration is for {size[0]}x{size[1]} images, the shots are {width}x{height}")
+    return m, kind
+
+
+def _sd(st) -> dict:
+    return {"d": float(st.d), "d_max": float(st.d_max)}
+
+
+def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, t=30) -> dict:
+    """The JSON report of ``harp evaluate`` (see module docstring)."""
+    from station.imageio import ImageReadError, read_grey
+
+    images, size = [], None
+    for path in image_paths:
+        try:
+            img = read_grey(path)
+        except ImageReadError as exc:
+            raise EvaluateError(str(exc)) from None
+        if size is None:
+            size = (img.shape[1], img.shape[0])
+        elif (img.shape[1], img.shape[0]) != size:
+            raise EvaluateError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, the first is "
+                                f"{size[0]}x{size[1]}; all shots must have the same size")
+        images.append((path, img))
+    w, h = size
+    if already_corrected and str(correction_path).lower() == "none":
+        model, kind = None, "none"
+    else:
+        model, kind = load_correction(correction_path, w, h, focal)
+    before_all, after_all, per_image = [], [], []
+    for path, img in images:
+        meas = measure_image(img, t=t)
+        pts = [ln.points for ln in meas.lines]
+        entry = {"path": str(path), "n_lines": len(pts)}
+        if not pts:
+            entry.update(before=None, after=None, note="no string edge found")
+            per_image.append(entry)
+            continue
+        try:
+            if already_corrected:
+                after = pts if model is None else [apply_homography(corner_homography(model, w, h), p) for p in pts]
+                before = None
+            else:
+                after = corrected_points(pts, model, w, h)
+                before = pts
+        except ValueError as exc:
+            raise EvaluateError(f"{correction_path}: {exc}") from None
+        entry["before"] = _sd(straightness(before)) if before is not None else None
+        entry["after"] = _sd(straightness(after))
+        per_image.append(entry)
+        after_all += after
+        if before is not None:
+            before_all += before
+    if not after_all:
+        raise EvaluateError("no string edge found in any image")
+    return {"correction": str(correction_path), "kind": kind, "already_corrected": bool(already_corrected),
+            "t": t, "width": w, "height": h,
+            "before": _sd(straightness(before_all)) if before_all else None,
+            "after": _sd(straightness(after_all)), "n_lines": len(after_all), "images": per_image}
+
+
+def _fmt(sd):
+    return ("     -", "     -") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
+
+
+def run(args) -> int:
+    try:
+        rep = evaluate(args.correction, args.images, already_corrected=args.already_corrected,
+                       focal=args.focal, t=args.t)
+    except EvaluateError as exc:
+        print(f"harp evaluate: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(rep, indent=2))
+        return 0
+    print(f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
+          + (", images already corrected" if rep["already_corrected"] else ""))
+    print(f"{'image':40s} {'lines':>5s} {'d before':>9s} {'dmax bef.':>9s} {'d after':>9s} {'dmax aft.':>9s}  (px)")
+    for e in rep["images"]:
+        b, a = _fmt(e["before"]), _fmt(e["after"])
+        print(f"{Path(e['path']).name[:40]:40s} {e['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
+    b, a = _fmt(rep["before"]), _fmt(rep["after"])
+    print(f"{'all':40s} {rep['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
+    return 0

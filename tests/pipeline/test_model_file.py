@@ -1,0 +1,93 @@
+"""Model file: round trip of every model type, provenance, atomic write, clear errors."""
+
+import hashlib
+import os
+
+import numpy as np
+import pytest
+import yaml
+
+import pipeline
+from pipeline.model_file import (FORMAT_NAME, make_provenance, read_model_file, sha256_file,
+                                 write_model_file)
+from pipeline.models import LensfunModel, OpenCVModel, RadialModel
+from pipeline.models.base import IdentityModel
+from pipeline.normalise import normalise_by_corners
+
+W, H = 640, 480
+PTS = np.array([[0.0, 0.0], [639.0, 479.0], [100.5, 300.25], [320.0, 10.0]])
+
+MODELS = [
+    RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, -0.004), center=(322.3, 236.9),
+                          tangential=(1e-3, -2e-3), prism=(1e-4, 0.0, -2e-4, 0.0)),
+    IdentityModel(),
+    OpenCVModel(fx=700.0, fy=702.0, cx=319.0, cy=241.0, dist=(-0.2, 0.05, 1e-3, -1e-3, 0.01)),
+    LensfunModel(kind="ptlens", terms=(0.01, -0.02, 0.005), width=W, height=H),
+]
+MODELS.append(normalise_by_corners(MODELS[0], W, H))  # a homography-composed model nests another
+
+
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: m.name)
+def test_round_trip_preserves_the_correction_exactly(tmp_path, model):
+    path = tmp_path / "lens.yaml"
+    merit = {"fit": {"d": 0.0123, "d_max": 0.05}, "holdout": {"d": np.float64(0.02), "d_max": 0.07}}
+    write_model_file(path, model, width=W, height=H, merit=merit, provenance={"t": 30})
+    mf = read_model_file(path)
+    assert type(mf.model) is type(model)
+    assert (mf.width, mf.height) == (W, H)
+    assert mf.merit["holdout"]["d"] == 0.02 and mf.merit["fit"]["d_max"] == 0.05
+    np.testing.assert_array_equal(mf.model.undistort_points(PTS), model.undistort_points(PTS))
+    # pipeline.load_model gives the model itself
+    np.testing.assert_array_equal(pipeline.load_model(path).undistort_points(PTS), model.undistort_points(PTS))
+
+
+def test_file_is_readable_yaml_with_provenance(tmp_path):
+    img = tmp_path / "shot.pgm"
+    img.write_bytes(b"P5\n2 1\n255\n\x00\xff")
+    prov = make_provenance([img], t=30, command=["harp", "calibrate", str(img)])
+    path = write_model_file(tmp_path / "m.yaml", MODELS[0], width=W, height=H, merit={}, provenance=prov)
+    doc = yaml.safe_load(path.read_text())
+    assert doc["format"] == FORMAT_NAME and doc["format_version"] == 1
+    assert doc["model"]["model"] == "radial" and doc["image"] == {"width": W, "height": H}
+    p = doc["provenance"]
+    assert p["software"].startswith("harp-station ") and p["created_utc"].endswith("Z")
+    assert p["t"] == 30 and p["command"] == f"harp calibrate {img}"
+    assert p["images"] == [{"path": str(img), "sha256": sha256_file(img)}]
+    assert p["images"][0]["sha256"] == hashlib.sha256(b"P5\n2 1\n255\n\x00\xff").hexdigest()
+
+
+def test_write_is_atomic_and_leaves_no_temporary(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text("old content")
+    write_model_file(path, MODELS[0], width=W, height=H)
+    assert os.listdir(tmp_path) == ["m.yaml"]
+    assert read_model_file(path).width == W
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial\n", "not a valid YAML"),
+    ("just a string", "not a harp model file"),
+    ("format: harp-distortion-model\nformat_version: 7\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
+     "unknown model file format version 7"),
+    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: warp9}\nimage: {width: 2, height: 2}\n",
+     "unknown distortion model 'warp9'"),
+    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
+     "invalid parameters for model 'radial'"),
+    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: identity}\n", "image size"),
+])
+def test_defective_files_raise_one_line_value_error_naming_file(tmp_path, text, reason):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as exc:
+        read_model_file(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: ") and reason in msg and "\n" not in msg
+
+
+def test_missing_and_binary_files(tmp_path):
+    with pytest.raises(ValueError, match="model file not found"):
+        pipeline.load_model(tmp_path / "nope.yaml")
+    p = tmp_path / "bin.yaml"
+    p.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ValueError, match=f"^{p}: "):
+        read_model_file(p)

@@ -1,0 +1,127 @@
+"""``harp evaluate``: residual distortion of any correction; the OpenCV export round trip."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from pipeline.exports.fit import fit_opencv
+from pipeline.exports.lensfun import lensfun_text
+from pipeline.exports.opencv import opencv_text
+from pipeline.exports.ros import ros_text
+from pipeline.model_file import write_model_file
+from pipeline.models import LensfunModel, RadialModel
+from pipeline.render import HarpScene, render_harp
+from station.cli import main
+
+W, H = 640, 480
+# barrel lens with an odd radial term: OpenCV's even polynomial cannot represent it exactly
+LENS = RadialModel.for_image(W, H, k=(1.0, 0.03, 0.05))
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    d = tmp_path_factory.mktemp("shots")
+    paths = []
+    for i, angle in enumerate((3.0, 93.0)):
+        r = render_harp(W, H, HarpScene(angle_deg=angle, spacing_px=40.0), lens=LENS, noise_sigma=1.5, seed=10 + i)
+        p = d / f"shot{i}.pgm"
+        assert cv2.imwrite(str(p), r.image)
+        paths.append(str(p))
+    return paths
+
+
+def run_json(capsys, *argv):
+    code = main(["evaluate", *map(str, argv), "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    return json.loads(out.out)
+
+
+def test_opencv_round_trip_residual_matches_stated_conversion_error(tmp_path, shots, capsys):
+    """Export the true lens to OpenCV YAML; evaluating that file on the shots leaves the stated error.
+
+    Noise floor: the same shots corrected by the true lens (``d_floor``). The
+    export's stated residual on a noise-free harp is ``err.d_px``; residual
+    and measurement noise add in quadrature, so the measured ``after`` must be
+    ``sqrt(d_floor^2 + d_px^2)`` to within half the 0.01 px bar.
+    """
+    true_file = tmp_path / "true.yaml"
+    write_model_file(true_file, LENS, width=W, height=H)
+    cv_model, err = fit_opencv(LENS, W, H, n_coeffs=5)
+    cv_file = tmp_path / "opencv.yaml"
+    cv_file.write_text(opencv_text(cv_model, W, H, err))
+    assert err.d_px > 0.015  # the export really cannot represent this lens: the test can tell
+
+    floor = run_json(capsys, true_file, *shots)
+    rep = run_json(capsys, cv_file, *shots)
+    assert rep["kind"] == "opencv" and floor["kind"] == "harp:radial"
+    assert rep["before"] == floor["before"] and rep["before"]["d"] > 0.5  # uncorrected lens
+    d_floor, d_after = floor["after"]["d"], rep["after"]["d"]
+    assert d_floor < 0.012
+    expected = float(np.hypot(d_floor, err.d_px))
+    assert abs(d_after - expected) < 0.005, (d_after, expected, d_floor, err.d_px)
+    assert d_after > d_floor + 0.01
+    assert [im["n_lines"] for im in rep["images"]] == [im["n_lines"] for im in floor["images"]]
+
+    # OpenCV's own code path: its maps from the exported file correct the images; measured as they are
+    fs = cv2.FileStorage(str(cv_file), cv2.FILE_STORAGE_READ)
+    k, dist = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+    fs.release()
+    mx, my = cv2.initUndistortRectifyMap(k, dist, None, k, (W, H), cv2.CV_32FC1)
+    corrected = []
+    for p in shots:
+        q = tmp_path / ("cv_" + p.rsplit("/", 1)[-1])
+        cv2.imwrite(str(q), cv2.remap(cv2.imread(p, cv2.IMREAD_UNCHANGED), mx, my, cv2.INTER_LANCZOS4))
+        corrected.append(q)
+    by_opencv = run_json(capsys, "none", *corrected, "--already-corrected")
+    assert abs(by_opencv["after"]["d"] - expected) < 0.005, (by_opencv["after"]["d"], expected)
+
+    # with 8 coefficients the conversion is ~exact: the residual is the noise floor
+    cv8, err8 = fit_opencv(LENS, W, H, n_coeffs=8)
+    assert err8.d_px < 0.002
+    ros_file = tmp_path / "camera_info.yaml"
+    ros_file.write_text(ros_text(cv8, W, H, err8))
+    rep8 = run_json(capsys, ros_file, *shots)
+    assert rep8["kind"] == "ros"
+    assert abs(rep8["after"]["d"] - d_floor) < 0.002
+
+
+def test_table_output_lensfun_and_already_corrected(tmp_path, shots, capsys):
+    lf = tmp_path / "lens.xml"
+    lf.write_text(lensfun_text(LensfunModel(kind="poly5", terms=(0.0, 0.0), width=W, height=H)))
+    # an identity lensfun correction leaves the distortion: after == before (up to the corner homography)
+    code = main(["evaluate", str(lf), shots[0]])
+    out = capsys.readouterr().out
+    assert code == 0 and "lensfun:poly5" in out and "shot0.pgm" in out and out.splitlines()[-1].startswith("all")
+    rep = run_json(capsys, lf, shots[0])
+    assert rep["after"]["d"] == pytest.approx(rep["before"]["d"], rel=1e-6)
+    # images measured as they are; no correction known
+    measured = rep["before"]
+    rep = run_json(capsys, "none", shots[0], "--already-corrected")
+    assert rep["kind"] == "none" and rep["before"] is None
+    assert rep["after"] == measured
+
+
+@pytest.mark.parametrize("content, message", [
+    ("format: harp-distortion-model\nformat_version: 99\n", "unknown model file format version 99"),
+    ("format: harp-distortion-model\nformat_version: 1\nmodel: [\n", "not a valid YAML"),
+    ("hello: world\n", "not a recognised correction"),
+    ("<lensdatabase><lens><model>x</model></lens></lensdatabase>", "no <calibration><distortion>"),
+])
+def test_bad_correction_files_exit_2_with_one_line(tmp_path, shots, capsys, content, message):
+    p = tmp_path / "bad.yaml"
+    p.write_text(content)
+    assert main(["evaluate", str(p), shots[0]]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("harp evaluate: ") and message in err and "\n" not in err
+
+
+def test_size_mismatch_and_missing_image_exit_2(tmp_path, shots, capsys):
+    m = tmp_path / "m.yaml"
+    write_model_file(m, LENS, width=W + 2, height=H)
+    assert main(["evaluate", str(m), shots[0]]) == 2
+    assert f"model is for {W + 2}x{H} images, the shots are {W}x{H}" in capsys.readouterr().err
+    assert main(["evaluate", str(m), str(tmp_path / "missing.pgm")]) == 2
+    assert "missing.pgm: no such file" in capsys.readouterr().err

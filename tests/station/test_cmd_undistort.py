@@ -1,0 +1,78 @@
+"""``harp undistort``: corrected images keep format, channels and bit depth; strings come out straight."""
+
+import cv2
+import numpy as np
+import pytest
+
+from pipeline.measure import measure_image
+from pipeline.model_file import write_model_file
+from pipeline.models import RadialModel
+from pipeline.render import HarpScene, render_harp
+from pipeline.undistort_maps import fast_undistortion_maps
+from station.cli import main
+
+W, H = 480, 360
+LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.06), tangential=(1e-3, -5e-4))
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    d = tmp_path_factory.mktemp("undist")
+    model = d / "lens.yaml"
+    write_model_file(model, LENS, width=W, height=H)
+    r = render_harp(W, H, HarpScene(angle_deg=4.0, spacing_px=40.0), lens=LENS, noise_sigma=0.5, seed=3)
+    grey = d / "shot.pgm"
+    assert cv2.imwrite(str(grey), r.image)
+    r16 = render_harp(W, H, HarpScene(angle_deg=91.0, spacing_px=40.0), lens=LENS, bit_depth=16, seed=4)
+    png16 = d / "shot16.png"
+    assert cv2.imwrite(str(png16), r16.image)
+    colour = d / "colour.png"
+    assert cv2.imwrite(str(colour), np.dstack([r.image, r.image // 2, 255 - r.image]))
+    return d, model, grey, png16, colour, r.image
+
+
+def test_corrected_images_keep_format_and_strings_are_straight(setup, tmp_path, capsys):
+    d, model, grey, png16, colour, image = setup
+    out = tmp_path / "out"
+    assert main(["undistort", str(model), str(grey), str(png16), str(colour), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.count("maps for 480x360") == 1  # computed once, reused for all three images
+    g = cv2.imread(str(out / "shot.pgm"), cv2.IMREAD_UNCHANGED)
+    assert g.dtype == np.uint8 and g.shape == (H, W)
+    g16 = cv2.imread(str(out / "shot16.png"), cv2.IMREAD_UNCHANGED)
+    assert g16.dtype == np.uint16 and g16.shape == (H, W) and g16.max() > 255 * 40
+    c = cv2.imread(str(out / "colour.png"), cv2.IMREAD_UNCHANGED)
+    assert c.shape == (H, W, 3) and c.dtype == np.uint8
+    np.testing.assert_array_equal(c[:, :, 0], g)  # channels remapped identically
+    before, after = measure_image(image), measure_image(g)
+    assert before.d > 0.3 and after.n_lines >= before.n_lines - 2
+    # straight up to noise and resampling (the same scene rendered without lens measures 0.0005 px)
+    assert after.d < 0.003, (before.d, after.d)
+
+
+def test_fast_maps_agree_with_exact_per_pixel_maps():
+    fast = fast_undistortion_maps(LENS, W, H, step=16)
+    assert fast.step == 16 and fast.interp_error_px < 1e-4
+    ex, ey = LENS.undistortion_maps(W, H)
+    assert np.max(np.abs(fast.map_x - ex)) < 1e-4 and np.max(np.abs(fast.map_y - ey)) < 1e-4
+
+
+def test_bad_inputs_exit_2_with_one_line(setup, tmp_path, capsys):
+    d, model, grey, png16, colour, image = setup
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: harp-distortion-model\nformat_version: 3\n")
+    assert main(["undistort", str(bad), str(grey), "-o", str(tmp_path / "o")]) == 2
+    assert "unknown model file format version 3" in capsys.readouterr().err
+    small = tmp_path / "small.pgm"
+    cv2.imwrite(str(small), image[:100, :100])
+    assert main(["undistort", str(model), str(small), "-o", str(tmp_path / "o")]) == 2
+    assert "image is 100x100 but the model" in capsys.readouterr().err
+    assert main(["undistort", str(model), str(tmp_path / "none.pgm"), "-o", str(tmp_path / "o")]) == 2
+    assert "none.pgm: no such file" in capsys.readouterr().err
+    assert main(["undistort", str(model), str(grey), "-o", str(d)]) == 2
+    assert "would overwrite the input" in capsys.readouterr().err
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image at all")
+    assert main(["undistort", str(model), str(junk), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("harp undistort: ") and "junk.png" in err and err.count("\n") == 1
