@@ -1,0 +1,196 @@
+r"""Bootstrap uncertainty of a fitted correction field.
+
+How well do the data determine the correction at each pixel? The bootstrap
+(Efron 1979) answers without a noise model: refit the correction on
+resampled data sets and look at how much the fitted field moves.
+
+Resampling units. Points of one edge are not independent (the edge detector
+and the t-smoothing correlate neighbours; a string may be slightly bent), so
+the unit is a whole *edge*: each replicate draws, within each image, as many
+edges as that image has, with replacement (``resample="edges"``; keeps every
+orientation in every replicate, which the fit needs). ``resample="images"``
+draws whole shots instead, which also captures shot-to-shot effects but needs
+many orientations (a replicate that lost the orientation spread is counted as
+failed, not silently dropped).
+
+Comparison modulo homography. A straight-line fit determines the correction
+only up to a homography, so replicate :math:`b` with correction :math:`U_b`
+is compared with the full-data fit :math:`U` after the best homography
+:math:`H_b` (least squares over the grid, :func:`pipeline.compare.fit_homography`):
+
+.. math::
+    r_b(p) = H_b(U_b(p)) - U(p), \qquad
+    \sigma(p) = \Big(\tfrac{1}{B-1}\sum_b |r_b(p) - \bar r(p)|^2\Big)^{1/2}
+
+:math:`\sigma(p)` (pixels) is the per-pixel uncertainty map on a coarse grid
+covering the image (corners included); its RMS and max over the grid are the
+figures a profile stores.
+
+Cost. Edges the full fit rejected as outliers are dropped before resampling,
+and each replicate is a plain least-squares fit started from the full fit
+(``robust=False``, ``init=``), so a replicate costs a few LM iterations.
+
+References
+----------
+.. [1] B. Efron, "Bootstrap methods: another look at the jackknife",
+   Ann. Statist. 7(1), 1979.
+.. [2] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision
+   camera distortion measurements with a calibration harp", JOSA A 29(10), 2012.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from pipeline.compare import fit_homography
+from pipeline.fit import FitFailure, FitResult, fit_distortion
+from pipeline.models.base import DistortionModel
+
+RESAMPLE = ("edges", "images")
+DEFAULT_N_BOOT = 20
+GRID_CELLS = 16
+"""Default uncertainty grid: this many cells along the longer image side."""
+
+
+@dataclass(frozen=True)
+class FieldUncertainty:
+    """Per-pixel bootstrap uncertainty of a correction (pixels).
+
+    ``std[j, i]`` is the uncertainty at ``(xs[i], ys[j])``; ``rms`` / ``max``
+    over the grid. ``model`` is the full-data fit the replicates are compared
+    with; ``n_boot`` replicates succeeded, ``n_failed`` did not (reasons in
+    ``failures``, at most a few).
+    """
+
+    rms: float
+    max: float
+    xs: np.ndarray
+    ys: np.ndarray
+    std: np.ndarray
+    n_boot: int
+    n_failed: int
+    resample: str
+    model: DistortionModel
+    failures: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        """Plain data (for JSON / a profile's details)."""
+        return {"rms_px": self.rms, "max_px": self.max, "n_boot": self.n_boot,
+                "n_failed": self.n_failed, "resample": self.resample,
+                "xs": self.xs.tolist(), "ys": self.ys.tolist(), "std_px": self.std.tolist()}
+
+
+def uncertainty_grid(width: int, height: int, cells: int = GRID_CELLS) -> tuple[np.ndarray, np.ndarray]:
+    """Coarse node coordinates ``(xs, ys)`` spanning the image, corners included."""
+    step = (max(width, height) - 1) / float(cells)
+    nx = max(2, int(round((width - 1) / step)) + 1)
+    ny = max(2, int(round((height - 1) / step)) + 1)
+    return np.linspace(0.0, width - 1.0, nx), np.linspace(0.0, height - 1.0, ny)
+
+
+def field_spread(models: Sequence[DistortionModel], reference: DistortionModel, xs: np.ndarray,
+                 ys: np.ndarray) -> np.ndarray:
+    """Per-node std ``(ny, nx)`` of ``models`` modulo homography, aligned to ``reference``."""
+    xx, yy = np.meshgrid(xs, ys)
+    grid = np.stack([xx.ravel(), yy.ravel()], axis=1)
+    ref = reference.undistort_points(grid)
+    res = []
+    for m in models:
+        _, r = fit_homography(m.undistort_points(grid), ref)
+        res.append(r)
+    res = np.stack(res)  # (B, N, 2)
+    var = np.sum(np.var(res, axis=0, ddof=1), axis=1)
+    return np.sqrt(var).reshape(xx.shape)
+
+
+def refit_job(job: tuple) -> tuple[DistortionModel | None, str | None]:
+    """One replicate fit ``(lines_per_image, width, height, fit_kwargs)`` -> ``(model, None)``
+    or ``(None, reason)``; module-level so that a process pool can run it."""
+    lines, width, height, kw = job
+    res = fit_distortion(lines, width, height, **kw)
+    if isinstance(res, FitFailure):
+        return None, res.reason
+    return res.model, None
+
+
+def bootstrap_field_uncertainty(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int,
+                                fit_kwargs: dict | None = None, *, n_boot: int = DEFAULT_N_BOOT,
+                                seed: int = 0, resample: str = "edges", cells: int = GRID_CELLS,
+                                full_fit: FitResult | None = None,
+                                map_fn=map) -> FieldUncertainty | FitFailure:
+    """Bootstrap the correction fit and map the spread of the fitted field.
+
+    Parameters
+    ----------
+    lines_per_image : sequence over images of sequences of (M, 2) arrays
+        The edge points the correction is fitted on (as for
+        :func:`pipeline.fit.fit_distortion`).
+    width, height : int
+        Image size.
+    fit_kwargs : dict, optional
+        Keyword arguments of :func:`~pipeline.fit.fit_distortion` (``model``,
+        ``degree``, ``tangential``...). Replicates override ``robust`` (False)
+        and ``init`` (the full fit).
+    n_boot : int
+        Number of replicates (>= 2; default 20: cheap, and the RMS figure is
+        then good to about +-15 %).
+    seed : int
+        Seed of the resampling RNG (same seed, same result).
+    resample : {'edges', 'images'}
+        Resampling unit (module doc).
+    cells : int
+        Grid cells along the longer image side for the map.
+    full_fit : FitResult, optional
+        The full-data fit, if already computed with ``fit_kwargs``.
+    map_fn : callable
+        ``map``-like runner of the replicate fits (e.g. a process pool's
+        ``map``, with :func:`refit_job` as the picklable job); results do not
+        depend on it.
+
+    Returns
+    -------
+    FieldUncertainty or FitFailure
+        A failure when the full fit fails or fewer than 2 replicates succeed.
+    """
+    if resample not in RESAMPLE:
+        raise ValueError(f"unknown resampling unit {resample!r}; known: {', '.join(RESAMPLE)}")
+    if int(n_boot) < 2:
+        raise ValueError(f"n_boot must be >= 2, got {n_boot}")
+    kw = dict(fit_kwargs or {})
+    full = full_fit if full_fit is not None else fit_distortion(lines_per_image, width, height, **kw)
+    if isinstance(full, FitFailure):
+        return FitFailure(f"full fit failed: {full.reason}")
+    # the data the full fit used: without its rejected (outlier / unusable) edges
+    dropped = {(r.image, r.line) for r in full.rejected}
+    data = [[np.asarray(p, np.float64) for j, p in enumerate(lines) if (i, j) not in dropped]
+            for i, lines in enumerate(lines_per_image)]
+    data = [lines for lines in data if lines]
+    rkw = {**kw, "robust": False, "init": full.model}
+    rng = np.random.default_rng(seed)
+    jobs = []
+    for _ in range(int(n_boot)):  # all resampling first: the result does not depend on map_fn
+        if resample == "edges":
+            sample = [[lines[k] for k in rng.integers(0, len(lines), len(lines))] for lines in data]
+        else:
+            sample = [data[k] for k in rng.integers(0, len(data), len(data))]
+        jobs.append((sample, width, height, rkw))
+    models, failures = [], []
+    n_failed = 0
+    for model, reason in map_fn(refit_job, jobs):
+        if model is None:
+            n_failed += 1
+            if len(failures) < 3:
+                failures.append(reason)
+            continue
+        models.append(model)
+    if len(models) < 2:
+        return FitFailure(f"only {len(models)} of {n_boot} bootstrap replicates could be fitted"
+                          + (f" (e.g. {failures[0]})" if failures else ""))
+    xs, ys = uncertainty_grid(width, height, cells)
+    std = field_spread(models, full.model, xs, ys)
+    return FieldUncertainty(rms=float(np.sqrt(np.mean(std ** 2))), max=float(std.max()), xs=xs, ys=ys,
+                            std=std, n_boot=len(models), n_failed=n_failed, resample=resample,
+                            model=full.model, failures=tuple(failures))

@@ -1,0 +1,279 @@
+"""``harp qa SESSION_OR_LENS [--reference REF] [--max-... PX] [--report DIR] [--json]``.
+
+Factory QA: a PASS / FAIL verdict, with reasons, for every profile of a
+session directory (thresholds from its configuration's ``qa`` section) or of
+a lens in the profile store (newest profile per focus; thresholds from
+``--config`` or the defaults); ``--max-holdout-d``, ``--max-distortion`` and
+``--max-reference-deviation`` override them. REF, the golden reference of the
+same lens model, is a harp model file, a stored profile ``#id``, or a lens in
+the store (its profile at the same focus, interpolated between its calibrated
+focus settings when needed). ``--report DIR`` writes a Markdown report with
+plots (for a session: also per-edge residuals, overlays and the bootstrap
+uncertainty map, re-measured from its frames). Each result is recorded in the
+store's ``qa_results`` (unless ``--no-record``).
+Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
+REPORT_BOOTSTRAP = 20
+"""Bootstrap replicates of the report's uncertainty map when the configuration sets none."""
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (math.isfinite(v) and v > 0):
+        import argparse
+
+        raise argparse.ArgumentTypeError(f"expected a positive number of pixels, got {text!r}")
+    return v
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("qa", help="factory QA verdict of a session or a stored lens",
+                              description=__doc__.split("\n\n")[1])
+    p.add_argument("target", metavar="SESSION_OR_LENS")
+    p.add_argument("--reference", metavar="REF", default=None,
+                   help="golden reference: model file, profile #id, or lens in the store")
+    p.add_argument("--store", type=Path, default=None, help="profile store (default: the session's, "
+                   f"else $HARP_STORE or {DEFAULT_STORE})")
+    p.add_argument("--config", type=Path, default=None, help="take the qa thresholds from this configuration")
+    p.add_argument("--max-holdout-d", type=_positive, metavar="PX", help="threshold on the holdout d")
+    p.add_argument("--max-distortion", type=_positive, metavar="PX",
+                   help="threshold on the max displacement of the correction (modulo homography)")
+    p.add_argument("--max-reference-deviation", type=_positive, metavar="PX",
+                   help="threshold on the max deviation from the reference (modulo homography)")
+    p.add_argument("--report", type=Path, metavar="DIR", default=None, help="write a Markdown report here")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--no-record", action="store_true", help="do not record the result in the store")
+    p.set_defaults(func=run)
+
+
+class _Fail(Exception):
+    pass
+
+
+def _store(args, config, create=False):
+    from station.store import ProfileStore
+
+    if args.store is not None:
+        path = args.store
+    elif config is not None:
+        path = config.store_path
+    else:
+        path = Path(os.environ.get("HARP_STORE", DEFAULT_STORE))
+    return ProfileStore(path, create=create)
+
+
+def _candidates(args, config, session):
+    """[(focus, profile object, profile_id, source)] of what to judge."""
+    from station.qa import session_models
+
+    if session is not None:
+        models = session_models(session.path)
+        if not models:
+            raise _Fail(f"{session.path}: session has no fitted profile yet")
+        return [(focus if math.isfinite(focus) else session.config.focus_settings[f], mf, None,
+                 str(session.path / "profiles" / f"focus{f}.yaml")) for f, focus, mf in models]
+    with _store(args, config) as store:
+        lens = store.find_lens(args.target)
+        profiles = store.latest_by_focus(lens[0])
+    if not profiles:
+        raise _Fail(f"lens {args.target!r} has no profile")
+    return [(p.focus, p, p.id, f"profile #{p.id}") for p in profiles]
+
+
+def _reference(args, config, focus, width, height):
+    """The reference correction for one profile, or None."""
+    if args.reference is None:
+        return None
+    from pipeline.models import model_from_dict
+
+    ref = args.reference
+    if Path(ref).is_file():
+        from pipeline.model_file import read_model_file
+
+        try:
+            mf = read_model_file(ref)
+        except ValueError as exc:
+            raise _Fail(f"reference {ref}: {exc}") from None
+        if (mf.width, mf.height) != (width, height):
+            raise _Fail(f"reference {ref} is for {mf.width}x{mf.height} images, not {width}x{height}")
+        return mf.model
+    if "/" in ref or Path(ref).suffix.lower() in (".yaml", ".yml", ".json"):
+        raise _Fail(f"reference {ref}: no such model file")
+    with _store(args, config) as store:
+        if ref.startswith("#") and ref[1:].isdigit():
+            p = store.profile(int(ref[1:]))
+            if p is None:
+                raise _Fail(f"no profile {ref} in {store.path}")
+            profiles = [p]
+        else:
+            lens = store.find_lens(ref)
+            profiles = store.latest_by_focus(lens[0])
+    sizes = {(p.width, p.height) for p in profiles}
+    if sizes != {(width, height)}:
+        raise _Fail(f"reference {ref!r} is for {', '.join(f'{w}x{h}' for w, h in sorted(sizes))} images, "
+                    f"not {width}x{height}")
+    if len(profiles) == 1 and ref.startswith("#"):
+        return model_from_dict(profiles[0].model)
+    same = [p for p in profiles if math.isclose(p.focus, focus, abs_tol=1e-9)]
+    if same:
+        return model_from_dict(same[0].model)
+    from pipeline.interpolate import interpolate_correction
+
+    try:
+        return interpolate_correction({p.focus: model_from_dict(p.model) for p in profiles}, focus,
+                                      width, height)
+    except ValueError as exc:
+        raise _Fail(f"reference lens {ref!r} at focus {focus:g}: {exc}") from None
+
+
+def _fit_kwargs(pipeline) -> dict:
+    """:func:`pipeline.fit.fit_distortion` options of a configuration's ``pipeline`` section."""
+    kw = {"model": pipeline.model, "degree": pipeline.degree}
+    if getattr(pipeline, "tangential", False):
+        kw["tangential"] = True
+    if getattr(pipeline, "prism", False):
+        kw["prism"] = True
+    return kw
+
+
+def _report(args, title, items, results, overall, thresholds, interpolation, session) -> Path:
+    from station.qa import profile_data
+    from station.report import FocusEvidence, session_shots, shot_uncertainty, write_report
+
+    evidence = []
+    for (focus, prof, _pid, source), v in zip(items, results):
+        pd = profile_data(prof)
+        e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v,
+                          source=source)
+        if session is not None:
+            cfg = session.config
+            f_idx = int(Path(source).stem.replace("focus", ""))
+            e.shots = session_shots(session, f_idx, t=cfg.pipeline.t)
+            e.uncertainty, e.uncertainty_note = shot_uncertainty(
+                e.shots, pd.width, pd.height, _fit_kwargs(cfg.pipeline),
+                n_boot=cfg.pipeline.bootstrap or REPORT_BOOTSTRAP, seed=cfg.pipeline.seed)
+        else:
+            e.uncertainty_note = ("stored: RMS {} px, max {} px (no per-pixel map without the session's "
+                                  "frames: run `harp qa SESSION_DIR --report`)").format(
+                *(f"{x:.4f}" if x is not None else "-" for x in (pd.field_uncertainty_rms,
+                                                                 pd.field_uncertainty_max)))
+        evidence.append(e)
+    return write_report(args.report, title, evidence, overall, thresholds=thresholds,
+                        interpolation=interpolation)
+
+
+def _plain(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+def run(args) -> int:
+    from station.config import ConfigError, load_config
+    from station.qa import combine, interpolation_error, profile_data, qa_verdict, thresholds_from
+    from station.session_dir import SessionDir, SessionError
+    from station.store import StoreError
+
+    session = None
+    try:
+        try:
+            config = load_config(args.config) if args.config else None
+            target = Path(args.target)
+            if (target / "session.json").is_file():
+                session = SessionDir.open(target)
+                config = config or session.config
+            elif target.exists() and target.is_dir():
+                raise _Fail(f"{target}: not a session directory (no session.json)")
+            thresholds = thresholds_from(config.qa if config is not None else None,
+                                         max_holdout_d_px=args.max_holdout_d,
+                                         max_distortion_px=args.max_distortion,
+                                         max_reference_deviation_px=args.max_reference_deviation)
+            if args.reference is not None and thresholds.max_reference_deviation_px is None:
+                raise _Fail("--reference needs a threshold: set qa.max_reference_deviation_px in the "
+                            "configuration or give --max-reference-deviation PX")
+            items = _candidates(args, config, session)
+            results = []
+            for focus, prof, _pid, _src in items:
+                pd = profile_data(prof)
+                ref = _reference(args, config, focus, pd.width, pd.height)
+                results.append(qa_verdict(pd, thresholds, reference=ref))
+            overall = combine(results)
+            pds = [profile_data(p) for _f, p, _i, _s in items]
+            interpolation = []
+            if len({(p.width, p.height) for p in pds}) == 1 and len({f for f, *_ in items}) == len(items):
+                interpolation = interpolation_error({f: p.model for (f, *_), p in zip(items, pds)},
+                                                    pds[0].width, pds[0].height)
+            report = None
+            if args.report is not None:
+                report = _report(args, str(args.target), items, results, overall, thresholds,
+                                 interpolation, session)
+        except (ConfigError, SessionError, StoreError, _Fail, ValueError, OSError) as exc:
+            print(f"harp qa: {exc}", file=sys.stderr)
+            return 2
+    finally:
+        if session is not None:
+            session.close()
+
+    if not args.no_record:
+        try:
+            with _store(args, config, create=True) as store:
+                for (focus, _p, pid, _src), v in zip(items, results):
+                    store.put_qa_result(verdict=v.verdict, reasons=list(v.reasons),
+                                        metrics=_plain({**v.metrics, "focus": focus}), profile_id=pid,
+                                        session_dir=str(session.path.resolve()) if session else None)
+        except StoreError as exc:
+            print(f"harp qa: warning: result not recorded: {exc}", file=sys.stderr)
+
+    if args.json:
+        out = {"target": str(args.target), "verdict": overall,
+               "thresholds": dict(thresholds.__dict__),
+               "profiles": [{"focus": f, "source": src, "profile_id": pid, **v.to_dict()}
+                            for (f, _p, pid, src), v in zip(items, results)],
+               "interpolation": [{"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px}
+                                 for r in interpolation],
+               "report": str(report) if report else None}
+        print(json.dumps(_plain(out), indent=1))
+    else:
+        _print_table(args.target, items, results, interpolation, overall, report)
+    return 0 if overall == "PASS" else 1
+
+
+def _print_table(target, items, results, interpolation, overall, report) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console() if sys.stdout.isatty() else Console(width=160)
+    t = Table(title=f"QA of {target}")
+    for col in ("focus", "verdict", "holdout d", "distortion max", "ref. dev. max", "unc. max",
+                "reasons / checks"):
+        t.add_column(col)
+    fmt = lambda v: "-" if v is None or not math.isfinite(v) else f"{v:.4f}"  # noqa: E731
+    for (focus, *_), v in zip(items, results):
+        m = v.metrics
+        t.add_row(f"{focus:g}", v.verdict, fmt(m.get("holdout_d_px")), fmt(m.get("distortion_max_px")),
+                  fmt(m.get("reference_max_px")), fmt(m.get("field_uncertainty_max_px")),
+                  "; ".join(v.reasons or v.checks))
+    console.print(t)
+    for r in interpolation:
+        console.print(f"focus interpolation error at {r.focus:g} (left out): RMS {r.rms_px:.4f} px, "
+                      f"max {r.max_px:.4f} px")
+    if report:
+        console.print(f"report: {report}")
+    print(f"QA: {overall}")

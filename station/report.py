@@ -1,0 +1,284 @@
+"""The QA report of a session: Markdown with PNG plots (matplotlib, Agg backend).
+
+Per focus setting:
+
+* ``field_f<i>.png`` — the correction's displacement field as a vector
+  (quiver) plot over the image, modulo homography (after the least-squares
+  homography closest to it, as in :func:`station.qa.distortion_magnitude`:
+  what is left once the homography a straight-line method cannot see is
+  removed), colour = length;
+* ``residuals_f<i>.png`` — RMS distance of each edge's points to its
+  regression line before and after the correction (log scale), grouped by
+  orientation;
+* ``overlay_f<i>_o<j>.png`` — one per orientation: the averaged frame with its
+  edges coloured by their residual (:func:`station.overlay.write_overlay`);
+* ``uncertainty_f<i>.png`` — the bootstrap field uncertainty map
+  (:func:`pipeline.uncertainty.bootstrap_field_uncertainty`);
+
+then the verdict with its reasons and figures, and the leave-one-focus-out
+interpolation error. ``report.md`` links them all.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from station.qa import Verdict  # noqa: E402
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One averaged shot of a focus setting and its measurement."""
+
+    orientation_deg: float
+    image: np.ndarray
+    measurement: Any  # pipeline.measure.ImageMeasurement
+
+
+@dataclass
+class FocusEvidence:
+    """Everything the report shows about one focus setting."""
+
+    focus: float
+    model: Any  # DistortionModel
+    width: int
+    height: int
+    verdict: Verdict
+    source: str = ""
+    shots: list[Shot] = field(default_factory=list)
+    uncertainty: Any = None  # pipeline.uncertainty.FieldUncertainty, or None
+    uncertainty_note: str = ""
+
+
+# ------------------------------------------------------------------ figures
+def _fig(width: int, height: int, extra_w: float = 1.6):
+    aspect = height / width
+    fig, ax = plt.subplots(figsize=(7.0 + extra_w, 7.0 * aspect + 0.9), dpi=110)
+    return fig, ax
+
+
+def _image_axes(ax, width, height):
+    ax.set_xlim(-0.5, width - 0.5)
+    ax.set_ylim(height - 0.5, -0.5)  # image rows grow downwards
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (column, px)")
+    ax.set_ylabel("y (row, px)")
+
+
+def plot_field(model, width: int, height: int, path, title: str = "", arrows: int = 24) -> Path:
+    """Quiver plot of the correction's displacement modulo homography; returns the path."""
+    from pipeline.compare import compare_models
+    from pipeline.interpolate import normalised_field
+    from pipeline.models.base import IdentityModel
+    from station.qa import _grid_step
+
+    # the same homography as the QA figure (station.qa.distortion_magnitude)
+    h = compare_models(model, IdentityModel(), width, height, step=_grid_step(width, height)).homography
+    step = max(width, height) / arrows
+    xs = np.linspace(0, width - 1, max(2, int(round((width - 1) / step)) + 1))
+    ys = np.linspace(0, height - 1, max(2, int(round((height - 1) / step)) + 1))
+    ux, uy = normalised_field(model, xs, ys, h)
+    fxs = np.linspace(0, width - 1, 120)
+    fys = np.linspace(0, height - 1, max(2, int(120 * height / width)))
+    fx, fy = normalised_field(model, fxs, fys, h)
+    mag = np.hypot(fx, fy)
+    fig, ax = _fig(width, height)
+    im = ax.imshow(mag, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="viridis",
+                   interpolation="bilinear")
+    xx, yy = np.meshgrid(xs, ys)
+    vmax = float(np.hypot(ux, uy).max()) or 1.0
+    q = ax.quiver(xx, yy, ux, uy, color="white", angles="xy", scale_units="xy",
+                  scale=vmax / (0.9 * step), width=0.004)
+    key = float(f"{vmax:.1g}")
+    ax.quiverkey(q, 0.80, 1.03, key, f"{key:g} px", labelpos="E", coordinates="axes", color="black")
+    _image_axes(ax, width, height)
+    fig.colorbar(im, ax=ax, label="|displacement| (px)", fraction=0.046, pad=0.03)
+    ax.set_title((title + "\n" if title else "") +
+                 f"correction modulo homography: max {mag.max():.3f} px, RMS {np.sqrt(np.mean(mag ** 2)):.3f} px",
+                 fontsize=10, loc="left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
+    """``(orientation index, edge index, rms before, rms after)`` per measured edge (px)."""
+    from pipeline.fit import edge_residuals
+
+    rows = []
+    for o, s in enumerate(shots):
+        for i, ln in enumerate(s.measurement.lines):
+            p = np.asarray(ln.points, np.float64)
+            if len(p) < 3:
+                continue
+            before = float(np.sqrt(np.mean(edge_residuals(p) ** 2)))
+            after = float(np.sqrt(np.mean(edge_residuals(model.undistort_points(p)) ** 2)))
+            rows.append((o, i, before, after))
+    return rows
+
+
+def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> Path:
+    """Per-edge RMS residual before / after correction, grouped by orientation (log scale)."""
+    rows = edge_residual_table(shots, model)
+    fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
+    if rows:
+        x = np.arange(len(rows))
+        before = np.array([r[2] for r in rows])
+        after = np.array([r[3] for r in rows])
+        ax.bar(x, before, width=0.9, color="#f4a582", label="before correction")
+        ax.bar(x, after, width=0.5, color="#2166ac", label="after correction")
+        ori = np.array([r[0] for r in rows])
+        for o in np.unique(ori):
+            idx = np.flatnonzero(ori == o)
+            if o > 0:
+                ax.axvline(idx[0] - 0.5, color="grey", lw=0.6)
+            ax.text(idx.mean(), 1.02, f"{shots[o].orientation_deg:g}°", transform=ax.get_xaxis_transform(),
+                    ha="center", fontsize=8)
+        ax.set_yscale("log")
+        ax.set_xlim(-0.5, len(rows) - 0.5)
+        lo = max(min(after.min(), before.min()) / 2, 1e-5)
+        ax.set_ylim(lo, before.max() * 2)
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+        sub = (f"mean RMS per edge: {before.mean():.4f} px before, {after.mean():.4f} px after "
+               f"({len(rows)} edges)")
+    else:
+        ax.text(0.5, 0.5, "no measured edges", ha="center", va="center", transform=ax.transAxes)
+        sub = "no measured edges"
+    ax.set_xlabel("edge (grouped by stage orientation)")
+    ax.set_ylabel("RMS distance to the edge's line (px)")
+    ax.set_title((title + "\n" if title else "") + sub, fontsize=10, loc="left", pad=16)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Path:
+    """Map of the bootstrap field uncertainty (px)."""
+    fig, ax = _fig(width, height)
+    dx = (unc.xs[1] - unc.xs[0]) / 2 if len(unc.xs) > 1 else 0.5
+    dy = (unc.ys[1] - unc.ys[0]) / 2 if len(unc.ys) > 1 else 0.5
+    im = ax.imshow(unc.std, extent=(unc.xs[0] - dx, unc.xs[-1] + dx, unc.ys[-1] + dy, unc.ys[0] - dy),
+                   cmap="magma", interpolation="bilinear", vmin=0)
+    _image_axes(ax, width, height)
+    fig.colorbar(im, ax=ax, label="uncertainty of the correction (px, 1 sigma)", fraction=0.046, pad=0.03)
+    ax.set_title((title + "\n" if title else "") +
+                 f"bootstrap ({unc.n_boot} replicates, {unc.resample} resampled): "
+                 f"RMS {unc.rms:.4f} px, max {unc.max:.4f} px", fontsize=10, loc="left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+# ------------------------------------------------------------------ report
+def _fmt(v, nd=4) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v:.{nd}f}" if isinstance(v, float) else str(v)
+
+
+def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall: str, *,
+                 thresholds=None, interpolation: Sequence = (), notes: Sequence[str] = ()) -> Path:
+    """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path."""
+    from station.overlay import write_overlay
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", ""]
+    if thresholds is not None:
+        md += ["Thresholds: " + ", ".join(f"{k} = {v:g} px" if v is not None else f"{k}: not judged"
+                                          for k, v in thresholds.__dict__.items()), ""]
+    md += ["| focus | verdict | holdout d (px) | distortion max (px) | ref. deviation max (px) | "
+           "uncertainty RMS / max (px) | reasons |",
+           "|---:|:---:|---:|---:|---:|---:|:---|"]
+    for e in evidence:
+        f = e.verdict.figures
+        unc = e.uncertainty
+        u = (f"{unc.rms:.4f} / {unc.max:.4f}" if unc is not None else
+             f"{_fmt(f.get('field_uncertainty_rms_px'))} / {_fmt(f.get('field_uncertainty_max_px'))}")
+        md.append(f"| {e.focus:g} | {e.verdict.verdict} | {_fmt(f.get('holdout_d_px'))} | "
+                  f"{_fmt(f.get('distortion_max_px'), 3)} | {_fmt(f.get('reference_max_px'))} | {u} | "
+                  f"{'; '.join(e.verdict.reasons) or '-'} |")
+    md.append("")
+    if interpolation:
+        md += ["## Focus interpolation (leave one calibrated focus out)", "",
+               "Each interior focus setting interpolated from the others and compared with its own fit, "
+               "modulo homography.", "", "| focus left out | RMS (px) | max (px) |", "|---:|---:|---:|"]
+        md += [f"| {r.focus:g} | {r.rms_px:.4f} | {r.max_px:.4f} |" for r in interpolation]
+        md.append("")
+    for n in notes:
+        md += [f"> {n}", ""]
+    for i, e in enumerate(evidence):
+        label = f"focus {e.focus:g}"
+        md += [f"## {label}", ""]
+        if e.source:
+            md += [f"Profile: `{e.source}`", ""]
+        md += ["Checks: " + ("; ".join(e.verdict.checks) or "-"), ""]
+        if e.verdict.reasons:
+            md += ["Reasons for FAIL:", ""] + [f"- {r}" for r in e.verdict.reasons] + [""]
+        name = f"field_f{i}.png"
+        plot_field(e.model, e.width, e.height, out / name, title=f"{title}, {label}")
+        md += ["### Distortion field", "", f"![distortion field]({name})", ""]
+        if e.shots:
+            name = f"residuals_f{i}.png"
+            plot_edge_residuals(e.shots, e.model, out / name, title=f"{title}, {label}")
+            md += ["### Residual per edge", "", f"![residual per edge]({name})", ""]
+        if e.uncertainty is not None:
+            name = f"uncertainty_f{i}.png"
+            plot_uncertainty(e.uncertainty, e.width, e.height, out / name, title=f"{title}, {label}")
+            md += ["### Field uncertainty", "", f"![field uncertainty]({name})", ""]
+        elif e.uncertainty_note:
+            md += ["### Field uncertainty", "", e.uncertainty_note, ""]
+        if e.shots:
+            md += ["### Overlays (edges coloured by their distance to their own line, before correction)", ""]
+            for j, s in enumerate(e.shots):
+                name = f"overlay_f{i}_o{j}.png"
+                write_overlay(out / name, s.image, s.measurement,
+                              title=f"{label}, stage {s.orientation_deg:g} deg")
+                md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md) + "\n")
+    return path
+
+
+# ------------------------------------------------------- session evidence
+def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
+    """Averaged, measured shots of one focus setting of an open
+    :class:`station.session_dir.SessionDir` (orientations with no frames are skipped)."""
+    from pipeline.measure import measure_image
+    from station.processing import average_frames
+
+    cfg = session.config
+    shots = []
+    for o, deg in enumerate(cfg.capture.orientations_deg):
+        records = session.frames(focus_idx, o)
+        if not records:
+            continue
+        image = average_frames([session.read_frame(r) for r in records])
+        shots.append(Shot(float(deg), image, measure_image(image, t=t)))
+    return shots
+
+
+def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, fit_kwargs: dict, *,
+                     n_boot: int = 20, seed: int = 0):
+    """(FieldUncertainty or None, note) from the shots' edges."""
+    from pipeline.fit import FitFailure
+    from pipeline.uncertainty import bootstrap_field_uncertainty
+
+    lines = [[np.asarray(ln.points, np.float64) for ln in s.measurement.lines] for s in shots]
+    res = bootstrap_field_uncertainty(lines, width, height, fit_kwargs, n_boot=n_boot, seed=seed)
+    if isinstance(res, FitFailure):
+        return None, f"not available: {res.reason}"
+    return res, ""

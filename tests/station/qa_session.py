@@ -1,0 +1,67 @@
+"""A small real session directory for QA / report tests (test helper).
+
+Frames are rendered through the demo's focus-dependent lens
+(:func:`drivers.sim.lens.lens_for_focus`) and written with the session
+directory's own API; each focus setting is measured and fitted with the
+station's processing (:func:`station.processing.fit_focus`, leave one
+orientation out) and its model file written as the executor writes it. No
+turntable moves, so it takes a few seconds instead of a session's minute.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from drivers.sim.lens import lens_for_focus
+from pipeline.model_file import write_model_file
+from pipeline.render import HarpScene, render_harp
+from station.config import load_config
+from station.processing import fit_focus, measure_shot
+from station.session_dir import SessionDir
+
+REPO = Path(__file__).resolve().parents[2]
+W, H = 400, 300
+FOCUS = (0.0, 0.5, 1.0)
+ANGLES = (0.0, 45.0, 90.0, 135.0)
+HARP_OFFSET = 5.0
+
+
+def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES) -> Path:
+    d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
+    d["station"]["camera"].update(width=W, height=H)
+    d["focus"]["settings"] = list(focus)
+    d["capture"]["orientations_deg"] = list(angles)
+    d["capture"]["frames_per_orientation"] = 1
+    d["pipeline"].update(degree=3, bootstrap=4, workers=1)
+    d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 5.0}
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / "station.yaml"
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES,
+                  name: str = "s1") -> Path:
+    """A finished session under ``root/sessions/name``; returns its path."""
+    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles))
+    s = SessionDir.create(config.sessions_dir, config, name=name)
+    with s:
+        for fi, f in enumerate(config.focus_settings):
+            lens = lens_for_focus(f, W, H)
+            shots = []
+            for oi, a in enumerate(config.capture.orientations_deg):
+                scene = HarpScene(angle_deg=a + HARP_OFFSET, spacing_px=28.0, phase_px=3.0 * oi)
+                img = render_harp(W, H, scene, lens=lens, noise_sigma=1.0, seed=100 * fi + oi).image
+                s.write_frame(fi, oi, 0, img, {"stage_deg": a, "focus": f})
+                shots.append(measure_shot(img.astype(float), config.pipeline))
+            fit = fit_focus(shots, W, H, config.pipeline)
+            assert fit.failure is None, fit.failure
+            write_model_file(s.path / "profiles" / f"focus{fi}.yaml", fit.model, width=W, height=H,
+                             merit={"fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
+                                    "holdout": {"d": fit.holdout_d, "d_max": fit.holdout_d_max}},
+                             provenance={"focus": f})
+        s.append({"kind": "finished"})
+    return s.path

@@ -1,0 +1,118 @@
+"""``harp qa`` through station.cli.main: exit codes 0 PASS / 1 FAIL / 2 error."""
+
+import json
+import shutil
+
+import pytest
+
+from drivers.sim.lens import lens_for_focus
+from pipeline.model_file import write_model_file
+from station.cli import main
+from station.qa import session_models
+from station.store import ProfileStore
+from tests.station.qa_session import H, W, build_session
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    return build_session(tmp_path_factory.mktemp("qa"))
+
+
+def qa(capsys, *args):
+    code = main(["qa", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def qa_json(capsys, *args):
+    code, out, err = qa(capsys, *args, "--json")
+    return code, (json.loads(out) if out.strip() else None), err
+
+
+def test_session_passes_and_is_recorded(session, capsys):
+    code, out, err = qa_json(capsys, session)
+    assert code == 0, err
+    assert out["verdict"] == "PASS" and [p["focus"] for p in out["profiles"]] == [0.0, 0.5, 1.0]
+    for p in out["profiles"]:
+        assert p["passed"] and p["figures"]["holdout_d_px"] < 0.05 and p["figures"]["distortion_max_px"] < 5
+    (loo,) = out["interpolation"]
+    assert loo["focus"] == 0.5 and 0 < loo["rms_px"] < 0.05
+    with ProfileStore(session.parent.parent / "profiles.sqlite") as st:
+        rows = list(st.qa_results())
+    assert [r["verdict"] for r in rows[-3:]] == ["PASS"] * 3
+    assert rows[-1]["session_dir"] == str(session.resolve())
+
+
+def test_fail_on_threshold_is_exit_1(session, capsys):
+    code, out, _ = qa_json(capsys, session, "--max-holdout-d", "1e-6", "--no-record")
+    assert code == 1 and out["verdict"] == "FAIL"
+    assert all("holdout d" in p["reasons"][0] for p in out["profiles"])
+    code, out, _ = qa_json(capsys, session, "--max-distortion", "0.01", "--no-record")
+    assert code == 1 and all(p["reasons"][0].startswith("distortion") for p in out["profiles"])
+    code, text, _ = qa(capsys, session, "--max-distortion", "0.01", "--no-record")
+    assert code == 1 and text.rstrip().endswith("QA: FAIL")
+
+
+def test_reference_model_file(session, tmp_path, capsys):
+    ref = tmp_path / "golden.yaml"
+    write_model_file(ref, lens_for_focus(0.0, W, H), width=W, height=H)
+    code, out, _ = qa_json(capsys, session, "--reference", ref, "--max-reference-deviation", "0.05",
+                           "--no-record")
+    assert code == 1
+    f0, f05, f1 = out["profiles"]
+    # the fit at focus 0 matches the golden lens (focus 0); focus 1 is another lens state
+    assert f0["passed"] and f0["figures"]["reference_max_px"] < 0.05
+    assert not f1["passed"] and "deviates from the reference" in f1["reasons"][0]
+    assert f1["figures"]["reference_max_px"] > f05["figures"]["reference_max_px"] > f0["figures"]["reference_max_px"]
+
+
+def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
+    store = tmp_path / "p.sqlite"
+    with ProfileStore(store) as st:
+        for f, focus, mf in session_models(session):
+            st.put_profile(lens=("Sim", "SIM-12mm", "UNIT-7"), camera=("c", "m", "s"), focus=focus,
+                           model=mf.model.to_dict(), width=W, height=H, holdout_d=mf.merit["holdout"]["d"],
+                           session_dir=str(session), station_id="t", software_version="0")
+        # the golden lens: the true demo lens, calibrated at focus 0 and 1 only
+        for focus in (0.0, 1.0):
+            st.put_profile(lens=("Sim", "SIM-12mm", "GOLDEN"), camera=("c", "m", "s"), focus=focus,
+                           model=lens_for_focus(focus, W, H).to_dict(), width=W, height=H, holdout_d=0.0,
+                           session_dir="golden", station_id="t", software_version="0")
+    code, out, err = qa_json(capsys, "UNIT-7", "--store", store, "--reference", "GOLDEN",
+                             "--max-reference-deviation", "0.05")
+    assert code == 0, err
+    # focus 0.5 was judged against the golden lens interpolated between 0 and 1
+    assert [p["profile_id"] is not None for p in out["profiles"]] == [True] * 3
+    assert all(p["figures"]["reference_max_px"] < 0.05 for p in out["profiles"])
+    with ProfileStore(store) as st:
+        assert len(list(st.qa_results())) == 3
+
+
+@pytest.mark.parametrize("args, message", [
+    (["no-such-lens", "--store", "{store}"], "no lens matching"),
+    (["{tmp}"], "not a session directory"),
+    (["{session}", "--reference", "{ref}"], "--reference needs a threshold"),
+    (["{session}", "--reference", "{ref}", "--max-reference-deviation", "1"], "is for 640x480 images"),
+    (["{session}", "--reference", "{tmp}/missing.yaml", "--max-reference-deviation", "1"], "no such model file"),
+    (["{session}", "--reference", "#99", "--max-reference-deviation", "1"], "no profile #99"),
+])
+def test_errors_are_one_line_exit_2(session, tmp_path, capsys, args, message):
+    store = tmp_path / "p.sqlite"
+    ProfileStore(store).close()
+    ref = tmp_path / "other-size.yaml"
+    write_model_file(ref, lens_for_focus(0.0, 640, 480), width=640, height=480)
+    fill = {"store": store, "tmp": tmp_path, "session": session, "ref": ref}
+    code, out, err = qa(capsys, *[a.format(**fill) for a in args], "--no-record")
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_session_without_profiles_and_bad_threshold(session, tmp_path, capsys):
+    empty = tmp_path / "s"
+    shutil.copytree(session, empty)
+    for p in (empty / "profiles").iterdir():
+        p.unlink()
+    code, _, err = qa(capsys, empty, "--no-record")
+    assert code == 2 and "no fitted profile" in err
+    with pytest.raises(SystemExit) as exc:
+        main(["qa", str(session), "--max-holdout-d", "-3"])
+    assert exc.value.code == 2

@@ -1,0 +1,74 @@
+"""The QA report (station/report.py): Markdown + PNG plots, written by ``harp qa --report``."""
+
+import re
+
+import cv2
+import numpy as np
+import pytest
+
+from station.cli import main
+from station.qa import session_models
+from station.report import edge_residual_table, session_shots
+from station.session_dir import SessionDir
+from station.store import ProfileStore
+from tests.station.qa_session import ANGLES, H, W, build_session
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    return build_session(tmp_path_factory.mktemp("rep"), focus=(0.3,))
+
+
+def png(path):
+    img = cv2.imread(str(path))
+    assert img is not None, f"{path} is not a readable PNG"
+    return img
+
+
+def test_session_report_has_every_plot(session, tmp_path, capsys):
+    out = tmp_path / "report"
+    code = main(["qa", str(session), "--report", str(out), "--max-distortion", "0.01", "--no-record"])
+    capsys.readouterr()
+    assert code == 1  # the report of a FAIL says why
+    md = (out / "report.md").read_text()
+    assert "**Verdict: FAIL**" in md and "distortion " in md and "> 0.01 px" in md
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
+    expected = {"field_f0.png", "residuals_f0.png", "uncertainty_f0.png"} | {f"overlay_f0_o{j}.png"
+                                                                             for j in range(len(ANGLES))}
+    assert set(links) == expected
+    for name in links:
+        img = png(out / name)
+        assert min(img.shape[:2]) >= 300 and img.std() > 5  # a real picture, not a blank canvas
+    # the overlays are the frames themselves (plus the legend panel)
+    assert png(out / "overlay_f0_o0.png").shape[1] == W
+    assert "bootstrap" in md or "uncertainty" in md
+
+
+def test_residuals_drop_after_correction(session):
+    (_, _, mf), = session_models(session)
+    with SessionDir.open(session) as s:
+        shots = session_shots(s, 0, t=30)
+    assert [sh.orientation_deg for sh in shots] == list(ANGLES)
+    rows = edge_residual_table(shots, mf.model)
+    before = np.array([r[2] for r in rows])
+    after = np.array([r[3] for r in rows])
+    assert len(rows) > 4 * len(ANGLES)
+    assert after.mean() < 0.2 * before.mean() and np.median(after) < 0.01
+
+
+def test_lens_report_without_frames(session, tmp_path, capsys):
+    store = tmp_path / "p.sqlite"
+    (_, focus, mf), = session_models(session)
+    with ProfileStore(store) as st:
+        st.put_profile(lens=("Sim", "SIM-12mm", "U1"), camera=("c", "m", "s"), focus=focus,
+                       model=mf.model.to_dict(), width=W, height=H, holdout_d=mf.merit["holdout"]["d"],
+                       field_uncertainty_rms=0.001, field_uncertainty_max=0.004,
+                       session_dir=str(session), station_id="t", software_version="0")
+    out = tmp_path / "r"
+    code = main(["qa", "U1", "--store", str(store), "--report", str(out)])
+    capsys.readouterr()
+    assert code == 0
+    md = (out / "report.md").read_text()
+    assert "**Verdict: PASS**" in md and "stored: RMS 0.0010 px, max 0.0040 px" in md
+    assert sorted(p.name for p in out.glob("*.png")) == ["field_f0.png"]
+    png(out / "field_f0.png")
