@@ -1,0 +1,222 @@
+"""``harp profile list | show LENS [--focus F] | export LENS --focus F --format ...``.
+
+Reads the profile store (``--store PATH``; default ``$HARP_STORE`` or
+``profiles/harp-profiles.sqlite``, where ``configs/demo.yaml`` stores). LENS is
+a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous part of
+"maker model serial". ``export`` converts the newest profile at that focus
+with :mod:`station.cmd_export`'s exporters. Exit 0 on success, 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
+FORMATS = ("opencv", "ros", "lensfun", "json")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("profile", help="list, show and export stored lens profiles",
+                              description=__doc__.split("\n\n")[1])
+    p.add_argument("--store", type=Path, default=None,
+                   help=f"profile store (default $HARP_STORE or {DEFAULT_STORE})")
+    sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
+    store_opt = argparse.ArgumentParser(add_help=False)  # --store also after the action
+    store_opt.add_argument("--store", type=Path, default=argparse.SUPPRESS, help="profile store")
+    ls = sub.add_parser("list", help="every stored profile", parents=[store_opt])
+    ls.set_defaults(func=_list)
+    show = sub.add_parser("show", help="the profiles of one lens", parents=[store_opt])
+    show.add_argument("lens", metavar="LENS")
+    show.add_argument("--focus", type=float, default=None, help="one focus setting in detail")
+    show.set_defaults(func=_show)
+    ex = sub.add_parser("export", help="export a lens profile for other software", parents=[store_opt])
+    ex.add_argument("lens", metavar="LENS")
+    ex.add_argument("--focus", type=float, required=True)
+    ex.add_argument("--format", required=True, choices=FORMATS)
+    ex.add_argument("-o", "--output", metavar="FILE", help="write here (default: stdout)")
+    ex.set_defaults(func=_export)
+    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
+
+
+class _Fail(Exception):
+    pass
+
+
+def _error(msg: str) -> int:
+    print(f"harp profile: {msg}", file=sys.stderr)
+    return 2
+
+
+def _open(args):
+    from station.store import ProfileStore
+
+    path = args.store or Path(os.environ.get("HARP_STORE", DEFAULT_STORE))
+    return ProfileStore(path, create=False)
+
+
+def _console():
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=160)
+
+
+def _num(v, nd=4) -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
+
+
+def _with_store(fn):
+    def wrapped(args) -> int:
+        from station.store import StoreError
+
+        try:
+            with _open(args) as store:
+                return fn(args, store)
+        except (StoreError, _Fail) as exc:
+            return _error(str(exc))
+    return wrapped
+
+
+@_with_store
+def _list(args, store) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    profiles = store.profiles()
+    if not profiles:
+        print(f"no profiles in {store.path}")
+        return 0
+    t = Table(title=f"profiles in {store.path}")
+    for col in ("id", "lens", "camera", "focus", "model", "holdout d", "holdout d_max", "created",
+                "station"):
+        t.add_column(col, justify="right" if col in ("id", "focus", "holdout d", "holdout d_max") else "left")
+    for p in profiles:
+        t.add_row(f"#{p.id}", " ".join(p.lens), " ".join(p.camera), f"{p.focus:g}", p.model_name,
+                  _num(p.holdout_d), _num(p.holdout_d_max), p.created_at, p.station_id)
+    _console().print(t)
+    return 0
+
+
+def _select(store, lens_query: str, focus: float | None):
+    lens = store.find_lens(lens_query)
+    latest = store.latest_by_focus(lens[0])
+    if focus is None:
+        return lens, latest
+    hits = [p for p in latest if math.isclose(p.focus, focus, rel_tol=0, abs_tol=1e-9)]
+    if not hits:
+        known = ", ".join(f"{p.focus:g}" for p in latest) or "none"
+        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} "
+                    f"(calibrated focus settings: {known})")
+    return lens, hits
+
+
+def _interpolated(lens, profiles, focus: float):
+    """The correction at an uncalibrated ``focus``: (model, width, height, note, loo)."""
+    from pipeline.interpolate import FocusInterpolator, leave_one_out_error
+    from pipeline.models import model_from_dict
+
+    sizes = {(p.width, p.height) for p in profiles}
+    if len(sizes) != 1:
+        raise _Fail(f"lens {' '.join(lens[1:])}: profiles of different image sizes; cannot interpolate")
+    (w, h), = sizes
+    models = {p.focus: model_from_dict(p.model) for p in profiles}
+    known = ", ".join(f"{p.focus:g}" for p in profiles)
+    if len(models) < 2 or not min(models) < focus < max(models):
+        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} and it is not between "
+                    f"two calibrated focus settings ({known}); no extrapolation")
+    interp = FocusInterpolator(models, w, h)
+    model = interp.at(focus)
+    loo = leave_one_out_error(models, w, h)
+    note = (f"focus {focus:g} is not calibrated: correction field interpolated "
+            f"({getattr(interp, 'method', 'auto')}) between the calibrated settings {known}")
+    return model, w, h, note, loo
+
+
+@_with_store
+def _show(args, store) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = _console()
+    if args.focus is not None:
+        lens, latest = _select(store, args.lens, None)
+        if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
+            model, w, h, note, loo = _interpolated(lens, latest, args.focus)
+            console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
+            console.print(note)
+            for e in loo:
+                console.print(f"interpolation error measured by leaving focus {e.focus:g} out: "
+                              f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)")
+            if not loo:
+                console.print("interpolation error: not measurable (needs >= 3 calibrated settings)")
+            return 0
+    lens, profiles = _select(store, args.lens, args.focus)
+    t = Table(title=f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]} (newest profile per focus)")
+    for col in ("focus", "id", "camera", "model", "fit d", "fit d_max", "holdout d", "holdout d_max",
+                "field unc. rms", "field unc. max", "created"):
+        t.add_column(col, justify="right")
+    for p in profiles:
+        t.add_row(f"{p.focus:g}", f"#{p.id}", " ".join(p.camera), p.model_name, _num(p.fit_d),
+                  _num(p.fit_d_max), _num(p.holdout_d), _num(p.holdout_d_max),
+                  _num(p.field_uncertainty_rms), _num(p.field_uncertainty_max), p.created_at)
+    console.print(t)
+    if args.focus is not None:
+        p = profiles[0]
+        console.print(f"image {p.width}x{p.height}, session {p.session_dir}, station {p.station_id}, "
+                      f"software {p.software_version}")
+        console.print_json(json.dumps(p.model))
+    return 0
+
+
+@_with_store
+def _export(args, store) -> int:
+    from pipeline.model_file import ModelFile
+    from pipeline.models import model_from_dict
+
+    lens, latest = _select(store, args.lens, None)
+    if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
+        model, w, h, note, loo = _interpolated(lens, latest, args.focus)
+        mf = ModelFile(model=model, width=w, height=h,
+                       merit={"interpolation_leave_one_out": [
+                           {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo]},
+                       provenance={"lens": list(lens[1:]), "focus": args.focus, "note": note,
+                                   "from_profiles": [p.id for p in latest]})
+        return _write_export(args, mf, f"interpolated focus {args.focus:g}")
+    _lens, (p,) = _select(store, args.lens, args.focus)
+    try:
+        mf = ModelFile(model=model_from_dict(p.model), width=p.width, height=p.height,
+                       merit={"fit": {"d": p.fit_d, "d_max": p.fit_d_max},
+                              "holdout": {"d": p.holdout_d, "d_max": p.holdout_d_max}},
+                       provenance={"profile_id": p.id, "lens": list(p.lens), "camera": list(p.camera),
+                                   "focus": p.focus, "session_dir": p.session_dir,
+                                   "station": p.station_id, "software": p.software_version,
+                                   "created_utc": p.created_at})
+    except ValueError as exc:
+        raise _Fail(f"profile #{p.id}: {exc}") from None
+    return _write_export(args, mf, f"profile #{p.id}")
+
+
+def _write_export(args, mf, what: str) -> int:
+    from pipeline.model_file import atomic_write_text
+    from station.cmd_export import export_text
+
+    try:
+        text, err = export_text(mf, args.format)
+    except ValueError as exc:
+        raise _Fail(f"{what}: {exc}") from None
+    if args.output:
+        try:
+            atomic_write_text(args.output, text)
+        except OSError as exc:
+            raise _Fail(f"cannot write {args.output}: {exc.strerror or exc}") from None
+        print(f"wrote {args.output}")
+    else:
+        sys.stdout.write(text)
+    if err is not None:
+        print(f"conversion error ({args.format}): RMS {err.rms_px:.4f} px, max {err.max_px:.4f} px",
+              file=sys.stderr)
+    return 0

@@ -1,0 +1,97 @@
+"""``harp session run CONFIG [--out DIR]`` and ``harp session resume DIR``.
+
+``run`` creates a session directory (under ``--out``, default the
+configuration's ``store.sessions_dir``), opens the station and performs the
+whole plan; ``resume`` reopens an interrupted session and captures only what
+is missing. Exit 0 when the session finished, 2 on bad input or when the
+session stopped (the message says why; the frames are kept).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from station import __version__
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("session", help="run or resume a calibration session",
+                              description=__doc__.split("\n\n")[1])
+    sub = p.add_subparsers(dest="session_command", metavar="ACTION")
+    run = sub.add_parser("run", help="run a session from a station configuration")
+    run.add_argument("config", type=Path, help="station configuration (YAML)")
+    run.add_argument("--out", type=Path, default=None,
+                     help="parent directory of the session directory (default: store.sessions_dir)")
+    run.add_argument("--name", default=None, help="session directory name (default: time + lens serial)")
+    run.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    run.set_defaults(func=_run)
+    res = sub.add_parser("resume", help="continue an interrupted session")
+    res.add_argument("session_dir", type=Path, help="the session directory")
+    res.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    res.set_defaults(func=_resume)
+    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
+
+
+def _error(msg: str) -> int:
+    print(f"harp session: {msg}", file=sys.stderr)
+    return 2
+
+
+def _run(args) -> int:
+    from station.config import ConfigError, check_port, load_config
+    from station.session_dir import SessionDir
+
+    try:
+        config = load_config(args.config)
+        check_port(config)  # before creating anything
+    except ConfigError as exc:
+        return _error(str(exc))
+    root = args.out if args.out is not None else config.sessions_dir
+
+    def new_session():  # created only once the devices are open
+        s = SessionDir.create(root, config, name=args.name, software_version=__version__)
+        print(f"session directory: {s.path}", file=sys.stderr)
+        return s
+
+    return _execute(config, new_session, args.quiet)
+
+
+def _resume(args) -> int:
+    from station.config import ConfigError
+    from station.session_dir import SessionDir, SessionError
+
+    try:
+        session = SessionDir.open(args.session_dir)
+    except (ConfigError, SessionError) as exc:
+        return _error(str(exc))
+    if session.finished:
+        session.close()
+        print(f"harp session: {args.session_dir}: already finished, nothing to do", file=sys.stderr)
+        return 0
+    return _execute(session.config, lambda: session, args.quiet, opened=session)
+
+
+def _execute(config, get_session, quiet: bool, opened=None) -> int:
+    from rich.console import Console
+
+    from station.config import ConfigError
+    from station.devices import open_station
+    from station.executor import Executor
+    from station.session_dir import SessionError
+    from station.store import ProfileStore, StoreError
+
+    try:
+        with ProfileStore(config.store_path) as store, open_station(config) as (camera, turntable):
+            with get_session() as session:
+                console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
+                result = Executor(session, camera, turntable, store=store, console=console).run()
+    except (ConfigError, StoreError, SessionError) as exc:
+        return _error(str(exc))
+    finally:
+        if opened is not None:
+            opened.close()
+    if result.exit_code:
+        return _error(result.message)
+    print(result.message, file=sys.stderr)
+    return 0

@@ -1,0 +1,451 @@
+"""Station configuration: YAML validated on load into frozen dataclasses.
+
+A configuration file describes one station (camera, turntable, harp), the
+lens and camera body being calibrated, what to capture (focus settings,
+orientations, frames per orientation, exposure), the pipeline parameters,
+the QA thresholds and where the profile store lives. Relative paths are
+relative to the directory holding the configuration file.
+
+Every problem is reported as a :class:`ConfigError` whose message is ONE line
+naming the file, the dotted path of the field and what was expected, e.g.::
+
+    configs/demo.yaml: capture.frames_per_orientation: expected an integer >= 1, got 'two'
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import yaml
+
+from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
+
+#: models :func:`pipeline.fit.fit_distortion` can fit
+FIT_MODELS = ("radial", "poly", "auto")  # auto: chosen by cross-validation (pipeline.select)
+
+#: turntable ``port`` value meaning "the emulator started by station.simulated"
+EMULATOR_PORT = "emulator"
+
+
+class ConfigError(ValueError):
+    """A configuration problem; ``str()`` is one line naming file and field."""
+
+    def __init__(self, file: str | os.PathLike, field_path: str, expected: str):
+        self.file = str(file)
+        self.field = field_path
+        self.expected = expected
+        super().__init__(f"{self.file}: {field_path}: {expected}")
+
+
+# --------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class DeviceConfig:
+    """A driver name plus that driver's own settings (passed to ``from_config``)."""
+
+    driver: str
+    settings: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+    def as_driver_config(self, **overrides) -> dict:
+        """The mapping handed to :func:`drivers.open_camera` / ``open_turntable``."""
+        d = {"driver": self.driver, **dict(self.settings)}
+        d.update(overrides)
+        return d
+
+
+@dataclass(frozen=True)
+class TurntableConfig(DeviceConfig):
+    port: str = ""
+    steps_per_degree: float | None = None
+
+    def as_driver_config(self, **overrides) -> dict:
+        d = {"driver": self.driver, **dict(self.settings), "port": self.port}
+        if self.steps_per_degree is not None:
+            d["steps_per_degree"] = self.steps_per_degree
+        d.update(overrides)
+        return d
+
+
+@dataclass(frozen=True)
+class HarpConfig:
+    """The calibration harp: string geometry and its angle at stage 0°.
+
+    ``offset_deg`` is the angle of the strings in the image (pipeline angle
+    convention) when the turntable is at 0°; ``direction`` is +1 when a
+    positive stage move increases that angle, -1 otherwise.
+    """
+
+    string_width_mm: float
+    string_spacing_mm: float
+    offset_deg: float = 0.0
+    direction: int = 1
+
+    def expected_angle(self, stage_deg: float) -> float:
+        return (self.offset_deg + self.direction * stage_deg) % 180.0
+
+
+@dataclass(frozen=True)
+class StationConfig:
+    id: str
+    camera: DeviceConfig
+    turntable: TurntableConfig
+    harp: HarpConfig
+
+
+@dataclass(frozen=True)
+class Identity:
+    maker: str
+    model: str
+    serial: str
+
+    def label(self) -> str:
+        return f"{self.maker} {self.model} #{self.serial}"
+
+
+@dataclass(frozen=True)
+class RetryConfig:
+    attempts: int = 3
+    backoff_s: float = 0.2  # first wait; doubles after each failure
+
+
+@dataclass(frozen=True)
+class CheckConfig:
+    """Acceptance of a captured shot (re-captured when a check fails)."""
+
+    min_lines: int = 4
+    angle_tolerance_deg: float = 3.0
+    max_saturated_fraction: float = 0.01  # of pixels at the top code value
+    min_dynamic_range: float = 0.2  # (p99 - p1) / full scale
+    max_recaptures: int = 2
+
+
+@dataclass(frozen=True)
+class CaptureConfig:
+    orientations_deg: tuple[float, ...]
+    frames_per_orientation: int = 1
+    exposure_us: float = 10000.0
+    gain_db: float = 0.0
+    settle_s: float = 0.0
+    timeout_s: float = 5.0
+    move_timeout_s: float = 60.0
+    checks: CheckConfig = field(default_factory=CheckConfig)
+    retries: RetryConfig = field(default_factory=RetryConfig)
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    t: int = 30
+    model: str = "radial"
+    degree: int | None = None  # None: the fit's default for the model
+    tangential: bool = False  # radial model: decentering terms p1, p2
+    prism: bool = False  # radial model: thin-prism terms s1..s4
+    bootstrap: int = 0  # replicates for the field uncertainty (0: not computed)
+    seed: int = 0  # of the bootstrap resampling
+    workers: int = 1  # processes for the cross-validation / bootstrap fits
+
+
+@dataclass(frozen=True)
+class QAConfig:
+    max_holdout_d_px: float = 0.05
+    max_distortion_px: float | None = None
+    max_reference_deviation_px: float | None = None
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Present only for a simulated station (see :mod:`station.simulated`)."""
+
+    harp_offset_deg: float = 0.0
+    emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True)
+class Config:
+    path: Path  # the file it was read from (absolute)
+    base_dir: Path  # relative paths are resolved against this
+    station: StationConfig
+    lens: Identity
+    camera_body: Identity
+    focus_settings: tuple[float, ...]
+    capture: CaptureConfig
+    pipeline: PipelineConfig
+    qa: QAConfig
+    store_path: Path
+    sessions_dir: Path
+    simulation: SimulationConfig | None = None
+
+    def error(self, field_path: str, expected: str) -> ConfigError:
+        return ConfigError(self.path, field_path, expected)
+
+
+# --------------------------------------------------------------- validation
+_MISSING = object()
+
+
+class _Section:
+    """A mapping being validated, knowing its dotted path and the file."""
+
+    def __init__(self, file: Path, path: str, data: Any, known: tuple[str, ...] | None = None):
+        self.file, self.path = file, path
+        if not isinstance(data, Mapping):
+            raise ConfigError(file, path or "(top level)", f"expected a mapping, got {_show(data)}")
+        self.data = data
+        if known is not None:
+            for key in data:
+                if key not in known:
+                    raise ConfigError(file, self._p(key),
+                                      f"unknown field; expected one of {', '.join(known)}")
+
+    def _p(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else str(key)
+
+    def err(self, key: str, expected: str, value: Any = _MISSING) -> ConfigError:
+        got = "missing" if value is _MISSING else f"got {_show(value)}"
+        return ConfigError(self.file, self._p(key), f"expected {expected}, {got}")
+
+    def get(self, key: str, default: Any = _MISSING) -> Any:
+        if key in self.data and self.data[key] is not None:
+            return self.data[key]
+        if default is _MISSING:
+            raise self.err(key, "a value")
+        return default
+
+    def section(self, key: str, known: tuple[str, ...] | None = None, optional: bool = False):
+        if optional and self.data.get(key) is None:
+            return _Section(self.file, self._p(key), {}, known)
+        if key not in self.data:
+            raise self.err(key, "a mapping")
+        return _Section(self.file, self._p(key), self.data[key], known)
+
+    def string(self, key: str, default: Any = _MISSING) -> str:
+        v = self.data.get(key, _MISSING)
+        if v is _MISSING or v is None:
+            if default is _MISSING:
+                raise self.err(key, "a string")
+            return default
+        if isinstance(v, bool) or not isinstance(v, (str, int, float)):
+            raise self.err(key, "a string", v)
+        v = str(v)
+        if not v.strip():
+            raise self.err(key, "a non-empty string", v)
+        return v
+
+    def number(self, key: str, default: Any = _MISSING, *, min: float | None = None,
+               positive: bool = False, integer: bool = False) -> Any:
+        kind = "an integer" if integer else "a number"
+        if positive:
+            kind += " > 0"
+        elif min is not None:
+            kind += f" >= {min:g}"
+        v = self.data.get(key, _MISSING)
+        if v is _MISSING or v is None:
+            if default is _MISSING:
+                raise self.err(key, kind)
+            return default
+        ok = isinstance(v, int) if integer else isinstance(v, (int, float))
+        if isinstance(v, bool) or not ok or (not integer and not math.isfinite(v)):
+            raise self.err(key, kind, v)
+        if (positive and not v > 0) or (min is not None and v < min):
+            raise self.err(key, kind, v)
+        return int(v) if integer else float(v)
+
+    def boolean(self, key: str, default: Any = _MISSING) -> bool:
+        v = self.data.get(key, _MISSING)
+        if v is _MISSING or v is None:
+            if default is _MISSING:
+                raise self.err(key, "true or false")
+            return default
+        if not isinstance(v, bool):
+            raise self.err(key, "true or false", v)
+        return v
+
+    def number_list(self, key: str, *, min_len: int = 1) -> tuple[float, ...]:
+        v = self.data.get(key, _MISSING)
+        expected = f"a list of at least {min_len} number{'s' if min_len > 1 else ''}"
+        if v is _MISSING or v is None:
+            raise self.err(key, expected)
+        if not isinstance(v, list) or len(v) < min_len:
+            raise self.err(key, expected, v)
+        for i, item in enumerate(v):
+            if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+                raise ConfigError(self.file, f"{self._p(key)}[{i}]", f"expected a number, got {_show(item)}")
+        if len(set(v)) != len(v):
+            raise self.err(key, "a list without repeated values", v)
+        return tuple(float(x) for x in v)
+
+
+def _show(v: Any) -> str:
+    s = repr(v)
+    return s if len(s) <= 60 else s[:57] + "..."
+
+
+def _device(sec: _Section, key: str, table: Mapping[str, str], kind: str) -> _Section:
+    dev = sec.section(key)
+    name = dev.data.get("driver", _MISSING)
+    if name is _MISSING or name is None:
+        raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})")
+    if name not in table:
+        raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})", name)
+    return dev
+
+
+def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
+    """Read and validate a station configuration file.
+
+    Parameters
+    ----------
+    path : path of the YAML file.
+    base_dir : directory against which relative paths are resolved; defaults
+        to the directory of ``path`` (a session directory passes the directory
+        of the original configuration, so paths keep their meaning).
+
+    Raises
+    ------
+    ConfigError : one line naming the file, the field and what was expected.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(path, "(file)", "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, "(file)", f"cannot read: {exc}") from None
+    return parse_config(text, path, base_dir)
+
+
+def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
+    """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
+    path = Path(path).absolute()
+    base = Path(base_dir).absolute() if base_dir is not None else path.parent
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else "(file)"
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(path, where, f"expected valid YAML: {problem}") from None
+    if data is None:
+        raise ConfigError(path, "(top level)", "expected a mapping, got an empty file")
+    top = _Section(path, "", data, ("station", "lens", "camera_body", "focus", "capture",
+                                    "pipeline", "qa", "store", "simulation"))
+
+    st = top.section("station", ("id", "camera", "turntable", "harp"))
+    cam = _device(st, "camera", CAMERA_DRIVERS, "camera")
+    camera = DeviceConfig(cam.data["driver"], MappingProxyType(
+        {k: v for k, v in cam.data.items() if k != "driver"}))
+    tt = _device(st, "turntable", TURNTABLE_DRIVERS, "turntable")
+    turntable = TurntableConfig(
+        driver=tt.data["driver"],
+        settings=MappingProxyType({k: v for k, v in tt.data.items()
+                                   if k not in ("driver", "port", "steps_per_degree")}),
+        port=tt.string("port"),
+        steps_per_degree=tt.number("steps_per_degree", None, positive=True),
+    )
+    hp = st.section("harp", ("string_width_mm", "string_spacing_mm", "offset_deg", "direction"))
+    direction = hp.number("direction", 1, integer=True)
+    if direction not in (1, -1):
+        raise hp.err("direction", "1 or -1", direction)
+    harp = HarpConfig(
+        string_width_mm=hp.number("string_width_mm", positive=True),
+        string_spacing_mm=hp.number("string_spacing_mm", positive=True),
+        offset_deg=hp.number("offset_deg", 0.0),
+        direction=direction,
+    )
+    station = StationConfig(id=st.string("id"), camera=camera, turntable=turntable, harp=harp)
+
+    def identity(key: str) -> Identity:
+        s = top.section(key, ("maker", "model", "serial"))
+        return Identity(s.string("maker"), s.string("model"), s.string("serial"))
+
+    lens, body = identity("lens"), identity("camera_body")
+
+    fo = top.section("focus", ("settings",))
+    focus_settings = fo.number_list("settings")
+
+    cp = top.section("capture", ("orientations_deg", "frames_per_orientation", "exposure_us",
+                                 "gain_db", "settle_s", "timeout_s", "move_timeout_s",
+                                 "checks", "retries"))
+    ck = cp.section("checks", ("min_lines", "angle_tolerance_deg", "max_saturated_fraction",
+                               "min_dynamic_range", "max_recaptures"), optional=True)
+    d = CheckConfig()
+    checks = CheckConfig(
+        min_lines=ck.number("min_lines", d.min_lines, min=1, integer=True),
+        angle_tolerance_deg=ck.number("angle_tolerance_deg", d.angle_tolerance_deg, positive=True),
+        max_saturated_fraction=ck.number("max_saturated_fraction", d.max_saturated_fraction, min=0),
+        min_dynamic_range=ck.number("min_dynamic_range", d.min_dynamic_range, min=0),
+        max_recaptures=ck.number("max_recaptures", d.max_recaptures, min=0, integer=True),
+    )
+    rt = cp.section("retries", ("attempts", "backoff_s"), optional=True)
+    r = RetryConfig()
+    retries = RetryConfig(attempts=rt.number("attempts", r.attempts, min=1, integer=True),
+                          backoff_s=rt.number("backoff_s", r.backoff_s, min=0))
+    orientations = cp.number_list("orientations_deg", min_len=2)
+    capture = CaptureConfig(
+        orientations_deg=orientations,
+        frames_per_orientation=cp.number("frames_per_orientation", min=1, integer=True),
+        exposure_us=cp.number("exposure_us", positive=True),
+        gain_db=cp.number("gain_db", 0.0),
+        settle_s=cp.number("settle_s", 0.0, min=0),
+        timeout_s=cp.number("timeout_s", 5.0, positive=True),
+        move_timeout_s=cp.number("move_timeout_s", 60.0, positive=True),
+        checks=checks, retries=retries,
+    )
+
+    pp = top.section("pipeline", ("t", "model", "degree", "tangential", "prism", "bootstrap", "seed",
+                                  "workers"), optional=True)
+    pipe = PipelineConfig(t=pp.number("t", 30, min=1, integer=True),
+                          model=pp.string("model", "radial"),
+                          degree=pp.number("degree", None, min=1, integer=True),
+                          tangential=pp.boolean("tangential", False),
+                          prism=pp.boolean("prism", False),
+                          bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
+                          seed=pp.number("seed", 0, min=0, integer=True),
+                          workers=pp.number("workers", 1, min=1, integer=True))
+    if pipe.model not in FIT_MODELS:
+        raise pp.err("model", f"a distortion model name (one of {', '.join(FIT_MODELS)})", pipe.model)
+
+    qs = top.section("qa", ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px"),
+                     optional=True)
+    q = QAConfig()
+    qa = QAConfig(max_holdout_d_px=qs.number("max_holdout_d_px", q.max_holdout_d_px, positive=True),
+                  max_distortion_px=qs.number("max_distortion_px", None, positive=True),
+                  max_reference_deviation_px=qs.number("max_reference_deviation_px", None,
+                                                       positive=True))
+
+    so = top.section("store", ("path", "sessions_dir"))
+    store_path = Path(os.path.normpath(base / so.string("path")))
+    sessions_dir = Path(os.path.normpath(base / so.string("sessions_dir", "sessions")))
+
+    simulation = None
+    if "simulation" in top.data:
+        sm = top.section("simulation", ("harp_offset_deg", "emulator"))
+        emu = sm.section("emulator", optional=True)
+        simulation = SimulationConfig(harp_offset_deg=sm.number("harp_offset_deg", 0.0),
+                                      emulator=MappingProxyType(dict(emu.data)))
+    elif turntable.port == EMULATOR_PORT:
+        raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)",
+                     turntable.port)
+
+    return Config(path=path, base_dir=base, station=station, lens=lens, camera_body=body,
+                  focus_settings=focus_settings, capture=capture, pipeline=pipe, qa=qa,
+                  store_path=store_path, sessions_dir=sessions_dir, simulation=simulation)
+
+
+def check_port(config: Config) -> None:
+    """Fail early, naming the field, when the turntable port cannot be reached.
+
+    A device path (``/dev/...`` or any absolute path) must exist; a URL
+    (``socket://``, ``rfc2217://``, ``loop://``...) is left to the driver.
+    """
+    port = config.station.turntable.port
+    if port == EMULATOR_PORT and config.simulation is not None:
+        return
+    if "://" in port:
+        return
+    if not os.path.exists(port):
+        raise config.error("station.turntable.port", f"expected a reachable serial port, "
+                                                      f"{port!r} does not exist")

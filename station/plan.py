@@ -1,0 +1,122 @@
+"""The capture plan as data: a generator of frozen step dataclasses.
+
+:func:`plan_session` lists every step of a calibration session (per focus
+setting: lock focus; per orientation: move, settle, capture and save N frames,
+measure; then fit and store) without touching any hardware, so tests can list
+it and :mod:`station.executor` can perform it. A resumed session passes the
+keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
+plan skips them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Union
+
+from station.config import Config
+
+
+@dataclass(frozen=True)
+class LockFocus:
+    focus_idx: int
+    focus: float
+
+
+@dataclass(frozen=True)
+class Move:
+    focus_idx: int
+    orientation_idx: int
+    degrees: float
+
+
+@dataclass(frozen=True)
+class Settle:
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Capture:
+    focus_idx: int
+    orientation_idx: int
+    frame_idx: int
+
+
+@dataclass(frozen=True)
+class Save:
+    focus_idx: int
+    orientation_idx: int
+    frame_idx: int
+
+
+@dataclass(frozen=True)
+class Measure:
+    """Average the orientation's frames, measure, check (re-capture on failure)."""
+
+    focus_idx: int
+    orientation_idx: int
+
+
+@dataclass(frozen=True)
+class Fit:
+    focus_idx: int
+
+
+@dataclass(frozen=True)
+class Store:
+    focus_idx: int
+
+
+Step = Union[LockFocus, Move, Settle, Capture, Save, Measure, Fit, Store]
+
+
+def frame_key(focus_idx: int, orientation_idx: int, frame_idx: int) -> tuple:
+    """Key of a saved frame in ``already_done``."""
+    return ("frame", int(focus_idx), int(orientation_idx), int(frame_idx))
+
+
+def stored_key(focus_idx: int) -> tuple:
+    """Key meaning the profile of this focus setting is in the store."""
+    return ("stored", int(focus_idx))
+
+
+def capture_steps(config: Config, focus_idx: int, orientation_idx: int,
+                  frames: Iterable[int] | None = None) -> Iterator[Step]:
+    """Move to an orientation, settle, capture and save ``frames`` (default all)."""
+    cap = config.capture
+    yield Move(focus_idx, orientation_idx, cap.orientations_deg[orientation_idx])
+    if cap.settle_s > 0:
+        yield Settle(cap.settle_s)
+    for i in (range(cap.frames_per_orientation) if frames is None else frames):
+        yield Capture(focus_idx, orientation_idx, i)
+        yield Save(focus_idx, orientation_idx, i)
+
+
+def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) -> Iterator[Step]:
+    """Every step of the session described by ``config``, minus ``already_done``.
+
+    Parameters
+    ----------
+    config : the validated station configuration.
+    already_done : keys of finished work (:func:`frame_key`, :func:`stored_key`).
+
+    Yields
+    ------
+    Step : in execution order. A focus setting whose profile is stored yields
+        nothing; an orientation whose frames are all saved yields only its
+        ``Measure``; ``LockFocus`` is emitted only when something is captured.
+    """
+    done = set(already_done)
+    n = config.capture.frames_per_orientation
+    for f, focus in enumerate(config.focus_settings):
+        if stored_key(f) in done:
+            continue
+        n_o = len(config.capture.orientations_deg)
+        missing = {o: [i for i in range(n) if frame_key(f, o, i) not in done] for o in range(n_o)}
+        if any(missing.values()):
+            yield LockFocus(f, focus)
+        for o in range(n_o):
+            if missing[o]:
+                yield from capture_steps(config, f, o, missing[o])
+            yield Measure(f, o)
+        yield Fit(f)
+        yield Store(f)

@@ -1,0 +1,260 @@
+"""What the executor does with captured frames: average, check, measure, fit.
+
+Thin glue between the session and the pure :mod:`pipeline`: averaging the
+frames of a shot, the acceptance checks (exposure, strings found, string
+angle against the commanded orientation) and the per-focus fit with
+leave-one-orientation-out cross-validation. No files, no devices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from station.config import CheckConfig, PipelineConfig
+
+
+def average_frames(images: Sequence[np.ndarray]) -> np.ndarray:
+    """Mean of same-shaped frames, float64."""
+    if not images:
+        raise ValueError("no frames to average")
+    acc = np.zeros(images[0].shape, np.float64)
+    for im in images:
+        if im.shape != acc.shape:
+            raise ValueError(f"frame shape {im.shape} differs from {acc.shape}")
+        acc += im
+    return acc / len(images)
+
+
+def full_scale(dtype: np.dtype, bit_depth: int | None = None) -> float:
+    if bit_depth:
+        return float(2 ** int(bit_depth) - 1)
+    return float(np.iinfo(dtype).max)
+
+
+def exposure_problems(image: np.ndarray, full: float, checks: CheckConfig) -> list[str]:
+    """Over/under-exposure of an averaged shot, as reasons (empty = fine)."""
+    problems = []
+    saturated = float(np.mean(image >= full - 1e-9))
+    if saturated > checks.max_saturated_fraction:
+        problems.append(f"over-exposed: {100 * saturated:.2f}% of pixels saturated "
+                        f"(limit {100 * checks.max_saturated_fraction:.2f}%)")
+    lo, hi = np.percentile(image, [0.5, 99.5])
+    dyn = (hi - lo) / full
+    if dyn < checks.min_dynamic_range:
+        problems.append(f"under-exposed or blank: dynamic range {dyn:.3f} of full scale "
+                        f"(minimum {checks.min_dynamic_range:.3f})")
+    return problems
+
+
+def garbage_rows(image: np.ndarray, full: float) -> int:
+    """Number of rows that look like transfer garbage rather than a harp image.
+
+    A back-lit harp is smooth along most of each row except at string
+    edges, so the mean absolute difference between neighbouring pixels of a
+    row is a few grey levels (noise plus a few edge jumps). Rows of random
+    bytes (a truncated or corrupted transfer) have a mean absolute
+    difference near ``full / 3``. A row counts as garbage when its figure
+    exceeds both ``0.15 * full`` and 10 x the median row's.
+    """
+    img = np.asarray(image, np.float32)
+    if img.shape[1] < 2:
+        return 0
+    row = np.mean(np.abs(np.diff(img, axis=1)), axis=1)
+    limit = max(0.15 * full, 10.0 * float(np.median(row)))
+    return int(np.count_nonzero(row > limit))
+
+
+def angle_difference(a: float, b: float) -> float:
+    """Smallest difference between two line angles (degrees, modulo 180)."""
+    d = (a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+def dominant_angle(angles: Sequence[float]) -> float:
+    """Mean of line angles modulo 180 (doubled-angle circular mean)."""
+    a = np.deg2rad(np.asarray(angles, np.float64) * 2.0)
+    return float(np.rad2deg(np.arctan2(np.sin(a).mean(), np.cos(a).mean())) / 2.0) % 180.0
+
+
+@dataclass(frozen=True)
+class ShotMeasurement:
+    """Edges of one averaged shot (one orientation of one focus setting)."""
+
+    lines: tuple[np.ndarray, ...]  # (N, 2) smoothed, subsampled edge points
+    angle_deg: float  # dominant string angle
+    d: float
+    d_max: float
+
+    @property
+    def n_lines(self) -> int:
+        return len(self.lines)
+
+
+def measure_shot(image: np.ndarray, pipeline: PipelineConfig) -> ShotMeasurement:
+    """Run :func:`pipeline.measure.measure_image` on an averaged shot."""
+    from pipeline.measure import measure_image
+
+    m = measure_image(image, t=pipeline.t)
+    lines = tuple(np.asarray(l.points, np.float64) for l in m.lines)
+    angle = dominant_angle([l.angle_deg for l in m.lines]) if lines else float("nan")
+    return ShotMeasurement(lines=lines, angle_deg=angle, d=float(m.d) if lines else float("nan"),
+                           d_max=float(m.d_max) if lines else float("nan"))
+
+
+def shot_problems(m: ShotMeasurement, expected_angle: float, checks: CheckConfig) -> list[str]:
+    """Strings found and at the expected angle, as reasons (empty = fine)."""
+    if m.n_lines < checks.min_lines:
+        return [f"only {m.n_lines} string edges found (need {checks.min_lines})"]
+    diff = angle_difference(m.angle_deg, expected_angle)
+    if diff > checks.angle_tolerance_deg:
+        return [f"strings at {m.angle_deg:.1f} deg, expected {expected_angle:.1f} deg "
+                f"(off by {diff:.1f} > {checks.angle_tolerance_deg:g})"]
+    return []
+
+
+@dataclass(frozen=True)
+class FocusFit:
+    """The correction of one focus setting and how well it generalises."""
+
+    model: object | None  # DistortionModel, None on failure
+    fit_d: float
+    fit_d_max: float
+    holdout_d: float
+    holdout_d_max: float
+    holdout_per_orientation: tuple[float, ...] = ()
+    failure: str | None = None
+    details: dict = field(default_factory=dict)
+    uncertainty_rms: float | None = None  # bootstrap field uncertainty over the image, px
+    uncertainty_max: float | None = None
+
+
+def fit_kwargs(pipeline: PipelineConfig) -> dict:
+    """Keyword arguments of :func:`pipeline.fit.fit_distortion` for a fixed model."""
+    kw = {"model": pipeline.model, "degree": pipeline.degree}
+    if pipeline.model == "radial":
+        kw.update(tangential=pipeline.tangential, prism=pipeline.prism)
+    return kw
+
+
+def fit_job(job: tuple) -> tuple:
+    """One fit, as a picklable job for a process pool.
+
+    ``job = (lines_per_image, width, height, fit_kwargs, init)``; returns
+    ``(model or None, failure reason or None)``.
+    """
+    from pipeline.fit import fit_distortion
+
+    lines, width, height, kw, init = job
+    res = fit_distortion(lines, width, height, init=init, **kw)
+    if getattr(res, "model", None) is None:
+        return None, str(getattr(res, "reason", res))
+    return res.model, None
+
+
+def _bootstrap_lines(lines, outliers, rng):
+    """Resample each shot's kept edges with replacement (same count per shot)."""
+    out = []
+    for k, shot in enumerate(lines):
+        kept = [p for i, p in enumerate(shot) if (k, i) not in outliers]
+        idx = rng.integers(0, len(kept), size=len(kept)) if kept else []
+        out.append([kept[i] for i in idx])
+    return out
+
+
+def field_uncertainty(reference, replicates, width: int, height: int,
+                      step: float | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Per-point spread of bootstrap corrections around ``reference``.
+
+    Each replicate is aligned to the reference by its best homography (a
+    straight-line method sees a correction only modulo a homography); the
+    uncertainty at a grid point is the RMS over replicates of the remaining
+    displacement. Returns ``(grid (N, 2), sigma (N,), rms, max)`` in pixels.
+    """
+    from pipeline.compare import fit_homography, image_grid
+
+    grid = image_grid(width, height, step or max(8.0, max(width, height) / 64))
+    ref = reference.undistort_points(grid)
+    sq = np.zeros(len(grid))
+    for m in replicates:
+        _h, res = fit_homography(m.undistort_points(grid), ref)
+        sq += np.sum(res ** 2, axis=1)
+    sigma = np.sqrt(sq / max(len(replicates), 1))
+    return grid, sigma, float(np.sqrt(np.mean(sigma ** 2))), float(sigma.max())
+
+
+def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
+              pipeline: PipelineConfig, *, bootstrap: int = 0, seed: int = 0,
+              map_fn=map) -> FocusFit:
+    """Fit one focus setting on all orientations, cross-validate it, bootstrap it.
+
+    * Fit: :func:`pipeline.fit.fit_distortion` on the edges of every shot
+      (``pipeline.model: auto``: model and degree chosen first by
+      cross-validation over the shots, :func:`pipeline.select.select_model`).
+    * Holdout: leave-one-orientation-out — for each orientation the model is
+      fitted on the others and applied to the left-out orientation's edges;
+      ``holdout_d`` / ``holdout_d_max`` are the straightness (Tang et al.
+      2012) of all left-out edges together. Edges the full fit rejected as
+      outliers (dust, frame, mis-grouped) are left out of the evaluation.
+    * Field uncertainty (``bootstrap`` > 0 replicates): each shot's edges are
+      resampled with replacement, refitted (started from the full fit), and
+      the spread of the corrections modulo homography gives a per-pixel
+      uncertainty, reported as its RMS and max over the image.
+
+    ``map_fn`` runs the independent fits (a process pool's ``map`` to use
+    several cores); results do not depend on it.
+    """
+    from pipeline.fit import corrected_straightness, fit_distortion, straightness_of
+
+    lines = [list(s.lines) for s in shots]
+    selection = None
+    if pipeline.model == "auto":
+        from pipeline.select import select_model
+
+        selection = select_model(lines, width, height)
+        kw = dict(selection.choice.kwargs())
+    else:
+        kw = fit_kwargs(pipeline)
+    full = fit_distortion(lines, width, height, **kw)
+    if getattr(full, "model", None) is None:
+        return FocusFit(None, np.nan, np.nan, np.nan, np.nan,
+                        failure=str(getattr(full, "reason", full)))
+    outliers = {(r.image, r.line) for r in full.rejected}
+    jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw, None)
+            for k in range(len(lines))]
+    rng = np.random.default_rng(seed)
+    jobs += [(_bootstrap_lines(lines, outliers, rng), width, height, kw, full.model)
+             for _ in range(bootstrap)]
+    results = list(map_fn(fit_job, jobs))
+
+    held_out: list[np.ndarray] = []
+    per_o: list[float] = []
+    for k, (model, reason) in enumerate(results[:len(lines)]):
+        if reason:
+            return FocusFit(full.model, full.d_after, full.d_max_after, np.nan, np.nan,
+                            failure=f"cross-validation without orientation {k}: {reason}")
+        kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
+        per_o.append(corrected_straightness(model, kept)[0])
+        held_out.extend(model.undistort_points(p) for p in kept)
+    hold_d, hold_d_max = straightness_of(held_out)
+    details = {"d_before": full.d_before, "d_max_before": full.d_max_before,
+               "n_points": full.n_points, "n_params": full.n_params,
+               "rejected_edges": len(full.rejected), "warnings": list(full.warnings),
+               "fit": {k: v for k, v in kw.items()}}
+    if selection is not None:
+        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason,
+                                "folds": selection.folds}
+    unc_rms = unc_max = None
+    if bootstrap:
+        reps = [m for m, reason in results[len(lines):] if m is not None]
+        failed = bootstrap - len(reps)
+        details.update(bootstrap_replicates=len(reps), bootstrap_failed=failed,
+                       bootstrap_scheme="edges resampled with replacement within each shot")
+        if len(reps) >= 2:
+            _g, _s, unc_rms, unc_max = field_uncertainty(full.model, reps, width, height)
+    return FocusFit(model=full.model, fit_d=full.d_after, fit_d_max=full.d_max_after,
+                    holdout_d=hold_d, holdout_d_max=hold_d_max,
+                    holdout_per_orientation=tuple(per_o), details=details,
+                    uncertainty_rms=unc_rms, uncertainty_max=unc_max)

@@ -1,0 +1,293 @@
+"""A session directory: atomically written frames plus an append-only manifest.
+
+Layout::
+
+    DIR/session.json       what the session is (written once, atomically)
+    DIR/config.yaml        verbatim copy of the configuration it runs
+    DIR/manifest.jsonl     one JSON record per line, fsync'ed after each line
+    DIR/frames/*.pgm       every captured frame (8- or 16-bit binary PGM)
+    DIR/profiles/*.json    the fitted model of each focus setting
+
+The manifest is the truth: a frame file counts only once its ``frame``
+record is in the manifest (it is renamed into place, fsync'ed, *then*
+recorded). A torn last line, left by a kill in the middle of a write, is
+dropped when the manifest is read and cut off before the next append, so a
+resumed session continues exactly where the last complete record left it.
+
+Record kinds: ``start`` / ``resume``, ``focus`` (focus locked),
+``frame`` (focus_idx, orientation_idx, frame_idx, attempt, file, sha256,
+metadata), ``reject`` (a shot failed its checks; its frames are superseded by
+the next attempt), ``measure``, ``fit``, ``stored`` (profile in the store),
+``fault`` (a device error and the attempt it hit), ``qa`` / ``qa_session``
+(verdicts), ``interpolation`` (leave-one-focus-out error), ``aborted``,
+``finished``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import fcntl
+import hashlib
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from station.config import Config, load_config
+from station.plan import frame_key, stored_key
+
+MANIFEST = "manifest.jsonl"
+SESSION_FILE = "session.json"
+CONFIG_COPY = "config.yaml"
+
+
+class SessionError(RuntimeError):
+    """A session directory that cannot be used; message is one line."""
+
+
+# ------------------------------------------------------------ atomic files
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary file, fsync, rename, fsync dir."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    _fsync_dir(path.parent)
+
+
+def encode_pgm(image: np.ndarray) -> bytes:
+    """Binary PGM (P5) of a 2-D uint8 or uint16 array (16-bit big-endian)."""
+    image = np.asarray(image)
+    if image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"a frame must be a 2-D uint8/uint16 array, got {image.dtype} {image.shape}")
+    maxval = 255 if image.dtype == np.uint8 else 65535
+    h, w = image.shape
+    body = image.astype(">u2").tobytes() if maxval == 65535 else np.ascontiguousarray(image).tobytes()
+    return f"P5\n{w} {h}\n{maxval}\n".encode("ascii") + body
+
+
+def decode_pgm(data: bytes) -> np.ndarray:
+    """Inverse of :func:`encode_pgm` (also reads PGMs with comments)."""
+    m = re.match(rb"P5\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s",
+                 data)
+    if not m:
+        raise ValueError("not a binary PGM (P5) file")
+    w, h, maxval = (int(g) for g in m.groups())
+    dtype = np.uint8 if maxval < 256 else np.dtype(">u2")
+    n = w * h * (1 if maxval < 256 else 2)
+    body = data[m.end(): m.end() + n]
+    if len(body) != n:
+        raise ValueError(f"truncated PGM: {len(body)} of {n} bytes")
+    img = np.frombuffer(body, dtype=dtype).reshape(h, w)
+    return img.astype(np.uint16) if maxval >= 256 else img.copy()
+
+
+# --------------------------------------------------------------- manifest
+def read_manifest(path: Path) -> tuple[list[dict], int]:
+    """Complete records of a manifest and the byte length they occupy.
+
+    A last line without its newline, or one that is not valid JSON, is a torn
+    write: it is not returned and not counted in the length. A corrupt line
+    *before* the last one is an error (the file was damaged, not torn).
+    """
+    if not path.exists():
+        return [], 0
+    data = path.read_bytes()
+    records: list[dict] = []
+    good = 0
+    pos = 0
+    while pos < len(data):
+        nl = data.find(b"\n", pos)
+        if nl < 0:
+            break  # torn: no newline
+        line = data[pos:nl]
+        try:
+            rec = json.loads(line)
+            if not isinstance(rec, dict):
+                raise ValueError("not an object")
+        except ValueError:
+            if data[nl + 1:].strip():
+                raise SessionError(f"{path}: line {len(records) + 1}: corrupt manifest record") from None
+            break  # torn last line
+        records.append(rec)
+        pos = good = nl + 1
+    return records, good
+
+
+class SessionDir:
+    """One session's directory. Create with :meth:`create`, reopen with :meth:`open`.
+
+    Holds an exclusive ``flock`` on the directory while open, so two processes
+    cannot resume the same session at once.
+    """
+
+    def __init__(self, path: Path, records: list[dict], good_len: int):
+        self.path = Path(path)
+        self.meta = json.loads((self.path / SESSION_FILE).read_text())
+        self._lock_fh = open(self.path / ".lock", "a+")
+        try:
+            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock_fh.close()
+            raise SessionError(f"{self.path}: session is in use by another process") from None
+        manifest = self.path / MANIFEST
+        if manifest.exists() and manifest.stat().st_size != good_len:
+            with open(manifest, "r+b") as fh:  # cut a torn last line
+                fh.truncate(good_len)
+                fh.flush()
+                os.fsync(fh.fileno())
+        self._manifest = open(manifest, "ab")
+        self.records = records
+        self.config: Config | None = None
+
+    # ------------------------------------------------------------ lifecycle
+    @classmethod
+    def create(cls, root: Path, config: Config, *, name: str | None = None,
+               software_version: str = "") -> "SessionDir":
+        """Make a new session directory under ``root`` for ``config``."""
+        root = Path(root)
+        now = _dt.datetime.now(_dt.timezone.utc)
+        if name is None:
+            stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", config.lens.serial)
+            name = f"{now:%Y%m%dT%H%M%SZ}-{stem}"
+        path = root / name
+        try:
+            path.mkdir(parents=True, exist_ok=False)
+        except FileExistsError:
+            raise SessionError(f"{path}: already exists") from None
+        except OSError as exc:
+            raise SessionError(f"{path}: cannot create session directory: {exc.strerror}") from None
+        (path / "frames").mkdir()
+        (path / "profiles").mkdir()
+        atomic_write_bytes(path / CONFIG_COPY, config.path.read_bytes())
+        meta = {
+            "format": 1, "created": now.isoformat(timespec="seconds"),
+            "config_source": str(config.path), "base_dir": str(config.base_dir),
+            "station_id": config.station.id, "software_version": software_version,
+            "lens": [config.lens.maker, config.lens.model, config.lens.serial],
+        }
+        atomic_write_bytes(path / SESSION_FILE, (json.dumps(meta, indent=1) + "\n").encode())
+        s = cls(path, [], 0)
+        s.config = config
+        return s
+
+    @classmethod
+    def open(cls, path: Path) -> "SessionDir":
+        """Reopen an existing session (for resume); reloads and validates its config."""
+        path = Path(path)
+        if not (path / SESSION_FILE).is_file():
+            raise SessionError(f"{path}: not a session directory (no {SESSION_FILE})")
+        records, good = read_manifest(path / MANIFEST)
+        s = cls(path, records, good)
+        try:
+            s.config = load_config(path / CONFIG_COPY, base_dir=s.meta["base_dir"])
+        except Exception:
+            s.close()
+            raise
+        return s
+
+    def close(self) -> None:
+        for fh in (getattr(self, "_manifest", None), getattr(self, "_lock_fh", None)):
+            if fh is not None and not fh.closed:
+                fh.close()
+
+    def __enter__(self) -> "SessionDir":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # --------------------------------------------------------------- writes
+    def append(self, record: dict) -> dict:
+        """Append one record to the manifest, durably (flush + fsync)."""
+        record = {"t": round(_dt.datetime.now(_dt.timezone.utc).timestamp(), 3), **record}
+        line = json.dumps(record, separators=(",", ":"), default=_json_default) + "\n"
+        self._manifest.write(line.encode())
+        self._manifest.flush()
+        os.fsync(self._manifest.fileno())
+        self.records.append(record)
+        return record
+
+    def write_frame(self, focus_idx: int, orientation_idx: int, frame_idx: int,
+                    image: np.ndarray, metadata: dict[str, Any] | None = None) -> dict:
+        """Write a frame atomically, then record it in the manifest."""
+        attempt = self.attempt(focus_idx, orientation_idx)
+        name = f"f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.pgm"
+        data = encode_pgm(image)
+        atomic_write_bytes(self.path / "frames" / name, data)
+        return self.append({
+            "kind": "frame", "focus_idx": focus_idx, "orientation_idx": orientation_idx,
+            "frame_idx": frame_idx, "attempt": attempt, "file": f"frames/{name}",
+            "sha256": hashlib.sha256(data).hexdigest(), "meta": metadata or {},
+        })
+
+    def write_profile_file(self, focus_idx: int, payload: dict) -> Path:
+        path = self.path / "profiles" / f"focus{focus_idx}.json"
+        atomic_write_bytes(path, (json.dumps(payload, indent=1, default=_json_default) + "\n").encode())
+        return path
+
+    # ---------------------------------------------------------------- reads
+    def of_kind(self, kind: str) -> Iterator[dict]:
+        return (r for r in self.records if r.get("kind") == kind)
+
+    def attempt(self, focus_idx: int, orientation_idx: int) -> int:
+        """Current capture attempt of a shot: the number of times it was rejected."""
+        return sum(1 for r in self.of_kind("reject")
+                   if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx)
+
+    def frames(self, focus_idx: int, orientation_idx: int) -> list[dict]:
+        """Frame records of the shot's current attempt, by frame index (last wins)."""
+        a = self.attempt(focus_idx, orientation_idx)
+        by_idx = {r["frame_idx"]: r for r in self.of_kind("frame")
+                  if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx
+                  and r["attempt"] == a}
+        return [by_idx[i] for i in sorted(by_idx)]
+
+    def read_frame(self, record: dict, verify: bool = True) -> np.ndarray:
+        data = (self.path / record["file"]).read_bytes()
+        if verify and hashlib.sha256(data).hexdigest() != record["sha256"]:
+            raise SessionError(f"{self.path / record['file']}: checksum does not match the manifest")
+        return decode_pgm(data)
+
+    def done_keys(self) -> set[tuple]:
+        """Keys for :func:`station.plan.plan_session` of what this session already has."""
+        keys = set()
+        attempts: dict[tuple, int] = {}
+        for r in self.of_kind("reject"):
+            k = (r["focus_idx"], r["orientation_idx"])
+            attempts[k] = attempts.get(k, 0) + 1
+        for r in self.of_kind("frame"):
+            if r["attempt"] == attempts.get((r["focus_idx"], r["orientation_idx"]), 0) \
+                    and (self.path / r["file"]).is_file():
+                keys.add(frame_key(r["focus_idx"], r["orientation_idx"], r["frame_idx"]))
+        for r in self.of_kind("stored"):
+            keys.add(stored_key(r["focus_idx"]))
+        return keys
+
+    @property
+    def finished(self) -> bool:
+        return any(True for _ in self.of_kind("finished"))
+
+
+def _json_default(o: Any):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

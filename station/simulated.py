@@ -1,0 +1,56 @@
+"""The demo's simulated station: one SimWorld, a Zaber emulator on a real pty
+and the simulated camera, built from a configuration with a ``simulation``
+section.
+
+Only the *devices* are simulated: the station talks to them through the real
+drivers (``drivers.zaber.ZaberTurntable`` over pyserial on the pty, the
+simulated camera through the Camera protocol), exactly as it would to
+hardware. The turntable emulator writes the stage angle into the shared
+world; the camera renders the harp at that angle, through the simulated lens
+at the locked focus.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Any, Iterator
+
+from drivers import open_camera, open_turntable
+from drivers.sim.world import SimWorld
+from station.config import EMULATOR_PORT, Config
+
+
+@dataclass
+class SimulatedStation:
+    camera: Any  # drivers.sim.camera.SimulatedCamera (not yet opened)
+    turntable: Any  # drivers.zaber.ZaberTurntable on the emulator's pty (not yet opened)
+    world: SimWorld
+    emulator: Any  # EmulatorHandle: .port_path, .emulator (.inject faults), .stop()
+
+
+@contextlib.contextmanager
+def simulated_devices(config: Config, **emulator_overrides) -> Iterator[SimulatedStation]:
+    """Start the simulated world and devices; yield a :class:`SimulatedStation`.
+
+    The devices are created but not opened. The emulator is stopped on exit.
+    ``emulator_overrides`` reach ``start_zaber_emulator``.
+    """
+    from drivers.sim.zaber_emulator import start_zaber_emulator
+
+    if config.simulation is None:
+        raise ValueError(f"{config.path}: simulation: expected a mapping for a simulated station, missing")
+    world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg)
+    tt = config.station.turntable
+    opts = dict(config.simulation.emulator)
+    if tt.steps_per_degree is not None:
+        opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
+    opts.update(emulator_overrides)
+    handle = start_zaber_emulator(world=world, **opts)
+    try:
+        port = handle.port_path if tt.port == EMULATOR_PORT else tt.port
+        camera = open_camera(config.station.camera.as_driver_config(), world=world)
+        turntable = open_turntable(tt.as_driver_config(port=port))
+        yield SimulatedStation(camera, turntable, world, handle)
+    finally:
+        handle.stop()

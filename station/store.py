@@ -1,0 +1,318 @@
+"""The profile store: one SQLite database file (WAL mode) of lens profiles.
+
+Tables: ``lenses`` (maker, model, serial), ``cameras`` (maker, model,
+serial), ``profiles`` (one fitted correction of one lens on one camera at one
+focus setting, with its fit and holdout straightness, field uncertainty,
+session directory, station, software version and time), ``qa_results`` and
+``schema_version``. :data:`MIGRATIONS` brings any older file up to
+:data:`SCHEMA_VERSION` inside one ``BEGIN IMMEDIATE`` transaction, so two
+processes opening a new file at once do not race.
+
+Concurrency: every connection uses WAL and a ``busy_timeout``; every write is
+one ``BEGIN IMMEDIATE`` transaction, so concurrent writers from several
+processes are serialised by SQLite and all succeed. A profile is keyed by
+(session directory, focus setting): storing it again (a resumed session)
+updates the row instead of duplicating it.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import sqlite3
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+BUSY_TIMEOUT_MS = 30000
+
+
+class StoreError(RuntimeError):
+    """A profile store problem; message is one line."""
+
+
+def _script(db: sqlite3.Connection, sql: str) -> None:
+    # one statement at a time: executescript() would COMMIT the migration transaction
+    for stmt in sql.split(";"):
+        if stmt.strip():
+            db.execute(stmt)
+
+
+def _v1(db: sqlite3.Connection) -> None:
+    _script(db, """
+    CREATE TABLE lenses (
+        id INTEGER PRIMARY KEY,
+        maker TEXT NOT NULL, model TEXT NOT NULL, serial TEXT NOT NULL,
+        UNIQUE (maker, model, serial));
+    CREATE TABLE cameras (
+        id INTEGER PRIMARY KEY,
+        maker TEXT NOT NULL, model TEXT NOT NULL, serial TEXT NOT NULL,
+        UNIQUE (maker, model, serial));
+    CREATE TABLE profiles (
+        id INTEGER PRIMARY KEY,
+        lens_id INTEGER NOT NULL REFERENCES lenses(id),
+        camera_id INTEGER NOT NULL REFERENCES cameras(id),
+        focus REAL NOT NULL,
+        model_name TEXT NOT NULL,
+        model_json TEXT NOT NULL,
+        width INTEGER NOT NULL, height INTEGER NOT NULL,
+        fit_d REAL, fit_d_max REAL,
+        holdout_d REAL, holdout_d_max REAL,
+        field_uncertainty_rms REAL, field_uncertainty_max REAL,
+        session_dir TEXT NOT NULL,
+        station_id TEXT NOT NULL,
+        software_version TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        UNIQUE (session_dir, focus));
+    CREATE INDEX profiles_lens_focus ON profiles (lens_id, focus);
+    CREATE TABLE qa_results (
+        id INTEGER PRIMARY KEY,
+        profile_id INTEGER REFERENCES profiles(id),
+        session_dir TEXT,
+        verdict TEXT NOT NULL CHECK (verdict IN ('PASS', 'FAIL')),
+        reasons_json TEXT NOT NULL,
+        metrics_json TEXT NOT NULL,
+        created_at TEXT NOT NULL);
+    """)
+
+
+def _v2(db: sqlite3.Connection) -> None:
+    # free-form details kept with a profile (per-orientation holdout, model
+    # selection table, focus-interpolation / bootstrap results added later)
+    db.execute("ALTER TABLE profiles ADD COLUMN details_json TEXT NOT NULL DEFAULT '{}'")
+
+
+#: migration i (1-based) brings a database from version i-1 to version i
+MIGRATIONS: list[Callable[[sqlite3.Connection], None]] = [_v1, _v2]
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+@dataclass(frozen=True)
+class Profile:
+    id: int
+    lens: tuple[str, str, str]  # maker, model, serial
+    camera: tuple[str, str, str]
+    focus: float
+    model_name: str
+    model: dict
+    width: int
+    height: int
+    fit_d: float | None
+    fit_d_max: float | None
+    holdout_d: float | None
+    holdout_d_max: float | None
+    field_uncertainty_rms: float | None
+    field_uncertainty_max: float | None
+    session_dir: str
+    station_id: str
+    software_version: str
+    created_at: str
+    details: dict
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+class ProfileStore:
+    """A connection to the profile database at ``path`` (created if missing)."""
+
+    def __init__(self, path: str | os.PathLike, *, create: bool = True):
+        self.path = Path(path)
+        if not create and not self.path.is_file():
+            raise StoreError(f"{self.path}: no profile store here")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
+                                      isolation_level=None)
+        except (OSError, sqlite3.Error) as exc:
+            raise StoreError(f"{self.path}: cannot open profile store: {exc}") from None
+        self.db.row_factory = sqlite3.Row
+        self.db.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+        try:
+            self._retry_locked(lambda: self.db.execute("PRAGMA journal_mode = WAL"))
+            self.db.execute("PRAGMA foreign_keys = ON")
+            self.db.execute("PRAGMA synchronous = FULL")
+            self._migrate()
+        except sqlite3.DatabaseError as exc:
+            self.db.close()
+            raise StoreError(f"{self.path}: not a usable profile store: {exc}") from None
+
+    def _retry_locked(self, fn, seconds: float = BUSY_TIMEOUT_MS / 1000):
+        # switching a brand-new file to WAL needs an exclusive lock that the
+        # busy handler does not always wait for; retry briefly.
+        deadline = time.monotonic() + seconds
+        while True:
+            try:
+                return fn()
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.02)
+
+    def close(self) -> None:
+        self.db.close()
+
+    def __enter__(self) -> "ProfileStore":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ----------------------------------------------------------- schema
+    def _transaction(self):
+        store = self
+
+        class _Tx:
+            def __enter__(self_inner):
+                store._retry_locked(lambda: store.db.execute("BEGIN IMMEDIATE"))
+                return store.db
+
+            def __exit__(self_inner, exc_type, *_):
+                store.db.execute("COMMIT" if exc_type is None else "ROLLBACK")
+
+        return _Tx()
+
+    def schema_version(self) -> int:
+        row = self.db.execute("SELECT name FROM sqlite_master WHERE name='schema_version'").fetchone()
+        if row is None:
+            return 0
+        return int(self.db.execute("SELECT version FROM schema_version").fetchone()[0])
+
+    def _migrate(self) -> None:
+        if self.schema_version() == SCHEMA_VERSION:
+            return
+        with self._transaction() as db:
+            v = self.schema_version()  # re-read under the write lock
+            if v > SCHEMA_VERSION:
+                raise StoreError(f"{self.path}: schema version {v} is newer than this software "
+                                 f"({SCHEMA_VERSION}); upgrade harp station")
+            if v == 0:
+                db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+                db.execute("INSERT INTO schema_version VALUES (0)")
+            for i in range(v, SCHEMA_VERSION):
+                MIGRATIONS[i](db)
+                db.execute("UPDATE schema_version SET version = ?", (i + 1,))
+
+    # ------------------------------------------------------------ writes
+    def _ident(self, db, table: str, ident: tuple[str, str, str]) -> int:
+        db.execute(f"INSERT OR IGNORE INTO {table} (maker, model, serial) VALUES (?, ?, ?)", ident)
+        return db.execute(f"SELECT id FROM {table} WHERE maker=? AND model=? AND serial=?",
+                          ident).fetchone()[0]
+
+    def put_profile(self, *, lens: tuple[str, str, str], camera: tuple[str, str, str],
+                    focus: float, model: dict, width: int, height: int,
+                    fit_d: float | None = None, fit_d_max: float | None = None,
+                    holdout_d: float | None = None, holdout_d_max: float | None = None,
+                    field_uncertainty_rms: float | None = None,
+                    field_uncertainty_max: float | None = None,
+                    session_dir: str, station_id: str, software_version: str,
+                    details: dict | None = None) -> int:
+        """Insert (or, for the same session and focus, replace) a profile; returns its id."""
+        model_name = model.get("model", "?")
+        with self._transaction() as db:
+            lens_id = self._ident(db, "lenses", tuple(lens))
+            cam_id = self._ident(db, "cameras", tuple(camera))
+            values = (lens_id, cam_id, float(focus), model_name, json.dumps(model), int(width),
+                      int(height), fit_d, fit_d_max, holdout_d, holdout_d_max,
+                      field_uncertainty_rms, field_uncertainty_max, str(session_dir),
+                      station_id, software_version, _now(), json.dumps(details or {}))
+            db.execute("""
+                INSERT INTO profiles (lens_id, camera_id, focus, model_name, model_json, width,
+                    height, fit_d, fit_d_max, holdout_d, holdout_d_max, field_uncertainty_rms,
+                    field_uncertainty_max, session_dir, station_id, software_version, created_at,
+                    details_json)
+                VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+                ON CONFLICT (session_dir, focus) DO UPDATE SET
+                    lens_id=excluded.lens_id, camera_id=excluded.camera_id,
+                    model_name=excluded.model_name, model_json=excluded.model_json,
+                    width=excluded.width, height=excluded.height,
+                    fit_d=excluded.fit_d, fit_d_max=excluded.fit_d_max,
+                    holdout_d=excluded.holdout_d, holdout_d_max=excluded.holdout_d_max,
+                    field_uncertainty_rms=excluded.field_uncertainty_rms,
+                    field_uncertainty_max=excluded.field_uncertainty_max,
+                    station_id=excluded.station_id, software_version=excluded.software_version,
+                    created_at=excluded.created_at, details_json=excluded.details_json
+                """, values)
+            return db.execute("SELECT id FROM profiles WHERE session_dir=? AND focus=?",
+                              (str(session_dir), float(focus))).fetchone()[0]
+
+    def put_qa_result(self, *, verdict: str, reasons: list[str], metrics: dict,
+                      profile_id: int | None = None, session_dir: str | None = None) -> int:
+        with self._transaction() as db:
+            cur = db.execute("INSERT INTO qa_results (profile_id, session_dir, verdict, reasons_json,"
+                             " metrics_json, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+                             (profile_id, session_dir, verdict, json.dumps(reasons),
+                              json.dumps(metrics), _now()))
+            return cur.lastrowid
+
+    # ------------------------------------------------------------- reads
+    _SELECT = """
+        SELECT p.*, l.maker AS l_maker, l.model AS l_model, l.serial AS l_serial,
+               c.maker AS c_maker, c.model AS c_model, c.serial AS c_serial
+        FROM profiles p JOIN lenses l ON l.id = p.lens_id JOIN cameras c ON c.id = p.camera_id"""
+
+    @staticmethod
+    def _profile(row: sqlite3.Row) -> Profile:
+        return Profile(
+            id=row["id"], lens=(row["l_maker"], row["l_model"], row["l_serial"]),
+            camera=(row["c_maker"], row["c_model"], row["c_serial"]), focus=row["focus"],
+            model_name=row["model_name"], model=json.loads(row["model_json"]),
+            width=row["width"], height=row["height"], fit_d=row["fit_d"],
+            fit_d_max=row["fit_d_max"], holdout_d=row["holdout_d"],
+            holdout_d_max=row["holdout_d_max"],
+            field_uncertainty_rms=row["field_uncertainty_rms"],
+            field_uncertainty_max=row["field_uncertainty_max"], session_dir=row["session_dir"],
+            station_id=row["station_id"], software_version=row["software_version"],
+            created_at=row["created_at"], details=json.loads(row["details_json"]))
+
+    def profiles(self, lens_id: int | None = None) -> list[Profile]:
+        """All profiles (of one lens), ordered by lens, focus, then newest first."""
+        where, args = ("WHERE p.lens_id = ?", (lens_id,)) if lens_id is not None else ("", ())
+        rows = self.db.execute(f"{self._SELECT} {where} ORDER BY l.maker, l.model, l.serial, "
+                               "p.focus, p.created_at DESC, p.id DESC", args).fetchall()
+        return [self._profile(r) for r in rows]
+
+    def profile(self, profile_id: int) -> Profile | None:
+        row = self.db.execute(f"{self._SELECT} WHERE p.id = ?", (profile_id,)).fetchone()
+        return self._profile(row) if row else None
+
+    def lenses(self) -> list[tuple[int, str, str, str]]:
+        return [tuple(r) for r in self.db.execute(
+            "SELECT id, maker, model, serial FROM lenses ORDER BY maker, model, serial")]
+
+    def find_lens(self, query: str) -> tuple[int, str, str, str]:
+        """Resolve a user's LENS argument: a serial, ``maker/model/serial``, an id
+        (``#3``), or any unambiguous substring of "maker model serial"."""
+        lenses = self.lenses()
+        q = query.strip()
+        if q.startswith("#") and q[1:].isdigit():
+            hits = [l for l in lenses if l[0] == int(q[1:])]
+        else:
+            hits = [l for l in lenses if l[3] == q or "/".join(l[1:]) == q]
+            if not hits:
+                hits = [l for l in lenses if q.lower() in " ".join(l[1:]).lower()]
+        if not hits:
+            raise StoreError(f"no lens matching {query!r} in {self.path}")
+        if len(hits) > 1:
+            names = "; ".join(f"#{l[0]} {l[1]} {l[2]} {l[3]}" for l in hits[:5])
+            raise StoreError(f"{query!r} matches {len(hits)} lenses ({names}); be more specific")
+        return hits[0]
+
+    def latest_by_focus(self, lens_id: int) -> list[Profile]:
+        """The newest profile of each focus setting of a lens, by focus."""
+        seen: dict[float, Profile] = {}
+        for p in self.profiles(lens_id):
+            seen.setdefault(p.focus, p)
+        return [seen[f] for f in sorted(seen)]
+
+    def qa_results(self) -> Iterator[dict]:
+        for r in self.db.execute("SELECT * FROM qa_results ORDER BY id"):
+            yield {**dict(r), "reasons": json.loads(r["reasons_json"]),
+                   "metrics": json.loads(r["metrics_json"])}
+
+
+def open_store(path: str | os.PathLike, **kw: Any) -> ProfileStore:
+    return ProfileStore(path, **kw)

@@ -1,0 +1,256 @@
+"""harp session run/resume and harp profile, on the real simulated station
+(SimulatedCamera + ZaberTurntable over pyserial on the Zaber emulator's pty)."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+import yaml
+
+from drivers.sim.lens import lens_for_focus
+from pipeline.compare import compare_models
+from pipeline.models import model_from_dict
+from station.cli import main
+from station.config import load_config
+from station.executor import EXIT_ABORTED, EXIT_OK, Executor
+from station.session_dir import SessionDir
+from station.simulated import simulated_devices
+from station.store import ProfileStore
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO = REPO / "configs" / "demo.yaml"
+W, H = 640, 480
+N_FOCUS, N_ORI, N_FRAMES = 2, 4, 2
+
+
+def small_config(dirpath: Path, focus=(0.0, 1.0), frames=N_FRAMES, **capture) -> Path:
+    """The demo station at test size: 2 focus x 4 orientations x 2 frames, 640x480."""
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["camera"].update(width=W, height=H, spacing_px=40.0)
+    d["focus"]["settings"] = list(focus)
+    d["capture"]["orientations_deg"] = [0, 45, 90, 135]
+    d["capture"]["frames_per_orientation"] = frames
+    d["capture"]["retries"] = {"attempts": 3, "backoff_s": 0.05}
+    d["capture"].update(capture)
+    d["pipeline"]["bootstrap"] = 4  # still through the 2-process pool, but quicker
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    dirpath.mkdir(parents=True, exist_ok=True)
+    p = dirpath / "station.yaml"
+    p.write_text(yaml.safe_dump(d))
+    return p
+
+
+def harp(*args) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "station.cli", *map(str, args)], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def manifest(session: Path) -> list[dict]:
+    return [json.loads(l) for l in (session / "manifest.jsonl").read_text().splitlines()]
+
+
+def profile_fields(store_path: Path) -> dict[float, object]:
+    with ProfileStore(store_path) as st:
+        return {p.focus: p for p in st.profiles()}
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """One complete session run through the CLI (shared by several tests)."""
+    base = tmp_path_factory.mktemp("run")
+    cfg = small_config(base)
+    code = main(["session", "run", str(cfg), "--name", "s", "--quiet"])
+    return code, base, base / "sessions" / "s"
+
+
+def test_run_end_to_end_matches_true_lens(uninterrupted):
+    code, base, session = uninterrupted
+    assert code == 0
+    recs = manifest(session)
+    frames = [r for r in recs if r["kind"] == "frame"]
+    assert len(frames) == N_FOCUS * N_ORI * N_FRAMES and recs[-1]["kind"] == "finished"
+    profiles = profile_fields(base / "profiles.sqlite")
+    assert sorted(profiles) == [0.0, 1.0]
+    for focus, p in profiles.items():
+        truth = lens_for_focus(focus, W, H)
+        cmp = compare_models(model_from_dict(p.model), truth, W, H)
+        assert cmp.rms < 0.02, (focus, cmp.rms)  # field RMS modulo homography
+        assert p.holdout_d < 0.05 and p.fit_d < 0.05
+        assert 0 < p.field_uncertainty_rms <= p.field_uncertainty_max < 0.05  # bootstrap
+        assert p.details["bootstrap_replicates"] == 4
+        assert (session / "profiles" / f"focus{[0.0, 1.0].index(focus)}.yaml").is_file()
+
+
+def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
+    cfg = small_config(tmp_path)
+    session = tmp_path / "sessions" / "k"
+    proc = harp("session", "run", cfg, "--name", "k", "--quiet")
+    deadline = time.monotonic() + 60
+    n = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (session / "manifest.jsonl").exists():
+            n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
+            if n >= 5:
+                break
+        time.sleep(0.005)
+    assert proc.poll() is None, proc.communicate()
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    killed_at = sum(1 for r in manifest(session) if r["kind"] == "frame")
+    assert 5 <= killed_at < N_FOCUS * N_ORI * N_FRAMES
+
+    assert main(["session", "resume", str(session), "--quiet"]) == 0
+    recs = manifest(session)
+    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"])
+                   for r in recs if r["kind"] == "frame")
+    assert set(keys) == {(f, o, i) for f in range(N_FOCUS) for o in range(N_ORI) for i in range(N_FRAMES)}
+    assert set(keys.values()) == {1}  # every frame exactly once
+    on_disk = sorted(p.name for p in (session / "frames").iterdir())
+    assert on_disk == sorted(Path(r["file"]).name for r in recs if r["kind"] == "frame")
+    assert recs[-1]["kind"] == "finished"
+    # the same profiles as the uninterrupted run (frames differ only by sensor noise)
+    resumed = profile_fields(tmp_path / "profiles.sqlite")
+    reference = profile_fields(uninterrupted[1] / "profiles.sqlite")
+    assert sorted(resumed) == sorted(reference) == [0.0, 1.0]
+    for focus in resumed:
+        cmp = compare_models(model_from_dict(resumed[focus].model),
+                             model_from_dict(reference[focus].model), W, H)
+        assert cmp.rms < 0.01, (focus, cmp.rms)
+    # resuming a finished session does nothing
+    assert main(["session", "resume", str(session), "--quiet"]) == 0
+    assert len(manifest(session)) == len(recs)
+
+
+def test_profile_commands(uninterrupted, capsys):
+    _, base, _ = uninterrupted
+    store = str(base / "profiles.sqlite")
+    assert main(["profile", "--store", store, "list"]) == 0
+    out = capsys.readouterr().out
+    assert "DEMO-0001" in out and "radial" in out
+    assert main(["profile", "show", "DEMO-0001", "--store", store]) == 0
+    assert "lens #1" in capsys.readouterr().out
+    assert main(["profile", "export", "DEMO-0001", "--focus", "1", "--format", "json",
+                 "--store", store]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["image"] == {"width": W, "height": H}
+    assert model_from_dict(doc["model"]).to_dict() == doc["model"]
+    assert main(["profile", "export", "DEMO-0001", "--focus", "0", "--format", "opencv",
+                 "--store", store]) == 0
+    out = capsys.readouterr().out
+    assert "distortion_coefficients" in out and "camera_matrix" in out
+    # between calibrated settings: the interpolated correction field
+    assert main(["profile", "export", "DEMO-0001", "--focus", "0.5", "--format", "json",
+                 "--store", store]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    interp = model_from_dict(doc["model"])
+    cmp = compare_models(interp, lens_for_focus(0.5, W, H), W, H)
+    assert cmp.rms < 0.02  # the demo lens changes linearly with focus
+    assert main(["profile", "show", "DEMO-0001", "--focus", "0.5", "--store", store]) == 0
+    assert "interpolated" in capsys.readouterr().out
+    assert main(["profile", "export", "DEMO-0001", "--focus", "1.5", "--format", "json",
+                 "--store", store]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not between two calibrated focus settings (0, 1)" in err
+    assert main(["profile", "show", "Zeiss", "--store", store]) == 2
+    assert "no lens matching 'Zeiss'" in capsys.readouterr().err
+
+
+def test_emulator_and_camera_faults_are_retried(tmp_path):
+    # four camera faults in a row on the first capture: allow five attempts
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1,
+                                   retries={"attempts": 5, "backoff_s": 0.01}))
+    with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="f") as s:
+        sim.camera.open()
+        sim.turntable.open()
+        sim.emulator.emulator.inject("stall", count=1, at=0.5)  # first move stalls (flag FS)
+        sim.emulator.emulator.inject("no_reply", count=1)  # a command times out
+        sim.camera.fail_next(2, "timeout")
+        sim.camera.fail_next(1, "corrupt")
+        sim.camera.fail_next(1, "disconnect")
+        result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+        faults = Counter(r["error"] for r in s.of_kind("fault"))
+        n_frames = len(list(s.of_kind("frame")))
+    assert result.exit_code == EXIT_OK, result.message
+    assert faults["DeviceTimeout"] >= 3 and faults["CaptureError"] == 1
+    assert faults["DeviceDisconnected"] == 1 and faults["DeviceFault"] >= 1
+    assert n_frames == N_ORI
+
+
+def test_unplugged_turntable_stops_cleanly(tmp_path):
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1))
+    with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="u") as s:
+        sim.camera.open()
+        sim.turntable.open()
+        sim.emulator.emulator.inject("vanish", at=0.5)  # unplugged during the first move
+        result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+        recs = list(s.records)
+    assert result.exit_code == EXIT_ABORTED
+    assert "failed 3 times" in result.message and "DeviceDisconnected" in result.message
+    assert "\n" not in result.message and recs[-1]["kind"] == "aborted"
+    assert [r["error"] for r in recs if r["kind"] == "fault"] == ["DeviceDisconnected"] * 3
+
+
+def test_bad_config_is_one_line_exit_2(tmp_path, capsys):
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["camera"]["driver"] = "hal9000"
+    p = tmp_path / "bad.yaml"
+    p.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "station.camera.driver" in err and "hal9000" in err
+
+
+def test_unreachable_port_is_one_line_exit_2(tmp_path, capsys):
+    d = yaml.safe_load((REPO / "configs" / "aravis-zaber.yaml").read_text())
+    d["station"]["turntable"]["port"] = "/dev/ttyUSB-harp-absent"
+    d["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"}
+    p = tmp_path / "hw.yaml"
+    p.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "station.turntable.port" in err and "ttyUSB-harp-absent" in err
+    assert not (tmp_path / "sessions").exists()  # nothing created
+
+
+def test_resume_of_a_non_session_is_exit_2(tmp_path, capsys):
+    assert main(["session", "resume", str(tmp_path)]) == 2
+    assert "not a session directory" in capsys.readouterr().err
+
+
+def test_session_records_qa_and_interpolation(uninterrupted):
+    _, base, session = uninterrupted
+    recs = manifest(session)
+    qa = [r for r in recs if r["kind"] == "qa"]
+    assert [r["verdict"] for r in qa] == ["PASS", "PASS"]
+    assert [r["verdict"] for r in recs if r["kind"] == "qa_session"] == ["PASS"]
+    with ProfileStore(base / "profiles.sqlite") as st:
+        assert [r["verdict"] for r in st.qa_results()] == ["PASS", "PASS"]
+
+
+
+def test_two_sessions_write_to_one_store_at_once(tmp_path):
+    store = tmp_path / "shared.sqlite"
+    procs = []
+    for k, serial in enumerate(["LENS-A", "LENS-B"]):
+        d = yaml.safe_load(DEMO.read_text())
+        d["station"]["camera"].update(width=W, height=H, spacing_px=40.0, seed=k)
+        d["lens"]["serial"] = serial
+        d["focus"]["settings"] = [0.5]
+        d["capture"].update(orientations_deg=[0, 60, 120], frames_per_orientation=1)
+        d["pipeline"].update(bootstrap=0, workers=1)
+        d["store"] = {"path": str(store), "sessions_dir": str(tmp_path / f"sessions{k}")}
+        cfg = tmp_path / f"c{k}.yaml"
+        cfg.write_text(yaml.safe_dump(d))
+        procs.append(harp("session", "run", cfg, "--quiet"))
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    with ProfileStore(store) as st:
+        assert sorted(p.lens[2] for p in st.profiles()) == ["LENS-A", "LENS-B"]
+        assert len(list(st.qa_results())) == 2
+        assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"

@@ -1,0 +1,157 @@
+"""Configuration: the shipped configs load; every bad field is one line naming it."""
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from station.config import ConfigError, check_port, load_config
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO = REPO / "configs" / "demo.yaml"
+
+
+def write(tmp_path, data, name="station.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return p
+
+
+def demo_data():
+    return yaml.safe_load(DEMO.read_text())
+
+
+def error_of(tmp_path, data) -> str:
+    p = write(tmp_path, data)
+    with pytest.raises(ConfigError) as ei:
+        load_config(p)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    assert msg.startswith(str(p))
+    return msg
+
+
+@pytest.mark.parametrize("name", ["demo.yaml", "aravis-zaber.yaml", "v4l2-grbl.yaml"])
+def test_shipped_configs_load(name):
+    cfg = load_config(REPO / "configs" / name)
+    assert len(cfg.focus_settings) == 3
+    assert len(cfg.capture.orientations_deg) == 8
+    assert cfg.capture.orientations_deg[1] == 22.5
+
+
+def test_demo_values_and_relative_paths():
+    cfg = load_config(DEMO)
+    assert cfg.station.camera.driver == "sim"
+    assert cfg.station.turntable.driver == "zaber"
+    assert cfg.simulation is not None
+    assert cfg.store_path == (REPO / "profiles" / "harp-profiles.sqlite")
+    assert cfg.station.turntable.as_driver_config(port="/dev/pts/9")["port"] == "/dev/pts/9"
+    with pytest.raises(Exception):
+        cfg.pipeline.t = 3  # frozen
+
+
+def test_relative_store_path_is_relative_to_config_file(tmp_path):
+    d = demo_data()
+    d["store"] = {"path": "db/p.sqlite"}
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    cfg = load_config(write(sub, d))
+    assert cfg.store_path == sub / "db" / "p.sqlite"
+    assert cfg.sessions_dir == sub / "sessions"
+
+
+def test_missing_field(tmp_path):
+    d = demo_data()
+    del d["lens"]["serial"]
+    msg = error_of(tmp_path, d)
+    assert "lens.serial: expected a string, missing" in msg
+
+
+def test_missing_section(tmp_path):
+    d = demo_data()
+    del d["capture"]
+    assert "capture: expected a mapping, missing" in error_of(tmp_path, d)
+
+
+def test_wrong_type(tmp_path):
+    d = demo_data()
+    d["capture"]["frames_per_orientation"] = "two"
+    assert "capture.frames_per_orientation: expected an integer >= 1, got 'two'" in error_of(tmp_path, d)
+
+
+def test_wrong_list_item(tmp_path):
+    d = demo_data()
+    d["capture"]["orientations_deg"][2] = "45deg"
+    assert "capture.orientations_deg[2]: expected a number, got '45deg'" in error_of(tmp_path, d)
+
+
+def test_negative_number(tmp_path):
+    d = demo_data()
+    d["station"]["harp"]["string_spacing_mm"] = -1
+    assert "station.harp.string_spacing_mm: expected a number > 0, got -1" in error_of(tmp_path, d)
+
+
+def test_unknown_camera_driver(tmp_path):
+    d = demo_data()
+    d["station"]["camera"]["driver"] = "webcam9000"
+    msg = error_of(tmp_path, d)
+    assert "station.camera.driver: expected a camera driver name (one of aravis, sim, v4l2), got 'webcam9000'" in msg
+
+
+def test_unknown_turntable_driver(tmp_path):
+    d = demo_data()
+    d["station"]["turntable"]["driver"] = "thorlabs"
+    assert "station.turntable.driver: expected a turntable driver name" in error_of(tmp_path, d)
+
+
+def test_unknown_field_is_named(tmp_path):
+    d = demo_data()
+    d["capture"]["frame_per_orientation"] = 3  # typo
+    assert "capture.frame_per_orientation: unknown field" in error_of(tmp_path, d)
+
+
+def test_unknown_model(tmp_path):
+    d = demo_data()
+    d["pipeline"]["model"] = "fisheye9"
+    assert "pipeline.model: expected a distortion model name" in error_of(tmp_path, d)
+
+
+def test_emulator_port_needs_simulation(tmp_path):
+    d = demo_data()
+    del d["simulation"]
+    assert "station.turntable.port:" in error_of(tmp_path, d)
+
+
+def test_bad_yaml_names_line(tmp_path):
+    p = write(tmp_path, "station:\n  id: [unclosed\n")
+    with pytest.raises(ConfigError) as ei:
+        load_config(p)
+    assert "line" in str(ei.value) and "\n" not in str(ei.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ConfigError, match="no such file"):
+        load_config(tmp_path / "nope.yaml")
+
+
+def test_unreachable_port(tmp_path):
+    d = yaml.safe_load((REPO / "configs" / "aravis-zaber.yaml").read_text())
+    d["station"]["turntable"]["port"] = str(tmp_path / "ttyUSB77")
+    cfg = load_config(write(tmp_path, d))
+    with pytest.raises(ConfigError) as ei:
+        check_port(cfg)
+    msg = str(ei.value)
+    assert "station.turntable.port: expected a reachable serial port" in msg and "ttyUSB77" in msg
+    assert "\n" not in msg
+    check_port(load_config(DEMO))  # the emulator is started by station.simulated
+
+
+def test_boolean_field(tmp_path):
+    d = demo_data()
+    d["pipeline"]["tangential"] = "yes"
+    assert "pipeline.tangential: expected true or false, got 'yes'" in error_of(tmp_path, d)
+
+
+def test_pipeline_options():
+    cfg = load_config(DEMO)
+    assert cfg.pipeline.tangential is True and cfg.pipeline.bootstrap > 0 and cfg.pipeline.workers == 2

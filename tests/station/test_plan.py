@@ -1,0 +1,54 @@
+"""The capture plan is data: listed without hardware, resumable."""
+
+from collections import Counter
+from pathlib import Path
+
+from station.config import load_config
+from station.plan import (Capture, Fit, LockFocus, Measure, Move, Save, Store, frame_key,
+                          plan_session, stored_key)
+
+DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
+
+
+def test_full_plan_lists_every_step():
+    cfg = load_config(DEMO)
+    steps = list(plan_session(cfg))
+    kinds = Counter(type(s).__name__ for s in steps)
+    n_f, n_o, n_i = 3, 8, cfg.capture.frames_per_orientation
+    assert kinds == {"LockFocus": n_f, "Move": n_f * n_o, "Capture": n_f * n_o * n_i,
+                     "Save": n_f * n_o * n_i, "Measure": n_f * n_o, "Fit": n_f, "Store": n_f}
+    assert steps[0] == LockFocus(0, 0.0)
+    assert steps[1] == Move(0, 0, 0.0)
+    assert steps[2:4] == [Capture(0, 0, 0), Save(0, 0, 0)]
+    assert steps[-2:] == [Fit(2), Store(2)]
+    # every capture is followed by its save, and every frame appears once
+    caps = [(s.focus_idx, s.orientation_idx, s.frame_idx) for s in steps if isinstance(s, Capture)]
+    assert len(set(caps)) == len(caps)
+    for a, b in zip(steps, steps[1:]):
+        if isinstance(a, Capture):
+            assert b == Save(a.focus_idx, a.orientation_idx, a.frame_idx)
+    moves = [s.degrees for s in steps if isinstance(s, Move)][:8]
+    assert moves == [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5]
+
+
+def test_resume_skips_done_work():
+    cfg = load_config(DEMO)
+    n_i = cfg.capture.frames_per_orientation
+    done = {stored_key(0)}
+    done |= {frame_key(1, o, i) for o in range(3) for i in range(n_i)}
+    done.add(frame_key(1, 3, 0))
+    steps = list(plan_session(cfg, done))
+    assert not any(getattr(s, "focus_idx", None) == 0 for s in steps)
+    caps = {(s.focus_idx, s.orientation_idx, s.frame_idx) for s in steps if isinstance(s, Capture)}
+    assert (1, 3, 0) not in caps and (1, 3, 1) in caps
+    assert not any(c[0] == 1 and c[1] < 3 for c in caps)
+    assert steps[0] == LockFocus(1, 0.5)
+    assert steps[1:4] == [Measure(1, 0), Measure(1, 1), Measure(1, 2)]
+    assert steps[4] == Move(1, 3, 67.5)
+    assert Measure(1, 0) in steps and Fit(1) in steps and Store(1) in steps
+    assert len(caps) == 2 * 8 * n_i - 3 * n_i - 1
+
+
+def test_nothing_left():
+    cfg = load_config(DEMO)
+    assert list(plan_session(cfg, {stored_key(f) for f in range(3)})) == []
