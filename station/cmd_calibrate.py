@@ -1,0 +1,228 @@
+"""``harp calibrate IMAGE... --out MODEL [--model auto|radial|poly] [--degree N] [--holdout IMAGE...]``.
+
+Fits a distortion correction to the string edges of harp shots (all shots at
+once, :func:`pipeline.fit.fit_distortion`) and writes it as a model file
+(:mod:`pipeline.model_file`) with its figures of merit and provenance.
+
+``--model auto`` (default) chooses the model kind and degree by
+cross-validation over the given shots (:func:`pipeline.select.select_model`:
+leave one shot out, correct it with the fit on the others, measure it) and
+says what it chose. ``--model radial`` fits the radial model with free centre
+(default degree 4, with tangential and thin-prism terms unless
+``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
+towards the image centre); ``--model poly`` the bivariate
+polynomial (default degree 5). ``--holdout`` shots are never used in the
+fit: they are corrected by the fitted model and measured (the paper's
+protocol). ``--json`` prints one object::
+
+    {"model": path, "choice": {"model", "degree", "tangential", "prism", "label", "reason", ...},
+     "before": {"d", "d_max"}, "fit": {"d", "d_max"}, "holdout": {"d", "d_max", "images": [...]},
+     "images": [{"path", "d_before", "d_max_before", "d", "d_max", "n_edges"}], "rejected": [...]}
+
+(``holdout`` only when given; distances in pixels). Bad input (unreadable
+image, no strings, images of different sizes, one orientation only, too few
+edges): one line on stderr, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from pipeline.fit import FitFailure, corrected_straightness, fit_distortion
+from pipeline.measure import measure_image
+from pipeline.select import Candidate, select_model
+
+
+class CalibrateError(Exception):
+    """One-line message for the user."""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("calibrate", help="fit a lens distortion model from harp shots",
+                              description=__doc__.split("\n\n")[0])
+    p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
+    p.add_argument("--model", choices=("auto", "radial", "poly"), default="auto",
+                   help="model kind; auto = chosen by leave-one-shot-out cross-validation (default)")
+    p.add_argument("--degree", type=_positive_int, default=None,
+                   help="radial: highest power of r (default 4); poly: total degree 3..11 (default 5)")
+    p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
+    p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
+    p.add_argument("--center-prior", action="store_true",
+                   help="radial: pull the distortion centre towards the image centre (see pipeline.select)")
+    p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (YAML)")
+    p.add_argument("--holdout", nargs="+", default=[], metavar="IMAGE",
+                   help="shots never used in the fit: corrected by the model and measured")
+    p.add_argument("--t", type=_positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def _num(v):
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+def _measure(paths, t):
+    from station.imageio import ImageReadError, read_grey
+
+    out = []
+    for path in paths:
+        try:
+            img = read_grey(path)
+        except ImageReadError as exc:
+            raise CalibrateError(str(exc)) from None
+        try:
+            m = measure_image(img, t=t)
+        except (ValueError, MemoryError) as exc:
+            raise CalibrateError(f"{path}: cannot measure: {exc}") from None
+        if m.n_lines == 0:
+            raise CalibrateError(f"{path}: no strings found")
+        out.append((path, m))
+    return out
+
+
+def _candidate(args) -> Candidate | None:
+    if args.model == "auto":
+        if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior:
+            raise CalibrateError("--degree/--no-tangential/--no-prism/--center-prior need --model radial or poly")
+        return None
+    if args.model == "poly":
+        if args.no_tangential or args.no_prism or args.center_prior:
+            raise CalibrateError("--no-tangential/--no-prism/--center-prior apply to --model radial only")
+        deg = 5 if args.degree is None else args.degree
+        if not 3 <= deg <= 11:
+            raise CalibrateError(f"--degree for poly must be within 3..11, got {deg}")
+        return Candidate("poly", deg)
+    deg = 4 if args.degree is None else args.degree
+    if deg > 10:
+        raise CalibrateError(f"--degree for radial must be within 1..10, got {deg}")
+    return Candidate("radial", deg, not args.no_tangential, not args.no_prism, args.center_prior)
+
+
+def calibrate(args) -> dict:
+    """Do the work; returns the JSON report. Raises CalibrateError (one line)."""
+    from pipeline.model_file import make_provenance, write_model_file
+
+    cand = _candidate(args)
+    fit_m = _measure(args.images, args.t)
+    hold_m = _measure(args.holdout, args.t)
+    sizes = {(m.width, m.height) for _, m in fit_m + hold_m}
+    if len(sizes) > 1:
+        listing = ", ".join(f"{p} {m.width}x{m.height}" for p, m in fit_m + hold_m)
+        raise CalibrateError(f"images of different sizes ({listing}): one model fits one image size")
+    width, height = sizes.pop()
+    shots = [[ln.points for ln in m.lines] for _, m in fit_m]
+
+    if cand is None:
+        if len(shots) < 2:
+            raise CalibrateError("need at least 2 shots at different harp orientations "
+                                 "(one orientation cannot constrain the distortion along the strings)")
+        sel = select_model(shots, width, height)
+        cand = sel.choice
+        choice = sel.to_dict()
+    else:
+        choice = {**cand.to_dict(), "reason": "given on the command line", "folds": "none", "table": []}
+
+    res = fit_distortion(shots, width, height, **cand.kwargs(),
+                         image_sizes=[(m.width, m.height) for _, m in fit_m])
+    if isinstance(res, FitFailure):
+        raise CalibrateError(f"cannot fit {cand.label}: {res.reason}")
+
+    report = {
+        "model": str(args.out),
+        "choice": choice,
+        "before": {"d": _num(res.d_before), "d_max": _num(res.d_max_before)},
+        "fit": {"d": _num(res.d_after), "d_max": _num(res.d_max_after)},
+        "images": [{"path": str(fit_m[im.image][0]), "n_edges": im.n_edges, "d_before": _num(im.d_before),
+                    "d_max_before": _num(im.d_max_before), "d": _num(im.d_after), "d_max": _num(im.d_max_after)}
+                   for im in res.images],
+        "rejected": [{"path": str(fit_m[e.image][0]), "line": e.line, "reason": e.reason} for e in res.rejected],
+        "warnings": list(res.warnings),
+    }
+    if hold_m:
+        per = []
+        for p, m in hold_m:
+            d, dm = corrected_straightness(res.model, [ln.points for ln in m.lines])
+            per.append({"path": str(p), "d_before": _num(m.d), "d_max_before": _num(m.d_max),
+                        "d": _num(d), "d_max": _num(dm)})
+        d, dm = corrected_straightness(res.model, [ln.points for _, m in hold_m for ln in m.lines])
+        report["holdout"] = {"d": _num(d), "d_max": _num(dm), "images": per}
+    merit = {k: report[k] for k in ("before", "fit") if k in report}
+    if "holdout" in report:
+        merit["holdout"] = {"d": report["holdout"]["d"], "d_max": report["holdout"]["d_max"]}
+    merit["choice"] = {k: v for k, v in choice.items() if k != "table"}
+    merit["rejected_edges"] = report["rejected"]
+    prov = make_provenance(args.images, t=args.t, command=["harp", "calibrate", *sys.argv[2:]],
+                           holdout=[{"path": str(p)} for p, _ in hold_m])
+    try:
+        write_model_file(args.out, res.model, width=width, height=height, merit=merit, provenance=prov)
+    except OSError as exc:
+        raise CalibrateError(f"{args.out}: cannot write model file ({exc.strerror or exc})") from None
+    return report
+
+
+def _print(report: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    ch = report["choice"]
+    con.print(f"model: [bold]{ch['label']}[/bold] ({ch['reason']})")
+    if ch.get("table"):
+        t = Table(title="cross-validation (holdout d, px)")
+        for c in ("candidate", "params", "CV d", "per fold"):
+            t.add_column(c)
+        for r in ch["table"]:
+            cv = "failed" if r["cv_d"] is None else f"{r['cv_d']:.4f}"
+            folds = " ".join("-" if v is None else f"{v:.4f}" for v in r["fold_d"])
+            t.add_row(r["label"], str(r["n_params"]), cv, folds)
+        con.print(t)
+    t = Table(title="straightness (px)")
+    for c in ("shot", "edges", "d before", "d_max before", "d after", "d_max after"):
+        t.add_column(c)
+
+    def f(v):
+        return "n/a" if v is None else f"{v:.4f}"
+
+    for im in report["images"]:
+        t.add_row(im["path"], str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
+                  f(im["d_max"]))
+    t.add_row("fit (all)", "", f(report["before"]["d"]), f(report["before"]["d_max"]), f(report["fit"]["d"]),
+              f(report["fit"]["d_max"]))
+    for im in report.get("holdout", {}).get("images", []):
+        t.add_row(f"holdout {im['path']}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
+                  f(im["d_max"]))
+    if "holdout" in report:
+        t.add_row("holdout (all)", "", "", "", f(report["holdout"]["d"]), f(report["holdout"]["d_max"]))
+    con.print(t)
+    for r in report["rejected"]:
+        con.print(f"rejected edge: {r['path']} line {r['line']}: {r['reason']}")
+    for w in report["warnings"]:
+        con.print(f"warning: {w}")
+    con.print(f"wrote {report['model']}")
+
+
+def run(args) -> int:
+    try:
+        report = calibrate(args)
+    except CalibrateError as exc:
+        print(f"harp calibrate: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(report))
+    else:
+        _print(report)
+    return 0

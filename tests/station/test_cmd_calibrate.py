@@ -1,0 +1,101 @@
+import json
+
+import cv2
+import pytest
+
+from pipeline import load_model
+from pipeline.compare import compare_models
+from pipeline.models import RadialModel
+from pipeline.render import HarpScene, render_harp
+from station.cli import main
+
+W, H = 640, 480
+LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(330, 230), tangential=(0.001, 0.0))
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    d = tmp_path_factory.mktemp("shots")
+    paths = {}
+    for i, ang in enumerate((3.0, 63.0, 123.0, 93.0)):
+        img = render_harp(W, H, HarpScene(angle_deg=ang, spacing_px=40.0, phase_px=7.0 * i), lens=LENS,
+                          noise_sigma=1.5, seed=i).image
+        paths[ang] = d / f"shot{i}.pgm"
+        assert cv2.imwrite(str(paths[ang]), img)
+    same = render_harp(W, H, HarpScene(angle_deg=4.0, spacing_px=40.0, phase_px=20.0), lens=LENS, seed=9).image
+    paths["same"] = d / "same_orientation.pgm"
+    cv2.imwrite(str(paths["same"]), same)
+    small = render_harp(320, 240, HarpScene(angle_deg=60.0, spacing_px=40.0), lens=None, seed=3).image
+    paths["small"] = d / "small.pgm"
+    cv2.imwrite(str(paths["small"]), small)
+    return paths
+
+
+def _run(capsys, *argv):
+    code = main(["calibrate", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_radial_fit_with_holdout_json(shots, tmp_path, capsys):
+    out_path = tmp_path / "lens.yaml"
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], "--model", "radial",
+                          "--holdout", shots[93.0], "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["model"] == str(out_path)
+    assert rep["choice"]["label"] == "radial4+tangential+prism"
+    assert rep["before"]["d"] > 0.3 and rep["fit"]["d"] < 0.01 and rep["fit"]["d_max"] < 0.05
+    assert rep["holdout"]["d"] < 0.01 and rep["holdout"]["images"][0]["d_before"] > 0.2
+    assert len(rep["images"]) == 3
+    model = load_model(out_path)
+    assert compare_models(model, LENS, W, H).rms < 0.01
+    text = out_path.read_text()
+    assert "holdout" in text and "sha256" in text
+
+
+def test_auto_chooses_by_cross_validation_and_says_so(shots, tmp_path, capsys):
+    out_path = tmp_path / "auto.yaml"
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    ch = rep["choice"]
+    assert ch["folds"] == "images" and "leave-one-shot-out" in ch["reason"]
+    assert ch["model"] == "radial"  # poly candidates do not generalise as well from 2 shots
+    labels = [r["label"] for r in ch["table"]]
+    assert ch["label"] in labels and "poly5" in labels
+    assert rep["fit"]["d"] < 0.01 and "holdout" not in rep
+    assert compare_models(load_model(out_path), LENS, W, H).rms < 0.01
+
+
+def test_table_output(shots, tmp_path, capsys):
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "poly", "--degree", "4",
+                          "--out", tmp_path / "p.yaml")
+    assert code == 0, err
+    assert "poly4" in out and "d after" in out and "wrote" in out
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("same_a", "same_b"), "orientation"),
+    ((3.0, "small"), "different sizes"),
+    ((3.0, "missing"), "missing.pgm"),
+    ((3.0, 63.0, "--degree", "3"), "need --model radial or poly"),
+    ((3.0, 63.0, "--model", "poly", "--degree", "12"), "3..11"),
+])
+def test_bad_input_one_line_exit_2(shots, tmp_path, capsys, args, needle):
+    resolved = []
+    for a in args:
+        if a == "same_a":
+            a = shots[3.0]
+        elif a == "same_b":
+            a = shots["same"]
+        elif a == "missing":
+            a = tmp_path / "missing.pgm"
+        elif a in shots:
+            a = shots[a]
+        resolved.append(a)
+    out_path = tmp_path / "x.yaml"
+    code, out, err = _run(capsys, *resolved, "--out", out_path)
+    assert code == 2
+    assert err.startswith("harp calibrate: ") and err.count("\n") == 1 and needle in err, err
+    assert not out_path.exists()
