@@ -1,0 +1,178 @@
+"""``harp measure IMAGE... [--t 30] [--json] [--overlay DIR]``: straightness of the strings.
+
+Each image is read (PGM/PNG/TIFF/JPEG, 8 or 16 bit, colour converted to
+grey), its string edges are found and measured
+(:func:`pipeline.measure.measure_image`); the command prints ``d`` and
+``d_max`` per image and over all images (all edges of all images pooled, as
+in Tang et al. 2012) as rich tables, or with ``--json`` exactly one JSON
+object on stdout::
+
+    {"d": float, "d_max": float, "n_lines": int,
+     "images": [{"path": str, "width": int, "height": int, "d": float, "d_max": float,
+                 "n_lines": int, "lines": [{"points": int, "rms": float, "p2p": float,
+                 "angle_deg": float, "length_px": float, "hf_rms": float, ...}], ...}],
+     "errors": [{"path": str, "error": str}]}
+
+(distances in pixels; ``d``/``d_max`` are ``null`` when nothing was measured).
+``--overlay DIR`` writes ``DIR/<image name>.overlay.png`` per image.
+
+Bad input (missing or unreadable file, truncated data, a directory, an image
+without strings): one line on stderr naming the file and the reason; the
+other images are still measured and reported; exit code 2. Exit 0 when
+every image was measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.measure import ImageMeasurement, measure_image
+from pipeline.straightness import straightness
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("measure", help="measure string straightness (d, d_max) in harp photos",
+                              description=__doc__.split("\n\n")[0])
+    p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
+    p.add_argument("--t", type=_positive_int, default=30,
+                   help="along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default 30)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    p.add_argument("--overlay", metavar="DIR", help="write an overlay PNG per image into DIR")
+    p.set_defaults(func=run)
+
+
+class MeasureError(Exception):
+    """One-line message for the user, naming the file."""
+
+
+def _measure_one(path: str, t: int) -> tuple[np.ndarray, ImageMeasurement]:
+    from station.imageio import ImageReadError, read_grey
+
+    try:
+        img = read_grey(path)
+    except ImageReadError as exc:
+        raise MeasureError(str(exc)) from None
+    try:
+        m = measure_image(img, t=t)
+    except (ValueError, MemoryError) as exc:
+        raise MeasureError(f"{path}: cannot measure: {exc}") from None
+    if m.n_lines == 0:
+        raise MeasureError(f"{path}: no strings found (no pair of long straight edges a string width apart)")
+    return img, m
+
+
+def _overlay_names(paths: list[str]) -> dict[str, str]:
+    """Unique overlay file names (``<name>.overlay.png``, numbered on clashes)."""
+    names: dict[str, str] = {}
+    used: set[str] = set()
+    for p in paths:
+        base = Path(p).name or "image"
+        name, k = f"{base}.overlay.png", 1
+        while name in used:
+            k += 1
+            name = f"{base}.{k}.overlay.png"
+        used.add(name)
+        names[p] = name
+    return names
+
+
+def _fmt(v) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v:.4f}"
+
+
+def _print_tables(results: list[tuple[str, ImageMeasurement]], overall: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console(file=sys.stdout, highlight=False)
+    for path, m in results:
+        tab = Table(title=f"{path}  ({m.width}x{m.height}, string width {m.string_width_px:.2f} px)",
+                    title_justify="left")
+        for col in ("string", "edge", "points", "rms px", "p2p px", "angle deg", "length px", "hf_rms px"):
+            tab.add_column(col, justify="right")
+        for ln in m.lines:
+            tab.add_row(str(ln.string_id), "+" if ln.polarity > 0 else "-", str(len(ln.points)),
+                        f"{ln.rms:.4f}", f"{ln.p2p:.4f}", f"{ln.angle_deg:.2f}", f"{ln.length_px:.1f}",
+                        f"{ln.hf_rms:.4f}")
+        rej = m.to_dict()["rejected"]
+        rej_text = ", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) or "none"
+        tab.caption = (f"d = {_fmt(m.d)} px   d_max = {_fmt(m.d_max)} px   {m.n_lines} edges of "
+                       f"{m.n_strings} strings   rejected groups: {rej_text}")
+        tab.caption_justify = "left"
+        con.print(tab)
+    summ = Table(title="overall (all edges of all images pooled)", title_justify="left")
+    for col in ("image", "size", "strings", "edges", "d px", "d_max px"):
+        summ.add_column(col, justify="right" if col != "image" else "left")
+    for path, m in results:
+        summ.add_row(Path(path).name, f"{m.width}x{m.height}", str(m.n_strings), str(m.n_lines), _fmt(m.d), _fmt(m.d_max))
+    summ.add_row("all", "", "", str(overall["n_lines"]), _fmt(overall["d"]), _fmt(overall["d_max"]),
+                 style="bold")
+    con.print(summ)
+
+
+def run(args) -> int:
+    t = int(args.t)
+    overlay_dir = None
+    status = 0
+    if args.overlay:
+        overlay_dir = Path(args.overlay)
+        try:
+            overlay_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            print(f"harp measure: {overlay_dir}: cannot create overlay directory: {exc.strerror or exc}",
+                  file=sys.stderr)
+            return 2
+    names = _overlay_names(list(args.images))
+    results: list[tuple[str, ImageMeasurement]] = []
+    errors: list[dict] = []
+    for path in args.images:
+        try:
+            img, m = _measure_one(path, t)
+        except MeasureError as exc:
+            print(f"harp measure: {exc}", file=sys.stderr)
+            errors.append({"path": path, "error": str(exc)})
+            status = 2
+            continue
+        results.append((path, m))
+        if overlay_dir is not None:
+            from station.overlay import write_overlay
+
+            try:
+                write_overlay(overlay_dir / names[path], img, m, title=Path(path).name)
+            except OSError as exc:
+                print(f"harp measure: {path}: cannot write overlay: {exc}", file=sys.stderr)
+                status = 2
+
+    all_points = [ln.points for _, m in results for ln in m.lines]
+    if all_points:
+        st = straightness(all_points)
+        overall = {"d": st.d, "d_max": st.d_max, "n_lines": st.n_lines}
+    else:
+        overall = {"d": None, "d_max": None, "n_lines": 0}
+
+    if args.json:
+        images = []
+        for path, m in results:
+            d = m.to_dict()
+            images.append({"path": path, **d})
+        doc = {**overall, "t": t, "images": images, "errors": errors}
+        json.dump(doc, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    elif results:
+        _print_tables(results, overall)
+    return status
