@@ -49,7 +49,6 @@ Unknown keys raise ``ValueError`` naming the key.
 
 from __future__ import annotations
 
-import math
 import tempfile
 import time
 from pathlib import Path
@@ -57,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers.camera_base import CameraBase
 from drivers.errors import (
     CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError,
 )
@@ -70,11 +70,6 @@ PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
 EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
 GAIN_FEATURES = ("Gain", "GainRaw")
 
-_CONFIG_KEYS = {
-    "driver", "device", "pixel_format", "exposure_us", "gain_db", "focus", "trigger", "roi",
-    "focus_feature", "focus_type", "autofocus_feature", "autofocus_off", "gain_db_per_raw",
-    "buffers", "fake_genicam_xml", "packet_size",
-}
 
 _ARAVIS = None
 _FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
@@ -130,7 +125,7 @@ def _select_fake_xml(Aravis, path: str | None) -> None:
         _FAKE_XML_STATE["current"] = path
 
 
-class AravisCamera:
+class AravisCamera(CameraBase):
     """A GenICam camera opened through Aravis; satisfies :class:`drivers.protocols.Camera`.
 
     Parameters
@@ -157,6 +152,13 @@ class AravisCamera:
     packet_size : int, optional
         GigE Vision stream packet size in bytes.
     """
+
+    CONFIG_KEYS = frozenset({
+        "driver", "device", "pixel_format", "exposure_us", "gain_db", "focus", "trigger", "roi",
+        "focus_feature", "focus_type", "autofocus_feature", "autofocus_off", "gain_db_per_raw",
+        "buffers", "fake_genicam_xml", "packet_size",
+    })
+    CONFIG_NAME = "aravis camera"
 
     def __init__(self, device: str | None = None, *, pixel_format: str = "Mono8",
                  exposure_us: float | None = None, gain_db: float | None = None,
@@ -204,17 +206,6 @@ class AravisCamera:
         self._exposure_feature = self._gain_feature = None
         self._focus_kind: str | None = None
 
-    # -- construction ---------------------------------------------------------------
-    @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> "AravisCamera":
-        """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"aravis camera: unknown config key {unknown[0]!r}; "
-                             f"expected some of {', '.join(sorted(_CONFIG_KEYS))}")
-        kw = {k: v for k, v in cfg.items() if k != "driver"}
-        return cls(kw.pop("device", None), **kw)
-
     @property
     def name(self) -> str:
         return f"aravis camera {self.device_id or '<first>'}"
@@ -223,13 +214,6 @@ class AravisCamera:
         return f"<AravisCamera {self.device_id!r} {'open' if self._camera else 'closed'}>"
 
     # -- open / close ---------------------------------------------------------------
-    def __enter__(self) -> "AravisCamera":
-        self.open()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self._camera is not None
@@ -322,12 +306,7 @@ class AravisCamera:
         if self.packet_size is not None and cam.is_gv_device():
             self._call(f"packet size {self.packet_size}", cam.gv_set_packet_size, int(self.packet_size))
 
-        if self._initial["exposure_us"] is not None:
-            self.set_exposure(self._initial["exposure_us"])
-        if self._initial["gain_db"] is not None:
-            self.set_gain(self._initial["gain_db"])
-        if self._initial["focus"] is not None:
-            self.lock_focus(self._initial["focus"])
+        self._apply_initial_settings()
 
     def _check_focus_features(self, Aravis) -> None:
         if not self.focus_feature:
@@ -356,7 +335,6 @@ class AravisCamera:
         for _ in range(self.n_buffers):
             stream.push_buffer(Aravis.Buffer.new_allocate(payload))
         self._stream = stream
-        self._payload = payload
         self._call("start acquisition", cam.start_acquisition)
         self._counter = 0
 
@@ -365,14 +343,10 @@ class AravisCamera:
         if cam is not None:
             try:
                 cam.stop_acquisition()
-            except Exception:
+            except Exception:  # noqa: BLE001 - a vanished device may fail to stop; we drop it anyway
                 pass
         self._stream = None  # drops the stream thread (joined on finalize)
         self._device = None
-
-    def _require_open(self) -> None:
-        if self._camera is None:
-            raise DriverError(f"{self.name}: camera is not open")
 
     # -- properties -----------------------------------------------------------------
     # Properties never raise (``isinstance(cam, Camera)`` reads them on Python 3.11):
@@ -410,9 +384,7 @@ class AravisCamera:
     # -- exposure / gain ------------------------------------------------------------
     def set_exposure(self, microseconds: float) -> float:
         self._require_open()
-        us = float(microseconds)
-        if not math.isfinite(us) or us <= 0:
-            raise ValueError(f"{self.name}: exposure must be a positive number of µs, got {microseconds!r}")
+        us = self._exposure_value(microseconds)
         f = self._exposure_feature
         self._call(f"{f}={us:g}", self._device.set_float_feature_value, f, us)
         return self.get_exposure()
@@ -424,9 +396,7 @@ class AravisCamera:
 
     def set_gain(self, db: float) -> float:
         self._require_open()
-        db = float(db)
-        if not math.isfinite(db):
-            raise ValueError(f"{self.name}: gain must be finite, got {db!r}")
+        db = self._finite_value(float(db), "gain")
         f, dev = self._gain_feature, self._device
         if f == "GainRaw":
             raw = int(round(db / self.gain_db_per_raw))
@@ -448,9 +418,7 @@ class AravisCamera:
         self._require_open()
         if not self.focus_feature:
             raise DeviceRejected(f"{self.name}: no focus feature configured (set focus_feature)")
-        pos = float(position)
-        if not math.isfinite(pos):
-            raise ValueError(f"{self.name}: focus position must be finite, got {position!r}")
+        pos = self._finite_value(position, "focus position")
         dev = self._device
         if self.autofocus_feature:
             self._autofocus_off()
@@ -526,18 +494,8 @@ class AravisCamera:
             finally:
                 stream.push_buffer(buf)
             break
-        frame = Frame(
-            image=image,
-            timestamp=(sys_ts / 1e9) if sys_ts else time.time(),
-            exposure_us=self.get_exposure(),
-            gain_db=self.get_gain(),
-            focus=self.get_focus(),
-            camera=self._identity,
-            counter=self._counter,
-            extra=extra,
-        )
-        self._counter += 1
-        return frame
+        return self._frame(image, (sys_ts / 1e9) if sys_ts else time.time(), self.get_exposure(),
+                           self.get_gain(), extra)
 
     def _to_array(self, Aravis, buf) -> np.ndarray:
         w, h = buf.get_image_width(), buf.get_image_height()

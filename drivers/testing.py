@@ -82,7 +82,7 @@ class _ScriptHandler:
                         self.server.write(reply)
 
     def tick(self, now: float) -> None:
-        pass
+        """Server hook for time passing: a script only answers bytes, so nothing to do."""
 
 
 class ScriptedDevice:

@@ -85,7 +85,7 @@ class SerialTransport:
         if ser is not None:
             try:
                 ser.close()
-            except _IO_ERRORS:
+            except _IO_ERRORS:  # a vanished port may fail to close; it is closed for us either way
                 pass
 
     def _port(self) -> serial.SerialBase:

@@ -41,11 +41,11 @@ Unknown keys raise ``ValueError`` naming the key.
 from __future__ import annotations
 
 import errno
-import math
 import time
 
 import numpy as np
 
+from drivers.camera_base import CameraBase
 from drivers.errors import (
     CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError,
 )
@@ -55,11 +55,6 @@ from drivers.protocols import CameraIdentity, Frame
 PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG")
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
 _MANUAL_EXPOSURE = 1  # V4L2_EXPOSURE_MANUAL
-
-_CONFIG_KEYS = {
-    "driver", "device", "pixel_format", "width", "height", "exposure_us", "gain_db", "focus",
-    "gain_db_per_unit", "buffers", "discard_frames",
-}
 
 # (standard control id attribute of linuxpy ControlID, names used by kernels old and new)
 _CONTROLS = {
@@ -79,7 +74,7 @@ def _fourcc_code(fmt: str) -> int:
     return raw.v4l2_fourcc(*fmt.ljust(4))
 
 
-class V4L2Camera:
+class V4L2Camera(CameraBase):
     """A V4L2 capture device; satisfies :class:`drivers.protocols.Camera`.
 
     Parameters
@@ -99,6 +94,13 @@ class V4L2Camera:
         Frames thrown away after the queue is flushed in :meth:`capture`,
         so new exposure/gain settings have taken effect.
     """
+
+    CONFIG_KEYS = frozenset({
+        "driver", "device", "pixel_format", "width", "height", "exposure_us", "gain_db", "focus",
+        "gain_db_per_unit", "buffers", "discard_frames",
+    })
+    CONFIG_NAME = "v4l2 camera"
+    DEFAULT_DEVICE = "/dev/video0"
 
     def __init__(self, device: str = "/dev/video0", *, pixel_format: str = "GREY",
                  width: int | None = None, height: int | None = None,
@@ -132,16 +134,6 @@ class V4L2Camera:
         self._identity: CameraIdentity | None = None
         self._counter = 0
 
-    @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> "V4L2Camera":
-        """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"v4l2 camera: unknown config key {unknown[0]!r}; "
-                             f"expected some of {', '.join(sorted(_CONFIG_KEYS))}")
-        kw = {k: v for k, v in cfg.items() if k != "driver"}
-        return cls(kw.pop("device", "/dev/video0"), **kw)
-
     @property
     def name(self) -> str:
         return f"v4l2 camera {self.path}"
@@ -150,13 +142,6 @@ class V4L2Camera:
         return f"<V4L2Camera {self.path!r} {'open' if self._dev else 'closed'}>"
 
     # -- open / close ---------------------------------------------------------------
-    def __enter__(self) -> "V4L2Camera":
-        self.open()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self._dev is not None
@@ -220,12 +205,7 @@ class V4L2Camera:
         except RuntimeWarning as exc:  # linuxpy refuses a control whose claimed range overflows
             raise DeviceRejected(f"{self.name}: cannot enumerate controls: {exc}") from None
         self._ctrl = {key: self._find_control(*spec) for key, spec in _CONTROLS.items()}
-        if self._initial["exposure_us"] is not None:
-            self.set_exposure(self._initial["exposure_us"])
-        if self._initial["gain_db"] is not None:
-            self.set_gain(self._initial["gain_db"])
-        if self._initial["focus"] is not None:
-            self.lock_focus(self._initial["focus"])
+        self._apply_initial_settings()
 
     def _find_control(self, ids, names):
         from linuxpy.video.device import ControlID
@@ -234,12 +214,12 @@ class V4L2Camera:
         for cid in ids:
             try:
                 return controls[int(getattr(ControlID, cid))]
-            except (KeyError, AttributeError):
+            except (KeyError, AttributeError):  # id unknown to linuxpy or not on this device
                 pass
         for name in names:
             try:
                 return controls[name]
-            except KeyError:
+            except KeyError:  # try the next name
                 pass
         return None
 
@@ -258,17 +238,13 @@ class V4L2Camera:
         if video is not None:
             try:
                 video.close()  # STREAMOFF, unmap, REQBUFS 0
-            except (OSError, ValueError):
+            except (OSError, ValueError):  # a vanished device may fail to stop; we drop it anyway
                 pass
         if dev is not None:
             try:
                 dev.close()
-            except OSError:
+            except OSError:  # as above
                 pass
-
-    def _require_open(self) -> None:
-        if self._dev is None:
-            raise DriverError(f"{self.name}: camera is not open")
 
     # -- properties -----------------------------------------------------------------
     # Properties never raise (``isinstance(cam, Camera)`` reads them on Python 3.11):
@@ -319,9 +295,7 @@ class V4L2Camera:
 
     def set_exposure(self, microseconds: float) -> float:
         self._require_open()
-        us = float(microseconds)
-        if not math.isfinite(us) or us <= 0:
-            raise ValueError(f"{self.name}: exposure must be a positive number of µs, got {microseconds!r}")
+        us = self._exposure_value(microseconds)
         auto = self._ctrl.get("exposure_auto")
         if auto is not None and self._read(auto) != _MANUAL_EXPOSURE:
             self._write(auto, _MANUAL_EXPOSURE)
@@ -337,9 +311,7 @@ class V4L2Camera:
 
     def set_gain(self, db: float) -> float:
         self._require_open()
-        db = float(db)
-        if not math.isfinite(db):
-            raise ValueError(f"{self.name}: gain must be finite, got {db!r}")
+        db = self._finite_value(float(db), "gain")
         self._write(self._control("gain", "gain"), int(round(db / self.gain_db_per_unit)))
         return self.get_gain()
 
@@ -350,9 +322,7 @@ class V4L2Camera:
     def lock_focus(self, position: float) -> float:
         """Continuous autofocus off, then ``focus_absolute`` = ``round(position)``."""
         self._require_open()
-        pos = float(position)
-        if not math.isfinite(pos):
-            raise ValueError(f"{self.name}: focus position must be finite, got {position!r}")
+        pos = self._finite_value(position, "focus position")
         ctrl = self._control("focus", "focus_absolute")
         auto = self._ctrl.get("focus_auto")
         if auto is not None:
@@ -395,19 +365,12 @@ class V4L2Camera:
             raise CaptureError(f"{self.name}: empty buffer (sequence {raw.frame_nb})")
         image = to_grey(bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height),
                         int(fmt.bytes_per_line) or None)
-        frame = Frame(
-            image=np.asarray(image),
-            timestamp=now,
-            exposure_us=self.get_exposure() if self._ctrl.get("exposure") is not None else float("nan"),
-            gain_db=self.get_gain() if self._ctrl.get("gain") is not None else float("nan"),
-            focus=self.get_focus(),
-            camera=self._identity,
-            counter=self._counter,
-            extra={"sequence": int(raw.frame_nb), "device_timestamp": float(raw.timestamp),
-                   "pixel_format": self._fourcc},
-        )
-        self._counter += 1
-        return frame
+        return self._frame(
+            np.asarray(image), now,
+            self.get_exposure() if self._ctrl.get("exposure") is not None else float("nan"),
+            self.get_gain() if self._ctrl.get("gain") is not None else float("nan"),
+            {"sequence": int(raw.frame_nb), "device_timestamp": float(raw.timestamp),
+             "pixel_format": self._fourcc})
 
 
 def _fourcc_name(code: int) -> str:

@@ -5,7 +5,8 @@ lines, so a straight-line method can only determine a correction up to a
 homography (Tang et al. 2012, Sect. 2). Two corrections :math:`U_a`,
 :math:`U_b` are therefore compared by fitting the homography :math:`H` that
 minimises :math:`\sum_p |H(U_a(p)) - U_b(p)|^2` over a dense grid of the image
-(Levenberg–Marquardt from the linear DLT solution) and reporting what is left.
+(Gauss-Newton from the linear DLT solution,
+:func:`pipeline.normalise.fit_homography`) and reporting what is left.
 
 References
 ----------
@@ -19,10 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from pipeline import normalise
 from pipeline.models.base import DistortionModel
-from pipeline.models.homography import HomographyModel, apply_homography
+from pipeline.models.homography import apply_homography
 
 
 @dataclass(frozen=True)
@@ -47,38 +48,17 @@ def image_grid(width: int, height: int, step: float = 10.0) -> np.ndarray:
     return np.stack([xx.ravel(), yy.ravel()], axis=1)
 
 
-def _dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Linear homography estimate src -> dst (normalised inputs), H[2,2] = 1."""
-    x, y = src[:, 0], src[:, 1]
-    u, v = dst[:, 0], dst[:, 1]
-    z, o = np.zeros_like(x), np.ones_like(x)
-    a = np.concatenate([np.stack([x, y, o, z, z, z, -u * x, -u * y, -u], 1),
-                        np.stack([z, z, z, x, y, o, -v * x, -v * y, -v], 1)])
-    h = np.linalg.svd(a, full_matrices=False)[2][-1].reshape(3, 3)
-    return h / h[2, 2]
-
-
 def fit_homography(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares homography ``src -> dst`` (pixels); returns ``(H, residual vectors)``."""
+    """Least-squares homography ``src -> dst`` (pixels); returns ``(H, residual vectors)``.
+
+    ``H`` is :func:`pipeline.normalise.fit_homography`; the residuals
+    ``H(src) - dst`` are over the points where both are finite.
+    """
     src = np.asarray(src, dtype=np.float64).reshape(-1, 2)
     dst = np.asarray(dst, dtype=np.float64).reshape(-1, 2)
     ok = np.all(np.isfinite(src), axis=1) & np.all(np.isfinite(dst), axis=1)
-    src, dst = src[ok], dst[ok]
-    c = src.mean(axis=0)
-    s = max(float(np.sqrt(np.mean(np.sum((src - c) ** 2, axis=1)))), 1e-12)
-    norm = np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
-    sn = (src - c) / s
-    dn = (dst - c) / s
-    h0 = _dlt(sn, dn)
-
-    def fun(p):
-        return (apply_homography(np.append(p, 1.0).reshape(3, 3), sn) - dn).ravel() * s
-
-    sol = least_squares(fun, h0.ravel()[:8], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    hn = np.append(sol.x, 1.0).reshape(3, 3)
-    h = np.linalg.inv(norm) @ hn @ norm
-    h = h / h[2, 2]
-    return h, apply_homography(h, src) - dst
+    h = normalise.fit_homography(src[ok], dst[ok])
+    return h, apply_homography(h, src[ok]) - dst[ok]
 
 
 def compare_models(a: DistortionModel, b: DistortionModel, width: int, height: int,
@@ -104,24 +84,6 @@ def compare_models(a: DistortionModel, b: DistortionModel, width: int, height: i
                            n_points=int(len(err)))
 
 
-def corner_homography(model: DistortionModel, width: int, height: int) -> np.ndarray:
-    """The homography mapping the 4 *corrected* image corners back to the original corners.
-
-    Same as :func:`pipeline.normalise.corner_homography` (corners = pixel centres
-    ``(0, 0), (W-1, 0), (W-1, H-1), (0, H-1)``).
-    """
-    from pipeline.normalise import corner_homography as _ch
-
-    return _ch(model, width, height)
-
-
-def corner_normalised(model: DistortionModel, width: int, height: int) -> HomographyModel:
-    """``model`` followed by :func:`corner_homography`: leaves the 4 image corners fixed.
-
-    This is the paper's normalisation (Tang et al. 2012, Sect. 2) making
-    corrections from different methods comparable: it removes the homography
-    a straight-line method cannot see, without changing any straightness.
-    """
-    from pipeline.normalise import normalise_by_corners
-
-    return normalise_by_corners(model, width, height)
+#: The 4-corner normalisation (Tang et al. 2012, Sect. 2), defined in :mod:`pipeline.normalise`.
+corner_homography = normalise.corner_homography
+corner_normalised = normalise.normalise_by_corners

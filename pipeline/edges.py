@@ -13,8 +13,9 @@ Devernay [2]_ algorithm, fully vectorised with numpy/OpenCV:
    rescales the thresholds).
 3. Non-maximum suppression of the gradient modulus ``m = |(gx, gy)|`` along
    *one image axis*, chosen by the dominant gradient component: when
-   ``|gx| >= |gy|`` a pixel is kept if ``m(x-1) < m(x) >= m(x+1)``, otherwise
-   (``|gy| > |gx|``) if ``m(y-1) < m(y) >= m(y+1)``. Interpolating along an
+   ``|gx| >= |gy|`` a pixel is kept if ``m(x-1) < m(x) >= m(x+1)``, otherwise,
+   when ``|gy| >= |gx|``, if ``m(y-1) < m(y) >= m(y+1)`` (at a tie
+   ``|gx| = |gy|`` both axes are tried, x first, as in the IPOL code). Interpolating along an
    image axis instead of along the gradient removes the oscillation of the
    original Devernay method at 45 degrees [1]_.
 4. Sub-pixel position of the maximum of the modulus along that axis, pixel

@@ -67,6 +67,7 @@ from scipy.optimize import least_squares
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialModel, monomial_exponents, monomials
 from pipeline.models.radial import RadialModel
+from pipeline.straightness import straightness
 
 MIN_POINTS_PER_EDGE = 5
 MIN_EDGES = 4
@@ -190,23 +191,15 @@ def _edge_figures(r: np.ndarray, starts, counts):
     return np.sqrt(ms), p2p
 
 
-def _d_dmax(r, starts, counts):
-    if len(counts) == 0:
-        return float("nan"), float("nan")
-    _, p2p = _edge_figures(r, starts, counts)
-    return float(np.sqrt(np.mean(r * r))), float(np.sqrt(np.mean(p2p * p2p)))
-
-
 def straightness_of(points_list: Sequence[np.ndarray]) -> tuple[float, float]:
-    """``(d, d_max)`` of a list of edges (each (M, 2)) as they are."""
+    """``(d, d_max)`` (:func:`pipeline.straightness.straightness`) of the edges of
+    ``points_list`` (each (M, 2)) that have 3 points or more; NaN when none has."""
     pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in points_list]
     pts = [p for p in pts if len(p) >= 3]
     if not pts:
         return float("nan"), float("nan")
-    counts = np.array([len(p) for p in pts])
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-    r = _tls(np.concatenate(pts), starts, counts)[0]
-    return _d_dmax(r, starts, counts)
+    st = straightness(pts)
+    return st.d, st.d_max
 
 
 def corrected_straightness(model: DistortionModel, points_list: Sequence[np.ndarray]) -> tuple[float, float]:

@@ -187,9 +187,6 @@ class StringEdge:
     string_id: int
     width_px: float
 
-    def piece_arrays(self) -> list[np.ndarray]:
-        return [self.xy[a:b] for a, b in self.pieces]
-
 
 @dataclass(frozen=True)
 class RejectedGroup:

@@ -58,8 +58,6 @@ class LineMeasurement:
     points : (M, 2) ndarray
         Smoothed, subsampled edge points: the input of the straightness
         measure and of distortion fits.
-    raw : int
-        Number of raw sub-pixel edge points.
     raw_points : (N, 2) ndarray
         The raw sub-pixel edge points, ordered along the edge.
     rms, p2p : float
@@ -79,7 +77,6 @@ class LineMeasurement:
     string_id: int
     polarity: int
     points: np.ndarray
-    raw: int
     raw_points: np.ndarray
     rms: float
     p2p: float
@@ -87,6 +84,11 @@ class LineMeasurement:
     length_px: float
     hf_rms: float
     width_px: float
+
+    @property
+    def raw(self) -> int:
+        """Number of raw sub-pixel edge points."""
+        return len(self.raw_points)
 
     def to_dict(self) -> dict:
         return {"points": int(len(self.points)), "rms": self.rms, "p2p": self.p2p,
@@ -193,7 +195,7 @@ def measure_grouping(grouping: Grouping, width: int, height: int, t: int = 30) -
     for i, (e, pts) in enumerate(zip(meta, fit_sets)):
         hf = hf_rms(resample_polyline(e.xy, 1.0))
         lines.append(LineMeasurement(
-            string_id=ids[e.string_id], polarity=e.polarity, points=pts, raw=int(len(e.xy)), raw_points=e.xy,
+            string_id=ids[e.string_id], polarity=e.polarity, points=pts, raw_points=e.xy,
             rms=st.rms[i], p2p=st.p2p[i], angle_deg=st.angle_deg[i], length_px=st.length_px[i],
             hf_rms=hf, width_px=e.width_px))
     return ImageMeasurement(width, height, t, tuple(lines), st.d, st.d_max, rej, rej_pts,

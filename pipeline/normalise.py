@@ -28,6 +28,13 @@ def image_corners(width: int, height: int) -> np.ndarray:
     return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
 
 
+def _conditioning(p: np.ndarray) -> np.ndarray:
+    """Similarity moving points ``p`` to their centroid, mean distance ``sqrt(2)`` (Hartley)."""
+    c = p.mean(axis=0)
+    s = np.sqrt(2) / max(np.mean(np.linalg.norm(p - c, axis=1)), 1e-300)
+    return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1.0]])
+
+
 def homography_from_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Exact homography ``H`` (``H[2,2] = 1``) with ``H(src_i) = dst_i`` for 4 points.
 
@@ -35,13 +42,7 @@ def homography_from_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """
     src = np.asarray(src, dtype=np.float64).reshape(4, 2)
     dst = np.asarray(dst, dtype=np.float64).reshape(4, 2)
-    # condition: centre and scale both point sets
-    def cond(p):
-        c = p.mean(axis=0)
-        s = np.sqrt(2) / max(np.mean(np.linalg.norm(p - c, axis=1)), 1e-300)
-        return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1.0]])
-
-    ts, td = cond(src), cond(dst)
+    ts, td = _conditioning(src), _conditioning(dst)
     ps, pd = apply_homography(ts, src), apply_homography(td, dst)
     a = np.zeros((8, 8))
     b = np.zeros(8)
@@ -66,7 +67,12 @@ def corner_homography(model: DistortionModel, width: int, height: int) -> np.nda
 
 
 def normalise_by_corners(model: DistortionModel, width: int, height: int) -> HomographyModel:
-    """The model composed with its :func:`corner_homography`: fixes the 4 image corners."""
+    """The model composed with its :func:`corner_homography`: fixes the 4 image corners.
+
+    This is the paper's normalisation (Tang et al. 2012, Sect. 2) making
+    corrections from different methods comparable: it removes the homography
+    a straight-line method cannot see, without changing any straightness.
+    """
     h = corner_homography(model, width, height)
     return HomographyModel(base=model, homography=tuple(tuple(r) for r in h))
 
@@ -82,13 +88,7 @@ def fit_homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     dst = np.asarray(dst, dtype=np.float64).reshape(-1, 2)
     ok = np.all(np.isfinite(src), axis=1) & np.all(np.isfinite(dst), axis=1)
     src, dst = src[ok], dst[ok]
-
-    def cond(p):
-        c = p.mean(axis=0)
-        s = np.sqrt(2) / max(np.mean(np.linalg.norm(p - c, axis=1)), 1e-300)
-        return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1.0]])
-
-    ts, td = cond(src), cond(dst)
+    ts, td = _conditioning(src), _conditioning(dst)
     ps, pd = apply_homography(ts, src), apply_homography(td, dst)
     n = len(ps)
     a = np.zeros((2 * n, 9))

@@ -26,29 +26,18 @@ edges): one line on stderr, exit 2.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 
 import numpy as np
 
 from pipeline.fit import FitFailure, corrected_straightness, fit_distortion
-from pipeline.measure import measure_image
 from pipeline.select import Candidate, select_model
+from station.cli_inputs import InputError, measure_file, positive_int
 
 
-class CalibrateError(Exception):
+class CalibrateError(InputError):
     """One-line message for the user."""
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
 
 
 def register(subparsers) -> None:
@@ -57,7 +46,7 @@ def register(subparsers) -> None:
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
     p.add_argument("--model", choices=("auto", "radial", "poly"), default="auto",
                    help="model kind; auto = chosen by leave-one-shot-out cross-validation (default)")
-    p.add_argument("--degree", type=_positive_int, default=None,
+    p.add_argument("--degree", type=positive_int, default=None,
                    help="radial: highest power of r (default 4); poly: total degree 3..11 (default 5)")
     p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
     p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
@@ -66,7 +55,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (YAML)")
     p.add_argument("--holdout", nargs="+", default=[], metavar="IMAGE",
                    help="shots never used in the fit: corrected by the model and measured")
-    p.add_argument("--t", type=_positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument("--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -76,22 +65,7 @@ def _num(v):
 
 
 def _measure(paths, t):
-    from station.imageio import ImageReadError, read_grey
-
-    out = []
-    for path in paths:
-        try:
-            img = read_grey(path)
-        except ImageReadError as exc:
-            raise CalibrateError(str(exc)) from None
-        try:
-            m = measure_image(img, t=t)
-        except (ValueError, MemoryError) as exc:
-            raise CalibrateError(f"{path}: cannot measure: {exc}") from None
-        if m.n_lines == 0:
-            raise CalibrateError(f"{path}: no strings found")
-        out.append((path, m))
-    return out
+    return [(path, measure_file(path, t)[1]) for path in paths]
 
 
 def _candidate(args) -> Candidate | None:
@@ -113,7 +87,7 @@ def _candidate(args) -> Candidate | None:
 
 
 def calibrate(args) -> dict:
-    """Do the work; returns the JSON report. Raises CalibrateError (one line)."""
+    """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
     from pipeline.model_file import make_provenance, write_model_file
 
     cand = _candidate(args)
@@ -218,7 +192,7 @@ def _print(report: dict) -> None:
 def run(args) -> int:
     try:
         report = calibrate(args)
-    except CalibrateError as exc:
+    except InputError as exc:
         print(f"harp calibrate: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -21,14 +21,14 @@ from pathlib import Path
 
 
 from pipeline.evaluate import corrected_points
-from pipeline.measure import measure_image
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.normalise import corner_homography
 from pipeline.straightness import straightness
+from station.cli_inputs import InputError, measure_grey, positive_int, read_image
 
 
-class EvaluateError(Exception):
+class EvaluateError(InputError):
     """One-line message for the user."""
 
 
@@ -46,7 +46,7 @@ def register(subparsers) -> None:
                    help="images were corrected by other software: only measure them")
     p.add_argument("--focal", type=float, default=None,
                    help="lensfun: focal length (mm) of the calibration entry to use")
-    p.add_argument("-t", type=int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument("-t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -104,15 +104,10 @@ def _sd(st) -> dict:
 
 
 def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, t=30) -> dict:
-    """The JSON report of ``harp evaluate`` (see module docstring)."""
-    from station.imageio import ImageReadError, read_grey
-
+    """The JSON report of ``harp evaluate`` (see module docstring); raises InputError (one line)."""
     images, size = [], None
     for path in image_paths:
-        try:
-            img = read_grey(path)
-        except ImageReadError as exc:
-            raise EvaluateError(str(exc)) from None
+        img = read_image(path)
         if size is None:
             size = (img.shape[1], img.shape[0])
         elif (img.shape[1], img.shape[0]) != size:
@@ -126,7 +121,7 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
         model, kind = load_correction(correction_path, w, h, focal)
     before_all, after_all, per_image = [], [], []
     for path, img in images:
-        meas = measure_image(img, t=t)
+        meas = measure_grey(path, img, t, require_strings=False)
         pts = [ln.points for ln in meas.lines]
         entry = {"path": str(path), "n_lines": len(pts)}
         if not pts:
@@ -135,7 +130,11 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
             continue
         try:
             if already_corrected:
-                after = pts if model is None else [apply_homography(corner_homography(model, w, h), p) for p in pts]
+                if model is None:
+                    after = pts
+                else:
+                    hc = corner_homography(model, w, h)
+                    after = [apply_homography(hc, p) for p in pts]
                 before = None
             else:
                 after = corrected_points(pts, model, w, h)
@@ -164,7 +163,7 @@ def run(args) -> int:
     try:
         rep = evaluate(args.correction, args.images, already_corrected=args.already_corrected,
                        focal=args.focal, t=args.t)
-    except EvaluateError as exc:
+    except InputError as exc:
         print(f"harp evaluate: {exc}", file=sys.stderr)
         return 2
     if args.json:

@@ -24,56 +24,26 @@ every image was measured.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.measure import ImageMeasurement, measure_image
+from pipeline.measure import ImageMeasurement
 from pipeline.straightness import straightness
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
+from station.cli_inputs import InputError, measure_file, positive_int
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("measure", help="measure string straightness (d, d_max) in harp photos",
                               description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
-    p.add_argument("--t", type=_positive_int, default=30,
+    p.add_argument("--t", type=positive_int, default=30,
                    help="along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     p.add_argument("--overlay", metavar="DIR", help="write an overlay PNG per image into DIR")
     p.set_defaults(func=run)
-
-
-class MeasureError(Exception):
-    """One-line message for the user, naming the file."""
-
-
-def _measure_one(path: str, t: int) -> tuple[np.ndarray, ImageMeasurement]:
-    from station.imageio import ImageReadError, read_grey
-
-    try:
-        img = read_grey(path)
-    except ImageReadError as exc:
-        raise MeasureError(str(exc)) from None
-    try:
-        m = measure_image(img, t=t)
-    except (ValueError, MemoryError) as exc:
-        raise MeasureError(f"{path}: cannot measure: {exc}") from None
-    if m.n_lines == 0:
-        raise MeasureError(f"{path}: no strings found (no pair of long straight edges a string width apart)")
-    return img, m
 
 
 def _overlay_names(paths: list[str]) -> dict[str, str]:
@@ -142,8 +112,8 @@ def run(args) -> int:
     errors: list[dict] = []
     for path in args.images:
         try:
-            img, m = _measure_one(path, t)
-        except MeasureError as exc:
+            img, m = measure_file(path, t)
+        except InputError as exc:
             print(f"harp measure: {exc}", file=sys.stderr)
             errors.append({"path": path, "error": str(exc)})
             status = 2

@@ -44,7 +44,7 @@ def register(subparsers) -> None:
 
 
 class _Fail(Exception):
-    pass
+    """A one-line error for the user (printed by :func:`_error`, exit 2)."""
 
 
 def _error(msg: str) -> int:

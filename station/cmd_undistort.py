@@ -19,12 +19,13 @@ import numpy as np
 
 from pipeline.model_file import read_model_file
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
+from station.cli_inputs import InputError, read_image
 
 INTERPOLATIONS = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 WRITABLE = (".pgm", ".ppm", ".pnm", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 
 
-class UndistortError(Exception):
+class UndistortError(InputError):
     """One-line message for the user."""
 
 
@@ -43,35 +44,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def read_unchanged(path) -> np.ndarray:
-    """Read an image keeping channels and bit depth; UndistortError with the reason."""
-    p = Path(path)
-    if not p.exists():
-        raise UndistortError(f"{p}: no such file")
-    if p.is_dir():
-        raise UndistortError(f"{p}: is a directory, not an image file")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise UndistortError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    if not data:
-        raise UndistortError(f"{p}: empty file")
-    try:  # reuse the truncation checks of station.imageio when available
-        from station import imageio as _io
-
-        reason = _io._pnm_truncated(data)
-        if reason is None and _io._looks_truncated(data, p.suffix.lower()):
-            reason = "truncated image data"
-    except (ImportError, AttributeError):  # pragma: no cover
-        reason = None
-    if reason:
-        raise UndistortError(f"{p}: {reason}")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise UndistortError(f"{p}: not a readable image (unknown format or corrupt data)")
-    return img
-
-
 def undistort_image(img: np.ndarray, maps, interpolation=cv2.INTER_LANCZOS4) -> np.ndarray:
     """Corrected image (same shape and dtype), pixels from outside the input set to 0."""
     return cv2.remap(img, maps.map_x, maps.map_y, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -80,7 +52,7 @@ def undistort_image(img: np.ndarray, maps, interpolation=cv2.INTER_LANCZOS4) -> 
 def run(args) -> int:
     try:
         return _run(args)
-    except UndistortError as exc:
+    except InputError as exc:
         print(f"harp undistort: {exc}", file=sys.stderr)
         return 2
 
@@ -112,7 +84,7 @@ def _run(args) -> int:
     cache: dict[tuple[int, int], object] = {}
     for path in args.images:
         p = Path(path)
-        img = read_unchanged(p)
+        img = read_image(p, grey=False)
         h, w = img.shape[:2]
         if (w, h) != (mf.width, mf.height):
             raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for "

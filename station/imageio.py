@@ -2,7 +2,8 @@
 
 :func:`read_grey` reads PGM/PPM, PNG, TIFF and JPEG files (8 or 16 bit,
 grey or colour) into a 2-D grey array, keeping the bit depth: ``uint8`` or
-``uint16``. Colour is converted to grey with the ITU-R BT.601 luma weights
+``uint16``; :func:`read_unchanged` reads them as stored (channels and bit
+depth kept), with the same checks. Colour is converted to grey with the ITU-R BT.601 luma weights
 (``0.299 R + 0.587 G + 0.114 B``, what ``cv2.cvtColor`` does), computed in
 float and rounded back to the input depth. An alpha channel is dropped.
 
@@ -18,9 +19,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
-SUPPORTED_SUFFIXES = (".pgm", ".ppm", ".pnm", ".png", ".tif", ".tiff", ".jpg", ".jpeg")
-
 
 class ImageReadError(Exception):
     """An image file could not be read; ``str(exc)`` is a one-line message."""
@@ -65,8 +63,8 @@ def _pnm_truncated(data: bytes) -> str | None:
     return None
 
 
-def read_grey(path) -> np.ndarray:
-    """Read an image file as a 2-D grey ``uint8`` or ``uint16`` array.
+def read_unchanged(path) -> np.ndarray:
+    """Read an image file keeping its channels and bit depth (``cv2.IMREAD_UNCHANGED``).
 
     Parameters
     ----------
@@ -75,13 +73,14 @@ def read_grey(path) -> np.ndarray:
     Returns
     -------
     ndarray
-        ``image[y, x]``, 2-D, dtype ``uint8`` or ``uint16`` (float TIFFs are
-        returned as float32).
+        ``image[y, x]`` or ``image[y, x, channel]`` (OpenCV's BGR(A) order),
+        as stored in the file.
 
     Raises
     ------
     ImageReadError
-        With a one-line reason naming the file.
+        With a one-line reason naming the file: missing, a directory,
+        unreadable, empty, truncated, not an image.
     """
     p = Path(path)
     if not p.exists():
@@ -104,9 +103,19 @@ def read_grey(path) -> np.ndarray:
         img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ImageReadError(p, "not a readable image (unknown format or corrupt/truncated data)")
-    if _looks_truncated(data, p.suffix.lower()):
+    if _looks_truncated(data):
         raise ImageReadError(p, "truncated image data")
-    return _to_grey(img, p)
+    return img
+
+
+def read_grey(path) -> np.ndarray:
+    """Read an image file as a 2-D grey ``image[y, x]``: ``uint8`` or ``uint16``
+    (float TIFFs as float32).
+
+    Raises :class:`ImageReadError` as :func:`read_unchanged` does, and for an
+    unsupported layout or pixel type, or an image under 16x16.
+    """
+    return _to_grey(read_unchanged(path), Path(path))
 
 
 class _quiet_opencv:
@@ -129,7 +138,7 @@ class _quiet_opencv:
         return False
 
 
-def _looks_truncated(data: bytes, suffix: str) -> bool:
+def _looks_truncated(data: bytes) -> bool:
     """PNG and JPEG decoders may fill a short file with grey; check the end markers."""
     if data[:8] == b"\x89PNG\r\n\x1a\n":
         return b"IEND" not in data[-32:]

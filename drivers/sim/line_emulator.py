@@ -17,11 +17,12 @@ Faults are injected with :meth:`LineEmulator.inject`:
 
 from __future__ import annotations
 
+import abc
 import random
 import threading
 
 
-class LineEmulator:
+class LineEmulator(abc.ABC):
     """Base class; see the module docstring. ``world`` is an optional SimWorld."""
 
     COUNTED = ("reject", "no_reply", "garbage")
@@ -132,16 +133,20 @@ class LineEmulator:
 
     # -- subclass interface ------------------------------------------------
     def handle_realtime(self, byte: bytes, now: float) -> bool:
+        """Claim a single realtime byte (True) or let it into the line (False, the default)."""
         return False
 
+    @abc.abstractmethod
     def handle_line(self, line: bytes, now: float) -> None:
-        raise NotImplementedError
+        """Answer one complete command line."""
 
+    @abc.abstractmethod
     def reject(self, line: bytes, spec: dict, now: float) -> None:
-        raise NotImplementedError
+        """Refuse ``line`` the way the device does (the ``"reject"`` fault)."""
 
     def update(self, now: float) -> None:
-        pass
+        """Advance the device's own state to ``now`` (default: nothing moves by itself)."""
 
+    @abc.abstractmethod
     def stage_degrees(self, now: float) -> float:
-        raise NotImplementedError
+        """The stage angle at ``now``, in degrees."""

@@ -86,7 +86,7 @@ class PtyServer:
                 if fd is not None:
                     try:
                         os.close(fd)
-                    except OSError:
+                    except OSError:  # already closed (e.g. by a "vanish" fault)
                         pass
 
     def _run(self) -> None:

@@ -8,6 +8,11 @@ with ``version``, ``lens`` with ``maker``, ``model``, ``mount``,
 lensfun computes for the image, ``(W-1)/(H-1)``, so lensfun's coordinate
 correction is exactly 1 for images of the calibrated size and crop factor.
 The conversion error is stated in an XML comment.
+
+References
+----------
+.. [1] Lensfun, "lfDistortionModel" and the lens database format,
+   https://lensfun.github.io/manual/latest/
 """
 
 from __future__ import annotations

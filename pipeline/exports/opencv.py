@@ -7,6 +7,13 @@ variants, and the straightness ``conversion_d_px`` / ``conversion_d_max_px``
 it leaves on a full-field harp) and as a comment. Also reads OpenCV calibrations made elsewhere
 (YAML or XML; names ``camera_matrix``/``distortion_coefficients``, or
 ``cameraMatrix``/``distCoeffs``, ``K``/``D``).
+
+References
+----------
+.. [1] OpenCV, "Camera Calibration and 3D Reconstruction" (calib3d),
+   https://docs.opencv.org/master/d9/d0c/group__calib3d.html
+.. [2] OpenCV, ``cv::FileStorage`` (XML/YAML persistence),
+   https://docs.opencv.org/master/da/d56/classcv_1_1FileStorage.html
 """
 
 from __future__ import annotations

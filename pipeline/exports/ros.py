@@ -6,6 +6,13 @@ The file ``camera_info_manager`` loads: ``image_width``, ``image_height``,
 ``rectification_matrix`` (identity: monocular) and ``projection_matrix``
 (``[K | 0]``), each matrix as ``{rows, cols, data}``. The conversion error is
 stated in leading comments (the format has no field for it).
+
+References
+----------
+.. [1] ROS ``sensor_msgs/CameraInfo`` message,
+   https://docs.ros.org/en/api/sensor_msgs/html/msg/CameraInfo.html
+.. [2] ROS ``camera_calibration_parsers`` package,
+   https://wiki.ros.org/camera_calibration_parsers
 """
 
 from __future__ import annotations

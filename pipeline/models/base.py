@@ -29,13 +29,14 @@ class DistortionModel(ABC):
         """Map distorted pixel coordinates ``(N, 2)`` to ideal ones."""
 
     def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
-        """Inverse of :meth:`undistort_points`, by damped Newton iterations.
+        """Inverse of :meth:`undistort_points`, by Newton iterations (Jacobian by
+        central differences).
 
-        Accurate to ``INVERSE_TOL_PX`` (1e-9 px) wherever the forward map is
-        invertible (a point where it does not converge is returned as NaN).
+        Accurate to ``INVERSE_TOL_PX`` (1e-9 px, on ``undistort_points(x)``)
+        wherever the forward map is invertible (a point where it does not
+        converge within ``max_iter`` iterations is returned as NaN).
         """
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        x = target.copy()
         # start: first-order inverse  x0 = 2 t - U(t)
         x = 2 * target - self.undistort_points(target)
         h = 1e-4

@@ -18,7 +18,6 @@ reaching the sensor) exactly.
 
 from __future__ import annotations
 
-import gc
 import math
 import time
 
@@ -26,12 +25,11 @@ import numpy as np
 import pytest
 
 import drivers
-from drivers.aravis_camera import FAKE_FOCUS_XML, AravisCamera, _aravis
+from drivers.aravis_camera import FAKE_FOCUS_XML, AravisCamera
 from drivers.errors import DeviceRejected, DeviceTimeout, DriverError
+from tests.drivers.aravis_fakes import FOCUS_CFG, gige_fake_camera
 
 W, H = 64, 48
-FOCUS_CFG = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusPosition",
-             "autofocus_feature": "FocusAuto"}
 
 
 def expected_ramp(frame_id: int, exposure_us: float, gain_raw: int, fmt: str = "Mono8") -> np.ndarray:
@@ -49,12 +47,8 @@ def fake(**cfg) -> AravisCamera:
 @pytest.fixture(scope="module")
 def gige_fake():
     """Aravis' GigE Vision fake camera on 127.0.0.1, with the focus XML."""
-    Aravis = _aravis()
-    gv = Aravis.GvFakeCamera.new_full("127.0.0.1", "HARPGV01", str(FAKE_FOCUS_XML))
-    assert gv.is_running(), "GigE Vision fake camera did not start on 127.0.0.1"
-    yield gv
-    del gv
-    gc.collect()
+    with gige_fake_camera("HARPGV01") as gv:
+        yield gv
 
 
 def test_embedded_fake_xml_uses_the_older_feature_names():

@@ -9,33 +9,24 @@
 
 from __future__ import annotations
 
-import gc
-
 import pytest
 
 import drivers
-from drivers.aravis_camera import FAKE_FOCUS_XML, _aravis
 from drivers.sim.world import SimWorld
+from tests.drivers.aravis_fakes import FOCUS_CFG, gige_fake_camera
 from tests.drivers.conformance_camera import run_camera_conformance
 from tests.drivers.fake_v4l2 import FakeV4L2Camera
-
-ARAVIS_FOCUS = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusPosition",
-                "autofocus_feature": "FocusAuto"}
 
 
 @pytest.fixture(scope="module")
 def gige_fake():
     """Aravis' GigE Vision fake camera listening on 127.0.0.1 (GVCP port 3956)."""
-    Aravis = _aravis()
-    fake = Aravis.GvFakeCamera.new_full("127.0.0.1", "HARPCONF", str(FAKE_FOCUS_XML))
-    assert fake.is_running(), "GigE Vision fake camera did not start on 127.0.0.1"
-    yield fake
-    del fake
-    gc.collect()
+    with gige_fake_camera("HARPCONF") as fake:
+        yield fake
 
 
 def test_aravis_fake_conformance():
-    cam = drivers.open_camera({"driver": "aravis", "device": "Fake_1", "roi": [0, 0, 96, 64], **ARAVIS_FOCUS})
+    cam = drivers.open_camera({"driver": "aravis", "device": "Fake_1", "roi": [0, 0, 96, 64], **FOCUS_CFG})
     frames = run_camera_conformance(cam, exposure_us=20_000.0, gain_db=2.0, focus=417.0)
     assert cam.exposure_feature == "ExposureTime" and cam.gain_feature == "Gain"
     assert frames[0].camera.vendor == "Aravis"
@@ -43,7 +34,7 @@ def test_aravis_fake_conformance():
 
 def test_aravis_gige_conformance(gige_fake):
     cam = drivers.open_camera({"driver": "aravis", "device": "127.0.0.1", "roi": [0, 0, 96, 64],
-                               "pixel_format": "Mono16", **ARAVIS_FOCUS})
+                               "pixel_format": "Mono16", **FOCUS_CFG})
     frames = run_camera_conformance(cam, exposure_us=20_000.0, gain_db=2.0, focus=417.0)
     assert frames[0].camera.serial == "HARPCONF"
     ids = [f.extra["frame_id"] for f in frames]

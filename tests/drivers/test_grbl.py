@@ -6,14 +6,13 @@ import time
 import pytest
 
 from drivers import open_turntable
-from drivers.errors import (DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout,
-                            ProtocolError)
+from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.grbl import GrblTurntable
 from drivers.sim.grbl_emulator import GrblEmulator, start_grbl_emulator
 from drivers.sim.world import SimWorld
 from drivers.testing import ScriptedDevice
+from tests.drivers.turntables import FAST, make_driver
 
-FAST = dict(speed_deg_s=3600.0, accel_deg_s2=72000.0)
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
 
 
@@ -25,9 +24,7 @@ def emu():
 
 
 def driver(port, **kw):
-    kw.setdefault("poll_interval", 0.005)
-    kw.setdefault("reply_timeout", 0.5)
-    return GrblTurntable(port, **kw)
+    return make_driver(GrblTurntable, port, **kw)
 
 
 # -- byte-exact ------------------------------------------------------------
@@ -103,24 +100,6 @@ def test_unlock_without_homing(emu):
         assert tt.move_to(30.0) == 30.0
 
 
-def test_position_is_reported_while_moving():
-    with start_grbl_emulator(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, driver(h.port_path) as tt:
-        tt.home()
-        tt.start_move(300.0)
-        seen = []
-        while True:
-            st = tt.status()
-            if not st["busy"]:
-                break
-            assert st["state"] == "Run"
-            seen.append(st["position"])
-            time.sleep(0.03)
-        assert len(seen) >= 5
-        assert all(0.0 <= p < 300.0 for p in seen)
-        assert all(b > a for a, b in zip(seen, seen[1:])), seen
-        assert tt.wait_idle(timeout=2.0) == 300.0
-
-
 def test_stop_mid_move_holds_and_keeps_the_position():
     with start_grbl_emulator(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, driver(h.port_path) as tt:
         tt.home()
@@ -171,36 +150,6 @@ def test_soft_limit_alarm_when_target_exceeds_travel():
             tt.move_to(270.0)
         tt.recover()
         assert tt.move_to(170.0) == 170.0
-
-
-def test_no_reply_times_out_within_the_reply_timeout_then_recovers(emu):
-    with driver(emu.port_path, reply_timeout=0.3) as tt:
-        tt.home()
-        emu.emulator.inject("no_reply")
-        t0 = time.monotonic()
-        with pytest.raises(DeviceTimeout, match=r"no reply to 'G90 G0 X45.000' within 0.30 s"):
-            tt.move_to(45.0)
-        assert 0.29 <= time.monotonic() - t0 < 0.6
-        assert tt.move_to(45.0) == 45.0
-
-
-def test_garbage_bytes_are_a_protocol_error_then_recovers(emu):
-    with driver(emu.port_path) as tt:
-        tt.home()
-        emu.emulator.inject("garbage")
-        with pytest.raises(ProtocolError, match="garbage on the line"):
-            tt.position()
-        assert tt.move_to(45.0) == 45.0
-
-
-def test_device_vanishing_mid_move_is_a_disconnect_within_the_timeout():
-    with start_grbl_emulator(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, driver(h.port_path) as tt:
-        tt.home()
-        h.emulator.inject("vanish", at=0.3)
-        t0 = time.monotonic()
-        with pytest.raises(DeviceDisconnected, match="device gone"):
-            tt.move_to(270.0, timeout=5.0)
-        assert time.monotonic() - t0 < 1.0
 
 
 def test_move_that_does_not_finish_times_out_and_stops():

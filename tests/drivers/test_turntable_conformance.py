@@ -1,7 +1,13 @@
-"""Every turntable driver passes the shared Turntable conformance check,
-talking through a real pty to its device emulator."""
+"""Every turntable driver passes the shared Turntable conformance check and
+handles the same device faults (no reply, garbage, a vanished device) the same
+way, talking through a real pty to its device emulator."""
+
+import re
+import time
 
 import pytest
+
+from drivers.errors import DeviceDisconnected, DeviceTimeout, ProtocolError
 
 from drivers.grbl import GrblTurntable
 from drivers.sim.grbl_emulator import start_grbl_emulator
@@ -9,13 +15,7 @@ from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import start_zaber_emulator
 from drivers.zaber import ZaberTurntable
 from tests.drivers.conformance_turntable import DEFAULT_ANGLES, run_turntable_conformance
-
-FAST = dict(speed_deg_s=3600.0, accel_deg_s2=72000.0)
-
-TURNTABLES = {
-    "zaber": (start_zaber_emulator, ZaberTurntable),
-    "grbl": (start_grbl_emulator, GrblTurntable),
-}
+from tests.drivers.turntables import FAST, TURNTABLES, make_driver
 
 
 @pytest.mark.parametrize("kind", sorted(TURNTABLES))
@@ -23,7 +23,7 @@ def test_turntable_conformance(kind):
     start, cls = TURNTABLES[kind]
     world = SimWorld()
     with start(world=world, **FAST) as handle:
-        tt = cls(handle.port_path, poll_interval=0.005, reply_timeout=0.5)
+        tt = make_driver(cls, handle.port_path)
         readings = run_turntable_conformance(tt)
     assert [t for t, _ in readings] == list(DEFAULT_ANGLES)
     assert world.stage_deg == pytest.approx(DEFAULT_ANGLES[-1], abs=1e-3)
@@ -51,6 +51,78 @@ class _IgnoresLimits(GrblTurntable):
 ])
 def test_conformance_check_catches_broken_drivers(start, broken, speed, message):
     with start(speed_deg_s=speed, accel_deg_s2=10 * speed) as handle:
-        tt = broken(handle.port_path, poll_interval=0.005, reply_timeout=0.5)
+        tt = make_driver(broken, handle.port_path)
         with pytest.raises(AssertionError, match=message):
             run_turntable_conformance(tt)
+
+
+# -- behaviour both drivers share, beyond the protocol -------------------------------
+
+NO_REPLY_COMMAND = {"zaber": "/1 1 move abs 192000", "grbl": "G90 G0 X45.000"}
+"""The command each driver sends for ``move_to(45.0)`` after homing."""
+BUSY_STATUS = {"grbl": {"state": "Run"}, "zaber": {}}
+"""Further ``status()`` items while a move is under way."""
+ARRIVAL_TOL_DEG = {"grbl": 0.0, "zaber": 1e-3}
+
+
+def _driver(kind, port, **kw):
+    return make_driver(TURNTABLES[kind][1], port, **kw)
+
+
+@pytest.mark.parametrize("kind", sorted(TURNTABLES))
+def test_position_is_reported_while_moving(kind):
+    start = TURNTABLES[kind][0]
+    with start(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, _driver(kind, h.port_path) as tt:
+        tt.home()
+        tt.start_move(300.0)
+        seen = []
+        while True:
+            st = tt.status()
+            if not st["busy"]:
+                break
+            for key, value in BUSY_STATUS[kind].items():
+                assert st[key] == value
+            seen.append(st["position"])
+            time.sleep(0.03)
+        assert len(seen) >= 5
+        assert all(0.0 <= p < 300.0 for p in seen)
+        assert all(b > a for a, b in zip(seen, seen[1:])), seen
+        assert abs(tt.wait_idle(timeout=2.0) - 300.0) <= ARRIVAL_TOL_DEG[kind]
+
+
+@pytest.mark.parametrize("kind", sorted(TURNTABLES))
+def test_no_reply_times_out_within_the_reply_timeout_then_recovers(kind):
+    start = TURNTABLES[kind][0]
+    with start(**FAST) as h, _driver(kind, h.port_path, reply_timeout=0.3) as tt:
+        tt.home()
+        h.emulator.inject("no_reply")
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeout, match=rf"no reply to '{re.escape(NO_REPLY_COMMAND[kind])}' within 0.30 s"):
+            tt.move_to(45.0)
+        assert 0.29 <= time.monotonic() - t0 < 0.6
+        assert tt.move_to(45.0) == 45.0
+
+
+@pytest.mark.parametrize("kind", sorted(TURNTABLES))
+def test_garbage_bytes_are_a_protocol_error_then_recovers(kind):
+    start = TURNTABLES[kind][0]
+    with start(**FAST) as h, _driver(kind, h.port_path) as tt:
+        tt.home()
+        h.emulator.inject("garbage")
+        with pytest.raises(ProtocolError, match="garbage on the line"):
+            tt.position()
+        assert tt.move_to(45.0) == 45.0
+
+
+@pytest.mark.parametrize("kind", sorted(TURNTABLES))
+def test_device_vanishing_mid_move_is_a_disconnect_within_the_timeout(kind):
+    start = TURNTABLES[kind][0]
+    with start(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, _driver(kind, h.port_path) as tt:
+        tt.home()
+        h.emulator.inject("vanish", at=0.3)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceDisconnected, match="device gone"):
+            tt.move_to(270.0, timeout=5.0)
+        assert time.monotonic() - t0 < 1.0
+        with pytest.raises(DeviceDisconnected):
+            tt.position()

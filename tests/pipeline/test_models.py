@@ -3,25 +3,12 @@ import pytest
 
 from pipeline.models import MODEL_TYPES, HomographyModel, PolynomialModel, RadialModel, model_from_dict
 from pipeline.models.polynomial import monomial_exponents, monomials
-
-W, H = 1000, 750
+from tests.pipeline.rendered_shots import H, W, nonradial_lens
 
 
 def _grid(step=25.0):
     xx, yy = np.meshgrid(np.arange(0, W, step), np.arange(0, H, step))
     return np.stack([xx.ravel(), yy.ravel()], 1).astype(float)
-
-
-def _poly_lens():
-    m = PolynomialModel.identity(W, H, 5)
-    a, b = np.array(m.a), np.array(m.b)
-    ex = {e: i for i, e in enumerate(monomial_exponents(5))}
-    a[ex[3, 0]] = a[ex[1, 2]] = 0.02
-    b[ex[2, 1]] = b[ex[0, 3]] = 0.02
-    a[ex[2, 1]] = 0.004
-    b[ex[3, 0]] = -0.003
-    a[ex[5, 0]] = 0.002
-    return PolynomialModel(m.center, 5, tuple(a), tuple(b), m.scale)
 
 
 def test_monomial_order_and_values():
@@ -38,7 +25,7 @@ def test_polynomial_identity_is_exact():
 
 
 def test_polynomial_equation_matches_docstring():
-    m = _poly_lens()
+    m = nonradial_lens()
     p = np.array([[100.0, 650.0], [900.0, 20.0]])
     xi, eta = (p[:, 0] - m.center[0]) / m.scale, (p[:, 1] - m.center[1]) / m.scale
     xu = m.center[0] + m.scale * (xi + 0.02 * xi ** 3 + 0.02 * xi * eta ** 2 + 0.004 * xi ** 2 * eta + 0.002 * xi ** 5)
@@ -47,7 +34,7 @@ def test_polynomial_equation_matches_docstring():
 
 
 @pytest.mark.parametrize("model", [
-    _poly_lens(),
+    nonradial_lens(),
     RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(530, 355), tangential=(0.001, -0.0007),
                           prism=(0.0005, 0.0, -0.0004, 0.0)),
 ])
@@ -60,7 +47,7 @@ def test_distort_inverts_undistort(model):
 
 
 @pytest.mark.parametrize("model", [
-    _poly_lens(),
+    nonradial_lens(),
     HomographyModel(RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)),
                     ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0))),
 ])

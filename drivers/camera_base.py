@@ -1,0 +1,84 @@
+"""Code the hardware camera drivers (:mod:`drivers.aravis_camera`,
+:mod:`drivers.v4l2_camera`) share around their device-specific parts.
+
+:class:`CameraBase` gives a driver of :class:`drivers.protocols.Camera`:
+``from_config`` (unknown keys refused), the context manager, the "not open"
+check, the settings applied at ``open()``, the checks of requested values
+and the :class:`~drivers.protocols.Frame` numbering. A subclass provides
+``open``/``close``/``is_open``, the setters and getters, ``capture`` and
+``name``, and keeps ``self._initial`` (``{"exposure_us", "gain_db",
+"focus"}``, each None or a value), ``self._identity`` and ``self._counter``
+(reset to 0 by ``open``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from drivers.errors import DriverError
+from drivers.protocols import Frame
+
+
+class CameraBase:
+    """Mixin of the shared camera driver code; see the module docstring."""
+
+    #: every key ``from_config`` accepts (``driver`` included)
+    CONFIG_KEYS: frozenset[str] = frozenset({"driver"})
+    #: how ``from_config`` errors name the driver, e.g. ``"v4l2 camera"``
+    CONFIG_NAME = "camera"
+    #: ``device`` when the configuration has none
+    DEFAULT_DEVICE: str | None = None
+
+    @classmethod
+    def from_config(cls, cfg: dict, **ctx):
+        """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
+        unknown = sorted(set(cfg) - cls.CONFIG_KEYS)
+        if unknown:
+            raise ValueError(f"{cls.CONFIG_NAME}: unknown config key {unknown[0]!r}; "
+                             f"expected some of {', '.join(sorted(cls.CONFIG_KEYS))}")
+        kw = {k: v for k, v in cfg.items() if k != "driver"}
+        return cls(kw.pop("device", cls.DEFAULT_DEVICE), **kw)
+
+    def __enter__(self):
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _require_open(self) -> None:
+        if not self.is_open:
+            raise DriverError(f"{self.name}: camera is not open")
+
+    def _apply_initial_settings(self) -> None:
+        """Exposure, gain, then focus (locked), as configured; called by ``open()``."""
+        if self._initial["exposure_us"] is not None:
+            self.set_exposure(self._initial["exposure_us"])
+        if self._initial["gain_db"] is not None:
+            self.set_gain(self._initial["gain_db"])
+        if self._initial["focus"] is not None:
+            self.lock_focus(self._initial["focus"])
+
+    def _exposure_value(self, microseconds) -> float:
+        """``microseconds`` as a float; ``ValueError`` unless finite and positive."""
+        us = float(microseconds)
+        if not math.isfinite(us) or us <= 0:
+            raise ValueError(f"{self.name}: exposure must be a positive number of µs, got {microseconds!r}")
+        return us
+
+    def _finite_value(self, value, what: str) -> float:
+        """``value`` as a float; ``ValueError`` naming ``what`` unless finite."""
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{self.name}: {what} must be finite, got {value!r}")
+        return v
+
+    def _frame(self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float,
+               extra: dict) -> Frame:
+        """The next :class:`Frame` (focus read back now, counter advanced)."""
+        frame = Frame(image=image, timestamp=timestamp, exposure_us=exposure_us, gain_db=gain_db,
+                      focus=self.get_focus(), camera=self._identity, counter=self._counter, extra=extra)
+        self._counter += 1
+        return frame

@@ -1,0 +1,31 @@
+"""Aravis fake cameras shared by the Aravis driver tests and the conformance tests.
+
+``FOCUS_CFG``: the driver settings that select our GenICam XML
+(``drivers/data/fake-focus.xml``: SFNC ExposureTime / Gain plus focus
+features) and its focus features. :func:`gige_fake_camera`: Aravis' GigE
+Vision fake camera served on 127.0.0.1 (GVCP port 3956) with that XML, for a
+``with`` block or a fixture.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+
+from drivers.aravis_camera import FAKE_FOCUS_XML, _aravis
+
+FOCUS_CFG = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusPosition",
+             "autofocus_feature": "FocusAuto"}
+
+
+@contextlib.contextmanager
+def gige_fake_camera(serial: str):
+    """Serve Aravis' GigE Vision fake camera with serial number ``serial`` on 127.0.0.1."""
+    Aravis = _aravis()
+    gv = Aravis.GvFakeCamera.new_full("127.0.0.1", serial, str(FAKE_FOCUS_XML))
+    assert gv.is_running(), "GigE Vision fake camera did not start on 127.0.0.1"
+    try:
+        yield gv
+    finally:
+        del gv
+        gc.collect()
