@@ -11,13 +11,15 @@ profile with the simulated camera's true lens at that focus
 (:func:`pipeline.compare.compare_models`, 10 px grid), and prints a
 Markdown table: focus, holdout d, bootstrap field uncertainty, field error
 against the truth (RMS, max), plus wall and CPU time of the whole session
-(process and its children) and the machine's load average, since other
-work on the machine slows a session down.
+(process and its children), how long the session report at its end took
+(from the manifest's timestamps), and the machine's load average, since
+other work on the machine slows a session down.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -50,7 +52,8 @@ def main() -> int:
         load0 = os.getloadavg()[0]
         c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "station.cli", "session", "run", str(cfg), "--quiet"],
+        proc = subprocess.run([sys.executable, "-m", "station.cli", "session", "run", str(cfg), "--quiet",
+                               "--name", "demo"],
                               cwd=REPO, capture_output=True, text=True)
         wall = time.perf_counter() - t0
         c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -72,8 +75,12 @@ def main() -> int:
             unc = ("-" if p.field_uncertainty_rms is None
                    else f"{p.field_uncertainty_rms:.4f} / {p.field_uncertainty_max:.4f}")
             print(f"| {p.focus:g} | {p.holdout_d:.4f} | {unc} | {c.rms:.4f} | {c.max:.4f} |")
+        recs = [json.loads(line) for line in (Path(tmp) / "s" / "demo" / "manifest.jsonl").open()]
+        t_of = {r["kind"]: r["t"] for r in recs}
+        report = (f"{t_of['report'] - t_of['qa_session']:.1f} s" if "report" in t_of else "not written")
         print(f"\nwall {wall:.1f} s, CPU {cpu:.1f} s (session and its worker processes), "
-              f"load average {load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores")
+              f"of which the session report (Markdown + HTML, {len(list((Path(tmp) / 's' / 'demo' / 'report').glob('*.png')))} PNGs) "
+              f"{report}; load average {load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores")
     return 0
 
 

@@ -8,8 +8,9 @@ a lens in the profile store (newest profile per focus; thresholds from
 same lens model, is a harp model file, a stored profile ``#id``, or a lens in
 the store (its profile at the same focus, interpolated between its calibrated
 focus settings when needed). ``--report DIR`` writes a Markdown report with
-plots (for a session: also per-edge residuals, overlays and the bootstrap
-uncertainty map, re-measured from its frames). Each result is recorded in the
+plots and its ``index.html`` (for a session: also per-edge residuals,
+overlays and the bootstrap uncertainty map, from the measurements and map the
+session kept; only an older session without them is measured again). Each result is recorded in the
 store's ``qa_results`` (unless ``--no-record``).
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 """
@@ -139,33 +140,20 @@ def _reference(args, config, focus, width, height):
         raise _Fail(f"reference lens {ref!r} at focus {focus:g}: {exc}") from None
 
 
-def _fit_kwargs(pipeline) -> dict:
-    """:func:`pipeline.fit.fit_distortion` options of a configuration's ``pipeline`` section."""
-    kw = {"model": pipeline.model, "degree": pipeline.degree}
-    if getattr(pipeline, "tangential", False):
-        kw["tangential"] = True
-    if getattr(pipeline, "prism", False):
-        kw["prism"] = True
-    return kw
-
-
 def _report(args, title, items, results, overall, thresholds, interpolation, session) -> Path:
     from station.qa import profile_data
-    from station.report import FocusEvidence, session_shots, shot_uncertainty, write_report
+    from station.report import FocusEvidence, session_evidence, write_report
 
     evidence = []
     for (focus, prof, _pid, source), v in zip(items, results):
-        pd = profile_data(prof)
-        e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v,
-                          source=source)
         if session is not None:
-            cfg = session.config
             f_idx = int(Path(source).stem.replace("focus", ""))
-            e.shots = session_shots(session, f_idx, t=cfg.pipeline.t)
-            e.uncertainty, e.uncertainty_note = shot_uncertainty(
-                e.shots, pd.width, pd.height, _fit_kwargs(cfg.pipeline),
-                n_boot=cfg.pipeline.bootstrap or REPORT_BOOTSTRAP, seed=cfg.pipeline.seed)
+            e = session_evidence(session, f_idx, focus, prof, v, source=source,
+                                 bootstrap_if_missing=session.config.pipeline.bootstrap or REPORT_BOOTSTRAP)
         else:
+            pd = profile_data(prof)
+            e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v,
+                              source=source)
             e.uncertainty_note = ("stored: RMS {} px, max {} px (no per-pixel map without the session's "
                                   "frames: run `harp qa SESSION_DIR --report`)").format(
                 *(f"{x:.4f}" if x is not None else "-" for x in (pd.field_uncertainty_rms,

@@ -3,8 +3,12 @@
 ``run`` creates a session directory (under ``--out``, default the
 configuration's ``store.sessions_dir``), opens the station and performs the
 whole plan; ``resume`` reopens an interrupted session and captures only what
-is missing. Exit 0 when the session finished, 2 on bad input or when the
-session stopped (the message says why; the frames are kept).
+is missing. When the session finishes, both write its report into
+``DIR/report/`` (``report.md`` and ``index.html`` with PNG plots: distortion
+field, residual per edge, one overlay per orientation, uncertainty map,
+verdict), from the measurements the session kept; ``--no-report`` skips it.
+Exit 0 when the session finished, 2 on bad input or when the session stopped
+(the message says why; the frames are kept).
 """
 
 from __future__ import annotations
@@ -24,12 +28,13 @@ def register(subparsers) -> None:
     run.add_argument("--out", type=Path, default=None,
                      help="parent directory of the session directory (default: store.sessions_dir)")
     run.add_argument("--name", default=None, help="session directory name (default: time + lens serial)")
-    run.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     run.set_defaults(func=_run)
     res = sub.add_parser("resume", help="continue an interrupted session")
     res.add_argument("session_dir", type=Path, help="the session directory")
-    res.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     res.set_defaults(func=_resume)
+    for action in (run, res):
+        action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+        action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
 
 
@@ -54,7 +59,7 @@ def _run(args) -> int:
         print(f"session directory: {s.path}", file=sys.stderr)
         return s
 
-    return _execute(config, new_session, args.quiet)
+    return _execute(config, new_session, args.quiet, report=not args.no_report)
 
 
 def _resume(args) -> int:
@@ -69,10 +74,10 @@ def _resume(args) -> int:
         session.close()
         print(f"harp session: {args.session_dir}: already finished, nothing to do", file=sys.stderr)
         return 0
-    return _execute(session.config, lambda: session, args.quiet, opened=session)
+    return _execute(session.config, lambda: session, args.quiet, opened=session, report=not args.no_report)
 
 
-def _execute(config, get_session, quiet: bool, opened=None) -> int:
+def _execute(config, get_session, quiet: bool, opened=None, report: bool = True) -> int:
     from rich.console import Console
 
     from station.config import ConfigError
@@ -85,7 +90,8 @@ def _execute(config, get_session, quiet: bool, opened=None) -> int:
         with ProfileStore(config.store_path) as store, open_station(config) as (camera, turntable):
             with get_session() as session:
                 console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
-                result = Executor(session, camera, turntable, store=store, console=console).run()
+                result = Executor(session, camera, turntable, store=store, console=console,
+                                  report=report).run()
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
     finally:

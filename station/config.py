@@ -221,11 +221,18 @@ class _Section:
             raise self.err(key, "a mapping")
         return _Section(self.file, self._p(key), self.data[key], known)
 
-    def string(self, key: str, default: Any = _MISSING) -> str:
+    def _given(self, key: str, default: Any, kind: str) -> Any:
+        """The value of ``key``, ``default`` when absent or null, an error when there is none."""
         v = self.data.get(key, _MISSING)
         if v is _MISSING or v is None:
             if default is _MISSING:
-                raise self.err(key, "a string")
+                raise self.err(key, kind)
+            return _MISSING
+        return v
+
+    def string(self, key: str, default: Any = _MISSING) -> str:
+        v = self._given(key, default, "a string")
+        if v is _MISSING:
             return default
         if isinstance(v, bool) or not isinstance(v, (str, int, float)):
             raise self.err(key, "a string", v)
@@ -241,10 +248,8 @@ class _Section:
             kind += " > 0"
         elif min is not None:
             kind += f" >= {min:g}"
-        v = self.data.get(key, _MISSING)
-        if v is _MISSING or v is None:
-            if default is _MISSING:
-                raise self.err(key, kind)
+        v = self._given(key, default, kind)
+        if v is _MISSING:
             return default
         ok = isinstance(v, int) if integer else isinstance(v, (int, float))
         if isinstance(v, bool) or not ok or (not integer and not math.isfinite(v)):
@@ -254,10 +259,8 @@ class _Section:
         return int(v) if integer else float(v)
 
     def boolean(self, key: str, default: Any = _MISSING) -> bool:
-        v = self.data.get(key, _MISSING)
-        if v is _MISSING or v is None:
-            if default is _MISSING:
-                raise self.err(key, "true or false")
+        v = self._given(key, default, "true or false")
+        if v is _MISSING:
             return default
         if not isinstance(v, bool):
             raise self.err(key, "true or false", v)

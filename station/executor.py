@@ -8,6 +8,20 @@ tolerance), re-capturing a rejected shot up to ``checks.max_recaptures``
 times; then it fits that focus setting's correction with
 leave-one-orientation-out cross-validation and stores the profile.
 
+Each accepted shot's measured edges are kept in the session directory
+(``measurements/*.npz``, :mod:`station.evidence_files`) and each focus
+setting's bootstrap uncertainty map next to its profile, so that the session
+report (``report=True``: written into ``DIR/report`` once the session has
+finished) and ``harp qa --report`` need not measure anything again. The
+cross-validation and bootstrap fits run on a process pool whose workers end
+themselves if the session process is killed.
+
+A camera that offers the optional ``set_capture_index(i)`` hook (the
+simulator, :class:`drivers.sim.camera.SimulatedCamera`; real drivers need
+not) is told before each capture which frame of the shot it is taking
+(``attempt * frames_per_orientation + frame_idx``), so that a resumed
+session receives the same frames as an uninterrupted one.
+
 Device faults (:class:`drivers.errors.DriverError`) are retried with
 exponential back-off (``capture.retries``); a disconnected device is closed
 and reopened between attempts; a turntable fault (stall, limit, alarm) is
@@ -21,6 +35,8 @@ code 2. ``harp session resume`` then continues from there.
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -34,6 +50,7 @@ from station.plan import (Capture, Fit, LockFocus, Measure, Move, Save, Settle, 
                           capture_steps, plan_session)
 from station.processing import (FocusFit, ShotMeasurement, average_frames, exposure_problems,
                                 fit_focus, full_scale, garbage_rows, measure_shot, shot_problems)
+from station.evidence_files import measurement_arrays, uncertainty_arrays
 from station.session_dir import SessionDir
 
 #: a stage read-back further than this from the target is a fault (degrees)
@@ -78,10 +95,13 @@ class Executor:
     console : a ``rich.console.Console`` for progress and the summary
         (``None``: silent).
     sleep : the back-off sleep (tests pass a recorder).
+    report : write the session report into ``DIR/report`` once the session
+        has finished (Markdown ``report.md`` and ``index.html`` with PNG plots).
     """
 
     def __init__(self, session: SessionDir, camera: Camera, turntable: Turntable, *,
-                 store=None, console=None, sleep: Callable[[float], None] = time.sleep):
+                 store=None, console=None, sleep: Callable[[float], None] = time.sleep,
+                 report: bool = False):
         self.session = session
         self.config = session.config
         self.camera = camera
@@ -89,6 +109,7 @@ class Executor:
         self.store = store
         self.console = console
         self.sleep = sleep
+        self.report = report
         self._pending: dict[tuple[int, int, int], object] = {}
         self._shots: dict[tuple[int, int], ShotMeasurement] = {}
         self._stage_deg: float | None = None
@@ -136,21 +157,24 @@ class Executor:
             self._print_summary()
             return self._result(EXIT_ABORTED, msg)
         self._print_summary()
-        self._quality()
+        quality = self._quality()
+        if self.report and quality is not None:
+            self._write_report(*quality)
         s.append({"kind": "finished"})
         return self._result(EXIT_OK, f"session finished: {s.path}")
 
-    def _quality(self) -> None:
+    def _quality(self):
         """QA verdict of every profile of the session, and the focus-interpolation
-        error (leave one calibrated focus out) — recorded, stored and printed."""
-        from station.qa import combine, evaluate, holdout_of, interpolation_error, session_models
+        error (leave one calibrated focus out) — recorded, stored and printed.
+        Returns ``(models, verdicts, overall, interpolation)`` (None: no profile)."""
+        from station.qa import combine, interpolation_error, qa_verdict, session_models
 
         models = session_models(self.session.path)
         if not models:
-            return
+            return None
         verdicts = []
         for f, focus, mf in models:
-            v = evaluate(mf.model, mf.width, mf.height, holdout_of(mf), self.config.qa)
+            v = qa_verdict(mf, self.config.qa)
             verdicts.append(v)
             pid = self._summary[f].profile_id if f in self._summary else None
             self.session.append({"kind": "qa", "focus_idx": f, "verdict": v.verdict,
@@ -174,6 +198,26 @@ class Executor:
         overall = combine(verdicts)
         self.session.append({"kind": "qa_session", "verdict": overall})
         self._note(f"QA verdict: [{'bold green' if overall == 'PASS' else 'bold red'}]{overall}")
+        return models, verdicts, overall, loo
+
+    def _write_report(self, models, verdicts, overall, interpolation) -> None:
+        """The session report (:func:`station.report.write_session_report`) into ``DIR/report``,
+        from the measurements and uncertainty maps the session kept (nothing re-measured)."""
+        from station.report import write_session_report
+
+        cfg = self.config
+        title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {self.session.path.name}"
+        try:
+            path = write_session_report(self.session, self.session.path / "report", title, models,
+                                        verdicts, overall, thresholds=cfg.qa, interpolation=interpolation)
+        except (OSError, ValueError) as exc:  # the profiles are stored; say so, do not lose the session
+            self.session.append({"kind": "report", "failure": f"{type(exc).__name__}: {exc}"})
+            self._note(f"[red]report not written: {type(exc).__name__}: {exc}")
+            return
+        rel = path.relative_to(self.session.path)
+        self.session.append({"kind": "report", "file": str(rel),
+                             "html": str(rel.with_name("index.html"))})
+        self._note(f"report: {path} (and {path.with_name('index.html').name})")
 
     def _result(self, code: int, msg: str) -> SessionResult:
         return SessionResult(code, msg, self.frames_saved, self.faults, list(self._summary.values()))
@@ -217,8 +261,16 @@ class Executor:
 
     def _do_Capture(self, step: Capture) -> None:
         timeout = self.config.capture.timeout_s
+        # Optional camera hook (not in the Camera protocol; the simulator has it): which
+        # capture at this pose comes next. Frames are numbered per shot and attempt, so a
+        # resumed session that captures only the missing frames asks for the same ones.
+        set_index = getattr(self.camera, "set_capture_index", None)
+        index = (self.session.attempt(step.focus_idx, step.orientation_idx)
+                 * self.config.capture.frames_per_orientation + step.frame_idx)
 
         def grab():
+            if set_index is not None:
+                set_index(index)
             frame = self.camera.capture(timeout=timeout)
             img = np.asarray(frame.image)
             if img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):
@@ -271,9 +323,12 @@ class Executor:
         self._shots[(f, o)] = m
         summary.shots += 1
         summary.lines += m.n_lines
+        attempt = self.session.attempt(f, o)
+        saved = self.session.write_arrays(f"measurements/f{f}_o{o}_a{attempt}.npz",
+                                          measurement_arrays(m.measurement))
         self.session.append({"kind": "measure", "focus_idx": f, "orientation_idx": o,
-                             "n_lines": m.n_lines, "d": m.d, "d_max": m.d_max,
-                             "angle_deg": m.angle_deg})
+                             "attempt": attempt, "n_lines": m.n_lines, "d": m.d, "d_max": m.d_max,
+                             "angle_deg": m.angle_deg, **saved})
         self._advance(self._proc_task)
 
     def _check_shot(self, f: int, o: int) -> tuple[list[str], ShotMeasurement | None]:
@@ -308,7 +363,12 @@ class Executor:
             self.session.append({"kind": "fit", "focus_idx": f, "failure": fit.failure})
             raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: "
                                  f"{fit.failure}")
-        self.session.append({"kind": "fit", "focus_idx": f, "model": fit.model.to_dict(),
+        unc_file = {}
+        if fit.uncertainty is not None:
+            saved = self.session.write_arrays(f"profiles/focus{f}_uncertainty.npz",
+                                              uncertainty_arrays(fit.uncertainty))
+            unc_file = {"uncertainty_file": saved["file"], "uncertainty_sha256": saved["sha256"]}
+        self.session.append({"kind": "fit", "focus_idx": f, "model": fit.model.to_dict(), **unc_file,
                              "fit_d": fit.fit_d, "fit_d_max": fit.fit_d_max,
                              "holdout_d": fit.holdout_d, "holdout_d_max": fit.holdout_d_max,
                              "holdout_per_orientation": list(fit.holdout_per_orientation),
@@ -326,8 +386,9 @@ class Executor:
             from concurrent.futures import ProcessPoolExecutor
 
             ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
-            ctx.set_forkserver_preload(["station.processing", "pipeline.fit"])
-            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx)
+            ctx.set_forkserver_preload(["station.processing", "pipeline.fit", "pipeline.uncertainty"])
+            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_exit_with_session,
+                                             initargs=(os.getpid(),))
         return self._pool.map
 
     def _image_size(self, f: int) -> tuple[int, int]:
@@ -482,6 +543,23 @@ class _NoProgress:
 
     def advance(self, *a, **k):
         return None
+
+
+def _exit_with_session(pid: int, period_s: float = 0.5) -> None:
+    """Process-pool initializer: the worker ends itself once the session process
+    ``pid`` is gone. A SIGKILLed session cannot shut its pool down, and its idle
+    workers would otherwise wait on the pool's queue (and keep its forkserver) forever."""
+    def watch():
+        while True:
+            time.sleep(period_s)
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os._exit(0)
+            except PermissionError:  # alive, owned by someone else (cannot happen for our parent)
+                pass
+
+    threading.Thread(target=watch, name="harp-session-watch", daemon=True).start()
 
 
 def _bit_depth(frame) -> int | None:

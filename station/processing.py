@@ -87,6 +87,7 @@ class ShotMeasurement:
     angle_deg: float  # dominant string angle
     d: float
     d_max: float
+    measurement: object = None  # the pipeline.measure.ImageMeasurement it came from
 
     @property
     def n_lines(self) -> int:
@@ -98,10 +99,15 @@ def measure_shot(image: np.ndarray, pipeline: PipelineConfig) -> ShotMeasurement
     from pipeline.measure import measure_image
 
     m = measure_image(image, t=pipeline.t)
+    return shot_from_measurement(m)
+
+
+def shot_from_measurement(m) -> ShotMeasurement:
+    """The :class:`ShotMeasurement` of a :class:`pipeline.measure.ImageMeasurement`."""
     lines = tuple(np.asarray(l.points, np.float64) for l in m.lines)
     angle = dominant_angle([l.angle_deg for l in m.lines]) if lines else float("nan")
     return ShotMeasurement(lines=lines, angle_deg=angle, d=float(m.d) if lines else float("nan"),
-                           d_max=float(m.d_max) if lines else float("nan"))
+                           d_max=float(m.d_max) if lines else float("nan"), measurement=m)
 
 
 def shot_problems(m: ShotMeasurement, expected_angle: float, checks: CheckConfig) -> list[str]:
@@ -129,6 +135,7 @@ class FocusFit:
     details: dict = field(default_factory=dict)
     uncertainty_rms: float | None = None  # bootstrap field uncertainty over the image, px
     uncertainty_max: float | None = None
+    uncertainty: object = None  # the pipeline.uncertainty.FieldUncertainty (per-pixel map), or None
 
 
 def fit_kwargs(pipeline: PipelineConfig) -> dict:
@@ -137,52 +144,6 @@ def fit_kwargs(pipeline: PipelineConfig) -> dict:
     if pipeline.model == "radial":
         kw.update(tangential=pipeline.tangential, prism=pipeline.prism)
     return kw
-
-
-def fit_job(job: tuple) -> tuple:
-    """One fit, as a picklable job for a process pool.
-
-    ``job = (lines_per_image, width, height, fit_kwargs, init)``; returns
-    ``(model or None, failure reason or None)``.
-    """
-    from pipeline.fit import fit_distortion
-
-    lines, width, height, kw, init = job
-    res = fit_distortion(lines, width, height, init=init, **kw)
-    if getattr(res, "model", None) is None:
-        return None, str(getattr(res, "reason", res))
-    return res.model, None
-
-
-def _bootstrap_lines(lines, outliers, rng):
-    """Resample each shot's kept edges with replacement (same count per shot)."""
-    out = []
-    for k, shot in enumerate(lines):
-        kept = [p for i, p in enumerate(shot) if (k, i) not in outliers]
-        idx = rng.integers(0, len(kept), size=len(kept)) if kept else []
-        out.append([kept[i] for i in idx])
-    return out
-
-
-def field_uncertainty(reference, replicates, width: int, height: int,
-                      step: float | None = None) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Per-point spread of bootstrap corrections around ``reference``.
-
-    Each replicate is aligned to the reference by its best homography (a
-    straight-line method sees a correction only modulo a homography); the
-    uncertainty at a grid point is the RMS over replicates of the remaining
-    displacement. Returns ``(grid (N, 2), sigma (N,), rms, max)`` in pixels.
-    """
-    from pipeline.compare import fit_homography, image_grid
-
-    grid = image_grid(width, height, step or max(8.0, max(width, height) / 64))
-    ref = reference.undistort_points(grid)
-    sq = np.zeros(len(grid))
-    for m in replicates:
-        _h, res = fit_homography(m.undistort_points(grid), ref)
-        sq += np.sum(res ** 2, axis=1)
-    sigma = np.sqrt(sq / max(len(replicates), 1))
-    return grid, sigma, float(np.sqrt(np.mean(sigma ** 2))), float(sigma.max())
 
 
 def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
@@ -198,10 +159,12 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
       ``holdout_d`` / ``holdout_d_max`` are the straightness (Tang et al.
       2012) of all left-out edges together. Edges the full fit rejected as
       outliers (dust, frame, mis-grouped) are left out of the evaluation.
-    * Field uncertainty (``bootstrap`` > 0 replicates): each shot's edges are
-      resampled with replacement, refitted (started from the full fit), and
-      the spread of the corrections modulo homography gives a per-pixel
-      uncertainty, reported as its RMS and max over the image.
+    * Field uncertainty (``bootstrap`` >= 2 replicates):
+      :func:`pipeline.uncertainty.bootstrap_field_uncertainty` — each shot's
+      kept edges are resampled with replacement and refitted (started from
+      the full fit); the spread of the corrections modulo homography is the
+      per-pixel uncertainty map (``FocusFit.uncertainty``), reported as its
+      RMS and max over the image.
 
     ``map_fn`` runs the independent fits (a process pool's ``map`` to use
     several cores); results do not depend on it.
@@ -222,12 +185,10 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
         return FocusFit(None, np.nan, np.nan, np.nan, np.nan,
                         failure=str(getattr(full, "reason", full)))
     outliers = {(r.image, r.line) for r in full.rejected}
-    jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw, None)
-            for k in range(len(lines))]
-    rng = np.random.default_rng(seed)
-    jobs += [(_bootstrap_lines(lines, outliers, rng), width, height, kw, full.model)
-             for _ in range(bootstrap)]
-    results = list(map_fn(fit_job, jobs))
+    from pipeline.uncertainty import refit_job
+
+    jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
+    results = list(map_fn(refit_job, jobs))
 
     held_out: list[np.ndarray] = []
     per_o: list[float] = []
@@ -246,15 +207,23 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
     if selection is not None:
         details["selection"] = {"choice": selection.choice.label, "reason": selection.reason,
                                 "folds": selection.folds}
-    unc_rms = unc_max = None
-    if bootstrap:
-        reps = [m for m, reason in results[len(lines):] if m is not None]
-        failed = bootstrap - len(reps)
-        details.update(bootstrap_replicates=len(reps), bootstrap_failed=failed,
-                       bootstrap_scheme="edges resampled with replacement within each shot")
-        if len(reps) >= 2:
-            _g, _s, unc_rms, unc_max = field_uncertainty(full.model, reps, width, height)
+    unc = None
+    if bootstrap == 1:
+        details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
+    elif bootstrap:
+        from pipeline.fit import FitFailure
+        from pipeline.uncertainty import bootstrap_field_uncertainty
+
+        res = bootstrap_field_uncertainty(lines, width, height, kw, n_boot=bootstrap, seed=seed,
+                                          full_fit=full, map_fn=map_fn)
+        if isinstance(res, FitFailure):
+            details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=res.reason)
+        else:
+            unc = res
+            details.update(bootstrap_replicates=res.n_boot, bootstrap_failed=res.n_failed)
+        details["bootstrap_scheme"] = "edges resampled with replacement within each shot"
     return FocusFit(model=full.model, fit_d=full.d_after, fit_d_max=full.d_max_after,
                     holdout_d=hold_d, holdout_d_max=hold_d_max,
                     holdout_per_orientation=tuple(per_o), details=details,
-                    uncertainty_rms=unc_rms, uncertainty_max=unc_max)
+                    uncertainty_rms=unc.rms if unc is not None else None,
+                    uncertainty_max=unc.max if unc is not None else None, uncertainty=unc)

@@ -16,12 +16,21 @@ Per focus setting:
   (:func:`pipeline.uncertainty.bootstrap_field_uncertainty`);
 
 then the verdict with its reasons and figures, and the leave-one-focus-out
-interpolation error. ``report.md`` links them all.
+interpolation error. ``report.md`` links them all; ``index.html`` is the same
+report as a standalone HTML page embedding the same PNGs (for a browser on
+the production line).
+
+For a session directory the evidence is what the executor kept: each shot's
+measured edges (``measurements/*.npz``) and each focus setting's bootstrap
+uncertainty map (``profiles/focus<i>_uncertainty.npz``); only a session
+without them (older or hand-made) is measured / bootstrapped again.
 """
 
 from __future__ import annotations
 
+import html
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -67,6 +76,17 @@ def _fig(width: int, height: int, extra_w: float = 1.6):
     return fig, ax
 
 
+def _save(fig, path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def _title(title: str, sub: str) -> str:
+    return (title + "\n" if title else "") + sub
+
+
 def _image_axes(ax, width, height):
     ax.set_xlim(-0.5, width - 0.5)
     ax.set_ylim(height - 0.5, -0.5)  # image rows grow downwards
@@ -103,13 +123,10 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
     ax.quiverkey(q, 0.80, 1.03, key, f"{key:g} px", labelpos="E", coordinates="axes", color="black")
     _image_axes(ax, width, height)
     fig.colorbar(im, ax=ax, label="|displacement| (px)", fraction=0.046, pad=0.03)
-    ax.set_title((title + "\n" if title else "") +
+    ax.set_title(_title(title, "") +
                  f"correction modulo homography: max {mag.max():.3f} px, RMS {np.sqrt(np.mean(mag ** 2)):.3f} px",
                  fontsize=10, loc="left")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path)
 
 
 def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
@@ -133,11 +150,13 @@ def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> 
     rows = edge_residual_table(shots, model)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     if rows:
-        x = np.arange(len(rows))
         before = np.array([r[2] for r in rows])
         after = np.array([r[3] for r in rows])
-        ax.bar(x, before, width=0.9, color="#f4a582", label="before correction")
-        ax.bar(x, after, width=0.5, color="#2166ac", label="after correction")
+        lo = max(min(after.min(), before.min()) / 2, 1e-5)
+        # one filled step artist per series (hundreds of bar patches are slow to draw)
+        edges = np.arange(len(rows) + 1) - 0.5
+        ax.stairs(before, edges, baseline=lo, fill=True, color="#f4a582", label="before correction")
+        ax.stairs(after, edges, baseline=lo, fill=True, color="#2166ac", label="after correction")
         ori = np.array([r[0] for r in rows])
         for o in np.unique(ori):
             idx = np.flatnonzero(ori == o)
@@ -147,7 +166,6 @@ def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> 
                     ha="center", fontsize=8)
         ax.set_yscale("log")
         ax.set_xlim(-0.5, len(rows) - 0.5)
-        lo = max(min(after.min(), before.min()) / 2, 1e-5)
         ax.set_ylim(lo, before.max() * 2)
         ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
         sub = (f"mean RMS per edge: {before.mean():.4f} px before, {after.mean():.4f} px after "
@@ -157,11 +175,8 @@ def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> 
         sub = "no measured edges"
     ax.set_xlabel("edge (grouped by stage orientation)")
     ax.set_ylabel("RMS distance to the edge's line (px)")
-    ax.set_title((title + "\n" if title else "") + sub, fontsize=10, loc="left", pad=16)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    ax.set_title(_title(title, sub), fontsize=10, loc="left", pad=16)
+    return _save(fig, path)
 
 
 def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Path:
@@ -173,13 +188,10 @@ def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Pat
                    cmap="magma", interpolation="bilinear", vmin=0)
     _image_axes(ax, width, height)
     fig.colorbar(im, ax=ax, label="uncertainty of the correction (px, 1 sigma)", fraction=0.046, pad=0.03)
-    ax.set_title((title + "\n" if title else "") +
+    ax.set_title(_title(title, "") +
                  f"bootstrap ({unc.n_boot} replicates, {unc.resample} resampled): "
                  f"RMS {unc.rms:.4f} px, max {unc.max:.4f} px", fontsize=10, loc="left")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path)
 
 
 # ------------------------------------------------------------------ report
@@ -249,14 +261,109 @@ def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall
                               title=f"{label}, stage {s.orientation_deg:g} deg")
                 md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
     path = out / "report.md"
-    path.write_text("\n".join(md) + "\n")
+    text = "\n".join(md) + "\n"
+    path.write_text(text)
+    (out / "index.html").write_text(markdown_to_html(text, title=f"QA report: {title}"))
     return path
 
 
+# ------------------------------------------------------------------- HTML
+_INLINE = [(re.compile(r"!\[([^\]]*)\]\(([^)]+)\)"), r'<img alt="\1" src="\2">'),
+           (re.compile(r"\*\*(.+?)\*\*"), r"<strong>\1</strong>"),
+           (re.compile(r"`([^`]+)`"), r"<code>\1</code>")]
+
+
+def _inline(text: str) -> str:
+    out = html.escape(text, quote=False)
+    for rx, rep in _INLINE:
+        out = rx.sub(rep, out)
+    return out
+
+
+def markdown_to_html(md: str, title: str = "") -> str:
+    """HTML page of the Markdown subset :func:`write_report` writes (headings,
+    paragraphs, pipe tables, images, bullet lists, block quotes, bold, code)."""
+    body: list[str] = []
+    lines = md.splitlines()
+    i = 0
+    while i < len(lines):
+        ln = lines[i]
+        if not ln.strip():
+            i += 1
+        elif ln.startswith("#"):
+            level = len(ln) - len(ln.lstrip("#"))
+            body.append(f"<h{level}>{_inline(ln[level:].strip())}</h{level}>")
+            i += 1
+        elif ln.startswith("|"):
+            rows = []
+            while i < len(lines) and lines[i].startswith("|"):
+                rows.append([c.strip() for c in lines[i].strip().strip("|").split("|")])
+                i += 1
+            aligns = []
+            if len(rows) > 1 and all(re.fullmatch(r":?-+:?", c) for c in rows[1]):
+                aligns = ["right" if c.endswith(":") and not c.startswith(":") else
+                          "center" if c.startswith(":") and c.endswith(":") else "left" for c in rows[1]]
+                rows = [rows[0]] + rows[2:]
+            t = ["<table>"]
+            for r, cells in enumerate(rows):
+                tag = "th" if r == 0 and aligns else "td"
+                t.append("<tr>" + "".join(
+                    f'<{tag} style="text-align:{aligns[k] if k < len(aligns) else "left"}">{_inline(c)}</{tag}>'
+                    for k, c in enumerate(cells)) + "</tr>")
+            body.append("\n".join(t + ["</table>"]))
+        elif ln.startswith("- "):
+            items = []
+            while i < len(lines) and lines[i].startswith("- "):
+                items.append(f"<li>{_inline(lines[i][2:])}</li>")
+                i += 1
+            body.append("<ul>" + "".join(items) + "</ul>")
+        elif ln.startswith("> "):
+            body.append(f"<blockquote>{_inline(ln[2:])}</blockquote>")
+            i += 1
+        else:
+            para = []
+            while i < len(lines) and lines[i].strip() and not lines[i].startswith(("#", "|", "- ", "> ")):
+                para.append(_inline(lines[i]))
+                i += 1
+            body.append("<p>" + "<br>\n".join(para) + "</p>")
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+             "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
+             "img{max-width:100%;display:block;margin:0.5em 0}"
+             "blockquote{color:#444;border-left:3px solid #bbb;margin-left:0;padding-left:1em}")
+    return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+            f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
 # ------------------------------------------------------- session evidence
+def _last_record(session, kind: str, **match) -> dict | None:
+    found = None
+    for r in session.of_kind(kind):
+        if all(r.get(k) == v for k, v in match.items()):
+            found = r
+    return found
+
+
+def stored_measurement(session, focus_idx: int, orientation_idx: int):
+    """The ``ImageMeasurement`` the executor kept for the shot's current attempt, or None
+    (no ``measurements/*.npz`` for it, or written by an incompatible version)."""
+    from station.evidence_files import measurement_from_arrays
+    from station.session_dir import SessionError
+
+    rec = _last_record(session, "measure", focus_idx=focus_idx, orientation_idx=orientation_idx)
+    if rec is None or "file" not in rec or rec.get("attempt") != session.attempt(focus_idx, orientation_idx):
+        return None
+    try:
+        return measurement_from_arrays(session.read_arrays(rec["file"], rec.get("sha256")))
+    except (OSError, ValueError, KeyError, SessionError):
+        return None
+
+
 def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
     """Averaged, measured shots of one focus setting of an open
-    :class:`station.session_dir.SessionDir` (orientations with no frames are skipped)."""
+    :class:`station.session_dir.SessionDir` (orientations with no frames are skipped).
+
+    The measurement is the one the executor kept (:func:`stored_measurement`);
+    a shot without one is measured now."""
     from pipeline.measure import measure_image
     from station.processing import average_frames
 
@@ -267,8 +374,62 @@ def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
         if not records:
             continue
         image = average_frames([session.read_frame(r) for r in records])
-        shots.append(Shot(float(deg), image, measure_image(image, t=t)))
+        m = stored_measurement(session, focus_idx, o)
+        shots.append(Shot(float(deg), image, m if m is not None else measure_image(image, t=t)))
     return shots
+
+
+def stored_uncertainty(session, focus_idx: int, model):
+    """The bootstrap uncertainty map the executor kept for a focus setting, or None."""
+    from station.evidence_files import uncertainty_from_arrays
+    from station.session_dir import SessionError
+
+    rec = _last_record(session, "fit", focus_idx=focus_idx)
+    if rec is None or not rec.get("uncertainty_file"):
+        return None
+    try:
+        return uncertainty_from_arrays(session.read_arrays(rec["uncertainty_file"],
+                                                           rec.get("uncertainty_sha256")), model)
+    except (OSError, ValueError, SessionError):
+        return None
+
+
+def session_evidence(session, focus_idx: int, focus: float, profile, verdict: Verdict, source: str = "",
+                     *, bootstrap_if_missing: int = 0) -> FocusEvidence:
+    """The report's evidence on one focus setting of a session.
+
+    ``profile``: anything :func:`station.qa.profile_data` takes (e.g. the
+    session's model file). Shots and the uncertainty map are those the
+    session kept; a missing map is bootstrapped with ``bootstrap_if_missing``
+    replicates (0: the report says it is not available)."""
+    from station.processing import fit_kwargs
+    from station.qa import profile_data
+
+    pd = profile_data(profile)
+    cfg = session.config
+    e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=verdict,
+                      source=source)
+    e.shots = session_shots(session, focus_idx, t=cfg.pipeline.t)
+    e.uncertainty = stored_uncertainty(session, focus_idx, pd.model)
+    if e.uncertainty is None:
+        if bootstrap_if_missing >= 2 and e.shots:
+            e.uncertainty, e.uncertainty_note = shot_uncertainty(
+                e.shots, pd.width, pd.height, fit_kwargs(cfg.pipeline), n_boot=bootstrap_if_missing,
+                seed=cfg.pipeline.seed)
+        else:
+            e.uncertainty_note = "not computed in this session (pipeline.bootstrap: 0)"
+    return e
+
+
+def write_session_report(session, out_dir, title: str, models, verdicts: Sequence[Verdict], overall: str, *,
+                         thresholds=None, interpolation: Sequence = (), bootstrap_if_missing: int = 0) -> Path:
+    """Report of a session's profiles: ``models`` as :func:`station.qa.session_models`
+    returns them, ``verdicts`` in the same order. Returns the Markdown path."""
+    evidence = [session_evidence(session, f, focus if math.isfinite(focus) else session.config.focus_settings[f],
+                                 mf, v, source=f"profiles/focus{f}.yaml",
+                                 bootstrap_if_missing=bootstrap_if_missing)
+                for (f, focus, mf), v in zip(models, verdicts)]
+    return write_report(out_dir, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 
 
 def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, fit_kwargs: dict, *,

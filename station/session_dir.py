@@ -6,7 +6,12 @@ Layout::
     DIR/config.yaml        verbatim copy of the configuration it runs
     DIR/manifest.jsonl     one JSON record per line, fsync'ed after each line
     DIR/frames/*.pgm       every captured frame (8- or 16-bit binary PGM)
-    DIR/profiles/*.json    the fitted model of each focus setting
+    DIR/measurements/*.npz the measured edges of every accepted shot
+                           (:mod:`station.evidence_files`), so that reports and
+                           QA need not measure the frames again
+    DIR/profiles/*.yaml    the fitted model of each focus setting
+    DIR/profiles/*.npz     its bootstrap field-uncertainty map
+    DIR/report/            the session report (``harp session run``, unless --no-report)
 
 The manifest is the truth: a frame file counts only once its ``frame``
 record is in the manifest (it is renamed into place, fsync'ed, *then*
@@ -17,10 +22,11 @@ resumed session continues exactly where the last complete record left it.
 Record kinds: ``start`` / ``resume``, ``focus`` (focus locked),
 ``frame`` (focus_idx, orientation_idx, frame_idx, attempt, file, sha256,
 metadata), ``reject`` (a shot failed its checks; its frames are superseded by
-the next attempt), ``measure``, ``fit``, ``stored`` (profile in the store),
+the next attempt), ``measure`` (with ``file`` / ``sha256`` of the shot's
+measurement), ``fit`` (with ``uncertainty_file`` / ``uncertainty_sha256``), ``stored`` (profile in the store),
 ``fault`` (a device error and the attempt it hit), ``qa`` / ``qa_session``
 (verdicts), ``interpolation`` (leave-one-focus-out error), ``aborted``,
-``finished``.
+``report``, ``finished``.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from __future__ import annotations
 import datetime as _dt
 import fcntl
 import hashlib
+import io
 import json
 import os
 import re
@@ -152,6 +159,11 @@ class SessionDir:
                 os.fsync(fh.fileno())
         self._manifest = open(manifest, "ab")
         self.records = records
+        # temporary files of writes a kill interrupted (never renamed into place)
+        for sub in ("frames", "measurements", "profiles"):
+            if (self.path / sub).is_dir():
+                for tmp in (self.path / sub).glob(".*.tmp*"):
+                    tmp.unlink(missing_ok=True)
         self.config: Config | None = None
 
     # ------------------------------------------------------------ lifecycle
@@ -173,6 +185,7 @@ class SessionDir:
             raise SessionError(f"{path}: cannot create session directory: {exc.strerror}") from None
         (path / "frames").mkdir()
         (path / "profiles").mkdir()
+        (path / "measurements").mkdir()
         atomic_write_bytes(path / CONFIG_COPY, config.path.read_bytes())
         meta = {
             "format": 1, "created": now.isoformat(timespec="seconds"),
@@ -234,6 +247,25 @@ class SessionDir:
             "frame_idx": frame_idx, "attempt": attempt, "file": f"frames/{name}",
             "sha256": hashlib.sha256(data).hexdigest(), "meta": metadata or {},
         })
+
+    def write_arrays(self, relpath: str, arrays: dict[str, np.ndarray]) -> dict:
+        """Write ``arrays`` as an ``.npz`` at ``relpath`` (inside the session) atomically;
+        returns ``{"file": relpath, "sha256": ...}`` for the record that uses it."""
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        data = buf.getvalue()
+        path = self.path / relpath
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, data)
+        return {"file": relpath, "sha256": hashlib.sha256(data).hexdigest()}
+
+    def read_arrays(self, relpath: str, sha256: str | None = None) -> dict[str, np.ndarray]:
+        """Arrays of an ``.npz`` written by :meth:`write_arrays` (checked against ``sha256``)."""
+        data = (self.path / relpath).read_bytes()
+        if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+            raise SessionError(f"{self.path / relpath}: checksum does not match the manifest")
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
 
     def write_profile_file(self, focus_idx: int, payload: dict) -> Path:
         path = self.path / "profiles" / f"focus{focus_idx}.json"

@@ -5,8 +5,20 @@
 at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
 that moment* (stage angle + harp offset), through the demo lens at the
 world's current focus (:func:`drivers.sim.lens.lens_for_focus`), with the
-camera's exposure and gain, and noise seeded by ``seed + frame counter`` (so
-successive frames differ and a session replays identically).
+camera's exposure and gain, and sensor noise that is a function of the
+physical situation only (see *Noise seeds* below).
+
+Noise seeds. The noise of a frame is seeded by a hash of ``(seed, focus,
+string angle rounded to 1e-3 deg, capture index at this pose)``
+(:func:`noise_seed`). The capture index at a pose is, by default, one more
+than the highest index this camera already returned at the same focus and
+string angle since it was opened, starting at 0 (so successive frames at one
+pose differ, and reopening replays them). A client that knows which frame it is taking — the station
+executor, which may capture only the frames missing from an interrupted
+session — can say so with the optional hook :meth:`SimulatedCamera.set_capture_index`
+before capturing; a resumed session then receives bit-identical frames to an
+uninterrupted run. The hook is *not* part of :class:`drivers.protocols.Camera`:
+real cameras have no use for it, and callers look it up with ``getattr``.
 
 Brightness: the rendered intensities are multiplied by
 ``(exposure_us / reference_exposure_us) * 10 ** (gain_db / 20)`` and saturate
@@ -20,6 +32,7 @@ Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
 from collections import deque
 
@@ -45,6 +58,23 @@ CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
 
 
+def noise_seed(seed: int, focus: float, angle_deg: float, index: int) -> int:
+    """Noise seed of the ``index``-th capture at a pose (focus, string angle).
+
+    A 64-bit hash of ``seed``, ``focus`` (to 1e-6), the string angle (to
+    1e-3 degree, modulo 180) and ``index``: equal physical situations give
+    equal seeds whatever happened before (reopen, resume), different ones
+    give unrelated seeds.
+    """
+    angle = round(float(angle_deg) % 180.0, 3) % 180.0
+    key = f"{int(seed)}|{round(float(focus), 6):.6f}|{angle:.3f}|{int(index)}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:8], "little")
+
+
+def _pose(focus: float, angle_deg: float) -> tuple[float, float]:
+    return round(float(focus), 6), round(float(angle_deg) % 180.0, 3) % 180.0
+
+
 def _clamp(v: float, lo_hi: tuple[float, float]) -> float:
     return float(min(max(float(v), lo_hi[0]), lo_hi[1]))
 
@@ -57,7 +87,7 @@ class SimulatedCamera:
     world : the shared simulated world (a new one if None).
     width, height : sensor size (default 1280 x 960).
     bit_depth : 8 (``Mono8``) or 16 (``Mono16``).
-    seed : base seed of the noise; frame ``i`` uses ``seed + i``.
+    seed : base seed of the noise (module doc: *Noise seeds*).
     noise_sigma, shot_noise, electrons_per_level : noise model of
         :func:`pipeline.render.render_harp` (at 0 dB gain).
     scene : the harp; its ``angle_deg`` is ignored (taken from the world).
@@ -92,6 +122,8 @@ class SimulatedCamera:
         self._gain = _clamp(gain_db, GAIN_RANGE_DB)
         self._open = False
         self._counter = 0
+        self._pose_counts: dict[tuple[float, float], int] = {}
+        self._next_index: int | None = None
         self._faults: deque[str] = deque()
         #: the :class:`pipeline.render.Rendered` behind the last frame (exact truth), or None
         self.last_rendered: Rendered | None = None
@@ -157,6 +189,8 @@ class SimulatedCamera:
     def open(self) -> None:
         self._open = True
         self._counter = 0
+        self._pose_counts = {}
+        self._next_index = None
 
     def close(self) -> None:
         self._open = False
@@ -235,22 +269,42 @@ class SimulatedCamera:
         self._faults.extend([kind] * int(n))
 
     # ------------------------------------------------------------ capture
-    def render(self, counter: int | None = None, angle_deg: float | None = None,
+    def set_capture_index(self, index: int) -> None:
+        """Optional hook (not in the Camera protocol): the next frame returned is
+        capture number ``index`` (>= 0) at the current pose.
+
+        Selects that frame's noise (module doc: *Noise seeds*) instead of the
+        count of frames already taken at this pose. Applies to the next
+        capture that returns a frame (a timeout or disconnect does not use it
+        up); later captures go back to counting, from ``index + 1`` on at this
+        pose (or further, if more frames were taken there already).
+        """
+        if isinstance(index, bool) or int(index) != index or index < 0:
+            raise ValueError(f"capture index must be a non-negative integer, got {index!r}")
+        self._next_index = int(index)
+
+    def _index_at(self, focus: float, angle_deg: float) -> int:
+        if self._next_index is not None:
+            return self._next_index
+        return self._pose_counts.get(_pose(focus, angle_deg), 0)
+
+    def render(self, index: int | None = None, angle_deg: float | None = None,
                focus: float | None = None) -> Rendered:
         """Render what the camera sees (no fault, no counter change).
 
         ``angle_deg`` and ``focus`` default to the world's current string
-        angle and focus; ``counter`` (default: the next frame's) selects the noise.
+        angle and focus; ``index`` (default: the next capture's at that pose)
+        is the capture index at the pose, which selects the noise.
         """
         w, h = self._size
-        counter = self._counter if counter is None else counter
         angle_deg = self.world.string_angle_deg() if angle_deg is None else angle_deg
         focus = self.world.focus if focus is None else focus
+        index = self._index_at(focus, angle_deg) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         return render_harp(w, h, scene, lens=lens_for_focus(focus, w, h),
                            noise_sigma=self.noise_sigma, shot_noise=self.shot_noise,
-                           bit_depth=self._bit_depth, seed=self.seed + counter,
+                           bit_depth=self._bit_depth, seed=noise_seed(self.seed, focus, angle_deg, index),
                            exposure=self._exposure / self.reference_exposure_us * gain_lin,
                            electrons_per_level=self.electrons_per_level / gain_lin)
 
@@ -271,16 +325,18 @@ class SimulatedCamera:
         with self.world._lock:
             stage, offset, focus = self.world.stage_deg, self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
-        r = self.render(angle_deg=angle, focus=focus)
+        index = self._index_at(focus, angle)
+        seed = noise_seed(self.seed, focus, angle, index)
+        r = self.render(index=index, angle_deg=angle, focus=focus)
         self.last_rendered = r
         image = r.image
         extra = {
             "sim": {"string_angle_deg": angle, "stage_deg": float(stage), "harp_offset_deg": float(offset),
-                    "lens": r.lens.to_dict(), "seed": self.seed + self._counter},
+                    "lens": r.lens.to_dict(), "seed": seed, "pose_index": index},
         }
         if fault == "corrupt":
             h = image.shape[0]
-            rng = np.random.default_rng(self.seed + self._counter + 1_000_003)
+            rng = np.random.default_rng([seed, 1_000_003])
             first = int(rng.integers(h // 4, 3 * h // 4))
             image = image.copy()
             image[first:] = rng.integers(0, np.iinfo(image.dtype).max, size=image[first:].shape,
@@ -290,4 +346,7 @@ class SimulatedCamera:
         frame = Frame(image=image, timestamp=stamp, exposure_us=self._exposure, gain_db=self._gain,
                       focus=float(focus), camera=self._identity, counter=self._counter, extra=extra)
         self._counter += 1
+        pose = _pose(focus, angle)
+        self._pose_counts[pose] = max(self._pose_counts.get(pose, 0), index + 1)
+        self._next_index = None
         return frame

@@ -54,13 +54,49 @@ def test_satisfies_camera_protocol_and_opens_from_config():
     assert abs(f0.timestamp - time.time()) < 60
     assert f0.camera == cam.identity and f0.focus == world.focus
     assert f0.exposure_us == cam.get_exposure() and f0.gain_db == cam.get_gain()
-    assert not np.array_equal(f0.image, f1.image)  # noise seeded by seed + counter
+    assert not np.array_equal(f0.image, f1.image)  # second capture at the same pose: other noise
     with pytest.raises(DeviceDisconnected, match="not open"):
         cam.capture()
     # reopening restarts the counter and replays the same frames
     with cam:
         again = cam.capture()
     assert again.counter == 0 and np.array_equal(again.image, f0.image)
+
+
+def test_noise_is_a_function_of_the_physical_situation():
+    """Frames depend on (seed, focus, string angle, capture index at the pose), not on history,
+    so a resumed session that captures only its missing frames gets the same pixels."""
+    world = SimWorld(harp_offset_deg=5.0)
+    cam = SimulatedCamera.from_config({"width": 96, "height": 64, "seed": 3}, world=world)
+
+    def shoot(stage, focus, index=None):
+        world.set_stage(stage)
+        cam.lock_focus(focus)
+        if index is not None:
+            cam.set_capture_index(index)
+        return cam.capture().image
+
+    with cam:  # an uninterrupted run: two poses x two frames
+        run = [shoot(0.0, 0.5), shoot(0.0, 0.5), shoot(45.0, 0.5), shoot(45.0, 1.0)]
+    with cam:  # a fresh camera visiting the poses in another order, with detours
+        late = shoot(45.0, 1.0)
+        shoot(90.0, 0.5)
+        second = shoot(0.0, 0.5, index=1)  # told which capture it is (the executor's hook)
+        third = shoot(0.0, 0.5)  # the hook was used up: counting goes on after index 1
+        first = shoot(0.0, 0.5, index=0)
+    assert np.array_equal(late, run[3]) and np.array_equal(second, run[1])
+    assert np.array_equal(first, run[0])
+    assert not any(np.array_equal(third, im) for im in run)
+    assert not np.array_equal(run[0], run[1]) and not np.array_equal(run[0], run[2])
+    assert not np.array_equal(run[2], run[3])  # same angle, other focus
+    with cam:  # a failed capture does not use the index up
+        cam.set_capture_index(1)
+        cam.fail_next(1, "timeout")
+        with pytest.raises(DeviceTimeout):
+            cam.capture(timeout=0.01)
+        assert np.array_equal(shoot(0.0, 0.5), run[1])
+    with pytest.raises(ValueError, match="non-negative"):
+        cam.set_capture_index(-1)
 
 
 def test_config_errors_name_the_key():
@@ -160,7 +196,7 @@ def test_injected_faults_raise_quickly_then_recover():
         bad = cam.capture()
         first, end = bad.extra["corrupt_rows"]
         assert bad.extra["corrupt"] is True and 0 < first < end == 120
-        clean = cam.render(counter=1).image
+        clean = cam.render(index=1).image  # the second frame at this pose
         assert np.array_equal(bad.image[:first], clean[:first])
         assert np.mean(bad.image[first:] != clean[first:]) > 0.9
         assert "corrupt" not in cam.capture().extra

@@ -42,6 +42,9 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
     # the overlays are the frames themselves (plus the legend panel)
     assert png(out / "overlay_f0_o0.png").shape[1] == W
     assert "bootstrap" in md or "uncertainty" in md
+    page = (out / "index.html").read_text()  # the same report as a page embedding the same PNGs
+    assert sorted(re.findall(r'<img alt="[^"]*" src="([^"]+)">', page)) == sorted(links)
+    assert "<strong>Verdict: FAIL</strong>" in page and "&gt; 0.01 px" in page
 
 
 def test_residuals_drop_after_correction(session):
