@@ -49,6 +49,7 @@ Unknown keys raise ``ValueError`` naming the key.
 
 from __future__ import annotations
 
+import contextlib
 import tempfile
 import time
 from pathlib import Path
@@ -341,10 +342,8 @@ class AravisCamera(CameraBase):
     def close(self) -> None:
         cam, self._camera = self._camera, None
         if cam is not None:
-            try:
+            with contextlib.suppress(Exception):  # noqa: BLE001 - a vanished device may fail to stop; we drop it anyway
                 cam.stop_acquisition()
-            except Exception:  # noqa: BLE001 - a vanished device may fail to stop; we drop it anyway
-                pass
         self._stream = None  # drops the stream thread (joined on finalize)
         self._device = None
 

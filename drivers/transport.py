@@ -15,6 +15,7 @@ low-level failure into one of the driver errors of :mod:`drivers.errors`:
 
 from __future__ import annotations
 
+import contextlib
 import termios
 import threading
 import time
@@ -83,10 +84,8 @@ class SerialTransport:
     def close(self) -> None:
         ser, self._ser = self._ser, None
         if ser is not None:
-            try:
+            with contextlib.suppress(_IO_ERRORS):  # a vanished port may fail to close; it is closed for us either way
                 ser.close()
-            except _IO_ERRORS:  # a vanished port may fail to close; it is closed for us either way
-                pass
 
     def _port(self) -> serial.SerialBase:
         if self._ser is None or not self._ser.is_open:

@@ -40,6 +40,7 @@ Unknown keys raise ``ValueError`` naming the key.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import time
 
@@ -212,15 +213,11 @@ class V4L2Camera(CameraBase):
 
         controls = self._dev.controls
         for cid in ids:
-            try:
+            with contextlib.suppress(KeyError, AttributeError):  # id unknown to linuxpy or not on this device
                 return controls[int(getattr(ControlID, cid))]
-            except (KeyError, AttributeError):  # id unknown to linuxpy or not on this device
-                pass
         for name in names:
-            try:
+            with contextlib.suppress(KeyError):  # try the next name
                 return controls[name]
-            except KeyError:  # try the next name
-                pass
         return None
 
     def _start(self) -> None:
@@ -236,15 +233,11 @@ class V4L2Camera(CameraBase):
         dev, self._dev = self._dev, None
         video, self._video, self._reader = self._video, None, None
         if video is not None:
-            try:
+            with contextlib.suppress(OSError, ValueError):  # a vanished device may fail to stop; we drop it anyway
                 video.close()  # STREAMOFF, unmap, REQBUFS 0
-            except (OSError, ValueError):  # a vanished device may fail to stop; we drop it anyway
-                pass
         if dev is not None:
-            try:
+            with contextlib.suppress(OSError):  # as above
                 dev.close()
-            except OSError:  # as above
-                pass
 
     # -- properties -----------------------------------------------------------------
     # Properties never raise (``isinstance(cam, Camera)`` reads them on Python 3.11):

@@ -19,6 +19,7 @@ not our format, unknown version, unknown model, bad parameters) raises
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import hashlib
 import os
@@ -115,19 +116,15 @@ def atomic_write_text(path, text: str) -> None:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        try:
+        with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        except FileNotFoundError:
-            pass
         raise
-    try:  # make the rename itself durable
+    with contextlib.suppress(OSError):  # make the rename durable (a platform may not fsync directories)
         dfd = os.open(directory, os.O_RDONLY)
         try:
             os.fsync(dfd)
         finally:
             os.close(dfd)
-    except OSError:  # pragma: no cover - platform without directory fsync
-        pass
 
 
 def model_file_text(model: DistortionModel, *, width: int, height: int,

@@ -61,7 +61,7 @@ def register(subparsers) -> None:
 
 
 class _Fail(Exception):
-    pass
+    """A one-line error for the user (exit 2)."""
 
 
 def _store(args, config, create=False):

@@ -59,10 +59,8 @@ def open_station(config: Config) -> Iterator[tuple]:
 
 
 def _quiet_close(device) -> None:
-    try:
+    with contextlib.suppress(Exception):  # noqa: BLE001 - a vanished device may fail to close any way
         device.close()
-    except Exception:  # noqa: BLE001 - a vanished device may fail to close any way
-        pass
 
 
 def _one_line(exc: BaseException) -> str:

@@ -35,6 +35,7 @@ code 2. ``harp session resume`` then continues from there.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -477,10 +478,8 @@ class Executor:
             self._note(f"[yellow]turntable recovery failed: {type(exc).__name__}: {exc}")
 
     def _reopen(self, device) -> None:
-        try:
+        with contextlib.suppress(Exception):  # noqa: BLE001 - closing a vanished device may fail any way
             device.close()
-        except Exception:  # noqa: BLE001 - closing a vanished device may fail any way
-            pass
         try:
             device.open()
             if device is self.camera:
@@ -557,7 +556,7 @@ def _exit_with_session(pid: int, period_s: float = 0.5) -> None:
             except ProcessLookupError:
                 os._exit(0)
             except PermissionError:  # alive, owned by someone else (cannot happen for our parent)
-                pass
+                continue
 
     threading.Thread(target=watch, name="harp-session-watch", daemon=True).start()
 

@@ -20,6 +20,7 @@ write on the slave fails (EIO / EOF).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import select
@@ -84,10 +85,8 @@ class PtyServer:
                 fd = getattr(self, attr)
                 setattr(self, attr, None)
                 if fd is not None:
-                    try:
+                    with contextlib.suppress(OSError):  # already closed (e.g. by a "vanish" fault)
                         os.close(fd)
-                    except OSError:  # already closed (e.g. by a "vanish" fault)
-                        pass
 
     def _run(self) -> None:
         try:

@@ -61,7 +61,7 @@ class FakeStage:
         return self.deg
 
     def stop(self):
-        pass
+        """A fake stage is always at rest."""
 
     @property
     def limits(self):
@@ -89,13 +89,13 @@ class FakeCamera:
         self.opened += 1
 
     def close(self):
-        pass
+        """Nothing to release."""
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
-        pass
+        """Nothing to release."""
 
     @property
     def identity(self):
