@@ -64,6 +64,10 @@ class DistortionModel(ABC):
 
         The corrected image has the same size; its pixel ``(x, y)`` (ideal
         coordinates) is read from the distorted image at ``distort_points``.
+        Exact per pixel, hence slow for large images (seconds per megapixel):
+        :func:`pipeline.undistort_maps.fast_undistortion_maps` (what ``harp
+        undistort`` uses) inverts on a coarse grid and interpolates, stating
+        its interpolation error.
         """
         yy, xx = np.mgrid[0:height, 0:width].astype(np.float64)
         src = self.distort_points(np.stack([xx.ravel(), yy.ravel()], axis=1))
