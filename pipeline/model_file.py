@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pipeline.models import model_from_dict
+from pipeline.models import MODEL_TYPES, model_from_dict
 from pipeline.models.base import DistortionModel
 
 FORMAT_NAME = "harp-distortion-model"
@@ -160,9 +160,11 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
+        _raise_if_foreign(text, name)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"{name}: not a valid YAML model file ({reason})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME:
+        _raise_if_foreign(text, name)
         raise ValueError(f"{name}: not a harp model file (no 'format: {FORMAT_NAME}')")
     version = doc.get("format_version")
     if version not in SUPPORTED_VERSIONS:
@@ -175,9 +177,13 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
             raise ValueError
     except (TypeError, KeyError, ValueError):
         raise ValueError(f"{name}: missing or invalid image size (image: {{width, height}})") from None
+    mdoc = doc.get("model")
     try:
-        model = model_from_dict(doc.get("model"))
+        model = model_from_dict(mdoc)
     except ValueError as exc:
+        if isinstance(mdoc, dict) and mdoc.get("model") in MODEL_TYPES:  # a bad parameter value
+            raise ValueError(f"{name}: invalid parameters for model {mdoc.get('model')!r} "
+                             f"({str(exc).splitlines()[0]})") from None
         raise ValueError(f"{name}: {str(exc).splitlines()[0]}") from None
     except (TypeError, KeyError, IndexError) as exc:
         raise ValueError(f"{name}: invalid parameters for model "
@@ -187,6 +193,26 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     if not isinstance(merit, dict) or not isinstance(prov, dict):
         raise ValueError(f"{name}: 'merit' and 'provenance' must be mappings")
     return ModelFile(model=model, width=width, height=height, merit=merit, provenance=prov, path=name)
+
+
+def _foreign_format(text: str) -> str | None:
+    """What a known non-harp calibration file is (by its opening), else None."""
+    head = text.lstrip()[:4096]
+    if "!!opencv-matrix" in head or "<opencv_storage>" in head:
+        return "an OpenCV FileStorage calibration file"
+    if "<lensdatabase" in head:
+        return "a lensfun XML profile"
+    if "camera_matrix:" in head and "distortion_model:" in head:
+        return "a ROS camera_info file"
+    return None
+
+
+def _raise_if_foreign(text: str, name: str) -> None:
+    """A clear error for a known calibration file of other software."""
+    foreign = _foreign_format(text)
+    if foreign:
+        raise ValueError(f"{name}: {foreign}, not a harp model file (harp evaluate reads it; "
+                         "this command needs a model written by harp calibrate)")
 
 
 def read_model_file(path) -> ModelFile:
@@ -202,6 +228,8 @@ def read_model_file(path) -> ModelFile:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ValueError(f"{path}: model file not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: is a directory, not a model file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: cannot read model file ({exc.__class__.__name__}: {exc})") from None
     return parse_model_text(text, str(path))

@@ -8,6 +8,7 @@ Exit codes: 0 success, 1 a verdict of FAIL (``harp qa``), 2 bad input or an erro
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 
@@ -41,7 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    try:  # Ctrl-C while the sub-commands import numpy/scipy/OpenCV: no traceback either
+        parser = build_parser()
+    except KeyboardInterrupt:
+        print("harp: interrupted", file=sys.stderr)
+        return 130
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
@@ -51,6 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("harp: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # stdout closed early (``harp measure --json ... | head``): not an error of
+        # ours, and no traceback; point stdout at devnull so the interpreter's
+        # final flush does not raise again
+        import os
+        with contextlib.suppress(OSError, ValueError):  # stdout may be a test double
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,7 +15,7 @@ import argparse
 
 import numpy as np
 
-from pipeline.measure import ImageMeasurement, measure_image
+from pipeline.measure import MIN_SMOOTHED_POINTS, ImageMeasurement, measure_image
 from station import imageio
 
 NO_STRINGS = "no strings found (no pair of long straight edges a string width apart)"
@@ -59,6 +59,10 @@ def measure_grey(path, img: np.ndarray, t: int, *, require_strings: bool = True)
     except (ValueError, MemoryError) as exc:
         raise InputError(f"{path}: cannot measure: {exc}") from None
     if require_strings and m.n_lines == 0:
+        short = [r for r in m.rejected if r.reason == "short edge"]
+        if short:  # strings were found, but t leaves too few points on each edge
+            raise InputError(f"{path}: {len(short)} string edges found, but each keeps < "
+                             f"{MIN_SMOOTHED_POINTS} points after smoothing with t={t}: use a smaller --t")
         raise InputError(f"{path}: {NO_STRINGS}")
     return m
 

@@ -28,10 +28,11 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
-from pipeline.fit import FitFailure, corrected_straightness, fit_distortion
+from pipeline.fit import FitFailure, corrected_straightness, fit_distortion, straightness_of
 from pipeline.select import Candidate, select_model
 from station.cli_inputs import InputError, measure_file, positive_int
 
@@ -91,6 +92,12 @@ def calibrate(args) -> dict:
     from pipeline.model_file import make_provenance, write_model_file
 
     cand = _candidate(args)
+    out_dir = Path(args.out).parent
+    if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
+        reason = "not a directory" if out_dir.exists() else "no such directory"
+        raise CalibrateError(f"{args.out}: cannot write model file ({out_dir}: {reason})")
+    if Path(args.out).is_dir():
+        raise CalibrateError(f"{args.out}: cannot write model file (is a directory)")
     fit_m = _measure(args.images, args.t)
     hold_m = _measure(args.holdout, args.t)
     sizes = {(m.width, m.height) for _, m in fit_m + hold_m}
@@ -134,6 +141,11 @@ def calibrate(args) -> dict:
                         "d": _num(d), "d_max": _num(dm)})
         d, dm = corrected_straightness(res.model, [ln.points for _, m in hold_m for ln in m.lines])
         report["holdout"] = {"d": _num(d), "d_max": _num(dm), "images": per}
+        d0, _ = straightness_of([ln.points for _, m in hold_m for ln in m.lines])
+        if d is not None and np.isfinite(d) and d > d0:
+            report["warnings"].append(
+                f"the model leaves the held-out shots less straight than uncorrected (d {d0:.4f} px "
+                f"before, {d:.4f} px after): it does not generalise to other orientations")
     merit = {k: report[k] for k in ("before", "fit") if k in report}
     if "holdout" in report:
         merit["holdout"] = {"d": report["holdout"]["d"], "d_max": report["holdout"]["d_max"]}
@@ -166,18 +178,24 @@ def _print(report: dict) -> None:
         con.print(t)
     t = Table(title="straightness (px)")
     for c in ("shot", "edges", "d before", "d_max before", "d after", "d_max after"):
-        t.add_column(c)
+        t.add_column(c, no_wrap=c == "shot")
 
     def f(v):
         return "n/a" if v is None else f"{v:.4f}"
 
+    hold = report.get("holdout", {}).get("images", [])
+    names = [Path(im["path"]).name for im in [*report["images"], *hold]]
+
+    def label(path):  # file names, unless two shots share one (then the whole path)
+        return Path(path).name if names.count(Path(path).name) == 1 else str(path)
+
     for im in report["images"]:
-        t.add_row(im["path"], str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
+        t.add_row(label(im["path"]), str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
                   f(im["d_max"]))
     t.add_row("fit (all)", "", f(report["before"]["d"]), f(report["before"]["d_max"]), f(report["fit"]["d"]),
               f(report["fit"]["d_max"]))
-    for im in report.get("holdout", {}).get("images", []):
-        t.add_row(f"holdout {im['path']}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
+    for im in hold:
+        t.add_row(f"holdout {label(im['path'])}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
                   f(im["d_max"]))
     if "holdout" in report:
         t.add_row("holdout (all)", "", "", "", f(report["holdout"]["d"]), f(report["holdout"]["d_max"]))

@@ -10,6 +10,9 @@ their straightness reported before and after (:mod:`pipeline.evaluate`).
 ``--already-corrected``: the images were corrected by other software; they
 are only measured (CORRECTION may be ``none``; when it is known, the
 measured points are put in the same 4-corner normalised frame).
+A shot that cannot be read, has another size than the first, or holds no
+string is named on stderr (one line each) and left out; the others are
+evaluated and reported (JSON: ``errors``), and the exit code is 2.
 Exit 0 on success, 2 on bad input.
 """
 
@@ -25,7 +28,7 @@ from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.normalise import corner_homography
 from pipeline.straightness import straightness
-from station.cli_inputs import InputError, measure_grey, positive_int, read_image
+from station.cli_inputs import NO_STRINGS, InputError, measure_grey, positive_int, read_image
 
 
 class EvaluateError(InputError):
@@ -61,7 +64,10 @@ def load_correction(path, width: int, height: int, focal: float | None = None) -
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise EvaluateError(f"{p}: correction file not found") from None
+        hint = " ('none' means no correction only with --already-corrected)" if str(path).lower() == "none" else ""
+        raise EvaluateError(f"{p}: correction file not found{hint}") from None
+    except IsADirectoryError:
+        raise EvaluateError(f"{p}: is a directory, not a correction file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise EvaluateError(f"{p}: cannot read correction file ({type(exc).__name__})") from None
     try:
@@ -105,15 +111,23 @@ def _sd(st) -> dict:
 
 def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, t=30) -> dict:
     """The JSON report of ``harp evaluate`` (see module docstring); raises InputError (one line)."""
-    images, size = [], None
-    for path in image_paths:
-        img = read_image(path)
+    images, size, errors = [], None, []
+    for path in image_paths:  # a bad shot is reported and skipped; the others are evaluated
+        try:
+            img = read_image(path)
+        except InputError as exc:
+            errors.append({"path": str(path), "error": str(exc)})
+            continue
         if size is None:
             size = (img.shape[1], img.shape[0])
         elif (img.shape[1], img.shape[0]) != size:
-            raise EvaluateError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, the first is "
-                                f"{size[0]}x{size[1]}; all shots must have the same size")
+            errors.append({"path": str(path), "error": f"{path}: image is {img.shape[1]}x{img.shape[0]}, the "
+                           f"first is {size[0]}x{size[1]}; all shots must have the same size"})
+            continue
         images.append((path, img))
+    if not images:
+        raise EvaluateError(errors[0]["error"] if len(errors) == 1 else
+                            "no readable image: " + "; ".join(e["error"] for e in errors))
     w, h = size
     if already_corrected and str(correction_path).lower() == "none":
         model, kind = None, "none"
@@ -127,6 +141,7 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
         if not pts:
             entry.update(before=None, after=None, note="no string edge found")
             per_image.append(entry)
+            errors.append({"path": str(path), "error": f"{path}: {NO_STRINGS}"})
             continue
         try:
             if already_corrected:
@@ -148,11 +163,13 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
         if before is not None:
             before_all += before
     if not after_all:
-        raise EvaluateError("no string edge found in any image")
+        raise EvaluateError("no string edge found in any image"
+                            + "".join(f"; {e['error']}" for e in errors if NO_STRINGS not in e["error"]))
     return {"correction": str(correction_path), "kind": kind, "already_corrected": bool(already_corrected),
             "t": t, "width": w, "height": h,
             "before": _sd(straightness(before_all)) if before_all else None,
-            "after": _sd(straightness(after_all)), "n_lines": len(after_all), "images": per_image}
+            "after": _sd(straightness(after_all)), "n_lines": len(after_all), "images": per_image,
+            "errors": errors}
 
 
 def _fmt(sd):
@@ -166,9 +183,12 @@ def run(args) -> int:
     except InputError as exc:
         print(f"harp evaluate: {exc}", file=sys.stderr)
         return 2
+    for e in rep["errors"]:
+        print(f"harp evaluate: {e['error']}", file=sys.stderr)
+    status = 2 if rep["errors"] else 0
     if args.json:
         print(json.dumps(rep, indent=2))
-        return 0
+        return status
     print(f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
           + (", images already corrected" if rep["already_corrected"] else ""))
     print(f"{'image':40s} {'lines':>5s} {'d before':>9s} {'dmax bef.':>9s} {'d after':>9s} {'dmax aft.':>9s}  (px)")
@@ -177,4 +197,4 @@ def run(args) -> int:
         print(f"{Path(e['path']).name[:40]:40s} {e['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
     b, a = _fmt(rep["before"]), _fmt(rep["after"])
     print(f"{'all':40s} {rep['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
-    return 0
+    return status

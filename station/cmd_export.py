@@ -10,6 +10,7 @@ Exit 0 on success, 2 on bad input.
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 from pipeline.exports.fit import fit_lensfun, fit_opencv
@@ -60,6 +61,9 @@ def export_text(mf, fmt: str, *, focal=None, coeffs=5, lensfun_model="ptlens", f
 
 
 def run(args) -> int:
+    if args.format == "lensfun" and not (math.isfinite(args.focal_mm) and args.focal_mm > 0):
+        print(f"harp export: --focal-mm must be a focal length > 0 mm, got {args.focal_mm:g}", file=sys.stderr)
+        return 2
     try:
         mf = read_model_file(args.model)
         text, err = export_text(mf, args.format, focal=args.focal, coeffs=args.coeffs,

@@ -104,8 +104,9 @@ def run(args) -> int:
         try:
             overlay_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            print(f"harp measure: {overlay_dir}: cannot create overlay directory: {exc.strerror or exc}",
-                  file=sys.stderr)
+            reason = ("exists and is not a directory" if overlay_dir.exists() and not overlay_dir.is_dir()
+                      else exc.strerror or exc)
+            print(f"harp measure: {overlay_dir}: cannot create overlay directory: {reason}", file=sys.stderr)
             return 2
     names = _overlay_names(list(args.images))
     results: list[tuple[str, ImageMeasurement]] = []

@@ -107,7 +107,7 @@ def _reference(args, config, focus, width, height):
         try:
             mf = read_model_file(ref)
         except ValueError as exc:
-            raise _Fail(f"reference {ref}: {exc}") from None
+            raise _Fail(f"reference {exc}") from None  # the message starts with the file name
         if (mf.width, mf.height) != (width, height):
             raise _Fail(f"reference {ref} is for {mf.width}x{mf.height} images, not {width}x{height}")
         return mf.model
@@ -210,8 +210,12 @@ def run(args) -> int:
                                                     pds[0].width, pds[0].height)
             report = None
             if args.report is not None:
-                report = _report(args, str(args.target), items, results, overall, thresholds,
-                                 interpolation, session)
+                try:
+                    report = _report(args, str(args.target), items, results, overall, thresholds,
+                                     interpolation, session)
+                except OSError as exc:
+                    raise _Fail(f"{args.report}: cannot write the report "
+                                f"({exc.strerror or exc}{': ' + exc.filename if exc.filename else ''})") from None
         except (ConfigError, SessionError, StoreError, _Fail, ValueError, OSError) as exc:
             print(f"harp qa: {exc}", file=sys.stderr)
             return 2

@@ -47,6 +47,9 @@ def _run(args) -> int:
     from station.config import ConfigError, check_port, load_config
     from station.session_dir import SessionDir
 
+    if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
+        return _error(f"--name {args.name!r}: expected a plain directory name (no '/'); "
+                      "use --out for the parent directory")
     try:
         config = load_config(args.config)
         check_port(config)  # before creating anything
@@ -86,14 +89,23 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
     from station.session_dir import SessionError
     from station.store import ProfileStore, StoreError
 
+    started = []  # the session directory, once there is one
     try:
         with ProfileStore(config.store_path) as store, open_station(config) as (camera, turntable):
             with get_session() as session:
+                started.append(session.path)
                 console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
                 result = Executor(session, camera, turntable, store=store, console=console,
                                   report=report).run()
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
+    except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
+        if not started:
+            _error("interrupted before the session started; nothing was captured")
+        else:
+            _error(f"interrupted; every frame captured so far is kept in {started[0]}; "
+                   f"continue with: harp session resume {started[0]}")
+        return 130
     finally:
         if opened is not None:
             opened.close()

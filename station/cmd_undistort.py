@@ -4,7 +4,9 @@ Each image is resampled through the model's undistortion maps
 (:func:`pipeline.undistort_maps.fast_undistortion_maps`, computed once per
 image size and cached) with ``cv2.remap``; the output keeps the input's file
 format, channels and bit depth, under the same file name in ``DIR``. The
-model's image size must match the images'. Exit 0 on success, 2 on bad input.
+model's image size must match the images'. An image that cannot be read or has
+another size is named on stderr (one line) and skipped; the others are still
+corrected. Exit 0 on success, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -80,29 +82,41 @@ def _run(args) -> int:
             raise UndistortError(f"{p}: output would overwrite the input; choose another -o DIR")
         if target.exists() and not args.overwrite:
             raise UndistortError(f"{target}: already exists (use --overwrite)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UndistortError(f"{out_dir}: cannot create the output directory ({exc.strerror or exc})") from None
     cache: dict[tuple[int, int], object] = {}
-    for path in args.images:
-        p = Path(path)
-        img = read_image(p, grey=False)
-        h, w = img.shape[:2]
-        if (w, h) != (mf.width, mf.height):
-            raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for "
-                                 f"{mf.width}x{mf.height} images")
-        if (w, h) not in cache:
-            t0 = time.perf_counter()
-            cache[(w, h)] = fast_undistortion_maps(mf.model, w, h, step=DEFAULT_STEP_PX)
-            m = cache[(w, h)]
-            print(f"maps for {w}x{h}: {time.perf_counter() - t0:.2f} s "
-                  f"(interpolation error <= {m.interp_error_px:.1e} px)")
-        out = undistort_image(img, cache[(w, h)], INTERPOLATIONS[args.interpolation])
-        target = out_dir / p.name
-        params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []
-        tmp = target.with_name(f".{target.name}.tmp{target.suffix}")
-        ok = cv2.imwrite(str(tmp), out, params)
-        if not ok:
-            tmp.unlink(missing_ok=True)
-            raise UndistortError(f"{target}: OpenCV cannot write {out.dtype} images as {p.suffix}")
-        os.replace(tmp, target)
-        print(f"wrote {target} ({w}x{h}, {out.dtype}, {1 if out.ndim == 2 else out.shape[2]} channel(s))")
-    return 0
+    status = 0
+    for path in args.images:  # a bad image is named on stderr; the others are still corrected
+        try:
+            _correct_one(args, mf, Path(path), out_dir, cache)
+        except InputError as exc:
+            print(f"harp undistort: {exc}", file=sys.stderr)
+            status = 2
+    return status
+
+
+def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict) -> None:
+    """Correct one image into ``out_dir``; InputError (one line) if it cannot be."""
+    img = read_image(p, grey=False)
+    h, w = img.shape[:2]
+    if (w, h) != (mf.width, mf.height):
+        raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for "
+                             f"{mf.width}x{mf.height} images")
+    if (w, h) not in cache:
+        t0 = time.perf_counter()
+        cache[(w, h)] = fast_undistortion_maps(mf.model, w, h, step=DEFAULT_STEP_PX)
+        m = cache[(w, h)]
+        print(f"maps for {w}x{h}: {time.perf_counter() - t0:.2f} s "
+              f"(interpolation error <= {m.interp_error_px:.1e} px)")
+    out = undistort_image(img, cache[(w, h)], INTERPOLATIONS[args.interpolation])
+    target = out_dir / p.name
+    params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []
+    tmp = target.with_name(f".{target.name}.tmp{target.suffix}")
+    ok = cv2.imwrite(str(tmp), out, params)
+    if not ok:
+        tmp.unlink(missing_ok=True)
+        raise UndistortError(f"{target}: OpenCV cannot write {out.dtype} images as {p.suffix}")
+    os.replace(tmp, target)
+    print(f"wrote {target} ({w}x{h}, {out.dtype}, {1 if out.ndim == 2 else out.shape[2]} channel(s))")

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import threading
 import time
 from dataclasses import dataclass, field
@@ -388,6 +389,7 @@ class Executor:
 
             ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
             ctx.set_forkserver_preload(["station.processing", "pipeline.fit", "pipeline.uncertainty"])
+            _start_forkserver_ignoring_sigint()
             self._pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_exit_with_session,
                                              initargs=(os.getpid(),))
         return self._pool.map
@@ -544,10 +546,32 @@ class _NoProgress:
         return None
 
 
+def _start_forkserver_ignoring_sigint() -> None:
+    """Start multiprocessing's forkserver with SIGINT ignored (inherited through
+    exec): it spends a second or two importing the preloaded modules before it
+    ignores SIGINT itself, and a Ctrl-C to the process group in that time would
+    print its KeyboardInterrupt traceback. Only the session process handles Ctrl-C."""
+    from multiprocessing import forkserver
+
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()  # signal handlers can only be set from the main thread
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def _exit_with_session(pid: int, period_s: float = 0.5) -> None:
     """Process-pool initializer: the worker ends itself once the session process
     ``pid`` is gone. A SIGKILLed session cannot shut its pool down, and its idle
-    workers would otherwise wait on the pool's queue (and keep its forkserver) forever."""
+    workers would otherwise wait on the pool's queue (and keep its forkserver) forever.
+    Ctrl-C reaches the whole process group: the session process handles it (the
+    frames are kept, the pool is shut down), so the workers ignore SIGINT instead
+    of each printing a KeyboardInterrupt traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
     def watch():
         while True:
             time.sleep(period_s)

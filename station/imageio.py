@@ -98,13 +98,15 @@ def read_unchanged(path) -> np.ndarray:
     reason = _pnm_truncated(data)
     if reason:
         raise ImageReadError(p, reason)
+    # before decoding: libpng prints its own "libpng error: ..." line straight to
+    # the C stderr on a short PNG, which would break the one-line error
+    if _looks_truncated(data):
+        raise ImageReadError(p, "truncated image data")
     buf = np.frombuffer(data, np.uint8)
     with _quiet_opencv():
         img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ImageReadError(p, "not a readable image (unknown format or corrupt/truncated data)")
-    if _looks_truncated(data):
-        raise ImageReadError(p, "truncated image data")
     return img
 
 

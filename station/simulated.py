@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Iterator
 
 from drivers import open_camera, open_turntable
+from drivers.errors import DriverError
 from drivers.sim.world import SimWorld
 from station.config import EMULATOR_PORT, Config
 
@@ -27,6 +28,11 @@ class SimulatedStation:
     turntable: Any  # drivers.zaber.ZaberTurntable on the emulator's pty (not yet opened)
     world: SimWorld
     emulator: Any  # EmulatorHandle: .port_path, .emulator (.inject faults), .stop()
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
 
 
 @contextlib.contextmanager
@@ -46,11 +52,21 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     if tt.steps_per_degree is not None:
         opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
     opts.update(emulator_overrides)
-    handle = start_zaber_emulator(world=world, **opts)
+    try:
+        handle = start_zaber_emulator(world=world, **opts)
+    except (ValueError, TypeError, OSError) as exc:
+        raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
     try:
         port = handle.port_path if tt.port == EMULATOR_PORT else tt.port
-        camera = open_camera(config.station.camera.as_driver_config(), world=world)
-        turntable = open_turntable(tt.as_driver_config(port=port))
+        # a setting the simulator refuses is a configuration error naming the section, not a traceback
+        try:
+            camera = open_camera(config.station.camera.as_driver_config(), world=world)
+        except (ValueError, TypeError, DriverError, OSError) as exc:
+            raise config.error("station.camera", f"cannot use this camera: {_one_line(exc)}") from None
+        try:
+            turntable = open_turntable(tt.as_driver_config(port=port))
+        except (ValueError, TypeError, DriverError, OSError) as exc:
+            raise config.error("station.turntable", f"cannot use this turntable: {_one_line(exc)}") from None
         yield SimulatedStation(camera, turntable, world, handle)
     finally:
         handle.stop()

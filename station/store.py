@@ -128,7 +128,10 @@ class ProfileStore:
             self.db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
                                       isolation_level=None)
         except (OSError, sqlite3.Error) as exc:
-            raise StoreError(f"{self.path}: cannot open profile store: {exc}") from None
+            blocker = next((p for p in self.path.parents if p.exists() and not p.is_dir()), None)
+            reason = f"{blocker} is a file, not a directory" if blocker is not None else (
+                getattr(exc, "strerror", None) or exc)
+            raise StoreError(f"{self.path}: cannot open profile store: {reason}") from None
         self.db.row_factory = sqlite3.Row
         self.db.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
         try:

@@ -91,3 +91,28 @@ def test_missing_and_binary_files(tmp_path):
     p.write_bytes(b"\xff\xfe\x00garbage")
     with pytest.raises(ValueError, match=f"^{p}: "):
         read_model_file(p)
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [1,0,0,0,1,0,0,0,1]\n",
+     "an OpenCV FileStorage calibration file"),
+    ('<?xml version="1.0"?>\n<opencv_storage>\n<camera_matrix type_id="opencv-matrix"></camera_matrix>\n'
+     "</opencv_storage>\n", "an OpenCV FileStorage calibration file"),
+    ("<lensdatabase><lens><model>x</model></lens></lensdatabase>\n", "a lensfun XML profile"),
+    ("image_width: 2\ncamera_matrix: {rows: 3, cols: 3, data: [1,0,0,0,1,0,0,0,1]}\ndistortion_model: plumb_bob\n",
+     "a ROS camera_info file"),
+    ("format: harp-distortion-model\nformat_version: 1\nimage: {width: 2, height: 2}\n"
+     "model: {model: radial, center: [1, 1], k: oops, scale: 1}\n", "invalid parameters for model 'radial'"),
+])
+def test_other_software_files_and_bad_values_are_named(tmp_path, text, reason):
+    path = tmp_path / "other.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as exc:
+        read_model_file(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: ") and reason in msg and "\n" not in msg, msg
+
+
+def test_directory_is_named_as_such(tmp_path):
+    with pytest.raises(ValueError, match=f"^{tmp_path}: is a directory, not a model file$"):
+        read_model_file(tmp_path)

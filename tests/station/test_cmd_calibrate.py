@@ -99,3 +99,40 @@ def test_bad_input_one_line_exit_2(shots, tmp_path, capsys, args, needle):
     assert code == 2
     assert err.startswith("harp calibrate: ") and err.count("\n") == 1 and needle in err, err
     assert not out_path.exists()
+
+
+def test_table_names_each_shot_readably(shots, tmp_path, capsys):
+    # long directories must not turn every row into the same truncated "/tmp/pytest-…"
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "radial", "--holdout", shots[93.0],
+                          "--out", tmp_path / "r.yaml")
+    assert code == 0, err
+    rows = [ln for ln in out.splitlines() if "shot" in ln and ".pgm" in ln]
+    assert any("shot0.pgm" in r for r in rows) and any("shot1.pgm" in r for r in rows)
+    assert any("holdout shot3.pgm" in r for r in rows), out
+
+
+def test_warns_when_the_model_makes_the_holdout_worse(real_harp_dir, tmp_path, capsys):
+    # a free degree-5 polynomial fitted on two real shots bends the third one further
+    r = real_harp_dir
+    code, out, err = _run(capsys, r / "IMG_6931.pgm", r / "IMG_6950.pgm", "--holdout", r / "IMG_6964.pgm",
+                          "--model", "poly", "--degree", "5", "--out", tmp_path / "p5.yaml", "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["holdout"]["d"] > rep["holdout"]["images"][0]["d_before"]
+    assert any("less straight" in w and "does not generalise" in w for w in rep["warnings"]), rep["warnings"]
+
+
+def test_unwritable_out_is_reported_before_any_work(shots, tmp_path, capsys, monkeypatch):
+    import station.cmd_calibrate as cc
+
+    def no_measuring(*a, **k):
+        raise AssertionError("measured although the model file cannot be written")
+
+    monkeypatch.setattr(cc, "_measure", no_measuring)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    for out, reason in ((tmp_path / "no" / "lens.yaml", "no such directory"),
+                        (blocker / "lens.yaml", "not a directory"), (tmp_path, "is a directory")):
+        code, _, err = _run(capsys, shots[3.0], shots[63.0], "--out", out)
+        assert code == 2 and err.startswith(f"harp calibrate: {out}: cannot write model file (")
+        assert reason in err and err.count("\n") == 1, err

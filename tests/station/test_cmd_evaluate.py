@@ -125,3 +125,30 @@ def test_size_mismatch_and_missing_image_exit_2(tmp_path, shots, capsys):
     assert f"model is for {W + 2}x{H} images, the shots are {W}x{H}" in capsys.readouterr().err
     assert main(["evaluate", str(m), str(tmp_path / "missing.pgm")]) == 2
     assert "missing.pgm: no such file" in capsys.readouterr().err
+
+
+def test_bad_shots_are_named_and_the_others_still_evaluated(tmp_path, shots, capsys):
+    m = tmp_path / "m.yaml"
+    write_model_file(m, LENS, width=W, height=H)
+    blank = tmp_path / "blank.png"
+    cv2.imwrite(str(blank), np.full((H, W), 200, np.uint8))
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.full((H // 2, W // 2), 200, np.uint8))
+    missing = tmp_path / "missing.pgm"
+    code = main(["evaluate", str(m), shots[0], str(missing), str(blank), str(small), shots[1], "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    rep = json.loads(out)
+    measured = [e["path"] for e in rep["images"] if e["after"] is not None]
+    assert measured == [shots[0], shots[1]] and rep["after"]["d"] < 0.01
+    lines = err.strip().splitlines()
+    assert len(lines) == 3 and all(ln.startswith("harp evaluate: ") for ln in lines)
+    for path, reason in ((missing, "no such file"), (blank, "no strings found"), (small, "same size")):
+        assert sum(str(path) in ln and reason in ln for ln in lines) == 1, (path, lines)
+    assert {e["path"] for e in rep["errors"]} == {str(missing), str(blank), str(small)}
+
+
+def test_none_without_already_corrected_says_what_is_missing(shots, capsys):
+    assert main(["evaluate", "none", shots[0]]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--already-corrected" in err

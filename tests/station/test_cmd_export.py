@@ -64,3 +64,12 @@ def test_bad_model_exit_2(tmp_path, capsys, content, reason):
     assert main(["export", str(p), "--format", "opencv"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"harp export: {p}: ") and reason in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("focal_mm", ["-3", "0", "nan"])
+def test_lensfun_focal_must_be_positive(model, capsys, focal_mm):
+    # lensfun files its calibration entries under a focal length: a negative one is no lens
+    assert main(["export", str(model), "--format", "lensfun", "--focal-mm", focal_mm]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("harp export: --focal-mm must be a focal length > 0 mm")
+    assert err.count("\n") == 1

@@ -178,3 +178,52 @@ def test_subprocess_exit_code_stdout_and_stderr(files):
     assert len(err) == 2
     assert str(files["truncated_pgm"]) in err[0] and "truncated" in err[0]
     assert str(files["dir"]) in err[1] and "directory" in err[1]
+
+
+def test_png_cut_in_the_middle_gives_one_line_and_no_libpng_noise(capfd, files):
+    # libpng writes "libpng error: ..." to the C-level stderr when it decodes a short
+    # PNG; the file must be rejected before decoding so stderr holds our one line only
+    png = files["truncated_png"].with_name("half.png")
+    cv2.imwrite(str(png), cv2.imread(str(files["pgm"]), cv2.IMREAD_UNCHANGED))
+    data = png.read_bytes()
+    png.write_bytes(data[: len(data) // 2])
+    code = main(["measure", str(png)])
+    out, err = capfd.readouterr()
+    assert code == 2
+    assert err.strip().splitlines() == [f"harp measure: {png}: truncated image data"]
+
+
+def test_stdout_closed_early_gives_no_traceback(files):
+    # ``harp measure --json ... | head -c 10``: the reader goes away mid-output
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, "-m", "station.cli", "measure", "--json", "--t", "1",
+                          str(files["pgm"])], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         cwd=REPO, env=env)
+    p.stdout.read(10)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    code = p.wait(timeout=120)
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert code == 141
+
+
+def test_overlay_dir_that_is_a_file(capsys, files, tmp_path):
+    blocker = tmp_path / "overlays.png"
+    blocker.write_bytes(b"x")
+    code = main(["measure", "--overlay", str(blocker), str(files["pgm"])])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert err == f"harp measure: {blocker}: cannot create overlay directory: exists and is not a directory\n"
+    code = main(["measure", "--overlay", str(blocker / "sub"), str(files["pgm"])])
+    err = capsys.readouterr().err
+    assert code == 2 and err == f"harp measure: {blocker / 'sub'}: cannot create overlay directory: Not a directory\n"
+
+
+def test_too_large_t_is_told_apart_from_no_strings(capsys, files):
+    # the strings are there; t = 1000 on a 480 px image leaves no edge enough points
+    code = main(["measure", "--t", "1000", str(files["pgm"]), str(files["blank"])])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 2
+    assert str(files["pgm"]) in err[0] and "string edges found, but each keeps < 3 points" in err[0]
+    assert "t=1000: use a smaller --t" in err[0]
+    assert str(files["blank"]) in err[1] and "no strings found" in err[1]

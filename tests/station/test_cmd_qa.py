@@ -116,3 +116,20 @@ def test_session_without_profiles_and_bad_threshold(session, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["qa", str(session), "--max-holdout-d", "-3"])
     assert exc.value.code == 2
+
+
+def test_unwritable_report_dir_is_one_line_naming_it(session, tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    code, out, err = qa(capsys, session, "--report", blocker / "report", "--no-record")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        f"harp qa: {blocker / 'report'}: cannot write the report (Not a directory: {blocker / 'report'})"], err
+
+
+def test_corrupt_reference_file_is_named_once(session, tmp_path, capsys):
+    ref = tmp_path / "golden.yaml"
+    ref.write_text("format: harp-distortion-model\nformat_version: 1\nmodel: [\n")
+    code, out, err = qa(capsys, session, "--reference", ref, "--max-reference-deviation", "1", "--no-record")
+    assert code == 2 and err.startswith(f"harp qa: reference {ref}: not a valid YAML model file")
+    assert err.count(str(ref)) == 1 and err.count("\n") == 1, err

@@ -66,8 +66,15 @@ def group_members(pgid: int) -> list[int]:
     return out
 
 
-def manifest(session: Path) -> list[dict]:
-    return [json.loads(l) for l in (session / "manifest.jsonl").read_text().splitlines()]
+def manifest(session: Path, killed: bool = False) -> list[dict]:
+    """The manifest's records. ``killed``: read right after a SIGKILL, which may tear the
+    line being appended (the kernel can stop a write between two pages); the session
+    cuts such a torn last line when it is resumed, so it is not counted here either."""
+    text = (session / "manifest.jsonl").read_text()
+    lines = text.splitlines()
+    if killed and lines and not text.endswith("\n"):
+        lines = lines[:-1]
+    return [json.loads(l) for l in lines]
 
 
 def frame_hashes(session: Path) -> dict[tuple, str]:
@@ -130,9 +137,9 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     assert proc.poll() is None, proc.communicate()
     os.kill(proc.pid, signal.SIGKILL)  # the session process only, not its workers
     proc.wait()
-    killed_at = sum(1 for r in manifest(session) if r["kind"] == "frame")
+    killed_at = sum(1 for r in manifest(session, killed=True) if r["kind"] == "frame")
     assert N_ORI * N_FRAMES < killed_at < N_FOCUS * N_ORI * N_FRAMES
-    assert any(r["kind"] == "stored" for r in manifest(session))
+    assert any(r["kind"] == "stored" for r in manifest(session, killed=True))
     # its orphaned worker processes (and their forkserver) end by themselves
     deadline = time.monotonic() + 10
     while group_members(proc.pid) and time.monotonic() < deadline:
@@ -165,6 +172,36 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     # resuming a finished session does nothing
     assert main(["session", "resume", str(session), "--quiet"]) == 0
     assert len(manifest(session)) == len(recs)
+
+
+def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
+    # Ctrl-C in a terminal signals the whole process group: the session process and its
+    # fit workers (and their forkserver); only the session process may speak
+    cfg = small_config(tmp_path)
+    session = tmp_path / "sessions" / "c"
+    proc = harp("session", "run", cfg, "--name", "c", "--quiet", "--no-report")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (session / "manifest.jsonl").exists():
+            n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
+            if n >= N_ORI * N_FRAMES + 1:  # the fit pool of the 1st focus exists
+                break
+        time.sleep(0.005)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    lines = err.strip().splitlines()
+    assert lines[-1] == (f"harp session: interrupted; every frame captured so far is kept in {session}; "
+                         f"continue with: harp session resume {session}"), err
+    kept = [r for r in manifest(session) if r["kind"] == "frame"]
+    assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
+    assert all((session / r["file"]).is_file() for r in kept)
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
+    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"])
+                   for r in manifest(session) if r["kind"] == "frame")
+    assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
 
 
 def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypatch, capsys):
@@ -346,3 +383,25 @@ def test_two_sessions_write_to_one_store_at_once(tmp_path):
         assert sorted(p.lens[2] for p in st.profiles()) == ["LENS-A", "LENS-B"]
         assert len(list(st.qa_results())) == 2
         assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+
+
+@pytest.mark.parametrize("name", ["../escape", "a/b", "..", ""])
+def test_session_name_must_be_a_plain_directory_name(tmp_path, capsys, name):
+    cfg = small_config(tmp_path)
+    assert main(["session", "run", str(cfg), "--name", name, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--name" in err and "plain directory name" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["station.yaml"]  # nothing created
+
+
+def test_setting_the_simulator_refuses_is_one_line_exit_2(tmp_path, capsys):
+    # passes the schema (an integer) but not the simulated camera: no traceback, and not
+    # exit 1 (which means QA FAIL)
+    cfg = small_config(tmp_path)
+    d = yaml.safe_load(cfg.read_text())
+    d["station"]["camera"]["width"] = 8
+    cfg.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "station.camera" in err and "8x480" in err, err
+    assert not (tmp_path / "sessions").exists()

@@ -76,3 +76,24 @@ def test_bad_inputs_exit_2_with_one_line(setup, tmp_path, capsys):
     assert main(["undistort", str(model), str(junk), "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("harp undistort: ") and "junk.png" in err and err.count("\n") == 1
+
+
+def test_bad_images_are_named_and_the_others_still_corrected(setup, tmp_path, capsys):
+    d, model, grey, png16, colour, image = setup
+    small = tmp_path / "small.pgm"
+    cv2.imwrite(str(small), image[:100, :100])
+    missing = tmp_path / "none.pgm"
+    out = tmp_path / "o"
+    assert main(["undistort", str(model), str(missing), str(grey), str(small), str(png16), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "none.pgm: no such file" in err[0] and "small.pgm: image is 100x100" in err[1]
+    assert sorted(p.name for p in out.iterdir()) == ["shot.pgm", "shot16.png"]
+
+
+def test_output_dir_that_cannot_be_created_is_one_line(setup, tmp_path, capsys):
+    d, model, grey, png16, colour, image = setup
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert main(["undistort", str(model), str(grey), "-o", str(blocker / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"harp undistort: {blocker / 'out'}: cannot create the output directory (Not a directory)\n"

@@ -112,3 +112,12 @@ def test_two_processes_write_concurrently(tmp_path):
         assert len(list(st.qa_results())) == 40
         assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         assert len(st.lenses()) == 1
+
+
+def test_store_under_a_file_names_the_file(tmp_path):
+    blocker = tmp_path / "profiles"
+    blocker.write_text("a file where a directory should be")
+    with pytest.raises(StoreError) as exc:
+        ProfileStore(blocker / "harp.sqlite")
+    assert str(exc.value) == (f"{blocker / 'harp.sqlite'}: cannot open profile store: "
+                              f"{blocker} is a file, not a directory")
