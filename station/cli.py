@@ -65,6 +65,21 @@ def main(argv: list[str] | None = None) -> int:
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except SystemExit as exc:
+        # rich's Console turns a broken stdout pipe into SystemExit(1) after pointing
+        # stdout at /dev/null; exit 1 means "QA FAIL" here, so report it as above
+        if exc.code == 1 and _stdout_is_devnull():
+            return 141
+        raise
+
+
+def _stdout_is_devnull() -> bool:
+    import os
+    try:
+        out, null = os.fstat(sys.stdout.fileno()), os.stat(os.devnull)
+    except (OSError, ValueError, AttributeError):  # stdout may be closed or a test double
+        return False
+    return (out.st_rdev, out.st_ino) == (null.st_rdev, null.st_ino)
 
 
 if __name__ == "__main__":  # pragma: no cover

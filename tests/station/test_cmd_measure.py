@@ -227,3 +227,16 @@ def test_too_large_t_is_told_apart_from_no_strings(capsys, files):
     assert str(files["pgm"]) in err[0] and "string edges found, but each keeps < 3 points" in err[0]
     assert "t=1000: use a smaller --t" in err[0]
     assert str(files["blank"]) in err[1] and "no strings found" in err[1]
+
+
+def test_stdout_closed_before_the_rich_table_is_not_a_qa_fail(files):
+    # ``harp measure IMG | head``: rich turns the broken pipe into SystemExit(1), which
+    # a production-line script would read as a QA FAIL; harp reports 141 instead
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([sys.executable, "-m", "station.cli", "measure", str(files["pgm"])],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO, env=env)
+    p.stdout.close()  # before the child has written anything: its first write fails
+    err = p.stderr.read().decode()
+    code = p.wait(timeout=120)
+    assert "Traceback" not in err, err
+    assert code == 141
