@@ -83,8 +83,11 @@ def _save(fig, path) -> Path:
     return Path(path)
 
 
-def _title(title: str, sub: str) -> str:
-    return (title + "\n" if title else "") + sub
+def _title(title: str, sub: str, width: int = 90) -> str:
+    """Plot title: ``title`` wrapped to ``width`` characters so it fits the figure, then ``sub``."""
+    import textwrap
+
+    return (textwrap.fill(title, width) + "\n" if title else "") + sub
 
 
 def _image_axes(ax, width, height):
