@@ -427,7 +427,10 @@ def _collect(lines_per_image, width, height, margin=2.0):
     pieces, img, lin, rejected = [], [], [], []
     for i, lines in enumerate(lines_per_image):
         for j, p in enumerate(lines):
-            p = np.asarray(p, dtype=np.float64)
+            try:
+                p = np.asarray(p, dtype=np.float64)
+            except (ValueError, TypeError):
+                return f"image {i} line {j}: points must be an (M, 2) array of numbers", []
             if p.ndim != 2 or p.shape[1] != 2:
                 return f"image {i} line {j}: points must be an (M, 2) array, got shape {p.shape}", []
             if not np.all(np.isfinite(p)):
@@ -441,11 +444,15 @@ def _collect(lines_per_image, width, height, margin=2.0):
                     or hi[1] > height - 0.5 + margin:
                 return (f"image {i} line {j} has points outside the {width}x{height} image "
                         f"(x {lo[0]:.1f}..{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f}): wrong image size?"), []
+            ev = np.linalg.eigvalsh(np.cov(p.T))  # scatter: an edge is elongated along its line
+            if not ev[1] > 0 or ev[0] > 0.25 * ev[1]:
+                rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
+                continue
             pieces.append(p)
             img.append(i)
             lin.append(j)
     if not pieces:
-        return "no usable edges (every edge has too few points)", rejected
+        return "no usable edges (every edge has too few points, non-finite coordinates or no direction)", rejected
     counts = np.array([len(p) for p in pieces])
     return _Edges(np.concatenate(pieces), np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
                   counts, np.array(img), np.array(lin)), rejected

@@ -10,7 +10,8 @@ simplest candidate (fewest parameters) whose CV ``d`` is within
 parameters on unseen shots.
 
 With fewer than three shots, a shot cannot be left out (the rest would have
-one orientation), so the folds leave out every other edge of every shot
+one orientation), so the folds leave out every other string (pair of
+adjacent edges, as :mod:`pipeline.measure` lists them) of every shot
 instead (``folds='edges'``); this checks over-fitting along the strings but
 not generalisation to a new orientation, and the selection says so.
 
@@ -122,6 +123,7 @@ class Selection:
 
 def _holdout_residuals(model, lines: Sequence[np.ndarray]) -> np.ndarray:
     pts = [np.asarray(p, dtype=np.float64) for p in lines if len(p) >= 3]
+    pts = [p for p in pts if np.all(np.isfinite(p))]  # as the fit does: an edge with NaN is no edge
     if not pts:
         return np.zeros(0)
     counts = np.array([len(p) for p in pts])
@@ -136,9 +138,11 @@ def _folds(lines_per_image, mode):
         for h in range(len(lines_per_image)):
             out.append(([s for i, s in enumerate(lines_per_image) if i != h], list(lines_per_image[h])))
     else:
+        # edges 2k, 2k+1 are the two sides of one string (pipeline.measure's order): hold out
+        # every other *string*, never one side of a string whose twin stays in the fit
         for parity in (0, 1):
-            train = [[p for j, p in enumerate(s) if j % 2 != parity] for s in lines_per_image]
-            held = [p for s in lines_per_image for j, p in enumerate(s) if j % 2 == parity]
+            train = [[p for j, p in enumerate(s) if (j // 2) % 2 != parity] for s in lines_per_image]
+            held = [p for s in lines_per_image for j, p in enumerate(s) if (j // 2) % 2 == parity]
             out.append((train, held))
     return out
 

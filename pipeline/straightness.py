@@ -94,6 +94,9 @@ def fit_line(points: np.ndarray) -> LineFit:
     # angle in [0, 180): y >= 0, and (1, 0) rather than (-1, 0)
     if direction[1] < 0 or (direction[1] == 0 and direction[0] < 0):
         direction = -direction
+    if np.degrees(np.arctan2(direction[1], direction[0])) >= 180.0:
+        # (-1, +1e-16): the angle rounds to 180; it is the horizontal direction 0
+        direction = np.array([1.0, 0.0])
     normal = np.array([-direction[1], direction[0]])
     return LineFit(centroid=c, direction=direction, normal=normal, S=q @ normal)
 
@@ -140,7 +143,9 @@ def hf_rms(points: np.ndarray, sigma_px: float = HF_SIGMA_PX) -> float:
     if half > 64 and S.size > 64:
         sm = fftconvolve(sig_stack, ker[None, :], mode="same", axes=1)
     else:
-        sm = np.stack([np.convolve(v, ker, mode="same") for v in sig_stack])
+        # centred "same" slice of the full convolution: np.convolve(mode="same")
+        # returns max(len(v), len(ker)) samples when the kernel is the longer one
+        sm = np.stack([np.convolve(v, ker, mode="full")[half:half + S.size] for v in sig_stack])
     a0, a1, a2, b0, b1 = sm
     m1 = a1 - k * a0
     m2 = a2 - 2 * k * a1 + k * k * a0

@@ -6,9 +6,11 @@ resampled data sets and look at how much the fitted field moves.
 
 Resampling units. Points of one edge are not independent (the edge detector
 and the t-smoothing correlate neighbours; a string may be slightly bent), so
-the unit is a whole *edge*: each replicate draws, within each image, as many
-edges as that image has, with replacement (``resample="edges"``; keeps every
-orientation in every replicate, which the fit needs). ``resample="images"``
+the unit is a whole *string* (its two edges, lines ``2k, 2k+1`` as
+:mod:`pipeline.measure` lists them, share the string's shape): each replicate
+draws, within each image, as many strings as that image has, with replacement
+(``resample="edges"``; keeps every orientation in every replicate, which the
+fit needs). ``resample="images"``
 draws whole shots instead, which also captures shot-to-shot effects but needs
 many orientations (a replicate that lost the orientation spread is counted as
 failed, not silently dropped).
@@ -168,12 +170,19 @@ def bootstrap_field_uncertainty(lines_per_image: Sequence[Sequence[np.ndarray]],
     data = [[np.asarray(p, np.float64) for j, p in enumerate(lines) if (i, j) not in dropped]
             for i, lines in enumerate(lines_per_image)]
     data = [lines for lines in data if lines]
+    # resampling units of "edges": strings, i.e. lines 2k, 2k+1 (pipeline.measure lists a string's
+    # two edges next to each other), grouped before dropping so a rejected edge keeps the pairing
+    strings = [[g for g in ([np.asarray(p, np.float64) for j, p in enumerate(lines)
+                             if j // 2 == k and (i, j) not in dropped] for k in range((len(lines) + 1) // 2)) if g]
+               for i, lines in enumerate(lines_per_image)]
+    strings = [groups for groups in strings if groups]
     rkw = {**kw, "robust": False, "init": full.model}
     rng = np.random.default_rng(seed)
     jobs = []
     for _ in range(int(n_boot)):  # all resampling first: the result does not depend on map_fn
         if resample == "edges":
-            sample = [[lines[k] for k in rng.integers(0, len(lines), len(lines))] for lines in data]
+            sample = [[p for k in rng.integers(0, len(groups), len(groups)) for p in groups[k]]
+                      for groups in strings]
         else:
             sample = [data[k] for k in rng.integers(0, len(data), len(data))]
         jobs.append((sample, width, height, rkw))

@@ -135,6 +135,23 @@ def test_too_few_edges_and_points_fail_clearly():
     assert "no usable edges" in _failure(fit_distortion([[np.zeros((2, 2))]], W, H))
 
 
+def test_directionless_edges_do_not_pass_for_a_second_orientation():
+    # one orientation plus two "edges" whose points have no direction (a dust blob, a stuck
+    # point): they must not satisfy the orientation check and yield a model from one orientation
+    shots = harp_point_sets(DECENTRED, W, H, (90,), noise=0.005, seed=5)
+    blobs = [np.full((6, 2), 500.0), np.array([[300.0, 300.0], [301.0, 300.0], [300.0, 301.0],
+                                                [301.0, 301.0], [300.5, 300.5]])]
+    for kw in (dict(model="radial", degree=4), dict(model="poly", degree=5)):
+        assert "orientation" in _failure(fit_distortion([list(shots[0]) + blobs], W, H, **kw))
+    r = fit_distortion([list(s) for s in harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005)]
+                       + [blobs], W, H)
+    assert isinstance(r, FitResult) and sum("direction" in e.reason for e in r.rejected) == 2
+
+
+def test_ragged_point_arrays_fail_clearly_not_raise():
+    assert "(M, 2)" in _failure(fit_distortion([[[[1.0, 2.0], [3.0]]]], W, H))
+
+
 def test_images_of_different_sizes_or_wrong_size_fail_clearly():
     shots = harp_point_sets(DECENTRED, W, H, (0, 60, 120), noise=0.005)
     assert "different sizes" in _failure(fit_distortion(shots, W, H, image_sizes=[(W, H), (W, H), (800, 600)]))
@@ -205,3 +222,10 @@ def test_real_photos_fit_two_hold_out_third(real, held, w_center):
           f"{r.d_after:.4f}, holdout {REAL[held]} d {d:.4f} d_max {dm:.4f} px")
     assert r.d_after < 0.03
     assert d <= 0.1
+
+
+def test_holdout_figure_skips_non_finite_edges_as_the_fit_does():
+    shots = harp_point_sets(DECENTRED, W, H, (0,), noise=0.005, seed=1)
+    good = corrected_straightness(DECENTRED, shots[0])
+    with_nan = corrected_straightness(DECENTRED, list(shots[0]) + [np.array([[1.0, np.nan]] * 10)])
+    assert np.isfinite(good[0]) and with_nan == good

@@ -54,3 +54,27 @@ def test_real_photos_radial_generalises_polynomial_does_not(real_harp_dir):
     assert sel.choice == cands[0]
     assert max(rows["radial4+tangential+prism"].fold_d) <= 0.1
     assert rows["poly5"].cv_d > 10 * rows["radial4+tangential+prism"].cv_d
+
+
+def test_edge_folds_hold_out_whole_strings_not_one_side_of_each():
+    # measure() lists a string's two edges next to each other (lines 2k, 2k+1: one string).
+    # Holding out one edge while fitting its twin 3 px away leaks the held-out string into the fit.
+    from pipeline.select import _folds
+
+    lines = [[np.full((6, 2), 10.0 * i + j) for j in range(8)] for i in range(2)]
+    for train, held in _folds(lines, "edges"):
+        held_ids = {float(p[0, 0]) for p in held}
+        train_ids = {float(p[0, 0]) for s in train for p in s}
+        assert held_ids and train_ids and not held_ids & train_ids
+        held_strings = {(int(v) // 10, int(v) % 10 // 2) for v in held_ids}
+        train_strings = {(int(v) // 10, int(v) % 10 // 2) for v in train_ids}
+        assert not held_strings & train_strings
+
+
+def test_a_non_finite_held_out_edge_does_not_void_the_cross_validation():
+    # the fit rejects an edge with non-finite points; the held-out measure must skip it too
+    shots = harp_point_sets(DECENTRED, W, H, (0, 45, 90, 135), noise=0.005, seed=5)
+    shots[1] = list(shots[1]) + [np.array([[1.0, np.nan]] * 10)]
+    sel = select_model(shots, W, H, candidates=CANDS[:2])
+    assert sel.folds == "images" and all(np.isfinite(r.cv_d) for r in sel.table)
+    assert sel.choice == Candidate("radial", 4, True)

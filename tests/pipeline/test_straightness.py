@@ -65,3 +65,41 @@ def test_bad_input_raises():
         straightness([])
     with pytest.raises(ValueError):
         straightness([np.zeros((1, 2))])
+
+
+def _hf_rms_direct(points, sigma_px):
+    """Brute-force Gaussian-weighted local linear regression (reference)."""
+    p = np.asarray(points, float)
+    S = fit_line(p).S
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+    step = s[-1] / (len(s) - 1)
+    k = np.arange(len(S)) * step
+    half = int(np.ceil(4.0 * sigma_px / step))
+    smooth = np.empty_like(S)
+    for i, k0 in enumerate(k):
+        j = np.abs(np.arange(len(S)) - i) <= half
+        wgt = np.exp(-0.5 * ((k[j] - k0) / sigma_px) ** 2)
+        A = np.column_stack([np.ones(j.sum()), k[j] - k0]) * np.sqrt(wgt)[:, None]
+        smooth[i] = np.linalg.lstsq(A, S[j] * np.sqrt(wgt), rcond=None)[0][0]
+    return float(np.sqrt(np.mean((S - smooth) ** 2)))
+
+
+@pytest.mark.parametrize("n, step", [(5, 30.0), (12, 30.0), (50, 1.0), (200, 1.0)])
+def test_hf_rms_on_edges_shorter_than_its_kernel(n, step):
+    # the Gaussian window (4 sigma each side) may be longer than the edge
+    s = np.arange(n) * step
+    rng = np.random.default_rng(3)
+    p = np.column_stack([s, 1e-3 * (s - s.mean()) ** 2 / step ** 2 + 0.05 * rng.standard_normal(n)])
+    assert hf_rms(p) == pytest.approx(_hf_rms_direct(p, 40.0), rel=1e-6, abs=1e-12)
+    straight = np.column_stack([s, 0.25 * s])
+    assert hf_rms(straight) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("slope", [-3e-16, -1e-16, -4e-17, 0.0, 4e-17])
+def test_angle_of_a_horizontal_line_stays_in_0_180(slope):
+    # rounding can leave the direction at (-1, +1e-16): its angle must read 0, never 180
+    x = np.arange(500.0)
+    p = np.column_stack([x, 100.0 + slope * x])
+    a = straightness([p]).angle_deg[0]
+    assert 0.0 <= a < 180.0
+    assert a == pytest.approx(0.0, abs=1e-9)

@@ -68,3 +68,24 @@ def test_replicates_run_through_any_map():
     with ProcessPoolExecutor(max_workers=2) as pool:
         pooled = bootstrap_field_uncertainty(data, W, H, KW, n_boot=4, seed=2, map_fn=pool.map)
     np.testing.assert_array_equal(serial.std, pooled.std)
+
+
+def test_edge_resampling_draws_whole_strings():
+    # measure() lists a string's two edges next to each other (lines 2k, 2k+1); they share the
+    # string's own shape, so the bootstrap unit is the string (issue 5: "over strings/shots"),
+    # never one side of it drawn independently of the other.
+    data = [[q for p in lines for q in (p, p + 0.25)] for lines in shots(0.01)]
+    jobs = []
+
+    def spy_map(fn, js):
+        js = list(js)
+        jobs.extend(js)
+        return map(fn, js)
+
+    u = bootstrap_field_uncertainty(data, W, H, KW, n_boot=3, seed=0, map_fn=spy_map)
+    assert u.n_boot == 3
+    for sample, *_ in jobs:
+        for lines in sample:
+            assert len(lines) % 2 == 0
+            for a, b in zip(lines[0::2], lines[1::2]):
+                np.testing.assert_allclose(b - a, 0.25)
