@@ -203,8 +203,10 @@ def straightness_of(points_list: Sequence[np.ndarray]) -> tuple[float, float]:
 
 
 def corrected_straightness(model: DistortionModel, points_list: Sequence[np.ndarray]) -> tuple[float, float]:
-    """``(d, d_max)`` of the edges after correction by ``model`` (holdout figure)."""
-    return straightness_of([model.undistort_points(p) for p in points_list if len(p) >= 3])
+    """``(d, d_max)`` of the edges after correction by ``model`` (holdout figure); edges with
+    non-finite points are skipped, as the fit skips them (NaN from the correction itself stays)."""
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in points_list]
+    return straightness_of([model.undistort_points(p) for p in pts if len(p) >= 3 and np.all(np.isfinite(p))])
 
 
 # ------------------------------------------------------ parametrisations
