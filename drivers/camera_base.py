@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from drivers.config_keys import check_config_keys
 from drivers.errors import DriverError
 from drivers.protocols import Frame
 
@@ -34,10 +35,7 @@ class CameraBase:
     @classmethod
     def from_config(cls, cfg: dict, **ctx):
         """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
-        unknown = sorted(set(cfg) - cls.CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"{cls.CONFIG_NAME}: unknown config key {unknown[0]!r}; "
-                             f"expected some of {', '.join(sorted(cls.CONFIG_KEYS))}")
+        check_config_keys(cls.CONFIG_NAME, cfg, cls.CONFIG_KEYS)
         kw = {k: v for k, v in cfg.items() if k != "driver"}
         return cls(kw.pop("device", cls.DEFAULT_DEVICE), **kw)
 

@@ -34,6 +34,7 @@ import re
 import threading
 import time
 
+from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.transport import SerialTransport
 
@@ -157,12 +158,7 @@ class GrblTurntable:
 
     @classmethod
     def from_config(cls, cfg: dict, **ctx) -> "GrblTurntable":
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"grbl turntable: unknown config key {unknown[0]!r}"
-                             f" (known: {', '.join(sorted(_CONFIG_KEYS - {'driver'}))})")
-        if not cfg.get("port"):
-            raise ValueError("grbl turntable: missing config key 'port' (device name or pyserial URL)")
+        check_config_keys("grbl turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
         if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
             raise ValueError("grbl turntable: 'steps_per_unit' needs 'steps_per_degree'")

@@ -39,6 +39,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.transport import SerialTransport
 
@@ -169,12 +170,7 @@ class ZaberTurntable:
 
     @classmethod
     def from_config(cls, cfg: dict, **ctx) -> "ZaberTurntable":
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"zaber turntable: unknown config key {unknown[0]!r}"
-                             f" (known: {', '.join(sorted(_CONFIG_KEYS - {'driver'}))})")
-        if not cfg.get("port"):
-            raise ValueError("zaber turntable: missing config key 'port' (device name or pyserial URL)")
+        check_config_keys("zaber turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
         if "device_address" in cfg:
             if "device" in cfg:

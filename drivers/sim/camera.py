@@ -38,6 +38,7 @@ from collections import deque
 
 import numpy as np
 
+from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceDisconnected, DeviceTimeout
 from drivers.protocols import CameraIdentity, Frame
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
@@ -142,9 +143,7 @@ class SimulatedCamera:
         bad value raises ValueError naming the key.
         """
         cfg = dict(cfg)
-        for key in cfg:
-            if key not in CONFIG_KEYS:
-                raise ValueError(f"sim camera: unknown config key {key!r}; known: {', '.join(CONFIG_KEYS)}")
+        check_config_keys("sim camera", cfg, CONFIG_KEYS)
         world = world if world is not None else SimWorld()
         kw: dict = {}
         scene_kw: dict = {}
