@@ -43,10 +43,9 @@ from scipy.special import ndtr
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.edges import detect_edges  # noqa: E402
-from pipeline.resample import smooth_subsample  # noqa: E402
-from tests.pipeline.synthetic_edges import (line_normal, quantise, render_step,  # noqa: E402
-                                            render_string)
+from pipeline.edges import detect_edges
+from pipeline.resample import smooth_subsample
+from tests.pipeline.synthetic_edges import line_normal, quantise, render_step, render_string
 
 _DEFAULT_REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"
 REAL_HARP = Path(os.environ.get("HARP_REAL_DATA", _DEFAULT_REAL))
@@ -74,8 +73,15 @@ def precision_row(angle, noise, seeds):
                 smooth.append((smooth_subsample(xy, t=30) - p) @ nrm)
     rms = lambda v: float(np.sqrt(np.mean(np.concatenate(v) ** 2)))  # noqa: E731
     maxbias = lambda v: float(max(abs(x.mean()) for x in v))  # noqa: E731
-    return (float(np.concatenate(raw).mean()), maxbias(raw), rms(raw), rms(smooth),
-            sum(x.size for x in smooth), maxbias(raw_par), rms(raw_par))
+    return (
+        float(np.concatenate(raw).mean()),
+        maxbias(raw),
+        rms(raw),
+        rms(smooth),
+        sum(x.size for x in smooth),
+        maxbias(raw_par),
+        rms(raw_par),
+    )
 
 
 MODELS = ("continuous", "gaussian", "parabola")
@@ -139,8 +145,7 @@ def strings_image(h, w, n_strings=14, width=3.0, angle_deg=3.0, noise=1.5, seed=
     img = np.full((h, w), 200.0, np.float32)
     for k in range(n_strings):
         c = (k + 0.5) * w / n_strings
-        img -= (170.0 * (ndtr((d - c + width / 2) / 0.7)
-                         - ndtr((d - c - width / 2) / 0.7))).astype(np.float32)
+        img -= (170.0 * (ndtr((d - c + width / 2) / 0.7) - ndtr((d - c - width / 2) / 0.7))).astype(np.float32)
     img += rng.normal(0.0, noise, (h, w)).astype(np.float32)
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
@@ -165,22 +170,27 @@ def main(argv=None):
     ap.add_argument("--no-24mp", action="store_true")
     args = ap.parse_args(argv)
 
-    print(f"# Edge precision: {N}x{N} 8-bit step edge 200/30, blur 0.7 px, sigma=1, "
-          f"{args.seeds} seeds per cell; distances to the true line in px")
+    print(
+        f"# Edge precision: {N}x{N} 8-bit step edge 200/30, blur 0.7 px, sigma=1, "
+        f"{args.seeds} seeds per cell; distances to the true line in px"
+    )
     print()
-    print("| angle | noise | mean bias | max abs bias | raw RMS | RMS t=30 (pts) "
-          "| parabola max abs bias | parabola RMS |")
-    print("|------:|------:|----------:|-------------:|--------:|---------------:"
-          "|----------------------:|-------------:|")
+    print(
+        "| angle | noise | mean bias | max abs bias | raw RMS | RMS t=30 (pts) | parabola max abs bias | parabola RMS |"
+    )
+    print(
+        "|------:|------:|----------:|-------------:|--------:|---------------:|----------------------:|-------------:|"
+    )
     for noise in NOISES:
         for angle in ANGLES:
             b, mb, r, s, ns, mbp, rp = precision_row(angle, noise, args.seeds)
             nz = "float" if noise is None else f"{noise:5.1f}"
-            print(f"| {angle:5d} | {nz:>5s} | {b:+9.4f} | {mb:12.4f} | {r:7.4f} "
-                  f"| {s:8.4f} ({ns:3d}) | {mbp:21.4f} | {rp:12.4f} |")
+            print(
+                f"| {angle:5d} | {nz:>5s} | {b:+9.4f} | {mb:12.4f} | {r:7.4f} "
+                f"| {s:8.4f} ({ns:3d}) | {mbp:21.4f} | {rp:12.4f} |"
+            )
     print()
-    print("# Sub-pixel model error vs optical blur (noise-free float images, sigma=1): "
-          "max |error| px")
+    print("# Sub-pixel model error vs optical blur (noise-free float images, sigma=1): max |error| px")
     print()
     print("| edge | blur px | continuous (default) | gaussian (log-parabola) | parabola |")
     print("|:-----|--------:|---------------------:|------------------------:|---------:|")
@@ -190,8 +200,10 @@ def main(argv=None):
             name = "step" if width is None else f"{width:g} px string"
             print(f"| {name} | {blur:7.1f} | {e[0]:20.4f} | {e[1]:23.4f} | {e[2]:8.4f} |")
     print()
-    print("# Straight dark string (8-bit 200/30, blur 0.7, noise 1.5, 900 px long), "
-          "d = RMS distance of the t=30 points to their own line, px")
+    print(
+        "# Straight dark string (8-bit 200/30, blur 0.7, noise 1.5, 900 px long), "
+        "d = RMS distance of the t=30 points to their own line, px"
+    )
     print()
     print("| width px | angle deg | continuous (default) | gaussian (log-parabola) | parabola |")
     print("|---------:|----------:|---------------------:|------------------------:|---------:|")
@@ -200,15 +212,15 @@ def main(argv=None):
             e = [string_straightness(width, angle, m) for m in MODELS]
             print(f"| {width:8.0f} | {angle:9.1f} | {e[0]:20.4f} | {e[1]:23.4f} | {e[2]:8.4f} |")
     print()
-    print(f"# Detector speed ({os.cpu_count()} CPUs, cv2 threads {cv2.getNumThreads()}, "
-          f"load average {os.getloadavg()[0]:.1f} at start), best of 5 runs. Synthetic: "
-          "14 dark strings 3 px wide, noise 1.5. Tiled photo: real noise and dust, 4x the "
-          "strings of a real 24 MP harp photo (pessimistic)")
+    print(
+        f"# Detector speed ({os.cpu_count()} CPUs, cv2 threads {cv2.getNumThreads()}, "
+        f"load average {os.getloadavg()[0]:.1f} at start), best of 5 runs. Synthetic: "
+        "14 dark strings 3 px wide, noise 1.5. Tiled photo: real noise and dust, 4x the "
+        "strings of a real 24 MP harp photo (pessimistic)"
+    )
     print()
-    print("| image | MP | detect_edges wall s | detect_edges CPU s | chains | points "
-          "| cv2.Canny wall s |")
-    print("|------:|---:|--------------------:|-------------------:|-------:|-------:"
-          "|-----------------:|")
+    print("| image | MP | detect_edges wall s | detect_edges CPU s | chains | points | cv2.Canny wall s |")
+    print("|------:|---:|--------------------:|-------------------:|-------:|-------:|-----------------:|")
     sizes = [(1200, 1700)] + ([] if args.no_24mp else [(4000, 6000)])
     images = [(f"synthetic {w}x{h}", strings_image(h, w)) for h, w in sizes]
     real = REAL_HARP / "IMG_6931.pgm"
@@ -223,8 +235,10 @@ def main(argv=None):
         t_det, c_det, chains = timed(lambda: detect_edges(img))
         t_canny, _, _ = timed(lambda: cv2.Canny(img, 20, 40))
         npts = sum(len(c) for c in chains)
-        print(f"| {name} | {h * w / 1e6:4.1f} | {t_det:19.3f} | {c_det:18.3f} | {len(chains):6d} "
-              f"| {npts:6d} | {t_canny:16.3f} |")
+        print(
+            f"| {name} | {h * w / 1e6:4.1f} | {t_det:19.3f} | {c_det:18.3f} | {len(chains):6d} "
+            f"| {npts:6d} | {t_canny:16.3f} |"
+        )
     print()
     print(f"load average at end: {os.getloadavg()[0]:.1f}")
     return 0

@@ -23,20 +23,28 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.fit import FitResult, fit_distortion  # noqa: E402
-from pipeline.models import RadialModel  # noqa: E402
-from tests.pipeline.harp_points import harp_point_sets  # noqa: E402
+from pipeline.fit import FitResult, fit_distortion
+from pipeline.models import RadialModel
+from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 1761, 1174
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(900, 570), tangential=(0.0005, -0.0003))
-CONFIGS = [("radial4", dict(model="radial", degree=4)),
-           ("radial4+tangential+prism", dict(model="radial", degree=4, tangential=True, prism=True)),
-           ("radial6+tangential+prism", dict(model="radial", degree=6, tangential=True, prism=True)),
-           ("poly3", dict(model="poly", degree=3)), ("poly5", dict(model="poly", degree=5)),
-           ("poly7", dict(model="poly", degree=7)), ("poly9", dict(model="poly", degree=9)),
-           ("poly11", dict(model="poly", degree=11))]
-DATASETS = [("3 shots, spacing 120 px", 3, 120.0), ("3 shots, spacing 60 px", 3, 60.0),
-            ("6 shots, spacing 60 px", 6, 60.0), ("12 shots, spacing 40 px", 12, 40.0)]
+CONFIGS = [
+    ("radial4", dict(model="radial", degree=4)),
+    ("radial4+tangential+prism", dict(model="radial", degree=4, tangential=True, prism=True)),
+    ("radial6+tangential+prism", dict(model="radial", degree=6, tangential=True, prism=True)),
+    ("poly3", dict(model="poly", degree=3)),
+    ("poly5", dict(model="poly", degree=5)),
+    ("poly7", dict(model="poly", degree=7)),
+    ("poly9", dict(model="poly", degree=9)),
+    ("poly11", dict(model="poly", degree=11)),
+]
+DATASETS = [
+    ("3 shots, spacing 120 px", 3, 120.0),
+    ("3 shots, spacing 60 px", 3, 60.0),
+    ("6 shots, spacing 60 px", 6, 60.0),
+    ("12 shots, spacing 40 px", 12, 40.0),
+]
 
 
 LOAD_AT_START = os.getloadavg()[0]
@@ -63,11 +71,13 @@ def main() -> str:
             cells.append(f"{best:.3f} s" + ("" if ok else " (failed)") + (f" / d {r.d_after:.4f}" if ok else ""))
         rows.append(f"| {label} | {n_e} | {n_p} | " + " | ".join(cells) + " |")
         print(rows[-1], flush=True)
-    info = (f"Fit time (best of 3, wall clock) and fitted d (px) of `fit_distortion`, {W}x{H} images.\n"
-            f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-            f"Python {platform.python_version()}, numpy {np.__version__}; load average at start "
-            f"{LOAD_AT_START:.1f} (the machine is shared: times are upper bounds).\n"
-            f"Command: `.venv/bin/python benchmarks/fit_speed.py --write`\n\n")
+    info = (
+        f"Fit time (best of 3, wall clock) and fitted d (px) of `fit_distortion`, {W}x{H} images.\n"
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"Python {platform.python_version()}, numpy {np.__version__}; load average at start "
+        f"{LOAD_AT_START:.1f} (the machine is shared: times are upper bounds).\n"
+        f"Command: `.venv/bin/python benchmarks/fit_speed.py --write`\n\n"
+    )
     return info + "\n".join(rows) + "\n"
 
 

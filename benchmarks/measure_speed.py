@@ -85,12 +85,15 @@ def bench(name, img, path, repeat):
             sys.stdout = old
 
     cli_t = _median_time(cli, repeat)
-    canny = _median_time(lambda: cv2.Canny(img if img.dtype == np.uint8 else (img >> 8).astype(np.uint8), 20, 40),
-                         repeat)
+    canny = _median_time(
+        lambda: cv2.Canny(img if img.dtype == np.uint8 else (img >> 8).astype(np.uint8), 20, 40), repeat
+    )
     m = measure_image(img)
-    return (f"| {name} | {w}x{h} ({w * h / 1e6:.1f} MP) | {m.n_lines} | {cli_t:.2f} | {total:.2f} | "
-            f"{stage['edges']:.2f} | {stage['group']:.2f} | {stage['per-edge']:.2f} | {cpu:.2f} | {canny:.3f} | "
-            f"{total / canny:.0f}x |")
+    return (
+        f"| {name} | {w}x{h} ({w * h / 1e6:.1f} MP) | {m.n_lines} | {cli_t:.2f} | {total:.2f} | "
+        f"{stage['edges']:.2f} | {stage['group']:.2f} | {stage['per-edge']:.2f} | {cpu:.2f} | {canny:.3f} | "
+        f"{total / canny:.0f}x |"
+    )
 
 
 def main(argv=None):
@@ -107,19 +110,29 @@ def main(argv=None):
     sizes = [(1732, 1155, 60.0, 3.0)] + ([] if args.no_24mp else [(6000, 4000, 200.0, 8.0)])
     for w, h, spacing, width in sizes:
         lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.006))
-        r = render_harp(w, h, HarpScene(angle_deg=80.0, spacing_px=spacing, string_width_px=width), lens=lens,
-                        noise_sigma=1.5, seed=0)
+        r = render_harp(
+            w,
+            h,
+            HarpScene(angle_deg=80.0, spacing_px=spacing, string_width_px=width),
+            lens=lens,
+            noise_sigma=1.5,
+            seed=0,
+        )
         p = tmp / f"synthetic_{w}x{h}.pgm"
         cv2.imwrite(str(p), r.image)
         cases.append((f"synthetic {w * h / 1e6:.0f} MP", r.image, p))
 
     load = os.getloadavg()[0]
-    print(f"harp measure speed, {os.cpu_count()} cores (load average {load:.1f} when started), "
-          f"median of {args.repeat} runs, wall seconds")
+    print(
+        f"harp measure speed, {os.cpu_count()} cores (load average {load:.1f} when started), "
+        f"median of {args.repeat} runs, wall seconds"
+    )
     print()
-    print("| image | size | edges found | `harp measure` (read+measure) | measure_image | "
-          "- sub-pixel edges | - grouping | - per-edge smoothing+straightness | measure_image CPU s | "
-          "cv2.Canny | measure / Canny |")
+    print(
+        "| image | size | edges found | `harp measure` (read+measure) | measure_image | "
+        "- sub-pixel edges | - grouping | - per-edge smoothing+straightness | measure_image CPU s | "
+        "cv2.Canny | measure / Canny |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     try:
         for name, img, path in cases:

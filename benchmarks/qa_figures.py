@@ -27,12 +27,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.sim.lens import lens_for_focus  # noqa: E402
-from pipeline.compare import compare_models  # noqa: E402
-from pipeline.fit import fit_distortion  # noqa: E402
-from pipeline.interpolate import FocusInterpolator, leave_one_out_error  # noqa: E402
-from pipeline.uncertainty import bootstrap_field_uncertainty  # noqa: E402
-from tests.pipeline.harp_points import harp_point_sets  # noqa: E402
+from drivers.sim.lens import lens_for_focus
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.interpolate import FocusInterpolator, leave_one_out_error
+from pipeline.uncertainty import bootstrap_field_uncertainty
+from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 1280, 960
 ANGLES = [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5]
@@ -52,8 +52,7 @@ def interpolation_table(noise) -> list[str]:
     (loo,) = leave_one_out_error(fits, W, H)
     t_loo = time.perf_counter() - t0
     interp = FocusInterpolator(fits, W, H)
-    rows.append(f"| {noise:g} | leave-one-out at 0.5 (from 0, 1) | {loo.rms_px:.4f} | {loo.max_px:.4f} | "
-                f"{t_loo:.2f} |")
+    rows.append(f"| {noise:g} | leave-one-out at 0.5 (from 0, 1) | {loo.rms_px:.4f} | {loo.max_px:.4f} | {t_loo:.2f} |")
     for f in (0.25, 0.75):
         c = compare_models(interp.at(f), lens_for_focus(f, W, H), W, H)
         rows.append(f"| {noise:g} | interpolated at {f:g} vs true lens | {c.rms:.4f} | {c.max:.4f} | |")
@@ -78,15 +77,24 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--write", action="store_true", help="save the tables to benchmarks/RESULTS-qa.md")
     args = ap.parse_args()
-    out = [f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-           f"Python {platform.python_version()}; demo lens {W}x{H}, 8 orientations, radial 4 + tangential.",
-           "", "### Focus interpolation (calibrated at 0, 0.5, 1; PCHIP in focus, 32 px grid)", "",
-           "| point noise (px) | what | RMS (px) | max (px) | time (s) |", "|---:|:---|---:|---:|---:|"]
+    out = [
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"Python {platform.python_version()}; demo lens {W}x{H}, 8 orientations, radial 4 + tangential.",
+        "",
+        "### Focus interpolation (calibrated at 0, 0.5, 1; PCHIP in focus, 32 px grid)",
+        "",
+        "| point noise (px) | what | RMS (px) | max (px) | time (s) |",
+        "|---:|:---|---:|---:|---:|",
+    ]
     for noise in (0.0, 0.01, 0.03):
         out += interpolation_table(noise)
-    out += ["", "### Bootstrap field uncertainty (20 replicates) vs the fit's true error", "",
-            "| point noise (px) | edges | unc. RMS | unc. max | true err. RMS | true err. max | time (s) |",
-            "|---:|---:|---:|---:|---:|---:|---:|"]
+    out += [
+        "",
+        "### Bootstrap field uncertainty (20 replicates) vs the fit's true error",
+        "",
+        "| point noise (px) | edges | unc. RMS | unc. max | true err. RMS | true err. max | time (s) |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for noise in (0.005, 0.01, 0.03):
         out += bootstrap_rows(noise)
     text = "\n".join(out) + "\n"
@@ -94,7 +102,8 @@ def main() -> None:
     if args.write:
         (Path(__file__).resolve().parent / "RESULTS-qa.md").write_text(
             "# Focus interpolation and field uncertainty\n\n`.venv/bin/python benchmarks/qa_figures.py --write`"
-            "\n\n" + text)
+            "\n\n" + text
+        )
 
 
 if __name__ == "__main__":

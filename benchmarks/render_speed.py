@@ -26,8 +26,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drivers.sim.lens import lens_for_focus  # noqa: E402
-from pipeline.render import HarpScene, render_harp, true_edge_curves  # noqa: E402
+from drivers.sim.lens import lens_for_focus
+from pipeline.render import HarpScene, render_harp, true_edge_curves
 
 SIZES = [("2 MP", 1761, 1174), ("24 MP", 6000, 4000)]
 
@@ -49,8 +49,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-24mp", action="store_true")
     args = ap.parse_args(argv)
     scene = HarpScene(angle_deg=30.0)
-    print(f"harp renderer speed ({platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"median of {args.repeat})\n")
+    print(
+        f"harp renderer speed ({platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"median of {args.repeat})\n"
+    )
     print("| size | lens | render_harp wall (s) | render_harp CPU (s) | true_edge_curves wall (s) | edges |")
     print("| --- | --- | ---: | ---: | ---: | ---: |")
     for name, w, h in SIZES:

@@ -52,9 +52,12 @@ def main() -> int:
         load0 = os.getloadavg()[0]
         c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "station.cli", "session", "run", str(cfg), "--quiet",
-                               "--name", "demo"],
-                              cwd=REPO, capture_output=True, text=True)
+        proc = subprocess.run(
+            [sys.executable, "-m", "station.cli", "session", "run", str(cfg), "--quiet", "--name", "demo"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+        )
         wall = time.perf_counter() - t0
         c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         load1 = os.getloadavg()[0]
@@ -65,22 +68,29 @@ def main() -> int:
         with ProfileStore(Path(tmp) / "profiles.sqlite") as st:
             profiles = st.profiles()
         w, h = profiles[0].width, profiles[0].height
-        print(f"## `harp session run {args.config.relative_to(REPO)}` "
-              f"({w}x{h}, {len(d['focus']['settings'])} focus x {len(d['capture']['orientations_deg'])} "
-              f"orientations x {d['capture']['frames_per_orientation']} frames)\n")
+        print(
+            f"## `harp session run {args.config.relative_to(REPO)}` "
+            f"({w}x{h}, {len(d['focus']['settings'])} focus x {len(d['capture']['orientations_deg'])} "
+            f"orientations x {d['capture']['frames_per_orientation']} frames)\n"
+        )
         print("| focus | holdout d (px) | field unc. RMS / max (px) | error vs true lens RMS (px) | max (px) |")
         print("|---:|---:|---:|---:|---:|")
         for p in profiles:
             c = compare_models(model_from_dict(p.model), lens_for_focus(p.focus, w, h), w, h, step=10.0)
-            unc = ("-" if p.field_uncertainty_rms is None
-                   else f"{p.field_uncertainty_rms:.4f} / {p.field_uncertainty_max:.4f}")
+            unc = (
+                "-"
+                if p.field_uncertainty_rms is None
+                else f"{p.field_uncertainty_rms:.4f} / {p.field_uncertainty_max:.4f}"
+            )
             print(f"| {p.focus:g} | {p.holdout_d:.4f} | {unc} | {c.rms:.4f} | {c.max:.4f} |")
         recs = [json.loads(line) for line in (Path(tmp) / "s" / "demo" / "manifest.jsonl").open()]
         t_of = {r["kind"]: r["t"] for r in recs}
-        report = (f"{t_of['report'] - t_of['qa_session']:.1f} s" if "report" in t_of else "not written")
-        print(f"\nwall {wall:.1f} s, CPU {cpu:.1f} s (session and its worker processes), "
-              f"of which the session report (Markdown + HTML, {len(list((Path(tmp) / 's' / 'demo' / 'report').glob('*.png')))} PNGs) "
-              f"{report}; load average {load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores")
+        report = f"{t_of['report'] - t_of['qa_session']:.1f} s" if "report" in t_of else "not written"
+        print(
+            f"\nwall {wall:.1f} s, CPU {cpu:.1f} s (session and its worker processes), "
+            f"of which the session report (Markdown + HTML, {len(list((Path(tmp) / 's' / 'demo' / 'report').glob('*.png')))} PNGs) "
+            f"{report}; load average {load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores"
+        )
     return 0
 
 

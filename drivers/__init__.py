@@ -10,11 +10,17 @@ yet opened: use it as a context manager.
 from __future__ import annotations
 
 import importlib
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from drivers.errors import (  # noqa: F401  (re-exported)
-    CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout,
-    DriverError, ProtocolError,
+    CaptureError,
+    DeviceDisconnected,
+    DeviceFault,
+    DeviceRejected,
+    DeviceTimeout,
+    DriverError,
+    ProtocolError,
 )
 from drivers.protocols import Camera, CameraIdentity, Frame, Turntable  # noqa: F401
 

@@ -59,7 +59,11 @@ import numpy as np
 
 from drivers.camera_base import CameraBase
 from drivers.errors import (
-    CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError,
+    CaptureError,
+    DeviceDisconnected,
+    DeviceRejected,
+    DeviceTimeout,
+    DriverError,
 )
 from drivers.frames import to_grey
 from drivers.protocols import CameraIdentity, Frame
@@ -88,7 +92,8 @@ def _aravis():
         except (ImportError, ValueError) as exc:
             raise DriverError(
                 "Aravis 0.8 is not available (install gir1.2-aravis-0.8 and PyGObject<3.51; "
-                f"see scripts/setup.sh): {exc}") from None
+                f"see scripts/setup.sh): {exc}"
+            ) from None
         _ARAVIS = Aravis
     return _ARAVIS
 
@@ -110,10 +115,8 @@ def _select_fake_xml(Aravis, path: str | None) -> None:
         if _FAKE_XML_STATE["embedded"] is None:
             from gi.repository import Gio
 
-            data = Gio.resources_lookup_data("/org/aravis/arv-fake-camera.xml",
-                                             Gio.ResourceLookupFlags.NONE).get_data()
-            with tempfile.NamedTemporaryFile("wb", prefix="harp-arv-fake-", suffix=".xml",
-                                             delete=False) as fh:
+            data = Gio.resources_lookup_data("/org/aravis/arv-fake-camera.xml", Gio.ResourceLookupFlags.NONE).get_data()
+            with tempfile.NamedTemporaryFile("wb", prefix="harp-arv-fake-", suffix=".xml", delete=False) as fh:
                 fh.write(data)
             _FAKE_XML_STATE["embedded"] = fh.name
         path = _FAKE_XML_STATE["embedded"]
@@ -154,21 +157,47 @@ class AravisCamera(CameraBase):
         GigE Vision stream packet size in bytes.
     """
 
-    CONFIG_KEYS = frozenset({
-        "driver", "device", "pixel_format", "exposure_us", "gain_db", "focus", "trigger", "roi",
-        "focus_feature", "focus_type", "autofocus_feature", "autofocus_off", "gain_db_per_raw",
-        "buffers", "fake_genicam_xml", "packet_size",
-    })
+    CONFIG_KEYS = frozenset(
+        {
+            "driver",
+            "device",
+            "pixel_format",
+            "exposure_us",
+            "gain_db",
+            "focus",
+            "trigger",
+            "roi",
+            "focus_feature",
+            "focus_type",
+            "autofocus_feature",
+            "autofocus_off",
+            "gain_db_per_raw",
+            "buffers",
+            "fake_genicam_xml",
+            "packet_size",
+        }
+    )
     CONFIG_NAME = "aravis camera"
 
-    def __init__(self, device: str | None = None, *, pixel_format: str = "Mono8",
-                 exposure_us: float | None = None, gain_db: float | None = None,
-                 focus: float | None = None, trigger: str = "software",
-                 roi: tuple[int, int, int, int] | None = None,
-                 focus_feature: str | None = None, focus_type: str = "auto",
-                 autofocus_feature: str | None = None, autofocus_off: Any = None,
-                 gain_db_per_raw: float = 1.0, buffers: int = 3,
-                 fake_genicam_xml: str | None = None, packet_size: int | None = None):
+    def __init__(
+        self,
+        device: str | None = None,
+        *,
+        pixel_format: str = "Mono8",
+        exposure_us: float | None = None,
+        gain_db: float | None = None,
+        focus: float | None = None,
+        trigger: str = "software",
+        roi: tuple[int, int, int, int] | None = None,
+        focus_feature: str | None = None,
+        focus_type: str = "auto",
+        autofocus_feature: str | None = None,
+        autofocus_off: Any = None,
+        gain_db_per_raw: float = 1.0,
+        buffers: int = 3,
+        fake_genicam_xml: str | None = None,
+        packet_size: int | None = None,
+    ):
         if pixel_format not in PIXEL_FORMATS:
             raise ValueError(f"pixel_format {pixel_format!r}: expected one of {', '.join(PIXEL_FORMATS)}")
         if focus_type not in ("auto", "integer", "float"):
@@ -287,8 +316,7 @@ class AravisCamera(CameraBase):
             roi = self._roi
         self._call(f"region {roi}", cam.set_region, *roi)
         region = cam.get_region()
-        rx, ry, rw, rh = ((region.x, region.y, region.width, region.height)
-                          if hasattr(region, "width") else region)
+        rx, ry, rw, rh = (region.x, region.y, region.width, region.height) if hasattr(region, "width") else region
         if (rw, rh) != roi[2:]:
             raise DeviceRejected(f"{self.name}: region {roi} not accepted (device has {rx},{ry},{rw},{rh})")
         self._size = (int(rw), int(rh))
@@ -315,14 +343,18 @@ class AravisCamera(CameraBase):
         if not self._has(self.focus_feature):
             raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} not found on device")
         node = self._device.get_feature(self.focus_feature)
-        kind = ("float" if isinstance(node, Aravis.GcFloat)
-                else "integer" if isinstance(node, Aravis.GcInteger) else None)
+        kind = (
+            "float" if isinstance(node, Aravis.GcFloat) else "integer" if isinstance(node, Aravis.GcInteger) else None
+        )
         if kind is None:
-            raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} is a "
-                                 f"{type(node).__name__}, not an Integer or Float")
+            raise DeviceRejected(
+                f"{self.name}: focus_feature {self.focus_feature!r} is a {type(node).__name__}, not an Integer or Float"
+            )
         if self._focus_type not in ("auto", kind):
-            raise DeviceRejected(f"{self.name}: focus_feature {self.focus_feature!r} is {kind}, "
-                                 f"configured focus_type is {self._focus_type}")
+            raise DeviceRejected(
+                f"{self.name}: focus_feature {self.focus_feature!r} is {kind}, "
+                f"configured focus_type is {self._focus_type}"
+            )
         self._focus_kind = kind
         if self.autofocus_feature and not self._has(self.autofocus_feature):
             raise DeviceRejected(f"{self.name}: autofocus_feature {self.autofocus_feature!r} not found on device")
@@ -342,7 +374,7 @@ class AravisCamera(CameraBase):
     def close(self) -> None:
         cam, self._camera = self._camera, None
         if cam is not None:
-            with contextlib.suppress(Exception):  # noqa: BLE001 - a vanished device may fail to stop; we drop it anyway
+            with contextlib.suppress(Exception):
                 cam.stop_acquisition()
         self._stream = None  # drops the stream thread (joined on finalize)
         self._device = None
@@ -487,14 +519,17 @@ class AravisCamera(CameraBase):
                 continue
             try:
                 image = self._to_array(Aravis, buf)
-                extra = {"frame_id": int(buf.get_frame_id()),
-                         "device_timestamp_ns": int(buf.get_timestamp()),
-                         "pixel_format": self._pixel_format}
+                extra = {
+                    "frame_id": int(buf.get_frame_id()),
+                    "device_timestamp_ns": int(buf.get_timestamp()),
+                    "pixel_format": self._pixel_format,
+                }
             finally:
                 stream.push_buffer(buf)
             break
-        return self._frame(image, (sys_ts / 1e9) if sys_ts else time.time(), self.get_exposure(),
-                           self.get_gain(), extra)
+        return self._frame(
+            image, (sys_ts / 1e9) if sys_ts else time.time(), self.get_exposure(), self.get_gain(), extra
+        )
 
     def _to_array(self, Aravis, buf) -> np.ndarray:
         w, h = buf.get_image_width(), buf.get_image_height()

@@ -73,10 +73,17 @@ class CameraBase:
             raise ValueError(f"{self.name}: {what} must be finite, got {value!r}")
         return v
 
-    def _frame(self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float,
-               extra: dict) -> Frame:
+    def _frame(self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float, extra: dict) -> Frame:
         """The next :class:`Frame` (focus read back now, counter advanced)."""
-        frame = Frame(image=image, timestamp=timestamp, exposure_us=exposure_us, gain_db=gain_db,
-                      focus=self.get_focus(), camera=self._identity, counter=self._counter, extra=extra)
+        frame = Frame(
+            image=image,
+            timestamp=timestamp,
+            exposure_us=exposure_us,
+            gain_db=gain_db,
+            focus=self.get_focus(),
+            camera=self._identity,
+            counter=self._counter,
+            extra=extra,
+        )
         self._counter += 1
         return frame

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Collection, Mapping
+from collections.abc import Collection, Mapping
 
 
-def check_config_keys(name: str, cfg: Mapping, known: Collection[str],
-                      required: Mapping[str, str] | None = None) -> None:
+def check_config_keys(
+    name: str, cfg: Mapping, known: Collection[str], required: Mapping[str, str] | None = None
+) -> None:
     """Raise ``ValueError`` naming the first unknown key, or a missing required one.
 
     ``name`` prefixes the message (e.g. ``"zaber turntable"``); ``known`` holds
@@ -16,8 +17,7 @@ def check_config_keys(name: str, cfg: Mapping, known: Collection[str],
     known = set(known) | {"driver"}
     unknown = sorted(set(cfg) - known)
     if unknown:
-        raise ValueError(f"{name}: unknown config key {unknown[0]!r}"
-                         f" (known: {', '.join(sorted(known - {'driver'}))})")
+        raise ValueError(f"{name}: unknown config key {unknown[0]!r} (known: {', '.join(sorted(known - {'driver'}))})")
     for key, what in (required or {}).items():
         if not cfg.get(key):
             raise ValueError(f"{name}: missing config key {key!r} ({what})")

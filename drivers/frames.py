@@ -18,15 +18,24 @@ import numpy as np
 from drivers.errors import CaptureError
 
 __all__ = [
-    "GREY_FORMATS", "grey8", "grey16", "yuyv_luma", "mjpeg_grey", "to_grey", "bytes_per_pixel",
+    "GREY_FORMATS",
+    "grey8",
+    "grey16",
+    "yuyv_luma",
+    "mjpeg_grey",
+    "to_grey",
+    "bytes_per_pixel",
 ]
 
 #: format name -> (numpy dtype, bytes per pixel); MJPG is compressed (no fixed size)
 _PACKED = {
-    "GREY": ("u1", 1), "Mono8": ("u1", 1),
-    "Y16": ("<u2", 2), "Mono16": ("<u2", 2),
+    "GREY": ("u1", 1),
+    "Mono8": ("u1", 1),
+    "Y16": ("<u2", 2),
+    "Mono16": ("<u2", 2),
     # GenICam unpacked Mono10/Mono12: one little-endian 16-bit word per pixel
-    "Mono10": ("<u2", 2), "Mono12": ("<u2", 2),
+    "Mono10": ("<u2", 2),
+    "Mono12": ("<u2", 2),
     "YUYV": ("u1", 2),
 }
 GREY_FORMATS = tuple(_PACKED) + ("MJPG",)
@@ -37,8 +46,9 @@ def bytes_per_pixel(fmt: str) -> int:
     try:
         return _PACKED[fmt][1]
     except KeyError:
-        raise ValueError(f"pixel format {fmt!r} has no fixed pixel size; expected one of "
-                         f"{', '.join(_PACKED)}") from None
+        raise ValueError(
+            f"pixel format {fmt!r} has no fixed pixel size; expected one of {', '.join(_PACKED)}"
+        ) from None
 
 
 def _rows(data, width: int, height: int, bpp: int, bytes_per_line: int | None, fmt: str) -> np.ndarray:
@@ -52,8 +62,9 @@ def _rows(data, width: int, height: int, bpp: int, bytes_per_line: int | None, f
     buf = np.frombuffer(data, dtype=np.uint8)
     need = stride * (height - 1) + row
     if buf.size < need:
-        raise CaptureError(f"{fmt} frame truncated: {buf.size} bytes for {width}x{height} "
-                           f"(stride {stride}) needs {need}")
+        raise CaptureError(
+            f"{fmt} frame truncated: {buf.size} bytes for {width}x{height} (stride {stride}) needs {need}"
+        )
     return np.lib.stride_tricks.as_strided(buf, shape=(height, row), strides=(stride, 1))
 
 
@@ -92,8 +103,7 @@ def mjpeg_grey(data, width: int | None = None, height: int | None = None) -> np.
     if img is None:
         raise CaptureError(f"MJPG frame of {buf.size} bytes does not decode")
     if width is not None and height is not None and img.shape != (height, width):
-        raise CaptureError(f"MJPG frame decodes to {img.shape[1]}x{img.shape[0]}, "
-                           f"expected {width}x{height}")
+        raise CaptureError(f"MJPG frame decodes to {img.shape[1]}x{img.shape[0]}, expected {width}x{height}")
     return img
 
 
@@ -107,5 +117,4 @@ def to_grey(data, fmt: str, width: int, height: int, bytes_per_line: int | None 
         return yuyv_luma(data, width, height, bytes_per_line)
     if fmt == "MJPG":
         return mjpeg_grey(data, width, height)
-    raise CaptureError(f"pixel format {fmt!r} cannot be converted to grey; "
-                       f"supported: {', '.join(GREY_FORMATS)}")
+    raise CaptureError(f"pixel format {fmt!r} cannot be converted to grey; supported: {', '.join(GREY_FORMATS)}")

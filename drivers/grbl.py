@@ -85,10 +85,24 @@ _ERROR = re.compile(r"^error:(\d+)$")
 _ALARM = re.compile(r"^ALARM:(\d+)$")
 _AXES = "XYZABC"
 
-_CONFIG_KEYS = {"driver", "port", "baudrate", "axis", "units_per_degree", "steps_per_degree",
-                "steps_per_unit", "feed", "limits",
-                "reply_timeout", "poll_interval", "move_timeout", "home_timeout",
-                "startup_timeout", "tolerance_deg", "name"}
+_CONFIG_KEYS = {
+    "driver",
+    "port",
+    "baudrate",
+    "axis",
+    "units_per_degree",
+    "steps_per_degree",
+    "steps_per_unit",
+    "feed",
+    "limits",
+    "reply_timeout",
+    "poll_interval",
+    "move_timeout",
+    "home_timeout",
+    "startup_timeout",
+    "tolerance_deg",
+    "name",
+}
 
 
 def error_text(code: int) -> str:
@@ -122,12 +136,23 @@ class GrblTurntable:
         How far from the target an idle axis may be (status has 3 decimals).
     """
 
-    def __init__(self, port: str, *, baudrate: int = 115200, axis: str = "X",
-                 units_per_degree: float = 1.0, feed: float | None = None,
-                 limits: tuple[float, float] = (0.0, 360.0), reply_timeout: float = 1.0,
-                 poll_interval: float = 0.05, move_timeout: float = 60.0,
-                 home_timeout: float = 120.0, startup_timeout: float = 3.0,
-                 tolerance_deg: float = 0.002, name: str | None = None):
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 115200,
+        axis: str = "X",
+        units_per_degree: float = 1.0,
+        feed: float | None = None,
+        limits: tuple[float, float] = (0.0, 360.0),
+        reply_timeout: float = 1.0,
+        poll_interval: float = 0.05,
+        move_timeout: float = 60.0,
+        home_timeout: float = 120.0,
+        startup_timeout: float = 3.0,
+        tolerance_deg: float = 0.002,
+        name: str | None = None,
+    ):
         axis = str(axis).upper()
         if axis not in _AXES:
             raise ValueError(f"grbl turntable: axis must be one of {', '.join(_AXES)}, got {axis!r}")
@@ -157,7 +182,7 @@ class GrblTurntable:
         self._target: float | None = None
 
     @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> "GrblTurntable":
+    def from_config(cls, cfg: dict, **ctx) -> GrblTurntable:
         check_config_keys("grbl turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
         if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
@@ -206,7 +231,7 @@ class GrblTurntable:
     def close(self) -> None:
         self.transport.close()
 
-    def __enter__(self) -> "GrblTurntable":
+    def __enter__(self) -> GrblTurntable:
         self.open()
         return self
 
@@ -279,8 +304,7 @@ class GrblTurntable:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     raise DeviceTimeout(f"{self.name}: no status report within {self.reply_timeout:.2f} s")
-                text = self._decode(self.transport.readline(remaining, "status report",
-                                                            total=self.reply_timeout))
+                text = self._decode(self.transport.readline(remaining, "status report", total=self.reply_timeout))
                 if not text or text == "ok":
                     continue
                 if text.startswith("<"):
@@ -305,8 +329,13 @@ class GrblTurntable:
             units = values[_AXES.index(self.axis)]
         except (ValueError, IndexError):
             raise ProtocolError(f"{self.name}: bad coordinates in {text!r}") from None
-        return {"state": m["state"], "substate": int(m["sub"]) if m["sub"] else None,
-                "position": units / self.units_per_degree, "fields": fields, "raw": text}
+        return {
+            "state": m["state"],
+            "substate": int(m["sub"]) if m["sub"] else None,
+            "position": units / self.units_per_degree,
+            "fields": fields,
+            "raw": text,
+        }
 
     # -- Turntable protocol ----------------------------------------------------------
     @property
@@ -323,8 +352,13 @@ class GrblTurntable:
             warnings.append(alarm_text(self.last_alarm) if self.last_alarm else "Alarm (locked: home or unlock)")
         elif st["state"] in ("Hold", "Door"):
             warnings.append(f"{st['state']}:{st['substate']}")
-        return {"busy": st["state"] in ("Run", "Home", "Jog"), "warnings": warnings,
-                "state": st["state"], "position": st["position"], "fault": st["state"] == "Alarm"}
+        return {
+            "busy": st["state"] in ("Run", "Home", "Jog"),
+            "warnings": warnings,
+            "state": st["state"],
+            "position": st["position"],
+            "fault": st["state"] == "Alarm",
+        }
 
     def home(self, timeout: float | None = None) -> None:
         timeout = self.home_timeout if timeout is None else timeout
@@ -340,11 +374,11 @@ class GrblTurntable:
         if not lo <= degrees <= hi:
             raise ValueError(f"{self.name}: target {degrees}° outside limits [{lo}, {hi}]°")
         if self.last_alarm is not None:
-            raise DeviceFault(f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)};"
-                              f" call recover() (then home())")
+            raise DeviceFault(
+                f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)}; call recover() (then home())"
+            )
         units = degrees * self.units_per_degree
-        cmd = (f"G90 G0 {self.axis}{units:.3f}" if self.feed is None
-               else f"G90 G1 {self.axis}{units:.3f} F{self.feed:g}")
+        cmd = f"G90 G0 {self.axis}{units:.3f}" if self.feed is None else f"G90 G1 {self.axis}{units:.3f} F{self.feed:g}"
         with self._lock:
             self.send(cmd)
             self._target = round(units, 3) / self.units_per_degree
@@ -376,8 +410,10 @@ class GrblTurntable:
                 try:
                     self.stop()
                 finally:
-                    raise DeviceTimeout(f"{self.name}: {what} not finished within {timeout:.2f} s"
-                                        f" (state {state} at {pos:.3f}°); feed hold + reset sent")
+                    raise DeviceTimeout(
+                        f"{self.name}: {what} not finished within {timeout:.2f} s"
+                        f" (state {state} at {pos:.3f}°); feed hold + reset sent"
+                    )
             time.sleep(self.poll_interval)
 
     def stop(self) -> None:

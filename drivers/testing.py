@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 from drivers.sim.pty_server import PtyServer
 
@@ -101,8 +101,9 @@ class ScriptedDevice:
     def __init__(self, exchange: Sequence[tuple[bytes, bytes]], name: str = "device", settle: float = 0.1):
         steps = []
         for k, step in enumerate(exchange):
-            if not (isinstance(step, tuple) and len(step) == 2
-                    and isinstance(step[0], bytes) and isinstance(step[1], bytes)):
+            if not (
+                isinstance(step, tuple) and len(step) == 2 and isinstance(step[0], bytes) and isinstance(step[1], bytes)
+            ):
                 raise TypeError(f"exchange step {k} must be a (bytes, bytes) pair, got {step!r}")
             if not step[0]:
                 raise ValueError(f"exchange step {k}: the sent bytes must not be empty")
@@ -133,19 +134,22 @@ class ScriptedDevice:
                 step, offset = h.failed_at
                 expected = self.exchange[step][0]
                 got = bytes(h.buf)
-                exp_b = expected[offset:offset + 1]
-                got_b = got[offset:offset + 1]
-                return (f"{self.name}: step {step + 1}/{len(self.exchange)}: expected {expected!r},"
-                        f" got {got!r}: first difference at byte {offset}"
-                        f" (expected {exp_b!r}, got {got_b!r})")
+                exp_b = expected[offset : offset + 1]
+                got_b = got[offset : offset + 1]
+                return (
+                    f"{self.name}: step {step + 1}/{len(self.exchange)}: expected {expected!r},"
+                    f" got {got!r}: first difference at byte {offset}"
+                    f" (expected {exp_b!r}, got {got_b!r})"
+                )
             if h.step < len(self.exchange):
                 expected = self.exchange[h.step][0]
                 partial = f" (got only {bytes(h.buf)!r})" if h.buf else ""
-                return (f"{self.name}: missing message at step {h.step + 1}/{len(self.exchange)}:"
-                        f" expected {expected!r} never sent{partial}")
+                return (
+                    f"{self.name}: missing message at step {h.step + 1}/{len(self.exchange)}:"
+                    f" expected {expected!r} never sent{partial}"
+                )
             if h.extra:
-                return (f"{self.name}: extra message after the last step ({len(self.exchange)}):"
-                        f" {bytes(h.extra)!r}")
+                return f"{self.name}: extra message after the last step ({len(self.exchange)}): {bytes(h.extra)!r}"
             return None
 
     def verify(self) -> None:
@@ -157,7 +161,7 @@ class ScriptedDevice:
         if message:
             raise AssertionError(message)
 
-    def __enter__(self) -> "ScriptedDevice":
+    def __enter__(self) -> ScriptedDevice:
         self.start()
         return self
 
@@ -174,7 +178,8 @@ class ScriptedDevice:
             self.stop()
 
 
-def expect_exchange(exchange: Sequence[tuple[bytes, bytes]], name: str = "device",
-                    settle: float = 0.1) -> ScriptedDevice:
+def expect_exchange(
+    exchange: Sequence[tuple[bytes, bytes]], name: str = "device", settle: float = 0.1
+) -> ScriptedDevice:
     """Shorthand: ``with expect_exchange([...]) as dev: ... dev.port ...``."""
     return ScriptedDevice(exchange, name=name, settle=settle)

@@ -48,8 +48,7 @@ class SerialTransport:
         ``rtscts``, ...), applied before opening.
     """
 
-    def __init__(self, port: str, baudrate: int = 115200, name: str = "device",
-                 serial_options: dict | None = None):
+    def __init__(self, port: str, baudrate: int = 115200, name: str = "device", serial_options: dict | None = None):
         if not port or not isinstance(port, str):
             raise ValueError(f"{name}: port must be a device name or pyserial URL, got {port!r}")
         self.port = port
@@ -111,8 +110,7 @@ class SerialTransport:
             self.close()
             raise DeviceDisconnected(f"{self.name}: read from {self.port} failed, device gone ({exc})") from exc
 
-    def readline(self, timeout: float, what: str = "a reply", eol: bytes = b"\n",
-                 total: float | None = None) -> bytes:
+    def readline(self, timeout: float, what: str = "a reply", eol: bytes = b"\n", total: float | None = None) -> bytes:
         """Return the next line, without its terminator (``\\r\\n`` or ``\\n``).
 
         Raises :class:`DeviceTimeout` naming ``what`` if no complete line
@@ -125,13 +123,14 @@ class SerialTransport:
                 idx = self._buf.find(eol)
                 if idx >= 0:
                     line = bytes(self._buf[:idx])
-                    del self._buf[:idx + len(eol)]
+                    del self._buf[: idx + len(eol)]
                     return line.rstrip(b"\r")
                 if time.monotonic() >= deadline:
                     partial = f" (got only {bytes(self._buf)!r})" if self._buf else ""
                     raise DeviceTimeout(
                         f"{self.name}: no {what} within {timeout if total is None else total:.2f} s"
-                        f" on {self.port}{partial}")
+                        f" on {self.port}{partial}"
+                    )
                 self._buf += self._read_some()
 
     def pending(self) -> bytes:

@@ -48,7 +48,11 @@ import numpy as np
 
 from drivers.camera_base import CameraBase
 from drivers.errors import (
-    CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError,
+    CaptureError,
+    DeviceDisconnected,
+    DeviceRejected,
+    DeviceTimeout,
+    DriverError,
 )
 from drivers.frames import to_grey
 from drivers.protocols import CameraIdentity, Frame
@@ -96,18 +100,38 @@ class V4L2Camera(CameraBase):
         so new exposure/gain settings have taken effect.
     """
 
-    CONFIG_KEYS = frozenset({
-        "driver", "device", "pixel_format", "width", "height", "exposure_us", "gain_db", "focus",
-        "gain_db_per_unit", "buffers", "discard_frames",
-    })
+    CONFIG_KEYS = frozenset(
+        {
+            "driver",
+            "device",
+            "pixel_format",
+            "width",
+            "height",
+            "exposure_us",
+            "gain_db",
+            "focus",
+            "gain_db_per_unit",
+            "buffers",
+            "discard_frames",
+        }
+    )
     CONFIG_NAME = "v4l2 camera"
     DEFAULT_DEVICE = "/dev/video0"
 
-    def __init__(self, device: str = "/dev/video0", *, pixel_format: str = "GREY",
-                 width: int | None = None, height: int | None = None,
-                 exposure_us: float | None = None, gain_db: float | None = None,
-                 focus: float | None = None, gain_db_per_unit: float = 1.0,
-                 buffers: int = 2, discard_frames: int = 1):
+    def __init__(
+        self,
+        device: str = "/dev/video0",
+        *,
+        pixel_format: str = "GREY",
+        width: int | None = None,
+        height: int | None = None,
+        exposure_us: float | None = None,
+        gain_db: float | None = None,
+        focus: float | None = None,
+        gain_db_per_unit: float = 1.0,
+        buffers: int = 2,
+        discard_frames: int = 1,
+    ):
         if pixel_format not in PIXEL_FORMATS:
             raise ValueError(f"pixel_format {pixel_format!r}: expected one of {', '.join(PIXEL_FORMATS)}")
         if (width is None) != (height is None):
@@ -196,8 +220,9 @@ class V4L2Camera(CameraBase):
         dev.set_format(BufferType.VIDEO_CAPTURE, w, h, self._fourcc.ljust(4))
         fmt = dev.get_format(BufferType.VIDEO_CAPTURE)
         if int(fmt.pixel_format) != code:
-            raise DeviceRejected(f"{self.name}: asked for {self._fourcc}, device set "
-                                 f"{_fourcc_name(int(fmt.pixel_format))}")
+            raise DeviceRejected(
+                f"{self.name}: asked for {self._fourcc}, device set {_fourcc_name(int(fmt.pixel_format))}"
+            )
         if fmt.width <= 0 or fmt.height <= 0:
             raise DeviceRejected(f"{self.name}: device reports frame size {fmt.width}x{fmt.height}")
         self._format = fmt
@@ -271,8 +296,7 @@ class V4L2Camera(CameraBase):
 
     def _write(self, ctrl, value: int) -> None:
         if value < ctrl.minimum or value > ctrl.maximum:
-            raise DeviceRejected(f"{self.name}: {ctrl.config_name}={value} outside "
-                                 f"[{ctrl.minimum}, {ctrl.maximum}]")
+            raise DeviceRejected(f"{self.name}: {ctrl.config_name}={value} outside [{ctrl.minimum}, {ctrl.maximum}]")
         try:
             ctrl.value = value
         except OSError as exc:
@@ -356,14 +380,14 @@ class V4L2Camera(CameraBase):
         fmt = self._format
         if raw.buff.bytesused == 0:
             raise CaptureError(f"{self.name}: empty buffer (sequence {raw.frame_nb})")
-        image = to_grey(bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height),
-                        int(fmt.bytes_per_line) or None)
+        image = to_grey(bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height), int(fmt.bytes_per_line) or None)
         return self._frame(
-            np.asarray(image), now,
+            np.asarray(image),
+            now,
             self.get_exposure() if self._ctrl.get("exposure") is not None else float("nan"),
             self.get_gain() if self._ctrl.get("gain") is not None else float("nan"),
-            {"sequence": int(raw.frame_nb), "device_timestamp": float(raw.timestamp),
-             "pixel_format": self._fourcc})
+            {"sequence": int(raw.frame_nb), "device_timestamp": float(raw.timestamp), "pixel_format": self._fourcc},
+        )
 
 
 def _fourcc_name(code: int) -> str:

@@ -74,13 +74,28 @@ FATAL_WARNINGS = ("WL",)
 
 _REPLY = re.compile(
     r"^@(?P<dev>\d+) (?P<axis>\d+)(?: (?P<id>\d+))? (?P<flag>OK|RJ) (?P<status>IDLE|BUSY)"
-    r" (?P<warn>--|[A-Z]{2})(?: (?P<data>.*?))?$")
+    r" (?P<warn>--|[A-Z]{2})(?: (?P<data>.*?))?$"
+)
 _ALERT = re.compile(r"^!(?P<dev>\d+) (?P<axis>\d+) (?P<status>IDLE|BUSY) (?P<warn>--|[A-Z]{2})(?: .*)?$")
 _INFO = re.compile(r"^#(?P<dev>\d+) (?P<axis>\d+)(?: .*)?$")
 
-_CONFIG_KEYS = {"driver", "port", "baudrate", "device", "device_address", "axis", "microsteps_per_degree",
-                "steps_per_degree", "limits", "reply_timeout", "poll_interval",
-                "move_timeout", "home_timeout", "tolerance_microsteps", "name"}
+_CONFIG_KEYS = {
+    "driver",
+    "port",
+    "baudrate",
+    "device",
+    "device_address",
+    "axis",
+    "microsteps_per_degree",
+    "steps_per_degree",
+    "limits",
+    "reply_timeout",
+    "poll_interval",
+    "move_timeout",
+    "home_timeout",
+    "tolerance_microsteps",
+    "name",
+}
 
 
 def describe_flag(flag: str) -> str:
@@ -96,10 +111,10 @@ def strip_checksum(text: str, source: str) -> str:
     m = re.search(r":([0-9A-Fa-f]{2})$", text)
     if not m:
         return text
-    body = text[1:m.start()]
+    body = text[1 : m.start()]
     if (sum(body.encode("ascii")) + int(m.group(1), 16)) & 0xFF:
         raise ProtocolError(f"{source}: bad checksum in {text!r}")
-    return text[:m.start()]
+    return text[: m.start()]
 
 
 @dataclass(frozen=True)
@@ -140,11 +155,22 @@ class ZaberTurntable:
         How far from the target an idle axis may be and count as arrived.
     """
 
-    def __init__(self, port: str, *, baudrate: int = 115200, device: int = 1, axis: int = 1,
-                 microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
-                 limits: tuple[float, float] = (0.0, 360.0), reply_timeout: float = 1.0,
-                 poll_interval: float = 0.05, move_timeout: float = 60.0,
-                 home_timeout: float = 120.0, tolerance_microsteps: int = 1, name: str | None = None):
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 115200,
+        device: int = 1,
+        axis: int = 1,
+        microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+        limits: tuple[float, float] = (0.0, 360.0),
+        reply_timeout: float = 1.0,
+        poll_interval: float = 0.05,
+        move_timeout: float = 60.0,
+        home_timeout: float = 120.0,
+        tolerance_microsteps: int = 1,
+        name: str | None = None,
+    ):
         if microsteps_per_degree <= 0:
             raise ValueError(f"microsteps_per_degree must be positive, got {microsteps_per_degree}")
         lo, hi = (float(v) for v in limits)
@@ -169,7 +195,7 @@ class ZaberTurntable:
         self._target: int | None = None
 
     @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> "ZaberTurntable":
+    def from_config(cls, cfg: dict, **ctx) -> ZaberTurntable:
         check_config_keys("zaber turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
         if "device_address" in cfg:
@@ -199,7 +225,7 @@ class ZaberTurntable:
     def close(self) -> None:
         self.transport.close()
 
-    def __enter__(self) -> "ZaberTurntable":
+    def __enter__(self) -> ZaberTurntable:
         self.open()
         return self
 
@@ -224,8 +250,16 @@ class ZaberTurntable:
         text = strip_checksum(text, self.name) if text else text
         m = _REPLY.match(text)
         if m:
-            return ZaberReply(int(m["dev"]), int(m["axis"]), int(m["id"]) if m["id"] else None,
-                              m["flag"] == "OK", m["status"] == "BUSY", m["warn"], m["data"] or "", text)
+            return ZaberReply(
+                int(m["dev"]),
+                int(m["axis"]),
+                int(m["id"]) if m["id"] else None,
+                m["flag"] == "OK",
+                m["status"] == "BUSY",
+                m["warn"],
+                m["data"] or "",
+                text,
+            )
         if _ALERT.match(text):
             self.alerts.append(text)
             return None
@@ -264,17 +298,19 @@ class ZaberTurntable:
                 if reply is None:
                     continue
                 if reply.device != self.device:
-                    raise ProtocolError(f"{self.name}: reply from device {reply.device}, "
-                                        f"expected {self.device}: {reply.raw!r}")
+                    raise ProtocolError(
+                        f"{self.name}: reply from device {reply.device}, expected {self.device}: {reply.raw!r}"
+                    )
                 return reply
 
     def _check(self, reply: ZaberReply, what: str, fault: bool = True) -> ZaberReply:
         if not reply.ok:
-            raise DeviceRejected(f"{self.name}: {what!r} rejected: {reply.data or 'no reason'}"
-                                 f" (reply {reply.raw!r})")
+            raise DeviceRejected(f"{self.name}: {what!r} rejected: {reply.data or 'no reason'} (reply {reply.raw!r})")
         if fault and reply.warning != "--" and is_fatal(reply.warning):
-            raise DeviceFault(f"{self.name}: warning {describe_flag(reply.warning)} during {what!r};"
-                              f" clear it with clear_warnings() / recover()")
+            raise DeviceFault(
+                f"{self.name}: warning {describe_flag(reply.warning)} during {what!r};"
+                f" clear it with clear_warnings() / recover()"
+            )
         return reply
 
     # -- conversions -------------------------------------------------------------
@@ -335,21 +371,26 @@ class ZaberTurntable:
             reply = self._get_pos(fault=False)
             pos = int(reply.data)
             if reply.warning != "--" and is_fatal(reply.warning):
-                raise DeviceFault(f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}°:"
-                                  f" warning {describe_flag(reply.warning)};"
-                                  f" clear it with clear_warnings() / recover()")
+                raise DeviceFault(
+                    f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}°:"
+                    f" warning {describe_flag(reply.warning)};"
+                    f" clear it with clear_warnings() / recover()"
+                )
             if not reply.busy:
                 if target is not None and abs(pos - target) > self.tolerance:
                     raise DeviceFault(
                         f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}° short of the target"
-                        f" {self.to_degrees(target):.4f}° (warning {reply.warning})")
+                        f" {self.to_degrees(target):.4f}° (warning {reply.warning})"
+                    )
                 return self.to_degrees(pos)
             if time.monotonic() >= deadline:
                 try:
                     self.stop()
                 finally:
-                    raise DeviceTimeout(f"{self.name}: {what} not finished within {timeout:.2f} s"
-                                        f" (at {self.to_degrees(pos):.4f}°); stage stopped")
+                    raise DeviceTimeout(
+                        f"{self.name}: {what} not finished within {timeout:.2f} s"
+                        f" (at {self.to_degrees(pos):.4f}°); stage stopped"
+                    )
             time.sleep(self.poll_interval)
 
     def stop(self) -> None:
@@ -387,10 +428,13 @@ class ZaberTurntable:
     def status(self) -> dict:
         reply = self._get_pos(fault=False)
         flags = self.warnings()
-        return {"busy": reply.busy, "warnings": flags,
-                "descriptions": [describe_flag(f) for f in flags],
-                "position": self.to_degrees(int(reply.data)),
-                "fault": any(is_fatal(f) for f in flags)}
+        return {
+            "busy": reply.busy,
+            "warnings": flags,
+            "descriptions": [describe_flag(f) for f in flags],
+            "position": self.to_degrees(int(reply.data)),
+            "fault": any(is_fatal(f) for f in flags),
+        }
 
     def __repr__(self) -> str:
         return f"ZaberTurntable({self.transport.port!r}, device={self.device}, axis={self.axis_number})"

@@ -29,7 +29,7 @@ References
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.polynomial import polynomial as P
@@ -63,7 +63,7 @@ def _line_terms(lines, center, scale, powers):
         if len(p) < 3:
             continue
         q = p - center
-        rho2 = np.sum(q * q, axis=1) / scale ** 2
+        rho2 = np.sum(q * q, axis=1) / scale**2
         v = np.stack([(rho2 ** (k // 2))[:, None] * q for k in powers])  # rho^k (x - c)
         out.append((p - p.mean(axis=0), v - v.mean(axis=1, keepdims=True)))
     if not out:
@@ -79,11 +79,19 @@ def _quartic_one(lines, center, scale, power=2):
         n = len(x0)
 
         def moment(i, j):
-            return np.array([np.dot(x0[:, i], x0[:, j]), np.dot(x0[:, i], v[:, j]) + np.dot(v[:, i], x0[:, j]),
-                             np.dot(v[:, i], v[:, j])]) / n
+            return (
+                np.array(
+                    [
+                        np.dot(x0[:, i], x0[:, j]),
+                        np.dot(x0[:, i], v[:, j]) + np.dot(v[:, i], x0[:, j]),
+                        np.dot(v[:, i], v[:, j]),
+                    ]
+                )
+                / n
+            )
 
         e = P.polysub(P.polymul(moment(0, 0), moment(1, 1)), P.polymul(moment(0, 1), moment(0, 1)))
-        total[:len(e)] += e
+        total[: len(e)] += e
     return total / max(len(lines), 1)
 
 
@@ -105,8 +113,7 @@ def alvarez_initial_k(lines: Sequence[np.ndarray], width: int, height: int, cent
     return float(min(cand, key=abs))
 
 
-def fit_alvarez(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int,
-                n_k: int = 2, center=None):
+def fit_alvarez(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int, n_k: int = 2, center=None):
     """Alvarez's method on harp edges: minimise E over ``k1`` (rho^2) and ``k2`` (rho^4).
 
     Returns a :class:`pipeline.fit.FitResult` whose model is a
@@ -133,10 +140,18 @@ def fit_alvarez(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, hei
     for x0, v in _line_terms(lines, c, s, [2, 4]):
         basis = np.stack([x0, v[0], v[1]])  # (3, N, 2)
         n = x0.shape[0]
-        mats.append([np.einsum("an,bn->ab", basis[:, :, 0], basis[:, :, 0]) / n,
-                     np.einsum("an,bn->ab", basis[:, :, 1], basis[:, :, 1]) / n,
-                     0.5 * (np.einsum("an,bn->ab", basis[:, :, 0], basis[:, :, 1])
-                            + np.einsum("an,bn->ab", basis[:, :, 1], basis[:, :, 0])) / n])
+        mats.append(
+            [
+                np.einsum("an,bn->ab", basis[:, :, 0], basis[:, :, 0]) / n,
+                np.einsum("an,bn->ab", basis[:, :, 1], basis[:, :, 1]) / n,
+                0.5
+                * (
+                    np.einsum("an,bn->ab", basis[:, :, 0], basis[:, :, 1])
+                    + np.einsum("an,bn->ab", basis[:, :, 1], basis[:, :, 0])
+                )
+                / n,
+            ]
+        )
     A, B, C = (np.asarray(m) for m in zip(*mats))  # each (L, 3, 3)
 
     def energy_grad(z):
@@ -150,9 +165,13 @@ def fit_alvarez(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, hei
     k = np.array([k1, 0.0])
     if n_k == 2:
         e0 = max(energy_grad(k)[0], 1e-300)
-        res = minimize(lambda z: tuple(v / e0 for v in energy_grad(z)), k, jac=True, method="BFGS",
-                       options={"gtol": 1e-14, "maxiter": 500})
+        res = minimize(
+            lambda z: tuple(v / e0 for v in energy_grad(z)),
+            k,
+            jac=True,
+            method="BFGS",
+            options={"gtol": 1e-14, "maxiter": 500},
+        )
         k = res.x
     model = RadialModel(center=tuple(c), k=(1.0, 0.0, float(k[0]), 0.0, float(k[1])), scale=s)
-    return summarise(model, edges, edges, rejected, message="Alvarez algebraic energy minimum",
-                     n_params=n_k)
+    return summarise(model, edges, edges, rejected, message="Alvarez algebraic energy minimum", n_params=n_k)

@@ -61,8 +61,9 @@ def fit_homography(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.nda
     return h, apply_homography(h, src[ok]) - dst[ok]
 
 
-def compare_models(a: DistortionModel, b: DistortionModel, width: int, height: int,
-                   step: float = 10.0) -> FieldComparison:
+def compare_models(
+    a: DistortionModel, b: DistortionModel, width: int, height: int, step: float = 10.0
+) -> FieldComparison:
     """Field difference of corrections ``a`` and ``b`` modulo the best homography.
 
     Parameters
@@ -80,8 +81,9 @@ def compare_models(a: DistortionModel, b: DistortionModel, width: int, height: i
     grid = image_grid(width, height, step)
     h, res = fit_homography(a.undistort_points(grid), b.undistort_points(grid))
     err = np.hypot(res[:, 0], res[:, 1])
-    return FieldComparison(rms=float(np.sqrt(np.mean(err ** 2))), max=float(err.max()), homography=h,
-                           n_points=int(len(err)))
+    return FieldComparison(
+        rms=float(np.sqrt(np.mean(err**2))), max=float(err.max()), homography=h, n_points=int(len(err))
+    )
 
 
 #: The 4-corner normalisation (Tang et al. 2012, Sect. 2), defined in :mod:`pipeline.normalise`.

@@ -149,8 +149,7 @@ def _check_image(img: np.ndarray) -> None:
         raise ValueError(f"expected a 2-D grey image, got shape {img.shape}")
     if img.shape[0] < 5 or img.shape[1] < 5:
         raise ValueError(f"image too small for edge detection: {img.shape}")
-    if img.dtype == np.bool_ or not (np.issubdtype(img.dtype, np.integer)
-                                     or np.issubdtype(img.dtype, np.floating)):
+    if img.dtype == np.bool_ or not (np.issubdtype(img.dtype, np.integer) or np.issubdtype(img.dtype, np.floating)):
         raise ValueError(f"unsupported image dtype {img.dtype}")
     if np.issubdtype(img.dtype, np.floating) and not np.isfinite(img).all():
         raise ValueError("image contains NaN or infinite values")
@@ -169,10 +168,8 @@ def _gradient(smoothed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     rule and are never used (points are only detected 2 pixels or more inside
     the image).
     """
-    gx = cv2.Sobel(smoothed, cv2.CV_32F, 1, 0, ksize=1, scale=0.5,
-                   borderType=cv2.BORDER_REPLICATE)
-    gy = cv2.Sobel(smoothed, cv2.CV_32F, 0, 1, ksize=1, scale=0.5,
-                   borderType=cv2.BORDER_REPLICATE)
+    gx = cv2.Sobel(smoothed, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REPLICATE)
+    gy = cv2.Sobel(smoothed, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REPLICATE)
     mod = cv2.magnitude(gx, gy)
     return gx, gy, mod
 
@@ -324,8 +321,7 @@ def gradient_noise(gx: np.ndarray, gy: np.ndarray) -> float:
     """
     h, w = gx.shape
     k = max(1, int(np.sqrt(max(h - 4, 1) * max(w - 4, 1) / 5e5)))
-    m = np.hypot(gx[2:-2:k, 2:-2:k].astype(np.float64),
-                 gy[2:-2:k, 2:-2:k].astype(np.float64)).ravel()
+    m = np.hypot(gx[2:-2:k, 2:-2:k].astype(np.float64), gy[2:-2:k, 2:-2:k].astype(np.float64)).ravel()
     if m.size == 0:
         return 0.0
     s = float(np.median(m)) / np.sqrt(2.0 * np.log(2.0))
@@ -417,8 +413,7 @@ def _nms_points(image, sigma, low, high, interpolation="continuous"):
         img = _as_float_image(img)  # else OpenCV converts on the fly (saves a full pass)
     h, w = img.shape
     if interpolation not in ("continuous", "gaussian", "parabola"):
-        raise ValueError(f"unknown interpolation {interpolation!r} "
-                         "(use 'continuous', 'gaussian' or 'parabola')")
+        raise ValueError(f"unknown interpolation {interpolation!r} (use 'continuous', 'gaussian' or 'parabola')")
     continuous = interpolation == "continuous" and sigma >= MIN_SIGMA_CONTINUOUS
     if sigma > 0:
         gx, gy, mod, sv, sh = _separable_gradient(img, sigma)
@@ -426,8 +421,7 @@ def _nms_points(image, sigma, low, high, interpolation="continuous"):
         gx, gy, mod = _gradient(img)
         sv = sh = None
     del img  # keep the peak memory down on large images
-    low, high = _resolve_thresholds(
-        low, high, lambda: _thresholds_from_gradient(raw, gx, gy, sigma))
+    low, high = _resolve_thresholds(low, high, lambda raw=raw: _thresholds_from_gradient(raw, gx, gy, sigma))
     del raw
     # candidates: modulus above low, 2-pixel border excluded (5x5 chaining)
     mask = mod > np.float32(low)  # bool: flatnonzero is ~6x faster than on uint8
@@ -479,10 +473,11 @@ class _Refiner:
         ax = self.along_x[sel]
         r, c, off = self.r[sel], self.c[sel], self.off[sel]
         for part, s_img, tap, cross, pos, base, col in (
-                (ax, self.sv, 1, w, c, r * w, 0), (~ax, self.sh, w, 1, r, c, 1)):
+            (ax, self.sv, 1, w, c, r * w, 0),
+            (~ax, self.sh, w, 1, r, c, 1),
+        ):
             if part.any():
-                u = _refine_continuous(s_img, pos[part], base[part], tap, cross, off[part],
-                                       self.sigma)
+                u = _refine_continuous(s_img, pos[part], base[part], tap, cross, off[part], self.sigma)
                 ok = ~np.isnan(u)
                 idx = sel[part][ok]
                 xy[idx, col] = (c if col == 0 else r)[part][ok] + u[ok]
@@ -506,9 +501,14 @@ def _resolve_thresholds(low, high, auto):
     return low, high
 
 
-def edge_points(image: np.ndarray, sigma: float = 1.0, low: float | None = None,
-                high: float | None = None, *,
-                interpolation: str = "continuous") -> tuple[np.ndarray, np.ndarray]:
+def edge_points(
+    image: np.ndarray,
+    sigma: float = 1.0,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    interpolation: str = "continuous",
+) -> tuple[np.ndarray, np.ndarray]:
     """Unchained sub-pixel edge points (Canny/Devernay NMS, no hysteresis).
 
     Parameters
@@ -678,9 +678,15 @@ def _order_chains(nxt, prv):
     return lab, order
 
 
-def detect_edges(image: np.ndarray, sigma: float = 1.0, low: float | None = None,
-                 high: float | None = None, min_length: int = 2, *,
-                 interpolation: str = "continuous") -> list[EdgeChain]:
+def detect_edges(
+    image: np.ndarray,
+    sigma: float = 1.0,
+    low: float | None = None,
+    high: float | None = None,
+    min_length: int = 2,
+    *,
+    interpolation: str = "continuous",
+) -> list[EdgeChain]:
     """Detect sub-pixel edge chains (Canny/Devernay, IPOL 2017 variant).
 
     Parameters
@@ -729,8 +735,7 @@ def detect_edges(image: np.ndarray, sigma: float = 1.0, low: float | None = None
     """
     # chaining and hysteresis use the 3-point sub-pixel positions; the continuous
     # refinement (< 0.1 px) is then computed for the kept points only
-    xy, grad, mod, idx, shape, refine, high = _nms_points(image, sigma, low, high,
-                                                          interpolation)
+    xy, grad, mod, idx, shape, refine, high = _nms_points(image, sigma, low, high, interpolation)
     if xy.shape[0] == 0:
         return []
     nxt, prv = _link(xy, grad, idx, shape)

@@ -17,7 +17,7 @@ References
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -27,8 +27,9 @@ from pipeline.normalise import corner_homography
 from pipeline.straightness import Straightness, straightness
 
 
-def corrected_points(point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int,
-                     height: int) -> list[np.ndarray]:
+def corrected_points(
+    point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int, height: int
+) -> list[np.ndarray]:
     """``H(U(p))`` for every edge: corrected and 4-corner normalised points.
 
     Raises ValueError if the correction is undefined at some edge point.
@@ -43,7 +44,8 @@ def corrected_points(point_sets: Sequence[np.ndarray], correction: DistortionMod
     return out
 
 
-def residual_straightness(point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int,
-                          height: int) -> Straightness:
+def residual_straightness(
+    point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int, height: int
+) -> Straightness:
     """Straightness of the edges after ``correction`` and the 4-corner normalisation."""
     return straightness(corrected_points(point_sets, correction, width, height))

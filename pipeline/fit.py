@@ -58,8 +58,8 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -155,12 +155,17 @@ class _Edges:
     image: np.ndarray  # (E,) image index
     line: np.ndarray  # (E,) line index within the image
 
-    def subset(self, keep: np.ndarray) -> "_Edges":
+    def subset(self, keep: np.ndarray) -> _Edges:
         keep = np.asarray(keep, bool)
-        pieces = [self.xy[s:s + c] for s, c, k in zip(self.starts, self.counts, keep) if k]
+        pieces = [self.xy[s : s + c] for s, c, k in zip(self.starts, self.counts, keep) if k]
         counts = self.counts[keep]
-        return _Edges(np.concatenate(pieces), np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
-                      counts, self.image[keep], self.line[keep])
+        return _Edges(
+            np.concatenate(pieces),
+            np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
+            counts,
+            self.image[keep],
+            self.line[keep],
+        )
 
 
 def _tls(u: np.ndarray, starts: np.ndarray, counts: np.ndarray):
@@ -226,17 +231,22 @@ class _RadialParam:
             scale = self.s / init.scale  # rho_init = rho * s / s_init
             th[:2] = (np.asarray(init.center) - self.c0) / self.s
             k0 = init.k[0]
-            for m, km in enumerate(init.k[1:self.degree + 1], start=1):
-                th[1 + m] = km / k0 * scale ** m  # rescale to this normalisation
+            for m, km in enumerate(init.k[1 : self.degree + 1], start=1):
+                th[1 + m] = km / k0 * scale**m  # rescale to this normalisation
         return th
 
     def model(self, th) -> RadialModel:
         i = 2 + self.degree
-        tang = tuple(th[i:i + 2]) if self.tangential else None
+        tang = tuple(th[i : i + 2]) if self.tangential else None
         i += 2 * self.tangential
-        prism = tuple(th[i:i + 4]) if self.prism else None
-        return RadialModel(center=tuple(self.c0 + self.s * th[:2]), k=(1.0, *th[2:2 + self.degree]),
-                           scale=self.s, tangential=tang, prism=prism)
+        prism = tuple(th[i : i + 4]) if self.prism else None
+        return RadialModel(
+            center=tuple(self.c0 + self.s * th[:2]),
+            k=(1.0, *th[2 : 2 + self.degree]),
+            scale=self.s,
+            tangential=tang,
+            prism=prism,
+        )
 
     def _linear_part(self, xy, th):
         c = self.c0 + self.s * th[:2]
@@ -345,19 +355,20 @@ class _PolyParam:
 
     def model(self, th) -> PolynomialModel:
         full = self.t0 + self.T @ th
-        return PolynomialModel(center=self.ident.center, degree=self.degree, a=tuple(full[:self.m]),
-                               b=tuple(full[self.m:]), scale=self.s)
+        return PolynomialModel(
+            center=self.ident.center, degree=self.degree, a=tuple(full[: self.m]), b=tuple(full[self.m :]), scale=self.s
+        )
 
     def evaluate(self, xy, th, jac=True):
         c = self.ident.center
         mon = monomials((xy[:, 0] - c[0]) / self.s, (xy[:, 1] - c[1]) / self.s, self.degree)
         full = self.t0 + self.T @ th
-        u = np.stack([c[0] + self.s * (mon @ full[:self.m]), c[1] + self.s * (mon @ full[self.m:])], axis=1)
+        u = np.stack([c[0] + self.s * (mon @ full[: self.m]), c[1] + self.s * (mon @ full[self.m :])], axis=1)
         if not jac:
             return u, None
         d = np.empty((len(xy), 2, self.n))
-        d[:, 0, :] = self.s * (mon @ self.T[:self.m])
-        d[:, 1, :] = self.s * (mon @ self.T[self.m:])
+        d[:, 0, :] = self.s * (mon @ self.T[: self.m])
+        d[:, 1, :] = self.s * (mon @ self.T[self.m :])
         return u, d
 
     def regularisation(self, th, n_points):
@@ -399,8 +410,9 @@ def _solve(param, edges: _Edges, th0, edge_weights=None, max_nfev=200):
         _, jg = param.regularisation(th, n_pts)
         return np.vstack([j if sw is None else j * sw[:, None], jg])
 
-    return least_squares(fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev,
-                         xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    return least_squares(
+        fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12
+    )
 
 
 # ------------------------------------------------------------ input checks
@@ -408,7 +420,7 @@ def _orientation_problem(edges: _Edges, min_spread_deg: float) -> str | None:
     """None if the edges have at least two orientations, else the reason."""
     r = []
     for s, c in zip(edges.starts, edges.counts):
-        p = edges.xy[s:s + c]
+        p = edges.xy[s : s + c]
         dev = p - p.mean(axis=0)
         sxx, syy, sxy = (dev[:, 0] ** 2).sum(), (dev[:, 1] ** 2).sum(), (dev[:, 0] * dev[:, 1]).sum()
         r.append(np.arctan2(2 * sxy, sxx - syy))  # doubled angle
@@ -417,10 +429,12 @@ def _orientation_problem(edges: _Edges, min_spread_deg: float) -> str | None:
     off = np.degrees(np.abs(np.angle(z * np.exp(-1j * mean)))) / 2.0
     n_off = int(np.sum(off > min_spread_deg / 2.0))
     if n_off < 2:
-        return (f"all {len(z)} edges lie within {2 * float(off.max()):.1f} deg of one orientation "
-                f"({np.degrees(mean) / 2 % 180:.1f} deg): one orientation cannot constrain the "
-                f"distortion along the strings; give shots of the harp at >= 2 orientations "
-                f"at least {min_spread_deg:g} deg apart")
+        return (
+            f"all {len(z)} edges lie within {2 * float(off.max()):.1f} deg of one orientation "
+            f"({np.degrees(mean) / 2 % 180:.1f} deg): one orientation cannot constrain the "
+            f"distortion along the strings; give shots of the harp at >= 2 orientations "
+            f"at least {min_spread_deg:g} deg apart"
+        )
     return None
 
 
@@ -442,10 +456,16 @@ def _collect(lines_per_image, width, height, margin=2.0):
                 rejected.append(RejectedEdge(i, j, f"too few points ({len(p)} < {MIN_POINTS_PER_EDGE})"))
                 continue
             lo, hi = p.min(axis=0), p.max(axis=0)
-            if lo[0] < -0.5 - margin or lo[1] < -0.5 - margin or hi[0] > width - 0.5 + margin \
-                    or hi[1] > height - 0.5 + margin:
-                return (f"image {i} line {j} has points outside the {width}x{height} image "
-                        f"(x {lo[0]:.1f}..{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f}): wrong image size?"), []
+            if (
+                lo[0] < -0.5 - margin
+                or lo[1] < -0.5 - margin
+                or hi[0] > width - 0.5 + margin
+                or hi[1] > height - 0.5 + margin
+            ):
+                return (
+                    f"image {i} line {j} has points outside the {width}x{height} image "
+                    f"(x {lo[0]:.1f}..{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f}): wrong image size?"
+                ), []
             ev = np.linalg.eigvalsh(np.cov(p.T))  # scatter: an edge is elongated along its line
             if not ev[1] > 0 or ev[0] > 0.25 * ev[1]:
                 rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
@@ -456,8 +476,13 @@ def _collect(lines_per_image, width, height, margin=2.0):
     if not pieces:
         return "no usable edges (every edge has too few points, non-finite coordinates or no direction)", rejected
     counts = np.array([len(p) for p in pieces])
-    return _Edges(np.concatenate(pieces), np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
-                  counts, np.array(img), np.array(lin)), rejected
+    return _Edges(
+        np.concatenate(pieces),
+        np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int),
+        counts,
+        np.array(img),
+        np.array(lin),
+    ), rejected
 
 
 def _fold_problem(model: DistortionModel, width, height) -> str | None:
@@ -472,30 +497,53 @@ def _fold_problem(model: DistortionModel, width, height) -> str | None:
     det = jx[:, 0] * jy[:, 1] - jx[:, 1] * jy[:, 0]
     if not np.all(np.isfinite(det)) or det.min() <= 0.05:
         k = int(np.nanargmin(det)) if np.any(np.isfinite(det)) else 0
-        return (f"the fitted correction folds over inside the image near ({p[k, 0]:.0f}, {p[k, 1]:.0f}) "
-                f"(Jacobian determinant {det[k]:.3g}); too few orientations or too high a degree")
+        return (
+            f"the fitted correction folds over inside the image near ({p[k, 0]:.0f}, {p[k, 1]:.0f}) "
+            f"(Jacobian determinant {det[k]:.3g}); too few orientations or too high a degree"
+        )
     return None
 
 
 # ------------------------------------------------------------------- API
-def make_parametrisation(width, height, model="radial", degree=None, tangential=False, prism=False,
-                         w_center=1e-5, w_gauge=1e-3, ridge=None):
+def make_parametrisation(
+    width, height, model="radial", degree=None, tangential=False, prism=False, w_center=1e-5, w_gauge=1e-3, ridge=None
+):
     """The free parameters of a model kind (see module doc); used by :func:`fit_distortion`."""
     if model == "radial":
-        return _RadialParam(width, height, 4 if degree is None else degree, tangential, prism,
-                            w_center, w_gauge, 0.0 if ridge is None else ridge)
+        return _RadialParam(
+            width,
+            height,
+            4 if degree is None else degree,
+            tangential,
+            prism,
+            w_center,
+            w_gauge,
+            0.0 if ridge is None else ridge,
+        )
     if model == "poly":
         return _PolyParam(width, height, 5 if degree is None else degree, 1e-4 if ridge is None else ridge)
     raise ValueError(f"unknown model kind {model!r}; known: 'radial', 'poly'")
 
 
-def fit_distortion(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int,
-                   model: str = "radial", degree: int | None = None, tangential: bool = False,
-                   prism: bool = False, *, image_sizes: Sequence[tuple[int, int]] | None = None,
-                   init: DistortionModel | None = None, robust: bool = True,
-                   reject_factor: float = 5.0, max_reject_fraction: float = 0.25,
-                   min_orientation_spread_deg: float = 20.0, ridge: float | None = None,
-                   w_center: float = 1e-5, max_nfev: int = 200) -> FitResult | FitFailure:
+def fit_distortion(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    model: str = "radial",
+    degree: int | None = None,
+    tangential: bool = False,
+    prism: bool = False,
+    *,
+    image_sizes: Sequence[tuple[int, int]] | None = None,
+    init: DistortionModel | None = None,
+    robust: bool = True,
+    reject_factor: float = 5.0,
+    max_reject_fraction: float = 0.25,
+    min_orientation_spread_deg: float = 20.0,
+    ridge: float | None = None,
+    w_center: float = 1e-5,
+    max_nfev: int = 200,
+) -> FitResult | FitFailure:
     """Fit a distortion correction straightening all edges of all images at once.
 
     Parameters
@@ -549,22 +597,24 @@ def fit_distortion(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, 
     if image_sizes is not None:
         sizes = {(int(w), int(h)) for w, h in image_sizes}
         if sizes != {(int(width), int(height))}:
-            return FitFailure(f"images of different sizes {sorted(sizes)}: one model fits one image "
-                              f"size ({width}x{height})")
+            return FitFailure(
+                f"images of different sizes {sorted(sizes)}: one model fits one image size ({width}x{height})"
+            )
     if len(lines_per_image) == 0:
         return FitFailure("no images given")
     edges, rejected = _collect(lines_per_image, width, height)
     if isinstance(edges, str):
         return FitFailure(edges)
-    param = make_parametrisation(width, height, model, degree, tangential, prism,
-                                 w_center=w_center, ridge=ridge)
+    param = make_parametrisation(width, height, model, degree, tangential, prism, w_center=w_center, ridge=ridge)
     n_e = len(edges.counts)
     n_constraints = int(np.sum(edges.counts - 2))
     if n_e < MIN_EDGES:
         return FitFailure(f"too few edges: {n_e} usable (need >= {MIN_EDGES})")
     if n_constraints < 2 * param.n:
-        return FitFailure(f"too few points: {n_constraints} constraints from {n_e} edges for "
-                          f"{param.n} parameters (need >= {2 * param.n}); lower the degree or add shots")
+        return FitFailure(
+            f"too few points: {n_constraints} constraints from {n_e} edges for "
+            f"{param.n} parameters (need >= {2 * param.n}); lower the degree or add shots"
+        )
     problem = _orientation_problem(edges, min_orientation_spread_deg)
     if problem:
         return FitFailure(problem)
@@ -604,16 +654,23 @@ def fit_distortion(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, 
                 bad = np.flatnonzero(rms > thresh)
                 max_bad = int(max_reject_fraction * n_e)
                 if len(bad) > max_bad:
-                    warnings.append(f"{len(bad)} edges above the outlier threshold {thresh:.3g} px; "
-                                    f"rejected only the worst {max_bad}")
+                    warnings.append(
+                        f"{len(bad)} edges above the outlier threshold {thresh:.3g} px; "
+                        f"rejected only the worst {max_bad}"
+                    )
                     bad = bad[np.argsort(rms[bad])[::-1][:max_bad]]
                 if len(bad):
                     keep = np.ones(n_e, bool)
                     keep[bad] = False
                     for b in bad:
-                        rejected.append(RejectedEdge(int(edges.image[b]), int(edges.line[b]),
-                                                     f"outlier: residual RMS {rms[b]:.3g} px > "
-                                                     f"{thresh:.3g} px ({reject_factor:g} x median edge RMS)"))
+                        rejected.append(
+                            RejectedEdge(
+                                int(edges.image[b]),
+                                int(edges.line[b]),
+                                f"outlier: residual RMS {rms[b]:.3g} px > "
+                                f"{thresh:.3g} px ({reject_factor:g} x median edge RMS)",
+                            )
+                        )
                     edges = edges.subset(keep)
                     if len(edges.counts) < MIN_EDGES:
                         return FitFailure(f"too few edges left after rejecting outliers: {len(edges.counts)}")
@@ -633,21 +690,39 @@ def fit_distortion(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, 
         return FitFailure(fold)
     if sol.status <= 0:
         warnings.append(f"optimiser stopped early: {sol.message}")
-    result = summarise(fitted, all_edges, edges, rejected, n_iter=n_iter, cost=float(sol.cost),
-                       message=str(sol.message), n_params=param.n, warnings=tuple(warnings))
+    result = summarise(
+        fitted,
+        all_edges,
+        edges,
+        rejected,
+        n_iter=n_iter,
+        cost=float(sol.cost),
+        message=str(sol.message),
+        n_params=param.n,
+        warnings=tuple(warnings),
+    )
     if result.d_after > result.d_before * 1.01 + 1e-9:
-        return FitFailure(f"the fit made the edges less straight (d {result.d_before:.4g} -> "
-                          f"{result.d_after:.4g} px)")
+        return FitFailure(f"the fit made the edges less straight (d {result.d_before:.4g} -> {result.d_after:.4g} px)")
     return result
 
 
 def edges_list(edges: _Edges) -> list[np.ndarray]:
     """The edges of an :class:`_Edges` as a list of (M, 2) arrays."""
-    return [edges.xy[s:s + c] for s, c in zip(edges.starts, edges.counts)]
+    return [edges.xy[s : s + c] for s, c in zip(edges.starts, edges.counts)]
 
 
-def summarise(model: DistortionModel, all_edges: _Edges, kept: _Edges, rejected, *, n_iter=0,
-              cost=float("nan"), message="", n_params=0, warnings=()) -> FitResult:
+def summarise(
+    model: DistortionModel,
+    all_edges: _Edges,
+    kept: _Edges,
+    rejected,
+    *,
+    n_iter=0,
+    cost=float("nan"),
+    message="",
+    n_params=0,
+    warnings=(),
+) -> FitResult:
     """Before/after figures of ``model`` on the edges (``kept`` for the totals)."""
     st, ct = all_edges.starts, all_edges.counts
     rb = _tls(all_edges.xy, st, ct)[0]
@@ -656,24 +731,40 @@ def summarise(model: DistortionModel, all_edges: _Edges, kept: _Edges, rejected,
     rms_a, p2p_a = _edge_figures(ra, st, ct)
     rej = {(e.image, e.line) for e in rejected}
     is_rej = np.array([(int(i), int(j)) in rej for i, j in zip(all_edges.image, all_edges.line)])
-    edges = tuple(EdgeFit(int(i), int(j), int(c), float(a), float(b), float(cc), float(dd), bool(x))
-                  for i, j, c, a, b, cc, dd, x in zip(all_edges.image, all_edges.line, ct, rms_b, p2p_b,
-                                                      rms_a, p2p_a, is_rej))
+    edges = tuple(
+        EdgeFit(int(i), int(j), int(c), float(a), float(b), float(cc), float(dd), bool(x))
+        for i, j, c, a, b, cc, dd, x in zip(all_edges.image, all_edges.line, ct, rms_b, p2p_b, rms_a, p2p_a, is_rej)
+    )
 
     def pooled(mask):
         n = ct[mask]
         if n.sum() == 0:
             return (float("nan"),) * 4
-        return (float(np.sqrt(np.sum(rms_b[mask] ** 2 * n) / n.sum())), float(np.sqrt(np.mean(p2p_b[mask] ** 2))),
-                float(np.sqrt(np.sum(rms_a[mask] ** 2 * n) / n.sum())), float(np.sqrt(np.mean(p2p_a[mask] ** 2))))
+        return (
+            float(np.sqrt(np.sum(rms_b[mask] ** 2 * n) / n.sum())),
+            float(np.sqrt(np.mean(p2p_b[mask] ** 2))),
+            float(np.sqrt(np.sum(rms_a[mask] ** 2 * n) / n.sum())),
+            float(np.sqrt(np.mean(p2p_a[mask] ** 2))),
+        )
 
     images = []
     for i in sorted(set(int(v) for v in all_edges.image)):
         mask = (all_edges.image == i) & ~is_rej
         images.append(ImageFit(i, int(mask.sum()), *pooled(mask)))
     total = pooled(~is_rej)
-    return FitResult(model=model, d_before=total[0], d_max_before=total[1], d_after=total[2],
-                     d_max_after=total[3], images=tuple(images), edges=edges,
-                     rejected=tuple(sorted(rejected, key=lambda e: (e.image, e.line))), n_iter=int(n_iter),
-                     cost=cost, message=message, n_points=int(kept.counts.sum()), n_params=int(n_params),
-                     warnings=tuple(warnings))
+    return FitResult(
+        model=model,
+        d_before=total[0],
+        d_max_before=total[1],
+        d_after=total[2],
+        d_max_after=total[3],
+        images=tuple(images),
+        edges=edges,
+        rejected=tuple(sorted(rejected, key=lambda e: (e.image, e.line))),
+        n_iter=int(n_iter),
+        cost=cost,
+        message=message,
+        n_points=int(kept.counts.sum()),
+        n_params=int(n_params),
+        warnings=tuple(warnings),
+    )

@@ -92,8 +92,8 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, uniform_filter1d
@@ -207,8 +207,12 @@ class RejectedGroup:
     @property
     def bbox(self) -> tuple[float, float, float, float]:
         """``(x_min, y_min, x_max, y_max)``."""
-        return (float(self.xy[:, 0].min()), float(self.xy[:, 1].min()),
-                float(self.xy[:, 0].max()), float(self.xy[:, 1].max()))
+        return (
+            float(self.xy[:, 0].min()),
+            float(self.xy[:, 1].min()),
+            float(self.xy[:, 0].max()),
+            float(self.xy[:, 1].max()),
+        )
 
 
 @dataclass(frozen=True)
@@ -254,8 +258,8 @@ def _split_chain(xy, grad, rejected):
     # turning over a base of 2k points, normalised by the arclength
     seg = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
-    ds = s[2 * k:] - s[:-2 * k]
-    rate[k:n - k] = np.degrees(np.abs(angs[2 * k:] - angs[:-2 * k])) / np.maximum(ds, 1e-9)
+    ds = s[2 * k :] - s[: -2 * k]
+    rate[k : n - k] = np.degrees(np.abs(angs[2 * k :] - angs[: -2 * k])) / np.maximum(ds, 1e-9)
     straight = rate <= MAX_TURN_DEG_PER_PX
     out = []
     for a, b in _runs(straight):
@@ -383,7 +387,7 @@ class _Pairing:
             hit = self.lab[yi[ok], xi[ok]]
             j = np.maximum(hit, 0)
             out[ok] |= (hit >= 0) & (self.pid[j] != own[ok]) & (self.gmag[j] >= gmin[ok])
-        return np.repeat(out, CROWD_STRIDE)[:self.n]
+        return np.repeat(out, CROWD_STRIDE)[: self.n]
 
 
 def _per_piece(spid, spart, swidth, npcs):
@@ -396,7 +400,7 @@ def _per_piece(spid, spart, swidth, npcs):
     fw, fp = swidth[found][order], spid[found][order]
     bounds = np.searchsorted(fp, np.arange(npcs + 1))
     for i in np.nonzero(bounds[1:] > bounds[:-1])[0]:
-        med_w[i] = np.median(fw[bounds[i]:bounds[i + 1]])
+        med_w[i] = np.median(fw[bounds[i] : bounds[i + 1]])
     return frac, med_w
 
 
@@ -498,8 +502,12 @@ def group_string_edges(chains: Sequence, shape: tuple[int, int], border_px: floa
     for ch in chains:
         xy = np.asarray(ch.xy, np.float64)
         gr = np.asarray(ch.grad, np.float64)
-        inner = ((xy[:, 0] >= border_px) & (xy[:, 0] <= w - 1 - border_px)
-                 & (xy[:, 1] >= border_px) & (xy[:, 1] <= h - 1 - border_px))
+        inner = (
+            (xy[:, 0] >= border_px)
+            & (xy[:, 0] <= w - 1 - border_px)
+            & (xy[:, 1] >= border_px)
+            & (xy[:, 1] <= h - 1 - border_px)
+        )
         for a, b in _runs(inner):
             pieces.extend(_split_chain(xy[a:b], gr[a:b], rejected))
     if not pieces:
@@ -540,7 +548,7 @@ def group_string_edges(chains: Sequence, shape: tuple[int, int], border_px: floa
         new_pid = np.full(len(pr.pid), -1, np.int32)
         for i, p in enumerate(pieces):
             s0 = int(pr.starts[i])
-            c = crowd[s0:s0 + pr.lens[i]]
+            c = crowd[s0 : s0 + pr.lens[i]]
             if c.any():
                 c = uniform_filter1d(c.astype(np.float32), CROWD_WINDOW_PTS, mode="nearest") > 0.5
                 for a, b in _runs(c):
@@ -550,7 +558,7 @@ def group_string_edges(chains: Sequence, shape: tuple[int, int], border_px: floa
                 runs = [(0, len(p[0]))]
             for a, b in runs:
                 if b - a >= MIN_PIECE_PX:
-                    new_pid[s0 + a:s0 + b] = len(new_pieces)
+                    new_pid[s0 + a : s0 + b] = len(new_pieces)
                     new_starts.append(s0 + a)
                     new_pieces.append((p[0][a:b], p[1][a:b]))
                 else:
@@ -661,6 +669,13 @@ def group_string_edges(chains: Sequence, shape: tuple[int, int], border_px: floa
         ws = med_w[cand[a]["pieces"] + cand[b]["pieces"]]
         width = float(np.nanmedian(ws)) if np.isfinite(ws).any() else float("nan")
         for e in sorted((a, b), key=lambda i: cand[i]["pol"]):
-            edges.append(StringEdge(xy=cand[e]["xy"], pieces=tuple(cand[e]["pcs"]), polarity=cand[e]["pol"],
-                                    string_id=sid, width_px=width))
+            edges.append(
+                StringEdge(
+                    xy=cand[e]["xy"],
+                    pieces=tuple(cand[e]["pcs"]),
+                    polarity=cand[e]["pol"],
+                    string_id=sid,
+                    width_px=width,
+                )
+            )
     return Grouping(tuple(edges), tuple(rejected), w0, dark)

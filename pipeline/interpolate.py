@@ -55,8 +55,8 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
@@ -94,8 +94,9 @@ def _as_pairs(models_by_focus) -> list[tuple[float, DistortionModel]]:
     return pairs
 
 
-def gauge_homography(model: DistortionModel, width: int, height: int, gauge: str = "lsq",
-                     step: float = 32.0) -> np.ndarray:
+def gauge_homography(
+    model: DistortionModel, width: int, height: int, gauge: str = "lsq", step: float = 32.0
+) -> np.ndarray:
     """The homography ``H`` bringing ``model`` to the ``gauge`` (see the module doc)."""
     if gauge == "corners":
         return corner_homography(model, width, height)
@@ -117,8 +118,9 @@ def field_grid(width: int, height: int, step: float = DEFAULT_STEP_PX) -> tuple[
     return -step + step * np.arange(nx), -step + step * np.arange(ny)
 
 
-def normalised_field(model: DistortionModel, xs: np.ndarray, ys: np.ndarray,
-                     homography: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def normalised_field(
+    model: DistortionModel, xs: np.ndarray, ys: np.ndarray, homography: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``u = H(U(p)) - p`` at the nodes ``xs x ys``, as two ``(ny, nx)`` arrays."""
     xx, yy = np.meshgrid(xs, ys)
     p = np.stack([xx.ravel(), yy.ravel()], axis=1)
@@ -145,16 +147,23 @@ class FocusInterpolator:
         Grid spacing (px) of the interpolated field.
     """
 
-    def __init__(self, models_by_focus, width: int, height: int, *, method: str = "auto",
-                 gauge: str = "lsq", step: float = DEFAULT_STEP_PX):
+    def __init__(
+        self,
+        models_by_focus,
+        width: int,
+        height: int,
+        *,
+        method: str = "auto",
+        gauge: str = "lsq",
+        step: float = DEFAULT_STEP_PX,
+    ):
         if method not in METHODS:
             raise ValueError(f"unknown interpolation method {method!r}; known: {', '.join(METHODS)}")
         if gauge not in GAUGES:
             raise ValueError(f"unknown gauge {gauge!r}; known: {', '.join(GAUGES)}")
         pairs = _as_pairs(models_by_focus)
         if len(pairs) < 2:
-            raise ValueError(f"focus interpolation needs at least 2 calibrated focus settings, "
-                             f"got {len(pairs)}")
+            raise ValueError(f"focus interpolation needs at least 2 calibrated focus settings, got {len(pairs)}")
         self.width, self.height = int(width), int(height)
         self.gauge, self.step = gauge, float(step)
         self.focus = np.array([f for f, _ in pairs])
@@ -178,8 +187,7 @@ class FocusInterpolator:
         elif method == "pchip":
             self._interp = PchipInterpolator(self.focus, self._field, axis=0, extrapolate=False)
         else:
-            self._interp = CubicSpline(self.focus, self._field, axis=0, bc_type="not-a-knot",
-                                       extrapolate=False)
+            self._interp = CubicSpline(self.focus, self._field, axis=0, bc_type="not-a-knot", extrapolate=False)
 
     @property
     def focus_range(self) -> tuple[float, float]:
@@ -191,8 +199,10 @@ class FocusInterpolator:
         lo, hi = self.focus_range
         tol = 1e-9 * max(1.0, abs(hi - lo))
         if not math.isfinite(f) or f < lo - tol or f > hi + tol:
-            raise ValueError(f"focus {focus:g} is outside the calibrated range [{lo:g}, {hi:g}]: "
-                             f"extrapolation refused (calibrate that focus setting)")
+            raise ValueError(
+                f"focus {focus:g} is outside the calibrated range [{lo:g}, {hi:g}]: "
+                f"extrapolation refused (calibrate that focus setting)"
+            )
         f = min(max(f, lo), hi)
         if self._interp is None:
             k = int(np.clip(np.searchsorted(self.focus, f, side="right") - 1, 0, len(self.focus) - 2))
@@ -203,24 +213,39 @@ class FocusInterpolator:
     def at(self, focus: float) -> GridFieldModel:
         """The interpolated correction at ``focus`` (ValueError outside the calibrated range)."""
         u = self.field_at(focus)
-        return GridFieldModel(origin=(float(self.xs[0]), float(self.ys[0])), step=self.step,
-                              dx=u[0], dy=u[1], width=self.width, height=self.height,
-                              info={"interpolated_focus": float(focus), "method": self.method,
-                                    "gauge": self.gauge,
-                                    "calibrated_focus": [float(v) for v in self.focus]})
+        return GridFieldModel(
+            origin=(float(self.xs[0]), float(self.ys[0])),
+            step=self.step,
+            dx=u[0],
+            dy=u[1],
+            width=self.width,
+            height=self.height,
+            info={
+                "interpolated_focus": float(focus),
+                "method": self.method,
+                "gauge": self.gauge,
+                "calibrated_focus": [float(v) for v in self.focus],
+            },
+        )
 
 
-def interpolate_correction(models_by_focus, focus: float, width: int, height: int, *,
-                           method: str = "auto", gauge: str = "lsq",
-                           step: float = DEFAULT_STEP_PX) -> GridFieldModel:
+def interpolate_correction(
+    models_by_focus,
+    focus: float,
+    width: int,
+    height: int,
+    *,
+    method: str = "auto",
+    gauge: str = "lsq",
+    step: float = DEFAULT_STEP_PX,
+) -> GridFieldModel:
     """The correction at ``focus`` interpolated between calibrated settings.
 
     See :class:`FocusInterpolator` for the parameters. Raises ValueError for a
     focus outside the calibrated range (no extrapolation), fewer than 2
     settings, or a correction that is not finite over the image.
     """
-    return FocusInterpolator(models_by_focus, width, height, method=method, gauge=gauge,
-                             step=step).at(focus)
+    return FocusInterpolator(models_by_focus, width, height, method=method, gauge=gauge, step=step).at(focus)
 
 
 @dataclass(frozen=True)
@@ -235,9 +260,16 @@ class LeaveOneOut:
         return iter((self.focus, self.rms_px, self.max_px))
 
 
-def leave_one_out_error(models_by_focus, width: int, height: int, *, method: str = "auto",
-                        gauge: str = "lsq", step: float = DEFAULT_STEP_PX,
-                        compare_step: float = 10.0) -> list[LeaveOneOut]:
+def leave_one_out_error(
+    models_by_focus,
+    width: int,
+    height: int,
+    *,
+    method: str = "auto",
+    gauge: str = "lsq",
+    step: float = DEFAULT_STEP_PX,
+    compare_step: float = 10.0,
+) -> list[LeaveOneOut]:
     """Interpolation error measured by leaving each interior calibrated focus out.
 
     For every interior setting :math:`f_i` (the two ends cannot be reached
@@ -266,9 +298,8 @@ def leave_one_out_error(models_by_focus, width: int, height: int, *, method: str
         raise ValueError(f"need at least 2 calibrated focus settings, got {len(pairs)}")
     out = []
     for i in range(1, len(pairs) - 1):
-        others = pairs[:i] + pairs[i + 1:]
-        m = interpolate_correction(others, pairs[i][0], width, height, method=method, gauge=gauge,
-                                   step=step)
+        others = pairs[:i] + pairs[i + 1 :]
+        m = interpolate_correction(others, pairs[i][0], width, height, method=method, gauge=gauge, step=step)
         c = compare_models(m, pairs[i][1], width, height, step=compare_step)
         out.append(LeaveOneOut(pairs[i][0], c.rms, c.max))
     return out

@@ -91,10 +91,18 @@ class LineMeasurement:
         return len(self.raw_points)
 
     def to_dict(self) -> dict:
-        return {"points": int(len(self.points)), "rms": self.rms, "p2p": self.p2p,
-                "angle_deg": self.angle_deg, "length_px": self.length_px, "hf_rms": self.hf_rms,
-                "string": self.string_id, "polarity": self.polarity, "raw_points": self.raw,
-                "width_px": _num(self.width_px)}
+        return {
+            "points": int(len(self.points)),
+            "rms": self.rms,
+            "p2p": self.p2p,
+            "angle_deg": self.angle_deg,
+            "length_px": self.length_px,
+            "hf_rms": self.hf_rms,
+            "string": self.string_id,
+            "polarity": self.polarity,
+            "raw_points": self.raw,
+            "width_px": _num(self.width_px),
+        }
 
 
 @dataclass(frozen=True)
@@ -140,10 +148,18 @@ class ImageMeasurement:
         reasons: dict[str, int] = {}
         for r in self.rejected:
             reasons[r.reason] = reasons.get(r.reason, 0) + 1
-        return {"width": self.width, "height": self.height, "d": _num(self.d), "d_max": _num(self.d_max),
-                "n_lines": self.n_lines, "n_strings": self.n_strings, "t": self.t,
-                "string_width_px": _num(self.string_width_px),
-                "lines": [ln.to_dict() for ln in self.lines], "rejected": reasons}
+        return {
+            "width": self.width,
+            "height": self.height,
+            "d": _num(self.d),
+            "d_max": _num(self.d_max),
+            "n_lines": self.n_lines,
+            "n_strings": self.n_strings,
+            "t": self.t,
+            "string_width_px": _num(self.string_width_px),
+            "lines": [ln.to_dict() for ln in self.lines],
+            "rejected": reasons,
+        }
 
 
 def _num(v: float):
@@ -178,36 +194,59 @@ def measure_grouping(grouping: Grouping, width: int, height: int, t: int = 30) -
     fit_sets, meta = [], []
     for e, pts in zip(grouping.edges, smoothed):
         if e.string_id in short_strings:
-            rejected.append(("short edge", f"a string edge keeps < {MIN_SMOOTHED_POINTS} points after "
-                             f"smoothing with t={t}", e.xy))
+            rejected.append(
+                ("short edge", f"a string edge keeps < {MIN_SMOOTHED_POINTS} points after smoothing with t={t}", e.xy)
+            )
             continue
         fit_sets.append(pts)
         meta.append(e)
     rej = tuple(Rejection(r, len(x), _bbox(x), d) for r, d, x in rejected)
     rej_pts = tuple(x for _, _, x in rejected)
     if not fit_sets:
-        return ImageMeasurement(width, height, t, (), float("nan"), float("nan"), rej, rej_pts,
-                                grouping.string_width_px, grouping.dark_strings)
+        return ImageMeasurement(
+            width,
+            height,
+            t,
+            (),
+            float("nan"),
+            float("nan"),
+            rej,
+            rej_pts,
+            grouping.string_width_px,
+            grouping.dark_strings,
+        )
     st = straightness(fit_sets)
     # renumber strings 0..n-1 in their order across the harp
     ids = {sid: k for k, sid in enumerate(sorted({e.string_id for e in meta}))}
     lines = []
     for i, (e, pts) in enumerate(zip(meta, fit_sets)):
         hf = hf_rms(resample_polyline(e.xy, 1.0))
-        lines.append(LineMeasurement(
-            string_id=ids[e.string_id], polarity=e.polarity, points=pts, raw_points=e.xy,
-            rms=st.rms[i], p2p=st.p2p[i], angle_deg=st.angle_deg[i], length_px=st.length_px[i],
-            hf_rms=hf, width_px=e.width_px))
-    return ImageMeasurement(width, height, t, tuple(lines), st.d, st.d_max, rej, rej_pts,
-                            grouping.string_width_px, grouping.dark_strings)
+        lines.append(
+            LineMeasurement(
+                string_id=ids[e.string_id],
+                polarity=e.polarity,
+                points=pts,
+                raw_points=e.xy,
+                rms=st.rms[i],
+                p2p=st.p2p[i],
+                angle_deg=st.angle_deg[i],
+                length_px=st.length_px[i],
+                hf_rms=hf,
+                width_px=e.width_px,
+            )
+        )
+    return ImageMeasurement(
+        width, height, t, tuple(lines), st.d, st.d_max, rej, rej_pts, grouping.string_width_px, grouping.dark_strings
+    )
 
 
 def _bbox(xy: np.ndarray) -> tuple[float, float, float, float]:
     return (float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max()))
 
 
-def measure_image(image: np.ndarray, t: int = 30, sigma: float = 1.0, low: float | None = None,
-                  high: float | None = None) -> ImageMeasurement:
+def measure_image(
+    image: np.ndarray, t: int = 30, sigma: float = 1.0, low: float | None = None, high: float | None = None
+) -> ImageMeasurement:
     """Find every string edge of a harp image and measure its straightness.
 
     Parameters

@@ -77,7 +77,7 @@ def sha256_file(path, chunk: int = 1 << 20) -> str:
 def make_provenance(images=(), *, t=None, command=None, **extra) -> dict:
     """Provenance record: UTC time, software version, input images with sha256, t, command line."""
     prov = {
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "created_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "software": software_version(),
     }
     if t is not None:
@@ -127,8 +127,9 @@ def atomic_write_text(path, text: str) -> None:
             os.close(dfd)
 
 
-def model_file_text(model: DistortionModel, *, width: int, height: int,
-                    merit: dict | None = None, provenance: dict | None = None) -> str:
+def model_file_text(
+    model: DistortionModel, *, width: int, height: int, merit: dict | None = None, provenance: dict | None = None
+) -> str:
     """The YAML text :func:`write_model_file` writes."""
     doc = {
         "format": FORMAT_NAME,
@@ -138,13 +139,16 @@ def model_file_text(model: DistortionModel, *, width: int, height: int,
         "merit": _plain(merit or {}),
         "provenance": _plain(provenance or {}),
     }
-    header = ("# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
-              "# pixel centres at integers). Load with pipeline.load_model(path).\n")
+    header = (
+        "# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
+        "# pixel centres at integers). Load with pipeline.load_model(path).\n"
+    )
     return header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
 
 
-def write_model_file(path, model: DistortionModel, *, width: int, height: int,
-                     merit: dict | None = None, provenance: dict | None = None) -> Path:
+def write_model_file(
+    path, model: DistortionModel, *, width: int, height: int, merit: dict | None = None, provenance: dict | None = None
+) -> Path:
     """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
     if not isinstance(model, DistortionModel):
         raise TypeError(f"write_model_file needs a DistortionModel, got {type(model).__name__}")
@@ -168,8 +172,10 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
         raise ValueError(f"{name}: not a harp model file (no 'format: {FORMAT_NAME}')")
     version = doc.get("format_version")
     if version not in SUPPORTED_VERSIONS:
-        raise ValueError(f"{name}: unknown model file format version {version!r} "
-                         f"(this software reads {', '.join(map(str, SUPPORTED_VERSIONS))})")
+        raise ValueError(
+            f"{name}: unknown model file format version {version!r} "
+            f"(this software reads {', '.join(map(str, SUPPORTED_VERSIONS))})"
+        )
     image = doc.get("image")
     try:
         width, height = int(image["width"]), int(image["height"])
@@ -182,12 +188,15 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
         model = model_from_dict(mdoc)
     except ValueError as exc:
         if isinstance(mdoc, dict) and mdoc.get("model") in MODEL_TYPES:  # a bad parameter value
-            raise ValueError(f"{name}: invalid parameters for model {mdoc.get('model')!r} "
-                             f"({str(exc).splitlines()[0]})") from None
+            raise ValueError(
+                f"{name}: invalid parameters for model {mdoc.get('model')!r} ({str(exc).splitlines()[0]})"
+            ) from None
         raise ValueError(f"{name}: {str(exc).splitlines()[0]}") from None
     except (TypeError, KeyError, IndexError) as exc:
-        raise ValueError(f"{name}: invalid parameters for model "
-                         f"{(doc.get('model') or {}).get('model')!r} ({type(exc).__name__}: {exc})") from None
+        raise ValueError(
+            f"{name}: invalid parameters for model "
+            f"{(doc.get('model') or {}).get('model')!r} ({type(exc).__name__}: {exc})"
+        ) from None
     merit = doc.get("merit") or {}
     prov = doc.get("provenance") or {}
     if not isinstance(merit, dict) or not isinstance(prov, dict):
@@ -211,8 +220,10 @@ def _raise_if_foreign(text: str, name: str) -> None:
     """A clear error for a known calibration file of other software."""
     foreign = _foreign_format(text)
     if foreign:
-        raise ValueError(f"{name}: {foreign}, not a harp model file (harp evaluate reads it; "
-                         "this command needs a model written by harp calibrate)")
+        raise ValueError(
+            f"{name}: {foreign}, not a harp model file (harp evaluate reads it; "
+            "this command needs a model written by harp calibrate)"
+        )
 
 
 def read_model_file(path) -> ModelFile:

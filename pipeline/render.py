@@ -142,7 +142,7 @@ class HarpScene:
     @property
     def sigma_px(self) -> float:
         """Total blur: optical PSF and pixel integration, ``sqrt(blur^2 + 1/12)``."""
-        return math.sqrt(self.blur_px ** 2 + 1.0 / 12.0)
+        return math.sqrt(self.blur_px**2 + 1.0 / 12.0)
 
     @property
     def direction(self) -> tuple[float, float]:
@@ -211,10 +211,14 @@ def _ideal_border(lens: DistortionModel, width: int, height: int, step: float = 
     """Ideal coordinates of points along the image border (the ideal footprint)."""
     xs = np.append(np.arange(-0.5, width - 0.5, step), width - 0.5)
     ys = np.append(np.arange(-0.5, height - 0.5, step), height - 0.5)
-    pts = np.concatenate([
-        np.stack([xs, np.full_like(xs, -0.5)], 1), np.stack([xs, np.full_like(xs, height - 0.5)], 1),
-        np.stack([np.full_like(ys, -0.5), ys], 1), np.stack([np.full_like(ys, width - 0.5), ys], 1),
-    ])
+    pts = np.concatenate(
+        [
+            np.stack([xs, np.full_like(xs, -0.5)], 1),
+            np.stack([xs, np.full_like(xs, height - 0.5)], 1),
+            np.stack([np.full_like(ys, -0.5), ys], 1),
+            np.stack([np.full_like(ys, width - 0.5), ys], 1),
+        ]
+    )
     return lens.undistort_points(pts)
 
 
@@ -250,6 +254,7 @@ def edge_peak_offset(string_width_px: float, sigma_px: float) -> float:
     ``sigma_eff = sqrt(sigma^2 + sigma_detector^2)``.
     """
     w, s = float(string_width_px), float(sigma_px)
+
     # gradient near the edge at q = -w/2 + t:  g(t) = phi(t/s) - phi((t - w)/s)
     # g'(t) = 0  <=>  t phi(t/s) = (t - w) phi((t - w)/s); solve by bisection on [-w/2, 0]
     def h(t):
@@ -300,8 +305,14 @@ def _dust_spots(scene: HarpScene, width: int, height: int) -> tuple[DustSpot, ..
     rng = np.random.default_rng(scene.dust_seed)
     spots = []
     for _ in range(int(scene.dust)):
-        spots.append(DustSpot(float(rng.uniform(0, width - 1)), float(rng.uniform(0, height - 1)),
-                              float(rng.uniform(3.0, 12.0)), float(rng.uniform(0.15, 0.45))))
+        spots.append(
+            DustSpot(
+                float(rng.uniform(0, width - 1)),
+                float(rng.uniform(0, height - 1)),
+                float(rng.uniform(3.0, 12.0)),
+                float(rng.uniform(0.15, 0.45)),
+            )
+        )
     for spec in scene.dust_at:
         x, y, sig, depth = (float(v) for v in spec)
         if not (sig > 0 and 0 <= depth <= 1):
@@ -311,10 +322,20 @@ def _dust_spots(scene: HarpScene, width: int, height: int) -> tuple[DustSpot, ..
 
 
 # ---------------------------------------------------------------- render
-def render_harp(width: int, height: int, scene: HarpScene = HarpScene(), lens: DistortionModel | None = None,
-                noise_sigma: float = 1.5, shot_noise: bool = False, bit_depth: int = 8, seed: int = 0,
-                exposure: float = 1.0, electrons_per_level: float = 40.0,
-                chunk_pixels: int = 1 << 20, threads: int | None = None) -> Rendered:
+def render_harp(
+    width: int,
+    height: int,
+    scene: HarpScene = HarpScene(),
+    lens: DistortionModel | None = None,
+    noise_sigma: float = 1.5,
+    shot_noise: bool = False,
+    bit_depth: int = 8,
+    seed: int = 0,
+    exposure: float = 1.0,
+    electrons_per_level: float = 40.0,
+    chunk_pixels: int = 1 << 20,
+    threads: int | None = None,
+) -> Rendered:
     """Render a harp image of ``width`` x ``height`` pixels with exact truth.
 
     Parameters
@@ -353,7 +374,7 @@ def render_harp(width: int, height: int, scene: HarpScene = HarpScene(), lens: D
         lens = IdentityModel()
     identity = isinstance(lens, IdentityModel)
     level = 1.0 if bit_depth == 8 else _LEVEL_16
-    top = float(2 ** bit_depth - 1)
+    top = float(2**bit_depth - 1)
 
     s = scene.sigma_px
     n = np.asarray(scene.normal)
@@ -404,18 +425,19 @@ def render_harp(width: int, height: int, scene: HarpScene = HarpScene(), lens: D
             x0, x1 = max(0, int(sp.x - rad)), min(width, int(sp.x + rad) + 2)
             gx = (np.arange(x0, x1) - sp.x) ** 2
             gy = (np.arange(y0, y1) - sp.y) ** 2
-            val[y0 - r0:y1 - r0, x0:x1] *= 1.0 - sp.depth * np.exp(-(gy[:, None] + gx[None, :]) / (2 * sp.sigma ** 2))
+            val[y0 - r0 : y1 - r0, x0:x1] *= 1.0 - sp.depth * np.exp(-(gy[:, None] + gx[None, :]) / (2 * sp.sigma**2))
         val *= exposure * scene.background * level
         # noise: one generator per block of NOISE_BLOCK_ROWS rows, seeded by (seed, block),
         # so that the image does not depend on chunking or threads
         for b0 in range(r0, r1, NOISE_BLOCK_ROWS):
-            blk = val[b0 - r0:b0 - r0 + NOISE_BLOCK_ROWS]
+            blk = val[b0 - r0 : b0 - r0 + NOISE_BLOCK_ROWS]
             if not (shot_noise or noise_sigma > 0):
                 break
             rng = np.random.default_rng((seed, b0 // NOISE_BLOCK_ROWS))
             if shot_noise:
                 blk[:] = rng.poisson(np.clip(blk, 0, None) * (electrons_per_level / level)) / (
-                    electrons_per_level / level)
+                    electrons_per_level / level
+                )
             if noise_sigma > 0:
                 blk += rng.standard_normal(blk.shape) * (noise_sigma * level)
         np.rint(val, out=val)
@@ -440,9 +462,15 @@ def render_harp(width: int, height: int, scene: HarpScene = HarpScene(), lens: D
 
 
 # ---------------------------------------------------------------- truth
-def visible_edges(rendered_or_edges, lens: DistortionModel | None = None, width: int | None = None,
-                  height: int | None = None, margin: float = 2.0, step: float = 1.0,
-                  min_length_px: float = 50.0) -> list[tuple[EdgeTruth, np.ndarray]]:
+def visible_edges(
+    rendered_or_edges,
+    lens: DistortionModel | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    margin: float = 2.0,
+    step: float = 1.0,
+    min_length_px: float = 50.0,
+) -> list[tuple[EdgeTruth, np.ndarray]]:
     """Like :func:`true_edge_curves` but pairs each curve with its :class:`EdgeTruth`."""
     if isinstance(rendered_or_edges, Rendered):
         r = rendered_or_edges
@@ -478,7 +506,7 @@ def visible_edges(rendered_or_edges, lens: DistortionModel | None = None, width:
         idx = np.flatnonzero(np.diff(np.concatenate([[0], inside.astype(np.int8), [0]])))
         starts, ends = idx[0::2], idx[1::2]
         j = int(np.argmax(ends - starts))
-        curve = pts[starts[j]:ends[j]]
+        curve = pts[starts[j] : ends[j]]
         if len(curve) < 2:
             continue
         length = float(np.sum(np.hypot(*np.diff(curve, axis=0).T)))
@@ -488,9 +516,15 @@ def visible_edges(rendered_or_edges, lens: DistortionModel | None = None, width:
     return result
 
 
-def true_edge_curves(rendered_or_edges, lens: DistortionModel | None = None, width: int | None = None,
-                     height: int | None = None, margin: float = 2.0, step: float = 1.0,
-                     min_length_px: float = 50.0) -> list[np.ndarray]:
+def true_edge_curves(
+    rendered_or_edges,
+    lens: DistortionModel | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    margin: float = 2.0,
+    step: float = 1.0,
+    min_length_px: float = 50.0,
+) -> list[np.ndarray]:
     """Exact distorted string-edge curves, clipped to the image minus ``margin``.
 
     Parameters

@@ -135,8 +135,7 @@ def smooth_subsample(xy: np.ndarray, t: int = 30, step: float = 1.0) -> np.ndarr
         k = np.arange(-half, half + 1, dtype=np.float64)
         w = np.exp(-0.5 * (k / sig) ** 2)
         w /= w.sum()
-        sm = np.column_stack([np.convolve(r[:, 0], w, mode="valid"),
-                              np.convolve(r[:, 1], w, mode="valid")])
+        sm = np.column_stack([np.convolve(r[:, 0], w, mode="valid"), np.convolve(r[:, 1], w, mode="valid")])
     else:
         sm = r
     n_keep = (n_valid - 1) // t_int + 1

@@ -25,8 +25,8 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -47,8 +47,12 @@ class Candidate:
     def label(self) -> str:
         if self.model == "poly":
             return f"poly{self.degree}"
-        return (f"radial{self.degree}" + ("+tangential" if self.tangential else "") + ("+prism" if self.prism else "")
-                + ("+centre-prior" if self.center_prior else ""))
+        return (
+            f"radial{self.degree}"
+            + ("+tangential" if self.tangential else "")
+            + ("+prism" if self.prism else "")
+            + ("+centre-prior" if self.center_prior else "")
+        )
 
     def kwargs(self) -> dict:
         kw = {"model": self.model, "degree": self.degree}
@@ -62,8 +66,14 @@ class Candidate:
         return make_parametrisation(width, height, self.model, self.degree, self.tangential, self.prism).n
 
     def to_dict(self) -> dict:
-        return {"model": self.model, "degree": self.degree, "tangential": self.tangential,
-                "prism": self.prism, "center_prior": self.center_prior, "label": self.label}
+        return {
+            "model": self.model,
+            "degree": self.degree,
+            "tangential": self.tangential,
+            "prism": self.prism,
+            "center_prior": self.center_prior,
+            "label": self.label,
+        }
 
 
 CENTER_PRIOR_WEIGHT = 1e-2
@@ -79,7 +89,8 @@ decentred synthetic lens)."""
 DEFAULT_CANDIDATES: tuple[Candidate, ...] = tuple(
     [Candidate("radial", d, t, p) for d in (2, 4, 6) for (t, p) in ((False, False), (True, False), (True, True))]
     + [Candidate("radial", d, True, p, True) for d in (4, 6) for p in (False, True)]
-    + [Candidate("poly", d) for d in (3, 5, 7)])
+    + [Candidate("poly", d) for d in (3, 5, 7)]
+)
 """Radial k up to rho^2, rho^4, rho^6, each plain / +tangential / +tangential+prism (degrees 4, 6 also with
 a centre prior); poly 3, 5, 7."""
 
@@ -102,9 +113,14 @@ class CVRow:
         def num(v):
             return None if not np.isfinite(v) else float(v)
 
-        return {**self.candidate.to_dict(), "n_params": self.n_params, "cv_d": num(self.cv_d),
-                "fold_d": [num(v) for v in self.fold_d], "fit_d": [num(v) for v in self.fit_d],
-                "failure": self.failure}
+        return {
+            **self.candidate.to_dict(),
+            "n_params": self.n_params,
+            "cv_d": num(self.cv_d),
+            "fold_d": [num(v) for v in self.fold_d],
+            "fit_d": [num(v) for v in self.fit_d],
+            "failure": self.failure,
+        }
 
 
 @dataclass(frozen=True)
@@ -117,8 +133,12 @@ class Selection:
     table: tuple[CVRow, ...] = field(default=())
 
     def to_dict(self) -> dict:
-        return {**self.choice.to_dict(), "reason": self.reason, "folds": self.folds,
-                "table": [r.to_dict() for r in self.table]}
+        return {
+            **self.choice.to_dict(),
+            "reason": self.reason,
+            "folds": self.folds,
+            "table": [r.to_dict() for r in self.table],
+        }
 
 
 def _holdout_residuals(model, lines: Sequence[np.ndarray]) -> np.ndarray:
@@ -147,8 +167,9 @@ def _folds(lines_per_image, mode):
     return out
 
 
-def cross_validate(lines_per_image, width, height, candidates=DEFAULT_CANDIDATES, folds="auto",
-                   **fit_kw) -> tuple[tuple[CVRow, ...], str]:
+def cross_validate(
+    lines_per_image, width, height, candidates=DEFAULT_CANDIDATES, folds="auto", **fit_kw
+) -> tuple[tuple[CVRow, ...], str]:
     """CV table of the candidates; ``folds`` 'images' (leave one shot out), 'edges' or 'auto'."""
     if folds == "auto":
         folds = "images" if len(lines_per_image) >= 3 else "edges"
@@ -165,16 +186,23 @@ def cross_validate(lines_per_image, width, height, candidates=DEFAULT_CANDIDATES
                 continue
             res = _holdout_residuals(r.model, held)
             res_all.append(res)
-            fold_d.append(float(np.sqrt(np.mean(res ** 2))) if len(res) else float("nan"))
+            fold_d.append(float(np.sqrt(np.mean(res**2))) if len(res) else float("nan"))
             fit_d.append(r.d_after)
         cv = float(np.sqrt(np.mean(np.concatenate(res_all) ** 2))) if res_all and failure is None else float("nan")
         rows.append(CVRow(cand, cand.n_params(width, height), cv, tuple(fold_d), tuple(fit_d), failure))
     return tuple(rows), folds
 
 
-def select_model(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int,
-                 candidates: Sequence[Candidate] = DEFAULT_CANDIDATES, rel_tol: float = 0.05,
-                 abs_tol: float = 0.001, folds: str = "auto", **fit_kw) -> Selection:
+def select_model(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    candidates: Sequence[Candidate] = DEFAULT_CANDIDATES,
+    rel_tol: float = 0.05,
+    abs_tol: float = 0.001,
+    folds: str = "auto",
+    **fit_kw,
+) -> Selection:
     """Choose model and degree by cross-validation over the shots.
 
     Parameters
@@ -197,12 +225,18 @@ def select_model(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, he
     ok = [r for r in table if np.isfinite(r.cv_d)]
     if not ok:
         reasons = sorted({r.failure for r in table if r.failure})
-        return Selection(FALLBACK, f"no candidate could be cross-validated ({'; '.join(reasons)[:200]}); "
-                                   f"using the default {FALLBACK.label}", "none", table)
+        return Selection(
+            FALLBACK,
+            f"no candidate could be cross-validated ({'; '.join(reasons)[:200]}); using the default {FALLBACK.label}",
+            "none",
+            table,
+        )
     best = min(r.cv_d for r in ok)
     good = [r for r in ok if r.cv_d <= best * (1 + rel_tol) + abs_tol]
     pick = min(good, key=lambda r: (r.n_params, r.cv_d))  # ties in size: the lower CV d
     what = "leave-one-shot-out" if mode == "images" else "alternate-edge (shots too few to leave one out)"
-    reason = (f"{pick.candidate.label}: {what} CV d {pick.cv_d:.4f} px, fewest parameters ({pick.n_params}) "
-              f"within {rel_tol:.0%} + {abs_tol:g} px of the best CV d {best:.4f} px")
+    reason = (
+        f"{pick.candidate.label}: {what} CV d {pick.cv_d:.4f} px, fewest parameters ({pick.n_params}) "
+        f"within {rel_tol:.0%} + {abs_tol:g} px of the best CV d {best:.4f} px"
+    )
     return Selection(pick.candidate, reason, mode, table)

@@ -32,8 +32,8 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from scipy.signal import fftconvolve
@@ -145,7 +145,7 @@ def hf_rms(points: np.ndarray, sigma_px: float = HF_SIGMA_PX) -> float:
     else:
         # centred "same" slice of the full convolution: np.convolve(mode="same")
         # returns max(len(v), len(ker)) samples when the kernel is the longer one
-        sm = np.stack([np.convolve(v, ker, mode="full")[half:half + S.size] for v in sig_stack])
+        sm = np.stack([np.convolve(v, ker, mode="full")[half : half + S.size] for v in sig_stack])
     a0, a1, a2, b0, b1 = sm
     m1 = a1 - k * a0
     m2 = a2 - 2 * k * a1 + k * k * a0

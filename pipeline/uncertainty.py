@@ -42,8 +42,8 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -80,9 +80,16 @@ class FieldUncertainty:
 
     def to_dict(self) -> dict:
         """Plain data (for JSON / a profile's details)."""
-        return {"rms_px": self.rms, "max_px": self.max, "n_boot": self.n_boot,
-                "n_failed": self.n_failed, "resample": self.resample,
-                "xs": self.xs.tolist(), "ys": self.ys.tolist(), "std_px": self.std.tolist()}
+        return {
+            "rms_px": self.rms,
+            "max_px": self.max,
+            "n_boot": self.n_boot,
+            "n_failed": self.n_failed,
+            "resample": self.resample,
+            "xs": self.xs.tolist(),
+            "ys": self.ys.tolist(),
+            "std_px": self.std.tolist(),
+        }
 
 
 def uncertainty_grid(width: int, height: int, cells: int = GRID_CELLS) -> tuple[np.ndarray, np.ndarray]:
@@ -93,8 +100,9 @@ def uncertainty_grid(width: int, height: int, cells: int = GRID_CELLS) -> tuple[
     return np.linspace(0.0, width - 1.0, nx), np.linspace(0.0, height - 1.0, ny)
 
 
-def field_spread(models: Sequence[DistortionModel], reference: DistortionModel, xs: np.ndarray,
-                 ys: np.ndarray) -> np.ndarray:
+def field_spread(
+    models: Sequence[DistortionModel], reference: DistortionModel, xs: np.ndarray, ys: np.ndarray
+) -> np.ndarray:
     """Per-node std ``(ny, nx)`` of ``models`` modulo homography, aligned to ``reference``."""
     xx, yy = np.meshgrid(xs, ys)
     grid = np.stack([xx.ravel(), yy.ravel()], axis=1)
@@ -118,11 +126,19 @@ def refit_job(job: tuple) -> tuple[DistortionModel | None, str | None]:
     return res.model, None
 
 
-def bootstrap_field_uncertainty(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int,
-                                fit_kwargs: dict | None = None, *, n_boot: int = DEFAULT_N_BOOT,
-                                seed: int = 0, resample: str = "edges", cells: int = GRID_CELLS,
-                                full_fit: FitResult | None = None,
-                                map_fn=map) -> FieldUncertainty | FitFailure:
+def bootstrap_field_uncertainty(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    fit_kwargs: dict | None = None,
+    *,
+    n_boot: int = DEFAULT_N_BOOT,
+    seed: int = 0,
+    resample: str = "edges",
+    cells: int = GRID_CELLS,
+    full_fit: FitResult | None = None,
+    map_fn=map,
+) -> FieldUncertainty | FitFailure:
     """Bootstrap the correction fit and map the spread of the fitted field.
 
     Parameters
@@ -167,22 +183,31 @@ def bootstrap_field_uncertainty(lines_per_image: Sequence[Sequence[np.ndarray]],
         return FitFailure(f"full fit failed: {full.reason}")
     # the data the full fit used: without its rejected (outlier / unusable) edges
     dropped = {(r.image, r.line) for r in full.rejected}
-    data = [[np.asarray(p, np.float64) for j, p in enumerate(lines) if (i, j) not in dropped]
-            for i, lines in enumerate(lines_per_image)]
+    data = [
+        [np.asarray(p, np.float64) for j, p in enumerate(lines) if (i, j) not in dropped]
+        for i, lines in enumerate(lines_per_image)
+    ]
     data = [lines for lines in data if lines]
     # resampling units of "edges": strings, i.e. lines 2k, 2k+1 (pipeline.measure lists a string's
     # two edges next to each other), grouped before dropping so a rejected edge keeps the pairing
-    strings = [[g for g in ([np.asarray(p, np.float64) for j, p in enumerate(lines)
-                             if j // 2 == k and (i, j) not in dropped] for k in range((len(lines) + 1) // 2)) if g]
-               for i, lines in enumerate(lines_per_image)]
+    strings = [
+        [
+            g
+            for g in (
+                [np.asarray(p, np.float64) for j, p in enumerate(lines) if j // 2 == k and (i, j) not in dropped]
+                for k in range((len(lines) + 1) // 2)
+            )
+            if g
+        ]
+        for i, lines in enumerate(lines_per_image)
+    ]
     strings = [groups for groups in strings if groups]
     rkw = {**kw, "robust": False, "init": full.model}
     rng = np.random.default_rng(seed)
     jobs = []
     for _ in range(int(n_boot)):  # all resampling first: the result does not depend on map_fn
         if resample == "edges":
-            sample = [[p for k in rng.integers(0, len(groups), len(groups)) for p in groups[k]]
-                      for groups in strings]
+            sample = [[p for k in rng.integers(0, len(groups), len(groups)) for p in groups[k]] for groups in strings]
         else:
             sample = [data[k] for k in rng.integers(0, len(data), len(data))]
         jobs.append((sample, width, height, rkw))
@@ -196,10 +221,21 @@ def bootstrap_field_uncertainty(lines_per_image: Sequence[Sequence[np.ndarray]],
             continue
         models.append(model)
     if len(models) < 2:
-        return FitFailure(f"only {len(models)} of {n_boot} bootstrap replicates could be fitted"
-                          + (f" (e.g. {failures[0]})" if failures else ""))
+        return FitFailure(
+            f"only {len(models)} of {n_boot} bootstrap replicates could be fitted"
+            + (f" (e.g. {failures[0]})" if failures else "")
+        )
     xs, ys = uncertainty_grid(width, height, cells)
     std = field_spread(models, full.model, xs, ys)
-    return FieldUncertainty(rms=float(np.sqrt(np.mean(std ** 2))), max=float(std.max()), xs=xs, ys=ys,
-                            std=std, n_boot=len(models), n_failed=n_failed, resample=resample,
-                            model=full.model, failures=tuple(failures))
+    return FieldUncertainty(
+        rms=float(np.sqrt(np.mean(std**2))),
+        max=float(std.max()),
+        xs=xs,
+        ys=ys,
+        std=std,
+        n_boot=len(models),
+        n_failed=n_failed,
+        resample=resample,
+        model=full.model,
+        failures=tuple(failures),
+    )

@@ -54,8 +54,9 @@ def _nodes(n: int, step: int) -> np.ndarray:
     return np.linspace(0.0, n - 1.0, k)
 
 
-def fast_undistortion_maps(model: DistortionModel, width: int, height: int, step: int = DEFAULT_STEP_PX,
-                           n_check: int = 2000, seed: int = 0) -> RemapMaps:
+def fast_undistortion_maps(
+    model: DistortionModel, width: int, height: int, step: int = DEFAULT_STEP_PX, n_check: int = 2000, seed: int = 0
+) -> RemapMaps:
     """Maps such that ``cv2.remap(img, map_x, map_y, ...)`` is the corrected image.
 
     The corrected pixel ``(x, y)`` (ideal coordinates) is read from the
@@ -90,7 +91,7 @@ def fast_undistortion_maps(model: DistortionModel, width: int, height: int, step
     map_y = np.empty((height, width), np.float32)
     band = max(1, (1 << 22) // width)  # evaluate in bands of ~4 Mpx to bound memory
     for r0 in range(0, height, band):
-        r = rows[r0:r0 + band]
-        map_x[r0:r0 + band] = sx(r, cols, grid=True)
-        map_y[r0:r0 + band] = sy(r, cols, grid=True)
+        r = rows[r0 : r0 + band]
+        map_x[r0 : r0 + band] = sx(r, cols, grid=True)
+        map_y[r0 : r0 + band] = sy(r, cols, grid=True)
     return RemapMaps(map_x, map_y, err, int(step))

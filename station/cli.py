@@ -61,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
         # ours, and no traceback; point stdout at devnull so the interpreter's
         # final flush does not raise again
         import os
+
         with contextlib.suppress(OSError, ValueError):  # stdout may be a test double
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
@@ -75,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _stdout_is_devnull() -> bool:
     import os
+
     try:
         out, null = os.fstat(sys.stdout.fileno()), os.stat(os.devnull)
     except (OSError, ValueError, AttributeError):  # stdout may be closed or a test double

@@ -61,8 +61,10 @@ def measure_grey(path, img: np.ndarray, t: int, *, require_strings: bool = True)
     if require_strings and m.n_lines == 0:
         short = [r for r in m.rejected if r.reason == "short edge"]
         if short:  # strings were found, but t leaves too few points on each edge
-            raise InputError(f"{path}: {len(short)} string edges found, but each keeps < "
-                             f"{MIN_SMOOTHED_POINTS} points after smoothing with t={t}: use a smaller --t")
+            raise InputError(
+                f"{path}: {len(short)} string edges found, but each keeps < "
+                f"{MIN_SMOOTHED_POINTS} points after smoothing with t={t}: use a smaller --t"
+            )
         raise InputError(f"{path}: {NO_STRINGS}")
     return m
 

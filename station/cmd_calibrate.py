@@ -42,20 +42,37 @@ class CalibrateError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("calibrate", help="fit a lens distortion model from harp shots",
-                              description=__doc__.split("\n\n")[0])
+    p = subparsers.add_parser(
+        "calibrate", help="fit a lens distortion model from harp shots", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
-    p.add_argument("--model", choices=("auto", "radial", "poly"), default="auto",
-                   help="model kind; auto = chosen by leave-one-shot-out cross-validation (default)")
-    p.add_argument("--degree", type=positive_int, default=None,
-                   help="radial: highest power of r (default 4); poly: total degree 3..11 (default 5)")
+    p.add_argument(
+        "--model",
+        choices=("auto", "radial", "poly"),
+        default="auto",
+        help="model kind; auto = chosen by leave-one-shot-out cross-validation (default)",
+    )
+    p.add_argument(
+        "--degree",
+        type=positive_int,
+        default=None,
+        help="radial: highest power of r (default 4); poly: total degree 3..11 (default 5)",
+    )
     p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
     p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
-    p.add_argument("--center-prior", action="store_true",
-                   help="radial: pull the distortion centre towards the image centre (see pipeline.select)")
+    p.add_argument(
+        "--center-prior",
+        action="store_true",
+        help="radial: pull the distortion centre towards the image centre (see pipeline.select)",
+    )
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (YAML)")
-    p.add_argument("--holdout", nargs="+", default=[], metavar="IMAGE",
-                   help="shots never used in the fit: corrected by the model and measured")
+    p.add_argument(
+        "--holdout",
+        nargs="+",
+        default=[],
+        metavar="IMAGE",
+        help="shots never used in the fit: corrected by the model and measured",
+    )
     p.add_argument("--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -109,16 +126,17 @@ def calibrate(args) -> dict:
 
     if cand is None:
         if len(shots) < 2:
-            raise CalibrateError("need at least 2 shots at different harp orientations "
-                                 "(one orientation cannot constrain the distortion along the strings)")
+            raise CalibrateError(
+                "need at least 2 shots at different harp orientations "
+                "(one orientation cannot constrain the distortion along the strings)"
+            )
         sel = select_model(shots, width, height)
         cand = sel.choice
         choice = sel.to_dict()
     else:
         choice = {**cand.to_dict(), "reason": "given on the command line", "folds": "none", "table": []}
 
-    res = fit_distortion(shots, width, height, **cand.kwargs(),
-                         image_sizes=[(m.width, m.height) for _, m in fit_m])
+    res = fit_distortion(shots, width, height, **cand.kwargs(), image_sizes=[(m.width, m.height) for _, m in fit_m])
     if isinstance(res, FitFailure):
         raise CalibrateError(f"cannot fit {cand.label}: {res.reason}")
 
@@ -127,9 +145,17 @@ def calibrate(args) -> dict:
         "choice": choice,
         "before": {"d": _num(res.d_before), "d_max": _num(res.d_max_before)},
         "fit": {"d": _num(res.d_after), "d_max": _num(res.d_max_after)},
-        "images": [{"path": str(fit_m[im.image][0]), "n_edges": im.n_edges, "d_before": _num(im.d_before),
-                    "d_max_before": _num(im.d_max_before), "d": _num(im.d_after), "d_max": _num(im.d_max_after)}
-                   for im in res.images],
+        "images": [
+            {
+                "path": str(fit_m[im.image][0]),
+                "n_edges": im.n_edges,
+                "d_before": _num(im.d_before),
+                "d_max_before": _num(im.d_max_before),
+                "d": _num(im.d_after),
+                "d_max": _num(im.d_max_after),
+            }
+            for im in res.images
+        ],
         "rejected": [{"path": str(fit_m[e.image][0]), "line": e.line, "reason": e.reason} for e in res.rejected],
         "warnings": list(res.warnings),
     }
@@ -137,22 +163,28 @@ def calibrate(args) -> dict:
         per = []
         for p, m in hold_m:
             d, dm = corrected_straightness(res.model, [ln.points for ln in m.lines])
-            per.append({"path": str(p), "d_before": _num(m.d), "d_max_before": _num(m.d_max),
-                        "d": _num(d), "d_max": _num(dm)})
+            per.append(
+                {"path": str(p), "d_before": _num(m.d), "d_max_before": _num(m.d_max), "d": _num(d), "d_max": _num(dm)}
+            )
         d, dm = corrected_straightness(res.model, [ln.points for _, m in hold_m for ln in m.lines])
         report["holdout"] = {"d": _num(d), "d_max": _num(dm), "images": per}
         d0, _ = straightness_of([ln.points for _, m in hold_m for ln in m.lines])
         if d is not None and np.isfinite(d) and d > d0:
             report["warnings"].append(
                 f"the model leaves the held-out shots less straight than uncorrected (d {d0:.4f} px "
-                f"before, {d:.4f} px after): it does not generalise to other orientations")
+                f"before, {d:.4f} px after): it does not generalise to other orientations"
+            )
     merit = {k: report[k] for k in ("before", "fit") if k in report}
     if "holdout" in report:
         merit["holdout"] = {"d": report["holdout"]["d"], "d_max": report["holdout"]["d_max"]}
     merit["choice"] = {k: v for k, v in choice.items() if k != "table"}
     merit["rejected_edges"] = report["rejected"]
-    prov = make_provenance(args.images, t=args.t, command=["harp", "calibrate", *sys.argv[2:]],
-                           holdout=[{"path": str(p)} for p, _ in hold_m])
+    prov = make_provenance(
+        args.images,
+        t=args.t,
+        command=["harp", "calibrate", *sys.argv[2:]],
+        holdout=[{"path": str(p)} for p, _ in hold_m],
+    )
     try:
         write_model_file(args.out, res.model, width=width, height=height, merit=merit, provenance=prov)
     except OSError as exc:
@@ -190,13 +222,21 @@ def _print(report: dict) -> None:
         return Path(path).name if names.count(Path(path).name) == 1 else str(path)
 
     for im in report["images"]:
-        t.add_row(label(im["path"]), str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
-                  f(im["d_max"]))
-    t.add_row("fit (all)", "", f(report["before"]["d"]), f(report["before"]["d_max"]), f(report["fit"]["d"]),
-              f(report["fit"]["d_max"]))
+        t.add_row(
+            label(im["path"]), str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"])
+        )
+    t.add_row(
+        "fit (all)",
+        "",
+        f(report["before"]["d"]),
+        f(report["before"]["d_max"]),
+        f(report["fit"]["d"]),
+        f(report["fit"]["d_max"]),
+    )
     for im in hold:
-        t.add_row(f"holdout {label(im['path'])}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]),
-                  f(im["d_max"]))
+        t.add_row(
+            f"holdout {label(im['path'])}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"])
+        )
     if "holdout" in report:
         t.add_row("holdout (all)", "", "", "", f(report["holdout"]["d"]), f(report["holdout"]["d_max"]))
     con.print(t)

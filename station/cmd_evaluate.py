@@ -22,7 +22,6 @@ import json
 import sys
 from pathlib import Path
 
-
 from pipeline.evaluate import corrected_points
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
@@ -36,19 +35,27 @@ class EvaluateError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("evaluate", help="measure the residual distortion left by any correction",
-                              description=(
-                                  "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
-                                  "camera_info YAML or lensfun XML), measured on harp shots: d and d_max before "
-                                  "and after, 4-corner normalised."))
-    p.add_argument("correction", metavar="CORRECTION",
-                   help="harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML ('none' with "
-                        "--already-corrected)")
+    p = subparsers.add_parser(
+        "evaluate",
+        help="measure the residual distortion left by any correction",
+        description=(
+            "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
+            "camera_info YAML or lensfun XML), measured on harp shots: d and d_max before "
+            "and after, 4-corner normalised."
+        ),
+    )
+    p.add_argument(
+        "correction",
+        metavar="CORRECTION",
+        help="harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML ('none' with --already-corrected)",
+    )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots")
-    p.add_argument("--already-corrected", action="store_true",
-                   help="images were corrected by other software: only measure them")
-    p.add_argument("--focal", type=float, default=None,
-                   help="lensfun: focal length (mm) of the calibration entry to use")
+    p.add_argument(
+        "--already-corrected", action="store_true", help="images were corrected by other software: only measure them"
+    )
+    p.add_argument(
+        "--focal", type=float, default=None, help="lensfun: focal length (mm) of the calibration entry to use"
+    )
     p.add_argument("-t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -77,8 +84,7 @@ def load_correction(path, width: int, height: int, focal: float | None = None) -
 
             mf = parse_model_text(text, str(p))
             if (mf.width, mf.height) != (width, height):
-                raise EvaluateError(f"{p}: model is for {mf.width}x{mf.height} images, the shots are "
-                                    f"{width}x{height}")
+                raise EvaluateError(f"{p}: model is for {mf.width}x{mf.height} images, the shots are {width}x{height}")
             return mf.model, f"harp:{mf.model.name}"
         if "<lensdatabase" in head:
             from pipeline.exports.lensfun import read_lensfun_text
@@ -96,8 +102,9 @@ def load_correction(path, width: int, height: int, focal: float | None = None) -
             m, size = read_ros_text(text, str(p))
             kind = "ros"
         else:
-            raise EvaluateError(f"{p}: not a recognised correction (harp model, OpenCV YAML/XML, "
-                                f"ROS camera_info YAML or lensfun XML)")
+            raise EvaluateError(
+                f"{p}: not a recognised correction (harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML)"
+            )
     except ValueError as exc:
         raise EvaluateError(str(exc)) from None
     if size is not None and tuple(size) != (width, height):
@@ -121,13 +128,19 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
         if size is None:
             size = (img.shape[1], img.shape[0])
         elif (img.shape[1], img.shape[0]) != size:
-            errors.append({"path": str(path), "error": f"{path}: image is {img.shape[1]}x{img.shape[0]}, the "
-                           f"first is {size[0]}x{size[1]}; all shots must have the same size"})
+            errors.append(
+                {
+                    "path": str(path),
+                    "error": f"{path}: image is {img.shape[1]}x{img.shape[0]}, the "
+                    f"first is {size[0]}x{size[1]}; all shots must have the same size",
+                }
+            )
             continue
         images.append((path, img))
     if not images:
-        raise EvaluateError(errors[0]["error"] if len(errors) == 1 else
-                            "no readable image: " + "; ".join(e["error"] for e in errors))
+        raise EvaluateError(
+            errors[0]["error"] if len(errors) == 1 else "no readable image: " + "; ".join(e["error"] for e in errors)
+        )
     w, h = size
     if already_corrected and str(correction_path).lower() == "none":
         model, kind = None, "none"
@@ -163,13 +176,23 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
         if before is not None:
             before_all += before
     if not after_all:
-        raise EvaluateError("no string edge found in any image"
-                            + "".join(f"; {e['error']}" for e in errors if NO_STRINGS not in e["error"]))
-    return {"correction": str(correction_path), "kind": kind, "already_corrected": bool(already_corrected),
-            "t": t, "width": w, "height": h,
-            "before": _sd(straightness(before_all)) if before_all else None,
-            "after": _sd(straightness(after_all)), "n_lines": len(after_all), "images": per_image,
-            "errors": errors}
+        raise EvaluateError(
+            "no string edge found in any image"
+            + "".join(f"; {e['error']}" for e in errors if NO_STRINGS not in e["error"])
+        )
+    return {
+        "correction": str(correction_path),
+        "kind": kind,
+        "already_corrected": bool(already_corrected),
+        "t": t,
+        "width": w,
+        "height": h,
+        "before": _sd(straightness(before_all)) if before_all else None,
+        "after": _sd(straightness(after_all)),
+        "n_lines": len(after_all),
+        "images": per_image,
+        "errors": errors,
+    }
 
 
 def _fmt(sd):
@@ -178,8 +201,9 @@ def _fmt(sd):
 
 def run(args) -> int:
     try:
-        rep = evaluate(args.correction, args.images, already_corrected=args.already_corrected,
-                       focal=args.focal, t=args.t)
+        rep = evaluate(
+            args.correction, args.images, already_corrected=args.already_corrected, focal=args.focal, t=args.t
+        )
     except InputError as exc:
         print(f"harp evaluate: {exc}", file=sys.stderr)
         return 2
@@ -189,8 +213,10 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(rep, indent=2))
         return status
-    print(f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
-          + (", images already corrected" if rep["already_corrected"] else ""))
+    print(
+        f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
+        + (", images already corrected" if rep["already_corrected"] else "")
+    )
     print(f"{'image':40s} {'lines':>5s} {'d before':>9s} {'dmax bef.':>9s} {'d after':>9s} {'dmax aft.':>9s}  (px)")
     for e in rep["images"]:
         b, a = _fmt(e["before"]), _fmt(e["after"])

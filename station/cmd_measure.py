@@ -36,11 +36,16 @@ from station.cli_inputs import InputError, measure_file, positive_int
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("measure", help="measure string straightness (d, d_max) in harp photos",
-                              description=__doc__.split("\n\n")[0])
+    p = subparsers.add_parser(
+        "measure", help="measure string straightness (d, d_max) in harp photos", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
-    p.add_argument("--t", type=positive_int, default=30,
-                   help="along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default 30)")
+    p.add_argument(
+        "--t",
+        type=positive_int,
+        default=30,
+        help="along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default 30)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     p.add_argument("--overlay", metavar="DIR", help="write an overlay PNG per image into DIR")
     p.set_defaults(func=run)
@@ -71,27 +76,38 @@ def _print_tables(results: list[tuple[str, ImageMeasurement]], overall: dict) ->
 
     con = Console(file=sys.stdout, highlight=False)
     for path, m in results:
-        tab = Table(title=f"{path}  ({m.width}x{m.height}, string width {m.string_width_px:.2f} px)",
-                    title_justify="left")
+        tab = Table(
+            title=f"{path}  ({m.width}x{m.height}, string width {m.string_width_px:.2f} px)", title_justify="left"
+        )
         for col in ("string", "edge", "points", "rms px", "p2p px", "angle deg", "length px", "hf_rms px"):
             tab.add_column(col, justify="right")
         for ln in m.lines:
-            tab.add_row(str(ln.string_id), "+" if ln.polarity > 0 else "-", str(len(ln.points)),
-                        f"{ln.rms:.4f}", f"{ln.p2p:.4f}", f"{ln.angle_deg:.2f}", f"{ln.length_px:.1f}",
-                        f"{ln.hf_rms:.4f}")
+            tab.add_row(
+                str(ln.string_id),
+                "+" if ln.polarity > 0 else "-",
+                str(len(ln.points)),
+                f"{ln.rms:.4f}",
+                f"{ln.p2p:.4f}",
+                f"{ln.angle_deg:.2f}",
+                f"{ln.length_px:.1f}",
+                f"{ln.hf_rms:.4f}",
+            )
         rej = m.to_dict()["rejected"]
         rej_text = ", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) or "none"
-        tab.caption = (f"d = {_fmt(m.d)} px   d_max = {_fmt(m.d_max)} px   {m.n_lines} edges of "
-                       f"{m.n_strings} strings   rejected groups: {rej_text}")
+        tab.caption = (
+            f"d = {_fmt(m.d)} px   d_max = {_fmt(m.d_max)} px   {m.n_lines} edges of "
+            f"{m.n_strings} strings   rejected groups: {rej_text}"
+        )
         tab.caption_justify = "left"
         con.print(tab)
     summ = Table(title="overall (all edges of all images pooled)", title_justify="left")
     for col in ("image", "size", "strings", "edges", "d px", "d_max px"):
         summ.add_column(col, justify="right" if col != "image" else "left")
     for path, m in results:
-        summ.add_row(Path(path).name, f"{m.width}x{m.height}", str(m.n_strings), str(m.n_lines), _fmt(m.d), _fmt(m.d_max))
-    summ.add_row("all", "", "", str(overall["n_lines"]), _fmt(overall["d"]), _fmt(overall["d_max"]),
-                 style="bold")
+        summ.add_row(
+            Path(path).name, f"{m.width}x{m.height}", str(m.n_strings), str(m.n_lines), _fmt(m.d), _fmt(m.d_max)
+        )
+    summ.add_row("all", "", "", str(overall["n_lines"]), _fmt(overall["d"]), _fmt(overall["d_max"]), style="bold")
     con.print(summ)
 
 
@@ -104,8 +120,11 @@ def run(args) -> int:
         try:
             overlay_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            reason = ("exists and is not a directory" if overlay_dir.exists() and not overlay_dir.is_dir()
-                      else exc.strerror or exc)
+            reason = (
+                "exists and is not a directory"
+                if overlay_dir.exists() and not overlay_dir.is_dir()
+                else exc.strerror or exc
+            )
             print(f"harp measure: {overlay_dir}: cannot create overlay directory: {reason}", file=sys.stderr)
             return 2
     names = _overlay_names(list(args.images))

@@ -21,10 +21,10 @@ FORMATS = ("opencv", "ros", "lensfun", "json")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("profile", help="list, show and export stored lens profiles",
-                              description=__doc__.split("\n\n")[1])
-    p.add_argument("--store", type=Path, default=None,
-                   help=f"profile store (default $HARP_STORE or {DEFAULT_STORE})")
+    p = subparsers.add_parser(
+        "profile", help="list, show and export stored lens profiles", description=__doc__.split("\n\n")[1]
+    )
+    p.add_argument("--store", type=Path, default=None, help=f"profile store (default $HARP_STORE or {DEFAULT_STORE})")
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
     store_opt = argparse.ArgumentParser(add_help=False)  # --store also after the action
     store_opt.add_argument("--store", type=Path, default=argparse.SUPPRESS, help="profile store")
@@ -78,12 +78,12 @@ def _with_store(fn):
                 return fn(args, store)
         except (StoreError, _Fail) as exc:
             return _error(str(exc))
+
     return wrapped
 
 
 @_with_store
 def _list(args, store) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     profiles = store.profiles()
@@ -91,12 +91,20 @@ def _list(args, store) -> int:
         print(f"no profiles in {store.path}")
         return 0
     t = Table(title=f"profiles in {store.path}")
-    for col in ("id", "lens", "camera", "focus", "model", "holdout d", "holdout d_max", "created",
-                "station"):
+    for col in ("id", "lens", "camera", "focus", "model", "holdout d", "holdout d_max", "created", "station"):
         t.add_column(col, justify="right" if col in ("id", "focus", "holdout d", "holdout d_max") else "left")
     for p in profiles:
-        t.add_row(f"#{p.id}", " ".join(p.lens), " ".join(p.camera), f"{p.focus:g}", p.model_name,
-                  _num(p.holdout_d), _num(p.holdout_d_max), p.created_at, p.station_id)
+        t.add_row(
+            f"#{p.id}",
+            " ".join(p.lens),
+            " ".join(p.camera),
+            f"{p.focus:g}",
+            p.model_name,
+            _num(p.holdout_d),
+            _num(p.holdout_d_max),
+            p.created_at,
+            p.station_id,
+        )
     _console().print(t)
     return 0
 
@@ -109,8 +117,7 @@ def _select(store, lens_query: str, focus: float | None):
     hits = [p for p in latest if math.isclose(p.focus, focus, rel_tol=0, abs_tol=1e-9)]
     if not hits:
         known = ", ".join(f"{p.focus:g}" for p in latest) or "none"
-        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} "
-                    f"(calibrated focus settings: {known})")
+        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} (calibrated focus settings: {known})")
     return lens, hits
 
 
@@ -122,23 +129,26 @@ def _interpolated(lens, profiles, focus: float):
     sizes = {(p.width, p.height) for p in profiles}
     if len(sizes) != 1:
         raise _Fail(f"lens {' '.join(lens[1:])}: profiles of different image sizes; cannot interpolate")
-    (w, h), = sizes
+    ((w, h),) = sizes
     models = {p.focus: model_from_dict(p.model) for p in profiles}
     known = ", ".join(f"{p.focus:g}" for p in profiles)
     if len(models) < 2 or not min(models) < focus < max(models):
-        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} and it is not between "
-                    f"two calibrated focus settings ({known}); no extrapolation")
+        raise _Fail(
+            f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} and it is not between "
+            f"two calibrated focus settings ({known}); no extrapolation"
+        )
     interp = FocusInterpolator(models, w, h)
     model = interp.at(focus)
     loo = leave_one_out_error(models, w, h)
-    note = (f"focus {focus:g} is not calibrated: correction field interpolated "
-            f"({getattr(interp, 'method', 'auto')}) between the calibrated settings {known}")
+    note = (
+        f"focus {focus:g} is not calibrated: correction field interpolated "
+        f"({getattr(interp, 'method', 'auto')}) between the calibrated settings {known}"
+    )
     return model, w, h, note, loo
 
 
 @_with_store
 def _show(args, store) -> int:
-    from rich.console import Console
     from rich.table import Table
 
     console = _console()
@@ -149,25 +159,50 @@ def _show(args, store) -> int:
             console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
             console.print(note)
             for e in loo:
-                console.print(f"interpolation error measured by leaving focus {e.focus:g} out: "
-                              f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)")
+                console.print(
+                    f"interpolation error measured by leaving focus {e.focus:g} out: "
+                    f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)"
+                )
             if not loo:
                 console.print("interpolation error: not measurable (needs >= 3 calibrated settings)")
             return 0
     lens, profiles = _select(store, args.lens, args.focus)
     t = Table(title=f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]} (newest profile per focus)")
-    for col in ("focus", "id", "camera", "model", "fit d", "fit d_max", "holdout d", "holdout d_max",
-                "field unc. rms", "field unc. max", "created"):
+    for col in (
+        "focus",
+        "id",
+        "camera",
+        "model",
+        "fit d",
+        "fit d_max",
+        "holdout d",
+        "holdout d_max",
+        "field unc. rms",
+        "field unc. max",
+        "created",
+    ):
         t.add_column(col, justify="right")
     for p in profiles:
-        t.add_row(f"{p.focus:g}", f"#{p.id}", " ".join(p.camera), p.model_name, _num(p.fit_d),
-                  _num(p.fit_d_max), _num(p.holdout_d), _num(p.holdout_d_max),
-                  _num(p.field_uncertainty_rms), _num(p.field_uncertainty_max), p.created_at)
+        t.add_row(
+            f"{p.focus:g}",
+            f"#{p.id}",
+            " ".join(p.camera),
+            p.model_name,
+            _num(p.fit_d),
+            _num(p.fit_d_max),
+            _num(p.holdout_d),
+            _num(p.holdout_d_max),
+            _num(p.field_uncertainty_rms),
+            _num(p.field_uncertainty_max),
+            p.created_at,
+        )
     console.print(t)
     if args.focus is not None:
         p = profiles[0]
-        console.print(f"image {p.width}x{p.height}, session {p.session_dir}, station {p.station_id}, "
-                      f"software {p.software_version}")
+        console.print(
+            f"image {p.width}x{p.height}, session {p.session_dir}, station {p.station_id}, "
+            f"software {p.software_version}"
+        )
         console.print_json(json.dumps(p.model))
     return 0
 
@@ -180,21 +215,42 @@ def _export(args, store) -> int:
     lens, latest = _select(store, args.lens, None)
     if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
         model, w, h, note, loo = _interpolated(lens, latest, args.focus)
-        mf = ModelFile(model=model, width=w, height=h,
-                       merit={"interpolation_leave_one_out": [
-                           {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo]},
-                       provenance={"lens": list(lens[1:]), "focus": args.focus, "note": note,
-                                   "from_profiles": [p.id for p in latest]})
+        mf = ModelFile(
+            model=model,
+            width=w,
+            height=h,
+            merit={
+                "interpolation_leave_one_out": [{"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo]
+            },
+            provenance={
+                "lens": list(lens[1:]),
+                "focus": args.focus,
+                "note": note,
+                "from_profiles": [p.id for p in latest],
+            },
+        )
         return _write_export(args, mf, f"interpolated focus {args.focus:g}")
     _lens, (p,) = _select(store, args.lens, args.focus)
     try:
-        mf = ModelFile(model=model_from_dict(p.model), width=p.width, height=p.height,
-                       merit={"fit": {"d": p.fit_d, "d_max": p.fit_d_max},
-                              "holdout": {"d": p.holdout_d, "d_max": p.holdout_d_max}},
-                       provenance={"profile_id": p.id, "lens": list(p.lens), "camera": list(p.camera),
-                                   "focus": p.focus, "session_dir": p.session_dir,
-                                   "station": p.station_id, "software": p.software_version,
-                                   "created_utc": p.created_at})
+        mf = ModelFile(
+            model=model_from_dict(p.model),
+            width=p.width,
+            height=p.height,
+            merit={
+                "fit": {"d": p.fit_d, "d_max": p.fit_d_max},
+                "holdout": {"d": p.holdout_d, "d_max": p.holdout_d_max},
+            },
+            provenance={
+                "profile_id": p.id,
+                "lens": list(p.lens),
+                "camera": list(p.camera),
+                "focus": p.focus,
+                "session_dir": p.session_dir,
+                "station": p.station_id,
+                "software": p.software_version,
+                "created_utc": p.created_at,
+            },
+        )
     except ValueError as exc:
         raise _Fail(f"profile #{p.id}: {exc}") from None
     return _write_export(args, mf, f"profile #{p.id}")
@@ -217,6 +273,5 @@ def _write_export(args, mf, what: str) -> int:
     else:
         sys.stdout.write(text)
     if err is not None:
-        print(f"conversion error ({args.format}): RMS {err.rms_px:.4f} px, max {err.max_px:.4f} px",
-              file=sys.stderr)
+        print(f"conversion error ({args.format}): RMS {err.rms_px:.4f} px, max {err.max_px:.4f} px", file=sys.stderr)
     return 0

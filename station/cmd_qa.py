@@ -41,19 +41,36 @@ def _positive(text: str) -> float:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("qa", help="factory QA verdict of a session or a stored lens",
-                              description=__doc__.split("\n\n")[1])
+    p = subparsers.add_parser(
+        "qa", help="factory QA verdict of a session or a stored lens", description=__doc__.split("\n\n")[1]
+    )
     p.add_argument("target", metavar="SESSION_OR_LENS")
-    p.add_argument("--reference", metavar="REF", default=None,
-                   help="golden reference: model file, profile #id, or lens in the store")
-    p.add_argument("--store", type=Path, default=None, help="profile store (default: the session's, "
-                   f"else $HARP_STORE or {DEFAULT_STORE})")
+    p.add_argument(
+        "--reference",
+        metavar="REF",
+        default=None,
+        help="golden reference: model file, profile #id, or lens in the store",
+    )
+    p.add_argument(
+        "--store",
+        type=Path,
+        default=None,
+        help=f"profile store (default: the session's, else $HARP_STORE or {DEFAULT_STORE})",
+    )
     p.add_argument("--config", type=Path, default=None, help="take the qa thresholds from this configuration")
     p.add_argument("--max-holdout-d", type=_positive, metavar="PX", help="threshold on the holdout d")
-    p.add_argument("--max-distortion", type=_positive, metavar="PX",
-                   help="threshold on the max displacement of the correction (modulo homography)")
-    p.add_argument("--max-reference-deviation", type=_positive, metavar="PX",
-                   help="threshold on the max deviation from the reference (modulo homography)")
+    p.add_argument(
+        "--max-distortion",
+        type=_positive,
+        metavar="PX",
+        help="threshold on the max displacement of the correction (modulo homography)",
+    )
+    p.add_argument(
+        "--max-reference-deviation",
+        type=_positive,
+        metavar="PX",
+        help="threshold on the max deviation from the reference (modulo homography)",
+    )
     p.add_argument("--report", type=Path, metavar="DIR", default=None, help="write a Markdown report here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--no-record", action="store_true", help="do not record the result in the store")
@@ -84,8 +101,15 @@ def _candidates(args, config, session):
         models = session_models(session.path)
         if not models:
             raise _Fail(f"{session.path}: session has no fitted profile yet")
-        return [(focus if math.isfinite(focus) else session.config.focus_settings[f], mf, None,
-                 str(session.path / "profiles" / f"focus{f}.yaml")) for f, focus, mf in models]
+        return [
+            (
+                focus if math.isfinite(focus) else session.config.focus_settings[f],
+                mf,
+                None,
+                str(session.path / "profiles" / f"focus{f}.yaml"),
+            )
+            for f, focus, mf in models
+        ]
     with _store(args, config) as store:
         lens = store.find_lens(args.target)
         profiles = store.latest_by_focus(lens[0])
@@ -124,8 +148,9 @@ def _reference(args, config, focus, width, height):
             profiles = store.latest_by_focus(lens[0])
     sizes = {(p.width, p.height) for p in profiles}
     if sizes != {(width, height)}:
-        raise _Fail(f"reference {ref!r} is for {', '.join(f'{w}x{h}' for w, h in sorted(sizes))} images, "
-                    f"not {width}x{height}")
+        raise _Fail(
+            f"reference {ref!r} is for {', '.join(f'{w}x{h}' for w, h in sorted(sizes))} images, not {width}x{height}"
+        )
     if len(profiles) == 1 and ref.startswith("#"):
         return model_from_dict(profiles[0].model)
     same = [p for p in profiles if math.isclose(p.focus, focus, abs_tol=1e-9)]
@@ -134,8 +159,7 @@ def _reference(args, config, focus, width, height):
     from pipeline.interpolate import interpolate_correction
 
     try:
-        return interpolate_correction({p.focus: model_from_dict(p.model) for p in profiles}, focus,
-                                      width, height)
+        return interpolate_correction({p.focus: model_from_dict(p.model) for p in profiles}, focus, width, height)
     except ValueError as exc:
         raise _Fail(f"reference lens {ref!r} at focus {focus:g}: {exc}") from None
 
@@ -148,19 +172,26 @@ def _report(args, title, items, results, overall, thresholds, interpolation, ses
     for (focus, prof, _pid, source), v in zip(items, results):
         if session is not None:
             f_idx = int(Path(source).stem.replace("focus", ""))
-            e = session_evidence(session, f_idx, focus, prof, v, source=source,
-                                 bootstrap_if_missing=session.config.pipeline.bootstrap or REPORT_BOOTSTRAP)
+            e = session_evidence(
+                session,
+                f_idx,
+                focus,
+                prof,
+                v,
+                source=source,
+                bootstrap_if_missing=session.config.pipeline.bootstrap or REPORT_BOOTSTRAP,
+            )
         else:
             pd = profile_data(prof)
-            e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v,
-                              source=source)
-            e.uncertainty_note = ("stored: RMS {} px, max {} px (no per-pixel map without the session's "
-                                  "frames: run `harp qa SESSION_DIR --report`)").format(
-                *(f"{x:.4f}" if x is not None else "-" for x in (pd.field_uncertainty_rms,
-                                                                 pd.field_uncertainty_max)))
+            e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v, source=source)
+            e.uncertainty_note = (
+                "stored: RMS {} px, max {} px (no per-pixel map without the session's "
+                "frames: run `harp qa SESSION_DIR --report`)"
+            ).format(
+                *(f"{x:.4f}" if x is not None else "-" for x in (pd.field_uncertainty_rms, pd.field_uncertainty_max))
+            )
         evidence.append(e)
-    return write_report(args.report, title, evidence, overall, thresholds=thresholds,
-                        interpolation=interpolation)
+    return write_report(args.report, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 
 
 def _plain(v):
@@ -189,13 +220,17 @@ def run(args) -> int:
                 config = config or session.config
             elif target.exists() and target.is_dir():
                 raise _Fail(f"{target}: not a session directory (no session.json)")
-            thresholds = thresholds_from(config.qa if config is not None else None,
-                                         max_holdout_d_px=args.max_holdout_d,
-                                         max_distortion_px=args.max_distortion,
-                                         max_reference_deviation_px=args.max_reference_deviation)
+            thresholds = thresholds_from(
+                config.qa if config is not None else None,
+                max_holdout_d_px=args.max_holdout_d,
+                max_distortion_px=args.max_distortion,
+                max_reference_deviation_px=args.max_reference_deviation,
+            )
             if args.reference is not None and thresholds.max_reference_deviation_px is None:
-                raise _Fail("--reference needs a threshold: set qa.max_reference_deviation_px in the "
-                            "configuration or give --max-reference-deviation PX")
+                raise _Fail(
+                    "--reference needs a threshold: set qa.max_reference_deviation_px in the "
+                    "configuration or give --max-reference-deviation PX"
+                )
             items = _candidates(args, config, session)
             results = []
             for focus, prof, _pid, _src in items:
@@ -206,16 +241,20 @@ def run(args) -> int:
             pds = [profile_data(p) for _f, p, _i, _s in items]
             interpolation = []
             if len({(p.width, p.height) for p in pds}) == 1 and len({f for f, *_ in items}) == len(items):
-                interpolation = interpolation_error({f: p.model for (f, *_), p in zip(items, pds)},
-                                                    pds[0].width, pds[0].height)
+                interpolation = interpolation_error(
+                    {f: p.model for (f, *_), p in zip(items, pds)}, pds[0].width, pds[0].height
+                )
             report = None
             if args.report is not None:
                 try:
-                    report = _report(args, str(args.target), items, results, overall, thresholds,
-                                     interpolation, session)
+                    report = _report(
+                        args, str(args.target), items, results, overall, thresholds, interpolation, session
+                    )
                 except OSError as exc:
-                    raise _Fail(f"{args.report}: cannot write the report "
-                                f"({exc.strerror or exc}{': ' + exc.filename if exc.filename else ''})") from None
+                    raise _Fail(
+                        f"{args.report}: cannot write the report "
+                        f"({exc.strerror or exc}{': ' + exc.filename if exc.filename else ''})"
+                    ) from None
         except (ConfigError, SessionError, StoreError, _Fail, ValueError, OSError) as exc:
             print(f"harp qa: {exc}", file=sys.stderr)
             return 2
@@ -227,20 +266,28 @@ def run(args) -> int:
         try:
             with _store(args, config, create=True) as store:
                 for (focus, _p, pid, _src), v in zip(items, results):
-                    store.put_qa_result(verdict=v.verdict, reasons=list(v.reasons),
-                                        metrics=_plain({**v.metrics, "focus": focus}), profile_id=pid,
-                                        session_dir=str(session.path.resolve()) if session else None)
+                    store.put_qa_result(
+                        verdict=v.verdict,
+                        reasons=list(v.reasons),
+                        metrics=_plain({**v.metrics, "focus": focus}),
+                        profile_id=pid,
+                        session_dir=str(session.path.resolve()) if session else None,
+                    )
         except StoreError as exc:
             print(f"harp qa: warning: result not recorded: {exc}", file=sys.stderr)
 
     if args.json:
-        out = {"target": str(args.target), "verdict": overall,
-               "thresholds": dict(thresholds.__dict__),
-               "profiles": [{"focus": f, "source": src, "profile_id": pid, **v.to_dict()}
-                            for (f, _p, pid, src), v in zip(items, results)],
-               "interpolation": [{"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px}
-                                 for r in interpolation],
-               "report": str(report) if report else None}
+        out = {
+            "target": str(args.target),
+            "verdict": overall,
+            "thresholds": dict(thresholds.__dict__),
+            "profiles": [
+                {"focus": f, "source": src, "profile_id": pid, **v.to_dict()}
+                for (f, _p, pid, src), v in zip(items, results)
+            ],
+            "interpolation": [{"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px} for r in interpolation],
+            "report": str(report) if report else None,
+        }
         print(json.dumps(_plain(out), indent=1))
     else:
         _print_table(args.target, items, results, interpolation, overall, report)
@@ -253,19 +300,25 @@ def _print_table(target, items, results, interpolation, overall, report) -> None
 
     console = Console() if sys.stdout.isatty() else Console(width=160)
     t = Table(title=f"QA of {target}")
-    for col in ("focus", "verdict", "holdout d", "distortion max", "ref. dev. max", "unc. max",
-                "reasons / checks"):
+    for col in ("focus", "verdict", "holdout d", "distortion max", "ref. dev. max", "unc. max", "reasons / checks"):
         t.add_column(col)
     fmt = lambda v: "-" if v is None or not math.isfinite(v) else f"{v:.4f}"  # noqa: E731
     for (focus, *_), v in zip(items, results):
         m = v.metrics
-        t.add_row(f"{focus:g}", v.verdict, fmt(m.get("holdout_d_px")), fmt(m.get("distortion_max_px")),
-                  fmt(m.get("reference_max_px")), fmt(m.get("field_uncertainty_max_px")),
-                  "; ".join(v.reasons or v.checks))
+        t.add_row(
+            f"{focus:g}",
+            v.verdict,
+            fmt(m.get("holdout_d_px")),
+            fmt(m.get("distortion_max_px")),
+            fmt(m.get("reference_max_px")),
+            fmt(m.get("field_uncertainty_max_px")),
+            "; ".join(v.reasons or v.checks),
+        )
     console.print(t)
     for r in interpolation:
-        console.print(f"focus interpolation error at {r.focus:g} (left out): RMS {r.rms_px:.4f} px, "
-                      f"max {r.max_px:.4f} px")
+        console.print(
+            f"focus interpolation error at {r.focus:g} (left out): RMS {r.rms_px:.4f} px, max {r.max_px:.4f} px"
+        )
     if report:
         console.print(f"report: {report}")
     print(f"QA: {overall}")

@@ -20,13 +20,15 @@ from station import __version__
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("session", help="run or resume a calibration session",
-                              description=__doc__.split("\n\n")[1])
+    p = subparsers.add_parser(
+        "session", help="run or resume a calibration session", description=__doc__.split("\n\n")[1]
+    )
     sub = p.add_subparsers(dest="session_command", metavar="ACTION")
     run = sub.add_parser("run", help="run a session from a station configuration")
     run.add_argument("config", type=Path, help="station configuration (YAML)")
-    run.add_argument("--out", type=Path, default=None,
-                     help="parent directory of the session directory (default: store.sessions_dir)")
+    run.add_argument(
+        "--out", type=Path, default=None, help="parent directory of the session directory (default: store.sessions_dir)"
+    )
     run.add_argument("--name", default=None, help="session directory name (default: time + lens serial)")
     run.set_defaults(func=_run)
     res = sub.add_parser("resume", help="continue an interrupted session")
@@ -48,8 +50,9 @@ def _run(args) -> int:
     from station.session_dir import SessionDir
 
     if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
-        return _error(f"--name {args.name!r}: expected a plain directory name (no '/'); "
-                      "use --out for the parent directory")
+        return _error(
+            f"--name {args.name!r}: expected a plain directory name (no '/'); use --out for the parent directory"
+        )
     try:
         config = load_config(args.config)
         check_port(config)  # before creating anything
@@ -95,16 +98,17 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
             with get_session() as session:
                 started.append(session.path)
                 console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
-                result = Executor(session, camera, turntable, store=store, console=console,
-                                  report=report).run()
+                result = Executor(session, camera, turntable, store=store, console=console, report=report).run()
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
     except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
         if not started:
             _error("interrupted before the session started; nothing was captured")
         else:
-            _error(f"interrupted; every frame captured so far is kept in {started[0]}; "
-                   f"continue with: harp session resume {started[0]}")
+            _error(
+                f"interrupted; every frame captured so far is kept in {started[0]}; "
+                f"continue with: harp session resume {started[0]}"
+            )
         return 130
     finally:
         if opened is not None:

@@ -32,16 +32,21 @@ class UndistortError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("undistort", help="correct images with a fitted model",
-                              description=(
-                                  "Write distortion-corrected images (same format, channels and bit depth) into "
-                                  "DIR."))
+    p = subparsers.add_parser(
+        "undistort",
+        help="correct images with a fitted model",
+        description=("Write distortion-corrected images (same format, channels and bit depth) into DIR."),
+    )
     p.add_argument("model", metavar="MODEL", help="harp model file")
     p.add_argument("images", metavar="IMAGE", nargs="+", help="distorted images")
     p.add_argument("-o", "--output-dir", metavar="DIR", required=True, help="directory for corrected images")
-    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="lanczos",
-                   help="resampling kernel (default lanczos: on a synthetic harp it keeps corrected strings "
-                        "straight to 0.001 px where cubic leaves 0.008 px and linear 0.013 px)")
+    p.add_argument(
+        "--interpolation",
+        choices=sorted(INTERPOLATIONS),
+        default="lanczos",
+        help="resampling kernel (default lanczos: on a synthetic harp it keeps corrected strings "
+        "straight to 0.001 px where cubic leaves 0.008 px and linear 0.013 px)",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace existing files in DIR")
     p.set_defaults(func=run)
 
@@ -72,8 +77,9 @@ def _run(args) -> int:
     for path in args.images:
         p = Path(path)
         if p.suffix.lower() not in WRITABLE:
-            raise UndistortError(f"{p}: unsupported image type {p.suffix or '(none)'!r} "
-                                 f"(supported: {', '.join(WRITABLE)})")
+            raise UndistortError(
+                f"{p}: unsupported image type {p.suffix or '(none)'!r} (supported: {', '.join(WRITABLE)})"
+            )
         target = out_dir / p.name
         if p.name in names:
             raise UndistortError(f"{p}: two input images named {p.name!r} would overwrite each other in {out_dir}")
@@ -102,14 +108,12 @@ def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict) -> None:
     img = read_image(p, grey=False)
     h, w = img.shape[:2]
     if (w, h) != (mf.width, mf.height):
-        raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for "
-                             f"{mf.width}x{mf.height} images")
+        raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for {mf.width}x{mf.height} images")
     if (w, h) not in cache:
         t0 = time.perf_counter()
         cache[(w, h)] = fast_undistortion_maps(mf.model, w, h, step=DEFAULT_STEP_PX)
         m = cache[(w, h)]
-        print(f"maps for {w}x{h}: {time.perf_counter() - t0:.2f} s "
-              f"(interpolation error <= {m.interp_error_px:.1e} px)")
+        print(f"maps for {w}x{h}: {time.perf_counter() - t0:.2f} s (interpolation error <= {m.interp_error_px:.1e} px)")
     out = undistort_image(img, cache[(w, h)], INTERPOLATIONS[args.interpolation])
     target = out_dir / p.name
     params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []

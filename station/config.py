@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -197,8 +198,7 @@ class _Section:
         if known is not None:
             for key in data:
                 if key not in known:
-                    raise ConfigError(file, self._p(key),
-                                      f"unknown field; expected one of {', '.join(known)}")
+                    raise ConfigError(file, self._p(key), f"unknown field; expected one of {', '.join(known)}")
 
     def _p(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else str(key)
@@ -241,8 +241,15 @@ class _Section:
             raise self.err(key, "a non-empty string", v)
         return v
 
-    def number(self, key: str, default: Any = _MISSING, *, min: float | None = None,
-               positive: bool = False, integer: bool = False) -> Any:
+    def number(
+        self,
+        key: str,
+        default: Any = _MISSING,
+        *,
+        min: float | None = None,
+        positive: bool = False,
+        integer: bool = False,
+    ) -> Any:
         kind = "an integer" if integer else "a number"
         if positive:
             kind += " > 0"
@@ -333,18 +340,19 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         raise ConfigError(path, where, f"expected valid YAML: {problem}") from None
     if data is None:
         raise ConfigError(path, "(top level)", "expected a mapping, got an empty file")
-    top = _Section(path, "", data, ("station", "lens", "camera_body", "focus", "capture",
-                                    "pipeline", "qa", "store", "simulation"))
+    top = _Section(
+        path, "", data, ("station", "lens", "camera_body", "focus", "capture", "pipeline", "qa", "store", "simulation")
+    )
 
     st = top.section("station", ("id", "camera", "turntable", "harp"))
     cam = _device(st, "camera", CAMERA_DRIVERS, "camera")
-    camera = DeviceConfig(cam.data["driver"], MappingProxyType(
-        {k: v for k, v in cam.data.items() if k != "driver"}))
+    camera = DeviceConfig(cam.data["driver"], MappingProxyType({k: v for k, v in cam.data.items() if k != "driver"}))
     tt = _device(st, "turntable", TURNTABLE_DRIVERS, "turntable")
     turntable = TurntableConfig(
         driver=tt.data["driver"],
-        settings=MappingProxyType({k: v for k, v in tt.data.items()
-                                   if k not in ("driver", "port", "steps_per_degree")}),
+        settings=MappingProxyType(
+            {k: v for k, v in tt.data.items() if k not in ("driver", "port", "steps_per_degree")}
+        ),
         port=tt.string("port"),
         steps_per_degree=tt.number("steps_per_degree", None, positive=True),
     )
@@ -369,11 +377,25 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     fo = top.section("focus", ("settings",))
     focus_settings = fo.number_list("settings")
 
-    cp = top.section("capture", ("orientations_deg", "frames_per_orientation", "exposure_us",
-                                 "gain_db", "settle_s", "timeout_s", "move_timeout_s",
-                                 "checks", "retries"))
-    ck = cp.section("checks", ("min_lines", "angle_tolerance_deg", "max_saturated_fraction",
-                               "min_dynamic_range", "max_recaptures"), optional=True)
+    cp = top.section(
+        "capture",
+        (
+            "orientations_deg",
+            "frames_per_orientation",
+            "exposure_us",
+            "gain_db",
+            "settle_s",
+            "timeout_s",
+            "move_timeout_s",
+            "checks",
+            "retries",
+        ),
+    )
+    ck = cp.section(
+        "checks",
+        ("min_lines", "angle_tolerance_deg", "max_saturated_fraction", "min_dynamic_range", "max_recaptures"),
+        optional=True,
+    )
     d = CheckConfig()
     checks = CheckConfig(
         min_lines=ck.number("min_lines", d.min_lines, min=1, integer=True),
@@ -384,8 +406,10 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     )
     rt = cp.section("retries", ("attempts", "backoff_s"), optional=True)
     r = RetryConfig()
-    retries = RetryConfig(attempts=rt.number("attempts", r.attempts, min=1, integer=True),
-                          backoff_s=rt.number("backoff_s", r.backoff_s, min=0))
+    retries = RetryConfig(
+        attempts=rt.number("attempts", r.attempts, min=1, integer=True),
+        backoff_s=rt.number("backoff_s", r.backoff_s, min=0),
+    )
     orientations = cp.number_list("orientations_deg", min_len=2)
     capture = CaptureConfig(
         orientations_deg=orientations,
@@ -395,29 +419,33 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         settle_s=cp.number("settle_s", 0.0, min=0),
         timeout_s=cp.number("timeout_s", 5.0, positive=True),
         move_timeout_s=cp.number("move_timeout_s", 60.0, positive=True),
-        checks=checks, retries=retries,
+        checks=checks,
+        retries=retries,
     )
 
-    pp = top.section("pipeline", ("t", "model", "degree", "tangential", "prism", "bootstrap", "seed",
-                                  "workers"), optional=True)
-    pipe = PipelineConfig(t=pp.number("t", 30, min=1, integer=True),
-                          model=pp.string("model", "radial"),
-                          degree=pp.number("degree", None, min=1, integer=True),
-                          tangential=pp.boolean("tangential", False),
-                          prism=pp.boolean("prism", False),
-                          bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
-                          seed=pp.number("seed", 0, min=0, integer=True),
-                          workers=pp.number("workers", 1, min=1, integer=True))
+    pp = top.section(
+        "pipeline", ("t", "model", "degree", "tangential", "prism", "bootstrap", "seed", "workers"), optional=True
+    )
+    pipe = PipelineConfig(
+        t=pp.number("t", 30, min=1, integer=True),
+        model=pp.string("model", "radial"),
+        degree=pp.number("degree", None, min=1, integer=True),
+        tangential=pp.boolean("tangential", False),
+        prism=pp.boolean("prism", False),
+        bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
+        seed=pp.number("seed", 0, min=0, integer=True),
+        workers=pp.number("workers", 1, min=1, integer=True),
+    )
     if pipe.model not in FIT_MODELS:
         raise pp.err("model", f"a distortion model name (one of {', '.join(FIT_MODELS)})", pipe.model)
 
-    qs = top.section("qa", ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px"),
-                     optional=True)
+    qs = top.section("qa", ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px"), optional=True)
     q = QAConfig()
-    qa = QAConfig(max_holdout_d_px=qs.number("max_holdout_d_px", q.max_holdout_d_px, positive=True),
-                  max_distortion_px=qs.number("max_distortion_px", None, positive=True),
-                  max_reference_deviation_px=qs.number("max_reference_deviation_px", None,
-                                                       positive=True))
+    qa = QAConfig(
+        max_holdout_d_px=qs.number("max_holdout_d_px", q.max_holdout_d_px, positive=True),
+        max_distortion_px=qs.number("max_distortion_px", None, positive=True),
+        max_reference_deviation_px=qs.number("max_reference_deviation_px", None, positive=True),
+    )
 
     so = top.section("store", ("path", "sessions_dir"))
     store_path = Path(os.path.normpath(base / so.string("path")))
@@ -427,15 +455,26 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     if "simulation" in top.data:
         sm = top.section("simulation", ("harp_offset_deg", "emulator"))
         emu = sm.section("emulator", optional=True)
-        simulation = SimulationConfig(harp_offset_deg=sm.number("harp_offset_deg", 0.0),
-                                      emulator=MappingProxyType(dict(emu.data)))
+        simulation = SimulationConfig(
+            harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))
+        )
     elif turntable.port == EMULATOR_PORT:
-        raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)",
-                     turntable.port)
+        raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)
 
-    return Config(path=path, base_dir=base, station=station, lens=lens, camera_body=body,
-                  focus_settings=focus_settings, capture=capture, pipeline=pipe, qa=qa,
-                  store_path=store_path, sessions_dir=sessions_dir, simulation=simulation)
+    return Config(
+        path=path,
+        base_dir=base,
+        station=station,
+        lens=lens,
+        camera_body=body,
+        focus_settings=focus_settings,
+        capture=capture,
+        pipeline=pipe,
+        qa=qa,
+        store_path=store_path,
+        sessions_dir=sessions_dir,
+        simulation=simulation,
+    )
 
 
 def check_port(config: Config) -> None:
@@ -450,5 +489,4 @@ def check_port(config: Config) -> None:
     if "://" in port:
         return
     if not os.path.exists(port):
-        raise config.error("station.turntable.port", f"expected a reachable serial port, "
-                                                      f"{port!r} does not exist")
+        raise config.error("station.turntable.port", f"expected a reachable serial port, {port!r} does not exist")

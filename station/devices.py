@@ -8,7 +8,7 @@ turntable port names ``station.turntable.port``.
 from __future__ import annotations
 
 import contextlib
-from typing import Iterator
+from collections.abc import Iterator
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
@@ -47,9 +47,10 @@ def open_station(config: Config) -> Iterator[tuple]:
             try:
                 turntable.open()
             except (DriverError, OSError) as exc:
-                raise config.error("station.turntable.port",
-                                   f"cannot open the turntable at {config.station.turntable.port!r}: "
-                                   f"{_one_line(exc)}") from None
+                raise config.error(
+                    "station.turntable.port",
+                    f"cannot open the turntable at {config.station.turntable.port!r}: {_one_line(exc)}",
+                ) from None
             try:
                 yield camera, turntable
             finally:
@@ -59,7 +60,7 @@ def open_station(config: Config) -> Iterator[tuple]:
 
 
 def _quiet_close(device) -> None:
-    with contextlib.suppress(Exception):  # noqa: BLE001 - a vanished device may fail to close any way
+    with contextlib.suppress(Exception):
         device.close()
 
 

@@ -57,19 +57,30 @@ def measurement_arrays(m) -> dict[str, np.ndarray]:
         rejected.append(scalars)
     for j, pts in enumerate(m.rejected_points):
         out[f"rejected{j}_points"] = np.asarray(pts, np.float64)
-    top = {f.name: getattr(m, f.name) for f in dataclasses.fields(m)
-           if f.name not in ("lines", "rejected", "rejected_points")}
+    top = {
+        f.name: getattr(m, f.name)
+        for f in dataclasses.fields(m)
+        if f.name not in ("lines", "rejected", "rejected_points")
+    }
     top = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in top.items()}
-    meta = {"format": FORMAT, "image": top, "lines": lines, "rejected": rejected,
-            "n_rejected_points": len(m.rejected_points)}
+    meta = {
+        "format": FORMAT,
+        "image": top,
+        "lines": lines,
+        "rejected": rejected,
+        "n_rejected_points": len(m.rejected_points),
+    }
     out["meta"] = np.array(json.dumps(meta))
     return out
 
 
 def _build(cls, values: dict):
     names = {f.name for f in dataclasses.fields(cls)}
-    required = {f.name for f in dataclasses.fields(cls)
-                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
+    required = {
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    }
     missing = required - set(values)
     if missing:
         raise ValueError(f"stored measurement lacks {cls.__name__} field(s) {', '.join(sorted(missing))}")
@@ -89,7 +100,7 @@ def measurement_from_arrays(arrays: dict[str, np.ndarray]):
     for i, scalars in enumerate(meta["lines"]):
         values = dict(scalars)
         prefix = f"line{i}_"
-        values.update({k[len(prefix):]: np.asarray(v) for k, v in arrays.items() if k.startswith(prefix)})
+        values.update({k[len(prefix) :]: np.asarray(v) for k, v in arrays.items() if k.startswith(prefix)})
         lines.append(_build(LineMeasurement, values))
     rejected = []
     for r in meta["rejected"]:
@@ -97,18 +108,26 @@ def measurement_from_arrays(arrays: dict[str, np.ndarray]):
         if isinstance(r.get("bbox"), list):
             r["bbox"] = tuple(r["bbox"])
         rejected.append(_build(Rejection, r))
-    rejected_points = tuple(np.asarray(arrays[f"rejected{j}_points"])
-                            for j in range(int(meta["n_rejected_points"])))
-    return _build(ImageMeasurement, {**meta["image"], "lines": tuple(lines), "rejected": tuple(rejected),
-                                     "rejected_points": rejected_points})
+    rejected_points = tuple(np.asarray(arrays[f"rejected{j}_points"]) for j in range(int(meta["n_rejected_points"])))
+    return _build(
+        ImageMeasurement,
+        {**meta["image"], "lines": tuple(lines), "rejected": tuple(rejected), "rejected_points": rejected_points},
+    )
 
 
 def uncertainty_arrays(u) -> dict[str, np.ndarray]:
     """Arrays of a ``FieldUncertainty`` (its model is the profile's, not stored here)."""
-    return {"xs": np.asarray(u.xs, np.float64), "ys": np.asarray(u.ys, np.float64),
-            "std": np.asarray(u.std, np.float64), "rms": np.float64(u.rms), "max": np.float64(u.max),
-            "n_boot": np.int64(u.n_boot), "n_failed": np.int64(u.n_failed),
-            "resample": np.array(u.resample), "failures": np.array(list(u.failures), dtype=str)}
+    return {
+        "xs": np.asarray(u.xs, np.float64),
+        "ys": np.asarray(u.ys, np.float64),
+        "std": np.asarray(u.std, np.float64),
+        "rms": np.float64(u.rms),
+        "max": np.float64(u.max),
+        "n_boot": np.int64(u.n_boot),
+        "n_failed": np.int64(u.n_failed),
+        "resample": np.array(u.resample),
+        "failures": np.array(list(u.failures), dtype=str),
+    }
 
 
 def uncertainty_from_arrays(arrays: dict[str, np.ndarray], model):
@@ -116,9 +135,17 @@ def uncertainty_from_arrays(arrays: dict[str, np.ndarray], model):
     from pipeline.uncertainty import FieldUncertainty
 
     try:
-        return FieldUncertainty(rms=float(arrays["rms"]), max=float(arrays["max"]), xs=arrays["xs"],
-                                ys=arrays["ys"], std=arrays["std"], n_boot=int(arrays["n_boot"]),
-                                n_failed=int(arrays["n_failed"]), resample=str(arrays["resample"]),
-                                model=model, failures=tuple(str(x) for x in arrays.get("failures", ())))
+        return FieldUncertainty(
+            rms=float(arrays["rms"]),
+            max=float(arrays["max"]),
+            xs=arrays["xs"],
+            ys=arrays["ys"],
+            std=arrays["std"],
+            n_boot=int(arrays["n_boot"]),
+            n_failed=int(arrays["n_failed"]),
+            resample=str(arrays["resample"]),
+            model=model,
+            failures=tuple(str(x) for x in arrays.get("failures", ())),
+        )
     except KeyError as exc:
         raise ValueError(f"stored uncertainty map lacks {exc.args[0]!r}") from None

@@ -40,19 +40,27 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import Camera, Turntable
 from station import __version__
-from station.plan import (Capture, Fit, LockFocus, Measure, Move, Save, Settle, Step, Store,
-                          capture_steps, plan_session)
-from station.processing import (FocusFit, ShotMeasurement, average_frames, exposure_problems,
-                                fit_focus, full_scale, garbage_rows, measure_shot, shot_problems)
 from station.evidence_files import measurement_arrays, uncertainty_arrays
+from station.plan import Capture, Fit, LockFocus, Measure, Move, Save, Settle, Step, Store, capture_steps, plan_session
+from station.processing import (
+    FocusFit,
+    ShotMeasurement,
+    average_frames,
+    exposure_problems,
+    fit_focus,
+    full_scale,
+    garbage_rows,
+    measure_shot,
+    shot_problems,
+)
 from station.session_dir import SessionDir
 
 #: a stage read-back further than this from the target is a fault (degrees)
@@ -101,9 +109,17 @@ class Executor:
         has finished (Markdown ``report.md`` and ``index.html`` with PNG plots).
     """
 
-    def __init__(self, session: SessionDir, camera: Camera, turntable: Turntable, *,
-                 store=None, console=None, sleep: Callable[[float], None] = time.sleep,
-                 report: bool = False):
+    def __init__(
+        self,
+        session: SessionDir,
+        camera: Camera,
+        turntable: Turntable,
+        *,
+        store=None,
+        console=None,
+        sleep: Callable[[float], None] = time.sleep,
+        report: bool = False,
+    ):
         self.session = session
         self.config = session.config
         self.camera = camera
@@ -117,7 +133,8 @@ class Executor:
         self._stage_deg: float | None = None
         self._focus: float | None = None
         self._summary: dict[int, FocusSummary] = {
-            f: FocusSummary(f, v) for f, v in enumerate(self.config.focus_settings)}
+            f: FocusSummary(f, v) for f, v in enumerate(self.config.focus_settings)
+        }
         self._size: tuple[int, int] | None = None
         self.faults = 0
         self.frames_saved = 0
@@ -142,10 +159,10 @@ class Executor:
     def _run(self, s, steps, progress) -> SessionResult:
         try:
             with progress:
-                self._cap_task = progress.add_task(
-                    "capture", total=sum(isinstance(x, Capture) for x in steps) or 1)
+                self._cap_task = progress.add_task("capture", total=sum(isinstance(x, Capture) for x in steps) or 1)
                 self._proc_task = progress.add_task(
-                    "process", total=sum(isinstance(x, (Measure, Fit, Store)) for x in steps) or 1)
+                    "process", total=sum(isinstance(x, (Measure, Fit, Store)) for x in steps) or 1
+                )
                 self._prog = progress
                 self._prepare()
                 for step in steps:
@@ -179,13 +196,21 @@ class Executor:
             v = qa_verdict(mf, self.config.qa)
             verdicts.append(v)
             pid = self._summary[f].profile_id if f in self._summary else None
-            self.session.append({"kind": "qa", "focus_idx": f, "verdict": v.verdict,
-                                 "reasons": list(v.reasons), "metrics": v.metrics})
+            self.session.append(
+                {"kind": "qa", "focus_idx": f, "verdict": v.verdict, "reasons": list(v.reasons), "metrics": v.metrics}
+            )
             if self.store is not None:
-                self.store.put_qa_result(verdict=v.verdict, reasons=list(v.reasons), metrics=v.metrics,
-                                         profile_id=pid, session_dir=str(self.session.path.resolve()))
-            self._note(f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
-                       + ("; ".join(v.reasons) if v.reasons else "; ".join(v.checks)))
+                self.store.put_qa_result(
+                    verdict=v.verdict,
+                    reasons=list(v.reasons),
+                    metrics=v.metrics,
+                    profile_id=pid,
+                    session_dir=str(self.session.path.resolve()),
+                )
+            self._note(
+                f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
+                + ("; ".join(v.reasons) if v.reasons else "; ".join(v.checks))
+            )
         w, h = models[0][2].width, models[0][2].height
         try:
             loo = interpolation_error({focus: mf.model for _f, focus, mf in models}, w, h)
@@ -193,10 +218,19 @@ class Executor:
             loo = []
             self._note(f"focus interpolation: not available ({exc})")
         for e in loo:
-            self.session.append({"kind": "interpolation", "focus": e.focus, "rms_px": e.rms_px,
-                                 "max_px": e.max_px, "scheme": "leave one focus out"})
-            self._note(f"focus interpolation error at {e.focus:g} (left out, interpolated from the "
-                       f"others): RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px")
+            self.session.append(
+                {
+                    "kind": "interpolation",
+                    "focus": e.focus,
+                    "rms_px": e.rms_px,
+                    "max_px": e.max_px,
+                    "scheme": "leave one focus out",
+                }
+            )
+            self._note(
+                f"focus interpolation error at {e.focus:g} (left out, interpolated from the "
+                f"others): RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px"
+            )
         overall = combine(verdicts)
         self.session.append({"kind": "qa_session", "verdict": overall})
         self._note(f"QA verdict: [{'bold green' if overall == 'PASS' else 'bold red'}]{overall}")
@@ -210,15 +244,22 @@ class Executor:
         cfg = self.config
         title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {self.session.path.name}"
         try:
-            path = write_session_report(self.session, self.session.path / "report", title, models,
-                                        verdicts, overall, thresholds=cfg.qa, interpolation=interpolation)
+            path = write_session_report(
+                self.session,
+                self.session.path / "report",
+                title,
+                models,
+                verdicts,
+                overall,
+                thresholds=cfg.qa,
+                interpolation=interpolation,
+            )
         except (OSError, ValueError) as exc:  # the profiles are stored; say so, do not lose the session
             self.session.append({"kind": "report", "failure": f"{type(exc).__name__}: {exc}"})
             self._note(f"[red]report not written: {type(exc).__name__}: {exc}")
             return
         rel = path.relative_to(self.session.path)
-        self.session.append({"kind": "report", "file": str(rel),
-                             "html": str(rel.with_name("index.html"))})
+        self.session.append({"kind": "report", "file": str(rel), "html": str(rel.with_name("index.html"))})
         self._note(f"report: {path} (and {path.with_name('index.html').name})")
 
     def _result(self, code: int, msg: str) -> SessionResult:
@@ -228,8 +269,7 @@ class Executor:
         cap = self.config.capture
         self._retry("set exposure", lambda: self.camera.set_exposure(cap.exposure_us), self.camera)
         self._retry("set gain", lambda: self.camera.set_gain(cap.gain_db), self.camera)
-        self._retry("home turntable", lambda: self.turntable.home(timeout=cap.move_timeout_s),
-                    self.turntable)
+        self._retry("home turntable", lambda: self.turntable.home(timeout=cap.move_timeout_s), self.turntable)
         w, h = self.camera.sensor_size
         self._size = (int(w), int(h))
 
@@ -240,11 +280,9 @@ class Executor:
         handler(step)
 
     def _do_LockFocus(self, step: LockFocus) -> None:
-        got = self._retry(f"lock focus {step.focus:g}", lambda: self.camera.lock_focus(step.focus),
-                          self.camera)
+        got = self._retry(f"lock focus {step.focus:g}", lambda: self.camera.lock_focus(step.focus), self.camera)
         self._focus = step.focus
-        self.session.append({"kind": "focus", "focus_idx": step.focus_idx, "focus": step.focus,
-                             "read_back": got})
+        self.session.append({"kind": "focus", "focus_idx": step.focus_idx, "focus": step.focus, "read_back": got})
 
     def _do_Move(self, step: Move) -> None:
         timeout = self.config.capture.move_timeout_s
@@ -267,8 +305,10 @@ class Executor:
         # capture at this pose comes next. Frames are numbered per shot and attempt, so a
         # resumed session that captures only the missing frames asks for the same ones.
         set_index = getattr(self.camera, "set_capture_index", None)
-        index = (self.session.attempt(step.focus_idx, step.orientation_idx)
-                 * self.config.capture.frames_per_orientation + step.frame_idx)
+        index = (
+            self.session.attempt(step.focus_idx, step.orientation_idx) * self.config.capture.frames_per_orientation
+            + step.frame_idx
+        )
 
         def grab():
             if set_index is not None:
@@ -278,27 +318,30 @@ class Executor:
             if img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):
                 raise CaptureError(f"corrupt frame: {img.dtype} array of shape {img.shape}")
             if self._size and img.shape != (self._size[1], self._size[0]):
-                raise CaptureError(f"corrupt frame: shape {img.shape}, sensor is "
-                                   f"{self._size[0]}x{self._size[1]}")
+                raise CaptureError(f"corrupt frame: shape {img.shape}, sensor is {self._size[0]}x{self._size[1]}")
             bad = garbage_rows(img, full_scale(img.dtype, _bit_depth(frame)))
             if bad:
                 raise CaptureError(f"corrupt frame: {bad} rows of garbage")
             return frame
 
         where = f"capture focus {step.focus_idx} orientation {step.orientation_idx} frame {step.frame_idx}"
-        self._pending[(step.focus_idx, step.orientation_idx, step.frame_idx)] = \
-            self._retry(where, grab, self.camera)
+        self._pending[(step.focus_idx, step.orientation_idx, step.frame_idx)] = self._retry(where, grab, self.camera)
 
     def _do_Save(self, step: Save) -> None:
         frame = self._pending.pop((step.focus_idx, step.orientation_idx, step.frame_idx))
-        meta = {"timestamp": frame.timestamp, "exposure_us": frame.exposure_us,
-                "gain_db": frame.gain_db, "focus": frame.focus, "counter": frame.counter,
-                "camera": [frame.camera.vendor, frame.camera.model, frame.camera.serial],
-                "stage_deg": self._stage_deg,
-                "commanded_deg": self.config.capture.orientations_deg[step.orientation_idx],
-                "bit_depth": _bit_depth(frame), "extra": _jsonable(frame.extra)}
-        self.session.write_frame(step.focus_idx, step.orientation_idx, step.frame_idx,
-                                 np.asarray(frame.image), meta)
+        meta = {
+            "timestamp": frame.timestamp,
+            "exposure_us": frame.exposure_us,
+            "gain_db": frame.gain_db,
+            "focus": frame.focus,
+            "counter": frame.counter,
+            "camera": [frame.camera.vendor, frame.camera.model, frame.camera.serial],
+            "stage_deg": self._stage_deg,
+            "commanded_deg": self.config.capture.orientations_deg[step.orientation_idx],
+            "bit_depth": _bit_depth(frame),
+            "extra": _jsonable(frame.extra),
+        }
+        self.session.write_frame(step.focus_idx, step.orientation_idx, step.frame_idx, np.asarray(frame.image), meta)
         self.frames_saved += 1
         self._advance(self._cap_task)
 
@@ -311,12 +354,14 @@ class Executor:
             if not problems:
                 break
             attempt = self.session.attempt(f, o)
-            self.session.append({"kind": "reject", "focus_idx": f, "orientation_idx": o,
-                                 "attempt": attempt, "reasons": problems})
+            self.session.append(
+                {"kind": "reject", "focus_idx": f, "orientation_idx": o, "attempt": attempt, "reasons": problems}
+            )
             self._note(f"[yellow]re-capturing focus {f} orientation {o}: {'; '.join(problems)}")
             if attempt >= checks.max_recaptures:
-                raise SessionAborted(f"shot focus {f} orientation {o} failed its checks "
-                                     f"{attempt + 1} times: {'; '.join(problems)}")
+                raise SessionAborted(
+                    f"shot focus {f} orientation {o} failed its checks {attempt + 1} times: {'; '.join(problems)}"
+                )
             summary.recaptures += 1
             if self._focus != self.config.focus_settings[f]:
                 self._do_LockFocus(LockFocus(f, self.config.focus_settings[f]))
@@ -326,11 +371,20 @@ class Executor:
         summary.shots += 1
         summary.lines += m.n_lines
         attempt = self.session.attempt(f, o)
-        saved = self.session.write_arrays(f"measurements/f{f}_o{o}_a{attempt}.npz",
-                                          measurement_arrays(m.measurement))
-        self.session.append({"kind": "measure", "focus_idx": f, "orientation_idx": o,
-                             "attempt": attempt, "n_lines": m.n_lines, "d": m.d, "d_max": m.d_max,
-                             "angle_deg": m.angle_deg, **saved})
+        saved = self.session.write_arrays(f"measurements/f{f}_o{o}_a{attempt}.npz", measurement_arrays(m.measurement))
+        self.session.append(
+            {
+                "kind": "measure",
+                "focus_idx": f,
+                "orientation_idx": o,
+                "attempt": attempt,
+                "n_lines": m.n_lines,
+                "d": m.d,
+                "d_max": m.d_max,
+                "angle_deg": m.angle_deg,
+                **saved,
+            }
+        )
         self._advance(self._proc_task)
 
     def _check_shot(self, f: int, o: int) -> tuple[list[str], ShotMeasurement | None]:
@@ -341,8 +395,7 @@ class Executor:
         images = [self.session.read_frame(r) for r in records]
         bit_depth = records[0]["meta"].get("bit_depth")
         image = average_frames(images)
-        problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth),
-                                     self.config.capture.checks)
+        problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), self.config.capture.checks)
         if problems:
             return problems, None
         m = measure_shot(image, self.config.pipeline)
@@ -358,24 +411,31 @@ class Executor:
         shots = [self._shots[(f, o)] for o in range(n_o)]
         w, h = self._image_size(f)
         pc = self.config.pipeline
-        fit = fit_focus(shots, w, h, pc, bootstrap=pc.bootstrap, seed=pc.seed + 1000 * f,
-                        map_fn=self._map_fn())
+        fit = fit_focus(shots, w, h, pc, bootstrap=pc.bootstrap, seed=pc.seed + 1000 * f, map_fn=self._map_fn())
         self._summary[f].fit = fit
         if fit.failure:
             self.session.append({"kind": "fit", "focus_idx": f, "failure": fit.failure})
-            raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: "
-                                 f"{fit.failure}")
+            raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: {fit.failure}")
         unc_file = {}
         if fit.uncertainty is not None:
-            saved = self.session.write_arrays(f"profiles/focus{f}_uncertainty.npz",
-                                              uncertainty_arrays(fit.uncertainty))
+            saved = self.session.write_arrays(f"profiles/focus{f}_uncertainty.npz", uncertainty_arrays(fit.uncertainty))
             unc_file = {"uncertainty_file": saved["file"], "uncertainty_sha256": saved["sha256"]}
-        self.session.append({"kind": "fit", "focus_idx": f, "model": fit.model.to_dict(), **unc_file,
-                             "fit_d": fit.fit_d, "fit_d_max": fit.fit_d_max,
-                             "holdout_d": fit.holdout_d, "holdout_d_max": fit.holdout_d_max,
-                             "holdout_per_orientation": list(fit.holdout_per_orientation),
-                             "uncertainty_rms": fit.uncertainty_rms,
-                             "uncertainty_max": fit.uncertainty_max, "details": fit.details})
+        self.session.append(
+            {
+                "kind": "fit",
+                "focus_idx": f,
+                "model": fit.model.to_dict(),
+                **unc_file,
+                "fit_d": fit.fit_d,
+                "fit_d_max": fit.fit_d_max,
+                "holdout_d": fit.holdout_d,
+                "holdout_d_max": fit.holdout_d_max,
+                "holdout_per_orientation": list(fit.holdout_per_orientation),
+                "uncertainty_rms": fit.uncertainty_rms,
+                "uncertainty_max": fit.uncertainty_max,
+                "details": fit.details,
+            }
+        )
         self._advance(self._proc_task)
 
     def _map_fn(self):
@@ -390,8 +450,9 @@ class Executor:
             ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
             ctx.set_forkserver_preload(["station.processing", "pipeline.fit", "pipeline.uncertainty"])
             _start_forkserver_ignoring_sigint()
-            self._pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_exit_with_session,
-                                             initargs=(os.getpid(),))
+            self._pool = ProcessPoolExecutor(
+                max_workers=n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
+            )
         return self._pool.map
 
     def _image_size(self, f: int) -> tuple[int, int]:
@@ -405,36 +466,69 @@ class Executor:
         cfg = self.config
         fit = self._summary[f].fit
         w, h = self._image_size(f)
-        merit = {"fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
-                 "holdout": {"d": fit.holdout_d, "d_max": fit.holdout_d_max,
-                             "scheme": "leave one orientation out",
-                             "per_orientation_d": list(fit.holdout_per_orientation)}}
+        merit = {
+            "fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
+            "holdout": {
+                "d": fit.holdout_d,
+                "d_max": fit.holdout_d_max,
+                "scheme": "leave one orientation out",
+                "per_orientation_d": list(fit.holdout_per_orientation),
+            },
+        }
         if fit.uncertainty_rms is not None:
-            merit["field_uncertainty"] = {"rms": fit.uncertainty_rms, "max": fit.uncertainty_max,
-                                          "replicates": fit.details.get("bootstrap_replicates")}
-        frames = [self.session.path / r["file"]
-                  for o in range(len(cfg.capture.orientations_deg)) for r in self.session.frames(f, o)]
-        prov = make_provenance(frames, t=cfg.pipeline.t, command="harp session",
-                               focus=cfg.focus_settings[f], lens=list(_ident(cfg.lens)),
-                               camera=list(_ident(cfg.camera_body)), station=cfg.station.id)
+            merit["field_uncertainty"] = {
+                "rms": fit.uncertainty_rms,
+                "max": fit.uncertainty_max,
+                "replicates": fit.details.get("bootstrap_replicates"),
+            }
+        frames = [
+            self.session.path / r["file"]
+            for o in range(len(cfg.capture.orientations_deg))
+            for r in self.session.frames(f, o)
+        ]
+        prov = make_provenance(
+            frames,
+            t=cfg.pipeline.t,
+            command="harp session",
+            focus=cfg.focus_settings[f],
+            lens=list(_ident(cfg.lens)),
+            camera=list(_ident(cfg.camera_body)),
+            station=cfg.station.id,
+        )
         path = self.session.path / "profiles" / f"focus{f}.yaml"
         write_model_file(path, fit.model, width=w, height=h, merit=merit, provenance=prov)
         profile_id = None
         if self.store is not None:
             profile_id = self.store.put_profile(
-                lens=_ident(cfg.lens), camera=_ident(cfg.camera_body), focus=cfg.focus_settings[f],
-                model=fit.model.to_dict(), width=w, height=h, fit_d=fit.fit_d,
-                fit_d_max=fit.fit_d_max, holdout_d=fit.holdout_d, holdout_d_max=fit.holdout_d_max,
-                field_uncertainty_rms=fit.uncertainty_rms, field_uncertainty_max=fit.uncertainty_max,
-                session_dir=str(self.session.path.resolve()), station_id=cfg.station.id,
+                lens=_ident(cfg.lens),
+                camera=_ident(cfg.camera_body),
+                focus=cfg.focus_settings[f],
+                model=fit.model.to_dict(),
+                width=w,
+                height=h,
+                fit_d=fit.fit_d,
+                fit_d_max=fit.fit_d_max,
+                holdout_d=fit.holdout_d,
+                holdout_d_max=fit.holdout_d_max,
+                field_uncertainty_rms=fit.uncertainty_rms,
+                field_uncertainty_max=fit.uncertainty_max,
+                session_dir=str(self.session.path.resolve()),
+                station_id=cfg.station.id,
                 software_version=__version__,
-                details={**fit.details, "holdout_per_orientation": list(fit.holdout_per_orientation),
-                         "model_file": str(path), "orientations_deg": list(cfg.capture.orientations_deg),
-                         "frames_per_orientation": cfg.capture.frames_per_orientation,
-                         "t": cfg.pipeline.t, "degree": cfg.pipeline.degree})
+                details={
+                    **fit.details,
+                    "holdout_per_orientation": list(fit.holdout_per_orientation),
+                    "model_file": str(path),
+                    "orientations_deg": list(cfg.capture.orientations_deg),
+                    "frames_per_orientation": cfg.capture.frames_per_orientation,
+                    "t": cfg.pipeline.t,
+                    "degree": cfg.pipeline.degree,
+                },
+            )
         self._summary[f].profile_id = profile_id
-        self.session.append({"kind": "stored", "focus_idx": f, "profile_id": profile_id,
-                             "model_file": f"profiles/{path.name}"})
+        self.session.append(
+            {"kind": "stored", "focus_idx": f, "profile_id": profile_id, "model_file": f"profiles/{path.name}"}
+        )
         self._advance(self._proc_task)
 
     # ============================================================ faults
@@ -451,10 +545,10 @@ class Executor:
             except (DriverError, OSError) as exc:
                 self._fault(what, exc, attempt)
                 if attempt == rc.attempts:
-                    raise SessionAborted(f"{what} failed {attempt} times, last: "
-                                         f"{type(exc).__name__}: {exc}") from None
-                self._note(f"[yellow]{what}: {type(exc).__name__}: {exc}; retry {attempt}/"
-                           f"{rc.attempts - 1} in {delay:g} s")
+                    raise SessionAborted(f"{what} failed {attempt} times, last: {type(exc).__name__}: {exc}") from None
+                self._note(
+                    f"[yellow]{what}: {type(exc).__name__}: {exc}; retry {attempt}/{rc.attempts - 1} in {delay:g} s"
+                )
                 self.sleep(delay)
                 delay *= 2
                 if isinstance(exc, (DeviceDisconnected, OSError)) and device is not None:
@@ -464,8 +558,9 @@ class Executor:
 
     def _fault(self, what: str, exc: Exception, attempt: int) -> None:
         self.faults += 1
-        self.session.append({"kind": "fault", "what": what, "error": type(exc).__name__,
-                             "message": str(exc), "attempt": attempt})
+        self.session.append(
+            {"kind": "fault", "what": what, "error": type(exc).__name__, "message": str(exc), "attempt": attempt}
+        )
 
     def _recover_turntable(self) -> None:
         """After a stall / limit / alarm: clear it (driver ``recover()``) and re-home,
@@ -480,7 +575,7 @@ class Executor:
             self._note(f"[yellow]turntable recovery failed: {type(exc).__name__}: {exc}")
 
     def _reopen(self, device) -> None:
-        with contextlib.suppress(Exception):  # noqa: BLE001 - closing a vanished device may fail any way
+        with contextlib.suppress(Exception):
             device.close()
         try:
             device.open()
@@ -499,8 +594,14 @@ class Executor:
 
         if self.console is None:
             return _NoProgress()
-        return Progress(TextColumn("{task.description:>8}"), BarColumn(), MofNCompleteColumn(),
-                        TimeElapsedColumn(), console=self.console, transient=False)
+        return Progress(
+            TextColumn("{task.description:>8}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=self.console,
+            transient=False,
+        )
 
     def _advance(self, task) -> None:
         self._prog.advance(task)
@@ -516,18 +617,38 @@ class Executor:
 
         cfg = self.config
         t = Table(title=f"{cfg.lens.label()} on {cfg.camera_body.label()}\n{self.session.path}")
-        for col in ("focus", "shots", "recapt.", "edges", "fit d", "fit d_max", "holdout d",
-                    "holdout d_max", "unc. rms", "unc. max", "model", "profile"):
+        for col in (
+            "focus",
+            "shots",
+            "recapt.",
+            "edges",
+            "fit d",
+            "fit d_max",
+            "holdout d",
+            "holdout d_max",
+            "unc. rms",
+            "unc. max",
+            "model",
+            "profile",
+        ):
             t.add_column(col, justify="right")
         fmt = lambda v: "-" if v is None or not np.isfinite(v) else f"{v:.4f}"  # noqa: E731
         for s in self._summary.values():
             fit = s.fit
-            t.add_row(f"{s.focus:g}", str(s.shots), str(s.recaptures), str(s.lines),
-                      fmt(fit.fit_d if fit else None), fmt(fit.fit_d_max if fit else None),
-                      fmt(fit.holdout_d if fit else None), fmt(fit.holdout_d_max if fit else None),
-                      fmt(fit.uncertainty_rms if fit else None), fmt(fit.uncertainty_max if fit else None),
-                      getattr(fit.model, "name", "?") if fit and fit.model is not None else "-",
-                      f"#{s.profile_id}" if s.profile_id is not None else "-")
+            t.add_row(
+                f"{s.focus:g}",
+                str(s.shots),
+                str(s.recaptures),
+                str(s.lines),
+                fmt(fit.fit_d if fit else None),
+                fmt(fit.fit_d_max if fit else None),
+                fmt(fit.holdout_d if fit else None),
+                fmt(fit.holdout_d_max if fit else None),
+                fmt(fit.uncertainty_rms if fit else None),
+                fmt(fit.uncertainty_max if fit else None),
+                getattr(fit.model, "name", "?") if fit and fit.model is not None else "-",
+                f"#{s.profile_id}" if s.profile_id is not None else "-",
+            )
         self.console.print(t)
         self.console.print(f"frames saved this run: {self.frames_saved}, device faults: {self.faults}")
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+
 class ImageReadError(Exception):
     """An image file could not be read; ``str(exc)`` is a one-line message."""
 
@@ -37,15 +38,15 @@ def _pnm_truncated(data: bytes) -> str | None:
     i = 2
     n = len(data)
     while len(fields) < 3 and i < n:
-        c = data[i:i + 1]
+        c = data[i : i + 1]
         if c == b"#":
-            while i < n and data[i:i + 1] not in (b"\n", b"\r"):
+            while i < n and data[i : i + 1] not in (b"\n", b"\r"):
                 i += 1
         elif c.isspace():
             i += 1
         else:
             j = i
-            while j < n and data[j:j + 1].isdigit():
+            while j < n and data[j : j + 1].isdigit():
                 j += 1
             if j == i:
                 return "malformed PNM header"

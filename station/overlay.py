@@ -76,7 +76,7 @@ def render_overlay(image: np.ndarray, m: ImageMeasurement, title: str = "") -> n
         _splat(canvas, rxy, np.tile(np.array(REJECT_BGR, np.uint8), (len(rxy), 1)), radius)
     labelled = set()
     big = sorted(zip(m.rejected, m.rejected_points), key=lambda rx: -rx[0].n_points)
-    for r, xy in big:
+    for r, _xy in big:
         if r.n_points >= LABEL_MIN_POINTS:
             x0, y0, x1, y1 = (int(round(v)) for v in r.bbox)
             cv2.rectangle(canvas, (x0 - 3, y0 - 3), (x1 + 3, y1 + 3), REJECT_BGR, thick)
@@ -94,8 +94,12 @@ def render_overlay(image: np.ndarray, m: ImageMeasurement, title: str = "") -> n
         residuals.append((ln.raw_points - f.centroid) @ f.normal)
     vmax = max([float(np.max(np.abs(s))) for s in residuals] + [1e-3])
     if m.lines:
-        _splat(canvas, np.concatenate([ln.raw_points for ln in m.lines]),
-               _colormap(np.concatenate(residuals), vmax), radius)
+        _splat(
+            canvas,
+            np.concatenate([ln.raw_points for ln in m.lines]),
+            _colormap(np.concatenate(residuals), vmax),
+            radius,
+        )
     # string numbers, at the middle of the first edge of each string
     seen = set()
     for ln in m.lines:
@@ -112,26 +116,45 @@ def render_overlay(image: np.ndarray, m: ImageMeasurement, title: str = "") -> n
     bar_w = int(0.35 * w)
     x0, y0, bh = int(20 * scale), int(15 * scale), int(20 * scale)
     ramp = _colormap(np.linspace(-vmax, vmax, bar_w), vmax)
-    panel[y0:y0 + bh, x0:x0 + bar_w] = ramp[None, :, :]
+    panel[y0 : y0 + bh, x0 : x0 + bar_w] = ramp[None, :, :]
     cv2.rectangle(panel, (x0, y0), (x0 + bar_w, y0 + bh), (0, 0, 0), 1)
     ty = y0 + bh + int(22 * scale)
     for frac, lab in ((0.0, f"-{vmax:.2f}"), (0.5, "0"), (1.0, f"+{vmax:.2f} px")):
         tx = x0 + int(frac * bar_w) - int(10 * scale)
         cv2.putText(panel, lab, (max(tx, 0), ty), font, fs, (0, 0, 0), thick, cv2.LINE_AA)
-    cv2.putText(panel, "signed distance to the edge's regression line", (x0, ty + int(28 * scale)), font, fs,
-                (0, 0, 0), thick, cv2.LINE_AA)
+    cv2.putText(
+        panel,
+        "signed distance to the edge's regression line",
+        (x0, ty + int(28 * scale)),
+        font,
+        fs,
+        (0, 0, 0),
+        thick,
+        cv2.LINE_AA,
+    )
     tx = x0 + bar_w + int(110 * scale)
     d = "n/a" if not np.isfinite(m.d) else f"{m.d:.4f} px"
     dm = "n/a" if not np.isfinite(m.d_max) else f"{m.d_max:.4f} px"
-    lines = [f"{title}" if title else "", f"d = {d}   d_max = {dm}",
-             f"{m.n_lines} edges of {m.n_strings} strings, t = {m.t}"]
+    lines = [
+        f"{title}" if title else "",
+        f"d = {d}   d_max = {dm}",
+        f"{m.n_lines} edges of {m.n_strings} strings, t = {m.t}",
+    ]
     yy = y0 + int(12 * scale)
     for text in [t for t in lines if t]:
         cv2.putText(panel, text, (tx, yy), font, fs, (0, 0, 0), thick, cv2.LINE_AA)
         yy += int(25 * scale)
     cv2.rectangle(panel, (tx, yy - int(10 * scale)), (tx + int(20 * scale), yy + int(4 * scale)), REJECT_BGR, -1)
-    cv2.putText(panel, f"rejected: {len(m.rejected)} groups (frame, dust, fragments)", (tx + int(28 * scale), yy),
-                font, fs, (0, 0, 0), thick, cv2.LINE_AA)
+    cv2.putText(
+        panel,
+        f"rejected: {len(m.rejected)} groups (frame, dust, fragments)",
+        (tx + int(28 * scale), yy),
+        font,
+        fs,
+        (0, 0, 0),
+        thick,
+        cv2.LINE_AA,
+    )
     return np.vstack([canvas, panel])
 
 

@@ -10,8 +10,8 @@ plan skips them.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import Iterable, Iterator, Union
 
 from station.config import Config
 
@@ -66,7 +66,7 @@ class Store:
     focus_idx: int
 
 
-Step = Union[LockFocus, Move, Settle, Capture, Save, Measure, Fit, Store]
+Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | Store
 
 
 def frame_key(focus_idx: int, orientation_idx: int, frame_idx: int) -> tuple:
@@ -79,14 +79,15 @@ def stored_key(focus_idx: int) -> tuple:
     return ("stored", int(focus_idx))
 
 
-def capture_steps(config: Config, focus_idx: int, orientation_idx: int,
-                  frames: Iterable[int] | None = None) -> Iterator[Step]:
+def capture_steps(
+    config: Config, focus_idx: int, orientation_idx: int, frames: Iterable[int] | None = None
+) -> Iterator[Step]:
     """Move to an orientation, settle, capture and save ``frames`` (default all)."""
     cap = config.capture
     yield Move(focus_idx, orientation_idx, cap.orientations_deg[orientation_idx])
     if cap.settle_s > 0:
         yield Settle(cap.settle_s)
-    for i in (range(cap.frames_per_orientation) if frames is None else frames):
+    for i in range(cap.frames_per_orientation) if frames is None else frames:
         yield Capture(focus_idx, orientation_idx, i)
         yield Save(focus_idx, orientation_idx, i)
 

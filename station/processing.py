@@ -8,8 +8,8 @@ leave-one-orientation-out cross-validation. No files, no devices.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -39,13 +39,16 @@ def exposure_problems(image: np.ndarray, full: float, checks: CheckConfig) -> li
     problems = []
     saturated = float(np.mean(image >= full - 1e-9))
     if saturated > checks.max_saturated_fraction:
-        problems.append(f"over-exposed: {100 * saturated:.2f}% of pixels saturated "
-                        f"(limit {100 * checks.max_saturated_fraction:.2f}%)")
+        problems.append(
+            f"over-exposed: {100 * saturated:.2f}% of pixels saturated "
+            f"(limit {100 * checks.max_saturated_fraction:.2f}%)"
+        )
     lo, hi = np.percentile(image, [0.5, 99.5])
     dyn = (hi - lo) / full
     if dyn < checks.min_dynamic_range:
-        problems.append(f"under-exposed or blank: dynamic range {dyn:.3f} of full scale "
-                        f"(minimum {checks.min_dynamic_range:.3f})")
+        problems.append(
+            f"under-exposed or blank: dynamic range {dyn:.3f} of full scale (minimum {checks.min_dynamic_range:.3f})"
+        )
     return problems
 
 
@@ -106,8 +109,13 @@ def shot_from_measurement(m) -> ShotMeasurement:
     """The :class:`ShotMeasurement` of a :class:`pipeline.measure.ImageMeasurement`."""
     lines = tuple(np.asarray(l.points, np.float64) for l in m.lines)
     angle = dominant_angle([l.angle_deg for l in m.lines]) if lines else float("nan")
-    return ShotMeasurement(lines=lines, angle_deg=angle, d=float(m.d) if lines else float("nan"),
-                           d_max=float(m.d_max) if lines else float("nan"), measurement=m)
+    return ShotMeasurement(
+        lines=lines,
+        angle_deg=angle,
+        d=float(m.d) if lines else float("nan"),
+        d_max=float(m.d_max) if lines else float("nan"),
+        measurement=m,
+    )
 
 
 def shot_problems(m: ShotMeasurement, expected_angle: float, checks: CheckConfig) -> list[str]:
@@ -116,8 +124,10 @@ def shot_problems(m: ShotMeasurement, expected_angle: float, checks: CheckConfig
         return [f"only {m.n_lines} string edges found (need {checks.min_lines})"]
     diff = angle_difference(m.angle_deg, expected_angle)
     if diff > checks.angle_tolerance_deg:
-        return [f"strings at {m.angle_deg:.1f} deg, expected {expected_angle:.1f} deg "
-                f"(off by {diff:.1f} > {checks.angle_tolerance_deg:g})"]
+        return [
+            f"strings at {m.angle_deg:.1f} deg, expected {expected_angle:.1f} deg "
+            f"(off by {diff:.1f} > {checks.angle_tolerance_deg:g})"
+        ]
     return []
 
 
@@ -146,9 +156,16 @@ def fit_kwargs(pipeline: PipelineConfig) -> dict:
     return kw
 
 
-def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
-              pipeline: PipelineConfig, *, bootstrap: int = 0, seed: int = 0,
-              map_fn=map) -> FocusFit:
+def fit_focus(
+    shots: Sequence[ShotMeasurement],
+    width: int,
+    height: int,
+    pipeline: PipelineConfig,
+    *,
+    bootstrap: int = 0,
+    seed: int = 0,
+    map_fn=map,
+) -> FocusFit:
     """Fit one focus setting on all orientations, cross-validate it, bootstrap it.
 
     * Fit: :func:`pipeline.fit.fit_distortion` on the edges of every shot
@@ -182,8 +199,7 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
         kw = fit_kwargs(pipeline)
     full = fit_distortion(lines, width, height, **kw)
     if getattr(full, "model", None) is None:
-        return FocusFit(None, np.nan, np.nan, np.nan, np.nan,
-                        failure=str(getattr(full, "reason", full)))
+        return FocusFit(None, np.nan, np.nan, np.nan, np.nan, failure=str(getattr(full, "reason", full)))
     outliers = {(r.image, r.line) for r in full.rejected}
     from pipeline.uncertainty import refit_job
 
@@ -192,21 +208,31 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
 
     held_out: list[np.ndarray] = []
     per_o: list[float] = []
-    for k, (model, reason) in enumerate(results[:len(lines)]):
+    for k, (model, reason) in enumerate(results[: len(lines)]):
         if reason:
-            return FocusFit(full.model, full.d_after, full.d_max_after, np.nan, np.nan,
-                            failure=f"cross-validation without orientation {k}: {reason}")
+            return FocusFit(
+                full.model,
+                full.d_after,
+                full.d_max_after,
+                np.nan,
+                np.nan,
+                failure=f"cross-validation without orientation {k}: {reason}",
+            )
         kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
         per_o.append(corrected_straightness(model, kept)[0])
         held_out.extend(model.undistort_points(p) for p in kept)
     hold_d, hold_d_max = straightness_of(held_out)
-    details = {"d_before": full.d_before, "d_max_before": full.d_max_before,
-               "n_points": full.n_points, "n_params": full.n_params,
-               "rejected_edges": len(full.rejected), "warnings": list(full.warnings),
-               "fit": {k: v for k, v in kw.items()}}
+    details = {
+        "d_before": full.d_before,
+        "d_max_before": full.d_max_before,
+        "n_points": full.n_points,
+        "n_params": full.n_params,
+        "rejected_edges": len(full.rejected),
+        "warnings": list(full.warnings),
+        "fit": {k: v for k, v in kw.items()},
+    }
     if selection is not None:
-        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason,
-                                "folds": selection.folds}
+        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason, "folds": selection.folds}
     unc = None
     if bootstrap == 1:
         details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
@@ -214,16 +240,24 @@ def fit_focus(shots: Sequence[ShotMeasurement], width: int, height: int,
         from pipeline.fit import FitFailure
         from pipeline.uncertainty import bootstrap_field_uncertainty
 
-        res = bootstrap_field_uncertainty(lines, width, height, kw, n_boot=bootstrap, seed=seed,
-                                          full_fit=full, map_fn=map_fn)
+        res = bootstrap_field_uncertainty(
+            lines, width, height, kw, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
+        )
         if isinstance(res, FitFailure):
             details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=res.reason)
         else:
             unc = res
             details.update(bootstrap_replicates=res.n_boot, bootstrap_failed=res.n_failed)
         details["bootstrap_scheme"] = "edges resampled with replacement within each shot"
-    return FocusFit(model=full.model, fit_d=full.d_after, fit_d_max=full.d_max_after,
-                    holdout_d=hold_d, holdout_d_max=hold_d_max,
-                    holdout_per_orientation=tuple(per_o), details=details,
-                    uncertainty_rms=unc.rms if unc is not None else None,
-                    uncertainty_max=unc.max if unc is not None else None, uncertainty=unc)
+    return FocusFit(
+        model=full.model,
+        fit_d=full.d_after,
+        fit_d_max=full.d_max_after,
+        holdout_d=hold_d,
+        holdout_d_max=hold_d_max,
+        holdout_per_orientation=tuple(per_o),
+        details=details,
+        uncertainty_rms=unc.rms if unc is not None else None,
+        uncertainty_max=unc.max if unc is not None else None,
+        uncertainty=unc,
+    )

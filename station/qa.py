@@ -24,8 +24,9 @@ or a plain mapping); :func:`evaluate` is the same on a model.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from station.config import QAConfig
 
@@ -55,8 +56,13 @@ class Verdict:
         return self.metrics
 
     def to_dict(self) -> dict:
-        return {"verdict": self.verdict, "passed": self.passed, "reasons": list(self.reasons),
-                "checks": list(self.checks), "figures": dict(self.metrics)}
+        return {
+            "verdict": self.verdict,
+            "passed": self.passed,
+            "reasons": list(self.reasons),
+            "checks": list(self.checks),
+            "figures": dict(self.metrics),
+        }
 
 
 QAVerdict = Verdict
@@ -72,8 +78,9 @@ def thresholds_from(obj: Any = None, **overrides) -> QAConfig:
     elif isinstance(obj, Mapping):
         unknown = set(obj) - set(THRESHOLD_FIELDS)
         if unknown:
-            raise ValueError(f"unknown QA threshold(s) {', '.join(sorted(unknown))}; "
-                             f"known: {', '.join(THRESHOLD_FIELDS)}")
+            raise ValueError(
+                f"unknown QA threshold(s) {', '.join(sorted(unknown))}; known: {', '.join(THRESHOLD_FIELDS)}"
+            )
         base = QAConfig(**{**QAConfig().__dict__, **obj})
     else:
         raise ValueError(f"thresholds must be a QAConfig or a mapping, got {type(obj).__name__}")
@@ -104,8 +111,15 @@ def _finite(v) -> bool:
     return isinstance(v, (int, float)) and math.isfinite(v)
 
 
-def evaluate(model, width: int, height: int, holdout_d: float | None, thresholds: QAConfig,
-             reference=None, extra: Mapping[str, Any] | None = None) -> Verdict:
+def evaluate(
+    model,
+    width: int,
+    height: int,
+    holdout_d: float | None,
+    thresholds: QAConfig,
+    reference=None,
+    extra: Mapping[str, Any] | None = None,
+) -> Verdict:
     """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`).
 
     ``reference`` is the golden correction of the same lens model for this
@@ -126,8 +140,10 @@ def evaluate(model, width: int, height: int, holdout_d: float | None, thresholds
     else:
         checks.append(f"holdout d {holdout_d:.4f} px <= {t:g} px")
         if holdout_d > t:
-            reasons.append(f"holdout d {holdout_d:.4f} px > {t:g} px: the correction does not "
-                           "straighten shots it was not fitted on well enough")
+            reasons.append(
+                f"holdout d {holdout_d:.4f} px > {t:g} px: the correction does not "
+                "straighten shots it was not fitted on well enough"
+            )
 
     try:
         rms, mx = distortion_magnitude(model, width, height)
@@ -139,8 +155,9 @@ def evaluate(model, width: int, height: int, holdout_d: float | None, thresholds
     elif thresholds.max_distortion_px is not None:
         checks.append(f"distortion max {mx:.3f} px <= {thresholds.max_distortion_px:g} px")
         if mx > thresholds.max_distortion_px:
-            reasons.append(f"distortion {mx:.3f} px (max over the image, modulo homography) > "
-                           f"{thresholds.max_distortion_px:g} px")
+            reasons.append(
+                f"distortion {mx:.3f} px (max over the image, modulo homography) > {thresholds.max_distortion_px:g} px"
+            )
 
     if reference is not None:
         c = compare_models(model, reference, width, height, step=_grid_step(width, height))
@@ -149,8 +166,7 @@ def evaluate(model, width: int, height: int, holdout_d: float | None, thresholds
         if lim is not None:
             checks.append(f"deviation from reference max {c.max:.4f} px <= {lim:g} px")
             if not c.max <= lim:
-                reasons.append(f"deviates from the reference by {c.max:.4f} px max "
-                               f"({c.rms:.4f} px RMS) > {lim:g} px")
+                reasons.append(f"deviates from the reference by {c.max:.4f} px max ({c.rms:.4f} px RMS) > {lim:g} px")
         else:
             checks.append(f"deviation from reference max {c.max:.4f} px: reported only (no threshold)")
     elif thresholds.max_reference_deviation_px is not None:
@@ -174,9 +190,12 @@ class ProfileData:
     focus: float | None = None
 
     def extra(self) -> dict:
-        return {"holdout_d_max_px": self.holdout_d_max, "fit_d_px": self.fit_d,
-                "field_uncertainty_rms_px": self.field_uncertainty_rms,
-                "field_uncertainty_max_px": self.field_uncertainty_max}
+        return {
+            "holdout_d_max_px": self.holdout_d_max,
+            "fit_d_px": self.fit_d,
+            "field_uncertainty_rms_px": self.field_uncertainty_rms,
+            "field_uncertainty_max_px": self.field_uncertainty_max,
+        }
 
 
 def _num(v) -> float | None:
@@ -198,15 +217,21 @@ def profile_data(obj) -> ProfileData:
     if hasattr(obj, "merit") and hasattr(obj, "provenance"):  # pipeline.model_file.ModelFile
         merit = obj.merit or {}
         fu = merit.get("field_uncertainty") or {}
-        return ProfileData(obj.model, int(obj.width), int(obj.height),
-                           holdout_d=_num((merit.get("holdout") or {}).get("d")),
-                           holdout_d_max=_num((merit.get("holdout") or {}).get("d_max")),
-                           fit_d=_num((merit.get("fit") or {}).get("d")),
-                           field_uncertainty_rms=_num(fu.get("rms")), field_uncertainty_max=_num(fu.get("max")),
-                           focus=_num((obj.provenance or {}).get("focus")))
+        return ProfileData(
+            obj.model,
+            int(obj.width),
+            int(obj.height),
+            holdout_d=_num((merit.get("holdout") or {}).get("d")),
+            holdout_d_max=_num((merit.get("holdout") or {}).get("d_max")),
+            fit_d=_num((merit.get("fit") or {}).get("d")),
+            field_uncertainty_rms=_num(fu.get("rms")),
+            field_uncertainty_max=_num(fu.get("max")),
+            focus=_num((obj.provenance or {}).get("focus")),
+        )
     if isinstance(obj, Mapping):
         get = obj.get
     elif hasattr(obj, "model") and hasattr(obj, "width"):  # station.store.Profile
+
         def get(k, default=None):
             return getattr(obj, k, default)
     else:
@@ -218,10 +243,17 @@ def profile_data(obj) -> ProfileData:
         raise ValueError("a profile needs a 'model' (a distortion model or its dict)")
     if get("width") is None or get("height") is None:
         raise ValueError("a profile needs its image 'width' and 'height'")
-    return ProfileData(model, int(get("width")), int(get("height")), holdout_d=_num(get("holdout_d")),
-                       holdout_d_max=_num(get("holdout_d_max")), fit_d=_num(get("fit_d")),
-                       field_uncertainty_rms=_num(get("field_uncertainty_rms")),
-                       field_uncertainty_max=_num(get("field_uncertainty_max")), focus=_num(get("focus")))
+    return ProfileData(
+        model,
+        int(get("width")),
+        int(get("height")),
+        holdout_d=_num(get("holdout_d")),
+        holdout_d_max=_num(get("holdout_d_max")),
+        fit_d=_num(get("fit_d")),
+        field_uncertainty_rms=_num(get("field_uncertainty_rms")),
+        field_uncertainty_max=_num(get("field_uncertainty_max")),
+        focus=_num(get("focus")),
+    )
 
 
 def qa_verdict(profile, thresholds=None, reference=None) -> Verdict:
@@ -249,11 +281,14 @@ def qa_verdict(profile, thresholds=None, reference=None) -> Verdict:
     if reference is not None and not isinstance(reference, DistortionModel):
         r = profile_data(reference)
         if (r.width, r.height) != (p.width, p.height):
-            raise ValueError(f"the reference is for {r.width}x{r.height} images, the profile for "
-                             f"{p.width}x{p.height}: they cannot be compared")
+            raise ValueError(
+                f"the reference is for {r.width}x{r.height} images, the profile for "
+                f"{p.width}x{p.height}: they cannot be compared"
+            )
         reference = r.model
-    return evaluate(p.model, p.width, p.height, p.holdout_d, thresholds_from(thresholds),
-                    reference=reference, extra=p.extra())
+    return evaluate(
+        p.model, p.width, p.height, p.holdout_d, thresholds_from(thresholds), reference=reference, extra=p.extra()
+    )
 
 
 def combine(verdicts) -> str:

@@ -31,18 +31,18 @@ from __future__ import annotations
 import html
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
-
-import numpy as np
+from typing import Any
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
-from station.qa import Verdict  # noqa: E402
+from station.qa import Verdict
 
 
 @dataclass(frozen=True)
@@ -116,19 +116,20 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
     fx, fy = normalised_field(model, fxs, fys, h)
     mag = np.hypot(fx, fy)
     fig, ax = _fig(width, height)
-    im = ax.imshow(mag, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="viridis",
-                   interpolation="bilinear")
+    im = ax.imshow(mag, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="viridis", interpolation="bilinear")
     xx, yy = np.meshgrid(xs, ys)
     vmax = float(np.hypot(ux, uy).max()) or 1.0
-    q = ax.quiver(xx, yy, ux, uy, color="white", angles="xy", scale_units="xy",
-                  scale=vmax / (0.9 * step), width=0.004)
+    q = ax.quiver(xx, yy, ux, uy, color="white", angles="xy", scale_units="xy", scale=vmax / (0.9 * step), width=0.004)
     key = float(f"{vmax:.1g}")
     ax.quiverkey(q, 0.80, 1.03, key, f"{key:g} px", labelpos="E", coordinates="axes", color="black")
     _image_axes(ax, width, height)
     fig.colorbar(im, ax=ax, label="|displacement| (px)", fraction=0.046, pad=0.03)
-    ax.set_title(_title(title, "") +
-                 f"correction modulo homography: max {mag.max():.3f} px, RMS {np.sqrt(np.mean(mag ** 2)):.3f} px",
-                 fontsize=10, loc="left")
+    ax.set_title(
+        _title(title, "")
+        + f"correction modulo homography: max {mag.max():.3f} px, RMS {np.sqrt(np.mean(mag**2)):.3f} px",
+        fontsize=10,
+        loc="left",
+    )
     return _save(fig, path)
 
 
@@ -165,14 +166,19 @@ def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> 
             idx = np.flatnonzero(ori == o)
             if o > 0:
                 ax.axvline(idx[0] - 0.5, color="grey", lw=0.6)
-            ax.text(idx.mean(), 1.02, f"{shots[o].orientation_deg:g}°", transform=ax.get_xaxis_transform(),
-                    ha="center", fontsize=8)
+            ax.text(
+                idx.mean(),
+                1.02,
+                f"{shots[o].orientation_deg:g}°",
+                transform=ax.get_xaxis_transform(),
+                ha="center",
+                fontsize=8,
+            )
         ax.set_yscale("log")
         ax.set_xlim(-0.5, len(rows) - 0.5)
         ax.set_ylim(lo, before.max() * 2)
         ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
-        sub = (f"mean RMS per edge: {before.mean():.4f} px before, {after.mean():.4f} px after "
-               f"({len(rows)} edges)")
+        sub = f"mean RMS per edge: {before.mean():.4f} px before, {after.mean():.4f} px after ({len(rows)} edges)"
     else:
         ax.text(0.5, 0.5, "no measured edges", ha="center", va="center", transform=ax.transAxes)
         sub = "no measured edges"
@@ -187,13 +193,21 @@ def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Pat
     fig, ax = _fig(width, height)
     dx = (unc.xs[1] - unc.xs[0]) / 2 if len(unc.xs) > 1 else 0.5
     dy = (unc.ys[1] - unc.ys[0]) / 2 if len(unc.ys) > 1 else 0.5
-    im = ax.imshow(unc.std, extent=(unc.xs[0] - dx, unc.xs[-1] + dx, unc.ys[-1] + dy, unc.ys[0] - dy),
-                   cmap="magma", interpolation="bilinear", vmin=0)
+    im = ax.imshow(
+        unc.std,
+        extent=(unc.xs[0] - dx, unc.xs[-1] + dx, unc.ys[-1] + dy, unc.ys[0] - dy),
+        cmap="magma",
+        interpolation="bilinear",
+        vmin=0,
+    )
     _image_axes(ax, width, height)
     fig.colorbar(im, ax=ax, label="uncertainty of the correction (px, 1 sigma)", fraction=0.046, pad=0.03)
-    ax.set_title(_title(title, "") +
-                 f"bootstrap ({unc.n_boot} replicates, {unc.resample} resampled): "
-                 f"RMS {unc.rms:.4f} px, max {unc.max:.4f} px", fontsize=10, loc="left")
+    ax.set_title(
+        _title(title, "") + f"bootstrap ({unc.n_boot} replicates, {unc.resample} resampled): "
+        f"RMS {unc.rms:.4f} px, max {unc.max:.4f} px",
+        fontsize=10,
+        loc="left",
+    )
     return _save(fig, path)
 
 
@@ -204,8 +218,16 @@ def _fmt(v, nd=4) -> str:
     return f"{v:.{nd}f}" if isinstance(v, float) else str(v)
 
 
-def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall: str, *,
-                 thresholds=None, interpolation: Sequence = (), notes: Sequence[str] = ()) -> Path:
+def write_report(
+    out_dir,
+    title: str,
+    evidence: Sequence[FocusEvidence],
+    overall: str,
+    *,
+    thresholds=None,
+    interpolation: Sequence = (),
+    notes: Sequence[str] = (),
+) -> Path:
     """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path."""
     from station.overlay import write_overlay
 
@@ -213,24 +235,42 @@ def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall
     out.mkdir(parents=True, exist_ok=True)
     md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", ""]
     if thresholds is not None:
-        md += ["Thresholds: " + ", ".join(f"{k} = {v:g} px" if v is not None else f"{k}: not judged"
-                                          for k, v in thresholds.__dict__.items()), ""]
-    md += ["| focus | verdict | holdout d (px) | distortion max (px) | ref. deviation max (px) | "
-           "uncertainty RMS / max (px) | reasons |",
-           "|---:|:---:|---:|---:|---:|---:|:---|"]
+        md += [
+            "Thresholds: "
+            + ", ".join(
+                f"{k} = {v:g} px" if v is not None else f"{k}: not judged" for k, v in thresholds.__dict__.items()
+            ),
+            "",
+        ]
+    md += [
+        "| focus | verdict | holdout d (px) | distortion max (px) | ref. deviation max (px) | "
+        "uncertainty RMS / max (px) | reasons |",
+        "|---:|:---:|---:|---:|---:|---:|:---|",
+    ]
     for e in evidence:
         f = e.verdict.figures
         unc = e.uncertainty
-        u = (f"{unc.rms:.4f} / {unc.max:.4f}" if unc is not None else
-             f"{_fmt(f.get('field_uncertainty_rms_px'))} / {_fmt(f.get('field_uncertainty_max_px'))}")
-        md.append(f"| {e.focus:g} | {e.verdict.verdict} | {_fmt(f.get('holdout_d_px'))} | "
-                  f"{_fmt(f.get('distortion_max_px'), 3)} | {_fmt(f.get('reference_max_px'))} | {u} | "
-                  f"{'; '.join(e.verdict.reasons) or '-'} |")
+        u = (
+            f"{unc.rms:.4f} / {unc.max:.4f}"
+            if unc is not None
+            else f"{_fmt(f.get('field_uncertainty_rms_px'))} / {_fmt(f.get('field_uncertainty_max_px'))}"
+        )
+        md.append(
+            f"| {e.focus:g} | {e.verdict.verdict} | {_fmt(f.get('holdout_d_px'))} | "
+            f"{_fmt(f.get('distortion_max_px'), 3)} | {_fmt(f.get('reference_max_px'))} | {u} | "
+            f"{'; '.join(e.verdict.reasons) or '-'} |"
+        )
     md.append("")
     if interpolation:
-        md += ["## Focus interpolation (leave one calibrated focus out)", "",
-               "Each interior focus setting interpolated from the others and compared with its own fit, "
-               "modulo homography.", "", "| focus left out | RMS (px) | max (px) |", "|---:|---:|---:|"]
+        md += [
+            "## Focus interpolation (leave one calibrated focus out)",
+            "",
+            "Each interior focus setting interpolated from the others and compared with its own fit, "
+            "modulo homography.",
+            "",
+            "| focus left out | RMS (px) | max (px) |",
+            "|---:|---:|---:|",
+        ]
         md += [f"| {r.focus:g} | {r.rms_px:.4f} | {r.max_px:.4f} |" for r in interpolation]
         md.append("")
     for n in notes:
@@ -260,8 +300,7 @@ def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall
             md += ["### Overlays (edges coloured by their distance to their own line, before correction)", ""]
             for j, s in enumerate(e.shots):
                 name = f"overlay_f{i}_o{j}.png"
-                write_overlay(out / name, s.image, s.measurement,
-                              title=f"{label}, stage {s.orientation_deg:g} deg")
+                write_overlay(out / name, s.image, s.measurement, title=f"{label}, stage {s.orientation_deg:g} deg")
                 md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
     path = out / "report.md"
     text = "\n".join(md) + "\n"
@@ -271,9 +310,11 @@ def write_report(out_dir, title: str, evidence: Sequence[FocusEvidence], overall
 
 
 # ------------------------------------------------------------------- HTML
-_INLINE = [(re.compile(r"!\[([^\]]*)\]\(([^)]+)\)"), r'<img alt="\1" src="\2">'),
-           (re.compile(r"\*\*(.+?)\*\*"), r"<strong>\1</strong>"),
-           (re.compile(r"`([^`]+)`"), r"<code>\1</code>")]
+_INLINE = [
+    (re.compile(r"!\[([^\]]*)\]\(([^)]+)\)"), r'<img alt="\1" src="\2">'),
+    (re.compile(r"\*\*(.+?)\*\*"), r"<strong>\1</strong>"),
+    (re.compile(r"`([^`]+)`"), r"<code>\1</code>"),
+]
 
 
 def _inline(text: str) -> str:
@@ -304,15 +345,26 @@ def markdown_to_html(md: str, title: str = "") -> str:
                 i += 1
             aligns = []
             if len(rows) > 1 and all(re.fullmatch(r":?-+:?", c) for c in rows[1]):
-                aligns = ["right" if c.endswith(":") and not c.startswith(":") else
-                          "center" if c.startswith(":") and c.endswith(":") else "left" for c in rows[1]]
+                aligns = [
+                    "right"
+                    if c.endswith(":") and not c.startswith(":")
+                    else "center"
+                    if c.startswith(":") and c.endswith(":")
+                    else "left"
+                    for c in rows[1]
+                ]
                 rows = [rows[0]] + rows[2:]
             t = ["<table>"]
             for r, cells in enumerate(rows):
                 tag = "th" if r == 0 and aligns else "td"
-                t.append("<tr>" + "".join(
-                    f'<{tag} style="text-align:{aligns[k] if k < len(aligns) else "left"}">{_inline(c)}</{tag}>'
-                    for k, c in enumerate(cells)) + "</tr>")
+                t.append(
+                    "<tr>"
+                    + "".join(
+                        f'<{tag} style="text-align:{aligns[k] if k < len(aligns) else "left"}">{_inline(c)}</{tag}>'
+                        for k, c in enumerate(cells)
+                    )
+                    + "</tr>"
+                )
             body.append("\n".join(t + ["</table>"]))
         elif ln.startswith("- "):
             items = []
@@ -329,12 +381,16 @@ def markdown_to_html(md: str, title: str = "") -> str:
                 para.append(_inline(lines[i]))
                 i += 1
             body.append("<p>" + "<br>\n".join(para) + "</p>")
-    style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
-             "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
-             "img{max-width:100%;display:block;margin:0.5em 0}"
-             "blockquote{color:#444;border-left:3px solid #bbb;margin-left:0;padding-left:1em}")
-    return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
-            f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n")
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+        "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
+        "img{max-width:100%;display:block;margin:0.5em 0}"
+        "blockquote{color:#444;border-left:3px solid #bbb;margin-left:0;padding-left:1em}"
+    )
+    return (
+        f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+        f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
 
 
 # ------------------------------------------------------- session evidence
@@ -391,14 +447,16 @@ def stored_uncertainty(session, focus_idx: int, model):
     if rec is None or not rec.get("uncertainty_file"):
         return None
     try:
-        return uncertainty_from_arrays(session.read_arrays(rec["uncertainty_file"],
-                                                           rec.get("uncertainty_sha256")), model)
+        return uncertainty_from_arrays(
+            session.read_arrays(rec["uncertainty_file"], rec.get("uncertainty_sha256")), model
+        )
     except (OSError, ValueError, SessionError):
         return None
 
 
-def session_evidence(session, focus_idx: int, focus: float, profile, verdict: Verdict, source: str = "",
-                     *, bootstrap_if_missing: int = 0) -> FocusEvidence:
+def session_evidence(
+    session, focus_idx: int, focus: float, profile, verdict: Verdict, source: str = "", *, bootstrap_if_missing: int = 0
+) -> FocusEvidence:
     """The report's evidence on one focus setting of a session.
 
     ``profile``: anything :func:`station.qa.profile_data` takes (e.g. the
@@ -410,33 +468,56 @@ def session_evidence(session, focus_idx: int, focus: float, profile, verdict: Ve
 
     pd = profile_data(profile)
     cfg = session.config
-    e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=verdict,
-                      source=source)
+    e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=verdict, source=source)
     e.shots = session_shots(session, focus_idx, t=cfg.pipeline.t)
     e.uncertainty = stored_uncertainty(session, focus_idx, pd.model)
     if e.uncertainty is None:
         if bootstrap_if_missing >= 2 and e.shots:
             e.uncertainty, e.uncertainty_note = shot_uncertainty(
-                e.shots, pd.width, pd.height, fit_kwargs(cfg.pipeline), n_boot=bootstrap_if_missing,
-                seed=cfg.pipeline.seed)
+                e.shots,
+                pd.width,
+                pd.height,
+                fit_kwargs(cfg.pipeline),
+                n_boot=bootstrap_if_missing,
+                seed=cfg.pipeline.seed,
+            )
         else:
             e.uncertainty_note = "not computed in this session (pipeline.bootstrap: 0)"
     return e
 
 
-def write_session_report(session, out_dir, title: str, models, verdicts: Sequence[Verdict], overall: str, *,
-                         thresholds=None, interpolation: Sequence = (), bootstrap_if_missing: int = 0) -> Path:
+def write_session_report(
+    session,
+    out_dir,
+    title: str,
+    models,
+    verdicts: Sequence[Verdict],
+    overall: str,
+    *,
+    thresholds=None,
+    interpolation: Sequence = (),
+    bootstrap_if_missing: int = 0,
+) -> Path:
     """Report of a session's profiles: ``models`` as :func:`station.qa.session_models`
     returns them, ``verdicts`` in the same order. Returns the Markdown path."""
-    evidence = [session_evidence(session, f, focus if math.isfinite(focus) else session.config.focus_settings[f],
-                                 mf, v, source=f"profiles/focus{f}.yaml",
-                                 bootstrap_if_missing=bootstrap_if_missing)
-                for (f, focus, mf), v in zip(models, verdicts)]
+    evidence = [
+        session_evidence(
+            session,
+            f,
+            focus if math.isfinite(focus) else session.config.focus_settings[f],
+            mf,
+            v,
+            source=f"profiles/focus{f}.yaml",
+            bootstrap_if_missing=bootstrap_if_missing,
+        )
+        for (f, focus, mf), v in zip(models, verdicts)
+    ]
     return write_report(out_dir, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 
 
-def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, fit_kwargs: dict, *,
-                     n_boot: int = 20, seed: int = 0):
+def shot_uncertainty(
+    shots: Sequence[Shot], width: int, height: int, fit_kwargs: dict, *, n_boot: int = 20, seed: int = 0
+):
     """(FieldUncertainty or None, note) from the shots' edges."""
     from pipeline.fit import FitFailure
     from pipeline.uncertainty import bootstrap_field_uncertainty

@@ -38,8 +38,9 @@ import io
 import json
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -89,14 +90,13 @@ def encode_pgm(image: np.ndarray) -> bytes:
 
 def decode_pgm(data: bytes) -> np.ndarray:
     """Inverse of :func:`encode_pgm` (also reads PGMs with comments)."""
-    m = re.match(rb"P5\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s",
-                 data)
+    m = re.match(rb"P5\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s", data)
     if not m:
         raise ValueError("not a binary PGM (P5) file")
     w, h, maxval = (int(g) for g in m.groups())
     dtype = np.uint8 if maxval < 256 else np.dtype(">u2")
     n = w * h * (1 if maxval < 256 else 2)
-    body = data[m.end(): m.end() + n]
+    body = data[m.end() : m.end() + n]
     if len(body) != n:
         raise ValueError(f"truncated PGM: {len(body)} of {n} bytes")
     img = np.frombuffer(body, dtype=dtype).reshape(h, w)
@@ -127,7 +127,7 @@ def read_manifest(path: Path) -> tuple[list[dict], int]:
             if not isinstance(rec, dict):
                 raise ValueError("not an object")
         except ValueError:
-            if data[nl + 1:].strip():
+            if data[nl + 1 :].strip():
                 raise SessionError(f"{path}: line {len(records) + 1}: corrupt manifest record") from None
             break  # torn last line
         records.append(rec)
@@ -168,11 +168,10 @@ class SessionDir:
 
     # ------------------------------------------------------------ lifecycle
     @classmethod
-    def create(cls, root: Path, config: Config, *, name: str | None = None,
-               software_version: str = "") -> "SessionDir":
+    def create(cls, root: Path, config: Config, *, name: str | None = None, software_version: str = "") -> SessionDir:
         """Make a new session directory under ``root`` for ``config``."""
         root = Path(root)
-        now = _dt.datetime.now(_dt.timezone.utc)
+        now = _dt.datetime.now(_dt.UTC)
         if name is None:
             stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", config.lens.serial)
             name = f"{now:%Y%m%dT%H%M%SZ}-{stem}"
@@ -188,9 +187,12 @@ class SessionDir:
         (path / "measurements").mkdir()
         atomic_write_bytes(path / CONFIG_COPY, config.path.read_bytes())
         meta = {
-            "format": 1, "created": now.isoformat(timespec="seconds"),
-            "config_source": str(config.path), "base_dir": str(config.base_dir),
-            "station_id": config.station.id, "software_version": software_version,
+            "format": 1,
+            "created": now.isoformat(timespec="seconds"),
+            "config_source": str(config.path),
+            "base_dir": str(config.base_dir),
+            "station_id": config.station.id,
+            "software_version": software_version,
             "lens": [config.lens.maker, config.lens.model, config.lens.serial],
         }
         atomic_write_bytes(path / SESSION_FILE, (json.dumps(meta, indent=1) + "\n").encode())
@@ -199,7 +201,7 @@ class SessionDir:
         return s
 
     @classmethod
-    def open(cls, path: Path) -> "SessionDir":
+    def open(cls, path: Path) -> SessionDir:
         """Reopen an existing session (for resume); reloads and validates its config."""
         path = Path(path)
         if not (path / SESSION_FILE).is_file():
@@ -218,7 +220,7 @@ class SessionDir:
             if fh is not None and not fh.closed:
                 fh.close()
 
-    def __enter__(self) -> "SessionDir":
+    def __enter__(self) -> SessionDir:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -227,7 +229,7 @@ class SessionDir:
     # --------------------------------------------------------------- writes
     def append(self, record: dict) -> dict:
         """Append one record to the manifest, durably (flush + fsync)."""
-        record = {"t": round(_dt.datetime.now(_dt.timezone.utc).timestamp(), 3), **record}
+        record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **record}
         line = json.dumps(record, separators=(",", ":"), default=_json_default) + "\n"
         self._manifest.write(line.encode())
         self._manifest.flush()
@@ -235,18 +237,31 @@ class SessionDir:
         self.records.append(record)
         return record
 
-    def write_frame(self, focus_idx: int, orientation_idx: int, frame_idx: int,
-                    image: np.ndarray, metadata: dict[str, Any] | None = None) -> dict:
+    def write_frame(
+        self,
+        focus_idx: int,
+        orientation_idx: int,
+        frame_idx: int,
+        image: np.ndarray,
+        metadata: dict[str, Any] | None = None,
+    ) -> dict:
         """Write a frame atomically, then record it in the manifest."""
         attempt = self.attempt(focus_idx, orientation_idx)
         name = f"f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.pgm"
         data = encode_pgm(image)
         atomic_write_bytes(self.path / "frames" / name, data)
-        return self.append({
-            "kind": "frame", "focus_idx": focus_idx, "orientation_idx": orientation_idx,
-            "frame_idx": frame_idx, "attempt": attempt, "file": f"frames/{name}",
-            "sha256": hashlib.sha256(data).hexdigest(), "meta": metadata or {},
-        })
+        return self.append(
+            {
+                "kind": "frame",
+                "focus_idx": focus_idx,
+                "orientation_idx": orientation_idx,
+                "frame_idx": frame_idx,
+                "attempt": attempt,
+                "file": f"frames/{name}",
+                "sha256": hashlib.sha256(data).hexdigest(),
+                "meta": metadata or {},
+            }
+        )
 
     def write_arrays(self, relpath: str, arrays: dict[str, np.ndarray]) -> dict:
         """Write ``arrays`` as an ``.npz`` at ``relpath`` (inside the session) atomically;
@@ -278,15 +293,18 @@ class SessionDir:
 
     def attempt(self, focus_idx: int, orientation_idx: int) -> int:
         """Current capture attempt of a shot: the number of times it was rejected."""
-        return sum(1 for r in self.of_kind("reject")
-                   if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx)
+        return sum(
+            1 for r in self.of_kind("reject") if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx
+        )
 
     def frames(self, focus_idx: int, orientation_idx: int) -> list[dict]:
         """Frame records of the shot's current attempt, by frame index (last wins)."""
         a = self.attempt(focus_idx, orientation_idx)
-        by_idx = {r["frame_idx"]: r for r in self.of_kind("frame")
-                  if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx
-                  and r["attempt"] == a}
+        by_idx = {
+            r["frame_idx"]: r
+            for r in self.of_kind("frame")
+            if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx and r["attempt"] == a
+        }
         return [by_idx[i] for i in sorted(by_idx)]
 
     def read_frame(self, record: dict, verify: bool = True) -> np.ndarray:
@@ -303,8 +321,10 @@ class SessionDir:
             k = (r["focus_idx"], r["orientation_idx"])
             attempts[k] = attempts.get(k, 0) + 1
         for r in self.of_kind("frame"):
-            if r["attempt"] == attempts.get((r["focus_idx"], r["orientation_idx"]), 0) \
-                    and (self.path / r["file"]).is_file():
+            if (
+                r["attempt"] == attempts.get((r["focus_idx"], r["orientation_idx"]), 0)
+                and (self.path / r["file"]).is_file()
+            ):
                 keys.add(frame_key(r["focus_idx"], r["orientation_idx"], r["frame_idx"]))
         for r in self.of_kind("stored"):
             keys.add(stored_key(r["focus_idx"]))

@@ -13,8 +13,9 @@ at the locked focus.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Iterator
+from typing import Any
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError

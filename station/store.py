@@ -22,9 +22,10 @@ import json
 import os
 import sqlite3
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 BUSY_TIMEOUT_MS = 30000
 
@@ -41,7 +42,9 @@ def _script(db: sqlite3.Connection, sql: str) -> None:
 
 
 def _v1(db: sqlite3.Connection) -> None:
-    _script(db, """
+    _script(
+        db,
+        """
     CREATE TABLE lenses (
         id INTEGER PRIMARY KEY,
         maker TEXT NOT NULL, model TEXT NOT NULL, serial TEXT NOT NULL,
@@ -75,7 +78,8 @@ def _v1(db: sqlite3.Connection) -> None:
         reasons_json TEXT NOT NULL,
         metrics_json TEXT NOT NULL,
         created_at TEXT NOT NULL);
-    """)
+    """,
+    )
 
 
 def _v2(db: sqlite3.Connection) -> None:
@@ -113,7 +117,7 @@ class Profile:
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 class ProfileStore:
@@ -125,12 +129,14 @@ class ProfileStore:
             raise StoreError(f"{self.path}: no profile store here")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000,
-                                      isolation_level=None)
+            self.db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
         except (OSError, sqlite3.Error) as exc:
             blocker = next((p for p in self.path.parents if p.exists() and not p.is_dir()), None)
-            reason = f"{blocker} is a file, not a directory" if blocker is not None else (
-                getattr(exc, "strerror", None) or exc)
+            reason = (
+                f"{blocker} is a file, not a directory"
+                if blocker is not None
+                else (getattr(exc, "strerror", None) or exc)
+            )
             raise StoreError(f"{self.path}: cannot open profile store: {reason}") from None
         self.db.row_factory = sqlite3.Row
         self.db.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
@@ -158,7 +164,7 @@ class ProfileStore:
     def close(self) -> None:
         self.db.close()
 
-    def __enter__(self) -> "ProfileStore":
+    def __enter__(self) -> ProfileStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -190,8 +196,10 @@ class ProfileStore:
         with self._transaction() as db:
             v = self.schema_version()  # re-read under the write lock
             if v > SCHEMA_VERSION:
-                raise StoreError(f"{self.path}: schema version {v} is newer than this software "
-                                 f"({SCHEMA_VERSION}); upgrade harp station")
+                raise StoreError(
+                    f"{self.path}: schema version {v} is newer than this software "
+                    f"({SCHEMA_VERSION}); upgrade harp station"
+                )
             if v == 0:
                 db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
                 db.execute("INSERT INTO schema_version VALUES (0)")
@@ -202,27 +210,55 @@ class ProfileStore:
     # ------------------------------------------------------------ writes
     def _ident(self, db, table: str, ident: tuple[str, str, str]) -> int:
         db.execute(f"INSERT OR IGNORE INTO {table} (maker, model, serial) VALUES (?, ?, ?)", ident)
-        return db.execute(f"SELECT id FROM {table} WHERE maker=? AND model=? AND serial=?",
-                          ident).fetchone()[0]
+        return db.execute(f"SELECT id FROM {table} WHERE maker=? AND model=? AND serial=?", ident).fetchone()[0]
 
-    def put_profile(self, *, lens: tuple[str, str, str], camera: tuple[str, str, str],
-                    focus: float, model: dict, width: int, height: int,
-                    fit_d: float | None = None, fit_d_max: float | None = None,
-                    holdout_d: float | None = None, holdout_d_max: float | None = None,
-                    field_uncertainty_rms: float | None = None,
-                    field_uncertainty_max: float | None = None,
-                    session_dir: str, station_id: str, software_version: str,
-                    details: dict | None = None) -> int:
+    def put_profile(
+        self,
+        *,
+        lens: tuple[str, str, str],
+        camera: tuple[str, str, str],
+        focus: float,
+        model: dict,
+        width: int,
+        height: int,
+        fit_d: float | None = None,
+        fit_d_max: float | None = None,
+        holdout_d: float | None = None,
+        holdout_d_max: float | None = None,
+        field_uncertainty_rms: float | None = None,
+        field_uncertainty_max: float | None = None,
+        session_dir: str,
+        station_id: str,
+        software_version: str,
+        details: dict | None = None,
+    ) -> int:
         """Insert (or, for the same session and focus, replace) a profile; returns its id."""
         model_name = model.get("model", "?")
         with self._transaction() as db:
             lens_id = self._ident(db, "lenses", tuple(lens))
             cam_id = self._ident(db, "cameras", tuple(camera))
-            values = (lens_id, cam_id, float(focus), model_name, json.dumps(model), int(width),
-                      int(height), fit_d, fit_d_max, holdout_d, holdout_d_max,
-                      field_uncertainty_rms, field_uncertainty_max, str(session_dir),
-                      station_id, software_version, _now(), json.dumps(details or {}))
-            db.execute("""
+            values = (
+                lens_id,
+                cam_id,
+                float(focus),
+                model_name,
+                json.dumps(model),
+                int(width),
+                int(height),
+                fit_d,
+                fit_d_max,
+                holdout_d,
+                holdout_d_max,
+                field_uncertainty_rms,
+                field_uncertainty_max,
+                str(session_dir),
+                station_id,
+                software_version,
+                _now(),
+                json.dumps(details or {}),
+            )
+            db.execute(
+                """
                 INSERT INTO profiles (lens_id, camera_id, focus, model_name, model_json, width,
                     height, fit_d, fit_d_max, holdout_d, holdout_d_max, field_uncertainty_rms,
                     field_uncertainty_max, session_dir, station_id, software_version, created_at,
@@ -238,17 +274,28 @@ class ProfileStore:
                     field_uncertainty_max=excluded.field_uncertainty_max,
                     station_id=excluded.station_id, software_version=excluded.software_version,
                     created_at=excluded.created_at, details_json=excluded.details_json
-                """, values)
-            return db.execute("SELECT id FROM profiles WHERE session_dir=? AND focus=?",
-                              (str(session_dir), float(focus))).fetchone()[0]
+                """,
+                values,
+            )
+            return db.execute(
+                "SELECT id FROM profiles WHERE session_dir=? AND focus=?", (str(session_dir), float(focus))
+            ).fetchone()[0]
 
-    def put_qa_result(self, *, verdict: str, reasons: list[str], metrics: dict,
-                      profile_id: int | None = None, session_dir: str | None = None) -> int:
+    def put_qa_result(
+        self,
+        *,
+        verdict: str,
+        reasons: list[str],
+        metrics: dict,
+        profile_id: int | None = None,
+        session_dir: str | None = None,
+    ) -> int:
         with self._transaction() as db:
-            cur = db.execute("INSERT INTO qa_results (profile_id, session_dir, verdict, reasons_json,"
-                             " metrics_json, created_at) VALUES (?, ?, ?, ?, ?, ?)",
-                             (profile_id, session_dir, verdict, json.dumps(reasons),
-                              json.dumps(metrics), _now()))
+            cur = db.execute(
+                "INSERT INTO qa_results (profile_id, session_dir, verdict, reasons_json,"
+                " metrics_json, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+                (profile_id, session_dir, verdict, json.dumps(reasons), json.dumps(metrics), _now()),
+            )
             return cur.lastrowid
 
     # ------------------------------------------------------------- reads
@@ -260,22 +307,33 @@ class ProfileStore:
     @staticmethod
     def _profile(row: sqlite3.Row) -> Profile:
         return Profile(
-            id=row["id"], lens=(row["l_maker"], row["l_model"], row["l_serial"]),
-            camera=(row["c_maker"], row["c_model"], row["c_serial"]), focus=row["focus"],
-            model_name=row["model_name"], model=json.loads(row["model_json"]),
-            width=row["width"], height=row["height"], fit_d=row["fit_d"],
-            fit_d_max=row["fit_d_max"], holdout_d=row["holdout_d"],
+            id=row["id"],
+            lens=(row["l_maker"], row["l_model"], row["l_serial"]),
+            camera=(row["c_maker"], row["c_model"], row["c_serial"]),
+            focus=row["focus"],
+            model_name=row["model_name"],
+            model=json.loads(row["model_json"]),
+            width=row["width"],
+            height=row["height"],
+            fit_d=row["fit_d"],
+            fit_d_max=row["fit_d_max"],
+            holdout_d=row["holdout_d"],
             holdout_d_max=row["holdout_d_max"],
             field_uncertainty_rms=row["field_uncertainty_rms"],
-            field_uncertainty_max=row["field_uncertainty_max"], session_dir=row["session_dir"],
-            station_id=row["station_id"], software_version=row["software_version"],
-            created_at=row["created_at"], details=json.loads(row["details_json"]))
+            field_uncertainty_max=row["field_uncertainty_max"],
+            session_dir=row["session_dir"],
+            station_id=row["station_id"],
+            software_version=row["software_version"],
+            created_at=row["created_at"],
+            details=json.loads(row["details_json"]),
+        )
 
     def profiles(self, lens_id: int | None = None) -> list[Profile]:
         """All profiles (of one lens), ordered by lens, focus, then newest first."""
         where, args = ("WHERE p.lens_id = ?", (lens_id,)) if lens_id is not None else ("", ())
-        rows = self.db.execute(f"{self._SELECT} {where} ORDER BY l.maker, l.model, l.serial, "
-                               "p.focus, p.created_at DESC, p.id DESC", args).fetchall()
+        rows = self.db.execute(
+            f"{self._SELECT} {where} ORDER BY l.maker, l.model, l.serial, p.focus, p.created_at DESC, p.id DESC", args
+        ).fetchall()
         return [self._profile(r) for r in rows]
 
     def profile(self, profile_id: int) -> Profile | None:
@@ -283,8 +341,10 @@ class ProfileStore:
         return self._profile(row) if row else None
 
     def lenses(self) -> list[tuple[int, str, str, str]]:
-        return [tuple(r) for r in self.db.execute(
-            "SELECT id, maker, model, serial FROM lenses ORDER BY maker, model, serial")]
+        return [
+            tuple(r)
+            for r in self.db.execute("SELECT id, maker, model, serial FROM lenses ORDER BY maker, model, serial")
+        ]
 
     def find_lens(self, query: str) -> tuple[int, str, str, str]:
         """Resolve a user's LENS argument: a serial, ``maker/model/serial``, an id
@@ -313,8 +373,7 @@ class ProfileStore:
 
     def qa_results(self) -> Iterator[dict]:
         for r in self.db.execute("SELECT * FROM qa_results ORDER BY id"):
-            yield {**dict(r), "reasons": json.loads(r["reasons_json"]),
-                   "metrics": json.loads(r["metrics_json"])}
+            yield {**dict(r), "reasons": json.loads(r["reasons_json"]), "metrics": json.loads(r["metrics_json"])}
 
 
 def open_store(path: str | os.PathLike, **kw: Any) -> ProfileStore:

@@ -50,11 +50,37 @@ GAIN_RANGE_DB = (0.0, 24.0)
 FAULT_KINDS = ("timeout", "corrupt", "disconnect")
 _TIMEOUT_WAIT_S = 0.05  # an injected timeout waits min(timeout, this) before raising
 
-_SCENE_KEYS = ("spacing_px", "string_width_px", "phase_px", "background", "string_level", "blur_px",
-               "vignetting", "dust", "dust_seed", "frame", "frame_level", "frame_depth_px", "frame_side")
-_CAMERA_KEYS = ("width", "height", "bit_depth", "pixel_format", "seed", "noise_sigma", "shot_noise",
-                "electrons_per_level", "exposure_us", "gain_db", "reference_exposure_us", "serial",
-                "focus", "harp_offset_deg")
+_SCENE_KEYS = (
+    "spacing_px",
+    "string_width_px",
+    "phase_px",
+    "background",
+    "string_level",
+    "blur_px",
+    "vignetting",
+    "dust",
+    "dust_seed",
+    "frame",
+    "frame_level",
+    "frame_depth_px",
+    "frame_side",
+)
+_CAMERA_KEYS = (
+    "width",
+    "height",
+    "bit_depth",
+    "pixel_format",
+    "seed",
+    "noise_sigma",
+    "shot_noise",
+    "electrons_per_level",
+    "exposure_us",
+    "gain_db",
+    "reference_exposure_us",
+    "serial",
+    "focus",
+    "harp_offset_deg",
+)
 CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
 
@@ -97,18 +123,29 @@ class SimulatedCamera:
     serial : reported in :attr:`identity`.
     """
 
-    def __init__(self, world: SimWorld | None = None, *, width: int = 1280, height: int = 960,
-                 bit_depth: int = 8, seed: int = 0, noise_sigma: float = 1.5, shot_noise: bool = False,
-                 electrons_per_level: float = 40.0, scene: HarpScene = HarpScene(),
-                 exposure_us: float = 10_000.0, gain_db: float = 0.0,
-                 reference_exposure_us: float = 10_000.0, serial: str = "SIM-0001"):
+    def __init__(
+        self,
+        world: SimWorld | None = None,
+        *,
+        width: int = 1280,
+        height: int = 960,
+        bit_depth: int = 8,
+        seed: int = 0,
+        noise_sigma: float = 1.5,
+        shot_noise: bool = False,
+        electrons_per_level: float = 40.0,
+        scene: HarpScene = HarpScene(),  # noqa: B008 (frozen, immutable default)
+        exposure_us: float = 10_000.0,
+        gain_db: float = 0.0,
+        reference_exposure_us: float = 10_000.0,
+        serial: str = "SIM-0001",
+    ):
         if int(width) != width or int(height) != height or width < 16 or height < 16:
             raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
         if bit_depth not in (8, 16):
             raise ValueError(f"sim camera: bit_depth must be 8 or 16, got {bit_depth!r}")
         if not noise_sigma >= 0 or not electrons_per_level > 0 or not reference_exposure_us > 0:
-            raise ValueError("sim camera: noise_sigma must be >= 0, electrons_per_level and "
-                             "reference_exposure_us > 0")
+            raise ValueError("sim camera: noise_sigma must be >= 0, electrons_per_level and reference_exposure_us > 0")
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
         self._bit_depth = int(bit_depth)
@@ -133,7 +170,7 @@ class SimulatedCamera:
 
     # ------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, cfg: dict, world: SimWorld | None = None, **context) -> "SimulatedCamera":
+    def from_config(cls, cfg: dict, world: SimWorld | None = None, **context) -> SimulatedCamera:
         """Create from a configuration mapping (keys: :data:`CONFIG_KEYS`).
 
         ``driver`` is ignored (it selected this class). ``pixel_format``
@@ -194,7 +231,7 @@ class SimulatedCamera:
     def close(self) -> None:
         self._open = False
 
-    def __enter__(self) -> "SimulatedCamera":
+    def __enter__(self) -> SimulatedCamera:
         self.open()
         return self
 
@@ -287,8 +324,7 @@ class SimulatedCamera:
             return self._next_index
         return self._pose_counts.get(_pose(focus, angle_deg), 0)
 
-    def render(self, index: int | None = None, angle_deg: float | None = None,
-               focus: float | None = None) -> Rendered:
+    def render(self, index: int | None = None, angle_deg: float | None = None, focus: float | None = None) -> Rendered:
         """Render what the camera sees (no fault, no counter change).
 
         ``angle_deg`` and ``focus`` default to the world's current string
@@ -301,11 +337,18 @@ class SimulatedCamera:
         index = self._index_at(focus, angle_deg) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
-        return render_harp(w, h, scene, lens=lens_for_focus(focus, w, h),
-                           noise_sigma=self.noise_sigma, shot_noise=self.shot_noise,
-                           bit_depth=self._bit_depth, seed=noise_seed(self.seed, focus, angle_deg, index),
-                           exposure=self._exposure / self.reference_exposure_us * gain_lin,
-                           electrons_per_level=self.electrons_per_level / gain_lin)
+        return render_harp(
+            w,
+            h,
+            scene,
+            lens=lens_for_focus(focus, w, h),
+            noise_sigma=self.noise_sigma,
+            shot_noise=self.shot_noise,
+            bit_depth=self._bit_depth,
+            seed=noise_seed(self.seed, focus, angle_deg, index),
+            exposure=self._exposure / self.reference_exposure_us * gain_lin,
+            electrons_per_level=self.electrons_per_level / gain_lin,
+        )
 
     def capture(self, timeout: float = 5.0) -> Frame:
         """Render one frame now; raises DeviceTimeout/DeviceDisconnected on injected faults."""
@@ -313,12 +356,12 @@ class SimulatedCamera:
         fault = self._faults.popleft() if self._faults else None
         if fault == "timeout":
             time.sleep(max(0.0, min(float(timeout), _TIMEOUT_WAIT_S)))
-            raise DeviceTimeout(f"sim camera {self._identity.serial}: no frame within {timeout:g} s "
-                                "(injected timeout)")
+            raise DeviceTimeout(f"sim camera {self._identity.serial}: no frame within {timeout:g} s (injected timeout)")
         if fault == "disconnect":
             self._open = False
-            raise DeviceDisconnected(f"sim camera {self._identity.serial}: device vanished during capture "
-                                     "(injected disconnect)")
+            raise DeviceDisconnected(
+                f"sim camera {self._identity.serial}: device vanished during capture (injected disconnect)"
+            )
         stamp = time.time()
         # one consistent snapshot of the world for this exposure
         with self.world._lock:
@@ -330,20 +373,33 @@ class SimulatedCamera:
         self.last_rendered = r
         image = r.image
         extra = {
-            "sim": {"string_angle_deg": angle, "stage_deg": float(stage), "harp_offset_deg": float(offset),
-                    "lens": r.lens.to_dict(), "seed": seed, "pose_index": index},
+            "sim": {
+                "string_angle_deg": angle,
+                "stage_deg": float(stage),
+                "harp_offset_deg": float(offset),
+                "lens": r.lens.to_dict(),
+                "seed": seed,
+                "pose_index": index,
+            },
         }
         if fault == "corrupt":
             h = image.shape[0]
             rng = np.random.default_rng([seed, 1_000_003])
             first = int(rng.integers(h // 4, 3 * h // 4))
             image = image.copy()
-            image[first:] = rng.integers(0, np.iinfo(image.dtype).max, size=image[first:].shape,
-                                         dtype=image.dtype)
+            image[first:] = rng.integers(0, np.iinfo(image.dtype).max, size=image[first:].shape, dtype=image.dtype)
             extra["corrupt"] = True
             extra["corrupt_rows"] = [first, h]
-        frame = Frame(image=image, timestamp=stamp, exposure_us=self._exposure, gain_db=self._gain,
-                      focus=float(focus), camera=self._identity, counter=self._counter, extra=extra)
+        frame = Frame(
+            image=image,
+            timestamp=stamp,
+            exposure_us=self._exposure,
+            gain_db=self._gain,
+            focus=float(focus),
+            camera=self._identity,
+            counter=self._counter,
+            extra=extra,
+        )
         self._counter += 1
         pose = _pose(focus, angle)
         self._pose_counts[pose] = max(self._pose_counts.get(pose, 0), index + 1)

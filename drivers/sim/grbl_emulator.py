@@ -38,9 +38,19 @@ class GrblEmulator(LineEmulator):
     NAME = "GRBL emulator"
     MOTION = ("alarm", "vanish")
 
-    def __init__(self, world=None, *, units_per_degree: float = 1.0, speed_deg_s: float = 360.0,
-                 accel_deg_s2: float = 3600.0, soft_limits: tuple[float, float] | None = (-360.0, 720.0),
-                 homing: bool = True, position_deg: float = 0.0, axis: str = "X", seed: int = 0):
+    def __init__(
+        self,
+        world=None,
+        *,
+        units_per_degree: float = 1.0,
+        speed_deg_s: float = 360.0,
+        accel_deg_s2: float = 3600.0,
+        soft_limits: tuple[float, float] | None = (-360.0, 720.0),
+        homing: bool = True,
+        position_deg: float = 0.0,
+        axis: str = "X",
+        seed: int = 0,
+    ):
         super().__init__(world, seed)
         axis = str(axis).upper()
         if axis not in "XYZA" or len(axis) != 1:
@@ -203,8 +213,11 @@ class GrblEmulator(LineEmulator):
             return
         self.absolute, self.feed = absolute, feed
         if x is not None:
-            base = self.queue[-1] if self.queue else (
-                self.axis.move.target if self.axis.move is not None else self.axis.position(now))
+            base = (
+                self.queue[-1]
+                if self.queue
+                else (self.axis.move.target if self.axis.move is not None else self.axis.position(now))
+            )
             target = x if absolute else base + x
             if self.soft_limits is not None and not self.soft_limits[0] <= target <= self.soft_limits[1]:
                 self.axis.halt(now)

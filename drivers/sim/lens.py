@@ -41,7 +41,7 @@ FOCUS_RANGE = (0.0, 1.0)
 """Focus positions for which the demo lens is defined (a camera clamps to it)."""
 
 K2 = (0.0040, -0.25)  # k2(f) = K2[0] * (1 + K2[1] f)
-K4 = (-0.0006, 0.2)   # k4(f) = K4[0] * (1 + K4[1] f)
+K4 = (-0.0006, 0.2)  # k4(f) = K4[0] * (1 + K4[1] f)
 TANGENTIAL = (1.5e-4, -1.0e-4)
 CENTRE_SHIFT = (0.004, -0.003)  # in units of s
 
@@ -60,5 +60,6 @@ def lens_for_focus(focus: float, width: int, height: int) -> RadialModel:
     centre = ((width - 1) / 2.0 + CENTRE_SHIFT[0] * s, (height - 1) / 2.0 + CENTRE_SHIFT[1] * s)
     k2 = K2[0] * (1.0 + K2[1] * f)
     k4 = K4[0] * (1.0 + K4[1] * f)
-    return RadialModel.for_image(int(width), int(height), k=(1.0, 0.0, k2, 0.0, k4), center=centre,
-                                 tangential=TANGENTIAL)
+    return RadialModel.for_image(
+        int(width), int(height), k=(1.0, 0.0, k2, 0.0, k4), center=centre, tangential=TANGENTIAL
+    )

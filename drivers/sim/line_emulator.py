@@ -105,8 +105,7 @@ class LineEmulator(abc.ABC):
 
     def garbage(self) -> bytes:
         """A line of random bytes that no driver can parse."""
-        body = bytes(self._rng.choice([0x00, 0x07, 0x1b, 0x7f, 0x80, 0xa5, 0xfe, 0xff, 0x3f, 0x5e])
-                     for _ in range(10))
+        body = bytes(self._rng.choice([0x00, 0x07, 0x1B, 0x7F, 0x80, 0xA5, 0xFE, 0xFF, 0x3F, 0x5E]) for _ in range(10))
         return b"\xff" + body + b"\r\n"
 
     def _dispatch(self, line: bytes, now: float) -> None:
@@ -144,7 +143,7 @@ class LineEmulator(abc.ABC):
     def reject(self, line: bytes, spec: dict, now: float) -> None:
         """Refuse ``line`` the way the device does (the ``"reject"`` fault)."""
 
-    def update(self, now: float) -> None:
+    def update(self, now: float) -> None:  # noqa: B027 (optional hook, default no-op)
         """Advance the device's own state to ``now`` (default: nothing moves by itself)."""
 
     @abc.abstractmethod

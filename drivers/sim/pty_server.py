@@ -123,7 +123,7 @@ class PtyServer:
             self._thread.join(timeout)
         self._close_fds()
 
-    def __enter__(self) -> "PtyServer":
+    def __enter__(self) -> PtyServer:
         if self.port is None:
             self.start()
         return self
@@ -144,7 +144,7 @@ class EmulatorHandle:
     def stop(self) -> None:
         self.server.stop()
 
-    def __enter__(self) -> "EmulatorHandle":
+    def __enter__(self) -> EmulatorHandle:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -47,12 +47,22 @@ def zaber_checksum(body: bytes) -> int:
 class ZaberEmulator(LineEmulator):
     NAME = "Zaber emulator"
 
-    def __init__(self, world=None, *, address: int = 1,
-                 microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
-                 speed_deg_s: float = 360.0, accel_deg_s2: float = 3600.0,
-                 limit_min: int | None = None, limit_max: int | None = None,
-                 position_deg: float = 0.0, homed: bool = False, alerts: bool = False,
-                 checksums: bool = False, seed: int = 0):
+    def __init__(
+        self,
+        world=None,
+        *,
+        address: int = 1,
+        microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+        speed_deg_s: float = 360.0,
+        accel_deg_s2: float = 3600.0,
+        limit_min: int | None = None,
+        limit_max: int | None = None,
+        position_deg: float = 0.0,
+        homed: bool = False,
+        alerts: bool = False,
+        checksums: bool = False,
+        seed: int = 0,
+    ):
         super().__init__(world, seed)
         self.address = int(address)
         self.mspd = float(microsteps_per_degree)
@@ -84,8 +94,7 @@ class ZaberEmulator(LineEmulator):
             raw += b":%02X" % zaber_checksum(raw)
         self.write(kind.encode() + raw + b"\r\n")
 
-    def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float,
-               flag: str | None = None) -> None:
+    def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float, flag: str | None = None) -> None:
         status = "BUSY" if self.axis.busy(now) else "IDLE"
         ident = f" {msg_id}" if msg_id is not None else ""
         flag = self.flag() if flag is None else flag
@@ -168,8 +177,12 @@ class ZaberEmulator(LineEmulator):
         if cmd == "get pos":
             return True, str(self.position_steps(now))
         if words[0] == "get" and len(words) == 2:
-            values = {"limit.max": self.limit_max, "limit.min": self.limit_min,
-                      "maxspeed": round(self.axis.vmax * 1.6384), "comm.alert": int(self.alerts)}
+            values = {
+                "limit.max": self.limit_max,
+                "limit.min": self.limit_min,
+                "maxspeed": round(self.axis.vmax * 1.6384),
+                "comm.alert": int(self.alerts),
+            }
             if words[1] in values:
                 return True, str(values[words[1]])
             return False, "BADCOMMAND"

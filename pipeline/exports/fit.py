@@ -30,11 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from pipeline.evaluate import corrected_points
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
 from pipeline.models.opencv_model import OpenCVModel
-from pipeline.evaluate import corrected_points
 from pipeline.normalise import corner_homography, fit_homography, normalise_by_corners
 from pipeline.straightness import straightness
 
@@ -70,9 +70,15 @@ class ConversionError:
     d_max_px: float = float("nan")
 
     def to_dict(self) -> dict:
-        return {"rms_px": self.rms_px, "max_px": self.max_px, "rms_mod_h_px": self.rms_mod_h_px,
-                "max_mod_h_px": self.max_mod_h_px, "n_points": self.n_points,
-                "d_px": self.d_px, "d_max_px": self.d_max_px}
+        return {
+            "rms_px": self.rms_px,
+            "max_px": self.max_px,
+            "rms_mod_h_px": self.rms_mod_h_px,
+            "max_mod_h_px": self.max_mod_h_px,
+            "n_points": self.n_points,
+            "d_px": self.d_px,
+            "d_max_px": self.d_max_px,
+        }
 
 
 def image_grid(width: int, height: int, n_long: int = 64) -> np.ndarray:
@@ -88,16 +94,19 @@ def image_grid(width: int, height: int, n_long: int = 64) -> np.ndarray:
     return np.stack([gx.ravel(), gy.ravel()], axis=1)
 
 
-def conversion_error(ours: DistortionModel, theirs: DistortionModel, width: int, height: int,
-                     n_long: int = 121) -> ConversionError:
+def conversion_error(
+    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 121
+) -> ConversionError:
     """Compare two corrections over the image: 4-corner normalised, and modulo best homography."""
     g = image_grid(width, height, n_long)
     uo = ours.undistort_points(g)
     ut = theirs.undistort_points(g)
     ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
     if ok.sum() < 0.99 * len(g):
-        raise ValueError(f"the export's correction is undefined on {np.sum(~ok)} of {len(g)} grid "
-                         f"points (its polynomial is not invertible over the image)")
+        raise ValueError(
+            f"the export's correction is undefined on {np.sum(~ok)} of {len(g)} grid "
+            f"points (its polynomial is not invertible over the image)"
+        )
     no = apply_homography(corner_homography(ours, width, height), uo[ok])
     nt = apply_homography(corner_homography(theirs, width, height), ut[ok])
     e = np.linalg.norm(nt - no, axis=1)
@@ -107,14 +116,26 @@ def conversion_error(ours: DistortionModel, theirs: DistortionModel, width: int,
         e = np.concatenate([e, np.full(np.sum(~ok), np.inf)])
         e_h = np.concatenate([e_h, np.full(np.sum(~ok), np.inf)])
     st = conversion_straightness(ours, theirs, width, height)
-    return ConversionError(rms_px=float(np.sqrt(np.mean(e ** 2))), max_px=float(e.max()),
-                           rms_mod_h_px=float(np.sqrt(np.mean(e_h ** 2))), max_mod_h_px=float(e_h.max()),
-                           n_points=int(len(e)), d_px=st.d, d_max_px=st.d_max)
+    return ConversionError(
+        rms_px=float(np.sqrt(np.mean(e**2))),
+        max_px=float(e.max()),
+        rms_mod_h_px=float(np.sqrt(np.mean(e_h**2))),
+        max_mod_h_px=float(e_h.max()),
+        n_points=int(len(e)),
+        d_px=st.d,
+        d_max_px=st.d_max,
+    )
 
 
-def straight_lines_through(model: DistortionModel, width: int, height: int, n_lines: int = 16,
-                           angles_deg=(0.0, 45.0, 90.0, 135.0), step_px: float = 4.0,
-                           min_points: int = 20) -> list[np.ndarray]:
+def straight_lines_through(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    n_lines: int = 16,
+    angles_deg=(0.0, 45.0, 90.0, 135.0),
+    step_px: float = 4.0,
+    min_points: int = 20,
+) -> list[np.ndarray]:
     """Distorted images of ideal straight lines: what ``model`` (4-corner normalised) makes straight.
 
     Lines at each angle, ``n_lines`` across the image, sampled every
@@ -132,11 +153,20 @@ def straight_lines_through(model: DistortionModel, width: int, height: int, n_li
         for off in np.linspace(-ext, ext, n_lines + 2)[1:-1]:
             s = np.arange(-half, half + step_px, step_px)
             ideal = c + off * n + s[:, None] * d
-            inside = ((ideal[:, 0] >= -0.5) & (ideal[:, 0] <= width - 0.5)
-                      & (ideal[:, 1] >= -0.5) & (ideal[:, 1] <= height - 0.5))
+            inside = (
+                (ideal[:, 0] >= -0.5)
+                & (ideal[:, 0] <= width - 0.5)
+                & (ideal[:, 1] >= -0.5)
+                & (ideal[:, 1] <= height - 0.5)
+            )
             pts = norm.distort_points(ideal[inside])
-            ok = (np.all(np.isfinite(pts), axis=1) & (pts[:, 0] >= 0) & (pts[:, 0] <= width - 1)
-                  & (pts[:, 1] >= 0) & (pts[:, 1] <= height - 1))
+            ok = (
+                np.all(np.isfinite(pts), axis=1)
+                & (pts[:, 0] >= 0)
+                & (pts[:, 0] <= width - 1)
+                & (pts[:, 1] >= 0)
+                & (pts[:, 1] <= height - 1)
+            )
             if ok.sum() >= min_points:
                 out.append(pts[ok])
     return out
@@ -181,14 +211,14 @@ def _fit_with_homography(ours: DistortionModel, width: int, height: int, make, t
         return r.ravel()
 
     p0 = np.concatenate([theta0, h0.ravel()[:8]])
-    sol = least_squares(resid, p0, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10,
-                        max_nfev=2000)
+    sol = least_squares(resid, p0, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=2000)
     theta, _ = unpack(sol.x)
     return make(theta)
 
 
-def fit_opencv(model: DistortionModel, width: int, height: int, *, n_coeffs: int = 5,
-               focal: float | None = None) -> tuple[OpenCVModel, ConversionError]:
+def fit_opencv(
+    model: DistortionModel, width: int, height: int, *, n_coeffs: int = 5, focal: float | None = None
+) -> tuple[OpenCVModel, ConversionError]:
     """Closest OpenCV pinhole distortion to ``model`` over the image.
 
     Parameters
@@ -220,8 +250,9 @@ def fit_opencv(model: DistortionModel, width: int, height: int, *, n_coeffs: int
     return out, conversion_error(model, out, width, height)
 
 
-def fit_lensfun(model: DistortionModel, width: int, height: int, *, kind: str = "ptlens",
-                fit_center: bool = True) -> tuple[LensfunModel, ConversionError]:
+def fit_lensfun(
+    model: DistortionModel, width: int, height: int, *, kind: str = "ptlens", fit_center: bool = True
+) -> tuple[LensfunModel, ConversionError]:
     """Closest lensfun ``poly3`` / ``poly5`` / ``ptlens`` distortion to ``model``.
 
     With ``fit_center`` (default) the distortion centre is fitted too and

@@ -25,9 +25,16 @@ from pipeline.exports.fit import ConversionError
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
 
 
-def lensfun_text(model: LensfunModel, error: ConversionError | None = None, *, maker: str = "harp station",
-                 lens_model: str = "harp calibration", mount: str = "Generic", cropfactor: float = 1.0,
-                 focal: float = 50.0) -> str:
+def lensfun_text(
+    model: LensfunModel,
+    error: ConversionError | None = None,
+    *,
+    maker: str = "harp station",
+    lens_model: str = "harp calibration",
+    mount: str = "Generic",
+    cropfactor: float = 1.0,
+    focal: float = 50.0,
+) -> str:
     """Lensfun database XML text with one lens and one distortion calibration."""
     root = ET.Element("lensdatabase", {"version": "1"})
     lens = ET.SubElement(root, "lens")
@@ -38,7 +45,7 @@ def lensfun_text(model: LensfunModel, error: ConversionError | None = None, *, m
     w, h = model.width, model.height
     ar = max(w - 1, h - 1) / min(w - 1, h - 1)
     if model.coord_scale != 1.0:  # a calibration of another aspect ratio: write that one
-        ar = float(np.sqrt(model.coord_scale ** 2 * (ar * ar + 1) - 1))
+        ar = float(np.sqrt(model.coord_scale**2 * (ar * ar + 1) - 1))
     ET.SubElement(lens, "aspect-ratio").text = repr(float(ar))
     if model.center != (0.0, 0.0):
         ET.SubElement(lens, "center", {"x": repr(model.center[0]), "y": repr(model.center[1])})
@@ -48,18 +55,22 @@ def lensfun_text(model: LensfunModel, error: ConversionError | None = None, *, m
     ET.SubElement(cal, "distortion", attrs)
     ET.indent(root, space="    ")
     head = '<?xml version="1.0" encoding="UTF-8"?>\n'
-    note = (f"<!-- exported by harp station for {w}x{h} images; lensfun normalisation: "
-            f"unit = half the shorter side -->\n")
+    note = (
+        f"<!-- exported by harp station for {w}x{h} images; lensfun normalisation: unit = half the shorter side -->\n"
+    )
     if error is not None:
-        note += (f"<!-- conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
-                 f"max {error.max_px:.4f} px; modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
-                 f"max {error.max_mod_h_px:.4f} px; residual on a noise-free full-field harp: "
-                 f"d {error.d_px:.4f} px, d_max {error.d_max_px:.4f} px -->\n")
+        note += (
+            f"<!-- conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
+            f"max {error.max_px:.4f} px; modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
+            f"max {error.max_mod_h_px:.4f} px; residual on a noise-free full-field harp: "
+            f"d {error.d_px:.4f} px, d_max {error.d_max_px:.4f} px -->\n"
+        )
     return head + note + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def read_lensfun_text(text: str, width: int, height: int, name: str = "<text>",
-                      focal: float | None = None) -> LensfunModel:
+def read_lensfun_text(
+    text: str, width: int, height: int, name: str = "<text>", focal: float | None = None
+) -> LensfunModel:
     """The distortion of the (first) lens of a lensfun XML, for images of ``width`` x ``height``.
 
     With several ``<distortion>`` entries, ``focal`` picks the one at that
@@ -89,8 +100,9 @@ def read_lensfun_text(text: str, width: int, height: int, name: str = "<text>",
     d = dists[0]
     kind = d.get("model")
     if kind not in LENSFUN_TERMS:
-        raise ValueError(f"{name}: unsupported lensfun distortion model {kind!r} "
-                         f"(supported: {', '.join(sorted(LENSFUN_TERMS))})")
+        raise ValueError(
+            f"{name}: unsupported lensfun distortion model {kind!r} (supported: {', '.join(sorted(LENSFUN_TERMS))})"
+        )
     try:
         terms = tuple(float(d.get(t, "0")) for t in LENSFUN_TERMS[kind])
     except ValueError:

@@ -27,17 +27,27 @@ CAMERA_MATRIX_NAMES = ("camera_matrix", "cameraMatrix", "K")
 DIST_NAMES = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
 
 
-def opencv_text(model: OpenCVModel, width: int, height: int, error: ConversionError | None = None,
-                *, xml: bool = False, comment: str | None = None) -> str:
+def opencv_text(
+    model: OpenCVModel,
+    width: int,
+    height: int,
+    error: ConversionError | None = None,
+    *,
+    xml: bool = False,
+    comment: str | None = None,
+) -> str:
     """FileStorage YAML (or XML) text of an OpenCV calibration."""
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     fs.writeComment(comment or "OpenCV pinhole distortion exported by harp station")
     if error is not None:
-        fs.writeComment(f"conversion error vs the harp correction (4-corner normalised): "
-                        f"RMS {error.rms_px:.4f} px, max {error.max_px:.4f} px; modulo best homography: "
-                        f"RMS {error.rms_mod_h_px:.4f} px, max {error.max_mod_h_px:.4f} px")
-        fs.writeComment(f"residual it leaves on a noise-free full-field harp: d {error.d_px:.4f} px, "
-                        f"d_max {error.d_max_px:.4f} px")
+        fs.writeComment(
+            f"conversion error vs the harp correction (4-corner normalised): "
+            f"RMS {error.rms_px:.4f} px, max {error.max_px:.4f} px; modulo best homography: "
+            f"RMS {error.rms_mod_h_px:.4f} px, max {error.max_mod_h_px:.4f} px"
+        )
+        fs.writeComment(
+            f"residual it leaves on a noise-free full-field harp: d {error.d_px:.4f} px, d_max {error.d_max_px:.4f} px"
+        )
     fs.write("image_width", int(width))
     fs.write("image_height", int(height))
     fs.write("camera_matrix", model.camera_matrix)
@@ -64,10 +74,11 @@ def read_opencv_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tupl
     try:
         if not fs.isOpened():
             raise ValueError(f"{name}: not an OpenCV FileStorage file")
-        k = next((fs.getNode(n).mat() for n in CAMERA_MATRIX_NAMES
-                  if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
-        d = next((fs.getNode(n).mat() for n in DIST_NAMES
-                  if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
+        k = next(
+            (fs.getNode(n).mat() for n in CAMERA_MATRIX_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()),
+            None,
+        )
+        d = next((fs.getNode(n).mat() for n in DIST_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
         if k is None or d is None:
             raise ValueError(f"{name}: OpenCV file without camera_matrix and distortion_coefficients matrices")
         size = None

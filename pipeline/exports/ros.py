@@ -23,8 +23,16 @@ import yaml
 from pipeline.exports.fit import ConversionError
 from pipeline.models.opencv_model import OpenCVModel
 
-ROS_FIELDS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
-              "distortion_coefficients", "rectification_matrix", "projection_matrix")
+ROS_FIELDS = (
+    "image_width",
+    "image_height",
+    "camera_name",
+    "camera_matrix",
+    "distortion_model",
+    "distortion_coefficients",
+    "rectification_matrix",
+    "projection_matrix",
+)
 ROS_DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
 
 
@@ -33,13 +41,13 @@ def _mat(a) -> dict:
     return {"rows": int(a.shape[0]), "cols": int(a.shape[1]), "data": [float(v) for v in a.ravel()]}
 
 
-def ros_text(model: OpenCVModel, width: int, height: int, error: ConversionError | None = None,
-             *, camera_name: str = "camera") -> str:
+def ros_text(
+    model: OpenCVModel, width: int, height: int, error: ConversionError | None = None, *, camera_name: str = "camera"
+) -> str:
     """camera_info YAML text for a 5- or 8-coefficient OpenCV model."""
     n = len(model.dist)
     if n not in ROS_DISTORTION_MODELS:
-        raise ValueError(f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) "
-                         f"coefficients, got {n}")
+        raise ValueError(f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}")
     k = model.camera_matrix
     doc = {
         "image_width": int(width),
@@ -53,10 +61,12 @@ def ros_text(model: OpenCVModel, width: int, height: int, error: ConversionError
     }
     head = "# ROS camera_info calibration exported by harp station\n"
     if error is not None:
-        head += (f"# conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
-                 f"max {error.max_px:.4f} px\n# modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
-                 f"max {error.max_mod_h_px:.4f} px\n# residual on a noise-free full-field harp: d {error.d_px:.4f} px, "
-                 f"d_max {error.d_max_px:.4f} px\n")
+        head += (
+            f"# conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
+            f"max {error.max_px:.4f} px\n# modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
+            f"max {error.max_mod_h_px:.4f} px\n# residual on a noise-free full-field harp: d {error.d_px:.4f} px, "
+            f"d_max {error.d_max_px:.4f} px\n"
+        )
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200)
 
 

@@ -7,9 +7,9 @@ Every model has ``undistort_points``, ``distort_points``, ``undistortion_maps``,
 from pipeline.models.base import DistortionModel, IdentityModel
 from pipeline.models.grid_field import GridFieldModel
 from pipeline.models.homography import HomographyModel
-from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.lensfun_model import LensfunModel
 from pipeline.models.opencv_model import OpenCVModel
+from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.radial import RadialModel
 
 MODEL_TYPES: dict[str, type[DistortionModel]] = {

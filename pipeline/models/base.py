@@ -72,8 +72,10 @@ class DistortionModel(ABC):
         yy, xx = np.mgrid[0:height, 0:width].astype(np.float64)
         src = self.distort_points(np.stack([xx.ravel(), yy.ravel()], axis=1))
         src = np.nan_to_num(src, nan=-1e6)
-        return (src[:, 0].reshape(height, width).astype(np.float32),
-                src[:, 1].reshape(height, width).astype(np.float32))
+        return (
+            src[:, 0].reshape(height, width).astype(np.float32),
+            src[:, 1].reshape(height, width).astype(np.float32),
+        )
 
     # ------------------------------------------------------------- file form
     @abstractmethod
@@ -82,7 +84,7 @@ class DistortionModel(ABC):
 
     @classmethod
     @abstractmethod
-    def from_dict(cls, d: dict) -> "DistortionModel":
+    def from_dict(cls, d: dict) -> DistortionModel:
         """Inverse of :meth:`to_dict`."""
 
 

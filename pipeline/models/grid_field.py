@@ -50,8 +50,9 @@ class GridFieldModel(DistortionModel):
         dx = np.array(self.dx, dtype=np.float64)
         dy = np.array(self.dy, dtype=np.float64)
         if dx.ndim != 2 or dx.shape != dy.shape or min(dx.shape) < 4:
-            raise ValueError(f"GridFieldModel needs two equal (ny, nx) grids with nx, ny >= 4; "
-                             f"got {dx.shape} and {dy.shape}")
+            raise ValueError(
+                f"GridFieldModel needs two equal (ny, nx) grids with nx, ny >= 4; got {dx.shape} and {dy.shape}"
+            )
         if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(dy))):
             raise ValueError("GridFieldModel displacement grid has non-finite values")
         if not (np.isfinite(self.step) and self.step > 0):
@@ -84,12 +85,25 @@ class GridFieldModel(DistortionModel):
         return xy + self.displacement(xy)
 
     def to_dict(self):
-        return {"model": self.name, "origin": list(self.origin), "step": self.step,
-                "width": self.width, "height": self.height,
-                "dx": self.dx.tolist(), "dy": self.dy.tolist(), "info": dict(self.info)}
+        return {
+            "model": self.name,
+            "origin": list(self.origin),
+            "step": self.step,
+            "width": self.width,
+            "height": self.height,
+            "dx": self.dx.tolist(),
+            "dy": self.dy.tolist(),
+            "info": dict(self.info),
+        }
 
     @classmethod
     def from_dict(cls, d):
-        return cls(origin=tuple(d["origin"]), step=float(d["step"]), dx=np.asarray(d["dx"], float),
-                   dy=np.asarray(d["dy"], float), width=int(d["width"]), height=int(d["height"]),
-                   info=dict(d.get("info") or {}))
+        return cls(
+            origin=tuple(d["origin"]),
+            step=float(d["step"]),
+            dx=np.asarray(d["dx"], float),
+            dy=np.asarray(d["dy"], float),
+            width=int(d["width"]),
+            height=int(d["height"]),
+            info=dict(d.get("info") or {}),
+        )

@@ -14,8 +14,13 @@ def apply_homography(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     h = np.asarray(h, dtype=np.float64)
     w = h[2, 0] * xy[:, 0] + h[2, 1] * xy[:, 1] + h[2, 2]
-    return np.stack([(h[0, 0] * xy[:, 0] + h[0, 1] * xy[:, 1] + h[0, 2]) / w,
-                     (h[1, 0] * xy[:, 0] + h[1, 1] * xy[:, 1] + h[1, 2]) / w], axis=1)
+    return np.stack(
+        [
+            (h[0, 0] * xy[:, 0] + h[0, 1] * xy[:, 1] + h[0, 2]) / w,
+            (h[1, 0] * xy[:, 0] + h[1, 1] * xy[:, 1] + h[1, 2]) / w,
+        ],
+        axis=1,
+    )
 
 
 @dataclass(frozen=True)
@@ -54,8 +59,7 @@ class HomographyModel(DistortionModel):
         return self.base.distort_points(apply_homography(np.linalg.inv(self.matrix), xy), max_iter)
 
     def to_dict(self):
-        return {"model": self.name, "base": self.base.to_dict(),
-                "homography": [list(r) for r in self.homography]}
+        return {"model": self.name, "base": self.base.to_dict(), "homography": [list(r) for r in self.homography]}
 
     @classmethod
     def from_dict(cls, d):

@@ -62,8 +62,7 @@ class LensfunModel(DistortionModel):
 
     def __post_init__(self):
         if self.kind not in LENSFUN_TERMS:
-            raise ValueError(f"unsupported lensfun distortion model {self.kind!r}; "
-                             f"supported: {sorted(LENSFUN_TERMS)}")
+            raise ValueError(f"unsupported lensfun distortion model {self.kind!r}; supported: {sorted(LENSFUN_TERMS)}")
         terms = tuple(float(v) for v in self.terms)
         if len(terms) != len(LENSFUN_TERMS[self.kind]):
             raise ValueError(f"lensfun {self.kind} needs terms {LENSFUN_TERMS[self.kind]}, got {len(terms)} values")
@@ -93,9 +92,9 @@ class LensfunModel(DistortionModel):
         """``R_d / R_u`` as a function of the ideal normalised radius."""
         t = self.terms
         if self.kind == "poly3":
-            return 1 - t[0] + t[0] * ru ** 2
+            return 1 - t[0] + t[0] * ru**2
         if self.kind == "poly5":
-            r2 = ru ** 2
+            r2 = ru**2
             return 1 + t[0] * r2 + t[1] * r2 * r2
         a, b, c = t
         return ((a * ru + b) * ru + c) * ru + 1 - a - b - c
@@ -104,9 +103,9 @@ class LensfunModel(DistortionModel):
         """d R_d / d R_u."""
         t = self.terms
         if self.kind == "poly3":
-            return 1 - t[0] + 3 * t[0] * ru ** 2
+            return 1 - t[0] + 3 * t[0] * ru**2
         if self.kind == "poly5":
-            r2 = ru ** 2
+            r2 = ru**2
             return 1 + 3 * t[0] * r2 + 5 * t[1] * r2 * r2
         a, b, c = t
         return ((4 * a * ru + 3 * b) * ru + 2 * c) * ru + 1 - a - b - c
@@ -146,13 +145,17 @@ class LensfunModel(DistortionModel):
 
     # ----------------------------------------------------------- file form
     def to_dict(self) -> dict:
-        return {"model": self.name, "kind": self.kind,
-                "terms": dict(zip(LENSFUN_TERMS[self.kind], self.terms)),
-                "image_size": [self.width, self.height], "center": list(self.center),
-                "coord_scale": self.coord_scale}
+        return {
+            "model": self.name,
+            "kind": self.kind,
+            "terms": dict(zip(LENSFUN_TERMS[self.kind], self.terms)),
+            "image_size": [self.width, self.height],
+            "center": list(self.center),
+            "coord_scale": self.coord_scale,
+        }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "LensfunModel":
+    def from_dict(cls, d: dict) -> LensfunModel:
         kind = d["kind"]
         if kind not in LENSFUN_TERMS:
             raise ValueError(f"unsupported lensfun distortion model {kind!r}")
@@ -160,5 +163,11 @@ class LensfunModel(DistortionModel):
         if isinstance(terms, dict):
             terms = [terms[k] for k in LENSFUN_TERMS[kind]]
         w, h = d["image_size"]
-        return cls(kind=kind, terms=tuple(terms), width=w, height=h, center=tuple(d.get("center", (0.0, 0.0))),
-                   coord_scale=float(d.get("coord_scale", 1.0)))
+        return cls(
+            kind=kind,
+            terms=tuple(terms),
+            width=w,
+            height=h,
+            center=tuple(d.get("center", (0.0, 0.0))),
+            coord_scale=float(d.get("coord_scale", 1.0)),
+        )

@@ -73,15 +73,20 @@ class OpenCVModel(DistortionModel):
 
     # ------------------------------------------------------------- matrices
     @classmethod
-    def from_matrices(cls, camera_matrix, dist_coeffs) -> "OpenCVModel":
+    def from_matrices(cls, camera_matrix, dist_coeffs) -> OpenCVModel:
         """From a 3x3 camera matrix and a coefficient vector (skew must be 0)."""
         k = np.asarray(camera_matrix, dtype=np.float64)
         if k.shape != (3, 3):
             raise ValueError(f"camera matrix must be 3x3, got shape {k.shape}")
         if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]) or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-12):
             raise ValueError("camera matrix with skew or a non-[0 0 1] last row is not supported")
-        return cls(fx=k[0, 0], fy=k[1, 1], cx=k[0, 2], cy=k[1, 2],
-                   dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()))
+        return cls(
+            fx=k[0, 0],
+            fy=k[1, 1],
+            cx=k[0, 2],
+            cy=k[1, 2],
+            dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()),
+        )
 
     @property
     def camera_matrix(self) -> np.ndarray:
@@ -99,7 +104,7 @@ class OpenCVModel(DistortionModel):
             return xy.copy()
         if len(self.dist) < 14:  # closed form in numpy (tested equal to cv2.projectPoints)
             d = np.zeros(12)
-            d[:len(self.dist)] = self.dist
+            d[: len(self.dist)] = self.dist
             k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
             x = (xy[:, 0] - self.cx) / self.fx
             y = (xy[:, 1] - self.cy) / self.fy
@@ -150,14 +155,16 @@ class OpenCVModel(DistortionModel):
     def undistortion_maps(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """``cv2.initUndistortRectifyMap`` with the same camera matrix (OpenCV's own maps)."""
         k = self.camera_matrix
-        return cv2.initUndistortRectifyMap(k, self.dist_coeffs, None, k, (int(width), int(height)),
-                                           cv2.CV_32FC1)
+        return cv2.initUndistortRectifyMap(k, self.dist_coeffs, None, k, (int(width), int(height)), cv2.CV_32FC1)
 
     # ------------------------------------------------------------ file form
     def to_dict(self) -> dict:
-        return {"model": self.name, "camera_matrix": self.camera_matrix.tolist(),
-                "distortion_coefficients": list(self.dist)}
+        return {
+            "model": self.name,
+            "camera_matrix": self.camera_matrix.tolist(),
+            "distortion_coefficients": list(self.dist),
+        }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "OpenCVModel":
+    def from_dict(cls, d: dict) -> OpenCVModel:
         return cls.from_matrices(d["camera_matrix"], d["distortion_coefficients"])

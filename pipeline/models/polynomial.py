@@ -104,8 +104,10 @@ class PolynomialModel(DistortionModel):
         if self.degree < 1:
             raise ValueError(f"PolynomialModel degree must be >= 1, got {self.degree}")
         if len(self.a) != m or len(self.b) != m:
-            raise ValueError(f"PolynomialModel of degree {self.degree} needs {m} coefficients "
-                             f"for x and for y, got {len(self.a)} and {len(self.b)}")
+            raise ValueError(
+                f"PolynomialModel of degree {self.degree} needs {m} coefficients "
+                f"for x and for y, got {len(self.a)} and {len(self.b)}"
+            )
         if not self.scale > 0:
             raise ValueError(f"PolynomialModel scale must be > 0, got {self.scale}")
 
@@ -115,15 +117,20 @@ class PolynomialModel(DistortionModel):
         return (degree + 1) * (degree + 2) // 2
 
     @classmethod
-    def identity(cls, width: int, height: int, degree: int) -> "PolynomialModel":
+    def identity(cls, width: int, height: int, degree: int) -> PolynomialModel:
         """The identity of the given degree, normalised for a ``width x height`` image."""
         m = cls.n_coefficients(degree)
         a = np.zeros(m)
         b = np.zeros(m)
         a[1] = 1.0  # xi
         b[2] = 1.0  # eta
-        return cls(center=((width - 1) / 2.0, (height - 1) / 2.0), degree=degree,
-                   a=tuple(a), b=tuple(b), scale=0.5 * float(np.hypot(width, height)))
+        return cls(
+            center=((width - 1) / 2.0, (height - 1) / 2.0),
+            degree=degree,
+            a=tuple(a),
+            b=tuple(b),
+            scale=0.5 * float(np.hypot(width, height)),
+        )
 
     def params(self) -> np.ndarray:
         """Parameter vector in the documented order (``a`` then ``b``)."""
@@ -136,8 +143,13 @@ class PolynomialModel(DistortionModel):
     def undistort_points(self, xy: np.ndarray) -> np.ndarray:
         xi, eta = self._normalised(xy)
         s = self.scale
-        return np.stack([self.center[0] + s * poly_eval(np.asarray(self.a), xi, eta, self.degree),
-                         self.center[1] + s * poly_eval(np.asarray(self.b), xi, eta, self.degree)], axis=1)
+        return np.stack(
+            [
+                self.center[0] + s * poly_eval(np.asarray(self.a), xi, eta, self.degree),
+                self.center[1] + s * poly_eval(np.asarray(self.b), xi, eta, self.degree),
+            ],
+            axis=1,
+        )
 
     def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
         """Inverse of :meth:`undistort_points` by Newton iterations (analytic Jacobian)."""
@@ -151,25 +163,43 @@ class PolynomialModel(DistortionModel):
         done = np.zeros(len(x), bool)
         for _ in range(max_iter):
             xi, eta = self._normalised(x)
-            r = np.stack([self.center[0] + s * poly_eval(a, xi, eta, self.degree),
-                          self.center[1] + s * poly_eval(b, xi, eta, self.degree)], axis=1) - target
+            r = (
+                np.stack(
+                    [
+                        self.center[0] + s * poly_eval(a, xi, eta, self.degree),
+                        self.center[1] + s * poly_eval(b, xi, eta, self.degree),
+                    ],
+                    axis=1,
+                )
+                - target
+            )
             done = np.all(np.abs(r) < INVERSE_TOL_PX, axis=1)
             if done.all():
                 break
             j11, j12, j21, j22 = (poly_eval(c, xi, eta, self.degree) for c in (da_x, da_y, db_x, db_y))
             det = j11 * j22 - j12 * j21
-            step = np.stack([(j22 * r[:, 0] - j12 * r[:, 1]) / det,
-                             (-j21 * r[:, 0] + j11 * r[:, 1]) / det], axis=1)
+            step = np.stack([(j22 * r[:, 0] - j12 * r[:, 1]) / det, (-j21 * r[:, 0] + j11 * r[:, 1]) / det], axis=1)
             step[done] = 0.0
             x = x - step
         x[~done] = np.nan
         return x
 
     def to_dict(self) -> dict:
-        return {"model": self.name, "center": list(self.center), "scale": self.scale,
-                "degree": self.degree, "a": list(self.a), "b": list(self.b)}
+        return {
+            "model": self.name,
+            "center": list(self.center),
+            "scale": self.scale,
+            "degree": self.degree,
+            "a": list(self.a),
+            "b": list(self.b),
+        }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "PolynomialModel":
-        return cls(center=tuple(d["center"]), degree=int(d["degree"]), a=tuple(d["a"]),
-                   b=tuple(d["b"]), scale=float(d["scale"]))
+    def from_dict(cls, d: dict) -> PolynomialModel:
+        return cls(
+            center=tuple(d["center"]),
+            degree=int(d["degree"]),
+            a=tuple(d["a"]),
+            b=tuple(d["b"]),
+            scale=float(d["scale"]),
+        )

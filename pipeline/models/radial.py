@@ -58,7 +58,7 @@ class RadialModel(DistortionModel):
             raise ValueError(f"RadialModel scale must be > 0, got {self.scale}")
 
     @classmethod
-    def for_image(cls, width: int, height: int, k=(1.0,), center=None, **kw) -> "RadialModel":
+    def for_image(cls, width: int, height: int, k=(1.0,), center=None, **kw) -> RadialModel:
         """Model with ``scale`` = half diagonal and centre (default) at the image centre."""
         if center is None:
             center = ((width - 1) / 2.0, (height - 1) / 2.0)
@@ -102,7 +102,11 @@ class RadialModel(DistortionModel):
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> "RadialModel":
-        return cls(center=tuple(d["center"]), k=tuple(d["k"]), scale=float(d["scale"]),
-                   tangential=tuple(d["tangential"]) if d.get("tangential") is not None else None,
-                   prism=tuple(d["prism"]) if d.get("prism") is not None else None)
+    def from_dict(cls, d: dict) -> RadialModel:
+        return cls(
+            center=tuple(d["center"]),
+            k=tuple(d["k"]),
+            scale=float(d["scale"]),
+            tangential=tuple(d["tangential"]) if d.get("tangential") is not None else None,
+            prism=tuple(d["prism"]) if d.get("prism") is not None else None,
+        )

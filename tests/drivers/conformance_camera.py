@@ -21,18 +21,34 @@ from drivers.errors import DriverError
 from drivers.protocols import Camera, CameraIdentity, Frame
 
 #: pixel format names a driver may report, and the image dtype they produce
-PIXEL_DTYPES = {"Mono8": np.uint8, "GREY": np.uint8, "YUYV": np.uint8, "MJPG": np.uint8,
-                "Mono16": np.uint16, "Y16": np.uint16, "Mono10": np.uint16, "Mono12": np.uint16}
+PIXEL_DTYPES = {
+    "Mono8": np.uint8,
+    "GREY": np.uint8,
+    "YUYV": np.uint8,
+    "MJPG": np.uint8,
+    "Mono16": np.uint16,
+    "Y16": np.uint16,
+    "Mono10": np.uint16,
+    "Mono12": np.uint16,
+}
 
 
 def _close(a: float, b: float, tol: float) -> bool:
     return math.isfinite(a) and abs(a - b) <= tol
 
 
-def run_camera_conformance(cam, *, exposure_us: float = 20_000.0, gain_db: float = 2.0,
-                           focus: float = 0.5, exposure_tol_us: float = 1e-6,
-                           gain_tol_db: float = 1e-6, focus_tol: float = 1e-6,
-                           n_frames: int = 3, timeout: float = 5.0) -> list[Frame]:
+def run_camera_conformance(
+    cam,
+    *,
+    exposure_us: float = 20_000.0,
+    gain_db: float = 2.0,
+    focus: float = 0.5,
+    exposure_tol_us: float = 1e-6,
+    gain_tol_db: float = 1e-6,
+    focus_tol: float = 1e-6,
+    n_frames: int = 3,
+    timeout: float = 5.0,
+) -> list[Frame]:
     """Exercise ``cam`` (created, not opened) through the whole Camera protocol.
 
     Checks: structural ``isinstance``; ``__enter__`` returns the camera;

@@ -17,8 +17,9 @@ from drivers.protocols import Turntable
 DEFAULT_ANGLES = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
 
 
-def run_turntable_conformance(tt, angles=DEFAULT_ANGLES, tolerance_deg: float = 1e-3,
-                              timeout: float = 10.0) -> list[tuple[float, float]]:
+def run_turntable_conformance(
+    tt, angles=DEFAULT_ANGLES, tolerance_deg: float = 1e-3, timeout: float = 10.0
+) -> list[tuple[float, float]]:
     """Exercise ``tt`` (not yet opened) through the whole Turntable protocol.
 
     Checks: structural ``isinstance``; context manager returning the driver;

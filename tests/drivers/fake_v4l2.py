@@ -40,8 +40,12 @@ import numpy as np
 from linuxpy.video import raw
 
 IOC = raw.IOC
-FOURCC = {"GREY": raw.PixelFormat.GREY, "Y16": raw.PixelFormat.Y16,
-          "YUYV": raw.PixelFormat.YUYV, "MJPG": raw.PixelFormat.MJPEG}
+FOURCC = {
+    "GREY": raw.PixelFormat.GREY,
+    "Y16": raw.PixelFormat.Y16,
+    "YUYV": raw.PixelFormat.YUYV,
+    "MJPG": raw.PixelFormat.MJPEG,
+}
 _NAME = {int(v): k for k, v in FOURCC.items()}
 NEXT_FLAGS = int(raw.ControlFlag.NEXT_CTRL | raw.ControlFlag.NEXT_COMPOUND)
 CID = raw.ControlID
@@ -63,8 +67,18 @@ class Ctrl:
 class FakeV4L2Camera:
     """Kernel-side behaviour of one UVC-like camera, driven through linuxpy."""
 
-    def __init__(self, path, *, formats=("GREY", "Y16", "YUYV", "MJPG"), width=64, height=48,
-                 max_size=(640, 480), stride_padding=0, old_names=False, with_focus=True):
+    def __init__(
+        self,
+        path,
+        *,
+        formats=("GREY", "Y16", "YUYV", "MJPG"),
+        width=64,
+        height=48,
+        max_size=(640, 480),
+        stride_padding=0,
+        old_names=False,
+        with_focus=True,
+    ):
         self.path = str(path)
         os.mkfifo(self.path)
         self.formats = [FOURCC[f] for f in formats]
@@ -82,12 +96,24 @@ class FakeV4L2Camera:
         self.sequence = 0
         self.jpeg_quality = 95
         C = raw.CtrlType
-        names = (("exposure_auto", "exposure_absolute", "focus_auto") if old_names else
-                 ("auto_exposure", "exposure_time_absolute", "focus_automatic_continuous"))
+        names = (
+            ("exposure_auto", "exposure_absolute", "focus_auto")
+            if old_names
+            else ("auto_exposure", "exposure_time_absolute", "focus_automatic_continuous")
+        )
         ctrls = [
             Ctrl(int(CID.GAIN), "Gain", C.INTEGER, 0, 100, 1, 0, 0),
-            Ctrl(int(CID.EXPOSURE_AUTO), _title(names[0]), C.MENU, 0, 3, 1, 3, 3,
-                 menu={1: b"Manual Mode", 3: b"Aperture Priority Mode"}),
+            Ctrl(
+                int(CID.EXPOSURE_AUTO),
+                _title(names[0]),
+                C.MENU,
+                0,
+                3,
+                1,
+                3,
+                3,
+                menu={1: b"Manual Mode", 3: b"Aperture Priority Mode"},
+            ),
             Ctrl(int(CID.EXPOSURE_ABSOLUTE), _title(names[1]), C.INTEGER, 3, 2047, 1, 156, 156),
         ]
         if with_focus:
@@ -100,11 +126,10 @@ class FakeV4L2Camera:
         self._stack: ExitStack | None = None
 
     # -- installing the fake ---------------------------------------------------------
-    def __enter__(self) -> "FakeV4L2Camera":
+    def __enter__(self) -> FakeV4L2Camera:
         self._stack = ExitStack()
         self._stack.enter_context(mock.patch("linuxpy.ioctl.fcntl", types.SimpleNamespace(ioctl=self.ioctl)))
-        self._stack.enter_context(mock.patch("linuxpy.video.device.mmap",
-                                             types.SimpleNamespace(mmap=self.mmap)))
+        self._stack.enter_context(mock.patch("linuxpy.video.device.mmap", types.SimpleNamespace(mmap=self.mmap)))
         return self
 
     def __exit__(self, *exc) -> None:
@@ -154,8 +179,7 @@ class FakeV4L2Camera:
         if fmt == "MJPG":
             import cv2
 
-            ok, jpg = cv2.imencode(".jpg", self.smooth_scene(seq, w, h),
-                                   [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+            ok, jpg = cv2.imencode(".jpg", self.smooth_scene(seq, w, h), [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
             assert ok
             return jpg.tobytes()
         if fmt == "GREY":
@@ -166,8 +190,8 @@ class FakeV4L2Camera:
             rows = np.full((h, 2 * w), 128, np.uint8)
             rows[:, 0::2] = self.scene(seq, w, h)
         out = np.zeros((h, bpl), np.uint8)
-        out[:, :rows.shape[1]] = rows
-        out[:, rows.shape[1]:] = 0xEE  # padding bytes must never reach the image
+        out[:, : rows.shape[1]] = rows
+        out[:, rows.shape[1] :] = 0xEE  # padding bytes must never reach the image
         return out.tobytes()
 
     def resume(self) -> None:
@@ -196,7 +220,7 @@ class FakeV4L2Camera:
         assert length == len(buf), (length, len(buf))
         return buf
 
-    def ioctl(self, fd, request, arg=None, *rest):  # noqa: C901 (one branch per ioctl)
+    def ioctl(self, fd, request, arg=None, *rest):
         fileno = fd if isinstance(fd, int) else fd.fileno()
         if os.fstat(fileno).st_ino != self._ino:
             raise OSError(errno.ENOTTY, "not a video device")
@@ -324,7 +348,10 @@ class FakeV4L2Camera:
 def _title(config_name: str) -> str:
     """Kernel control name whose linuxpy config name is ``config_name``."""
     return {
-        "auto_exposure": "Auto Exposure", "exposure_auto": "Exposure, Auto",
-        "exposure_time_absolute": "Exposure Time, Absolute", "exposure_absolute": "Exposure (Absolute)",
-        "focus_automatic_continuous": "Focus, Automatic Continuous", "focus_auto": "Focus, Auto",
+        "auto_exposure": "Auto Exposure",
+        "exposure_auto": "Exposure, Auto",
+        "exposure_time_absolute": "Exposure Time, Absolute",
+        "exposure_absolute": "Exposure (Absolute)",
+        "focus_automatic_continuous": "Focus, Automatic Continuous",
+        "focus_auto": "Focus, Auto",
     }[config_name]

@@ -95,8 +95,12 @@ def test_lock_focus_integer_feature_turns_enumeration_autofocus_off():
 
 
 def test_lock_focus_float_feature_turns_boolean_autofocus_off():
-    cfg = {"fake_genicam_xml": str(FAKE_FOCUS_XML), "focus_feature": "FocusDistance",
-           "focus_type": "float", "autofocus_feature": "LensAutoFocusEnable"}
+    cfg = {
+        "fake_genicam_xml": str(FAKE_FOCUS_XML),
+        "focus_feature": "FocusDistance",
+        "focus_type": "float",
+        "autofocus_feature": "LensAutoFocusEnable",
+    }
     with fake(**cfg) as cam:
         dev = cam._device
         dev.set_boolean_feature_value("LensAutoFocusEnable", True)
@@ -137,12 +141,15 @@ def test_focus_without_configured_feature():
             cam.lock_focus(10)
 
 
-@pytest.mark.parametrize("cfg, match", [
-    ({"focus_feature": "NoSuchFocus"}, "NoSuchFocus"),
-    ({"focus_feature": "FocusPosition", "focus_type": "float"}, "is integer"),
-    ({"focus_feature": "FocusPosition", "autofocus_feature": "NoAF"}, "NoAF"),
-    ({"pixel_format": "Mono12"}, "Mono12"),
-])
+@pytest.mark.parametrize(
+    "cfg, match",
+    [
+        ({"focus_feature": "NoSuchFocus"}, "NoSuchFocus"),
+        ({"focus_feature": "FocusPosition", "focus_type": "float"}, "is integer"),
+        ({"focus_feature": "FocusPosition", "autofocus_feature": "NoAF"}, "NoAF"),
+        ({"pixel_format": "Mono12"}, "Mono12"),
+    ],
+)
 def test_misconfiguration_fails_at_open_and_closes(cfg, match):
     cam = fake(fake_genicam_xml=str(FAKE_FOCUS_XML), **cfg)
     with pytest.raises(DeviceRejected, match=match):

@@ -33,8 +33,9 @@ def test_aravis_fake_conformance():
 
 
 def test_aravis_gige_conformance(gige_fake):
-    cam = drivers.open_camera({"driver": "aravis", "device": "127.0.0.1", "roi": [0, 0, 96, 64],
-                               "pixel_format": "Mono16", **FOCUS_CFG})
+    cam = drivers.open_camera(
+        {"driver": "aravis", "device": "127.0.0.1", "roi": [0, 0, 96, 64], "pixel_format": "Mono16", **FOCUS_CFG}
+    )
     frames = run_camera_conformance(cam, exposure_us=20_000.0, gain_db=2.0, focus=417.0)
     assert frames[0].camera.serial == "HARPCONF"
     ids = [f.extra["frame_id"] for f in frames]
@@ -43,8 +44,9 @@ def test_aravis_gige_conformance(gige_fake):
 
 def test_v4l2_conformance(tmp_path):
     with FakeV4L2Camera(tmp_path / "video0"):
-        cam = drivers.open_camera({"driver": "v4l2", "device": str(tmp_path / "video0"),
-                                   "pixel_format": "GREY", "width": 80, "height": 60})
+        cam = drivers.open_camera(
+            {"driver": "v4l2", "device": str(tmp_path / "video0"), "pixel_format": "GREY", "width": 80, "height": 60}
+        )
         run_camera_conformance(cam, exposure_us=20_000.0, gain_db=2.0, focus=100.0)
 
 

@@ -29,8 +29,7 @@ def station():
     world = SimWorld(harp_offset_deg=HARP_OFFSET_DEG)
     handle = start_zaber_emulator(world, speed_deg_s=720.0, accel_deg_s2=7200.0)
     turntable = open_turntable({"driver": "zaber", "port": handle.port_path})
-    camera = open_camera({"driver": "sim", "width": 800, "height": 600, "seed": 3, "focus": 0.5},
-                         world=world)
+    camera = open_camera({"driver": "sim", "width": 800, "height": 600, "seed": 3, "focus": 0.5}, world=world)
     with turntable, camera:
         turntable.home()
         yield world, turntable, camera

@@ -35,13 +35,16 @@ def test_mjpg_decodes_and_checks_size():
         to_grey(jpg, "MJPG", 8, 16)
 
 
-@pytest.mark.parametrize("raw, fmt, w, h, match", [
-    (b"\x00" * 11, "GREY", 4, 3, "truncated"),
-    (b"\x00" * 8, "YUYV", 3, 1, "odd"),
-    (b"not a jpeg", "MJPG", 4, 4, "does not decode"),
-    (b"\x00" * 12, "RGB3", 2, 2, "cannot be converted"),
-    (b"\x00" * 12, "GREY", 4, 3, None),
-])
+@pytest.mark.parametrize(
+    "raw, fmt, w, h, match",
+    [
+        (b"\x00" * 11, "GREY", 4, 3, "truncated"),
+        (b"\x00" * 8, "YUYV", 3, 1, "odd"),
+        (b"not a jpeg", "MJPG", 4, 4, "does not decode"),
+        (b"\x00" * 12, "RGB3", 2, 2, "cannot be converted"),
+        (b"\x00" * 12, "GREY", 4, 3, None),
+    ],
+)
 def test_bad_buffers_raise_capture_error(raw, fmt, w, h, match):
     if match is None:
         assert to_grey(raw, fmt, w, h).shape == (h, w)

@@ -29,6 +29,7 @@ def driver(port, **kw):
 
 # -- byte-exact ------------------------------------------------------------
 
+
 def test_open_home_move_and_position_bytes():
     script = [
         (b"\x18", BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"),
@@ -51,18 +52,18 @@ def test_open_home_move_and_position_bytes():
 
 
 def test_feed_and_units_per_degree_shape_the_gcode():
-    script = [(b"\x18", BANNER),
-              (b"G90 G1 X90.000 F1200\n", b"ok\r\n"),
-              (b"?", b"<Idle|MPos:90.000,0.000,0.000|WCO:0.000,0.000,0.000|FS:0,0>\r\n")]
+    script = [
+        (b"\x18", BANNER),
+        (b"G90 G1 X90.000 F1200\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:90.000,0.000,0.000|WCO:0.000,0.000,0.000|FS:0,0>\r\n"),
+    ]
     with ScriptedDevice(script, name="grbl") as dev:
         with driver(dev.port, feed=1200, units_per_degree=2.0) as tt:
             assert tt.move_to(45.0) == 45.0
 
 
 def test_wpos_reports_and_malformed_status():
-    script = [(b"\x18", BANNER),
-              (b"?", b"<Idle|WPos:12.500,0.000,0.000|FS:0,0>\r\n"),
-              (b"?", b"<Idle|MPos:1.0.0>\r\n")]
+    script = [(b"\x18", BANNER), (b"?", b"<Idle|WPos:12.500,0.000,0.000|FS:0,0>\r\n"), (b"?", b"<Idle|MPos:1.0.0>\r\n")]
     with ScriptedDevice(script, name="grbl") as dev:
         with driver(dev.port) as tt:
             assert tt.position() == 12.5
@@ -77,6 +78,7 @@ def test_missing_banner_is_a_timeout():
 
 
 # -- against the emulator --------------------------------------------------
+
 
 def test_locked_until_homed_then_moves_around_the_circle():
     world = SimWorld()
@@ -136,8 +138,9 @@ def test_hard_limit_alarm_mid_move_then_recover_and_rehome(emu):
         assert st["state"] == "Alarm" and 0.0 < st["position"] < 270.0
         with pytest.raises(DeviceFault, match=r"cannot move, controller in ALARM:1.*recover\(\)"):
             tt.move_to(90.0)
-        assert tt.recover() == ["ALARM:1 (hard limit triggered; machine position is likely lost,"
-                                " re-homing is recommended)"]
+        assert tt.recover() == [
+            "ALARM:1 (hard limit triggered; machine position is likely lost, re-homing is recommended)"
+        ]
         assert tt.status()["state"] == "Idle"
         tt.home()
         assert tt.move_to(90.0) == 90.0
@@ -163,12 +166,20 @@ def test_move_that_does_not_finish_times_out_and_stops():
 
 # -- configuration -------------------------------------------------------------
 
+
 def test_from_config_with_steps_per_degree_and_a_fourth_axis():
     # motor: 17.7778 steps per table degree; GRBL $103 = 35.5556 steps/unit
     with start_grbl_emulator(axis="A", units_per_degree=0.5, **FAST) as h:
-        tt = open_turntable({"driver": "grbl", "port": h.port_path, "axis": "A",
-                             "steps_per_degree": 17.7778, "steps_per_unit": 35.5556,
-                             "poll_interval": 0.005})
+        tt = open_turntable(
+            {
+                "driver": "grbl",
+                "port": h.port_path,
+                "axis": "A",
+                "steps_per_degree": 17.7778,
+                "steps_per_unit": 35.5556,
+                "poll_interval": 0.005,
+            }
+        )
         assert isinstance(tt, GrblTurntable)
         assert tt.units_per_degree == pytest.approx(0.5)
         with tt:
@@ -177,14 +188,17 @@ def test_from_config_with_steps_per_degree_and_a_fourth_axis():
             assert b"G90 G0 A45.000" in h.emulator.received
 
 
-@pytest.mark.parametrize("cfg, message", [
-    ({"driver": "grbl"}, "missing config key 'port'"),
-    ({"driver": "grbl", "port": "x", "speed": 1}, "unknown config key 'speed'"),
-    ({"driver": "grbl", "port": "x", "axis": "Q"}, "axis must be one of"),
-    ({"driver": "grbl", "port": "x", "units_per_degree": 1, "steps_per_degree": 2}, "not both"),
-    ({"driver": "grbl", "port": "x", "steps_per_unit": 2}, "'steps_per_unit' needs 'steps_per_degree'"),
-    ({"driver": "grbl", "port": "x", "feed": -5}, "feed must be positive"),
-])
+@pytest.mark.parametrize(
+    "cfg, message",
+    [
+        ({"driver": "grbl"}, "missing config key 'port'"),
+        ({"driver": "grbl", "port": "x", "speed": 1}, "unknown config key 'speed'"),
+        ({"driver": "grbl", "port": "x", "axis": "Q"}, "axis must be one of"),
+        ({"driver": "grbl", "port": "x", "units_per_degree": 1, "steps_per_degree": 2}, "not both"),
+        ({"driver": "grbl", "port": "x", "steps_per_unit": 2}, "'steps_per_unit' needs 'steps_per_degree'"),
+        ({"driver": "grbl", "port": "x", "feed": -5}, "feed must be positive"),
+    ],
+)
 def test_bad_config_names_the_problem(cfg, message):
     with pytest.raises(ValueError, match=message):
         open_turntable(cfg)

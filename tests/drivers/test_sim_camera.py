@@ -28,7 +28,7 @@ def string_angle(img: np.ndarray, crop: int = 300, sigma: float = 1.5) -> float:
     """
     h, w = img.shape
     y0, x0 = (h - crop) // 2, (w - crop) // 2
-    a = img[y0:y0 + crop, x0:x0 + crop].astype(float)
+    a = img[y0 : y0 + crop, x0 : x0 + crop].astype(float)
     gx = ndimage.gaussian_filter(a, sigma, order=(0, 1))
     gy = ndimage.gaussian_filter(a, sigma, order=(1, 0))
     b = int(4 * sigma) + 1
@@ -110,8 +110,9 @@ def test_config_errors_name_the_key():
         SimulatedCamera.from_config({"shot_noise": "yes"})
     with pytest.raises(ValueError, match="spacing_px"):
         SimulatedCamera.from_config({"spacing_px": 2.0})
-    cam = SimulatedCamera.from_config({"pixel_format": "Mono8", "focus": 0.4, "harp_offset_deg": 7.0,
-                                       "string_width_px": 8, "dust": 3})
+    cam = SimulatedCamera.from_config(
+        {"pixel_format": "Mono8", "focus": 0.4, "harp_offset_deg": 7.0, "string_width_px": 8, "dust": 3}
+    )
     assert cam.pixel_format == "Mono8" and cam.get_focus() == 0.4
     assert cam.world.harp_offset_deg == 7.0 and cam.scene.string_width_px == 8.0 and cam.scene.dust == 3
     assert cam.sensor_size == (1280, 960)

@@ -8,7 +8,6 @@ import time
 import pytest
 
 from drivers.errors import DeviceDisconnected, DeviceTimeout, ProtocolError
-
 from drivers.grbl import GrblTurntable
 from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.world import SimWorld
@@ -45,10 +44,13 @@ class _IgnoresLimits(GrblTurntable):
         return (0.0, 315.0)
 
 
-@pytest.mark.parametrize("start, broken, speed, message", [
-    (start_zaber_emulator, _ReturnsBeforeArrival, 360.0, "busy after move_to"),
-    (start_grbl_emulator, _IgnoresLimits, 3600.0, "did not raise ValueError"),
-])
+@pytest.mark.parametrize(
+    "start, broken, speed, message",
+    [
+        (start_zaber_emulator, _ReturnsBeforeArrival, 360.0, "busy after move_to"),
+        (start_grbl_emulator, _IgnoresLimits, 3600.0, "did not raise ValueError"),
+    ],
+)
 def test_conformance_check_catches_broken_drivers(start, broken, speed, message):
     with start(speed_deg_s=speed, accel_deg_s2=10 * speed) as handle:
         tt = make_driver(broken, handle.port_path)

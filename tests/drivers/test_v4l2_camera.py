@@ -32,9 +32,17 @@ def camera(node, **cfg) -> V4L2Camera:
     return V4L2Camera.from_config({"driver": "v4l2", "device": str(node), "width": W, "height": H, **cfg})
 
 
-@pytest.mark.parametrize("fmt, padding, bits", [
-    ("GREY", 0, 8), ("GREY", 24, 8), ("Y16", 0, 16), ("Y16", 8, 16), ("YUYV", 0, 8), ("YUYV", 4, 8),
-])
+@pytest.mark.parametrize(
+    "fmt, padding, bits",
+    [
+        ("GREY", 0, 8),
+        ("GREY", 24, 8),
+        ("Y16", 0, 16),
+        ("Y16", 8, 16),
+        ("YUYV", 0, 8),
+        ("YUYV", 4, 8),
+    ],
+)
 def test_uncompressed_formats_give_the_exact_grey_image(node, fmt, padding, bits):
     with FakeV4L2Camera(node, stride_padding=padding) as hw, camera(node, pixel_format=fmt) as cam:
         assert cam.pixel_format == fmt and cam.sensor_size == (W, H)

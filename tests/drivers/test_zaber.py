@@ -6,13 +6,12 @@ import time
 import pytest
 
 from drivers import open_turntable
-from drivers.errors import (DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout,
-                            ProtocolError)
+from drivers.errors import DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import ZaberEmulator, start_zaber_emulator, zaber_checksum
 from drivers.testing import ScriptedDevice
-from tests.drivers.turntables import FAST, make_driver
 from drivers.zaber import ZaberTurntable
+from tests.drivers.turntables import FAST, make_driver
 
 MSPD = 1536000 / 360.0  # X-RSW60 microsteps per degree
 
@@ -29,6 +28,7 @@ def driver(port, **kw):
 
 
 # -- byte-exact ------------------------------------------------------------
+
 
 def test_home_move_and_position_bytes():
     script = [
@@ -66,8 +66,7 @@ def test_checksummed_replies_and_info_and_alert_lines_are_understood():
 
 
 def test_bad_checksum_is_a_protocol_error():
-    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
-              (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
+    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"), (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port) as tt:
             with pytest.raises(ProtocolError, match="bad checksum in '@01 1 OK IDLE -- 4267:00'"):
@@ -82,6 +81,7 @@ def test_reply_from_another_device_is_a_protocol_error():
 
 
 # -- against the emulator --------------------------------------------------
+
 
 def test_moves_around_the_circle_read_back_and_drive_the_world():
     world = SimWorld()
@@ -123,8 +123,9 @@ def test_out_of_limits_target_is_refused_before_sending(emu):
         assert len(emu.emulator.received) == n
 
 
-@pytest.mark.parametrize("flag, meaning", [("FS", "stalled and stopped"), ("WL", "unexpected limit trigger"),
-                                           ("FQ", "encoder error")])
+@pytest.mark.parametrize(
+    "flag, meaning", [("FS", "stalled and stopped"), ("WL", "unexpected limit trigger"), ("FQ", "encoder error")]
+)
 def test_fault_flag_raises_and_clearing_warnings_recovers(emu, flag, meaning):
     with driver(emu.port_path) as tt:
         tt.home()
@@ -173,9 +174,18 @@ def test_emulator_ignores_other_addresses_and_refuses_other_axes(emu):
 
 # -- configuration -------------------------------------------------------------
 
+
 def test_from_config_through_the_registry(emu):
-    tt = open_turntable({"driver": "zaber", "port": emu.port_path, "device_address": 1,
-                         "steps_per_degree": MSPD / 2, "limits": [0, 720], "poll_interval": 0.005})
+    tt = open_turntable(
+        {
+            "driver": "zaber",
+            "port": emu.port_path,
+            "device_address": 1,
+            "steps_per_degree": MSPD / 2,
+            "limits": [0, 720],
+            "poll_interval": 0.005,
+        }
+    )
     assert isinstance(tt, ZaberTurntable) and tt.limits == (0.0, 720.0)
     with tt:
         tt.home()
@@ -183,12 +193,15 @@ def test_from_config_through_the_registry(emu):
         assert emu.emulator.position_steps(time.monotonic()) == round(225 * MSPD)
 
 
-@pytest.mark.parametrize("cfg, message", [
-    ({"driver": "zaber"}, "missing config key 'port'"),
-    ({"driver": "zaber", "port": "/dev/null", "speed": 3}, "unknown config key 'speed'"),
-    ({"driver": "zaber", "port": "x", "steps_per_degree": 1, "microsteps_per_degree": 1}, "not both"),
-    ({"driver": "zaber", "port": "x", "limits": [10, 0]}, "min < max"),
-])
+@pytest.mark.parametrize(
+    "cfg, message",
+    [
+        ({"driver": "zaber"}, "missing config key 'port'"),
+        ({"driver": "zaber", "port": "/dev/null", "speed": 3}, "unknown config key 'speed'"),
+        ({"driver": "zaber", "port": "x", "steps_per_degree": 1, "microsteps_per_degree": 1}, "not both"),
+        ({"driver": "zaber", "port": "x", "limits": [10, 0]}, "min < max"),
+    ],
+)
 def test_bad_config_names_the_problem(cfg, message):
     with pytest.raises(ValueError, match=message):
         open_turntable(cfg)
@@ -210,8 +223,15 @@ def test_emulator_fault_names_are_checked():
 def test_reply_parsing_with_message_id_and_garbage():
     tt = ZaberTurntable("loop://")
     reply = tt.parse_line(b"@01 1 05 OK BUSY FS 12\r")
-    assert (reply.device, reply.axis, reply.message_id, reply.ok, reply.busy, reply.warning, reply.data) == \
-        (1, 1, 5, True, True, "FS", "12")
+    assert (reply.device, reply.axis, reply.message_id, reply.ok, reply.busy, reply.warning, reply.data) == (
+        1,
+        1,
+        5,
+        True,
+        True,
+        "FS",
+        "12",
+    )
     assert tt.parse_line(b"@01 0 RJ IDLE -- BADCOMMAND").ok is False
     with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'@01 1 OK'"):
         tt.parse_line(b"@01 1 OK")

@@ -50,7 +50,7 @@ def true_measure(r: Rendered, m: ImageMeasurement, matches=None):
             _, i0 = tree.query(raw[a])
             _, i1 = tree.query(raw[b - 1])
             lo, hi = sorted((int(i0), int(i1)))
-            seg = curve[lo:hi + 1]
+            seg = curve[lo : hi + 1]
             if i0 > i1:
                 seg = seg[::-1]
             parts.append(smooth_subsample(seg, t=m.t))

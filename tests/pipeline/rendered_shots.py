@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -30,13 +30,14 @@ def nonradial_lens() -> PolynomialModel:
 LENSES = {
     "barrel": RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005)),
     "pincushion": RadialModel.for_image(W, H, k=(1.0, 0.0, -0.03, 0.0, -0.004)),
-    "decentred": RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530.0, 355.0),
-                                       tangential=(0.001, -0.0007)),
+    "decentred": RadialModel.for_image(
+        W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530.0, 355.0), tangential=(0.001, -0.0007)
+    ),
     "nonradial": nonradial_lens(),
 }
 
 
-@lru_cache(maxsize=None)
+@cache
 def measured_shots(lens_name: str, angles: tuple = ANGLES) -> tuple:
     """Edge point sets (one tuple of (M, 2) arrays per shot) of rendered shots, noise sigma 1.5."""
     from pipeline.measure import measure_image
@@ -44,8 +45,14 @@ def measured_shots(lens_name: str, angles: tuple = ANGLES) -> tuple:
 
     shots = []
     for i, ang in enumerate(angles):
-        r = render_harp(W, H, HarpScene(angle_deg=ang, spacing_px=50.0, phase_px=11.0 * i), lens=LENSES[lens_name],
-                        noise_sigma=NOISE, seed=100 + i)
+        r = render_harp(
+            W,
+            H,
+            HarpScene(angle_deg=ang, spacing_px=50.0, phase_px=11.0 * i),
+            lens=LENSES[lens_name],
+            noise_sigma=NOISE,
+            seed=100 + i,
+        )
         m = measure_image(r.image, t=30)
         shots.append(tuple(ln.points for ln in m.lines))
     return tuple(shots)
@@ -54,7 +61,7 @@ def measured_shots(lens_name: str, angles: tuple = ANGLES) -> tuple:
 REAL = ("IMG_6931", "IMG_6964", "IMG_6950")  # near vertical, near horizontal, diagonal strings
 
 
-@lru_cache(maxsize=None)
+@cache
 def real_shots(directory: str) -> tuple:
     """``(width, height, (edge points, ...))`` of each real photo in :data:`REAL` (measured once per run)."""
     from pathlib import Path

@@ -23,7 +23,7 @@ def _pixel_integral(profile, ss: int, bright: float, dark: float) -> np.ndarray:
     for oy in _subsamples(ss):
         for ox in _subsamples(ss):
             acc = acc + profile(ox, oy)
-    return dark + (bright - dark) * acc / ss ** 2
+    return dark + (bright - dark) * acc / ss**2
 
 
 def _signed_distance(shape, angle_deg, point):
@@ -54,8 +54,9 @@ def render_disk(shape, centre, radius, bright=200.0, dark=30.0, blur=0.7, ss=4):
     """Dark disk on a bright background (edge profile Phi((r - R) / blur))."""
     h, w = shape
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    return _pixel_integral(lambda ox, oy: ndtr((np.hypot(xs + ox - centre[0], ys + oy - centre[1]) - radius) / blur),
-                           ss, bright, dark)
+    return _pixel_integral(
+        lambda ox, oy: ndtr((np.hypot(xs + ox - centre[0], ys + oy - centre[1]) - radius) / blur), ss, bright, dark
+    )
 
 
 def render_string(shape, angle_deg, point, width, bright=200.0, dark=30.0, blur=0.7, ss=4):

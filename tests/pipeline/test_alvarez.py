@@ -6,13 +6,13 @@ from pipeline.compare import compare_models
 from pipeline.fit import FitFailure, FitResult
 from pipeline.models import RadialModel
 from tests.pipeline.harp_points import harp_point_sets
-from tests.pipeline.rendered_shots import H, W, LENSES, measured_shots
+from tests.pipeline.rendered_shots import LENSES, H, W, measured_shots
 
 
 def test_energy_is_zero_exactly_for_straight_lines():
     t = np.linspace(0, 1, 20)
     line = np.stack([10 + 300 * t, 20 + 100 * t], 1)
-    assert abs(alvarez_energy([line])) < 1e-15 * (300 ** 2 * 100 ** 2)
+    assert abs(alvarez_energy([line])) < 1e-15 * (300**2 * 100**2)
     arc = np.stack([10 + 300 * t, 20 + 100 * t + 5 * t * (1 - t)], 1)
     assert alvarez_energy([arc]) > 1.0
 

@@ -4,10 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.edges import (EdgeChain, auto_thresholds, detect_edges, edge_points,
-                            gradient_noise)
-from tests.pipeline.synthetic_edges import (line_normal, quantise, render_disk, render_step,
-                                            render_string)
+from pipeline.edges import EdgeChain, auto_thresholds, detect_edges, edge_points, gradient_noise
+from tests.pipeline.synthetic_edges import line_normal, quantise, render_disk, render_step, render_string
 
 ANGLES = [0, 15, 30, 45, 60, 75, 90]
 SHAPE = (64, 64)
@@ -91,7 +89,7 @@ def test_bias_and_rms_on_8bit_noisy_edges(noise):
         d = _distances(chains[0].xy, p, angle)
         assert d.size > 40
         assert abs(d.mean()) <= 0.008 + 0.004 * noise, (angle, d.mean())
-        assert np.sqrt(np.mean(d ** 2)) <= 0.008 + 0.007 * noise, (angle, np.sqrt(np.mean(d ** 2)))
+        assert np.sqrt(np.mean(d**2)) <= 0.008 + 0.007 * noise, (angle, np.sqrt(np.mean(d**2)))
 
 
 def test_no_extra_noise_at_45_degrees():
@@ -231,8 +229,7 @@ def test_gradient_noise_is_measured_on_the_gradient_and_robust_to_edges():
     assert (low, high) == pytest.approx((4 * 2.0 * 0.1586, 8 * 2.0 * 0.1586), rel=0.05)
     # a dense harp: strings 24 px apart cover a third of the image with edge responses
     nrm = line_normal(25)
-    dense = sum(render_string((120, 120), 25, tuple(60 + 24 * i * nrm), 3.0) - 200
-                for i in range(-3, 4))
+    dense = sum(render_string((120, 120), 25, tuple(60 + 24 * i * nrm), 3.0) - 200 for i in range(-3, 4))
     dense = 200 + dense + rng.normal(0, 2.0, (120, 120))
     assert auto_thresholds(dense)[0] == pytest.approx(4 * 2.0 * 0.1586, rel=0.06)
     # spatially correlated noise (as after demosaicing): the thresholds follow the real
@@ -241,8 +238,11 @@ def test_gradient_noise_is_measured_on_the_gradient_and_robust_to_edges():
     corr = 100 + cv2.GaussianBlur(white, (0, 0), 0.8)
     low, _ = auto_thresholds(corr)
     _, _, mod = (lambda g: (g[0], g[1], np.hypot(g[0], g[1])))(
-        [cv2.Sobel(cv2.GaussianBlur(corr, (9, 9), 1.0), cv2.CV_32F, dx, 1 - dx, ksize=1,
-                   scale=0.5)[4:-4, 4:-4] for dx in (1, 0)])
+        [
+            cv2.Sobel(cv2.GaussianBlur(corr, (9, 9), 1.0), cv2.CV_32F, dx, 1 - dx, ksize=1, scale=0.5)[4:-4, 4:-4]
+            for dx in (1, 0)
+        ]
+    )
     assert (mod > low).mean() < 1.5e-3
     assert detect_edges(corr) == []
     # noise-free: the quantisation floor

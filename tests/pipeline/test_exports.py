@@ -24,7 +24,7 @@ BARREL = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.04, 0.0, -0.01))
 def opencv_closed_form(m: OpenCVModel, xy):
     """Independent numpy implementation of OpenCV's projection (no tilt)."""
     d = np.zeros(12)
-    d[:len(m.dist)] = m.dist
+    d[: len(m.dist)] = m.dist
     k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
     x, y = (xy[:, 0] - m.cx) / m.fx, (xy[:, 1] - m.cy) / m.fy
     r2 = x * x + y * y
@@ -34,11 +34,14 @@ def opencv_closed_form(m: OpenCVModel, xy):
     return np.column_stack([m.fx * xd + m.cx, m.fy * yd + m.cy])
 
 
-@pytest.mark.parametrize("dist", [
-    (-0.21, 0.06, 1e-3, -2e-3, 0.01),
-    (0.3, -0.1, 1e-3, 5e-4, 0.02, 0.5, -0.05, 0.03),
-    (-0.1, 0.01, 0.0, 1e-3, 0.0, 0.0, 0.0, 0.0, 1e-3, -1e-4, 2e-3, 1e-4),
-])
+@pytest.mark.parametrize(
+    "dist",
+    [
+        (-0.21, 0.06, 1e-3, -2e-3, 0.01),
+        (0.3, -0.1, 1e-3, 5e-4, 0.02, 0.5, -0.05, 0.03),
+        (-0.1, 0.01, 0.0, 1e-3, 0.0, 0.0, 0.0, 0.0, 1e-3, -1e-4, 2e-3, 1e-4),
+    ],
+)
 def test_opencv_model_is_opencvs_projection_and_inverts_it(dist):
     m = OpenCVModel(fx=400.0, fy=405.0, cx=161.0, cy=118.5, dist=dist)
     np.testing.assert_allclose(m.distort_points(PTS), opencv_closed_form(m, PTS), atol=1e-9)
@@ -56,8 +59,9 @@ def test_opencv_model_is_opencvs_projection_and_inverts_it(dist):
 
 
 def test_opencv_model_with_sensor_tilt_uses_opencv_and_inverts():
-    m = OpenCVModel(fx=400.0, fy=400.0, cx=160.0, cy=120.0,
-                    dist=(-0.2, 0.05, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.01, -0.005))
+    m = OpenCVModel(
+        fx=400.0, fy=400.0, cx=160.0, cy=120.0, dist=(-0.2, 0.05, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.01, -0.005)
+    )
     u = m.undistort_points(PTS)
     assert np.max(np.abs(m.distort_points(u) - PTS)) < 1e-8
     flat = OpenCVModel(fx=400.0, fy=400.0, cx=160.0, cy=120.0, dist=(-0.2, 0.05, 0, 0, 0))
@@ -75,8 +79,9 @@ def test_lensfun_model_follows_lensfun_normalisation_and_formulas():
     f = a * 0.125 + b * 0.25 + c * 0.5 + 1 - a - b - c
     np.testing.assert_allclose(m.distort_points(q), [[159.5 + 119.5 * 0.5 * f, 119.5]], atol=1e-12)
     m5 = LensfunModel(kind="poly5", terms=(-0.05, 0.01), width=W, height=H)
-    np.testing.assert_allclose(m5.distort_points(q), [[159.5 + 119.5 * 0.5 * (1 - 0.05 * 0.25 + 0.01 * 0.0625), 119.5]],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        m5.distort_points(q), [[159.5 + 119.5 * 0.5 * (1 - 0.05 * 0.25 + 0.01 * 0.0625), 119.5]], atol=1e-12
+    )
     for mm in (m, m5, LensfunModel(kind="poly3", terms=(0.02,), width=W, height=H)):
         u = mm.undistort_points(PTS)
         assert np.max(np.abs(mm.distort_points(u) - PTS)) < 1e-9
@@ -152,8 +157,10 @@ def test_ros_camera_info_has_exactly_the_camera_info_fields(n, name):
     assert set(doc) == set(ROS_FIELDS)
     assert doc["distortion_model"] == name and doc["camera_name"] == "harp_cam"
     assert (doc["image_width"], doc["image_height"]) == (W, H)
-    assert [len(doc[k]["data"]) for k in ("camera_matrix", "distortion_coefficients", "rectification_matrix",
-                                          "projection_matrix")] == [9, n, 9, 12]
+    assert [
+        len(doc[k]["data"])
+        for k in ("camera_matrix", "distortion_coefficients", "rectification_matrix", "projection_matrix")
+    ] == [9, n, 9, 12]
     assert doc["distortion_coefficients"] == {"rows": 1, "cols": n, "data": list(m.dist)}
     assert doc["projection_matrix"]["data"] == [400.0, 0.0, 160.0, 0.0, 0.0, 400.0, 120.0, 0.0, 0.0, 0.0, 1.0, 0.0]
     assert read_ros_text(text) == (m, (W, H))
@@ -185,11 +192,15 @@ def test_lensfun_xml_uses_the_lensfun_schema_and_reads_back():
         read_lensfun_text("<foo/>", W, H, "f.xml")
 
 
-@pytest.mark.parametrize("model", [
-    LensfunModel(kind="ptlens", terms=(0.012, -0.031, 0.004), width=W + 1, height=H + 1, center=(0.05, -0.03)),
-    LensfunModel(kind="poly5", terms=(-0.05, 0.01), width=W, height=H),
-    LensfunModel(kind="poly3", terms=(0.02,), width=H, height=W),  # portrait
-], ids=lambda m: m.kind)
+@pytest.mark.parametrize(
+    "model",
+    [
+        LensfunModel(kind="ptlens", terms=(0.012, -0.031, 0.004), width=W + 1, height=H + 1, center=(0.05, -0.03)),
+        LensfunModel(kind="poly5", terms=(-0.05, 0.01), width=W, height=H),
+        LensfunModel(kind="poly3", terms=(0.02,), width=H, height=W),  # portrait
+    ],
+    ids=lambda m: m.kind,
+)
 def test_lensfun_itself_loads_the_xml_and_applies_our_model(model):
     """The lensfun library (via lensfunpy) reads the export and maps pixels exactly as LensfunModel."""
     db = lensfunpy.Database(xml=lensfun_text(model, focal=35.0), load_common=False, load_bundled=False)

@@ -2,26 +2,35 @@ import numpy as np
 import pytest
 
 from pipeline.compare import compare_models
-from pipeline.fit import (FitFailure, FitResult, _residuals_and_jacobian, _collect, corrected_straightness,
-                          fit_distortion, make_parametrisation)
+from pipeline.fit import (
+    FitFailure,
+    FitResult,
+    _collect,
+    _residuals_and_jacobian,
+    corrected_straightness,
+    fit_distortion,
+    make_parametrisation,
+)
 from pipeline.models import PolynomialModel, RadialModel
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import ANGLES, LENSES, REAL, measured_shots, nonradial_lens, real_shots
 
 W, H = 1000, 750
 SIX = (0, 30, 60, 90, 120, 150)
-DECENTRED = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530, 355),
-                                  tangential=(0.001, -0.0007))
+DECENTRED = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530, 355), tangential=(0.001, -0.0007))
 
 
 # ----------------------------------------------------------- point sets
-@pytest.mark.parametrize("lens,kw,field_tol", [
-    (RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005)), dict(model="radial", degree=4), 0.002),
-    (DECENTRED, dict(model="radial", degree=4, tangential=True), 0.002),
-    (DECENTRED, dict(model="radial", degree=4, tangential=True, prism=True), 0.004),
-    (nonradial_lens(), dict(model="poly", degree=5), 0.004),
-    (DECENTRED, dict(model="poly", degree=7), 0.006),
-])
+@pytest.mark.parametrize(
+    "lens,kw,field_tol",
+    [
+        (RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005)), dict(model="radial", degree=4), 0.002),
+        (DECENTRED, dict(model="radial", degree=4, tangential=True), 0.002),
+        (DECENTRED, dict(model="radial", degree=4, tangential=True, prism=True), 0.004),
+        (nonradial_lens(), dict(model="poly", degree=5), 0.004),
+        (DECENTRED, dict(model="poly", degree=7), 0.006),
+    ],
+)
 def test_fit_recovers_true_correction_modulo_homography(lens, kw, field_tol):
     shots = harp_point_sets(lens, W, H, SIX, noise=0.005, seed=1)
     r = fit_distortion(shots, W, H, **kw)
@@ -42,9 +51,10 @@ def test_fit_without_the_needed_terms_leaves_residual():
     assert compare_models(r.model, lens, W, H).rms > 0.05
 
 
-@pytest.mark.parametrize("kind,kw", [("radial", dict(degree=4, tangential=True, prism=True)),
-                                     ("radial", dict(degree=3)),
-                                     ("poly", dict(degree=6))])
+@pytest.mark.parametrize(
+    "kind,kw",
+    [("radial", dict(degree=4, tangential=True, prism=True)), ("radial", dict(degree=3)), ("poly", dict(degree=6))],
+)
 def test_analytic_jacobian_matches_finite_differences(kind, kw):
     shots = harp_point_sets(DECENTRED, W, H, (10, 70, 130), noise=0.01, seed=2)
     edges, _ = _collect(shots, W, H)
@@ -56,8 +66,10 @@ def test_analytic_jacobian_matches_finite_differences(kind, kw):
     for k in range(param.n):
         e = np.zeros(param.n)
         e[k] = 1e-7
-        num[:, k] = (_residuals_and_jacobian(param, edges, th + e, jac=False)[0]
-                     - _residuals_and_jacobian(param, edges, th - e, jac=False)[0]) / 2e-7
+        num[:, k] = (
+            _residuals_and_jacobian(param, edges, th + e, jac=False)[0]
+            - _residuals_and_jacobian(param, edges, th - e, jac=False)[0]
+        ) / 2e-7
     assert np.abs(j - num).max() < 1e-4 * np.abs(num).max()
 
 
@@ -139,12 +151,13 @@ def test_directionless_edges_do_not_pass_for_a_second_orientation():
     # one orientation plus two "edges" whose points have no direction (a dust blob, a stuck
     # point): they must not satisfy the orientation check and yield a model from one orientation
     shots = harp_point_sets(DECENTRED, W, H, (90,), noise=0.005, seed=5)
-    blobs = [np.full((6, 2), 500.0), np.array([[300.0, 300.0], [301.0, 300.0], [300.0, 301.0],
-                                                [301.0, 301.0], [300.5, 300.5]])]
+    blobs = [
+        np.full((6, 2), 500.0),
+        np.array([[300.0, 300.0], [301.0, 300.0], [300.0, 301.0], [301.0, 301.0], [300.5, 300.5]]),
+    ]
     for kw in (dict(model="radial", degree=4), dict(model="poly", degree=5)):
         assert "orientation" in _failure(fit_distortion([list(shots[0]) + blobs], W, H, **kw))
-    r = fit_distortion([list(s) for s in harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005)]
-                       + [blobs], W, H)
+    r = fit_distortion([list(s) for s in harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005)] + [blobs], W, H)
     assert isinstance(r, FitResult) and sum("direction" in e.reason for e in r.rejected) == 2
 
 
@@ -169,12 +182,15 @@ def test_bad_options_fail_clearly():
 
 
 # ------------------------------------------- acceptance: rendered shots
-@pytest.mark.parametrize("lens_name,kw", [
-    ("barrel", dict(model="radial", degree=4)),
-    ("pincushion", dict(model="radial", degree=4)),
-    ("decentred", dict(model="radial", degree=4, tangential=True)),
-    ("nonradial", dict(model="poly", degree=5)),
-])
+@pytest.mark.parametrize(
+    "lens_name,kw",
+    [
+        ("barrel", dict(model="radial", degree=4)),
+        ("pincushion", dict(model="radial", degree=4)),
+        ("decentred", dict(model="radial", degree=4, tangential=True)),
+        ("nonradial", dict(model="poly", degree=5)),
+    ],
+)
 def test_rendered_six_orientations_field_error(lens_name, kw):
     """Issue 3 item 1: 6 orientations, noise 1.5: field error <= 0.01 px RMS, <= 0.05 px max."""
     shots = measured_shots(lens_name)
@@ -187,10 +203,13 @@ def test_rendered_six_orientations_field_error(lens_name, kw):
     assert cmp.rms <= 0.01 and cmp.max <= 0.05
 
 
-@pytest.mark.parametrize("lens_name,kw", [
-    ("decentred", dict(model="radial", degree=4, tangential=True)),
-    ("nonradial", dict(model="poly", degree=5)),
-])
+@pytest.mark.parametrize(
+    "lens_name,kw",
+    [
+        ("decentred", dict(model="radial", degree=4, tangential=True)),
+        ("nonradial", dict(model="poly", degree=5)),
+    ],
+)
 def test_rendered_holdout_on_unseen_orientations(lens_name, kw):
     """Issue 3 item 2: fit on 4 orientations, the 2 others held out: holdout d <= 0.01 px."""
     shots = measured_shots(lens_name)
@@ -218,8 +237,10 @@ def test_real_photos_fit_two_hold_out_third(real, held, w_center):
     r = fit_distortion(train, w, h, model="radial", degree=4, tangential=True, prism=True, w_center=w_center)
     assert isinstance(r, FitResult), getattr(r, "reason", "")
     d, dm = corrected_straightness(r.model, real[held][2])
-    print(f"real (w_center {w_center:g}): fit on {[n for i, n in enumerate(REAL) if i != held]}: fit d "
-          f"{r.d_after:.4f}, holdout {REAL[held]} d {d:.4f} d_max {dm:.4f} px")
+    print(
+        f"real (w_center {w_center:g}): fit on {[n for i, n in enumerate(REAL) if i != held]}: fit d "
+        f"{r.d_after:.4f}, holdout {REAL[held]} d {d:.4f} d_max {dm:.4f} px"
+    )
     assert r.d_after < 0.03
     assert d <= 0.1
 

@@ -17,18 +17,19 @@ def _group(r):
     return group_string_edges(detect_edges(r.image), r.image.shape)
 
 
-def _check_complete(r, g, min_len=0.3 * min(W, H)):
+def _check_complete(r, g, min_len=0.3 * min(W, H)):  # noqa: B008 (constants)
     """Every true edge longer than min_len is found exactly once, paired with its own string's other edge."""
     m = measure_grouping(g, r.width, r.height, t=1)  # t=1: raw points, no length lost
     matches = match_truth(r, m, max_dist=0.8)
     found = {}
-    for ln, (e, _, dist) in zip(m.lines, matches):
+    for ln, (e, _, _dist) in zip(m.lines, matches):
         found.setdefault((e.string_index, e.side), []).append(ln)
     for e, curve in visible_edges(r, margin=5.0):
         length = float(np.sum(np.hypot(*np.diff(curve, axis=0).T)))
         if length >= min_len:
-            assert len(found.get((e.string_index, e.side), [])) == 1, \
+            assert len(found.get((e.string_index, e.side), [])) == 1, (
                 f"true edge {e.string_index}{e.side:+d} ({length:.0f} px) found {len(found.get((e.string_index, e.side), []))} times"
+            )
     # the two edges of each measured string are the two sides of one true string
     by_string = {}
     for ln, (e, _, _) in zip(m.lines, matches):
@@ -60,8 +61,9 @@ def test_every_string_edge_found_once_and_paired(angle):
 
 @pytest.mark.parametrize("width,spacing", [(2.0, 30.0), (15.0, 90.0)])
 def test_string_width_range(width, spacing):
-    r = render_harp(W, H, HarpScene(angle_deg=60.0, spacing_px=spacing, string_width_px=width, blur_px=0.6),
-                    noise_sigma=1.5, seed=5)
+    r = render_harp(
+        W, H, HarpScene(angle_deg=60.0, spacing_px=spacing, string_width_px=width, blur_px=0.6), noise_sigma=1.5, seed=5
+    )
     g = _group(r)
     _check_complete(r, g)
     assert abs(g.string_width_px - width) < 1.5
@@ -75,8 +77,16 @@ def test_thirty_strings_at_small_spacing():
 
 
 def test_frame_and_dust_are_rejected_not_measured():
-    scene = HarpScene(angle_deg=20.0, spacing_px=60.0, string_width_px=3.0, frame=True, frame_depth_px=120.0,
-                      dust=12, dust_seed=4, vignetting=0.5)
+    scene = HarpScene(
+        angle_deg=20.0,
+        spacing_px=60.0,
+        string_width_px=3.0,
+        frame=True,
+        frame_depth_px=120.0,
+        dust=12,
+        dust_seed=4,
+        vignetting=0.5,
+    )
     r = render_harp(W, H, scene, noise_sigma=1.5, seed=2)
     g = _group(r)
     _check_complete(r, g)
@@ -115,8 +125,9 @@ def test_string_cut_by_a_gap_is_rejoined():
 
 def test_strong_distortion_keeps_each_edge_whole():
     lens = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.08))  # ~40 px at the corners
-    r = render_harp(W, H, HarpScene(angle_deg=10.0, spacing_px=60.0, string_width_px=3.0), lens=lens,
-                    noise_sigma=1.5, seed=8)
+    r = render_harp(
+        W, H, HarpScene(angle_deg=10.0, spacing_px=60.0, string_width_px=3.0), lens=lens, noise_sigma=1.5, seed=8
+    )
     g = _group(r)
     _check_complete(r, g)
 

@@ -58,9 +58,13 @@ def test_leave_one_out_measures_the_true_interpolation_error(method):
         dk2 = 0.004 * 0.6 * h * h
         base = lens_for_focus(0.0, W, H)
         k_lo = list(base.k)
-        k_lo[2] = 0.004 * (1 - 0.6 * 0.5 ** 2) - dk2
-        expected = compare_models(RadialModel(center=base.center, k=tuple(k_lo), scale=base.scale,
-                                              tangential=base.tangential), curved_lens(0.5), W, H)
+        k_lo[2] = 0.004 * (1 - 0.6 * 0.5**2) - dk2
+        expected = compare_models(
+            RadialModel(center=base.center, k=tuple(k_lo), scale=base.scale, tangential=base.tangential),
+            curved_lens(0.5),
+            W,
+            H,
+        )
         mid = loo[1]
         assert mid.rms_px == pytest.approx(expected.rms, rel=0.02)
         assert worst > 0.01
@@ -73,8 +77,10 @@ def test_leave_one_out_measures_the_true_interpolation_error(method):
 def test_fields_are_compared_in_a_common_gauge():
     # the fit at f=1 came out in another homography gauge (projective part included)
     g = np.array([[1.02, 0.01, 3.0], [-0.008, 0.99, -2.0], [1.5e-4, -1e-4, 1.0]])
-    models = {0.0: lens_for_focus(0.0, W, H),
-              1.0: HomographyModel(base=lens_for_focus(1.0, W, H), homography=tuple(map(tuple, g)))}
+    models = {
+        0.0: lens_for_focus(0.0, W, H),
+        1.0: HomographyModel(base=lens_for_focus(1.0, W, H), homography=tuple(map(tuple, g))),
+    }
     for gauge in ("lsq", "corners"):
         m = interpolate_correction(models, 0.5, W, H, gauge=gauge)
         assert compare_models(m, lens_for_focus(0.5, W, H), W, H).max < 1e-3, gauge
@@ -111,9 +117,9 @@ def test_grid_field_model_round_trip_and_inverse(tmp_path):
     pts = np.array([[0.0, 0.0], [W - 1.0, H - 1.0], [123.4, 321.9]])
     np.testing.assert_array_equal(back.undistort_points(pts), m.undistort_points(pts))
     write_model_file(tmp_path / "m.yaml", m, width=W, height=H)
-    np.testing.assert_allclose(load_model(tmp_path / "m.yaml").undistort_points(pts), m.undistort_points(pts),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        load_model(tmp_path / "m.yaml").undistort_points(pts), m.undistort_points(pts), atol=1e-12
+    )
     np.testing.assert_allclose(m.undistort_points(m.distort_points(pts)), pts, atol=1e-8)
     with pytest.raises(ValueError, match="non-finite"):
-        GridFieldModel(origin=(0, 0), step=10, dx=np.full((5, 5), np.nan), dy=np.zeros((5, 5)), width=40,
-                       height=40)
+        GridFieldModel(origin=(0, 0), step=10, dx=np.full((5, 5), np.nan), dy=np.zeros((5, 5)), width=40, height=40)

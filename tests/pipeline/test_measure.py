@@ -16,8 +16,14 @@ W, H = 1000, 750
 @pytest.mark.parametrize("width,spacing", [(3.0, 60.0), (8.0, 80.0)])
 @pytest.mark.parametrize("angle", [0.0, 30.0, 45.0, 60.0, 90.0, 120.0, 135.0, 150.0])
 def test_undistorted_harp_measures_straight(angle, width, spacing):
-    r = render_harp(W, H, HarpScene(angle_deg=angle, spacing_px=spacing, string_width_px=width),
-                    noise_sigma=1.5, bit_depth=8, seed=int(angle) + int(width))
+    r = render_harp(
+        W,
+        H,
+        HarpScene(angle_deg=angle, spacing_px=spacing, string_width_px=width),
+        noise_sigma=1.5,
+        bit_depth=8,
+        seed=int(angle) + int(width),
+    )
     m = measure_image(r.image)
     assert m.n_lines >= 14 and m.n_lines % 2 == 0
     assert m.d <= 0.01, f"d = {m.d:.5f} px"
@@ -46,8 +52,9 @@ LENSES = {
 @pytest.mark.parametrize("angle,width", [(20.0, 3.0), (100.0, 8.0)])
 def test_distorted_harp_matches_ground_truth(lens_name, angle, width):
     lens = RadialModel.for_image(W, H, **LENSES[lens_name])
-    r = render_harp(W, H, HarpScene(angle_deg=angle, spacing_px=60.0, string_width_px=width), lens=lens,
-                    noise_sigma=1.5, seed=21)
+    r = render_harp(
+        W, H, HarpScene(angle_deg=angle, spacing_px=60.0, string_width_px=width), lens=lens, noise_sigma=1.5, seed=21
+    )
     # the lens moves the corners by several pixels
     corner = np.array([[0.0, 0.0], [W - 1.0, H - 1.0]])
     assert np.max(np.hypot(*(lens.undistort_points(corner) - corner).T)) > 5.0
@@ -59,13 +66,22 @@ def test_distorted_harp_matches_ground_truth(lens_name, angle, width):
     assert m.d == pytest.approx(truth.d, rel=0.02)
     assert m.d_max == pytest.approx(truth.d_max, rel=0.02)
     # per edge too: every edge is measured on the right curve
-    for ln, (_, _, dist) in zip(m.lines, matches):
+    for _ln, (_, _, dist) in zip(m.lines, matches):
         assert dist < 0.5  # gradient maxima sit ~0.3 px outside a 3 px string (blur), a constant offset
 
 
 def test_distorted_harp_with_frame_dust_and_vignetting_matches_ground_truth():
-    scene = HarpScene(angle_deg=150.0, spacing_px=45.0, string_width_px=3.0, frame=True, frame_side=-1,
-                      frame_depth_px=150.0, dust=40, dust_seed=6, vignetting=0.5)
+    scene = HarpScene(
+        angle_deg=150.0,
+        spacing_px=45.0,
+        string_width_px=3.0,
+        frame=True,
+        frame_side=-1,
+        frame_depth_px=150.0,
+        dust=40,
+        dust_seed=6,
+        vignetting=0.5,
+    )
     r = render_harp(W, H, scene, lens=RadialModel.for_image(W, H, k=(1.0, 0.0, 0.04)), noise_sigma=1.5, seed=6)
     m = measure_image(r.image)
     matches = match_truth(r, m)  # every measured edge is a true string edge (not frame, not dust)
@@ -148,7 +164,7 @@ def test_real_photo_nothing_measured_on_frame_or_dust(real_measurements, name, r
     for ln in m.lines:
         # on both sides of every measured edge pair lies the bright sheet, not the dark frame:
         # sample 6 px outside the string, on the side away from the partner edge
-        pts = ln.raw_points[:: 25]
+        pts = ln.raw_points[::25]
         other = [o for o in m.lines if o.string_id == ln.string_id and o is not ln][0]
         c = np.mean(other.raw_points, axis=0) - np.mean(ln.raw_points, axis=0)
         d = np.diff(ln.raw_points[[0, -1]], axis=0)[0]

@@ -8,8 +8,7 @@ import pytest
 import yaml
 
 import pipeline
-from pipeline.model_file import (FORMAT_NAME, make_provenance, read_model_file, sha256_file,
-                                 write_model_file)
+from pipeline.model_file import FORMAT_NAME, make_provenance, read_model_file, sha256_file, write_model_file
 from pipeline.models import LensfunModel, OpenCVModel, RadialModel
 from pipeline.models.base import IdentityModel
 from pipeline.normalise import normalise_by_corners
@@ -18,8 +17,14 @@ W, H = 640, 480
 PTS = np.array([[0.0, 0.0], [639.0, 479.0], [100.5, 300.25], [320.0, 10.0]])
 
 MODELS = [
-    RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, -0.004), center=(322.3, 236.9),
-                          tangential=(1e-3, -2e-3), prism=(1e-4, 0.0, -2e-4, 0.0)),
+    RadialModel.for_image(
+        W,
+        H,
+        k=(1.0, 0.0, 0.03, 0.0, -0.004),
+        center=(322.3, 236.9),
+        tangential=(1e-3, -2e-3),
+        prism=(1e-4, 0.0, -2e-4, 0.0),
+    ),
     IdentityModel(),
     OpenCVModel(fx=700.0, fy=702.0, cx=319.0, cy=241.0, dist=(-0.2, 0.05, 1e-3, -1e-3, 0.01)),
     LensfunModel(kind="ptlens", terms=(0.01, -0.02, 0.005), width=W, height=H),
@@ -64,17 +69,26 @@ def test_write_is_atomic_and_leaves_no_temporary(tmp_path):
     assert read_model_file(path).width == W
 
 
-@pytest.mark.parametrize("text, reason", [
-    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial\n", "not a valid YAML"),
-    ("just a string", "not a harp model file"),
-    ("format: harp-distortion-model\nformat_version: 7\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
-     "unknown model file format version 7"),
-    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: warp9}\nimage: {width: 2, height: 2}\n",
-     "unknown distortion model 'warp9'"),
-    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
-     "invalid parameters for model 'radial'"),
-    ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: identity}\n", "image size"),
-])
+@pytest.mark.parametrize(
+    "text, reason",
+    [
+        ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial\n", "not a valid YAML"),
+        ("just a string", "not a harp model file"),
+        (
+            "format: harp-distortion-model\nformat_version: 7\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
+            "unknown model file format version 7",
+        ),
+        (
+            "format: harp-distortion-model\nformat_version: 1\nmodel: {model: warp9}\nimage: {width: 2, height: 2}\n",
+            "unknown distortion model 'warp9'",
+        ),
+        (
+            "format: harp-distortion-model\nformat_version: 1\nmodel: {model: radial}\nimage: {width: 2, height: 2}\n",
+            "invalid parameters for model 'radial'",
+        ),
+        ("format: harp-distortion-model\nformat_version: 1\nmodel: {model: identity}\n", "image size"),
+    ],
+)
 def test_defective_files_raise_one_line_value_error_naming_file(tmp_path, text, reason):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
@@ -93,17 +107,30 @@ def test_missing_and_binary_files(tmp_path):
         read_model_file(p)
 
 
-@pytest.mark.parametrize("text, reason", [
-    ("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [1,0,0,0,1,0,0,0,1]\n",
-     "an OpenCV FileStorage calibration file"),
-    ('<?xml version="1.0"?>\n<opencv_storage>\n<camera_matrix type_id="opencv-matrix"></camera_matrix>\n'
-     "</opencv_storage>\n", "an OpenCV FileStorage calibration file"),
-    ("<lensdatabase><lens><model>x</model></lens></lensdatabase>\n", "a lensfun XML profile"),
-    ("image_width: 2\ncamera_matrix: {rows: 3, cols: 3, data: [1,0,0,0,1,0,0,0,1]}\ndistortion_model: plumb_bob\n",
-     "a ROS camera_info file"),
-    ("format: harp-distortion-model\nformat_version: 1\nimage: {width: 2, height: 2}\n"
-     "model: {model: radial, center: [1, 1], k: oops, scale: 1}\n", "invalid parameters for model 'radial'"),
-])
+@pytest.mark.parametrize(
+    "text, reason",
+    [
+        (
+            "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [1,0,0,0,1,0,0,0,1]\n",
+            "an OpenCV FileStorage calibration file",
+        ),
+        (
+            '<?xml version="1.0"?>\n<opencv_storage>\n<camera_matrix type_id="opencv-matrix"></camera_matrix>\n'
+            "</opencv_storage>\n",
+            "an OpenCV FileStorage calibration file",
+        ),
+        ("<lensdatabase><lens><model>x</model></lens></lensdatabase>\n", "a lensfun XML profile"),
+        (
+            "image_width: 2\ncamera_matrix: {rows: 3, cols: 3, data: [1,0,0,0,1,0,0,0,1]}\ndistortion_model: plumb_bob\n",
+            "a ROS camera_info file",
+        ),
+        (
+            "format: harp-distortion-model\nformat_version: 1\nimage: {width: 2, height: 2}\n"
+            "model: {model: radial, center: [1, 1], k: oops, scale: 1}\n",
+            "invalid parameters for model 'radial'",
+        ),
+    ],
+)
 def test_other_software_files_and_bad_values_are_named(tmp_path, text, reason):
     path = tmp_path / "other.yaml"
     path.write_text(text)

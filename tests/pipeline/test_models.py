@@ -28,16 +28,25 @@ def test_polynomial_equation_matches_docstring():
     m = nonradial_lens()
     p = np.array([[100.0, 650.0], [900.0, 20.0]])
     xi, eta = (p[:, 0] - m.center[0]) / m.scale, (p[:, 1] - m.center[1]) / m.scale
-    xu = m.center[0] + m.scale * (xi + 0.02 * xi ** 3 + 0.02 * xi * eta ** 2 + 0.004 * xi ** 2 * eta + 0.002 * xi ** 5)
-    yu = m.center[1] + m.scale * (eta + 0.02 * xi ** 2 * eta + 0.02 * eta ** 3 - 0.003 * xi ** 3)
+    xu = m.center[0] + m.scale * (xi + 0.02 * xi**3 + 0.02 * xi * eta**2 + 0.004 * xi**2 * eta + 0.002 * xi**5)
+    yu = m.center[1] + m.scale * (eta + 0.02 * xi**2 * eta + 0.02 * eta**3 - 0.003 * xi**3)
     assert np.allclose(m.undistort_points(p), np.stack([xu, yu], 1), atol=1e-9)
 
 
-@pytest.mark.parametrize("model", [
-    nonradial_lens(),
-    RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(530, 355), tangential=(0.001, -0.0007),
-                          prism=(0.0005, 0.0, -0.0004, 0.0)),
-])
+@pytest.mark.parametrize(
+    "model",
+    [
+        nonradial_lens(),
+        RadialModel.for_image(
+            W,
+            H,
+            k=(1.0, 0.0, 0.03, 0.0, 0.005),
+            center=(530, 355),
+            tangential=(0.001, -0.0007),
+            prism=(0.0005, 0.0, -0.0004, 0.0),
+        ),
+    ],
+)
 def test_distort_inverts_undistort(model):
     p = _grid()
     u = model.undistort_points(p)
@@ -46,11 +55,16 @@ def test_distort_inverts_undistort(model):
     assert np.abs(back - p).max() < 1e-8
 
 
-@pytest.mark.parametrize("model", [
-    nonradial_lens(),
-    HomographyModel(RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)),
-                    ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0))),
-])
+@pytest.mark.parametrize(
+    "model",
+    [
+        nonradial_lens(),
+        HomographyModel(
+            RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)),
+            ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0)),
+        ),
+    ],
+)
 def test_dict_round_trip_and_registry(model):
     d = model.to_dict()
     assert model.name in MODEL_TYPES
@@ -61,8 +75,9 @@ def test_dict_round_trip_and_registry(model):
 
 
 def test_homography_model_inverse():
-    m = HomographyModel(RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)),
-                        ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0)))
+    m = HomographyModel(
+        RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)), ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0))
+    )
     p = _grid(50.0)
     assert np.abs(m.distort_points(m.undistort_points(p)) - p).max() < 1e-8
 

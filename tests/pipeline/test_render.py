@@ -15,7 +15,12 @@ import pytest
 from pipeline.models.base import IdentityModel
 from pipeline.models.radial import RadialModel
 from pipeline.render import (
-    EdgeTruth, HarpScene, edge_peak_offset, render_harp, true_edge_curves, visible_edges,
+    EdgeTruth,
+    HarpScene,
+    edge_peak_offset,
+    render_harp,
+    true_edge_curves,
+    visible_edges,
 )
 from tests.pipeline.scanline_fit import scanline_errors
 
@@ -35,8 +40,9 @@ def test_edges_match_truth_without_distortion(angle, width):
 LENSES = {
     "barrel": RadialModel.for_image(W, H, k=(1.0, 0.0, 0.04)),
     "pincushion": RadialModel.for_image(W, H, k=(1.0, 0.0, -0.04, 0.0, 0.01)),
-    "decentred": RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03), center=(W / 2 + 17.0, H / 2 - 11.0),
-                                       tangential=(0.002, -0.001)),
+    "decentred": RadialModel.for_image(
+        W, H, k=(1.0, 0.0, 0.03), center=(W / 2 + 17.0, H / 2 - 11.0), tangential=(0.002, -0.001)
+    ),
 }
 
 
@@ -47,6 +53,7 @@ def test_edges_match_truth_through_lens(lens_name, angle):
     scene = HarpScene(angle_deg=angle, spacing_px=45.0, string_width_px=3.0, vignetting=0.2)
     r = render_harp(W, H, scene, lens=lens, noise_sigma=0.0, bit_depth=16)
     curves = true_edge_curves(r)
+
     # the lens really bends the edges: largest sagitta far above the tolerance
     def sagitta(c):
         chord = c[-1] - c[0]
@@ -121,8 +128,9 @@ def test_read_noise_statistics_and_seeds():
 def test_shot_noise_variance_follows_level():
     scene = HarpScene(angle_deg=0.0, spacing_px=200.0, vignetting=0.5)
     clean = render_harp(W, H, scene, noise_sigma=0.0, bit_depth=16).image.astype(float) / (65535 / 255)
-    noisy = render_harp(W, H, scene, noise_sigma=0.0, shot_noise=True, electrons_per_level=20.0,
-                        bit_depth=16, seed=3).image.astype(float) / (65535 / 255)
+    noisy = render_harp(
+        W, H, scene, noise_sigma=0.0, shot_noise=True, electrons_per_level=20.0, bit_depth=16, seed=3
+    ).image.astype(float) / (65535 / 255)
     var = (noisy - clean) ** 2
     for lo, hi in [(100, 140), (170, 205)]:
         m = (clean > lo) & (clean < hi)
@@ -149,8 +157,13 @@ def test_bit_depth_exposure_and_saturation():
 
 
 def test_vignetting_reaches_configured_falloff_at_corners():
-    r = render_harp(W, H, HarpScene(angle_deg=45.0, spacing_px=1000.0, phase_px=400.0, vignetting=0.3),
-                    noise_sigma=0.0, bit_depth=16)
+    r = render_harp(
+        W,
+        H,
+        HarpScene(angle_deg=45.0, spacing_px=1000.0, phase_px=400.0, vignetting=0.3),
+        noise_sigma=0.0,
+        bit_depth=16,
+    )
     img = r.image / (65535 / 255)
     for y, x in [(0, 0), (0, W - 1), (H - 1, 0), (H - 1, W - 1)]:
         assert abs(img[y, x] - 0.7 * 200) < 0.01
@@ -165,7 +178,7 @@ def test_dust_darkens_where_recorded_and_does_not_depend_on_noise_seed():
     ratio = (r.image.astype(float) + 1) / (ref.image.astype(float) + 1)
     for sp in r.dust:
         x, y = int(round(sp.x)), int(round(sp.y))
-        expected = 1 - sp.depth * math.exp(-((x - sp.x) ** 2 + (y - sp.y) ** 2) / (2 * sp.sigma ** 2))
+        expected = 1 - sp.depth * math.exp(-((x - sp.x) ** 2 + (y - sp.y) ** 2) / (2 * sp.sigma**2))
         assert abs(ratio[y, x] - expected) < 0.03
     far = np.ones((H, W), bool)
     yy, xx = np.mgrid[0:H, 0:W]

@@ -91,14 +91,13 @@ def test_after_t30_smoothing_rms_to_true_line_is_below_5_thousandths_px():
         for seed in range(2):
             rng = np.random.default_rng(1000 * seed + angle)
             p = (n / 2 + rng.uniform(-0.5, 0.5), n / 2 + rng.uniform(-0.5, 0.5))
-            img = quantise(render_step((n, n), angle, p, bright=200, dark=30, blur=0.7),
-                           1.5, rng)
+            img = quantise(render_step((n, n), angle, p, bright=200, dark=30, blur=0.7), 1.5, rng)
             chains = detect_edges(img)
             assert len(chains) == 1
             sm = smooth_subsample(chains[0].xy, t=30)
             assert sm.shape[0] >= 4
             d_all.append((sm - p) @ line_normal(angle))
     d = np.concatenate(d_all)
-    rms = np.sqrt(np.mean(d ** 2))
+    rms = np.sqrt(np.mean(d**2))
     assert rms <= 0.005, rms
     assert np.abs(d).max() <= 0.012

@@ -1,15 +1,13 @@
 import numpy as np
 
-from pipeline.select import FALLBACK, Candidate, select_model
 from pipeline.models import RadialModel
+from pipeline.select import FALLBACK, Candidate, select_model
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import real_shots
 
 W, H = 1000, 750
-DECENTRED = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530, 355),
-                                  tangential=(0.001, -0.0007))
-CANDS = (Candidate("radial", 2), Candidate("radial", 4, True), Candidate("radial", 4, True, True),
-         Candidate("poly", 5))
+DECENTRED = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530, 355), tangential=(0.001, -0.0007))
+CANDS = (Candidate("radial", 2), Candidate("radial", 4, True), Candidate("radial", 4, True, True), Candidate("poly", 5))
 
 
 def test_cv_picks_the_simplest_model_that_generalises():

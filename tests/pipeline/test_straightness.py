@@ -89,7 +89,7 @@ def test_hf_rms_on_edges_shorter_than_its_kernel(n, step):
     # the Gaussian window (4 sigma each side) may be longer than the edge
     s = np.arange(n) * step
     rng = np.random.default_rng(3)
-    p = np.column_stack([s, 1e-3 * (s - s.mean()) ** 2 / step ** 2 + 0.05 * rng.standard_normal(n)])
+    p = np.column_stack([s, 1e-3 * (s - s.mean()) ** 2 / step**2 + 0.05 * rng.standard_normal(n)])
     assert hf_rms(p) == pytest.approx(_hf_rms_direct(p, 40.0), rel=1e-6, abs=1e-12)
     straight = np.column_stack([s, 0.25 * s])
     assert hf_rms(straight) == pytest.approx(0.0, abs=1e-9)

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from drivers.protocols import CameraIdentity, Frame
 from pipeline.models.radial import RadialModel
 from pipeline.render import HarpScene, render_harp
@@ -137,10 +135,19 @@ class FakeCamera:
         if self.calls in self.images:
             img = self.images[self.calls]
         else:
-            scene = HarpScene(angle_deg=(self.stage.deg + self.stage.offset_deg) % 180.0,
-                              spacing_px=40.0, vignetting=0.1)
-            img = render_harp(W, H, scene, TRUE_LENS, noise_sigma=1.0,
-                              seed=self.seed + int(self.stage.deg * 10) + 1000 * self.counter).image
+            scene = HarpScene(
+                angle_deg=(self.stage.deg + self.stage.offset_deg) % 180.0, spacing_px=40.0, vignetting=0.1
+            )
+            img = render_harp(
+                W, H, scene, TRUE_LENS, noise_sigma=1.0, seed=self.seed + int(self.stage.deg * 10) + 1000 * self.counter
+            ).image
         self.counter += 1
-        return Frame(image=img, timestamp=time.time(), exposure_us=self.exposure, gain_db=0.0,
-                     focus=self.focus, camera=self.identity, counter=self.counter - 1)
+        return Frame(
+            image=img,
+            timestamp=time.time(),
+            exposure_us=self.exposure,
+            gain_db=0.0,
+            focus=self.focus,
+            camera=self.identity,
+            counter=self.counter - 1,
+        )

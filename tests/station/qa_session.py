@@ -43,8 +43,7 @@ def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGL
     return path
 
 
-def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES,
-                  name: str = "s1") -> Path:
+def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1") -> Path:
     """A finished session under ``root/sessions/name``; returns its path."""
     config = load_config(write_config(root, qa=qa, focus=focus, angles=angles))
     s = SessionDir.create(config.sessions_dir, config, name=name)
@@ -59,9 +58,16 @@ def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANG
                 shots.append(measure_shot(img.astype(float), config.pipeline))
             fit = fit_focus(shots, W, H, config.pipeline)
             assert fit.failure is None, fit.failure
-            write_model_file(s.path / "profiles" / f"focus{fi}.yaml", fit.model, width=W, height=H,
-                             merit={"fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
-                                    "holdout": {"d": fit.holdout_d, "d_max": fit.holdout_d_max}},
-                             provenance={"focus": f})
+            write_model_file(
+                s.path / "profiles" / f"focus{fi}.yaml",
+                fit.model,
+                width=W,
+                height=H,
+                merit={
+                    "fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
+                    "holdout": {"d": fit.holdout_d, "d_max": fit.holdout_d_max},
+                },
+                provenance={"focus": f},
+            )
         s.append({"kind": "finished"})
     return s.path

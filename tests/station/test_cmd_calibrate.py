@@ -18,8 +18,9 @@ def shots(tmp_path_factory):
     d = tmp_path_factory.mktemp("shots")
     paths = {}
     for i, ang in enumerate((3.0, 63.0, 123.0, 93.0)):
-        img = render_harp(W, H, HarpScene(angle_deg=ang, spacing_px=40.0, phase_px=7.0 * i), lens=LENS,
-                          noise_sigma=1.5, seed=i).image
+        img = render_harp(
+            W, H, HarpScene(angle_deg=ang, spacing_px=40.0, phase_px=7.0 * i), lens=LENS, noise_sigma=1.5, seed=i
+        ).image
         paths[ang] = d / f"shot{i}.pgm"
         assert cv2.imwrite(str(paths[ang]), img)
     same = render_harp(W, H, HarpScene(angle_deg=4.0, spacing_px=40.0, phase_px=20.0), lens=LENS, seed=9).image
@@ -39,8 +40,19 @@ def _run(capsys, *argv):
 
 def test_radial_fit_with_holdout_json(shots, tmp_path, capsys):
     out_path = tmp_path / "lens.yaml"
-    code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], "--model", "radial",
-                          "--holdout", shots[93.0], "--out", out_path, "--json")
+    code, out, err = _run(
+        capsys,
+        shots[3.0],
+        shots[63.0],
+        shots[123.0],
+        "--model",
+        "radial",
+        "--holdout",
+        shots[93.0],
+        "--out",
+        out_path,
+        "--json",
+    )
     assert code == 0, err
     rep = json.loads(out)
     assert rep["model"] == str(out_path)
@@ -69,19 +81,23 @@ def test_auto_chooses_by_cross_validation_and_says_so(shots, tmp_path, capsys):
 
 
 def test_table_output(shots, tmp_path, capsys):
-    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "poly", "--degree", "4",
-                          "--out", tmp_path / "p.yaml")
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], "--model", "poly", "--degree", "4", "--out", tmp_path / "p.yaml"
+    )
     assert code == 0, err
     assert "poly4" in out and "d after" in out and "wrote" in out
 
 
-@pytest.mark.parametrize("args,needle", [
-    (("same_a", "same_b"), "orientation"),
-    ((3.0, "small"), "different sizes"),
-    ((3.0, "missing"), "missing.pgm"),
-    ((3.0, 63.0, "--degree", "3"), "need --model radial or poly"),
-    ((3.0, 63.0, "--model", "poly", "--degree", "12"), "3..11"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (("same_a", "same_b"), "orientation"),
+        ((3.0, "small"), "different sizes"),
+        ((3.0, "missing"), "missing.pgm"),
+        ((3.0, 63.0, "--degree", "3"), "need --model radial or poly"),
+        ((3.0, 63.0, "--model", "poly", "--degree", "12"), "3..11"),
+    ],
+)
 def test_bad_input_one_line_exit_2(shots, tmp_path, capsys, args, needle):
     resolved = []
     for a in args:
@@ -103,8 +119,9 @@ def test_bad_input_one_line_exit_2(shots, tmp_path, capsys, args, needle):
 
 def test_table_names_each_shot_readably(shots, tmp_path, capsys):
     # long directories must not turn every row into the same truncated "/tmp/pytest-…"
-    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "radial", "--holdout", shots[93.0],
-                          "--out", tmp_path / "r.yaml")
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], "--model", "radial", "--holdout", shots[93.0], "--out", tmp_path / "r.yaml"
+    )
     assert code == 0, err
     rows = [ln for ln in out.splitlines() if "shot" in ln and ".pgm" in ln]
     assert any("shot0.pgm" in r for r in rows) and any("shot1.pgm" in r for r in rows)
@@ -114,8 +131,20 @@ def test_table_names_each_shot_readably(shots, tmp_path, capsys):
 def test_warns_when_the_model_makes_the_holdout_worse(real_harp_dir, tmp_path, capsys):
     # a free degree-5 polynomial fitted on two real shots bends the third one further
     r = real_harp_dir
-    code, out, err = _run(capsys, r / "IMG_6931.pgm", r / "IMG_6950.pgm", "--holdout", r / "IMG_6964.pgm",
-                          "--model", "poly", "--degree", "5", "--out", tmp_path / "p5.yaml", "--json")
+    code, out, err = _run(
+        capsys,
+        r / "IMG_6931.pgm",
+        r / "IMG_6950.pgm",
+        "--holdout",
+        r / "IMG_6964.pgm",
+        "--model",
+        "poly",
+        "--degree",
+        "5",
+        "--out",
+        tmp_path / "p5.yaml",
+        "--json",
+    )
     assert code == 0, err
     rep = json.loads(out)
     assert rep["holdout"]["d"] > rep["holdout"]["images"][0]["d_before"]
@@ -131,8 +160,11 @@ def test_unwritable_out_is_reported_before_any_work(shots, tmp_path, capsys, mon
     monkeypatch.setattr(cc, "_measure", no_measuring)
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    for out, reason in ((tmp_path / "no" / "lens.yaml", "no such directory"),
-                        (blocker / "lens.yaml", "not a directory"), (tmp_path, "is a directory")):
+    for out, reason in (
+        (tmp_path / "no" / "lens.yaml", "no such directory"),
+        (blocker / "lens.yaml", "not a directory"),
+        (tmp_path, "is a directory"),
+    ):
         code, _, err = _run(capsys, shots[3.0], shots[63.0], "--out", out)
         assert code == 2 and err.startswith(f"harp calibrate: {out}: cannot write model file (")
         assert reason in err and err.count("\n") == 1, err

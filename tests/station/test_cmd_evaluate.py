@@ -104,12 +104,15 @@ def test_table_output_lensfun_and_already_corrected(tmp_path, shots, capsys):
     assert rep["after"] == measured
 
 
-@pytest.mark.parametrize("content, message", [
-    ("format: harp-distortion-model\nformat_version: 99\n", "unknown model file format version 99"),
-    ("format: harp-distortion-model\nformat_version: 1\nmodel: [\n", "not a valid YAML"),
-    ("hello: world\n", "not a recognised correction"),
-    ("<lensdatabase><lens><model>x</model></lens></lensdatabase>", "no <calibration><distortion>"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("format: harp-distortion-model\nformat_version: 99\n", "unknown model file format version 99"),
+        ("format: harp-distortion-model\nformat_version: 1\nmodel: [\n", "not a valid YAML"),
+        ("hello: world\n", "not a recognised correction"),
+        ("<lensdatabase><lens><model>x</model></lens></lensdatabase>", "no <calibration><distortion>"),
+    ],
+)
 def test_bad_correction_files_exit_2_with_one_line(tmp_path, shots, capsys, content, message):
     p = tmp_path / "bad.yaml"
     p.write_text(content)

@@ -54,10 +54,13 @@ def test_stdout_exports_ros_lensfun_json(model, capsys):
     assert doc["merit"]["fit"]["d"] == 0.01
 
 
-@pytest.mark.parametrize("content, reason", [
-    ("format: harp-distortion-model\nformat_version: 2\n", "unknown model file format version 2"),
-    ("{{{{", "not a valid YAML"),
-])
+@pytest.mark.parametrize(
+    "content, reason",
+    [
+        ("format: harp-distortion-model\nformat_version: 2\n", "unknown model file format version 2"),
+        ("{{{{", "not a valid YAML"),
+    ],
+)
 def test_bad_model_exit_2(tmp_path, capsys, content, reason):
     p = tmp_path / "m.yaml"
     p.write_text(content)

@@ -26,8 +26,7 @@ def harp8():
 
 @pytest.fixture(scope="module")
 def harp16():
-    return render_harp(W, H, HarpScene(angle_deg=10.0, spacing_px=50.0), noise_sigma=1.5, bit_depth=16,
-                       seed=2).image
+    return render_harp(W, H, HarpScene(angle_deg=10.0, spacing_px=50.0), noise_sigma=1.5, bit_depth=16, seed=2).image
 
 
 @pytest.fixture()
@@ -46,7 +45,7 @@ def files(tmp_path, harp8, harp16):
     data = f["pgm"].read_bytes()
     f["truncated_pgm"] = tmp_path / "truncated.pgm"
     f["truncated_pgm"].write_bytes(data[: len(data) // 2])
-    png = (tmp_path / "harp8.png")
+    png = tmp_path / "harp8.png"
     cv2.imwrite(str(png), harp8)
     f["truncated_png"] = tmp_path / "truncated.png"
     f["truncated_png"].write_bytes(png.read_bytes()[:-2000])
@@ -89,8 +88,9 @@ def test_json_schema_and_values(capsys, files):
 
 
 def test_formats_and_colour_give_the_same_measure(capsys, files):
-    code, doc, _ = _json(capsys, ["measure", "--json", str(files["png16"]), str(files["tif16"]),
-                                  str(files["pgm"]), str(files["jpg"])])
+    code, doc, _ = _json(
+        capsys, ["measure", "--json", str(files["png16"]), str(files["tif16"]), str(files["pgm"]), str(files["jpg"])]
+    )
     assert code == 0
     png16, tif16, pgm, jpg = doc["images"]
     assert png16["d"] == tif16["d"]  # lossless 16-bit in two containers
@@ -168,9 +168,23 @@ def test_only_bad_input(capsys, files):
 
 def test_subprocess_exit_code_stdout_and_stderr(files):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    p = subprocess.run([sys.executable, "-m", "station.cli", "measure", "--json", str(files["pgm"]),
-                        str(files["truncated_pgm"]), str(files["dir"])],
-                       capture_output=True, text=True, cwd=REPO, env=env, timeout=120)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "station.cli",
+            "measure",
+            "--json",
+            str(files["pgm"]),
+            str(files["truncated_pgm"]),
+            str(files["dir"]),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=env,
+        timeout=120,
+    )
     assert p.returncode == 2
     doc = json.loads(p.stdout)  # exactly one JSON object on stdout
     assert len(doc["images"]) == 1 and doc["images"][0]["n_lines"] >= 10
@@ -196,9 +210,13 @@ def test_png_cut_in_the_middle_gives_one_line_and_no_libpng_noise(capfd, files):
 def test_stdout_closed_early_gives_no_traceback(files):
     # ``harp measure --json ... | head -c 10``: the reader goes away mid-output
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    p = subprocess.Popen([sys.executable, "-m", "station.cli", "measure", "--json", "--t", "1",
-                          str(files["pgm"])], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         cwd=REPO, env=env)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "station.cli", "measure", "--json", "--t", "1", str(files["pgm"])],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env=env,
+    )
     # close before the child has written anything (it is still importing), so its
     # first write fails for certain: reading some bytes first would race with a child
     # that fits its whole output into the pipe buffer and exits 0
@@ -235,8 +253,13 @@ def test_stdout_closed_before_the_rich_table_is_not_a_qa_fail(files):
     # ``harp measure IMG | head``: rich turns the broken pipe into SystemExit(1), which
     # a production-line script would read as a QA FAIL; harp reports 141 instead
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    p = subprocess.Popen([sys.executable, "-m", "station.cli", "measure", str(files["pgm"])],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO, env=env)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "station.cli", "measure", str(files["pgm"])],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+        env=env,
+    )
     p.stdout.close()  # before the child has written anything: its first write fails
     err = p.stderr.read().decode()
     code = p.wait(timeout=120)

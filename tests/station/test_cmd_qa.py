@@ -56,8 +56,7 @@ def test_fail_on_threshold_is_exit_1(session, capsys):
 def test_reference_model_file(session, tmp_path, capsys):
     ref = tmp_path / "golden.yaml"
     write_model_file(ref, lens_for_focus(0.0, W, H), width=W, height=H)
-    code, out, _ = qa_json(capsys, session, "--reference", ref, "--max-reference-deviation", "0.05",
-                           "--no-record")
+    code, out, _ = qa_json(capsys, session, "--reference", ref, "--max-reference-deviation", "0.05", "--no-record")
     assert code == 1
     f0, f05, f1 = out["profiles"]
     # the fit at focus 0 matches the golden lens (focus 0); focus 1 is another lens state
@@ -69,17 +68,36 @@ def test_reference_model_file(session, tmp_path, capsys):
 def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
     store = tmp_path / "p.sqlite"
     with ProfileStore(store) as st:
-        for f, focus, mf in session_models(session):
-            st.put_profile(lens=("Sim", "SIM-12mm", "UNIT-7"), camera=("c", "m", "s"), focus=focus,
-                           model=mf.model.to_dict(), width=W, height=H, holdout_d=mf.merit["holdout"]["d"],
-                           session_dir=str(session), station_id="t", software_version="0")
+        for _f, focus, mf in session_models(session):
+            st.put_profile(
+                lens=("Sim", "SIM-12mm", "UNIT-7"),
+                camera=("c", "m", "s"),
+                focus=focus,
+                model=mf.model.to_dict(),
+                width=W,
+                height=H,
+                holdout_d=mf.merit["holdout"]["d"],
+                session_dir=str(session),
+                station_id="t",
+                software_version="0",
+            )
         # the golden lens: the true demo lens, calibrated at focus 0 and 1 only
         for focus in (0.0, 1.0):
-            st.put_profile(lens=("Sim", "SIM-12mm", "GOLDEN"), camera=("c", "m", "s"), focus=focus,
-                           model=lens_for_focus(focus, W, H).to_dict(), width=W, height=H, holdout_d=0.0,
-                           session_dir="golden", station_id="t", software_version="0")
-    code, out, err = qa_json(capsys, "UNIT-7", "--store", store, "--reference", "GOLDEN",
-                             "--max-reference-deviation", "0.05")
+            st.put_profile(
+                lens=("Sim", "SIM-12mm", "GOLDEN"),
+                camera=("c", "m", "s"),
+                focus=focus,
+                model=lens_for_focus(focus, W, H).to_dict(),
+                width=W,
+                height=H,
+                holdout_d=0.0,
+                session_dir="golden",
+                station_id="t",
+                software_version="0",
+            )
+    code, out, err = qa_json(
+        capsys, "UNIT-7", "--store", store, "--reference", "GOLDEN", "--max-reference-deviation", "0.05"
+    )
     assert code == 0, err
     # focus 0.5 was judged against the golden lens interpolated between 0 and 1
     assert [p["profile_id"] is not None for p in out["profiles"]] == [True] * 3
@@ -88,14 +106,17 @@ def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
         assert len(list(st.qa_results())) == 3
 
 
-@pytest.mark.parametrize("args, message", [
-    (["no-such-lens", "--store", "{store}"], "no lens matching"),
-    (["{tmp}"], "not a session directory"),
-    (["{session}", "--reference", "{ref}"], "--reference needs a threshold"),
-    (["{session}", "--reference", "{ref}", "--max-reference-deviation", "1"], "is for 640x480 images"),
-    (["{session}", "--reference", "{tmp}/missing.yaml", "--max-reference-deviation", "1"], "no such model file"),
-    (["{session}", "--reference", "#99", "--max-reference-deviation", "1"], "no profile #99"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["no-such-lens", "--store", "{store}"], "no lens matching"),
+        (["{tmp}"], "not a session directory"),
+        (["{session}", "--reference", "{ref}"], "--reference needs a threshold"),
+        (["{session}", "--reference", "{ref}", "--max-reference-deviation", "1"], "is for 640x480 images"),
+        (["{session}", "--reference", "{tmp}/missing.yaml", "--max-reference-deviation", "1"], "no such model file"),
+        (["{session}", "--reference", "#99", "--max-reference-deviation", "1"], "no profile #99"),
+    ],
+)
 def test_errors_are_one_line_exit_2(session, tmp_path, capsys, args, message):
     store = tmp_path / "p.sqlite"
     ProfileStore(store).close()
@@ -124,7 +145,8 @@ def test_unwritable_report_dir_is_one_line_naming_it(session, tmp_path, capsys):
     code, out, err = qa(capsys, session, "--report", blocker / "report", "--no-record")
     assert code == 2 and out == ""
     assert err.strip().splitlines() == [
-        f"harp qa: {blocker / 'report'}: cannot write the report (Not a directory: {blocker / 'report'})"], err
+        f"harp qa: {blocker / 'report'}: cannot write the report (Not a directory: {blocker / 'report'})"
+    ], err
 
 
 def test_corrupt_reference_file_is_named_once(session, tmp_path, capsys):

@@ -48,9 +48,14 @@ def small_config(dirpath: Path, focus=(0.0, 1.0), frames=N_FRAMES, **capture) ->
 
 def harp(*args) -> subprocess.Popen:
     """``harp ARGS`` in a new session (process group = its pid, shared by its worker processes)."""
-    return subprocess.Popen([sys.executable, "-m", "station.cli", *map(str, args)], cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "station.cli", *map(str, args)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
 
 
 def group_members(pgid: int) -> list[int]:
@@ -149,8 +154,7 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
     assert not (session / "report").exists()
     recs = manifest(session)
-    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"])
-                   for r in recs if r["kind"] == "frame")
+    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in recs if r["kind"] == "frame")
     assert set(keys) == {(f, o, i) for f in range(N_FOCUS) for o in range(N_ORI) for i in range(N_FRAMES)}
     assert set(keys.values()) == {1}  # every frame exactly once
     on_disk = sorted(p.name for p in (session / "frames").iterdir())
@@ -165,10 +169,13 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     for focus in resumed:
         a, b = resumed[focus], reference[focus]
         assert a.model == b.model, focus  # every parameter, exactly
-        assert (a.fit_d, a.fit_d_max, a.holdout_d, a.holdout_d_max) == \
-            (b.fit_d, b.fit_d_max, b.holdout_d, b.holdout_d_max)
-        assert (a.field_uncertainty_rms, a.field_uncertainty_max) == \
-            (b.field_uncertainty_rms, b.field_uncertainty_max)
+        assert (a.fit_d, a.fit_d_max, a.holdout_d, a.holdout_d_max) == (
+            b.fit_d,
+            b.fit_d_max,
+            b.holdout_d,
+            b.holdout_d_max,
+        )
+        assert (a.field_uncertainty_rms, a.field_uncertainty_max) == (b.field_uncertainty_rms, b.field_uncertainty_max)
     # resuming a finished session does nothing
     assert main(["session", "resume", str(session), "--quiet"]) == 0
     assert len(manifest(session)) == len(recs)
@@ -193,14 +200,17 @@ def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
     assert proc.returncode == 130
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     lines = err.strip().splitlines()
-    assert lines[-1] == (f"harp session: interrupted; every frame captured so far is kept in {session}; "
-                         f"continue with: harp session resume {session}"), err
+    assert lines[-1] == (
+        f"harp session: interrupted; every frame captured so far is kept in {session}; "
+        f"continue with: harp session resume {session}"
+    ), err
     kept = [r for r in manifest(session) if r["kind"] == "frame"]
     assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
     assert all((session / r["file"]).is_file() for r in kept)
     assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
-    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"])
-                   for r in manifest(session) if r["kind"] == "frame")
+    keys = Counter(
+        (r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in manifest(session) if r["kind"] == "frame"
+    )
     assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
 
 
@@ -239,8 +249,10 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
         image = average_frames([s.read_frame(r) for r in s.frames(1, 2)])
     fresh = pipeline.measure.measure_image(image, t=30)
     assert kept.n_lines == fresh.n_lines > 10 and (kept.d, kept.d_max) == (fresh.d, fresh.d_max)
-    assert all(np.array_equal(a.points, b.points) and np.array_equal(a.raw_points, b.raw_points)
-               for a, b in zip(kept.lines, fresh.lines))
+    assert all(
+        np.array_equal(a.points, b.points) and np.array_equal(a.raw_points, b.raw_points)
+        for a, b in zip(kept.lines, fresh.lines)
+    )
     assert [r.reason for r in kept.rejected] == [r.reason for r in fresh.rejected]
 
     # harp qa --report reuses them and the kept uncertainty maps: nothing measured or bootstrapped again
@@ -264,26 +276,22 @@ def test_profile_commands(uninterrupted, capsys):
     assert "DEMO-0001" in out and "radial" in out
     assert main(["profile", "show", "DEMO-0001", "--store", store]) == 0
     assert "lens #1" in capsys.readouterr().out
-    assert main(["profile", "export", "DEMO-0001", "--focus", "1", "--format", "json",
-                 "--store", store]) == 0
+    assert main(["profile", "export", "DEMO-0001", "--focus", "1", "--format", "json", "--store", store]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["image"] == {"width": W, "height": H}
     assert model_from_dict(doc["model"]).to_dict() == doc["model"]
-    assert main(["profile", "export", "DEMO-0001", "--focus", "0", "--format", "opencv",
-                 "--store", store]) == 0
+    assert main(["profile", "export", "DEMO-0001", "--focus", "0", "--format", "opencv", "--store", store]) == 0
     out = capsys.readouterr().out
     assert "distortion_coefficients" in out and "camera_matrix" in out
     # between calibrated settings: the interpolated correction field
-    assert main(["profile", "export", "DEMO-0001", "--focus", "0.5", "--format", "json",
-                 "--store", store]) == 0
+    assert main(["profile", "export", "DEMO-0001", "--focus", "0.5", "--format", "json", "--store", store]) == 0
     doc = json.loads(capsys.readouterr().out)
     interp = model_from_dict(doc["model"])
     cmp = compare_models(interp, lens_for_focus(0.5, W, H), W, H)
     assert cmp.rms < 0.02  # the demo lens changes linearly with focus
     assert main(["profile", "show", "DEMO-0001", "--focus", "0.5", "--store", store]) == 0
     assert "interpolated" in capsys.readouterr().out
-    assert main(["profile", "export", "DEMO-0001", "--focus", "1.5", "--format", "json",
-                 "--store", store]) == 2
+    assert main(["profile", "export", "DEMO-0001", "--focus", "1.5", "--format", "json", "--store", store]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not between two calibrated focus settings (0, 1)" in err
     assert main(["profile", "show", "Zeiss", "--store", store]) == 2
@@ -292,8 +300,7 @@ def test_profile_commands(uninterrupted, capsys):
 
 def test_emulator_and_camera_faults_are_retried(tmp_path):
     # four camera faults in a row on the first capture: allow five attempts
-    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1,
-                                   retries={"attempts": 5, "backoff_s": 0.01}))
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1, retries={"attempts": 5, "backoff_s": 0.01}))
     with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="f") as s:
         sim.camera.open()
         sim.turntable.open()
@@ -360,7 +367,6 @@ def test_session_records_qa_and_interpolation(uninterrupted):
     assert [r["verdict"] for r in recs if r["kind"] == "qa_session"] == ["PASS"]
     with ProfileStore(base / "profiles.sqlite") as st:
         assert [r["verdict"] for r in st.qa_results()] == ["PASS", "PASS"]
-
 
 
 def test_two_sessions_write_to_one_store_at_once(tmp_path):

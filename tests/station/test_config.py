@@ -1,5 +1,6 @@
 """Configuration: the shipped configs load; every bad field is one line naming it."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -46,7 +47,7 @@ def test_demo_values_and_relative_paths():
     assert cfg.simulation is not None
     assert cfg.store_path == (REPO / "profiles" / "harp-profiles.sqlite")
     assert cfg.station.turntable.as_driver_config(port="/dev/pts/9")["port"] == "/dev/pts/9"
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.pipeline.t = 3  # frozen
 
 

@@ -10,8 +10,12 @@ from pipeline.measure import measure_image
 from pipeline.render import HarpScene, render_harp
 from pipeline.uncertainty import FieldUncertainty
 from station.config import load_config
-from station.evidence_files import (measurement_arrays, measurement_from_arrays, uncertainty_arrays,
-                                    uncertainty_from_arrays)
+from station.evidence_files import (
+    measurement_arrays,
+    measurement_from_arrays,
+    uncertainty_arrays,
+    uncertainty_from_arrays,
+)
 from station.session_dir import SessionDir, SessionError
 from tests.station.qa_session import write_config
 
@@ -20,8 +24,14 @@ W, H = 320, 240
 
 @pytest.fixture(scope="module")
 def measurement():
-    img = render_harp(W, H, HarpScene(angle_deg=30.0, spacing_px=24.0, dust=2, dust_seed=1),
-                      lens=lens_for_focus(0.5, W, H), noise_sigma=1.0, seed=4).image
+    img = render_harp(
+        W,
+        H,
+        HarpScene(angle_deg=30.0, spacing_px=24.0, dust=2, dust_seed=1),
+        lens=lens_for_focus(0.5, W, H),
+        noise_sigma=1.0,
+        seed=4,
+    ).image
     return measure_image(img.astype(float), t=30)
 
 
@@ -56,9 +66,25 @@ def test_a_file_from_an_incompatible_version_is_refused(measurement):
 def test_uncertainty_map_round_trips():
     xs, ys = np.linspace(0, W - 1, 5), np.linspace(0, H - 1, 4)
     std = np.arange(20, dtype=float).reshape(4, 5) / 1000
-    u = FieldUncertainty(rms=0.01, max=0.019, xs=xs, ys=ys, std=std, n_boot=7, n_failed=1,
-                         resample="edges", model=None, failures=("diverged",))
+    u = FieldUncertainty(
+        rms=0.01,
+        max=0.019,
+        xs=xs,
+        ys=ys,
+        std=std,
+        n_boot=7,
+        n_failed=1,
+        resample="edges",
+        model=None,
+        failures=("diverged",),
+    )
     back = uncertainty_from_arrays(uncertainty_arrays(u), model="m")
     assert np.array_equal(back.std, std) and np.array_equal(back.xs, xs) and back.model == "m"
-    assert (back.rms, back.max, back.n_boot, back.n_failed, back.resample, back.failures) == \
-        (0.01, 0.019, 7, 1, "edges", ("diverged",))
+    assert (back.rms, back.max, back.n_boot, back.n_failed, back.resample, back.failures) == (
+        0.01,
+        0.019,
+        7,
+        1,
+        "edges",
+        ("diverged",),
+    )

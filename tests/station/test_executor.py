@@ -12,7 +12,7 @@ from station.config import load_config
 from station.executor import EXIT_ABORTED, EXIT_OK, Executor
 from station.session_dir import SessionDir
 from station.store import ProfileStore
-from tests.station.fakes import H, W, FakeCamera, FakeStage
+from tests.station.fakes import FakeCamera, FakeStage, H, W
 
 DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
 
@@ -45,13 +45,13 @@ def frame_records(path):
 def test_complete_session_stores_a_profile(tmp_path):
     cfg = make_config(tmp_path, frames=2)
     stage = FakeStage(offset_deg=5.0)
-    with SessionDir.create(tmp_path / "sessions", cfg, name="s") as s, \
-            ProfileStore(cfg.store_path) as store:
+    with SessionDir.create(tmp_path / "sessions", cfg, name="s") as s, ProfileStore(cfg.store_path) as store:
         result, sleeps = run(s, FakeCamera(stage), stage, store)
     assert result.exit_code == EXIT_OK and sleeps == [] and result.frames_saved == 8
     frames, records = frame_records(tmp_path / "sessions" / "s")
-    assert sorted((r["orientation_idx"], r["frame_idx"]) for r in frames) == \
-        [(o, i) for o in range(4) for i in range(2)]
+    assert sorted((r["orientation_idx"], r["frame_idx"]) for r in frames) == [
+        (o, i) for o in range(4) for i in range(2)
+    ]
     assert [r["meta"]["stage_deg"] for r in frames] == [0, 0, 45, 45, 90, 90, 135, 135]
     assert records[-1]["kind"] == "finished"
     fit = result.focus[0].fit
@@ -68,16 +68,16 @@ def test_complete_session_stores_a_profile(tmp_path):
 def test_transient_faults_are_retried_with_backoff(tmp_path):
     cfg = make_config(tmp_path)
     stage = FakeStage(faults={2: DeviceFault("stall"), 3: DeviceTimeout("no reply")})
-    cam = FakeCamera(stage, faults={1: CaptureError("timeout")},
-                     images={3: np.zeros((10, 10), np.uint8)})  # corrupt: wrong size
+    cam = FakeCamera(
+        stage, faults={1: CaptureError("timeout")}, images={3: np.zeros((10, 10), np.uint8)}
+    )  # corrupt: wrong size
     with SessionDir.create(tmp_path, cfg, name="s") as s:
         result, sleeps = run(s, cam, stage)
     assert result.exit_code == EXIT_OK
     assert sleeps == [0.1, 0.1, 0.2, 0.1]  # camera x1; stage x2 (back-off doubles); corrupt frame x1
     _, records = frame_records(tmp_path / "s")
     faults = [(r["what"].split()[0], r["error"]) for r in records if r["kind"] == "fault"]
-    assert Counter(faults) == {("capture", "CaptureError"): 2, ("move", "DeviceFault"): 1,
-                               ("move", "DeviceTimeout"): 1}
+    assert Counter(faults) == {("capture", "CaptureError"): 2, ("move", "DeviceFault"): 1, ("move", "DeviceTimeout"): 1}
     assert len([r for r in records if r["kind"] == "frame"]) == 4
 
 

@@ -22,8 +22,9 @@ def test_grey_lossless_round_trip(tmp_path, grey, suffix, depth):
     np.testing.assert_array_equal(out, img)
 
 
-@pytest.mark.parametrize("dtype,suffix", [(np.uint8, ".png"), (np.uint16, ".png"), (np.uint8, ".tif"),
-                                          (np.uint16, ".tiff")])
+@pytest.mark.parametrize(
+    "dtype,suffix", [(np.uint8, ".png"), (np.uint16, ".png"), (np.uint8, ".tif"), (np.uint16, ".tiff")]
+)
 def test_colour_to_grey_bt601(tmp_path, dtype, suffix):
     rng = np.random.default_rng(1)
     top = np.iinfo(dtype).max

@@ -4,8 +4,7 @@ from collections import Counter
 from pathlib import Path
 
 from station.config import load_config
-from station.plan import (Capture, Fit, LockFocus, Measure, Move, Save, Store, frame_key,
-                          plan_session, stored_key)
+from station.plan import Capture, Fit, LockFocus, Measure, Move, Save, Store, frame_key, plan_session, stored_key
 
 DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
 
@@ -15,8 +14,15 @@ def test_full_plan_lists_every_step():
     steps = list(plan_session(cfg))
     kinds = Counter(type(s).__name__ for s in steps)
     n_f, n_o, n_i = 3, 8, cfg.capture.frames_per_orientation
-    assert kinds == {"LockFocus": n_f, "Move": n_f * n_o, "Capture": n_f * n_o * n_i,
-                     "Save": n_f * n_o * n_i, "Measure": n_f * n_o, "Fit": n_f, "Store": n_f}
+    assert kinds == {
+        "LockFocus": n_f,
+        "Move": n_f * n_o,
+        "Capture": n_f * n_o * n_i,
+        "Save": n_f * n_o * n_i,
+        "Measure": n_f * n_o,
+        "Fit": n_f,
+        "Store": n_f,
+    }
     assert steps[0] == LockFocus(0, 0.0)
     assert steps[1] == Move(0, 0, 0.0)
     assert steps[2:4] == [Capture(0, 0, 0), Save(0, 0, 0)]

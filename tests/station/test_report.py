@@ -33,8 +33,9 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
     md = (out / "report.md").read_text()
     assert "**Verdict: FAIL**" in md and "distortion " in md and "> 0.01 px" in md
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
-    expected = {"field_f0.png", "residuals_f0.png", "uncertainty_f0.png"} | {f"overlay_f0_o{j}.png"
-                                                                             for j in range(len(ANGLES))}
+    expected = {"field_f0.png", "residuals_f0.png", "uncertainty_f0.png"} | {
+        f"overlay_f0_o{j}.png" for j in range(len(ANGLES))
+    }
     assert set(links) == expected
     for name in links:
         img = png(out / name)
@@ -48,7 +49,7 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
 
 
 def test_residuals_drop_after_correction(session):
-    (_, _, mf), = session_models(session)
+    ((_, _, mf),) = session_models(session)
     with SessionDir.open(session) as s:
         shots = session_shots(s, 0, t=30)
     assert [sh.orientation_deg for sh in shots] == list(ANGLES)
@@ -61,12 +62,22 @@ def test_residuals_drop_after_correction(session):
 
 def test_lens_report_without_frames(session, tmp_path, capsys):
     store = tmp_path / "p.sqlite"
-    (_, focus, mf), = session_models(session)
+    ((_, focus, mf),) = session_models(session)
     with ProfileStore(store) as st:
-        st.put_profile(lens=("Sim", "SIM-12mm", "U1"), camera=("c", "m", "s"), focus=focus,
-                       model=mf.model.to_dict(), width=W, height=H, holdout_d=mf.merit["holdout"]["d"],
-                       field_uncertainty_rms=0.001, field_uncertainty_max=0.004,
-                       session_dir=str(session), station_id="t", software_version="0")
+        st.put_profile(
+            lens=("Sim", "SIM-12mm", "U1"),
+            camera=("c", "m", "s"),
+            focus=focus,
+            model=mf.model.to_dict(),
+            width=W,
+            height=H,
+            holdout_d=mf.merit["holdout"]["d"],
+            field_uncertainty_rms=0.001,
+            field_uncertainty_max=0.004,
+            session_dir=str(session),
+            station_id="t",
+            software_version="0",
+        )
     out = tmp_path / "r"
     code = main(["qa", "U1", "--store", str(store), "--report", str(out)])
     capsys.readouterr()

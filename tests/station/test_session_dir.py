@@ -8,8 +8,7 @@ import pytest
 
 from station.config import load_config
 from station.plan import frame_key, stored_key
-from station.session_dir import (MANIFEST, SessionDir, SessionError, decode_pgm, encode_pgm,
-                                 read_manifest)
+from station.session_dir import MANIFEST, SessionDir, SessionError, decode_pgm, encode_pgm, read_manifest
 
 DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
 

@@ -13,9 +13,21 @@ MODEL = {"model": "radial", "center": [1.0, 2.0], "k": [1.0, 0.01], "scale": 100
 
 
 def put(store, session="sess", focus=0.5, **kw):
-    args = dict(lens=LENS, camera=CAM, focus=focus, model=MODEL, width=640, height=480,
-                fit_d=0.01, fit_d_max=0.02, holdout_d=0.012, holdout_d_max=0.03,
-                session_dir=session, station_id="st", software_version="0.1.0")
+    args = dict(
+        lens=LENS,
+        camera=CAM,
+        focus=focus,
+        model=MODEL,
+        width=640,
+        height=480,
+        fit_d=0.01,
+        fit_d_max=0.02,
+        holdout_d=0.012,
+        holdout_d_max=0.03,
+        session_dir=session,
+        station_id="st",
+        software_version="0.1.0",
+    )
     args.update(kw)
     return store.put_profile(**args)
 
@@ -98,8 +110,7 @@ def test_two_processes_write_concurrently(tmp_path):
     path = tmp_path / "shared.sqlite"  # brand-new file: both also race to create the schema
     ctx = mp.get_context("spawn")
     barrier = ctx.Barrier(2)
-    procs = [ctx.Process(target=_writer, args=(str(path), f"session-{k}", 20, barrier))
-             for k in range(2)]
+    procs = [ctx.Process(target=_writer, args=(str(path), f"session-{k}", 20, barrier)) for k in range(2)]
     for p in procs:
         p.start()
     for p in procs:
@@ -119,5 +130,6 @@ def test_store_under_a_file_names_the_file(tmp_path):
     blocker.write_text("a file where a directory should be")
     with pytest.raises(StoreError) as exc:
         ProfileStore(blocker / "harp.sqlite")
-    assert str(exc.value) == (f"{blocker / 'harp.sqlite'}: cannot open profile store: "
-                              f"{blocker} is a file, not a directory")
+    assert str(exc.value) == (
+        f"{blocker / 'harp.sqlite'}: cannot open profile store: {blocker} is a file, not a directory"
+    )
