@@ -4,7 +4,7 @@
 # virtual environment in .venv, and the project with its test dependencies.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-APT_PKGS="python3-venv python3-dev gcc pkg-config libgirepository1.0-dev libcairo2-dev gir1.2-aravis-0.8 libaravis-0.8-0 aravis-tools"
+APT_PKGS="python3-venv python3-dev gcc pkg-config libgirepository1.0-dev libcairo2-dev gir1.2-aravis-0.8 libaravis-0.8-0 aravis-tools postgresql chromium"
 if ! dpkg -s $APT_PKGS >/dev/null 2>&1; then
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq

@@ -12,3 +12,38 @@ def real_harp_dir() -> Path:
     if not REAL_HARP.is_dir():
         pytest.fail(f"real harp photos not found at {REAL_HARP} (set HARP_REAL_DATA)")
     return REAL_HARP
+
+
+@pytest.fixture(scope="session")
+def postgres():
+    """A real PostgreSQL server (Debian's ``postgresql``) for this test session: see tests/pg_server.py."""
+    from tests.pg_server import postgres_server
+
+    with postgres_server() as server:
+        yield server
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Headless Debian Chromium under Playwright, shared by the session's browser tests (tests/browser.py)."""
+    from playwright.sync_api import sync_playwright
+
+    from tests.browser import CHROMIUM_FLAGS, chromium_path
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(chromium_path()), headless=True, args=CHROMIUM_FLAGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@pytest.fixture
+def page(browser):
+    """A fresh browser page (own context: no cookies or storage shared between tests)."""
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    pg = ctx.new_page()
+    try:
+        yield pg
+    finally:
+        ctx.close()
