@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 from drivers.errors import (  # noqa: F401  (re-exported)
     CaptureError,
@@ -35,19 +35,19 @@ TURNTABLE_DRIVERS = {
 }
 
 
-def _driver_class(table: Mapping[str, str], kind: str, cfg: Mapping[str, Any]):
+def _driver_class(table: Mapping[str, str], kind: str, cfg: Mapping[str, Any]) -> Any:
     name = cfg.get("driver") if isinstance(cfg, Mapping) else None
-    if name not in table:
+    if not isinstance(name, str) or name not in table:
         raise ValueError(f"unknown {kind} driver {name!r}; expected one of {', '.join(sorted(table))}")
     module, cls = table[name].split(":")
     return getattr(importlib.import_module(module), cls)
 
 
-def open_camera(cfg: Mapping[str, Any], **context) -> Camera:
+def open_camera(cfg: Mapping[str, Any], **context: Any) -> Camera:
     """Create (not open) the camera driver named by ``cfg["driver"]``."""
-    return _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(dict(cfg), **context)
+    return cast(Camera, _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(dict(cfg), **context))
 
 
-def open_turntable(cfg: Mapping[str, Any], **context) -> Turntable:
+def open_turntable(cfg: Mapping[str, Any], **context: Any) -> Turntable:
     """Create (not open) the turntable driver named by ``cfg["driver"]``."""
-    return _driver_class(TURNTABLE_DRIVERS, "turntable", cfg).from_config(dict(cfg), **context)
+    return cast(Turntable, _driver_class(TURNTABLE_DRIVERS, "turntable", cfg).from_config(dict(cfg), **context))

@@ -52,8 +52,9 @@ from __future__ import annotations
 import contextlib
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -76,11 +77,13 @@ EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
 GAIN_FEATURES = ("Gain", "GainRaw")
 
 
-_ARAVIS = None
+T = TypeVar("T")
+
+_ARAVIS: Any = None  # the gi.repository.Aravis module, once imported
 _FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
 
 
-def _aravis():
+def _aravis() -> Any:
     """Import ``gi.repository.Aravis`` 0.8 once, with an installation hint on failure."""
     global _ARAVIS
     if _ARAVIS is None:
@@ -102,7 +105,7 @@ def _gerror_text(exc: BaseException) -> str:
     return getattr(exc, "message", None) or str(exc)
 
 
-def _select_fake_xml(Aravis, path: str | None) -> None:
+def _select_fake_xml(Aravis: Any, path: str | None) -> None:
     """Make the next ``Fake_*`` device use ``path`` (or Aravis' embedded XML when None).
 
     ``arv_set_fake_camera_genicam_filename`` is process-global and cannot be
@@ -205,9 +208,10 @@ class AravisCamera(CameraBase):
         if not isinstance(trigger, str) or not trigger:
             raise ValueError(f"trigger {trigger!r}: expected 'software', 'off' or a TriggerSource name")
         if roi is not None:
-            roi = tuple(int(v) for v in roi)
-            if len(roi) != 4 or roi[2] <= 0 or roi[3] <= 0 or roi[0] < 0 or roi[1] < 0:
-                raise ValueError(f"roi {roi!r}: expected [x, y, width, height] with positive size")
+            xywh = tuple(int(v) for v in roi)
+            if len(xywh) != 4 or xywh[2] <= 0 or xywh[3] <= 0 or xywh[0] < 0 or xywh[1] < 0:
+                raise ValueError(f"roi {xywh!r}: expected [x, y, width, height] with positive size")
+            roi = (xywh[0], xywh[1], xywh[2], xywh[3])
         if int(buffers) < 1:
             raise ValueError(f"buffers {buffers!r}: expected >= 1")
         if not (gain_db_per_raw > 0):
@@ -227,13 +231,15 @@ class AravisCamera(CameraBase):
         self.n_buffers = int(buffers)
         self.fake_genicam_xml = fake_genicam_xml
         self.packet_size = packet_size
-        self._camera = None
-        self._device = None
-        self._stream = None
+        # Aravis objects (GObject introspection, no type information) while open
+        self._camera: Any = None  # Aravis.Camera
+        self._device: Any = None  # Aravis.Device
+        self._stream: Any = None  # Aravis.Stream
         self._identity: CameraIdentity | None = None
         self._size: tuple[int, int] | None = None
         self._counter = 0
-        self._exposure_feature = self._gain_feature = None
+        self._exposure_feature: str | None = None
+        self._gain_feature: str | None = None
         self._focus_kind: str | None = None
 
     @property
@@ -275,7 +281,7 @@ class AravisCamera(CameraBase):
         except Exception:
             return False
 
-    def _call(self, what: str, fn, *args):
+    def _call(self, what: str, fn: Callable[..., T], *args: Any) -> T:
         """Call an Aravis function, mapping GLib errors to :class:`DeviceRejected`."""
         try:
             return fn(*args)
@@ -284,7 +290,7 @@ class AravisCamera(CameraBase):
         except Exception as exc:
             raise DeviceRejected(f"{self.name}: {what}: {_gerror_text(exc)}") from None
 
-    def _configure(self, Aravis) -> None:
+    def _configure(self, Aravis: Any) -> None:
         cam, dev = self._camera, self._device
         self._identity = CameraIdentity(
             vendor=str(cam.get_vendor_name() or ""),
@@ -337,7 +343,7 @@ class AravisCamera(CameraBase):
 
         self._apply_initial_settings()
 
-    def _check_focus_features(self, Aravis) -> None:
+    def _check_focus_features(self, Aravis: Any) -> None:
         if not self.focus_feature:
             return
         if not self._has(self.focus_feature):
@@ -359,7 +365,7 @@ class AravisCamera(CameraBase):
         if self.autofocus_feature and not self._has(self.autofocus_feature):
             raise DeviceRejected(f"{self.name}: autofocus_feature {self.autofocus_feature!r} not found on device")
 
-    def _start_stream(self, Aravis) -> None:
+    def _start_stream(self, Aravis: Any) -> None:
         cam = self._camera
         stream = self._call("create stream", cam.create_stream, None, None)
         if stream is None:
@@ -458,12 +464,13 @@ class AravisCamera(CameraBase):
             self._call(f"{f}={round(pos)}", dev.set_integer_feature_value, f, int(round(pos)))
         else:
             self._call(f"{f}={pos:g}", dev.set_float_feature_value, f, pos)
-        return self.get_focus()
+        return self._read_focus()
 
     def _autofocus_off(self) -> None:
         Aravis = _aravis()
         dev, f = self._device, self.autofocus_feature
         node = dev.get_feature(f)
+        want: bool | int | str
         if isinstance(node, Aravis.GcBoolean):
             want = bool(self.autofocus_off) if self.autofocus_off is not None else False
             self._call(f"{f}={want}", dev.set_boolean_feature_value, f, want)
@@ -483,6 +490,9 @@ class AravisCamera(CameraBase):
         self._require_open()
         if not self.focus_feature:
             return None
+        return self._read_focus()
+
+    def _read_focus(self) -> float:
         dev, f = self._device, self.focus_feature
         if self._focus_kind == "integer":
             return float(self._call(f"read {f}", dev.get_integer_feature_value, f))
@@ -531,7 +541,7 @@ class AravisCamera(CameraBase):
             image, (sys_ts / 1e9) if sys_ts else time.time(), self.get_exposure(), self.get_gain(), extra
         )
 
-    def _to_array(self, Aravis, buf) -> np.ndarray:
+    def _to_array(self, Aravis: Any, buf: Any) -> np.ndarray:
         w, h = buf.get_image_width(), buf.get_image_height()
         pf = buf.get_image_pixel_format()
         names = {getattr(Aravis, f"PIXEL_FORMAT_{n.upper().replace('MONO', 'MONO_')}"): n for n in PIXEL_FORMATS}

@@ -13,17 +13,20 @@ and the :class:`~drivers.protocols.Frame` numbering. A subclass provides
 
 from __future__ import annotations
 
+import abc
 import math
+from collections.abc import Callable
+from typing import Any, Self
 
 import numpy as np
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DriverError
-from drivers.protocols import Frame
+from drivers.protocols import CameraIdentity, Frame
 
 
-class CameraBase:
-    """Mixin of the shared camera driver code; see the module docstring."""
+class CameraBase(abc.ABC):
+    """Base of the hardware camera drivers; see the module docstring."""
 
     #: every key ``from_config`` accepts (``driver`` included)
     CONFIG_KEYS: frozenset[str] = frozenset({"driver"})
@@ -32,18 +35,57 @@ class CameraBase:
     #: ``device`` when the configuration has none
     DEFAULT_DEVICE: str | None = None
 
+    # kept by the subclass (module docstring)
+    _initial: dict[str, float | None]
+    _identity: CameraIdentity | None
+    _counter: int
+
     @classmethod
-    def from_config(cls, cfg: dict, **ctx):
+    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> Self:
         """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
         check_config_keys(cls.CONFIG_NAME, cfg, cls.CONFIG_KEYS)
         kw = {k: v for k, v in cfg.items() if k != "driver"}
-        return cls(kw.pop("device", cls.DEFAULT_DEVICE), **kw)
+        make: Callable[..., Self] = cls  # the subclass's constructor: (device, **settings)
+        return make(kw.pop("device", cls.DEFAULT_DEVICE), **kw)
 
-    def __enter__(self):
+    # -- the device-specific part ---------------------------------------------------
+    @property
+    @abc.abstractmethod
+    def name(self) -> str:
+        """Short description starting every error message, e.g. ``"v4l2 camera /dev/video0"``."""
+
+    @property
+    @abc.abstractmethod
+    def is_open(self) -> bool: ...
+
+    @property
+    @abc.abstractmethod
+    def identity(self) -> CameraIdentity: ...
+
+    @abc.abstractmethod
+    def open(self) -> None: ...
+
+    @abc.abstractmethod
+    def close(self) -> None: ...
+
+    @abc.abstractmethod
+    def set_exposure(self, microseconds: float) -> float: ...
+
+    @abc.abstractmethod
+    def set_gain(self, db: float) -> float: ...
+
+    @abc.abstractmethod
+    def lock_focus(self, position: float) -> float: ...
+
+    @abc.abstractmethod
+    def get_focus(self) -> float | None: ...
+
+    # -- shared -----------------------------------------------------------------------
+    def __enter__(self) -> Self:
         self.open()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def _require_open(self) -> None:
@@ -59,21 +101,23 @@ class CameraBase:
         if self._initial["focus"] is not None:
             self.lock_focus(self._initial["focus"])
 
-    def _exposure_value(self, microseconds) -> float:
+    def _exposure_value(self, microseconds: float) -> float:
         """``microseconds`` as a float; ``ValueError`` unless finite and positive."""
         us = float(microseconds)
         if not math.isfinite(us) or us <= 0:
             raise ValueError(f"{self.name}: exposure must be a positive number of µs, got {microseconds!r}")
         return us
 
-    def _finite_value(self, value, what: str) -> float:
+    def _finite_value(self, value: float, what: str) -> float:
         """``value`` as a float; ``ValueError`` naming ``what`` unless finite."""
         v = float(value)
         if not math.isfinite(v):
             raise ValueError(f"{self.name}: {what} must be finite, got {value!r}")
         return v
 
-    def _frame(self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float, extra: dict) -> Frame:
+    def _frame(
+        self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float, extra: dict[str, Any]
+    ) -> Frame:
         """The next :class:`Frame` (focus read back now, counter advanced)."""
         frame = Frame(
             image=image,
@@ -81,7 +125,7 @@ class CameraBase:
             exposure_us=exposure_us,
             gain_db=gain_db,
             focus=self.get_focus(),
-            camera=self._identity,
+            camera=self.identity,
             counter=self._counter,
             extra=extra,
         )

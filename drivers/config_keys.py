@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping
+from typing import Any
 
 
 def check_config_keys(
-    name: str, cfg: Mapping, known: Collection[str], required: Mapping[str, str] | None = None
+    name: str, cfg: Mapping[str, Any], known: Collection[str], required: Mapping[str, str] | None = None
 ) -> None:
     """Raise ``ValueError`` naming the first unknown key, or a missing required one.
 

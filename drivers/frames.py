@@ -13,6 +13,9 @@ unpadded.
 
 from __future__ import annotations
 
+import mmap
+from typing import TypeAlias
+
 import numpy as np
 
 from drivers.errors import CaptureError
@@ -40,6 +43,9 @@ _PACKED = {
 }
 GREY_FORMATS = tuple(_PACKED) + ("MJPG",)
 
+#: what a driver hands over: the bytes of one frame as the device delivered them
+RawFrame: TypeAlias = bytes | bytearray | memoryview | mmap.mmap
+
 
 def bytes_per_pixel(fmt: str) -> int:
     """Bytes per pixel on the wire (``YUYV`` is 2: Y and one chroma byte)."""
@@ -51,7 +57,7 @@ def bytes_per_pixel(fmt: str) -> int:
         ) from None
 
 
-def _rows(data, width: int, height: int, bpp: int, bytes_per_line: int | None, fmt: str) -> np.ndarray:
+def _rows(data: RawFrame, width: int, height: int, bpp: int, bytes_per_line: int | None, fmt: str) -> np.ndarray:
     """View ``data`` as ``height`` rows of ``width * bpp`` bytes (stride-aware)."""
     if width <= 0 or height <= 0:
         raise CaptureError(f"{fmt} frame has invalid size {width}x{height}")
@@ -68,18 +74,18 @@ def _rows(data, width: int, height: int, bpp: int, bytes_per_line: int | None, f
     return np.lib.stride_tricks.as_strided(buf, shape=(height, row), strides=(stride, 1))
 
 
-def grey8(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+def grey8(data: RawFrame, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
     """8-bit grey (V4L2 ``GREY``, GenICam ``Mono8``) -> ``uint8`` (height, width)."""
     return np.ascontiguousarray(_rows(data, width, height, 1, bytes_per_line, "GREY"))
 
 
-def grey16(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+def grey16(data: RawFrame, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
     """16-bit little-endian grey (``Y16``, ``Mono16``, unpacked ``Mono10/12``) -> ``uint16``."""
     rows = np.ascontiguousarray(_rows(data, width, height, 2, bytes_per_line, "Y16"))
     return rows.view("<u2").astype(np.uint16, copy=False).reshape(height, width)
 
 
-def yuyv_luma(data, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+def yuyv_luma(data: RawFrame, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
     """Packed 4:2:2 ``YUYV`` (Y0 U Y1 V) -> its luma plane, ``uint8``.
 
     The luma samples are every even byte; chroma is discarded (no colour
@@ -91,7 +97,7 @@ def yuyv_luma(data, width: int, height: int, bytes_per_line: int | None = None) 
     return np.ascontiguousarray(rows[:, 0::2])
 
 
-def mjpeg_grey(data, width: int | None = None, height: int | None = None) -> np.ndarray:
+def mjpeg_grey(data: RawFrame, width: int | None = None, height: int | None = None) -> np.ndarray:
     """Motion-JPEG frame -> decoded grey ``uint8`` (luma as decoded by libjpeg).
 
     ``width``/``height``, when given, are checked against the decoded size.
@@ -107,7 +113,7 @@ def mjpeg_grey(data, width: int | None = None, height: int | None = None) -> np.
     return img
 
 
-def to_grey(data, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+def to_grey(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
     """Convert one raw frame in format ``fmt`` to a 2-D grey array (a copy)."""
     if fmt in ("GREY", "Mono8"):
         return grey8(data, width, height, bytes_per_line)

@@ -33,6 +33,7 @@ from __future__ import annotations
 import re
 import threading
 import time
+from typing import Any, TypedDict
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
@@ -103,6 +104,16 @@ _CONFIG_KEYS = {
     "tolerance_deg",
     "name",
 }
+
+
+class GrblStatus(TypedDict):
+    """One decoded realtime status report (``?``)."""
+
+    state: str  # Idle, Run, Hold, Jog, Alarm, Door, Check, Home, Sleep
+    substate: int | None  # e.g. 0 of Hold:0
+    position: float  # the turntable axis, in degrees
+    fields: dict[str, str]  # every field of the report by name (MPos, FS, Pn, ...)
+    raw: str
 
 
 def error_text(code: int) -> str:
@@ -182,7 +193,7 @@ class GrblTurntable:
         self._target: float | None = None
 
     @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> GrblTurntable:
+    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> GrblTurntable:
         check_config_keys("grbl turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
         if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
@@ -235,7 +246,7 @@ class GrblTurntable:
         self.open()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # -- wire level ----------------------------------------------------------------
@@ -277,7 +288,7 @@ class GrblTurntable:
             self._drain()
             self.transport.write(line.encode("ascii") + b"\n")
             deadline = time.monotonic() + timeout
-            feedback = []
+            feedback: list[str] = []
             while True:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
@@ -294,7 +305,7 @@ class GrblTurntable:
                 self._classify(text)
                 feedback.extend(self.messages[n_messages:])
 
-    def query_status(self) -> dict:
+    def query_status(self) -> GrblStatus:
         """Realtime ``?``: ``{"state", "substate", "position" (deg), "fields"}``."""
         with self._lock:
             self._drain()
@@ -311,11 +322,11 @@ class GrblTurntable:
                     return self._parse_status(text)
                 self._classify(text)
 
-    def _parse_status(self, text: str) -> dict:
+    def _parse_status(self, text: str) -> GrblStatus:
         m = _STATUS.match(text)
         if not m:
             raise ProtocolError(f"{self.name}: malformed status report {text!r}")
-        fields = {}
+        fields: dict[str, str] = {}
         for part in m["fields"].split("|"):
             key, sep, value = part.partition(":")
             if not sep:
@@ -345,7 +356,7 @@ class GrblTurntable:
     def position(self) -> float:
         return self.query_status()["position"]
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         st = self.query_status()
         warnings = []
         if st["state"] == "Alarm":

@@ -53,9 +53,9 @@ class _ScriptHandler:
         self.extra = bytearray()
         self.log: list[tuple[bytes, bytes]] = []
         self.lock = threading.Lock()
-        self.server = None
+        self.server: PtyServer | None = None
 
-    def attach(self, server) -> None:
+    def attach(self, server: PtyServer) -> None:
         self.server = server
 
     def on_bytes(self, data: bytes, now: float) -> None:
@@ -78,7 +78,7 @@ class _ScriptHandler:
                     self.log.append((bytes(self.buf), reply))
                     self.buf.clear()
                     self.step += 1
-                    if reply:
+                    if reply and self.server is not None:
                         self.server.write(reply)
 
     def tick(self, now: float) -> None:
@@ -130,7 +130,7 @@ class ScriptedDevice:
         """The failure message, or None if the exchange so far is correct and complete."""
         h = self._handler
         with h.lock:
-            if h.failure == "mismatch":
+            if h.failure == "mismatch" and h.failed_at is not None:
                 step, offset = h.failed_at
                 expected = self.exchange[step][0]
                 got = bytes(h.buf)
@@ -165,7 +165,7 @@ class ScriptedDevice:
         self.start()
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
         try:
             if exc is not None:
                 message = self.report()

@@ -19,6 +19,7 @@ import contextlib
 import termios
 import threading
 import time
+from typing import Any
 
 import serial
 
@@ -29,7 +30,9 @@ from drivers.errors import DeviceDisconnected, DeviceTimeout
 _POLL = 0.02
 # what pyserial lets through when the device disappears (termios.error is
 # not an OSError: tcdrain/tcflush on a hung-up pty raise it)
-_IO_ERRORS = (serial.SerialException, OSError, termios.error)
+_IO_ERRORS: tuple[type[Exception], ...] = (serial.SerialException, OSError, termios.error)
+# ... and what opening a port raises besides (a malformed URL)
+_OPEN_ERRORS: tuple[type[Exception], ...] = (*_IO_ERRORS, ValueError)
 
 
 class SerialTransport:
@@ -48,14 +51,16 @@ class SerialTransport:
         ``rtscts``, ...), applied before opening.
     """
 
-    def __init__(self, port: str, baudrate: int = 115200, name: str = "device", serial_options: dict | None = None):
+    def __init__(
+        self, port: str, baudrate: int = 115200, name: str = "device", serial_options: dict[str, Any] | None = None
+    ):
         if not port or not isinstance(port, str):
             raise ValueError(f"{name}: port must be a device name or pyserial URL, got {port!r}")
         self.port = port
         self.baudrate = int(baudrate)
         self.name = name
         self.serial_options = dict(serial_options or {})
-        self._ser: serial.SerialBase | None = None
+        self._ser: Any = None  # serial.SerialBase once open (pyserial ships no type information)
         self._buf = bytearray()
         self._lock = threading.RLock()
 
@@ -75,7 +80,7 @@ class SerialTransport:
             for key, value in self.serial_options.items():
                 setattr(ser, key, value)
             ser.open()
-        except (*_IO_ERRORS, ValueError) as exc:
+        except _OPEN_ERRORS as exc:
             raise DeviceDisconnected(f"{self.name}: cannot open {self.port}: {exc}") from exc
         self._ser = ser
         self._buf.clear()
@@ -83,10 +88,10 @@ class SerialTransport:
     def close(self) -> None:
         ser, self._ser = self._ser, None
         if ser is not None:
-            with contextlib.suppress(_IO_ERRORS):  # a vanished port may fail to close; it is closed for us either way
+            with contextlib.suppress(*_IO_ERRORS):  # a vanished port may fail to close; it is closed for us either way
                 ser.close()
 
-    def _port(self) -> serial.SerialBase:
+    def _port(self) -> Any:
         if self._ser is None or not self._ser.is_open:
             raise DeviceDisconnected(f"{self.name}: port {self.port} is not open")
         return self._ser
@@ -105,7 +110,8 @@ class SerialTransport:
         ser = self._port()
         try:
             waiting = ser.in_waiting
-            return ser.read(max(1, waiting))
+            data: bytes = ser.read(max(1, waiting))
+            return data
         except _IO_ERRORS as exc:
             self.close()
             raise DeviceDisconnected(f"{self.name}: read from {self.port} failed, device gone ({exc})") from exc

@@ -43,6 +43,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import time
+from typing import Any
 
 import numpy as np
 
@@ -76,7 +77,7 @@ _DISCONNECT_ERRNOS = {errno.ENODEV, errno.ENXIO, errno.EIO, errno.EBADF}
 def _fourcc_code(fmt: str) -> int:
     from linuxpy.video import raw
 
-    return raw.v4l2_fourcc(*fmt.ljust(4))
+    return int(raw.v4l2_fourcc(*fmt.ljust(4)))
 
 
 class V4L2Camera(CameraBase):
@@ -136,7 +137,7 @@ class V4L2Camera(CameraBase):
             raise ValueError(f"pixel_format {pixel_format!r}: expected one of {', '.join(PIXEL_FORMATS)}")
         if (width is None) != (height is None):
             raise ValueError("width and height must be given together")
-        if width is not None and (int(width) <= 0 or int(height) <= 0):
+        if width is not None and height is not None and (int(width) <= 0 or int(height) <= 0):
             raise ValueError(f"frame size {width}x{height} must be positive")
         if int(buffers) < 1:
             raise ValueError(f"buffers {buffers!r}: expected >= 1")
@@ -146,16 +147,18 @@ class V4L2Camera(CameraBase):
             raise ValueError(f"gain_db_per_unit {gain_db_per_unit!r}: expected > 0")
         self.path = str(device)
         self._fourcc = pixel_format
-        self._req_size = None if width is None else (int(width), int(height))
+        self._req_size = None if width is None or height is None else (int(width), int(height))
         self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus}
         self.gain_db_per_unit = float(gain_db_per_unit)
         self.n_buffers = int(buffers)
         self.discard_frames = int(discard_frames)
-        self._dev = None
-        self._video = None
-        self._reader = None
-        self._ctrl: dict = {}
-        self._format = None
+        # linuxpy objects (no type information): Device, VideoCapture, its frame reader,
+        # the controls found by _find_control (or None), the format read back (G_FMT)
+        self._dev: Any = None
+        self._video: Any = None
+        self._reader: Any = None
+        self._ctrl: dict[str, Any] = {}
+        self._format: Any = None
         self._identity: CameraIdentity | None = None
         self._counter = 0
 
@@ -233,7 +236,7 @@ class V4L2Camera(CameraBase):
         self._ctrl = {key: self._find_control(*spec) for key, spec in _CONTROLS.items()}
         self._apply_initial_settings()
 
-    def _find_control(self, ids, names):
+    def _find_control(self, ids: tuple[str, ...], names: tuple[str, ...]) -> Any:
         from linuxpy.video.device import ControlID
 
         controls = self._dev.controls
@@ -288,13 +291,13 @@ class V4L2Camera(CameraBase):
         return self._fourcc
 
     # -- controls -------------------------------------------------------------------
-    def _control(self, key: str, what: str):
+    def _control(self, key: str, what: str) -> Any:
         ctrl = self._ctrl.get(key)
         if ctrl is None:
             raise DeviceRejected(f"{self.name}: device has no {what} control")
         return ctrl
 
-    def _write(self, ctrl, value: int) -> None:
+    def _write(self, ctrl: Any, value: int) -> None:
         if value < ctrl.minimum or value > ctrl.maximum:
             raise DeviceRejected(f"{self.name}: {ctrl.config_name}={value} outside [{ctrl.minimum}, {ctrl.maximum}]")
         try:
@@ -304,9 +307,9 @@ class V4L2Camera(CameraBase):
         except (AttributeError, ValueError) as exc:  # linuxpy: read-only / uncoercible
             raise DeviceRejected(f"{self.name}: set {ctrl.config_name}={value}: {exc}") from None
 
-    def _read(self, ctrl):
+    def _read(self, ctrl: Any) -> int:
         try:
-            return ctrl.value
+            return int(ctrl.value)
         except OSError as exc:
             raise self._oserror(f"read {ctrl.config_name}", exc) from None
 
@@ -348,7 +351,7 @@ class V4L2Camera(CameraBase):
             if self._read(auto):
                 raise DeviceRejected(f"{self.name}: {auto.config_name} did not switch off")
         self._write(ctrl, int(round(pos)))
-        return self.get_focus()
+        return float(self._read(ctrl))
 
     def get_focus(self) -> float | None:
         self._require_open()
@@ -356,7 +359,7 @@ class V4L2Camera(CameraBase):
         return None if ctrl is None else float(self._read(ctrl))
 
     # -- capture --------------------------------------------------------------------
-    def _next(self, deadline: float, timeout: float):
+    def _next(self, deadline: float, timeout: float) -> Any:
         remaining = deadline - time.monotonic()
         frame = self._reader.read(timeout=max(0.0, remaining)) if remaining > 0 else None
         if frame is None:

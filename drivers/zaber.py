@@ -38,6 +38,7 @@ import re
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
@@ -195,7 +196,7 @@ class ZaberTurntable:
         self._target: int | None = None
 
     @classmethod
-    def from_config(cls, cfg: dict, **ctx) -> ZaberTurntable:
+    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> ZaberTurntable:
         check_config_keys("zaber turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
         if "device_address" in cfg:
@@ -229,7 +230,7 @@ class ZaberTurntable:
         self.open()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # -- wire level ------------------------------------------------------------
@@ -425,7 +426,7 @@ class ZaberTurntable:
             raise ProtocolError(f"{self.name}: {what!r} announced {count} flags, got {flags}: {reply.raw!r}")
         return flags
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         reply = self._get_pos(fault=False)
         flags = self.warnings()
         return {

@@ -35,6 +35,7 @@ import dataclasses
 import hashlib
 import time
 from collections import deque
+from typing import Any
 
 import numpy as np
 
@@ -170,7 +171,7 @@ class SimulatedCamera:
 
     # ------------------------------------------------------------ config
     @classmethod
-    def from_config(cls, cfg: dict, world: SimWorld | None = None, **context) -> SimulatedCamera:
+    def from_config(cls, cfg: dict[str, Any], world: SimWorld | None = None, **context: Any) -> SimulatedCamera:
         """Create from a configuration mapping (keys: :data:`CONFIG_KEYS`).
 
         ``driver`` is ignored (it selected this class). ``pixel_format``
@@ -182,8 +183,8 @@ class SimulatedCamera:
         cfg = dict(cfg)
         check_config_keys("sim camera", cfg, CONFIG_KEYS)
         world = world if world is not None else SimWorld()
-        kw: dict = {}
-        scene_kw: dict = {}
+        kw: dict[str, Any] = {}
+        scene_kw: dict[str, Any] = {}
         try:
             for key, value in cfg.items():
                 if key in ("width", "height", "bit_depth", "seed", "dust", "dust_seed", "frame_side"):
@@ -235,7 +236,7 @@ class SimulatedCamera:
         self.open()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     @property
@@ -372,7 +373,7 @@ class SimulatedCamera:
         r = self.render(index=index, angle_deg=angle, focus=focus)
         self.last_rendered = r
         image = r.image
-        extra = {
+        extra: dict[str, Any] = {
             "sim": {
                 "string_angle_deg": angle,
                 "stage_deg": float(stage),

@@ -24,9 +24,14 @@ every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``.
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING, Any
 
 from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
+from drivers.sim.world import SimWorld
+
+if TYPE_CHECKING:
+    from drivers.sim.pty_server import EmulatorHandle
 
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
 UNLOCK_MSG = b"[MSG:'$H'|'$X' to unlock]\r\n"
@@ -40,7 +45,7 @@ class GrblEmulator(LineEmulator):
 
     def __init__(
         self,
-        world=None,
+        world: SimWorld | None = None,
         *,
         units_per_degree: float = 1.0,
         speed_deg_s: float = 360.0,
@@ -133,7 +138,7 @@ class GrblEmulator(LineEmulator):
             self.write(UNLOCK_MSG)
 
     # -- lines --------------------------------------------------------------------
-    def reject(self, line: bytes, spec: dict, now: float) -> None:
+    def reject(self, line: bytes, spec: dict[str, Any], now: float) -> None:
         if not self.critical:
             self._line(f"error:{spec.get('code', 20)}")
 
@@ -265,7 +270,7 @@ class GrblEmulator(LineEmulator):
                 self.state = "Idle"
 
 
-def start_grbl_emulator(world=None, **opts):
+def start_grbl_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[GrblEmulator]:
     """Start a :class:`GrblEmulator` (``opts`` are its keyword arguments) on a
     new pty; returns an :class:`~drivers.sim.pty_server.EmulatorHandle`."""
     from drivers.sim.pty_server import serve

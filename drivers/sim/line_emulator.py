@@ -20,27 +20,33 @@ from __future__ import annotations
 import abc
 import random
 import threading
+from typing import TYPE_CHECKING, Any
+
+from drivers.sim.world import SimWorld
+
+if TYPE_CHECKING:
+    from drivers.sim.pty_server import PtyServer
 
 
 class LineEmulator(abc.ABC):
     """Base class; see the module docstring. ``world`` is an optional SimWorld."""
 
-    COUNTED = ("reject", "no_reply", "garbage")
-    MOTION = ("stall", "vanish")
+    COUNTED: tuple[str, ...] = ("reject", "no_reply", "garbage")
+    MOTION: tuple[str, ...] = ("stall", "vanish")
     NAME = "device"
 
-    def __init__(self, world=None, seed: int = 0):
+    def __init__(self, world: SimWorld | None = None, seed: int = 0):
         self.world = world
-        self.server = None
+        self.server: PtyServer | None = None
         self._inbuf = bytearray()
         self._rng = random.Random(seed)
-        self._faults: dict[str, dict] = {}
+        self._faults: dict[str, dict[str, Any]] = {}
         self._lock = threading.RLock()
         self.received: list[bytes] = []  # every complete line / realtime byte, for tests
         self._last_world: float | None = None
 
     # -- server hooks ------------------------------------------------------
-    def attach(self, server) -> None:
+    def attach(self, server: PtyServer) -> None:
         self.server = server
 
     def on_bytes(self, data: bytes, now: float) -> None:
@@ -69,7 +75,7 @@ class LineEmulator(abc.ABC):
                     self._last_world = deg
 
     # -- faults --------------------------------------------------------------
-    def inject(self, fault: str, count: int | None = 1, at: float = 0.5, **params) -> None:
+    def inject(self, fault: str, count: int | None = 1, at: float = 0.5, **params: Any) -> None:
         """Arm a fault (see module docstring); extra ``params`` are device-specific."""
         allowed = self.COUNTED + self.MOTION
         if fault not in allowed:
@@ -83,7 +89,7 @@ class LineEmulator(abc.ABC):
         with self._lock:
             self._faults.clear()
 
-    def _take_counted(self, fault: str) -> dict | None:
+    def _take_counted(self, fault: str) -> dict[str, Any] | None:
         spec = self._faults.get(fault)
         if spec is None:
             return None
@@ -93,7 +99,7 @@ class LineEmulator(abc.ABC):
                 del self._faults[fault]
         return spec
 
-    def motion_fault(self) -> tuple[str, dict] | None:
+    def motion_fault(self) -> tuple[str, dict[str, Any]] | None:
         """The armed motion fault (consumed by the subclass when it fires)."""
         for name in self.MOTION:
             if name in self._faults:
@@ -140,7 +146,7 @@ class LineEmulator(abc.ABC):
         """Answer one complete command line."""
 
     @abc.abstractmethod
-    def reject(self, line: bytes, spec: dict, now: float) -> None:
+    def reject(self, line: bytes, spec: dict[str, Any], now: float) -> None:
         """Refuse ``line`` the way the device does (the ``"reject"`` fault)."""
 
     def update(self, now: float) -> None:  # noqa: B027 (optional hook, default no-op)

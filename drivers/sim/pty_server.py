@@ -27,12 +27,24 @@ import select
 import threading
 import time
 import tty
+from typing import Generic, Protocol, TypeVar
+
+
+class Handler(Protocol):
+    """What :class:`PtyServer` serves (see the module docstring)."""
+
+    def attach(self, server: PtyServer) -> None: ...
+    def on_bytes(self, data: bytes, now: float) -> None: ...
+    def tick(self, now: float) -> None: ...
+
+
+H = TypeVar("H", bound=Handler)
 
 
 class PtyServer:
     """A handler served on a fresh pty; :attr:`port` is the slave path."""
 
-    def __init__(self, handler, name: str = "emulator", tick_s: float = 0.002):
+    def __init__(self, handler: Handler, name: str = "emulator", tick_s: float = 0.002):
         self.handler = handler
         self.name = name
         self.tick_s = tick_s
@@ -128,15 +140,15 @@ class PtyServer:
             self.start()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
 
-class EmulatorHandle:
+class EmulatorHandle(Generic[H]):
     """A running emulator: ``port_path`` (give it to the driver), ``emulator``
     (inject faults, read state), ``server`` and ``stop()``. Context manager."""
 
-    def __init__(self, emulator, server: PtyServer):
+    def __init__(self, emulator: H, server: PtyServer):
         self.emulator = emulator
         self.server = server
         self.port_path = server.port
@@ -144,17 +156,17 @@ class EmulatorHandle:
     def stop(self) -> None:
         self.server.stop()
 
-    def __enter__(self) -> EmulatorHandle:
+    def __enter__(self) -> EmulatorHandle[H]:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     def __repr__(self) -> str:
         return f"EmulatorHandle({type(self.emulator).__name__} on {self.port_path})"
 
 
-def serve(emulator, name: str = "emulator") -> EmulatorHandle:
+def serve(emulator: H, name: str = "emulator") -> EmulatorHandle[H]:
     """Serve ``emulator`` on a new pty; returns its :class:`EmulatorHandle`."""
     server = PtyServer(emulator, name=name)
     server.start()

@@ -31,8 +31,14 @@ Faults (:meth:`inject`): ``"reject"`` (``RJ ... BADDATA``), ``"no_reply"``,
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
+from drivers.sim.world import SimWorld
+
+if TYPE_CHECKING:
+    from drivers.sim.pty_server import EmulatorHandle
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0  # 0.000234375 deg per microstep
 
@@ -49,7 +55,7 @@ class ZaberEmulator(LineEmulator):
 
     def __init__(
         self,
-        world=None,
+        world: SimWorld | None = None,
         *,
         address: int = 1,
         microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
@@ -101,7 +107,7 @@ class ZaberEmulator(LineEmulator):
         self._send("@", f"{self.address:02d} {axis}{ident} {'OK' if ok else 'RJ'} {status} {flag} {data}")
 
     @staticmethod
-    def _parse(line: bytes):
+    def _parse(line: bytes) -> tuple[int, int, str | None, list[str]] | None:
         """(device, axis, id, words) or None if the line is not a command."""
         try:
             text = line.decode("ascii").strip()
@@ -118,7 +124,7 @@ class ZaberEmulator(LineEmulator):
                 return None
             text = "/" + body
         words = text[1:].split()
-        nums = []
+        nums: list[int] = []
         while words and words[0].isdigit() and len(nums) < 3:
             nums.append(int(words.pop(0)))
         device = nums[0] if nums else 0
@@ -127,7 +133,7 @@ class ZaberEmulator(LineEmulator):
         return device, axis, msg_id, words
 
     # -- LineEmulator interface -----------------------------------------------
-    def reject(self, line: bytes, spec: dict, now: float) -> None:
+    def reject(self, line: bytes, spec: dict[str, Any], now: float) -> None:
         parsed = self._parse(line)
         if parsed is None or parsed[0] not in (0, self.address):
             return
@@ -240,7 +246,7 @@ class ZaberEmulator(LineEmulator):
                 self._send("!", f"{self.address:02d} 1 IDLE {self.flag()}")
 
 
-def start_zaber_emulator(world=None, **opts):
+def start_zaber_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[ZaberEmulator]:
     """Start a :class:`ZaberEmulator` (``opts`` are its keyword arguments) on a
     new pty; returns an :class:`~drivers.sim.pty_server.EmulatorHandle`."""
     from drivers.sim.pty_server import serve
