@@ -3,10 +3,16 @@
 :class:`SimulatedCamera` satisfies :class:`drivers.protocols.Camera`. Each
 :meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
 at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
-that moment* (stage angle + harp offset), through the demo lens at the
-world's current focus (:func:`drivers.sim.lens.lens_for_focus`), with the
-camera's exposure and gain, and sensor noise that is a function of the
-physical situation only (see *Noise seeds* below).
+the moment of the exposure* (stage angle + harp offset), through the demo
+lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`),
+with the camera's exposure and gain, and sensor noise that is a function of
+the physical situation only (see *Noise seeds* below).
+
+The stage angle is the turntable emulator's own motion model evaluated at
+the exposure time (:meth:`SimWorld.stage_at`), not a copy of it: a frame
+captured after the turntable reported "idle at θ" is rendered at exactly θ
+(recorded in ``Frame.extra["sim"]["stage_deg"]``), however the threads are
+scheduled.
 
 Noise seeds. The noise of a frame is seeded by a hash of ``(seed, focus,
 string angle rounded to 1e-3 deg, capture index at this pose)``
@@ -364,9 +370,9 @@ class SimulatedCamera:
                 f"sim camera {self._identity.serial}: device vanished during capture (injected disconnect)"
             )
         stamp = time.time()
-        # one consistent snapshot of the world for this exposure
-        with self.world._lock:
-            stage, offset, focus = self.world.stage_deg, self.world.harp_offset_deg, self.world.focus
+        # the world at the moment of this exposure (the stage: the emulator's motion at that time)
+        stage = self.world.stage_at(time.monotonic())
+        offset, focus = self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
         index = self._index_at(focus, angle)
         seed = noise_seed(self.seed, focus, angle, index)

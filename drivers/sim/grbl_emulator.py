@@ -75,7 +75,7 @@ class GrblEmulator(LineEmulator):
         self._held_target: float | None = None
 
     def stage_degrees(self, now: float) -> float:
-        return self.axis.position(now) / self.upd
+        return self.axis.peek(now) / self.upd
 
     def _line(self, text: str) -> None:
         self.write(text.encode("ascii") + b"\r\n")

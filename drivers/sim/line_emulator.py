@@ -13,6 +13,13 @@ Faults are injected with :meth:`LineEmulator.inject`:
               of the next move
 
 ``count=None`` makes a counted fault permanent until :meth:`clear_faults`.
+
+The shared :class:`~drivers.sim.world.SimWorld`, when given, is driven by
+this emulator's motion model (:meth:`SimWorld.drive_stage`): the camera
+evaluates :meth:`LineEmulator.stage_degrees` at its exposure time, the very
+function the emulator answers position queries from, so a frame taken after
+the device replied "idle at θ" is rendered at θ (no copy of the angle that a
+descheduled thread could leave stale).
 """
 
 from __future__ import annotations
@@ -43,7 +50,8 @@ class LineEmulator(abc.ABC):
         self._faults: dict[str, dict[str, Any]] = {}
         self._lock = threading.RLock()
         self.received: list[bytes] = []  # every complete line / realtime byte, for tests
-        self._last_world: float | None = None
+        if world is not None:
+            world.drive_stage(self._stage_for_world, self.NAME)
 
     # -- server hooks ------------------------------------------------------
     def attach(self, server: PtyServer) -> None:
@@ -68,11 +76,10 @@ class LineEmulator(abc.ABC):
     def tick(self, now: float) -> None:
         with self._lock:
             self.update(now)
-            if self.world is not None:
-                deg = self.stage_degrees(now)
-                if deg != self._last_world:
-                    self.world.set_stage(deg)
-                    self._last_world = deg
+
+    def _stage_for_world(self, t: float) -> float:
+        with self._lock:  # not while a command is half-way through
+            return self.stage_degrees(t)
 
     # -- faults --------------------------------------------------------------
     def inject(self, fault: str, count: int | None = 1, at: float = 0.5, **params: Any) -> None:
@@ -154,4 +161,5 @@ class LineEmulator(abc.ABC):
 
     @abc.abstractmethod
     def stage_degrees(self, now: float) -> float:
-        """The stage angle at ``now``, in degrees."""
+        """The stage angle at ``now``, in degrees; must not change the device's state
+        (the camera's thread calls it, see the module docstring)."""

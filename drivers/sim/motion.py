@@ -104,6 +104,12 @@ class Axis:
                 return self._pos
             return self.move.position(now)
 
+    def peek(self, now: float) -> float:
+        """Where the axis is at ``now``, without changing its state (safe from any thread)."""
+        with self._lock:
+            move = self.move
+            return self._pos if move is None else move.position(now)
+
     def busy(self, now: float) -> bool:
         with self._lock:
             self.position(now)

@@ -1,31 +1,91 @@
-"""The simulated physical world shared by the turntable emulator and the camera."""
+"""The simulated physical world shared by the turntable emulator and the camera.
+
+The stage angle is not a value one simulator writes and another reads (a
+copy is always late by however long the writing thread was descheduled);
+it is a *function of time*. A turntable emulator hands the world its own
+motion model with :meth:`SimWorld.drive_stage` — the same function from
+which it answers position queries — and the camera evaluates it at the
+moment of its exposure (:meth:`SimWorld.stage_at`). When the emulator has
+replied "idle at θ" for time *t*, the axis is at rest at θ from *t* until
+the next command, so any exposure after that reply sees exactly θ: the
+frame and the read-back cannot disagree, whatever the thread scheduling.
+"""
 
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+import time
+from collections.abc import Callable
 
 
-@dataclass
 class SimWorld:
     """Ground truth of the simulated station, shared between simulators.
 
-    The turntable emulator writes ``stage_deg`` as the stage moves; the
-    simulated camera reads it (and writes ``focus`` when the driver locks
-    focus). ``harp_offset_deg`` is the angle of the strings in the image
-    when the stage is at 0°. Thread-safe.
+    Parameters
+    ----------
+    stage_deg : float
+        Stage angle while no emulator drives the stage (see :meth:`set_stage`).
+    focus : float
+        Focus position; written by the simulated camera's ``lock_focus``.
+    harp_offset_deg : float
+        Angle of the strings in the image when the stage is at 0°.
+
+    Thread-safe: the stage function is called under the emulator's own lock,
+    ``focus`` and ``harp_offset_deg`` are plain floats.
     """
 
-    stage_deg: float = 0.0
-    focus: float = 0.0
-    harp_offset_deg: float = 0.0
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    def __init__(self, stage_deg: float = 0.0, focus: float = 0.0, harp_offset_deg: float = 0.0):
+        self._stage_deg = float(stage_deg)
+        self.focus = float(focus)
+        self.harp_offset_deg = float(harp_offset_deg)
+        self._drive: Callable[[float], float] | None = None
+        self._driver_name: str | None = None
+        self._lock = threading.Lock()
+
+    # -- the stage ---------------------------------------------------------------
+    def drive_stage(self, stage_at: Callable[[float], float], name: str) -> None:
+        """Let ``stage_at(t)`` (degrees at ``time.monotonic()`` time ``t``) define the stage.
+
+        Called once by a turntable emulator (``name`` says which, for errors).
+        A second emulator on the same world is refused with ``ValueError``.
+        """
+        with self._lock:
+            if self._drive is not None:
+                raise ValueError(f"the simulated stage is already driven by the {self._driver_name}; one per world")
+            self._drive = stage_at
+            self._driver_name = name
+
+    @property
+    def driven(self) -> bool:
+        """True when a turntable emulator drives the stage."""
+        return self._drive is not None
+
+    def stage_at(self, t: float | None = None) -> float:
+        """The stage angle in degrees at monotonic time ``t`` (default: now)."""
+        drive = self._drive
+        if drive is None:
+            return self._stage_deg
+        return float(drive(time.monotonic() if t is None else t))
+
+    @property
+    def stage_deg(self) -> float:
+        """The stage angle now, in degrees."""
+        return self.stage_at()
 
     def set_stage(self, deg: float) -> None:
-        with self._lock:
-            self.stage_deg = float(deg)
+        """Put the stage at ``deg`` by hand (tests of the camera alone).
 
-    def string_angle_deg(self) -> float:
-        """Angle of the strings in the ideal image, in [0, 180)."""
-        with self._lock:
-            return (self.stage_deg + self.harp_offset_deg) % 180.0
+        ``ValueError`` when an emulator drives the stage: only its motion moves it then.
+        """
+        if self._drive is not None:
+            raise ValueError(f"the simulated stage is driven by the {self._driver_name}; move it through the turntable")
+        self._stage_deg = float(deg)
+
+    # -- what the camera sees ----------------------------------------------------
+    def string_angle_deg(self, t: float | None = None) -> float:
+        """Angle of the strings in the ideal image at time ``t`` (default now), in [0, 180)."""
+        return (self.stage_at(t) + self.harp_offset_deg) % 180.0
+
+    def __repr__(self) -> str:
+        stage = f"driven by the {self._driver_name}" if self._drive else f"{self._stage_deg:g}°"
+        return f"SimWorld(stage {stage}, focus {self.focus:g}, harp offset {self.harp_offset_deg:g}°)"

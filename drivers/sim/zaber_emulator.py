@@ -84,7 +84,7 @@ class ZaberEmulator(LineEmulator):
 
     # -- helpers --------------------------------------------------------------
     def stage_degrees(self, now: float) -> float:
-        return self.axis.position(now) / self.mspd
+        return self.axis.peek(now) / self.mspd
 
     def position_steps(self, now: float) -> int:
         return int(round(self.axis.position(now)))
