@@ -1,4 +1,4 @@
-r"""Convert a harp correction to OpenCV or lensfun parameters, with its conversion error.
+r"""Convert a harp correction to OpenCV, OpenCV-fisheye or lensfun parameters, with its conversion error.
 
 OpenCV's and lensfun's models cannot represent every lens, so an export is
 the member of their family closest to our correction, and the export states
@@ -7,36 +7,64 @@ how far it is. Both are defined only up to a homography, so the fit is
 .. math::
     \min_{\theta, H} \sum_{x_d \in G} \bigl\| D_\theta\bigl(H(U(x_d))\bigr) - x_d \bigr\|^2
 
-over a dense grid :math:`G` of distorted pixels covering the whole image,
-with :math:`U` our correction, :math:`D_\theta` the export's closed-form
-projection (ideal -> distorted) and :math:`H` a free homography (the output
-frame of the export need not be ours). The conversion error is then measured
-in the correction direction, on a denser grid, comparing the export's
-correction :math:`U_\theta = D_\theta^{-1}` with ours after *both* are
-normalised by their 4-corner homography (:mod:`pipeline.normalise`) — the
-comparison ``harp evaluate`` makes — and also modulo the best least-squares
-homography (smaller or equal: the intrinsic mismatch).
+over a grid :math:`G` of distorted pixels covering the whole image, borders
+and corners included, with :math:`U` our correction, :math:`D_\theta` the
+export's closed-form projection (ideal -> distorted: the direction in which
+OpenCV, ROS and lensfun apply their model, e.g. ``cv2.initUndistortRectifyMap``
+evaluates :math:`D_\theta` at every ideal pixel) and :math:`H` a free
+homography (the output frame of the export need not be ours).
+
+Richer families are fitted *in stages*, each started from the solution of
+the one below it padded with zeros (OpenCV: 5 -> 8 -> 12 -> 14 coefficients;
+lensfun: poly3 -> ptlens), which is an exact member of the richer family; the
+export is the stage with the smallest conversion error, so a richer export is
+never worse than a poorer one.
+
+The conversion error is then measured in the correction direction, on a
+denser grid, comparing the export's correction :math:`U_\theta = D_\theta^{-1}`
+with ours after *both* are normalised by their 4-corner homography
+(:mod:`pipeline.normalise`) — the comparison ``harp evaluate`` makes — and
+modulo the best least-squares homography (smaller or equal: the intrinsic
+mismatch), plus the straightness it leaves on lines our correction makes
+straight and, when the fitting shots' edges are given, on those shots.
 
 References
 ----------
 .. [1] Z. Tang et al., "High-precision camera distortion measurements with a
    calibration harp", JOSA A 29(10), 2012, section 2 (corrections modulo homography).
+.. [2] J. J. Moré, "The Levenberg-Marquardt algorithm: implementation and theory",
+   Numerical Analysis, LNM 630, 1978 (the LM iterations, monotone in the cost).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from pipeline.evaluate import corrected_points
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
+from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.normalise import corner_homography, fit_homography, normalise_by_corners
-from pipeline.straightness import straightness
+from pipeline.straightness import Straightness, straightness
+
+Array = npt.NDArray[np.float64]
+
+OPENCV_STAGES = (5, 8, 12, 14)
+"""Coefficient counts of OpenCV's pin-hole model, in the order they are fitted."""
+
+FIT_GRID_LONG = 48
+"""Fitting grid: points along the long side of the image (borders and corners included)."""
+
+ERROR_GRID_LONG = 121
+"""Conversion-error grid: points along the long side (denser than the fitting grid)."""
 
 
 @dataclass(frozen=True)
@@ -57,8 +85,12 @@ class ConversionError:
         correction makes exactly straight, after the export's correction:
         the residual distortion ``harp evaluate`` would report for the export
         on a noise-free harp (lines every ~1/16 of the image at 0, 45, 90 and
-        135 degrees, a point every 4 px). Homography-invariant; compare with
-        the measurement noise floor.
+        135 degrees, a point every 4 px). Homography-invariant.
+    shots_d_px, shots_d_max_px : float
+        Straightness the export leaves on the measured edges of the shots the
+        model was fitted on (NaN when they were not given).
+    model_shots_d_px, model_shots_d_max_px : float
+        Our own correction's straightness on the same edges, for comparison.
     """
 
     rms_px: float
@@ -68,8 +100,12 @@ class ConversionError:
     n_points: int
     d_px: float = float("nan")
     d_max_px: float = float("nan")
+    shots_d_px: float = float("nan")
+    shots_d_max_px: float = float("nan")
+    model_shots_d_px: float = float("nan")
+    model_shots_d_max_px: float = float("nan")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "rms_px": self.rms_px,
             "max_px": self.max_px,
@@ -78,10 +114,30 @@ class ConversionError:
             "n_points": self.n_points,
             "d_px": self.d_px,
             "d_max_px": self.d_max_px,
+            "shots_d_px": self.shots_d_px,
+            "shots_d_max_px": self.shots_d_max_px,
+            "model_shots_d_px": self.model_shots_d_px,
+            "model_shots_d_max_px": self.model_shots_d_max_px,
         }
 
+    def lines(self) -> list[str]:
+        """The figures as short human-readable lines (for file comments and the terminal)."""
+        out = [
+            f"conversion error vs the harp correction, modulo best homography: RMS {self.rms_mod_h_px:.4f} px, "
+            f"max {self.max_mod_h_px:.4f} px; 4-corner normalised: RMS {self.rms_px:.4f} px, "
+            f"max {self.max_px:.4f} px ({self.n_points} points over the whole image)",
+            f"residual it leaves on a noise-free full-field harp: d {self.d_px:.4f} px, d_max {self.d_max_px:.4f} px",
+        ]
+        if np.isfinite(self.shots_d_px):
+            out.append(
+                f"residual on the fitting shots: d {self.shots_d_px:.4f} px, d_max {self.shots_d_max_px:.4f} px "
+                f"(the harp correction itself: d {self.model_shots_d_px:.4f} px, "
+                f"d_max {self.model_shots_d_max_px:.4f} px)"
+            )
+        return out
 
-def image_grid(width: int, height: int, n_long: int = 64) -> np.ndarray:
+
+def image_grid(width: int, height: int, n_long: int = 64) -> Array:
     """Grid of pixel positions covering the image (borders included), ``n_long`` along the long side."""
     n_long = max(int(n_long), 2)
     if width >= height:
@@ -95,9 +151,19 @@ def image_grid(width: int, height: int, n_long: int = 64) -> np.ndarray:
 
 
 def conversion_error(
-    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 121
+    ours: DistortionModel,
+    theirs: DistortionModel,
+    width: int,
+    height: int,
+    n_long: int = ERROR_GRID_LONG,
+    edges: Sequence[Array] | None = None,
 ) -> ConversionError:
-    """Compare two corrections over the image: 4-corner normalised, and modulo best homography."""
+    """Compare two corrections over the image: 4-corner normalised, and modulo best homography.
+
+    ``edges``: the measured edge points (distorted pixels) of the shots ``ours``
+    was fitted on; with them the figures include the straightness the export
+    leaves on those shots.
+    """
     g = image_grid(width, height, n_long)
     uo = ours.undistort_points(g)
     ut = theirs.undistort_points(g)
@@ -116,6 +182,11 @@ def conversion_error(
         e = np.concatenate([e, np.full(np.sum(~ok), np.inf)])
         e_h = np.concatenate([e_h, np.full(np.sum(~ok), np.inf)])
     st = conversion_straightness(ours, theirs, width, height)
+    shots: tuple[float, float, float, float] = (float("nan"),) * 4
+    if edges is not None and len(edges) > 0:
+        sh = straightness(corrected_points(list(edges), theirs, width, height))
+        so = straightness(corrected_points(list(edges), ours, width, height))
+        shots = (sh.d, sh.d_max, so.d, so.d_max)
     return ConversionError(
         rms_px=float(np.sqrt(np.mean(e**2))),
         max_px=float(e.max()),
@@ -124,7 +195,87 @@ def conversion_error(
         n_points=int(len(e)),
         d_px=st.d,
         d_max_px=st.d_max,
+        shots_d_px=shots[0],
+        shots_d_max_px=shots[1],
+        model_shots_d_px=shots[2],
+        model_shots_d_max_px=shots[3],
     )
+
+
+def _inside(p: Array, width: int, height: int) -> npt.NDArray[np.bool_]:
+    ok: npt.NDArray[np.bool_] = (
+        np.all(np.isfinite(p), axis=1)
+        & (p[:, 0] >= 0)
+        & (p[:, 0] <= width - 1)
+        & (p[:, 1] >= 0)
+        & (p[:, 1] <= height - 1)
+    )
+    return ok
+
+
+def conversion_error_in_frame(
+    ours: DistortionModel,
+    theirs: DistortionModel,
+    width: int,
+    height: int,
+    n_long: int = ERROR_GRID_LONG,
+    edges: Sequence[Array] | None = None,
+) -> ConversionError:
+    """Conversion error of an export in *our own* ideal frame, over the corrected image only.
+
+    For per-pixel maps (``maps``, ``stmap``): they hold our correction itself,
+    for the pixels of the corrected image ``[0, W-1] x [0, H-1]``; a distorted
+    point whose ideal image falls outside is not in the corrected image and is
+    not compared. No homography is applied (the frames are the same), so both
+    the "4-corner" and the "modulo homography" figures are the plain distance
+    ``|U_theirs(x) - U_ours(x)|``; the straightness figures are on lines of our
+    ideal frame inside the corrected image, and on the fitting shots' edge
+    points that appear in it.
+    """
+    g = image_grid(width, height, n_long)
+    uo = ours.undistort_points(g)
+    keep = _inside(uo, width, height)
+    ut = theirs.undistort_points(g[keep])
+    e = np.linalg.norm(ut - uo[keep], axis=1)
+    e = np.where(np.isfinite(e), e, np.inf)
+    lines = straight_lines_through(ours, width, height, normalise=False)
+    st = straightness([theirs.undistort_points(ln) for ln in lines])
+    shots: tuple[float, float, float, float] = (float("nan"),) * 4
+    if edges is not None and len(edges) > 0:
+        kept = []
+        for p in edges:
+            p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+            ok = _inside(ours.undistort_points(p), width, height)
+            if ok.sum() >= 2:
+                kept.append(p[ok])
+        if kept:
+            sh = straightness([theirs.undistort_points(p) for p in kept])
+            so = straightness([ours.undistort_points(p) for p in kept])
+            shots = (sh.d, sh.d_max, so.d, so.d_max)
+    rms, mx = float(np.sqrt(np.mean(e**2))), float(e.max())
+    return ConversionError(
+        rms_px=rms,
+        max_px=mx,
+        rms_mod_h_px=rms,
+        max_mod_h_px=mx,
+        n_points=int(len(e)),
+        d_px=st.d,
+        d_max_px=st.d_max,
+        shots_d_px=shots[0],
+        shots_d_max_px=shots[1],
+        model_shots_d_px=shots[2],
+        model_shots_d_max_px=shots[3],
+    )
+
+
+def mod_h_rms(ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 64) -> float:
+    """RMS distance of the two corrections modulo the best homography (inf if undefined somewhere)."""
+    g = image_grid(width, height, n_long)
+    uo, ut = ours.undistort_points(g), theirs.undistort_points(g)
+    if not (np.all(np.isfinite(uo)) and np.all(np.isfinite(ut))):
+        return float("inf")
+    h = fit_homography(ut, uo)
+    return float(np.sqrt(np.mean(np.sum((apply_homography(h, ut) - uo) ** 2, axis=1))))
 
 
 def straight_lines_through(
@@ -132,17 +283,19 @@ def straight_lines_through(
     width: int,
     height: int,
     n_lines: int = 16,
-    angles_deg=(0.0, 45.0, 90.0, 135.0),
+    angles_deg: Sequence[float] = (0.0, 45.0, 90.0, 135.0),
     step_px: float = 4.0,
     min_points: int = 20,
-) -> list[np.ndarray]:
+    normalise: bool = True,
+) -> list[Array]:
     """Distorted images of ideal straight lines: what ``model`` (4-corner normalised) makes straight.
 
     Lines at each angle, ``n_lines`` across the image, sampled every
     ``step_px`` in the ideal frame, mapped to the distorted image by the
-    model's inverse; points falling outside the image are dropped.
+    model's inverse; points falling outside the image are dropped. With
+    ``normalise=False`` the ideal frame is the model's own (not 4-corner normalised).
     """
-    norm = normalise_by_corners(model, width, height)
+    norm: DistortionModel = normalise_by_corners(model, width, height) if normalise else model
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     half = 0.5 * float(np.hypot(width, height))
     out = []
@@ -172,101 +325,237 @@ def straight_lines_through(
     return out
 
 
-def conversion_straightness(ours: DistortionModel, theirs: DistortionModel, width: int, height: int):
+def conversion_straightness(ours: DistortionModel, theirs: DistortionModel, width: int, height: int) -> Straightness:
     """Straightness (``d``, ``d_max``) left by ``theirs`` on lines ``ours`` makes exactly straight."""
     lines = straight_lines_through(ours, width, height)
     return straightness(corrected_points(lines, theirs, width, height))
 
 
-def _fit_with_homography(ours: DistortionModel, width: int, height: int, make, theta0, n_long: int = 40):
-    """Least squares over (theta, H) of ``make(theta).distort_points(H(U(x_d))) - x_d``."""
-    xd = image_grid(width, height, n_long)
-    u = ours.undistort_points(xd)
-    ok = np.all(np.isfinite(u), axis=1)
-    if ok.sum() < 0.9 * len(xd):
-        raise ValueError("our correction is undefined over much of the image; cannot convert it")
-    xd, u = xd[ok], u[ok]
-    # condition H in coordinates centred on the image, unit ~ half diagonal
-    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
-    s = 0.5 * float(np.hypot(width, height))
-    t = np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
-    tinv = np.linalg.inv(t)
-    h0 = t @ fit_homography(u, xd) @ tinv
-    h0 = h0 / h0[2, 2]
-    theta0 = np.asarray(theta0, dtype=np.float64)
+@dataclass(frozen=True)
+class _Problem:
+    """The fitting data: distorted grid points, our ideal points, and the homography conditioning."""
+
+    xd: Array
+    u: Array
+    t: Array
+    tinv: Array
+
+    @classmethod
+    def make(cls, ours: DistortionModel, width: int, height: int, n_long: int) -> _Problem:
+        xd = image_grid(width, height, n_long)
+        u = ours.undistort_points(xd)
+        ok = np.all(np.isfinite(u), axis=1)
+        if ok.sum() < 0.9 * len(xd):
+            raise ValueError("our correction is undefined over much of the image; cannot convert it")
+        # condition H in coordinates centred on the image, unit ~ half diagonal
+        c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+        s = 0.5 * float(np.hypot(width, height))
+        t = np.array([[1 / s, 0, -c[0] / s], [0, 1 / s, -c[1] / s], [0, 0, 1.0]])
+        return cls(xd=xd[ok], u=u[ok], t=t, tinv=np.linalg.inv(t))
+
+    def h0(self) -> Array:
+        """Conditioned initial homography (ours -> distorted), flattened 8 values."""
+        h = self.t @ fit_homography(self.u, self.xd) @ self.tinv
+        return np.asarray((h / h[2, 2]).ravel()[:8], dtype=np.float64)
+
+    def pixel_h(self, hn8: Array) -> Array:
+        return np.asarray(self.tinv @ np.append(hn8, 1.0).reshape(3, 3) @ self.t, dtype=np.float64)
+
+
+def _least_squares(
+    prob: _Problem, make: Callable[[Array], DistortionModel], theta0: Array, h0: Array, *, fix_h: bool = False
+) -> tuple[Array, Array, float]:
+    """LM over (theta, H) of ``make(theta).distort_points(H(U(x_d))) - x_d``: ``(theta, h8, cost)``.
+
+    With ``fix_h`` only ``theta`` moves (``H = h0``).
+    """
     nt = len(theta0)
 
-    def unpack(p):
-        hn = np.append(p[nt:], 1.0).reshape(3, 3)
-        return p[:nt], tinv @ hn @ t
-
-    def resid(p):
-        theta, h = unpack(p)
+    def resid(p: Array) -> Array:
         try:
-            m = make(theta)
+            m = make(p[:nt])
         except ValueError:
-            return np.full(2 * len(xd), 1e6)
-        r = m.distort_points(apply_homography(h, u)) - xd
-        r = np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6)
-        return r.ravel()
+            return np.full(2 * len(prob.xd), 1e6)
+        h8 = h0 if fix_h else p[nt:]
+        r = m.distort_points(apply_homography(prob.pixel_h(h8), prob.u)) - prob.xd
+        return np.asarray(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6).ravel(), dtype=np.float64)
 
-    p0 = np.concatenate([theta0, h0.ravel()[:8]])
-    sol = least_squares(resid, p0, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=2000)
-    theta, _ = unpack(sol.x)
-    return make(theta)
+    p0 = theta0.copy() if fix_h else np.concatenate([theta0, h0])
+    sol = least_squares(resid, p0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=4000)
+    x = np.asarray(sol.x, dtype=np.float64)
+    if not float(sol.cost) <= 0.5 * float(np.sum(resid(p0) ** 2)):  # LM is monotone; keep the start if not
+        x = p0
+    return x[:nt], (h0.copy() if fix_h else x[nt:]), float(0.5 * np.sum(resid(x) ** 2))
+
+
+def placeholder_focal(width: int, height: int) -> float:
+    """The focal length (px) used when none is given: the image diagonal (a scale, not a measurement)."""
+    return float(np.hypot(width, height))
 
 
 def fit_opencv(
-    model: DistortionModel, width: int, height: int, *, n_coeffs: int = 5, focal: float | None = None
+    model: DistortionModel,
+    width: int,
+    height: int,
+    *,
+    n_coeffs: int = 12,
+    focal: float | None = None,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
 ) -> tuple[OpenCVModel, ConversionError]:
-    """Closest OpenCV pinhole distortion to ``model`` over the image.
+    """Closest OpenCV pin-hole distortion to ``model`` over the whole image.
 
     Parameters
     ----------
-    n_coeffs : 5 or 8
-        ``k1 k2 p1 p2 k3`` (plumb_bob) or the rational ``k1 k2 p1 p2 k3 k4 k5 k6``.
+    n_coeffs : 5, 8, 12 or 14
+        ``k1 k2 p1 p2 k3`` (plumb_bob), + ``k4 k5 k6`` (rational), + thin prism
+        ``s1..s4``, + sensor tilt ``taux tauy``. Fitted in stages from 5 up,
+        each from the previous solution; the stage with the smallest
+        conversion error (modulo homography) is returned, padded with zeros.
     focal : float, optional
-        Nominal focal length in pixels (``fx = fy``), default the image
-        diagonal. A harp gives no focal length: only the shape of the field is
-        measured, so the coefficients are those for this nominal focal; the
-        principal point (the distortion centre) is fitted.
+        Focal length in pixels (``fx = fy``), e.g. the nominal one from the
+        lens and sensor; default :func:`placeholder_focal`. A harp measures
+        only the shape of the field, so for the pin-hole model the focal is a
+        scale the coefficients are expressed in (any value represents the same
+        distortion, except through the tilt terms); the principal point (the
+        distortion centre) is fitted.
+    edges : sequence of (N, 2) arrays, optional
+        Measured edge points of the fitting shots, for the conversion figures.
 
     Returns
     -------
     (OpenCVModel, ConversionError)
     """
-    if n_coeffs not in (5, 8):
-        raise ValueError(f"OpenCV export supports 5 or 8 coefficients, got {n_coeffs}")
-    f = float(np.hypot(width, height)) if focal is None else float(focal)
-    if not f > 0:
+    if n_coeffs not in OPENCV_STAGES:
+        raise ValueError(f"OpenCV export supports {', '.join(map(str, OPENCV_STAGES))} coefficients, got {n_coeffs}")
+    f = placeholder_focal(width, height) if focal is None else float(focal)
+    if not (np.isfinite(f) and f > 0):
         raise ValueError(f"focal length must be > 0 px, got {focal}")
     cx0, cy0 = (width - 1) / 2.0, (height - 1) / 2.0
     s = 0.5 * float(np.hypot(width, height))
+    prob = _Problem.make(model, width, height, n_long)
 
-    def make(theta):
-        return OpenCVModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=tuple(theta[2:]))
+    def maker(n: int) -> Callable[[Array], OpenCVModel]:
+        def make(theta: Array) -> OpenCVModel:
+            return OpenCVModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=tuple(theta[2 : 2 + n]))
 
-    out = _fit_with_homography(model, width, height, make, np.zeros(2 + n_coeffs))
-    return out, conversion_error(model, out, width, height)
+        return make
+
+    h8 = prob.h0()
+    # first the coefficients alone (H fixed at its linear start), so that the centre does not
+    # wander off along the centre/perspective valley, then everything
+    theta, _, _ = _least_squares(prob, maker(OPENCV_STAGES[0]), np.zeros(2 + OPENCV_STAGES[0]), h8, fix_h=True)
+    best: tuple[float, OpenCVModel] | None = None
+    for n in (m for m in OPENCV_STAGES if m <= n_coeffs):
+        theta = np.concatenate([theta, np.zeros(2 + n - len(theta))])
+        theta, h8, _ = _least_squares(prob, maker(n), theta, h8)
+        cand = maker(n_coeffs)(np.concatenate([theta, np.zeros(2 + n_coeffs - len(theta))]))
+        score = mod_h_rms(model, cand, width, height)
+        if best is None or score < best[0]:
+            best = (score, cand)
+    assert best is not None
+    out = best[1]
+    return out, conversion_error(model, out, width, height, edges=edges)
+
+
+FISHEYE_FOCAL_STARTS = (0.2, 0.3, 0.45, 0.7, 1.0, 1.6, 3.0)
+"""Starting focal lengths (in image diagonals) tried by :func:`fit_fisheye` when no focal is given."""
+
+
+def fit_fisheye(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    *,
+    focal: float | None = None,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
+) -> tuple[OpenCVFisheyeModel, ConversionError]:
+    """Closest OpenCV fisheye (Kannala–Brandt ``k1..k4``) projection to ``model`` over the whole image.
+
+    Unlike the pin-hole polynomial, the fisheye family depends on the focal
+    length (the angle of a ray is ``atan(r / f)``): with ``focal`` (px, the
+    nominal one) it is kept; without, it is fitted too, from the best of
+    :data:`FISHEYE_FOCAL_STARTS` (the fitted focal is then the one that makes
+    the lens closest to a Kannala–Brandt lens, not a measured focal length).
+    The principal point is fitted.
+    """
+    cx0, cy0 = (width - 1) / 2.0, (height - 1) / 2.0
+    s = 0.5 * float(np.hypot(width, height))
+    diag = placeholder_focal(width, height)
+    if focal is not None and not (np.isfinite(focal) and focal > 0):
+        raise ValueError(f"focal length must be > 0 px, got {focal}")
+    prob = _Problem.make(model, width, height, n_long)
+
+    def fixed(f: float) -> Callable[[Array], OpenCVFisheyeModel]:
+        def make(theta: Array) -> OpenCVFisheyeModel:
+            d = (float(theta[2]), float(theta[3]), float(theta[4]), float(theta[5]))
+            return OpenCVFisheyeModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=d)
+
+        return make
+
+    def free(theta: Array) -> OpenCVFisheyeModel:
+        return fixed(diag * float(np.exp(theta[6])))(theta)
+
+    starts = [float(focal)] if focal is not None else [diag * v for v in FISHEYE_FOCAL_STARTS]
+    best: tuple[float, Array, Array, float] | None = None
+    for f0 in starts:
+        th, _, _ = _least_squares(prob, fixed(f0), np.zeros(6), prob.h0(), fix_h=True)
+        th, h8, cost = _least_squares(prob, fixed(f0), th, prob.h0())
+        if best is None or cost < best[0]:
+            best = (cost, th, h8, f0)
+    assert best is not None
+    _, th, h8, f0 = best
+    if focal is None:
+        th, h8, _ = _least_squares(prob, free, np.append(th, np.log(f0 / diag)), h8)
+        out = free(th)
+    else:
+        out = fixed(float(focal))(th)
+    return out, conversion_error(model, out, width, height, edges=edges)
 
 
 def fit_lensfun(
-    model: DistortionModel, width: int, height: int, *, kind: str = "ptlens", fit_center: bool = True
+    model: DistortionModel,
+    width: int,
+    height: int,
+    *,
+    kind: str = "ptlens",
+    fit_center: bool = True,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
 ) -> tuple[LensfunModel, ConversionError]:
     """Closest lensfun ``poly3`` / ``poly5`` / ``ptlens`` distortion to ``model``.
 
     With ``fit_center`` (default) the distortion centre is fitted too and
     written as the lens' ``<center x y>`` offset (read by lensfun 0.3.x;
     verified with lensfun 0.3.4); without, it is the image centre, so a
-    decentred lens shows up in the conversion error.
+    decentred lens shows up in the conversion error. ``ptlens`` starts from
+    the ``poly3`` solution (poly3 is the ptlens lens with ``a = c = 0``).
     """
     if kind not in LENSFUN_TERMS:
         raise ValueError(f"lensfun export supports {sorted(LENSFUN_TERMS)}, got {kind!r}")
-    n = len(LENSFUN_TERMS[kind])
+    prob = _Problem.make(model, width, height, n_long)
 
-    def make(theta):
-        center = (theta[n], theta[n + 1]) if fit_center else (0.0, 0.0)
-        return LensfunModel(kind=kind, terms=tuple(theta[:n]), width=width, height=height, center=center)
+    def maker(k: str) -> Callable[[Array], LensfunModel]:
+        n = len(LENSFUN_TERMS[k])
 
-    out = _fit_with_homography(model, width, height, make, np.zeros(n + 2 if fit_center else n))
-    return out, conversion_error(model, out, width, height)
+        def make(theta: Array) -> LensfunModel:
+            center = (float(theta[n]), float(theta[n + 1])) if fit_center else (0.0, 0.0)
+            return LensfunModel(kind=k, terms=tuple(theta[:n]), width=width, height=height, center=center)
+
+        return make
+
+    nc = 2 if fit_center else 0
+    h8 = prob.h0()
+    candidates: list[LensfunModel] = []
+    if kind == "ptlens":
+        th3, _, _ = _least_squares(prob, maker("poly3"), np.zeros(1 + nc), h8, fix_h=True)
+        th3, h8, _ = _least_squares(prob, maker("poly3"), th3, h8)
+        candidates.append(maker("ptlens")(np.concatenate([[0.0, th3[0], 0.0], th3[1:]])))
+        theta0 = np.concatenate([[0.0, th3[0], 0.0], th3[1:]])
+    else:
+        theta0, _, _ = _least_squares(prob, maker(kind), np.zeros(len(LENSFUN_TERMS[kind]) + nc), h8, fix_h=True)
+    th, _, _ = _least_squares(prob, maker(kind), theta0, h8)
+    candidates.append(maker(kind)(th))
+    out = min(candidates, key=lambda m: mod_h_rms(model, m, width, height))
+    return out, conversion_error(model, out, width, height, edges=edges)

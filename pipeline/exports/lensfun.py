@@ -1,13 +1,33 @@
 """Lensfun database XML (``<lensdatabase><lens>…<calibration><distortion …/>``).
 
 Element and attribute names follow lensfun's database format (``lensdatabase``
-with ``version``, ``lens`` with ``maker``, ``model``, ``mount``,
-``cropfactor``, ``aspect-ratio``, ``calibration``/``distortion`` with
-``model`` = ``poly3`` | ``poly5`` | ``ptlens``, ``focal`` and the terms
-``k1``[, ``k2``] or ``a``, ``b``, ``c``). The aspect ratio written is the one
-lensfun computes for the image, ``(W-1)/(H-1)``, so lensfun's coordinate
-correction is exactly 1 for images of the calibrated size and crop factor.
-The conversion error is stated in an XML comment.
+with ``version``, ``camera`` and ``lens`` with ``maker``, ``model``,
+``mount``, ``cropfactor``, a lens' ``aspect-ratio``, ``center`` and
+``calibration``/``distortion`` with ``model`` = ``poly3`` | ``poly5`` |
+``ptlens``, ``focal`` and the terms ``k1``[, ``k2``] or ``a``, ``b``, ``c``).
+The aspect ratio written is the one lensfun computes for the image,
+``(W-1)/(H-1)``, so lensfun's coordinate correction is exactly 1 for images
+of the calibrated size and crop factor. The conversion error is stated in an
+XML comment beside each calibration.
+
+Maker, model, mount and crop factor come from the configuration
+(:class:`~pipeline.exports.lens.LensInfo`): applications (darktable,
+RawTherapee, digiKam, Hugin) find a lens by the camera's mount and the lens
+name of the photo's EXIF, and scale the correction by the ratio of the
+lens' calibration crop factor to the camera's, so the crop factor written is
+the camera's. The focal length (``focal``) is the nominal one; lensfun has no
+focus axis for distortion, so the focus setting (and the serial number) are
+recorded in the comment beside the calibration. With the camera body known a
+``<camera>`` entry (maker, model, mount, crop factor) is written too, for
+bodies lensfun does not know.
+
+One database holds several lenses: :func:`lensfun_database_text` adds
+entries to an existing database, keyed by (maker, model, mount, crop
+factor): a new key adds a ``<lens>``; a lens already there gets the
+calibration at this focal added, or replaced if it had one at this focal
+(lensfun keeps one calibration per focal; what was replaced is reported). A
+lens' ``<center>`` and aspect ratio apply to all its calibrations, so a
+calibration with another fitted centre goes into a lens element of its own.
 
 References
 ----------
@@ -17,76 +37,259 @@ References
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.lens import LensInfo
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
+
+DEFAULT_MAKER = "harp station"
+DEFAULT_MODEL = "harp calibration"
+DEFAULT_MOUNT = "Generic"
+DEFAULT_FOCAL_MM = 50.0
+
+
+@dataclass(frozen=True)
+class LensfunEntry:
+    """One calibration for a lensfun database: the fitted model, the lens, the figures."""
+
+    model: LensfunModel
+    lens: LensInfo = field(default_factory=LensInfo)
+    error: ConversionError | None = None
+
+    @property
+    def maker(self) -> str:
+        return self.lens.lens_maker or DEFAULT_MAKER
+
+    @property
+    def lens_model(self) -> str:
+        return self.lens.lens_model or DEFAULT_MODEL
+
+    @property
+    def mount(self) -> str:
+        return self.lens.mount or DEFAULT_MOUNT
+
+    @property
+    def cropfactor(self) -> float:
+        return float(self.lens.crop_factor) if self.lens.crop_factor is not None else 1.0
+
+    @property
+    def focal(self) -> float:
+        return float(self.lens.focal_mm) if self.lens.focal_mm is not None else DEFAULT_FOCAL_MM
+
+    def aspect_ratio(self) -> float:
+        """The aspect ratio written: lensfun's ``(W-1)/(H-1)`` (>= 1) of the calibrated images."""
+        w, h = self.model.width, self.model.height
+        ar = max(w - 1, h - 1) / min(w - 1, h - 1)
+        if self.model.coord_scale != 1.0:  # a calibration of another aspect ratio: write that one
+            ar = float(np.sqrt(self.model.coord_scale**2 * (ar * ar + 1) - 1))
+        return float(ar)
+
+    def note(self) -> str:
+        """The comment written beside the calibration."""
+        m = self.model
+        parts = [f"harp station calibration for {m.width}x{m.height} images at focal {self.focal:g} mm"]
+        if self.lens.focus is not None:
+            parts.append(f"focus setting {self.lens.focus:g} (lensfun has no focus axis for distortion)")
+        if self.lens.lens_serial:
+            parts.append(f"lens serial {self.lens.lens_serial}")
+        if self.lens.camera_body:
+            parts.append(f"camera {self.lens.camera_body}")
+        if self.lens.focal_mm is None:
+            parts.append(f"focal {DEFAULT_FOCAL_MM:g} mm is a placeholder (no nominal focal configured)")
+        if self.lens.crop_factor is None:
+            parts.append("crop factor 1 assumed (none configured)")
+        if self.error is not None:
+            parts.extend(self.error.lines())
+        return "; ".join(parts)
+
+
+def _xml_comment(text: str) -> str:
+    return " " + text.replace("--", "- -") + " "
+
+
+def _text_of(el: ET.Element, tag: str) -> str:
+    e = el.find(tag)
+    return (e.text or "").strip() if e is not None else ""
+
+
+def _key(el: ET.Element) -> tuple[str, str, str, float]:
+    """(maker, model, mount, crop factor) of a ``<lens>`` or ``<camera>``."""
+    try:
+        crop = float(_text_of(el, "cropfactor") or "nan")
+    except ValueError:
+        crop = float("nan")
+    return (_text_of(el, "maker"), _text_of(el, "model"), _text_of(el, "mount"), crop)
+
+
+def _center_of(lens: ET.Element) -> tuple[float, float]:
+    c = lens.find("center")
+    return (float(c.get("x", 0)), float(c.get("y", 0))) if c is not None else (0.0, 0.0)
+
+
+def _distortion_element(entry: LensfunEntry) -> ET.Element:
+    attrs = {"model": entry.model.kind, "focal": repr(entry.focal)}
+    attrs.update({n: repr(float(v)) for n, v in zip(LENSFUN_TERMS[entry.model.kind], entry.model.terms)})
+    return ET.Element("distortion", attrs)
+
+
+def _new_lens(entry: LensfunEntry) -> ET.Element:
+    lens = ET.Element("lens")
+    ET.SubElement(lens, "maker").text = entry.maker
+    ET.SubElement(lens, "model").text = entry.lens_model
+    ET.SubElement(lens, "mount").text = entry.mount
+    ET.SubElement(lens, "cropfactor").text = repr(entry.cropfactor)
+    ET.SubElement(lens, "aspect-ratio").text = repr(entry.aspect_ratio())
+    if entry.model.center != (0.0, 0.0):
+        ET.SubElement(lens, "center", {"x": repr(entry.model.center[0]), "y": repr(entry.model.center[1])})
+    ET.SubElement(lens, "calibration")
+    return lens
+
+
+def _add_camera(root: ET.Element, entry: LensfunEntry) -> None:
+    lens = entry.lens
+    if not (lens.camera_maker and lens.camera_model):
+        return
+    if any(_key(c)[:2] == (lens.camera_maker, lens.camera_model) for c in root.findall("camera")):
+        return
+    cam = ET.Element("camera")
+    ET.SubElement(cam, "maker").text = lens.camera_maker
+    ET.SubElement(cam, "model").text = lens.camera_model
+    ET.SubElement(cam, "mount").text = entry.mount
+    ET.SubElement(cam, "cropfactor").text = repr(entry.cropfactor)
+    cams = root.findall("camera")
+    root.insert(list(root).index(cams[-1]) + 1 if cams else 0, cam)
+
+
+def add_to_database(root: ET.Element, entry: LensfunEntry) -> str:
+    """Add ``entry`` to a parsed ``<lensdatabase>`` in place; returns what was done (one line)."""
+    _add_camera(root, entry)
+    ar = entry.aspect_ratio()
+    for lens in root.findall("lens"):
+        k = _key(lens)
+        if k[:3] != (entry.maker, entry.lens_model, entry.mount) or not math.isclose(k[3], entry.cropfactor):
+            continue
+        try:
+            same_ar = math.isclose(float(_text_of(lens, "aspect-ratio") or "nan"), ar, rel_tol=1e-9)
+        except ValueError:
+            same_ar = False
+        if not same_ar or _center_of(lens) != tuple(entry.model.center):
+            continue
+        cal = lens.find("calibration")
+        if cal is None:
+            cal = ET.SubElement(lens, "calibration")
+        kids = list(cal)
+        for i, d in enumerate(kids):
+            if d.tag == "distortion" and math.isclose(float(d.get("focal", "nan")), entry.focal, rel_tol=1e-9):
+                before = kids[i - 1] if i > 0 and kids[i - 1].tag is ET.Comment else None
+                pos = list(cal).index(d)
+                cal.remove(d)
+                if before is not None:
+                    cal.remove(before)
+                    pos -= 1
+                cal.insert(pos, ET.Comment(_xml_comment(entry.note())))
+                cal.insert(pos + 1, _distortion_element(entry))
+                was = f" (it was: {(before.text or '').strip().split(';')[0]})" if before is not None else ""
+                return f"replaced the calibration of {entry.maker} {entry.lens_model} at {entry.focal:g} mm{was}"
+        cal.append(ET.Comment(_xml_comment(entry.note())))
+        cal.append(_distortion_element(entry))
+        return f"added focal {entry.focal:g} mm to lens {entry.maker} {entry.lens_model}"
+    lens = _new_lens(entry)
+    cal = lens.find("calibration")
+    assert cal is not None
+    cal.append(ET.Comment(_xml_comment(entry.note())))
+    cal.append(_distortion_element(entry))
+    lenses = root.findall("lens")
+    root.insert(list(root).index(lenses[-1]) + 1 if lenses else len(root), lens)
+    return f"added lens {entry.maker} {entry.lens_model} ({entry.mount}, crop factor {entry.cropfactor:g})"
+
+
+def parse_database(text: str, name: str = "<text>") -> ET.Element:
+    """A lensfun database's root element, comments kept; ValueError('<name>: <reason>') if it is not one."""
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    try:
+        root = ET.fromstring(text, parser=parser)
+    except ET.ParseError as exc:
+        raise ValueError(f"{name}: not valid XML ({exc})") from None
+    if root.tag != "lensdatabase":
+        raise ValueError(f"{name}: not a lensfun database (root <{root.tag}>, expected <lensdatabase>)")
+    return root
+
+
+def lensfun_database_text(
+    entries: Sequence[LensfunEntry], existing: str | None = None, name: str = "<existing>"
+) -> tuple[str, list[str]]:
+    """Database XML holding ``entries`` (added to ``existing`` if given): ``(text, what was done)``."""
+    root = parse_database(existing, name) if existing is not None else ET.Element("lensdatabase", {"version": "1"})
+    done = [add_to_database(root, e) for e in entries]
+    for el in root.iter():  # re-indent from scratch
+        if el.text is not None and not el.text.strip():
+            el.text = None
+        el.tail = None
+    ET.indent(root, space="    ")
+    head = '<?xml version="1.0" encoding="UTF-8"?>\n'
+    note = "<!-- exported by harp station; lensfun normalisation: unit = half the shorter side -->\n"
+    return head + note + ET.tostring(root, encoding="unicode") + "\n", done
 
 
 def lensfun_text(
     model: LensfunModel,
     error: ConversionError | None = None,
     *,
-    maker: str = "harp station",
-    lens_model: str = "harp calibration",
-    mount: str = "Generic",
+    maker: str = DEFAULT_MAKER,
+    lens_model: str = DEFAULT_MODEL,
+    mount: str = DEFAULT_MOUNT,
     cropfactor: float = 1.0,
-    focal: float = 50.0,
+    focal: float = DEFAULT_FOCAL_MM,
+    lens: LensInfo | None = None,
 ) -> str:
-    """Lensfun database XML text with one lens and one distortion calibration."""
-    root = ET.Element("lensdatabase", {"version": "1"})
-    lens = ET.SubElement(root, "lens")
-    ET.SubElement(lens, "maker").text = maker
-    ET.SubElement(lens, "model").text = lens_model
-    ET.SubElement(lens, "mount").text = mount
-    ET.SubElement(lens, "cropfactor").text = repr(float(cropfactor))
-    w, h = model.width, model.height
-    ar = max(w - 1, h - 1) / min(w - 1, h - 1)
-    if model.coord_scale != 1.0:  # a calibration of another aspect ratio: write that one
-        ar = float(np.sqrt(model.coord_scale**2 * (ar * ar + 1) - 1))
-    ET.SubElement(lens, "aspect-ratio").text = repr(float(ar))
-    if model.center != (0.0, 0.0):
-        ET.SubElement(lens, "center", {"x": repr(model.center[0]), "y": repr(model.center[1])})
-    cal = ET.SubElement(lens, "calibration")
-    attrs = {"model": model.kind, "focal": repr(float(focal))}
-    attrs.update({n: repr(float(v)) for n, v in zip(LENSFUN_TERMS[model.kind], model.terms)})
-    ET.SubElement(cal, "distortion", attrs)
-    ET.indent(root, space="    ")
-    head = '<?xml version="1.0" encoding="UTF-8"?>\n'
-    note = (
-        f"<!-- exported by harp station for {w}x{h} images; lensfun normalisation: unit = half the shorter side -->\n"
-    )
-    if error is not None:
-        note += (
-            f"<!-- conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
-            f"max {error.max_px:.4f} px; modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
-            f"max {error.max_mod_h_px:.4f} px; residual on a noise-free full-field harp: "
-            f"d {error.d_px:.4f} px, d_max {error.d_max_px:.4f} px -->\n"
-        )
-    return head + note + ET.tostring(root, encoding="unicode") + "\n"
+    """Lensfun database XML text with one lens and one distortion calibration.
+
+    ``lens`` (the configuration) takes precedence over the keyword values.
+    """
+    info = lens or LensInfo(lens_maker=maker, lens_model=lens_model, mount=mount, crop_factor=cropfactor, focal_mm=focal)
+    text, _ = lensfun_database_text([LensfunEntry(model=model, lens=info, error=error)])
+    return text
+
+
+def lensfun_lens_names(text: str, name: str = "<text>") -> list[str]:
+    """``"maker model"`` of every lens in a database."""
+    return [" ".join(_key(ln)[:2]) for ln in parse_database(text, name).findall("lens")]
 
 
 def read_lensfun_text(
-    text: str, width: int, height: int, name: str = "<text>", focal: float | None = None
+    text: str,
+    width: int,
+    height: int,
+    name: str = "<text>",
+    focal: float | None = None,
+    lens_name: str | None = None,
 ) -> LensfunModel:
-    """The distortion of the (first) lens of a lensfun XML, for images of ``width`` x ``height``.
+    """The distortion of the lens of a lensfun XML, for images of ``width`` x ``height``.
 
-    With several ``<distortion>`` entries, ``focal`` picks the one at that
-    focal length (no interpolation); ValueError('<name>: <reason>') otherwise.
-    A calibration aspect ratio other than the images' gives lensfun's
-    coordinate correction ``coord_scale`` (same crop factor assumed).
+    With several lenses, ``lens_name`` (``"maker model"`` or ``"model"``) picks
+    one. With several ``<distortion>`` entries, ``focal`` picks the one at
+    that focal length (no interpolation); ValueError('<name>: <reason>')
+    otherwise. A calibration aspect ratio other than the images' gives
+    lensfun's coordinate correction ``coord_scale`` (same crop factor assumed).
     """
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise ValueError(f"{name}: not valid XML ({exc})") from None
-    if root.tag != "lensdatabase":
-        raise ValueError(f"{name}: not a lensfun database (root <{root.tag}>, expected <lensdatabase>)")
-    lens = root.find("lens")
-    if lens is None:
+    root = parse_database(text, name)
+    lenses = root.findall("lens")
+    if not lenses:
         raise ValueError(f"{name}: lensfun file without a <lens>")
+    if lens_name is not None:
+        lenses = [ln for ln in lenses if lens_name in (" ".join(_key(ln)[:2]), _key(ln)[1])]
+        if not lenses:
+            raise ValueError(f"{name}: no lens named {lens_name!r}")
+    if len(lenses) > 1:
+        names = "; ".join(" ".join(_key(ln)[:2]) for ln in lenses)
+        raise ValueError(f"{name}: several lenses ({names}); choose one by name")
+    lens = lenses[0]
     dists = lens.findall("calibration/distortion")
     if not dists:
         raise ValueError(f"{name}: lens has no <calibration><distortion>")
@@ -107,12 +310,10 @@ def read_lensfun_text(
         terms = tuple(float(d.get(t, "0")) for t in LENSFUN_TERMS[kind])
     except ValueError:
         raise ValueError(f"{name}: non-numeric distortion terms") from None
-    c = lens.find("center")
-    center = (float(c.get("x", 0)), float(c.get("y", 0))) if c is not None else (0.0, 0.0)
-    ar_el = lens.find("aspect-ratio")
+    center = _center_of(lens)
+    txt = _text_of(lens, "aspect-ratio")
     ar = 1.5  # lensfun's default for lenses
-    if ar_el is not None and ar_el.text:
-        txt = ar_el.text.strip()
+    if txt:
         try:
             ar = (float(txt.split(":")[0]) / float(txt.split(":")[1])) if ":" in txt else float(txt)
         except (ValueError, ZeroDivisionError):

@@ -1,12 +1,20 @@
 """OpenCV FileStorage calibration files (``camera_matrix`` + ``distortion_coefficients``).
 
 Written and read with ``cv2.FileStorage`` itself (in memory), so OpenCV
-loads the export unchanged; the conversion error is stored as fields
-``conversion_rms_px`` / ``conversion_max_px`` (and modulo-homography
-variants, and the straightness ``conversion_d_px`` / ``conversion_d_max_px``
-it leaves on a full-field harp) and as a comment. Also reads OpenCV calibrations made elsewhere
-(YAML or XML; names ``camera_matrix``/``distortion_coefficients``, or
-``cameraMatrix``/``distCoeffs``, ``K``/``D``).
+loads the export unchanged. Fields: ``image_width``, ``image_height``,
+``camera_matrix``, ``distortion_coefficients`` (1 x 5, 8, 12 or 14 for the
+pin-hole model of ``cv::undistort`` / ``cv::initUndistortRectifyMap``; 1 x 4
+``k1..k4`` for ``cv::fisheye``), ``distortion_model`` (``pinhole`` or
+``fisheye``: which OpenCV functions take the coefficients),
+``camera_matrix_kind`` (``nominal`` / ``given`` / ``placeholder``, see
+:mod:`pipeline.exports.lens`) and the conversion error
+``conversion_rms_px`` / ``conversion_max_px`` (4-corner normalised),
+``conversion_rms_mod_h_px`` / ``conversion_max_mod_h_px`` (modulo
+homography), ``conversion_d_px`` / ``conversion_d_max_px`` (straightness
+left on a full-field harp) and, when known, ``conversion_shots_d_px`` (on
+the fitting shots); the same figures as comments. Also reads OpenCV
+calibrations made elsewhere (YAML or XML; names ``camera_matrix`` /
+``distortion_coefficients``, or ``cameraMatrix`` / ``distCoeffs``, ``K`` / ``D``).
 
 References
 ----------
@@ -18,9 +26,13 @@ References
 
 from __future__ import annotations
 
+import math
+
 import cv2
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
 CAMERA_MATRIX_NAMES = ("camera_matrix", "cameraMatrix", "K")
@@ -28,30 +40,30 @@ DIST_NAMES = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
 
 
 def opencv_text(
-    model: OpenCVModel,
+    model: OpenCVModel | OpenCVFisheyeModel,
     width: int,
     height: int,
     error: ConversionError | None = None,
     *,
     xml: bool = False,
     comment: str | None = None,
+    camera: CameraMatrixChoice | None = None,
+    notes: tuple[str, ...] = (),
 ) -> str:
-    """FileStorage YAML (or XML) text of an OpenCV calibration."""
+    """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye)."""
+    fisheye = isinstance(model, OpenCVFisheyeModel)
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
-    fs.writeComment(comment or "OpenCV pinhole distortion exported by harp station")
-    if error is not None:
-        fs.writeComment(
-            f"conversion error vs the harp correction (4-corner normalised): "
-            f"RMS {error.rms_px:.4f} px, max {error.max_px:.4f} px; modulo best homography: "
-            f"RMS {error.rms_mod_h_px:.4f} px, max {error.max_mod_h_px:.4f} px"
-        )
-        fs.writeComment(
-            f"residual it leaves on a noise-free full-field harp: d {error.d_px:.4f} px, d_max {error.d_max_px:.4f} px"
-        )
+    kind = "fisheye (cv::fisheye, Kannala-Brandt k1..k4)" if fisheye else f"pinhole, {len(model.dist)} coefficients"
+    fs.writeComment(comment or f"OpenCV {kind} distortion exported by harp station")
+    for line in [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]:
+        fs.writeComment(line)
     fs.write("image_width", int(width))
     fs.write("image_height", int(height))
     fs.write("camera_matrix", model.camera_matrix)
     fs.write("distortion_coefficients", model.dist_coeffs.reshape(1, -1))
+    fs.write("distortion_model", "fisheye" if fisheye else "pinhole")
+    if camera is not None:
+        fs.write("camera_matrix_kind", camera.kind)
     if error is not None:
         fs.write("conversion_rms_px", float(error.rms_px))
         fs.write("conversion_max_px", float(error.max_px))
@@ -59,13 +71,20 @@ def opencv_text(
         fs.write("conversion_max_mod_h_px", float(error.max_mod_h_px))
         fs.write("conversion_d_px", float(error.d_px))
         fs.write("conversion_d_max_px", float(error.d_max_px))
-    return fs.releaseAndGetString()
+        if math.isfinite(error.shots_d_px):
+            fs.write("conversion_shots_d_px", float(error.shots_d_px))
+            fs.write("conversion_shots_d_max_px", float(error.shots_d_max_px))
+    return str(fs.releaseAndGetString())
 
 
-def read_opencv_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tuple[int, int] | None]:
+def read_opencv_text(
+    text: str, name: str = "<text>"
+) -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int] | None]:
     """Parse an OpenCV FileStorage calibration: ``(model, (width, height) or None)``.
 
-    Raises ValueError('<name>: <reason>') if it has no camera matrix / coefficients.
+    ``distortion_model: fisheye`` gives an :class:`OpenCVFisheyeModel`, anything
+    else the pin-hole :class:`OpenCVModel`. Raises ValueError('<name>: <reason>')
+    if it has no camera matrix / coefficients.
     """
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
@@ -81,6 +100,8 @@ def read_opencv_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tupl
         d = next((fs.getNode(n).mat() for n in DIST_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
         if k is None or d is None:
             raise ValueError(f"{name}: OpenCV file without camera_matrix and distortion_coefficients matrices")
+        dm = fs.getNode("distortion_model")
+        fisheye = (not dm.empty()) and dm.isString() and dm.string().strip().lower() == "fisheye"
         size = None
         wn, hn = fs.getNode("image_width"), fs.getNode("image_height")
         if not wn.empty() and not hn.empty():
@@ -92,6 +113,8 @@ def read_opencv_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tupl
     finally:
         fs.release()
     try:
+        if fisheye:
+            return OpenCVFisheyeModel.from_matrices(k, d), size
         return OpenCVModel.from_matrices(k, d), size
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None

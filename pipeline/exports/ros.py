@@ -2,10 +2,15 @@
 
 The file ``camera_info_manager`` loads: ``image_width``, ``image_height``,
 ``camera_name``, ``camera_matrix``, ``distortion_model`` (``plumb_bob`` for
-5 coefficients, ``rational_polynomial`` for 8), ``distortion_coefficients``,
+5 coefficients, ``rational_polynomial`` for 8, ``equidistant`` for the
+fisheye ``k1..k4`` of ``cv::fisheye``, which ROS 2's image_geometry
+rectifies; Debian's python image_geometry 1.16 rectifies only the first
+two), ``distortion_coefficients``,
 ``rectification_matrix`` (identity: monocular) and ``projection_matrix``
-(``[K | 0]``), each matrix as ``{rows, cols, data}``. The conversion error is
-stated in leading comments (the format has no field for it).
+(``[K | 0]``), each matrix as ``{rows, cols, data}``. The conversion error
+and what the camera matrix means (nominal or a placeholder scale, see
+:mod:`pipeline.exports.lens`) are stated in leading comments (the format has
+no field for them).
 
 References
 ----------
@@ -17,10 +22,15 @@ References
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 import yaml
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
 ROS_FIELDS = (
@@ -34,43 +44,54 @@ ROS_FIELDS = (
     "projection_matrix",
 )
 ROS_DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
+ROS_FISHEYE_MODEL = "equidistant"
 
 
-def _mat(a) -> dict:
+def _mat(a: npt.ArrayLike) -> dict[str, Any]:
     a = np.atleast_2d(np.asarray(a, dtype=np.float64))
     return {"rows": int(a.shape[0]), "cols": int(a.shape[1]), "data": [float(v) for v in a.ravel()]}
 
 
 def ros_text(
-    model: OpenCVModel, width: int, height: int, error: ConversionError | None = None, *, camera_name: str = "camera"
+    model: OpenCVModel | OpenCVFisheyeModel,
+    width: int,
+    height: int,
+    error: ConversionError | None = None,
+    *,
+    camera_name: str = "camera",
+    camera: CameraMatrixChoice | None = None,
+    notes: tuple[str, ...] = (),
 ) -> str:
-    """camera_info YAML text for a 5- or 8-coefficient OpenCV model."""
-    n = len(model.dist)
-    if n not in ROS_DISTORTION_MODELS:
-        raise ValueError(f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}")
+    """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``)."""
+    if isinstance(model, OpenCVFisheyeModel):
+        dm = ROS_FISHEYE_MODEL
+    else:
+        n = len(model.dist)
+        if n not in ROS_DISTORTION_MODELS:
+            raise ValueError(
+                f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}"
+            )
+        dm = ROS_DISTORTION_MODELS[n]
     k = model.camera_matrix
     doc = {
         "image_width": int(width),
         "image_height": int(height),
         "camera_name": str(camera_name),
         "camera_matrix": _mat(k),
-        "distortion_model": ROS_DISTORTION_MODELS[n],
+        "distortion_model": dm,
         "distortion_coefficients": _mat(model.dist_coeffs.reshape(1, -1)),
         "rectification_matrix": _mat(np.eye(3)),
         "projection_matrix": _mat(np.hstack([k, np.zeros((3, 1))])),
     }
     head = "# ROS camera_info calibration exported by harp station\n"
-    if error is not None:
-        head += (
-            f"# conversion error vs the harp correction (4-corner normalised): RMS {error.rms_px:.4f} px, "
-            f"max {error.max_px:.4f} px\n# modulo best homography: RMS {error.rms_mod_h_px:.4f} px, "
-            f"max {error.max_mod_h_px:.4f} px\n# residual on a noise-free full-field harp: d {error.d_px:.4f} px, "
-            f"d_max {error.d_max_px:.4f} px\n"
-        )
+    lines = [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
+    head += "".join(f"# {line}\n" for line in lines)
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200)
 
 
-def read_ros_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tuple[int, int] | None]:
+def read_ros_text(
+    text: str, name: str = "<text>"
+) -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int] | None]:
     """Parse a camera_info YAML: ``(model, (width, height))``; ValueError on defects."""
     try:
         doc = yaml.safe_load(text)
@@ -79,12 +100,14 @@ def read_ros_text(text: str, name: str = "<text>") -> tuple[OpenCVModel, tuple[i
         dm = doc.get("distortion_model", "plumb_bob")
     except (yaml.YAMLError, TypeError, KeyError, ValueError) as exc:
         raise ValueError(f"{name}: not a ROS camera_info YAML ({type(exc).__name__})") from None
-    if dm not in ("plumb_bob", "rational_polynomial"):
+    if dm not in ("plumb_bob", "rational_polynomial", ROS_FISHEYE_MODEL):
         raise ValueError(f"{name}: unsupported ROS distortion_model {dm!r}")
     size = None
     if "image_width" in doc and "image_height" in doc:
         size = (int(doc["image_width"]), int(doc["image_height"]))
     try:
+        if dm == ROS_FISHEYE_MODEL:
+            return OpenCVFisheyeModel.from_matrices(k, d), size
         return OpenCVModel.from_matrices(k, d), size
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None

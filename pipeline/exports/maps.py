@@ -1,0 +1,177 @@
+r"""Exact per-pixel exports: ``cv2.remap`` maps (``.npz``) and STMaps (32-bit float OpenEXR).
+
+Both hold, for every pixel of the corrected image, where to read it in the
+distorted image: the maps of ``harp undistort``
+(:func:`pipeline.undistort_maps.fast_undistortion_maps`, the model's own
+inverse, interpolated between exact nodes with a stated error), so that
+``cv2.remap(img, map_x, map_y, ...)`` gives ``harp undistort``'s image.
+
+**maps** (``.npz``, ``numpy.load``): ``map_x``, ``map_y`` float32 (H, W),
+``width``, ``height``, and ``interp_rms_px`` / ``interp_max_px`` (the
+interpolation error of the maps against the exact inverse, measured at
+pixels), ``convention`` (text). Pixel centres at integers, x = column,
+y = row, as in ``cv2.remap``.
+
+**stmap** (``.exr``, 32-bit float, channels R, G, B; ZIP compression, lossless):
+the convention of Nuke's and Natron's STMap node, whose coordinates put the
+*edges* of the image at 0 and 1 and the bottom-left corner at the origin, so
+a pixel centre (column :math:`i`, row :math:`j` from the top) sits at
+:math:`((i + 0.5)/W,\ 1 - (j + 0.5)/H)`. For the corrected pixel whose
+source is :math:`(m_x, m_y)` (our pixel-centre coordinates):
+
+.. math::
+    R = (m_x + 0.5) / W, \qquad G = 1 - (m_y + 0.5) / H, \qquad B = 0
+
+(the identity STMap is ``R = (x + 0.5)/width``, ``G = (y + 0.5)/height`` in
+Nuke's bottom-up pixel coordinates; the ``x / (width - 1)`` variant seen in
+some tutorials is half a pixel off at the borders). The header carries a
+``comments`` attribute with the convention and the figures.
+
+References
+----------
+.. [1] OpenCV, ``cv::remap``, https://docs.opencv.org/master/da/d54/group__imgproc__transform.html
+.. [2] The Foundry, Nuke reference guide, "STMap" node; Natron, "STMap" node (``net.sf.openfx.STMap``).
+.. [3] OpenEXR file layout, https://openexr.com/en/latest/OpenEXRFileLayout.html
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.models.base import DistortionModel
+from pipeline.models.remap_model import RemapModel
+from pipeline.undistort_maps import DEFAULT_STEP_PX, RemapMaps, fast_undistortion_maps
+
+Array = npt.NDArray[np.float64]
+
+MAPS_CONVENTION = (
+    "cv2.remap(img, map_x, map_y): corrected pixel (x, y) is read from the distorted image at "
+    "(map_x[y, x], map_y[y, x]); x = column, y = row, pixel centres at integers"
+)
+STMAP_CONVENTION = (
+    "STMap (Nuke/Natron): R = (src_x + 0.5) / width, G = 1 - (src_y + 0.5) / height, B = 0; "
+    "src = position in the distorted image of each corrected pixel, pixel centres at integers, rows from the top"
+)
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+NPZ_MAGIC = b"PK\x03\x04"
+
+
+@dataclass(frozen=True)
+class MapAccuracy:
+    """How far stored maps are from the model's exact inverse, at pixels (distorted-image pixels)."""
+
+    rms_px: float
+    max_px: float
+    n_points: int
+
+
+def map_accuracy(model: DistortionModel, map_x: Array, map_y: Array, n: int = 20000, seed: int = 0) -> MapAccuracy:
+    """|stored map - exact ``distort_points``| at ``n`` random pixels plus every border pixel (as stored, float32)."""
+    h, w = map_x.shape
+    rng = np.random.default_rng(seed)
+    xs = np.concatenate([rng.integers(0, w, n), np.arange(w), np.arange(w), np.zeros(h, int), np.full(h, w - 1)])
+    ys = np.concatenate([rng.integers(0, h, n), np.zeros(w, int), np.full(w, h - 1), np.arange(h), np.arange(h)])
+    exact = model.distort_points(np.stack([xs, ys], axis=1).astype(np.float64))
+    got = np.stack([map_x[ys, xs], map_y[ys, xs]], axis=1).astype(np.float64)
+    e = np.linalg.norm(got - exact, axis=1)
+    e = np.where(np.isfinite(e), e, np.inf)
+    return MapAccuracy(rms_px=float(np.sqrt(np.mean(e**2))), max_px=float(e.max()), n_points=int(len(e)))
+
+
+def export_maps(model: DistortionModel, width: int, height: int, step: int = DEFAULT_STEP_PX) -> RemapMaps:
+    """The maps of ``harp undistort`` for this model and image size."""
+    return fast_undistortion_maps(model, width, height, step=step)
+
+
+def maps_npz_bytes(maps: RemapMaps, accuracy: MapAccuracy, notes: tuple[str, ...] = ()) -> bytes:
+    """The ``.npz`` file: float32 maps, size, convention, measured interpolation error."""
+    h, w = maps.map_x.shape
+    buf = io.BytesIO()
+    np.savez_compressed(
+        buf,
+        map_x=np.asarray(maps.map_x, dtype=np.float32),
+        map_y=np.asarray(maps.map_y, dtype=np.float32),
+        width=np.int64(w),
+        height=np.int64(h),
+        interp_rms_px=np.float64(accuracy.rms_px),
+        interp_max_px=np.float64(accuracy.max_px),
+        convention=np.str_(MAPS_CONVENTION),
+        notes=np.str_("\n".join(notes)),
+    )
+    return buf.getvalue()
+
+
+def sniff_npz(head: bytes) -> bool:
+    return head.startswith(NPZ_MAGIC) and b"map_x" in head[:4096]
+
+
+def read_maps_npz(data: bytes, name: str = "<maps>") -> RemapModel:
+    """The correction of a maps file; ValueError('<name>: <reason>') if it is not one."""
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            if "map_x" not in z or "map_y" not in z:
+                raise ValueError(f"{name}: .npz without map_x and map_y arrays")
+            return RemapModel(map_x=z["map_x"], map_y=z["map_y"])
+    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ValueError(f"{name}: not a readable .npz maps file ({type(exc).__name__})") from None
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(f"{name}:") else f"{name}: {msg}") from None
+
+
+def stmap_channels(map_x: Array, map_y: Array) -> tuple[Array, Array]:
+    """``(R, G)`` float32 of the STMap of maps (see module docstring)."""
+    h, w = map_x.shape
+    r = (np.asarray(map_x, dtype=np.float64) + 0.5) / w
+    g = 1.0 - (np.asarray(map_y, dtype=np.float64) + 0.5) / h
+    return r.astype(np.float32), g.astype(np.float32)
+
+
+def maps_from_stmap(r: Array, g: Array) -> tuple[Array, Array]:
+    """Inverse of :func:`stmap_channels` (float64)."""
+    h, w = r.shape
+    return np.asarray(r, np.float64) * w - 0.5, (1.0 - np.asarray(g, np.float64)) * h - 0.5
+
+
+def stmap_exr_bytes(maps: RemapMaps, notes: tuple[str, ...] = ()) -> bytes:
+    """The STMap as a 32-bit float OpenEXR file (written by the OpenEXR library)."""
+    import OpenEXR  # imported where used: only STMap exports pay for it
+
+    r, g = stmap_channels(np.asarray(maps.map_x, np.float64), np.asarray(maps.map_y, np.float64))
+    header: dict[str, Any] = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        "comments": "\n".join([STMAP_CONVENTION, *notes]),
+    }
+    channels = {"R": r, "G": g, "B": np.zeros_like(r)}
+    buf = io.BytesIO()
+    with OpenEXR.File(header, channels) as f:
+        f.write(buf)
+    return buf.getvalue()
+
+
+def sniff_exr(head: bytes) -> bool:
+    return head.startswith(EXR_MAGIC)
+
+
+def read_stmap_exr(data: bytes, name: str = "<stmap>") -> RemapModel:
+    """The correction of an STMap EXR (R, G channels); ValueError('<name>: <reason>') if it is not one."""
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(io.BytesIO(data), separate_channels=True) as f:
+            ch = f.channels()
+            if "R" not in ch or "G" not in ch:
+                raise ValueError(f"{name}: EXR without R and G channels (not an STMap)")
+            r = np.asarray(ch["R"].pixels, dtype=np.float64)
+            g = np.asarray(ch["G"].pixels, dtype=np.float64)
+    except (RuntimeError, OSError) as exc:
+        raise ValueError(f"{name}: not a readable OpenEXR file ({str(exc).splitlines()[0][:120]})") from None
+    mx, my = maps_from_stmap(r, g)
+    return RemapModel(map_x=mx, map_y=my)

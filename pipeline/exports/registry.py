@@ -1,0 +1,484 @@
+"""The export formats of a harp correction, each with ``write``, ``read`` and ``sniff``.
+
+One table, :data:`FORMATS`, names every format harp station writes for other
+software (and reads back, so that ``harp evaluate`` can measure any of them
+on harp shots). Each :class:`ExportFormat` has
+
+- ``write(source, options) -> Export``: the file's bytes from an
+  :class:`ExportSource` (the model, its image size, the lens configuration,
+  the holdout figure and the fitting shots' edges), with the conversion error
+  and any warning (e.g. the conversion error exceeds the model's own
+  holdout ``d``) for the command to print;
+- ``read(data, request) -> Correction``: the correction a file holds, as a
+  :class:`~pipeline.models.base.DistortionModel`;
+- ``sniff(data) -> bool``: whether bytes look like this format.
+
+:func:`read_correction` detects the format of any correction file and reads
+it for an image size. Everything here works on bytes: the commands do the
+file I/O.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.exports import maps as maps_fmt
+from pipeline.exports.fit import ConversionError, conversion_error_in_frame, fit_fisheye, fit_lensfun, fit_opencv
+from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
+from pipeline.exports.lensfun import LensfunEntry, lensfun_database_text, read_lensfun_text
+from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
+from pipeline.exports.opencv import opencv_text, read_opencv_text
+from pipeline.exports.ros import read_ros_text, ros_text
+from pipeline.models.base import DistortionModel
+from pipeline.models.remap_model import RemapModel
+
+Array = npt.NDArray[np.float64]
+
+HARP_FORMAT_NAME = "harp-distortion-model"
+
+
+@dataclass(frozen=True)
+class ExportSource:
+    """What an export is made from.
+
+    Attributes
+    ----------
+    model : DistortionModel
+        The harp correction (distorted -> ideal pixels).
+    width, height : int
+        The image size it is for.
+    lens : LensInfo
+        Lens, camera body and optics from the configuration.
+    holdout_d : float, optional
+        The model's own holdout ``d`` (px): an export whose conversion error
+        exceeds it is less exact than the calibration, and says so.
+    edges : sequence of (N, 2) arrays, optional
+        Measured edge points of the shots the model was fitted on.
+    merit, provenance : mapping
+        The model file's records (written by the ``harp``/``json`` formats).
+    """
+
+    model: DistortionModel
+    width: int
+    height: int
+    lens: LensInfo = field(default_factory=LensInfo)
+    holdout_d: float | None = None
+    edges: Sequence[Array] | None = None
+    merit: Mapping[str, Any] = field(default_factory=dict)
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """Choices of the user for one export (None: the format's default)."""
+
+    coeffs: int | None = None
+    focal_px: float | None = None
+    xml: bool = False
+    lensfun_model: str = "ptlens"
+    lensfun_center: bool = True
+    crop_factor: float | None = None
+    mount: str | None = None
+    camera_name: str | None = None
+    existing: bytes | None = None
+    existing_name: str = "<existing>"
+
+
+@dataclass(frozen=True)
+class Export:
+    """A written export: the bytes, the conversion error, what to tell the user."""
+
+    format: str
+    data: bytes
+    error: ConversionError | None = None
+    converted: DistortionModel | None = None
+    notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ReadRequest:
+    """What a reader needs besides the bytes: the file's name (for messages) and the image size."""
+
+    name: str
+    width: int
+    height: int
+    focal: float | None = None
+    lens_name: str | None = None
+
+
+@dataclass(frozen=True)
+class Correction:
+    """The correction held by a file: the model, the image size the file states (if any), its kind."""
+
+    model: DistortionModel
+    size: tuple[int, int] | None
+    kind: str
+
+
+@dataclass(frozen=True)
+class ExportFormat:
+    """One export format (see module docstring)."""
+
+    name: str
+    summary: str
+    suffix: str
+    binary: bool
+    write: Callable[[ExportSource, ExportOptions], Export]
+    read: Callable[[bytes, ReadRequest], Correction]
+    sniff: Callable[[bytes], bool]
+    coeffs: tuple[int, ...] = ()
+    default_coeffs: int | None = None
+
+
+# ------------------------------------------------------------------ helpers
+def _text(data: bytes, name: str) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{name}: cannot read correction file (UnicodeDecodeError)") from None
+
+
+def _coeffs(fmt: str, opt: ExportOptions, allowed: tuple[int, ...], default: int) -> int:
+    n = default if opt.coeffs is None else int(opt.coeffs)
+    if n not in allowed:
+        raise ValueError(f"--coeffs {n}: the {fmt} export takes {', '.join(map(str, allowed))} coefficients")
+    return n
+
+
+def conversion_warnings(fmt: str, src: ExportSource, err: ConversionError) -> list[str]:
+    """A warning when the conversion error exceeds the model's own holdout ``d``."""
+    if src.holdout_d is None or not math.isfinite(src.holdout_d):
+        return []
+    worst = max(err.rms_mod_h_px, err.d_px if math.isfinite(err.d_px) else 0.0)
+    if worst <= src.holdout_d:
+        return []
+    return [
+        f"{fmt}: the conversion error (RMS {err.rms_mod_h_px:.4f} px modulo homography, residual d "
+        f"{err.d_px:.4f} px) exceeds the model's own holdout d {src.holdout_d:.4f} px: "
+        "this export is less exact than the calibration"
+    ]
+
+
+def _fisheye_hint(fmt: str, src: ExportSource, err: ConversionError, focal: float | None) -> list[str]:
+    """When a pin-hole export is not good enough, say whether the fisheye model is closer."""
+    try:
+        _, fe = fit_fisheye(src.model, src.width, src.height, focal=focal)
+    except ValueError:
+        return []
+    if fe.rms_mod_h_px < 0.5 * err.rms_mod_h_px:
+        alt = "opencv-fisheye" if fmt.startswith("opencv") else "ros-equidistant"
+        return [
+            f"{fmt}: the fisheye (Kannala-Brandt) model is closer to this lens: --format {alt} converts with "
+            f"RMS {fe.rms_mod_h_px:.4f} px, max {fe.max_mod_h_px:.4f} px modulo homography"
+        ]
+    return []
+
+
+def _camera(src: ExportSource, opt: ExportOptions) -> CameraMatrixChoice:
+    return camera_matrix_choice(src.lens, src.width, src.height, opt.focal_px)
+
+
+def _lens_notes(src: ExportSource) -> tuple[str, ...]:
+    parts = []
+    if src.lens.lens_name:
+        parts.append(f"lens {src.lens.lens_name}" + (f" s/n {src.lens.lens_serial}" if src.lens.lens_serial else ""))
+    if src.lens.camera_body:
+        parts.append(f"camera {src.lens.camera_body}")
+    if src.lens.focus is not None:
+        parts.append(f"focus setting {src.lens.focus:g}")
+    return ("; ".join(parts),) if parts else ()
+
+
+# ------------------------------------------------------------------ writers
+def _write_pinhole(fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int) -> Export:
+    n = _coeffs(fmt, opt, allowed, default)
+    cam = _camera(src, opt)
+    m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
+    warnings = conversion_warnings(fmt, src, err)
+    if warnings:
+        warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
+    notes = _lens_notes(src)
+    if fmt == "opencv":
+        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+    elif fmt == "ros":
+        name = opt.camera_name or src.lens.ros_camera_name()
+        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
+    else:
+        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes)
+    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
+
+
+def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
+    cam = _camera(src, opt)
+    focal = None if cam.kind == "placeholder" else cam.focal_px
+    m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    if focal is None:
+        cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
+    notes = _lens_notes(src)
+    if fmt == "opencv-fisheye":
+        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+    else:
+        name = opt.camera_name or src.lens.ros_camera_name()
+        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
+    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(conversion_warnings(fmt, src, err)))
+
+
+def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
+    lens = src.lens.with_overrides(crop_factor=opt.crop_factor, mount=opt.mount)
+    m, err = fit_lensfun(
+        src.model, src.width, src.height, kind=opt.lensfun_model, fit_center=opt.lensfun_center, edges=src.edges
+    )
+    existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
+    text, done = lensfun_database_text([LensfunEntry(model=m, lens=lens, error=err)], existing, opt.existing_name)
+    notes = list(done)
+    if lens.crop_factor is None:
+        notes.append("lensfun: no crop factor configured, 1.0 written (set the camera's with --crop)")
+    if lens.focal_mm is None:
+        notes.append("lensfun: no nominal focal length configured, filed under 50 mm")
+    return Export("lensfun", text.encode(), err, m, tuple(notes), tuple(conversion_warnings("lensfun", src, err)))
+
+
+def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
+    maps = maps_fmt.export_maps(src.model, src.width, src.height)
+    acc = maps_fmt.map_accuracy(src.model, maps.map_x, maps.map_y)
+    converted = RemapModel(map_x=maps.map_x, map_y=maps.map_y)
+    err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges)
+    note = (
+        f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
+        f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
+    )
+    notes = (note, *_lens_notes(src))
+    data = maps_fmt.maps_npz_bytes(maps, acc, notes) if fmt == "maps" else maps_fmt.stmap_exr_bytes(maps, notes)
+    return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
+
+
+def harp_model_doc(src: ExportSource) -> dict[str, Any]:
+    """The model-file record of a source (the layout of :mod:`pipeline.model_file`)."""
+    from pipeline.model_file import FORMAT_VERSION
+
+    return {
+        "format": HARP_FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "model": src.model.to_dict(),
+        "image": {"width": int(src.width), "height": int(src.height)},
+        "merit": dict(src.merit),
+        "provenance": dict(src.provenance),
+    }
+
+
+def _write_json(src: ExportSource, opt: ExportOptions) -> Export:
+    return Export("json", (json.dumps(harp_model_doc(src), indent=2, default=_plain) + "\n").encode())
+
+
+def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
+    from pipeline.model_file import model_file_text
+
+    text = model_file_text(
+        src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
+    )
+    return Export("harp", text.encode())
+
+
+def _plain(obj: object) -> object:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
+
+
+# ------------------------------------------------------------------ readers
+def _read_harp(data: bytes, req: ReadRequest) -> Correction:
+    from pipeline.model_file import parse_model_text
+
+    mf = parse_model_text(_text(data, req.name), req.name)
+    return Correction(mf.model, (mf.width, mf.height), f"harp:{mf.model.name}")
+
+
+def _read_opencv(data: bytes, req: ReadRequest) -> Correction:
+    m, size = read_opencv_text(_text(data, req.name), req.name)
+    return Correction(m, size, "opencv-fisheye" if m.name == "opencv_fisheye" else "opencv")
+
+
+def _read_ros(data: bytes, req: ReadRequest) -> Correction:
+    m, size = read_ros_text(_text(data, req.name), req.name)
+    return Correction(m, size, "ros-equidistant" if m.name == "opencv_fisheye" else "ros")
+
+
+def _read_lensfun(data: bytes, req: ReadRequest) -> Correction:
+    m = read_lensfun_text(_text(data, req.name), req.width, req.height, req.name, req.focal, req.lens_name)
+    return Correction(m, None, f"lensfun:{m.kind}")
+
+
+def _read_mrcal(data: bytes, req: ReadRequest) -> Correction:
+    m, size = read_mrcal_text(_text(data, req.name), req.name)
+    return Correction(m, size, "mrcal")
+
+
+def _read_maps(data: bytes, req: ReadRequest) -> Correction:
+    m = maps_fmt.read_maps_npz(data, req.name)
+    return Correction(m, (m.width, m.height), "maps")
+
+
+def _read_stmap(data: bytes, req: ReadRequest) -> Correction:
+    m = maps_fmt.read_stmap_exr(data, req.name)
+    return Correction(m, (m.width, m.height), "stmap")
+
+
+def _sniff_harp(d: bytes) -> bool:
+    return HARP_FORMAT_NAME.encode() in d.lstrip()[:4096]
+
+
+def _sniff_lensfun(d: bytes) -> bool:
+    return b"<lensdatabase" in d.lstrip()[:4096]
+
+
+def _sniff_opencv(d: bytes) -> bool:
+    return b"opencv-matrix" in d or b"<opencv_storage" in d.lstrip()[:4096]
+
+
+def _sniff_ros(d: bytes) -> bool:
+    return b"camera_matrix" in d and b"distortion_coefficients" in d and b"opencv-matrix" not in d
+
+
+def _never(d: bytes) -> bool:
+    return False  # harp JSON is read by the harp reader (JSON is YAML)
+
+
+# ------------------------------------------------------------------- table
+FORMATS: dict[str, ExportFormat] = {
+    f.name: f
+    for f in (
+        ExportFormat(
+            "opencv",
+            "OpenCV FileStorage YAML/XML, pin-hole model (12 coefficients: rational + thin prism)",
+            ".yml",
+            False,
+            lambda s, o: _write_pinhole("opencv", s, o, (5, 8, 12, 14), 12),
+            _read_opencv,
+            _sniff_opencv,
+            (5, 8, 12, 14),
+            12,
+        ),
+        ExportFormat(
+            "opencv-fisheye",
+            "OpenCV FileStorage YAML/XML for cv::fisheye (Kannala-Brandt k1..k4)",
+            ".yml",
+            False,
+            lambda s, o: _write_fisheye("opencv-fisheye", s, o),
+            _read_opencv,
+            _never,
+        ),
+        ExportFormat(
+            "ros",
+            "ROS camera_info YAML (rational_polynomial, 8 coefficients; plumb_bob with --coeffs 5)",
+            ".yaml",
+            False,
+            lambda s, o: _write_pinhole("ros", s, o, (5, 8), 8),
+            _read_ros,
+            _sniff_ros,
+            (5, 8),
+            8,
+        ),
+        ExportFormat(
+            "ros-equidistant",
+            "ROS camera_info YAML, equidistant (fisheye k1..k4)",
+            ".yaml",
+            False,
+            lambda s, o: _write_fisheye("ros-equidistant", s, o),
+            _read_ros,
+            _never,
+        ),
+        ExportFormat(
+            "lensfun",
+            "lensfun database XML (ptlens; adds to an existing database)",
+            ".xml",
+            False,
+            _write_lensfun,
+            _read_lensfun,
+            _sniff_lensfun,
+        ),
+        ExportFormat(
+            "mrcal",
+            "mrcal .cameramodel (LENSMODEL_OPENCV12, or 8)",
+            ".cameramodel",
+            False,
+            lambda s, o: _write_pinhole("mrcal", s, o, (8, 12), 12),
+            _read_mrcal,
+            sniff_mrcal,
+            (8, 12),
+            12,
+        ),
+        ExportFormat(
+            "maps",
+            "float32 map_x/map_y for cv2.remap (.npz), exactly harp undistort's",
+            ".npz",
+            True,
+            lambda s, o: _write_maps("maps", s, o),
+            _read_maps,
+            maps_fmt.sniff_npz,
+        ),
+        ExportFormat(
+            "stmap",
+            "STMap for Nuke/Natron (32-bit float OpenEXR), exactly harp undistort's",
+            ".exr",
+            True,
+            lambda s, o: _write_maps("stmap", s, o),
+            _read_stmap,
+            maps_fmt.sniff_exr,
+        ),
+        ExportFormat("json", "harp model file as JSON", ".json", False, _write_json, _read_harp, _never),
+        ExportFormat("harp", "harp model file (YAML)", ".yaml", False, _write_harp, _read_harp, _sniff_harp),
+    )
+}
+
+SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "opencv", "ros")
+"""The order in which :func:`sniff_format` tries the formats (binary magic first)."""
+
+RECOGNISED = "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr"
+
+
+def get_format(name: str) -> ExportFormat:
+    """The format called ``name``; ValueError listing the known ones."""
+    if name not in FORMATS:
+        raise ValueError(f"unknown export format {name!r}; known: {', '.join(FORMATS)}")
+    return FORMATS[name]
+
+
+def sniff_format(data: bytes) -> ExportFormat | None:
+    """The format these bytes look like, or None."""
+    for name in SNIFF_ORDER:
+        if FORMATS[name].sniff(data):
+            return FORMATS[name]
+    return None
+
+
+def write_export(name: str, source: ExportSource, options: ExportOptions | None = None) -> Export:
+    """Write ``source`` in format ``name`` (ValueError on a bad option or an unconvertible model)."""
+    return get_format(name).write(source, options or ExportOptions())
+
+
+def read_correction(
+    data: bytes, name: str, width: int, height: int, *, focal: float | None = None, lens_name: str | None = None
+) -> Correction:
+    """The correction of any supported file, for ``width`` x ``height`` images.
+
+    Raises ValueError('<name>: <reason>') if the format is not recognised, the
+    file is defective, or it is for another image size.
+    """
+    fmt = sniff_format(data)
+    if fmt is None:
+        raise ValueError(f"{name}: not a recognised correction ({RECOGNISED})")
+    c = fmt.read(data, ReadRequest(name=name, width=width, height=height, focal=focal, lens_name=lens_name))
+    if c.size is not None and tuple(c.size) != (width, height):
+        what = "model" if c.kind.startswith("harp:") else "calibration"
+        raise ValueError(f"{name}: {what} is for {c.size[0]}x{c.size[1]} images, the shots are {width}x{height}")
+    return c

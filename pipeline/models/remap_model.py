@@ -1,0 +1,113 @@
+"""A correction given as per-pixel ``cv2.remap`` maps (an exported maps file or STMap, read back)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.models.base import DistortionModel
+
+Array = npt.NDArray[np.float64]
+
+#: accuracy (px) to which :meth:`RemapModel.undistort_points` inverts the bilinear map
+REMAP_INVERSE_TOL_PX = 1e-7
+
+
+@dataclass(frozen=True, eq=False)
+class RemapModel(DistortionModel):
+    r"""Correction defined by maps :math:`m_x, m_y` such that ``cv2.remap(img, m_x, m_y)`` corrects ``img``.
+
+    The corrected pixel at integer :math:`(i, j)` (column, row) is read from
+    the distorted image at :math:`(m_x[j, i], m_y[j, i])`: the maps sample the
+    projection ideal -> distorted at the pixel centres of the output. Between
+    pixel centres the projection is the bilinear interpolation of the maps
+    (``scipy.ndimage.map_coordinates``, ``order=1``; points outside the map are
+    extrapolated from the border cells):
+
+    .. math::
+        D(x, y) = \sum_{a, b \in \{0, 1\}} w_a(x)\,w_b(y)\;m[\lfloor y\rfloor + b, \lfloor x\rfloor + a]
+
+    :meth:`distort_points` is :math:`D`; :meth:`undistort_points` (the
+    correction) inverts it by Newton iterations to ``REMAP_INVERSE_TOL_PX``.
+    Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64.
+    """
+
+    map_x: npt.NDArray[np.floating[Any]]
+    map_y: npt.NDArray[np.floating[Any]]
+    name: str = field(default="remap", init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        mx = np.asarray(self.map_x, dtype=np.float64)
+        my = np.asarray(self.map_y, dtype=np.float64)
+        if mx.ndim != 2 or mx.shape != my.shape or min(mx.shape) < 2:
+            raise ValueError(f"remap maps must be two equal (H, W) arrays, got {mx.shape} and {my.shape}")
+        if not (np.all(np.isfinite(mx)) and np.all(np.isfinite(my))):
+            raise ValueError("remap maps hold non-finite values")
+        mx.setflags(write=False)
+        my.setflags(write=False)
+        object.__setattr__(self, "map_x", mx)
+        object.__setattr__(self, "map_y", my)
+
+    @property
+    def width(self) -> int:
+        return int(self.map_x.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.map_x.shape[0])
+
+    def _bilinear(self, m: Array, xy: Array) -> Array:
+        x = np.clip(xy[:, 0], 0.0, self.width - 1.0)
+        y = np.clip(xy[:, 1], 0.0, self.height - 1.0)
+        i = np.minimum(np.floor(x).astype(np.int64), self.width - 2)
+        j = np.minimum(np.floor(y).astype(np.int64), self.height - 2)
+        # linear extrapolation outside [0, W-1] x [0, H-1] from the border cells
+        fx = xy[:, 0] - i
+        fy = xy[:, 1] - j
+        v00, v10 = m[j, i], m[j, i + 1]
+        v01, v11 = m[j + 1, i], m[j + 1, i + 1]
+        out: Array = (v00 * (1 - fx) + v10 * fx) * (1 - fy) + (v01 * (1 - fx) + v11 * fx) * fy
+        return out
+
+    def distort_points(self, xy: Array, max_iter: int = 50) -> Array:
+        """Ideal -> distorted: the bilinear interpolation of the maps."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return np.stack([self._bilinear(self.map_x, xy), self._bilinear(self.map_y, xy)], axis=1)
+
+    def undistort_points(self, xy: Array, max_iter: int = 50) -> Array:
+        """Distorted -> ideal, Newton iterations on :meth:`distort_points`."""
+        target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        x = target.copy()
+        h = 0.25
+        done = np.zeros(len(x), bool)
+        for _ in range(max_iter):
+            r = self.distort_points(x) - target
+            done = np.all(np.abs(r) < REMAP_INVERSE_TOL_PX, axis=1)
+            if done.all():
+                break
+            jx = (self.distort_points(x + [h, 0]) - self.distort_points(x - [h, 0])) / (2 * h)
+            jy = (self.distort_points(x + [0, h]) - self.distort_points(x - [0, h])) / (2 * h)
+            a, b, c, d = jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]
+            det = a * d - b * c
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = np.stack([(d * r[:, 0] - b * r[:, 1]) / det, (-c * r[:, 0] + a * r[:, 1]) / det], axis=1)
+            step[done] = 0.0
+            x = x - step
+        x[~done] = np.nan
+        return x
+
+    def undistortion_maps(self, width: int, height: int) -> tuple[Array, Array]:
+        """The maps themselves (for their own size)."""
+        if (int(width), int(height)) != (self.width, self.height):
+            raise ValueError(f"remap maps are {self.width}x{self.height}, asked for {width}x{height}")
+        return self.map_x.astype(np.float32), self.map_y.astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"model": self.name, "map_x": self.map_x.tolist(), "map_y": self.map_y.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RemapModel:
+        return cls(map_x=np.asarray(d["map_x"], dtype=np.float64), map_y=np.asarray(d["map_y"], dtype=np.float64))
