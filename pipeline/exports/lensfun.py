@@ -252,7 +252,9 @@ def lensfun_text(
 
     ``lens`` (the configuration) takes precedence over the keyword values.
     """
-    info = lens or LensInfo(lens_maker=maker, lens_model=lens_model, mount=mount, crop_factor=cropfactor, focal_mm=focal)
+    info = lens or LensInfo(
+        lens_maker=maker, lens_model=lens_model, mount=mount, crop_factor=cropfactor, focal_mm=focal
+    )
     text, _ = lensfun_database_text([LensfunEntry(model=model, lens=info, error=error)])
     return text
 

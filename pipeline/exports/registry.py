@@ -443,7 +443,9 @@ FORMATS: dict[str, ExportFormat] = {
 SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "opencv", "ros")
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
-RECOGNISED = "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr"
+RECOGNISED = (
+    "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr"
+)
 
 
 def get_format(name: str) -> ExportFormat:

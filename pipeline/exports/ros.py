@@ -68,9 +68,7 @@ def ros_text(
     else:
         n = len(model.dist)
         if n not in ROS_DISTORTION_MODELS:
-            raise ValueError(
-                f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}"
-            )
+            raise ValueError(f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}")
         dm = ROS_DISTORTION_MODELS[n]
     k = model.camera_matrix
     doc = {
@@ -89,9 +87,7 @@ def ros_text(
     return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200)
 
 
-def read_ros_text(
-    text: str, name: str = "<text>"
-) -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int] | None]:
+def read_ros_text(text: str, name: str = "<text>") -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int] | None]:
     """Parse a camera_info YAML: ``(model, (width, height))``; ValueError on defects."""
     try:
         doc = yaml.safe_load(text)

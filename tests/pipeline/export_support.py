@@ -1,0 +1,140 @@
+"""Shared truth and helpers of the export tests: an exact wide-angle lens, the real-photo models,
+consumer comparisons modulo homography, and running Debian's own consumers under /usr/bin/python3."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from dataclasses import dataclass, field
+from functools import cache
+
+import numpy as np
+
+from pipeline.compare import fit_homography
+from pipeline.fit import FitResult, corrected_straightness, fit_distortion
+from pipeline.models.base import DistortionModel
+from tests.pipeline.rendered_shots import REAL, real_shots
+
+SYSTEM_PYTHON = "/usr/bin/python3"
+
+
+@dataclass(frozen=True)
+class EquisolidLens(DistortionModel):
+    r"""Exact wide-angle lens (test truth, independent of the export code): equisolid projection.
+
+    A ray at angle :math:`\theta` is recorded at radius :math:`r_d = 2f\sin(\theta/2)` from
+    ``(cx, cy)``; its pin-hole image is at :math:`r_u = f\tan\theta`. So the correction is
+    :math:`r_u(r_d) = f\tan(2\arcsin(r_d / 2f))`, in closed form both ways.
+    """
+
+    f: float
+    cx: float
+    cy: float
+    name: str = field(default="equisolid_test", init=False, repr=False)
+
+    def undistort_points(self, xy):
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        d = xy - [self.cx, self.cy]
+        rd = np.hypot(d[:, 0], d[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            theta = 2 * np.arcsin(rd / (2 * self.f))
+            s = np.where(rd > 1e-12, self.f * np.tan(theta) / rd, 1.0)
+        return np.array([self.cx, self.cy]) + d * s[:, None]
+
+    def distort_points(self, xy, max_iter=50):
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        d = xy - [self.cx, self.cy]
+        ru = np.hypot(d[:, 0], d[:, 1])
+        theta = np.arctan(ru / self.f)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(ru > 1e-12, 2 * self.f * np.sin(theta / 2) / ru, 1.0)
+        return np.array([self.cx, self.cy]) + d * s[:, None]
+
+    def to_dict(self):
+        return {"model": self.name, "f": self.f, "cx": self.cx, "cy": self.cy}
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(d["f"], d["cx"], d["cy"])
+
+
+#: 640 x 480, 74 degrees from the axis at the corners (149 degrees diagonal field), slightly decentred
+WIDE_W, WIDE_H = 640, 480
+WIDE = EquisolidLens(f=330.0, cx=322.0, cy=236.5)
+
+
+@dataclass(frozen=True)
+class RealModel:
+    """A model fitted on two real photos, with the third held out."""
+
+    model: DistortionModel
+    width: int
+    height: int
+    train: tuple[str, str]
+    held: str
+    holdout_d: float
+    edges: tuple[np.ndarray, ...]
+
+
+@cache
+def real_model(held: int, directory: str) -> RealModel:
+    """radial4 + tangential + prism (free centre, the recommended model), fit on the two other photos."""
+    shots = real_shots(directory)
+    w, h, _ = shots[0]
+    train = [s for i, (_, _, s) in enumerate(shots) if i != held]
+    r = fit_distortion(train, w, h, model="radial", degree=4, tangential=True, prism=True)
+    assert isinstance(r, FitResult), getattr(r, "reason", "")
+    d, _ = corrected_straightness(r.model, shots[held][2])
+    names = tuple(n for i, n in enumerate(REAL) if i != held)
+    edges = tuple(p for s in train for p in s)
+    return RealModel(r.model, w, h, (names[0], names[1]), REAL[held], float(d), edges)
+
+
+def mod_h(ideal_theirs: np.ndarray, ideal_ours: np.ndarray) -> tuple[float, float]:
+    """RMS and max of ``|H(theirs) - ours|`` after the best homography (pixels)."""
+    _, res = fit_homography(ideal_theirs, ideal_ours)
+    e = np.hypot(res[:, 0], res[:, 1])
+    return float(np.sqrt(np.mean(e**2))), float(e.max())
+
+
+def ideal_grid(width: int, height: int, step: int) -> np.ndarray:
+    """Integer pixel grid every ``step`` px with the last row/column."""
+    xs = np.unique(np.append(np.arange(0, width, step), width - 1))
+    ys = np.unique(np.append(np.arange(0, height, step), height - 1))
+    gx, gy = np.meshgrid(xs, ys)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1).astype(np.int64)
+
+
+def compare_map(
+    model: DistortionModel, map_x: np.ndarray, map_y: np.ndarray, step: int = 8
+) -> tuple[float, float, int]:
+    """A consumer's map (ideal pixel -> distorted source) against our correction, modulo homography.
+
+    At ideal pixels ``p`` of the grid, ``q = map(p)`` is where the consumer reads the distorted
+    image; our correction of ``q`` must be ``p`` up to a homography. Points whose ``q`` falls outside
+    the image are not compared (they are not in the picture). Returns ``(rms, max, n)``.
+    """
+    h, w = map_x.shape[:2]
+    p = ideal_grid(w, h, step)
+    q = np.stack([map_x.reshape(h, w)[p[:, 1], p[:, 0]], map_y.reshape(h, w)[p[:, 1], p[:, 0]]], axis=1)
+    q = q.astype(np.float64)
+    ok = (q[:, 0] >= 0) & (q[:, 0] <= w - 1) & (q[:, 1] >= 0) & (q[:, 1] <= h - 1)
+    rms, mx = mod_h(p[ok].astype(np.float64), model.undistort_points(q[ok]))
+    return rms, mx, int(ok.sum())
+
+
+def system_python(script: str, payload: dict) -> dict:
+    """Run ``script`` with Debian's /usr/bin/python3 (its own packages), JSON in on stdin, JSON out on stdout."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    out = subprocess.run(
+        [SYSTEM_PYTHON, "-c", script],
+        input=json.dumps(payload),
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+        check=False,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
