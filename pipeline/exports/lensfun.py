@@ -109,6 +109,10 @@ class LensfunEntry:
         return "; ".join(parts)
 
 
+def _is_comment(el: ET.Element) -> bool:
+    return el.tag is ET.Comment  # type: ignore[comparison-overlap]  # ElementTree tags comments by the factory
+
+
 def _xml_comment(text: str) -> str:
     return " " + text.replace("--", "- -") + " "
 
@@ -186,7 +190,7 @@ def add_to_database(root: ET.Element, entry: LensfunEntry) -> str:
         kids = list(cal)
         for i, d in enumerate(kids):
             if d.tag == "distortion" and math.isclose(float(d.get("focal", "nan")), entry.focal, rel_tol=1e-9):
-                before = kids[i - 1] if i > 0 and kids[i - 1].tag is ET.Comment else None
+                before = kids[i - 1] if i > 0 and _is_comment(kids[i - 1]) else None
                 pos = list(cal).index(d)
                 cal.remove(d)
                 if before is not None:

@@ -84,7 +84,7 @@ def ros_text(
     head = "# ROS camera_info calibration exported by harp station\n"
     lines = [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
     head += "".join(f"# {line}\n" for line in lines)
-    return head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200)
+    return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))
 
 
 def read_ros_text(text: str, name: str = "<text>") -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int] | None]:

@@ -131,13 +131,13 @@ class OpenCVFisheyeModel(DistortionModel):
         ratio[~ok] = np.nan
         return np.stack([self.cx + self.fx * ratio * a, self.cy + self.fy * ratio * b], axis=1)
 
-    def undistortion_maps(self, width: int, height: int) -> tuple[Array, Array]:
+    def undistortion_maps(self, width: int, height: int) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
         """``cv2.fisheye.initUndistortRectifyMap`` with the same camera matrix (OpenCV's own maps)."""
         k = self.camera_matrix
         mx, my = cv2.fisheye.initUndistortRectifyMap(
             k, self.dist_coeffs, np.eye(3), k, (int(width), int(height)), cv2.CV_32FC1
         )
-        return mx, my
+        return np.asarray(mx), np.asarray(my)
 
     def to_dict(self) -> dict[str, Any]:
         return {

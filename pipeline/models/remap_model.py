@@ -35,8 +35,8 @@ class RemapModel(DistortionModel):
     Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64.
     """
 
-    map_x: npt.NDArray[np.floating[Any]]
-    map_y: npt.NDArray[np.floating[Any]]
+    map_x: Array
+    map_y: Array
     name: str = field(default="remap", init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -99,7 +99,7 @@ class RemapModel(DistortionModel):
         x[~done] = np.nan
         return x
 
-    def undistortion_maps(self, width: int, height: int) -> tuple[Array, Array]:
+    def undistortion_maps(self, width: int, height: int) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
         """The maps themselves (for their own size)."""
         if (int(width), int(height)) != (self.width, self.height):
             raise ValueError(f"remap maps are {self.width}x{self.height}, asked for {width}x{height}")
