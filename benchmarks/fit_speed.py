@@ -23,7 +23,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.fit import FitResult, fit_distortion
+from pipeline.edgeset import FitResult
+from pipeline.fit import fit_distortion
 from pipeline.models import RadialModel
 from tests.pipeline.harp_points import harp_point_sets
 

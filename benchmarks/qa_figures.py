@@ -30,13 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from drivers.sim.lens import lens_for_focus
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
 from pipeline.interpolate import FocusInterpolator, leave_one_out_error
 from pipeline.uncertainty import bootstrap_field_uncertainty
 from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 1280, 960
 ANGLES = [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5]
-KW = dict(model="radial", degree=4, tangential=True)
+SPEC = FitSpec("radial", 4, tangential=True)
+KW = SPEC.fit_arguments()
 
 
 def shots(focus, noise, seed):
@@ -66,7 +68,7 @@ def bootstrap_rows(noise) -> list[str]:
     data = shots(0.3, noise, seed=3)
     full = fit_distortion(data, W, H, **KW)
     t0 = time.perf_counter()
-    u = bootstrap_field_uncertainty(data, W, H, KW, n_boot=20, seed=0, full_fit=full)
+    u = bootstrap_field_uncertainty(data, W, H, SPEC, n_boot=20, seed=0, full_fit=full)
     dt = time.perf_counter() - t0
     c = compare_models(full.model, lens_for_focus(0.3, W, H), W, H)
     n_edges = sum(len(s) for s in data)

@@ -1,7 +1,27 @@
 """Pure image-processing core of harp station.
 
 Everything in this package is a function (or a frozen dataclass) over numpy
-arrays: no files, no cameras, no configuration, no printing.
+arrays: no cameras, no configuration, no printing, no writing of files (reading a
+model file, :func:`pipeline.model_file.read_model_file`, is the one file access).
+
+Where things are
+----------------
+* measuring strings: :mod:`pipeline.edges` (sub-pixel Canny/Devernay),
+  :mod:`pipeline.grouping` (edges into strings), :mod:`pipeline.resample`
+  (along-edge smoothing), :mod:`pipeline.straightness` (d, d_max),
+  :mod:`pipeline.measure` (all of it on one image), :mod:`pipeline.render`
+  (synthetic harps with exact truth);
+* models: :mod:`pipeline.models` (one file per model, each with its equation and,
+  for the fitted ones, its parametrisation), :mod:`pipeline.model_file` (the YAML
+  format);
+* fitting: :mod:`pipeline.fitspec` (what to fit), :mod:`pipeline.edgeset` (the edges
+  of a fit, TLS lines, figures, result types), :mod:`pipeline.fit` (the
+  Levenberg–Marquardt fit), :mod:`pipeline.alvarez` (closed-form start),
+  :mod:`pipeline.select` (cross-validated model choice),
+  :mod:`pipeline.uncertainty` (bootstrap field uncertainty);
+* using corrections: :mod:`pipeline.compare` and :mod:`pipeline.normalise` (modulo
+  homography), :mod:`pipeline.evaluate`, :mod:`pipeline.interpolate` (over focus),
+  :mod:`pipeline.undistort_maps`, :mod:`pipeline.exports` (OpenCV, ROS, lensfun).
 
 Coordinate convention (used everywhere in harp station)
 -------------------------------------------------------
@@ -20,4 +40,14 @@ References
    Implementation of the Canny/Devernay Algorithm", IPOL 7 (2017).
 """
 
-from pipeline.models import load_model  # noqa: F401  (public entry point)
+from typing import Any
+
+
+def __getattr__(name: str) -> Any:
+    """``pipeline.load_model(path)``, the entry point named in every model file's header
+    (:func:`pipeline.model_file.load_model`), imported when first used."""
+    if name == "load_model":
+        from pipeline.model_file import load_model
+
+        return load_model
+    raise AttributeError(f"module 'pipeline' has no attribute {name!r}")

@@ -17,7 +17,8 @@ of a cubic (closed form); with two, :math:`E` is minimised from that start.
 Their method needed lines picked by hand; fed with the automatic harp edges
 of :mod:`pipeline.measure` it becomes automatic (Tang et al. 2012, Sect. 6:
 "automatic edges make Alvarez's method automatic"). Here it also provides the
-initial ``k2`` of :func:`pipeline.fit.fit_distortion` for the radial model.
+initial ``k2`` of :func:`pipeline.fit.fit_distortion` for the radial model. It works on
+the edge set of :mod:`pipeline.edgeset`, as the fit does.
 
 References
 ----------
@@ -35,6 +36,7 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 from scipy.optimize import minimize
 
+from pipeline.edgeset import FitFailure, FitResult, collect, summarise
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialModel
 
@@ -113,19 +115,23 @@ def alvarez_initial_k(lines: Sequence[np.ndarray], width: int, height: int, cent
     return float(min(cand, key=abs))
 
 
-def fit_alvarez(lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int, n_k: int = 2, center=None):
+def fit_alvarez(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    n_k: int = 2,
+    center: Sequence[float] | None = None,
+) -> FitResult | FitFailure:
     """Alvarez's method on harp edges: minimise E over ``k1`` (rho^2) and ``k2`` (rho^4).
 
-    Returns a :class:`pipeline.fit.FitResult` whose model is a
+    Returns a :class:`pipeline.edgeset.FitResult` whose model is a
     :class:`RadialModel` with ``k = (1, 0, k1, 0, k2)`` (centre fixed, default
-    the image centre), or a :class:`pipeline.fit.FitFailure`.
+    the image centre), or a :class:`pipeline.edgeset.FitFailure`.
     """
-    from pipeline.fit import FitFailure, _collect, edges_list, summarise
-
-    edges, rejected = _collect(lines_per_image, width, height)
-    if isinstance(edges, str):
-        return FitFailure(edges)
-    lines = edges_list(edges)
+    edges, rejected = collect(lines_per_image, width, height)
+    if not edges:
+        return edges
+    lines = edges.lines()
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if center is None else np.asarray(center, float)
     s = 0.5 * float(np.hypot(width, height))
     try:

@@ -1,7 +1,12 @@
 """The harp model file: a readable YAML record of a fitted distortion model.
 
-This module is the one place of :mod:`pipeline` that touches files (it is
-imported lazily by :func:`pipeline.load_model`). Layout (format version 1)::
+This module is the format: :func:`model_file_text` writes a :class:`ModelFile`'s
+text, :func:`parse_model_text` reads it back, :func:`read_model_file` /
+:func:`load_model` read a file (the only file access of :mod:`pipeline`: the entry
+point named in every model file's header). Writing a file (atomically) is the
+station's (:func:`station.files.write_model_file`), and so is the provenance record
+(:func:`station.provenance.make_provenance`: software version, input images with
+their SHA-256), passed in here as plain data. Layout (format version 1)::
 
     format: harp-distortion-model
     format_version: 1
@@ -11,21 +16,16 @@ imported lazily by :func:`pipeline.load_model`). Layout (format version 1)::
     provenance: {created_utc: .., software: harp-station 0.1.0, t: 30,
                  command: .., images: [{path: .., sha256: ..}, ..]}
 
-Files are written atomically (temporary file in the same directory, fsync,
-rename), so a reader never sees a half-written model. Any defect (not YAML,
-not our format, unknown version, unknown model, bad parameters) raises
-:class:`ValueError` with a one-line message naming the file and the reason.
+Any defect (not YAML, not our format, unknown version, unknown model, bad
+parameters) raises :class:`ValueError` with a one-line message naming the file and
+the reason.
 """
 
 from __future__ import annotations
 
-import contextlib
-import datetime as _dt
-import hashlib
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -45,51 +45,18 @@ class ModelFile:
     model: DistortionModel
     width: int
     height: int
-    merit: dict = field(default_factory=dict)
-    provenance: dict = field(default_factory=dict)
+    merit: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
     path: str | None = None
 
-
-def software_version() -> str:
-    """``harp-station <version>`` of the running software."""
-    try:
-        from station import __version__
-
-        return f"harp-station {__version__}"
-    except Exception:  # pragma: no cover - station not importable
-        try:
-            from importlib.metadata import version
-
-            return f"harp-station {version('harp-station')}"
-        except Exception:
-            return "harp-station unknown"
+    def text(self) -> str:
+        """The file's text (:func:`model_file_text`)."""
+        return model_file_text(
+            self.model, width=self.width, height=self.height, merit=self.merit, provenance=self.provenance
+        )
 
 
-def sha256_file(path, chunk: int = 1 << 20) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
-def make_provenance(images=(), *, t=None, command=None, **extra) -> dict:
-    """Provenance record: UTC time, software version, input images with sha256, t, command line."""
-    prov = {
-        "created_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "software": software_version(),
-    }
-    if t is not None:
-        prov["t"] = t
-    if command is not None:
-        prov["command"] = command if isinstance(command, str) else " ".join(map(str, command))
-    prov["images"] = [{"path": str(p), "sha256": sha256_file(p)} for p in images]
-    prov.update(extra)
-    return prov
-
-
-def _plain(obj):
+def _plain(obj: Any) -> Any:
     """Convert numpy scalars/arrays and tuples into plain YAML-safe data."""
     if isinstance(obj, dict):
         return {str(k): _plain(v) for k, v in obj.items()}
@@ -104,33 +71,23 @@ def _plain(obj):
     return obj
 
 
-def atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (tmp in same dir + fsync + rename)."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-    with contextlib.suppress(OSError):  # make the rename durable (a platform may not fsync directories)
-        dfd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-
-
 def model_file_text(
-    model: DistortionModel, *, width: int, height: int, merit: dict | None = None, provenance: dict | None = None
+    model: DistortionModel,
+    *,
+    width: int,
+    height: int,
+    merit: dict[str, Any] | None = None,
+    provenance: dict[str, Any] | None = None,
 ) -> str:
-    """The YAML text :func:`write_model_file` writes."""
+    """The text of a model file holding ``model`` for ``width x height`` images, with its
+    figures of merit and provenance (plain data: numpy values and tuples are converted).
+
+    Raises TypeError for something that is not a model, ValueError for a size <= 0.
+    """
+    if not isinstance(model, DistortionModel):
+        raise TypeError(f"a model file holds a DistortionModel, got {type(model).__name__}")
+    if int(width) <= 0 or int(height) <= 0:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
     doc = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -143,20 +100,7 @@ def model_file_text(
         "# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
         "# pixel centres at integers). Load with pipeline.load_model(path).\n"
     )
-    return header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-
-
-def write_model_file(
-    path, model: DistortionModel, *, width: int, height: int, merit: dict | None = None, provenance: dict | None = None
-) -> Path:
-    """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
-    if not isinstance(model, DistortionModel):
-        raise TypeError(f"write_model_file needs a DistortionModel, got {type(model).__name__}")
-    if int(width) <= 0 or int(height) <= 0:
-        raise ValueError(f"image size must be positive, got {width}x{height}")
-    text = model_file_text(model, width=width, height=height, merit=merit, provenance=provenance)
-    atomic_write_text(path, text)
-    return Path(path)
+    return header + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
 
 
 def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
@@ -176,7 +120,7 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
             f"{name}: unknown model file format version {version!r} "
             f"(this software reads {', '.join(map(str, SUPPORTED_VERSIONS))})"
         )
-    image = doc.get("image")
+    image: Any = doc.get("image")
     try:
         width, height = int(image["width"]), int(image["height"])
         if width <= 0 or height <= 0:
@@ -226,8 +170,8 @@ def _raise_if_foreign(text: str, name: str) -> None:
         )
 
 
-def read_model_file(path) -> ModelFile:
-    """Read a model file written by :func:`write_model_file`.
+def read_model_file(path: str | Path) -> ModelFile:
+    """Read a model file (as :func:`model_file_text` writes it).
 
     Raises
     ------
@@ -244,3 +188,8 @@ def read_model_file(path) -> ModelFile:
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: cannot read model file ({exc.__class__.__name__}: {exc})") from None
     return parse_model_text(text, str(path))
+
+
+def load_model(path: str | Path) -> DistortionModel:
+    """The model of a saved model file (:func:`read_model_file`); ValueError (one line) if bad."""
+    return read_model_file(path).model

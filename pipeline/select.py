@@ -1,6 +1,7 @@
 """Choose the distortion model and degree by cross-validation over shots.
 
-Each candidate (model kind, degree, tangential / thin-prism terms) is fitted
+Each candidate (a :class:`pipeline.fitspec.FitSpec`: model kind, degree,
+tangential / thin-prism terms, centre prior) is fitted
 with one shot left out, and the left-out shot's edges are corrected by that
 fit and measured: the *holdout* ``d`` (the paper's protocol: a correction is
 judged on shots it was not fitted on). The CV figure of a candidate is the
@@ -27,90 +28,44 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from pipeline.fit import FitFailure, _tls, fit_distortion, make_parametrisation
+from pipeline.edgeset import held_out_residuals
+from pipeline.fit import fit_distortion, make_parametrisation
+from pipeline.fitspec import FitSpec
 
-
-@dataclass(frozen=True)
-class Candidate:
-    """One model configuration for :func:`pipeline.fit.fit_distortion`."""
-
-    model: str
-    degree: int
-    tangential: bool = False
-    prism: bool = False
-    center_prior: bool = False
-
-    @property
-    def label(self) -> str:
-        if self.model == "poly":
-            return f"poly{self.degree}"
-        return (
-            f"radial{self.degree}"
-            + ("+tangential" if self.tangential else "")
-            + ("+prism" if self.prism else "")
-            + ("+centre-prior" if self.center_prior else "")
-        )
-
-    def kwargs(self) -> dict:
-        kw = {"model": self.model, "degree": self.degree}
-        if self.model == "radial":
-            kw.update(tangential=self.tangential, prism=self.prism)
-            if self.center_prior:
-                kw["w_center"] = CENTER_PRIOR_WEIGHT
-        return kw
-
-    def n_params(self, width: int, height: int) -> int:
-        return make_parametrisation(width, height, self.model, self.degree, self.tangential, self.prism).n
-
-    def to_dict(self) -> dict:
-        return {
-            "model": self.model,
-            "degree": self.degree,
-            "tangential": self.tangential,
-            "prism": self.prism,
-            "center_prior": self.center_prior,
-            "label": self.label,
-        }
-
-
-CENTER_PRIOR_WEIGHT = 1e-2
-"""``w_center`` of the "+centre-prior" candidates (default fits use 1e-5, a free centre).
-
-A shift of the distortion centre is, to first order, a tangential term, so
-with tangential terms the centre is nearly undetermined by few orientations;
-the prior pulls it towards the image centre and lets the tangential terms
-carry the decentering. Whether that generalises better is for the
-cross-validation to say (it does on the real photos, not on a strongly
-decentred synthetic lens)."""
-
-DEFAULT_CANDIDATES: tuple[Candidate, ...] = tuple(
-    [Candidate("radial", d, t, p) for d in (2, 4, 6) for (t, p) in ((False, False), (True, False), (True, True))]
-    + [Candidate("radial", d, True, p, True) for d in (4, 6) for p in (False, True)]
-    + [Candidate("poly", d) for d in (3, 5, 7)]
+DEFAULT_CANDIDATES: tuple[FitSpec, ...] = tuple(
+    [FitSpec("radial", d, t, p) for d in (2, 4, 6) for (t, p) in ((False, False), (True, False), (True, True))]
+    + [FitSpec("radial", d, True, p, True) for d in (4, 6) for p in (False, True)]
+    + [FitSpec("poly", d) for d in (3, 5, 7)]
 )
 """Radial k up to rho^2, rho^4, rho^6, each plain / +tangential / +tangential+prism (degrees 4, 6 also with
 a centre prior); poly 3, 5, 7."""
 
-FALLBACK = Candidate("radial", 4, True, True)
+FALLBACK = FitSpec("radial", 4, True, True)
 """Choice when no cross-validation is possible: physically motivated, generalises across orientations."""
+
+
+def n_params(spec: FitSpec, width: int, height: int) -> int:
+    """Number of free parameters of a fit of ``spec``."""
+    return make_parametrisation(width, height, spec).n
 
 
 @dataclass(frozen=True)
 class CVRow:
     """Cross-validation figures of one candidate (pixels)."""
 
-    candidate: Candidate
+    candidate: FitSpec
     n_params: int
     cv_d: float  # pooled holdout d (RMS over all held-out points of all folds); NaN if a fold failed
     fold_d: tuple[float, ...]  # holdout d of each fold
     fit_d: tuple[float, ...]  # fit d of each fold
     failure: str | None = None
 
-    def to_dict(self) -> dict:
-        def num(v):
+    def to_dict(self) -> dict[str, Any]:
+        def num(v: float) -> float | None:
             return None if not np.isfinite(v) else float(v)
 
         return {
@@ -127,12 +82,12 @@ class CVRow:
 class Selection:
     """The chosen candidate, why, and the whole CV table."""
 
-    choice: Candidate
+    choice: FitSpec
     reason: str
     folds: str  # 'images' or 'edges' or 'none'
     table: tuple[CVRow, ...] = field(default=())
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             **self.choice.to_dict(),
             "reason": self.reason,
@@ -141,22 +96,18 @@ class Selection:
         }
 
 
-def _holdout_residuals(model, lines: Sequence[np.ndarray]) -> np.ndarray:
-    pts = [np.asarray(p, dtype=np.float64) for p in lines if len(p) >= 3]
-    pts = [p for p in pts if np.all(np.isfinite(p))]  # as the fit does: an edge with NaN is no edge
-    if not pts:
-        return np.zeros(0)
-    counts = np.array([len(p) for p in pts])
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-    return _tls(model.undistort_points(np.concatenate(pts)), starts, counts)[0]
+def cv_folds(
+    lines_per_image: Sequence[Sequence[np.ndarray]], mode: str
+) -> list[tuple[list[list[np.ndarray]], list[np.ndarray]]]:
+    """The folds of a cross-validation: a list of (train lines_per_image, held-out list of lines).
 
-
-def _folds(lines_per_image, mode):
-    """List of (train lines_per_image, held-out list of lines)."""
-    out = []
+    ``mode`` 'images': each shot held out in turn; 'edges': every other string (the
+    pair of edges ``2k, 2k+1``, :mod:`pipeline.measure`'s order) of every shot, twice.
+    """
+    out: list[tuple[list[list[np.ndarray]], list[np.ndarray]]] = []
     if mode == "images":
         for h in range(len(lines_per_image)):
-            out.append(([s for i, s in enumerate(lines_per_image) if i != h], list(lines_per_image[h])))
+            out.append(([list(s) for i, s in enumerate(lines_per_image) if i != h], list(lines_per_image[h])))
     else:
         # edges 2k, 2k+1 are the two sides of one string (pipeline.measure's order): hold out
         # every other *string*, never one side of a string whose twin stays in the fit
@@ -168,28 +119,36 @@ def _folds(lines_per_image, mode):
 
 
 def cross_validate(
-    lines_per_image, width, height, candidates=DEFAULT_CANDIDATES, folds="auto", **fit_kw
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    candidates: Sequence[FitSpec] = DEFAULT_CANDIDATES,
+    folds: str = "auto",
+    **fit_kw: Any,
 ) -> tuple[tuple[CVRow, ...], str]:
     """CV table of the candidates; ``folds`` 'images' (leave one shot out), 'edges' or 'auto'."""
     if folds == "auto":
         folds = "images" if len(lines_per_image) >= 3 else "edges"
-    fl = _folds(lines_per_image, folds)
+    fl = cv_folds(lines_per_image, folds)
     rows = []
     for cand in candidates:
-        fold_d, fit_d, res_all, failure = [], [], [], None
+        fold_d: list[float] = []
+        fit_d: list[float] = []
+        res_all: list[np.ndarray] = []
+        failure: str | None = None
         for train, held in fl:
-            r = fit_distortion(train, width, height, **cand.kwargs(), **fit_kw)
-            if isinstance(r, FitFailure):
+            r = fit_distortion(train, width, height, **cand.fit_arguments(), **fit_kw)
+            if not r:
                 failure = r.reason
                 fold_d.append(float("nan"))
                 fit_d.append(float("nan"))
                 continue
-            res = _holdout_residuals(r.model, held)
+            res = held_out_residuals(r.model, held)
             res_all.append(res)
             fold_d.append(float(np.sqrt(np.mean(res**2))) if len(res) else float("nan"))
             fit_d.append(r.d_after)
         cv = float(np.sqrt(np.mean(np.concatenate(res_all) ** 2))) if res_all and failure is None else float("nan")
-        rows.append(CVRow(cand, cand.n_params(width, height), cv, tuple(fold_d), tuple(fit_d), failure))
+        rows.append(CVRow(cand, n_params(cand, width, height), cv, tuple(fold_d), tuple(fit_d), failure))
     return tuple(rows), folds
 
 
@@ -197,11 +156,11 @@ def select_model(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
     height: int,
-    candidates: Sequence[Candidate] = DEFAULT_CANDIDATES,
+    candidates: Sequence[FitSpec] = DEFAULT_CANDIDATES,
     rel_tol: float = 0.05,
     abs_tol: float = 0.001,
     folds: str = "auto",
-    **fit_kw,
+    **fit_kw: Any,
 ) -> Selection:
     """Choose model and degree by cross-validation over the shots.
 

@@ -48,7 +48,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.compare import fit_homography
-from pipeline.fit import FitFailure, FitResult, fit_distortion
+from pipeline.edgeset import FitFailure, FitResult
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
 
 RESAMPLE = ("edges", "images")
@@ -121,7 +123,7 @@ def refit_job(job: tuple) -> tuple[DistortionModel | None, str | None]:
     or ``(None, reason)``; module-level so that a process pool can run it."""
     lines, width, height, kw = job
     res = fit_distortion(lines, width, height, **kw)
-    if isinstance(res, FitFailure):
+    if not res:
         return None, res.reason
     return res.model, None
 
@@ -130,7 +132,7 @@ def bootstrap_field_uncertainty(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
     height: int,
-    fit_kwargs: dict | None = None,
+    spec: FitSpec | None = None,
     *,
     n_boot: int = DEFAULT_N_BOOT,
     seed: int = 0,
@@ -148,10 +150,9 @@ def bootstrap_field_uncertainty(
         :func:`pipeline.fit.fit_distortion`).
     width, height : int
         Image size.
-    fit_kwargs : dict, optional
-        Keyword arguments of :func:`~pipeline.fit.fit_distortion` (``model``,
-        ``degree``, ``tangential``...). Replicates override ``robust`` (False)
-        and ``init`` (the full fit).
+    spec : FitSpec, optional
+        What to fit (default ``FitSpec()``, radial degree 4); every replicate fits
+        exactly this spec, with ``robust=False`` and started from the full fit.
     n_boot : int
         Number of replicates (>= 2; default 20: cheap, and the RMS figure is
         then good to about +-15 %).
@@ -162,7 +163,7 @@ def bootstrap_field_uncertainty(
     cells : int
         Grid cells along the longer image side for the map.
     full_fit : FitResult, optional
-        The full-data fit, if already computed with ``fit_kwargs``.
+        The full-data fit of ``spec``, if already computed.
     map_fn : callable
         ``map``-like runner of the replicate fits (e.g. a process pool's
         ``map``, with :func:`refit_job` as the picklable job); results do not
@@ -177,9 +178,9 @@ def bootstrap_field_uncertainty(
         raise ValueError(f"unknown resampling unit {resample!r}; known: {', '.join(RESAMPLE)}")
     if int(n_boot) < 2:
         raise ValueError(f"n_boot must be >= 2, got {n_boot}")
-    kw = dict(fit_kwargs or {})
+    kw = (spec or FitSpec()).fit_arguments()
     full = full_fit if full_fit is not None else fit_distortion(lines_per_image, width, height, **kw)
-    if isinstance(full, FitFailure):
+    if not full:
         return FitFailure(f"full fit failed: {full.reason}")
     # the data the full fit used: without its rejected (outlier / unusable) edges
     dropped = {(r.image, r.line) for r in full.rejected}

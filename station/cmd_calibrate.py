@@ -32,8 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fit import FitFailure, corrected_straightness, fit_distortion, straightness_of
-from pipeline.select import Candidate, select_model
+from pipeline.edgeset import corrected_straightness, straightness_of
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
+from pipeline.select import select_model
 from station.cli_inputs import InputError, measure_file, positive_int
 
 
@@ -56,7 +58,11 @@ def register(subparsers) -> None:
         "--degree",
         type=positive_int,
         default=None,
-        help="radial: highest power of r (default 4); poly: total degree 3..11 (default 5)",
+        help=(
+            f"radial: highest power of r, {'..'.join(map(str, DEGREE_BOUNDS['radial']))} "
+            f"(default {DEFAULT_DEGREE['radial']}); poly: total degree "
+            f"{'..'.join(map(str, DEGREE_BOUNDS['poly']))} (default {DEFAULT_DEGREE['poly']})"
+        ),
     )
     p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
     p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
@@ -86,29 +92,28 @@ def _measure(paths, t):
     return [(path, measure_file(path, t)[1]) for path in paths]
 
 
-def _candidate(args) -> Candidate | None:
+def _spec(args) -> FitSpec | None:
+    """The FitSpec the options ask for (None: --model auto)."""
     if args.model == "auto":
         if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior:
             raise CalibrateError("--degree/--no-tangential/--no-prism/--center-prior need --model radial or poly")
         return None
-    if args.model == "poly":
-        if args.no_tangential or args.no_prism or args.center_prior:
-            raise CalibrateError("--no-tangential/--no-prism/--center-prior apply to --model radial only")
-        deg = 5 if args.degree is None else args.degree
-        if not 3 <= deg <= 11:
-            raise CalibrateError(f"--degree for poly must be within 3..11, got {deg}")
-        return Candidate("poly", deg)
-    deg = 4 if args.degree is None else args.degree
-    if deg > 10:
-        raise CalibrateError(f"--degree for radial must be within 1..10, got {deg}")
-    return Candidate("radial", deg, not args.no_tangential, not args.no_prism, args.center_prior)
+    if args.model == "poly" and (args.no_tangential or args.no_prism or args.center_prior):
+        raise CalibrateError("--no-tangential/--no-prism/--center-prior apply to --model radial only")
+    try:
+        if args.model == "poly":
+            return FitSpec("poly", args.degree)
+        return FitSpec("radial", args.degree, not args.no_tangential, not args.no_prism, args.center_prior)
+    except ValueError as exc:
+        raise CalibrateError(f"--degree: {exc}") from None
 
 
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
-    from pipeline.model_file import make_provenance, write_model_file
+    from station.files import write_model_file
+    from station.provenance import make_provenance
 
-    cand = _candidate(args)
+    cand = _spec(args)
     out_dir = Path(args.out).parent
     if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
         reason = "not a directory" if out_dir.exists() else "no such directory"
@@ -136,8 +141,10 @@ def calibrate(args) -> dict:
     else:
         choice = {**cand.to_dict(), "reason": "given on the command line", "folds": "none", "table": []}
 
-    res = fit_distortion(shots, width, height, **cand.kwargs(), image_sizes=[(m.width, m.height) for _, m in fit_m])
-    if isinstance(res, FitFailure):
+    res = fit_distortion(
+        shots, width, height, **cand.fit_arguments(), image_sizes=[(m.width, m.height) for _, m in fit_m]
+    )
+    if not res:
         raise CalibrateError(f"cannot fit {cand.label}: {res.reason}")
 
     report = {

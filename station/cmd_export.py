@@ -17,7 +17,8 @@ from pipeline.exports.fit import fit_lensfun, fit_opencv
 from pipeline.exports.lensfun import lensfun_text
 from pipeline.exports.opencv import opencv_text
 from pipeline.exports.ros import ros_text
-from pipeline.model_file import FORMAT_NAME, FORMAT_VERSION, atomic_write_text, read_model_file
+from pipeline.model_file import FORMAT_NAME, FORMAT_VERSION, read_model_file
+from station.files import atomic_write_text
 
 FORMATS = ("opencv", "ros", "lensfun", "json")
 

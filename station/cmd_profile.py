@@ -257,8 +257,8 @@ def _export(args, store) -> int:
 
 
 def _write_export(args, mf, what: str) -> int:
-    from pipeline.model_file import atomic_write_text
     from station.cmd_export import export_text
+    from station.files import atomic_write_text
 
     try:
         text, err = export_text(mf, args.format)

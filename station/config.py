@@ -25,9 +25,13 @@ from typing import Any
 import yaml
 
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
+from pipeline.fitspec import KINDS, FitSpec
 
-#: models :func:`pipeline.fit.fit_distortion` can fit
-FIT_MODELS = ("radial", "poly", "auto")  # auto: chosen by cross-validation (pipeline.select)
+AUTO_MODEL = "auto"
+"""``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
+
+#: values of ``pipeline.model``: a model kind of :mod:`pipeline.fitspec`, or auto
+FIT_MODELS = (*KINDS, AUTO_MODEL)
 
 #: turntable ``port`` value meaning "the emulator started by station.simulated"
 EMULATOR_PORT = "emulator"
@@ -144,9 +148,20 @@ class PipelineConfig:
     degree: int | None = None  # None: the fit's default for the model
     tangential: bool = False  # radial model: decentering terms p1, p2
     prism: bool = False  # radial model: thin-prism terms s1..s4
+    center_prior: bool = False  # radial model: pull the distortion centre towards the image centre
     bootstrap: int = 0  # replicates for the field uncertainty (0: not computed)
     seed: int = 0  # of the bootstrap resampling
     workers: int = 1  # processes for the cross-validation / bootstrap fits
+
+    @property
+    def spec(self) -> FitSpec | None:
+        """What to fit (:class:`pipeline.fitspec.FitSpec`); ``None`` for ``model: auto``
+        (chosen by cross-validation). The radial-only flags are ignored for ``poly``."""
+        if self.model == AUTO_MODEL:
+            return None
+        if self.model == "poly":
+            return FitSpec("poly", self.degree)
+        return FitSpec(self.model, self.degree, self.tangential, self.prism, self.center_prior)
 
 
 @dataclass(frozen=True)
@@ -424,7 +439,9 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     )
 
     pp = top.section(
-        "pipeline", ("t", "model", "degree", "tangential", "prism", "bootstrap", "seed", "workers"), optional=True
+        "pipeline",
+        ("t", "model", "degree", "tangential", "prism", "center_prior", "bootstrap", "seed", "workers"),
+        optional=True,
     )
     pipe = PipelineConfig(
         t=pp.number("t", 30, min=1, integer=True),
@@ -432,12 +449,17 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         degree=pp.number("degree", None, min=1, integer=True),
         tangential=pp.boolean("tangential", False),
         prism=pp.boolean("prism", False),
+        center_prior=pp.boolean("center_prior", False),
         bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
         seed=pp.number("seed", 0, min=0, integer=True),
         workers=pp.number("workers", 1, min=1, integer=True),
     )
     if pipe.model not in FIT_MODELS:
         raise pp.err("model", f"a distortion model name (one of {', '.join(FIT_MODELS)})", pipe.model)
+    try:
+        pipe.spec  # noqa: B018  (validates degree and terms against pipeline.fitspec)
+    except ValueError as exc:
+        raise ConfigError(path, "pipeline.degree", f"expected a degree the model allows: {exc}") from None
 
     qs = top.section("qa", ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px"), optional=True)
     q = QAConfig()

@@ -460,7 +460,8 @@ class Executor:
         return w, h
 
     def _do_Store(self, step: Store) -> None:
-        from pipeline.model_file import make_provenance, write_model_file
+        from station.files import write_model_file
+        from station.provenance import make_provenance
 
         f = step.focus_idx
         cfg = self.config
@@ -716,10 +717,10 @@ def _jsonable(value):
     """``value`` if it survives JSON, else its ``repr`` (driver extras may be anything)."""
     import json
 
-    from station.session_dir import _json_default
+    from station.session_dir import json_default
 
     try:
-        return json.loads(json.dumps(value, default=_json_default))
+        return json.loads(json.dumps(value, default=json_default))
     except (TypeError, ValueError):
         return repr(value)
 

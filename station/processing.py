@@ -148,14 +148,6 @@ class FocusFit:
     uncertainty: object = None  # the pipeline.uncertainty.FieldUncertainty (per-pixel map), or None
 
 
-def fit_kwargs(pipeline: PipelineConfig) -> dict:
-    """Keyword arguments of :func:`pipeline.fit.fit_distortion` for a fixed model."""
-    kw = {"model": pipeline.model, "degree": pipeline.degree}
-    if pipeline.model == "radial":
-        kw.update(tangential=pipeline.tangential, prism=pipeline.prism)
-    return kw
-
-
 def fit_focus(
     shots: Sequence[ShotMeasurement],
     width: int,
@@ -186,20 +178,21 @@ def fit_focus(
     ``map_fn`` runs the independent fits (a process pool's ``map`` to use
     several cores); results do not depend on it.
     """
-    from pipeline.fit import corrected_straightness, fit_distortion, straightness_of
+    from pipeline.edgeset import corrected_straightness, straightness_of
+    from pipeline.fit import fit_distortion
 
     lines = [list(s.lines) for s in shots]
     selection = None
-    if pipeline.model == "auto":
+    spec = pipeline.spec
+    if spec is None:
         from pipeline.select import select_model
 
         selection = select_model(lines, width, height)
-        kw = dict(selection.choice.kwargs())
-    else:
-        kw = fit_kwargs(pipeline)
+        spec = selection.choice
+    kw = spec.fit_arguments()
     full = fit_distortion(lines, width, height, **kw)
-    if getattr(full, "model", None) is None:
-        return FocusFit(None, np.nan, np.nan, np.nan, np.nan, failure=str(getattr(full, "reason", full)))
+    if not full:
+        return FocusFit(None, np.nan, np.nan, np.nan, np.nan, failure=full.reason)
     outliers = {(r.image, r.line) for r in full.rejected}
     from pipeline.uncertainty import refit_job
 
@@ -237,13 +230,12 @@ def fit_focus(
     if bootstrap == 1:
         details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
     elif bootstrap:
-        from pipeline.fit import FitFailure
         from pipeline.uncertainty import bootstrap_field_uncertainty
 
         res = bootstrap_field_uncertainty(
-            lines, width, height, kw, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
+            lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
         )
-        if isinstance(res, FitFailure):
+        if not res:
             details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=res.reason)
         else:
             unc = res

@@ -94,7 +94,8 @@ def thresholds_from(obj: Any = None, **overrides) -> QAConfig:
     return QAConfig(**values)
 
 
-def _grid_step(width: int, height: int) -> float:
+def grid_step(width: int, height: int) -> float:
+    """Spacing (px) of the grid on which QA compares corrections (:func:`distortion_magnitude`)."""
     return max(8.0, max(width, height) / 80)
 
 
@@ -103,7 +104,7 @@ def distortion_magnitude(model, width: int, height: int) -> tuple[float, float]:
     from pipeline.compare import compare_models
     from pipeline.models.base import IdentityModel
 
-    c = compare_models(model, IdentityModel(), width, height, step=_grid_step(width, height))
+    c = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height))
     return c.rms, c.max
 
 
@@ -160,7 +161,7 @@ def evaluate(
             )
 
     if reference is not None:
-        c = compare_models(model, reference, width, height, step=_grid_step(width, height))
+        c = compare_models(model, reference, width, height, step=grid_step(width, height))
         metrics.update(reference_rms_px=c.rms, reference_max_px=c.max)
         lim = thresholds.max_reference_deviation_px
         if lim is not None:

@@ -103,10 +103,10 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
     from pipeline.compare import compare_models
     from pipeline.interpolate import normalised_field
     from pipeline.models.base import IdentityModel
-    from station.qa import _grid_step
+    from station.qa import grid_step
 
     # the same homography as the QA figure (station.qa.distortion_magnitude)
-    h = compare_models(model, IdentityModel(), width, height, step=_grid_step(width, height)).homography
+    h = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height)).homography
     step = max(width, height) / arrows
     xs = np.linspace(0, width - 1, max(2, int(round((width - 1) / step)) + 1))
     ys = np.linspace(0, height - 1, max(2, int(round((height - 1) / step)) + 1))
@@ -135,7 +135,7 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
 
 def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
     """``(orientation index, edge index, rms before, rms after)`` per measured edge (px)."""
-    from pipeline.fit import edge_residuals
+    from pipeline.edgeset import edge_residuals
 
     rows = []
     for o, s in enumerate(shots):
@@ -463,7 +463,6 @@ def session_evidence(
     session's model file). Shots and the uncertainty map are those the
     session kept; a missing map is bootstrapped with ``bootstrap_if_missing``
     replicates (0: the report says it is not available)."""
-    from station.processing import fit_kwargs
     from station.qa import profile_data
 
     pd = profile_data(profile)
@@ -477,7 +476,7 @@ def session_evidence(
                 e.shots,
                 pd.width,
                 pd.height,
-                fit_kwargs(cfg.pipeline),
+                cfg.pipeline.spec,
                 n_boot=bootstrap_if_missing,
                 seed=cfg.pipeline.seed,
             )
@@ -515,15 +514,12 @@ def write_session_report(
     return write_report(out_dir, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 
 
-def shot_uncertainty(
-    shots: Sequence[Shot], width: int, height: int, fit_kwargs: dict, *, n_boot: int = 20, seed: int = 0
-):
-    """(FieldUncertainty or None, note) from the shots' edges."""
-    from pipeline.fit import FitFailure
+def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, spec, *, n_boot: int = 20, seed: int = 0):
+    """(FieldUncertainty or None, note) from the shots' edges, refitting ``spec`` (a FitSpec)."""
     from pipeline.uncertainty import bootstrap_field_uncertainty
 
     lines = [[np.asarray(ln.points, np.float64) for ln in s.measurement.lines] for s in shots]
-    res = bootstrap_field_uncertainty(lines, width, height, fit_kwargs, n_boot=n_boot, seed=seed)
-    if isinstance(res, FitFailure):
+    res = bootstrap_field_uncertainty(lines, width, height, spec, n_boot=n_boot, seed=seed)
+    if not res:
         return None, f"not available: {res.reason}"
     return res, ""

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from station.config import Config, load_config
+from station.files import atomic_write_bytes
 from station.plan import frame_key, stored_key
 
 MANIFEST = "manifest.jsonl"
@@ -54,27 +55,6 @@ CONFIG_COPY = "config.yaml"
 
 class SessionError(RuntimeError):
     """A session directory that cannot be used; message is one line."""
-
-
-# ------------------------------------------------------------ atomic files
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file, fsync, rename, fsync dir."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    _fsync_dir(path.parent)
 
 
 def encode_pgm(image: np.ndarray) -> bytes:
@@ -230,7 +210,7 @@ class SessionDir:
     def append(self, record: dict) -> dict:
         """Append one record to the manifest, durably (flush + fsync)."""
         record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **record}
-        line = json.dumps(record, separators=(",", ":"), default=_json_default) + "\n"
+        line = json.dumps(record, separators=(",", ":"), default=json_default) + "\n"
         self._manifest.write(line.encode())
         self._manifest.flush()
         os.fsync(self._manifest.fileno())
@@ -284,7 +264,7 @@ class SessionDir:
 
     def write_profile_file(self, focus_idx: int, payload: dict) -> Path:
         path = self.path / "profiles" / f"focus{focus_idx}.json"
-        atomic_write_bytes(path, (json.dumps(payload, indent=1, default=_json_default) + "\n").encode())
+        atomic_write_bytes(path, (json.dumps(payload, indent=1, default=json_default) + "\n").encode())
         return path
 
     # ---------------------------------------------------------------- reads
@@ -335,7 +315,8 @@ class SessionDir:
         return any(True for _ in self.of_kind("finished"))
 
 
-def _json_default(o: Any):
+def json_default(o: Any) -> Any:
+    """``json.dumps`` default for numpy values and paths (manifest records, driver extras)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

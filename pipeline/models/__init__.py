@@ -1,10 +1,13 @@
 """Distortion models: named objects mapping distorted -> ideal pixels.
 
 Every model has ``undistort_points``, ``distort_points``, ``undistortion_maps``,
-``to_dict``/``from_dict``; :func:`model_from_dict` rebuilds any of them.
+``to_dict``/``from_dict`` and its equation in its docstring; :func:`model_from_dict`
+rebuilds any of them by its ``name`` (:data:`MODEL_TYPES`). The models a fit can
+produce carry their parametrisation beside them (:mod:`pipeline.models.radial`,
+:mod:`pipeline.models.polynomial`). Model files: :mod:`pipeline.model_file`.
 """
 
-from pipeline.models.base import DistortionModel, IdentityModel
+from pipeline.models.base import DistortionModel, IdentityModel, model_from_dict, model_types
 from pipeline.models.grid_field import GridFieldModel
 from pipeline.models.homography import HomographyModel
 from pipeline.models.lensfun_model import LensfunModel
@@ -12,27 +15,20 @@ from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.radial import RadialModel
 
-MODEL_TYPES: dict[str, type[DistortionModel]] = {
-    IdentityModel.name: IdentityModel,
-    "radial": RadialModel,
-    "poly": PolynomialModel,
-    "homography": HomographyModel,
-    "opencv": OpenCVModel,
-    "lensfun": LensfunModel,
-    "grid_field": GridFieldModel,
-}
+MODEL_TYPES: dict[str, type[DistortionModel]] = model_types()
+"""Every model class by the ``name`` its files carry: identity, radial, poly, homography,
+opencv, lensfun, grid_field."""
 
-
-def model_from_dict(d: dict) -> DistortionModel:
-    """Rebuild a model from :meth:`DistortionModel.to_dict` output."""
-    name = d.get("model") if isinstance(d, dict) else None
-    if name not in MODEL_TYPES:
-        raise ValueError(f"unknown distortion model {name!r}; known: {sorted(MODEL_TYPES)}")
-    return MODEL_TYPES[name].from_dict(d)
-
-
-def load_model(path):
-    """Load the model of a saved model file (see :mod:`pipeline.model_file`); ValueError if bad."""
-    from pipeline.model_file import read_model_file  # file I/O lives outside the pure core
-
-    return read_model_file(path).model
+__all__ = [
+    "MODEL_TYPES",
+    "DistortionModel",
+    "GridFieldModel",
+    "HomographyModel",
+    "IdentityModel",
+    "LensfunModel",
+    "OpenCVModel",
+    "PolynomialModel",
+    "RadialModel",
+    "model_from_dict",
+    "model_types",
+]

@@ -9,7 +9,9 @@ closed form. Coordinates follow the convention of :mod:`pipeline`.
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
+from typing import Any
 
 import numpy as np
 
@@ -105,3 +107,27 @@ class IdentityModel(DistortionModel):
     @classmethod
     def from_dict(cls, d):
         return cls()
+
+
+def model_types() -> dict[str, type[DistortionModel]]:
+    """Every concrete model class by its ``name``: the subclasses of :class:`DistortionModel`
+    defined so far (importing :mod:`pipeline.models` defines them all; the first class of a
+    name wins)."""
+    found: dict[str, type[DistortionModel]] = {}
+    todo = list(DistortionModel.__subclasses__())
+    while todo:
+        cls = todo.pop(0)
+        todo.extend(cls.__subclasses__())
+        name = getattr(cls, "name", None)
+        if isinstance(name, str) and name != DistortionModel.name and not inspect.isabstract(cls):
+            found.setdefault(name, cls)
+    return found
+
+
+def model_from_dict(d: Any) -> DistortionModel:
+    """Rebuild a model from :meth:`DistortionModel.to_dict` output (ValueError for an unknown name)."""
+    types = model_types()
+    name = d.get("model") if isinstance(d, dict) else None
+    if name not in types:
+        raise ValueError(f"unknown distortion model {name!r}; known: {sorted(types)}")
+    return types[name].from_dict(d)

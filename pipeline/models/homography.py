@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, model_from_dict
 
 
 def apply_homography(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -63,6 +63,4 @@ class HomographyModel(DistortionModel):
 
     @classmethod
     def from_dict(cls, d):
-        from pipeline.models import model_from_dict
-
         return cls(base=model_from_dict(d["base"]), homography=tuple(tuple(r) for r in d["homography"]))

@@ -1,7 +1,10 @@
-"""Non-radial bivariate polynomial correction (Tang et al., ICIP 2011)."""
+"""Non-radial bivariate polynomial correction (Tang et al., ICIP 2011), and its
+parametrisation for the fit (:class:`PolynomialParametrisation`, on the same
+monomial basis :func:`monomials`)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -203,3 +206,78 @@ class PolynomialModel(DistortionModel):
             b=tuple(d["b"]),
             scale=float(d["scale"]),
         )
+
+
+class PolynomialParametrisation:
+    """The free coefficients of a :class:`PolynomialModel` fit, with the gauge fixed.
+
+    The full coefficient vector ``[a, b]`` is ``t0 + T @ theta``: the constant and
+    linear terms are the identity's (``t0``; translation, rotation, scale and shear are
+    a homography's, which straight lines cannot see), and the first-order projective
+    part is removed by tying ``b_11 = -a_20`` and ``b_02 = -a_11`` (see
+    :mod:`pipeline.fit`). The corrected points are linear in ``theta``: their Jacobian
+    is ``s * monomials @ T``. ``regularisation`` is a ridge of weight ``ridge``.
+    """
+
+    def __init__(self, width: int, height: int, degree: int, ridge: float) -> None:
+        self.ident = PolynomialModel.identity(width, height, degree)
+        self.s = self.ident.scale
+        self.degree = int(degree)
+        m = PolynomialModel.n_coefficients(degree)
+        self.m = m
+        self.t0 = self.ident.params()
+        cols = []
+        for k in range(3, m):  # a_ij, degree >= 2
+            e = np.zeros(2 * m)
+            e[k] = 1.0
+            if k == 3:
+                e[m + 4] = -1.0  # b11 = -a20
+            if k == 4:
+                e[m + 5] = -1.0  # b02 = -a11
+            cols.append(e)
+        for k in range(3, m):
+            if k in (4, 5):
+                continue
+            e = np.zeros(2 * m)
+            e[m + k] = 1.0
+            cols.append(e)
+        self.T = np.stack(cols, axis=1)
+        self.n = self.T.shape[1]
+        self.ridge = ridge
+
+    def theta0(self, init: DistortionModel | None) -> np.ndarray:
+        """Start: ``init`` (a PolynomialModel of at most this degree, projected) or the identity."""
+        if isinstance(init, PolynomialModel) and init.degree <= self.degree:
+            full = np.zeros(2 * self.m)
+            idx = {e: i for i, e in enumerate(monomial_exponents(self.degree))}
+            for i, e in enumerate(monomial_exponents(init.degree)):
+                full[idx[e]] = init.a[i]
+                full[self.m + idx[e]] = init.b[i]
+            return np.linalg.lstsq(self.T, full - self.t0, rcond=None)[0]
+        return np.zeros(self.n)
+
+    def model(self, th: np.ndarray) -> PolynomialModel:
+        full = self.t0 + self.T @ th
+        return PolynomialModel(
+            center=self.ident.center, degree=self.degree, a=tuple(full[: self.m]), b=tuple(full[self.m :]), scale=self.s
+        )
+
+    def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)``."""
+        c = self.ident.center
+        mon = monomials((xy[:, 0] - c[0]) / self.s, (xy[:, 1] - c[1]) / self.s, self.degree)
+        full = self.t0 + self.T @ th
+        u = np.stack([c[0] + self.s * (mon @ full[: self.m]), c[1] + self.s * (mon @ full[self.m :])], axis=1)
+        if not jac:
+            return u, None
+        d = np.empty((len(xy), 2, self.n))
+        d[:, 0, :] = self.s * (mon @ self.T[: self.m])
+        d[:, 1, :] = self.s * (mon @ self.T[self.m :])
+        return u, d
+
+    def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+        """Ridge residuals and their Jacobian rows."""
+        if self.ridge <= 0:
+            return np.zeros(0), np.zeros((0, self.n))
+        e = math.sqrt(max(n_points, 1)) * self.ridge * self.s * np.eye(self.n)
+        return e @ th, e

@@ -3,7 +3,7 @@ import pytest
 
 from pipeline.alvarez import alvarez_energy, alvarez_initial_k, fit_alvarez
 from pipeline.compare import compare_models
-from pipeline.fit import FitFailure, FitResult
+from pipeline.edgeset import FitFailure, FitResult
 from pipeline.models import RadialModel
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import LENSES, H, W, measured_shots

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pipeline.compare import compare_models, corner_homography, corner_normalised, fit_homography, image_grid
-from pipeline.fit import straightness_of
+from pipeline.edgeset import straightness_of
 from pipeline.models import HomographyModel, PolynomialModel, RadialModel
 from pipeline.models.homography import apply_homography
 

@@ -2,15 +2,9 @@ import numpy as np
 import pytest
 
 from pipeline.compare import compare_models
-from pipeline.fit import (
-    FitFailure,
-    FitResult,
-    _collect,
-    _residuals_and_jacobian,
-    corrected_straightness,
-    fit_distortion,
-    make_parametrisation,
-)
+from pipeline.edgeset import FitFailure, FitResult, collect, corrected_straightness
+from pipeline.fit import fit_distortion, make_parametrisation, residuals_and_jacobian
+from pipeline.fitspec import FitSpec
 from pipeline.models import PolynomialModel, RadialModel
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import ANGLES, LENSES, REAL, measured_shots, nonradial_lens, real_shots
@@ -57,18 +51,18 @@ def test_fit_without_the_needed_terms_leaves_residual():
 )
 def test_analytic_jacobian_matches_finite_differences(kind, kw):
     shots = harp_point_sets(DECENTRED, W, H, (10, 70, 130), noise=0.01, seed=2)
-    edges, _ = _collect(shots, W, H)
-    param = make_parametrisation(W, H, kind, **kw)
+    edges, _ = collect(shots, W, H)
+    param = make_parametrisation(W, H, FitSpec(kind, **kw))
     rng = np.random.default_rng(3)
     th = rng.normal(0, 1e-3, param.n)
-    _, j = _residuals_and_jacobian(param, edges, th)
+    _, j = residuals_and_jacobian(param, edges, th)
     num = np.empty_like(j)
     for k in range(param.n):
         e = np.zeros(param.n)
         e[k] = 1e-7
         num[:, k] = (
-            _residuals_and_jacobian(param, edges, th + e, jac=False)[0]
-            - _residuals_and_jacobian(param, edges, th - e, jac=False)[0]
+            residuals_and_jacobian(param, edges, th + e, jac=False)[0]
+            - residuals_and_jacobian(param, edges, th - e, jac=False)[0]
         ) / 2e-7
     assert np.abs(j - num).max() < 1e-4 * np.abs(num).max()
 

@@ -1,20 +1,21 @@
 import numpy as np
 
+from pipeline.fitspec import FitSpec
 from pipeline.models import RadialModel
-from pipeline.select import FALLBACK, Candidate, select_model
+from pipeline.select import FALLBACK, select_model
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import real_shots
 
 W, H = 1000, 750
 DECENTRED = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, 0.003), center=(530, 355), tangential=(0.001, -0.0007))
-CANDS = (Candidate("radial", 2), Candidate("radial", 4, True), Candidate("radial", 4, True, True), Candidate("poly", 5))
+CANDS = (FitSpec("radial", 2), FitSpec("radial", 4, True), FitSpec("radial", 4, True, True), FitSpec("poly", 5))
 
 
 def test_cv_picks_the_simplest_model_that_generalises():
     shots = harp_point_sets(DECENTRED, W, H, (0, 45, 90, 135), noise=0.005, seed=5)
     sel = select_model(shots, W, H, candidates=CANDS)
     assert sel.folds == "images"
-    assert sel.choice == Candidate("radial", 4, True)
+    assert sel.choice == FitSpec("radial", 4, True)
     rows = {r.candidate.label: r for r in sel.table}
     assert len(rows) == 4 and all(len(r.fold_d) == 4 for r in rows.values())
     assert rows["radial4+tangential"].cv_d < 0.006  # holdout d at the point noise (0.005)
@@ -30,7 +31,7 @@ def test_two_shots_fall_back_to_alternate_edge_folds():
     shots = harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005, seed=5)
     sel = select_model(shots, W, H, candidates=CANDS[:2])
     assert sel.folds == "edges" and "alternate-edge" in sel.reason
-    assert sel.choice == Candidate("radial", 4, True)
+    assert sel.choice == FitSpec("radial", 4, True)
 
 
 def test_no_candidate_possible_gives_the_fallback_and_says_why():
@@ -45,7 +46,7 @@ def test_real_photos_radial_generalises_polynomial_does_not(real_harp_dir):
     """Issue 3 item 3: leave-one-shot-out over the 3 real shots prefers the physical model."""
     real = real_shots(str(real_harp_dir))
     w, h, _ = real[0]
-    cands = (Candidate("radial", 4, True, True), Candidate("poly", 5))
+    cands = (FitSpec("radial", 4, True, True), FitSpec("poly", 5))
     sel = select_model([s for _, _, s in real], w, h, candidates=cands)
     rows = {r.candidate.label: r for r in sel.table}
     print({k: (round(r.cv_d, 4), [round(v, 4) for v in r.fold_d]) for k, r in rows.items()})
@@ -57,10 +58,10 @@ def test_real_photos_radial_generalises_polynomial_does_not(real_harp_dir):
 def test_edge_folds_hold_out_whole_strings_not_one_side_of_each():
     # measure() lists a string's two edges next to each other (lines 2k, 2k+1: one string).
     # Holding out one edge while fitting its twin 3 px away leaks the held-out string into the fit.
-    from pipeline.select import _folds
+    from pipeline.select import cv_folds
 
     lines = [[np.full((6, 2), 10.0 * i + j) for j in range(8)] for i in range(2)]
-    for train, held in _folds(lines, "edges"):
+    for train, held in cv_folds(lines, "edges"):
         held_ids = {float(p[0, 0]) for p in held}
         train_ids = {float(p[0, 0]) for s in train for p in s}
         assert held_ids and train_ids and not held_ids & train_ids
@@ -75,4 +76,4 @@ def test_a_non_finite_held_out_edge_does_not_void_the_cross_validation():
     shots[1] = list(shots[1]) + [np.array([[1.0, np.nan]] * 10)]
     sel = select_model(shots, W, H, candidates=CANDS[:2])
     assert sel.folds == "images" and all(np.isfinite(r.cv_d) for r in sel.table)
-    assert sel.choice == Candidate("radial", 4, True)
+    assert sel.choice == FitSpec("radial", 4, True)

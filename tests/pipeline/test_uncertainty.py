@@ -5,14 +5,16 @@ import pytest
 
 from drivers.sim.lens import lens_for_focus
 from pipeline.compare import compare_models
-from pipeline.fit import FitFailure, fit_distortion
+from pipeline.edgeset import FitFailure
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
 from pipeline.uncertainty import bootstrap_field_uncertainty
 from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 640, 480
 LENS = lens_for_focus(0.3, W, H)
 ANGLES = [0, 45, 90, 135]
-KW = dict(model="radial", degree=3, tangential=True)
+KW = FitSpec("radial", 3, tangential=True)
 
 
 def shots(noise, spacing=40.0, seed=1, angles=ANGLES):
@@ -55,7 +57,7 @@ def test_whole_image_resampling_and_failures():
     with pytest.raises(ValueError, match="n_boot"):
         bootstrap_field_uncertainty(data, W, H, KW, n_boot=1)
     # a given full fit is used (and its rejected edges are not resampled)
-    full = fit_distortion(data, W, H, **KW)
+    full = fit_distortion(data, W, H, **KW.fit_arguments())
     again = bootstrap_field_uncertainty(data, W, H, KW, n_boot=6, seed=0, resample="images", full_fit=full)
     np.testing.assert_array_equal(again.std, u.std)
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import yaml
 
 from drivers.sim.lens import lens_for_focus
-from pipeline.model_file import write_model_file
 from pipeline.render import HarpScene, render_harp
 from station.config import load_config
+from station.files import write_model_file
 from station.processing import fit_focus, measure_shot
 from station.session_dir import SessionDir
 

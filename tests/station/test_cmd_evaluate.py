@@ -10,10 +10,10 @@ from pipeline.exports.fit import fit_opencv
 from pipeline.exports.lensfun import lensfun_text
 from pipeline.exports.opencv import opencv_text
 from pipeline.exports.ros import ros_text
-from pipeline.model_file import write_model_file
 from pipeline.models import LensfunModel, RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
+from station.files import write_model_file
 
 W, H = 640, 480
 # barrel lens with an odd radial term: OpenCV's even polynomial cannot represent it exactly

@@ -8,9 +8,9 @@ import pytest
 import yaml
 
 from pipeline.exports.opencv import read_opencv_text
-from pipeline.model_file import write_model_file
 from pipeline.models import RadialModel
 from station.cli import main
+from station.files import write_model_file
 
 W, H = 400, 300
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.05, 0.0, -0.01), center=(203.0, 147.0))

@@ -6,8 +6,8 @@ import shutil
 import pytest
 
 from drivers.sim.lens import lens_for_focus
-from pipeline.model_file import write_model_file
 from station.cli import main
+from station.files import write_model_file
 from station.qa import session_models
 from station.store import ProfileStore
 from tests.station.qa_session import H, W, build_session

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from pipeline.measure import measure_image
-from pipeline.model_file import write_model_file
 from pipeline.models import RadialModel
 from pipeline.render import HarpScene, render_harp
 from pipeline.undistort_maps import fast_undistortion_maps
 from station.cli import main
+from station.files import write_model_file
 
 W, H = 480, 360
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.06), tangential=(1e-3, -5e-4))

@@ -1,0 +1,204 @@
+"""What to fit: one frozen :class:`FitSpec` (model kind, degree, extra terms, centre prior).
+
+A spec names one member of the two model families :func:`pipeline.fit.fit_distortion`
+can fit:
+
+* ``radial`` — :class:`~pipeline.models.radial.RadialModel` with a free centre,
+  ``k0 = 1`` and ``k1 .. k_degree`` (degree 1..10, default 4), optionally with the
+  decentering (``tangential``: p1, p2) and thin-prism (``prism``: s1..s4) terms,
+  optionally with a prior pulling the distortion centre towards the image centre
+  (``center_prior``);
+* ``poly`` — :class:`~pipeline.models.polynomial.PolynomialModel`, a free bivariate
+  polynomial of total degree 3..11 (default 5). A degree-2 polynomial is not offered:
+  once its linear and first-order projective parts are fixed by the gauge (see
+  :mod:`pipeline.fit`) it has no odd (cubic) term, so it cannot express even the
+  simplest radial distortion.
+
+The spec is the one spelling of "what to fit" everywhere: the configuration
+(``pipeline.model/degree/tangential/prism/center_prior``), ``harp calibrate``'s
+options, the cross-validated model selection (:mod:`pipeline.select`), the bootstrap,
+and every stored profile (the spec that was actually fitted, so QA and reports refit
+exactly that). Its :attr:`~FitSpec.label` is a short name such as
+``radial4+tangential+prism`` that :func:`parse` reads back; :meth:`FitSpec.fit_arguments`
+gives the keyword arguments of :func:`pipeline.fit.fit_distortion`.
+
+References
+----------
+.. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision camera
+   distortion measurements with a calibration harp", JOSA A 29(10), 2012.
+"""
+
+from __future__ import annotations
+
+import operator
+from dataclasses import dataclass
+from typing import Any
+
+KINDS: tuple[str, ...] = ("radial", "poly")
+"""The model families a spec can name."""
+
+DEGREE_BOUNDS: dict[str, tuple[int, int]] = {"radial": (1, 10), "poly": (3, 11)}
+"""Allowed degrees per kind, inclusive: radial = highest power of rho, poly = total degree."""
+
+DEFAULT_DEGREE: dict[str, int] = {"radial": 4, "poly": 5}
+"""Degree of a spec that gives none."""
+
+FREE_CENTER_WEIGHT = 1e-5
+"""``w_center`` of a radial fit without a centre prior: the centre is practically free."""
+
+CENTER_PRIOR_WEIGHT = 1e-2
+"""``w_center`` of a spec with ``center_prior``.
+
+A shift of the distortion centre is, to first order, a tangential term, so with
+tangential terms the centre is nearly undetermined by few orientations; the prior
+pulls it towards the image centre and lets the tangential terms carry the
+decentering. Whether that generalises better is for the cross-validation to say (it
+does on the real photos, not on a strongly decentred synthetic lens)."""
+
+
+def spec_problem(kind: Any, degree: Any = None, tangential: Any = False, prism: Any = False) -> str | None:
+    """Why ``(kind, degree, tangential, prism)`` is not a valid spec, or ``None``.
+
+    The one check of the allowed kinds and degrees (:data:`DEGREE_BOUNDS`), used by
+    :class:`FitSpec` and by :func:`pipeline.fit.fit_distortion`.
+    """
+    if kind not in KINDS:
+        return f"unknown model {kind!r}; use {' or '.join(repr(k) for k in KINDS)}"
+    if degree is not None:
+        lo, hi = DEGREE_BOUNDS[kind]
+        try:
+            whole = not isinstance(degree, bool) and operator.index(degree) == degree
+        except TypeError:
+            whole = False
+        if not whole or not lo <= degree <= hi:
+            name = "polynomial" if kind == "poly" else "radial"
+            return f"{name} degree must be within {lo}..{hi}, got {degree}"
+    if kind == "poly" and (tangential or prism):
+        return "tangential/prism terms apply to the radial model only (poly contains them)"
+    return None
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """One model configuration to fit (see the module docstring).
+
+    Parameters
+    ----------
+    kind : {'radial', 'poly'}
+    degree : int, optional
+        Radial: highest power of rho in ``f``; poly: total degree. ``None``: the
+        default of the kind (:data:`DEFAULT_DEGREE`); the spec always holds a number.
+    tangential, prism : bool
+        Radial only: decentering (p1, p2) / thin-prism (s1..s4) terms.
+    center_prior : bool
+        Radial only: pull the distortion centre towards the image centre
+        (:data:`CENTER_PRIOR_WEIGHT`).
+
+    Raises
+    ------
+    ValueError
+        One line saying what is wrong (unknown kind, degree out of bounds, terms that
+        do not apply to the kind).
+    """
+
+    kind: str = "radial"
+    degree: int | None = None
+    tangential: bool = False
+    prism: bool = False
+    center_prior: bool = False
+
+    def __post_init__(self) -> None:
+        problem = spec_problem(self.kind, self.degree, self.tangential, self.prism)
+        if problem is None and self.kind == "poly" and self.center_prior:
+            problem = "a centre prior applies to the radial model only"
+        if problem is not None:
+            raise ValueError(problem)
+        object.__setattr__(self, "degree", DEFAULT_DEGREE[self.kind] if self.degree is None else int(self.degree))
+        object.__setattr__(self, "tangential", bool(self.tangential))
+        object.__setattr__(self, "prism", bool(self.prism))
+        object.__setattr__(self, "center_prior", bool(self.center_prior))
+
+    @property
+    def label(self) -> str:
+        """Short name, e.g. ``radial4+tangential+prism+centre-prior`` or ``poly5`` (:func:`parse` reads it)."""
+        if self.kind == "poly":
+            return f"poly{self.degree}"
+        return (
+            f"radial{self.degree}"
+            + ("+tangential" if self.tangential else "")
+            + ("+prism" if self.prism else "")
+            + ("+centre-prior" if self.center_prior else "")
+        )
+
+    @property
+    def w_center(self) -> float:
+        """Weight of the centre penalty of a radial fit (:mod:`pipeline.fit`)."""
+        return CENTER_PRIOR_WEIGHT if self.center_prior else FREE_CENTER_WEIGHT
+
+    def fit_arguments(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`pipeline.fit.fit_distortion` that fit this spec."""
+        kw: dict[str, Any] = {"model": self.kind, "degree": self.degree}
+        if self.kind == "radial":
+            kw.update(tangential=self.tangential, prism=self.prism)
+            if self.center_prior:
+                kw["w_center"] = CENTER_PRIOR_WEIGHT
+        return kw
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (model files, JSON, the store): ``model`` (the kind), ``degree``,
+        ``tangential``, ``prism``, ``center_prior``, ``label``."""
+        return {
+            "model": self.kind,
+            "degree": self.degree,
+            "tangential": self.tangential,
+            "prism": self.prism,
+            "center_prior": self.center_prior,
+            "label": self.label,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any) -> FitSpec:
+        """Inverse of :meth:`to_dict` (``label`` is ignored; missing flags are false).
+        ValueError (one line) for anything else."""
+        if not isinstance(d, dict):
+            raise ValueError(f"a fit spec must be a mapping, got {type(d).__name__}")
+        return cls(
+            str(d.get("model", d.get("kind"))),
+            d.get("degree"),
+            bool(d.get("tangential", False)),
+            bool(d.get("prism", False)),
+            bool(d.get("center_prior", False)),
+        )
+
+
+_TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_prior", "center-prior": "center_prior"}
+
+
+def parse(label: str) -> FitSpec:
+    """The spec of a label: ``radial``, ``radial4``, ``radial4+tangential+prism``,
+    ``radial6+tangential+centre-prior``, ``poly``, ``poly7`` (no degree: the default).
+
+    Raises
+    ------
+    ValueError
+        One line naming the label and what is wrong.
+    """
+    text = str(label).strip().lower()
+    head, *terms = text.split("+")
+    kind = next((k for k in KINDS if head.startswith(k)), None)
+    if kind is None:
+        raise ValueError(
+            f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+centre-prior] or poly<degree>"
+        )
+    digits = head[len(kind) :]
+    if digits and not digits.isdigit():
+        raise ValueError(f"{label!r}: the degree must be a whole number, got {digits!r}")
+    flags: dict[str, bool] = {}
+    for term in terms:
+        if term not in _TERMS:
+            raise ValueError(f"{label!r}: unknown term {term!r}; known: tangential, prism, centre-prior")
+        flags[_TERMS[term]] = True
+    try:
+        return FitSpec(kind, int(digits) if digits else None, **flags)
+    except ValueError as exc:
+        raise ValueError(f"{label!r}: {exc}") from None

@@ -1,0 +1,159 @@
+"""The import structure, read from the source (ast), not from a running interpreter.
+
+* no import circle between the modules of ``pipeline``, ``drivers`` and ``station``
+  (imports inside functions count: a late import is still a dependency);
+* the layers point one way: ``pipeline`` imports neither ``drivers`` nor ``station``,
+  ``drivers`` does not import ``station``;
+* no private name (``_x``) is imported from another module.
+
+The checker itself is tested on a small made-up tree, so that a broken checker
+cannot pass the real one.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("pipeline", "drivers", "station")
+LAYERS = {"pipeline": set(), "drivers": {"pipeline"}, "station": {"pipeline", "drivers"}}
+"""Which other packages each package may import."""
+
+
+def module_names(root: Path, packages=PACKAGES) -> dict[str, Path]:
+    """``{dotted module name: file}`` of every module of ``packages`` under ``root``."""
+    out = {}
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            parts = list(path.relative_to(root).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = path
+    return out
+
+
+def imports_of(name: str, path: Path) -> Iterator[tuple[str, str | None, int]]:
+    """``(module imported, name imported from it or None, line)`` of every import in a module."""
+    is_package = path.name == "__init__.py"
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, None, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: resolve against this module's package
+                base = name.split(".") if is_package else name.split(".")[:-1]
+                base = base[: len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            for alias in node.names:
+                yield module, alias.name, node.lineno
+
+
+def import_graph(root: Path, packages=PACKAGES) -> tuple[dict[str, set[str]], list[str]]:
+    """Edges between the modules of ``packages`` and the private-name imports found."""
+    modules = module_names(root, packages)
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    private = []
+    for name, path in modules.items():
+        for module, imported, line in imports_of(name, path):
+            target = f"{module}.{imported}" if imported and f"{module}.{imported}" in modules else module
+            if target in modules and target != name:
+                graph[name].add(target)
+            internal = module.split(".")[0] in packages
+            if internal and imported and imported.startswith("_") and not imported.startswith("__"):
+                private.append(f"{path.relative_to(root)}:{line}: {name} imports {imported} from {module}")
+    return graph, private
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan), sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(found)
+
+
+def layer_violations(graph: dict[str, set[str]]) -> list[str]:
+    out = []
+    for a, targets in graph.items():
+        pa = a.split(".")[0]
+        for b in sorted(targets):
+            pb = b.split(".")[0]
+            if pb != pa and pb not in LAYERS[pa]:
+                out.append(f"{a} imports {b}")
+    return out
+
+
+@pytest.fixture(scope="module")
+def real():
+    return import_graph(REPO)
+
+
+def test_no_import_circles(real):
+    graph, _ = real
+    assert len(graph) > 60 and sum(map(len, graph.values())) > 100  # the whole tree was read
+    assert cycles(graph) == []
+
+
+def test_layers_point_one_way(real):
+    graph, _ = real
+    assert "pipeline.edgeset" in graph["pipeline.fit"]  # edges are seen
+    assert layer_violations(graph) == []
+
+
+def test_no_private_name_imported_across_modules(real):
+    _, private = real
+    assert private == []
+
+
+def test_the_checker_sees_what_it_must(tmp_path):
+    for rel, text in {
+        "pipeline/__init__.py": "",
+        "pipeline/a.py": "from pipeline.b import thing\n",
+        "pipeline/b.py": "def f():\n    from pipeline import a\n    from . import c\n",
+        "pipeline/c.py": "from station.x import _hidden\n",
+        "drivers/__init__.py": "",
+        "station/__init__.py": "",
+        "station/x.py": "import drivers\n_hidden = 1\n",
+    }.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    graph, private = import_graph(tmp_path)
+    assert graph["pipeline.b"] == {"pipeline.a", "pipeline.c"}  # late and relative imports count
+    assert cycles(graph) == [["pipeline.a", "pipeline.b"]]
+    assert layer_violations(graph) == ["pipeline.c imports station.x"]
+    assert private == ["pipeline/c.py:1: pipeline.c imports _hidden from station.x"]
