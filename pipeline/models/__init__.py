@@ -11,13 +11,15 @@ from pipeline.models.base import DistortionModel, IdentityModel, model_from_dict
 from pipeline.models.grid_field import GridFieldModel
 from pipeline.models.homography import HomographyModel
 from pipeline.models.lensfun_model import LensfunModel
+from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.radial import RadialModel
+from pipeline.models.remap_model import RemapModel
 
 MODEL_TYPES: dict[str, type[DistortionModel]] = model_types()
 """Every model class by the ``name`` its files carry: identity, radial, poly, homography,
-opencv, lensfun, grid_field."""
+opencv, opencv_fisheye, lensfun, grid_field, remap."""
 
 __all__ = [
     "MODEL_TYPES",
@@ -26,9 +28,11 @@ __all__ = [
     "HomographyModel",
     "IdentityModel",
     "LensfunModel",
+    "OpenCVFisheyeModel",
     "OpenCVModel",
     "PolynomialModel",
     "RadialModel",
+    "RemapModel",
     "model_from_dict",
     "model_types",
 ]

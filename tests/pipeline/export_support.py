@@ -12,7 +12,8 @@ from functools import cache
 import numpy as np
 
 from pipeline.compare import fit_homography
-from pipeline.fit import FitResult, corrected_straightness, fit_distortion
+from pipeline.edgeset import FitResult, corrected_straightness
+from pipeline.fit import fit_distortion
 from pipeline.models.base import DistortionModel
 from tests.pipeline.rendered_shots import REAL, real_shots
 
