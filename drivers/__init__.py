@@ -20,9 +20,18 @@ from drivers.errors import (  # noqa: F401  (re-exported)
     DeviceRejected,
     DeviceTimeout,
     DriverError,
+    OutOfRange,
     ProtocolError,
 )
-from drivers.protocols import Camera, CameraIdentity, Frame, Turntable  # noqa: F401
+from drivers.protocols import (  # noqa: F401  (re-exported)
+    Camera,
+    CameraIdentity,
+    CameraRanges,
+    Frame,
+    Range,
+    Turntable,
+    TurntableRanges,
+)
 
 CAMERA_DRIVERS = {
     "v4l2": "drivers.v4l2_camera:V4L2Camera",

@@ -21,8 +21,12 @@ GenICam features used, chosen by what the device's XML declares:
   ``autofocus_feature`` (Enumeration/String set to ``autofocus_off``, default
   ``"Off"``; Boolean set to false; Integer set to ``autofocus_off``, default 0).
 
-Every setter writes with Aravis' range checking on and returns the value
-read back from the device. A buffer that does not arrive within the
+Ranges (:class:`drivers.protocols.CameraRanges`) are the GenICam ``Min`` /
+``Max`` (and ``Inc``) of the exposure, gain and focus features, read at
+``open()``; a setter given a value outside raises
+:class:`~drivers.errors.OutOfRange` before anything is written. Every setter
+writes with Aravis' range checking on too and returns the value read back
+from the device. A buffer that does not arrive within the
 ``capture`` timeout raises :class:`~drivers.errors.DeviceTimeout`; a buffer
 with a non-success status raises :class:`~drivers.errors.CaptureError`.
 
@@ -67,7 +71,7 @@ from drivers.errors import (
     DriverError,
 )
 from drivers.frames import to_grey
-from drivers.protocols import CameraIdentity, Frame
+from drivers.protocols import CameraIdentity, Frame, Range
 
 #: GenICam XML for Aravis' fake camera with SFNC exposure/gain names and focus features
 FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
@@ -241,6 +245,7 @@ class AravisCamera(CameraBase):
         self._exposure_feature: str | None = None
         self._gain_feature: str | None = None
         self._focus_kind: str | None = None
+        self._ranges: dict[str, Range | None] = {}
 
     @property
     def name(self) -> str:
@@ -307,6 +312,7 @@ class AravisCamera(CameraBase):
             if self._has(auto) and dev.get_string_feature_value(auto) != "Off":
                 self._call(f"{auto}=Off", dev.set_string_feature_value, auto, "Off")
         self._check_focus_features(Aravis)
+        self._ranges = self._read_ranges()
 
         # image format: pixel format, region (full sensor unless configured)
         pf = getattr(Aravis, f"PIXEL_FORMAT_{self._pixel_format.upper().replace('MONO', 'MONO_')}")
@@ -365,6 +371,36 @@ class AravisCamera(CameraBase):
         if self.autofocus_feature and not self._has(self.autofocus_feature):
             raise DeviceRejected(f"{self.name}: autofocus_feature {self.autofocus_feature!r} not found on device")
 
+    def _bounds(self, feature: str, kind: str, unit: str, scale: float = 1.0) -> Range:
+        """The GenICam Min/Max (and Inc) of ``feature``, times ``scale``, as a Range."""
+        dev = self._device
+        if kind == "integer":
+            lo, hi = self._call(f"bounds of {feature}", dev.get_integer_feature_bounds, feature)
+            inc = self._call(f"increment of {feature}", dev.get_integer_feature_increment, feature)
+            step: float | None = float(inc) * scale if inc and inc > 1 else None
+        else:
+            lo, hi = self._call(f"bounds of {feature}", dev.get_float_feature_bounds, feature)
+            try:
+                inc = float(dev.get_float_feature_increment(feature))
+            except Exception:  # GLib.Error: the feature has no <Inc>
+                inc = 0.0
+            step = inc * scale if inc >= 1e-9 else None  # Aravis answers DBL_MIN for "any value"
+        return Range(float(lo) * scale, float(hi) * scale, unit, f"GenICam {feature}", step)
+
+    def _read_ranges(self) -> dict[str, Range | None]:
+        exposure, gain = self._exposure_feature, self._gain_feature
+        assert exposure is not None and gain is not None  # _configure checked them
+        ranges: dict[str, Range | None] = {"exposure": self._bounds(exposure, "float", "µs")}
+        if gain == "GainRaw":
+            ranges["gain"] = self._bounds(gain, "integer", "dB", self.gain_db_per_raw)
+        else:
+            ranges["gain"] = self._bounds(gain, "float", "dB")
+        if self.focus_feature and self._focus_kind is not None:
+            ranges["focus"] = self._bounds(self.focus_feature, self._focus_kind, "")
+        else:
+            ranges["focus"] = None
+        return ranges
+
     def _start_stream(self, Aravis: Any) -> None:
         cam = self._camera
         stream = self._call("create stream", cam.create_stream, None, None)
@@ -421,7 +457,7 @@ class AravisCamera(CameraBase):
     # -- exposure / gain ------------------------------------------------------------
     def set_exposure(self, microseconds: float) -> float:
         self._require_open()
-        us = self._exposure_value(microseconds)
+        us = self._in_range("exposure", "exposure", self._exposure_value(microseconds))
         f = self._exposure_feature
         self._call(f"{f}={us:g}", self._device.set_float_feature_value, f, us)
         return self.get_exposure()
@@ -433,7 +469,7 @@ class AravisCamera(CameraBase):
 
     def set_gain(self, db: float) -> float:
         self._require_open()
-        db = self._finite_value(float(db), "gain")
+        db = self._in_range("gain", "gain", self._finite_value(float(db), "gain"))
         f, dev = self._gain_feature, self._device
         if f == "GainRaw":
             raw = int(round(db / self.gain_db_per_raw))
@@ -455,7 +491,7 @@ class AravisCamera(CameraBase):
         self._require_open()
         if not self.focus_feature:
             raise DeviceRejected(f"{self.name}: no focus feature configured (set focus_feature)")
-        pos = self._finite_value(position, "focus position")
+        pos = self._in_range("focus", "focus", self._finite_value(position, "focus position"))
         dev = self._device
         if self.autofocus_feature:
             self._autofocus_off()

@@ -7,8 +7,14 @@ check, the settings applied at ``open()``, the checks of requested values
 and the :class:`~drivers.protocols.Frame` numbering. A subclass provides
 ``open``/``close``/``is_open``, the setters and getters, ``capture`` and
 ``name``, and keeps ``self._initial`` (``{"exposure_us", "gain_db",
-"focus"}``, each None or a value), ``self._identity`` and ``self._counter``
-(reset to 0 by ``open``).
+"focus"}``, each None or a value), ``self._identity``, ``self._counter``
+(reset to 0 by ``open``) and ``self._ranges`` (``{"exposure", "gain",
+"focus"}`` -> :class:`~drivers.protocols.Range` or None, read from the
+device by ``open`` before the initial settings are applied).
+
+The base gives :class:`drivers.protocols.CameraRanges` from ``self._ranges``
+and :meth:`CameraBase._in_range`, the check every setter makes before it
+writes to the device.
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import numpy as np
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DriverError
-from drivers.protocols import CameraIdentity, Frame
+from drivers.protocols import CameraIdentity, Frame, Range
 
 
 class CameraBase(abc.ABC):
@@ -39,6 +45,7 @@ class CameraBase(abc.ABC):
     _initial: dict[str, float | None]
     _identity: CameraIdentity | None
     _counter: int
+    _ranges: dict[str, Range | None]
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> Self:
@@ -87,6 +94,27 @@ class CameraBase(abc.ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    # -- ranges (drivers.protocols.CameraRanges) ------------------------------------
+    def focus_range(self) -> Range | None:
+        """The focus feature's/control's range read at ``open()`` (None: no focus control)."""
+        self._require_open()
+        return self._ranges.get("focus")
+
+    def exposure_range(self) -> Range | None:
+        """The exposure range in µs read at ``open()`` (None: the device gives none)."""
+        self._require_open()
+        return self._ranges.get("exposure")
+
+    def gain_range(self) -> Range | None:
+        """The gain range in dB read at ``open()`` (None: the device gives none)."""
+        self._require_open()
+        return self._ranges.get("gain")
+
+    def _in_range(self, key: str, what: str, value: float) -> float:
+        """``value`` checked against the range ``key`` (``OutOfRange`` outside; unchecked without one)."""
+        rng = self._ranges.get(key)
+        return float(value) if rng is None else rng.check(self.name, what, value)
 
     def _require_open(self) -> None:
         if not self.is_open:

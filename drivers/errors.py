@@ -2,7 +2,16 @@
 
 
 class DriverError(Exception):
-    """Base class of all driver errors."""
+    """Base class of all driver errors.
+
+    The message is always one line: line breaks in a device's or library's
+    own text (a GLib error, a garbled reply) are folded into spaces.
+    """
+
+    def __init__(self, *args: object) -> None:
+        if len(args) == 1 and isinstance(args[0], str) and ("\n" in args[0] or "\r" in args[0]):
+            args = (" ".join(args[0].split()),)
+        super().__init__(*args)
 
 
 class DeviceTimeout(DriverError):
@@ -27,3 +36,34 @@ class DeviceDisconnected(DriverError):
 
 class CaptureError(DriverError):
     """A frame could not be captured or is corrupt."""
+
+
+def _number(value: float) -> str:
+    return f"{value:.10g}"
+
+
+class OutOfRange(DeviceRejected, ValueError):
+    """A commanded value outside the range the device accepts; nothing was sent.
+
+    The range is the one read from the device when it was opened (intersected
+    with the configured limits for a turntable), so the device never clamps
+    the value silently. Also a ``ValueError``, as the drivers raised for
+    out-of-limits moves before ranges were read from the devices.
+
+    Attributes: ``device`` (the driver's name), ``what`` (``"move to"``,
+    ``"focus"``, ``"exposure"``, ``"gain"``), ``value``, ``minimum``,
+    ``maximum``, ``unit``, ``source`` (where the range came from).
+    """
+
+    def __init__(
+        self, device: str, what: str, value: float, minimum: float, maximum: float, unit: str = "", source: str = ""
+    ):
+        self.device, self.what, self.value = device, what, float(value)
+        self.minimum, self.maximum, self.unit, self.source = float(minimum), float(maximum), unit, source
+        sep = "" if unit in ("", "°") else " "
+        u = f"{sep}{unit}"
+        where = f" ({source})" if source else ""
+        super().__init__(
+            f"{device}: {what} {_number(value)}{u} is outside the range"
+            f" [{_number(minimum)}, {_number(maximum)}]{u}{where}; nothing was sent"
+        )

@@ -14,6 +14,19 @@ Bytes on the wire::
 ``ok`` only means the planner took the line, so :meth:`move_to` polls the
 realtime status ``?`` until the state is ``Idle`` at the target.
 
+Travel: ``open()`` reads the settings (``$$`` -> ``$0=10`` ... ``$130=360.000``
+... ``ok``, kept in :attr:`GrblTurntable.settings`). With soft limits on
+(``$20=1``) GRBL accepts machine positions ``[-$13x, 0]`` on the axis (it
+homes to the positive end; ``grbl/system.c`` ``system_check_travel_limits``),
+which is ``[-$13x, 0] / units_per_degree`` degrees: a turntable that turns
+positive when GRBL counts down has a negative ``units_per_degree``.
+:meth:`GrblTurntable.travel_range` is the configured ``limits`` within that
+travel; a target outside raises :class:`~drivers.errors.OutOfRange` before
+anything is sent (GRBL would raise ``ALARM:2``, a critical alarm). Soft limits
+off: no device travel, the configured limits apply. (A firmware built with
+``HOMING_FORCE_SET_ORIGIN`` counts up from the home switch instead; it is
+not detected.)
+
 Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
 ``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
 meaning (recover with :meth:`recover`: soft reset if needed, then ``$X``;
@@ -37,6 +50,8 @@ from typing import Any, TypedDict
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.protocols import Range
+from drivers.ranges import effective_travel
 from drivers.transport import SerialTransport
 
 ERROR_CODES = {
@@ -84,6 +99,7 @@ ALARM_CODES = {
 _STATUS = re.compile(r"^<(?P<state>[A-Za-z]+)(?::(?P<sub>\d+))?\|(?P<fields>.*)>$")
 _ERROR = re.compile(r"^error:(\d+)$")
 _ALARM = re.compile(r"^ALARM:(\d+)$")
+_SETTING = re.compile(r"^\$(\d+)=([-+]?[0-9.]+)$")
 _AXES = "XYZABC"
 
 _CONFIG_KEYS = {
@@ -140,7 +156,8 @@ class GrblTurntable:
     feed : float or None
         None: rapid moves ``G0``; else ``G1`` at this feed (units/min).
     limits : (float, float)
-        Allowed ``move_to`` range in degrees (``ValueError`` outside).
+        Allowed ``move_to`` range in degrees, narrowed at ``open()`` to the
+        soft-limit travel (:class:`~drivers.errors.OutOfRange` outside).
     reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
         Seconds.
     tolerance_deg : float
@@ -177,7 +194,10 @@ class GrblTurntable:
         self.axis = axis
         self.units_per_degree = float(units_per_degree)
         self.feed = feed
-        self._limits = (lo, hi)
+        self._configured = Range(lo, hi, "°", "configured limits")
+        self._device_travel: Range | None = None
+        self._travel = self._configured
+        self.settings: dict[int, float] = {}  # as read by ``$$`` at open()
         self.reply_timeout = float(reply_timeout)
         self.poll_interval = float(poll_interval)
         self.move_timeout = float(move_timeout)
@@ -218,9 +238,14 @@ class GrblTurntable:
         self.transport.open()
         try:
             with self._lock:
+                self.last_alarm = None  # the controller's state after the reset is what counts
+                self._target = None
                 self.transport.pending()
                 self.transport.write(b"\x18")
                 self._wait_banner(self.startup_timeout)
+                self.settings = self.read_settings()
+                self._device_travel = self._soft_limit_travel()
+                self._travel = effective_travel(self.name, self._configured, self._device_travel)
         except Exception:
             self.transport.close()
             raise
@@ -348,10 +373,51 @@ class GrblTurntable:
             "raw": text,
         }
 
+    def read_settings(self) -> dict[int, float]:
+        """``$$``: every setting, ``{130: 360.0, ...}``; ``{}`` if the controller refuses ``$$``."""
+        with self._lock:
+            self._drain()
+            self.transport.write(b"$$\n")
+            deadline = time.monotonic() + self.reply_timeout
+            settings: dict[int, float] = {}
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise DeviceTimeout(f"{self.name}: no end of the settings ($$) within {self.reply_timeout:.2f} s")
+                text = self._decode(self.transport.readline(remaining, "reply to '$$'", total=self.reply_timeout))
+                if not text or text.startswith("<"):
+                    continue
+                if text == "ok":
+                    return settings
+                if _ERROR.match(text):
+                    return {}  # not a GRBL that lists its settings: no device travel known
+                m = _SETTING.match(text)
+                if m:
+                    settings[int(m.group(1))] = float(m.group(2))
+                    continue
+                self._classify(text)
+
+    def _soft_limit_travel(self) -> Range | None:
+        idx = _AXES.index(self.axis)
+        travel = self.settings.get(130 + idx)
+        if not self.settings.get(20) or travel is None:
+            return None
+        ends = sorted((-travel / self.units_per_degree, 0.0))
+        return Range(ends[0], ends[1], "°", f"GRBL soft limits $20=1, ${130 + idx}={travel:.3f}")
+
     # -- Turntable protocol ----------------------------------------------------------
     @property
     def limits(self) -> tuple[float, float]:
-        return self._limits
+        """``(min, max)`` of :meth:`travel_range` (the configured limits before ``open()``)."""
+        return (self._travel.minimum, self._travel.maximum)
+
+    def travel_range(self) -> Range:
+        """The angles ``move_to`` accepts: the configured limits within the soft-limit travel."""
+        return self._travel
+
+    def device_travel_range(self) -> Range | None:
+        """The soft-limit travel read at ``open()`` in degrees; None when ``$20=0`` (no limits)."""
+        return self._device_travel
 
     def position(self) -> float:
         return self.query_status()["position"]
@@ -381,9 +447,7 @@ class GrblTurntable:
 
     def start_move(self, degrees: float) -> float:
         """Queue the move (``ok`` = buffered) and return without waiting."""
-        lo, hi = self._limits
-        if not lo <= degrees <= hi:
-            raise ValueError(f"{self.name}: target {degrees}° outside limits [{lo}, {hi}]°")
+        self._travel.check(self.name, "move to", degrees)
         if self.last_alarm is not None:
             raise DeviceFault(
                 f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)}; call recover() (then home())"

@@ -93,3 +93,76 @@ class Turntable(Protocol):
     def status(self) -> dict[str, Any]:
         """``{"busy": bool, "warnings": [str, ...], ...}``."""
         ...
+
+
+# -- Device ranges ------------------------------------------------------------------------------
+# What a device accepts, read from the device when it is opened, so that a station can validate a
+# plan before it creates anything and a driver refuses (OutOfRange) instead of letting the device
+# clamp. Capability protocols: every driver in drivers/ has them; check with isinstance().
+
+
+@dataclass(frozen=True)
+class Range:
+    """The closed interval ``[minimum, maximum]`` a device accepts for one setting.
+
+    ``unit`` is ``"°"``, ``"µs"``, ``"dB"`` or ``""`` (the device's own units,
+    e.g. a V4L2 focus control). ``source`` says where the range came from
+    (``"device limit.min/limit.max"``, ``"GRBL $20=1, $130"``, ``"V4L2
+    focus_absolute"``, ``"configured limits"``, ...). ``step`` is the
+    device's increment when it has one: a commanded value is rounded to a
+    multiple of it, so the read-back may differ from the command by up to
+    ``step / 2``.
+    """
+
+    minimum: float
+    maximum: float
+    unit: str = ""
+    source: str = ""
+    step: float | None = None
+
+    def __contains__(self, value: object) -> bool:
+        return isinstance(value, int | float) and self.minimum <= float(value) <= self.maximum
+
+    def check(self, device: str, what: str, value: float) -> float:
+        """``value`` as a float if inside, else :class:`~drivers.errors.OutOfRange` naming ``device``."""
+        from drivers.errors import OutOfRange  # here, to keep this block self-contained
+
+        v = float(value)
+        if not self.minimum <= v <= self.maximum:  # NaN is outside too
+            raise OutOfRange(device, what, v, self.minimum, self.maximum, self.unit, self.source)
+        return v
+
+    def tolerance(self) -> float:
+        """How far a read-back may be from a command inside the range: half a ``step`` (0 without one)."""
+        return 0.0 if self.step is None else 0.5 * self.step
+
+    def __str__(self) -> str:
+        sep = "" if self.unit in ("", "°") else " "
+        return f"[{self.minimum:.10g}, {self.maximum:.10g}]{sep}{self.unit}"
+
+
+@runtime_checkable
+class TurntableRanges(Protocol):
+    """A turntable whose travel is known from the device (Zaber ``limit.min``/``limit.max``,
+    GRBL soft limits ``$20``/``$130`` from ``$$``), read at ``open()``."""
+
+    def travel_range(self) -> Range:
+        """The angles ``move_to`` accepts: the configured limits intersected with the device's
+        (before ``open()``: the configured limits alone). Outside it ``move_to`` raises OutOfRange."""
+        ...
+
+    def device_travel_range(self) -> Range | None:
+        """The travel the device reported at ``open()``, in degrees; None when it reports none
+        (soft limits off, setting unsupported) or before the first ``open()``."""
+        ...
+
+
+@runtime_checkable
+class CameraRanges(Protocol):
+    """A camera whose setting ranges are read from the device at ``open()``. Each is None when
+    the device has no such control; a setter given a value outside raises OutOfRange. Hardware
+    drivers raise DriverError ("not open") before ``open()``."""
+
+    def focus_range(self) -> Range | None: ...
+    def exposure_range(self) -> Range | None: ...
+    def gain_range(self) -> Range | None: ...

@@ -19,9 +19,14 @@ camera raises :class:`~drivers.errors.DeviceTimeout` instead of hanging).
   ``gain_db_per_unit`` converts to dB (V4L2 does not define gain units).
 * Focus: continuous autofocus off, then ``focus_absolute`` (device units).
 
-Values outside a control's range are refused with
-:class:`~drivers.errors.DeviceRejected` (never silently clipped); setters
-return the value read back from the device.
+Ranges (:class:`drivers.protocols.CameraRanges`) are the controls'
+minimum/maximum/step read at ``open()`` (``VIDIOC_QUERY_EXT_CTRL``), in µs
+for exposure, dB (``gain_db_per_unit``) for gain and device units for focus.
+A value outside is refused with :class:`~drivers.errors.OutOfRange` before
+anything is written (never silently clipped, as the kernel would); inside,
+the control rounds to its step, so the read-back returned by every setter
+may differ from the command by up to half a step
+(:meth:`~drivers.protocols.Range.tolerance`).
 
 Configuration (``drivers.open_camera``), e.g.::
 
@@ -56,7 +61,7 @@ from drivers.errors import (
     DriverError,
 )
 from drivers.frames import to_grey
-from drivers.protocols import CameraIdentity, Frame
+from drivers.protocols import CameraIdentity, Frame, Range
 
 PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG")
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
@@ -159,6 +164,7 @@ class V4L2Camera(CameraBase):
         self._reader: Any = None
         self._ctrl: dict[str, Any] = {}
         self._format: Any = None
+        self._ranges: dict[str, Range | None] = {}
         self._identity: CameraIdentity | None = None
         self._counter = 0
 
@@ -234,7 +240,20 @@ class V4L2Camera(CameraBase):
         except RuntimeWarning as exc:  # linuxpy refuses a control whose claimed range overflows
             raise DeviceRejected(f"{self.name}: cannot enumerate controls: {exc}") from None
         self._ctrl = {key: self._find_control(*spec) for key, spec in _CONTROLS.items()}
+        self._ranges = {
+            "exposure": self._control_range("exposure", EXPOSURE_UNIT_US, "µs"),
+            "gain": self._control_range("gain", self.gain_db_per_unit, "dB"),
+            "focus": self._control_range("focus", 1.0, ""),
+        }
         self._apply_initial_settings()
+
+    def _control_range(self, key: str, scale: float, unit: str) -> Range | None:
+        ctrl = self._ctrl.get(key)
+        if ctrl is None:
+            return None
+        step = float(ctrl.step) * scale if int(ctrl.step) > 1 else None
+        lo, hi = float(ctrl.minimum) * scale, float(ctrl.maximum) * scale
+        return Range(lo, hi, unit, f"V4L2 {ctrl.config_name}", step)
 
     def _find_control(self, ids: tuple[str, ...], names: tuple[str, ...]) -> Any:
         from linuxpy.video.device import ControlID
@@ -315,7 +334,7 @@ class V4L2Camera(CameraBase):
 
     def set_exposure(self, microseconds: float) -> float:
         self._require_open()
-        us = self._exposure_value(microseconds)
+        us = self._in_range("exposure", "exposure", self._exposure_value(microseconds))
         auto = self._ctrl.get("exposure_auto")
         if auto is not None and self._read(auto) != _MANUAL_EXPOSURE:
             self._write(auto, _MANUAL_EXPOSURE)
@@ -331,8 +350,9 @@ class V4L2Camera(CameraBase):
 
     def set_gain(self, db: float) -> float:
         self._require_open()
-        db = self._finite_value(float(db), "gain")
-        self._write(self._control("gain", "gain"), int(round(db / self.gain_db_per_unit)))
+        ctrl = self._control("gain", "gain")
+        db = self._in_range("gain", "gain", self._finite_value(float(db), "gain"))
+        self._write(ctrl, int(round(db / self.gain_db_per_unit)))
         return self.get_gain()
 
     def get_gain(self) -> float:
@@ -342,8 +362,8 @@ class V4L2Camera(CameraBase):
     def lock_focus(self, position: float) -> float:
         """Continuous autofocus off, then ``focus_absolute`` = ``round(position)``."""
         self._require_open()
-        pos = self._finite_value(position, "focus position")
         ctrl = self._control("focus", "focus_absolute")
+        pos = self._in_range("focus", "focus", self._finite_value(position, "focus position"))
         auto = self._ctrl.get("focus_auto")
         if auto is not None:
             if self._read(auto):

@@ -19,6 +19,17 @@ Angles are converted with ``microsteps_per_degree`` (X-RSW60: 1 536 000
 microsteps per turn, 4266.67 per degree). ``move_to`` sends ``move abs`` and
 then polls ``get pos`` until the axis is ``IDLE`` at the target.
 
+Travel: ``open()`` reads the axis settings ``limit.min`` and ``limit.max``
+(microsteps)::
+
+    /1 1 get limit.min      @01 1 OK IDLE -- 0
+    /1 1 get limit.max      @01 1 OK IDLE -- 1536000
+
+:meth:`ZaberTurntable.travel_range` is the configured ``limits`` within that
+travel; a target outside raises :class:`~drivers.errors.OutOfRange` before
+anything is sent (the device would answer ``RJ ... BADDATA``). A device that
+rejects the settings (``RJ``) reports no travel: the configured limits apply.
+
 Errors: ``RJ`` -> :class:`DeviceRejected` (with the reason, e.g. BADDATA);
 a fault flag (``F*``) or an unexpected-limit ``WL`` -> :class:`DeviceFault`
 naming the flag and its meaning (clear with :meth:`clear_warnings`, or
@@ -42,6 +53,8 @@ from typing import Any
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.protocols import Range
+from drivers.ranges import effective_travel
 from drivers.transport import SerialTransport
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0
@@ -146,8 +159,9 @@ class ZaberTurntable:
     microsteps_per_degree : float
         Conversion of angles (default: X-RSW60, 1536000/360).
     limits : (float, float)
-        Allowed range of ``move_to`` in degrees; outside it, ``ValueError``
-        before anything is sent.
+        Allowed range of ``move_to`` in degrees, narrowed at ``open()`` to
+        the device's ``limit.min``/``limit.max``; outside it,
+        :class:`~drivers.errors.OutOfRange` before anything is sent.
     reply_timeout : float
         Seconds to wait for each reply.
     poll_interval : float
@@ -182,7 +196,9 @@ class ZaberTurntable:
         self.device = int(device)
         self.axis_number = int(axis)
         self.microsteps_per_degree = float(microsteps_per_degree)
-        self._limits = (lo, hi)
+        self._configured = Range(lo, hi, "°", "configured limits")
+        self._device_travel: Range | None = None
+        self._travel = self._configured
         self.reply_timeout = float(reply_timeout)
         self.poll_interval = float(poll_interval)
         self.move_timeout = float(move_timeout)
@@ -219,6 +235,9 @@ class ZaberTurntable:
             reply = self.command("", axis_scope=False)  # "/1": is the device there?
             if not reply.ok:  # warnings do not stop opening: recover() needs an open port
                 raise DeviceRejected(f"{self.name}: status request rejected: {reply.raw!r}")
+            self._target = None
+            self._device_travel = self._read_device_travel()
+            self._travel = effective_travel(self.name, self._configured, self._device_travel)
         except Exception:
             self.transport.close()
             raise
@@ -324,7 +343,31 @@ class ZaberTurntable:
     # -- Turntable protocol ----------------------------------------------------
     @property
     def limits(self) -> tuple[float, float]:
-        return self._limits
+        """``(min, max)`` of :meth:`travel_range` (the configured limits before ``open()``)."""
+        return (self._travel.minimum, self._travel.maximum)
+
+    def travel_range(self) -> Range:
+        """The angles ``move_to`` accepts: the configured limits within the device's travel."""
+        return self._travel
+
+    def device_travel_range(self) -> Range | None:
+        """``limit.min`` .. ``limit.max`` as read at ``open()``, in degrees (None if not reported)."""
+        return self._device_travel
+
+    def _read_device_travel(self) -> Range | None:
+        values = []
+        for setting in ("limit.min", "limit.max"):
+            reply = self.command(f"get {setting}")
+            if not reply.ok:
+                return None  # no such setting on this device: only the configured limits apply
+            try:
+                values.append(self.to_degrees(int(reply.data)))
+            except ValueError:
+                raise ProtocolError(f"{self.name}: {setting} is not an integer: {reply.raw!r}") from None
+        lo, hi = values
+        if not lo < hi:
+            raise ProtocolError(f"{self.name}: device reports limit.min {lo:g}° >= limit.max {hi:g}°")
+        return Range(lo, hi, "°", "device limit.min/limit.max")
 
     def _get_pos(self, fault: bool = True) -> ZaberReply:
         reply = self._check(self.command("get pos"), "get pos", fault)
@@ -346,9 +389,7 @@ class ZaberTurntable:
 
     def start_move(self, degrees: float) -> int:
         """Send ``move abs`` and return the target in microsteps, without waiting."""
-        lo, hi = self._limits
-        if not lo <= degrees <= hi:
-            raise ValueError(f"{self.name}: target {degrees}° outside limits [{lo}, {hi}]°")
+        self._travel.check(self.name, "move to", degrees)
         steps = self.to_microsteps(degrees)
         with self._lock:
             self._check(self.command(f"move abs {steps}"), f"move abs {steps}")

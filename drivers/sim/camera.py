@@ -1,4 +1,4 @@
-"""A simulated grey camera looking at the calibration harp.
+r"""A simulated grey camera looking at the calibration harp.
 
 :class:`SimulatedCamera` satisfies :class:`drivers.protocols.Camera`. Each
 :meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
@@ -26,11 +26,45 @@ before capturing; a resumed session then receives bit-identical frames to an
 uninterrupted run. The hook is *not* part of :class:`drivers.protocols.Camera`:
 real cameras have no use for it, and callers look it up with ``getattr``.
 
-Brightness: the rendered intensities are multiplied by
-``(exposure_us / reference_exposure_us) * 10 ** (gain_db / 20)`` and saturate
-at the top of the pixel format. Gain also lowers the number of electrons per
-grey level, so shot noise (when enabled) grows with gain like on a sensor;
-the read noise ``noise_sigma`` is in output grey levels (8-bit scale).
+Brightness: the rendered intensities are multiplied by the exposure scale
+``e = (exposure_us / reference_exposure_us) * 10 ** (gain_db / 20)`` and
+saturate at the top of the pixel format: with the default scene (background
+200 of 255 at the centre, 30 % vignetting) the centre of the lit sheet clips
+from ``e = 255/200 = 1.275`` on and the whole sheet from ``e ≈ 1.8``, so a
+longer exposure is how a test makes a frame saturate (``e`` is recorded in
+``extra["sim"]["exposure_scale"]``). Gain also lowers the number of
+electrons per grey level, so shot noise (when enabled) grows with gain like
+on a sensor; the read noise ``noise_sigma`` is in output grey levels (8-bit
+scale).
+
+Ranges (:class:`drivers.protocols.CameraRanges`): focus
+:data:`drivers.sim.lens.FOCUS_RANGE` (0 to 1, the demo lens's focus
+positions), exposure :data:`EXPOSURE_RANGE_US` (20 µs to 1 s), gain
+:data:`GAIN_RANGE_DB` (0 to 24 dB). A value outside raises
+:class:`~drivers.errors.OutOfRange` (a ``ValueError`` in ``from_config``);
+nothing is clamped. Read-back is exact.
+
+Defocus (off by default, so frames are unchanged unless configured). With
+``best_focus`` = :math:`f^*` and ``defocus_blur_px`` = :math:`k` the lens is
+sharp at focus setting :math:`f^*` and blurs away from it. Optics: a point
+of the harp plane is imaged, out of focus, as a blur disc whose radius grows
+linearly with the distance between the image plane and the plane of sharp
+focus, which over the small travel of a focus ring is linear in the focus
+setting, :math:`r = 2k\,|f - f^*|`. A uniform disc of radius :math:`r` has a
+standard deviation :math:`r/2` along any direction, and is replaced by the
+Gaussian of that standard deviation, convolved with the in-focus PSF (the
+scene's ``blur_px`` = :math:`b_0`):
+
+.. math::
+    b(f) = \sqrt{b_0^2 + k^2 (f - f^*)^2}
+
+is the ``blur_px`` the harp is rendered with (recorded in
+``extra["sim"]["blur_px"]``). The PSF stays symmetric, so the edge
+positions, the distortion and the ground truth do not move; only the edge
+width (10–90 % width :math:`2.563\,\sqrt{b^2 + 1/12}` px) and the
+gradient peak change, and every sharpness score is best at :math:`f^*`. The
+demo lens's distortion changes with focus as before
+(:func:`drivers.sim.lens.lens_for_focus`).
 
 Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
 """
@@ -39,6 +73,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import time
 from collections import deque
 from typing import Any
@@ -47,13 +82,16 @@ import numpy as np
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceDisconnected, DeviceTimeout
-from drivers.protocols import CameraIdentity, Frame
+from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
 from drivers.sim.world import SimWorld
 from pipeline.render import HarpScene, Rendered, render_harp
 
 EXPOSURE_RANGE_US = (20.0, 1_000_000.0)
 GAIN_RANGE_DB = (0.0, 24.0)
+_FOCUS = Range(FOCUS_RANGE[0], FOCUS_RANGE[1], "", "simulated lens focus range")
+_EXPOSURE = Range(EXPOSURE_RANGE_US[0], EXPOSURE_RANGE_US[1], "µs", "simulated sensor")
+_GAIN = Range(GAIN_RANGE_DB[0], GAIN_RANGE_DB[1], "dB", "simulated sensor")
 FAULT_KINDS = ("timeout", "corrupt", "disconnect")
 _TIMEOUT_WAIT_S = 0.05  # an injected timeout waits min(timeout, this) before raising
 
@@ -87,6 +125,8 @@ _CAMERA_KEYS = (
     "serial",
     "focus",
     "harp_offset_deg",
+    "best_focus",
+    "defocus_blur_px",
 )
 CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
@@ -109,10 +149,6 @@ def _pose(focus: float, angle_deg: float) -> tuple[float, float]:
     return round(float(focus), 6), round(float(angle_deg) % 180.0, 3) % 180.0
 
 
-def _clamp(v: float, lo_hi: tuple[float, float]) -> float:
-    return float(min(max(float(v), lo_hi[0]), lo_hi[1]))
-
-
 class SimulatedCamera:
     """Simulated harp camera (see the module docstring).
 
@@ -125,9 +161,12 @@ class SimulatedCamera:
     noise_sigma, shot_noise, electrons_per_level : noise model of
         :func:`pipeline.render.render_harp` (at 0 dB gain).
     scene : the harp; its ``angle_deg`` is ignored (taken from the world).
-    exposure_us, gain_db : initial settings (clamped to the ranges).
+    exposure_us, gain_db : initial settings (``ValueError`` outside the ranges).
     reference_exposure_us : exposure at which the scene has its nominal levels.
     serial : reported in :attr:`identity`.
+    best_focus, defocus_blur_px : the defocus model (module docstring);
+        ``best_focus=None`` (default) or ``defocus_blur_px=0`` renders every
+        focus setting sharp.
     """
 
     def __init__(
@@ -146,6 +185,8 @@ class SimulatedCamera:
         gain_db: float = 0.0,
         reference_exposure_us: float = 10_000.0,
         serial: str = "SIM-0001",
+        best_focus: float | None = None,
+        defocus_blur_px: float = 0.0,
     ):
         if int(width) != width or int(height) != height or width < 16 or height < 16:
             raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
@@ -153,6 +194,12 @@ class SimulatedCamera:
             raise ValueError(f"sim camera: bit_depth must be 8 or 16, got {bit_depth!r}")
         if not noise_sigma >= 0 or not electrons_per_level > 0 or not reference_exposure_us > 0:
             raise ValueError("sim camera: noise_sigma must be >= 0, electrons_per_level and reference_exposure_us > 0")
+        if not defocus_blur_px >= 0:
+            raise ValueError(f"sim camera: defocus_blur_px must be >= 0, got {defocus_blur_px!r}")
+        if defocus_blur_px > 0 and best_focus is None:
+            raise ValueError("sim camera: defocus_blur_px needs best_focus (the focus setting that is sharp)")
+        self.best_focus = None if best_focus is None else _FOCUS.check("sim camera", "best_focus", best_focus)
+        self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
         self._bit_depth = int(bit_depth)
@@ -163,8 +210,8 @@ class SimulatedCamera:
         self.scene = scene
         self.reference_exposure_us = float(reference_exposure_us)
         self._identity = CameraIdentity("harp station", "SimulatedCamera", str(serial))
-        self._exposure = _clamp(exposure_us, EXPOSURE_RANGE_US)
-        self._gain = _clamp(gain_db, GAIN_RANGE_DB)
+        self._exposure = _EXPOSURE.check(self.name, "exposure", exposure_us)
+        self._gain = _GAIN.check(self.name, "gain", gain_db)
         self._open = False
         self._counter = 0
         self._pose_counts: dict[tuple[float, float], int] = {}
@@ -202,6 +249,8 @@ class SimulatedCamera:
                         raise ValueError(f"must be true or false, got {value!r}")
                 elif key in ("serial", "pixel_format", "driver"):
                     value = str(value)
+                elif key == "best_focus" and value is None:
+                    pass
                 else:
                     value = float(value)
                 if key in _SCENE_KEYS:
@@ -214,7 +263,7 @@ class SimulatedCamera:
                         raise ValueError(f"{value} contradicts bit_depth {cfg['bit_depth']}")
                     kw["bit_depth"] = bd
                 elif key == "focus":
-                    world.focus = _clamp(value, FOCUS_RANGE)
+                    world.focus = _FOCUS.check("sim camera", "focus", value)
                 elif key == "harp_offset_deg":
                     world.harp_offset_deg = value
                 elif key != "driver":
@@ -266,29 +315,59 @@ class SimulatedCamera:
     def pixel_format(self) -> str:
         return "Mono8" if self._bit_depth == 8 else "Mono16"
 
+    @property
+    def name(self) -> str:
+        """How errors name this camera: ``"sim camera SIM-0001"``."""
+        return f"sim camera {self._identity.serial}"
+
+    # ------------------------------------------------------------ ranges
+    def focus_range(self) -> Range:
+        """:data:`drivers.sim.lens.FOCUS_RANGE`, the focus positions of the demo lens."""
+        return _FOCUS
+
+    def exposure_range(self) -> Range:
+        """:data:`EXPOSURE_RANGE_US`, in µs."""
+        return _EXPOSURE
+
+    def gain_range(self) -> Range:
+        """:data:`GAIN_RANGE_DB`, in dB."""
+        return _GAIN
+
+    def blur_at(self, focus: float) -> float:
+        """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
+        b0 = self.scene.blur_px
+        if self.best_focus is None or self.defocus_blur_px == 0:
+            return b0
+        return math.hypot(b0, self.defocus_blur_px * (float(focus) - self.best_focus))
+
+    def exposure_scale(self) -> float:
+        """The factor on the scene's grey levels at the current exposure and gain (module doc)."""
+        gain: float = 10.0 ** (self._gain / 20.0)
+        return self._exposure / self.reference_exposure_us * gain
+
     # ------------------------------------------------------------ settings
     def set_exposure(self, microseconds: float) -> float:
-        """Set the exposure time, clamped to :data:`EXPOSURE_RANGE_US`; returns the read-back."""
+        """Set the exposure time (:class:`OutOfRange` outside :data:`EXPOSURE_RANGE_US`); returns it."""
         self._require_open("set exposure")
-        self._exposure = _clamp(microseconds, EXPOSURE_RANGE_US)
+        self._exposure = _EXPOSURE.check(self.name, "exposure", microseconds)
         return self._exposure
 
     def get_exposure(self) -> float:
         return self._exposure
 
     def set_gain(self, db: float) -> float:
-        """Set the gain, clamped to :data:`GAIN_RANGE_DB`; returns the read-back."""
+        """Set the gain (:class:`OutOfRange` outside :data:`GAIN_RANGE_DB`); returns it."""
         self._require_open("set gain")
-        self._gain = _clamp(db, GAIN_RANGE_DB)
+        self._gain = _GAIN.check(self.name, "gain", db)
         return self._gain
 
     def get_gain(self) -> float:
         return self._gain
 
     def lock_focus(self, position: float) -> float:
-        """Set the world's focus (clamped to :data:`drivers.sim.lens.FOCUS_RANGE`); returns it."""
+        """Set the world's focus (:class:`OutOfRange` outside :data:`drivers.sim.lens.FOCUS_RANGE`); returns it."""
         self._require_open("lock focus")
-        self.world.focus = _clamp(position, FOCUS_RANGE)
+        self.world.focus = _FOCUS.check(self.name, "focus", position)
         return self.world.focus
 
     def get_focus(self) -> float | None:
@@ -344,6 +423,8 @@ class SimulatedCamera:
         index = self._index_at(focus, angle_deg) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
+        if self.best_focus is not None and self.defocus_blur_px > 0:
+            scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
         return render_harp(
             w,
             h,
@@ -353,7 +434,7 @@ class SimulatedCamera:
             shot_noise=self.shot_noise,
             bit_depth=self._bit_depth,
             seed=noise_seed(self.seed, focus, angle_deg, index),
-            exposure=self._exposure / self.reference_exposure_us * gain_lin,
+            exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
 
@@ -387,6 +468,8 @@ class SimulatedCamera:
                 "lens": r.lens.to_dict(),
                 "seed": seed,
                 "pose_index": index,
+                "blur_px": r.scene.blur_px,
+                "exposure_scale": self.exposure_scale(),
             },
         }
         if fault == "corrupt":

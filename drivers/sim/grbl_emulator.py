@@ -13,7 +13,19 @@ Lines (ended by ``\\n`` or ``\\r``), each answered by ``ok`` or ``error:N``:
 the real planner: ``ok`` means buffered, not done. With homing enabled
 (``homing=True``, the default) the controller starts in ``Alarm`` and
 prints ``[MSG:'$H'|'$X' to unlock]``; G-code is then refused with
-``error:9``. A target outside the soft limits raises ``ALARM:2``.
+``error:9``.
+
+Settings, as GRBL 1.1h stores and prints them: ``$$`` lists every setting,
+one ``$N=value`` line each (integers, or 3 decimals; ``$30``/``$31`` without
+decimals) then ``ok``; ``$N=value`` changes one (``error:3`` for an unknown
+``N``, ``error:4`` for a negative value, ``error:10`` for ``$20=1`` while
+``$22=0``; ``$22=0`` also clears ``$20``; ``error:8`` while moving). The
+generic defaults of ``grbl/defaults.h`` apply, except: ``$20`` = ``soft_limits``,
+``$22`` = ``homing``, ``$27=0.000`` (no pull-off: homing ends at machine 0),
+and for the turntable's axis ``$11x`` / ``$12x`` from the emulated speed and
+acceleration and ``$13x`` = ``max_travel``. Soft limits (``$20=1``), as in
+GRBL's ``system_check_travel_limits``: a target outside machine
+``[-$13x, 0]`` raises ``ALARM:2`` (critical: reset to continue).
 
 Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 ``"no_reply"``, ``"garbage"``, ``"alarm"`` (hard limit ``ALARM:1`` at
@@ -37,6 +49,32 @@ BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
 UNLOCK_MSG = b"[MSG:'$H'|'$X' to unlock]\r\n"
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
+_SETTING = re.compile(r"^\$(?P<n>\d+)=(?P<value>.*)$")
+
+# GRBL 1.1h report_grbl_settings: which settings print as integers, which without decimals
+_INT_SETTINGS = frozenset({0, 1, 2, 3, 4, 5, 6, 10, 13, 20, 21, 22, 23, 26, 32})
+_RPM_SETTINGS = frozenset({30, 31})
+
+
+def _default_settings(n_axes: int) -> dict[int, float]:
+    """GRBL 1.1h ``DEFAULTS_GENERIC`` (grbl/defaults.h), with no homing pull-off."""
+    settings: dict[int, float] = {
+        0: 10, 1: 25, 2: 0, 3: 0, 4: 0, 5: 0, 6: 0, 10: 1, 11: 0.010, 12: 0.002, 13: 0,
+        20: 0, 21: 0, 22: 0, 23: 0, 24: 25.0, 25: 500.0, 26: 250, 27: 0.0, 30: 1000.0, 31: 0.0, 32: 0,
+    }  # fmt: skip
+    for i in range(n_axes):
+        settings[100 + i] = 250.0  # steps/mm
+        settings[110 + i] = 500.0  # max rate, mm/min
+        settings[120 + i] = 10.0  # acceleration, mm/s^2
+        settings[130 + i] = 200.0  # max travel, mm
+    return settings
+
+
+def _format_setting(n: int, value: float) -> str:
+    """One value as GRBL prints it (print_uint8_base10 / printFloat with 0 or 3 decimals)."""
+    if n in _INT_SETTINGS:
+        return str(int(value))
+    return f"{value:.0f}" if n in _RPM_SETTINGS else f"{value:.3f}"
 
 
 class GrblEmulator(LineEmulator):
@@ -50,7 +88,8 @@ class GrblEmulator(LineEmulator):
         units_per_degree: float = 1.0,
         speed_deg_s: float = 360.0,
         accel_deg_s2: float = 3600.0,
-        soft_limits: tuple[float, float] | None = (-360.0, 720.0),
+        soft_limits: bool = False,
+        max_travel: float = 360.0,
         homing: bool = True,
         position_deg: float = 0.0,
         axis: str = "X",
@@ -63,9 +102,21 @@ class GrblEmulator(LineEmulator):
         self.axis_letter = axis
         self.n_axes = 4 if axis == "A" else 3
         self.upd = float(units_per_degree)
-        self.axis = Axis(position_deg * self.upd, speed_deg_s * self.upd, accel_deg_s2 * self.upd)
-        self.soft_limits = None if soft_limits is None else tuple(v * self.upd for v in soft_limits)
-        self.homing_enabled = bool(homing)
+        if self.upd == 0:
+            raise ValueError("GRBL emulator units_per_degree must not be 0")
+        if soft_limits and not homing:
+            raise ValueError("GRBL emulator: soft limits need homing ($20=1 requires $22=1)")
+        if max_travel < 0:
+            raise ValueError(f"GRBL emulator max_travel ($13x) must be >= 0, got {max_travel}")
+        scale = abs(self.upd)
+        self.axis = Axis(position_deg * self.upd, speed_deg_s * scale, accel_deg_s2 * scale)
+        self.axis_index = "XYZA".index(axis)
+        self.settings = _default_settings(self.n_axes)
+        self.settings[20] = int(bool(soft_limits))
+        self.settings[22] = int(bool(homing))
+        self.settings[110 + self.axis_index] = speed_deg_s * scale * 60.0
+        self.settings[120 + self.axis_index] = accel_deg_s2 * scale
+        self.settings[130 + self.axis_index] = float(max_travel)
         self.state = "Alarm" if homing else "Idle"
         self.critical = False  # waiting for Ctrl-X after a hard/soft limit alarm
         self.absolute = True
@@ -73,6 +124,17 @@ class GrblEmulator(LineEmulator):
         self.queue: list[float] = []
         self._homing = False
         self._held_target: float | None = None
+
+    @property
+    def homing_enabled(self) -> bool:
+        return bool(self.settings[22])
+
+    @property
+    def soft_limits(self) -> tuple[float, float] | None:
+        """The machine range of the turntable axis while ``$20=1`` (GRBL units), else None."""
+        if not self.settings[20]:
+            return None
+        return (-float(self.settings[130 + self.axis_index]), 0.0)
 
     def stage_degrees(self, now: float) -> float:
         return self.axis.peek(now) / self.upd
@@ -175,7 +237,44 @@ class GrblEmulator(LineEmulator):
                 self._line("[MSG:Caution: Unlocked]")
             self._line("ok")
             return
+        if text == "$$":
+            if self.state in ("Run", "Home") or self.state.startswith("Hold"):
+                self._line("error:8")
+                return
+            for n, value in sorted(self.settings.items()):
+                self._line(f"${n}={_format_setting(n, value)}")
+            self._line("ok")
+            return
+        m = _SETTING.match(text)
+        if m:
+            self._line(self._write_setting(int(m["n"]), m["value"]))
+            return
         self._line("error:3")
+
+    def _write_setting(self, n: int, text: str) -> str:
+        """``$N=value``: the reply (``ok`` or ``error:N``), as GRBL's settings_store_global_setting."""
+        if self.state in ("Run", "Home") or self.state.startswith("Hold"):
+            return "error:8"
+        if n not in self.settings:
+            return "error:3"
+        try:
+            value = float(text)
+        except ValueError:
+            return "error:2"
+        if value < 0:
+            return "error:4"
+        if n in _INT_SETTINGS:
+            value = int(value)
+        if n == 20 and value and not self.settings[22]:
+            return "error:10"
+        self.settings[n] = value
+        if n == 22 and not value:
+            self.settings[20] = 0  # GRBL: disabling homing forces soft limits off
+        if n == 110 + self.axis_index and value > 0:
+            self.axis.vmax = value / 60.0
+        if n == 120 + self.axis_index and value > 0:
+            self.axis.accel = value
+        return "ok"
 
     def _gcode(self, text: str, now: float) -> None:
         words = _WORD.findall(text)

@@ -17,8 +17,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.errors import DriverError
-from drivers.protocols import Camera, CameraIdentity, Frame
+from drivers.errors import DriverError, OutOfRange
+from drivers.protocols import Camera, CameraIdentity, CameraRanges, Frame, Range
 
 #: pixel format names a driver may report, and the image dtype they produce
 PIXEL_DTYPES = {
@@ -31,6 +31,24 @@ PIXEL_DTYPES = {
     "Mono10": np.uint16,
     "Mono12": np.uint16,
 }
+
+
+def _check_ranges(cam, exposure_us: float, gain_db: float, focus: float) -> None:
+    for getter, setter, value in (
+        (cam.exposure_range, cam.set_exposure, exposure_us),
+        (cam.gain_range, cam.set_gain, gain_db),
+        (cam.focus_range, cam.lock_focus, focus),
+    ):
+        rng = getter()
+        if rng is None:
+            continue
+        assert isinstance(rng, Range) and rng.minimum < rng.maximum, rng
+        assert value in rng, f"{value} set above, but outside {rng}"
+        span = max(rng.maximum - rng.minimum, 1.0)
+        below = rng.minimum / 2 if rng.minimum > 0 else rng.minimum - span  # an exposure stays positive
+        for bad in (rng.maximum + span, below):
+            with pytest.raises(OutOfRange):
+                setter(bad)
 
 
 def _close(a: float, b: float, tol: float) -> bool:
@@ -61,7 +79,10 @@ def run_camera_conformance(
     timestamp taken during the call, the settings read back above, the
     camera identity, counters 0, 1, 2, ... and a dict ``extra``; after
     ``close`` a capture raises :class:`DriverError`; reopening restarts the
-    counter at 0. Returns the frames of the first session.
+    counter at 0. With :class:`CameraRanges` (every driver here): each range
+    is a :class:`Range` (or None) containing the values set above, and a
+    value beyond either end raises :class:`OutOfRange` and changes nothing.
+    Returns the frames of the first session.
     """
     assert isinstance(cam, Camera), f"{type(cam).__name__} does not satisfy the Camera protocol"
     frames: list[Frame] = []
@@ -88,6 +109,9 @@ def run_camera_conformance(
         assert isinstance(got_focus, float), f"lock_focus returned {got_focus!r}"
         assert _close(got_focus, focus, focus_tol), (got_focus, focus)
         assert cam.get_focus() == got_focus
+        if isinstance(cam, CameraRanges):
+            _check_ranges(cam, exposure_us, gain_db, focus)
+            assert (cam.get_exposure(), cam.get_gain(), cam.get_focus()) == (got_exp, got_gain, got_focus)
 
         last_stamp = -math.inf
         for i in range(n_frames):

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import math
 
-from drivers.protocols import Turntable
+from drivers.errors import OutOfRange
+from drivers.protocols import Turntable, TurntableRanges
 
 DEFAULT_ANGLES = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
 
@@ -29,7 +30,9 @@ def run_turntable_conformance(
     target outside the limits raises ``ValueError`` and does not move;
     ``status()`` is a dict with ``busy`` (bool) and ``warnings`` (list of
     str); ``stop()`` on an idle stage is harmless; the driver can be closed
-    and opened again. Returns ``[(target, read back), ...]``.
+    and opened again. With :class:`TurntableRanges` (every driver here):
+    ``travel_range()`` is ``limits`` and the refusal is an :class:`OutOfRange`.
+    Returns ``[(target, read back), ...]``.
     """
     assert isinstance(tt, Turntable), f"{type(tt).__name__} does not satisfy the Turntable protocol"
     lo, hi = tt.limits
@@ -53,6 +56,18 @@ def run_turntable_conformance(
             assert abs(now - target) <= tolerance_deg, f"position() {now} after move_to({target})"
             readings.append((target, got))
         before = tt.position()
+        if isinstance(tt, TurntableRanges):
+            travel = tt.travel_range()
+            assert (travel.minimum, travel.maximum) == tt.limits, (
+                f"travel_range() {travel} differs from limits {tt.limits}"
+            )
+            for bad in (hi + 1.0, lo - 1.0):
+                try:
+                    tt.move_to(bad, timeout=timeout)
+                except OutOfRange as exc:
+                    assert (exc.minimum, exc.maximum) == tt.limits
+                else:
+                    raise AssertionError(f"move_to({bad}) outside {travel} did not raise OutOfRange")
         for bad in (hi + 1.0, lo - 1.0):
             try:
                 tt.move_to(bad, timeout=timeout)

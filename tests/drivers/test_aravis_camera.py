@@ -20,13 +20,15 @@ from __future__ import annotations
 
 import math
 import time
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 
 import drivers
 from drivers.aravis_camera import FAKE_FOCUS_XML, AravisCamera
-from drivers.errors import DeviceRejected, DeviceTimeout, DriverError
+from drivers.errors import DeviceRejected, DeviceTimeout, DriverError, OutOfRange
+from drivers.protocols import CameraRanges, Range
 from tests.drivers.aravis_fakes import FOCUS_CFG, gige_fake_camera
 
 W, H = 64, 48
@@ -114,20 +116,49 @@ def test_focus_from_config_is_locked_at_open():
         assert cam.get_focus() == 250.0
 
 
-def test_focus_out_of_range_is_rejected_and_unchanged():
+def _xml_bounds(name: str) -> tuple[float, float]:
+    """Min and Max of a feature, read from the GenICam XML itself (not through Aravis)."""
+    for node in ET.parse(FAKE_FOCUS_XML).getroot().iter():
+        if node.get("Name") == name:
+            return float(node.findtext("{*}Min", node.findtext("Min"))), float(
+                node.findtext("{*}Max", node.findtext("Max"))
+            )
+    raise KeyError(name)
+
+
+def test_ranges_are_the_genicam_bounds_read_at_open():
+    with fake(**FOCUS_CFG) as cam:
+        assert isinstance(cam, CameraRanges)
+        assert cam.focus_range() == Range(*_xml_bounds("FocusPosition"), "", "GenICam FocusPosition")
+        assert cam.exposure_range() == Range(*_xml_bounds("ExposureTime"), "µs", "GenICam ExposureTime")
+        assert cam.gain_range() == Range(*_xml_bounds("Gain"), "dB", "GenICam Gain")
+    with fake(gain_db_per_raw=0.5) as cam:  # the embedded XML: GainRaw in device units
+        raw = cam._device.get_integer_feature_bounds("GainRaw")
+        assert cam.gain_range() == Range(raw.min * 0.5, raw.max * 0.5, "dB", "GenICam GainRaw")
+        assert cam.focus_range() is None  # no focus feature configured
+    with pytest.raises(DriverError, match="not open"):
+        cam.exposure_range()
+
+
+def test_focus_out_of_range_is_refused_before_writing_and_unchanged():
     with fake(**FOCUS_CFG) as cam:
         cam.lock_focus(300)
-        with pytest.raises(DeviceRejected, match="FocusPosition"):
+        cam._device.set_string_feature_value("FocusAuto", "Continuous")
+        with pytest.raises(OutOfRange) as err:
             cam.lock_focus(5000)
+        assert str(err.value) == (
+            "aravis camera Fake_1: focus 5000 is outside the range [0, 1000] (GenICam FocusPosition); nothing was sent"
+        )
         assert cam.get_focus() == 300.0
+        assert cam._device.get_string_feature_value("FocusAuto") == "Continuous"  # not even autofocus was touched
 
 
 def test_exposure_and_gain_out_of_range_are_rejected():
     with fake(**FOCUS_CFG) as cam:
         cam.set_exposure(15_000)
-        with pytest.raises(DeviceRejected, match="ExposureTime"):
+        with pytest.raises(OutOfRange, match=r"exposure 5 µs is outside the range \[10, 10000000\] µs"):
             cam.set_exposure(5.0)  # min 10 µs
-        with pytest.raises(DeviceRejected, match="Gain"):
+        with pytest.raises(OutOfRange, match=r"gain 50 dB is outside the range \[0, 10\] dB \(GenICam Gain\)"):
             cam.set_gain(50.0)  # max 10
         assert cam.get_exposure() == 15_000.0
         with pytest.raises(ValueError):

@@ -6,14 +6,32 @@ import time
 import pytest
 
 from drivers import open_turntable
-from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, OutOfRange, ProtocolError
 from drivers.grbl import GrblTurntable
+from drivers.protocols import Range
 from drivers.sim.grbl_emulator import GrblEmulator, start_grbl_emulator
 from drivers.sim.world import SimWorld
 from drivers.testing import ScriptedDevice
 from tests.drivers.turntables import FAST, make_driver
 
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
+
+
+def settings_listing(soft_limits: int = 0, homing: int = 0, pulloff: str = "1.000", x: tuple = ()) -> bytes:
+    """A GRBL 1.1h reply to ``$$`` as written out by hand from grbl/report.c (report_grbl_settings)
+    and the DEFAULTS_GENERIC values of grbl/defaults.h; ``x`` replaces $110, $120, $130."""
+    rate, accel, travel = x or ("500.000", "10.000", "200.000")
+    lines = (
+        "$0=10 $1=25 $2=0 $3=0 $4=0 $5=0 $6=0 $10=1 $11=0.010 $12=0.002 $13=0"
+        f" $20={soft_limits} $21=0 $22={homing} $23=0 $24=25.000 $25=500.000 $26=250 $27={pulloff}"
+        " $30=1000 $31=0 $32=0 $100=250.000 $101=250.000 $102=250.000"
+        f" $110={rate} $111=500.000 $112=500.000 $120={accel} $121=10.000 $122=10.000"
+        f" $130={travel} $131=200.000 $132=200.000 ok"
+    ).split()
+    return b"".join(line.encode() + b"\r\n" for line in lines)
+
+
+SETTINGS = settings_listing()  # a fresh GRBL: soft limits off
 
 
 @pytest.fixture
@@ -33,6 +51,7 @@ def driver(port, **kw):
 def test_open_home_move_and_position_bytes():
     script = [
         (b"\x18", BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"),
+        (b"$$\n", settings_listing(homing=1)),
         (b"$H\n", b"ok\r\n"),
         (b"?", b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
         (b"G90 G0 X45.000\n", b"ok\r\n"),
@@ -44,6 +63,8 @@ def test_open_home_move_and_position_bytes():
     with ScriptedDevice(script, name="grbl") as dev:
         with driver(dev.port) as tt:
             assert tt.version == "1.1h"
+            assert tt.settings[22] == 1.0 and tt.settings[130] == 200.0 and len(tt.settings) == 34
+            assert tt.device_travel_range() is None  # $20=0: no soft limits
             tt.home()
             assert tt.move_to(45.0) == 45.0
             assert tt.position() == 45.0
@@ -54,6 +75,7 @@ def test_open_home_move_and_position_bytes():
 def test_feed_and_units_per_degree_shape_the_gcode():
     script = [
         (b"\x18", BANNER),
+        (b"$$\n", SETTINGS),
         (b"G90 G1 X90.000 F1200\n", b"ok\r\n"),
         (b"?", b"<Idle|MPos:90.000,0.000,0.000|WCO:0.000,0.000,0.000|FS:0,0>\r\n"),
     ]
@@ -63,12 +85,62 @@ def test_feed_and_units_per_degree_shape_the_gcode():
 
 
 def test_wpos_reports_and_malformed_status():
-    script = [(b"\x18", BANNER), (b"?", b"<Idle|WPos:12.500,0.000,0.000|FS:0,0>\r\n"), (b"?", b"<Idle|MPos:1.0.0>\r\n")]
+    script = [
+        (b"\x18", BANNER),
+        (b"$$\n", SETTINGS),
+        (b"?", b"<Idle|WPos:12.500,0.000,0.000|FS:0,0>\r\n"),
+        (b"?", b"<Idle|MPos:1.0.0>\r\n"),
+    ]
     with ScriptedDevice(script, name="grbl") as dev:
         with driver(dev.port) as tt:
             assert tt.position() == 12.5
             with pytest.raises(ProtocolError, match=r"bad coordinates in '<Idle\|MPos:1.0.0>'"):
                 tt.position()
+
+
+def test_soft_limits_read_at_open_are_the_travel():
+    """$20=1, $130=360: GRBL accepts machine X in [-360, 0]; a table turning positive as GRBL counts
+    down (units_per_degree -1) travels [0, 360]°. Outside it: OutOfRange, nothing sent."""
+    script = [
+        (b"\x18", BANNER),
+        (b"$$\n", settings_listing(soft_limits=1, homing=1, x=("600.000", "50.000", "360.000"))),
+    ]
+    with ScriptedDevice(script, name="grbl") as dev:
+        with driver(dev.port, units_per_degree=-1.0, limits=(0.0, 720.0)) as tt:
+            assert tt.device_travel_range() == Range(0.0, 360.0, "°", "GRBL soft limits $20=1, $130=360.000")
+            assert tt.limits == (0.0, 360.0)
+            with pytest.raises(OutOfRange, match=r"move to 400° is outside the range \[0, 360\]° \(configured limits"):
+                tt.move_to(400.0)
+    script = [
+        (b"\x18", BANNER),
+        (b"$$\n", settings_listing(soft_limits=1, homing=1, x=("600.000", "50.000", "90.000"))),
+    ]
+    with ScriptedDevice(script, name="grbl") as dev:
+        with pytest.raises(
+            DeviceRejected, match=r"configured limits \[0, 360\]° lie outside the device's travel \[-90, 0\]°"
+        ):
+            driver(dev.port).open()  # units_per_degree +1: the travel is negative
+
+
+def test_a_controller_that_refuses_dollar_dollar_keeps_the_configured_limits():
+    with ScriptedDevice([(b"\x18", BANNER), (b"$$\n", b"error:3\r\n")], name="grbl") as dev:
+        with driver(dev.port) as tt:
+            assert tt.settings == {} and tt.device_travel_range() is None
+            assert tt.travel_range() == Range(0.0, 360.0, "°", "configured limits")
+
+
+def test_emulator_lists_and_stores_settings_like_grbl():
+    sent = bytearray()
+    emu = GrblEmulator(speed_deg_s=10.0, accel_deg_s2=50.0, soft_limits=True, max_travel=360.0)
+    emu.server = type("Wire", (), {"write": staticmethod(sent.extend)})()
+    emu.on_bytes(b"$$\n", time.monotonic())
+    expected = settings_listing(soft_limits=1, homing=1, pulloff="0.000", x=("600.000", "50.000", "360.000"))
+    assert bytes(sent) == expected
+    sent.clear()
+    for line in (b"$130=90\n", b"$200=1\n", b"$120=-5\n", b"$22=0\n", b"$20=1\n"):
+        emu.on_bytes(line, time.monotonic())
+    assert bytes(sent) == b"ok\r\nerror:3\r\nerror:4\r\nok\r\nerror:10\r\n"
+    assert emu.settings[130] == 90.0 and emu.settings[20] == 0 and not emu.homing_enabled  # $22=0 cleared $20
 
 
 def test_missing_banner_is_a_timeout():
@@ -146,13 +218,26 @@ def test_hard_limit_alarm_mid_move_then_recover_and_rehome(emu):
         assert tt.move_to(90.0) == 90.0
 
 
-def test_soft_limit_alarm_when_target_exceeds_travel():
-    with start_grbl_emulator(soft_limits=(0.0, 180.0), **FAST) as h, driver(h.port_path) as tt:
+def test_soft_limit_alarm_when_the_travel_shrinks_behind_the_drivers_back():
+    """The driver refuses what the travel read at open excludes; if $130 is changed afterwards
+    the controller's own ALARM:2 is a DeviceFault, and reopening reads the new travel."""
+    emu = dict(soft_limits=True, max_travel=180.0, units_per_degree=-1.0, **FAST)
+    with start_grbl_emulator(**emu) as h, driver(h.port_path, units_per_degree=-1.0) as tt:
         tt.home()
-        with pytest.raises(DeviceFault, match=r"ALARM:2 \(soft limit alarm"):
+        assert tt.limits == (0.0, 180.0)
+        with pytest.raises(OutOfRange):
             tt.move_to(270.0)
+        tt.send("$130=90")
+        with pytest.raises(DeviceFault, match=r"ALARM:2 \(soft limit alarm"):
+            tt.move_to(170.0)
         tt.recover()
-        assert tt.move_to(170.0) == 170.0
+        tt.close()
+        tt.open()
+        assert tt.limits == (0.0, 90.0)
+        with pytest.raises(OutOfRange, match=r"move to 170° is outside the range \[0, 90\]°"):
+            tt.move_to(170.0)
+        tt.home()
+        assert tt.move_to(80.0) == 80.0
 
 
 def test_move_that_does_not_finish_times_out_and_stops():

@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 
 import drivers
-from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
+from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
 from drivers.protocols import Camera, CameraIdentity, Frame
 from drivers.sim.camera import EXPOSURE_RANGE_US, GAIN_RANGE_DB, SimulatedCamera
 from drivers.sim.lens import lens_for_focus
@@ -110,6 +110,12 @@ def test_config_errors_name_the_key():
         SimulatedCamera.from_config({"shot_noise": "yes"})
     with pytest.raises(ValueError, match="spacing_px"):
         SimulatedCamera.from_config({"spacing_px": 2.0})
+    with pytest.raises(ValueError, match=r"'focus': .*focus 7 is outside the range \[0, 1\]"):
+        SimulatedCamera.from_config({"focus": 7.0})
+    with pytest.raises(ValueError, match=r"exposure 5 µs is outside"):
+        SimulatedCamera.from_config({"exposure_us": 5})
+    with pytest.raises(ValueError, match="needs best_focus"):
+        SimulatedCamera.from_config({"defocus_blur_px": 3.0})
     cam = SimulatedCamera.from_config(
         {"pixel_format": "Mono8", "focus": 0.4, "harp_offset_deg": 7.0, "string_width_px": 8, "dust": 3}
     )
@@ -118,7 +124,7 @@ def test_config_errors_name_the_key():
     assert cam.sensor_size == (1280, 960)
 
 
-def test_exposure_and_gain_read_back_clamp_and_scale_brightness():
+def test_exposure_and_gain_read_back_refuse_out_of_range_and_scale_brightness():
     cam = SimulatedCamera(width=320, height=240, noise_sigma=0.0, bit_depth=16)
     with pytest.raises(DriverError):
         cam.set_exposure(5000)  # not open
@@ -129,9 +135,20 @@ def test_exposure_and_gain_read_back_clamp_and_scale_brightness():
         gained = cam.capture().image.astype(float)
         assert cam.set_gain(0.0) == 0.0 and cam.set_exposure(10_000) == 10_000
         ref = cam.capture().image.astype(float)
-        assert cam.set_exposure(1e9) == EXPOSURE_RANGE_US[1]
-        assert cam.set_exposure(-3) == EXPOSURE_RANGE_US[0]
-        assert cam.set_gain(99) == GAIN_RANGE_DB[1] and cam.set_gain(-1) == GAIN_RANGE_DB[0]
+        assert cam.exposure_range().minimum == EXPOSURE_RANGE_US[0] and cam.exposure_range().maximum == 1e6
+        assert (cam.gain_range().minimum, cam.gain_range().maximum) == GAIN_RANGE_DB
+        with pytest.raises(
+            OutOfRange, match=r"^sim camera SIM-0001: exposure 1000000000 µs is outside the range \[20, 1000000\] µs"
+        ):
+            cam.set_exposure(1e9)
+        for bad in (-3, 19.9, float("nan")):
+            with pytest.raises(DeviceRejected, match="exposure"):
+                cam.set_exposure(bad)
+        for bad in (99, -1):
+            with pytest.raises(OutOfRange, match=r"gain .* dB is outside the range \[0, 24\] dB"):
+                cam.set_gain(bad)
+        assert cam.get_exposure() == 10_000 and cam.get_gain() == 0.0  # nothing was changed
+        assert cam.set_exposure(EXPOSURE_RANGE_US[0]) == 20.0 and cam.set_gain(GAIN_RANGE_DB[1]) == 24.0
         cam.set_gain(24.0)
         cam.set_exposure(1e6)
         saturated = cam.capture().image
@@ -147,7 +164,10 @@ def test_focus_changes_the_lens_as_predicted():
         assert cam.lock_focus(0.0) == 0.0 == cam.get_focus()
         near = cam.capture()
         r_near = cam.last_rendered
-        assert cam.lock_focus(1.7) == 1.0 == world.focus  # clamped to the lens's range
+        with pytest.raises(OutOfRange, match=r"focus 1.7 is outside the range \[0, 1\] \(simulated lens"):
+            cam.lock_focus(1.7)  # refused, not clamped
+        assert world.focus == 0.0 and cam.focus_range().minimum == 0.0 and cam.focus_range().maximum == 1.0
+        assert cam.lock_focus(1.0) == 1.0 == world.focus
         far = cam.capture()
         r_far = cam.last_rendered
     assert near.focus == 0.0 and far.focus == 1.0

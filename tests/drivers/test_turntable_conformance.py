@@ -48,7 +48,7 @@ class _IgnoresLimits(GrblTurntable):
     "start, broken, speed, message",
     [
         (start_zaber_emulator, _ReturnsBeforeArrival, 360.0, "busy after move_to"),
-        (start_grbl_emulator, _IgnoresLimits, 3600.0, "did not raise ValueError"),
+        (start_grbl_emulator, _IgnoresLimits, 3600.0, "differs from limits"),
     ],
 )
 def test_conformance_check_catches_broken_drivers(start, broken, speed, message):

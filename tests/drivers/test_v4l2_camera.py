@@ -16,7 +16,8 @@ import pytest
 from linuxpy.video.device import ControlID
 
 import drivers
-from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError
+from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
+from drivers.protocols import CameraRanges, Range
 from drivers.v4l2_camera import V4L2Camera
 from tests.drivers.fake_v4l2 import FakeV4L2Camera
 
@@ -84,8 +85,10 @@ def test_exposure_switches_auto_exposure_to_manual(node):
         assert hw.value(ControlID.EXPOSURE_ABSOLUTE) == 200  # units of 100 µs
         assert cam.set_exposure(12_345) == 12_300.0  # read back what the device holds
         assert cam.capture(timeout=1.0).exposure_us == 12_300.0
-        with pytest.raises(DeviceRejected, match="exposure_time_absolute=3000 outside"):
+        n = hw.calls.count("S_EXT_CTRLS")
+        with pytest.raises(OutOfRange, match=r"exposure 300000 µs is outside the range \[300, 204700\] µs"):
             cam.set_exposure(300_000)
+        assert hw.calls.count("S_EXT_CTRLS") == n  # refused before anything reached the device
         assert hw.value(ControlID.EXPOSURE_ABSOLUTE) == 123
 
 
@@ -101,7 +104,7 @@ def test_gain_in_db_per_unit(node):
     with FakeV4L2Camera(node) as hw, camera(node, gain_db_per_unit=0.5) as cam:
         assert cam.set_gain(7.0) == 7.0
         assert hw.value(ControlID.GAIN) == 14
-        with pytest.raises(DeviceRejected, match="gain=202 outside"):
+        with pytest.raises(OutOfRange, match=r"gain 101 dB is outside the range \[0, 50\] dB \(V4L2 gain\)"):
             cam.set_gain(101)
 
 
@@ -115,9 +118,25 @@ def test_focus_lock_turns_continuous_autofocus_off(node, old_names):
         assert hw.value(ControlID.FOCUS_AUTO) == 0
         assert hw.value(ControlID.FOCUS_ABSOLUTE) == 100
         assert cam.capture(timeout=1.0).focus == 100.0
-        with pytest.raises(DeviceRejected, match="focus_absolute=300 outside"):
+        with pytest.raises(OutOfRange, match=r"focus 300 is outside the range \[0, 250\] \(V4L2 focus_absolute\)"):
             cam.lock_focus(300)
-        assert cam.get_focus() == 100.0
+        assert cam.get_focus() == 100.0 and hw.value(ControlID.FOCUS_ABSOLUTE) == 100
+
+
+def test_ranges_are_the_controls_read_at_open(node):
+    """The fake kernel's controls (tests/drivers/fake_v4l2.py): exposure 3..2047 x 100 µs,
+    gain 0..100, focus_absolute 0..250 in steps of 5."""
+    with FakeV4L2Camera(node), camera(node, gain_db_per_unit=0.25) as cam:
+        assert isinstance(cam, CameraRanges)
+        assert cam.exposure_range() == Range(300.0, 204_700.0, "µs", "V4L2 exposure_time_absolute")
+        assert cam.gain_range() == Range(0.0, 25.0, "dB", "V4L2 gain")
+        focus = cam.focus_range()
+        assert focus == Range(0.0, 250.0, "", "V4L2 focus_absolute", step=5.0) and focus.tolerance() == 2.5
+        got = cam.lock_focus(117)  # rounded by the control to its step: read back within the tolerance
+        assert got == 115.0 and abs(got - 117) <= focus.tolerance()
+    cam = camera(node)
+    with pytest.raises(DriverError, match="not open"):
+        cam.focus_range()
 
 
 def test_settings_from_config_are_applied_at_open(node):

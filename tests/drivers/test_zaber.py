@@ -6,7 +6,8 @@ import time
 import pytest
 
 from drivers import open_turntable
-from drivers.errors import DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.errors import DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout, OutOfRange, ProtocolError
+from drivers.protocols import Range
 from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import ZaberEmulator, start_zaber_emulator, zaber_checksum
 from drivers.testing import ScriptedDevice
@@ -14,6 +15,11 @@ from drivers.zaber import ZaberTurntable
 from tests.drivers.turntables import FAST, make_driver
 
 MSPD = 1536000 / 360.0  # X-RSW60 microsteps per degree
+# what open() reads after the status request: the axis travel, in microsteps
+LIMITS = [
+    (b"/1 1 get limit.min\n", b"@01 1 OK IDLE -- 0\r\n"),
+    (b"/1 1 get limit.max\n", b"@01 1 OK IDLE -- 1536000\r\n"),
+]
 
 
 @pytest.fixture
@@ -33,6 +39,8 @@ def driver(port, **kw):
 def test_home_move_and_position_bytes():
     script = [
         (b"/1\n", b"@01 0 OK IDLE WR 0\r\n"),
+        (b"/1 1 get limit.min\n", b"@01 1 OK IDLE WR 0\r\n"),
+        (b"/1 1 get limit.max\n", b"@01 1 OK IDLE WR 1536000\r\n"),
         (b"/1 1 home\n", b"@01 1 OK BUSY WR 0\r\n"),
         (b"/1 1 get pos\n", b"@01 1 OK BUSY WR 51200\r\n"),
         (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 0\r\n"),
@@ -57,6 +65,7 @@ def test_checksummed_replies_and_info_and_alert_lines_are_understood():
     reply = b"@" + body + b":%02X\r\n" % zaber_checksum(body)
     script = [
         (b"/1\n", b"#01 0 an info line\r\n!01 1 IDLE --\r\n@01 0 OK IDLE -- 0\r\n"),
+        *LIMITS,
         (b"/1 1 get pos\n", reply),
     ]
     with ScriptedDevice(script, name="zaber") as dev:
@@ -66,7 +75,7 @@ def test_checksummed_replies_and_info_and_alert_lines_are_understood():
 
 
 def test_bad_checksum_is_a_protocol_error():
-    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"), (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
+    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"), *LIMITS, (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port) as tt:
             with pytest.raises(ProtocolError, match="bad checksum in '@01 1 OK IDLE -- 4267:00'"):
@@ -106,21 +115,66 @@ def test_rejected_command_raises_and_the_next_one_works(emu):
         assert tt.move_to(90.0) == 90.0
 
 
-def test_target_beyond_the_device_limit_is_rejected_by_the_device():
+def test_the_device_travel_read_at_open_bounds_every_move():
+    """limit.max of 180° on the device: 270° is refused by the driver, naming device, value and
+    range, and never reaches the device (which would answer RJ BADDATA)."""
     with start_zaber_emulator(limit_max=round(180 * MSPD), **FAST) as h, driver(h.port_path) as tt:
-        with pytest.raises(DeviceRejected, match="BADDATA"):
+        assert tt.device_travel_range() == Range(0.0, 180.0, "°", "device limit.min/limit.max")
+        travel = tt.travel_range()
+        assert (travel.minimum, travel.maximum) == (0.0, 180.0) == tt.limits
+        assert travel.source == "configured limits within device limit.min/limit.max"
+        n = len(h.emulator.received)
+        with pytest.raises(OutOfRange) as err:
             tt.move_to(270.0)
+        assert str(err.value) == (
+            f"{tt.name}: move to 270° is outside the range [0, 180]°"
+            " (configured limits within device limit.min/limit.max); nothing was sent"
+        )
+        assert isinstance(err.value, DeviceRejected) and isinstance(err.value, ValueError)
+        assert (err.value.value, err.value.minimum, err.value.maximum) == (270.0, 0.0, 180.0)
+        assert len(h.emulator.received) == n
         reply = tt.command("fly")
         assert not reply.ok and reply.data == "BADCOMMAND"
         assert tt.move_to(170.0) == pytest.approx(170.0, abs=1e-3)
+        assert tt.command(f"move abs {round(270 * MSPD)}").data == "BADDATA"  # what the driver spared us
 
 
-def test_out_of_limits_target_is_refused_before_sending(emu):
+def test_configured_limits_narrow_the_travel_and_are_refused_before_sending(emu):
     with driver(emu.port_path, limits=(0.0, 180.0)) as tt:
+        assert tt.device_travel_range() == Range(0.0, 360.0, "°", "device limit.min/limit.max")
+        assert tt.travel_range() == Range(0.0, 180.0, "°", "configured limits")
         n = len(emu.emulator.received)
-        with pytest.raises(ValueError, match=r"target 200.0° outside limits \[0.0, 180.0\]°"):
+        with pytest.raises(OutOfRange, match=r"move to 200° is outside the range \[0, 180\]° \(configured limits\)"):
             tt.move_to(200.0)
         assert len(emu.emulator.received) == n
+
+
+def test_limits_outside_the_device_travel_fail_at_open():
+    with start_zaber_emulator(limit_max=round(90 * MSPD), **FAST) as h:
+        tt = driver(h.port_path, limits=(100.0, 200.0))
+        with pytest.raises(DeviceRejected, match=r"configured limits \[100, 200\]° lie outside the device's travel"):
+            tt.open()
+        assert not tt.transport.is_open
+
+
+def test_a_device_without_limit_settings_keeps_the_configured_limits():
+    script = [
+        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 1 get limit.min\n", b"@01 1 RJ IDLE -- BADCOMMAND\r\n"),
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port, limits=(-10.0, 370.0)) as tt:
+            assert tt.device_travel_range() is None
+            assert tt.travel_range() == Range(-10.0, 370.0, "°", "configured limits")
+
+
+def test_emulator_answers_the_limit_settings_like_the_device():
+    sent = bytearray()
+    emu = ZaberEmulator(limit_min=-1000, limit_max=768000)
+    emu.server = type("Wire", (), {"write": staticmethod(sent.extend)})()
+    for line in (b"/1 1 get limit.min\n", b"/1 1 get limit.max\n", b"/1 1 get limit.cycle\n"):
+        emu.on_bytes(line, time.monotonic())
+    assert bytes(sent) == (b"@01 1 OK IDLE WR -1000\r\n@01 1 OK IDLE WR 768000\r\n@01 1 RJ IDLE WR BADCOMMAND\r\n")
 
 
 @pytest.mark.parametrize(
