@@ -25,7 +25,9 @@ pixel is
            \bigl(\Phi(\tfrac{q - kp + w/2}{\sigma}) - \Phi(\tfrac{q - kp - w/2}{\sigma})\bigr)\Bigr]
 
 * :math:`B` = ``background`` (grey level at the centre), :math:`c_s` =
-  ``string_level / background`` (string transmission), :math:`e` = exposure scale.
+  ``string_level / background`` (string transmission, or for bright strings on a
+  dark background, ``string_level > background``, how much brighter a string is),
+  :math:`e` = exposure scale.
 * :math:`\sigma^2 = b^2 + 1/12`: the optical PSF is a Gaussian of standard
   deviation :math:`b` (``blur_px``); integration over a square pixel adds a
   box whose projection on *any* direction :math:`n` has variance
@@ -110,7 +112,9 @@ class HarpScene:
     spacing_px, string_width_px, phase_px : string pitch, width, and the
         signed offset (along the normal) of string 0 from the image centre.
     background, string_level : grey level of the lit sheet at the image
-        centre and inside a string (before vignetting, exposure, noise).
+        centre and inside a string (before vignetting, exposure, noise);
+        ``string_level > background`` renders bright strings on a dark
+        background (strings lit from the front).
     blur_px : standard deviation of the Gaussian optical PSF.
     vignetting : fractional fall-off at the image corners, in [0, 1).
     dust, dust_seed : number of dust shadows and the seed placing them
@@ -161,8 +165,9 @@ class HarpScene:
 class EdgeTruth:
     """One string edge: the ideal line ``{p : n . p = offset}``.
 
-    ``side`` is -1 for the edge at smaller ``n . p`` (the image gets darker
-    when crossing it along +n) and +1 for the other one.
+    ``side`` is -1 for the edge at smaller ``n . p`` (crossing it along +n
+    enters the string: the image gets darker for dark strings, brighter for
+    bright ones) and +1 for the other one.
     """
 
     string_index: int
@@ -381,7 +386,8 @@ def render_harp(
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     base = float(n @ c) + scene.phase_px
     p, w2 = float(scene.spacing_px), 0.5 * float(scene.string_width_px)
-    dark = 1.0 - min(max(scene.string_level / scene.background, 0.0), 1.0)
+    # string contrast: > 0 for dark strings (string_level < background), < 0 for bright ones
+    dark = 1.0 - max(scene.string_level / scene.background, 0.0)
     reach = w2 + 10.0 * s  # beyond this a string edge contributes < 1e-23
     # the nearest string is always summed; neighbour j only if some point can lie within reach of it
     n_near = max(0, int(math.ceil(reach / p + 0.5)) - 1)

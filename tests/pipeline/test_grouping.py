@@ -7,8 +7,8 @@ from pipeline.edges import detect_edges
 from pipeline.grouping import REJECT_REASONS, group_string_edges
 from pipeline.measure import measure_grouping
 from pipeline.models.radial import RadialModel
-from pipeline.render import HarpScene, render_harp, visible_edges
-from tests.pipeline._harp_truth import match_truth
+from pipeline.render import HarpScene, render_harp
+from tests.pipeline._harp_truth import compare
 
 W, H = 800, 600
 
@@ -20,20 +20,20 @@ def _group(r):
 def _check_complete(r, g, min_len=0.3 * min(W, H)):  # noqa: B008 (constants)
     """Every true edge longer than min_len is found exactly once, paired with its own string's other edge."""
     m = measure_grouping(g, r.width, r.height, t=1)  # t=1: raw points, no length lost
-    matches = match_truth(r, m, max_dist=0.8)
+    c = compare(r, m, max_dist=0.8)
     found = {}
-    for ln, (e, _, _dist) in zip(m.lines, matches):
-        found.setdefault((e.string_index, e.side), []).append(ln)
-    for e, curve in visible_edges(r, margin=5.0):
-        length = float(np.sum(np.hypot(*np.diff(curve, axis=0).T)))
-        if length >= min_len:
-            assert len(found.get((e.string_index, e.side), [])) == 1, (
-                f"true edge {e.string_index}{e.side:+d} ({length:.0f} px) found {len(found.get((e.string_index, e.side), []))} times"
+    for mt in c.matches:
+        found.setdefault(mt.truth, []).append(mt.line)
+    for k, te in enumerate(c.truths):
+        if te.length >= min_len:
+            assert len(found.get(k, [])) == 1, (
+                f"true edge {te.edge.string_index}{te.edge.side:+d} ({te.length:.0f} px) found {len(found.get(k, []))} times"
             )
     # the two edges of each measured string are the two sides of one true string
     by_string = {}
-    for ln, (e, _, _) in zip(m.lines, matches):
-        by_string.setdefault(ln.string_id, []).append((e.string_index, e.side, ln.polarity))
+    for mt in c.matches:
+        e = c.truths[mt.truth].edge
+        by_string.setdefault(m.lines[mt.line].string_id, []).append((e.string_index, e.side, m.lines[mt.line].polarity))
     for sid, members in by_string.items():
         assert len(members) == 2, f"string {sid} has {len(members)} edges"
         (k1, s1, p1), (k2, s2, p2) = members
@@ -172,3 +172,46 @@ def test_string_right_beside_a_dark_bar(gap, measured):
         assert any(x.reason == "crowded" and abs(np.median(x.xy[:, 1]) - lower_edge) < 2 for x in g.rejected)
     # the other strings are all there: 9 in the image, one (k = 3) hidden under the bar
     assert g.n_strings == (8 if measured else 7)
+
+
+@pytest.mark.parametrize("bright", [False, True])
+def test_wide_strings_at_40_percent_duty_cycle(bright):
+    """12 px strings 30 px apart: both marching directions find an opposite edge in reach; the
+    string is the narrower band (12 px), whether dark on bright or bright on dark."""
+    scene = HarpScene(angle_deg=35.0, spacing_px=30.0, string_width_px=12.0)
+    if bright:
+        scene = HarpScene(angle_deg=35.0, spacing_px=30.0, string_width_px=12.0, background=30.0, string_level=200.0)
+    r = render_harp(W, H, scene, noise_sigma=1.5, seed=4)
+    g = _group(r)
+    assert g.dark_strings == (not bright)
+    assert abs(g.string_width_px - 12.0) < 1.0
+    m = _check_complete(r, g)
+    assert m.n_strings >= 25
+
+
+class _Chain:
+    def __init__(self, xy, grad):
+        self.xy, self.grad = xy, grad
+
+
+def _arc(radius, length, centre=(400.0, 300.0)):
+    phi = np.arange(0.0, length, 1.0) / radius
+    xy = np.column_stack([centre[0] + radius * np.cos(phi), centre[1] + radius * np.sin(phi)])
+    grad = -np.column_stack([np.cos(phi), np.sin(phi)]) * 40.0  # gradient towards the centre
+    return _Chain(xy, grad)
+
+
+def test_local_curvature_limit_not_total_turn():
+    """A ring of dust (radius 60 px) bends more than any string and is rejected as curved; the image
+    of a string through a wide-angle lens may turn by 40 degrees in total over 1400 px (radius
+    2000 px) and is not (here it is unpaired: it is alone)."""
+    big = 3000
+    ring = _arc(60.0, 300.0, centre=(1500.0, 1500.0))
+    bow = _arc(2000.0, 1400.0, centre=(-500.0, 1500.0))
+    g = group_string_edges([ring, bow], (big, big))
+    by_reason = {}
+    for x in g.rejected:
+        by_reason.setdefault(x.reason, []).append(x)
+    assert sum(x.n_points for x in by_reason["curved"]) >= 280
+    assert all(np.hypot(*(x.xy - [1500.0, 1500.0]).T).max() < 61 for x in by_reason["curved"])
+    assert [x.n_points for x in by_reason["unpaired edge"]] == [1400]

@@ -139,7 +139,9 @@ def test_wrong_string_angle_stops_after_max_recaptures(tmp_path):
         result, _ = run(s, FakeCamera(stage), stage)
     assert result.exit_code == EXIT_ABORTED
     assert "orientation 0 failed its checks 2 times" in result.message
-    assert "strings at 25.0 deg, expected 5.0 deg" in result.message
+    # 25.1: the mean angle of the whole edges' regression lines through the lens (the whole-edge truth of
+    # tests/pipeline/_harp_truth.py gives 25.103 deg for this shot; the ideal strings are at 25.0 deg)
+    assert "strings at 25.1 deg, expected 5.0 deg" in result.message
 
 
 def test_model_auto_is_chosen_by_cross_validation(tmp_path):
