@@ -316,7 +316,7 @@ def test_real_photos_d(real_measurements, real_harp_dir):
     independent method (darkness centroids, above). Measured (issue 8, ends kept): d 2.45 / 2.06 /
     3.91 px (IMG_6931 / 6950 / 6964), pooled 2.91 px; the centroids give 2.37 / 2.05 / 3.88 px. The
     measurement before issue 8 dropped 72 px at each end of every edge: 1.95 / 1.74 / 3.48 px,
-    17-20 % below the centroids."""
+    10-18 % below the centroids."""
     from station.imageio import read_grey
 
     per_image = {n: (m.d, m.d_max) for n, m in real_measurements.items()}
