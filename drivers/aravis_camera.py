@@ -87,7 +87,7 @@ _ARAVIS: Any = None  # the gi.repository.Aravis module, once imported
 _FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
 
 
-def _aravis() -> Any:
+def aravis_module() -> Any:
     """Import ``gi.repository.Aravis`` 0.8 once, with an installation hint on failure."""
     global _ARAVIS
     if _ARAVIS is None:
@@ -262,7 +262,7 @@ class AravisCamera(CameraBase):
     def open(self) -> None:
         if self._camera is not None:
             return
-        Aravis = _aravis()
+        Aravis = aravis_module()
         if self.device_id and self.device_id.startswith("Fake_"):
             Aravis.enable_interface("Fake")
             _select_fake_xml(Aravis, self.fake_genicam_xml)
@@ -503,7 +503,7 @@ class AravisCamera(CameraBase):
         return self._read_focus()
 
     def _autofocus_off(self) -> None:
-        Aravis = _aravis()
+        Aravis = aravis_module()
         dev, f = self._device, self.autofocus_feature
         node = dev.get_feature(f)
         want: bool | int | str
@@ -542,7 +542,7 @@ class AravisCamera(CameraBase):
         image is exposed after this call started.
         """
         self._require_open()
-        Aravis = _aravis()
+        Aravis = aravis_module()
         stream, cam = self._stream, self._camera
         while (old := stream.try_pop_buffer()) is not None:  # drop frames taken before now
             stream.push_buffer(old)

@@ -219,7 +219,7 @@ class V4L2Camera(CameraBase):
         offered = [f.pixel_format for f in info.formats if f.type == BufferType.VIDEO_CAPTURE]
         code = _fourcc_code(self._fourcc)
         if code not in offered:
-            names = ", ".join(_fourcc_name(int(p)) for p in offered) or "none"
+            names = ", ".join(fourcc_name(int(p)) for p in offered) or "none"
             raise DeviceRejected(f"{self.name}: pixel format {self._fourcc} not offered (device offers {names})")
         if self._req_size is None:
             cur = dev.get_format(BufferType.VIDEO_CAPTURE)
@@ -230,7 +230,7 @@ class V4L2Camera(CameraBase):
         fmt = dev.get_format(BufferType.VIDEO_CAPTURE)
         if int(fmt.pixel_format) != code:
             raise DeviceRejected(
-                f"{self.name}: asked for {self._fourcc}, device set {_fourcc_name(int(fmt.pixel_format))}"
+                f"{self.name}: asked for {self._fourcc}, device set {fourcc_name(int(fmt.pixel_format))}"
             )
         if fmt.width <= 0 or fmt.height <= 0:
             raise DeviceRejected(f"{self.name}: device reports frame size {fmt.width}x{fmt.height}")
@@ -413,5 +413,6 @@ class V4L2Camera(CameraBase):
         )
 
 
-def _fourcc_name(code: int) -> str:
+def fourcc_name(code: int) -> str:
+    """The four-character code of a V4L2 pixel format, e.g. ``"GREY"`` for 0x59455247."""
     return "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4)).strip()

@@ -17,7 +17,7 @@ import gc
 import os
 import tempfile
 
-from drivers.aravis_camera import FAKE_FOCUS_XML, _aravis
+from drivers.aravis_camera import FAKE_FOCUS_XML, aravis_module
 
 FOCUS_CFG = {
     "fake_genicam_xml": str(FAKE_FOCUS_XML),
@@ -29,7 +29,7 @@ FOCUS_CFG = {
 @contextlib.contextmanager
 def gige_fake_camera(serial: str):
     """Serve Aravis' GigE Vision fake camera with serial number ``serial`` on 127.0.0.1."""
-    Aravis = _aravis()
+    Aravis = aravis_module()
     lock_path = os.path.join(tempfile.gettempdir(), "harp-station-gige-3956.lock")
     with open(lock_path, "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
