@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import contextlib
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -107,6 +108,23 @@ def aravis_module() -> Any:
 
 def _gerror_text(exc: BaseException) -> str:
     return getattr(exc, "message", None) or str(exc)
+
+
+# ArvDeviceError codes that mean the device stopped answering (unplugged, powered off, cable cut),
+# as opposed to refusing a value: NOT_CONNECTED, TRANSFER_ERROR, TIMEOUT
+_GONE_CODES = frozenset({2, 4, 5})
+
+
+def _device_gone(exc: BaseException) -> bool:
+    return getattr(exc, "domain", None) == "arv-device-error-quark" and getattr(exc, "code", None) in _GONE_CODES
+
+
+def _release_in_background(doomed: list[Any]) -> None:
+    """Drop the Aravis objects in ``doomed`` (the only references left to them) in a daemon
+    thread: the finalizers of a device that no longer answers wait out Aravis' GVCP timeouts
+    (about 7 s for a GigE camera), which would otherwise block ``close()``; they wait without
+    holding the GIL."""
+    threading.Thread(target=doomed.clear, name="aravis-release", daemon=True).start()
 
 
 def _select_fake_xml(Aravis: Any, path: str | None) -> None:
@@ -246,6 +264,7 @@ class AravisCamera(CameraBase):
         self._gain_feature: str | None = None
         self._focus_kind: str | None = None
         self._ranges: dict[str, Range | None] = {}
+        self._lost = False  # the device stopped answering (close() then sends nothing)
 
     @property
     def name(self) -> str:
@@ -270,6 +289,7 @@ class AravisCamera(CameraBase):
             camera = Aravis.Camera.new(self.device_id)
         except Exception as exc:  # GLib.Error
             raise DeviceDisconnected(f"{self.name}: cannot open: {_gerror_text(exc)}") from None
+        self._lost = False
         self._camera = camera
         self._device = camera.get_device()
         try:
@@ -287,12 +307,22 @@ class AravisCamera(CameraBase):
             return False
 
     def _call(self, what: str, fn: Callable[..., T], *args: Any) -> T:
-        """Call an Aravis function, mapping GLib errors to :class:`DeviceRejected`."""
+        """Call an Aravis function, mapping GLib errors to driver errors.
+
+        A device that does not answer (``ArvDeviceError`` TIMEOUT, TRANSFER_ERROR,
+        NOT_CONNECTED) is :class:`DeviceDisconnected` and marks the connection lost;
+        anything else the device refuses is :class:`DeviceRejected`.
+        """
         try:
             return fn(*args)
         except DriverError:
             raise
         except Exception as exc:
+            if _device_gone(exc):
+                self._lost = True
+                raise DeviceDisconnected(
+                    f"{self.name}: {what}: device not answering ({_gerror_text(exc)}); close() and open() again"
+                ) from None
             raise DeviceRejected(f"{self.name}: {what}: {_gerror_text(exc)}") from None
 
     def _configure(self, Aravis: Any) -> None:
@@ -309,7 +339,7 @@ class AravisCamera(CameraBase):
         if self._gain_feature is None:
             raise DeviceRejected(f"{self.name}: device has no {' / '.join(GAIN_FEATURES)} feature")
         for auto in ("ExposureAuto", "GainAuto"):  # automatic control would defeat set values
-            if self._has(auto) and dev.get_string_feature_value(auto) != "Off":
+            if self._has(auto) and self._call(f"read {auto}", dev.get_string_feature_value, auto) != "Off":
                 self._call(f"{auto}=Off", dev.set_string_feature_value, auto, "Off")
         self._check_focus_features(Aravis)
         self._ranges = self._read_ranges()
@@ -414,12 +444,23 @@ class AravisCamera(CameraBase):
         self._counter = 0
 
     def close(self) -> None:
-        cam, self._camera = self._camera, None
-        if cam is not None:
-            with contextlib.suppress(Exception):
-                cam.stop_acquisition()
-        self._stream = None  # drops the stream thread (joined on finalize)
-        self._device = None
+        """Stop acquisition and release the device; idempotent.
+
+        After the device stopped answering (a :class:`DeviceDisconnected` was raised) nothing
+        more is sent to it and its Aravis objects are released in the background, so that
+        closing and reopening a re-plugged camera does not wait for network timeouts.
+        """
+        cam = self._camera
+        if cam is None:
+            return
+        if self._lost:
+            doomed = [self._camera, self._stream, self._device]
+            cam = self._camera = self._stream = self._device = None
+            _release_in_background(doomed)
+            return
+        self._camera = self._stream = self._device = None
+        with contextlib.suppress(Exception):  # a camera that vanished since its last answer: dropped anyway
+            cam.stop_acquisition()
 
     # -- properties -----------------------------------------------------------------
     # Properties never raise (``isinstance(cam, Camera)`` reads them on Python 3.11):
@@ -510,15 +551,15 @@ class AravisCamera(CameraBase):
         if isinstance(node, Aravis.GcBoolean):
             want = bool(self.autofocus_off) if self.autofocus_off is not None else False
             self._call(f"{f}={want}", dev.set_boolean_feature_value, f, want)
-            ok = dev.get_boolean_feature_value(f) == want
+            ok = self._call(f"read {f}", dev.get_boolean_feature_value, f) == want
         elif isinstance(node, Aravis.GcInteger) and not isinstance(node, Aravis.GcEnumeration):
             want = int(self.autofocus_off) if self.autofocus_off is not None else 0
             self._call(f"{f}={want}", dev.set_integer_feature_value, f, want)
-            ok = dev.get_integer_feature_value(f) == want
+            ok = self._call(f"read {f}", dev.get_integer_feature_value, f) == want
         else:  # Enumeration / String
             want = str(self.autofocus_off) if self.autofocus_off is not None else "Off"
             self._call(f"{f}={want}", dev.set_string_feature_value, f, want)
-            ok = dev.get_string_feature_value(f) == want
+            ok = self._call(f"read {f}", dev.get_string_feature_value, f) == want
         if not ok:
             raise DeviceRejected(f"{self.name}: {f} did not switch to {want!r}")
 

@@ -194,6 +194,27 @@ class FakeV4L2Camera:
         out[:, rows.shape[1] :] = 0xEE  # padding bytes must never reach the image
         return out.tobytes()
 
+    def replug(self) -> None:
+        """Plug the camera back in after ``unplugged``: a fresh device (no buffers, not
+        streaming, nothing pending on the node), with the controls it kept in its own memory,
+        as a UVC camera re-enumerated by the kernel."""
+        for b in self.buffers:
+            if not b.closed:
+                b.close()
+        self.buffers, self.queued, self.done = [], deque(), deque()
+        self.streaming = False
+        fd = os.open(self.path, os.O_RDONLY | os.O_NONBLOCK)
+        try:
+            while True:  # "frame ready" bytes of the old connection
+                try:
+                    if not os.read(fd, 4096):
+                        break
+                except BlockingIOError:
+                    break
+        finally:
+            os.close(fd)
+        self.unplugged = False
+
     def resume(self) -> None:
         """End a stall: the sensor delivers frames again (fills the queued buffers)."""
         self.stalled = False
