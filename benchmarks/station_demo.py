@@ -41,7 +41,6 @@ def main() -> int:
 
     from drivers.sim.lens import lens_for_focus
     from pipeline.compare import compare_models
-    from pipeline.models import model_from_dict
     from station.store import ProfileStore
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -76,13 +75,10 @@ def main() -> int:
         print("| focus | holdout d (px) | field unc. RMS / max (px) | error vs true lens RMS (px) | max (px) |")
         print("|---:|---:|---:|---:|---:|")
         for p in profiles:
-            c = compare_models(model_from_dict(p.model), lens_for_focus(p.focus, w, h), w, h, step=10.0)
-            unc = (
-                "-"
-                if p.field_uncertainty_rms is None
-                else f"{p.field_uncertainty_rms:.4f} / {p.field_uncertainty_max:.4f}"
-            )
-            print(f"| {p.focus:g} | {p.holdout_d:.4f} | {unc} | {c.rms:.4f} | {c.max:.4f} |")
+            c = compare_models(p.model, lens_for_focus(p.focus, w, h), w, h, step=10.0)
+            fu = p.merit.field_uncertainty
+            unc = "-" if fu is None else f"{fu.rms:.4f} / {fu.max:.4f}"
+            print(f"| {p.focus:g} | {p.merit.holdout.d:.4f} | {unc} | {c.rms:.4f} | {c.max:.4f} |")
         recs = [json.loads(line) for line in (Path(tmp) / "s" / "demo" / "manifest.jsonl").open()]
         t_of = {r["kind"]: r["t"] for r in recs}
         report = f"{t_of['report'] - t_of['qa_session']:.1f} s" if "report" in t_of else "not written"

@@ -1,8 +1,9 @@
 """``harp calibrate IMAGE... --out MODEL [--model auto|radial|poly] [--degree N] [--holdout IMAGE...]``.
 
 Fits a distortion correction to the string edges of harp shots (all shots at
-once, :func:`pipeline.fit.fit_distortion`) and writes it as a model file
-(:mod:`pipeline.model_file`) with its figures of merit and provenance.
+once, :func:`station.calibration.calibrate_shots`, as a session does) and writes
+its profile as a model file (:mod:`pipeline.model_file`) with its figures of merit
+and provenance.
 
 ``--model auto`` (default) chooses the model kind and degree by
 cross-validation over the given shots (:func:`pipeline.select.select_model`:
@@ -28,14 +29,13 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.edgeset import corrected_straightness, straightness_of
-from pipeline.fit import fit_distortion
+from pipeline.edgeset import straightness_of
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
-from pipeline.select import select_model
 from station.cli_inputs import InputError, measure_file, positive_int
 
 
@@ -110,7 +110,8 @@ def _spec(args) -> FitSpec | None:
 
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
-    from station.files import write_model_file
+    from station.calibration import calibrate_shots
+    from station.files import write_profile
     from station.provenance import make_provenance
 
     cand = _spec(args)
@@ -129,23 +130,24 @@ def calibrate(args) -> dict:
     width, height = sizes.pop()
     shots = [[ln.points for ln in m.lines] for _, m in fit_m]
 
-    if cand is None:
-        if len(shots) < 2:
-            raise CalibrateError(
-                "need at least 2 shots at different harp orientations "
-                "(one orientation cannot constrain the distortion along the strings)"
-            )
-        sel = select_model(shots, width, height)
-        cand = sel.choice
-        choice = sel.to_dict()
-    else:
-        choice = {**cand.to_dict(), "reason": "given on the command line", "folds": "none", "table": []}
-
-    res = fit_distortion(
-        shots, width, height, **cand.fit_arguments(), image_sizes=[(m.width, m.height) for _, m in fit_m]
+    if cand is None and len(shots) < 2:
+        raise CalibrateError(
+            "need at least 2 shots at different harp orientations "
+            "(one orientation cannot constrain the distortion along the strings)"
+        )
+    held = [[ln.points for ln in m.lines] for _, m in hold_m]
+    cal = calibrate_shots(
+        shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m]
     )
+    if cal.selection is not None:
+        choice = cal.selection.to_dict()
+        selection = {"reason": cal.selection.reason, "folds": cal.selection.folds}
+    else:
+        selection = {"reason": "given on the command line", "folds": "none"}
+        choice = {**cal.spec.to_dict(), **selection, "table": []}
+    res = cal.fit
     if not res:
-        raise CalibrateError(f"cannot fit {cand.label}: {res.reason}")
+        raise CalibrateError(f"cannot fit {cal.spec.label}: {res.reason}")
 
     report = {
         "model": str(args.out),
@@ -167,33 +169,38 @@ def calibrate(args) -> dict:
         "warnings": list(res.warnings),
     }
     if hold_m:
-        per = []
-        for p, m in hold_m:
-            d, dm = corrected_straightness(res.model, [ln.points for ln in m.lines])
-            per.append(
-                {"path": str(p), "d_before": _num(m.d), "d_max_before": _num(m.d_max), "d": _num(d), "d_max": _num(dm)}
-            )
-        d, dm = corrected_straightness(res.model, [ln.points for _, m in hold_m for ln in m.lines])
-        report["holdout"] = {"d": _num(d), "d_max": _num(dm), "images": per}
+        per = [
+            {
+                "path": str(p),
+                "d_before": _num(m.d),
+                "d_max_before": _num(m.d_max),
+                "d": _num(h.after.d),
+                "d_max": _num(h.after.d_max),
+            }
+            for (p, m), h in zip(hold_m, cal.held_out)
+        ]
+        hold = cal.merit.holdout
+        report["holdout"] = {"d": _num(hold.d), "d_max": _num(hold.d_max), "images": per}
         d0, _ = straightness_of([ln.points for _, m in hold_m for ln in m.lines])
-        if d is not None and np.isfinite(d) and d > d0:
+        if hold.d is not None and hold.d > d0:
             report["warnings"].append(
                 f"the model leaves the held-out shots less straight than uncorrected (d {d0:.4f} px "
-                f"before, {d:.4f} px after): it does not generalise to other orientations"
+                f"before, {hold.d:.4f} px after): it does not generalise to other orientations"
             )
-    merit = {k: report[k] for k in ("before", "fit") if k in report}
-    if "holdout" in report:
-        merit["holdout"] = {"d": report["holdout"]["d"], "d_max": report["holdout"]["d_max"]}
-    merit["choice"] = {k: v for k, v in choice.items() if k != "table"}
-    merit["rejected_edges"] = report["rejected"]
-    prov = make_provenance(
-        args.images,
-        t=args.t,
-        command=["harp", "calibrate", *sys.argv[2:]],
-        holdout=[{"path": str(p)} for p, _ in hold_m],
+    profile = cal.profile(
+        width,
+        height,
+        provenance=make_provenance(
+            args.images,
+            t=args.t,
+            command=["harp", "calibrate", *sys.argv[2:]],
+            holdout=[{"path": str(p)} for p, _ in hold_m],
+        ),
+        selection=selection,
     )
+    profile = profile.with_(merit=replace(profile.merit, extra={"rejected_edges": report["rejected"]}))
     try:
-        write_model_file(args.out, res.model, width=width, height=height, merit=merit, provenance=prov)
+        write_profile(args.out, profile)
     except OSError as exc:
         raise CalibrateError(f"{args.out}: cannot write model file ({exc.strerror or exc})") from None
     return report

@@ -94,19 +94,24 @@ def _list(args, store) -> int:
     for col in ("id", "lens", "camera", "focus", "model", "holdout d", "holdout d_max", "created", "station"):
         t.add_column(col, justify="right" if col in ("id", "focus", "holdout d", "holdout d_max") else "left")
     for p in profiles:
+        hold = p.merit.holdout
         t.add_row(
             f"#{p.id}",
-            " ".join(p.lens),
-            " ".join(p.camera),
+            _ident(p.lens),
+            _ident(p.camera),
             f"{p.focus:g}",
-            p.model_name,
-            _num(p.holdout_d),
-            _num(p.holdout_d_max),
-            p.created_at,
-            p.station_id,
+            p.model.name,
+            _num(hold.d if hold else None),
+            _num(hold.d_max if hold else None),
+            p.stored_at or "-",
+            p.provenance.station or "-",
         )
     _console().print(t)
     return 0
+
+
+def _ident(identity) -> str:
+    return "-" if identity is None else f"{identity.maker} {identity.model} {identity.serial}"
 
 
 def _select(store, lens_query: str, focus: float | None):
@@ -124,13 +129,12 @@ def _select(store, lens_query: str, focus: float | None):
 def _interpolated(lens, profiles, focus: float):
     """The correction at an uncalibrated ``focus``: (model, width, height, note, loo)."""
     from pipeline.interpolate import FocusInterpolator, leave_one_out_error
-    from pipeline.models import model_from_dict
 
     sizes = {(p.width, p.height) for p in profiles}
     if len(sizes) != 1:
         raise _Fail(f"lens {' '.join(lens[1:])}: profiles of different image sizes; cannot interpolate")
     ((w, h),) = sizes
-    models = {p.focus: model_from_dict(p.model) for p in profiles}
+    models = {p.focus: p.model for p in profiles}
     known = ", ".join(f"{p.focus:g}" for p in profiles)
     if len(models) < 2 or not min(models) < focus < max(models):
         raise _Fail(
@@ -183,77 +187,56 @@ def _show(args, store) -> int:
     ):
         t.add_column(col, justify="right")
     for p in profiles:
+        fit, hold, unc = p.merit.fit, p.merit.holdout, p.merit.field_uncertainty
         t.add_row(
             f"{p.focus:g}",
             f"#{p.id}",
-            " ".join(p.camera),
-            p.model_name,
-            _num(p.fit_d),
-            _num(p.fit_d_max),
-            _num(p.holdout_d),
-            _num(p.holdout_d_max),
-            _num(p.field_uncertainty_rms),
-            _num(p.field_uncertainty_max),
-            p.created_at,
+            _ident(p.camera),
+            p.model.name,
+            _num(fit.d if fit else None),
+            _num(fit.d_max if fit else None),
+            _num(hold.d if hold else None),
+            _num(hold.d_max if hold else None),
+            _num(unc.rms if unc else None),
+            _num(unc.max if unc else None),
+            p.stored_at or "-",
         )
     console.print(t)
     if args.focus is not None:
         p = profiles[0]
         console.print(
-            f"image {p.width}x{p.height}, session {p.session_dir}, station {p.station_id}, "
-            f"software {p.software_version}"
+            f"image {p.width}x{p.height}, session {p.provenance.session_dir}, station {p.provenance.station}, "
+            f"software {p.provenance.software_version}"
         )
-        console.print_json(json.dumps(p.model))
+        console.print_json(json.dumps(p.model.to_dict()))
     return 0
 
 
 @_with_store
 def _export(args, store) -> int:
-    from pipeline.model_file import ModelFile
-    from pipeline.models import model_from_dict
+    from station.profile import Merit, Profile, Provenance
 
     lens, latest = _select(store, args.lens, None)
     if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
         model, w, h, note, loo = _interpolated(lens, latest, args.focus)
-        mf = ModelFile(
+        interpolated = Profile(
             model=model,
             width=w,
             height=h,
-            merit={
-                "interpolation_leave_one_out": [{"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo]
-            },
-            provenance={
-                "lens": list(lens[1:]),
-                "focus": args.focus,
-                "note": note,
-                "from_profiles": [p.id for p in latest],
-            },
+            merit=Merit(
+                extra={
+                    "interpolation_leave_one_out": [
+                        {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo
+                    ]
+                }
+            ),
+            lens=latest[0].lens,
+            focus=args.focus,
+            provenance=Provenance(extra={"note": note, "from_profiles": [p.id for p in latest]}),
         )
-        return _write_export(args, mf, f"interpolated focus {args.focus:g}")
+        return _write_export(args, interpolated.to_model_file(), f"interpolated focus {args.focus:g}")
     _lens, (p,) = _select(store, args.lens, args.focus)
-    try:
-        mf = ModelFile(
-            model=model_from_dict(p.model),
-            width=p.width,
-            height=p.height,
-            merit={
-                "fit": {"d": p.fit_d, "d_max": p.fit_d_max},
-                "holdout": {"d": p.holdout_d, "d_max": p.holdout_d_max},
-            },
-            provenance={
-                "profile_id": p.id,
-                "lens": list(p.lens),
-                "camera": list(p.camera),
-                "focus": p.focus,
-                "session_dir": p.session_dir,
-                "station": p.station_id,
-                "software": p.software_version,
-                "created_utc": p.created_at,
-            },
-        )
-    except ValueError as exc:
-        raise _Fail(f"profile #{p.id}: {exc}") from None
-    return _write_export(args, mf, f"profile #{p.id}")
+    return _write_export(args, p.to_model_file(), f"profile #{p.id}")
 
 
 def _write_export(args, mf, what: str) -> int:

@@ -94,21 +94,21 @@ def _store(args, config, create=False):
 
 
 def _candidates(args, config, session):
-    """[(focus, profile object, profile_id, source)] of what to judge."""
-    from station.qa import session_models
+    """[(focus, Profile, profile_id, source)] of what to judge."""
+    from station.qa import session_profiles
 
     if session is not None:
-        models = session_models(session.path)
-        if not models:
+        profiles = session_profiles(session.path)
+        if not profiles:
             raise _Fail(f"{session.path}: session has no fitted profile yet")
         return [
             (
-                focus if math.isfinite(focus) else session.config.focus_settings[f],
-                mf,
+                p.focus if p.focus is not None else session.config.focus_settings[f],
+                p,
                 None,
                 str(session.path / "profiles" / f"focus{f}.yaml"),
             )
-            for f, focus, mf in models
+            for f, p in profiles
         ]
     with _store(args, config) as store:
         lens = store.find_lens(args.target)
@@ -122,8 +122,6 @@ def _reference(args, config, focus, width, height):
     """The reference correction for one profile, or None."""
     if args.reference is None:
         return None
-    from pipeline.models import model_from_dict
-
     ref = args.reference
     if Path(ref).is_file():
         from pipeline.model_file import read_model_file
@@ -152,20 +150,19 @@ def _reference(args, config, focus, width, height):
             f"reference {ref!r} is for {', '.join(f'{w}x{h}' for w, h in sorted(sizes))} images, not {width}x{height}"
         )
     if len(profiles) == 1 and ref.startswith("#"):
-        return model_from_dict(profiles[0].model)
+        return profiles[0].model
     same = [p for p in profiles if math.isclose(p.focus, focus, abs_tol=1e-9)]
     if same:
-        return model_from_dict(same[0].model)
+        return same[0].model
     from pipeline.interpolate import interpolate_correction
 
     try:
-        return interpolate_correction({p.focus: model_from_dict(p.model) for p in profiles}, focus, width, height)
+        return interpolate_correction({p.focus: p.model for p in profiles}, focus, width, height)
     except ValueError as exc:
         raise _Fail(f"reference lens {ref!r} at focus {focus:g}: {exc}") from None
 
 
 def _report(args, title, items, results, overall, thresholds, interpolation, session) -> Path:
-    from station.qa import profile_data
     from station.report import FocusEvidence, session_evidence, write_report
 
     evidence = []
@@ -182,14 +179,14 @@ def _report(args, title, items, results, overall, thresholds, interpolation, ses
                 bootstrap_if_missing=session.config.pipeline.bootstrap or REPORT_BOOTSTRAP,
             )
         else:
-            pd = profile_data(prof)
-            e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=v, source=source)
+            e = FocusEvidence(
+                focus=focus, model=prof.model, width=prof.width, height=prof.height, verdict=v, source=source
+            )
+            unc = prof.merit.field_uncertainty
             e.uncertainty_note = (
                 "stored: RMS {} px, max {} px (no per-pixel map without the session's "
                 "frames: run `harp qa SESSION_DIR --report`)"
-            ).format(
-                *(f"{x:.4f}" if x is not None else "-" for x in (pd.field_uncertainty_rms, pd.field_uncertainty_max))
-            )
+            ).format(*(f"{x:.4f}" if x is not None else "-" for x in ((unc.rms, unc.max) if unc else (None, None))))
         evidence.append(e)
     return write_report(args.report, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 
@@ -206,7 +203,7 @@ def _plain(v):
 
 def run(args) -> int:
     from station.config import ConfigError, load_config
-    from station.qa import combine, interpolation_error, profile_data, qa_verdict, thresholds_from
+    from station.qa import combine, interpolation_error, qa_verdict, thresholds_from
     from station.session_dir import SessionDir, SessionError
     from station.store import StoreError
 
@@ -234,11 +231,10 @@ def run(args) -> int:
             items = _candidates(args, config, session)
             results = []
             for focus, prof, _pid, _src in items:
-                pd = profile_data(prof)
-                ref = _reference(args, config, focus, pd.width, pd.height)
-                results.append(qa_verdict(pd, thresholds, reference=ref))
+                ref = _reference(args, config, focus, prof.width, prof.height)
+                results.append(qa_verdict(prof, thresholds, reference=ref))
             overall = combine(results)
-            pds = [profile_data(p) for _f, p, _i, _s in items]
+            pds = [p for _f, p, _i, _s in items]
             interpolation = []
             if len({(p.width, p.height) for p in pds}) == 1 and len({f for f, *_ in items}) == len(items):
                 interpolation = interpolation_error(
@@ -273,6 +269,8 @@ def run(args) -> int:
                         profile_id=pid,
                         session_dir=str(session.path.resolve()) if session else None,
                     )
+                    if pid is not None:
+                        store.record_verdict(pid, v)
         except StoreError as exc:
             print(f"harp qa: warning: result not recorded: {exc}", file=sys.stderr)
 
@@ -312,7 +310,7 @@ def _print_table(target, items, results, interpolation, overall, report) -> None
             fmt(m.get("distortion_max_px")),
             fmt(m.get("reference_max_px")),
             fmt(m.get("field_uncertainty_max_px")),
-            "; ".join(v.reasons or v.checks),
+            "; ".join(v.reasons or [c.text for c in v.checks]),
         )
     console.print(t)
     for r in interpolation:

@@ -48,19 +48,19 @@ import numpy as np
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import Camera, Turntable
 from station import __version__
+from station.calibration import Calibration, calibrate_shots
 from station.evidence_files import measurement_arrays, uncertainty_arrays
 from station.plan import Capture, Fit, LockFocus, Measure, Move, Save, Settle, Step, Store, capture_steps, plan_session
 from station.processing import (
-    FocusFit,
     ShotMeasurement,
     average_frames,
     exposure_problems,
-    fit_focus,
     full_scale,
     garbage_rows,
     measure_shot,
     shot_problems,
 )
+from station.profile import Profile
 from station.session_dir import SessionDir
 
 #: a stage read-back further than this from the target is a fault (degrees)
@@ -81,8 +81,14 @@ class FocusSummary:
     shots: int = 0
     recaptures: int = 0
     lines: int = 0
-    fit: FocusFit | None = None
+    calibration: Calibration | None = None
+    profile: Profile | None = None
     profile_id: int | None = None
+
+    @property
+    def failure(self) -> str | None:
+        """Why this focus setting has no profile (None: it has one, or was not fitted in this run)."""
+        return self.calibration.failure if self.calibration is not None else None
 
 
 @dataclass
@@ -186,14 +192,15 @@ class Executor:
         """QA verdict of every profile of the session, and the focus-interpolation
         error (leave one calibrated focus out) — recorded, stored and printed.
         Returns ``(models, verdicts, overall, interpolation)`` (None: no profile)."""
-        from station.qa import combine, interpolation_error, qa_verdict, session_models
+        from station.qa import combine, interpolation_error, qa_verdict, session_profiles
 
-        models = session_models(self.session.path)
-        if not models:
+        profiles = session_profiles(self.session.path)
+        if not profiles:
             return None
         verdicts = []
-        for f, focus, mf in models:
-            v = qa_verdict(mf, self.config.qa)
+        for f, p in profiles:
+            focus = p.focus if p.focus is not None else self.config.focus_settings[f]
+            v = qa_verdict(p, self.config.qa)
             verdicts.append(v)
             pid = self._summary[f].profile_id if f in self._summary else None
             self.session.append(
@@ -207,13 +214,19 @@ class Executor:
                     profile_id=pid,
                     session_dir=str(self.session.path.resolve()),
                 )
+                if pid is not None:
+                    self.store.record_verdict(pid, v)
             self._note(
                 f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
-                + ("; ".join(v.reasons) if v.reasons else "; ".join(v.checks))
+                + ("; ".join(v.reasons) if v.reasons else "; ".join(c.text for c in v.checks))
             )
-        w, h = models[0][2].width, models[0][2].height
+        w, h = profiles[0][1].width, profiles[0][1].height
         try:
-            loo = interpolation_error({focus: mf.model for _f, focus, mf in models}, w, h)
+            loo = interpolation_error(
+                {(p.focus if p.focus is not None else self.config.focus_settings[f]): p.model for f, p in profiles},
+                w,
+                h,
+            )
         except ValueError as exc:
             loo = []
             self._note(f"focus interpolation: not available ({exc})")
@@ -234,9 +247,9 @@ class Executor:
         overall = combine(verdicts)
         self.session.append({"kind": "qa_session", "verdict": overall})
         self._note(f"QA verdict: [{'bold green' if overall == 'PASS' else 'bold red'}]{overall}")
-        return models, verdicts, overall, loo
+        return profiles, verdicts, overall, loo
 
-    def _write_report(self, models, verdicts, overall, interpolation) -> None:
+    def _write_report(self, profiles, verdicts, overall, interpolation) -> None:
         """The session report (:func:`station.report.write_session_report`) into ``DIR/report``,
         from the measurements and uncertainty maps the session kept (nothing re-measured)."""
         from station.report import write_session_report
@@ -248,7 +261,7 @@ class Executor:
                 self.session,
                 self.session.path / "report",
                 title,
-                models,
+                profiles,
                 verdicts,
                 overall,
                 thresholds=cfg.qa,
@@ -411,29 +424,41 @@ class Executor:
         shots = [self._shots[(f, o)] for o in range(n_o)]
         w, h = self._image_size(f)
         pc = self.config.pipeline
-        fit = fit_focus(shots, w, h, pc, bootstrap=pc.bootstrap, seed=pc.seed + 1000 * f, map_fn=self._map_fn())
-        self._summary[f].fit = fit
-        if fit.failure:
-            self.session.append({"kind": "fit", "focus_idx": f, "failure": fit.failure})
-            raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: {fit.failure}")
+        cal = calibrate_shots(
+            [list(s.lines) for s in shots],
+            w,
+            h,
+            pc.spec,
+            holdout="orientations",
+            bootstrap=pc.bootstrap,
+            seed=pc.seed + 1000 * f,
+            map_fn=self._map_fn(),
+        )
+        self._summary[f].calibration = cal
+        if cal.failure:
+            self.session.append({"kind": "fit", "focus_idx": f, "failure": cal.failure})
+            raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: {cal.failure}")
         unc_file = {}
-        if fit.uncertainty is not None:
-            saved = self.session.write_arrays(f"profiles/focus{f}_uncertainty.npz", uncertainty_arrays(fit.uncertainty))
+        if cal.uncertainty is not None:
+            saved = self.session.write_arrays(f"profiles/focus{f}_uncertainty.npz", uncertainty_arrays(cal.uncertainty))
             unc_file = {"uncertainty_file": saved["file"], "uncertainty_sha256": saved["sha256"]}
+        m = cal.merit
+        unc = m.field_uncertainty
         self.session.append(
             {
                 "kind": "fit",
                 "focus_idx": f,
-                "model": fit.model.to_dict(),
+                "model": cal.fit.model.to_dict(),
                 **unc_file,
-                "fit_d": fit.fit_d,
-                "fit_d_max": fit.fit_d_max,
-                "holdout_d": fit.holdout_d,
-                "holdout_d_max": fit.holdout_d_max,
-                "holdout_per_orientation": list(fit.holdout_per_orientation),
-                "uncertainty_rms": fit.uncertainty_rms,
-                "uncertainty_max": fit.uncertainty_max,
-                "details": fit.details,
+                "spec": cal.spec.to_dict() if cal.spec is not None else None,
+                "fit_d": m.fit.d if m.fit else None,
+                "fit_d_max": m.fit.d_max if m.fit else None,
+                "holdout_d": m.holdout.d if m.holdout else None,
+                "holdout_d_max": m.holdout.d_max if m.holdout else None,
+                "holdout_per_orientation": list(m.holdout.per_orientation_d) if m.holdout else [],
+                "uncertainty_rms": unc.rms if unc else None,
+                "uncertainty_max": unc.max if unc else None,
+                "details": dict(cal.details),
             }
         )
         self._advance(self._proc_task)
@@ -448,7 +473,7 @@ class Executor:
             from concurrent.futures import ProcessPoolExecutor
 
             ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
-            ctx.set_forkserver_preload(["station.processing", "pipeline.fit", "pipeline.uncertainty"])
+            ctx.set_forkserver_preload(["station.calibration", "pipeline.fit", "pipeline.uncertainty"])
             _start_forkserver_ignoring_sigint()
             self._pool = ProcessPoolExecutor(
                 max_workers=n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
@@ -460,72 +485,49 @@ class Executor:
         return w, h
 
     def _do_Store(self, step: Store) -> None:
-        from station.files import write_model_file
+        from station.files import write_profile
         from station.provenance import make_provenance
 
         f = step.focus_idx
         cfg = self.config
-        fit = self._summary[f].fit
+        cal = self._summary[f].calibration
         w, h = self._image_size(f)
-        merit = {
-            "fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
-            "holdout": {
-                "d": fit.holdout_d,
-                "d_max": fit.holdout_d_max,
-                "scheme": "leave one orientation out",
-                "per_orientation_d": list(fit.holdout_per_orientation),
-            },
-        }
-        if fit.uncertainty_rms is not None:
-            merit["field_uncertainty"] = {
-                "rms": fit.uncertainty_rms,
-                "max": fit.uncertainty_max,
-                "replicates": fit.details.get("bootstrap_replicates"),
-            }
         frames = [
             self.session.path / r["file"]
             for o in range(len(cfg.capture.orientations_deg))
             for r in self.session.frames(f, o)
         ]
-        prov = make_provenance(
-            frames,
-            t=cfg.pipeline.t,
-            command="harp session",
-            focus=cfg.focus_settings[f],
-            lens=list(_ident(cfg.lens)),
-            camera=list(_ident(cfg.camera_body)),
-            station=cfg.station.id,
-        )
         path = self.session.path / "profiles" / f"focus{f}.yaml"
-        write_model_file(path, fit.model, width=w, height=h, merit=merit, provenance=prov)
+        profile = cal.profile(
+            w,
+            h,
+            provenance=make_provenance(
+                frames,
+                t=cfg.pipeline.t,
+                command="harp session",
+                station=cfg.station.id,
+                session_dir=str(self.session.path.resolve()),
+            ),
+            lens=cfg.lens,
+            camera=cfg.camera_body,
+            focus=cfg.focus_settings[f],
+            selection=None if cal.selection is not None else {"reason": "pipeline.model of the configuration"},
+        )
+        profile = profile.with_(
+            details={
+                **profile.details,
+                "model_file": str(path),
+                "orientations_deg": list(cfg.capture.orientations_deg),
+                "frames_per_orientation": cfg.capture.frames_per_orientation,
+                "t": cfg.pipeline.t,
+            }
+        )
+        write_profile(path, profile)
         profile_id = None
         if self.store is not None:
-            profile_id = self.store.put_profile(
-                lens=_ident(cfg.lens),
-                camera=_ident(cfg.camera_body),
-                focus=cfg.focus_settings[f],
-                model=fit.model.to_dict(),
-                width=w,
-                height=h,
-                fit_d=fit.fit_d,
-                fit_d_max=fit.fit_d_max,
-                holdout_d=fit.holdout_d,
-                holdout_d_max=fit.holdout_d_max,
-                field_uncertainty_rms=fit.uncertainty_rms,
-                field_uncertainty_max=fit.uncertainty_max,
-                session_dir=str(self.session.path.resolve()),
-                station_id=cfg.station.id,
-                software_version=__version__,
-                details={
-                    **fit.details,
-                    "holdout_per_orientation": list(fit.holdout_per_orientation),
-                    "model_file": str(path),
-                    "orientations_deg": list(cfg.capture.orientations_deg),
-                    "frames_per_orientation": cfg.capture.frames_per_orientation,
-                    "t": cfg.pipeline.t,
-                    "degree": cfg.pipeline.degree,
-                },
-            )
+            profile_id = self.store.put_profile(profile)
+            profile = profile.with_(id=profile_id)
+        self._summary[f].profile = profile
         self._summary[f].profile_id = profile_id
         self.session.append(
             {"kind": "stored", "focus_idx": f, "profile_id": profile_id, "model_file": f"profiles/{path.name}"}
@@ -635,19 +637,21 @@ class Executor:
             t.add_column(col, justify="right")
         fmt = lambda v: "-" if v is None or not np.isfinite(v) else f"{v:.4f}"  # noqa: E731
         for s in self._summary.values():
-            fit = s.fit
+            cal = s.calibration
+            m = cal.merit if cal is not None else None
+            fit, hold, unc = (m.fit, m.holdout, m.field_uncertainty) if m is not None else (None, None, None)
             t.add_row(
                 f"{s.focus:g}",
                 str(s.shots),
                 str(s.recaptures),
                 str(s.lines),
-                fmt(fit.fit_d if fit else None),
-                fmt(fit.fit_d_max if fit else None),
-                fmt(fit.holdout_d if fit else None),
-                fmt(fit.holdout_d_max if fit else None),
-                fmt(fit.uncertainty_rms if fit else None),
-                fmt(fit.uncertainty_max if fit else None),
-                getattr(fit.model, "name", "?") if fit and fit.model is not None else "-",
+                fmt(fit.d if fit else None),
+                fmt(fit.d_max if fit else None),
+                fmt(hold.d if hold else None),
+                fmt(hold.d_max if hold else None),
+                fmt(unc.rms if unc else None),
+                fmt(unc.max if unc else None),
+                cal.fit.model.name if cal is not None and cal.fit else "-",
                 f"#{s.profile_id}" if s.profile_id is not None else "-",
             )
         self.console.print(t)
@@ -723,7 +727,3 @@ def _jsonable(value):
         return json.loads(json.dumps(value, default=json_default))
     except (TypeError, ValueError):
         return repr(value)
-
-
-def _ident(identity) -> tuple[str, str, str]:
-    return (identity.maker, identity.model, identity.serial)

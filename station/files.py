@@ -6,7 +6,7 @@ directory, so a reader — or a session resumed after a kill — never sees a
 half-written file; a temporary left by a kill matches ``.*.tmp*`` and is removed
 when a session directory is reopened (:mod:`station.session_dir`).
 :func:`write_model_file` writes a harp model file (:mod:`pipeline.model_file`, the
-format) this way. :func:`sha256_file` is the checksum recorded for every input.
+format) this way, :func:`write_profile` the model file of a :class:`station.profile.Profile`. :func:`sha256_file` is the checksum recorded for every input.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from typing import Any
 
 from pipeline.model_file import model_file_text
 from pipeline.models.base import DistortionModel
+from station.profile import Profile
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
@@ -61,6 +62,12 @@ def write_model_file(
 ) -> Path:
     """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
     atomic_write_text(path, model_file_text(model, width=width, height=height, merit=merit, provenance=provenance))
+    return Path(path)
+
+
+def write_profile(path: str | os.PathLike, profile: Profile) -> Path:
+    """Write a profile's model file (:meth:`station.profile.Profile.to_model_file`) to ``path`` atomically."""
+    atomic_write_text(path, profile.to_model_file().text())
     return Path(path)
 
 

@@ -1,15 +1,15 @@
-"""What the executor does with captured frames: average, check, measure, fit.
+"""What the executor does with captured frames: average, check, measure.
 
 Thin glue between the session and the pure :mod:`pipeline`: averaging the
-frames of a shot, the acceptance checks (exposure, strings found, string
-angle against the commanded orientation) and the per-focus fit with
-leave-one-orientation-out cross-validation. No files, no devices.
+frames of a shot and the acceptance checks (exposure, strings found, string
+angle against the commanded orientation). The per-focus fit is
+:func:`station.calibration.calibrate_shots`. No files, no devices.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -129,127 +129,3 @@ def shot_problems(m: ShotMeasurement, expected_angle: float, checks: CheckConfig
             f"(off by {diff:.1f} > {checks.angle_tolerance_deg:g})"
         ]
     return []
-
-
-@dataclass(frozen=True)
-class FocusFit:
-    """The correction of one focus setting and how well it generalises."""
-
-    model: object | None  # DistortionModel, None on failure
-    fit_d: float
-    fit_d_max: float
-    holdout_d: float
-    holdout_d_max: float
-    holdout_per_orientation: tuple[float, ...] = ()
-    failure: str | None = None
-    details: dict = field(default_factory=dict)
-    uncertainty_rms: float | None = None  # bootstrap field uncertainty over the image, px
-    uncertainty_max: float | None = None
-    uncertainty: object = None  # the pipeline.uncertainty.FieldUncertainty (per-pixel map), or None
-
-
-def fit_focus(
-    shots: Sequence[ShotMeasurement],
-    width: int,
-    height: int,
-    pipeline: PipelineConfig,
-    *,
-    bootstrap: int = 0,
-    seed: int = 0,
-    map_fn=map,
-) -> FocusFit:
-    """Fit one focus setting on all orientations, cross-validate it, bootstrap it.
-
-    * Fit: :func:`pipeline.fit.fit_distortion` on the edges of every shot
-      (``pipeline.model: auto``: model and degree chosen first by
-      cross-validation over the shots, :func:`pipeline.select.select_model`).
-    * Holdout: leave-one-orientation-out — for each orientation the model is
-      fitted on the others and applied to the left-out orientation's edges;
-      ``holdout_d`` / ``holdout_d_max`` are the straightness (Tang et al.
-      2012) of all left-out edges together. Edges the full fit rejected as
-      outliers (dust, frame, mis-grouped) are left out of the evaluation.
-    * Field uncertainty (``bootstrap`` >= 2 replicates):
-      :func:`pipeline.uncertainty.bootstrap_field_uncertainty` — each shot's
-      kept edges are resampled with replacement and refitted (started from
-      the full fit); the spread of the corrections modulo homography is the
-      per-pixel uncertainty map (``FocusFit.uncertainty``), reported as its
-      RMS and max over the image.
-
-    ``map_fn`` runs the independent fits (a process pool's ``map`` to use
-    several cores); results do not depend on it.
-    """
-    from pipeline.edgeset import corrected_straightness, straightness_of
-    from pipeline.fit import fit_distortion
-
-    lines = [list(s.lines) for s in shots]
-    selection = None
-    spec = pipeline.spec
-    if spec is None:
-        from pipeline.select import select_model
-
-        selection = select_model(lines, width, height)
-        spec = selection.choice
-    kw = spec.fit_arguments()
-    full = fit_distortion(lines, width, height, **kw)
-    if not full:
-        return FocusFit(None, np.nan, np.nan, np.nan, np.nan, failure=full.reason)
-    outliers = {(r.image, r.line) for r in full.rejected}
-    from pipeline.uncertainty import refit_job
-
-    jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
-    results = list(map_fn(refit_job, jobs))
-
-    held_out: list[np.ndarray] = []
-    per_o: list[float] = []
-    for k, (model, reason) in enumerate(results[: len(lines)]):
-        if reason:
-            return FocusFit(
-                full.model,
-                full.d_after,
-                full.d_max_after,
-                np.nan,
-                np.nan,
-                failure=f"cross-validation without orientation {k}: {reason}",
-            )
-        kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-        per_o.append(corrected_straightness(model, kept)[0])
-        held_out.extend(model.undistort_points(p) for p in kept)
-    hold_d, hold_d_max = straightness_of(held_out)
-    details = {
-        "d_before": full.d_before,
-        "d_max_before": full.d_max_before,
-        "n_points": full.n_points,
-        "n_params": full.n_params,
-        "rejected_edges": len(full.rejected),
-        "warnings": list(full.warnings),
-        "fit": {k: v for k, v in kw.items()},
-    }
-    if selection is not None:
-        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason, "folds": selection.folds}
-    unc = None
-    if bootstrap == 1:
-        details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
-    elif bootstrap:
-        from pipeline.uncertainty import bootstrap_field_uncertainty
-
-        res = bootstrap_field_uncertainty(
-            lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
-        )
-        if not res:
-            details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=res.reason)
-        else:
-            unc = res
-            details.update(bootstrap_replicates=res.n_boot, bootstrap_failed=res.n_failed)
-        details["bootstrap_scheme"] = "edges resampled with replacement within each shot"
-    return FocusFit(
-        model=full.model,
-        fit_d=full.d_after,
-        fit_d_max=full.d_max_after,
-        holdout_d=hold_d,
-        holdout_d_max=hold_d_max,
-        holdout_per_orientation=tuple(per_o),
-        details=details,
-        uncertainty_rms=unc.rms if unc is not None else None,
-        uncertainty_max=unc.max if unc is not None else None,
-        uncertainty=unc,
-    )

@@ -16,56 +16,24 @@ A profile with no holdout figure, or a correction that is not finite over
 the image, FAILs with that reason. Figures that are not judged (e.g. the
 field uncertainty, or a distortion with no threshold) are still reported.
 
-:func:`qa_verdict` is the entry point for one profile in any of its forms (a
-stored :class:`station.store.Profile`, a :class:`pipeline.model_file.ModelFile`
-or a plain mapping); :func:`evaluate` is the same on a model.
+:func:`qa_verdict` is the entry point for one :class:`station.profile.Profile`;
+:func:`evaluate` is the same on a model. Each judged figure is a typed
+:class:`station.profile.Check` (value, comparison, limit, passed) of the
+:class:`station.profile.Verdict`.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from station.config import QAConfig
+from station.profile import Check, Profile, Verdict
 
 THRESHOLD_FIELDS = ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px")
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The QA verdict of one profile.
-
-    ``verdict`` is ``"PASS"`` or ``"FAIL"``; ``reasons`` say why it failed
-    (empty for PASS); ``metrics`` (alias ``figures``) holds every figure
-    computed, in pixels; ``checks`` lists what was judged, one line each.
-    """
-
-    verdict: str
-    reasons: tuple[str, ...]
-    metrics: dict = field(default_factory=dict)
-    checks: tuple[str, ...] = ()
-
-    @property
-    def passed(self) -> bool:
-        return self.verdict == "PASS"
-
-    @property
-    def figures(self) -> dict:
-        return self.metrics
-
-    def to_dict(self) -> dict:
-        return {
-            "verdict": self.verdict,
-            "passed": self.passed,
-            "reasons": list(self.reasons),
-            "checks": list(self.checks),
-            "figures": dict(self.metrics),
-        }
-
-
-QAVerdict = Verdict
 
 
 def thresholds_from(obj: Any = None, **overrides) -> QAConfig:
@@ -131,7 +99,7 @@ def evaluate(
     from pipeline.compare import compare_models
 
     reasons: list[str] = []
-    checks: list[str] = []
+    checks: list[Check] = []
     metrics: dict = {"holdout_d_px": holdout_d}
     metrics.update({k: v for k, v in (extra or {}).items() if v is not None})
 
@@ -139,8 +107,9 @@ def evaluate(
     if not _finite(holdout_d):
         reasons.append("no cross-validated (holdout) straightness for this profile")
     else:
-        checks.append(f"holdout d {holdout_d:.4f} px <= {t:g} px")
-        if holdout_d > t:
+        ok = holdout_d <= t
+        checks.append(Check("holdout_d", holdout_d, "<=", t, ok, f"holdout d {holdout_d:.4f} px <= {t:g} px"))
+        if not ok:
             reasons.append(
                 f"holdout d {holdout_d:.4f} px > {t:g} px: the correction does not "
                 "straighten shots it was not fitted on well enough"
@@ -154,141 +123,112 @@ def evaluate(
     if not (math.isfinite(rms) and math.isfinite(mx)):
         reasons.append("the correction is not finite over the whole image")
     elif thresholds.max_distortion_px is not None:
-        checks.append(f"distortion max {mx:.3f} px <= {thresholds.max_distortion_px:g} px")
-        if mx > thresholds.max_distortion_px:
-            reasons.append(
-                f"distortion {mx:.3f} px (max over the image, modulo homography) > {thresholds.max_distortion_px:g} px"
-            )
+        lim = thresholds.max_distortion_px
+        ok = mx <= lim
+        checks.append(Check("distortion_max", mx, "<=", lim, ok, f"distortion max {mx:.3f} px <= {lim:g} px"))
+        if not ok:
+            reasons.append(f"distortion {mx:.3f} px (max over the image, modulo homography) > {lim:g} px")
 
+    lim = thresholds.max_reference_deviation_px
     if reference is not None:
         c = compare_models(model, reference, width, height, step=grid_step(width, height))
         metrics.update(reference_rms_px=c.rms, reference_max_px=c.max)
-        lim = thresholds.max_reference_deviation_px
         if lim is not None:
-            checks.append(f"deviation from reference max {c.max:.4f} px <= {lim:g} px")
-            if not c.max <= lim:
+            ok = c.max <= lim
+            checks.append(
+                Check(
+                    "reference_deviation_max",
+                    c.max,
+                    "<=",
+                    lim,
+                    ok,
+                    f"deviation from reference max {c.max:.4f} px <= {lim:g} px",
+                )
+            )
+            if not ok:
                 reasons.append(f"deviates from the reference by {c.max:.4f} px max ({c.rms:.4f} px RMS) > {lim:g} px")
         else:
-            checks.append(f"deviation from reference max {c.max:.4f} px: reported only (no threshold)")
-    elif thresholds.max_reference_deviation_px is not None:
-        checks.append("deviation from reference: not checked (no reference given)")
+            checks.append(
+                Check(
+                    "reference_deviation_max",
+                    c.max,
+                    "<=",
+                    None,
+                    None,
+                    f"deviation from reference max {c.max:.4f} px: reported only (no threshold)",
+                )
+            )
+    elif lim is not None:
+        checks.append(
+            Check(
+                "reference_deviation_max",
+                None,
+                "<=",
+                lim,
+                None,
+                "deviation from reference: not checked (no reference given)",
+            )
+        )
 
-    return Verdict("FAIL" if reasons else "PASS", tuple(reasons), metrics, tuple(checks))
-
-
-@dataclass(frozen=True)
-class ProfileData:
-    """What QA needs of a profile, whatever it was read from."""
-
-    model: Any  # DistortionModel
-    width: int
-    height: int
-    holdout_d: float | None = None
-    holdout_d_max: float | None = None
-    fit_d: float | None = None
-    field_uncertainty_rms: float | None = None
-    field_uncertainty_max: float | None = None
-    focus: float | None = None
-
-    def extra(self) -> dict:
-        return {
-            "holdout_d_max_px": self.holdout_d_max,
-            "fit_d_px": self.fit_d,
-            "field_uncertainty_rms_px": self.field_uncertainty_rms,
-            "field_uncertainty_max_px": self.field_uncertainty_max,
-        }
+    return Verdict(
+        "FAIL" if reasons else "PASS",
+        tuple(reasons),
+        metrics,
+        tuple(checks),
+        {k: getattr(thresholds, k) for k in THRESHOLD_FIELDS},
+    )
 
 
 def _num(v) -> float | None:
     return float(v) if _finite(v) else None
 
 
-def profile_data(obj) -> ProfileData:
-    """Normalise a stored ``Profile``, a ``ModelFile``, a mapping or a ``ProfileData``.
-
-    A mapping needs ``model`` (a DistortionModel or its dict), ``width``,
-    ``height``; optional ``holdout_d``, ``holdout_d_max``, ``fit_d``,
-    ``field_uncertainty_rms``, ``field_uncertainty_max``, ``focus``.
-    """
-    from pipeline.models import model_from_dict
-    from pipeline.models.base import DistortionModel
-
-    if isinstance(obj, ProfileData):
-        return obj
-    if hasattr(obj, "merit") and hasattr(obj, "provenance"):  # pipeline.model_file.ModelFile
-        merit = obj.merit or {}
-        fu = merit.get("field_uncertainty") or {}
-        return ProfileData(
-            obj.model,
-            int(obj.width),
-            int(obj.height),
-            holdout_d=_num((merit.get("holdout") or {}).get("d")),
-            holdout_d_max=_num((merit.get("holdout") or {}).get("d_max")),
-            fit_d=_num((merit.get("fit") or {}).get("d")),
-            field_uncertainty_rms=_num(fu.get("rms")),
-            field_uncertainty_max=_num(fu.get("max")),
-            focus=_num((obj.provenance or {}).get("focus")),
-        )
-    if isinstance(obj, Mapping):
-        get = obj.get
-    elif hasattr(obj, "model") and hasattr(obj, "width"):  # station.store.Profile
-
-        def get(k, default=None):
-            return getattr(obj, k, default)
-    else:
-        raise ValueError(f"not a profile: {type(obj).__name__}")
-    model = get("model")
-    if isinstance(model, Mapping):
-        model = model_from_dict(dict(model))
-    if not isinstance(model, DistortionModel):
-        raise ValueError("a profile needs a 'model' (a distortion model or its dict)")
-    if get("width") is None or get("height") is None:
-        raise ValueError("a profile needs its image 'width' and 'height'")
-    return ProfileData(
-        model,
-        int(get("width")),
-        int(get("height")),
-        holdout_d=_num(get("holdout_d")),
-        holdout_d_max=_num(get("holdout_d_max")),
-        fit_d=_num(get("fit_d")),
-        field_uncertainty_rms=_num(get("field_uncertainty_rms")),
-        field_uncertainty_max=_num(get("field_uncertainty_max")),
-        focus=_num(get("focus")),
-    )
+def reported_figures(profile: Profile) -> dict[str, float | None]:
+    """The figures of a profile QA reports without judging them (px)."""
+    m = profile.merit
+    unc = m.field_uncertainty
+    return {
+        "holdout_d_max_px": _num(m.holdout.d_max) if m.holdout else None,
+        "fit_d_px": _num(m.fit.d) if m.fit else None,
+        "field_uncertainty_rms_px": _num(unc.rms) if unc else None,
+        "field_uncertainty_max_px": _num(unc.max) if unc else None,
+    }
 
 
-def qa_verdict(profile, thresholds=None, reference=None) -> Verdict:
+def qa_verdict(profile: Profile, thresholds=None, reference=None) -> Verdict:
     """The QA verdict of one profile.
 
     Parameters
     ----------
-    profile : station.store.Profile, pipeline.model_file.ModelFile, mapping or ProfileData
-        The correction and its figures (see :func:`profile_data`).
+    profile : Profile
+        The correction and its figures.
     thresholds : QAConfig or mapping, optional
         ``max_holdout_d_px`` (default 0.05), ``max_distortion_px``,
         ``max_reference_deviation_px`` (``None``: not judged).
-    reference : DistortionModel or any ``profile`` form, optional
-        The golden reference correction of the same lens model; must be for
-        the same image size (ValueError otherwise).
+    reference : DistortionModel or Profile, optional
+        The golden reference correction of the same lens model; a profile must be
+        for the same image size (ValueError otherwise).
 
     Returns
     -------
     Verdict
-        ``passed``, ``reasons`` (one per failed check), ``figures`` (px).
+        ``passed``, ``reasons`` (one per failed check), ``figures`` (px), ``checks``.
     """
-    from pipeline.models.base import DistortionModel
-
-    p = profile_data(profile)
-    if reference is not None and not isinstance(reference, DistortionModel):
-        r = profile_data(reference)
-        if (r.width, r.height) != (p.width, p.height):
+    if isinstance(reference, Profile):
+        if (reference.width, reference.height) != (profile.width, profile.height):
             raise ValueError(
-                f"the reference is for {r.width}x{r.height} images, the profile for "
-                f"{p.width}x{p.height}: they cannot be compared"
+                f"the reference is for {reference.width}x{reference.height} images, the profile for "
+                f"{profile.width}x{profile.height}: they cannot be compared"
             )
-        reference = r.model
+        reference = reference.model
     return evaluate(
-        p.model, p.width, p.height, p.holdout_d, thresholds_from(thresholds), reference=reference, extra=p.extra()
+        profile.model,
+        profile.width,
+        profile.height,
+        _num(profile.merit.holdout_d),
+        thresholds_from(thresholds),
+        reference=reference,
+        extra=reported_figures(profile),
     )
 
 
@@ -298,19 +238,9 @@ def combine(verdicts) -> str:
     return "PASS" if verdicts and all(v.passed for v in verdicts) else "FAIL"
 
 
-@dataclass(frozen=True)
-class ProfileVerdict:
-    focus: float
-    verdict: Verdict
-    profile_id: int | None = None
-    source: str = ""  # model file or "profile #id"
-
-
-def session_models(session_path) -> list[tuple[int, float, object]]:
-    """``(focus_idx, focus, ModelFile)`` of every profile a session directory holds."""
-    import re
-    from pathlib import Path
-
+def session_profiles(session_path) -> list[tuple[int, Profile]]:
+    """``(focus_idx, profile)`` of every profile a session directory holds, by focus index
+    (a profile file that does not record its focus gets the session's focus setting later)."""
     from pipeline.model_file import read_model_file
 
     out = []
@@ -318,15 +248,8 @@ def session_models(session_path) -> list[tuple[int, float, object]]:
         m = re.fullmatch(r"focus(\d+)\.yaml", p.name)
         if not m:
             continue
-        mf = read_model_file(p)
-        focus = mf.provenance.get("focus")
-        out.append((int(m.group(1)), float(focus) if focus is not None else math.nan, mf))
+        out.append((int(m.group(1)), Profile.from_model_file(read_model_file(p))))
     return sorted(out, key=lambda x: x[0])
-
-
-def holdout_of(model_file) -> float | None:
-    v = (model_file.merit or {}).get("holdout", {}).get("d")
-    return float(v) if isinstance(v, (int, float)) else None
 
 
 def interpolation_error(models_by_focus: dict, width: int, height: int):

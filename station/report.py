@@ -42,7 +42,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from station.qa import Verdict
+from station.profile import Profile, Verdict
 
 
 @dataclass(frozen=True)
@@ -280,7 +280,7 @@ def write_report(
         md += [f"## {label}", ""]
         if e.source:
             md += [f"Profile: `{e.source}`", ""]
-        md += ["Checks: " + ("; ".join(e.verdict.checks) or "-"), ""]
+        md += ["Checks: " + ("; ".join(c.text for c in e.verdict.checks) or "-"), ""]
         if e.verdict.reasons:
             md += ["Reasons for FAIL:", ""] + [f"- {r}" for r in e.verdict.reasons] + [""]
         name = f"field_f{i}.png"
@@ -455,33 +455,37 @@ def stored_uncertainty(session, focus_idx: int, model):
 
 
 def session_evidence(
-    session, focus_idx: int, focus: float, profile, verdict: Verdict, source: str = "", *, bootstrap_if_missing: int = 0
+    session,
+    focus_idx: int,
+    focus: float,
+    profile: Profile,
+    verdict: Verdict,
+    source: str = "",
+    *,
+    bootstrap_if_missing: int = 0,
 ) -> FocusEvidence:
     """The report's evidence on one focus setting of a session.
 
-    ``profile``: anything :func:`station.qa.profile_data` takes (e.g. the
-    session's model file). Shots and the uncertainty map are those the
-    session kept; a missing map is bootstrapped with ``bootstrap_if_missing``
-    replicates (0: the report says it is not available)."""
-    from station.qa import profile_data
-
-    pd = profile_data(profile)
+    Shots and the uncertainty map are those the session kept; a missing map is
+    bootstrapped with ``bootstrap_if_missing`` replicates (0: the report says it is
+    not available), refitting exactly the spec the profile records (an older
+    profile that records none: the configuration's, when it names one)."""
     cfg = session.config
-    e = FocusEvidence(focus=focus, model=pd.model, width=pd.width, height=pd.height, verdict=verdict, source=source)
+    e = FocusEvidence(
+        focus=focus, model=profile.model, width=profile.width, height=profile.height, verdict=verdict, source=source
+    )
     e.shots = session_shots(session, focus_idx, t=cfg.pipeline.t)
-    e.uncertainty = stored_uncertainty(session, focus_idx, pd.model)
+    e.uncertainty = stored_uncertainty(session, focus_idx, profile.model)
     if e.uncertainty is None:
-        if bootstrap_if_missing >= 2 and e.shots:
-            e.uncertainty, e.uncertainty_note = shot_uncertainty(
-                e.shots,
-                pd.width,
-                pd.height,
-                cfg.pipeline.spec,
-                n_boot=bootstrap_if_missing,
-                seed=cfg.pipeline.seed,
-            )
-        else:
+        spec = profile.spec if profile.spec is not None else cfg.pipeline.spec
+        if bootstrap_if_missing < 2 or not e.shots:
             e.uncertainty_note = "not computed in this session (pipeline.bootstrap: 0)"
+        elif spec is None:
+            e.uncertainty_note = "not available: the profile does not record which model was fitted"
+        else:
+            e.uncertainty, e.uncertainty_note = shot_uncertainty(
+                e.shots, profile.width, profile.height, spec, n_boot=bootstrap_if_missing, seed=cfg.pipeline.seed
+            )
     return e
 
 
@@ -489,7 +493,7 @@ def write_session_report(
     session,
     out_dir,
     title: str,
-    models,
+    profiles: Sequence[tuple[int, Profile]],
     verdicts: Sequence[Verdict],
     overall: str,
     *,
@@ -497,19 +501,20 @@ def write_session_report(
     interpolation: Sequence = (),
     bootstrap_if_missing: int = 0,
 ) -> Path:
-    """Report of a session's profiles: ``models`` as :func:`station.qa.session_models`
-    returns them, ``verdicts`` in the same order. Returns the Markdown path."""
+    """Report of a session's profiles: ``(focus_idx, profile)`` as
+    :func:`station.qa.session_profiles` returns them, ``verdicts`` in the same order.
+    Returns the Markdown path."""
     evidence = [
         session_evidence(
             session,
             f,
-            focus if math.isfinite(focus) else session.config.focus_settings[f],
-            mf,
+            p.focus if p.focus is not None else session.config.focus_settings[f],
+            p,
             v,
             source=f"profiles/focus{f}.yaml",
             bootstrap_if_missing=bootstrap_if_missing,
         )
-        for (f, focus, mf), v in zip(models, verdicts)
+        for (f, p), v in zip(profiles, verdicts)
     ]
     return write_report(out_dir, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
 

@@ -1,10 +1,12 @@
 """The profile store: one SQLite database file (WAL mode) of lens profiles.
 
 Tables: ``lenses`` (maker, model, serial), ``cameras`` (maker, model,
-serial), ``profiles`` (one fitted correction of one lens on one camera at one
-focus setting, with its fit and holdout straightness, field uncertainty,
-session directory, station, software version and time), ``qa_results`` and
-``schema_version``. :data:`MIGRATIONS` brings any older file up to
+serial), ``profiles`` (one :class:`station.profile.Profile` per row: a fitted
+correction of one lens on one camera at one focus setting, with its fit and
+holdout straightness and field uncertainty as columns for listing and queries,
+and the whole typed record — fit spec, merit, provenance, QA verdict with its
+checks — as JSON columns; :meth:`Profile.to_row` / :meth:`Profile.from_row`
+convert), ``qa_results`` and ``schema_version``. :data:`MIGRATIONS` brings any older file up to
 :data:`SCHEMA_VERSION` inside one ``BEGIN IMMEDIATE`` transaction, so two
 processes opening a new file at once do not race.
 
@@ -23,9 +25,9 @@ import os
 import sqlite3
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+
+from station.profile import Profile, Verdict
 
 BUSY_TIMEOUT_MS = 30000
 
@@ -88,32 +90,52 @@ def _v2(db: sqlite3.Connection) -> None:
     db.execute("ALTER TABLE profiles ADD COLUMN details_json TEXT NOT NULL DEFAULT '{}'")
 
 
+def _v3(db: sqlite3.Connection) -> None:
+    # the typed profile record (station.profile.Profile): what was fitted, every figure of
+    # merit, the provenance and the QA verdict with its checks; rows of schema 2 keep NULL /
+    # '{}' and are read from their flat figures and details
+    for column in (
+        "spec_json TEXT",
+        "selection_json TEXT NOT NULL DEFAULT '{}'",
+        "merit_json TEXT",
+        "provenance_json TEXT NOT NULL DEFAULT '{}'",
+        "qa_json TEXT",
+        "verdict TEXT CHECK (verdict IN ('PASS', 'FAIL'))",
+    ):
+        db.execute(f"ALTER TABLE profiles ADD COLUMN {column}")
+
+
 #: migration i (1-based) brings a database from version i-1 to version i
-MIGRATIONS: list[Callable[[sqlite3.Connection], None]] = [_v1, _v2]
+MIGRATIONS: list[Callable[[sqlite3.Connection], None]] = [_v1, _v2, _v3]
 SCHEMA_VERSION = len(MIGRATIONS)
 
-
-@dataclass(frozen=True)
-class Profile:
-    id: int
-    lens: tuple[str, str, str]  # maker, model, serial
-    camera: tuple[str, str, str]
-    focus: float
-    model_name: str
-    model: dict
-    width: int
-    height: int
-    fit_d: float | None
-    fit_d_max: float | None
-    holdout_d: float | None
-    holdout_d_max: float | None
-    field_uncertainty_rms: float | None
-    field_uncertainty_max: float | None
-    session_dir: str
-    station_id: str
-    software_version: str
-    created_at: str
-    details: dict
+#: the columns a profile row is written with (:meth:`station.profile.Profile.to_row`)
+PROFILE_COLUMNS = (
+    "lens_id",
+    "camera_id",
+    "focus",
+    "model_name",
+    "model_json",
+    "width",
+    "height",
+    "fit_d",
+    "fit_d_max",
+    "holdout_d",
+    "holdout_d_max",
+    "field_uncertainty_rms",
+    "field_uncertainty_max",
+    "session_dir",
+    "station_id",
+    "software_version",
+    "created_at",
+    "details_json",
+    "spec_json",
+    "selection_json",
+    "merit_json",
+    "provenance_json",
+    "qa_json",
+    "verdict",
+)
 
 
 def _now() -> str:
@@ -212,74 +234,40 @@ class ProfileStore:
         db.execute(f"INSERT OR IGNORE INTO {table} (maker, model, serial) VALUES (?, ?, ?)", ident)
         return db.execute(f"SELECT id FROM {table} WHERE maker=? AND model=? AND serial=?", ident).fetchone()[0]
 
-    def put_profile(
-        self,
-        *,
-        lens: tuple[str, str, str],
-        camera: tuple[str, str, str],
-        focus: float,
-        model: dict,
-        width: int,
-        height: int,
-        fit_d: float | None = None,
-        fit_d_max: float | None = None,
-        holdout_d: float | None = None,
-        holdout_d_max: float | None = None,
-        field_uncertainty_rms: float | None = None,
-        field_uncertainty_max: float | None = None,
-        session_dir: str,
-        station_id: str,
-        software_version: str,
-        details: dict | None = None,
-    ) -> int:
-        """Insert (or, for the same session and focus, replace) a profile; returns its id."""
-        model_name = model.get("model", "?")
+    def put_profile(self, profile: Profile) -> int:
+        """Insert (or, for the same session and focus, replace) a profile; returns its id.
+
+        Raises StoreError when the profile lacks what a row needs (lens, camera,
+        focus, session directory, station)."""
+        try:
+            row = profile.to_row()
+        except ValueError as exc:
+            raise StoreError(f"{self.path}: cannot store the profile: {exc}") from None
         with self._transaction() as db:
-            lens_id = self._ident(db, "lenses", tuple(lens))
-            cam_id = self._ident(db, "cameras", tuple(camera))
-            values = (
-                lens_id,
-                cam_id,
-                float(focus),
-                model_name,
-                json.dumps(model),
-                int(width),
-                int(height),
-                fit_d,
-                fit_d_max,
-                holdout_d,
-                holdout_d_max,
-                field_uncertainty_rms,
-                field_uncertainty_max,
-                str(session_dir),
-                station_id,
-                software_version,
-                _now(),
-                json.dumps(details or {}),
-            )
+            values = {
+                **row,
+                "lens_id": self._ident(db, "lenses", tuple(row["lens"])),
+                "camera_id": self._ident(db, "cameras", tuple(row["camera"])),
+                "created_at": _now(),
+            }
+            cols = ", ".join(PROFILE_COLUMNS)
+            marks = ", ".join("?" for _ in PROFILE_COLUMNS)
+            update = ", ".join(f"{c}=excluded.{c}" for c in PROFILE_COLUMNS if c not in ("session_dir", "focus"))
             db.execute(
-                """
-                INSERT INTO profiles (lens_id, camera_id, focus, model_name, model_json, width,
-                    height, fit_d, fit_d_max, holdout_d, holdout_d_max, field_uncertainty_rms,
-                    field_uncertainty_max, session_dir, station_id, software_version, created_at,
-                    details_json)
-                VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
-                ON CONFLICT (session_dir, focus) DO UPDATE SET
-                    lens_id=excluded.lens_id, camera_id=excluded.camera_id,
-                    model_name=excluded.model_name, model_json=excluded.model_json,
-                    width=excluded.width, height=excluded.height,
-                    fit_d=excluded.fit_d, fit_d_max=excluded.fit_d_max,
-                    holdout_d=excluded.holdout_d, holdout_d_max=excluded.holdout_d_max,
-                    field_uncertainty_rms=excluded.field_uncertainty_rms,
-                    field_uncertainty_max=excluded.field_uncertainty_max,
-                    station_id=excluded.station_id, software_version=excluded.software_version,
-                    created_at=excluded.created_at, details_json=excluded.details_json
-                """,
-                values,
+                f"INSERT INTO profiles ({cols}) VALUES ({marks}) ON CONFLICT (session_dir, focus) DO UPDATE SET {update}",
+                tuple(values[c] for c in PROFILE_COLUMNS),
             )
             return db.execute(
-                "SELECT id FROM profiles WHERE session_dir=? AND focus=?", (str(session_dir), float(focus))
+                "SELECT id FROM profiles WHERE session_dir=? AND focus=?", (row["session_dir"], row["focus"])
             ).fetchone()[0]
+
+    def record_verdict(self, profile_id: int, verdict: Verdict) -> None:
+        """Keep a QA verdict, with its checks, with the profile it judged."""
+        with self._transaction() as db:
+            db.execute(
+                "UPDATE profiles SET qa_json = ?, verdict = ? WHERE id = ?",
+                (json.dumps(verdict.to_record()), verdict.verdict, int(profile_id)),
+            )
 
     def put_qa_result(
         self,
@@ -304,29 +292,14 @@ class ProfileStore:
                c.maker AS c_maker, c.model AS c_model, c.serial AS c_serial
         FROM profiles p JOIN lenses l ON l.id = p.lens_id JOIN cameras c ON c.id = p.camera_id"""
 
-    @staticmethod
-    def _profile(row: sqlite3.Row) -> Profile:
-        return Profile(
-            id=row["id"],
-            lens=(row["l_maker"], row["l_model"], row["l_serial"]),
-            camera=(row["c_maker"], row["c_model"], row["c_serial"]),
-            focus=row["focus"],
-            model_name=row["model_name"],
-            model=json.loads(row["model_json"]),
-            width=row["width"],
-            height=row["height"],
-            fit_d=row["fit_d"],
-            fit_d_max=row["fit_d_max"],
-            holdout_d=row["holdout_d"],
-            holdout_d_max=row["holdout_d_max"],
-            field_uncertainty_rms=row["field_uncertainty_rms"],
-            field_uncertainty_max=row["field_uncertainty_max"],
-            session_dir=row["session_dir"],
-            station_id=row["station_id"],
-            software_version=row["software_version"],
-            created_at=row["created_at"],
-            details=json.loads(row["details_json"]),
-        )
+    def _profile(self, row: sqlite3.Row) -> Profile:
+        values = {k: row[k] for k in row.keys()}
+        values["lens"] = (row["l_maker"], row["l_model"], row["l_serial"])
+        values["camera"] = (row["c_maker"], row["c_model"], row["c_serial"])
+        try:
+            return Profile.from_row(values)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise StoreError(f"{self.path}: profile #{row['id']} cannot be read: {exc}") from None
 
     def profiles(self, lens_id: int | None = None) -> list[Profile]:
         """All profiles (of one lens), ordered by lens, focus, then newest first."""
@@ -374,7 +347,3 @@ class ProfileStore:
     def qa_results(self) -> Iterator[dict]:
         for r in self.db.execute("SELECT * FROM qa_results ORDER BY id"):
             yield {**dict(r), "reasons": json.loads(r["reasons_json"]), "metrics": json.loads(r["metrics_json"])}
-
-
-def open_store(path: str | os.PathLike, **kw: Any) -> ProfileStore:
-    return ProfileStore(path, **kw)

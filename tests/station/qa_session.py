@@ -2,10 +2,10 @@
 
 Frames are rendered through the demo's focus-dependent lens
 (:func:`drivers.sim.lens.lens_for_focus`) and written with the session
-directory's own API; each focus setting is measured and fitted with the
-station's processing (:func:`station.processing.fit_focus`, leave one
-orientation out) and its model file written as the executor writes it. No
-turntable moves, so it takes a few seconds instead of a session's minute.
+directory's own API; each focus setting is measured and fitted as the executor
+does it (:func:`station.calibration.calibrate_shots`, leave one orientation out)
+and its profile written as the executor writes it. No turntable moves, so it takes
+a few seconds instead of a session's minute.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ import yaml
 
 from drivers.sim.lens import lens_for_focus
 from pipeline.render import HarpScene, render_harp
+from station.calibration import calibrate_shots
 from station.config import load_config
-from station.files import write_model_file
-from station.processing import fit_focus, measure_shot
+from station.files import write_profile
+from station.processing import measure_shot
+from station.profile import Provenance
 from station.session_dir import SessionDir
 
 REPO = Path(__file__).resolve().parents[2]
@@ -28,13 +30,13 @@ ANGLES = (0.0, 45.0, 90.0, 135.0)
 HARP_OFFSET = 5.0
 
 
-def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES) -> Path:
+def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, model: str = "radial") -> Path:
     d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
     d["station"]["camera"].update(width=W, height=H)
     d["focus"]["settings"] = list(focus)
     d["capture"]["orientations_deg"] = list(angles)
     d["capture"]["frames_per_orientation"] = 1
-    d["pipeline"].update(degree=3, bootstrap=4, workers=1)
+    d["pipeline"].update(model=model, degree=3, bootstrap=4, workers=1)
     d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 5.0}
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     root.mkdir(parents=True, exist_ok=True)
@@ -43,9 +45,11 @@ def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGL
     return path
 
 
-def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1") -> Path:
+def build_session(
+    root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1", model: str = "radial"
+) -> Path:
     """A finished session under ``root/sessions/name``; returns its path."""
-    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles))
+    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles, model=model))
     s = SessionDir.create(config.sessions_dir, config, name=name)
     with s:
         for fi, f in enumerate(config.focus_settings):
@@ -56,18 +60,11 @@ def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANG
                 img = render_harp(W, H, scene, lens=lens, noise_sigma=1.0, seed=100 * fi + oi).image
                 s.write_frame(fi, oi, 0, img, {"stage_deg": a, "focus": f})
                 shots.append(measure_shot(img.astype(float), config.pipeline))
-            fit = fit_focus(shots, W, H, config.pipeline)
-            assert fit.failure is None, fit.failure
-            write_model_file(
+            cal = calibrate_shots([list(sh.lines) for sh in shots], W, H, config.pipeline.spec, holdout="orientations")
+            assert cal.failure is None, cal.failure
+            write_profile(
                 s.path / "profiles" / f"focus{fi}.yaml",
-                fit.model,
-                width=W,
-                height=H,
-                merit={
-                    "fit": {"d": fit.fit_d, "d_max": fit.fit_d_max},
-                    "holdout": {"d": fit.holdout_d, "d_max": fit.holdout_d_max},
-                },
-                provenance={"focus": f},
+                cal.profile(W, H, provenance=Provenance(), focus=f, lens=config.lens, camera=config.camera_body),
             )
         s.append({"kind": "finished"})
     return s.path

@@ -7,10 +7,23 @@ import pytest
 
 from drivers.sim.lens import lens_for_focus
 from station.cli import main
+from station.config import Identity
 from station.files import write_model_file
-from station.qa import session_models
+from station.profile import Holdout, Merit, Profile, Provenance
+from station.qa import session_profiles
 from station.store import ProfileStore
 from tests.station.qa_session import H, W, build_session
+
+
+def stored(p, lens, focus, session_dir):
+    """A profile as a store keeps it: of ``lens`` at ``focus``, from ``session_dir``, station "t"."""
+    return p.with_(
+        lens=Identity(*lens),
+        camera=Identity("c", "m", "s"),
+        focus=focus,
+        merit=Merit(holdout=Holdout(p.merit.holdout_d)),
+        provenance=Provenance(station="t", session_dir=session_dir, software="harp-station 0"),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -68,33 +81,12 @@ def test_reference_model_file(session, tmp_path, capsys):
 def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
     store = tmp_path / "p.sqlite"
     with ProfileStore(store) as st:
-        for _f, focus, mf in session_models(session):
-            st.put_profile(
-                lens=("Sim", "SIM-12mm", "UNIT-7"),
-                camera=("c", "m", "s"),
-                focus=focus,
-                model=mf.model.to_dict(),
-                width=W,
-                height=H,
-                holdout_d=mf.merit["holdout"]["d"],
-                session_dir=str(session),
-                station_id="t",
-                software_version="0",
-            )
+        for _f, p in session_profiles(session):
+            st.put_profile(stored(p, ("Sim", "SIM-12mm", "UNIT-7"), p.focus, str(session)))
         # the golden lens: the true demo lens, calibrated at focus 0 and 1 only
         for focus in (0.0, 1.0):
-            st.put_profile(
-                lens=("Sim", "SIM-12mm", "GOLDEN"),
-                camera=("c", "m", "s"),
-                focus=focus,
-                model=lens_for_focus(focus, W, H).to_dict(),
-                width=W,
-                height=H,
-                holdout_d=0.0,
-                session_dir="golden",
-                station_id="t",
-                software_version="0",
-            )
+            golden = Profile(lens_for_focus(focus, W, H), W, H, merit=Merit(holdout=Holdout(0.0)))
+            st.put_profile(stored(golden, ("Sim", "SIM-12mm", "GOLDEN"), focus, "golden"))
     code, out, err = qa_json(
         capsys, "UNIT-7", "--store", store, "--reference", "GOLDEN", "--max-reference-deviation", "0.05"
     )

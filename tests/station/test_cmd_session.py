@@ -119,11 +119,12 @@ def test_run_end_to_end_matches_true_lens(uninterrupted):
     assert sorted(profiles) == [0.0, 1.0]
     for focus, p in profiles.items():
         truth = lens_for_focus(focus, W, H)
-        cmp = compare_models(model_from_dict(p.model), truth, W, H)
+        cmp = compare_models(p.model, truth, W, H)
         assert cmp.rms < 0.02, (focus, cmp.rms)  # field RMS modulo homography
-        assert p.holdout_d < 0.05 and p.fit_d < 0.05
-        assert 0 < p.field_uncertainty_rms <= p.field_uncertainty_max < 0.05  # bootstrap
-        assert p.details["bootstrap_replicates"] == 4
+        assert p.merit.holdout.d < 0.05 and p.merit.fit.d < 0.05
+        unc = p.merit.field_uncertainty
+        assert 0 < unc.rms <= unc.max < 0.05  # bootstrap
+        assert unc.replicates == 4
         assert (session / "profiles" / f"focus{[0.0, 1.0].index(focus)}.yaml").is_file()
 
 
@@ -168,14 +169,13 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     assert sorted(resumed) == sorted(reference) == [0.0, 1.0]
     for focus in resumed:
         a, b = resumed[focus], reference[focus]
-        assert a.model == b.model, focus  # every parameter, exactly
-        assert (a.fit_d, a.fit_d_max, a.holdout_d, a.holdout_d_max) == (
-            b.fit_d,
-            b.fit_d_max,
-            b.holdout_d,
-            b.holdout_d_max,
+        assert a.model.to_dict() == b.model.to_dict(), focus  # every parameter, exactly
+        assert (a.merit.fit, a.merit.holdout.d, a.merit.holdout.d_max) == (
+            b.merit.fit,
+            b.merit.holdout.d,
+            b.merit.holdout.d_max,
         )
-        assert (a.field_uncertainty_rms, a.field_uncertainty_max) == (b.field_uncertainty_rms, b.field_uncertainty_max)
+        assert a.merit.field_uncertainty == b.merit.field_uncertainty
     # resuming a finished session does nothing
     assert main(["session", "resume", str(session), "--quiet"]) == 0
     assert len(manifest(session)) == len(recs)
@@ -298,6 +298,21 @@ def test_profile_commands(uninterrupted, capsys):
     assert "no lens matching 'Zeiss'" in capsys.readouterr().err
 
 
+def test_profile_export_keeps_what_the_session_measured(uninterrupted, capsys):
+    # the export of a stored profile is its whole record: the field uncertainty, the hold-out
+    # scheme and the fitted spec too (a hand-built copy once dropped them)
+    _, base, session = uninterrupted
+    store = str(base / "profiles.sqlite")
+    assert main(["profile", "export", "DEMO-0001", "--focus", "1", "--format", "json", "--store", store]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    written = yaml.safe_load((session / "profiles" / "focus1.yaml").read_text())
+    assert doc["model"] == written["model"]
+    for key in ("fit", "holdout", "field_uncertainty", "choice"):
+        assert doc["merit"][key] == written["merit"][key], key
+    assert doc["merit"]["field_uncertainty"]["replicates"] == 4
+    assert doc["provenance"]["images"] == written["provenance"]["images"]
+
+
 def test_emulator_and_camera_faults_are_retried(tmp_path):
     # four camera faults in a row on the first capture: allow five attempts
     cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1, retries={"attempts": 5, "backoff_s": 0.01}))
@@ -386,7 +401,7 @@ def test_two_sessions_write_to_one_store_at_once(tmp_path):
     outs = [p.communicate(timeout=120) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], outs
     with ProfileStore(store) as st:
-        assert sorted(p.lens[2] for p in st.profiles()) == ["LENS-A", "LENS-B"]
+        assert sorted(p.lens.serial for p in st.profiles()) == ["LENS-A", "LENS-B"]
         assert len(list(st.qa_results())) == 2
         assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
 

@@ -54,14 +54,15 @@ def test_complete_session_stores_a_profile(tmp_path):
     ]
     assert [r["meta"]["stage_deg"] for r in frames] == [0, 0, 45, 45, 90, 90, 135, 135]
     assert records[-1]["kind"] == "finished"
-    fit = result.focus[0].fit
-    assert fit.failure is None
-    assert fit.fit_d < 0.5 * fit.details["d_before"]  # the correction straightens the edges
-    assert np.isfinite(fit.holdout_d) and len(fit.holdout_per_orientation) == 4
+    assert result.focus[0].failure is None
+    merit = result.focus[0].profile.merit
+    assert merit.fit.d < 0.5 * merit.before.d  # the correction straightens the edges
+    assert np.isfinite(merit.holdout.d) and len(merit.holdout.per_orientation_d) == 4
     with ProfileStore(cfg.store_path) as store:
         (p,) = store.profiles()
-    assert p.lens == ("Simulated Optics", "SIM-12mm", "DEMO-0001") and p.focus == 0.0
-    assert (p.width, p.height) == (W, H) and p.holdout_d == pytest.approx(fit.holdout_d)
+    assert (p.lens.maker, p.lens.model, p.lens.serial) == ("Simulated Optics", "SIM-12mm", "DEMO-0001")
+    assert p.focus == 0.0
+    assert (p.width, p.height) == (W, H) and p.merit.holdout.d == pytest.approx(merit.holdout.d)
     assert (tmp_path / "sessions" / "s" / "profiles" / "focus0.yaml").is_file()
 
 
@@ -154,8 +155,8 @@ def test_model_auto_is_chosen_by_cross_validation(tmp_path):
     with SessionDir.create(tmp_path, cfg, name="s") as s:
         result, _ = run(s, FakeCamera(stage), stage)
     assert result.exit_code == EXIT_OK
-    fit = result.focus[0].fit
+    profile = result.focus[0].profile
     # the fake lens is radial with a rho^2 term only: the simplest model that explains it
-    assert fit.details["selection"]["choice"] == "radial2"
-    assert fit.details["bootstrap_replicates"] == 4
-    assert 0 < fit.uncertainty_rms <= fit.uncertainty_max
+    assert profile.spec.label == "radial2"
+    assert profile.merit.field_uncertainty.replicates == 4
+    assert 0 < profile.merit.field_uncertainty.rms <= profile.merit.field_uncertainty.max

@@ -7,7 +7,8 @@ import yaml
 
 from pipeline.model_file import FORMAT_NAME, read_model_file
 from pipeline.models import RadialModel
-from station.files import sha256_file, write_model_file
+from station.files import sha256_file, write_model_file, write_profile
+from station.profile import Profile
 from station.provenance import make_provenance
 
 W, H = 640, 480
@@ -25,7 +26,7 @@ def test_file_is_readable_yaml_with_provenance(tmp_path):
     img = tmp_path / "shot.pgm"
     img.write_bytes(b"P5\n2 1\n255\n\x00\xff")
     prov = make_provenance([img], t=30, command=["harp", "calibrate", str(img)])
-    path = write_model_file(tmp_path / "m.yaml", MODEL, width=W, height=H, merit={}, provenance=prov)
+    path = write_profile(tmp_path / "m.yaml", Profile(MODEL, W, H, provenance=prov))
     doc = yaml.safe_load(path.read_text())
     assert doc["format"] == FORMAT_NAME and doc["format_version"] == 1
     assert doc["model"]["model"] == "radial" and doc["image"] == {"width": W, "height": H}

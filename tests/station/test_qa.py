@@ -36,5 +36,5 @@ def test_reference_deviation_and_missing_holdout():
     assert not v.passed and "deviates from the reference" in v.reasons[0]
     v = evaluate(a, W, H, None, q)
     assert not v.passed and "no cross-validated" in v.reasons[0]
-    assert "not checked (no reference given)" in v.checks[-1]
+    assert "not checked (no reference given)" in v.checks[-1].text
     assert combine([]) == "FAIL" and combine([evaluate(a, W, H, 0.0, q)]) == "PASS"

@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from station.cli import main
-from station.qa import session_models
+from station.config import Identity
+from station.profile import Holdout, Merit, Provenance, UncertaintySummary
+from station.qa import session_profiles
 from station.report import edge_residual_table, session_shots
 from station.session_dir import SessionDir
 from station.store import ProfileStore
-from tests.station.qa_session import ANGLES, H, W, build_session
+from tests.station.qa_session import ANGLES, W, build_session
 
 
 @pytest.fixture(scope="module")
@@ -49,11 +51,11 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
 
 
 def test_residuals_drop_after_correction(session):
-    ((_, _, mf),) = session_models(session)
+    ((_, prof),) = session_profiles(session)
     with SessionDir.open(session) as s:
         shots = session_shots(s, 0, t=30)
     assert [sh.orientation_deg for sh in shots] == list(ANGLES)
-    rows = edge_residual_table(shots, mf.model)
+    rows = edge_residual_table(shots, prof.model)
     before = np.array([r[2] for r in rows])
     after = np.array([r[3] for r in rows])
     assert len(rows) > 4 * len(ANGLES)
@@ -62,21 +64,15 @@ def test_residuals_drop_after_correction(session):
 
 def test_lens_report_without_frames(session, tmp_path, capsys):
     store = tmp_path / "p.sqlite"
-    ((_, focus, mf),) = session_models(session)
+    ((_, prof),) = session_profiles(session)
     with ProfileStore(store) as st:
         st.put_profile(
-            lens=("Sim", "SIM-12mm", "U1"),
-            camera=("c", "m", "s"),
-            focus=focus,
-            model=mf.model.to_dict(),
-            width=W,
-            height=H,
-            holdout_d=mf.merit["holdout"]["d"],
-            field_uncertainty_rms=0.001,
-            field_uncertainty_max=0.004,
-            session_dir=str(session),
-            station_id="t",
-            software_version="0",
+            prof.with_(
+                lens=Identity("Sim", "SIM-12mm", "U1"),
+                camera=Identity("c", "m", "s"),
+                merit=Merit(holdout=Holdout(prof.merit.holdout_d), field_uncertainty=UncertaintySummary(0.001, 0.004)),
+                provenance=Provenance(station="t", session_dir=str(session), software="harp-station 0"),
+            )
         )
     out = tmp_path / "r"
     code = main(["qa", "U1", "--store", str(store), "--report", str(out)])
@@ -86,3 +82,27 @@ def test_lens_report_without_frames(session, tmp_path, capsys):
     assert "**Verdict: PASS**" in md and "stored: RMS 0.0010 px, max 0.0040 px" in md
     assert sorted(p.name for p in out.glob("*.png")) == ["field_f0.png"]
     png(out / "field_f0.png")
+
+
+def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(tmp_path, monkeypatch, capsys):
+    # pipeline.model: auto: the report's bootstrap once asked the fit for model 'auto' ("not available")
+    import pipeline.uncertainty
+
+    session = build_session(tmp_path, focus=(0.3,), model="auto")
+    ((_, prof),) = session_profiles(session)
+    assert prof.spec is not None and prof.selection["folds"] == "images"  # chosen, and the choice kept
+    real = pipeline.uncertainty.bootstrap_field_uncertainty
+    specs = []
+
+    def spy(lines, width, height, spec=None, **kw):
+        specs.append(spec)
+        return real(lines, width, height, spec, **kw)
+
+    monkeypatch.setattr(pipeline.uncertainty, "bootstrap_field_uncertainty", spy)
+    out = tmp_path / "report"
+    assert main(["qa", str(session), "--report", str(out), "--no-record"]) == 0
+    capsys.readouterr()
+    assert specs == [prof.spec]
+    md = (out / "report.md").read_text()
+    assert "uncertainty_f0.png" in md and "not available" not in md
+    png(out / "uncertainty_f0.png")

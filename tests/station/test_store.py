@@ -5,31 +5,30 @@ import sqlite3
 
 import pytest
 
-from station.store import SCHEMA_VERSION, ProfileStore, StoreError, _v1
+from pipeline.models import model_from_dict
+from station.config import Identity
+from station.profile import Figures, Holdout, Merit, Profile, Provenance
+from station.store import MIGRATIONS, SCHEMA_VERSION, ProfileStore, StoreError
 
 LENS = ("Acme", "50mm", "S1")
 CAM = ("Cam", "Body", "C1")
 MODEL = {"model": "radial", "center": [1.0, 2.0], "k": [1.0, 0.01], "scale": 100.0}
 
 
-def put(store, session="sess", focus=0.5, **kw):
-    args = dict(
-        lens=LENS,
-        camera=CAM,
-        focus=focus,
-        model=MODEL,
-        width=640,
-        height=480,
-        fit_d=0.01,
-        fit_d_max=0.02,
-        holdout_d=0.012,
-        holdout_d_max=0.03,
-        session_dir=session,
-        station_id="st",
-        software_version="0.1.0",
+def put(store, session="sess", focus=0.5, lens=LENS, holdout_d=0.012, details=None):
+    return store.put_profile(
+        Profile(
+            model_from_dict(MODEL),
+            640,
+            480,
+            merit=Merit(fit=Figures(0.01, 0.02), holdout=Holdout(holdout_d, 0.03)),
+            lens=Identity(*lens),
+            camera=Identity(*CAM),
+            focus=focus,
+            provenance=Provenance(software="harp-station 0.1.0", station="st", session_dir=session),
+            details=details or {},
+        )
     )
-    args.update(kw)
-    return store.put_profile(**args)
 
 
 def test_roundtrip_and_wal(tmp_path):
@@ -40,8 +39,9 @@ def test_roundtrip_and_wal(tmp_path):
         assert st.schema_version() == SCHEMA_VERSION
     with ProfileStore(path) as st:
         p = st.profile(pid)
-        assert p.lens == LENS and p.camera == CAM and p.model == MODEL and p.focus == 0.5
-        assert p.holdout_d == 0.012 and p.field_uncertainty_rms is None
+        assert p.lens == Identity(*LENS) and p.camera == Identity(*CAM) and p.model.to_dict() == MODEL
+        assert p.focus == 0.5
+        assert p.merit.holdout.d == 0.012 and p.merit.field_uncertainty is None
         assert st.find_lens("S1")[0] == st.find_lens("acme 50")[0] == st.find_lens(f"#{p.id}")[0]
 
 
@@ -52,7 +52,7 @@ def test_same_session_focus_updates(tmp_path):
         put(st, session="other")
         assert a == b
         assert len(st.profiles()) == 2
-        assert st.profile(a).holdout_d == 0.1
+        assert st.profile(a).merit.holdout.d == 0.1
         lens_id = st.find_lens("S1")[0]
         assert len(st.latest_by_focus(lens_id)) == 1
 
@@ -72,12 +72,12 @@ def test_migrates_v1_file(tmp_path):
     db = sqlite3.connect(path)
     db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
     db.execute("INSERT INTO schema_version VALUES (1)")
-    _v1(db)
+    MIGRATIONS[0](db)
     db.execute("INSERT INTO lenses (maker, model, serial) VALUES ('A','B','C')")
     db.commit()
     db.close()
     with ProfileStore(path) as st:
-        assert st.schema_version() == SCHEMA_VERSION == 2
+        assert st.schema_version() == SCHEMA_VERSION == 3
         assert st.lenses() == [(1, "A", "B", "C")]
         pid = put(st, details={"cv": [0.1]})
         assert st.profile(pid).details == {"cv": [0.1]}
@@ -119,7 +119,7 @@ def test_two_processes_write_concurrently(tmp_path):
     with ProfileStore(path) as st:
         profiles = st.profiles()
         assert len(profiles) == 40
-        assert {p.session_dir for p in profiles} == {"session-0", "session-1"}
+        assert {p.provenance.session_dir for p in profiles} == {"session-0", "session-1"}
         assert len(list(st.qa_results())) == 40
         assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         assert len(st.lenses()) == 1

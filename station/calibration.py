@@ -1,0 +1,223 @@
+"""Calibrating a set of shots: the one way from measured edges to a profile's content.
+
+:func:`calibrate_shots` serves both ``harp calibrate`` (shots given on the command
+line, optional held-out shots) and a session (one shot per orientation of a focus
+setting, each orientation held out in turn, bootstrap). It
+
+1. chooses what to fit when no :class:`~pipeline.fitspec.FitSpec` is given, by
+   cross-validation over the shots (:func:`pipeline.select.select_model`);
+2. fits it on every shot at once (:func:`pipeline.fit.fit_distortion`);
+3. measures how well it generalises: ``holdout='orientations'`` fits the spec
+   without each shot in turn and measures that shot corrected by it (the edges the
+   full fit rejected as outliers are left out, as in the fit); ``held_out`` shots
+   (never fitted) are corrected by the full fit and measured; the figure is the
+   straightness (Tang et al. 2012) of all held-out edges together;
+4. with ``bootstrap >= 2`` replicates, maps the field uncertainty
+   (:func:`pipeline.uncertainty.bootstrap_field_uncertainty`, same spec).
+
+The result, a :class:`Calibration`, holds the fit, the spec and how it was chosen,
+the typed :class:`~station.profile.Merit` and the evidence (uncertainty map,
+per-shot figures); :meth:`Calibration.profile` makes the
+:class:`~station.profile.Profile` of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline.edgeset import FitFailure, FitResult
+from pipeline.fitspec import FitSpec
+from station.config import Identity
+from station.profile import (
+    HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
+    HOLDOUT_SHOTS,
+    Figures,
+    Holdout,
+    Merit,
+    Profile,
+    Provenance,
+    UncertaintySummary,
+)
+
+MapFn = Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]]
+
+BOOTSTRAP_SCHEME = "edges resampled with replacement within each shot"
+
+
+@dataclass(frozen=True)
+class HeldOutShot:
+    """Straightness of one held-out shot before and after the correction (px)."""
+
+    before: Figures
+    after: Figures
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What :func:`calibrate_shots` found. ``failure`` is None when ``fit`` is a result.
+
+    ``spec``/``selection``: what was fitted and why (``selection`` is the
+    :class:`pipeline.select.Selection` of an automatic choice, else None);
+    ``merit``: the figures of merit; ``held_out``: per held-out shot (``held_out``
+    mode); ``uncertainty``: the bootstrap map (``FieldUncertainty``) or None;
+    ``details``: fit diagnostics kept with the profile.
+    """
+
+    fit: FitResult | FitFailure
+    spec: FitSpec | None
+    selection: Any = None
+    merit: Merit = field(default_factory=Merit)
+    held_out: tuple[HeldOutShot, ...] = ()
+    uncertainty: Any = None
+    details: Mapping[str, Any] = field(default_factory=dict)
+    failure: str | None = None
+
+    @property
+    def selection_record(self) -> dict[str, Any]:
+        """How the spec was chosen, as a profile keeps it (``reason``, ``folds``)."""
+        if self.selection is None:
+            return {"reason": "given", "folds": "none"}
+        return {"reason": self.selection.reason, "folds": self.selection.folds}
+
+    def profile(
+        self,
+        width: int,
+        height: int,
+        *,
+        provenance: Provenance,
+        lens: Identity | None = None,
+        camera: Identity | None = None,
+        focus: float | None = None,
+        selection: Mapping[str, Any] | None = None,
+    ) -> Profile:
+        """The profile of this calibration (raises ValueError for a failed one)."""
+        if self.failure is not None or not self.fit:
+            raise ValueError(f"no profile of a failed calibration: {self.failure}")
+        return Profile(
+            model=self.fit.model,
+            width=int(width),
+            height=int(height),
+            spec=self.spec,
+            selection=dict(self.selection_record if selection is None else selection),
+            merit=self.merit,
+            lens=lens,
+            camera=camera,
+            focus=focus,
+            provenance=provenance,
+            details=dict(self.details),
+        )
+
+
+def _figures(d: float, d_max: float) -> Figures:
+    return Figures(_finite(d), _finite(d_max))
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def calibrate_shots(
+    shots: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    spec: FitSpec | None = None,
+    *,
+    holdout: str | None = None,
+    held_out: Sequence[Sequence[np.ndarray]] = (),
+    image_sizes: Sequence[tuple[int, int]] | None = None,
+    bootstrap: int = 0,
+    seed: int = 0,
+    map_fn: MapFn = map,
+) -> Calibration:
+    """Calibrate the edges of ``shots`` (see the module docstring).
+
+    Parameters
+    ----------
+    shots : per shot, its edges as (M, 2) arrays (pixels, distorted).
+    width, height : the image size.
+    spec : what to fit; None: chosen by cross-validation over the shots.
+    holdout : ``'orientations'`` (leave each shot out in turn; a session) or None.
+    held_out : shots never used in the fit, measured after correction.
+    image_sizes : size of each shot (a mismatch is a failure).
+    bootstrap : replicates of the field uncertainty (0: none; 1 is recorded as failed).
+    seed : of the bootstrap resampling.
+    map_fn : ``map`` over independent fits (a process pool's); results do not depend on it.
+    """
+    from pipeline.edgeset import corrected_straightness, straightness_of
+    from pipeline.fit import fit_distortion
+
+    lines = [list(s) for s in shots]
+    selection = None
+    if spec is None:
+        from pipeline.select import select_model
+
+        selection = select_model(lines, width, height)
+        spec = selection.choice
+    kw = spec.fit_arguments()
+    full = fit_distortion(lines, width, height, **kw, image_sizes=image_sizes)
+    if not full:
+        return Calibration(full, spec, selection, failure=full.reason)
+    fit_figures = _figures(full.d_after, full.d_max_after)
+    before = _figures(full.d_before, full.d_max_before)
+    details: dict[str, Any] = {
+        "n_points": full.n_points,
+        "n_params": full.n_params,
+        "rejected_edges": len(full.rejected),
+        "warnings": list(full.warnings),
+    }
+    if selection is not None:
+        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason, "folds": selection.folds}
+
+    hold: Holdout | None = None
+    per_shot: list[HeldOutShot] = []
+    if holdout == "orientations":
+        from pipeline.uncertainty import refit_job
+
+        outliers = {(r.image, r.line) for r in full.rejected}
+        jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
+        held_lines: list[np.ndarray] = []
+        per_o: list[float | None] = []
+        for k, (model, reason) in enumerate(map_fn(refit_job, jobs)):
+            if reason:
+                return Calibration(
+                    full, spec, selection, Merit(fit=fit_figures, before=before), details=details,
+                    failure=f"cross-validation without orientation {k}: {reason}",
+                )  # fmt: skip
+            kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
+            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            held_lines.extend(model.undistort_points(p) for p in kept)
+        d, d_max = straightness_of(held_lines)
+        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+    elif holdout is not None:
+        raise ValueError(f"unknown hold-out scheme {holdout!r}; known: 'orientations'")
+    if held_out:
+        for s in held_out:
+            b = straightness_of(list(s))
+            a = corrected_straightness(full.model, list(s))
+            per_shot.append(HeldOutShot(_figures(*b), _figures(*a)))
+        d, d_max = corrected_straightness(full.model, [p for s in held_out for p in s])
+        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_SHOTS)
+
+    unc = None
+    unc_summary = None
+    if bootstrap == 1:
+        details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
+    elif bootstrap:
+        from pipeline.uncertainty import bootstrap_field_uncertainty
+
+        res = bootstrap_field_uncertainty(
+            lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
+        )
+        if not res:
+            details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=res.reason)
+        else:
+            unc = res
+            unc_summary = UncertaintySummary(float(res.rms), float(res.max), int(res.n_boot))
+            details.update(bootstrap_replicates=res.n_boot, bootstrap_failed=res.n_failed)
+        details["bootstrap_scheme"] = BOOTSTRAP_SCHEME
+    merit = Merit(fit=fit_figures, holdout=hold, before=before, field_uncertainty=unc_summary)
+    return Calibration(full, spec, selection, merit, tuple(per_shot), unc, details)
