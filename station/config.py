@@ -33,7 +33,7 @@ AUTO_MODEL = "auto"
 #: values of ``pipeline.model``: a model kind of :mod:`pipeline.fitspec`, or auto
 FIT_MODELS = (*KINDS, AUTO_MODEL)
 
-#: turntable ``port`` value meaning "the emulator started by station.simulated"
+#: turntable ``port`` value meaning "the emulator started by station.session.simulated"
 EMULATOR_PORT = "emulator"
 
 
@@ -173,7 +173,7 @@ class QAConfig:
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Present only for a simulated station (see :mod:`station.simulated`)."""
+    """Present only for a simulated station (see :mod:`station.session.simulated`)."""
 
     harp_offset_deg: float = 0.0
     emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))

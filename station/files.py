@@ -4,7 +4,7 @@
 (``.<name>.<random>.tmp``), fsyncs it, renames it into place and fsyncs the
 directory, so a reader — or a session resumed after a kill — never sees a
 half-written file; a temporary left by a kill matches ``.*.tmp*`` and is removed
-when a session directory is reopened (:mod:`station.session_dir`).
+when a session directory is reopened (:mod:`station.session.directory`).
 :func:`write_model_file` writes a harp model file (:mod:`pipeline.model_file`, the
 format) this way, :func:`write_profile` the model file of a :class:`station.profile.Profile`. :func:`sha256_file` is the checksum recorded for every input.
 """

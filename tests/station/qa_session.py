@@ -19,9 +19,9 @@ from pipeline.render import HarpScene, render_harp
 from station.calibration import calibrate_shots
 from station.config import load_config
 from station.files import write_profile
-from station.processing import measure_shot
 from station.profile import Provenance
-from station.session_dir import SessionDir
+from station.session.directory import SessionDir
+from station.session.processing import measure_shot
 
 REPO = Path(__file__).resolve().parents[2]
 W, H = 400, 300

@@ -144,7 +144,7 @@ def test_unreachable_port(tmp_path):
     msg = str(ei.value)
     assert "station.turntable.port: expected a reachable serial port" in msg and "ttyUSB77" in msg
     assert "\n" not in msg
-    check_port(load_config(DEMO))  # the emulator is started by station.simulated
+    check_port(load_config(DEMO))  # the emulator is started by station.session.simulated
 
 
 def test_boolean_field(tmp_path):

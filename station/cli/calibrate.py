@@ -36,7 +36,7 @@ import numpy as np
 
 from pipeline.edgeset import straightness_of
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
-from station.cli_inputs import InputError, measure_file, positive_int
+from station.cli.inputs import InputError, measure_file, positive_int
 
 
 class CalibrateError(InputError):

@@ -9,7 +9,7 @@ times; then it fits that focus setting's correction with
 leave-one-orientation-out cross-validation and stores the profile.
 
 Each accepted shot's measured edges are kept in the session directory
-(``measurements/*.npz``, :mod:`station.evidence_files`) and each focus
+(``measurements/*.npz``, :mod:`station.session.evidence`) and each focus
 setting's bootstrap uncertainty map next to its profile, so that the session
 report (``report=True``: written into ``DIR/report`` once the session has
 finished) and ``harp qa --report`` need not measure anything again. The
@@ -49,9 +49,23 @@ from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, Device
 from drivers.protocols import Camera, Turntable
 from station import __version__
 from station.calibration import Calibration, calibrate_shots
-from station.evidence_files import measurement_arrays, uncertainty_arrays
-from station.plan import Capture, Fit, LockFocus, Measure, Move, Save, Settle, Step, Store, capture_steps, plan_session
-from station.processing import (
+from station.profile import Profile
+from station.session.directory import SessionDir
+from station.session.evidence import measurement_arrays, uncertainty_arrays
+from station.session.plan import (
+    Capture,
+    Fit,
+    LockFocus,
+    Measure,
+    Move,
+    Save,
+    Settle,
+    Step,
+    Store,
+    capture_steps,
+    plan_session,
+)
+from station.session.processing import (
     ShotMeasurement,
     average_frames,
     exposure_problems,
@@ -60,8 +74,6 @@ from station.processing import (
     measure_shot,
     shot_problems,
 )
-from station.profile import Profile
-from station.session_dir import SessionDir
 
 #: a stage read-back further than this from the target is a fault (degrees)
 POSITION_TOLERANCE_DEG = 0.05
@@ -192,7 +204,7 @@ class Executor:
         """QA verdict of every profile of the session, and the focus-interpolation
         error (leave one calibrated focus out) — recorded, stored and printed.
         Returns ``(models, verdicts, overall, interpolation)`` (None: no profile)."""
-        from station.qa import combine, interpolation_error, qa_verdict, session_profiles
+        from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_profiles
 
         profiles = session_profiles(self.session.path)
         if not profiles:
@@ -252,7 +264,7 @@ class Executor:
     def _write_report(self, profiles, verdicts, overall, interpolation) -> None:
         """The session report (:func:`station.report.write_session_report`) into ``DIR/report``,
         from the measurements and uncertainty maps the session kept (nothing re-measured)."""
-        from station.report import write_session_report
+        from station.qa.report import write_session_report
 
         cfg = self.config
         title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {self.session.path.name}"
@@ -721,7 +733,7 @@ def _jsonable(value):
     """``value`` if it survives JSON, else its ``repr`` (driver extras may be anything)."""
     import json
 
-    from station.session_dir import json_default
+    from station.session.directory import json_default
 
     try:
         return json.loads(json.dumps(value, default=json_default))

@@ -7,7 +7,7 @@ Layout::
     DIR/manifest.jsonl     one JSON record per line, fsync'ed after each line
     DIR/frames/*.pgm       every captured frame (8- or 16-bit binary PGM)
     DIR/measurements/*.npz the measured edges of every accepted shot
-                           (:mod:`station.evidence_files`), so that reports and
+                           (:mod:`station.session.evidence`), so that reports and
                            QA need not measure the frames again
     DIR/profiles/*.yaml    the fitted model of each focus setting
     DIR/profiles/*.npz     its bootstrap field-uncertainty map
@@ -46,7 +46,7 @@ import numpy as np
 
 from station.config import Config, load_config
 from station.files import atomic_write_bytes
-from station.plan import frame_key, stored_key
+from station.session.plan import frame_key, stored_key
 
 MANIFEST = "manifest.jsonl"
 SESSION_FILE = "session.json"

@@ -18,12 +18,12 @@ from pipeline.compare import compare_models
 from pipeline.models import model_from_dict
 from station.cli import main
 from station.config import load_config
-from station.executor import EXIT_ABORTED, EXIT_OK, Executor
-from station.session_dir import SessionDir
-from station.simulated import simulated_devices
+from station.session.directory import SessionDir
+from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
+from station.session.simulated import simulated_devices
 from station.store import ProfileStore
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"
 W, H = 640, 480
 N_FOCUS, N_ORI, N_FRAMES = 2, 4, 2
@@ -222,8 +222,8 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
 
     import pipeline.measure
     import pipeline.uncertainty
-    from station.processing import average_frames
-    from station.report import stored_measurement
+    from station.qa.report import stored_measurement
+    from station.session.processing import average_frames
 
     _, _, session = uninterrupted
     recs = manifest(session)

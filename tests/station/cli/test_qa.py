@@ -10,7 +10,7 @@ from station.cli import main
 from station.config import Identity
 from station.files import write_model_file
 from station.profile import Holdout, Merit, Profile, Provenance
-from station.qa import session_profiles
+from station.qa.verdicts import session_profiles
 from station.store import ProfileStore
 from tests.station.qa_session import H, W, build_session
 

@@ -1,8 +1,14 @@
-"""The ``harp`` command line.
+"""The ``harp`` command line (entry point ``harp = station.cli:main``).
 
-Each sub-command lives in its own module ``station.cmd_<name>`` exposing
-``register(subparsers)``; the parser it adds sets ``func(args) -> int``.
-Exit codes: 0 success, 1 a verdict of FAIL (``harp qa``), 2 bad input or an error.
+Each sub-command lives in its own module ``station.cli.<name>`` (``measure``,
+``calibrate``, ``undistort``, ``evaluate``, ``export``, ``session``, ``profile``,
+``qa``) exposing ``register(subparsers)``; the parser it adds sets
+``func(args) -> int``. A command module parses, calls the domain code
+(:mod:`station.calibration`, :mod:`station.session`, :mod:`station.qa`,
+:mod:`station.store`, :mod:`pipeline`) and prints; :mod:`station.cli.inputs` holds the
+input helpers they share (one-line input errors, reading and measuring photos).
+Exit codes: 0 success, 1 a verdict of FAIL (``harp qa``), 2 bad input or an error,
+130 interrupted, 141 standard output closed early.
 """
 
 from __future__ import annotations
@@ -15,14 +21,14 @@ import sys
 from station import __version__
 
 COMMAND_MODULES = [
-    "station.cmd_measure",
-    "station.cmd_calibrate",
-    "station.cmd_undistort",
-    "station.cmd_evaluate",
-    "station.cmd_export",
-    "station.cmd_session",
-    "station.cmd_profile",
-    "station.cmd_qa",
+    "station.cli.measure",
+    "station.cli.calibrate",
+    "station.cli.undistort",
+    "station.cli.evaluate",
+    "station.cli.export",
+    "station.cli.session",
+    "station.cli.profile",
+    "station.cli.qa",
 ]
 
 
@@ -82,7 +88,3 @@ def _stdout_is_devnull() -> bool:
     except (OSError, ValueError, AttributeError):  # stdout may be closed or a test double
         return False
     return (out.st_rdev, out.st_ino) == (null.st_rdev, null.st_ino)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -152,7 +152,7 @@ def test_warns_when_the_model_makes_the_holdout_worse(real_harp_dir, tmp_path, c
 
 
 def test_unwritable_out_is_reported_before_any_work(shots, tmp_path, capsys, monkeypatch):
-    import station.cmd_calibrate as cc
+    import station.cli.calibrate as cc
 
     def no_measuring(*a, **k):
         raise AssertionError("measured although the model file cannot be written")

@@ -4,9 +4,20 @@ from collections import Counter
 from pathlib import Path
 
 from station.config import load_config
-from station.plan import Capture, Fit, LockFocus, Measure, Move, Save, Store, frame_key, plan_session, stored_key
+from station.session.plan import (
+    Capture,
+    Fit,
+    LockFocus,
+    Measure,
+    Move,
+    Save,
+    Store,
+    frame_key,
+    plan_session,
+    stored_key,
+)
 
-DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
+DEMO = Path(__file__).resolve().parents[3] / "configs" / "demo.yaml"
 
 
 def test_full_plan_lists_every_step():

@@ -9,9 +9,9 @@ import pytest
 from station.cli import main
 from station.config import Identity
 from station.profile import Holdout, Merit, Provenance, UncertaintySummary
-from station.qa import session_profiles
-from station.report import edge_residual_table, session_shots
-from station.session_dir import SessionDir
+from station.qa.report import edge_residual_table, session_shots
+from station.qa.verdicts import session_profiles
+from station.session.directory import SessionDir
 from station.store import ProfileStore
 from tests.station.qa_session import ANGLES, W, build_session
 

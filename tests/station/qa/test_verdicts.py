@@ -5,7 +5,7 @@ import math
 from pipeline.models.base import IdentityModel
 from pipeline.models.radial import RadialModel
 from station.config import QAConfig
-from station.qa import combine, distortion_magnitude, evaluate
+from station.qa.verdicts import combine, distortion_magnitude, evaluate
 
 W, H = 400, 300
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from station.config import load_config
-from station.plan import frame_key, stored_key
-from station.session_dir import MANIFEST, SessionDir, SessionError, decode_pgm, encode_pgm, read_manifest
+from station.session.directory import MANIFEST, SessionDir, SessionError, decode_pgm, encode_pgm, read_manifest
+from station.session.plan import frame_key, stored_key
 
-DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
+DEMO = Path(__file__).resolve().parents[3] / "configs" / "demo.yaml"
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])

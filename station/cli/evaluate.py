@@ -27,7 +27,7 @@ from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.normalise import corner_homography
 from pipeline.straightness import straightness
-from station.cli_inputs import NO_STRINGS, InputError, measure_grey, positive_int, read_image
+from station.cli.inputs import NO_STRINGS, InputError, measure_grey, positive_int, read_image
 
 
 class EvaluateError(InputError):

@@ -3,7 +3,7 @@
 :func:`plan_session` lists every step of a calibration session (per focus
 setting: lock focus; per orientation: move, settle, capture and save N frames,
 measure; then fit and store) without touching any hardware, so tests can list
-it and :mod:`station.executor` can perform it. A resumed session passes the
+it and :mod:`station.session.executor` can perform it. A resumed session passes the
 keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
 plan skips them.
 """

@@ -10,13 +10,13 @@ from pipeline.measure import measure_image
 from pipeline.render import HarpScene, render_harp
 from pipeline.uncertainty import FieldUncertainty
 from station.config import load_config
-from station.evidence_files import (
+from station.session.directory import SessionDir, SessionError
+from station.session.evidence import (
     measurement_arrays,
     measurement_from_arrays,
     uncertainty_arrays,
     uncertainty_from_arrays,
 )
-from station.session_dir import SessionDir, SessionError
 from tests.station.qa_session import write_config
 
 W, H = 320, 240

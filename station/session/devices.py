@@ -18,7 +18,7 @@ from station.config import Config, check_port
 @contextlib.contextmanager
 def _created(config: Config) -> Iterator[tuple]:
     if config.simulation is not None:
-        from station.simulated import simulated_devices
+        from station.session.simulated import simulated_devices
 
         with simulated_devices(config) as sim:
             yield sim.camera, sim.turntable

@@ -9,12 +9,12 @@ import yaml
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout
 from station.config import load_config
-from station.executor import EXIT_ABORTED, EXIT_OK, Executor
-from station.session_dir import SessionDir
+from station.session.directory import SessionDir
+from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
 from station.store import ProfileStore
 from tests.station.fakes import FakeCamera, FakeStage, H, W
 
-DEMO = Path(__file__).resolve().parents[2] / "configs" / "demo.yaml"
+DEMO = Path(__file__).resolve().parents[3] / "configs" / "demo.yaml"
 
 
 def make_config(tmp_path, focus=(0.0,), orientations=(0, 45, 90, 135), frames=1, **capture):

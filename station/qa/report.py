@@ -103,7 +103,7 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
     from pipeline.compare import compare_models
     from pipeline.interpolate import normalised_field
     from pipeline.models.base import IdentityModel
-    from station.qa import grid_step
+    from station.qa.verdicts import grid_step
 
     # the same homography as the QA figure (station.qa.distortion_magnitude)
     h = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height)).homography
@@ -229,7 +229,7 @@ def write_report(
     notes: Sequence[str] = (),
 ) -> Path:
     """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path."""
-    from station.overlay import write_overlay
+    from station.qa.overlay import write_overlay
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -405,8 +405,8 @@ def _last_record(session, kind: str, **match) -> dict | None:
 def stored_measurement(session, focus_idx: int, orientation_idx: int):
     """The ``ImageMeasurement`` the executor kept for the shot's current attempt, or None
     (no ``measurements/*.npz`` for it, or written by an incompatible version)."""
-    from station.evidence_files import measurement_from_arrays
-    from station.session_dir import SessionError
+    from station.session.directory import SessionError
+    from station.session.evidence import measurement_from_arrays
 
     rec = _last_record(session, "measure", focus_idx=focus_idx, orientation_idx=orientation_idx)
     if rec is None or "file" not in rec or rec.get("attempt") != session.attempt(focus_idx, orientation_idx):
@@ -424,7 +424,7 @@ def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
     The measurement is the one the executor kept (:func:`stored_measurement`);
     a shot without one is measured now."""
     from pipeline.measure import measure_image
-    from station.processing import average_frames
+    from station.session.processing import average_frames
 
     cfg = session.config
     shots = []
@@ -440,8 +440,8 @@ def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
 
 def stored_uncertainty(session, focus_idx: int, model):
     """The bootstrap uncertainty map the executor kept for a focus setting, or None."""
-    from station.evidence_files import uncertainty_from_arrays
-    from station.session_dir import SessionError
+    from station.session.directory import SessionError
+    from station.session.evidence import uncertainty_from_arrays
 
     rec = _last_record(session, "fit", focus_idx=focus_idx)
     if rec is None or not rec.get("uncertainty_file"):

@@ -14,7 +14,7 @@ from pipeline.models.radial import RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 W, H = 640, 480
 
 

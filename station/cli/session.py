@@ -47,7 +47,7 @@ def _error(msg: str) -> int:
 
 def _run(args) -> int:
     from station.config import ConfigError, check_port, load_config
-    from station.session_dir import SessionDir
+    from station.session.directory import SessionDir
 
     if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
         return _error(
@@ -70,7 +70,7 @@ def _run(args) -> int:
 
 def _resume(args) -> int:
     from station.config import ConfigError
-    from station.session_dir import SessionDir, SessionError
+    from station.session.directory import SessionDir, SessionError
 
     try:
         session = SessionDir.open(args.session_dir)
@@ -87,9 +87,9 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
     from rich.console import Console
 
     from station.config import ConfigError
-    from station.devices import open_station
-    from station.executor import Executor
-    from station.session_dir import SessionError
+    from station.session.devices import open_station
+    from station.session.directory import SessionError
+    from station.session.executor import Executor
     from station.store import ProfileStore, StoreError
 
     started = []  # the session directory, once there is one

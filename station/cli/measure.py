@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.measure import ImageMeasurement
 from pipeline.straightness import straightness
-from station.cli_inputs import InputError, measure_file, positive_int
+from station.cli.inputs import InputError, measure_file, positive_int
 
 
 def register(subparsers) -> None:
@@ -140,7 +140,7 @@ def run(args) -> int:
             continue
         results.append((path, m))
         if overlay_dir is not None:
-            from station.overlay import write_overlay
+            from station.qa.overlay import write_overlay
 
             try:
                 write_overlay(overlay_dir / names[path], img, m, title=Path(path).name)

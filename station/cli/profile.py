@@ -4,7 +4,7 @@ Reads the profile store (``--store PATH``; default ``$HARP_STORE`` or
 ``profiles/harp-profiles.sqlite``, where ``configs/demo.yaml`` stores). LENS is
 a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous part of
 "maker model serial". ``export`` converts the newest profile at that focus
-with :mod:`station.cmd_export`'s exporters. Exit 0 on success, 2 on bad input.
+with :mod:`station.cli.export`'s exporters. Exit 0 on success, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -240,7 +240,7 @@ def _export(args, store) -> int:
 
 
 def _write_export(args, mf, what: str) -> int:
-    from station.cmd_export import export_text
+    from station.cli.export import export_text
     from station.files import atomic_write_text
 
     try:

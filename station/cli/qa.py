@@ -95,7 +95,7 @@ def _store(args, config, create=False):
 
 def _candidates(args, config, session):
     """[(focus, Profile, profile_id, source)] of what to judge."""
-    from station.qa import session_profiles
+    from station.qa.verdicts import session_profiles
 
     if session is not None:
         profiles = session_profiles(session.path)
@@ -163,7 +163,7 @@ def _reference(args, config, focus, width, height):
 
 
 def _report(args, title, items, results, overall, thresholds, interpolation, session) -> Path:
-    from station.report import FocusEvidence, session_evidence, write_report
+    from station.qa.report import FocusEvidence, session_evidence, write_report
 
     evidence = []
     for (focus, prof, _pid, source), v in zip(items, results):
@@ -203,8 +203,8 @@ def _plain(v):
 
 def run(args) -> int:
     from station.config import ConfigError, load_config
-    from station.qa import combine, interpolation_error, qa_verdict, thresholds_from
-    from station.session_dir import SessionDir, SessionError
+    from station.qa.verdicts import combine, interpolation_error, qa_verdict, thresholds_from
+    from station.session.directory import SessionDir, SessionError
     from station.store import StoreError
 
     session = None

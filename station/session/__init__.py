@@ -1,0 +1,20 @@
+"""A calibration session: what to capture, capturing it, and the session directory.
+
+* :mod:`station.session.plan` — the capture plan as data (steps; re-captures decided
+  from each shot's check result);
+* :mod:`station.session.executor` — the one executor performing the plan on a camera
+  and a turntable (retries, device recovery), emitting typed manifest records;
+* :mod:`station.session.records` — those records (one dataclass per manifest kind);
+* :mod:`station.session.progress` — progress bars and the summary table, a subscriber
+  to the records;
+* :mod:`station.session.run` — a whole session: the executor, then QA and the report
+  (:mod:`station.qa`), then ``finished``;
+* :mod:`station.session.directory` — the session directory (atomic frames, the
+  append-only manifest, resume) and :mod:`station.session.layout`, the one place
+  that names every path in it;
+* :mod:`station.session.processing` — averaging and checking shots;
+  :mod:`station.session.evidence` — measurements and uncertainty maps kept as ``.npz``;
+* :mod:`station.session.workers` — the process pool of the fits;
+* :mod:`station.session.devices`, :mod:`station.session.simulated` — opening the
+  configured (or simulated) camera and turntable.
+"""
