@@ -166,3 +166,34 @@ class CameraRanges(Protocol):
     def focus_range(self) -> Range | None: ...
     def exposure_range(self) -> Range | None: ...
     def gain_range(self) -> Range | None: ...
+
+
+# -- Optional capabilities the executor uses -----------------------------------------------------
+# Small protocols for what some drivers offer beyond Camera / Turntable; the station checks them
+# with isinstance() instead of looking methods up by name.
+
+
+@runtime_checkable
+class Recoverable(Protocol):
+    """A device that can clear a fault it stopped on (a stall, a limit, an alarm) without reopening.
+
+    The Zaber and GRBL turntables have it; after ``recover()`` the station re-homes the stage,
+    since a stepper that stalled no longer knows where it is.
+    """
+
+    def recover(self) -> list[str]:
+        """Clear the fault; returns what was cleared (warning flags, alarm codes), empty when nothing was."""
+        ...
+
+
+@runtime_checkable
+class IndexedCapture(Protocol):
+    """A camera told, before each capture, which frame of the shot it is taking.
+
+    The simulator has it (its noise is seeded per pose and capture index), so that a resumed
+    session receives the same frames as an uninterrupted one; real cameras need not.
+    """
+
+    def set_capture_index(self, index: int) -> None:
+        """The next capture is frame ``index`` of this shot (``attempt * frames_per_orientation + frame``)."""
+        ...

@@ -6,6 +6,10 @@ orientations, frames per orientation, exposure), the pipeline parameters,
 the QA thresholds and where the profile store lives. Relative paths are
 relative to the directory holding the configuration file.
 
+The keys each section accepts are the fields of its dataclass (:func:`keys_of`;
+the top level, ``focus`` and ``store`` from :class:`Config`'s field metadata,
+:func:`config_keys`), so a field added to a dataclass is a key of the file.
+
 Every problem is reported as a :class:`ConfigError` whose message is ONE line
 naming the file, the dotted path of the field and what was expected, e.g.::
 
@@ -14,6 +18,7 @@ naming the file, the dotted path of the field and what was expected, e.g.::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping
@@ -179,20 +184,25 @@ class SimulationConfig:
     emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
 
 
+def _at(yaml_path: str | None) -> Any:
+    """Metadata of a :class:`Config` field: where it is in the YAML file (None: not from the file)."""
+    return field(metadata={"yaml": yaml_path})
+
+
 @dataclass(frozen=True)
 class Config:
-    path: Path  # the file it was read from (absolute)
-    base_dir: Path  # relative paths are resolved against this
-    station: StationConfig
-    lens: Identity
-    camera_body: Identity
-    focus_settings: tuple[float, ...]
-    capture: CaptureConfig
-    pipeline: PipelineConfig
-    qa: QAConfig
-    store_path: Path
-    sessions_dir: Path
-    simulation: SimulationConfig | None = None
+    path: Path = _at(None)  # the file it was read from (absolute)
+    base_dir: Path = _at(None)  # relative paths are resolved against this
+    station: StationConfig = _at("station")
+    lens: Identity = _at("lens")
+    camera_body: Identity = _at("camera_body")
+    focus_settings: tuple[float, ...] = _at("focus.settings")
+    capture: CaptureConfig = _at("capture")
+    pipeline: PipelineConfig = _at("pipeline")
+    qa: QAConfig = _at("qa")
+    store_path: Path = _at("store.path")
+    sessions_dir: Path = _at("store.sessions_dir")
+    simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
 
     def error(self, field_path: str, expected: str) -> ConfigError:
         return ConfigError(self.path, field_path, expected)
@@ -200,6 +210,25 @@ class Config:
 
 # --------------------------------------------------------------- validation
 _MISSING = object()
+
+
+def keys_of(cls: type) -> tuple[str, ...]:
+    """The YAML keys of a section: the fields of its dataclass, in order."""
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
+def config_keys(section: str = "") -> tuple[str, ...]:
+    """The keys of the top level (``""``) or of ``focus`` / ``store``, from :class:`Config`'s field metadata."""
+    out: list[str] = []
+    for f in dataclasses.fields(Config):
+        where = f.metadata.get("yaml")
+        if where is None:
+            continue
+        head, _, rest = where.partition(".")
+        key = head if not section else (rest if head == section else "")
+        if key and key not in out:
+            out.append(key)
+    return tuple(out)
 
 
 class _Section:
@@ -355,11 +384,9 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         raise ConfigError(path, where, f"expected valid YAML: {problem}") from None
     if data is None:
         raise ConfigError(path, "(top level)", "expected a mapping, got an empty file")
-    top = _Section(
-        path, "", data, ("station", "lens", "camera_body", "focus", "capture", "pipeline", "qa", "store", "simulation")
-    )
+    top = _Section(path, "", data, config_keys())
 
-    st = top.section("station", ("id", "camera", "turntable", "harp"))
+    st = top.section("station", keys_of(StationConfig))
     cam = _device(st, "camera", CAMERA_DRIVERS, "camera")
     camera = DeviceConfig(cam.data["driver"], MappingProxyType({k: v for k, v in cam.data.items() if k != "driver"}))
     tt = _device(st, "turntable", TURNTABLE_DRIVERS, "turntable")
@@ -371,7 +398,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         port=tt.string("port"),
         steps_per_degree=tt.number("steps_per_degree", None, positive=True),
     )
-    hp = st.section("harp", ("string_width_mm", "string_spacing_mm", "offset_deg", "direction"))
+    hp = st.section("harp", keys_of(HarpConfig))
     direction = hp.number("direction", 1, integer=True)
     if direction not in (1, -1):
         raise hp.err("direction", "1 or -1", direction)
@@ -384,33 +411,16 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     station = StationConfig(id=st.string("id"), camera=camera, turntable=turntable, harp=harp)
 
     def identity(key: str) -> Identity:
-        s = top.section(key, ("maker", "model", "serial"))
+        s = top.section(key, keys_of(Identity))
         return Identity(s.string("maker"), s.string("model"), s.string("serial"))
 
     lens, body = identity("lens"), identity("camera_body")
 
-    fo = top.section("focus", ("settings",))
+    fo = top.section("focus", config_keys("focus"))
     focus_settings = fo.number_list("settings")
 
-    cp = top.section(
-        "capture",
-        (
-            "orientations_deg",
-            "frames_per_orientation",
-            "exposure_us",
-            "gain_db",
-            "settle_s",
-            "timeout_s",
-            "move_timeout_s",
-            "checks",
-            "retries",
-        ),
-    )
-    ck = cp.section(
-        "checks",
-        ("min_lines", "angle_tolerance_deg", "max_saturated_fraction", "min_dynamic_range", "max_recaptures"),
-        optional=True,
-    )
+    cp = top.section("capture", keys_of(CaptureConfig))
+    ck = cp.section("checks", keys_of(CheckConfig), optional=True)
     d = CheckConfig()
     checks = CheckConfig(
         min_lines=ck.number("min_lines", d.min_lines, min=1, integer=True),
@@ -419,7 +429,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         min_dynamic_range=ck.number("min_dynamic_range", d.min_dynamic_range, min=0),
         max_recaptures=ck.number("max_recaptures", d.max_recaptures, min=0, integer=True),
     )
-    rt = cp.section("retries", ("attempts", "backoff_s"), optional=True)
+    rt = cp.section("retries", keys_of(RetryConfig), optional=True)
     r = RetryConfig()
     retries = RetryConfig(
         attempts=rt.number("attempts", r.attempts, min=1, integer=True),
@@ -438,11 +448,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         retries=retries,
     )
 
-    pp = top.section(
-        "pipeline",
-        ("t", "model", "degree", "tangential", "prism", "center_prior", "bootstrap", "seed", "workers"),
-        optional=True,
-    )
+    pp = top.section("pipeline", keys_of(PipelineConfig), optional=True)
     pipe = PipelineConfig(
         t=pp.number("t", 30, min=1, integer=True),
         model=pp.string("model", "radial"),
@@ -461,7 +467,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     except ValueError as exc:
         raise ConfigError(path, "pipeline.degree", f"expected a degree the model allows: {exc}") from None
 
-    qs = top.section("qa", ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px"), optional=True)
+    qs = top.section("qa", keys_of(QAConfig), optional=True)
     q = QAConfig()
     qa = QAConfig(
         max_holdout_d_px=qs.number("max_holdout_d_px", q.max_holdout_d_px, positive=True),
@@ -469,13 +475,13 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         max_reference_deviation_px=qs.number("max_reference_deviation_px", None, positive=True),
     )
 
-    so = top.section("store", ("path", "sessions_dir"))
+    so = top.section("store", config_keys("store"))
     store_path = Path(os.path.normpath(base / so.string("path")))
     sessions_dir = Path(os.path.normpath(base / so.string("sessions_dir", "sessions")))
 
     simulation = None
     if "simulation" in top.data:
-        sm = top.section("simulation", ("harp_offset_deg", "emulator"))
+        sm = top.section("simulation", keys_of(SimulationConfig))
         emu = sm.section("emulator", optional=True)
         simulation = SimulationConfig(
             harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))

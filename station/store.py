@@ -26,10 +26,20 @@ import sqlite3
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from station.profile import Profile, Verdict
+if TYPE_CHECKING:  # imported where used: listing the commands must not load the models
+    from station.profile import Profile, Verdict
 
 BUSY_TIMEOUT_MS = 30000
+
+DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
+"""Where the commands look for the store when none is named (what ``configs/demo.yaml`` uses)."""
+
+
+def default_store_path() -> Path:
+    """``$HARP_STORE``, else :data:`DEFAULT_STORE` (relative to the working directory)."""
+    return Path(os.environ.get("HARP_STORE", DEFAULT_STORE))
 
 
 class StoreError(RuntimeError):
@@ -293,6 +303,8 @@ class ProfileStore:
         FROM profiles p JOIN lenses l ON l.id = p.lens_id JOIN cameras c ON c.id = p.camera_id"""
 
     def _profile(self, row: sqlite3.Row) -> Profile:
+        from station.profile import Profile
+
         values = {k: row[k] for k in row.keys()}
         values["lens"] = (row["l_maker"], row["l_model"], row["l_serial"])
         values["camera"] = (row["c_maker"], row["c_model"], row["c_serial"])

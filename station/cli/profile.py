@@ -12,11 +12,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
-DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
+from station.store import DEFAULT_STORE
+
 FORMATS = ("opencv", "ros", "lensfun", "json")
 
 
@@ -53,9 +53,9 @@ def _error(msg: str) -> int:
 
 
 def _open(args):
-    from station.store import ProfileStore
+    from station.store import ProfileStore, default_store_path
 
-    path = args.store or Path(os.environ.get("HARP_STORE", DEFAULT_STORE))
+    path = args.store or default_store_path()
     return ProfileStore(path, create=False)
 
 

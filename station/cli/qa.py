@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
-DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
+from station.session import layout
+from station.store import DEFAULT_STORE, default_store_path
+
 REPORT_BOOTSTRAP = 20
 """Bootstrap replicates of the report's uncertainty map when the configuration sets none."""
 
@@ -89,7 +90,7 @@ def _store(args, config, create=False):
     elif config is not None:
         path = config.store_path
     else:
-        path = Path(os.environ.get("HARP_STORE", DEFAULT_STORE))
+        path = default_store_path()
     return ProfileStore(path, create=create)
 
 
@@ -106,7 +107,7 @@ def _candidates(args, config, session):
                 p.focus if p.focus is not None else session.config.focus_settings[f],
                 p,
                 None,
-                str(session.path / "profiles" / f"focus{f}.yaml"),
+                str(session.path / layout.profile_file(f)),
             )
             for f, p in profiles
         ]
@@ -212,11 +213,11 @@ def run(args) -> int:
         try:
             config = load_config(args.config) if args.config else None
             target = Path(args.target)
-            if (target / "session.json").is_file():
+            if (target / layout.SESSION_FILE).is_file():
                 session = SessionDir.open(target)
                 config = config or session.config
             elif target.exists() and target.is_dir():
-                raise _Fail(f"{target}: not a session directory (no session.json)")
+                raise _Fail(f"{target}: not a session directory (no {layout.SESSION_FILE})")
             thresholds = thresholds_from(
                 config.qa if config is not None else None,
                 max_holdout_d_px=args.max_holdout_d,

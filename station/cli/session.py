@@ -89,7 +89,7 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
     from station.config import ConfigError
     from station.session.devices import open_station
     from station.session.directory import SessionError
-    from station.session.executor import Executor
+    from station.session.run import run_session
     from station.store import ProfileStore, StoreError
 
     started = []  # the session directory, once there is one
@@ -98,7 +98,7 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
             with get_session() as session:
                 started.append(session.path)
                 console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
-                result = Executor(session, camera, turntable, store=store, console=console, report=report).run()
+                result = run_session(session, camera, turntable, store=store, console=console, report=report)
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
     except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on

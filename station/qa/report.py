@@ -43,6 +43,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from station.profile import Profile, Verdict
+from station.session import layout
+
+REPORT_MD = "report.md"
+"""The report's Markdown file, in its directory."""
+REPORT_HTML = "index.html"
+"""The same report as a standalone HTML page."""
 
 
 @dataclass(frozen=True)
@@ -302,10 +308,10 @@ def write_report(
                 name = f"overlay_f{i}_o{j}.png"
                 write_overlay(out / name, s.image, s.measurement, title=f"{label}, stage {s.orientation_deg:g} deg")
                 md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
-    path = out / "report.md"
+    path = out / REPORT_MD
     text = "\n".join(md) + "\n"
     path.write_text(text)
-    (out / "index.html").write_text(markdown_to_html(text, title=f"QA report: {title}"))
+    (out / REPORT_HTML).write_text(markdown_to_html(text, title=f"QA report: {title}"))
     return path
 
 
@@ -511,7 +517,7 @@ def write_session_report(
             p.focus if p.focus is not None else session.config.focus_settings[f],
             p,
             v,
-            source=f"profiles/focus{f}.yaml",
+            source=layout.profile_file(f),
             bootstrap_if_missing=bootstrap_if_missing,
         )
         for (f, p), v in zip(profiles, verdicts)

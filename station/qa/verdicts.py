@@ -25,9 +25,7 @@ field uncertainty, or a distortion with no threshold) are still reported.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 from station.config import QAConfig
@@ -242,14 +240,9 @@ def session_profiles(session_path) -> list[tuple[int, Profile]]:
     """``(focus_idx, profile)`` of every profile a session directory holds, by focus index
     (a profile file that does not record its focus gets the session's focus setting later)."""
     from pipeline.model_file import read_model_file
+    from station.session import layout
 
-    out = []
-    for p in sorted(Path(session_path, "profiles").glob("focus*.yaml")):
-        m = re.fullmatch(r"focus(\d+)\.yaml", p.name)
-        if not m:
-            continue
-        out.append((int(m.group(1)), Profile.from_model_file(read_model_file(p))))
-    return sorted(out, key=lambda x: x[0])
+    return [(f, Profile.from_model_file(read_model_file(p))) for f, p in layout.profile_files(session_path)]
 
 
 def interpolation_error(models_by_focus: dict, width: int, height: int):

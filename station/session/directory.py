@@ -1,32 +1,17 @@
 """A session directory: atomically written frames plus an append-only manifest.
 
-Layout::
-
-    DIR/session.json       what the session is (written once, atomically)
-    DIR/config.yaml        verbatim copy of the configuration it runs
-    DIR/manifest.jsonl     one JSON record per line, fsync'ed after each line
-    DIR/frames/*.pgm       every captured frame (8- or 16-bit binary PGM)
-    DIR/measurements/*.npz the measured edges of every accepted shot
-                           (:mod:`station.session.evidence`), so that reports and
-                           QA need not measure the frames again
-    DIR/profiles/*.yaml    the fitted model of each focus setting
-    DIR/profiles/*.npz     its bootstrap field-uncertainty map
-    DIR/report/            the session report (``harp session run``, unless --no-report)
+What lives where is :mod:`station.session.layout`'s (the one module naming the
+paths); what the manifest says is :mod:`station.session.records`' (one dataclass
+per record kind; :meth:`SessionDir.append` takes a record, or a plain mapping).
 
 The manifest is the truth: a frame file counts only once its ``frame``
 record is in the manifest (it is renamed into place, fsync'ed, *then*
 recorded). A torn last line, left by a kill in the middle of a write, is
 dropped when the manifest is read and cut off before the next append, so a
 resumed session continues exactly where the last complete record left it.
-
-Record kinds: ``start`` / ``resume``, ``focus`` (focus locked),
-``frame`` (focus_idx, orientation_idx, frame_idx, attempt, file, sha256,
-metadata), ``reject`` (a shot failed its checks; its frames are superseded by
-the next attempt), ``measure`` (with ``file`` / ``sha256`` of the shot's
-measurement), ``fit`` (with ``uncertainty_file`` / ``uncertainty_sha256``), ``stored`` (profile in the store),
-``fault`` (a device error and the attempt it hit), ``qa`` / ``qa_session``
-(verdicts), ``interpolation`` (leave-one-focus-out error), ``aborted``,
-``report``, ``finished``.
+Records are read back as plain mappings (:meth:`SessionDir.of_kind`,
+:meth:`SessionDir.frames`); a ``reject`` record supersedes the shot's frames
+(the next attempt captures it again).
 """
 
 from __future__ import annotations
@@ -38,7 +23,7 @@ import io
 import json
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -46,11 +31,10 @@ import numpy as np
 
 from station.config import Config, load_config
 from station.files import atomic_write_bytes
+from station.session import layout
+from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import frame_key, stored_key
-
-MANIFEST = "manifest.jsonl"
-SESSION_FILE = "session.json"
-CONFIG_COPY = "config.yaml"
+from station.session.records import FrameSaved, Record
 
 
 class SessionError(RuntimeError):
@@ -140,7 +124,7 @@ class SessionDir:
         self._manifest = open(manifest, "ab")
         self.records = records
         # temporary files of writes a kill interrupted (never renamed into place)
-        for sub in ("frames", "measurements", "profiles"):
+        for sub in layout.WRITTEN_DIRS:
             if (self.path / sub).is_dir():
                 for tmp in (self.path / sub).glob(".*.tmp*"):
                     tmp.unlink(missing_ok=True)
@@ -162,9 +146,8 @@ class SessionDir:
             raise SessionError(f"{path}: already exists") from None
         except OSError as exc:
             raise SessionError(f"{path}: cannot create session directory: {exc.strerror}") from None
-        (path / "frames").mkdir()
-        (path / "profiles").mkdir()
-        (path / "measurements").mkdir()
+        for sub in layout.WRITTEN_DIRS:
+            (path / sub).mkdir()
         atomic_write_bytes(path / CONFIG_COPY, config.path.read_bytes())
         meta = {
             "format": 1,
@@ -207,9 +190,10 @@ class SessionDir:
         self.close()
 
     # --------------------------------------------------------------- writes
-    def append(self, record: dict) -> dict:
-        """Append one record to the manifest, durably (flush + fsync)."""
-        record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **record}
+    def append(self, record: Record | Mapping[str, Any]) -> dict:
+        """Append one record to the manifest, durably (flush + fsync); returns the line's mapping."""
+        data = record.to_json() if isinstance(record, Record) else dict(record)
+        record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **data}
         line = json.dumps(record, separators=(",", ":"), default=json_default) + "\n"
         self._manifest.write(line.encode())
         self._manifest.flush()
@@ -227,20 +211,13 @@ class SessionDir:
     ) -> dict:
         """Write a frame atomically, then record it in the manifest."""
         attempt = self.attempt(focus_idx, orientation_idx)
-        name = f"f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.pgm"
+        rel = layout.frame_file(focus_idx, orientation_idx, attempt, frame_idx)
         data = encode_pgm(image)
-        atomic_write_bytes(self.path / "frames" / name, data)
+        atomic_write_bytes(self.path / rel, data)
         return self.append(
-            {
-                "kind": "frame",
-                "focus_idx": focus_idx,
-                "orientation_idx": orientation_idx,
-                "frame_idx": frame_idx,
-                "attempt": attempt,
-                "file": f"frames/{name}",
-                "sha256": hashlib.sha256(data).hexdigest(),
-                "meta": metadata or {},
-            }
+            FrameSaved(
+                focus_idx, orientation_idx, frame_idx, attempt, rel, hashlib.sha256(data).hexdigest(), metadata or {}
+            )
         )
 
     def write_arrays(self, relpath: str, arrays: dict[str, np.ndarray]) -> dict:
@@ -261,11 +238,6 @@ class SessionDir:
             raise SessionError(f"{self.path / relpath}: checksum does not match the manifest")
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
-
-    def write_profile_file(self, focus_idx: int, payload: dict) -> Path:
-        path = self.path / "profiles" / f"focus{focus_idx}.json"
-        atomic_write_bytes(path, (json.dumps(payload, indent=1, default=json_default) + "\n").encode())
-        return path
 
     # ---------------------------------------------------------------- reads
     def of_kind(self, kind: str) -> Iterator[dict]:

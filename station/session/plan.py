@@ -6,11 +6,18 @@ measure; then fit and store) without touching any hardware, so tests can list
 it and :mod:`station.session.executor` can perform it. A resumed session passes the
 keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
 plan skips them.
+
+Re-captures are the plan's decision: the executor sends each ``Measure``'s
+:class:`ShotCheck` back into the generator (``plan.send(check)``); a shot that
+failed its checks is captured again (locking its focus first if another one is
+locked) up to ``capture.checks.max_recaptures`` times, after which the plan yields
+:class:`Stop` with the reason. Listing the plan (``list(plan_session(...))``)
+sends nothing: every shot is taken to pass.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 
 from station.config import Config
@@ -66,7 +73,29 @@ class Store:
     focus_idx: int
 
 
-Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | Store
+@dataclass(frozen=True)
+class Stop:
+    """The session cannot go on (a shot keeps failing its checks); ``reason`` says why."""
+
+    reason: str
+
+
+Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | Store | Stop
+
+
+@dataclass(frozen=True)
+class ShotCheck:
+    """What measuring a shot found: ``problems`` (empty: accepted) at capture ``attempt``
+    (the number of times the shot was rejected before this one)."""
+
+    focus_idx: int
+    orientation_idx: int
+    attempt: int
+    problems: tuple[str, ...] = ()
+
+    @property
+    def accepted(self) -> bool:
+        return not self.problems
 
 
 def frame_key(focus_idx: int, orientation_idx: int, frame_idx: int) -> tuple:
@@ -92,7 +121,9 @@ def capture_steps(
         yield Save(focus_idx, orientation_idx, i)
 
 
-def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) -> Iterator[Step]:
+def plan_session(
+    config: Config, already_done: Iterable[tuple] = frozenset()
+) -> Generator[Step, ShotCheck | None, None]:
     """Every step of the session described by ``config``, minus ``already_done``.
 
     Parameters
@@ -105,9 +136,13 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
     Step : in execution order. A focus setting whose profile is stored yields
         nothing; an orientation whose frames are all saved yields only its
         ``Measure``; ``LockFocus`` is emitted only when something is captured.
+        After a ``Measure``, the executor sends its :class:`ShotCheck`; a rejected
+        shot is re-captured, or ``Stop`` is yielded (see the module docstring).
     """
     done = set(already_done)
     n = config.capture.frames_per_orientation
+    max_recaptures = config.capture.checks.max_recaptures
+    locked: int | None = None
     for f, focus in enumerate(config.focus_settings):
         if stored_key(f) in done:
             continue
@@ -115,9 +150,23 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
         missing = {o: [i for i in range(n) if frame_key(f, o, i) not in done] for o in range(n_o)}
         if any(missing.values()):
             yield LockFocus(f, focus)
+            locked = f
         for o in range(n_o):
             if missing[o]:
                 yield from capture_steps(config, f, o, missing[o])
-            yield Measure(f, o)
+            while True:
+                check = yield Measure(f, o)
+                if check is None or check.accepted:
+                    break
+                if check.attempt >= max_recaptures:
+                    yield Stop(
+                        f"shot focus {f} orientation {o} failed its checks {check.attempt + 1} times: "
+                        + "; ".join(check.problems)
+                    )
+                    return
+                if locked != f:
+                    yield LockFocus(f, focus)
+                    locked = f
+                yield from capture_steps(config, f, o)
         yield Fit(f)
         yield Store(f)

@@ -156,3 +156,25 @@ def test_boolean_field(tmp_path):
 def test_pipeline_options():
     cfg = load_config(DEMO)
     assert cfg.pipeline.tangential is True and cfg.pipeline.bootstrap > 0 and cfg.pipeline.workers == 2
+
+
+def test_the_keys_a_section_accepts_are_its_dataclass_fields(tmp_path):
+    import dataclasses
+
+    from station.config import PipelineConfig
+
+    d = demo_data()
+    d["pipeline"]["centre_prior"] = True  # a misspelling: the message lists the dataclass's fields
+    msg = error_of(tmp_path, d)
+    assert (
+        f"pipeline.centre_prior: unknown field; expected one of {', '.join(f.name for f in dataclasses.fields(PipelineConfig))}"
+        in msg
+    )
+    d["pipeline"].pop("centre_prior")
+    d["pipeline"]["center_prior"] = True
+    cfg = load_config(write(tmp_path, d))
+    assert cfg.pipeline.spec.center_prior and cfg.pipeline.spec.label == "radial4+tangential+centre-prior"
+    d["pipeline"]["degree"] = 11
+    assert "pipeline.degree: expected a degree the model allows: radial degree must be within 1..10, got 11" in (
+        error_of(tmp_path, d)
+    )

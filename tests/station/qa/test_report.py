@@ -1,4 +1,4 @@
-"""The QA report (station/report.py): Markdown + PNG plots, written by ``harp qa --report``."""
+"""The QA report (station/qa/report.py): Markdown + PNG plots, written by ``harp qa --report``."""
 
 import re
 

@@ -10,7 +10,8 @@ import yaml
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DeviceTimeout
 from station.config import load_config
 from station.session.directory import SessionDir
-from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
+from station.session.executor import EXIT_ABORTED, EXIT_OK
+from station.session.run import run_session
 from station.store import ProfileStore
 from tests.station.fakes import FakeCamera, FakeStage, H, W
 
@@ -33,8 +34,7 @@ def make_config(tmp_path, focus=(0.0,), orientations=(0, 45, 90, 135), frames=1,
 
 def run(session, cam, stage, store=None):
     sleeps = []
-    ex = Executor(session, cam, stage, store=store, sleep=sleeps.append)
-    return ex.run(), sleeps
+    return run_session(session, cam, stage, store=store, sleep=sleeps.append, report=False), sleeps
 
 
 def frame_records(path):

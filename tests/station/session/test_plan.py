@@ -11,7 +11,10 @@ from station.session.plan import (
     Measure,
     Move,
     Save,
+    ShotCheck,
+    Stop,
     Store,
+    capture_steps,
     frame_key,
     plan_session,
     stored_key,
@@ -69,3 +72,41 @@ def test_resume_skips_done_work():
 def test_nothing_left():
     cfg = load_config(DEMO)
     assert list(plan_session(cfg, {stored_key(f) for f in range(3)})) == []
+
+
+def test_a_rejected_shot_is_captured_again_then_the_plan_stops():
+    cfg = load_config(DEMO)  # max_recaptures 2, 2 frames per orientation
+    plan = plan_session(cfg)
+    steps = []
+    step = next(plan)
+    while not (isinstance(step, Measure) and step.orientation_idx == 1):
+        steps.append(step)
+        step = plan.send(None)
+    for attempt in range(cfg.capture.checks.max_recaptures):
+        step = plan.send(ShotCheck(0, 1, attempt, ("over-exposed",)))
+        again = []
+        while not isinstance(step, Measure):
+            again.append(step)
+            step = plan.send(None)
+        # the focus is still locked: the shot alone, all its frames, then measured again
+        assert again == list(capture_steps(cfg, 0, 1)) and step == Measure(0, 1)
+    stop = plan.send(ShotCheck(0, 1, 2, ("over-exposed", "only 2 string edges found (need 4)")))
+    assert stop == Stop(
+        "shot focus 0 orientation 1 failed its checks 3 times: over-exposed; only 2 string edges found (need 4)"
+    )
+    assert list(plan) == []  # nothing after a stop
+
+
+def test_a_recapture_on_resume_locks_the_focus_first():
+    cfg = load_config(DEMO)
+    n_i = cfg.capture.frames_per_orientation
+    done = {frame_key(0, o, i) for o in range(8) for i in range(n_i)}  # focus 0 captured, nothing locked yet
+    plan = plan_session(cfg, done)
+    assert next(plan) == Measure(0, 0)
+    step = plan.send(ShotCheck(0, 0, 0, ("blank",)))
+    assert step == LockFocus(0, 0.0)
+    assert plan.send(None) == Move(0, 0, 0.0)
+    accepted = plan.send(None)
+    while not isinstance(accepted, Measure):
+        accepted = plan.send(None)
+    assert plan.send(ShotCheck(0, 0, 1)) == Measure(0, 1)  # accepted: on to the next orientation

@@ -1,0 +1,81 @@
+"""QA of a finished session: every profile judged, recorded and stored, after the executor.
+
+:func:`judge_session` reads the profiles the session directory holds
+(:func:`station.qa.verdicts.session_profiles`), judges each against the
+configuration's ``qa`` thresholds (:func:`station.qa.verdicts.qa_verdict`), records each
+verdict in the manifest (``qa``) and the store (``qa_results``, and with its profile),
+measures the focus-interpolation error (leave one calibrated focus out,
+``interpolation``) and records the session's verdict (``qa_session``). What it finds
+is also said, one line each, through ``note`` (the console of ``harp session run``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from station.profile import Profile, Verdict
+from station.session.records import InterpolationError, QARecorded, SessionVerdict
+
+
+@dataclass(frozen=True)
+class SessionQA:
+    """The verdicts of a session: per profile (by focus index), overall, and the interpolation error."""
+
+    profiles: Sequence[tuple[int, Profile]]
+    verdicts: Sequence[Verdict]
+    overall: str
+    interpolation: Sequence[Any]
+
+
+def judge_session(
+    session: Any, *, store: Any = None, note: Callable[[str], None] = lambda _t: None
+) -> SessionQA | None:
+    """Judge, record and say the QA of every profile of an open session directory (None: no profile yet)."""
+    from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_profiles
+
+    config = session.config
+    profiles = session_profiles(session.path)
+    if not profiles:
+        return None
+    stored = {r["focus_idx"]: r.get("profile_id") for r in session.of_kind("stored")}
+    verdicts = []
+    for f, p in profiles:
+        focus = p.focus if p.focus is not None else config.focus_settings[f]
+        v = qa_verdict(p, config.qa)
+        verdicts.append(v)
+        pid = stored.get(f)
+        session.append(QARecorded(f, v.verdict, list(v.reasons), dict(v.metrics)))
+        if store is not None:
+            store.put_qa_result(
+                verdict=v.verdict,
+                reasons=list(v.reasons),
+                metrics=dict(v.metrics),
+                profile_id=pid,
+                session_dir=str(session.path.resolve()),
+            )
+            if pid is not None:
+                store.record_verdict(pid, v)
+        note(
+            f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
+            + ("; ".join(v.reasons) if v.reasons else "; ".join(c.text for c in v.checks))
+        )
+    w, h = profiles[0][1].width, profiles[0][1].height
+    try:
+        loo = interpolation_error(
+            {(p.focus if p.focus is not None else config.focus_settings[f]): p.model for f, p in profiles}, w, h
+        )
+    except ValueError as exc:
+        loo = []
+        note(f"focus interpolation: not available ({exc})")
+    for e in loo:
+        session.append(InterpolationError(e.focus, e.rms_px, e.max_px))
+        note(
+            f"focus interpolation error at {e.focus:g} (left out, interpolated from the "
+            f"others): RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px"
+        )
+    overall = combine(verdicts)
+    session.append(SessionVerdict(overall))
+    note(f"QA verdict: [{'bold green' if overall == 'PASS' else 'bold red'}]{overall}")
+    return SessionQA(profiles, verdicts, overall, loo)

@@ -1,0 +1,63 @@
+"""Where a session directory keeps things: the one place that names every path in it.
+
+Layout (paths relative to the session directory ``DIR``)::
+
+    session.json                     what the session is (written once, atomically)
+    config.yaml                      verbatim copy of the configuration it runs
+    manifest.jsonl                   one JSON record per line (station.session.records)
+    frames/f{f}_o{o}_a{a}_i{i}.pgm   frame i of attempt a of orientation o at focus setting f
+    measurements/f{f}_o{o}_a{a}.npz  the measured edges of that shot (station.session.evidence)
+    profiles/focus{f}.yaml           the profile (model file) of focus setting f
+    profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
+    report/                          the session report (station.qa.report)
+
+``f``, ``o``, ``a``, ``i`` are indices: of the focus setting in ``focus.settings``, of
+the orientation in ``capture.orientations_deg``, of the capture attempt (the number of
+times the shot was rejected before), of the frame in the shot. Every function returns a
+POSIX relative path (as the manifest records it); join it to the session directory.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+SESSION_FILE = "session.json"
+CONFIG_COPY = "config.yaml"
+MANIFEST = "manifest.jsonl"
+FRAMES = "frames"
+MEASUREMENTS = "measurements"
+PROFILES = "profiles"
+REPORT = "report"
+
+WRITTEN_DIRS = (FRAMES, MEASUREMENTS, PROFILES)
+"""Subdirectories written atomically (a kill may leave a ``.*.tmp*`` temporary there)."""
+
+_PROFILE = re.compile(r"focus(\d+)\.yaml")
+
+
+def frame_file(focus_idx: int, orientation_idx: int, attempt: int, frame_idx: int) -> str:
+    return f"{FRAMES}/f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.pgm"
+
+
+def measurement_file(focus_idx: int, orientation_idx: int, attempt: int) -> str:
+    return f"{MEASUREMENTS}/f{focus_idx}_o{orientation_idx}_a{attempt}.npz"
+
+
+def profile_file(focus_idx: int) -> str:
+    return f"{PROFILES}/focus{focus_idx}.yaml"
+
+
+def uncertainty_file(focus_idx: int) -> str:
+    return f"{PROFILES}/focus{focus_idx}_uncertainty.npz"
+
+
+def profile_files(session_dir: str | Path) -> Iterator[tuple[int, Path]]:
+    """``(focus_idx, path)`` of every profile file in a session directory, by focus index."""
+    found = []
+    for p in Path(session_dir, PROFILES).glob("focus*.yaml"):
+        m = _PROFILE.fullmatch(p.name)
+        if m:
+            found.append((int(m.group(1)), p))
+    yield from sorted(found)

@@ -1,0 +1,81 @@
+"""A whole session: the executor, then QA and the report, then ``finished``.
+
+:func:`run_session` is what ``harp session run`` / ``resume`` do once the devices are
+open: the executor performs what the session lacks (:mod:`station.session.executor`,
+with :class:`station.session.progress.ConsoleProgress` showing it); when the plan is
+done, QA judges every profile (:func:`station.qa.judge.judge_session`), the report is
+written into ``DIR/report`` (:func:`station.qa.report.write_session_report`, from the
+measurements the session kept) and a ``finished`` record closes the session. A session
+stopped by a fault skips QA and the report; one killed during QA or the report is
+finished by its next ``resume`` (nothing left to capture, QA and report again).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from drivers.protocols import Camera, Turntable
+from station.session import layout
+from station.session.directory import SessionDir
+from station.session.executor import EXIT_OK, Executor, SessionResult
+from station.session.progress import ConsoleProgress
+from station.session.records import Finished, ReportFailed, ReportWritten
+
+
+def run_session(
+    session: SessionDir,
+    camera: Camera,
+    turntable: Turntable,
+    *,
+    store: Any = None,
+    console: Any = None,
+    sleep: Callable[[float], None] = time.sleep,
+    report: bool = True,
+) -> SessionResult:
+    """Run (or resume) ``session`` on open devices; see the module docstring.
+
+    ``console``: a ``rich.console.Console`` for progress, summary, QA lines (None: silent);
+    ``report``: write ``DIR/report`` once the plan is done.
+    """
+    executor = Executor(session, camera, turntable, store=store, sleep=sleep)
+    if console is not None:
+        executor.subscribe(ConsoleProgress(console, executor.tally))
+    result = executor.run()
+    if result.exit_code != EXIT_OK:
+        return result
+    note = console.print if console is not None else (lambda _text: None)
+    from station.qa.judge import judge_session
+
+    qa = judge_session(session, store=store, note=note)
+    if report and qa is not None:
+        _write_report(session, qa, note)
+    session.append(Finished())
+    return result
+
+
+def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> None:
+    """The session report into ``DIR/report``; a failure is recorded and said, the session kept."""
+    from station.qa.report import REPORT_HTML, write_session_report
+
+    cfg = session.config
+    title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {session.path.name}"
+    try:
+        path = write_session_report(
+            session,
+            session.path / layout.REPORT,
+            title,
+            qa.profiles,
+            qa.verdicts,
+            qa.overall,
+            thresholds=cfg.qa,
+            interpolation=qa.interpolation,
+        )
+    except (OSError, ValueError) as exc:  # the profiles are stored; say so, do not lose the session
+        session.append(ReportFailed(f"{type(exc).__name__}: {exc}"))
+        note(f"[red]report not written: {type(exc).__name__}: {exc}")
+        return
+    rel = path.relative_to(session.path)
+    session.append(ReportWritten(str(rel), str(rel.with_name(REPORT_HTML))))
+    note(f"report: {path} (and {REPORT_HTML})")

@@ -1,0 +1,89 @@
+"""The process pool of a session's fits (cross-validation and bootstrap replicates).
+
+:class:`FitWorkers` creates the pool on first use (``pipeline.workers`` > 1; else
+plain ``map``) with the ``forkserver`` start method — the session process runs
+device threads, so it must not fork — and shuts it down with :meth:`FitWorkers.close`.
+Its workers end themselves when the session process is gone (a SIGKILLed session
+cannot shut its pool down) and ignore Ctrl-C, which the session process handles.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty"]
+"""Modules the forkserver imports once, so that each worker starts warm."""
+
+
+class FitWorkers:
+    """``map`` over ``n`` worker processes (created when first used), or the builtin ``map`` for ``n <= 1``."""
+
+    def __init__(self, n: int) -> None:
+        self.n = int(n)
+        self._pool: Any = None
+
+    @property
+    def map(self) -> Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]]:
+        if self.n <= 1:
+            return map
+        if self._pool is None:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
+            ctx.set_forkserver_preload(PRELOAD)
+            _start_forkserver_ignoring_sigint()
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
+            )
+        return self._pool.map
+
+    def close(self) -> None:
+        """Shut the pool down (pending fits are cancelled)."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+
+def _start_forkserver_ignoring_sigint() -> None:
+    """Start multiprocessing's forkserver with SIGINT ignored (inherited through
+    exec): it spends a second or two importing the preloaded modules before it
+    ignores SIGINT itself, and a Ctrl-C to the process group in that time would
+    print its KeyboardInterrupt traceback. Only the session process handles Ctrl-C."""
+    from multiprocessing import forkserver
+
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()  # signal handlers can only be set from the main thread
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _exit_with_session(pid: int, period_s: float = 0.5) -> None:
+    """Process-pool initializer: the worker ends itself once the session process
+    ``pid`` is gone. A SIGKILLed session cannot shut its pool down, and its idle
+    workers would otherwise wait on the pool's queue (and keep its forkserver) forever.
+    Ctrl-C reaches the whole process group: the session process handles it (the
+    frames are kept, the pool is shut down), so the workers ignore SIGINT instead
+    of each printing a KeyboardInterrupt traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def watch() -> None:
+        while True:
+            time.sleep(period_s)
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os._exit(0)
+            except PermissionError:  # alive, owned by someone else (cannot happen for our parent)
+                continue
+
+    threading.Thread(target=watch, name="harp-session-watch", daemon=True).start()
