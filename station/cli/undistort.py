@@ -11,7 +11,6 @@ corrected. Exit 0 on success, 2 on bad input.
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 from pipeline.model_file import read_model_file
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.inputs import InputError, read_image
+from station.files import atomic_write_bytes
 
 INTERPOLATIONS = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 WRITABLE = (".pgm", ".ppm", ".pnm", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
@@ -117,10 +117,11 @@ def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict) -> None:
     out = undistort_image(img, cache[(w, h)], INTERPOLATIONS[args.interpolation])
     target = out_dir / p.name
     params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []
-    tmp = target.with_name(f".{target.name}.tmp{target.suffix}")
-    ok = cv2.imwrite(str(tmp), out, params)
+    try:
+        ok, encoded = cv2.imencode(p.suffix, out, params)
+    except cv2.error:
+        ok = False
     if not ok:
-        tmp.unlink(missing_ok=True)
         raise UndistortError(f"{target}: OpenCV cannot write {out.dtype} images as {p.suffix}")
-    os.replace(tmp, target)
+    atomic_write_bytes(target, encoded.tobytes())
     print(f"wrote {target} ({w}x{h}, {out.dtype}, {1 if out.ndim == 2 else out.shape[2]} channel(s))")

@@ -30,13 +30,13 @@ ANGLES = (0.0, 45.0, 90.0, 135.0)
 HARP_OFFSET = 5.0
 
 
-def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, model: str = "radial") -> Path:
+def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES) -> Path:
     d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
     d["station"]["camera"].update(width=W, height=H)
     d["focus"]["settings"] = list(focus)
     d["capture"]["orientations_deg"] = list(angles)
     d["capture"]["frames_per_orientation"] = 1
-    d["pipeline"].update(model=model, degree=3, bootstrap=4, workers=1)
+    d["pipeline"].update(degree=3, bootstrap=4, workers=1)
     d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 5.0}
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     root.mkdir(parents=True, exist_ok=True)
@@ -45,11 +45,9 @@ def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGL
     return path
 
 
-def build_session(
-    root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1", model: str = "radial"
-) -> Path:
+def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1") -> Path:
     """A finished session under ``root/sessions/name``; returns its path."""
-    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles, model=model))
+    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles))
     s = SessionDir.create(config.sessions_dir, config, name=name)
     with s:
         for fi, f in enumerate(config.focus_settings):

@@ -84,13 +84,21 @@ def test_lens_report_without_frames(session, tmp_path, capsys):
     png(out / "field_f0.png")
 
 
-def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(tmp_path, monkeypatch, capsys):
-    # pipeline.model: auto: the report's bootstrap once asked the fit for model 'auto' ("not available")
+def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(session, tmp_path, monkeypatch, capsys):
+    # pipeline.model: auto: the report's bootstrap once asked the fit for model 'auto' ("not available");
+    # it must refit the spec the profile records, whatever the configuration says
+    import shutil
+
     import pipeline.uncertainty
 
-    session = build_session(tmp_path, focus=(0.3,), model="auto")
-    ((_, prof),) = session_profiles(session)
-    assert prof.spec is not None and prof.selection["folds"] == "images"  # chosen, and the choice kept
+    auto = tmp_path / "auto"
+    shutil.copytree(session, auto)
+    cfg = auto / "config.yaml"
+    cfg.write_text(cfg.read_text().replace("model: radial", "model: auto"))
+    with SessionDir.open(auto) as s:
+        assert s.config.pipeline.model == "auto"
+    ((_, prof),) = session_profiles(auto)
+    assert prof.spec is not None and prof.spec.label == "radial3+tangential"
     real = pipeline.uncertainty.bootstrap_field_uncertainty
     specs = []
 
@@ -100,7 +108,7 @@ def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(tmp_path, 
 
     monkeypatch.setattr(pipeline.uncertainty, "bootstrap_field_uncertainty", spy)
     out = tmp_path / "report"
-    assert main(["qa", str(session), "--report", str(out), "--no-record"]) == 0
+    assert main(["qa", str(auto), "--report", str(out), "--no-record"]) == 0
     capsys.readouterr()
     assert specs == [prof.spec]
     md = (out / "report.md").read_text()
