@@ -1,7 +1,8 @@
 """Station configuration: YAML validated on load into frozen dataclasses.
 
 A configuration file describes one station (camera, turntable, harp), the
-lens and camera body being calibrated, what to capture (focus settings,
+lens and camera body being calibrated (their identities and, optionally, the
+optics an export needs: :class:`Optics`), what to capture (focus settings,
 orientations, frames per orientation, exposure), the pipeline parameters,
 the QA thresholds and where the profile store lives. Relative paths are
 relative to the directory holding the configuration file.
@@ -116,6 +117,85 @@ class Identity:
         return f"{self.maker} {self.model} #{self.serial}"
 
 
+def _optic(section: str, check: tuple[float, float] | None, unit: str, doc: str) -> Any:
+    """An :class:`Optics` field: which YAML section holds it, its plausible range and unit."""
+    return field(default=None, metadata={"section": section, "range": check, "unit": unit, "doc": doc})
+
+
+@dataclass(frozen=True)
+class Optics:
+    """What the configuration says about the optics, for exports (every field optional).
+
+    The harp measures the *shape* of the distortion, not these: they make an
+    export's camera matrix nominal instead of a placeholder
+    (:func:`pipeline.exports.lens.camera_matrix_choice`) and let lensfun
+    applications find the lens (:mod:`pipeline.exports.lensfun`). In the YAML
+    file ``focal_mm`` and ``mount`` belong to ``lens``, the others to
+    ``camera_body`` (each field's ``section`` metadata); ``pixel_pitch_um`` and
+    ``sensor_width_mm`` are alternatives (give one).
+    """
+
+    focal_mm: float | None = _optic("lens", (0.1, 10000.0), "mm", "the nominal focal length (at this zoom setting)")
+    mount: str | None = _optic("lens", None, "", "the lens mount, as lensfun names it (e.g. 'Canon EF')")
+    pixel_pitch_um: float | None = _optic(
+        "camera_body", (0.2, 100.0), "micrometres", "the pixel pitch of the images (after any binning)"
+    )
+    sensor_width_mm: float | None = _optic(
+        "camera_body", (0.5, 200.0), "mm", "the width of the sensor area the image covers"
+    )
+    crop_factor: float | None = _optic(
+        "camera_body", (0.1, 20.0), "", "the crop factor (35 mm diagonal / sensor diagonal)"
+    )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields that are set (for a model file's provenance)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if getattr(self, f.name) is not None}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Optics:
+        """The optics of a :meth:`to_dict` mapping; a value that is not valid is left out."""
+        if not isinstance(d, Mapping):
+            return cls()
+        kw: dict[str, Any] = {}
+        for f in dataclasses.fields(cls):
+            v = d.get(f.name)
+            if f.metadata["range"] is None:
+                if isinstance(v, str) and v.strip():
+                    kw[f.name] = v
+            elif optic_problem(f.name, v) is None and v is not None:
+                kw[f.name] = float(v)
+        return cls(**kw)
+
+
+def optics_keys(section: str) -> tuple[str, ...]:
+    """The :class:`Optics` keys of YAML section ``section`` (``lens`` or ``camera_body``)."""
+    return tuple(f.name for f in dataclasses.fields(Optics) if f.metadata["section"] == section)
+
+
+def optic_problem(name: str, value: Any) -> str | None:
+    """Why ``value`` is not valid for :class:`Optics` field ``name`` (the 'expected ...' text), or None.
+
+    Numbers must lie in a plausible range for their unit, which catches a value
+    written in the wrong unit (a pitch of 0.0057 is millimetres, not µm).
+    """
+    (f,) = [f for f in dataclasses.fields(Optics) if f.name == name]
+    if value is None:
+        return None
+    lo_hi = f.metadata["range"]
+    if lo_hi is None:
+        if isinstance(value, str) and value.strip():
+            return None
+        return f"{f.metadata['doc']} (a non-empty string)"
+    lo, hi = lo_hi
+    unit = f" in {f.metadata['unit']}" if f.metadata["unit"] else ""
+    expected = f"{f.metadata['doc']}{unit} ({lo:g}..{hi:g})"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return expected
+    if not lo <= value <= hi:
+        return expected
+    return None
+
+
 @dataclass(frozen=True)
 class RetryConfig:
     attempts: int = 3
@@ -203,6 +283,7 @@ class Config:
     store_path: Path = _at("store.path")
     sessions_dir: Path = _at("store.sessions_dir")
     simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
+    optics: Optics = field(default_factory=Optics, metadata={"yaml": None})  # from lens and camera_body
 
     def error(self, field_path: str, expected: str) -> ConfigError:
         return ConfigError(self.path, field_path, expected)
@@ -410,11 +491,23 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     )
     station = StationConfig(id=st.string("id"), camera=camera, turntable=turntable, harp=harp)
 
+    optic_values: dict[str, Any] = {}
+
     def identity(key: str) -> Identity:
-        s = top.section(key, keys_of(Identity))
+        s = top.section(key, (*keys_of(Identity), *optics_keys(key)))
+        for name in optics_keys(key):
+            v = s.data.get(name)
+            problem = optic_problem(name, v)
+            if problem is not None:
+                raise s.err(name, problem, v)
+            if v is not None:
+                optic_values[name] = v if isinstance(v, str) else float(v)
         return Identity(s.string("maker"), s.string("model"), s.string("serial"))
 
     lens, body = identity("lens"), identity("camera_body")
+    if "pixel_pitch_um" in optic_values and "sensor_width_mm" in optic_values:
+        raise ConfigError(path, "camera_body.sensor_width_mm", "expected pixel_pitch_um or sensor_width_mm, not both")
+    optics = Optics(**optic_values)
 
     fo = top.section("focus", config_keys("focus"))
     focus_settings = fo.number_list("settings")
@@ -502,6 +595,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         store_path=store_path,
         sessions_dir=sessions_dir,
         simulation=simulation,
+        optics=optics,
     )
 
 

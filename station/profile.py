@@ -15,7 +15,9 @@ same record), ``harp calibrate`` writes it, QA judges it, the report shows it an
   written (``Merit.extra``), so nothing read is lost;
 * the QA verdict with its checks (:class:`Verdict`, :class:`Check`: value,
   comparison, limit, passed), once judged;
-* what it is of (``lens``, ``camera``, ``focus``) and where it comes from
+* what it is of (``lens``, ``camera``, ``focus``; the configured ``optics``: nominal
+  focal length, mount, pixel pitch or sensor width, crop factor, for exports —
+  :meth:`Profile.lens_info`) and where it comes from
   (:class:`Provenance`: time, software, command, images with SHA-256, station,
   session, plus free-form ``extra``);
 * its store id (``id``), the store's time (``stored_at``) and free-form fit
@@ -36,11 +38,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from pipeline.exports.lens import LensInfo
 from pipeline.fitspec import FitSpec, parse
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
-from station.config import Identity
+from station.config import Identity, Optics
 
 HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
 """Hold-out scheme of a session: each orientation corrected by the fit on the others."""
@@ -296,7 +299,18 @@ class Provenance:
         return self.software.split(" ", 1)[1] if self.software.startswith("harp-station ") else self.software
 
 
-_PROVENANCE_KEYS = ("created_utc", "software", "t", "command", "images", "focus", "lens", "camera", "station")
+_PROVENANCE_KEYS = (
+    "created_utc",
+    "software",
+    "t",
+    "command",
+    "images",
+    "focus",
+    "lens",
+    "camera",
+    "optics",
+    "station",
+)
 
 
 # ---------------------------------------------------------------- profile
@@ -315,6 +329,7 @@ class Profile:
     camera: Identity | None = None
     focus: float | None = None
     provenance: Provenance = field(default_factory=Provenance)
+    optics: Optics = field(default_factory=Optics)
     details: Mapping[str, Any] = field(default_factory=dict)
     id: int | None = None
     stored_at: str | None = None
@@ -322,6 +337,24 @@ class Profile:
     def with_(self, **changes: Any) -> Profile:
         """A copy with ``changes`` (e.g. ``qa=verdict`` once judged, ``id=`` once stored)."""
         return replace(self, **changes)
+
+    def lens_info(self) -> LensInfo:
+        """What an export needs to know about the lens and camera
+        (:class:`pipeline.exports.lens.LensInfo`): identities, optics, focus setting."""
+        lens, cam, o = self.lens, self.camera, self.optics
+        return LensInfo(
+            lens_maker=lens.maker if lens else None,
+            lens_model=lens.model if lens else None,
+            lens_serial=lens.serial if lens else None,
+            camera_maker=cam.maker if cam else None,
+            camera_model=cam.model if cam else None,
+            mount=o.mount,
+            crop_factor=o.crop_factor,
+            focal_mm=o.focal_mm,
+            pixel_pitch_um=o.pixel_pitch_um,
+            sensor_width_mm=o.sensor_width_mm,
+            focus=self.focus,
+        )
 
     # ------------------------------------------------------------ model file
     def to_model_file(self) -> ModelFile:
@@ -349,6 +382,8 @@ class Profile:
             prov["lens"] = [self.lens.maker, self.lens.model, self.lens.serial]
         if self.camera is not None:
             prov["camera"] = [self.camera.maker, self.camera.model, self.camera.serial]
+        if self.optics.to_dict():
+            prov["optics"] = self.optics.to_dict()
         if p.station is not None:
             prov["station"] = p.station
         if p.session_dir is not None:
@@ -378,6 +413,7 @@ class Profile:
             camera=_identity(prov.get("camera")),
             focus=_num(prov.get("focus")),
             provenance=_provenance_of(prov),
+            optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
         )
 
@@ -472,7 +508,8 @@ class Profile:
             selection = json.loads(row.get("selection_json") or "{}")
         else:
             spec, selection = _spec_of_details(details)
-        base = _provenance_of(json.loads(row.get("provenance_json") or "{}"))
+        prov_doc = json.loads(row.get("provenance_json") or "{}")
+        base = _provenance_of(prov_doc)
         provenance = replace(
             base,
             software=base.software
@@ -494,6 +531,7 @@ class Profile:
             camera=Identity(*camera) if camera else None,
             focus=_num(row.get("focus")),
             provenance=provenance,
+            optics=Optics.from_dict(prov_doc.get("optics")),
             details=details,
             id=int(row["id"]) if row.get("id") is not None else None,
             stored_at=row.get("created_at"),

@@ -461,6 +461,9 @@ def fit_opencv(
 FISHEYE_FOCAL_STARTS = (0.2, 0.3, 0.45, 0.7, 1.0, 1.6, 3.0)
 """Starting focal lengths (in image diagonals) tried by :func:`fit_fisheye` when no focal is given."""
 
+FISHEYE_SCAN_GRID_LONG = 16
+"""Grid (points along the long side) on which :func:`fit_fisheye` compares the starting focal lengths."""
+
 
 def fit_fisheye(
     model: DistortionModel,
@@ -476,7 +479,8 @@ def fit_fisheye(
     Unlike the pin-hole polynomial, the fisheye family depends on the focal
     length (the angle of a ray is ``atan(r / f)``): with ``focal`` (px, the
     nominal one) it is kept; without, it is fitted too, from the best of
-    :data:`FISHEYE_FOCAL_STARTS` (the fitted focal is then the one that makes
+    :data:`FISHEYE_FOCAL_STARTS` (compared on a coarse grid,
+    :data:`FISHEYE_SCAN_GRID_LONG`, then refined on the full one; the fitted focal is then the one that makes
     the lens closest to a Kannala–Brandt lens, not a measured focal length).
     The principal point is fitted.
     """
@@ -497,15 +501,24 @@ def fit_fisheye(
     def free(theta: Array) -> OpenCVFisheyeModel:
         return fixed(diag * float(np.exp(theta[6])))(theta)
 
-    starts = [float(focal)] if focal is not None else [diag * v for v in FISHEYE_FOCAL_STARTS]
-    best: tuple[float, Array, Array, float] | None = None
-    for f0 in starts:
-        th, _, _ = _least_squares(prob, fixed(f0), np.zeros(6), prob.h0(), fix_h=True)
-        th, h8, cost = _least_squares(prob, fixed(f0), th, prob.h0())
-        if best is None or cost < best[0]:
-            best = (cost, th, h8, f0)
-    assert best is not None
-    _, th, h8, f0 = best
+    def start(p: _Problem, f0: float, th0: Array) -> tuple[Array, Array, float]:
+        th, _, _ = _least_squares(p, fixed(f0), th0, p.h0(), fix_h=True)
+        return _least_squares(p, fixed(f0), th, p.h0())
+
+    if focal is not None:
+        f0 = float(focal)
+        th, h8, _ = start(prob, f0, np.zeros(6))
+    else:
+        # the starting focal is chosen on a coarse grid (the scan is most of the work), then refined
+        coarse = _Problem.make(model, width, height, FISHEYE_SCAN_GRID_LONG)
+        best: tuple[float, Array, float] | None = None
+        for v in FISHEYE_FOCAL_STARTS:
+            th, _, cost = start(coarse, diag * v, np.zeros(6))
+            if best is None or cost < best[0]:
+                best = (cost, th, diag * v)
+        assert best is not None
+        _, th_c, f0 = best
+        th, h8, _ = start(prob, f0, th_c)
     if focal is None:
         th, h8, _ = _least_squares(prob, free, np.append(th, np.log(f0 / diag)), h8)
         out = free(th)

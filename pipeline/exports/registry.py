@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -63,6 +63,9 @@ class ExportSource:
         Measured edge points of the shots the model was fitted on.
     merit, provenance : mapping
         The model file's records (written by the ``harp``/``json`` formats).
+    wide_angle : bool
+        The calibration chose a wide-angle model: :data:`AUTO` then fits the
+        fisheye export too and writes the closer of the two.
     """
 
     model: DistortionModel
@@ -73,6 +76,7 @@ class ExportSource:
     edges: Sequence[Array] | None = None
     merit: Mapping[str, Any] = field(default_factory=dict)
     provenance: Mapping[str, Any] = field(default_factory=dict)
+    wide_angle: bool = False
 
 
 @dataclass(frozen=True)
@@ -194,16 +198,21 @@ def _lens_notes(src: ExportSource) -> tuple[str, ...]:
         parts.append(f"camera {src.lens.camera_body}")
     if src.lens.focus is not None:
         parts.append(f"focus setting {src.lens.focus:g}")
-    return ("; ".join(parts),) if parts else ()
+    out = ["; ".join(parts)] if parts else []
+    if src.holdout_d is not None and math.isfinite(src.holdout_d):
+        out.append(f"the harp correction's own holdout d: {src.holdout_d:.4f} px")
+    return tuple(out)
 
 
 # ------------------------------------------------------------------ writers
-def _write_pinhole(fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int) -> Export:
+def _write_pinhole(
+    fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int, hint: bool = True
+) -> Export:
     n = _coeffs(fmt, opt, allowed, default)
     cam = _camera(src, opt)
     m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
     warnings = conversion_warnings(fmt, src, err)
-    if warnings:
+    if warnings and hint:
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
     notes = _lens_notes(src)
     if fmt == "opencv":
@@ -293,6 +302,46 @@ def _plain(obj: object) -> object:
     if isinstance(obj, np.generic):
         return obj.item()
     raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
+
+
+AUTO = "auto"
+"""The name :func:`write_export` takes for "OpenCV, pin-hole or fisheye, whichever is closer"."""
+
+AUTO_BAR_PX = 0.01
+"""Without a holdout ``d``, :data:`AUTO` tries the fisheye export when the pin-hole one's
+conversion RMS (modulo homography) exceeds this (the station's precision bar)."""
+
+
+def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
+    """OpenCV pin-hole (12 coefficients, or ``opt.coeffs``) or OpenCV fisheye, whichever converts closer.
+
+    The fisheye model is fitted too when the calibration chose a wide-angle model
+    (``src.wide_angle``) or when the pin-hole conversion is less exact than the
+    calibration (its error exceeds the holdout ``d``, or :data:`AUTO_BAR_PX` without
+    one); the export is the one with the smaller RMS modulo homography.
+    """
+    pin = _write_pinhole("opencv", src, opt, (5, 8, 12, 14), 12, hint=False)
+    assert pin.error is not None
+    n = _coeffs("opencv", opt, (5, 8, 12, 14), 12)
+    limit = src.holdout_d if src.holdout_d is not None and math.isfinite(src.holdout_d) else AUTO_BAR_PX
+    worst = max(pin.error.rms_mod_h_px, pin.error.d_px if math.isfinite(pin.error.d_px) else 0.0)
+    if not src.wide_angle and worst <= limit:
+        what = "the holdout d" if limit == src.holdout_d else f"the {AUTO_BAR_PX:g} px bar"
+        why = (
+            f"auto: opencv (pin-hole, {n} coefficients): its conversion error (RMS {pin.error.rms_mod_h_px:.4f} px "
+            f"modulo homography) is within {what} ({limit:.4f} px), fisheye not tried"
+        )
+        return replace(pin, notes=(why, *pin.notes))
+    fe = _write_fisheye("opencv-fisheye", src, opt)
+    assert fe.error is not None
+    reason = "the calibration chose a wide-angle model" if src.wide_angle else f"the pin-hole exceeds {limit:.4f} px"
+    figures = (
+        f"pin-hole ({n}) RMS {pin.error.rms_mod_h_px:.4f} / max {pin.error.max_mod_h_px:.4f} px, "
+        f"fisheye RMS {fe.error.rms_mod_h_px:.4f} / max {fe.error.max_mod_h_px:.4f} px modulo homography"
+    )
+    if fe.error.rms_mod_h_px < pin.error.rms_mod_h_px:
+        return replace(fe, notes=(f"auto: opencv-fisheye ({reason}; {figures})", *fe.notes))
+    return replace(pin, notes=(f"auto: opencv (pin-hole) ({reason}; {figures})", *pin.notes))
 
 
 # ------------------------------------------------------------------ readers
@@ -464,8 +513,15 @@ def sniff_format(data: bytes) -> ExportFormat | None:
 
 
 def write_export(name: str, source: ExportSource, options: ExportOptions | None = None) -> Export:
-    """Write ``source`` in format ``name`` (ValueError on a bad option or an unconvertible model)."""
-    return get_format(name).write(source, options or ExportOptions())
+    """Write ``source`` in format ``name`` or :data:`AUTO` (ValueError on a bad option or an
+    unconvertible model); the written format is ``Export.format``."""
+    opt = options or ExportOptions()
+    if name == AUTO:
+        return _write_auto(source, opt)
+    fmt = get_format(name)
+    if opt.coeffs is not None and not fmt.coeffs:
+        raise ValueError(f"--coeffs {opt.coeffs}: the {name} export has no choice of coefficients")
+    return fmt.write(source, opt)
 
 
 def read_correction(

@@ -1,8 +1,12 @@
 """``harp evaluate CORRECTION IMAGE... [--json]``: residual distortion left by any correction.
 
-CORRECTION is a harp model file, an OpenCV calibration (FileStorage YAML or
-XML with ``camera_matrix`` + ``distortion_coefficients``), a ROS camera_info
-YAML, or a lensfun XML (``<lensdatabase>``). The string edges of the harp
+CORRECTION is any file :func:`pipeline.exports.registry.read_correction` reads
+(the format is detected from its content): a harp model file (YAML or JSON), an
+OpenCV calibration (FileStorage YAML or XML with ``camera_matrix`` +
+``distortion_coefficients``, pin-hole or fisheye), a ROS camera_info YAML
+(plumb_bob, rational_polynomial, equidistant), a lensfun XML (``<lensdatabase>``;
+``--lens`` picks a lens of a database holding several, ``--focal`` a calibration), a
+mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of the harp
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
 their straightness reported before and after (:mod:`pipeline.evaluate`).
@@ -40,14 +44,14 @@ def register(subparsers) -> None:
         help="measure the residual distortion left by any correction",
         description=(
             "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
-            "camera_info YAML or lensfun XML), measured on harp shots: d and d_max before "
-            "and after, 4-corner normalised."
+            "camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr), measured on "
+            "harp shots: d and d_max before and after, 4-corner normalised."
         ),
     )
     p.add_argument(
         "correction",
         metavar="CORRECTION",
-        help="harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML ('none' with --already-corrected)",
+        help="harp model, OpenCV, ROS, lensfun, mrcal, maps or STMap file ('none' with --already-corrected)",
     )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots")
     p.add_argument(
@@ -56,67 +60,48 @@ def register(subparsers) -> None:
     p.add_argument(
         "--focal", type=float, default=None, help="lensfun: focal length (mm) of the calibration entry to use"
     )
+    p.add_argument(
+        "--lens", default=None, metavar="NAME", help="lensfun: the lens ('maker model' or 'model') of a database"
+    )
     p.add_argument("-t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
 
-def load_correction(path, width: int, height: int, focal: float | None = None) -> tuple[DistortionModel, str]:
-    """Any supported correction file as a model for ``width`` x ``height`` images: ``(model, kind)``.
+def load_correction(
+    path, width: int, height: int, focal: float | None = None, lens_name: str | None = None
+) -> tuple[DistortionModel, str]:
+    """Any correction file :func:`pipeline.exports.registry.read_correction` reads, as a model
+    for ``width`` x ``height`` images: ``(model, kind)``.
 
-    kind is ``harp:<model name>``, ``opencv``, ``ros`` or ``lensfun:<model>``.
-    Raises EvaluateError (one line, naming the file) on any problem.
+    kind is ``harp:<model name>``, ``opencv``, ``opencv-fisheye``, ``ros``, ``ros-equidistant``,
+    ``lensfun:<model>``, ``mrcal``, ``maps`` or ``stmap``. Raises EvaluateError (one line,
+    naming the file) on any problem.
     """
+    from pipeline.exports.registry import read_correction
+
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        data = p.read_bytes()
     except FileNotFoundError:
         hint = " ('none' means no correction only with --already-corrected)" if str(path).lower() == "none" else ""
         raise EvaluateError(f"{p}: correction file not found{hint}") from None
     except IsADirectoryError:
         raise EvaluateError(f"{p}: is a directory, not a correction file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise EvaluateError(f"{p}: cannot read correction file ({type(exc).__name__})") from None
+    except OSError as exc:
+        raise EvaluateError(f"{p}: cannot read correction file ({exc.strerror or type(exc).__name__})") from None
     try:
-        head = text.lstrip()[:4096]
-        if "harp-distortion-model" in head:
-            from pipeline.model_file import parse_model_text
-
-            mf = parse_model_text(text, str(p))
-            if (mf.width, mf.height) != (width, height):
-                raise EvaluateError(f"{p}: model is for {mf.width}x{mf.height} images, the shots are {width}x{height}")
-            return mf.model, f"harp:{mf.model.name}"
-        if "<lensdatabase" in head:
-            from pipeline.exports.lensfun import read_lensfun_text
-
-            m = read_lensfun_text(text, width, height, str(p), focal=focal)
-            return m, f"lensfun:{m.kind}"
-        if "opencv-matrix" in text or "<opencv_storage" in head:
-            from pipeline.exports.opencv import read_opencv_text
-
-            m, size = read_opencv_text(text, str(p))
-            kind = "opencv"
-        elif "camera_matrix" in text and "distortion_coefficients" in text:
-            from pipeline.exports.ros import read_ros_text
-
-            m, size = read_ros_text(text, str(p))
-            kind = "ros"
-        else:
-            raise EvaluateError(
-                f"{p}: not a recognised correction (harp model, OpenCV YAML/XML, ROS camera_info YAML or lensfun XML)"
-            )
+        c = read_correction(data, str(p), width, height, focal=focal, lens_name=lens_name)
     except ValueError as exc:
         raise EvaluateError(str(exc)) from None
-    if size is not None and tuple(size) != (width, height):
-        raise EvaluateError(f"{p}: calibration is for {size[0]}x{size[1]} images, the shots are {width}x{height}")
-    return m, kind
+    return c.model, c.kind
 
 
 def _sd(st) -> dict:
     return {"d": float(st.d), "d_max": float(st.d_max)}
 
 
-def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, t=30) -> dict:
+def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, lens_name=None, t=30) -> dict:
     """The JSON report of ``harp evaluate`` (see module docstring); raises InputError (one line)."""
     images, size, errors = [], None, []
     for path in image_paths:  # a bad shot is reported and skipped; the others are evaluated
@@ -145,7 +130,7 @@ def evaluate(correction_path: str, image_paths, *, already_corrected=False, foca
     if already_corrected and str(correction_path).lower() == "none":
         model, kind = None, "none"
     else:
-        model, kind = load_correction(correction_path, w, h, focal)
+        model, kind = load_correction(correction_path, w, h, focal, lens_name)
     before_all, after_all, per_image = [], [], []
     for path, img in images:
         meas = measure_grey(path, img, t, require_strings=False)
@@ -202,7 +187,12 @@ def _fmt(sd):
 def run(args) -> int:
     try:
         rep = evaluate(
-            args.correction, args.images, already_corrected=args.already_corrected, focal=args.focal, t=args.t
+            args.correction,
+            args.images,
+            already_corrected=args.already_corrected,
+            focal=args.focal,
+            lens_name=args.lens,
+            t=args.t,
         )
     except InputError as exc:
         print(f"harp evaluate: {exc}", file=sys.stderr)

@@ -1,10 +1,40 @@
-"""``harp export MODEL --format opencv|ros|lensfun|json [-o FILE]``: a correction for other software.
+"""``harp export MODEL --format FORMAT [-o FILE]``: a harp correction for other software.
 
-OpenCV / ROS / lensfun cannot represent every lens: the export is the closest
-member of their model family (least squares over the whole image, see
-:mod:`pipeline.exports.fit`) and its conversion error in pixels is printed and
-recorded in the exported file. ``json`` writes our own model file as JSON.
-Exit 0 on success, 2 on bad input.
+Formats (:data:`pipeline.exports.registry.FORMATS`)::
+
+    opencv           OpenCV FileStorage YAML (XML with --xml or -o *.xml), pin-hole model,
+                     12 coefficients (rational + thin prism); --coeffs 5, 8, 12 or 14
+    opencv-fisheye   the same for cv::fisheye (Kannala-Brandt k1..k4)
+    ros              ROS camera_info YAML, rational_polynomial (8); --coeffs 5: plumb_bob
+    ros-equidistant  ROS camera_info YAML, equidistant (fisheye k1..k4)
+    lensfun          lensfun database XML (ptlens); -o an existing database adds the lens to it
+    mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
+    maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
+    stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's
+    json             the harp model file as JSON
+    auto             opencv or opencv-fisheye, whichever converts closer (the fisheye model is
+                     tried for a wide-angle calibration or when the pin-hole one is less exact
+                     than the calibration)
+
+Only the per-pixel maps hold the correction exactly; every other format holds the member of
+its family closest to it over the whole image (:mod:`pipeline.exports.fit`). Each export
+states its conversion error in the file and here: RMS and max modulo homography, the
+residual ``d`` it leaves on a noise-free full-field harp and on the shots the model was
+fitted on (a session's stored measurements, or the model file's images measured again when
+they are still there unchanged; ``--shots`` names them, ``--no-shots`` skips them), next to
+the model's own holdout ``d``. When the conversion error exceeds the holdout ``d``, a
+warning says so on stderr.
+
+Lens and camera: a session's profile carries the configuration's lens, camera body and
+optics (nominal focal length, pixel pitch or sensor width, crop factor, mount); the options
+override them. With the nominal focal length and the pixel pitch (or sensor width) the
+camera matrix is nominal; otherwise the file says it is a placeholder scale.
+
+Output: the file goes to ``-o FILE`` (written atomically) or to stdout (text formats); the
+figures go to stdout with ``-o`` (stderr without, so that stdout stays the file), warnings
+to stderr, one line each (``harp export: warning: ...``); ``--json`` (with ``-o``) prints
+the figures as one JSON object instead. Exit codes: 0 the export was written (also with
+warnings), 2 bad input or an error (one line on stderr, nothing written).
 """
 
 from __future__ import annotations
@@ -12,132 +42,290 @@ from __future__ import annotations
 import json
 import math
 import sys
+from pathlib import Path
 
-from pipeline.exports.fit import fit_lensfun, fit_opencv
-from pipeline.exports.lensfun import lensfun_text
-from pipeline.exports.opencv import opencv_text
-from pipeline.exports.ros import ros_text
-from pipeline.model_file import FORMAT_NAME, FORMAT_VERSION, read_model_file
-from station.files import atomic_write_text
+from station.cli.inputs import InputError
 
-FORMATS = ("opencv", "ros", "lensfun", "json")
+FORMAT_CHOICES = (
+    "auto",
+    "opencv",
+    "opencv-fisheye",
+    "ros",
+    "ros-equidistant",
+    "lensfun",
+    "mrcal",
+    "maps",
+    "stmap",
+    "json",
+)
+"""The ``--format`` values (the registry's formats other than ``harp``, plus ``auto``)."""
+
+LENS_OPTIONS = {  # option -> (LensInfo field, kind)
+    "lens_maker": ("lens_maker", str),
+    "lens_model": ("lens_model", str),
+    "lens_serial": ("lens_serial", str),
+    "camera_maker": ("camera_maker", str),
+    "camera_model": ("camera_model", str),
+    "mount": ("mount", str),
+    "focal_mm": ("focal_mm", float),
+    "pixel_pitch_um": ("pixel_pitch_um", float),
+    "sensor_width_mm": ("sensor_width_mm", float),
+    "crop": ("crop_factor", float),
+}
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "export",
-        help="export a fitted model to OpenCV, ROS, lensfun or JSON",
-        description=(
-            "Export a fitted model to OpenCV FileStorage YAML, ROS camera_info YAML, "
-            "lensfun XML or JSON, stating the conversion error in pixels."
-        ),
-    )
-    p.add_argument("model", metavar="MODEL", help="harp model file (from harp calibrate)")
-    p.add_argument("--format", required=True, choices=FORMATS)
-    p.add_argument("-o", "--output", metavar="FILE", help="write here (default: print to stdout)")
-    p.add_argument(
-        "--focal",
-        type=float,
-        default=None,
-        help="opencv/ros: nominal focal length in pixels (default: the image diagonal)",
-    )
+class ExportError(InputError):
+    """One-line message for the user."""
+
+
+def add_export_options(p) -> None:
+    """The options ``harp export`` and ``harp profile export`` share."""
+    p.add_argument("--format", required=True, choices=FORMAT_CHOICES, help="export format (see the command's help)")
+    p.add_argument("-o", "--output", metavar="FILE", help="write here (default: stdout, text formats only)")
     p.add_argument(
         "--coeffs",
         type=int,
-        choices=(5, 8),
-        default=5,
-        help="opencv/ros: 5 (plumb_bob) or 8 (rational_polynomial) coefficients (default 5)",
+        default=None,
+        help="opencv/auto: 5, 8, 12 (default) or 14 coefficients; ros: 5 or 8 (default); mrcal: 8 or 12 (default)",
+    )
+    p.add_argument("--xml", action="store_true", help="opencv: FileStorage XML instead of YAML (also -o *.xml)")
+    p.add_argument(
+        "--focal", type=float, default=None, help="opencv/ros/mrcal: focal length of the camera matrix in pixels"
     )
     p.add_argument(
-        "--lensfun-model",
-        choices=("ptlens", "poly5", "poly3"),
-        default="ptlens",
-        help="lensfun distortion model (default ptlens)",
+        "--lensfun-model", choices=("ptlens", "poly5", "poly3"), default="ptlens", help="lensfun distortion model"
     )
     p.add_argument(
         "--lensfun-no-center",
         action="store_true",
         help="lensfun: keep the distortion centre at the image centre (no <center> element)",
     )
-    p.add_argument(
-        "--focal-mm",
-        type=float,
-        default=50.0,
-        help="lensfun: focal length (mm) the calibration entry is filed under (default 50)",
+    g = p.add_argument_group("lens and camera (override what the profile records)")
+    g.add_argument("--lens-maker", metavar="TEXT")
+    g.add_argument("--lens-model", metavar="TEXT")
+    g.add_argument("--lens-serial", metavar="TEXT")
+    g.add_argument("--camera-maker", metavar="TEXT", help="camera body maker")
+    g.add_argument("--camera-model", metavar="TEXT", help="camera body model")
+    g.add_argument("--mount", metavar="TEXT", help="lens mount as lensfun names it, e.g. 'Canon EF'")
+    g.add_argument("--crop", metavar="FACTOR", help="the camera's crop factor (lensfun scales by it)")
+    g.add_argument("--focal-mm", metavar="MM", help="nominal focal length (lensfun files the calibration under it)")
+    g.add_argument("--pixel-pitch-um", metavar="UM", help="pixel pitch of the images, micrometres")
+    g.add_argument("--sensor-width-mm", metavar="MM", help="width of the sensor area the image covers (or a pitch)")
+    g.add_argument("--camera-name", metavar="NAME", help="ros: camera_name (default: from the camera body)")
+    s = p.add_mutually_exclusive_group()
+    s.add_argument(
+        "--shots",
+        nargs="+",
+        metavar="IMAGE",
+        help="the shots the model was fitted on, if they moved (their residual d is stated)",
     )
-    p.add_argument("--camera-name", default="camera", help="ros: camera_name (default 'camera')")
+    s.add_argument("--no-shots", action="store_true", help="do not measure the fitting shots again")
+    p.add_argument("--json", action="store_true", help="with -o: print the figures as one JSON object")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export",
+        help="export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
+        description=(
+            "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
+            "lensfun, mrcal, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL", help="harp model file (from harp calibrate or a session)")
+    add_export_options(p)
     p.set_defaults(func=run)
 
 
-def export_text(
-    mf,
-    fmt: str,
-    *,
-    focal=None,
-    coeffs=5,
-    lensfun_model="ptlens",
-    focal_mm=50.0,
-    camera_name="camera",
-    lensfun_center=True,
-):
-    """(text, ConversionError or None) of the export of a loaded model file."""
-    w, h = mf.width, mf.height
-    if fmt == "json":
-        doc = {
-            "format": FORMAT_NAME,
-            "format_version": FORMAT_VERSION,
-            "model": mf.model.to_dict(),
-            "image": {"width": w, "height": h},
-            "merit": mf.merit,
-            "provenance": mf.provenance,
-        }
-        return json.dumps(doc, indent=2) + "\n", None
-    if fmt in ("opencv", "ros"):
-        m, err = fit_opencv(mf.model, w, h, n_coeffs=coeffs, focal=focal)
-        text = opencv_text(m, w, h, err) if fmt == "opencv" else ros_text(m, w, h, err, camera_name=camera_name)
-        return text, err
-    m, err = fit_lensfun(mf.model, w, h, kind=lensfun_model, fit_center=lensfun_center)
-    return lensfun_text(m, err, focal=focal_mm), err
+# ------------------------------------------------------------------ options
+def lens_overrides(args) -> dict:
+    """The :class:`~pipeline.exports.lens.LensInfo` fields the options set (checked; ExportError)."""
+    from station.config import optic_problem
+
+    out = {}
+    for opt, (name, kind) in LENS_OPTIONS.items():
+        raw = getattr(args, opt, None)
+        if raw is None:
+            continue
+        flag = "--" + opt.replace("_", "-")
+        if kind is float:
+            try:
+                value = float(raw)
+            except ValueError:
+                raise ExportError(f"{flag}: expected a number, got {raw!r}") from None
+            problem = optic_problem(name, value)
+            if problem is not None:
+                raise ExportError(f"{flag}: expected {problem}, got {raw}")
+        else:
+            value = str(raw)
+            if not value.strip():
+                raise ExportError(f"{flag}: expected a non-empty text")
+        out[name] = value
+    if "pixel_pitch_um" in out and "sensor_width_mm" in out:
+        raise ExportError("--pixel-pitch-um and --sensor-width-mm are alternatives: give one")
+    return out
+
+
+def export_options(args, existing: bytes | None = None, existing_name: str = "<existing>"):
+    """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
+    from pipeline.exports.registry import ExportOptions
+
+    if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
+        raise ExportError(f"--focal: expected a focal length > 0 px, got {args.focal:g}")
+    xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
+    return ExportOptions(
+        coeffs=args.coeffs,
+        focal_px=args.focal,
+        xml=xml,
+        lensfun_model=args.lensfun_model,
+        lensfun_center=not args.lensfun_no_center,
+        camera_name=args.camera_name,
+        existing=existing,
+        existing_name=existing_name,
+    )
+
+
+def _existing_lensfun(args) -> bytes | None:
+    """The database at ``-o`` when it is one (lensfun exports add to it)."""
+    from pipeline.exports.registry import FORMATS
+
+    if args.format != "lensfun" or not args.output or not Path(args.output).is_file():
+        return None
+    try:
+        data = Path(args.output).read_bytes()
+    except OSError as exc:
+        raise ExportError(f"{args.output}: cannot read ({exc.strerror or exc})") from None
+    return data if FORMATS["lensfun"].sniff(data) else None
+
+
+# ------------------------------------------------------------------- export
+def export_profile(args, profile, *, model_dir=None, what: str | None = None, edges=None) -> tuple[object, dict]:
+    """Export ``profile`` as the options ask: ``(Export, figures)``; the file is not written.
+
+    ``edges``: the fitting shots' :class:`~station.export_source.FittingEdges` when the
+    caller knows them (default: found from the profile, unless the options say otherwise).
+
+    Raises ExportError (one line) on bad options or a model the format cannot take.
+    """
+    from pipeline.exports.registry import FORMATS, write_export
+    from station.export_source import FittingEdges, export_source, fitting_edges, measured_edges
+
+    if args.json and not args.output:
+        raise ExportError("--json needs -o FILE (without it stdout is the exported file)")
+    if args.format in FORMATS and FORMATS[args.format].binary and not args.output:
+        raise ExportError(f"--format {args.format} writes a binary file: give -o FILE{FORMATS[args.format].suffix}")
+    lens = lens_overrides(args)
+    existing = _existing_lensfun(args)
+    options = export_options(args, existing, str(args.output))
+    if args.format == "json":
+        edges = FittingEdges(None, "not used by the json format")
+    elif edges is not None:
+        pass
+    elif args.no_shots:
+        edges = FittingEdges(None, "not measured (--no-shots)")
+    elif args.shots:
+        try:
+            edges = measured_edges(args.shots, profile.provenance.t or 30)
+        except ValueError as exc:
+            raise ExportError(str(exc)) from None
+    else:
+        edges = fitting_edges(profile, model_dir)
+    source = export_source(profile, lens=lens, edges=edges)
+    try:
+        ex = write_export(args.format, source, options)
+    except ValueError as exc:
+        raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
+    return ex, figures(ex, source, edges)
+
+
+def figures(ex, source, edges) -> dict:
+    """The figures of an export as plain data (``--json``, and the lines printed)."""
+    err = ex.error
+    return {
+        "format": ex.format,
+        "conversion": None if err is None else {k: _finite(v) for k, v in err.to_dict().items()},
+        "holdout_d": _finite(source.holdout_d),
+        "fitting_shots": {"source": edges.source, "n_shots": edges.n_shots, "used": edges.edges is not None},
+        "notes": list(ex.notes),
+        "warnings": list(ex.warnings),
+    }
+
+
+def _finite(v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return v if isinstance(v, int) else float(v)
+
+
+def _px(v) -> str:
+    return "-" if v is None else f"{v:.4f} px"
+
+
+def figure_lines(fig: dict) -> list[str]:
+    """The figures as the lines printed on the terminal."""
+    lines = []
+    c, fmt = fig["conversion"], fig["format"]
+    if c is not None:
+        lines.append(
+            f"conversion error ({fmt}): RMS {c['rms_mod_h_px']:.4f} px, max {c['max_mod_h_px']:.4f} px modulo "
+            f"homography; 4-corner normalised: RMS {c['rms_px']:.4f} px, max {c['max_px']:.4f} px "
+            f"({c['n_points']} points over the whole image)"
+        )
+        shots = fig["fitting_shots"]
+        if c.get("shots_d_px") is not None:
+            on_shots = (
+                f"{_px(c['shots_d_px'])} on the fitting shots (the harp correction: {_px(c['model_shots_d_px'])}; "
+                f"{shots['source']})"
+            )
+        else:
+            on_shots = f"not stated on the fitting shots ({shots['source']})"
+        lines.append(
+            f"residual d ({fmt}): {_px(c['d_px'])} on a noise-free full-field harp, {on_shots}; "
+            f"the model's own holdout d: {_px(fig['holdout_d']) if fig['holdout_d'] is not None else 'not recorded'}"
+        )
+    lines += fig["notes"]
+    return lines
+
+
+def write_output(args, ex) -> None:
+    """Write the export to ``-o`` atomically, or its text to stdout (ExportError on failure)."""
+    from station.files import atomic_write_bytes
+
+    if args.output:
+        try:
+            atomic_write_bytes(args.output, ex.data)
+        except OSError as exc:
+            raise ExportError(f"cannot write {args.output}: {exc.strerror or exc}") from None
+    else:
+        sys.stdout.write(ex.data.decode("utf-8"))
+        sys.stdout.flush()
+
+
+def report(args, ex, fig: dict, prog: str) -> None:
+    """Print what was written, the figures and the warnings (see the module docstring)."""
+    for w in ex.warnings:
+        print(f"{prog}: warning: {w}", file=sys.stderr)
+    if args.json:
+        print(json.dumps({"output": str(args.output), **fig}))
+        return
+    out = sys.stdout if args.output else sys.stderr
+    if args.output:
+        print(f"wrote {args.output} ({ex.format})", file=out)
+    for line in figure_lines(fig):
+        print(line, file=out)
 
 
 def run(args) -> int:
-    if args.format == "lensfun" and not (math.isfinite(args.focal_mm) and args.focal_mm > 0):
-        print(f"harp export: --focal-mm must be a focal length > 0 mm, got {args.focal_mm:g}", file=sys.stderr)
-        return 2
+    from pipeline.model_file import read_model_file
+    from station.profile import Profile
+
     try:
         mf = read_model_file(args.model)
-        text, err = export_text(
-            mf,
-            args.format,
-            focal=args.focal,
-            coeffs=args.coeffs,
-            lensfun_model=args.lensfun_model,
-            focal_mm=args.focal_mm,
-            camera_name=args.camera_name,
-            lensfun_center=not args.lensfun_no_center,
-        )
-    except ValueError as exc:
+        profile = Profile.from_model_file(mf)
+        ex, fig = export_profile(args, profile, model_dir=Path(args.model).parent)
+        write_output(args, ex)
+    except (ValueError, InputError) as exc:
         print(f"harp export: {exc}", file=sys.stderr)
         return 2
-    msg = None
-    if err is not None:
-        msg = (
-            f"conversion error ({args.format}): RMS {err.rms_px:.4f} px, max {err.max_px:.4f} px "
-            f"(4-corner normalised, {err.n_points} points); modulo best homography: "
-            f"RMS {err.rms_mod_h_px:.4f} px, max {err.max_mod_h_px:.4f} px; residual on a noise-free "
-            f"full-field harp: d {err.d_px:.4f} px, d_max {err.d_max_px:.4f} px"
-        )
-    if args.output:
-        try:
-            atomic_write_text(args.output, text)
-        except OSError as exc:
-            print(f"harp export: cannot write {args.output}: {exc.strerror or exc}", file=sys.stderr)
-            return 2
-        print(f"wrote {args.output}")
-        if msg:
-            print(msg)
-    else:
-        sys.stdout.write(text)
-        if msg:
-            print(msg, file=sys.stderr)
+    report(args, ex, fig, "harp export")
     return 0

@@ -3,8 +3,11 @@
 Reads the profile store (``--store PATH``; default ``$HARP_STORE`` or
 ``profiles/harp-profiles.sqlite``, where ``configs/demo.yaml`` stores). LENS is
 a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous part of
-"maker model serial". ``export`` converts the newest profile at that focus
-with :mod:`station.cli.export`'s exporters. Exit 0 on success, 2 on bad input.
+"maker model serial". ``export`` converts the newest profile at that focus (or the
+correction interpolated between the calibrated focus settings) with the options,
+figures and warnings of ``harp export`` (:mod:`station.cli.export`); the profile
+brings the lens, camera body and optics of its session's configuration and the
+session's measured edges of its fitting shots. Exit 0 on success, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -15,9 +18,8 @@ import math
 import sys
 from pathlib import Path
 
+from station.cli.export import add_export_options
 from station.store import DEFAULT_STORE
-
-FORMATS = ("opencv", "ros", "lensfun", "json")
 
 
 def register(subparsers) -> None:
@@ -34,11 +36,16 @@ def register(subparsers) -> None:
     show.add_argument("lens", metavar="LENS")
     show.add_argument("--focus", type=float, default=None, help="one focus setting in detail")
     show.set_defaults(func=_show)
-    ex = sub.add_parser("export", help="export a lens profile for other software", parents=[store_opt])
+    ex = sub.add_parser(
+        "export",
+        help="export a lens profile for other software",
+        parents=[store_opt],
+        description="Export the newest profile of LENS at --focus (interpolated between calibrated focus "
+        "settings when it is not one): the formats, options, figures and exit codes of harp export.",
+    )
     ex.add_argument("lens", metavar="LENS")
     ex.add_argument("--focus", type=float, required=True)
-    ex.add_argument("--format", required=True, choices=FORMATS)
-    ex.add_argument("-o", "--output", metavar="FILE", help="write here (default: stdout)")
+    add_export_options(ex)
     ex.set_defaults(func=_export)
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
 
@@ -214,12 +221,16 @@ def _show(args, store) -> int:
 
 @_with_store
 def _export(args, store) -> int:
+    from station.cli.export import export_profile, report, write_output
+    from station.cli.inputs import InputError
+    from station.export_source import FittingEdges
     from station.profile import Merit, Profile, Provenance
 
     lens, latest = _select(store, args.lens, None)
     if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
         model, w, h, note, loo = _interpolated(lens, latest, args.focus)
-        interpolated = Profile(
+        nearest = min(latest, key=lambda p: abs(p.focus - args.focus))
+        profile = Profile(
             model=model,
             width=w,
             height=h,
@@ -230,31 +241,22 @@ def _export(args, store) -> int:
                     ]
                 }
             ),
-            lens=latest[0].lens,
+            lens=nearest.lens,
+            camera=nearest.camera,
+            optics=nearest.optics,
             focus=args.focus,
             provenance=Provenance(extra={"note": note, "from_profiles": [p.id for p in latest]}),
         )
-        return _write_export(args, interpolated.to_model_file(), f"interpolated focus {args.focus:g}")
-    _lens, (p,) = _select(store, args.lens, args.focus)
-    return _write_export(args, p.to_model_file(), f"profile #{p.id}")
-
-
-def _write_export(args, mf, what: str) -> int:
-    from station.cli.export import export_text
-    from station.files import atomic_write_text
-
-    try:
-        text, err = export_text(mf, args.format)
-    except ValueError as exc:
-        raise _Fail(f"{what}: {exc}") from None
-    if args.output:
-        try:
-            atomic_write_text(args.output, text)
-        except OSError as exc:
-            raise _Fail(f"cannot write {args.output}: {exc.strerror or exc}") from None
-        print(f"wrote {args.output}")
+        what = f"interpolated focus {args.focus:g}"
+        known = ", ".join(f"{p.focus:g}" for p in latest)
+        edges = FittingEdges(None, f"none: the correction is interpolated between the focus settings {known}")
     else:
-        sys.stdout.write(text)
-    if err is not None:
-        print(f"conversion error ({args.format}): RMS {err.rms_px:.4f} px, max {err.max_px:.4f} px", file=sys.stderr)
+        _lens, (profile,) = _select(store, args.lens, args.focus)
+        what, edges = f"profile #{profile.id}", None
+    try:
+        ex, fig = export_profile(args, profile, what=what, edges=edges)
+        write_output(args, ex)
+    except InputError as exc:
+        raise _Fail(str(exc)) from None
+    report(args, ex, fig, "harp profile")
     return 0

@@ -449,13 +449,14 @@ class Executor:
             selection=None if cal.selection is not None else {"reason": "pipeline.model of the configuration"},
         )
         profile = profile.with_(
+            optics=cfg.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
             details={
                 **profile.details,
                 "model_file": str(path),
                 "orientations_deg": list(cfg.capture.orientations_deg),
                 "frames_per_orientation": cfg.capture.frames_per_orientation,
                 "t": cfg.pipeline.t,
-            }
+            },
         )
         write_profile(path, profile)
         profile_id = None

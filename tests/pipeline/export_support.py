@@ -139,3 +139,115 @@ def system_python(script: str, payload: dict) -> dict:
     )
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# ------------------------------------------------------ the real consumers
+ROS_SCRIPT = r"""
+import json, sys
+import numpy as np
+import camera_calibration_parsers, image_geometry
+req = json.load(sys.stdin)
+name, ci = camera_calibration_parsers.readCalibration(req["path"])
+out = {"camera_name": name, "model": ci.distortion_model, "D": list(ci.D), "K": list(ci.K),
+       "width": ci.width, "height": ci.height}
+if req.get("rectify"):
+    m = image_geometry.PinholeCameraModel()
+    m.fromCameraInfo(ci)
+    raw = np.zeros((ci.height, ci.width), np.uint8)
+    m.rectifyImage(raw, raw.copy())
+    np.save(req["rectify"], np.stack([m.mapx.reshape(ci.height, ci.width), m.mapy.reshape(ci.height, ci.width)]))
+print(json.dumps(out))
+"""
+"""Debian's ``camera_calibration_parsers`` reads a camera_info YAML; with ``rectify`` (an ``.npy``
+path) ``image_geometry.PinholeCameraModel`` builds its rectification maps and they are saved there."""
+
+MRCAL_SCRIPT = r"""
+import json, sys
+import numpy as np
+import mrcal
+req = json.load(sys.stdin)
+m = mrcal.cameramodel(req["path"])
+lensmodel, intr = m.intrinsics()
+q = np.array(req["q"], dtype=float)
+v = mrcal.unproject(q, lensmodel, intr)
+p = np.stack([intr[0] * v[:, 0] / v[:, 2] + intr[2], intr[1] * v[:, 1] / v[:, 2] + intr[3]], axis=1)
+print(json.dumps({"lensmodel": lensmodel, "imagersize": [int(x) for x in m.imagersize()], "p": p.tolist()}))
+"""
+"""Debian's ``mrcal`` reads a ``.cameramodel`` and unprojects pixels ``q`` to pin-hole pixels."""
+
+
+def ros_in_consumer(path, rectify: bool = False) -> dict:
+    """The camera_info at ``path`` as Debian's ROS parser reads it; with ``rectify`` also
+    ``mapx``, ``mapy``: image_geometry's rectification maps (ideal pixel -> distorted source)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        npy = os.path.join(d, "maps.npy")
+        got = system_python(ROS_SCRIPT, {"path": str(path), "rectify": npy if rectify else None})
+        if rectify:
+            got["mapx"], got["mapy"] = np.load(npy)
+    return got
+
+
+def opencv_maps(path, width: int, height: int) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
+    """cv2.FileStorage reads an OpenCV export and OpenCV builds its undistortion maps
+    (``cv2.initUndistortRectifyMap``, or ``cv2.fisheye``'s for ``distortion_model: fisheye``):
+    ``(map_x, map_y, distortion_model, camera_matrix)``."""
+    import cv2
+
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    k, d = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+    kind = fs.getNode("distortion_model").string()
+    fs.release()
+    if kind == "fisheye":
+        mx, my = cv2.fisheye.initUndistortRectifyMap(k, d, np.eye(3), k, (width, height), cv2.CV_32FC1)
+    else:
+        mx, my = cv2.initUndistortRectifyMap(k, d, None, k, (width, height), cv2.CV_32FC1)
+    return mx, my, kind, k
+
+
+def fisheye_maps_of_ros(got: dict, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """cv::fisheye maps of a parsed ``equidistant`` camera_info (what ROS 2's image_proc does)."""
+    import cv2
+
+    k = np.array(got["K"]).reshape(3, 3)
+    return cv2.fisheye.initUndistortRectifyMap(k, np.array(got["D"]), np.eye(3), k, (width, height), cv2.CV_32FC1)
+
+
+def mrcal_in_consumer(
+    path, width: int, height: int, nx: int = 60, ny: int = 40
+) -> tuple[str, list, np.ndarray, np.ndarray]:
+    """mrcal's reading of a ``.cameramodel`` at pixels of a grid: ``(lensmodel, imagersize, q, p)``
+    with ``p`` the pin-hole pixels mrcal unprojects ``q`` to."""
+    xs, ys = np.linspace(0, width - 1, nx), np.linspace(0, height - 1, ny)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    got = system_python(MRCAL_SCRIPT, {"path": str(path), "q": q.tolist()})
+    return got["lensmodel"], got["imagersize"], q, np.array(got["p"])
+
+
+def lensfun_in_consumer(
+    xml: str, camera: tuple[str, str], lens: tuple[str, str], focal: float, width: int, height: int, n: int = 40
+) -> tuple[object, object, np.ndarray, np.ndarray]:
+    """lensfun (lensfunpy) finds ``camera`` (maker, model) and ``lens`` (maker, model) in a database
+    and corrects the pixels of a grid at ``focal`` and the camera's crop factor:
+    ``(camera, lens, p, q)`` with ``q`` where lensfun reads the distorted image for ideal ``p``."""
+    import lensfunpy
+
+    db = lensfunpy.Database(xml=xml, load_common=False, load_bundled=False)
+    (cam,) = db.find_cameras(*camera)
+    (lf_lens,) = db.find_lenses(cam, *lens)
+    mod = lensfunpy.Modifier(lf_lens, cam.crop_factor, width, height)
+    mod.initialize(focal, 2.8, 1000.0, scale=1.0, flags=lensfunpy.ModifyFlags.DISTORTION)
+    xs, ys = np.linspace(0, width - 1, n), np.linspace(0, height - 1, max(2, n * height // width))
+    p = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    q = np.array([mod.apply_geometry_distortion(float(x), float(y), 1, 1)[0, 0] for x, y in p], dtype=np.float64)
+    return cam, lf_lens, p, q
+
+
+def compare_points(
+    model: DistortionModel, p: np.ndarray, q: np.ndarray, width: int, height: int
+) -> tuple[float, float]:
+    """A consumer's ideal pixels ``p`` and the distorted ``q`` it reads them from, against our correction
+    (modulo homography; points whose ``q`` is outside the image are not compared)."""
+    ok = (q[:, 0] >= 0) & (q[:, 0] <= width - 1) & (q[:, 1] >= 0) & (q[:, 1] <= height - 1)
+    return mod_h(p[ok], model.undistort_points(q[ok]))

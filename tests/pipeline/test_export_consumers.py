@@ -17,7 +17,17 @@ import pytest
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, read_correction, write_export
 from pipeline.undistort_maps import fast_undistortion_maps
-from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, compare_map, mod_h, real_model, system_python
+from tests.pipeline.export_support import (
+    WIDE,
+    WIDE_H,
+    WIDE_W,
+    compare_map,
+    fisheye_maps_of_ros,
+    mod_h,
+    mrcal_in_consumer,
+    real_model,
+    ros_in_consumer,
+)
 
 LENS = LensInfo(
     lens_maker="Canon",
@@ -103,23 +113,6 @@ def test_opencv_fisheye_export_in_cv2_fisheye(wide, tmp_path):
 
 
 # -------------------------------------------------------------------- ROS
-ROS_SCRIPT = r"""
-import json, sys
-import numpy as np
-import camera_calibration_parsers, image_geometry
-req = json.load(sys.stdin)
-name, ci = camera_calibration_parsers.readCalibration(req["path"])
-out = {"camera_name": name, "model": ci.distortion_model, "D": list(ci.D), "K": list(ci.K),
-       "width": ci.width, "height": ci.height}
-if req.get("rectify"):
-    m = image_geometry.PinholeCameraModel()
-    m.fromCameraInfo(ci)
-    raw = np.zeros((ci.height, ci.width), np.uint8)
-    m.rectifyImage(raw, raw.copy())
-    out["mapx"] = m.mapx.reshape(ci.height, ci.width).tolist()
-    out["mapy"] = m.mapy.reshape(ci.height, ci.width).tolist()
-print(json.dumps(out))
-"""
 
 
 def test_ros_parsers_and_image_geometry_rectify_with_the_export(real, exports, tmp_path):
@@ -127,10 +120,10 @@ def test_ros_parsers_and_image_geometry_rectify_with_the_export(real, exports, t
     ex = exports["ros"]
     path = tmp_path / "camera.yaml"
     path.write_bytes(ex.data)
-    got = system_python(ROS_SCRIPT, {"path": str(path), "rectify": True})
+    got = ros_in_consumer(path, rectify=True)
     assert got["camera_name"] == "canon_eos_40d" and got["model"] == "rational_polynomial" and len(got["D"]) == 8
     assert (got["width"], got["height"]) == (rm.width, rm.height)
-    rms, mxe, _ = compare_map(rm.model, np.array(got["mapx"]), np.array(got["mapy"]), step=6)
+    rms, mxe, _ = compare_map(rm.model, got["mapx"], got["mapy"], step=6)
     _figures("ros (rational_polynomial, image_geometry)", rms, mxe, ex.error)
     _agrees(rms, mxe, ex.error)
     assert rms < 0.05  # 8 coefficients cannot hold the thin-prism terms: stated, and below the holdout d
@@ -141,30 +134,17 @@ def test_ros_equidistant_export_is_read_by_the_ros_parser(wide, tmp_path):
     e = ex["ros-equidistant"]
     path = tmp_path / "fisheye.yaml"
     path.write_bytes(e.data)
-    got = system_python(ROS_SCRIPT, {"path": str(path)})
+    got = ros_in_consumer(path)
     assert got["model"] == "equidistant" and len(got["D"]) == 4
     # Debian's image_geometry 1.16 rectifies only plumb_bob / rational_polynomial; ROS 2 rectifies
     # equidistant with cv::fisheye, which is what we apply to the parsed message here
-    k = np.array(got["K"]).reshape(3, 3)
-    mx, my = cv2.fisheye.initUndistortRectifyMap(k, np.array(got["D"]), np.eye(3), k, (WIDE_W, WIDE_H), cv2.CV_32FC1)
+    mx, my = fisheye_maps_of_ros(got, WIDE_W, WIDE_H)
     rms, mxe, _ = compare_map(WIDE, mx, my, step=4)
     _figures("ros-equidistant (wide lens)", rms, mxe, e.error)
     assert rms < 2e-3 and mxe < 0.01
 
 
 # ------------------------------------------------------------------ mrcal
-MRCAL_SCRIPT = r"""
-import json, sys
-import numpy as np
-import mrcal
-req = json.load(sys.stdin)
-m = mrcal.cameramodel(req["path"])
-lensmodel, intr = m.intrinsics()
-q = np.array(req["q"], dtype=float)
-v = mrcal.unproject(q, lensmodel, intr)
-p = np.stack([intr[0] * v[:, 0] / v[:, 2] + intr[2], intr[1] * v[:, 1] / v[:, 2] + intr[3]], axis=1)
-print(json.dumps({"lensmodel": lensmodel, "imagersize": [int(x) for x in m.imagersize()], "p": p.tolist()}))
-"""
 
 
 def test_mrcal_reads_the_cameramodel_and_unprojects_like_the_model(real, exports, tmp_path):
@@ -172,11 +152,9 @@ def test_mrcal_reads_the_cameramodel_and_unprojects_like_the_model(real, exports
     ex = exports["mrcal"]
     path = tmp_path / "lens.cameramodel"
     path.write_bytes(ex.data)
-    xs, ys = np.linspace(0, rm.width - 1, 60), np.linspace(0, rm.height - 1, 40)
-    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    got = system_python(MRCAL_SCRIPT, {"path": str(path), "q": q.tolist()})
-    assert got["lensmodel"] == "LENSMODEL_OPENCV12" and got["imagersize"] == [rm.width, rm.height]
-    rms, mxe = mod_h(np.array(got["p"]), rm.model.undistort_points(q))
+    lensmodel, size, q, p = mrcal_in_consumer(path, rm.width, rm.height)
+    assert lensmodel == "LENSMODEL_OPENCV12" and size == [rm.width, rm.height]
+    rms, mxe = mod_h(p, rm.model.undistort_points(q))
     _figures("mrcal (OPENCV12)", rms, mxe, ex.error)
     assert rms <= 0.01 and mxe <= 0.05
     _agrees(rms, mxe, ex.error)

@@ -178,3 +178,35 @@ def test_the_keys_a_section_accepts_are_its_dataclass_fields(tmp_path):
     assert "pipeline.degree: expected a degree the model allows: radial degree must be within 1..10, got 11" in (
         error_of(tmp_path, d)
     )
+
+
+def test_optics_fields_of_lens_and_camera_body(tmp_path):
+    from station.config import Optics
+
+    assert load_config(DEMO).optics == Optics(focal_mm=12.0, pixel_pitch_um=3.75)
+    d = demo_data()
+    d["lens"].update(focal_mm=50, mount="Canon EF")
+    del d["camera_body"]["pixel_pitch_um"]
+    d["camera_body"].update(sensor_width_mm=22.2, crop_factor=1.611)
+    cfg = load_config(write(tmp_path, d))
+    assert cfg.optics == Optics(focal_mm=50.0, mount="Canon EF", sensor_width_mm=22.2, crop_factor=1.611)
+    assert cfg.lens.serial == "DEMO-0001"  # the identity is unchanged
+
+
+@pytest.mark.parametrize(
+    "section, values, message",
+    [
+        ("camera_body", {"pixel_pitch_um": 0.0057}, "camera_body.pixel_pitch_um: expected the pixel pitch of the "
+         "images (after any binning) in micrometres (0.2..100), got 0.0057"),
+        ("lens", {"focal_mm": 0}, "lens.focal_mm: expected the nominal focal length"),
+        ("lens", {"focal_mm": "50mm"}, "lens.focal_mm: expected the nominal focal length"),
+        ("lens", {"mount": ""}, "lens.mount: expected the lens mount"),
+        ("camera_body", {"crop_factor": True}, "camera_body.crop_factor: expected the crop factor"),
+        ("camera_body", {"pixel_pitch_um": 3.45, "sensor_width_mm": 5.0}, "expected pixel_pitch_um or sensor_width_mm"),
+        ("lens", {"pixel_pitch_um": 3.45}, "lens.pixel_pitch_um: unknown field"),
+    ],
+)  # fmt: skip
+def test_bad_optics_are_one_line_naming_the_field(tmp_path, section, values, message):
+    d = demo_data()
+    d[section].update(values)
+    assert message in error_of(tmp_path, d)

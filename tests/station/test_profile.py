@@ -9,7 +9,7 @@ import pytest
 from pipeline.fitspec import FitSpec
 from pipeline.model_file import parse_model_text
 from pipeline.models import RadialModel
-from station.config import Identity
+from station.config import Identity, Optics
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
     Check,
@@ -52,6 +52,7 @@ FULL = Profile(
     lens=Identity("Acme", "12mm", "L-1"),
     camera=Identity("Cam", "Body", "C-1"),
     focus=0.5,
+    optics=Optics(focal_mm=12.0, mount="C", pixel_pitch_um=3.45, crop_factor=5.6),
     provenance=Provenance(
         created_utc="2026-12-01T18:11:21Z",
         software="harp-station 0.1.0",
@@ -74,6 +75,16 @@ def test_model_file_round_trip_keeps_every_typed_field():
     assert doc["holdout"]["scheme"] == HOLDOUT_LEAVE_ONE_ORIENTATION_OUT  # the layout model files had
     assert doc["field_uncertainty"] == {"rms": 0.0006, "max": 0.0034, "replicates": 12}
     assert doc["choice"]["label"] == "radial4+tangential" and mf.provenance["focus"] == 0.5
+    assert mf.provenance["optics"] == {"focal_mm": 12.0, "mount": "C", "pixel_pitch_um": 3.45, "crop_factor": 5.6}
+
+
+def test_lens_info_is_what_an_export_needs_of_the_profile():
+    info = FULL.lens_info()
+    assert (info.lens_maker, info.lens_model, info.lens_serial) == ("Acme", "12mm", "L-1")
+    assert (info.camera_maker, info.camera_model, info.focus) == ("Cam", "Body", 0.5)
+    assert info.nominal_focal_px(W) == pytest.approx(12.0 / 3.45e-3)  # f / pitch
+    assert (info.mount, info.crop_factor, info.sensor_width_mm) == ("C", 5.6, None)
+    assert Profile(MODEL, W, H).lens_info() == type(info)()  # nothing known: every field empty
 
 
 def test_store_row_round_trip_keeps_every_typed_field(tmp_path):

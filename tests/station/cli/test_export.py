@@ -1,57 +1,496 @@
-"""``harp export``: files other software loads, with the conversion error stated."""
+"""``harp export`` and ``harp profile export`` end to end: every format written through the CLI
+and read by its real consumer (OpenCV, Debian's ROS parser + image_geometry and mrcal, lensfun,
+numpy + cv2.remap, OpenEXR), the lens and camera from the model file / the session's
+configuration, the fitting shots' residual d, warnings on stderr, exit codes; ``harp evaluate``
+reads every format back.
 
+Two sources, each exported once per format (module fixtures):
+
+* ``harp export MODEL``: a model file holding an exact synthetic lens (decentred, with
+  tangential and thin-prism terms that no OpenCV family holds exactly), its fitting shots
+  rendered through that lens, its holdout d measured on a third shot;
+* ``harp profile export``: a small simulated session (``harp session run``) whose
+  configuration gives the lens' nominal focal length, mount, pixel pitch and crop factor.
+
+The truth of each comparison is the lens (or the stored profile) itself, evaluated in the
+consumer's own code; the figure it is held to is the one the export states.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
 import json
-import xml.etree.ElementTree as ET
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 import yaml
 
-from pipeline.exports.opencv import read_opencv_text
+from pipeline.edgeset import corrected_straightness
+from pipeline.fitspec import FitSpec
+from pipeline.measure import measure_image
+from pipeline.model_file import read_model_file
 from pipeline.models import RadialModel
+from pipeline.render import HarpScene, render_harp
 from station.cli import main
-from station.files import write_model_file
+from station.config import Identity, Optics
+from station.files import write_profile
+from station.profile import HOLDOUT_SHOTS, Holdout, Merit, Profile
+from station.provenance import make_provenance
+from tests.pipeline.export_support import (
+    compare_map,
+    compare_points,
+    fisheye_maps_of_ros,
+    lensfun_in_consumer,
+    mod_h,
+    mrcal_in_consumer,
+    opencv_maps,
+    ros_in_consumer,
+)
 
 W, H = 400, 300
-LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.05, 0.0, -0.01), center=(203.0, 147.0))
+LENS = RadialModel.for_image(
+    W, H, k=(1.0, 0.0, 0.06, 0.0, -0.012), center=(207.0, 146.0), tangential=(3e-3, -2e-3), prism=(2e-3, 0, -1.5e-3, 0)
+)
+ANGLES = (3.0, 93.0, 48.0)  # two fitting shots, one held out
+FILES = {
+    "opencv": "lens.yml",
+    "opencv-fisheye": "fisheye.yml",
+    "ros": "camera.yaml",
+    "ros-equidistant": "camera-equidistant.yaml",
+    "lensfun": "lensfun.xml",
+    "mrcal": "lens.cameramodel",
+    "maps": "maps.npz",
+    "stmap": "stmap.exr",
+    "json": "lens.json",
+    "auto": "auto.yml",
+}
 
 
-@pytest.fixture()
-def model(tmp_path):
-    p = tmp_path / "lens.yaml"
-    write_model_file(p, LENS, width=W, height=H, merit={"fit": {"d": 0.01, "d_max": 0.04}})
-    return p
+@dataclass(frozen=True)
+class Source:
+    """What was exported, and what its exports must say about the lens and camera."""
+
+    model: object
+    width: int
+    height: int
+    model_file: Path
+    lens: tuple[str, str]
+    camera: tuple[str, str]
+    focal_mm: float
+    focal_px: float
+    crop: float
+    mount: str
+    ros_name: str
+    focus: float
+    shots: tuple[Path, ...] = ()
 
 
-def test_opencv_export_to_file_states_conversion_error(model, tmp_path, capsys):
-    out = tmp_path / "calib.yml"
-    assert main(["export", str(model), "--format", "opencv", "-o", str(out), "--focal", "500"]) == 0
-    text = capsys.readouterr().out
-    assert f"wrote {out}" in text and "conversion error (opencv): RMS" in text
-    fs = cv2.FileStorage(str(out), cv2.FILE_STORAGE_READ)
-    k = fs.getNode("camera_matrix").mat()
-    assert k[0, 0] == 500.0 and k[1, 1] == 500.0 and fs.getNode("distortion_coefficients").mat().shape == (1, 5)
-    rms = fs.getNode("conversion_rms_px").real()
-    fs.release()
-    assert 0 < rms < 0.05 and f"RMS {rms:.4f} px" in text
-    m, size = read_opencv_text(out.read_text())
-    assert size == (W, H) and abs(m.cx - 203.0) < 1.0 and abs(m.cy - 147.0) < 1.0
+@dataclass(frozen=True)
+class Run:
+    code: int
+    out: str
+    err: str
+    path: Path
+
+    @property
+    def fig(self) -> dict:
+        return json.loads(self.out)
 
 
-def test_stdout_exports_ros_lensfun_json(model, capsys):
-    assert main(["export", str(model), "--format", "ros", "--coeffs", "8", "--camera-name", "cam0"]) == 0
-    cap = capsys.readouterr()
-    doc = yaml.safe_load(cap.out)
-    assert doc["distortion_model"] == "rational_polynomial" and doc["camera_name"] == "cam0"
-    assert "conversion error (ros)" in cap.err  # stdout stays a clean file
-    assert main(["export", str(model), "--format", "lensfun", "--lensfun-model", "poly5", "--focal-mm", "24"]) == 0
-    cap = capsys.readouterr()
-    d = ET.fromstring(cap.out.split("\n", 1)[1]).find("lens/calibration/distortion")
-    assert d.get("model") == "poly5" and d.get("focal") == "24.0" and set(d.attrib) == {"model", "focal", "k1", "k2"}
-    assert main(["export", str(model), "--format", "json"]) == 0
-    doc = json.loads(capsys.readouterr().out)
-    assert doc["model"] == LENS.to_dict() and doc["image"] == {"width": W, "height": H}
-    assert doc["merit"]["fit"]["d"] == 0.01
+def run_main(*argv) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def export_all(command: list, directory: Path) -> dict[str, Run]:
+    runs = {}
+    for fmt, name in FILES.items():
+        path = directory / name
+        code, out, err = run_main(*command, "--format", fmt, "-o", path, "--json")
+        runs[fmt] = Run(code, out, err, path)
+    return runs
+
+
+# ------------------------------------------------------------------ sources
+@pytest.fixture(scope="module")
+def model_source(tmp_path_factory) -> Source:
+    d = tmp_path_factory.mktemp("model")
+    shots = []
+    for i, angle in enumerate(ANGLES):
+        img = render_harp(W, H, HarpScene(angle_deg=angle, spacing_px=28.0), lens=LENS, noise_sigma=1.0, seed=40 + i)
+        p = d / f"shot{i}.pgm"
+        assert cv2.imwrite(str(p), img.image)
+        shots.append(p)
+    held = [ln.points for ln in measure_image(cv2.imread(str(shots[2]), cv2.IMREAD_UNCHANGED), t=30).lines]
+    holdout_d, holdout_d_max = corrected_straightness(LENS, held)
+    profile = Profile(
+        LENS,
+        W,
+        H,
+        spec=FitSpec("radial", 4, tangential=True, prism=True),
+        merit=Merit(holdout=Holdout(float(holdout_d), float(holdout_d_max), HOLDOUT_SHOTS)),
+        lens=Identity("Canon", "EF-S 10-18mm f/4.5-5.6 IS STM", "4711"),
+        camera=Identity("Canon", "EOS 40D", "C-1"),
+        optics=Optics(focal_mm=10.0, mount="Canon EF-S", sensor_width_mm=22.2, crop_factor=1.611),
+        focus=0.3,
+        provenance=make_provenance(shots[:2], t=30, command="test"),
+    )
+    mf = write_profile(d / "lens.yaml", profile)
+    return Source(
+        LENS,
+        W,
+        H,
+        mf,
+        ("Canon", "EF-S 10-18mm f/4.5-5.6 IS STM"),
+        ("Canon", "EOS 40D"),
+        10.0,
+        10.0 * W / 22.2,
+        1.611,
+        "Canon EF-S",
+        "canon_eos_40d",
+        0.3,
+        tuple(shots[:2]),
+    )
+
+
+REPO = Path(__file__).resolve().parents[3]
+SW, SH = 400, 300
+
+
+@pytest.fixture(scope="module")
+def session_source(tmp_path_factory) -> tuple[Source, Path]:
+    """A small simulated session whose configuration gives the optics; (source, store)."""
+    base = tmp_path_factory.mktemp("session")
+    d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
+    d["station"]["camera"].update(width=SW, height=SH, spacing_px=28.0)
+    d["focus"]["settings"] = [0.0, 1.0]
+    d["capture"]["orientations_deg"] = [0, 45, 90, 135]
+    d["capture"]["frames_per_orientation"] = 1
+    d["pipeline"].update(bootstrap=0, workers=1)
+    d["lens"].update(focal_mm=6.0, mount="C")
+    d["camera_body"].update(pixel_pitch_um=5.6, crop_factor=7.2)
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    cfg = base / "station.yaml"
+    cfg.write_text(yaml.safe_dump(d))
+    code, _, err = run_main("session", "run", cfg, "--name", "s", "--quiet", "--no-report")
+    assert code == 0, err
+    mf = base / "sessions" / "s" / "profiles" / "focus0.yaml"
+    src = Source(
+        read_model_file(mf).model,
+        SW,
+        SH,
+        mf,
+        ("Simulated Optics", "SIM-12mm"),
+        ("harp station", "SimulatedCamera"),
+        6.0,
+        6.0 / 5.6e-3,
+        7.2,
+        "C",
+        "harp_station_simulatedcamera",
+        0.0,
+    )
+    return src, base / "profiles.sqlite"
+
+
+@pytest.fixture(scope="module")
+def exported(model_source, tmp_path_factory) -> dict[str, Run]:
+    return export_all(["export", model_source.model_file], tmp_path_factory.mktemp("export"))
+
+
+@pytest.fixture(scope="module")
+def profile_exported(session_source, tmp_path_factory) -> dict[str, Run]:
+    _, store = session_source
+    cmd = ["profile", "export", "DEMO-0001", "--focus", "0", "--store", store]
+    return export_all(cmd, tmp_path_factory.mktemp("profile-export"))
+
+
+@pytest.fixture(params=["harp export", "harp profile export"])
+def both(request, model_source, session_source):
+    """(source, runs) of each command."""
+    if request.param == "harp export":
+        return model_source, request.getfixturevalue("exported")
+    return session_source[0], request.getfixturevalue("profile_exported")
+
+
+def _ok(run: Run) -> dict:
+    assert run.code == 0, run.err
+    fig = run.fig
+    assert fig["output"] == str(run.path) and run.path.is_file()
+    return fig
+
+
+def _agrees(rms, mx, conv, rel=0.3, abs_px=5e-4):
+    """The consumer finds the stated conversion error (different grids: within ``rel``)."""
+    assert abs(rms - conv["rms_mod_h_px"]) <= rel * conv["rms_mod_h_px"] + abs_px, (rms, conv)
+    assert mx <= conv["max_mod_h_px"] * (1 + rel) + abs_px, (mx, conv)
+
+
+# ----------------------------------------------------------- each format
+def test_opencv_in_opencv(both):
+    src, runs = both
+    for fmt in ("opencv", "auto"):
+        fig = _ok(runs[fmt])
+        assert fig["format"] == "opencv"  # auto: the pin-hole model is exact enough for this lens
+        mx, my, kind, k = opencv_maps(runs[fmt].path, src.width, src.height)
+        assert kind == "pinhole" and k[0, 0] == pytest.approx(src.focal_px)  # nominal, from the optics
+        rms, mxe, _ = compare_map(src.model, mx, my, step=4)
+        _agrees(rms, mxe, fig["conversion"])
+        text = runs[fmt].path.read_text()
+        assert "camera matrix: nominal" in text and f"lens {src.lens[0]} {src.lens[1]}" in text
+    assert any(n.startswith("auto: opencv (pin-hole, 12 coefficients)") for n in runs["auto"].fig["notes"])
+    assert cv2.FileStorage(str(runs["opencv"].path), cv2.FILE_STORAGE_READ).getNode(
+        "distortion_coefficients"
+    ).mat().shape == (1, 12)
+
+
+def test_opencv_fisheye_in_cv2_fisheye(both):
+    src, runs = both
+    fig = _ok(runs["opencv-fisheye"])
+    mx, my, kind, k = opencv_maps(runs["opencv-fisheye"].path, src.width, src.height)
+    assert kind == "fisheye" and k[0, 0] == pytest.approx(src.focal_px)
+    rms, mxe, _ = compare_map(src.model, mx, my, step=4)
+    _agrees(rms, mxe, fig["conversion"])
+
+
+def test_ros_in_the_ros_parser_and_image_geometry(both):
+    src, runs = both
+    fig = _ok(runs["ros"])
+    got = ros_in_consumer(runs["ros"].path, rectify=True)
+    assert got["camera_name"] == src.ros_name and got["model"] == "rational_polynomial" and len(got["D"]) == 8
+    assert got["K"][0] == pytest.approx(src.focal_px)
+    rms, mxe, _ = compare_map(src.model, got["mapx"], got["mapy"], step=4)
+    _agrees(rms, mxe, fig["conversion"])
+    fig = _ok(runs["ros-equidistant"])
+    got = ros_in_consumer(runs["ros-equidistant"].path)
+    assert got["model"] == "equidistant" and got["camera_name"] == src.ros_name
+    rms, mxe, _ = compare_map(src.model, *fisheye_maps_of_ros(got, src.width, src.height), step=4)
+    _agrees(rms, mxe, fig["conversion"])
+
+
+def test_mrcal_in_mrcal(both):
+    src, runs = both
+    fig = _ok(runs["mrcal"])
+    lensmodel, size, q, p = mrcal_in_consumer(runs["mrcal"].path, src.width, src.height)
+    assert lensmodel == "LENSMODEL_OPENCV12" and size == [src.width, src.height]
+    rms, mxe = mod_h(p, src.model.undistort_points(q))
+    _agrees(rms, mxe, fig["conversion"])
+
+
+def test_lensfun_finds_the_lens_by_its_names_at_the_crop_factor(both):
+    src, runs = both
+    fig = _ok(runs["lensfun"])
+    text = runs["lensfun"].path.read_text()
+    cam, lens, p, q = lensfun_in_consumer(text, src.camera, src.lens, src.focal_mm, src.width, src.height)
+    assert cam.crop_factor == pytest.approx(src.crop) and cam.mount == src.mount and lens.mounts == [src.mount]
+    rms, mxe = compare_points(src.model, p, q, src.width, src.height)
+    _agrees(rms, mxe, fig["conversion"])
+    assert f"focus setting {src.focus:g}" in text
+
+
+def test_maps_give_harp_undistorts_image(both, tmp_path):
+    src, runs = both
+    fig = _ok(runs["maps"])
+    assert fig["conversion"]["max_mod_h_px"] < 0.01
+    shot = next(iter(src.shots), None) or next((src.model_file.parents[1] / "frames").glob("*.pgm"))
+    assert run_main("undistort", src.model_file, shot, "-o", tmp_path)[0] == 0
+    theirs = cv2.imread(str(tmp_path / shot.name), cv2.IMREAD_UNCHANGED)
+    with np.load(runs["maps"].path) as z:
+        map_x, map_y = z["map_x"], z["map_y"]
+    img = cv2.imread(str(shot), cv2.IMREAD_UNCHANGED)
+    ours = cv2.remap(img, map_x, map_y, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    assert np.array_equal(ours, theirs)
+
+
+def test_stmap_in_openexr_holds_the_exact_projection(both):
+    import OpenEXR
+
+    src, runs = both
+    _ok(runs["stmap"])
+    head = subprocess.run(["exrheader", str(runs["stmap"].path)], capture_output=True, text=True, check=True).stdout
+    assert "R, 32-bit floating-point" in head and "Nuke" in head
+    with OpenEXR.File(str(runs["stmap"].path), separate_channels=True) as f:
+        r, g = f.channels()["R"].pixels, f.channels()["G"].pixels
+    px = np.array([[0, 0], [src.width - 1, src.height - 1], [120, 77], [src.width - 1, 0]])
+    exact = src.model.distort_points(px.astype(np.float64))
+    for (x, y), (sx, sy) in zip(px, exact):
+        assert r[y, x] == pytest.approx((sx + 0.5) / src.width, abs=3e-5)
+        assert g[y, x] == pytest.approx(1 - (sy + 0.5) / src.height, abs=3e-5)
+
+
+def test_json_is_the_whole_record_with_the_optics(both):
+    src, runs = both
+    _ok(runs["json"])
+    doc = json.loads(runs["json"].path.read_text())
+    assert doc["model"] == src.model.to_dict() and doc["image"] == {"width": src.width, "height": src.height}
+    assert doc["provenance"]["optics"]["focal_mm"] == src.focal_mm
+    assert doc["provenance"]["optics"]["crop_factor"] == src.crop
+
+
+def test_every_export_states_its_residual_on_the_fitting_shots(both):
+    src, runs = both
+    for fmt, run in runs.items():
+        if fmt == "json":
+            continue
+        fig = _ok(run)
+        c = fig["conversion"]
+        assert fig["fitting_shots"]["used"] and fig["fitting_shots"]["n_shots"] == (len(src.shots) or 4), fmt
+        assert c["shots_d_px"] is not None and c["model_shots_d_px"] is not None, fmt
+        # an export is never straighter than the harp correction by more than noise, nor much worse
+        # than its conversion error allows
+        assert c["shots_d_px"] <= np.hypot(c["model_shots_d_px"], 2 * c["d_px"]) + 1e-3, (fmt, c)
+    text = runs["opencv"].path.read_text()
+    assert "residual on the fitting shots" in text
+
+
+def test_the_fitting_shots_are_what_the_session_fitted(session_source, profile_exported):
+    src, _ = session_source
+    fig = _ok(profile_exported["opencv"])
+    assert fig["fitting_shots"]["source"] == "the session's stored measurements (4 shots at focus 0)"
+    # the harp correction on the edges found is the fit d the session recorded
+    fit_d = yaml.safe_load(src.model_file.read_text())["merit"]["fit"]["d"]
+    assert fig["conversion"]["model_shots_d_px"] == pytest.approx(fit_d, rel=0.02)
+    assert fig["holdout_d"] == yaml.safe_load(src.model_file.read_text())["merit"]["holdout"]["d"]
+
+
+def test_a_warning_exactly_when_the_export_is_less_exact_than_the_calibration(both):
+    src, runs = both
+    warned = set()
+    for fmt, run in runs.items():
+        fig = _ok(run)
+        lines = run.err.splitlines()
+        assert len(lines) == len(fig["warnings"]) and all(ln.startswith("harp ") for ln in lines), fmt
+        if fig["conversion"] is None:
+            assert not lines
+            continue
+        c = fig["conversion"]
+        worse = max(c["rms_mod_h_px"], c["d_px"]) > fig["holdout_d"]
+        assert bool(fig["warnings"]) == worse, (fmt, c, fig["holdout_d"])
+        if worse:
+            assert "exceeds the model's own holdout d" in lines[0]
+            warned.add(fmt)
+    if src.shots:  # lensfun and the fisheye model have no decentering or thin-prism terms
+        assert {"lensfun", "opencv-fisheye", "ros-equidistant"} <= warned
+        assert "opencv" not in warned and "mrcal" not in warned
+
+
+# ---------------------------------------------------------- harp evaluate
+def test_harp_evaluate_reads_every_format(model_source, exported):
+    def evaluate(path, *extra):
+        code, out, err = run_main("evaluate", path, *model_source.shots, "--json", *extra)
+        assert code == 0, err
+        return json.loads(out)
+
+    floor = evaluate(model_source.model_file)
+    assert floor["kind"] == "harp:radial" and floor["before"]["d"] > 0.5
+    kinds = {
+        "opencv": "opencv",
+        "opencv-fisheye": "opencv-fisheye",
+        "ros": "ros",
+        "ros-equidistant": "ros-equidistant",
+        "lensfun": "lensfun:ptlens",
+        "mrcal": "mrcal",
+        "maps": "maps",
+        "stmap": "stmap",
+        "json": "harp:radial",
+        "auto": "opencv",
+    }
+    for fmt, run in exported.items():
+        rep = evaluate(run.path)
+        assert rep["kind"] == kinds[fmt] and rep["before"] == floor["before"], fmt
+        after = rep["after"]["d"]
+        if fmt in ("json",):
+            assert after == floor["after"]["d"]
+        elif fmt in ("maps", "stmap"):  # the correction itself, to the maps' interpolation error
+            assert abs(after - floor["after"]["d"]) < 1e-3, (fmt, after, floor["after"])
+        else:  # the file holds what the export stated for these very shots
+            assert after == pytest.approx(run.fig["conversion"]["shots_d_px"], abs=2e-5), fmt
+
+
+# ------------------------------------------------------ warnings, lenses
+def test_text_output_and_the_warning_when_less_exact_than_the_calibration(model_source, tmp_path):
+    out = tmp_path / "lf.xml"
+    code, stdout, stderr = run_main("export", model_source.model_file, "--format", "lensfun", "-o", out, "--no-shots")
+    assert code == 0 and out.is_file()
+    lines = stdout.splitlines()
+    assert lines[0] == f"wrote {out} (lensfun)" and lines[1].startswith("conversion error (lensfun): RMS ")
+    assert "not stated on the fitting shots (not measured (--no-shots))" in lines[2]
+    # lensfun has no decentering or thin-prism terms: less exact than this lens' holdout d
+    (warning,) = stderr.splitlines()
+    assert lines[3].startswith("added lens Canon EF-S 10-18mm")
+    assert warning.startswith("harp export: warning: lensfun: the conversion error") and "holdout d" in warning
+
+
+def test_the_pinhole_export_to_stdout_keeps_stdout_the_file(model_source):
+    code, stdout, stderr = run_main(
+        "export", model_source.model_file, "--format", "ros", "--coeffs", "5", "--no-shots", "--camera-name", "cam0"
+    )
+    assert code == 0
+    doc = yaml.safe_load(stdout)
+    assert doc["distortion_model"] == "plumb_bob" and doc["camera_name"] == "cam0"
+    assert "conversion error (ros): RMS" in stderr
+
+
+def test_lensfun_database_holds_several_lenses(model_source, exported, tmp_path):
+    db = tmp_path / "db.xml"
+    db.write_bytes(exported["lensfun"].path.read_bytes())
+    code, stdout, _ = run_main(
+        "export", model_source.model_file, "--format", "lensfun", "-o", db, "--no-shots",
+        "--lens-model", "EF-S 18-55mm f/3.5-5.6", "--focal-mm", "18",
+    )  # fmt: skip
+    assert code == 0 and "added lens Canon EF-S 18-55mm" in stdout
+    text = db.read_text()
+    for model, focal in ((model_source.lens[1], 10.0), ("EF-S 18-55mm f/3.5-5.6", 18.0)):
+        lensfun_in_consumer(text, model_source.camera, (model_source.lens[0], model), focal, W, H, n=4)
+    # harp evaluate picks one lens of the database by its name
+    code, out, err = run_main("evaluate", db, model_source.shots[0], "--json")
+    assert code == 2 and "several lenses" in err
+    code, out, err = run_main("evaluate", db, model_source.shots[0], "--lens", "Canon EF-S 18-55mm f/3.5-5.6", "--json")
+    assert code == 0 and json.loads(out)["kind"] == "lensfun:ptlens"
+
+
+# ------------------------------------------------------------- bad input
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--format", "opencv", "--coeffs", "3", "-o", "OUT"],
+            "--coeffs 3: the opencv export takes 5, 8, 12, 14 coeff",
+        ),
+        (["--format", "ros", "--coeffs", "12", "-o", "OUT"], "--coeffs 12: the ros export takes 5, 8 coefficients"),
+        (["--format", "lensfun", "--coeffs", "5", "-o", "OUT"], "--coeffs 5: the lensfun export has no choice of"),
+        (["--format", "maps"], "--format maps writes a binary file: give -o FILE.npz"),
+        (["--format", "opencv", "--json"], "--json needs -o FILE"),
+        (
+            ["--format", "opencv", "--pixel-pitch-um", "0.0057", "-o", "OUT"],
+            "--pixel-pitch-um: expected the pixel pitch",
+        ),
+        (["--format", "lensfun", "--focal-mm", "-3", "-o", "OUT"], "--focal-mm: expected the nominal focal length"),
+        (["--format", "lensfun", "--crop", "x", "-o", "OUT"], "--crop: expected a number, got 'x'"),
+        (["--format", "opencv", "--focal", "0", "-o", "OUT"], "--focal: expected a focal length > 0 px"),
+        (["--format", "opencv", "--pixel-pitch-um", "5", "--sensor-width-mm", "20", "-o", "OUT"], "alternatives"),
+        (["--format", "opencv", "--shots", "missing.pgm", "-o", "OUT"], "missing.pgm: no such file"),
+    ],
+)
+def test_bad_options_exit_2_with_one_line_and_nothing_written(model_source, tmp_path, args, message):
+    out = tmp_path / "out"
+    args = [str(out) if a == "OUT" else a for a in args]
+    code, stdout, stderr = run_main("export", model_source.model_file, *args)
+    assert code == 2 and stdout == "" and not out.exists()
+    assert stderr.startswith("harp export: ") and message in stderr and stderr.count("\n") == 1, stderr
+
+
+def test_unwritable_output_exit_2(model_source, tmp_path):
+    code, _, stderr = run_main(
+        "export", model_source.model_file, "--format", "json", "-o", tmp_path / "no" / "such" / "dir.json"
+    )
+    assert code == 2 and stderr.startswith("harp export: cannot write ") and stderr.count("\n") == 1
 
 
 @pytest.mark.parametrize(
@@ -61,18 +500,31 @@ def test_stdout_exports_ros_lensfun_json(model, capsys):
         ("{{{{", "not a valid YAML"),
     ],
 )
-def test_bad_model_exit_2(tmp_path, capsys, content, reason):
+def test_bad_model_exit_2(tmp_path, content, reason):
     p = tmp_path / "m.yaml"
     p.write_text(content)
-    assert main(["export", str(p), "--format", "opencv"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith(f"harp export: {p}: ") and reason in err and err.count("\n") == 1
+    code, _, err = run_main("export", p, "--format", "opencv")
+    assert code == 2 and err.startswith(f"harp export: {p}: ") and reason in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("focal_mm", ["-3", "0", "nan"])
-def test_lensfun_focal_must_be_positive(model, capsys, focal_mm):
-    # lensfun files its calibration entries under a focal length: a negative one is no lens
-    assert main(["export", str(model), "--format", "lensfun", "--focal-mm", focal_mm]) == 2
-    out, err = capsys.readouterr()
-    assert out == "" and err.startswith("harp export: --focal-mm must be a focal length > 0 mm")
-    assert err.count("\n") == 1
+def test_profile_export_errors_are_one_line(session_source):
+    _, store = session_source
+    code, _, err = run_main("profile", "export", "DEMO-0001", "--focus", "1.5", "--format", "ros", "--store", store)
+    assert code == 2 and err.count("\n") == 1 and "not between two calibrated focus settings" in err
+    code, _, err = run_main(
+        "profile", "export", "DEMO-0001", "--focus", "0", "--format", "ros", "--coeffs", "14", "--store", store
+    )
+    assert code == 2 and err.startswith("harp profile: ") and "--coeffs 14" in err and err.count("\n") == 1
+
+
+def test_profile_export_between_focus_settings_has_the_optics_but_no_fitting_shots(session_source, tmp_path):
+    src, store = session_source
+    out = tmp_path / "mid.yaml"
+    code, stdout, err = run_main(
+        "profile", "export", "DEMO-0001", "--focus", "0.5", "--format", "ros", "-o", out, "--store", store, "--json"
+    )
+    assert code == 0, err
+    fig = json.loads(stdout)
+    assert not fig["fitting_shots"]["used"] and "interpolated" in fig["fitting_shots"]["source"]
+    got = ros_in_consumer(out)
+    assert got["camera_name"] == src.ros_name and got["K"][0] == pytest.approx(src.focal_px)
