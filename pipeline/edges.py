@@ -97,8 +97,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 __all__ = ["EdgeChain", "detect_edges", "edge_points", "auto_thresholds", "gradient_noise"]
 
@@ -624,6 +622,32 @@ def _link(xy, grad, idx, shape):
     return nxt, prv
 
 
+def _path_components(cn: np.ndarray, cp: np.ndarray) -> tuple[int, np.ndarray]:
+    """Components of a graph where every node has at most one successor ``cn`` and one
+    predecessor ``cp`` (-1: none), i.e. disjoint paths and cycles: ``(count, labels 0..count-1)``.
+
+    Each node's label is the smallest index of its component, found by pointer doubling
+    (after round ``k`` a node holds the minimum over the ``2**k`` nodes following it),
+    first along the successors, then along the predecessors; on a cycle the first pass
+    already covers the whole cycle within ``ceil(log2(m))`` rounds.
+    """
+    m = cn.size
+    rounds = max(1, int(np.ceil(np.log2(max(m, 2))))) + 1
+    lab = np.arange(m, dtype=np.int64)
+    for ptr0 in (cn, cp):
+        ptr = ptr0.copy()
+        active = np.nonzero(ptr >= 0)[0]
+        for _ in range(rounds):
+            if not active.size:
+                break
+            p = ptr[active]
+            lab[active] = np.minimum(lab[active], lab[p])
+            ptr[active] = ptr[p]
+            active = active[ptr[active] >= 0]
+    uniq, clab = np.unique(lab, return_inverse=True)
+    return int(uniq.size), clab.astype(np.int64)
+
+
 def _order_chains(nxt, prv):
     """Label linked components and order their points along the links.
 
@@ -645,10 +669,7 @@ def _order_chains(nxt, prv):
         cn[nxt[linked] < 0] = -1  # (index -1 picked the last entry)
         cp = comp_of[prv[linked]]
         cp[prv[linked] < 0] = -1
-        has = cn >= 0
-        src = np.nonzero(has)[0]
-        g = coo_matrix((np.ones(src.size, np.int8), (src, cn[has])), shape=(m, m))
-        ncomp, clab = connected_components(g, directed=True, connection="weak")
+        ncomp, clab = _path_components(cn, cp)
         comp_has_head = np.zeros(ncomp, bool)
         comp_has_head[clab[cp < 0]] = True
         cyc = ~comp_has_head[clab]

@@ -207,7 +207,11 @@ def collect(
                     f"image {i} line {j} has points outside the {width}x{height} image "
                     f"(x {lo[0]:.1f}..{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f}): wrong image size?"
                 ), []
-            ev = np.linalg.eigvalsh(np.cov(p.T))  # scatter: an edge is elongated along its line
+            # scatter: an edge is elongated along its line (eigenvalues of the 2x2 scatter matrix)
+            d = p - p.mean(axis=0)
+            sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
+            half_tr, rad = 0.5 * (sxx + syy), float(np.hypot(0.5 * (sxx - syy), sxy))
+            ev = (half_tr - rad, half_tr + rad)
             if not ev[1] > 0 or ev[0] > 0.25 * ev[1]:
                 rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
                 continue

@@ -11,8 +11,8 @@ where :math:`m_e` is the centroid and :math:`n_e` the unit normal of the TLS
 line of :math:`\{U_\theta(p_i)\}_{i\in e}`. The lines are not free parameters:
 they are recomputed from the corrected points at every evaluation (variable
 projection); the Jacobian is analytic, including the derivative of the line
-(centroid and angle) with respect to :math:`\theta` (only the two centre
-columns of the radial model are central differences). It is minimised by
+(centroid and angle) with respect to :math:`\theta` and the centre columns of
+the radial model. It is minimised by
 Levenberg–Marquardt (``scipy.optimize.least_squares``), all edges of all
 images at once, in coordinates normalised by half the image diagonal.
 
@@ -49,7 +49,9 @@ by the Huber weight ``min(1, 3 m / rms_e)`` of its RMS residual ``rms_e``
 (``m`` the median edge RMS), then edges whose RMS residual is an outlier
 (``> reject_factor x`` the median edge RMS) are rejected, reported with their
 (image, line) index and reason, and the final fit (plain least squares) uses
-the remaining edges.
+the remaining edges. (When no edge is down-weighted the weighted fit is the
+first one, and when moreover none is rejected the final fit is too: they are
+not run again.)
 
 References
 ----------
@@ -124,6 +126,7 @@ def make_parametrisation(
             spec.w_center if w_center is None else w_center,
             w_gauge,
             0.0 if ridge is None else ridge,
+            spec.division,
         )
     return PolynomialParametrisation(width, height, int(spec.degree or 0), 1e-4 if ridge is None else ridge)
 
@@ -139,10 +142,12 @@ def residuals_and_jacobian(
     r, a, nrm, tan, _ = tls(u, st, ct)
     if not jac or du is None:
         return r, None
-    mean_du = np.add.reduceat(du, st, axis=0) / ct[:, None, None]
-    ddu = du - np.repeat(mean_du, ct, axis=0)
-    n_d = nrm[:, 0, None] * ddu[:, 0, :] + nrm[:, 1, None] * ddu[:, 1, :]
-    t_d = tan[:, 0, None] * ddu[:, 0, :] + tan[:, 1, None] * ddu[:, 1, :]
+    # the line's normal and tangent are constant along an edge: project first, then centre per edge
+    # (n . (du - mean du) = n . du - mean(n . du)), on (N, n) arrays instead of (N, 2, n)
+    n_d = nrm[:, 0, None] * du[:, 0, :] + nrm[:, 1, None] * du[:, 1, :]
+    t_d = tan[:, 0, None] * du[:, 0, :] + tan[:, 1, None] * du[:, 1, :]
+    n_d -= np.repeat(np.add.reduceat(n_d, st, axis=0) / ct[:, None], ct, axis=0)
+    t_d -= np.repeat(np.add.reduceat(t_d, st, axis=0) / ct[:, None], ct, axis=0)
     num = np.add.reduceat(a[:, None] * n_d + r[:, None] * t_d, st, axis=0)
     den = np.add.reduceat(a * a - r * r, st)
     dphi = num / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]
@@ -179,12 +184,13 @@ def _solve(
 # ------------------------------------------------------------ input checks
 def _orientation_problem(edges: EdgeSet, min_spread_deg: float) -> str | None:
     """None if the edges have at least two orientations, else the reason."""
-    r = []
-    for s, c in zip(edges.starts, edges.counts):
-        p = edges.xy[s : s + c]
-        dev = p - p.mean(axis=0)
-        sxx, syy, sxy = (dev[:, 0] ** 2).sum(), (dev[:, 1] ** 2).sum(), (dev[:, 0] * dev[:, 1]).sum()
-        r.append(np.arctan2(2 * sxy, sxx - syy))  # doubled angle
+    st, ct = edges.starts, edges.counts
+    m = np.add.reduceat(edges.xy, st, axis=0) / ct[:, None]
+    dev = edges.xy - np.repeat(m, ct, axis=0)
+    sxx = np.add.reduceat(dev[:, 0] ** 2, st)
+    syy = np.add.reduceat(dev[:, 1] ** 2, st)
+    sxy = np.add.reduceat(dev[:, 0] * dev[:, 1], st)
+    r = np.arctan2(2 * sxy, sxx - syy)  # doubled angle
     z = np.exp(1j * np.asarray(r))
     mean = np.angle(z.mean()) if abs(z.mean()) > 1e-9 else 0.0
     off = np.degrees(np.abs(np.angle(z * np.exp(-1j * mean)))) / 2.0
@@ -228,6 +234,7 @@ def fit_distortion(
     tangential: bool = False,
     prism: bool = False,
     *,
+    division: int = 0,
     image_sizes: Sequence[tuple[int, int]] | None = None,
     init: DistortionModel | None = None,
     robust: bool = True,
@@ -254,6 +261,9 @@ def fit_distortion(
         (:class:`~pipeline.models.polynomial.PolynomialModel`, total degree 3..11,
         default 5); radial only: decentering (p1, p2) / thin-prism (s1..s4) terms.
         The bounds are :data:`pipeline.fitspec.DEGREE_BOUNDS`.
+    division : int
+        Radial only: division (rational) denominator coefficients ``d1 .. dM`` (0..3,
+        :class:`~pipeline.models.radial.RadialModel`), started at 0.
     image_sizes : sequence of (width, height), optional
         Size of each shot; a mismatch gives a :class:`FitFailure`.
     init : DistortionModel, optional
@@ -279,10 +289,10 @@ def fit_distortion(
     FitResult or FitFailure
         Never raises for a data problem: a :class:`FitFailure` says why.
     """
-    problem = spec_problem(model, degree, tangential, prism)
+    problem = spec_problem(model, degree, tangential, prism, division)
     if problem:
         return FitFailure(problem)
-    spec = FitSpec(model, degree, tangential, prism)
+    spec = FitSpec(model, degree, tangential, prism, division=division)
     if image_sizes is not None:
         sizes = {(int(w), int(h)) for w, h in image_sizes}
         if sizes != {(int(width), int(height))}:
@@ -333,11 +343,13 @@ def fit_distortion(
                 rms, _ = edge_figures(r, edges.starts, edges.counts)
                 scale = 3.0 * max(float(np.median(rms)), 1e-6)
                 weights = np.minimum(1.0, scale / np.maximum(rms, 1e-12))  # Huber weights per edge
-                sol = _solve(param, edges, th, edge_weights=weights, max_nfev=max_nfev)
-                n_iter += sol.nfev
-                th = sol.x
-                r, _ = residuals_and_jacobian(param, edges, th, jac=False)
-                rms, _ = edge_figures(r, edges.starts, edges.counts)
+                weighted = bool(np.any(weights < 1.0))
+                if weighted:  # (all weights 1: the weighted problem is the one just solved)
+                    sol = _solve(param, edges, th, edge_weights=weights, max_nfev=max_nfev)
+                    n_iter += sol.nfev
+                    th = sol.x
+                    r, _ = residuals_and_jacobian(param, edges, th, jac=False)
+                    rms, _ = edge_figures(r, edges.starts, edges.counts)
                 thresh = reject_factor * max(float(np.median(rms)), 1e-6)
                 bad = np.flatnonzero(rms > thresh)
                 max_bad = int(max_reject_fraction * n_e)
@@ -365,9 +377,10 @@ def fit_distortion(
                     problem = _orientation_problem(edges, min_orientation_spread_deg)
                     if problem:
                         return FitFailure("after rejecting outlier edges, " + problem)
-                sol = _solve(param, edges, th, max_nfev=max_nfev)
-                n_iter += sol.nfev
-                th = sol.x
+                if weighted or len(bad):  # (else the final plain fit is the first one)
+                    sol = _solve(param, edges, th, max_nfev=max_nfev)
+                    n_iter += sol.nfev
+                    th = sol.x
     except (ValueError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"optimisation failed: {exc}")
     if not np.all(np.isfinite(th)):

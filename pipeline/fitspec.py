@@ -6,8 +6,9 @@ can fit:
 * ``radial`` — :class:`~pipeline.models.radial.RadialModel` with a free centre,
   ``k0 = 1`` and ``k1 .. k_degree`` (degree 1..10, default 4), optionally with the
   decentering (``tangential``: p1, p2) and thin-prism (``prism``: s1..s4) terms,
-  optionally with a prior pulling the distortion centre towards the image centre
-  (``center_prior``);
+  optionally with a division (rational) denominator ``1 + d1 rho^2 + .. + dM rho^2M``
+  (``division = M``, 1..3: wide-angle lenses), optionally with a prior pulling the
+  distortion centre towards the image centre (``center_prior``);
 * ``poly`` — :class:`~pipeline.models.polynomial.PolynomialModel`, a free bivariate
   polynomial of total degree 3..11 (default 5). A degree-2 polynomial is not offered:
   once its linear and first-order projective parts are fixed by the gauge (see
@@ -43,6 +44,9 @@ DEGREE_BOUNDS: dict[str, tuple[int, int]] = {"radial": (1, 10), "poly": (3, 11)}
 DEFAULT_DEGREE: dict[str, int] = {"radial": 4, "poly": 5}
 """Degree of a spec that gives none."""
 
+DIVISION_BOUNDS: tuple[int, int] = (0, 3)
+"""Allowed number of division (denominator) coefficients of a radial spec, inclusive."""
+
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
 
@@ -56,11 +60,13 @@ decentering. Whether that generalises better is for the cross-validation to say 
 does on the real photos, not on a strongly decentred synthetic lens)."""
 
 
-def spec_problem(kind: Any, degree: Any = None, tangential: Any = False, prism: Any = False) -> str | None:
-    """Why ``(kind, degree, tangential, prism)`` is not a valid spec, or ``None``.
+def spec_problem(
+    kind: Any, degree: Any = None, tangential: Any = False, prism: Any = False, division: Any = 0
+) -> str | None:
+    """Why ``(kind, degree, tangential, prism, division)`` is not a valid spec, or ``None``.
 
-    The one check of the allowed kinds and degrees (:data:`DEGREE_BOUNDS`), used by
-    :class:`FitSpec` and by :func:`pipeline.fit.fit_distortion`.
+    The one check of the allowed kinds and degrees (:data:`DEGREE_BOUNDS`,
+    :data:`DIVISION_BOUNDS`), used by :class:`FitSpec` and by :func:`pipeline.fit.fit_distortion`.
     """
     if kind not in KINDS:
         return f"unknown model {kind!r}; use {' or '.join(repr(k) for k in KINDS)}"
@@ -75,6 +81,15 @@ def spec_problem(kind: Any, degree: Any = None, tangential: Any = False, prism: 
             return f"{name} degree must be within {lo}..{hi}, got {degree}"
     if kind == "poly" and (tangential or prism):
         return "tangential/prism terms apply to the radial model only (poly contains them)"
+    try:
+        whole_div = not isinstance(division, bool) and operator.index(division) == division
+    except TypeError:
+        whole_div = False
+    lo, hi = DIVISION_BOUNDS
+    if not whole_div or not lo <= division <= hi:
+        return f"division terms must be within {lo}..{hi}, got {division}"
+    if kind == "poly" and division:
+        return "division terms apply to the radial model only"
     return None
 
 
@@ -90,6 +105,8 @@ class FitSpec:
         default of the kind (:data:`DEFAULT_DEGREE`); the spec always holds a number.
     tangential, prism : bool
         Radial only: decentering (p1, p2) / thin-prism (s1..s4) terms.
+    division : int
+        Radial only: number of division (denominator) coefficients ``d1 .. dM``, 0..3.
     center_prior : bool
         Radial only: pull the distortion centre towards the image centre
         (:data:`CENTER_PRIOR_WEIGHT`).
@@ -106,9 +123,10 @@ class FitSpec:
     tangential: bool = False
     prism: bool = False
     center_prior: bool = False
+    division: int = 0
 
     def __post_init__(self) -> None:
-        problem = spec_problem(self.kind, self.degree, self.tangential, self.prism)
+        problem = spec_problem(self.kind, self.degree, self.tangential, self.prism, self.division)
         if problem is None and self.kind == "poly" and self.center_prior:
             problem = "a centre prior applies to the radial model only"
         if problem is not None:
@@ -117,16 +135,19 @@ class FitSpec:
         object.__setattr__(self, "tangential", bool(self.tangential))
         object.__setattr__(self, "prism", bool(self.prism))
         object.__setattr__(self, "center_prior", bool(self.center_prior))
+        object.__setattr__(self, "division", int(self.division))
 
     @property
     def label(self) -> str:
-        """Short name, e.g. ``radial4+tangential+prism+centre-prior`` or ``poly5`` (:func:`parse` reads it)."""
+        """Short name, e.g. ``radial4+tangential+prism+centre-prior``, ``radial2+division1`` or
+        ``poly5`` (:func:`parse` reads it)."""
         if self.kind == "poly":
             return f"poly{self.degree}"
         return (
             f"radial{self.degree}"
             + ("+tangential" if self.tangential else "")
             + ("+prism" if self.prism else "")
+            + (f"+division{self.division}" if self.division else "")
             + ("+centre-prior" if self.center_prior else "")
         )
 
@@ -140,14 +161,16 @@ class FitSpec:
         kw: dict[str, Any] = {"model": self.kind, "degree": self.degree}
         if self.kind == "radial":
             kw.update(tangential=self.tangential, prism=self.prism)
+            if self.division:
+                kw["division"] = self.division
             if self.center_prior:
                 kw["w_center"] = CENTER_PRIOR_WEIGHT
         return kw
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (model files, JSON, the store): ``model`` (the kind), ``degree``,
-        ``tangential``, ``prism``, ``center_prior``, ``label``."""
-        return {
+        ``tangential``, ``prism``, ``center_prior``, ``label`` and, when not 0, ``division``."""
+        d: dict[str, Any] = {
             "model": self.kind,
             "degree": self.degree,
             "tangential": self.tangential,
@@ -155,6 +178,9 @@ class FitSpec:
             "center_prior": self.center_prior,
             "label": self.label,
         }
+        if self.division:
+            d["division"] = self.division
+        return d
 
     @classmethod
     def from_dict(cls, d: Any) -> FitSpec:
@@ -168,6 +194,7 @@ class FitSpec:
             bool(d.get("tangential", False)),
             bool(d.get("prism", False)),
             bool(d.get("center_prior", False)),
+            d.get("division", 0),
         )
 
 
@@ -176,7 +203,8 @@ _TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_
 
 def parse(label: str) -> FitSpec:
     """The spec of a label: ``radial``, ``radial4``, ``radial4+tangential+prism``,
-    ``radial6+tangential+centre-prior``, ``poly``, ``poly7`` (no degree: the default).
+    ``radial6+tangential+centre-prior``, ``radial2+division1``, ``poly``, ``poly7`` (no
+    degree: the default).
 
     Raises
     ------
@@ -188,17 +216,22 @@ def parse(label: str) -> FitSpec:
     kind = next((k for k in KINDS if head.startswith(k)), None)
     if kind is None:
         raise ValueError(
-            f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+centre-prior] or poly<degree>"
+            f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+division<M>][+centre-prior] "
+            "or poly<degree>"
         )
     digits = head[len(kind) :]
     if digits and not digits.isdigit():
         raise ValueError(f"{label!r}: the degree must be a whole number, got {digits!r}")
     flags: dict[str, bool] = {}
+    division = 0
     for term in terms:
+        if term.startswith("division") and term[len("division") :].isdigit():
+            division = int(term[len("division") :])
+            continue
         if term not in _TERMS:
-            raise ValueError(f"{label!r}: unknown term {term!r}; known: tangential, prism, centre-prior")
+            raise ValueError(f"{label!r}: unknown term {term!r}; known: tangential, prism, division<M>, centre-prior")
         flags[_TERMS[term]] = True
     try:
-        return FitSpec(kind, int(digits) if digits else None, **flags)
+        return FitSpec(kind, int(digits) if digits else None, division=division, **flags)
     except ValueError as exc:
         raise ValueError(f"{label!r}: {exc}") from None

@@ -262,17 +262,30 @@ class PolynomialParametrisation:
             center=self.ident.center, degree=self.degree, a=tuple(full[: self.m]), b=tuple(full[self.m :]), scale=self.s
         )
 
-    def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)``."""
+    def _basis(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Monomials of ``xy`` and the (constant) Jacobian, kept for the last ``xy`` (a fit
+        evaluates the same points at every iteration)."""
+        cached = getattr(self, "_cached", None)
+        if cached is not None and cached[0] is xy:
+            return cached[1], cached[2]
         c = self.ident.center
         mon = monomials((xy[:, 0] - c[0]) / self.s, (xy[:, 1] - c[1]) / self.s, self.degree)
+        d = np.empty((len(xy), 2, self.n))
+        d[:, 0, :] = self.s * (mon @ self.T[: self.m])
+        d[:, 1, :] = self.s * (mon @ self.T[self.m :])
+        d.setflags(write=False)
+        self._cached = (xy, mon, d)
+        return mon, d
+
+    def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)`` (read-only:
+        linear in ``theta``, it does not change between iterations)."""
+        c = self.ident.center
+        mon, d = self._basis(xy)
         full = self.t0 + self.T @ th
         u = np.stack([c[0] + self.s * (mon @ full[: self.m]), c[1] + self.s * (mon @ full[self.m :])], axis=1)
         if not jac:
             return u, None
-        d = np.empty((len(xy), 2, self.n))
-        d[:, 0, :] = self.s * (mon @ self.T[: self.m])
-        d[:, 1, :] = self.s * (mon @ self.T[self.m :])
         return u, d
 
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:

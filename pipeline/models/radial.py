@@ -1,10 +1,12 @@
-"""Radial polynomial correction with free centre, plus Brown–Conrady terms, and its
-parametrisation for the fit.
+"""Radial polynomial (or rational) correction with free centre, plus Brown–Conrady terms,
+and its parametrisation for the fit.
 
-The correction is linear in its coefficients ``k0 … kN, p1, p2, s1 … s4``:
-:func:`radial_basis` writes the formula once, as the basis function of each
+Without a denominator the correction is linear in its coefficients ``k0 … kN, p1, p2,
+s1 … s4``: :func:`radial_basis` writes the formula once, as the basis function of each
 coefficient, and both the model (:class:`RadialModel`, a sum over the terms) and the
-fit (:class:`RadialParametrisation`, the terms as Jacobian columns) use it.
+fit (:class:`RadialParametrisation`, the terms as Jacobian columns) use it. The
+optional division (rational) denominator ``1 + d1 rho^2 + … + dM rho^2M`` divides the
+radial factor; its Jacobian columns follow from the same basis.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ def radial_basis(
     :math:`(2\xi\eta,\ \rho^2 + 2\eta^2)` and :math:`p_2`: :math:`(\rho^2 + 2\xi^2,\ 2\xi\eta)`;
     then, with ``prism``, :math:`s_1`: :math:`(\rho^2, 0)`, :math:`s_2`: :math:`(\rho^4, 0)`,
     :math:`s_3`: :math:`(0, \rho^2)`, :math:`s_4`: :math:`(0, \rho^4)`. The corrected
-    offsets are the coefficient-weighted sum of the terms (:meth:`RadialModel.undistort_points`).
+    offsets are the coefficient-weighted sum of the terms (:meth:`RadialModel.undistort_points`),
+    the radial part divided by the denominator of :func:`division_basis` when there is one.
     """
     rho2 = xi * xi + eta * eta
     rho = np.sqrt(rho2)
@@ -45,6 +48,15 @@ def radial_basis(
     return powers, extra
 
 
+def division_basis(rho2: np.ndarray, terms: int) -> list[np.ndarray]:
+    r"""The terms :math:`\rho^{2j}` (``j = 1 … terms``) of the division denominator
+    :math:`D(\rho) = 1 + d_1\rho^2 + \dots + d_M\rho^{2M}` of :class:`RadialModel`."""
+    out = [rho2]
+    for _ in range(terms - 1):
+        out.append(out[-1] * rho2)
+    return out[:terms]
+
+
 @dataclass(frozen=True)
 class RadialModel(DistortionModel):
     r"""Radial polynomial correction with a free centre (Tang et al. 2012, eq. 1),
@@ -55,16 +67,24 @@ class RadialModel(DistortionModel):
     :math:`\eta = (y_d - c_y)/s`, :math:`\rho^2 = \xi^2 + \eta^2`:
 
     .. math::
-        f(\rho) &= k_0 + k_1 \rho + k_2 \rho^2 + \dots + k_N \rho^N \\
+        f(\rho) &= \frac{k_0 + k_1 \rho + k_2 \rho^2 + \dots + k_N \rho^N}
+                         {1 + d_1 \rho^2 + \dots + d_M \rho^{2M}} \\
         \xi_u &= f(\rho)\,\xi + 2 p_1 \xi\eta + p_2(\rho^2 + 2\xi^2) + s_1\rho^2 + s_2\rho^4 \\
         \eta_u &= f(\rho)\,\eta + p_1(\rho^2 + 2\eta^2) + 2 p_2 \xi\eta + s_3\rho^2 + s_4\rho^4 \\
         x_u &= c_x + s\,\xi_u, \quad y_u = c_y + s\,\eta_u
 
     ``s`` (``scale``) is a fixed normalisation, by convention half the image
-    diagonal, so that the coefficients do not depend on the image size.
+    diagonal, so that the coefficients do not depend on the image size. Without
+    ``division`` (``M = 0``) the denominator is 1: the radial polynomial of the paper.
+    With it, :math:`f` is a rational function, the *division model* of Fitzgibbon
+    (:math:`N = 0, M = 1`) generalised: it follows the strong barrel of wide-angle lenses,
+    whose correction grows faster towards the corners than any short polynomial, with
+    few coefficients (the pin-hole image of an equidistant fisheye,
+    :math:`\tan(a\rho)/(a\rho)`, has its pole inside the image's reach, which a
+    denominator can place and a polynomial cannot).
 
-    Parameter order (as in :meth:`params`): ``cx, cy, k0 … kN, p1, p2, s1 … s4``
-    (``p`` and ``s`` present only when enabled).
+    Parameter order (as in :meth:`params`): ``cx, cy, k0 … kN, p1, p2, s1 … s4,
+    d1 … dM`` (``p``, ``s`` and ``d`` present only when enabled).
 
     References
     ----------
@@ -72,6 +92,10 @@ class RadialModel(DistortionModel):
        with a calibration harp", JOSA A 29(10), 2012.
     .. [2] D. C. Brown, "Decentering distortion of lenses", Photogrammetric
        Engineering 32(3), 1966.
+    .. [3] A. W. Fitzgibbon, "Simultaneous linear estimation of multiple view
+       geometry and lens distortion", CVPR 2001 (the division model).
+    .. [4] R. Hartley, S. B. Kang, "Parameter-free radial distortion correction with
+       center of distortion estimation", IEEE TPAMI 29(8), 2007 (rational radial models).
     """
 
     center: tuple[float, float]
@@ -79,6 +103,7 @@ class RadialModel(DistortionModel):
     scale: float = 1000.0
     tangential: tuple[float, float] | None = None
     prism: tuple[float, float, float, float] | None = None
+    division: tuple[float, ...] | None = None
     name: str = field(default="radial", init=False, repr=False)
 
     def __post_init__(self):
@@ -88,6 +113,10 @@ class RadialModel(DistortionModel):
             object.__setattr__(self, "tangential", tuple(float(v) for v in self.tangential))
         if self.prism is not None:
             object.__setattr__(self, "prism", tuple(float(v) for v in self.prism))
+        if self.division is not None:
+            object.__setattr__(self, "division", tuple(float(v) for v in self.division))
+            if not self.division:
+                raise ValueError("RadialModel division needs at least d1 (or None)")
         if not self.k:
             raise ValueError("RadialModel needs at least k0")
         if not self.scale > 0:
@@ -107,6 +136,8 @@ class RadialModel(DistortionModel):
             p += list(self.tangential)
         if self.prism is not None:
             p += list(self.prism)
+        if self.division is not None:
+            p += list(self.division)
         return np.asarray(p, dtype=np.float64)
 
     def undistort_points(self, xy: np.ndarray) -> np.ndarray:
@@ -118,6 +149,11 @@ class RadialModel(DistortionModel):
         f = self.k[0] * powers[0]
         for km, pw in zip(self.k[1:], powers[1:], strict=True):
             f = f + km * pw
+        if self.division is not None:
+            den = np.ones_like(f)
+            for dj, ev in zip(self.division, division_basis(xi * xi + eta * eta, len(self.division)), strict=True):
+                den = den + dj * ev
+            f = f / den
         xu, yu = f * xi, f * eta
         for c, (tx, ty) in zip((*(self.tangential or ()), *(self.prism or ())), extra, strict=True):
             xu = xu + c * tx
@@ -130,6 +166,8 @@ class RadialModel(DistortionModel):
             d["tangential"] = list(self.tangential)
         if self.prism is not None:
             d["prism"] = list(self.prism)
+        if self.division is not None:
+            d["division"] = list(self.division)
         return d
 
     @classmethod
@@ -140,17 +178,20 @@ class RadialModel(DistortionModel):
             scale=float(d["scale"]),
             tangential=tuple(d["tangential"]) if d.get("tangential") is not None else None,
             prism=tuple(d["prism"]) if d.get("prism") is not None else None,
+            division=tuple(d["division"]) if d.get("division") is not None else None,
         )
 
 
 class RadialParametrisation:
     """The free parameters of a :class:`RadialModel` fit, for :func:`pipeline.fit.fit_distortion`.
 
-    ``theta = [dcx, dcy, k1 … kN, (p1, p2), (s1 … s4)]``: centre ``c0 + s * dc``
+    ``theta = [dcx, dcy, k1 … kN, (p1, p2), (s1 … s4), (d1 … dM)]``: centre ``c0 + s * dc``
     (``c0`` the image centre, ``s`` half the image diagonal), ``k0 = 1`` fixed (the
-    model can express scale, so the gauge fixes it). The corrected points are linear
-    in ``theta[2:]`` (their Jacobian columns are the terms of :func:`radial_basis` without ``k0``);
-    the two centre columns are central differences. ``regularisation`` adds the
+    model can express scale, so the gauge fixes it). Without a denominator the corrected
+    points are linear in ``theta[2:]`` (their Jacobian columns are the terms of
+    :func:`radial_basis` without ``k0``); with one, the ``k`` columns are divided by
+    ``D`` and the column of ``d_j`` is ``-f rho^2j (xi, eta) / D``; the two centre columns
+    follow from the derivatives of the corrected offsets in ``xi``, ``eta``: all analytic. ``regularisation`` adds the
     centre penalty (``w_center``), the first-order projective gauge of tangential +
     prism terms (``w_gauge``) and an optional ridge (see :mod:`pipeline.fit`).
     """
@@ -165,11 +206,13 @@ class RadialParametrisation:
         w_center: float,
         w_gauge: float,
         ridge: float,
+        division: int = 0,
     ) -> None:
         self.s = 0.5 * float(np.hypot(width, height))
         self.c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
         self.degree, self.tangential, self.prism = int(degree), bool(tangential), bool(prism)
-        self.n = 2 + self.degree + 2 * self.tangential + 4 * self.prism
+        self.division = int(division)
+        self.n = 2 + self.degree + 2 * self.tangential + 4 * self.prism + self.division
         self.w_center, self.w_gauge, self.ridge = w_center, w_gauge, ridge
 
     def theta0(self, init: DistortionModel | None) -> np.ndarray:
@@ -181,6 +224,10 @@ class RadialParametrisation:
             k0 = init.k[0]
             for m, km in enumerate(init.k[1 : self.degree + 1], start=1):
                 th[1 + m] = km / k0 * scale**m  # rescale to this normalisation
+            if init.division is not None and self.division:
+                i = self.n - self.division
+                for j, dj in enumerate(init.division[: self.division], start=1):
+                    th[i + j - 1] = dj * scale ** (2 * j)
         return th
 
     def model(self, th: np.ndarray) -> RadialModel:
@@ -188,6 +235,7 @@ class RadialParametrisation:
         tang = (float(th[i]), float(th[i + 1])) if self.tangential else None
         i += 2 * self.tangential
         prism = (float(th[i]), float(th[i + 1]), float(th[i + 2]), float(th[i + 3])) if self.prism else None
+        div = tuple(float(v) for v in th[self.n - self.division :]) if self.division else None
         c = self.c0 + self.s * th[:2]
         return RadialModel(
             center=(float(c[0]), float(c[1])),
@@ -195,18 +243,39 @@ class RadialParametrisation:
             scale=self.s,
             tangential=tang,
             prism=prism,
+            division=div,
         )
 
     def _linear_part(self, xy: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Corrected points and the Jacobian columns of ``theta[2:]`` (x and y parts)."""
         c = self.c0 + self.s * th[:2]
         xi = (xy[:, 0] - c[0]) / self.s
         eta = (xy[:, 1] - c[1]) / self.s
         powers, extra = radial_basis(xi, eta, self.degree, self.tangential, self.prism)
         # k0 = 1 is fixed: the columns of k1..kN, then the extra terms
-        bx = np.stack([pw * xi for pw in powers[1:]] + [t[0] for t in extra], axis=1)
-        by = np.stack([pw * eta for pw in powers[1:]] + [t[1] for t in extra], axis=1)
-        lin = th[2:]
-        u = np.stack([c[0] + self.s * (xi + bx @ lin), c[1] + self.s * (eta + by @ lin)], axis=1)
+        cols_k = [pw for pw in powers[1:]]
+        if not self.division:
+            bx = np.stack([pw * xi for pw in cols_k] + [t[0] for t in extra], axis=1)
+            by = np.stack([pw * eta for pw in cols_k] + [t[1] for t in extra], axis=1)
+            lin = th[2:]
+            u = np.stack([c[0] + self.s * (xi + bx @ lin), c[1] + self.s * (eta + by @ lin)], axis=1)
+            return u, self.s * bx, self.s * by
+        nk, ne = self.degree, len(extra)
+        num = 1.0 + sum((th[2 + m] * pw for m, pw in enumerate(cols_k)), np.zeros_like(xi))
+        even = division_basis(xi * xi + eta * eta, self.division)
+        dco = th[2 + nk + 2 * self.tangential + 4 * self.prism :]
+        den = 1.0 + sum((dj * ev for dj, ev in zip(dco, even)), np.zeros_like(xi))
+        f = num / den
+        ext = th[2 + nk : 2 + nk + ne]
+        ex = sum((cc * t[0] for cc, t in zip(ext, extra)), np.zeros_like(xi))
+        ey = sum((cc * t[1] for cc, t in zip(ext, extra)), np.zeros_like(xi))
+        u = np.stack([c[0] + self.s * (f * xi + ex), c[1] + self.s * (f * eta + ey)], axis=1)
+        bx = np.stack(
+            [pw * xi / den for pw in cols_k] + [t[0] for t in extra] + [-f * ev * xi / den for ev in even], axis=1
+        )
+        by = np.stack(
+            [pw * eta / den for pw in cols_k] + [t[1] for t in extra] + [-f * ev * eta / den for ev in even], axis=1
+        )
         return u, self.s * bx, self.s * by
 
     def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -216,13 +285,63 @@ class RadialParametrisation:
             return u, None
         d = np.empty((len(xy), 2, self.n))
         d[:, 0, 2:], d[:, 1, 2:] = bx, by
-        eps = 1e-6
-        for j in range(2):
-            tp, tm = th.copy(), th.copy()
-            tp[j] += eps
-            tm[j] -= eps
-            d[:, :, j] = (self._linear_part(xy, tp)[0] - self._linear_part(xy, tm)[0]) / (2 * eps)
+        gxx, gxy, gyx, gyy = self._offset_derivatives(xy, th)
+        # centre c = c0 + s dc moves xi, eta by -dc: du/d(dc_x) = s ((1, 0) - dg/dxi), likewise for y
+        d[:, 0, 0], d[:, 1, 0] = self.s * (1.0 - gxx), -self.s * gyx
+        d[:, 0, 1], d[:, 1, 1] = -self.s * gxy, self.s * (1.0 - gyy)
         return u, d
+
+    def _offset_derivatives(
+        self, xy: np.ndarray, th: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Partial derivatives ``(dg_x/dxi, dg_x/deta, dg_y/dxi, dg_y/deta)`` of the corrected
+        offsets ``g = f(rho) (xi, eta) + extra terms`` (analytic, :class:`RadialModel`'s formula)."""
+        c = self.c0 + self.s * th[:2]
+        xi = (xy[:, 0] - c[0]) / self.s
+        eta = (xy[:, 1] - c[1]) / self.s
+        rho2 = xi * xi + eta * eta
+        rho = np.sqrt(rho2)
+        safe = np.where(rho > 1e-12, rho, 1e-12)
+        k = th[2 : 2 + self.degree]
+        num = np.ones_like(rho)
+        dnum = np.zeros_like(rho)  # d num / d rho
+        p = np.ones_like(rho)  # rho^(m-1)
+        for m, km in enumerate(k, start=1):
+            dnum = dnum + m * km * p
+            p = p * rho
+            num = num + km * p
+        f, df = num, dnum
+        if self.division:
+            dco = th[self.n - self.division :]
+            den = np.ones_like(rho)
+            dden = np.zeros_like(rho)
+            q = np.ones_like(rho)  # rho^(2j-2)
+            for j, dj in enumerate(dco, start=1):
+                dden = dden + 2 * j * dj * q * rho
+                q = q * rho2
+                den = den + dj * q
+            f = num / den
+            df = (dnum * den - num * dden) / (den * den)
+        w = df / safe  # f'(rho) / rho; the k1 term makes it ~1/rho, always multiplied by xi^2 or xi eta
+        gxx = f + w * xi * xi
+        gxy = w * xi * eta
+        gyx = gxy.copy()
+        gyy = f + w * eta * eta
+        i = 2 + self.degree
+        if self.tangential:
+            p1, p2 = th[i], th[i + 1]
+            gxx += 2 * p1 * eta + 6 * p2 * xi
+            gxy += 2 * p1 * xi + 2 * p2 * eta
+            gyx += 2 * p1 * xi + 2 * p2 * eta
+            gyy += 6 * p1 * eta + 2 * p2 * xi
+            i += 2
+        if self.prism:
+            s1, s2, s3, s4 = th[i : i + 4]
+            gxx += 2 * s1 * xi + 4 * s2 * rho2 * xi
+            gxy += 2 * s1 * eta + 4 * s2 * rho2 * eta
+            gyx += 2 * s3 * xi + 4 * s4 * rho2 * xi
+            gyy += 2 * s3 * eta + 4 * s4 * rho2 * eta
+        return gxx, gxy, gyx, gyy
 
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
         """Penalty residuals and their Jacobian rows (see the class docstring)."""

@@ -280,7 +280,7 @@ class Match:
 
     line: int  # index in m.lines
     truth: int  # index in the list of true edges
-    distance: float  # median distance of the raw points to the true curve, px
+    distance: float  # median distance of (up to 200 of) the raw points to the true curve, px
     coverage: float  # fraction of the true edge's arclength between the ends of the measured pieces
 
 
@@ -316,6 +316,21 @@ def coverage(truth: TrueEdge, line) -> float:
     return covered / truth.length
 
 
+def curve_distance(truth: TrueEdge, pts: np.ndarray) -> np.ndarray:
+    """Distance of each of ``pts`` to the true curve (to its nearest segment of the dense polyline)."""
+    best = np.full(len(pts), np.inf)
+    for piece in truth.dense:
+        _, i = cKDTree(piece).query(pts)
+        for j0 in (np.maximum(i - 1, 0), i):
+            j1 = np.minimum(j0 + 1, len(piece) - 1)
+            a, b = piece[j0], piece[j1]
+            ab = b - a
+            den = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+            f = np.clip(np.sum((pts - a) * ab, axis=1) / den, 0.0, 1.0)
+            best = np.minimum(best, np.hypot(*(a + f[:, None] * ab - pts).T))
+    return best
+
+
 def match_lines(truths: list[TrueEdge], m, max_dist: float = 1.5) -> list[Match]:
     """Match every measured line to the true edge its raw points lie on (asserts that one exists)."""
     dense = np.concatenate([np.concatenate(te.dense) for te in truths])
@@ -326,7 +341,7 @@ def match_lines(truths: list[TrueEdge], m, max_dist: float = 1.5) -> list[Match]
         q = ln.raw_points[:: max(1, len(ln.raw_points) // 200)]
         _, idx = tree.query(q)
         k = int(np.bincount(label[idx]).argmax())
-        med = float(np.median(cKDTree(np.concatenate(truths[k].dense)).query(q)[0]))
+        med = float(np.median(curve_distance(truths[k], q)))
         assert med < max_dist, f"measured line {i} lies on no true edge ({med:.2f} px off)"
         out.append(Match(i, k, med, coverage(truths[k], ln)))
     return out

@@ -74,3 +74,42 @@ def real_shots(directory: str) -> tuple:
         m = measure_image(read_grey(Path(directory) / f"{name}.pgm"), t=30)
         out.append((m.width, m.height, tuple(ln.points for ln in m.lines)))
     return tuple(out)
+
+
+# ------------------------------------------------- exact closed-form lenses (issue 8)
+MILD_SIZE = (1000, 750)
+WIDE_SIZE = (1600, 1200)
+
+
+def exact_lens(family: str):
+    """The exact closed-form lens of a family of :mod:`tests.pipeline.lenses` (mild: 1000x750, wide: 1600x1200)."""
+    from tests.pipeline.lenses import mild_lenses, wide_lenses
+
+    if family.startswith("wide"):
+        return wide_lenses(*WIDE_SIZE)[family]
+    return mild_lenses(*MILD_SIZE)[family]
+
+
+@cache
+def exact_shots(family: str, angles: tuple = ANGLES) -> tuple:
+    """Edge point sets of 6 (default) rendered orientations through the exact lens of ``family``
+    (strings 3 px wide, 50 px apart on 1000x750, 60 px on 1600x1200, noise 1.5), measured once per run."""
+    from pipeline.measure import measure_image
+    from pipeline.render import HarpScene, render_harp
+
+    lens = exact_lens(family)
+    w, h = lens.width, lens.height
+    spacing = 60.0 if family.startswith("wide") else 50.0
+    shots = []
+    for i, ang in enumerate(angles):
+        r = render_harp(
+            w,
+            h,
+            HarpScene(angle_deg=ang, spacing_px=spacing, phase_px=11.0 * i),
+            lens=lens,
+            noise_sigma=NOISE,
+            seed=100 + i,
+        )
+        m = measure_image(r.image, t=30)
+        shots.append(tuple(ln.points for ln in m.lines))
+    return tuple(shots)

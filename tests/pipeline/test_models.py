@@ -45,6 +45,7 @@ def test_polynomial_equation_matches_docstring():
             tangential=(0.001, -0.0007),
             prism=(0.0005, 0.0, -0.0004, 0.0),
         ),
+        RadialModel.for_image(W, H, k=(1.0, 0.0, 0.01), center=(490, 380), tangential=(0.001, 0.0), division=(-0.2,)),
     ],
 )
 def test_distort_inverts_undistort(model):
@@ -63,6 +64,7 @@ def test_distort_inverts_undistort(model):
             RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02)),
             ((1.01, 0.002, -3.0), (0.001, 0.99, 2.0), (1e-6, -2e-6, 1.0)),
         ),
+        RadialModel.for_image(W, H, k=(1.0, 0.001, -0.02), division=(-0.25, 0.01), prism=(1e-4, 0, 0, 2e-4)),
     ],
 )
 def test_dict_round_trip_and_registry(model):
@@ -72,6 +74,23 @@ def test_dict_round_trip_and_registry(model):
     p = _grid(100.0)
     assert np.array_equal(back.undistort_points(p), model.undistort_points(p))
     assert back.to_dict() == d
+
+
+def test_radial_division_equation_matches_docstring():
+    # f = (k0 + k1 rho + k2 rho^2) / (1 + d1 rho^2 + d2 rho^4), then the Brown-Conrady terms
+    m = RadialModel.for_image(
+        W, H, k=(1.0, 0.01, 0.03), center=(480.0, 390.0), tangential=(0.002, -0.001), division=(-0.2, 0.02)
+    )
+    p = np.array([[10.0, 700.0], [990.0, 15.0], [480.0, 390.0]])
+    xi, eta = (p[:, 0] - 480.0) / m.scale, (p[:, 1] - 390.0) / m.scale
+    r2 = xi**2 + eta**2
+    f = (1.0 + 0.01 * np.sqrt(r2) + 0.03 * r2) / (1.0 - 0.2 * r2 + 0.02 * r2**2)
+    xu = xi * f + 2 * 0.002 * xi * eta - 0.001 * (r2 + 2 * xi**2)
+    yu = eta * f + 0.002 * (r2 + 2 * eta**2) - 2 * 0.001 * xi * eta
+    assert np.allclose(m.undistort_points(p), np.stack([480.0 + m.scale * xu, 390.0 + m.scale * yu], 1), atol=1e-9)
+    assert list(m.params()[-2:]) == [-0.2, 0.02]
+    with pytest.raises(ValueError, match="division"):
+        RadialModel.for_image(W, H, division=())
 
 
 def test_homography_model_inverse():

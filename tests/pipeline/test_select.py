@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from pipeline.fitspec import FitSpec
 from pipeline.models import RadialModel
@@ -13,7 +14,7 @@ CANDS = (FitSpec("radial", 2), FitSpec("radial", 4, True), FitSpec("radial", 4, 
 
 def test_cv_picks_the_simplest_model_that_generalises():
     shots = harp_point_sets(DECENTRED, W, H, (0, 45, 90, 135), noise=0.005, seed=5)
-    sel = select_model(shots, W, H, candidates=CANDS)
+    sel = select_model(shots, W, H, candidates=CANDS, stop_factor=None)  # every fold of every candidate
     assert sel.folds == "images"
     assert sel.choice == FitSpec("radial", 4, True)
     rows = {r.candidate.label: r for r in sel.table}
@@ -47,7 +48,7 @@ def test_real_photos_radial_generalises_polynomial_does_not(real_harp_dir):
     real = real_shots(str(real_harp_dir))
     w, h, _ = real[0]
     cands = (FitSpec("radial", 4, True, True), FitSpec("poly", 5))
-    sel = select_model([s for _, _, s in real], w, h, candidates=cands)
+    sel = select_model([s for _, _, s in real], w, h, candidates=cands, stop_factor=None)
     rows = {r.candidate.label: r for r in sel.table}
     print({k: (round(r.cv_d, 4), [round(v, 4) for v in r.fold_d]) for k, r in rows.items()})
     assert sel.choice == cands[0]
@@ -77,3 +78,38 @@ def test_a_non_finite_held_out_edge_does_not_void_the_cross_validation():
     sel = select_model(shots, W, H, candidates=CANDS[:2])
     assert sel.folds == "images" and all(np.isfinite(r.cv_d) for r in sel.table)
     assert sel.choice == FitSpec("radial", 4, True)
+
+
+def test_a_simpler_model_measurably_worse_is_not_chosen():
+    """One standard error, paired over the held-out edges (pipeline.select): a lens with thin-prism
+    terms gets them although the CV d of the model without is only 1.8 % higher (inside the old
+    5 % + 0.001 px tolerance, which chose it); without prism terms in the lens, the simpler wins."""
+    cands = (FitSpec("radial", 4), FitSpec("radial", 4, True, True))
+    for prism, expected in ((8e-4, cands[1]), (0.0, cands[0])):
+        lens = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02), prism=(prism, 0.0, -prism, 0.0) if prism else None)
+        shots = harp_point_sets(lens, W, H, (0, 30, 60, 90, 120, 150), noise=0.005, seed=7)
+        sel = select_model(shots, W, H, candidates=cands)
+        cv = {r.candidate: r.cv_d for r in sel.table}
+        assert sel.choice == expected, (prism, cv)
+        if prism:
+            assert cv[cands[0]] < 1.05 * cv[cands[1]] + 0.001  # what the tolerance rule could not see
+            assert "one standard error" in sel.reason
+
+
+def test_warm_started_folds_and_stopped_candidates_keep_the_choice_and_figures():
+    """Item 6 of issue 8: folds warm-started from the fit on all shots, hopeless candidates stopped;
+    the choice is the same as from scratch, the CV d of the good candidates within 0.1 % (a poor model
+    within 5 %: its outlier edges, set by the fit on all shots, differ a little from each fold's)."""
+    shots = harp_point_sets(DECENTRED, W, H, (0, 45, 90, 135), noise=0.005, seed=5)
+    cold = select_model(shots, W, H, candidates=CANDS, warm_start=False, stop_factor=None)
+    fast = select_model(shots, W, H, candidates=CANDS)
+    assert fast.choice == cold.choice
+    for a, b in zip(fast.table, cold.table):
+        assert a.candidate == b.candidate
+        if a.failure is None:
+            good = b.cv_d < 2 * cold.table[1].cv_d
+            assert a.cv_d == pytest.approx(b.cv_d, rel=0.001 if good else 0.05)
+            assert a.full_fit is not None and a.full_fit.model is not None
+        else:  # stopped: far worse than the best, and says so
+            assert a.failure.startswith("stopped") and b.cv_d > 2 * cold.table[1].cv_d
+    assert any(r.failure for r in fast.table)  # radial2 is stopped (its fit on all shots is 2.5x too bent)
