@@ -1,0 +1,12 @@
+"""The set-up assistant (issue 13): a live view of the camera that tells the operator when the
+harp, the focus and the exposure are right, before and during a session.
+
+* :mod:`station.live.checks` -- the live figures against the session's acceptance checks, and
+  the one-shot check of ``harp live --once`` (the executor's own checks on an averaged shot).
+* :mod:`station.live.runner` -- :class:`~station.live.runner.LiveStation`: the camera and
+  turntable threads, reconnects, the accumulated coverage and the through-focus history.
+* :mod:`station.live.view` -- what the page receives (JSON figures, the downscaled frame).
+* :mod:`station.live.web` -- the page, built on :mod:`station.web` (imported only to serve).
+
+The assessment itself is pure and lives in :mod:`pipeline.assess`.
+"""

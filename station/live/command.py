@@ -1,0 +1,176 @@
+"""``harp live CONFIG``: the set-up assistant's page; ``harp live CONFIG --once [--json]``: one check.
+
+``harp live CONFIG`` opens the configured camera and turntable (the simulated ones for a
+configuration with a ``simulation`` section) and serves the live page on 127.0.0.1 (``--host``
+other than the loopback address needs ``--token``); it runs until Ctrl-C (exit 130).
+
+``harp live CONFIG --once`` captures one shot as the session would (``frames_per_orientation``
+frames, averaged), runs the session's acceptance checks on it (exposure, string edges found,
+string angle against the turntable's orientation) and prints one assessment: focus score,
+exposure figures, strings found, coverage. ``--json`` prints it as one JSON object. Exit 0 when
+the shot would pass the session's checks, 1 when not, 2 on an error (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "live",
+        help="live set-up view: focus, exposure, strings and coverage (or one check with --once)",
+        description=__doc__.split("\n\n")[1] + "\n\n" + __doc__.split("\n\n")[2],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("config", type=Path, help="station configuration (YAML)")
+    p.add_argument("--once", action="store_true", help="check one shot, print the assessment and exit (0 pass, 1 fail)")
+    p.add_argument("--json", action="store_true", help="with --once: print the assessment as one JSON object")
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=8013, help="port to serve on (default 8013; 0: any free port)")
+    p.add_argument(
+        "--token",
+        default=os.environ.get("HARP_WEB_TOKEN"),
+        help="token the page requires (needed for a --host other than 127.0.0.1; default $HARP_WEB_TOKEN)",
+    )
+    p.set_defaults(func=run)
+
+
+def _error(msg: str) -> int:
+    print(f"harp live: {msg}", file=sys.stderr)
+    return EXIT_ERROR
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.config import ConfigError, load_config
+
+    if args.json and not args.once:
+        return _error("--json needs --once (the live page is served, not printed)")
+    try:
+        config = load_config(args.config)
+    except ConfigError as exc:
+        return _error(str(exc))
+    if not args.once:
+        from station.web.serve import ServeError, check_bind
+
+        try:
+            check_bind(args.host, args.token)
+        except ServeError as exc:
+            return _error(str(exc))
+    from drivers.errors import DriverError
+    from station.devices import open_station
+
+    try:
+        with open_station(config) as (camera, turntable):
+            if args.once:
+                return _once(config, camera, turntable, args.json)
+            return _serve(config, camera, turntable, args)
+    except ConfigError as exc:
+        return _error(str(exc))
+    except DriverError as exc:
+        return _error(" ".join(str(exc).split()))
+
+
+def _settings(config: Any, camera: Any) -> None:
+    """The session's exposure and gain (focus: the first focus setting), as the executor sets them."""
+    cap = config.capture
+    camera.set_exposure(cap.exposure_us)
+    camera.set_gain(cap.gain_db)
+    if config.focus_settings:
+        camera.lock_focus(config.focus_settings[0])
+
+
+def live_station(config: Any, camera: Any, turntable: Any, **kw: Any) -> Any:
+    """The :class:`~station.live.runner.LiveStation` of a configuration's devices."""
+    from station.live.runner import LiveStation
+
+    return LiveStation(
+        camera,
+        turntable,
+        orientations=config.capture.orientations_deg,
+        checks=config.capture.checks,
+        expected_angle=config.station.harp.expected_angle,
+        capture_timeout_s=config.capture.timeout_s,
+        move_timeout_s=config.capture.move_timeout_s,
+        title=f"{config.station.id} · {config.lens.label()}",
+        **kw,
+    )
+
+
+def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -> int:
+    from station.live.web import live_app
+    from station.web.serve import ServeError, serve
+
+    _settings(config, camera)
+    with live_station(config, camera, turntable) as station:
+        try:
+            serve(live_app(station), host=args.host, port=args.port, token=args.token)
+        except ServeError as exc:
+            return _error(str(exc))
+        except KeyboardInterrupt:
+            print("harp live: stopped", file=sys.stderr)
+            return 130
+    return 0
+
+
+def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:
+    import numpy as np
+
+    from pipeline.assess import assess_frame
+    from station.live.checks import check_shot
+
+    _settings(config, camera)
+    stage = float(turntable.position()) if turntable is not None else None
+    n = config.capture.frames_per_orientation
+    frames = [camera.capture(config.capture.timeout_s) for _ in range(n)]
+    images = [np.asarray(f.image) for f in frames]
+    bit_depth = 8 if frames[0].image.dtype == np.uint8 else None
+    expected = config.station.harp.expected_angle(stage if stage is not None else 0.0)
+    verdict = check_shot(images, config.capture.checks, config.pipeline, expected, bit_depth)
+    image = images[0] if n == 1 else np.mean(np.stack(images), axis=0)
+    a = assess_frame(image, full_scale=float(np.iinfo(images[0].dtype).max))
+    out: dict[str, Any] = {
+        "pass": verdict.passed,
+        "problems": list(verdict.problems),
+        "frames_averaged": n,
+        "stage_deg": stage,
+        "expected_angle_deg": expected,
+        "focus": frames[-1].focus,
+        "exposure_us": frames[-1].exposure_us,
+        "gain_db": frames[-1].gain_db,
+        "session_measurement": {"string_edges": verdict.n_lines, "angle_deg": verdict.angle_deg, "d_px": verdict.d},
+        "assessment": a.to_dict(),
+    }
+    if as_json:
+        print(json.dumps(out, allow_nan=False))
+    else:
+        _print_once(out)
+    return EXIT_PASS if verdict.passed else EXIT_FAIL
+
+
+def _print_once(o: dict[str, Any]) -> None:
+    a = o["assessment"]
+    e = a["exposure"]
+
+    def f(v: Any, d: int = 3) -> str:
+        return "–" if v is None else f"{v:.{d}f}"
+
+    lines = [
+        f"verdict: {'PASS' if o['pass'] else 'FAIL'} (the session's checks on {o['frames_averaged']} averaged frame(s))",
+        *[f"  problem: {p}" for p in o["problems"]],
+        f"focus score {f(a['focus_score'])} /px (edge 10-90 % width {f(a['edge_width_px'], 2)} px) at focus {o['focus']}",
+        f"exposure {o['exposure_us']:g} us, gain {o['gain_db']:g} dB: saturated {100 * e['saturated_fraction']:.2f} %,"
+        f" dark {100 * e['dark_fraction']:.2f} %, dynamic range {e['dynamic_range']:.3f}",
+        f"strings found {a['strings_found']} ({a['edges_found']} edges) at {f(a['angle_deg'], 1)} deg"
+        f" (expected {o['expected_angle_deg']:.1f} deg at stage {f(o['stage_deg'], 2)} deg)",
+        f"coverage of this orientation in two directions: {100 * a['coverage']['covered_fraction']:.0f} %"
+        " (turn the harp: the fit needs edges in two directions everywhere, corners included)",
+    ]
+    print("\n".join(lines))
