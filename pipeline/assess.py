@@ -596,13 +596,11 @@ def string_sharpness(
     centres_all = []
     for sid, a, b in strings:
         pa, pb = np.asarray(a, np.float64), np.asarray(b, np.float64)
-        both = np.concatenate([pa, pb])
         if len(pa) < 2 or len(pb) < 2:
             prepared.append(None)
             continue
-        c0 = both.mean(axis=0)
-        _, vec = np.linalg.eigh((both - c0).T @ (both - c0))
-        direction = vec[:, 1]
+        c0 = np.concatenate([pa, pb]).mean(axis=0)
+        direction = _direction(pa, pb)
         cs = _cross_sections(pa, pb, k, direction)
         if cs is None:
             prepared.append(None)
@@ -627,6 +625,20 @@ def string_sharpness(
         sid, _, _, _, angle, mid = p
         out[i] = StringSharpness(int(sid), fig[0], fig[1], fig[2], fig[3], angle, mid, fig[4], fig[5])
     return tuple(out)
+
+
+def _direction(a: Points, b: Points) -> Points:
+    """Unit direction of a string: the length-weighted doubled-angle mean of its edges' own
+    total-least-squares directions (two edges of unequal extent would tilt a joint fit)."""
+    acc = np.zeros(2)
+    for xy in (a, b):
+        c = xy - xy.mean(axis=0)
+        val, vec = np.linalg.eigh(c.T @ c)
+        t = vec[:, 1]
+        ang = 2.0 * math.atan2(t[1], t[0])
+        acc += math.sqrt(max(float(val[1]), 0.0)) * np.array([math.cos(ang), math.sin(ang)])
+    half = 0.5 * math.atan2(acc[1], acc[0])
+    return np.array([math.cos(half), math.sin(half)])
 
 
 def _pitch(lines: Sequence[tuple[Points, Points, float]]) -> float:

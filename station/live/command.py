@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         return _error(" ".join(str(exc).split()))
 
 
-def _settings(config: Any, camera: Any) -> None:
+def apply_session_settings(config: Any, camera: Any) -> None:
     """The session's exposure and gain (focus: the first focus setting), as the executor sets them."""
     cap = config.capture
     camera.set_exposure(cap.exposure_us)
@@ -108,7 +108,7 @@ def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -
     from station.live.web import live_app
     from station.web.serve import ServeError, serve
 
-    _settings(config, camera)
+    apply_session_settings(config, camera)
     with live_station(config, camera, turntable) as station:
         try:
             serve(live_app(station), host=args.host, port=args.port, token=args.token)
@@ -126,7 +126,7 @@ def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:
     from pipeline.assess import assess_frame
     from station.live.checks import check_shot
 
-    _settings(config, camera)
+    apply_session_settings(config, camera)
     stage = float(turntable.position()) if turntable is not None else None
     n = config.capture.frames_per_orientation
     frames = [camera.capture(config.capture.timeout_s) for _ in range(n)]

@@ -32,8 +32,8 @@
     ctx.font = (11 / k) + "px system-ui, sans-serif";
     for (const r of s.rejected || []) {
       path(r.xy);
-      const [x0, y0] = r.bbox;
-      ctx.fillText(r.reason, Math.max(2 / k, x0), Math.max(12 / k, y0 - 3 / k));
+      const [x0, y0, x1, y1] = r.bbox;
+      if (Math.hypot(x1 - x0, y1 - y0) * k > 30) ctx.fillText(r.reason, Math.max(2 / k, x0), Math.max(12 / k, y0 - 3 / k));
     }
     ctx.fillStyle = "#fff";
     for (const st of s.strings || []) {
