@@ -132,6 +132,7 @@ MIN_CELL_EDGE_FRACTION = 0.25
 BORDER_PX = 4.0
 """Border of the analysis image where no edge point is kept (as :func:`pipeline.measure.measure_image`)."""
 _MAX_GN_ITER = 12
+_WIDTH_TO_SIGMA = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 9.0, 14.0)
 
 
 # ----------------------------------------------------------------------------- exposure
@@ -451,79 +452,98 @@ def _profile(s: Floats, w: Floats, sig: Floats) -> Floats:
     return np.asarray(ndtr((s + 0.5 * w) / sig) - ndtr((s - 0.5 * w) / sig), np.float64)
 
 
-def _project(
-    s: Floats, v: Floats, g: Floats, row: NDArray[np.intp], nrows: int
-) -> tuple[Floats, Floats, Floats, Floats]:
-    """Per cross-section linear least squares ``v ~ B + C s + A g``.
+class _Rows:
+    """Samples grouped by cross-section, with the sums of the linear model that do not change.
 
-    Returns ``B``, ``C``, ``A`` (per row) and the residual of every sample. The
-    slope ``C`` absorbs the shading across one cross-section (vignetting).
+    The linear part of the model is ``v ~ B + C s + A g`` per cross-section (row): the slope
+    ``C`` absorbs the shading across one cross-section (vignetting). Only the sums involving
+    ``g`` change while ``(w, sigma)`` are fitted.
     """
-    basis = (np.ones_like(s), s, g)
-    ata = np.empty((nrows, 3, 3))
-    atb = np.empty((nrows, 3))
-    for i in range(3):
-        atb[:, i] = np.bincount(row, weights=basis[i] * v, minlength=nrows)
-        for j in range(i, 3):
-            ata[:, i, j] = ata[:, j, i] = np.bincount(row, weights=basis[i] * basis[j], minlength=nrows)
-    scale = np.maximum(np.einsum("rii->r", ata), 1e-300)[:, None, None]
-    ata_n = ata / scale + 1e-12 * np.eye(3)
-    coef = np.linalg.solve(ata_n, (atb / scale[:, :, 0])[..., None])[..., 0]
-    bg, slope, amp = coef[:, 0], coef[:, 1], coef[:, 2]
-    return bg, slope, amp, v - bg[row] - slope[row] * s - amp[row] * g
+
+    def __init__(self, s: Floats, v: Floats, row: NDArray[np.intp], nrows: int) -> None:
+        self.s, self.v, self.row, self.nrows = s, v, row, nrows
+        self.n = np.bincount(row, minlength=nrows).astype(np.float64)
+        self.ss, self.sss = self._sum(row, s), self._sum(row, s * s)
+        self.sv, self.ssv = self._sum(row, v), self._sum(row, s * v)
+
+    def _sum(self, row: NDArray[np.intp], x: Floats) -> Floats:
+        return np.bincount(row, weights=x, minlength=self.nrows).astype(np.float64)
+
+    def project(self, g: Floats, sel: NDArray[np.intp] | None = None) -> tuple[Floats, Floats, Floats, Floats]:
+        """``B``, ``C``, ``A`` per row and the residual of the samples ``sel`` (all: None).
+
+        ``g`` is the profile at the samples ``sel``; rows not in ``sel`` get meaningless values.
+        """
+        s, v, row = (self.s, self.v, self.row) if sel is None else (self.s[sel], self.v[sel], self.row[sel])
+        sg, sgg, ssg, sgv = self._sum(row, g), self._sum(row, g * g), self._sum(row, s * g), self._sum(row, g * v)
+        ata = np.empty((self.nrows, 3, 3))
+        ata[:, 0, 0], ata[:, 1, 1], ata[:, 2, 2] = self.n, self.sss, sgg
+        ata[:, 0, 1] = ata[:, 1, 0] = self.ss
+        ata[:, 0, 2] = ata[:, 2, 0] = sg
+        ata[:, 1, 2] = ata[:, 2, 1] = ssg
+        atb = np.stack([self.sv, self.ssv, sgv], axis=1)
+        scale = np.maximum(ata[:, 0, 0] + ata[:, 1, 1] + ata[:, 2, 2], 1e-300)
+        coef = np.linalg.solve(ata / scale[:, None, None] + 1e-12 * np.eye(3), (atb / scale[:, None])[..., None])[
+            ..., 0
+        ]
+        bg, slope, amp = coef[:, 0], coef[:, 1], coef[:, 2]
+        return bg, slope, amp, v - bg[row] - slope[row] * s - amp[row] * g
 
 
 def _fit_strings(
-    s: Floats,
-    v: Floats,
-    row: NDArray[np.intp],
-    nrows: int,
+    rows: _Rows,
     string_of_row: NDArray[np.intp],
     w0: Floats,
     sig0: Floats,
 ) -> tuple[Floats, Floats, Floats]:
     """Variable-projection Levenberg-Marquardt for ``(w, sigma)`` of every string at once.
 
-    ``s, v, row``: the samples (distance to the centre line, value, cross-section).
+    Each string stops iterating once converged (the others go on without it).
     Returns ``w``, ``sigma`` and the cost (sum of squared residuals) per string.
     """
     ns = len(w0)
-    st = string_of_row[row]
+    st = string_of_row[rows.row]
     p = np.stack([np.log(np.maximum(w0, 0.5)), np.log(np.maximum(sig0, 0.3))], axis=1)
     lam = np.full(ns, 1e-3)
+    s = rows.s
 
-    def resid(q: Floats) -> Floats:
-        g = _profile(s, np.exp(q[st, 0]), np.exp(q[st, 1]))
-        return _project(s, v, g, row, nrows)[3]
+    def resid(q: Floats, sel: NDArray[np.intp]) -> Floats:
+        k = st[sel]
+        return rows.project(_profile(s[sel], np.exp(q[k, 0]), np.exp(q[k, 1])), sel)[3]
 
-    def per_string(x: Floats) -> Floats:
-        return np.bincount(st, weights=x, minlength=ns).astype(np.float64)
+    def per_string(sel: NDArray[np.intp], x: Floats) -> Floats:
+        return np.bincount(st[sel], weights=x, minlength=ns).astype(np.float64)
 
-    r = resid(p)
-    c = per_string(r * r)
+    everything = np.arange(len(s))
+    r = resid(p, everything)
+    c = per_string(everything, r * r)
+    active = np.ones(ns, bool)
     eps = 1e-5
     for _ in range(_MAX_GN_ITER):
-        j0 = (resid(p + [eps, 0.0]) - r) / eps
-        j1 = (resid(p + [0.0, eps]) - r) / eps
-        a00, a01, a11 = per_string(j0 * j0), per_string(j0 * j1), per_string(j1 * j1)
-        g0, g1 = per_string(j0 * r), per_string(j1 * r)
+        sel = np.nonzero(active[st])[0]
+        if not len(sel):
+            break
+        rs = r[sel]
+        j0 = (resid(p + [eps, 0.0], sel) - rs) / eps
+        j1 = (resid(p + [0.0, eps], sel) - rs) / eps
+        a00, a01, a11 = per_string(sel, j0 * j0), per_string(sel, j0 * j1), per_string(sel, j1 * j1)
+        g0, g1 = per_string(sel, j0 * rs), per_string(sel, j1 * rs)
         a00d, a11d = a00 * (1.0 + lam) + 1e-12, a11 * (1.0 + lam) + 1e-12
         det = a00d * a11d - a01 * a01
         det = np.where(np.abs(det) > 1e-300, det, 1e-300)
         step = np.stack([-(a11d * g0 - a01 * g1) / det, -(a00d * g1 - a01 * g0) / det], axis=1)
-        step = np.clip(step, -0.7, 0.7)
+        step = np.where(active[:, None], np.clip(step, -0.7, 0.7), 0.0)
         q = p + step
         q[:, 1] = np.maximum(q[:, 1], math.log(0.2))
-        rq = resid(q)
-        cq = per_string(rq * rq)
+        rq = resid(q, sel)
+        cq = np.where(active, per_string(sel, rq * rq), np.inf)
         better = cq < c
+        small = better & ((np.abs(step).max(axis=1) < 1e-3) | (c - cq < 1e-5 * c))
         p = np.where(better[:, None], q, p)
-        r = np.where(better[st], rq, r)
+        r[sel] = np.where(better[st[sel]], rq, rs)
         c = np.where(better, cq, c)
         lam = np.where(better, lam * 0.2, lam * 10.0)
-        done = (better & (np.abs(step).max(axis=1) < 1e-3)) | (lam > 1e4)
-        if np.all(done):
-            break
+        active &= ~(small | (lam > 1e4))
     return np.exp(p[:, 0]), np.exp(p[:, 1]), c
 
 
@@ -669,8 +689,8 @@ def _line_fit(s: Floats, v: Floats, m: NDArray[np.bool_]) -> tuple[Floats, Float
 
 
 def _centre(s: Floats, d: Floats, m: NDArray[np.bool_]) -> tuple[Floats, Floats]:
-    """Per row centroid and variance of the darkness ``d`` (clipped at 0) over the mask."""
-    wt = np.clip(d, 0.0, None) * m
+    """Per row centroid and variance of the darkness ``d`` over the mask (noise averages out: not clipped)."""
+    wt = d * m
     tot = wt.sum(-1)
     good = tot > 1e-9
     mean = np.where(good, (wt * s).sum(-1) / np.where(good, tot, 1.0), 0.0)
@@ -706,17 +726,29 @@ def _fit_batch(
     lo, hi = np.where(inner, dev, np.inf).min(-1), np.where(inner, dev, -np.inf).max(-1)
     amp = np.where(np.abs(lo) > np.abs(hi), lo, hi)
     amp = np.where(np.isfinite(amp) & (np.abs(amp) > 1e-12), amp, 1.0)
-    w_fit = np.maximum(widths, 1.0)
-    sig_fit = np.full(ns, extra / 3.0)
+    sd = np.full(ns, extra / 3.0)  # the profile's standard deviation, sqrt(w^2 / 12 + sigma^2)
     for _ in range(3):
-        win = np.minimum(w_fit / 2.0 + 3.0 * sig_fit + 1.0, widths / 2.0 + 0.6 * extra)[sor][:, None]
+        win = np.minimum(3.0 * sd + 1.0, widths / 2.0 + 0.6 * extra)[sor][:, None]
         shift, var = _centre(s, dev / amp[:, None], m0 & (np.abs(s) <= win))
         s = s - shift[:, None]
         with np.errstate(all="ignore"):
             var_s = np.array(
                 [np.nanmedian(var[sor == i]) if np.isfinite(var[sor == i]).any() else np.nan for i in range(ns)]
             )
-        sig_fit = np.where(np.isfinite(var_s), np.sqrt(np.clip(var_s - w_fit**2 / 12.0, 0.09, None)), 1.0)
+        sd = np.where(np.isfinite(var_s), np.sqrt(np.clip(var_s, 0.09, None)), 1.0)
+    # split that variance between the string width and the blur: the best of a few ratios w / sigma
+    rr, jj = np.nonzero(m0 & (np.abs(s) <= np.minimum(4.0 * sd + 3.0, widths / 2.0 + extra)[sor][:, None]))
+    rows = _Rows(s[rr, jj], v[rr, jj], rr.astype(np.intp), nrows)
+    st = sor[rr]
+    best = np.full(ns, np.inf)
+    w_fit, sig_fit = np.maximum(widths, 1.0), np.maximum(sd / 2.0, 0.3)
+    for rho in _WIDTH_TO_SIGMA:
+        sig = sd / math.sqrt(rho * rho / 12.0 + 1.0)
+        res = rows.project(_profile(rows.s, rho * sig[st], sig[st]))[3]
+        c = np.bincount(st, weights=res * res, minlength=ns)
+        take = c < best
+        best = np.where(take, c, best)
+        w_fit, sig_fit = np.where(take, rho * sig, w_fit), np.where(take, sig, sig_fit)
     cost = np.zeros(ns)
     rr = np.zeros(0, np.intp)
     bg = amp_f = np.zeros(nrows)
@@ -725,9 +757,9 @@ def _fit_batch(
         fit_win = np.minimum(w_fit / 2.0 + 5.0 * sig_fit + 3.0, widths / 2.0 + extra)
         rr, jj = np.nonzero(m0 & (np.abs(s) <= fit_win[sor][:, None]))
         rr = rr.astype(np.intp)
-        w_fit, sig_fit, cost = _fit_strings(s[rr, jj], v[rr, jj], rr, nrows, sor, w_fit, sig_fit)
-        g = _profile(s[rr, jj], w_fit[sor[rr]], sig_fit[sor[rr]])
-        bg, slope, amp_f, _ = _project(s[rr, jj], v[rr, jj], g, rr, nrows)
+        rows = _Rows(s[rr, jj], v[rr, jj], rr, nrows)
+        w_fit, sig_fit, cost = _fit_strings(rows, sor, w_fit, sig_fit)
+        bg, slope, amp_f, _ = rows.project(_profile(rows.s, w_fit[sor[rr]], sig_fit[sor[rr]]))
         if rnd == 0:  # re-centre each cross-section on the fitted model's darkness
             a_safe = np.where(np.abs(amp_f) > 1e-12, amp_f, 1.0)[:, None]
             win = (w_fit / 2.0 + 3.0 * sig_fit + 1.0)[sor][:, None]

@@ -7,8 +7,8 @@ Two uses:
   the session computes them, :func:`pipeline.assess.exposure_figures`), the string edges found
   against ``min_lines`` and the harp angle against the expected one.
 * :func:`check_shot` -- ``harp live --once``: the executor's own checks
-  (:func:`station.processing.exposure_problems`, :func:`station.processing.measure_shot`,
-  :func:`station.processing.shot_problems`) on the average of ``frames_per_orientation``
+  (:func:`station.session.processing.exposure_problems`, :func:`station.session.processing.measure_shot`,
+  :func:`station.session.processing.shot_problems`) on the average of ``frames_per_orientation``
   frames, so that its verdict is the session's.
 """
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from pipeline.assess import Assessment, ExposureFigures
 from station.config import CheckConfig, PipelineConfig
-from station.processing import angle_difference
+from station.session.processing import angle_difference
 
 
 def exposure_warnings(fig: ExposureFigures, checks: CheckConfig) -> list[str]:
@@ -78,7 +78,7 @@ def check_shot(
     bit_depth: int | None = None,
 ) -> ShotCheck:
     """The executor's checks (exposure, then strings found at the expected angle) on the averaged shot."""
-    from station.processing import average_frames, exposure_problems, full_scale, measure_shot, shot_problems
+    from station.session.processing import average_frames, exposure_problems, full_scale, measure_shot, shot_problems
 
     image = average_frames(list(images))
     problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), checks)

@@ -105,6 +105,6 @@ def test_importing_the_cli_does_not_import_the_web_stack():
     import subprocess
     import sys
 
-    code = "import sys, station.live.command, station.live.checks; print(any(m.split('.')[0] in ('starlette', 'uvicorn', 'jinja2') for m in sys.modules))"
+    code = "import sys, station.cli.live, station.live.checks; print(any(m.split('.')[0] in ('starlette', 'uvicorn', 'jinja2') for m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

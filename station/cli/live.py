@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         except ServeError as exc:
             return _error(str(exc))
     from drivers.errors import DriverError
-    from station.devices import open_station
+    from station.session.devices import open_station
 
     try:
         with open_station(config) as (camera, turntable):

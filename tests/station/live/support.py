@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"
 BEST_FOCUS = 0.37
 
@@ -45,9 +45,9 @@ def wait_for(cond: Callable[[], Any], timeout: float = 30.0, what: str = "condit
 @contextlib.contextmanager
 def running_live(config_path: Path, **kw: Any) -> Iterator[tuple[Any, Any, Any]]:
     """``(live_station, camera, simulated station)`` on the simulated devices, started."""
+    from station.cli.live import apply_session_settings, live_station
     from station.config import load_config
-    from station.live.command import apply_session_settings, live_station
-    from station.simulated import simulated_devices
+    from station.session.simulated import simulated_devices
 
     config = load_config(config_path)
     with simulated_devices(config) as sim:

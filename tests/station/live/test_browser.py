@@ -14,7 +14,7 @@ import pytest
 
 from station.live.web import live_app
 from station.web import start
-from tests.station.live_support import live_config, running_live, wait_for
+from tests.station.live.support import live_config, running_live, wait_for
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,121 @@
+"""``harp live``: ``--once`` verdicts and exit codes on the simulated station, refused addresses."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import pytest
+
+from tests.station.live.support import live_config
+
+
+def _harp_live(argv):
+    from station.cli.live import register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["live", *map(str, argv)])
+    return args.func(args)
+
+
+def test_once_json_passes_a_good_shot(tmp_path, capsys):
+    assert _harp_live([live_config(tmp_path, frames=2), "--once", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["pass"] is True and out["problems"] == [] and out["frames_averaged"] == 2
+    a = out["assessment"]
+    assert a["strings_found"] >= 4 and a["focus_score"] > 0.4 and a["exposure"]["saturated_fraction"] == 0
+    assert out["session_measurement"]["string_edges"] >= 8
+    assert out["expected_angle_deg"] == pytest.approx(5.0) and a["angle_deg"] == pytest.approx(5.0, abs=1.0)
+    assert len(a["coverage"]["covered"]) == 6
+
+
+@pytest.mark.parametrize(
+    "change, problem",
+    [
+        ({"capture": {"exposure_us": 16000}}, "over-exposed"),
+        ({"station": {"harp": {"offset_deg": 50.0}}}, "expected 50.0 deg"),
+    ],
+)
+def test_once_fails_a_shot_the_session_would_recapture(tmp_path, capsys, change, problem):
+    import yaml
+
+    p = live_config(tmp_path)
+    d = yaml.safe_load(p.read_text())
+    for section, values in change.items():
+        for k, v in values.items():
+            if isinstance(v, dict):
+                d[section][k].update(v)
+            else:
+                d[section][k] = v
+    p.write_text(yaml.safe_dump(d))
+    assert _harp_live([p, "--once", "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out["pass"] is False and any(problem in x for x in out["problems"]), out["problems"]
+
+
+def test_once_bad_config_is_one_line_exit_2(tmp_path, capsys):
+    p = tmp_path / "bad.yaml"
+    p.write_text("station: [1, 2]\n")
+    assert _harp_live([p, "--once"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("harp live: ") and err.count("\n") == 1 and "bad.yaml" in err
+
+
+def test_live_refuses_a_network_address_without_a_token(tmp_path, capsys):
+    assert _harp_live([live_config(tmp_path), "--host", "0.0.0.0", "--token", ""]) == 2
+    assert "token is empty" in capsys.readouterr().err
+    os.environ.pop("HARP_WEB_TOKEN", None)
+    assert _harp_live([live_config(tmp_path), "--host", "0.0.0.0"]) == 2
+    assert "give a token" in capsys.readouterr().err
+
+
+def _harp(*args, **kw):
+    import subprocess
+    import sys
+
+    from tests.station.live.support import REPO
+
+    return subprocess.Popen(
+        [sys.executable, "-m", "station.cli", *map(str, args)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
+
+
+def test_harp_live_once_json_whole_process(tmp_path):
+    p = _harp("live", live_config(tmp_path, width=320, height=240), "--once", "--json")
+    out, err = p.communicate(timeout=120)
+    assert p.returncode == 0, err
+    assert json.loads(out)["pass"] is True and err == ""
+
+
+def test_harp_live_serves_the_page_until_ctrl_c(tmp_path):
+    import re
+    import signal
+    import urllib.request
+
+    p = _harp("live", live_config(tmp_path, width=320, height=240), "--port", "0")
+    try:
+        line = p.stderr.readline()
+        m = re.match(r"serving on (http://127\.0\.0\.1:\d+/) \(Ctrl-C to stop\)", line)
+        assert m, line
+        from tests.station.live.support import wait_for
+
+        def state():
+            s = json.load(urllib.request.urlopen(m.group(1) + "api/state", timeout=10))
+            return s if s.get("figures") else None
+
+        s = wait_for(state, 60, "a first assessed frame")
+        assert s["figures"]["strings_found"] >= 3 and s["turntable"]["position_deg"] == pytest.approx(0.0, abs=1e-3)
+        page = urllib.request.urlopen(m.group(1), timeout=10).read().decode()
+        assert "next orientation" in page
+    finally:
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    assert p.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "harp live: stopped"
