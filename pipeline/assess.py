@@ -483,9 +483,10 @@ class _Rows:
         ata[:, 1, 2] = ata[:, 2, 1] = ssg
         atb = np.stack([self.sv, self.ssv, sgv], axis=1)
         scale = np.maximum(ata[:, 0, 0] + ata[:, 1, 1] + ata[:, 2, 2], 1e-300)
-        coef: Floats = np.linalg.solve(
-            ata / scale[:, None, None] + 1e-12 * np.eye(3), (atb / scale[:, None])[..., None]
-        )[..., 0]
+        coef = np.asarray(
+            np.linalg.solve(ata / scale[:, None, None] + 1e-12 * np.eye(3), (atb / scale[:, None])[..., None])[..., 0],
+            np.float64,
+        )
         bg, slope, amp = coef[:, 0], coef[:, 1], coef[:, 2]
         return bg, slope, amp, v - bg[row] - slope[row] * s - amp[row] * g
 
