@@ -37,6 +37,12 @@ def register(subparsers) -> None:
     for action in (run, res):
         action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
         action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")
+        action.add_argument(
+            "--live",
+            action="store_true",
+            help="show the session on the live page (http://127.0.0.1:8013/; it stays until Ctrl-C after the end)",
+        )
+        action.add_argument("--live-port", type=int, default=8013, help="port of the live page (0: any free port)")
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
 
 
@@ -65,7 +71,7 @@ def _run(args) -> int:
         print(f"session directory: {s.path}", file=sys.stderr)
         return s
 
-    return _execute(config, new_session, args.quiet, report=not args.no_report)
+    return _execute(config, new_session, args.quiet, report=not args.no_report, live=_live(args))
 
 
 def _resume(args) -> int:
@@ -80,10 +86,46 @@ def _resume(args) -> int:
         session.close()
         print(f"harp session: {args.session_dir}: already finished, nothing to do", file=sys.stderr)
         return 0
-    return _execute(session.config, lambda: session, args.quiet, opened=session, report=not args.no_report)
+    return _execute(
+        session.config, lambda: session, args.quiet, opened=session, report=not args.no_report, live=_live(args)
+    )
 
 
-def _execute(config, get_session, quiet: bool, opened=None, report: bool = True) -> int:
+def _live(args) -> int | None:
+    """The live page's port with ``--live`` (None without)."""
+    return args.live_port if getattr(args, "live", False) else None
+
+
+def _execute(config, get_session, quiet: bool, opened=None, report: bool = True, live: int | None = None) -> int:
+    if live is None:
+        return _execute_session(config, get_session, quiet, opened, report)
+    from station.live.session_tap import live_session_page
+    from station.web.serve import ServeError
+
+    try:
+        page = live_session_page(config, port=live)
+        tap = page.__enter__()
+    except ServeError as exc:
+        if opened is not None:
+            opened.close()
+        return _error(f"--live: {exc}")
+    try:
+        code = _execute_session(config, get_session, quiet, opened, report, tap=tap)
+        if code == 130:
+            return code
+        print("harp session: the live page shows the result until Ctrl-C", file=sys.stderr, flush=True)
+        try:
+            import threading
+
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            pass
+        return code
+    finally:
+        page.__exit__(None, None, None)
+
+
+def _execute_session(config, get_session, quiet: bool, opened=None, report: bool = True, tap=None) -> int:
     from rich.console import Console
 
     from station.config import ConfigError
@@ -97,6 +139,8 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True)
         with ProfileStore(config.store_path) as store, open_station(config) as (camera, turntable):
             with get_session() as session:
                 started.append(session.path)
+                if tap is not None:
+                    session = tap(session)  # the live page subscribes to the session's records and frames
                 console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
                 result = run_session(session, camera, turntable, store=store, console=console, report=report)
     except (ConfigError, StoreError, SessionError) as exc:

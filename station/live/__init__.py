@@ -7,6 +7,10 @@ harp, the focus and the exposure are right, before and during a session.
   turntable threads, reconnects, the accumulated coverage and the through-focus history.
 * :mod:`station.live.view` -- what the page receives (JSON figures, the downscaled frame).
 * :mod:`station.live.web` -- the page, built on :mod:`station.web` (imported only to serve).
+* :mod:`station.live.session_tap` -- the page during a session (``harp session run --live``):
+  a subscriber to the session's records and frames.
+
+The command is :mod:`station.cli.live` (``harp live``).
 
 The assessment itself is pure and lives in :mod:`pipeline.assess`.
 """

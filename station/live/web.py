@@ -51,6 +51,8 @@ async def command(request: Request) -> Response:
     if not isinstance(body, dict) or not isinstance(body.get("action"), str):
         return JSONResponse({"error": 'expected a JSON object {"action": ..., "value": ...}'}, status_code=400)
     fut = _live(request).command(body["action"], body.get("value"))
+    if fut.done() and fut.exception() is not None:
+        return JSONResponse({"error": str(fut.exception())}, status_code=400)
     if body["action"] in ("next", "previous", "goto", "home"):
         return JSONResponse({"ok": True, "queued": body["action"]}, status_code=202)
     try:

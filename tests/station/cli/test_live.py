@@ -119,3 +119,52 @@ def test_harp_live_serves_the_page_until_ctrl_c(tmp_path):
         out, err = p.communicate(timeout=30)
     assert p.returncode == 130, err
     assert err.strip().splitlines()[-1] == "harp live: stopped"
+
+
+def test_session_run_live_shows_the_session_on_the_page(tmp_path):
+    """``harp session run --live``: the page subscribes to the session's records and frames and
+    shows progress, each shot's check, the fit figures and the verdict; it stays until Ctrl-C."""
+    import re
+    import signal
+    import urllib.error
+    import urllib.request
+
+    import yaml
+
+    from tests.station.live.support import wait_for
+
+    cfg = live_config(tmp_path, width=480, height=360)
+    d = yaml.safe_load(cfg.read_text())
+    d["pipeline"].update(bootstrap=0, workers=1)
+    cfg.write_text(yaml.safe_dump(d))
+    p = _harp("session", "run", cfg, "--live", "--live-port", "0", "--quiet", "--no-report", "--name", "s")
+    try:
+        line = p.stderr.readline()
+        m = re.match(r"live page: (http://127\.0\.0\.1:\d+/)$", line.strip())
+        assert m, line
+        url = m.group(1)
+
+        def finished():
+            s = json.load(urllib.request.urlopen(url + "api/state", timeout=10))
+            return s if s["session"] and s["session"].get("state") == "finished" else None
+
+        s = wait_for(finished, 240, "the session to finish on the page")
+        ses = s["session"]
+        assert ses["progress"]["shots_done"] == ses["progress"]["shots_total"] == 4
+        assert [(r["orientation_idx"], r["problems"]) for r in ses["shots"]] == [(o, []) for o in range(4)]
+        (fit,) = ses["fits"]
+        assert fit["holdout_d"] is not None and fit["holdout_d"] < 0.05
+        assert ses["qa"] and ses["qa"][0]["verdict"] in ("PASS", "FAIL")
+        assert s["figures"]["strings_found"] >= 4  # the session's last frame, assessed
+        assert s["turntable"] is None and s["camera"] is None  # the page only shows: the session drives
+        req = urllib.request.Request(
+            url + "api/command", data=b'{"action": "next"}', headers={"content-type": "application/json"}
+        )
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(req, timeout=10)
+        assert err.value.code == 400
+    finally:
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    assert p.returncode == 0, err
+    assert "session finished" in err and (tmp_path / "sessions" / "s" / "manifest.jsonl").exists()

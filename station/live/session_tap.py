@@ -1,0 +1,130 @@
+"""The live page during a session (``harp session run ... --live``): a subscriber to the session.
+
+:class:`SessionTap` stands in for the session directory the executor writes to: every record
+the executor appends (``focus``, ``frame``, ``reject``, ``measure``, ``fit``, ``stored``, ``qa``,
+``finished``, ``aborted``, ...) is appended to the real directory first, then shown on the page
+(:meth:`station.live.runner.LiveStation.session_record`), and every frame written is also handed
+to the page's assessment thread (:meth:`~station.live.runner.LiveStation.show_frame`, which
+never blocks the executor). The executor is unchanged and owns the devices; the page only
+shows. When the executor emits typed records to subscribers, this becomes one of them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+
+from drivers.protocols import CameraIdentity, Frame
+
+
+class SessionTap:
+    """A session directory that also shows the session on a live page (module docstring)."""
+
+    def __init__(self, session: Any, live: Any, config: Any) -> None:
+        self._session, self._live, self._config = session, live, config
+        n_f, n_o = len(config.focus_settings), len(config.capture.orientations_deg)
+        self._totals = (n_f, n_o, n_f * n_o)
+        self._where = (0, 0)
+        live.begin_session({"session": str(session.path), "shots_total": n_f * n_o})
+        self._show({"kind": "tap"})
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._session, name)
+
+    def __enter__(self) -> SessionTap:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._session.__exit__(*exc)
+
+    # -- what the executor calls -----------------------------------------------------------
+    def append(self, record: dict[str, Any]) -> dict[str, Any]:
+        out: dict[str, Any] = self._session.append(record)
+        self._show(out)
+        return out
+
+    def write_frame(
+        self,
+        focus_idx: int,
+        orientation_idx: int,
+        frame_idx: int,
+        image: np.ndarray,
+        metadata: dict[str, Any] | None = None,
+    ) -> dict[str, Any]:
+        out: dict[str, Any] = self._session.write_frame(focus_idx, orientation_idx, frame_idx, image, metadata)
+        meta = metadata or {}
+        cam = meta.get("camera") or ["", "", ""]
+        frame = Frame(
+            image=image,
+            timestamp=float(meta.get("timestamp", 0.0)),
+            exposure_us=float(meta.get("exposure_us", float("nan"))),
+            gain_db=float(meta.get("gain_db", float("nan"))),
+            focus=meta.get("focus"),
+            camera=CameraIdentity(*[str(c) for c in cam[:3]]),
+            counter=int(meta.get("counter", 0)),
+        )
+        stage = meta.get("stage_deg")
+        self._live.show_frame(
+            frame, stage_deg=stage, focus_idx=focus_idx, orientation_idx=orientation_idx, frame_idx=frame_idx
+        )
+        self._show(out)
+        return out
+
+    # -- what the page shows ---------------------------------------------------------------
+    def _show(self, record: dict[str, Any]) -> None:
+        kind = record.get("kind")
+        if "focus_idx" in record:
+            self._where = (int(record["focus_idx"]), int(record.get("orientation_idx", self._where[1])))
+        shown = dict(record)
+        if kind == "measure":
+            shown = {**record, "kind": "shot", "problems": []}
+        elif kind == "reject":
+            shown = {**record, "kind": "shot", "problems": list(record.get("reasons", []))}
+        elif kind == "frame":
+            shown = {k: v for k, v in record.items() if k != "meta"}
+        n_f, n_o, total = self._totals
+        f, o = self._where
+        done = sum(1 for r in self._session.records if r.get("kind") == "measure")
+        focus = self._config.focus_settings[f] if f < n_f else None
+        shown["progress"] = {
+            "focus_idx": f,
+            "focus_total": n_f,
+            "focus": focus,
+            "orientation_idx": o,
+            "orientation_total": n_o,
+            "shots_done": done,
+            "shots_total": total,
+        }
+        self._live.session_record(shown)
+
+
+@contextlib.contextmanager
+def live_session_page(
+    config: Any, host: str = "127.0.0.1", port: int = 8013, token: str | None = None
+) -> Iterator[Callable[[Any], SessionTap]]:
+    """Serve the live page for a session; yield ``tap(session) -> SessionTap``.
+
+    The page's server runs on a background thread (the session runs in the foreground);
+    raises :class:`station.web.ServeError` (one line) when the address cannot be used.
+    """
+    from station.cli.live import live_station
+    from station.live.web import live_app
+    from station.web.serve import start
+
+    station = live_station(config, None, None)
+    station.start()
+    try:
+        server = start(live_app(station), host, port, token)
+    except BaseException:
+        station.stop()
+        raise
+    print(f"live page: {server.url}", file=sys.stderr, flush=True)
+    try:
+        yield lambda session: SessionTap(session, station, config)
+    finally:
+        server.stop()
+        station.stop()
