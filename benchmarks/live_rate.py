@@ -8,13 +8,19 @@ For each frame size, frames of the simulated camera (the demo lens at focus 0.5,
 the camera's defocus on: best focus 0.37, here at focus 0.37) are rendered first; then
 :func:`pipeline.assess.assess_frame` runs on them as the live view runs it: the analysis
 scale from the last measured string width, the edge thresholds of the previous frame reused.
-It reports the median wall time per assessment and its stages (exposure figures, downscale,
+*Tracked*: the same frames assessed with ``previous=`` a search of the first one (the strings
+not searched again; every figure of the strings and the exposure measured on each frame), as the
+live loop does between searches (it searches again after a move, every second, and whenever a
+string is found more than 0.5 px from where it was).
+
+It reports the median wall time per assessment, its CPU time (``time.process_time``, all
+threads of the process: what the assessment costs whatever else runs on the machine), and its stages (exposure figures, downscale,
 sub-pixel edges, grouping, full-resolution string refinement, coverage), the rate it allows,
 and the cost of what the live loop adds per frame (JPEG of the displayed frame, the page's
 JSON). Sizes: 1280x960 (the demo camera: 3 px strings 60 px apart) and 2592x1944 (5 MP: the
 same harp imaged at twice the resolution, 6 px strings 120 px apart, found on the 2x
-downscaled image), and 5 MP with 3 px strings (searched at full resolution: a string would be
-lost at half size).
+downscaled image), and 5 MP with 3 px strings (twice as many strings to refine; the grouping
+still finds 1.5 px strings on the 2x downscaled image).
 
 ``--loop-seconds``: also runs the whole live loop (:class:`station.live.runner.LiveStation`,
 capture on one thread, assessment on another) on the simulated camera for that long and
@@ -69,7 +75,7 @@ def stages(img, scale, th):
     t.append(time.perf_counter())
     small = A._downscale(img, scale)
     t.append(time.perf_counter())
-    chains = detect_edges(small, low=th[0], high=th[1], interpolation="parabola")
+    chains = detect_edges(small, low=th[0], high=th[1], min_length=8, interpolation="parabola")
     t.append(time.perf_counter())
     g = group_string_edges(chains, small.shape, border_px=A.BORDER_PX)
     t.append(time.perf_counter())
@@ -90,23 +96,33 @@ def bench(name, w, h, k, n):
     scale = A.analysis_scale(w, h, first.string_width_px)
     a = A.assess_frame(imgs[0], scale=scale)
     th = a.thresholds
-    total, st, extra = [], [], []
+    total, cpu, st, extra = [], [], [], []
     for img in imgs:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         a = A.assess_frame(img, scale=scale, thresholds=th)
         total.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         t0 = time.perf_counter()
         encode_frame(img, 960, a.exposure.full_scale)
         json.dumps(view_of(a, [], 960))
         extra.append(time.perf_counter() - t0)
+    searched = A.assess_frame(imgs[0], scale=scale, thresholds=th)
+    tr, tr_cpu = [], []
+    for img in imgs:
+        t0, c0 = time.perf_counter(), time.process_time()
+        A.assess_frame(img, previous=searched)
+        tr.append(time.perf_counter() - t0)
+        tr_cpu.append(time.process_time() - c0)
     for img in imgs[: max(3, n // 4)]:
         st.append(stages(img, scale, th))
     s = np.median(st, axis=0)
     med = float(np.median(total))
     return (
-        f"| {name} | {w}x{h} | {scale:g} | {a.n_strings} | {med:.3f} | {1 / med:.1f} | "
+        f"| {name} | {w}x{h} | {scale:g} | {a.n_strings} | {med:.3f} | {1 / med:.1f} | {np.median(cpu):.3f} | "
+        f"{1 / np.median(cpu):.1f} | "
         + " | ".join(f"{v:.3f}" for v in s)
         + f" | {np.median(extra):.3f} | {1 / (med + np.median(extra)):.1f} |"
+        + f" {np.median(tr):.3f} | {1 / np.median(tr):.1f} | {np.median(tr_cpu):.3f} | {1 / np.median(tr_cpu):.1f} |"
     )
 
 
@@ -137,10 +153,11 @@ def main() -> None:
     print(f"live view assessment rate, {os.cpu_count()} cores, median of {args.frames} frames, wall seconds")
     print()
     print(
-        "| frames | size | analysis scale | strings | assessment s | assessments/s | exposure | downscale | edges |"
-        " grouping | string refinement | coverage | + JPEG & JSON | with them /s |"
+        "| frames | size | analysis scale | strings | assessment s | assessments/s | CPU s | per CPU s |"
+        " exposure | downscale | edges | grouping | string refinement | coverage | + JPEG & JSON | with them /s |"
+        " tracked s | tracked/s | tracked CPU s | per CPU s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, w, h, k in CASES:
         print(bench(name, w, h, k, args.frames), flush=True)
     if args.loop_seconds > 0:

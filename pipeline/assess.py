@@ -14,7 +14,8 @@ pixels, never so small that a string is narrower than
 :data:`MIN_ANALYSIS_STRING_PX`), with the sub-pixel edge detector
 (:func:`pipeline.edges.detect_edges`, parabolic sub-pixel peaks: the live
 view needs no 0.01 px positions) and the string grouping
-(:func:`pipeline.grouping.group_string_edges`). Only the figures shown per
+(:func:`pipeline.grouping.group_string_edges`; edge chains shorter than its shortest piece,
+``MIN_PIECE_PX``, are dropped first: they could only be rejected as fragments). Only the figures shown per
 string are then refined on the full-resolution pixels, on
 :data:`CROSS_SECTIONS` cross-sections per string.
 
@@ -91,6 +92,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -102,7 +104,7 @@ from numpy.typing import NDArray
 from scipy.special import ndtr
 
 from pipeline.edges import auto_thresholds, detect_edges
-from pipeline.grouping import REJECT_REASONS, Grouping, group_string_edges
+from pipeline.grouping import MIN_PIECE_PX, REJECT_REASONS, Grouping, group_string_edges
 
 Points = NDArray[np.float64]
 Floats = NDArray[np.float64]
@@ -392,6 +394,9 @@ class StringSharpness:
         Cross-sections that entered the fit.
     residual : float
         RMS residual of the fit relative to ``|A|``.
+    offset_px : float
+        Median distance between the centre line given (from the edges) and the one refined on
+        the pixels: how far the string is from where it was looked for.
     """
 
     string_id: int
@@ -403,6 +408,7 @@ class StringSharpness:
     centre: tuple[float, float]
     cross_sections: int
     residual: float
+    offset_px: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -415,6 +421,7 @@ class StringSharpness:
             "centre": [self.centre[0], self.centre[1]],
             "cross_sections": self.cross_sections,
             "residual": _num(self.residual),
+            "offset_px": _num(self.offset_px),
         }
 
 
@@ -644,7 +651,7 @@ def string_sharpness(
         p = prepared[i]
         assert p is not None
         sid, _, _, _, angle, mid = p
-        out[i] = StringSharpness(int(sid), fig[0], fig[1], fig[2], fig[3], angle, mid, fig[4], fig[5])
+        out[i] = StringSharpness(int(sid), fig[0], fig[1], fig[2], fig[3], angle, mid, fig[4], fig[5], fig[6])
     return tuple(out)
 
 
@@ -703,8 +710,8 @@ def _fit_batch(
     img: NDArray[Any],
     live: Sequence[tuple[int, Points, Points, float, float, tuple[float, float]]],
     extra: float,
-) -> list[tuple[float, float, float, float, int, float]]:
-    """Fit every string at once; per string (sigma, edge width, contrast, width, sections, residual)."""
+) -> list[tuple[float, float, float, float, int, float, float]]:
+    """Fit every string at once; per string (sigma, edge width, contrast, width, sections, residual, offset)."""
     ns = len(live)
     widths = np.array([p[3] for p in live])
     reach = float(np.max(widths)) / 2.0 + extra
@@ -727,11 +734,13 @@ def _fit_batch(
     lo, hi = np.where(inner, dev, np.inf).min(-1), np.where(inner, dev, -np.inf).max(-1)
     amp = np.where(np.abs(lo) > np.abs(hi), lo, hi)
     amp = np.where(np.isfinite(amp) & (np.abs(amp) > 1e-12), amp, 1.0)
+    moved = np.zeros(nrows)  # how far each cross-section's centre was moved
     sd = np.full(ns, extra / 3.0)  # the profile's standard deviation, sqrt(w^2 / 12 + sigma^2)
     for _ in range(3):
         win = np.minimum(3.0 * sd + 1.0, widths / 2.0 + 0.6 * extra)[sor][:, None]
         shift, var = _centre(s, dev / amp[:, None], m0 & (np.abs(s) <= win))
         s = s - shift[:, None]
+        moved += shift
         with np.errstate(all="ignore"):
             var_s = np.array(
                 [np.nanmedian(var[sor == i]) if np.isfinite(var[sor == i]).any() else np.nan for i in range(ns)]
@@ -766,6 +775,7 @@ def _fit_batch(
             win = (w_fit / 2.0 + 3.0 * sig_fit + 1.0)[sor][:, None]
             shift, _ = _centre(s, (v - bg[:, None] - slope[:, None] * s) / a_safe, m0 & (np.abs(s) <= win))
             s = s - shift[:, None]
+            moved += shift
     counts = np.bincount(rr, minlength=nrows)
     n_str = np.bincount(sor, weights=counts, minlength=ns)
     out = []
@@ -773,12 +783,13 @@ def _fit_batch(
         ok = (sor == i) & (counts >= 5) & (np.abs(amp_f) > 0)
         a, b = amp_f[ok], bg[ok]
         if ok.sum() < 2 or not (0.2 < sig_fit[i] < 0.5 * extra + 10.0):
-            out.append((float("nan"),) * 4 + (0, float("nan")))
+            out.append((float("nan"),) * 4 + (0, float("nan"), float("nan")))
             continue
         contrast = float(np.median(np.abs(a) / np.maximum(np.maximum(b, b + a), 1e-12)))
         rel = math.sqrt(cost[i] / max(n_str[i], 1.0)) / max(float(np.median(np.abs(a))), 1e-12)
         sg = float(sig_fit[i])
-        out.append((sg, EDGE_WIDTH_PER_SIGMA * sg, contrast, float(w_fit[i]), int(ok.sum()), rel))
+        offset = float(np.median(np.abs(moved[ok])))
+        out.append((sg, EDGE_WIDTH_PER_SIGMA * sg, contrast, float(w_fit[i]), int(ok.sum()), rel, offset))
     return out
 
 
@@ -912,6 +923,12 @@ class Assessment:
     string_width_px : float
         The grouping's string width, frame pixels.
     dark_strings : bool
+    rejected_reasons : dict
+        Rejected groups per reason.
+    tracked : bool
+        True when the strings were not searched again but taken from a previous assessment
+        (:func:`assess_frame` ``previous``); every figure of the strings is still measured on
+        this frame's pixels.
     """
 
     width: int
@@ -929,6 +946,7 @@ class Assessment:
     string_width_px: float
     dark_strings: bool
     rejected_reasons: dict[str, int] = field(default_factory=dict)
+    tracked: bool = False
 
     @property
     def n_strings(self) -> int:
@@ -938,6 +956,13 @@ class Assessment:
     def n_edges(self) -> int:
         return len(self.edges)
 
+    @property
+    def offset_px(self) -> float:
+        """Median over the strings of :attr:`StringSharpness.offset_px` (NaN without strings):
+        with ``tracked``, how far the strings moved since they were searched."""
+        v = [s.offset_px for s in self.strings if math.isfinite(s.offset_px)]
+        return float(np.median(v)) if v else float("nan")
+
     def to_dict(self) -> dict[str, Any]:
         """Plain figures (no point lists): the object of ``harp live --once --json``."""
         return {
@@ -945,6 +970,7 @@ class Assessment:
             "height": self.height,
             "analysis_scale": self.scale,
             "strings_found": self.n_strings,
+            "tracked": self.tracked,
             "edges_found": self.n_edges,
             "focus_score": _num(self.focus_score),
             "edge_width_px": _num(self.edge_width_px),
@@ -1011,6 +1037,7 @@ def assess_frame(
     full_scale: float | None = None,
     cross_sections: int = CROSS_SECTIONS,
     sigma: float = 1.0,
+    previous: Assessment | None = None,
 ) -> Assessment:
     """Assess one harp frame for the set-up assistant (module docstring).
 
@@ -1031,6 +1058,13 @@ def assess_frame(
         Cross-sections per string for the sharpness figures.
     sigma : float
         Smoothing of the edge detector on the downscaled image.
+    previous : Assessment or None
+        An assessment of an earlier frame of the same, unmoved scene: its strings, rejected
+        groups and coverage are taken instead of searching again (``tracked``), and only the
+        per-string figures and the exposure are measured on this frame. Each cross-section is
+        re-centred on this frame's pixels, so a string that moved shows as ``offset_px``: a
+        caller searches again when it grows (a live view also after every turntable move and
+        every second or so).
 
     Returns
     -------
@@ -1053,6 +1087,8 @@ def assess_frame(
     if min(h, w) < 16:
         raise ValueError(f"image {w}x{h} is too small to assess (at least 16x16)")
     exposure = exposure_figures(img, full_scale)
+    if previous is not None and (previous.width, previous.height) == (w, h):
+        return _tracked(img, previous, exposure, cross_sections)
     sc = analysis_scale(w, h) if scale is None else max(1.0, float(scale))
     small = _downscale(img, sc)
     sh, sw = small.shape
@@ -1060,21 +1096,18 @@ def assess_frame(
     if thresholds is None:
         thresholds = auto_thresholds(small, sigma)
     low, high = float(thresholds[0]), float(thresholds[1])
-    chains = detect_edges(small, sigma=sigma, low=low, high=high, interpolation="parabola")
+    # chains shorter than the grouping's shortest piece would only come back as "short fragment"s
+    chains = detect_edges(
+        small, sigma=sigma, low=low, high=high, min_length=int(MIN_PIECE_PX), interpolation="parabola"
+    )
     grouping: Grouping = group_string_edges(chains, (sh, sw), border_px=BORDER_PX)
     edges = tuple(AssessedEdge(e.string_id, e.polarity, _to_frame(e.xy, sx, sy)) for e in grouping.edges)
     rejected = tuple(RejectedMark(r.reason, _to_frame(r.xy, sx, sy), r.detail) for r in grouping.rejected)
     reasons: dict[str, int] = {}
     for r in rejected:
         reasons[r.reason] = reasons.get(r.reason, 0) + 1
-    by_string: dict[int, list[Points]] = {}
-    for e in edges:
-        by_string.setdefault(e.string_id, []).append(e.xy)
-    pairs = [(sid, xs[0], xs[1]) for sid, xs in sorted(by_string.items()) if len(xs) == 2]
-    strings = string_sharpness(img, pairs, cross_sections=cross_sections)
-    widths = np.array([s.edge_width_px for s in strings if math.isfinite(s.edge_width_px)])
-    edge_width = float(np.median(widths)) if len(widths) else float("nan")
-    focus = 1.0 / edge_width if math.isfinite(edge_width) and edge_width > 0 else float("nan")
+    strings = string_sharpness(img, _pairs(edges), cross_sections=cross_sections)
+    focus, edge_width = _focus(strings)
     return Assessment(
         width=w,
         height=h,
@@ -1091,6 +1124,28 @@ def assess_frame(
         string_width_px=float(grouping.string_width_px) * 0.5 * (sx + sy),
         dark_strings=bool(grouping.dark_strings),
         rejected_reasons=reasons,
+    )
+
+
+def _pairs(edges: Sequence[AssessedEdge]) -> list[tuple[int, Points, Points]]:
+    by_string: dict[int, list[Points]] = {}
+    for e in edges:
+        by_string.setdefault(e.string_id, []).append(e.xy)
+    return [(sid, xs[0], xs[1]) for sid, xs in sorted(by_string.items()) if len(xs) == 2]
+
+
+def _focus(strings: Sequence[StringSharpness]) -> tuple[float, float]:
+    widths = np.array([s.edge_width_px for s in strings if math.isfinite(s.edge_width_px)])
+    edge_width = float(np.median(widths)) if len(widths) else float("nan")
+    focus = 1.0 / edge_width if math.isfinite(edge_width) and edge_width > 0 else float("nan")
+    return focus, edge_width
+
+
+def _tracked(img: NDArray[Any], prev: Assessment, exposure: ExposureFigures, cross_sections: int) -> Assessment:
+    strings = string_sharpness(img, _pairs(prev.edges), cross_sections=cross_sections)
+    focus, edge_width = _focus(strings)
+    return dataclasses.replace(
+        prev, strings=strings, focus_score=focus, edge_width_px=edge_width, exposure=exposure, tracked=True
     )
 
 

@@ -49,6 +49,11 @@ HISTORY = 400
 """Frames kept in the through-focus history."""
 THRESHOLD_REFRESH_S = 5.0
 """Edge thresholds are re-estimated at least this often (and whenever exposure, gain or scale change)."""
+RESEARCH_S = 1.0
+"""The strings are searched again at least this often; between searches they are tracked
+(:func:`pipeline.assess.assess_frame` ``previous``): their figures measured afresh on every frame."""
+MAX_TRACK_OFFSET_PX = 0.5
+"""A tracked string further than this from where it was found: search again."""
 
 
 @dataclass
@@ -124,6 +129,7 @@ class LiveStation:
         self._coverage: Coverage | None = None
         self._thresholds: tuple[tuple[float, float, float], tuple[float, float], float] | None = None
         self._string_width: float | None = None
+        self._searched: tuple[Assessment, tuple[int, int, float | None], float] | None = None
         self._stage: float | None = None
         self._moving = False
         self._target: float | None = None
@@ -383,12 +389,22 @@ class LiveStation:
             and time.monotonic() - self._thresholds[2] < THRESHOLD_REFRESH_S
         ):
             th = self._thresholds[1]
+        pose = (w, h, None if idle_stage is None else round(idle_stage, 3))
+        prev = None
+        if self._searched is not None and idle_stage is not None:
+            last, last_pose, t_found = self._searched
+            if last_pose == pose and time.monotonic() - t_found < RESEARCH_S and last.n_strings > 0:
+                prev = last
         try:
-            a: Assessment = assess_frame(img, scale=scale, thresholds=th)
+            a: Assessment = assess_frame(img, scale=scale, thresholds=th, previous=prev)
+            if prev is not None and not a.offset_px <= MAX_TRACK_OFFSET_PX:  # moved (or lost): search again
+                a = assess_frame(img, scale=scale, thresholds=th)
         except ValueError as exc:
             self._problem("camera", ValueError(f"frame {frame.counter}: {exc}"))
             return
-        if th is None:
+        if not a.tracked:
+            self._searched = (a, pose, time.monotonic())
+        if th is None and not a.tracked:
             self._thresholds = (key, a.thresholds, time.monotonic())
         if math.isfinite(a.string_width_px):
             self._string_width = a.string_width_px

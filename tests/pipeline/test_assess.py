@@ -240,3 +240,20 @@ def test_analysis_scale_keeps_strings_wide_enough():
     assert analysis_scale(2592, 1944, string_width_px=3.0) == 1.0  # 1.5 px strings would be lost
     assert analysis_scale(6000, 4000, string_width_px=12.0) == 4.0
     assert analysis_scale(6000, 4000) == 4.0
+
+
+def test_tracked_assessment_measures_the_new_frame_and_sees_a_moved_harp():
+    scene = HarpScene(angle_deg=30.0, blur_px=1.0, string_width_px=5.0)
+    first = assess_frame(render_harp(360, 280, scene, seed=1).image)
+    again = render_harp(360, 280, dataclasses.replace(scene, blur_px=1.6), seed=2).image  # refocused, new noise
+    t = assess_frame(again, previous=first)
+    assert t.tracked and t.edges == first.edges and t.n_strings == first.n_strings
+    assert t.edge_width_px == pytest.approx(
+        EDGE_WIDTH_PER_SIGMA * dataclasses.replace(scene, blur_px=1.6).sigma_px, rel=0.03
+    )
+    assert t.offset_px < 0.1
+    moved = render_harp(360, 280, dataclasses.replace(scene, phase_px=1.5), seed=3).image  # the harp shifted 1.5 px
+    m = assess_frame(moved, previous=first)
+    assert m.offset_px == pytest.approx(1.5, abs=0.2)
+    fresh = assess_frame(moved)
+    assert not fresh.tracked and fresh.offset_px < 0.3
