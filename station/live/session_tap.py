@@ -6,7 +6,14 @@ the executor appends (``focus``, ``frame``, ``reject``, ``measure``, ``fit``, ``
 (:meth:`station.live.runner.LiveStation.session_record`), and every frame written is also handed
 to the page's assessment thread (:meth:`~station.live.runner.LiveStation.show_frame`, which
 never blocks the executor). The executor is unchanged and owns the devices; the page only
-shows. When the executor emits typed records to subscribers, this becomes one of them.
+shows.
+
+Why at the directory and not as an executor subscriber (:class:`station.session.progress.Subscriber`):
+the page also shows what comes after the executor -- QA's verdicts (:mod:`station.qa.judge`),
+the report and ``finished`` are appended by :func:`station.session.run.run_session` once the
+executor's subscribers have been told it is done -- and the frames themselves, which a
+subscriber sees only as file names (``FrameSaved``). Every record passes through
+``append`` exactly once, so this sees the manifest as it is written, in order.
 """
 
 from __future__ import annotations
