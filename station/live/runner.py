@@ -129,6 +129,7 @@ class LiveStation:
         self._coverage: Coverage | None = None
         self._thresholds: tuple[tuple[float, float, float], tuple[float, float], float] | None = None
         self._string_width: float | None = None
+        self._cam_settings: dict[str, Any] = {}
         self._searched: tuple[Assessment, tuple[int, int, float | None], float] | None = None
         self._stage: float | None = None
         self._moving = False
@@ -219,26 +220,26 @@ class LiveStation:
         }
 
     def _camera_state(self) -> dict[str, Any] | None:
-        cam = self.camera
-        if cam is None:
+        if self.camera is None:
             return None
-        out: dict[str, Any] = {"controls": self._session is None}
+        return {"controls": self._session is None, **self._cam_settings}
+
+    def _read_camera_settings(self) -> None:
+        """Settings and ranges as the camera thread last read them (the web thread never touches the device)."""
         from drivers import CameraRanges
 
+        cam = self.camera
+        out: dict[str, Any] = {}
         with contextlib.suppress(Exception):
-            out["focus"] = cam.get_focus()
-            out["exposure_us"] = cam.get_exposure()
-            out["gain_db"] = cam.get_gain()
+            out.update(focus=cam.get_focus(), exposure_us=cam.get_exposure(), gain_db=cam.get_gain())
         if isinstance(cam, CameraRanges):
-            for name, fn in (
-                ("focus", cam.focus_range),
-                ("exposure_us", cam.exposure_range),
-                ("gain_db", cam.gain_range),
-            ):
+            ranges = (("focus", cam.focus_range), ("exposure_us", cam.exposure_range), ("gain_db", cam.gain_range))
+            for name, fn in ranges:
                 with contextlib.suppress(Exception):
                     r = fn()
                     out[f"{name}_range"] = None if r is None else [r.minimum, r.maximum]
-        return out
+        with self._lock:
+            self._cam_settings = out
 
     def _coverage_total(self) -> dict[str, Any] | None:
         if self._coverage is None:
@@ -329,13 +330,16 @@ class LiveStation:
     def _camera_loop(self) -> None:
         cam = self.camera
         lost = False
+        self._read_camera_settings()
         while not self._stop.is_set():
-            self._camera_jobs()
+            if self._camera_jobs():
+                self._read_camera_settings()
             if lost:
                 if not self._reopen("camera", cam):
                     self._stop.wait(self.reconnect_s)
                     continue
                 lost = False
+                self._read_camera_settings()
             epoch, stage, moving = self._move_epoch, self._stage, self._moving
             try:
                 frame = cam.capture(self.capture_timeout_s)
@@ -359,12 +363,15 @@ class LiveStation:
                 except queue.Full:
                     continue
 
-    def _camera_jobs(self) -> None:
+    def _camera_jobs(self) -> bool:
+        """Apply the settings asked for; True when there were any."""
+        did = False
         while True:
             try:
                 action, value, fut = self._cam_jobs.get_nowait()
             except queue.Empty:
-                return
+                return did
+            did = True
             try:
                 v = float(value)
                 setter = {
