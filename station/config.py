@@ -32,6 +32,8 @@ import yaml
 
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
 from pipeline.fitspec import KINDS, FitSpec
+from station.store.errors import StoreError
+from station.store.location import SQLITE, StoreLocation, parse_store
 
 AUTO_MODEL = "auto"
 """``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
@@ -280,10 +282,19 @@ class Config:
     capture: CaptureConfig = _at("capture")
     pipeline: PipelineConfig = _at("pipeline")
     qa: QAConfig = _at("qa")
-    store_path: Path = _at("store.path")
+    store_path: Path | None = _at("store.path")  # the SQLite file of the store (None: PostgreSQL, store_url)
     sessions_dir: Path = _at("store.sessions_dir")
     simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
     optics: Optics = field(default_factory=Optics, metadata={"yaml": None})  # from lens and camera_body
+    store_url: str | None = field(default=None, metadata={"yaml": "store.url"})  # as given: postgresql:// or sqlite:///
+
+    @property
+    def store(self) -> StoreLocation:
+        """Where this station's profile store is (:mod:`station.store.location`)."""
+        if self.store_url is not None:
+            return parse_store(self.store_url, self.base_dir)
+        assert self.store_path is not None
+        return StoreLocation(SQLITE, path=self.store_path)
 
     def error(self, field_path: str, expected: str) -> ConfigError:
         return ConfigError(self.path, field_path, expected)
@@ -569,7 +580,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     )
 
     so = top.section("store", config_keys("store"))
-    store_path = Path(os.path.normpath(base / so.string("path")))
+    store_path, store_url = _store_of(so, base)
     sessions_dir = Path(os.path.normpath(base / so.string("sessions_dir", "sessions")))
 
     simulation = None
@@ -593,10 +604,26 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         pipeline=pipe,
         qa=qa,
         store_path=store_path,
+        store_url=store_url,
         sessions_dir=sessions_dir,
         simulation=simulation,
         optics=optics,
     )
+
+
+def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:
+    """``store.path`` (a file, relative to the configuration) or ``store.url`` (``sqlite:///`` or
+    ``postgresql://``, :mod:`station.store.location`): exactly one of them."""
+    if ("path" in so.data) == ("url" in so.data):
+        raise so.err("path", "exactly one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://)")
+    if "path" in so.data:
+        return Path(os.path.normpath(base / so.string("path"))), None
+    url = so.string("url")
+    try:
+        loc = parse_store(url, base)
+    except StoreError as exc:
+        raise ConfigError(so.file, so._p("url"), f"expected a store URL: {exc}") from None
+    return loc.path, url
 
 
 def check_port(config: Config) -> None:

@@ -1,13 +1,14 @@
 """``harp profile list | show LENS [--focus F] | export LENS --focus F --format ...``.
 
-Reads the profile store (``--store PATH``; default ``$HARP_STORE`` or
-``profiles/harp-profiles.sqlite``, where ``configs/demo.yaml`` stores). LENS is
-a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous part of
-"maker model serial". ``export`` converts the newest profile at that focus (or the
+Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://``), or
+``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else
+``profiles/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
+error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
+part of "maker model serial". ``export`` converts the newest profile at that focus (or the
 correction interpolated between the calibrated focus settings) with the options,
 figures and warnings of ``harp export`` (:mod:`station.cli.export`); the profile
 brings the lens, camera body and optics of its session's configuration and the
-session's measured edges of its fitting shots. Exit 0 on success, 2 on bad input.
+session's measured edges of its fitting shots. Exit 0 on success, 2 on bad input or a damaged store.
 """
 
 from __future__ import annotations
@@ -16,20 +17,19 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
 
 from station.cli.export import add_export_options
-from station.store import DEFAULT_STORE
+from station.store.resolve import add_store_options
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "profile", help="list, show and export stored lens profiles", description=__doc__.split("\n\n")[1]
     )
-    p.add_argument("--store", type=Path, default=None, help=f"profile store (default $HARP_STORE or {DEFAULT_STORE})")
+    add_store_options(p)
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
-    store_opt = argparse.ArgumentParser(add_help=False)  # --store also after the action
-    store_opt.add_argument("--store", type=Path, default=argparse.SUPPRESS, help="profile store")
+    store_opt = argparse.ArgumentParser(add_help=False)  # --store / --config also after the action
+    add_store_options(store_opt, suppress=True)
     ls = sub.add_parser("list", help="every stored profile", parents=[store_opt])
     ls.set_defaults(func=_list)
     show = sub.add_parser("show", help="the profiles of one lens", parents=[store_opt])
@@ -60,10 +60,9 @@ def _error(msg: str) -> int:
 
 
 def _open(args):
-    from station.store import ProfileStore, default_store_path
+    from station.store.resolve import open_store
 
-    path = args.store or default_store_path()
-    return ProfileStore(path, create=False)
+    return open_store(args)  # for reading: never creates a store
 
 
 def _console():
@@ -78,12 +77,13 @@ def _num(v, nd=4) -> str:
 
 def _with_store(fn):
     def wrapped(args) -> int:
+        from station.config import ConfigError
         from station.store import StoreError
 
         try:
             with _open(args) as store:
                 return fn(args, store)
-        except (StoreError, _Fail) as exc:
+        except (StoreError, ConfigError, _Fail) as exc:
             return _error(str(exc))
 
     return wrapped
@@ -93,8 +93,9 @@ def _with_store(fn):
 def _list(args, store) -> int:
     from rich.table import Table
 
-    profiles = store.profiles()
-    if not profiles:
+    errors: list = []
+    profiles = store.profiles(errors=errors)  # the readable rows; each damaged one reported below
+    if not profiles and not errors:
         print(f"no profiles in {store.path}")
         return 0
     t = Table(title=f"profiles in {store.path}")
@@ -114,7 +115,9 @@ def _list(args, store) -> int:
             p.provenance.station or "-",
         )
     _console().print(t)
-    return 0
+    for exc in errors:
+        _error(str(exc))
+    return 2 if errors else 0
 
 
 def _ident(identity) -> str:

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from station.session import layout
-from station.store import DEFAULT_STORE, default_store_path
+from station.store import DEFAULT_STORE
 
 REPORT_BOOTSTRAP = 20
 """Bootstrap replicates of the report's uncertainty map when the configuration sets none."""
@@ -54,11 +54,12 @@ def register(subparsers) -> None:
     )
     p.add_argument(
         "--store",
-        type=Path,
+        metavar="PATH|URL",
         default=None,
-        help=f"profile store (default: the session's, else $HARP_STORE or {DEFAULT_STORE})",
+        help=f"profile store: a SQLite file or postgresql://user@host:port/db (default: the --config's or the "
+        f"session's, else $HARP_STORE or {DEFAULT_STORE})",
     )
-    p.add_argument("--config", type=Path, default=None, help="take the qa thresholds from this configuration")
+    p.add_argument("--config", type=Path, default=None, help="station configuration: its qa thresholds and its store")
     p.add_argument("--max-holdout-d", type=_positive, metavar="PX", help="threshold on the holdout d")
     p.add_argument(
         "--max-distortion",
@@ -83,15 +84,11 @@ class _Fail(Exception):
 
 
 def _store(args, config, create=False):
-    from station.store import ProfileStore
+    """The store (:mod:`station.store.resolve`): ``--store``, else that of ``config`` (``--config``,
+    or the session's), else ``$HARP_STORE``, else the default. For reading unless ``create``."""
+    from station.store.resolve import open_store, store_location
 
-    if args.store is not None:
-        path = args.store
-    elif config is not None:
-        path = config.store_path
-    else:
-        path = default_store_path()
-    return ProfileStore(path, create=create)
+    return open_store(store_location(args.store, config), write=create)
 
 
 def _candidates(args, config, session):
@@ -263,15 +260,15 @@ def run(args) -> int:
         try:
             with _store(args, config, create=True) as store:
                 for (focus, _p, pid, _src), v in zip(items, results):
+                    # one row of QA history, with its checks and thresholds; the verdict a profile was
+                    # calibrated under (which decides whether it is current) is the session's, not changed here
                     store.put_qa_result(
-                        verdict=v.verdict,
-                        reasons=list(v.reasons),
+                        verdict=v,
                         metrics=_plain({**v.metrics, "focus": focus}),
                         profile_id=pid,
                         session_dir=str(session.path.resolve()) if session else None,
+                        focus=focus,
                     )
-                    if pid is not None:
-                        store.record_verdict(pid, v)
         except StoreError as exc:
             print(f"harp qa: warning: result not recorded: {exc}", file=sys.stderr)
 

@@ -136,7 +136,7 @@ def _execute_session(config, get_session, quiet: bool, opened=None, report: bool
 
     started = []  # the session directory, once there is one
     try:
-        with ProfileStore(config.store_path) as store, open_station(config) as (camera, turntable):
+        with ProfileStore(config.store) as store, open_station(config) as (camera, turntable):
             with get_session() as session:
                 started.append(session.path)
                 if tap is not None:

@@ -21,7 +21,8 @@ from station.profile import (
     UncertaintySummary,
     Verdict,
 )
-from station.store import MIGRATIONS, ProfileStore
+from station.store import ProfileStore
+from tests.station.store.legacy import legacy_schema
 
 W, H = 640, 480
 MODEL = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.02, 0.0, -0.003), center=(321.5, 240.25), tangential=(1e-4, -2e-4))
@@ -118,10 +119,7 @@ def test_an_older_model_file_gives_what_it_holds():
 def test_a_schema_2_row_is_migrated_and_read_from_its_figures_and_details(tmp_path):
     path = tmp_path / "old.sqlite"
     db = sqlite3.connect(path)
-    db.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
-    db.execute("INSERT INTO schema_version VALUES (2)")
-    MIGRATIONS[0](db)
-    MIGRATIONS[1](db)
+    legacy_schema(db, 2)
     db.execute("INSERT INTO lenses (maker, model, serial) VALUES ('Acme', '12mm', 'L-1')")
     db.execute("INSERT INTO cameras (maker, model, serial) VALUES ('Cam', 'Body', 'C-1')")
     details = {
@@ -158,4 +156,6 @@ def test_a_verdict_is_kept_with_its_profile(tmp_path):
         assert st.profile(pid).qa is None
         st.record_verdict(pid, FULL.qa)
         assert st.profile(pid).qa == FULL.qa
-        assert st.db.execute("SELECT verdict FROM profiles WHERE id = ?", (pid,)).fetchone()[0] == "FAIL"
+        with st.engine.connect() as conn:
+            got = conn.exec_driver_sql("SELECT verdict FROM profiles WHERE id = ?", (pid,)).scalar()
+        assert got == "FAIL"

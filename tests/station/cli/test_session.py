@@ -403,7 +403,8 @@ def test_two_sessions_write_to_one_store_at_once(tmp_path):
     with ProfileStore(store) as st:
         assert sorted(p.lens.serial for p in st.profiles()) == ["LENS-A", "LENS-B"]
         assert len(list(st.qa_results())) == 2
-        assert st.db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+        with st.engine.connect() as conn:
+            assert conn.exec_driver_sql("PRAGMA integrity_check").scalar() == "ok"
 
 
 @pytest.mark.parametrize("name", ["../escape", "a/b", "..", ""])

@@ -1,0 +1,79 @@
+"""Which profile store a command uses — the one place that decides it.
+
+Every command that reads or writes profiles (``harp session``, ``harp profile``, ``harp qa``, and
+any later one) finds its store with :func:`store_location` / :func:`open_store`, and the commands
+that take a store on the command line add the same two options with :func:`add_store_options`:
+
+* ``--store PATH|URL`` — a SQLite file or a ``postgresql://`` URL (:mod:`station.store.location`);
+* ``--config CONFIG`` — the store named in that station configuration (``store.path`` or
+  ``store.url``; a relative path there is relative to the configuration file).
+
+First match wins: ``--store``, then ``--config`` (or the configuration the command already has,
+e.g. a session's), then ``$HARP_STORE``, then ``profiles/harp-profiles.sqlite`` in the working
+directory. Opening for reading never creates a store: a command that only reads fails with one line
+naming the store it looked for.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from station.store.location import DEFAULT_STORE, StoreLocation, default_store, parse_store
+
+if TYPE_CHECKING:
+    from station.config import Config
+    from station.store.database import ProfileStore
+
+STORE_HELP = f"profile store: a SQLite file or postgresql://user@host:port/db (default $HARP_STORE or {DEFAULT_STORE})"
+CONFIG_HELP = "station configuration whose store to use (its store.path or store.url)"
+
+
+def add_store_options(parser: argparse.ArgumentParser, *, suppress: bool = False, config: bool = True) -> None:
+    """Add ``--store PATH|URL`` (and ``--config CONFIG``) to a parser. ``suppress=True`` leaves the
+    attributes unset when not given (for an option repeated on a sub-command)."""
+    default = argparse.SUPPRESS if suppress else None
+    parser.add_argument("--store", metavar="PATH|URL", default=default, help=STORE_HELP)
+    if config:
+        parser.add_argument("--config", metavar="CONFIG", type=Path, default=default, help=CONFIG_HELP)
+
+
+def store_location(
+    store: str | os.PathLike[str] | None = None,
+    config: Config | None = None,
+    config_path: str | os.PathLike[str] | None = None,
+) -> StoreLocation:
+    """The store to use: ``store`` (``--store``), else the store of ``config`` (a loaded
+    configuration) or of the configuration file ``config_path``, else ``$HARP_STORE``, else the
+    default. Raises StoreError (a bad store name) or ConfigError (a bad configuration)."""
+    if store is not None:
+        return parse_store(store)
+    if config is None and config_path is not None:
+        from station.config import load_config
+
+        config = load_config(config_path)
+    if config is not None:
+        return config.store
+    return default_store()
+
+
+def location_from_args(args: argparse.Namespace, config: Config | None = None) -> StoreLocation:
+    """:func:`store_location` from the ``--store`` / ``--config`` options of ``args`` (either may be
+    absent); ``config`` is a configuration the command already has (used when neither is given)."""
+    store = getattr(args, "store", None)
+    config_path = getattr(args, "config", None)
+    if store is None and config_path is not None:
+        return store_location(config_path=config_path)
+    return store_location(store, config)
+
+
+def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool = False) -> ProfileStore:
+    """Open the store at ``where`` (a location, or parsed arguments with ``--store`` / ``--config``):
+    for reading by default (it must exist), for writing with ``write=True`` (created, migrated and
+    checked before anything is written)."""
+    from station.store.database import ProfileStore
+
+    loc = where if isinstance(where, StoreLocation) else location_from_args(where)
+    return ProfileStore(loc, create=write)
