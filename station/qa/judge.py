@@ -48,15 +48,10 @@ def judge_session(
         pid = stored.get(f)
         session.append(QARecorded(f, v.verdict, list(v.reasons), dict(v.metrics)))
         if store is not None:
-            store.put_qa_result(
-                verdict=v.verdict,
-                reasons=list(v.reasons),
-                metrics=dict(v.metrics),
-                profile_id=pid,
-                session_dir=str(session.path.resolve()),
-            )
-            if pid is not None:
-                store.record_verdict(pid, v)
+            if pid is not None:  # the profile's own verdict, once per profile however often resumed
+                store.record_verdict(pid, v, session_dir=str(session.path.resolve()))
+            else:
+                store.put_qa_result(verdict=v, session_dir=str(session.path.resolve()), focus=focus)
         note(
             f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
             + ("; ".join(v.reasons) if v.reasons else "; ".join(c.text for c in v.checks))

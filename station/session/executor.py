@@ -458,10 +458,20 @@ class Executor:
                 "t": cfg.pipeline.t,
             },
         )
+        # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
+        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
+        from station.qa.verdicts import qa_verdict
+
+        profile = profile.with_(qa=qa_verdict(profile, cfg.qa))
         write_profile(path, profile)
         profile_id = None
         if self.store is not None:
-            profile_id = self.store.put_profile(profile)
+            from station.store import StoreError
+
+            try:
+                profile_id = self.store.put_profile(profile)
+            except StoreError as exc:  # full disk, damaged store: stop here, frames and fits kept
+                raise SessionAborted(f"{exc}; then continue with: harp session resume {self.session.path}") from None
             profile = profile.with_(id=profile_id)
         self._profiles[f] = profile
         self._emit(Stored(f, profile_id, rel))

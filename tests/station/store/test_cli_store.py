@@ -1,0 +1,136 @@
+"""``harp profile`` and ``harp qa`` find their store one way (--store PATH|URL, --config CONFIG),
+on both backends, from any directory; reading never creates a store; damage is one line, exit 2."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from station.cli import main
+from station.store import ProfileStore
+from station.store.location import parse_store
+from tests.station.store.conftest import tamper
+from tests.station.store.test_database import put, verdict
+
+REPO = Path(__file__).resolve().parents[3]
+DEMO = REPO / "configs" / "demo.yaml"
+
+
+def config_naming(dirpath: Path, store_url: str) -> Path:
+    """A station configuration in ``dirpath`` whose store is ``store_url`` (a file named relative to it)."""
+    d = yaml.safe_load(DEMO.read_text())
+    loc = parse_store(store_url)
+    d["store"] = (
+        {"path": str(Path("..") / loc.path.parent.name / loc.path.name)}
+        if loc.backend == "sqlite"
+        else {"url": store_url}
+    )
+    dirpath.mkdir(parents=True, exist_ok=True)
+    p = dirpath / "station.yaml"
+    p.write_text(yaml.safe_dump(d))
+    return p
+
+
+def test_profile_and_qa_find_the_store_by_url_or_config(store_url, tmp_path, monkeypatch, capsys):
+    with ProfileStore(store_url) as st:
+        for focus in (0.0, 0.5, 1.0):
+            put(st, focus=focus, qa=verdict(0.012))
+    cfg = config_naming(tmp_path / "cfg", store_url)
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    monkeypatch.chdir(other)  # relative paths in the config are relative to the config, not here
+    monkeypatch.delenv("HARP_STORE", raising=False)
+    for opts in (["--store", store_url], ["--config", str(cfg)]):
+        capsys.readouterr()
+        assert main(["profile", "list", *opts]) == 0, capsys.readouterr().err
+        assert "S1" in capsys.readouterr().out
+        assert main(["profile", *opts, "show", "S1", "--focus", "0.5"]) == 0
+        capsys.readouterr()
+        # --config also brings its thresholds: the demo's max_distortion_px 5 fails this 5.9 px lens
+        code = main(["qa", "S1", *opts, "--json"])
+        out = json.loads(capsys.readouterr().out)
+        assert len(out["profiles"]) == 3
+        if opts[0] == "--store":
+            assert code == 0 and out["verdict"] == "PASS"
+        else:
+            assert code == 1 and out["verdict"] == "FAIL" and "distortion" in out["profiles"][0]["reasons"][0]
+    with ProfileStore(store_url, create=False) as st:
+        rows = list(st.qa_results())
+        assert sum(r["origin"] == "command" for r in rows) == 6 and sum(r["origin"] == "session" for r in rows) == 3
+        assert all(r["checks"] for r in rows)  # every run of harp qa kept its checks
+    assert sorted(p.name for p in other.iterdir()) == []  # nothing created where the command ran
+
+
+def test_reading_a_store_that_is_not_there_creates_nothing(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("HARP_STORE", raising=False)
+    for argv in (
+        ["profile", "list"],
+        ["profile", "show", "S1", "--store", "nowhere/p.sqlite"],
+        ["qa", "S1", "--store", "nowhere/p.sqlite"],
+        ["profile", "list", "--config", str(config_naming(tmp_path / "cfg", str(tmp_path / "db" / "p.sqlite")))],
+    ):
+        capsys.readouterr()
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "no profile store here" in err, (argv, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg"]  # no store, no profiles/ directory
+
+
+def test_bad_store_names_and_servers_are_one_line(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    for store, says in (
+        ("mysql://x@h/db", "unknown store URL scheme"),
+        (f"postgresql://harp@127.0.0.1:{port}/harp", "cannot connect"),
+    ):
+        capsys.readouterr()
+        assert main(["profile", "list", "--store", store]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err and "Traceback" not in err
+
+
+def test_profile_list_shows_the_readable_rows_and_reports_the_damaged(store_url, raw, capsys):
+    with ProfileStore(store_url) as st:
+        bad = put(st, session="a")
+        put(st, session="b", lens=("B", "b", "GOOD-1"))
+    tamper(raw, f"UPDATE profiles SET model_json = '{{broken' WHERE id = {bad}")
+    assert main(["profile", "list", "--store", store_url]) == 2
+    out, err = capsys.readouterr()
+    assert "GOOD-1" in out
+    assert err.count("\n") == 1 and f"profile #{bad}" in err and "cannot be read" in err
+
+
+def test_damaged_sqlite_store_is_one_line_for_every_reading_command(tmp_path, capsys):
+    store = tmp_path / "p.sqlite"
+    with ProfileStore(store) as st:
+        for i in range(40):
+            put(st, session=f"s{i}", details={"pad": "x" * 600})
+    data = bytearray(store.read_bytes())
+    data[3 * 4096 : 3 * 4096 + 400] = b"\x33" * 400
+    store.write_bytes(bytes(data))
+    for argv in (
+        ["profile", "list"],
+        ["profile", "show", "S1"],
+        ["profile", "export", "S1", "--focus", "0.5", "--format", "json"],
+        ["qa", "S1"],
+    ):
+        capsys.readouterr()
+        assert main([*argv, "--store", str(store)]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(store) in err and "Traceback" not in err, (argv, err)
+
+
+def test_commands_that_do_not_use_the_store_do_not_import_sqlalchemy():
+    code = (
+        "import sys\nfrom station.cli import main\n"
+        "try:\n    main(['measure', '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('sqlalchemy', 'alembic', 'psycopg') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"
