@@ -34,7 +34,10 @@ def register(subparsers) -> None:
     res = sub.add_parser("resume", help="continue an interrupted session")
     res.add_argument("session_dir", type=Path, help="the session directory")
     res.set_defaults(func=_resume)
+    from station.store.resolve import add_store_options
+
     for action in (run, res):
+        add_store_options(action, config=False)  # --store PATH|URL instead of the configuration's store
         action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
         action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")
         action.add_argument(
@@ -71,7 +74,7 @@ def _run(args) -> int:
         print(f"session directory: {s.path}", file=sys.stderr)
         return s
 
-    return _execute(config, new_session, args.quiet, report=not args.no_report, live=_live(args))
+    return _execute(config, new_session, args.quiet, report=not args.no_report, live=_live(args), store_name=args.store)
 
 
 def _resume(args) -> int:
@@ -87,7 +90,13 @@ def _resume(args) -> int:
         print(f"harp session: {args.session_dir}: already finished, nothing to do", file=sys.stderr)
         return 0
     return _execute(
-        session.config, lambda: session, args.quiet, opened=session, report=not args.no_report, live=_live(args)
+        session.config,
+        lambda: session,
+        args.quiet,
+        opened=session,
+        report=not args.no_report,
+        live=_live(args),
+        store_name=args.store,
     )
 
 
@@ -96,9 +105,11 @@ def _live(args) -> int | None:
     return args.live_port if getattr(args, "live", False) else None
 
 
-def _execute(config, get_session, quiet: bool, opened=None, report: bool = True, live: int | None = None) -> int:
+def _execute(
+    config, get_session, quiet: bool, opened=None, report: bool = True, live: int | None = None, store_name=None
+) -> int:
     if live is None:
-        return _execute_session(config, get_session, quiet, opened, report)
+        return _execute_session(config, get_session, quiet, opened, report, store_name=store_name)
     from station.live.session_tap import live_session_page
     from station.web.serve import ServeError
 
@@ -110,7 +121,7 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True,
             opened.close()
         return _error(f"--live: {exc}")
     try:
-        code = _execute_session(config, get_session, quiet, opened, report, tap=tap)
+        code = _execute_session(config, get_session, quiet, opened, report, tap=tap, store_name=store_name)
         if code == 130:
             return code
         print("harp session: the live page shows the result until Ctrl-C", file=sys.stderr, flush=True)
@@ -125,7 +136,9 @@ def _execute(config, get_session, quiet: bool, opened=None, report: bool = True,
         page.__exit__(None, None, None)
 
 
-def _execute_session(config, get_session, quiet: bool, opened=None, report: bool = True, tap=None) -> int:
+def _execute_session(
+    config, get_session, quiet: bool, opened=None, report: bool = True, tap=None, store_name=None
+) -> int:
     from rich.console import Console
 
     from station.config import ConfigError
@@ -133,10 +146,11 @@ def _execute_session(config, get_session, quiet: bool, opened=None, report: bool
     from station.session.directory import SessionError
     from station.session.run import run_session
     from station.store import ProfileStore, StoreError
+    from station.store.resolve import store_location
 
     started = []  # the session directory, once there is one
     try:
-        with ProfileStore(config.store) as store, open_station(config) as (camera, turntable):
+        with open_station(config) as (camera, turntable), ProfileStore(store_location(store_name, config)) as store:
             with get_session() as session:
                 started.append(session.path)
                 if tap is not None:

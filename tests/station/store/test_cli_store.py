@@ -134,3 +134,29 @@ def test_commands_that_do_not_use_the_store_do_not_import_sqlalchemy():
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_a_station_that_cannot_open_creates_no_store(tmp_path, capsys):
+    from tests.station.cli.test_session import small_config
+
+    cfg = small_config(tmp_path)
+    d = yaml.safe_load(cfg.read_text())
+    d["station"]["camera"]["width"] = 8  # the simulated camera refuses it when opened
+    cfg.write_text(yaml.safe_dump(d))
+    for extra in ([], ["--store", str(tmp_path / "other.sqlite")]):
+        assert main(["session", "run", str(cfg), "--quiet", *extra]) == 2
+        assert capsys.readouterr().err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["station.yaml"]  # no store, no sessions
+
+
+def test_session_run_into_the_store_named_on_the_command_line(postgres, tmp_path):
+    from tests.station.store.stations import station_config
+
+    url = postgres.create_database("cli_session")
+    cfg = station_config(tmp_path, str(tmp_path / "config-store.sqlite"), "CLI-1", seed=3)
+    assert main(["session", "run", str(cfg), "--quiet", "--no-report", "--store", url]) == 0
+    with ProfileStore(url, create=False) as st:
+        (p,) = st.profiles()
+        assert p.lens.serial == "CLI-1" and p.qa is not None
+        assert [r["origin"] for r in st.qa_results()] == ["session"]
+    assert not (tmp_path / "config-store.sqlite").exists()

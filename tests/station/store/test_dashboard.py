@@ -25,7 +25,14 @@ def store(store_url):
             for focus, hd in zip((0.0, 1.0), holdouts):
                 qa = verdict(hd, distortion=dist) if hd is not None else None
                 st.put_profile(
-                    profile(session=session, focus=focus, lens=("Acme", "12mm", serial), holdout_d=hd or 0.02, qa=qa, station=station)
+                    profile(
+                        session=session,
+                        focus=focus,
+                        lens=("Acme", "12mm", serial),
+                        holdout_d=hd or 0.02,
+                        qa=qa,
+                        station=station,
+                    )
                 )
         st.put_profile(profile(session="z1", lens=("Zeta", "8mm", "Z-1"), qa=verdict(0.01)))
         yield st
