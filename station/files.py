@@ -16,11 +16,11 @@ import hashlib
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pipeline.model_file import model_file_text
-from pipeline.models.base import DistortionModel
-from station.profile import Profile
+if TYPE_CHECKING:  # annotations only: an atomic write does not pay for the model file's imports (YAML)
+    from pipeline.models.base import DistortionModel
+    from station.profile import Profile
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
@@ -61,6 +61,8 @@ def write_model_file(
     provenance: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
+    from pipeline.model_file import model_file_text
+
     atomic_write_text(path, model_file_text(model, width=width, height=height, merit=merit, provenance=provenance))
     return Path(path)
 

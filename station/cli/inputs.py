@@ -48,18 +48,20 @@ def read_image(path, *, grey: bool = True) -> np.ndarray:
         raise InputError(str(exc)) from None
 
 
-def measure_grey(path, img: np.ndarray, t: int, *, require_strings: bool = True) -> ImageMeasurement:
+def measure_grey(
+    path, img: np.ndarray, t: int, *, require_strings: bool = True, smoothing: str = "local-quadratic"
+) -> ImageMeasurement:
     """:func:`pipeline.measure.measure_image` of the image read from ``path``.
 
     Raises :class:`InputError` naming ``path`` when the image cannot be
     measured or, with ``require_strings``, holds no string.
     """
     try:
-        m = measure_image(img, t=t)
+        m = measure_image(img, t=t, smoothing=smoothing)
     except (ValueError, MemoryError) as exc:
         raise InputError(f"{path}: cannot measure: {exc}") from None
     if require_strings and m.n_lines == 0:
-        short = [r for r in m.rejected if r.reason == "short edge"]
+        short = [r for r in m.rejected if r.reason == "short edge" and "after smoothing" in r.detail]
         if short:  # strings were found, but t leaves too few points on each edge
             raise InputError(
                 f"{path}: {len(short)} string edges found, but each keeps < "
@@ -69,10 +71,10 @@ def measure_grey(path, img: np.ndarray, t: int, *, require_strings: bool = True)
     return m
 
 
-def measure_file(path, t: int) -> tuple[np.ndarray, ImageMeasurement]:
+def measure_file(path, t: int, *, smoothing: str = "local-quadratic") -> tuple[np.ndarray, ImageMeasurement]:
     """Read and measure one harp photograph: ``(image, measurement with strings)``.
 
     Raises :class:`InputError` (one line naming the file) on any problem.
     """
     img = read_image(path)
-    return img, measure_grey(path, img, t)
+    return img, measure_grey(path, img, t, smoothing=smoothing)

@@ -1,4 +1,4 @@
-"""``harp measure IMAGE... [--t 30] [--json] [--overlay DIR]``: straightness of the strings.
+"""``harp measure IMAGE... [--t 30] [--json] [--overlay DIR] [--points FILE]``: straightness of the strings.
 
 Each image is read (PGM/PNG/TIFF/JPEG, 8 or 16 bit, colour converted to
 grey), its string edges are found and measured
@@ -9,12 +9,20 @@ object on stdout::
 
     {"d": float, "d_max": float, "n_lines": int,
      "images": [{"path": str, "width": int, "height": int, "d": float, "d_max": float,
-                 "n_lines": int, "lines": [{"points": int, "rms": float, "p2p": float,
-                 "angle_deg": float, "length_px": float, "hf_rms": float, ...}], ...}],
+                 "n_lines": int, "smoothing": str,
+                 "lines": [{"points": int, "rms": float, "p2p": float,
+                            "angle_deg": float, "length_px": float, "hf_rms": float,
+                            "start": [x, y], "end": [x, y], "pieces": int, ...}], ...}],
      "errors": [{"path": str, "error": str}]}
 
-(distances in pixels; ``d``/``d_max`` are ``null`` when nothing was measured).
-``--overlay DIR`` writes ``DIR/<image name>.overlay.png`` per image.
+(distances in pixels; ``d``/``d_max`` are ``null`` when nothing was measured;
+``start``/``end`` are the first and last smoothed points of the edge, its two ends as
+measured). ``--overlay DIR`` writes ``DIR/<image name>.overlay.png`` per image.
+``--points FILE`` writes every edge's raw sub-pixel points and smoothed points, per
+image (``FILE`` ending in ``.json`` or ``.npz``; the format is :mod:`station.edge_points`),
+for any other plumb-line method. ``--smoothing gaussian`` uses the paper's plain
+Gaussian along the edges (3 sigma lost at both ends of every piece) instead of the
+local quadratic regression that keeps every edge to its ends (:mod:`pipeline.resample`).
 
 Bad input (missing or unreadable file, truncated data, a directory, an image
 without strings): one line on stderr naming the file and the reason; the
@@ -48,6 +56,17 @@ def register(subparsers) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     p.add_argument("--overlay", metavar="DIR", help="write an overlay PNG per image into DIR")
+    p.add_argument(
+        "--points",
+        metavar="FILE",
+        help="write every edge's raw and smoothed points to FILE (.json or .npz, see station.edge_points)",
+    )
+    p.add_argument(
+        "--smoothing",
+        choices=("local-quadratic", "gaussian"),
+        default="local-quadratic",
+        help="along-edge smoothing: local quadratic regression to the ends (default) or the paper's Gaussian",
+    )
     p.set_defaults(func=run)
 
 
@@ -115,6 +134,14 @@ def run(args) -> int:
     t = int(args.t)
     overlay_dir = None
     status = 0
+    points_path = Path(args.points) if args.points else None
+    if points_path is not None and points_path.suffix.lower() not in (".json", ".npz"):
+        print(
+            f"harp measure: {points_path}: unknown points format {points_path.suffix or '(none)'!r}: "
+            "give a file name ending in .json or .npz",
+            file=sys.stderr,
+        )
+        return 2
     if args.overlay:
         overlay_dir = Path(args.overlay)
         try:
@@ -132,7 +159,7 @@ def run(args) -> int:
     errors: list[dict] = []
     for path in args.images:
         try:
-            img, m = measure_file(path, t)
+            img, m = measure_file(path, t, smoothing=args.smoothing)
         except InputError as exc:
             print(f"harp measure: {exc}", file=sys.stderr)
             errors.append({"path": path, "error": str(exc)})
@@ -154,6 +181,16 @@ def run(args) -> int:
         overall = {"d": st.d, "d_max": st.d_max, "n_lines": st.n_lines}
     else:
         overall = {"d": None, "d_max": None, "n_lines": 0}
+
+    if points_path is not None:
+        from station.edge_points import edge_points_bytes
+        from station.files import atomic_write_bytes
+
+        try:
+            atomic_write_bytes(points_path, edge_points_bytes(results, points_path.suffix.lower()))
+        except OSError as exc:
+            print(f"harp measure: {points_path}: cannot write the points file: {exc.strerror or exc}", file=sys.stderr)
+            status = 2
 
     if args.json:
         images = []
