@@ -178,10 +178,8 @@ def collect(
     -------
     (EdgeSet or FitFailure, list of RejectedEdge)
     """
-    pieces: list[np.ndarray] = []
-    img: list[int] = []
-    lin: list[int] = []
-    rejected: list[RejectedEdge] = []
+    arrays: list[np.ndarray] = []
+    where: list[tuple[int, int]] = []
     for i, lines in enumerate(lines_per_image):
         for j, raw in enumerate(lines):
             try:
@@ -190,32 +188,66 @@ def collect(
                 return FitFailure(f"image {i} line {j}: points must be an (M, 2) array of numbers"), []
             if p.ndim != 2 or p.shape[1] != 2:
                 return FitFailure(f"image {i} line {j}: points must be an (M, 2) array, got shape {p.shape}"), []
-            if not np.all(np.isfinite(p)):
-                rejected.append(RejectedEdge(i, j, "non-finite coordinates"))
-                continue
-            if len(p) < MIN_POINTS_PER_EDGE:
-                rejected.append(RejectedEdge(i, j, f"too few points ({len(p)} < {MIN_POINTS_PER_EDGE})"))
-                continue
-            lo, hi = p.min(axis=0), p.max(axis=0)
-            if (
-                lo[0] < -0.5 - margin
-                or lo[1] < -0.5 - margin
-                or hi[0] > width - 0.5 + margin
-                or hi[1] > height - 0.5 + margin
-            ):
-                return FitFailure(
-                    f"image {i} line {j} has points outside the {width}x{height} image "
-                    f"(x {lo[0]:.1f}..{hi[0]:.1f}, y {lo[1]:.1f}..{hi[1]:.1f}): wrong image size?"
-                ), []
-            # scatter: an edge is elongated along its line (eigenvalues of the 2x2 scatter matrix)
-            d = p - p.mean(axis=0)
-            sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
-            half_tr, rad = 0.5 * (sxx + syy), float(np.hypot(0.5 * (sxx - syy), sxy))
-            ev = (half_tr - rad, half_tr + rad)
-            if not ev[1] > 0 or ev[0] > 0.25 * ev[1]:
-                rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
-                continue
-            pieces.append(p)
+            arrays.append(p)
+            where.append((i, j))
+    rejected: list[RejectedEdge] = []
+    if not arrays:
+        return FitFailure("no usable edges (every edge has too few points, non-finite coordinates or no direction)"), []
+    # per-edge checks, vectorised over all edges (the points of every edge in one array)
+    counts = np.array([len(p) for p in arrays], dtype=int)
+    allp = np.concatenate(arrays)
+    nonempty = counts > 0
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+    st = starts[nonempty]
+    finite = np.ones(len(arrays), bool)
+    finite[nonempty] = np.logical_and.reduceat(np.all(np.isfinite(allp), axis=1), st)
+    ok = finite & (counts >= MIN_POINTS_PER_EDGE)
+    # bounds: on the finite edges only (a non-finite edge is rejected, not a failure)
+    okf = ok & nonempty
+    if okf.any():
+        sel = np.repeat(okf, counts)
+        cf = counts[okf]
+        sf = np.concatenate([[0], np.cumsum(cf)[:-1]]).astype(int)
+        q = allp[sel]
+        lo = np.minimum.reduceat(q, sf, axis=0)
+        hi = np.maximum.reduceat(q, sf, axis=0)
+        out = (
+            (lo[:, 0] < -0.5 - margin)
+            | (lo[:, 1] < -0.5 - margin)
+            | (hi[:, 0] > width - 0.5 + margin)
+            | (hi[:, 1] > height - 0.5 + margin)
+        )
+        if out.any():
+            k = int(np.flatnonzero(out)[0])
+            i, j = where[int(np.flatnonzero(okf)[k])]
+            return FitFailure(
+                f"image {i} line {j} has points outside the {width}x{height} image "
+                f"(x {lo[k, 0]:.1f}..{hi[k, 0]:.1f}, y {lo[k, 1]:.1f}..{hi[k, 1]:.1f}): wrong image size?"
+            ), []
+        # scatter: an edge is elongated along its line (eigenvalues of the 2x2 scatter matrix)
+        m = np.add.reduceat(q, sf, axis=0) / cf[:, None]
+        d = q - np.repeat(m, cf, axis=0)
+        sxx = np.add.reduceat(d[:, 0] ** 2, sf)
+        syy = np.add.reduceat(d[:, 1] ** 2, sf)
+        sxy = np.add.reduceat(d[:, 0] * d[:, 1], sf)
+        half_tr, rad = 0.5 * (sxx + syy), np.hypot(0.5 * (sxx - syy), sxy)
+        ev0, ev1 = half_tr - rad, half_tr + rad
+        line_like = np.zeros(len(arrays), bool)
+        line_like[okf] = (ev1 > 0) & (ev0 <= 0.25 * ev1)
+    else:
+        line_like = np.zeros(len(arrays), bool)
+    pieces: list[np.ndarray] = []
+    img: list[int] = []
+    lin: list[int] = []
+    for k, (i, j) in enumerate(where):
+        if not finite[k]:
+            rejected.append(RejectedEdge(i, j, "non-finite coordinates"))
+        elif counts[k] < MIN_POINTS_PER_EDGE:
+            rejected.append(RejectedEdge(i, j, f"too few points ({counts[k]} < {MIN_POINTS_PER_EDGE})"))
+        elif not line_like[k]:
+            rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
+        else:
+            pieces.append(arrays[k])
             img.append(i)
             lin.append(j)
     if not pieces:

@@ -155,10 +155,13 @@ def calibrate_shots(
     if spec is None:
         from pipeline.select import select_model
 
-        selection = select_model(lines, width, height)
+        selection = select_model(lines, width, height, map_fn=map_fn)
         spec = selection.choice
     kw = spec.fit_arguments()
-    full = fit_distortion(lines, width, height, **kw, image_sizes=image_sizes)
+    same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
+    # the cross-validation fitted every candidate on all shots (its folds start there): the same fit
+    cv_fit = next((r.full_fit for r in selection.table if r.candidate == spec), None) if selection else None
+    full = cv_fit if cv_fit and same_size else fit_distortion(lines, width, height, **kw, image_sizes=image_sizes)
     if not full:
         return Calibration(full, spec, selection, failure=full.reason)
     fit_figures = _figures(full.d_after, full.d_max_after)

@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import RectBivariateSpline
 
 from pipeline.models.base import DistortionModel
 
@@ -66,6 +65,8 @@ class GridFieldModel(DistortionModel):
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
         xs, ys = self.nodes
+        from scipy.interpolate import RectBivariateSpline  # here: importing pipeline.models stays light
+
         object.__setattr__(self, "_sx", RectBivariateSpline(ys, xs, dx, kx=3, ky=3, s=0))
         object.__setattr__(self, "_sy", RectBivariateSpline(ys, xs, dy, kx=3, ky=3, s=0))
 

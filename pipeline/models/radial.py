@@ -216,7 +216,8 @@ class RadialParametrisation:
         self.w_center, self.w_gauge, self.ridge = w_center, w_gauge, ridge
 
     def theta0(self, init: DistortionModel | None) -> np.ndarray:
-        """Start: ``init`` (a RadialModel, rescaled to this normalisation) or the identity."""
+        """Start: ``init`` (a RadialModel, rescaled to this normalisation; the terms both have,
+        divided by its ``k0``, the others 0) or the identity."""
         th = np.zeros(self.n)
         if isinstance(init, RadialModel):
             scale = self.s / init.scale  # rho_init = rho * s / s_init
@@ -224,6 +225,13 @@ class RadialParametrisation:
             k0 = init.k[0]
             for m, km in enumerate(init.k[1 : self.degree + 1], start=1):
                 th[1 + m] = km / k0 * scale**m  # rescale to this normalisation
+            i = 2 + self.degree
+            if self.tangential and init.tangential is not None:
+                th[i : i + 2] = np.asarray(init.tangential) / k0 * scale
+            i += 2 * self.tangential
+            if self.prism and init.prism is not None:
+                s1, s2, s3, s4 = init.prism
+                th[i : i + 4] = np.array([s1 * scale, s2 * scale**3, s3 * scale, s4 * scale**3]) / k0
             if init.division is not None and self.division:
                 i = self.n - self.division
                 for j, dj in enumerate(init.division[: self.division], start=1):

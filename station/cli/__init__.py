@@ -33,11 +33,24 @@ COMMAND_MODULES = [
 ]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _command_in(argv: list[str] | None) -> str | None:
+    """The sub-command module ``argv`` names (its first word, when it is one of ours), else None."""
+    words = sys.argv[1:] if argv is None else argv
+    if not words or words[0].startswith("-"):
+        return None
+    name = f"station.cli.{words[0]}"
+    return name if name in COMMAND_MODULES else None
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``harp`` parser. When ``argv`` names a sub-command, only that command's module is
+    imported (a command does not pay for the imports of the others); otherwise all are, for
+    the list of commands in ``--help`` and the error on an unknown one."""
     parser = argparse.ArgumentParser(prog="harp", description="calibration-harp lens distortion station")
     parser.add_argument("--version", action="version", version=f"harp station {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    only = _command_in(argv)
+    for name in [only] if only else COMMAND_MODULES:
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError as exc:
@@ -50,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     try:  # Ctrl-C while the sub-commands import numpy/scipy/OpenCV: no traceback either
-        parser = build_parser()
+        parser = build_parser(argv)
     except KeyboardInterrupt:
         print("harp: interrupted", file=sys.stderr)
         return 130

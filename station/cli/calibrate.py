@@ -12,9 +12,12 @@ says what it chose. ``--model radial`` fits the radial model with free centre
 (default degree 4, with tangential and thin-prism terms unless
 ``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
 towards the image centre); ``--model poly`` the bivariate
-polynomial (default degree 5). ``--holdout`` shots are never used in the
+polynomial (default degree 5); ``--division M`` adds a division (rational)
+denominator to the radial factor (wide-angle lenses). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
-protocol). ``--json`` prints one object::
+protocol). On a machine with two cores or more the shots are measured, and the
+candidates cross-validated, by two worker processes (the results do not depend on
+it). ``--json`` prints one object::
 
     {"model": path, "choice": {"model", "degree", "tangential", "prism", "label", "reason", ...},
      "before": {"d", "d_max"}, "fit": {"d", "d_max"}, "holdout": {"d", "d_max", "images": [...]},
@@ -27,6 +30,7 @@ edges): one line on stderr, exit 2.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 from dataclasses import replace
@@ -67,6 +71,13 @@ def register(subparsers) -> None:
     p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
     p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
     p.add_argument(
+        "--division",
+        type=int,
+        default=0,
+        metavar="M",
+        help="radial: M division (rational) denominator terms 1 + d1 r^2 + ... (wide-angle lenses; default 0)",
+    )
+    p.add_argument(
         "--center-prior",
         action="store_true",
         help="radial: pull the distortion centre towards the image centre (see pipeline.select)",
@@ -88,32 +99,65 @@ def _num(v):
     return None if v is None or not np.isfinite(v) else float(v)
 
 
-def _measure(paths, t):
-    return [(path, measure_file(path, t)[1]) for path in paths]
+def _measure_one(job: tuple[str, int]):
+    path, t = job
+    return path, measure_file(path, t)[1]
+
+
+def _measure(paths, t, map_fn=map):
+    """Each shot measured once: ``[(path, ImageMeasurement)]`` in the given order."""
+    return list(map_fn(_measure_one, [(path, t) for path in paths]))
+
+
+def _ignore_sigint() -> None:  # in a worker: Ctrl-C is the command's to handle (no worker traceback)
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def _workers(n_jobs: int):
+    """A ``map`` over ``min(2, cores)`` worker processes (forked before any image is processed),
+    or the built-in ``map`` on one core or for a single job."""
+    import os
+
+    n = min(2, os.cpu_count() or 1, n_jobs)
+    if n < 2:
+        yield map
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=_ignore_sigint)
+    try:
+        yield pool.map
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _spec(args) -> FitSpec | None:
     """The FitSpec the options ask for (None: --model auto)."""
     if args.model == "auto":
-        if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior:
-            raise CalibrateError("--degree/--no-tangential/--no-prism/--center-prior need --model radial or poly")
+        if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior or args.division:
+            raise CalibrateError(
+                "--degree/--no-tangential/--no-prism/--center-prior/--division need --model radial or poly"
+            )
         return None
-    if args.model == "poly" and (args.no_tangential or args.no_prism or args.center_prior):
-        raise CalibrateError("--no-tangential/--no-prism/--center-prior apply to --model radial only")
+    if args.model == "poly" and (args.no_tangential or args.no_prism or args.center_prior or args.division):
+        raise CalibrateError("--no-tangential/--no-prism/--center-prior/--division apply to --model radial only")
     try:
         if args.model == "poly":
             return FitSpec("poly", args.degree)
-        return FitSpec("radial", args.degree, not args.no_tangential, not args.no_prism, args.center_prior)
+        return FitSpec(
+            "radial", args.degree, not args.no_tangential, not args.no_prism, args.center_prior, args.division
+        )
     except ValueError as exc:
-        raise CalibrateError(f"--degree: {exc}") from None
+        option = "--division" if "division" in str(exc) else "--degree"
+        raise CalibrateError(f"{option}: {exc}") from None
 
 
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
-    from station.calibration import calibrate_shots
-    from station.files import write_profile
-    from station.provenance import make_provenance
-
     cand = _spec(args)
     out_dir = Path(args.out).parent
     if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
@@ -121,8 +165,17 @@ def calibrate(args) -> dict:
         raise CalibrateError(f"{args.out}: cannot write model file ({out_dir}: {reason})")
     if Path(args.out).is_dir():
         raise CalibrateError(f"{args.out}: cannot write model file (is a directory)")
-    fit_m = _measure(args.images, args.t)
-    hold_m = _measure(args.holdout, args.t)
+    with _workers(len(args.images) + len(args.holdout) if cand is None else len(args.images)) as map_fn:
+        return _calibrate(args, cand, map_fn)
+
+
+def _calibrate(args, cand: FitSpec | None, map_fn) -> dict:
+    from station.calibration import calibrate_shots
+    from station.files import write_profile
+    from station.provenance import make_provenance
+
+    fit_m = _measure(args.images, args.t, map_fn)
+    hold_m = _measure(args.holdout, args.t, map_fn)
     sizes = {(m.width, m.height) for _, m in fit_m + hold_m}
     if len(sizes) > 1:
         listing = ", ".join(f"{p} {m.width}x{m.height}" for p, m in fit_m + hold_m)
@@ -137,7 +190,7 @@ def calibrate(args) -> dict:
         )
     held = [[ln.points for ln in m.lines] for _, m in hold_m]
     cal = calibrate_shots(
-        shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m]
+        shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
     )
     if cal.selection is not None:
         choice = cal.selection.to_dict()
@@ -218,7 +271,12 @@ def _print(report: dict) -> None:
         for c in ("candidate", "params", "CV d", "per fold"):
             t.add_column(c)
         for r in ch["table"]:
-            cv = "failed" if r["cv_d"] is None else f"{r['cv_d']:.4f}"
+            if r["cv_d"] is not None:
+                cv = f"{r['cv_d']:.4f}"
+            elif r.get("cv_d_bound") is not None:  # stopped: it cannot be chosen
+                cv = f">= {r['cv_d_bound']:.4f} (stopped)"
+            else:
+                cv = "failed"
             folds = " ".join("-" if v is None else f"{v:.4f}" for v in r["fold_d"])
             t.add_row(r["label"], str(r["n_params"]), cv, folds)
         con.print(t)

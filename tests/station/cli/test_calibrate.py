@@ -168,3 +168,56 @@ def test_unwritable_out_is_reported_before_any_work(shots, tmp_path, capsys, mon
         code, _, err = _run(capsys, shots[3.0], shots[63.0], "--out", out)
         assert code == 2 and err.startswith(f"harp calibrate: {out}: cannot write model file (")
         assert reason in err and err.count("\n") == 1, err
+
+
+def test_division_option(shots, tmp_path, capsys):
+    out_path = tmp_path / "div.yaml"
+    code, out, err = _run(
+        capsys,
+        shots[3.0],
+        shots[63.0],
+        shots[123.0],
+        "--model",
+        "radial",
+        "--division",
+        "1",
+        "--out",
+        out_path,
+        "--json",
+    )
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["choice"]["label"] == "radial4+tangential+prism+division1" and rep["fit"]["d"] < 0.01
+    model = load_model(out_path)
+    assert model.division is not None and len(model.division) == 1
+    assert compare_models(model, LENS, W, H).rms < 0.01
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "radial", "--division", "7", "--out", out_path)
+    assert code == 2 and err.count("\n") == 1 and "--division" in err and "0..3" in err
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], "--division", "1", "--out", out_path)
+    assert code == 2 and "need --model radial" in err
+
+
+def test_workers_give_the_same_choice_and_figures_as_one_process(shots, tmp_path, capsys, monkeypatch):
+    """Issue 8 item 6: shots measured and candidates cross-validated by two worker processes; the
+    report is the one a single process writes, and hopeless candidates are shown as stopped."""
+    import os
+
+    args = [shots[3.0], shots[63.0], shots[123.0], "--json"]
+    code, out2, err = _run(capsys, *args, "--out", tmp_path / "two.yaml")
+    assert code == 0, err
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    code, out1, err = _run(capsys, *args, "--out", tmp_path / "one.yaml")
+    assert code == 0, err
+    two, one = json.loads(out2), json.loads(out1)
+    assert two["choice"]["label"] == one["choice"]["label"]
+    assert two["fit"] == pytest.approx(one["fit"], rel=1e-9)
+    for a, b in zip(two["choice"]["table"], one["choice"]["table"]):
+        assert a["label"] == b["label"] and a["failure"] == b["failure"]
+        assert (a["cv_d"] is None) == (b["cv_d"] is None)
+        if a["cv_d"] is not None:
+            assert a["cv_d"] == pytest.approx(b["cv_d"], rel=1e-9)
+    stopped = [r for r in two["choice"]["table"] if r["failure"] and r["failure"].startswith("stopped")]
+    assert stopped and all(r["cv_d_bound"] > 2 * min(x["cv_d"] or 1e9 for x in two["choice"]["table"]) for r in stopped)
+    monkeypatch.undo()
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], "--out", tmp_path / "t.yaml")
+    assert code == 0 and "(stopped)" in out
