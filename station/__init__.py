@@ -8,6 +8,8 @@ Where things are (one idea, one room):
 * :mod:`station.calibration` — ``calibrate_shots``: measured shots → a profile's content
   (``harp calibrate`` and every session);
 * :mod:`station.store` — the SQLite profile store;
+* :mod:`station.export_source` — what an export of a profile is made from (lens and
+  camera, holdout ``d``, the fitting shots' edges), for :mod:`pipeline.exports`;
 * :mod:`station.files` (atomic writes, model files), :mod:`station.provenance`,
   :mod:`station.imageio` (reading photographs);
 * :mod:`station.session` — a session: plan, executor, records, progress, the session

@@ -308,8 +308,12 @@ AUTO = "auto"
 """The name :func:`write_export` takes for "OpenCV, pin-hole or fisheye, whichever is closer"."""
 
 AUTO_BAR_PX = 0.01
-"""Without a holdout ``d``, :data:`AUTO` tries the fisheye export when the pin-hole one's
-conversion RMS (modulo homography) exceeds this (the station's precision bar)."""
+"""Without a holdout ``d``, the RMS (modulo homography) within which :data:`AUTO` takes the
+pin-hole export without trying the fisheye one (the station's precision bar)."""
+
+AUTO_MAX_FACTOR = 5.0
+"""... and its max must be within this many times that RMS limit (issue 10's targets for the
+default OpenCV export: 0.01 px RMS, 0.05 px max)."""
 
 
 def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
@@ -317,24 +321,31 @@ def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
 
     The fisheye model is fitted too when the calibration chose a wide-angle model
     (``src.wide_angle``) or when the pin-hole conversion is less exact than the
-    calibration (its error exceeds the holdout ``d``, or :data:`AUTO_BAR_PX` without
-    one); the export is the one with the smaller RMS modulo homography.
+    calibration: its RMS or residual ``d`` exceeds the limit (the holdout ``d``, or
+    :data:`AUTO_BAR_PX` without one) or its max exceeds :data:`AUTO_MAX_FACTOR` times
+    the limit; the export is then the one with the smaller RMS modulo homography.
     """
     pin = _write_pinhole("opencv", src, opt, (5, 8, 12, 14), 12, hint=False)
     assert pin.error is not None
     n = _coeffs("opencv", opt, (5, 8, 12, 14), 12)
-    limit = src.holdout_d if src.holdout_d is not None and math.isfinite(src.holdout_d) else AUTO_BAR_PX
-    worst = max(pin.error.rms_mod_h_px, pin.error.d_px if math.isfinite(pin.error.d_px) else 0.0)
-    if not src.wide_angle and worst <= limit:
-        what = "the holdout d" if limit == src.holdout_d else f"the {AUTO_BAR_PX:g} px bar"
+    held = src.holdout_d is not None and math.isfinite(src.holdout_d)
+    limit = float(src.holdout_d) if held and src.holdout_d is not None else AUTO_BAR_PX
+    e = pin.error
+    worst = max(e.rms_mod_h_px, e.d_px if math.isfinite(e.d_px) else 0.0)
+    if not src.wide_angle and worst <= limit and e.max_mod_h_px <= AUTO_MAX_FACTOR * limit:
+        what = "the holdout d" if held else f"the {AUTO_BAR_PX:g} px bar"
         why = (
-            f"auto: opencv (pin-hole, {n} coefficients): its conversion error (RMS {pin.error.rms_mod_h_px:.4f} px "
-            f"modulo homography) is within {what} ({limit:.4f} px), fisheye not tried"
+            f"auto: opencv (pin-hole, {n} coefficients): its conversion error (RMS {e.rms_mod_h_px:.4f} px, "
+            f"max {e.max_mod_h_px:.4f} px modulo homography) is within {what} ({limit:.4f} px), fisheye not tried"
         )
         return replace(pin, notes=(why, *pin.notes))
     fe = _write_fisheye("opencv-fisheye", src, opt)
     assert fe.error is not None
-    reason = "the calibration chose a wide-angle model" if src.wide_angle else f"the pin-hole exceeds {limit:.4f} px"
+    reason = (
+        "the calibration chose a wide-angle model"
+        if src.wide_angle
+        else f"the pin-hole is less exact than {limit:.4f} px RMS / {AUTO_MAX_FACTOR * limit:.4f} px max"
+    )
     figures = (
         f"pin-hole ({n}) RMS {pin.error.rms_mod_h_px:.4f} / max {pin.error.max_mod_h_px:.4f} px, "
         f"fisheye RMS {fe.error.rms_mod_h_px:.4f} / max {fe.error.max_mod_h_px:.4f} px modulo homography"

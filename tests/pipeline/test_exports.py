@@ -213,3 +213,17 @@ def test_lensfun_itself_loads_the_xml_and_applies_our_model(model):
     ours = model.distort_points(pts)
     assert np.abs(ours - pts).max() > 1.0  # a real distortion
     assert np.abs(got - ours).max() < 2e-4  # lensfun computes in float32
+
+
+def test_auto_tries_the_fisheye_for_a_wide_angle_calibration_and_keeps_the_closer():
+    from pipeline.exports.registry import ExportOptions, ExportSource, write_export
+
+    # a mild barrel lens whose calibration chose a wide-angle model: both are fitted, the pin-hole
+    # (5 coefficients: quicker, and exact for this lens) holds it better, so it is the export
+    five = ExportOptions(coeffs=5)
+    e = write_export("auto", ExportSource(BARREL, W, H, holdout_d=0.1, wide_angle=True), five)
+    assert e.format == "opencv" and e.notes[0].startswith("auto: opencv (pin-hole) (the calibration chose a wide")
+    assert "fisheye RMS" in e.notes[0]
+    # not wide-angle and within the holdout d: the fisheye model is not tried
+    e = write_export("auto", ExportSource(BARREL, W, H, holdout_d=0.1), five)
+    assert e.format == "opencv" and "fisheye not tried" in e.notes[0]
