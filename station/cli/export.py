@@ -80,7 +80,7 @@ class ExportError(InputError):
 
 def add_export_options(p) -> None:
     """The options ``harp export`` and ``harp profile export`` share."""
-    p.add_argument("--format", required=True, choices=FORMAT_CHOICES, help="export format (see the command's help)")
+    p.add_argument("--format", required=True, choices=FORMAT_CHOICES, help="export format (listed below)")
     p.add_argument("-o", "--output", metavar="FILE", help="write here (default: stdout, text formats only)")
     p.add_argument(
         "--coeffs",
@@ -123,9 +123,19 @@ def add_export_options(p) -> None:
     p.add_argument("--json", action="store_true", help="with -o: print the figures as one JSON object")
 
 
+def formats_epilog() -> str:
+    """The list of formats of the module docstring, for ``--help``."""
+    block = __doc__.split("Formats (:data:`pipeline.exports.registry.FORMATS`)::", 1)[1].split("\n\n")[1]
+    return "formats:\n" + block + "\n\nexit codes: 0 written (also with warnings), 2 bad input or an error"
+
+
 def register(subparsers) -> None:
+    import argparse
+
     p = subparsers.add_parser(
         "export",
+        epilog=formats_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         help="export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "

@@ -18,7 +18,7 @@ import json
 import math
 import sys
 
-from station.cli.export import add_export_options
+from station.cli.export import add_export_options, formats_epilog
 from station.store.resolve import add_store_options
 
 
@@ -40,6 +40,8 @@ def register(subparsers) -> None:
         "export",
         help="export a lens profile for other software",
         parents=[store_opt],
+        epilog=formats_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Export the newest profile of LENS at --focus (interpolated between calibrated focus "
         "settings when it is not one): the formats, options, figures and exit codes of harp export.",
     )

@@ -528,3 +528,13 @@ def test_profile_export_between_focus_settings_has_the_optics_but_no_fitting_sho
     assert not fig["fitting_shots"]["used"] and "interpolated" in fig["fitting_shots"]["source"]
     got = ros_in_consumer(out)
     assert got["camera_name"] == src.ros_name and got["K"][0] == pytest.approx(src.focal_px)
+
+
+def test_opencv_xml_from_the_option_or_the_file_name():
+    from station.cli import build_parser
+    from station.cli.export import export_options
+
+    parser = build_parser()
+    for argv, xml in ((["-o", "lens.xml"], True), (["--xml"], True), (["-o", "lens.yml"], False)):
+        args = parser.parse_args(["export", "m.yaml", "--format", "opencv", *argv])
+        assert export_options(args).xml is xml
