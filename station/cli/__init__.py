@@ -2,7 +2,7 @@
 
 Each sub-command lives in its own module ``station.cli.<name>`` (``measure``,
 ``calibrate``, ``undistort``, ``evaluate``, ``export``, ``session``, ``profile``,
-``qa``, ``live``) exposing ``register(subparsers)``; the parser it adds sets
+``qa``, ``live``, ``serve``, ``reprocess``) exposing ``register(subparsers)``; the parser it adds sets
 ``func(args) -> int``. A command module parses, calls the domain code
 (:mod:`station.calibration`, :mod:`station.session`, :mod:`station.qa`,
 :mod:`station.store`, :mod:`pipeline`) and prints; :mod:`station.cli.inputs` holds the
@@ -30,6 +30,8 @@ COMMAND_MODULES = [
     "station.cli.profile",
     "station.cli.qa",
     "station.cli.live",
+    "station.cli.serve",
+    "station.cli.reprocess",
 ]
 
 

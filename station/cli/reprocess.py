@@ -1,0 +1,246 @@
+"""``harp reprocess SESSION_DIR... [--scheduler tcp://HOST:PORT] [--store PATH|URL] [--json]``.
+
+Re-measures and re-fits archived sessions with the current pipeline
+(:mod:`station.reprocess`): every focus setting a session stored a profile for, from the frames
+it kept, exactly as the session did (its configuration's measurement, fit, bootstrap and QA
+thresholds; ``--model`` fits another model, ``auto`` the cross-validated choice). The new
+profiles are stored next to the old ones (``--dry-run``: not stored); each one's provenance
+names the session, the profile it re-processes and the software versions before and now. Then
+a table compares the old and new figures per session and focus setting (``--json``: one JSON
+object instead).
+
+Where it runs: a local process pool (``--workers N``, default the number of CPUs; 1: in this
+process), or the Dask cluster whose scheduler is ``--scheduler tcp://HOST:PORT`` (its workers
+must run this software and read the session directories at the same paths). One job is one
+focus setting of one session; the figures do not depend on where it ran.
+
+Store: ``--store PATH|URL`` or ``--config CONFIG``; else the store the first session's
+configuration names (else ``$HARP_STORE``, else the default).
+
+Exit codes: 0 every session was re-processed (and stored); 2 an error — bad arguments, a store
+or scheduler that cannot be used, or a session that could not be re-processed (one line each on
+stderr; the other sessions are still re-processed and stored); 130 interrupted (sessions already
+reported are stored).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+EXIT_OK, EXIT_ERROR = 0, 2
+
+
+def register(subparsers: Any) -> None:
+    from station.store.resolve import add_store_options
+
+    p = subparsers.add_parser(
+        "reprocess",
+        help="re-measure and re-fit archived sessions with the current pipeline (local pool or Dask cluster)",
+        description="\n\n".join(__doc__.split("\n\n")[1:]),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("sessions", nargs="+", metavar="SESSION_DIR", type=Path, help="archived session directories")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask cluster (default: a local pool)")
+    p.add_argument(
+        "--workers", type=int, default=None, help="local pool processes (default: the number of CPUs; 1: no pool)"
+    )
+    p.add_argument("--model", metavar="LABEL", help="fit this model instead of the session's ('auto': cross-validated)")
+    p.add_argument("--dry-run", action="store_true", help="re-process and compare, store nothing")
+    p.add_argument("--json", action="store_true", help="print the comparison as one JSON object")
+    add_store_options(p)
+    p.set_defaults(func=run)
+
+
+def _error(msg: str) -> None:
+    print(f"harp reprocess: {msg}", file=sys.stderr, flush=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.config import ConfigError
+    from station.reprocess import ArchivedSession, FocusResult, ReprocessError, finish_session, plan_jobs, run_jobs
+    from station.store import StoreError
+    from station.store.resolve import location_from_args, open_store
+
+    if args.workers is not None and args.workers < 1:
+        _error("--workers must be at least 1")
+        return EXIT_ERROR
+    if args.scheduler is not None and args.workers is not None:
+        _error("--workers is for the local pool; the cluster's workers are the scheduler's")
+        return EXIT_ERROR
+    if args.model is not None and args.model != "auto":
+        from pipeline.fitspec import parse
+
+        try:
+            parse(args.model)
+        except ValueError as exc:
+            _error(f"--model {args.model}: {exc}")
+            return EXIT_ERROR
+    missing = [str(s) for s in args.sessions if not s.is_dir()]
+    if missing:
+        _error(f"{missing[0]}: no such session directory")
+        return EXIT_ERROR
+
+    jobs, failed = plan_jobs(args.sessions, args.model)
+    for msg in failed.values():
+        _error(msg)
+    store = None
+    if not args.dry_run and jobs:
+        try:
+            first = ArchivedSession(jobs[0].session_dir).config
+            loc = location_from_args(args, first)
+            store = open_store(loc, write=True)
+        except (StoreError, ConfigError) as exc:
+            _error(" ".join(str(exc).split()))
+            return EXIT_ERROR
+
+    expected: dict[str, int] = {}
+    for j in jobs:
+        expected[j.session_dir] = expected.get(j.session_dir, 0) + 1
+    arrived: dict[str, list[FocusResult]] = {}
+    outcomes: dict[str, Any] = {}
+    t0 = time.perf_counter()
+
+    def on_result(r: FocusResult) -> None:
+        got = arrived.setdefault(r.job.session_dir, [])
+        got.append(r)
+        if len(got) < expected[r.job.session_dir]:
+            return
+        got.sort(key=lambda x: x.job.focus_idx)
+        outcome = finish_session(r.job.session_dir, got, store)
+        if outcome.ok and store is not None:
+            try:
+                for p in outcome.profiles:
+                    outcome.new_ids.append(store.put_profile(p))
+            except StoreError as exc:
+                outcome = type(outcome)(outcome.session_dir, outcome.results, " ".join(str(exc).split()))
+        outcomes[r.job.session_dir] = outcome
+        if not outcome.ok:
+            _error(outcome.failure or "failed")
+
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    try:
+        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=on_result)
+    except ReprocessError as exc:
+        _error(str(exc))
+        return EXIT_ERROR
+    finally:
+        if store is not None:
+            store.close()
+    wall = time.perf_counter() - t0
+    order = [str(Path(s).resolve()) for s in args.sessions]
+    doc = _document(order, outcomes, failed, wall, args)
+    if args.json:
+        print(json.dumps(doc, allow_nan=False))
+    else:
+        _print_table(doc)
+    return EXIT_OK if not doc["failed"] else EXIT_ERROR
+
+
+# ----------------------------------------------------------------- output
+def _num(v: Any) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+
+
+def _figures(p: Any, verdict: str | None = None) -> dict[str, Any]:
+    if p is None:
+        return {}
+    m = p.merit
+    unc = m.field_uncertainty
+    qa = p.qa
+    return {
+        "model": p.spec.label if p.spec is not None else p.model.name,
+        "fit_d_px": _num(m.fit.d) if m.fit else None,
+        "holdout_d_px": _num(m.holdout.d) if m.holdout else None,
+        "holdout_d_max_px": _num(m.holdout.d_max) if m.holdout else None,
+        "distortion_max_px": _num(qa.metrics.get("distortion_max_px")) if qa is not None else None,
+        "field_uncertainty_rms_px": _num(unc.rms) if unc else None,
+        "verdict": qa.verdict if qa is not None else verdict,
+        "software": p.provenance.software,
+    }
+
+
+def _document(order: list[str], outcomes: dict[str, Any], failed: dict[str, str], wall: float, args: Any) -> dict:
+    sessions = []
+    for s in order:
+        if s in failed:
+            sessions.append({"session": s, "ok": False, "failure": failed[s], "focus": []})
+            continue
+        o = outcomes.get(s)
+        if o is None:
+            continue
+        focus = []
+        for i, r in enumerate(o.results):
+            old = r.old.profile if r.old is not None else None
+            entry: dict[str, Any] = {
+                "focus": r.focus,
+                "seconds": round(r.seconds, 3),
+                "worker": r.worker,
+                "failure": r.failure,
+                "old": {
+                    "profile_id": o.old_ids[i] if o.ok else (r.old.store_id if r.old else None),
+                    **_figures(old, r.old.verdict if r.old else None),
+                },
+                "new": {"profile_id": o.new_ids[i] if i < len(o.new_ids) else None, **_figures(r.profile)},
+            }
+            focus.append(entry)
+        sessions.append({"session": s, "ok": o.ok, "failure": o.failure, "focus": focus})
+    n_failed = sum(1 for s in sessions if not s["ok"])
+    return {
+        "sessions": sessions,
+        "reprocessed": len(sessions) - n_failed,
+        "failed": n_failed,
+        "stored": not args.dry_run,
+        "where": args.scheduler or f"local pool of {args.workers or os.cpu_count() or 1}",
+        "wall_s": round(wall, 2),
+    }
+
+
+def _print_table(doc: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console() if sys.stdout.isatty() else Console(width=200)
+
+    def f(v: Any, nd: int = 4) -> str:
+        return "–" if v is None else f"{v:.{nd}f}"
+
+    def pair(o: dict, n: dict, key: str, nd: int = 4) -> str:
+        return f"{f(o.get(key), nd)} → {f(n.get(key), nd)}"
+
+    t = Table(title=f"re-processed on {doc['where']}: old → new (px)")
+    for col in ("session", "focus", "profile", "model", "fit d", "holdout d", "distortion max", "uncertainty rms", "verdict"):
+        t.add_column(col, justify="left" if col in ("session", "model", "verdict", "profile") else "right")
+    for s in doc["sessions"]:
+        name = Path(s["session"]).name
+        if not s["focus"]:
+            t.add_row(name, "", "", "", "", "", "", "", "not re-processed")
+        for e in s["focus"]:
+            o, n = e["old"], e["new"]
+            if e["failure"] or not s["ok"]:
+                t.add_row(name, f"{e['focus']:g}" if e["focus"] is not None else "", "", "", "", "", "", "", "failed")
+                continue
+            ids = f"#{o['profile_id'] if o['profile_id'] is not None else '?'} → #{n['profile_id'] if n['profile_id'] is not None else '–'}"
+            model = o.get("model", "?") if o.get("model") == n.get("model") else f"{o.get('model', '?')} → {n.get('model')}"
+            t.add_row(
+                name,
+                f"{e['focus']:g}",
+                ids,
+                model,
+                pair(o, n, "fit_d_px"),
+                pair(o, n, "holdout_d_px"),
+                pair(o, n, "distortion_max_px", 3),
+                pair(o, n, "field_uncertainty_rms_px"),
+                f"{o.get('verdict') or '–'} → {n.get('verdict') or '–'}",
+            )
+    console.print(t)
+    stored = "stored" if doc["stored"] else "not stored (--dry-run)"
+    console.print(
+        f"{doc['reprocessed']} session(s) re-processed, {doc['failed']} failed, in {doc['wall_s']:.1f} s; new profiles {stored}"
+    )

@@ -1,0 +1,80 @@
+"""``harp serve [--store PATH|URL | --config CONFIG] [--host H] [--port P] [--token T]``: the QA dashboard.
+
+Serves the factory QA dashboard (:mod:`station.web.dashboard`) over the profile store, read
+only: lens models with pass/fail counts per station and day, each lens's profiles per focus
+setting with every QA check, plots and downloads in every export format, each lens model's
+distortion and holdout d over its serial numbers with control limits, and the same data as JSON
+(``/api/lenses``, ``/api/lenses/{serial}``, ``/api/profiles/{id}``, ``/api/model``).
+
+It binds 127.0.0.1 unless ``--host`` says otherwise, and any other address needs ``--token`` (or
+``$HARP_WEB_TOKEN``): every request must then carry it (open the address printed, with
+``?token=...``, once). Runs until Ctrl-C (exit 130). Exit 2 on an error (a store that is not
+there or cannot be read, an address that cannot be used): one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Any
+
+EXIT_ERROR = 2
+DEFAULT_PORT = 8014
+
+
+def register(subparsers: Any) -> None:
+    from station.store.resolve import add_store_options
+
+    p = subparsers.add_parser(
+        "serve",
+        help="the factory QA dashboard in the browser (read-only, over the profile store)",
+        description=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_store_options(p)
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
+    p.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help=f"port to serve on (default {DEFAULT_PORT}; 0: any free port)"
+    )
+    p.add_argument(
+        "--token",
+        default=os.environ.get("HARP_WEB_TOKEN"),
+        help="token every request must carry (needed for a --host other than 127.0.0.1; default $HARP_WEB_TOKEN)",
+    )
+    p.set_defaults(func=run)
+
+
+def _error(msg: str) -> int:
+    print(f"harp serve: {' '.join(str(msg).split())}", file=sys.stderr)
+    return EXIT_ERROR
+
+
+def run(args: argparse.Namespace) -> int:
+    from station.config import ConfigError
+    from station.store import StoreError
+    from station.store.resolve import open_store
+    from station.web.serve import ServeError, check_bind
+
+    try:
+        check_bind(args.host, args.token)
+    except ServeError as exc:
+        return _error(str(exc))
+    try:
+        store = open_store(args)
+    except (StoreError, ConfigError) as exc:
+        return _error(str(exc))
+    from station.web import serve
+    from station.web.dashboard import dashboard_app
+
+    try:
+        store.lens_models()  # a store that cannot be read says so now, not on the first page
+        serve(dashboard_app(store), host=args.host, port=args.port, token=args.token)
+    except (ServeError, StoreError) as exc:
+        return _error(str(exc))
+    except KeyboardInterrupt:
+        print("harp serve: stopped", file=sys.stderr)
+        return 130
+    finally:
+        store.close()
+    return 0

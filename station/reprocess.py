@@ -1,0 +1,482 @@
+"""Re-processing archived sessions: their frames measured and fitted again with the current pipeline.
+
+When the pipeline improves (every string measured to its ends, a better model choice), the
+frames a session kept are worth more than the profiles it stored. :func:`reprocess_focus`
+re-does one focus setting of one archived session directory exactly as the executor did
+(:mod:`station.session.executor`): the frames of each orientation's accepted attempt averaged
+(checked against the manifest's SHA-256), measured (:func:`station.session.processing.measure_shot`
+with the session's ``pipeline.t``) and checked (strings found at the expected angle), fitted by
+:func:`station.calibration.calibrate_shots` (leave one orientation out, the session's bootstrap
+and seed), and judged against the session's ``qa`` thresholds. It only *reads* the session
+directory (no lock, nothing written), so an archive can be read-only, and it never raises for
+a bad session: a :class:`FocusResult` carries the new profile or a one-line ``failure``.
+
+Jobs are :class:`FocusJob` (one focus setting of one session, the unit a worker runs);
+:func:`plan_jobs` lists them — every focus setting for which the session stored a profile.
+:func:`run_jobs` runs them here, on a local process pool, or on a Dask cluster
+(``scheduler="tcp://HOST:PORT"``; ``dask.distributed`` is imported only then), and the results
+do not depend on where they ran: each job limits BLAS to one thread (:func:`_one_thread`) so
+that its floating-point sums are the same on every worker. The session directories must be
+readable at the same path on every worker (a shared file system).
+
+:func:`finish_session` turns a session's results into the profiles to store: each new profile's
+provenance (``Profile.provenance.extra["reprocess"]``) names the session, the profile it
+re-processes (its store id when this store holds it) and the software versions before and now;
+its store key is ``<session_dir>#reprocess-<version>`` (:func:`reprocess_key`), so the old
+profile stays, and re-processing again with the same version replaces the earlier result
+instead of adding another.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from station import SOFTWARE, __version__
+from station.profile import Profile
+
+BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+PRELOAD = ["station.reprocess", "station.calibration", "pipeline.fit", "pipeline.measure", "station.qa.verdicts"]
+"""Modules the local pool's forkserver imports once, so that each worker starts warm."""
+
+
+class ReprocessError(RuntimeError):
+    """Re-processing cannot start (no scheduler, no pool); ``str()`` is one line."""
+
+
+# ------------------------------------------------------------------ jobs
+@dataclass(frozen=True)
+class FocusJob:
+    """One focus setting of one archived session: what a worker re-processes.
+
+    ``spec``: a fit label (:func:`pipeline.fitspec.parse`), ``"auto"`` for the cross-validated
+    choice, or None for what the session's configuration names.
+    """
+
+    session_dir: str
+    focus_idx: int
+    spec: str | None = None
+
+
+@dataclass(frozen=True)
+class OldProfile:
+    """The profile the session stored for a focus setting, as its directory records it."""
+
+    profile: Profile | None
+    store_id: int | None
+    verdict: str | None
+    software: str | None
+
+
+@dataclass(frozen=True)
+class FocusResult:
+    """What re-processing one focus setting came to: the new profile (judged), or a failure."""
+
+    job: FocusJob
+    focus: float | None
+    profile: Profile | None
+    old: OldProfile | None
+    failure: str | None = None
+    seconds: float = 0.0
+    worker: str = ""
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _software_versions() -> dict[str, str]:
+    import cv2
+    import numpy
+    import scipy
+
+    return {"harp-station": __version__, "numpy": numpy.__version__, "scipy": scipy.__version__, "opencv": cv2.__version__}
+
+
+# --------------------------------------------------- the session, read only
+class ArchivedSession:
+    """A session directory opened for reading only: its meta, manifest records and configuration.
+
+    Unlike :class:`station.session.directory.SessionDir` it takes no lock and writes nothing
+    (no torn line cut, no temporary removed): an archive may be read-only, or being read by
+    many workers at once. Raises ValueError (one line naming the file) for what cannot be read.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        import json
+
+        from station.config import ConfigError, load_config
+        from station.session.directory import SessionError, read_manifest
+        from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
+
+        self.path = Path(path)
+        meta_file = self.path / SESSION_FILE
+        if not meta_file.is_file():
+            raise ValueError(f"{self.path}: not a session directory (no {SESSION_FILE})")
+        try:
+            self.meta = json.loads(meta_file.read_text())
+            if not isinstance(self.meta, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{meta_file}: cannot read ({_one_line(exc)})") from None
+        try:
+            self.records, _ = read_manifest(self.path / MANIFEST)
+        except (OSError, SessionError) as exc:
+            raise ValueError(_one_line(exc)) from None
+        try:
+            self.config = load_config(self.path / CONFIG_COPY, base_dir=self.meta.get("base_dir"))
+        except ConfigError as exc:
+            raise ValueError(_one_line(exc)) from None
+
+    def of_kind(self, kind: str) -> list[dict[str, Any]]:
+        return [r for r in self.records if r.get("kind") == kind]
+
+    def attempt(self, f: int, o: int) -> int:
+        """The accepted attempt of a shot: the number of times it was rejected."""
+        return sum(1 for r in self.of_kind("reject") if (r.get("focus_idx"), r.get("orientation_idx")) == (f, o))
+
+    def frames(self, f: int, o: int) -> list[dict[str, Any]]:
+        """The frame records of a shot's accepted attempt, by frame index (the last record wins)."""
+        a = self.attempt(f, o)
+        by_idx = {
+            r["frame_idx"]: r
+            for r in self.of_kind("frame")
+            if (r.get("focus_idx"), r.get("orientation_idx"), r.get("attempt")) == (f, o, a)
+        }
+        return [by_idx[i] for i in sorted(by_idx)]
+
+    def read_frame(self, record: dict[str, Any]) -> Any:
+        """The frame of a record, checked against the manifest's SHA-256."""
+        from station.session.directory import decode_pgm
+
+        path = self.path / record["file"]
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        if hashlib.sha256(data).hexdigest() != record.get("sha256"):
+            raise ValueError(f"{path}: checksum does not match the session manifest (damaged frame)")
+        try:
+            return decode_pgm(data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+    def stored_focus(self) -> dict[int, int | None]:
+        """``{focus_idx: store id}`` of every focus setting the session stored a profile for."""
+        return {int(r["focus_idx"]): r.get("profile_id") for r in self.of_kind("stored")}
+
+    def old_profile(self, f: int) -> OldProfile:
+        """The profile the session stored for focus setting ``f`` (its model file) and its verdict."""
+        from pipeline.model_file import read_model_file
+        from station.session import layout
+
+        profile = None
+        try:
+            profile = Profile.from_model_file(read_model_file(self.path / layout.profile_file(f)))
+        except (OSError, ValueError):
+            pass
+        judged = [r for r in self.of_kind("qa") if r.get("focus_idx") == f]
+        verdict = str(judged[-1].get("verdict")) if judged else None
+        if profile is not None and profile.qa is None and judged:  # the session's verdict, from its manifest
+            from station.profile import Verdict
+
+            last = judged[-1]
+            profile = profile.with_(
+                qa=Verdict(str(last.get("verdict")), tuple(last.get("reasons") or ()), dict(last.get("metrics") or {}))
+            )
+        stored = self.stored_focus().get(f)
+        software = profile.provenance.software if profile is not None else None
+        if software is None and self.meta.get("software_version"):
+            software = f"harp-station {self.meta['software_version']}"
+        return OldProfile(profile, stored, verdict, software)
+
+
+def plan_jobs(session_dirs: Iterable[str | os.PathLike[str]], spec: str | None = None) -> tuple[list[FocusJob], dict[str, str]]:
+    """The jobs of some session directories — one per focus setting the session stored a profile
+    for — and ``{session_dir: failure}`` for those that cannot be re-processed at all."""
+    jobs: list[FocusJob] = []
+    failed: dict[str, str] = {}
+    for d in session_dirs:
+        path = str(Path(d).resolve())
+        try:
+            s = ArchivedSession(path)
+        except ValueError as exc:
+            failed[path] = str(exc)
+            continue
+        stored = s.stored_focus()
+        if not stored:
+            failed[path] = f"{path}: the session stored no profile (nothing to re-process)"
+            continue
+        jobs += [FocusJob(path, f, spec) for f in sorted(stored)]
+    return jobs, failed
+
+
+# ------------------------------------------------------------ one job
+def _one_thread() -> Any:
+    """A context in which BLAS/OpenMP use one thread, so that sums are the same on every worker."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(1)
+
+
+def reprocess_focus(job: FocusJob) -> FocusResult:
+    """Re-measure and re-fit one focus setting of an archived session (module docstring).
+    Never raises for a bad session: the result's ``failure`` says what went wrong, in one line."""
+    import socket
+
+    t0 = time.perf_counter()
+    worker = f"{socket.gethostname()}:{os.getpid()}"
+    try:
+        with _one_thread():
+            focus, profile, old = _reprocess(job)
+    except ValueError as exc:
+        return FocusResult(job, None, None, None, _one_line(exc), time.perf_counter() - t0, worker)
+    except Exception as exc:  # a bug or an unforeseen fault: said in one line, the other jobs go on
+        return FocusResult(
+            job, None, None, None, f"{type(exc).__name__}: {_one_line(exc)}", time.perf_counter() - t0, worker
+        )
+    return FocusResult(job, focus, profile, old, None, time.perf_counter() - t0, worker)
+
+
+def _spec(job: FocusJob, config: Any) -> Any:
+    from pipeline.fitspec import parse
+
+    if job.spec is None:
+        return config.pipeline.spec
+    if job.spec == "auto":
+        return None
+    return parse(job.spec)
+
+
+def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
+    from station.calibration import calibrate_shots
+    from station.provenance import make_provenance
+    from station.qa.verdicts import qa_verdict
+    from station.session import layout
+    from station.session.processing import average_frames, measure_shot, shot_problems
+
+    s = ArchivedSession(job.session_dir)
+    cfg = s.config
+    f = job.focus_idx
+    if not 0 <= f < len(cfg.focus_settings):
+        raise ValueError(f"{s.path}: no focus setting #{f} in its configuration")
+    focus = float(cfg.focus_settings[f])
+    where = f"{s.path.name} focus {focus:g}"
+    n = cfg.capture.frames_per_orientation
+    shots = []
+    frame_files: list[Path] = []
+    size: tuple[int, int] | None = None
+    for o, commanded in enumerate(cfg.capture.orientations_deg):
+        records = s.frames(f, o)
+        if len(records) != n:
+            raise ValueError(f"{where}: orientation {o} has {len(records)} of its {n} frames in the manifest")
+        images = [s.read_frame(r) for r in records]
+        h, w = images[0].shape
+        if size is None:
+            size = (w, h)
+        elif size != (w, h):
+            raise ValueError(f"{where}: orientation {o} frames are {w}x{h}, the others {size[0]}x{size[1]}")
+        m = measure_shot(average_frames(images), cfg.pipeline)
+        stage = records[-1].get("meta", {}).get("stage_deg")
+        expected = cfg.station.harp.expected_angle(commanded if stage is None else stage)
+        problems = shot_problems(m, expected, cfg.capture.checks)
+        if problems:
+            raise ValueError(f"{where}: orientation {o}: {'; '.join(problems)}")
+        shots.append(list(m.lines))
+        frame_files += [s.path / r["file"] for r in records]
+    assert size is not None
+    w, h = size
+    pc = cfg.pipeline
+    spec = _spec(job, cfg)
+    cal = calibrate_shots(
+        shots, w, h, spec, holdout="orientations", bootstrap=pc.bootstrap, seed=pc.seed + 1000 * f, map_fn=map
+    )
+    if cal.failure or not cal.fit:
+        raise ValueError(f"{where}: the fit failed: {cal.failure}")
+    old = s.old_profile(f)
+    profile = cal.profile(
+        w,
+        h,
+        provenance=make_provenance(frame_files, t=pc.t, command="harp reprocess", station=cfg.station.id),
+        lens=cfg.lens,
+        camera=cfg.camera_body,
+        focus=focus,
+        selection=None if cal.selection is not None else {"reason": "given" if job.spec else "pipeline.model of the configuration"},
+    )
+    profile = profile.with_(
+        optics=cfg.optics,
+        details={
+            **profile.details,
+            "orientations_deg": list(cfg.capture.orientations_deg),
+            "frames_per_orientation": n,
+            "t": pc.t,
+            "session_model_file": str(s.path / layout.profile_file(f)),
+        },
+    )
+    return focus, profile.with_(qa=qa_verdict(profile, cfg.qa)), old
+
+
+# --------------------------------------------------------- where it runs
+def run_jobs(
+    jobs: Sequence[FocusJob],
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    on_result: Callable[[FocusResult], None] = lambda _r: None,
+) -> list[FocusResult]:
+    """Run ``jobs`` and return their results in the jobs' order.
+
+    ``scheduler`` (``tcp://HOST:PORT``): on that Dask cluster; else on a local process pool of
+    ``workers`` processes (``workers <= 1``: in this process). ``on_result`` is called as each
+    result arrives (in the order they finish). A worker that dies is that job's failure; a
+    scheduler that cannot be reached raises :class:`ReprocessError`.
+    """
+    if not jobs:
+        return []
+    if scheduler is not None:
+        return _run_dask(jobs, scheduler, on_result)
+    if workers <= 1:
+        out = []
+        for j in jobs:
+            r = reprocess_focus(j)
+            on_result(r)
+            out.append(r)
+        return out
+    return _run_pool(jobs, min(workers, len(jobs)), on_result)
+
+
+def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(PRELOAD)
+    results: dict[int, FocusResult] = {}
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                r = fut.result()
+            except Exception as exc:  # BrokenProcessPool: a worker died (killed, out of memory)
+                r = FocusResult(jobs[i], None, None, None, f"worker process failed: {type(exc).__name__}: {_one_line(exc)}")
+            results[i] = r
+            on_result(r)
+    return [results[i] for i in range(len(jobs))]
+
+
+def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
+    from dask.distributed import Client, as_completed
+
+    try:
+        client = Client(scheduler, timeout="10s", set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ReprocessError(f"cannot reach the Dask scheduler at {scheduler}: {_one_line(exc)}") from None
+    try:
+        futures = client.map(reprocess_focus, list(jobs), pure=False, retries=0)
+        index = {fut.key: i for i, fut in enumerate(futures)}
+        results: dict[int, FocusResult] = {}
+        for fut in as_completed(futures, loop=client.loop):
+            i = index[fut.key]
+            try:
+                r = fut.result()
+            except Exception as exc:  # KilledWorker, a worker that cannot import the station, ...
+                r = FocusResult(jobs[i], None, None, None, f"Dask worker failed: {type(exc).__name__}: {_one_line(exc)}")
+            results[i] = r
+            on_result(r)
+        return [results[i] for i in range(len(jobs))]
+    finally:
+        client.close()
+
+
+# ------------------------------------------------- results to the store
+def reprocess_key(session_dir: str) -> str:
+    """The store's ``session_dir`` of a session's re-processed profiles (module docstring)."""
+    return f"{session_dir}#reprocess-{__version__}"
+
+
+@dataclass(frozen=True)
+class SessionOutcome:
+    """One session re-processed: its focus results and the profiles to store (empty if it failed)."""
+
+    session_dir: str
+    results: tuple[FocusResult, ...] = ()
+    failure: str | None = None
+    profiles: tuple[Profile, ...] = ()
+    old_ids: tuple[int | None, ...] = ()
+    new_ids: list[int | None] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.failure is None
+
+
+def _same_focus(a: float | None, b: float | None) -> bool:
+    return a is not None and b is not None and math.isclose(a, b, rel_tol=0, abs_tol=1e-9)
+
+
+def old_store_profile(store: Any, old: OldProfile, session_dir: str, focus: float) -> Profile | None:
+    """The store's row of the profile a session stored (by the id its manifest records), when this
+    store holds it: the same lens, focus and session (by path, or by name for a moved archive)."""
+    if store is None or old.store_id is None:
+        return None
+    p = store.profile(int(old.store_id))
+    if p is None or not _same_focus(p.focus, focus) or p.provenance.session_dir is None:
+        return None
+    if old.profile is not None and old.profile.lens is not None and p.lens != old.profile.lens:
+        return None
+    if Path(p.provenance.session_dir).name != Path(session_dir).name:
+        return None
+    return p
+
+
+def finish_session(session_dir: str, results: Sequence[FocusResult], store: Any = None) -> SessionOutcome:
+    """The profiles to store for one session (none when any of its focus settings failed), each
+    with the provenance of module docstring; ``store``: where the old profiles are looked up."""
+    failures = [r.failure for r in results if r.failure is not None]
+    if failures:
+        return SessionOutcome(session_dir, tuple(results), "; ".join(failures))
+    versions = _software_versions()
+    profiles = []
+    old_ids = []
+    for r in results:
+        assert r.profile is not None and r.old is not None and r.focus is not None
+        stored = old_store_profile(store, r.old, session_dir, r.focus)
+        base = stored.provenance.session_dir if stored is not None else session_dir
+        assert base is not None
+        old_id = stored.id if stored is not None else None
+        prov = r.profile.provenance
+        extra = {
+            **dict(prov.extra),
+            "reprocess": {
+                "session": session_dir,
+                "old_profile_id": old_id,
+                "old_software": r.old.software,
+                "old_verdict": stored.qa.verdict if stored is not None and stored.qa is not None else r.old.verdict,
+                "software": SOFTWARE,
+                "versions": versions,
+                "worker": r.worker,
+            },
+        }
+        profiles.append(r.profile.with_(provenance=replace(prov, session_dir=reprocess_key(base), extra=extra)))
+        old_ids.append(old_id)
+    return SessionOutcome(session_dir, tuple(results), None, tuple(profiles), tuple(old_ids))
+
+
+def group_by_session(jobs: Sequence[FocusJob], results: Sequence[FocusResult]) -> dict[str, list[FocusResult]]:
+    """Results by session directory (in the jobs' order)."""
+    out: dict[str, list[FocusResult]] = {}
+    for j, r in zip(jobs, results):
+        out.setdefault(j.session_dir, []).append(r)
+    return out

@@ -1,0 +1,224 @@
+"""The factory QA dashboard (``harp serve``): a read-only web app over the profile store.
+
+Pages (HTML, Jinja templates extending ``base.html``) and the JSON endpoints that hold the same
+data (:mod:`station.web.dashboard_data`):
+
+=========================================  ==================================================
+``/``, ``/api/lenses``                     lens models with lenses and calibrations passed /
+                                           failed; pass/fail counts per station and day; lenses
+``/lenses/{serial}``, ``/api/lenses/...``  one lens: profiles per focus (newest first), verdict
+                                           with every check, plots, downloads
+``/api/profiles/{id}``                     one profile in full (model, merit, provenance, QA)
+``/model?maker=&model=``, ``/api/model``   a lens model's distortion magnitude and holdout d
+                                           over its serial numbers, control limits (mean ± 3σ
+                                           of the passed lenses)
+``/profiles/{id}/field.png``               the field plot (session report's, else rendered)
+``/profiles/{id}/uncertainty.png``         the field-uncertainty plot
+``/profiles/{id}/export/{format}``         the profile in an export format (download)
+=========================================  ==================================================
+
+A serial shared by several lens models takes ``?maker=...&model=...``. Files are found from what
+the store holds for a profile, never from a path in the request (:mod:`station.web.profile_files`).
+Only GET: nothing is written. Serve it with :func:`station.web.serve` (127.0.0.1 by default, a
+token for any other address).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from station.web import create_app, render
+from station.web import dashboard_data as data
+from station.web.charts import ChartPoint, control_chart, verdict_bars
+from station.web.profile_files import ProfileFiles, Served, Unavailable
+
+def _store(request: Request) -> Any:
+    return request.app.state.store
+
+
+def _err(status: int, message: str) -> JSONResponse:
+    return JSONResponse({"error": " ".join(message.split())}, status_code=status)
+
+
+def _page_error(request: Request, status: int, message: str) -> Response:
+    return render(request, "dashboard_error.html", status_code=status, message=" ".join(message.split()))
+
+
+async def _call(fn: Any, *args: Any) -> Any:
+    """Run a store read on a worker thread (the store's calls block)."""
+    return await run_in_threadpool(fn, *args)
+
+
+def _lens_args(request: Request) -> tuple[str, str | None, str | None]:
+    q = request.query_params
+    return request.path_params["serial"], q.get("maker"), q.get("model")
+
+
+def _lookup_status(exc: LookupError) -> int:
+    return 409 if isinstance(exc, data.Ambiguous) else 404
+
+
+def _store_error(exc: Exception) -> str | None:
+    from station.store import StoreError
+
+    return " ".join(str(exc).split()) if isinstance(exc, StoreError) else None
+
+
+# ------------------------------------------------------------------- JSON
+async def api_lenses(request: Request) -> Response:
+    return JSONResponse(await _call(data.lenses_doc, _store(request)))
+
+
+async def api_lens(request: Request) -> Response:
+    try:
+        return JSONResponse(await _call(data.lens_doc, _store(request), *_lens_args(request)))
+    except LookupError as exc:
+        return _err(_lookup_status(exc), str(exc))
+
+
+async def api_profile(request: Request) -> Response:
+    try:
+        return JSONResponse(await _call(data.profile_doc, _store(request), request.path_params["profile_id"]))
+    except LookupError as exc:
+        return _err(_lookup_status(exc), str(exc))
+
+
+async def api_model(request: Request) -> Response:
+    q = request.query_params
+    if not q.get("maker") or not q.get("model"):
+        return _err(400, "give the lens model as ?maker=...&model=...")
+    try:
+        return JSONResponse(await _call(data.model_doc, _store(request), q["maker"], q["model"]))
+    except LookupError as exc:
+        return _err(404, str(exc))
+
+
+# ------------------------------------------------------------------ pages
+async def index(request: Request) -> Response:
+    doc = await _call(data.lenses_doc, _store(request))
+    days: dict[str, list[int]] = {}
+    for c in doc["counts"]:
+        d = days.setdefault(c["day"], [0, 0, 0])
+        d[0] += c["passed"]
+        d[1] += c["failed"]
+        d[2] += c["unjudged"]
+    bars = verdict_bars([(d, *v) for d, v in sorted(days.items())])
+    return render(request, "dashboard_index.html", doc=doc, bars=bars)
+
+
+async def lens_page(request: Request) -> Response:
+    try:
+        doc = await _call(data.lens_doc, _store(request), *_lens_args(request))
+    except LookupError as exc:
+        return _page_error(request, _lookup_status(exc), str(exc))
+    return render(request, "dashboard_lens.html", doc=doc)
+
+
+def _charts(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    out = []
+    for f in doc["focus"]:
+        charts = []
+        for key, fig in f["figures"].items():
+            lim = fig["limits"] or {}
+            pts = [ChartPoint(p["serial"], p[key], p["verdict"], p["href"]) for p in f["points"]]
+            charts.append(
+                {
+                    "key": key,
+                    "label": fig["label"],
+                    "limits": fig["limits"],
+                    "outside": fig["outside"],
+                    "svg": control_chart(
+                        pts,
+                        mean=lim.get("mean"),
+                        lower=lim.get("lower"),
+                        upper=lim.get("upper"),
+                        title=f"{fig['label']} at focus {f['focus']:g}",
+                        css_id=f"chart-{key}-{len(out)}",
+                    ),
+                }
+            )
+        out.append({"focus": f["focus"], "charts": charts, "points": f["points"]})
+    return out
+
+
+async def model_page(request: Request) -> Response:
+    q = request.query_params
+    if not q.get("maker") or not q.get("model"):
+        return _page_error(request, 400, "give the lens model as ?maker=...&model=...")
+    try:
+        doc = await _call(data.model_doc, _store(request), q["maker"], q["model"])
+    except LookupError as exc:
+        return _page_error(request, 404, str(exc))
+    bars = verdict_bars([(d["day"], d["passed"], d["failed"], d["unjudged"]) for d in doc["days"]])
+    return render(request, "dashboard_model.html", doc=doc, focus=_charts(doc), bars=bars)
+
+
+# ------------------------------------------------------------------ files
+def _served(s: Served) -> Response:
+    headers = {"cache-control": "private, max-age=60", "x-harp-source": s.source}
+    if s.filename:
+        headers["content-disposition"] = f'attachment; filename="{s.filename}"'
+    if s.path is not None:
+        return FileResponse(s.path, media_type=s.media_type, headers=headers)
+    assert s.data is not None
+    return Response(s.data, media_type=s.media_type, headers=headers)
+
+
+def _file_endpoint(what: str) -> Any:
+    async def endpoint(request: Request) -> Response:
+        store = _store(request)
+        files: ProfileFiles = request.app.state.files
+        pid = request.path_params["profile_id"]
+        profile = await _call(store.profile, pid)
+        if profile is None:
+            return _err(404, f"no profile #{pid} in the store")
+        try:
+            if what == "field":
+                s = await _call(files.field_plot, profile)
+            elif what == "uncertainty":
+                s = await _call(files.uncertainty_plot, profile)
+            else:
+                s = await _call(files.export, profile, request.path_params["fmt"])
+        except Unavailable as exc:
+            return _err(404, str(exc))
+        return _served(s)
+
+    return endpoint
+
+
+def dashboard_app(store: Any, *, title: str = "harp QA dashboard") -> Starlette:
+    """The dashboard's app over an open :class:`station.store.ProfileStore` (read only)."""
+
+    async def store_errors(request: Request, exc: Exception) -> Response:
+        msg = _store_error(exc) or f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        if request.url.path.startswith("/api/") or "/profiles/" in request.url.path:
+            return _err(503 if _store_error(exc) else 500, msg)
+        return _page_error(request, 503 if _store_error(exc) else 500, msg)
+
+    app = create_app(
+        title,
+        [
+            Route("/", index),
+            Route("/lenses/{serial}", lens_page),
+            Route("/model", model_page),
+            Route("/api/lenses", api_lenses),
+            Route("/api/lenses/{serial}", api_lens),
+            Route("/api/profiles/{profile_id:int}", api_profile),
+            Route("/api/model", api_model),
+            Route("/profiles/{profile_id:int}/field.png", _file_endpoint("field")),
+            Route("/profiles/{profile_id:int}/uncertainty.png", _file_endpoint("uncertainty")),
+            Route("/profiles/{profile_id:int}/export/{fmt}", _file_endpoint("export")),
+        ],
+        nav=[("/", "Lenses"), ("/api/lenses", "JSON")],
+        state={"store": store, "files": ProfileFiles()},
+    )
+    from station.store import StoreError
+
+    app.add_exception_handler(StoreError, store_errors)
+    return app
