@@ -47,6 +47,22 @@ class VerdictCount:
 
 
 @dataclass(frozen=True)
+class LensSummary:
+    """One lens (serial): how many profiles and calibrations the store holds, and its newest
+    calibration's time (UTC), station and verdict (``"PASS"``, ``"FAIL"`` or None: not judged)."""
+
+    lens_id: int
+    maker: str
+    model: str
+    serial: str
+    profiles: int
+    calibrations: int
+    last_at: str
+    last_station: str
+    last_verdict: str | None
+
+
+@dataclass(frozen=True)
 class TrendPoint:
     """The newest profile of one lens (serial) at one focus setting: what the drift plots show (px)."""
 
@@ -87,6 +103,7 @@ def _calibrations(conn: sa.Connection, maker: str | None = None, model: str | No
             p.c.session_dir,
             p.c.station_id,
             sa.func.min(p.c.created_at).label("started"),
+            sa.func.max(p.c.id).label("last_id"),
             failed.label("failed"),
             passed.label("passed"),
             sa.func.count().label("n"),
@@ -121,6 +138,38 @@ def lens_models(conn: sa.Connection) -> list[LensModel]:
         )
         for (mk, md), a in sorted(acc.items())
     ]
+
+
+def lens_summaries(conn: sa.Connection, maker: str | None = None, model: str | None = None) -> list[LensSummary]:
+    """Every lens (of one model) with its profile and calibration counts and its newest calibration,
+    by maker, model, serial."""
+    serials = {r.id: r.serial for r in conn.execute(sa.select(lenses.c.id, lenses.c.serial)).all()}
+    acc: dict[int, dict] = {}
+    for r in _calibrations(conn, maker, model):
+        a = acc.setdefault(r.lens_id, {"row": r, "profiles": 0, "calibrations": 0})
+        a["profiles"] += r.n
+        a["calibrations"] += 1
+        if (str(r.started), r.last_id) > (str(a["row"].started), a["row"].last_id):
+            a["row"] = r
+    out = []
+    for lid, a in acc.items():
+        r = a["row"]
+        v = _verdict(r)
+        verdict = "FAIL" if v == "failed" else "PASS" if v == "passed" else None
+        out.append(
+            LensSummary(
+                lid,
+                r.maker,
+                r.model,
+                serials[lid],
+                a["profiles"],
+                a["calibrations"],
+                str(r.started),
+                r.station_id,
+                verdict,
+            )
+        )
+    return sorted(out, key=lambda s: (s.maker, s.model, s.serial))
 
 
 def verdict_counts(conn: sa.Connection, maker: str | None = None, model: str | None = None) -> list[VerdictCount]:

@@ -26,7 +26,8 @@ Reading (for the commands)
     unless ``allow_failed=True``; :meth:`qa_results`.
 
 Reading (for the factory dashboard, :mod:`station.store.dashboard`)
-    :meth:`lens_models`, :meth:`verdict_counts`, :meth:`lens_history`, :meth:`model_trend`.
+    :meth:`lens_models`, :meth:`verdict_counts`, :meth:`lens_summaries`, :meth:`lens_history`,
+    :meth:`model_trend`.
 
 A row that cannot be read (bad JSON, a model without a centre, a profile whose lens row is
 missing) raises a one-line StoreError (``kind="damaged"``) naming the store, the profile and what
@@ -451,6 +452,11 @@ class ProfileStore:
         """Pass / fail counts of calibrations per lens model, station and day (UTC). See
         :func:`station.store.dashboard.verdict_counts`."""
         return self._read("reading the verdict counts", lambda conn: dashboard.verdict_counts(conn, maker, model))
+
+    def lens_summaries(self, maker: str | None = None, model: str | None = None) -> list[dashboard.LensSummary]:
+        """Every lens with its profiles, calibrations and newest calibration's verdict. See
+        :func:`station.store.dashboard.lens_summaries`."""
+        return self._read("reading the lenses", lambda conn: dashboard.lens_summaries(conn, maker, model))
 
     def lens_history(self, lens_id: int, *, errors: list[StoreError] | None = None) -> dict[float, list[Profile]]:
         """Every profile of a lens by focus setting, newest first, each with its verdict and checks (``p.qa``)."""

@@ -53,6 +53,23 @@ def test_verdict_counts_per_station_and_day(store):
     assert {(r.maker, r.model) for r in store.verdict_counts()} == {("Acme", "12mm"), ("Zeta", "8mm")}
 
 
+def test_lens_summaries(store):
+    rows = store.lens_summaries()
+    assert [(r.maker, r.serial) for r in rows] == [
+        ("Acme", "A-1"),
+        ("Acme", "A-2"),
+        ("Acme", "A-3"),
+        ("Acme", "A-4"),
+        ("Zeta", "Z-1"),
+    ]
+    a1, a2, a3, a4, z1 = rows
+    assert (a1.profiles, a1.calibrations, a1.last_station, a1.last_verdict) == (4, 2, "line-2", "PASS")  # s5, newest
+    assert (a2.calibrations, a2.last_verdict) == (1, "FAIL") and a3.last_verdict == "PASS"
+    assert (a4.profiles, a4.last_verdict) == (2, None)  # stored, not judged
+    assert (z1.profiles, z1.last_station) == (1, "st") and len(a1.last_at) >= 19
+    assert [r.serial for r in store.lens_summaries("Zeta", "8mm")] == ["Z-1"]
+
+
 def test_lens_history_per_focus_with_verdicts(store):
     lens = store.find_lens("A-1")[0]
     hist = store.lens_history(lens)
