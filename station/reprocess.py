@@ -33,7 +33,7 @@ import hashlib
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -97,7 +97,12 @@ def _software_versions() -> dict[str, str]:
     import numpy
     import scipy
 
-    return {"harp-station": __version__, "numpy": numpy.__version__, "scipy": scipy.__version__, "opencv": cv2.__version__}
+    return {
+        "harp-station": __version__,
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "opencv": cv2.__version__,
+    }
 
 
 # --------------------------------------------------- the session, read only
@@ -198,7 +203,9 @@ class ArchivedSession:
         return OldProfile(profile, stored, verdict, software)
 
 
-def plan_jobs(session_dirs: Iterable[str | os.PathLike[str]], spec: str | None = None) -> tuple[list[FocusJob], dict[str, str]]:
+def plan_jobs(
+    session_dirs: Iterable[str | os.PathLike[str]], spec: str | None = None
+) -> tuple[list[FocusJob], dict[str, str]]:
     """The jobs of some session directories — one per focus setting the session stored a profile
     for — and ``{session_dir: failure}`` for those that cannot be re-processed at all."""
     jobs: list[FocusJob] = []
@@ -312,7 +319,9 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         lens=cfg.lens,
         camera=cfg.camera_body,
         focus=focus,
-        selection=None if cal.selection is not None else {"reason": "given" if job.spec else "pipeline.model of the configuration"},
+        selection=None
+        if cal.selection is not None
+        else {"reason": "given" if job.spec else "pipeline.model of the configuration"},
     )
     profile = profile.with_(
         optics=cfg.optics,
@@ -370,13 +379,35 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
             try:
                 r = fut.result()
             except Exception as exc:  # BrokenProcessPool: a worker died (killed, out of memory)
-                r = FocusResult(jobs[i], None, None, None, f"worker process failed: {type(exc).__name__}: {_one_line(exc)}")
+                r = FocusResult(
+                    jobs[i], None, None, None, f"worker process failed: {type(exc).__name__}: {_one_line(exc)}"
+                )
             results[i] = r
             on_result(r)
     return [results[i] for i in range(len(jobs))]
 
 
+def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:
+    """Refuse at once (:class:`ReprocessError`, one line) a scheduler address that is not
+    ``tcp://HOST:PORT`` or where nothing listens, instead of Dask's retries until its timeout."""
+    import socket
+    from urllib.parse import urlsplit
+
+    u = urlsplit(scheduler)
+    try:
+        host, port = u.hostname, u.port
+    except ValueError:
+        host, port = None, None
+    if u.scheme != "tcp" or not host or port is None:
+        raise ReprocessError(f"--scheduler {scheduler}: give the Dask scheduler's address as tcp://HOST:PORT")
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        raise ReprocessError(f"cannot reach the Dask scheduler at {scheduler}: {exc.strerror or exc}") from None
+
+
 def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
+    probe_scheduler(scheduler)
     from dask.distributed import Client, as_completed
 
     try:
@@ -392,7 +423,9 @@ def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[Foc
             try:
                 r = fut.result()
             except Exception as exc:  # KilledWorker, a worker that cannot import the station, ...
-                r = FocusResult(jobs[i], None, None, None, f"Dask worker failed: {type(exc).__name__}: {_one_line(exc)}")
+                r = FocusResult(
+                    jobs[i], None, None, None, f"Dask worker failed: {type(exc).__name__}: {_one_line(exc)}"
+                )
             results[i] = r
             on_result(r)
         return [results[i] for i in range(len(jobs))]

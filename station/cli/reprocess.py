@@ -64,7 +64,15 @@ def _error(msg: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from station.config import ConfigError
-    from station.reprocess import ArchivedSession, FocusResult, ReprocessError, finish_session, plan_jobs, run_jobs
+    from station.reprocess import (
+        ArchivedSession,
+        FocusResult,
+        ReprocessError,
+        finish_session,
+        plan_jobs,
+        probe_scheduler,
+        run_jobs,
+    )
     from station.store import StoreError
     from station.store.resolve import location_from_args, open_store
 
@@ -86,6 +94,13 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         _error(f"{missing[0]}: no such session directory")
         return EXIT_ERROR
+
+    if args.scheduler is not None:  # before the store is opened: a typo creates no store
+        try:
+            probe_scheduler(args.scheduler)
+        except ReprocessError as exc:
+            _error(str(exc))
+            return EXIT_ERROR
 
     jobs, failed = plan_jobs(args.sessions, args.model)
     for msg in failed.values():
@@ -215,7 +230,17 @@ def _print_table(doc: dict) -> None:
         return f"{f(o.get(key), nd)} → {f(n.get(key), nd)}"
 
     t = Table(title=f"re-processed on {doc['where']}: old → new (px)")
-    for col in ("session", "focus", "profile", "model", "fit d", "holdout d", "distortion max", "uncertainty rms", "verdict"):
+    for col in (
+        "session",
+        "focus",
+        "profile",
+        "model",
+        "fit d",
+        "holdout d",
+        "distortion max",
+        "uncertainty rms",
+        "verdict",
+    ):
         t.add_column(col, justify="left" if col in ("session", "model", "verdict", "profile") else "right")
     for s in doc["sessions"]:
         name = Path(s["session"]).name
@@ -227,7 +252,9 @@ def _print_table(doc: dict) -> None:
                 t.add_row(name, f"{e['focus']:g}" if e["focus"] is not None else "", "", "", "", "", "", "", "failed")
                 continue
             ids = f"#{o['profile_id'] if o['profile_id'] is not None else '?'} → #{n['profile_id'] if n['profile_id'] is not None else '–'}"
-            model = o.get("model", "?") if o.get("model") == n.get("model") else f"{o.get('model', '?')} → {n.get('model')}"
+            model = (
+                o.get("model", "?") if o.get("model") == n.get("model") else f"{o.get('model', '?')} → {n.get('model')}"
+            )
             t.add_row(
                 name,
                 f"{e['focus']:g}",

@@ -86,7 +86,9 @@ def control_chart(
         return x0 + (i + 0.5) * (x1 - x0) / max(n, 1)
 
     for v in (lo + 0.08 * span / 1.16, hi - 0.08 * span / 1.16):
-        out.append(f'<text x="{x0 - 6}" y="{Y(v) + 4:.1f}" font-size="11" text-anchor="end" fill="{MUTED}">{_fmt(v)}</text>')
+        out.append(
+            f'<text x="{x0 - 6}" y="{Y(v) + 4:.1f}" font-size="11" text-anchor="end" fill="{MUTED}">{_fmt(v)}</text>'
+        )
     out.append(
         f'<text x="12" y="{(y0 + y1) / 2:.1f}" font-size="11" fill="{MUTED}" '
         f'transform="rotate(-90 12 {(y0 + y1) / 2:.1f})" text-anchor="middle">{_esc(unit)}</text>'
@@ -100,13 +102,17 @@ def control_chart(
             + f' data-value="{v:.6g}"/>'
         )
         label = {"mean": "mean", "lcl": "−3σ", "ucl": "+3σ"}[name]
-        out.append(f'<text x="{x1 - 4}" y="{Y(v) - 3:.1f}" font-size="10" text-anchor="end" fill="{colour}">{label} {_fmt(v)}</text>')
+        out.append(
+            f'<text x="{x1 - 4}" y="{Y(v) - 3:.1f}" font-size="10" text-anchor="end" fill="{colour}">{label} {_fmt(v)}</text>'
+        )
     prev = None
     for i, p in enumerate(points):
         if p.value is None or not math.isfinite(p.value):
             continue
         if prev is not None:
-            out.append(f'<line x1="{prev[0]:.1f}" y1="{prev[1]:.1f}" x2="{X(i):.1f}" y2="{Y(p.value):.1f}" stroke="{LINE}"/>')
+            out.append(
+                f'<line x1="{prev[0]:.1f}" y1="{prev[1]:.1f}" x2="{X(i):.1f}" y2="{Y(p.value):.1f}" stroke="{LINE}"/>'
+            )
         prev = (X(i), Y(p.value))
     step = max(1, math.ceil(n / 24))
     for i, p in enumerate(points):
@@ -126,7 +132,9 @@ def control_chart(
             f"{' — outside the control limits' if outside else ''}{f' ({p.verdict})' if p.verdict else ''}</title></circle>"
         )
         if outside:
-            mark += f'<circle cx="{X(i):.1f}" cy="{Y(p.value):.1f}" r="7.5" fill="none" stroke="{BAD}" stroke-width="1.5"/>'
+            mark += (
+                f'<circle cx="{X(i):.1f}" cy="{Y(p.value):.1f}" r="7.5" fill="none" stroke="{BAD}" stroke-width="1.5"/>'
+            )
         out.append(f'<a href="{_esc(p.href)}">{mark}</a>' if p.href else mark)
     out.append("</svg>")
     return Markup("".join(out))
@@ -137,7 +145,9 @@ def verdict_bars(days: Sequence[tuple[str, int, int, int]], *, width: int = 760,
     ``days`` is ``(day, passed, failed, unjudged)``, oldest first."""
     pad_l, pad_r, pad_t, pad_b = 40, 10, 10, 34
     x0, x1, y0, y1 = pad_l, width - pad_r, pad_t, height - pad_b
-    out = [f'<svg class="chart days" viewBox="0 0 {width} {height}" width="100%" role="img" aria-label="calibrations per day" xmlns="http://www.w3.org/2000/svg">']
+    out = [
+        f'<svg class="chart days" viewBox="0 0 {width} {height}" width="100%" role="img" aria-label="calibrations per day" xmlns="http://www.w3.org/2000/svg">'
+    ]
     out.append(f'<line x1="{x0}" x2="{x1}" y1="{y1}" y2="{y1}" stroke="{LINE}"/>')
     top = max((p + f + u for _, p, f, u in days), default=0)
     if not top:
@@ -159,6 +169,8 @@ def verdict_bars(days: Sequence[tuple[str, int, int, int]], *, width: int = 760,
                 f'<rect class="bar {cls}" x="{x:.1f}" y="{y:.1f}" width="{0.7 * bw:.1f}" height="{h:.1f}" fill="{colour}"'
                 f' data-day="{_esc(day)}" data-count="{count}"><title>{_esc(day)}: {count} {cls}</title></rect>'
             )
-        out.append(f'<text x="{x + 0.35 * bw:.1f}" y="{y1 + 14}" font-size="10" text-anchor="middle" fill="{MUTED}">{_esc(day[5:])}</text>')
+        out.append(
+            f'<text x="{x + 0.35 * bw:.1f}" y="{y1 + 14}" font-size="10" text-anchor="middle" fill="{MUTED}">{_esc(day[5:])}</text>'
+        )
     out.append("</svg>")
     return Markup("".join(out))

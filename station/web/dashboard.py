@@ -38,6 +38,7 @@ from station.web import dashboard_data as data
 from station.web.charts import ChartPoint, control_chart, verdict_bars
 from station.web.profile_files import ProfileFiles, Served, Unavailable
 
+
 def _store(request: Request) -> Any:
     return request.app.state.store
 

@@ -105,7 +105,11 @@ def _shared_serials(store: Any) -> set[str]:
 
 def find_lens(store: Any, serial: str, maker: str | None = None, model: str | None = None) -> tuple[int, str, str, str]:
     """The lens with this exact serial number (and maker / model, when given)."""
-    hits = [l for l in store.lenses() if l[3] == serial and (maker is None or l[1] == maker) and (model is None or l[2] == model)]
+    hits = [
+        l
+        for l in store.lenses()
+        if l[3] == serial and (maker is None or l[1] == maker) and (model is None or l[2] == model)
+    ]
     if not hits:
         raise NotFound(f"no lens with serial {serial!r} in the store")
     if len(hits) > 1:
@@ -261,7 +265,9 @@ def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
                         "verdict": t.verdict,
                         "distortion_max": _num(t.distortion_max),
                         "holdout_d": _num(t.holdout_d),
-                        "href": lens_href(t.serial, maker if t.serial in shared else None, model if t.serial in shared else None),
+                        "href": lens_href(
+                            t.serial, maker if t.serial in shared else None, model if t.serial in shared else None
+                        ),
                     }
                     for t in pts
                 ],

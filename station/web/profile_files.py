@@ -151,7 +151,11 @@ class ProfileFiles:
         f = session_focus_index(p)
         if f is None:
             unc = p.merit.field_uncertainty
-            figures = f" (RMS {unc.rms:.4f} px, max {unc.max:.4f} px)" if unc and unc.rms is not None and unc.max is not None else ""
+            figures = (
+                f" (RMS {unc.rms:.4f} px, max {unc.max:.4f} px)"
+                if unc and unc.rms is not None and unc.max is not None
+                else ""
+            )
             raise Unavailable(f"the field-uncertainty map of profile #{p.id} is not kept{figures}")
         root = Path(str(p.provenance.session_dir))
         png = root / "report" / f"uncertainty_f{f}.png"
@@ -182,7 +186,9 @@ class ProfileFiles:
             try:
                 ex = write_export(fmt, export_source(p))
             except ValueError as exc:
-                raise Unavailable(f"profile #{p.id} cannot be exported as {fmt}: {' '.join(str(exc).split())}") from None
+                raise Unavailable(
+                    f"profile #{p.id} cannot be exported as {fmt}: {' '.join(str(exc).split())}"
+                ) from None
             serial = p.lens.serial if p.lens is not None else "lens"
             safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in serial)
             name = f"{safe}-focus{p.focus:g}-profile{p.id}{FORMATS[ex.format].suffix}"

@@ -1,0 +1,217 @@
+"""``harp reprocess`` on a real archived session: on a local process pool and on a real Dask cluster
+(``LocalCluster`` with two worker processes), into a real SQLite file and a real PostgreSQL server.
+
+The archive is one real session of the small demo station (tests/station/archive.py). The pipeline
+has not changed since it was recorded, so its re-processed profiles must be the profiles the
+session itself stored — the executor's fit is the independent reference — and the same on both
+runners. A copy of the session with one damaged frame must be reported (one line, exit 2) while
+the good session is re-processed and stored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+import uuid
+
+import numpy as np
+import pytest
+
+from station import __version__
+from station.cli import main
+from station.store import ProfileStore
+
+
+def _main(argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def _damage_frames(session):
+    """One pixel changed in the first frame of each focus setting: the manifest's SHA-256 no longer
+    matches (each job fails at its first frame)."""
+    frames = [sorted((session / "frames").glob(f"f{f}_o0_*.pgm"))[0] for f in (0, 1)]
+    for frame in frames:
+        data = bytearray(frame.read_bytes())
+        data[-100] ^= 0x55
+        frame.write_bytes(bytes(data))
+    return frames
+
+
+@pytest.fixture(scope="module")
+def runs(factory_archive, tmp_path_factory, postgres):
+    """The same archive re-processed twice: on the local pool (into the archive's SQLite store, a
+    damaged copy of the session beside it) and on a Dask LocalCluster (into a PostgreSQL database)."""
+    from dask.distributed import LocalCluster
+
+    root = tmp_path_factory.mktemp("reprocess") / "archive"
+    shutil.copytree(factory_archive.root, root, symlinks=True)
+    good, sqlite_store = root / "sessions" / "s1", root / "profiles.sqlite"
+    bad = root / "sessions" / "s1-damaged"
+    shutil.copytree(good, bad)
+    damaged = _damage_frames(bad)
+    with ProfileStore(sqlite_store, create=False) as st:
+        before = {p.id: p for p in st.profiles()}
+    local = _main(["reprocess", good, bad, "--workers", "2", "--store", sqlite_store])
+
+    pg = postgres.create_database(f"reprocess_{uuid.uuid4().hex[:12]}")
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+    ) as cluster:
+        dask = _main(["reprocess", good, "--scheduler", cluster.scheduler_address, "--store", pg, "--json"])
+    return {
+        "good": good,
+        "bad": bad,
+        "damaged": damaged,
+        "before": before,
+        "sqlite": sqlite_store,
+        "pg": pg,
+        "local": local,
+        "dask": dask,
+    }
+
+
+def _reprocessed(store_where):
+    with ProfileStore(store_where, create=False) as st:
+        return {p.focus: p for p in st.profiles() if "#reprocess-" in (p.provenance.session_dir or "")}
+
+
+def _field(p, n=9):
+    """The profile's correction at an n x n grid over its image (px), from its stored model."""
+    xs, ys = np.meshgrid(np.linspace(0, p.width - 1, n), np.linspace(0, p.height - 1, n))
+    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    return np.asarray(p.model.undistort_points(pts))
+
+
+def test_local_pool_reports_the_damaged_session_and_stores_the_good_one(runs):
+    code, out, err = runs["local"]
+    assert code == 2
+    lines = [l for l in err.splitlines() if l.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("harp reprocess: ") and "checksum does not match" in lines[0]
+    assert all(str(frame) in lines[0] for frame in runs["damaged"])
+    assert "Traceback" not in out + err
+    new = _reprocessed(runs["sqlite"])
+    assert sorted(new) == [0.0, 1.0]  # both focus settings of the good session, none of the damaged one
+    for p in new.values():
+        assert p.provenance.extra["reprocess"]["session"] == str(runs["good"])
+    assert "1 session(s) re-processed, 1 failed" in out
+
+
+def test_reprocessed_profiles_are_the_sessions_own_and_keep_the_old_ones(runs):
+    before = runs["before"]
+    with ProfileStore(runs["sqlite"], create=False) as st:
+        after = {p.id: p for p in st.profiles()}
+    assert set(before) <= set(after)  # nothing replaced: the old profiles stay
+    for p in before.values():
+        assert after[p.id].model.to_dict() == p.model.to_dict()
+    new = _reprocessed(runs["sqlite"])
+    old_by_focus = {p.focus: p for p in before.values()}
+    for f, p in new.items():
+        old = old_by_focus[f]
+        # the same frames through the same pipeline: the executor's fit, to rounding
+        assert np.abs(_field(p) - _field(old)).max() < 1e-9
+        assert p.merit.holdout.d == pytest.approx(old.merit.holdout.d, abs=1e-9)
+        assert p.qa.verdict == old.qa.verdict == "PASS"
+
+
+def test_provenance_names_the_session_the_old_profile_and_the_versions(runs):
+    import numpy
+    import scipy
+
+    before = {p.focus: p for p in runs["before"].values()}
+    for f, p in _reprocessed(runs["sqlite"]).items():
+        r = p.provenance.extra["reprocess"]
+        old = before[f]
+        assert r["session"] == str(runs["good"])
+        assert r["old_profile_id"] == old.id
+        assert r["old_verdict"] == "PASS"
+        assert r["old_software"] == old.provenance.software
+        assert r["versions"]["harp-station"] == __version__
+        assert r["versions"]["numpy"] == numpy.__version__ and r["versions"]["scipy"] == scipy.__version__
+        assert p.provenance.session_dir == f"{old.provenance.session_dir}#reprocess-{__version__}"
+        assert p.provenance.command == "harp reprocess"
+
+
+def test_old_and_new_figures_are_printed(runs):
+    _code, out, _err = runs["local"]
+    rows = [l for l in out.splitlines() if l.startswith("│ s1 ")]
+    assert len(rows) == 2, out  # the good session's two focus settings ...
+    assert any(l.startswith("│ s1-damaged") and "failed" in l for l in out.splitlines())  # ... and the damaged one
+    new = _reprocessed(runs["sqlite"])
+    for old in runs["before"].values():
+        row = next(r for r in rows if f" {old.focus:g} │" in r)
+        cells = [c.strip() for c in row.strip("│").split("│")]
+        assert cells[2] == f"#{old.id} → #{new[old.focus].id}"
+        assert cells[5] == f"{old.merit.holdout.d:.4f} → {new[old.focus].merit.holdout.d:.4f}"
+        assert cells[8] == "PASS → PASS"
+
+
+def test_dask_cluster_gives_the_same_profiles_as_the_local_pool(runs):
+    code, out, err = runs["dask"]
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["reprocessed"] == 1 and doc["failed"] == 0
+    # the jobs ran on the cluster's worker processes, not here
+    ran_on = {e["worker"] for s in doc["sessions"] for e in s["focus"]}
+    assert ran_on and all(
+        w.split(":")[-1].isdigit() and int(w.split(":")[-1]) != __import__("os").getpid() for w in ran_on
+    )
+    local, dask = _reprocessed(runs["sqlite"]), _reprocessed(runs["pg"])
+    assert sorted(dask) == sorted(local) == [0.0, 1.0]
+    for f in local:
+        a, b = local[f], dask[f]
+        assert a.model.to_dict() == b.model.to_dict()  # identical, not merely close
+        assert a.merit.to_dict() == b.merit.to_dict()
+        assert a.qa.to_dict() == b.qa.to_dict()
+        # the PostgreSQL store does not hold the session's old profile: named by the session only
+        assert b.provenance.extra["reprocess"]["old_profile_id"] is None
+        assert b.provenance.extra["reprocess"]["session"] == str(runs["good"])
+    for s in doc["sessions"]:
+        for e in s["focus"]:
+            assert e["new"]["profile_id"] == dask[e["focus"]].id
+            assert e["new"]["holdout_d_px"] == dask[e["focus"]].merit.holdout.d
+
+
+# ------------------------------------------------------------------ faults (no re-processing)
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--workers", "0"], "--workers must be at least 1"),
+        (["--model", "nonsense"], "--model nonsense"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:9"], "--workers is for the local pool"),
+    ],
+)
+def test_bad_arguments_are_one_line_and_exit_2(factory_archive, argv, needle):
+    code, out, err = _main(["reprocess", factory_archive.session, *argv])
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and needle in err
+
+
+def test_what_is_not_a_session_is_reported_and_nothing_is_stored(tmp_path):
+    (tmp_path / "empty").mkdir()
+    code, out, err = _main(["reprocess", tmp_path / "empty", "--store", tmp_path / "st.sqlite"])
+    assert code == 2
+    assert "not a session directory" in err and str(tmp_path / "empty") in err and err.count("\n") == 1
+    assert not (tmp_path / "st.sqlite").exists()
+    code, _out, err = _main(["reprocess", tmp_path / "missing"])
+    assert code == 2 and "no such session directory" in err
+
+
+@pytest.mark.parametrize(
+    ("address", "needle"),
+    [
+        ("tcp://127.0.0.1:9", "cannot reach the Dask scheduler at tcp://127.0.0.1:9"),
+        ("127.0.0.1:8786", "give the Dask scheduler's address as tcp://HOST:PORT"),
+    ],
+)
+def test_a_scheduler_that_cannot_be_used_is_one_line_and_creates_no_store(factory_archive, tmp_path, address, needle):
+    store = tmp_path / "new.sqlite"
+    code, out, err = _main(["reprocess", factory_archive.session, "--scheduler", address, "--store", store])
+    assert code == 2 and out == ""
+    assert err.startswith("harp reprocess: ") and needle in err and err.count("\n") == 1
+    assert not store.exists()
