@@ -1,0 +1,74 @@
+"""``harp serve``: the whole process on a real store (served until Ctrl-C), the token off localhost, and
+the errors that are one line and exit 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+from station.cli import main
+
+REPO_ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+
+def _get(url, token=None):
+    req = urllib.request.Request(url)
+    if token:
+        req.add_header("Authorization", f"Bearer {token}")
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read()
+
+
+def test_serve_off_localhost_needs_the_token_and_stops_on_ctrl_c(factory_archive):
+    cmd = [sys.executable, "-m", "station.cli", "serve", "--config", str(factory_archive.config)]
+    cmd += ["--host", "0.0.0.0", "--port", "0", "--token", "t0ken-for-the-test"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=REPO_ENV)
+    try:
+        line = proc.stderr.readline()
+        m = re.match(r"serving on http://0\.0\.0\.0:(\d+)/\?token=t0ken-for-the-test \(Ctrl-C to stop\)$", line.strip())
+        assert m, line
+        base = f"http://127.0.0.1:{m.group(1)}"
+        status, body = _get(base + "/api/lenses")
+        assert status == 401 and b"needs its token" in body
+        status, body = _get(base + "/api/lenses", token="t0ken-for-the-test")
+        assert status == 200
+        assert [l["serial"] for l in json.loads(body)["lenses"]] == [factory_archive.serial]
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            code = proc.wait(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    rest = proc.stderr.read()
+    proc.stderr.close()
+    assert code == 130 and rest.strip() == "harp serve: stopped"
+
+
+def test_any_other_address_without_a_token_is_refused(factory_archive, capsys):
+    code = main(["serve", "--store", str(factory_archive.store), "--host", "0.0.0.0"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith("harp serve: host '0.0.0.0' makes the page reachable from other machines: give a token")
+
+
+def test_a_store_that_is_not_there_is_one_line_and_is_not_created(tmp_path, capsys):
+    code = main(["serve", "--store", str(tmp_path / "none.sqlite")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and str(tmp_path / "none.sqlite") in err
+    assert not (tmp_path / "none.sqlite").exists()
+    started = time.time()
+    code = main(["serve", "--store", "postgresql://harp@127.0.0.1:9/nowhere"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "127.0.0.1" in err and "Traceback" not in err
+    assert time.time() - started < 30

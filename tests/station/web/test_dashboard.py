@@ -1,0 +1,254 @@
+"""The QA dashboard (``harp serve``) over real HTTP (uvicorn on 127.0.0.1), on a real SQLite file and a
+real PostgreSQL server: its JSON endpoints, its control limits, the files it serves and the token.
+
+What the pages must show is computed here from the plan of the store (tests/station/web/dashboard_store.py)
+and from the stored profiles, not from the dashboard's code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import urllib.error
+import urllib.request
+import uuid
+from datetime import UTC, datetime
+
+import cv2
+import numpy as np
+import pytest
+
+from station.store import ProfileStore
+from station.web import start
+from station.web.dashboard import dashboard_app
+from tests.station.web.dashboard_store import LENSES, copy_into
+
+MAKER, MODEL = "Simulated Optics", "SIM-12mm"
+
+
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def served(request, dashboard):
+    """The dashboard on both backends: the shared SQLite one, and the same profiles copied into a
+    PostgreSQL database."""
+    srv, store, stored, path = dashboard
+    if request.param == "sqlite":
+        yield srv, store, stored
+        return
+    url = request.getfixturevalue("postgres").create_database(f"dash_{uuid.uuid4().hex[:12]}")
+    copy_into(path, url)
+    with ProfileStore(url, create=False) as pg, start(dashboard_app(pg)) as pg_srv:
+        yield pg_srv, pg, stored
+
+
+@pytest.fixture
+def sqlite_served(dashboard):
+    srv, store, stored, _path = dashboard
+    return srv, store, stored
+
+
+def _get(srv, path, token=None):
+    req = urllib.request.Request(srv.base.rstrip("/") + path)
+    if token:
+        req.add_header("Authorization", f"Bearer {token}")
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, r.headers, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.headers, e.read()
+
+
+def _json(srv, path):
+    status, _h, body = _get(srv, path)
+    return status, json.loads(body)
+
+
+def _by_serial(store):
+    return {serial: lens_id for lens_id, _mk, _md, serial in store.lenses()}
+
+
+# ------------------------------------------------------------------ JSON
+def test_api_lenses_lists_every_lens_and_the_pass_fail_counts(served):
+    srv, store, stored = served
+    status, doc = _json(srv, "/api/lenses")
+    assert status == 200
+    assert sorted(l["serial"] for l in doc["lenses"]) == sorted(stored)
+    fails = {s for s, _st, _d, hold in LENSES if hold > 10}
+    for l in doc["lenses"]:
+        assert l["profiles"] == 2 and l["calibrations"] == 1
+        assert l["last_verdict"] == ("FAIL" if l["serial"] in fails else "PASS")
+        assert l["api"] == f"/api/lenses/{l['serial']}"
+    (m,) = doc["models"]
+    assert (m["maker"], m["model"]) == (MAKER, MODEL)
+    assert (m["lenses"], m["calibrations"], m["passed"], m["failed"]) == (6, 6, 5, 1)
+    today = datetime.now(UTC).strftime("%Y-%m-%d")
+    stations = {"line-1": [0, 0], "line-2": [0, 0]}  # the real session ran on line-1
+    stations["line-1"][0] += 1
+    for _serial, station, _d, hold in LENSES:
+        stations[station][1 if hold > 10 else 0] += 1
+    got = {c["station"]: [c["passed"], c["failed"]] for c in doc["counts"]}
+    assert got == stations
+    assert {c["day"] for c in doc["counts"]} == {today}
+
+
+def test_api_lens_has_every_profile_check_plot_and_download(served):
+    srv, store, stored = served
+    status, doc = _json(srv, "/api/lenses/DEMO-0001")
+    assert status == 200
+    assert (doc["maker"], doc["model"], doc["serial"]) == (MAKER, MODEL, "DEMO-0001")
+    real = {p.focus: p for p in stored["DEMO-0001"]}
+    assert [f["focus"] for f in doc["focus"]] == sorted(real)
+    from pipeline.exports.registry import FORMATS
+
+    for f in doc["focus"]:
+        (p,) = f["profiles"]
+        want = real[f["focus"]]
+        assert p["current"] is True and p["verdict"] == want.qa.verdict == "PASS"
+        assert p["figures"]["holdout_d_px"] == want.merit.holdout.d
+        assert {c["name"]: c["value"] for c in p["checks"]} == {c.name: c.value for c in want.qa.checks}
+        assert {c["name"] for c in p["checks"]} == {"holdout_d", "distortion_max"}
+        assert [d["format"] for d in p["downloads"]] == list(FORMATS)
+        assert p["plots"] == {
+            "field": f"/profiles/{p['id']}/field.png",
+            "uncertainty": f"/profiles/{p['id']}/uncertainty.png",
+        }
+    status, err = _json(srv, "/api/lenses/NO-SUCH-LENS")
+    assert status == 404 and err == {"error": "no lens with serial 'NO-SUCH-LENS' in the store"}
+
+
+def test_api_profile_is_the_stored_profile(served):
+    srv, store, stored = served
+    p = next(p for p in store.profiles() if p.lens.serial == "DEMO-0003" and p.focus == 1.0)
+    status, doc = _json(srv, f"/api/profiles/{p.id}")
+    assert status == 200
+    assert doc["distortion_model"] == json.loads(json.dumps(p.model.to_dict()))
+    assert doc["lens"] == {"maker": MAKER, "model": MODEL, "serial": "DEMO-0003"}
+    assert doc["station"] == "line-2" and doc["focus"] == 1.0
+    assert doc["merit"]["holdout"]["d"] == pytest.approx(p.merit.holdout.d, rel=1e-12)
+    status, err = _json(srv, "/api/profiles/99999")
+    assert status == 404 and err["error"] == "no profile #99999 in the store"
+
+
+def _limits(values):
+    v = np.asarray(values, float)
+    m, s = v.mean(), v.std(ddof=1)
+    return m - 3 * s, m + 3 * s
+
+
+def test_model_control_limits_are_mean_3_sigma_of_the_passed_lenses(served):
+    srv, store, stored = served
+    status, doc = _json(srv, f"/api/model?maker={MAKER.replace(' ', '+')}&model={MODEL}")
+    assert status == 200
+    fails = {s for s, _st, _d, hold in LENSES if hold > 10}
+    for f in doc["focus"]:
+        newest = {s: next(p for p in ps if p.focus == f["focus"]) for s, ps in stored.items()}
+        passed = [p for s, p in newest.items() if s not in fails]
+        assert all(p.qa.verdict == "PASS" for p in passed) and all(newest[s].qa.verdict == "FAIL" for s in fails)
+        lo, hi = _limits([p.merit.holdout.d for p in passed])
+        lim = f["figures"]["holdout_d"]["limits"]
+        assert lim["n"] == 5
+        assert lim["lower"] == pytest.approx(lo, rel=1e-9) and lim["upper"] == pytest.approx(hi, rel=1e-9)
+        assert f["figures"]["holdout_d"]["outside"] == sorted(fails)  # the failed lens is out of control
+        lo, hi = _limits([p.qa.metrics["distortion_max_px"] for p in passed])
+        lim = f["figures"]["distortion_max"]["limits"]
+        assert lim["lower"] == pytest.approx(lo, rel=1e-9) and lim["upper"] == pytest.approx(hi, rel=1e-9)
+        # every lens once, in calibration order (the order they were stored)
+        assert [p["serial"] for p in f["points"]] == list(stored)
+    status, err = _json(srv, "/api/model?maker=Nobody&model=X")
+    assert status == 404 and "no lens model 'Nobody' 'X'" in err["error"]
+
+
+# ------------------------------------------------------------------ files
+def _png(body):
+    assert body[:8] == b"\x89PNG\r\n\x1a\n"
+    img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None and img.shape[0] > 200 and img.shape[1] > 200
+    return img
+
+
+def test_plots_come_from_what_the_store_references(sqlite_served):
+    srv, store, stored = sqlite_served
+    real = stored["DEMO-0001"][0]
+    ids = _by_serial(store)
+    pid = next(p.id for p in store.profiles(ids["DEMO-0001"]) if p.focus == real.focus)
+    status, h, body = _get(srv, f"/profiles/{pid}/field.png")
+    assert status == 200 and h["content-type"] == "image/png" and h["x-harp-source"] == "rendered from the stored model"
+    _png(body)
+    # the session kept its bootstrap map (SHA-256 checked against its manifest): the plot is made from it
+    status, h, body = _get(srv, f"/profiles/{pid}/uncertainty.png")
+    assert status == 200 and h["x-harp-source"] == "rendered from the session's uncertainty map"
+    _png(body)
+    # a lens whose session directory is not on this machine: the field from its stored model, no uncertainty map
+    other = next(p.id for p in store.profiles(ids["DEMO-0002"]))
+    assert _get(srv, f"/profiles/{other}/field.png")[0] == 200
+    status, _h, body = _get(srv, f"/profiles/{other}/uncertainty.png")
+    assert status == 404 and json.loads(body)["error"].startswith(
+        f"the field-uncertainty map of profile #{other} is not kept"
+    )
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/profiles/{pid}/export/..%2F..%2F..%2Fetc%2Fpasswd",
+        "/profiles/{pid}/export/%2Fetc%2Fpasswd",
+        "/profiles/{pid}/../../etc/passwd",
+        "/profiles/99999/field.png",
+        "/static/base/..%2F..%2F..%2F..%2Fetc%2Fpasswd",
+        "/profiles/{pid}/field.png?path=/etc/passwd",
+    ],
+)
+def test_no_path_is_taken_from_the_request(sqlite_served, path):
+    srv, store, _stored = sqlite_served
+    pid = store.profiles()[0].id
+    status, _h, body = _get(srv, path.format(pid=pid))
+    assert b"root:" not in body
+    if "field.png?path" in path:
+        assert status == 200 and body[:4] == b"\x89PNG"  # the query is ignored: the profile's own plot
+    else:
+        assert status == 404
+
+
+def test_downloads_load_in_opencv(sqlite_served, tmp_path):
+    from tests.pipeline.export_support import compare_map, opencv_maps
+
+    srv, store, _stored = sqlite_served
+    p = next(p for p in store.profiles() if p.lens.serial == "DEMO-0001" and p.focus == 0.0)
+    status, h, body = _get(srv, f"/profiles/{p.id}/export/opencv")
+    assert status == 200 and h["content-disposition"] == f'attachment; filename="DEMO-0001-focus0-profile{p.id}.yml"'
+    (tmp_path / "c.yml").write_bytes(body)
+    mx, my, kind, k = opencv_maps(tmp_path / "c.yml", p.width, p.height)
+    assert kind == "pinhole" and k.shape == (3, 3)
+    rms, worst, _n = compare_map(p.model, mx, my, step=4)
+    assert worst < 0.01  # OpenCV's own undistortion of the download is the stored correction, to the bar
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/maps")
+    with np.load(io.BytesIO(body)) as z:
+        map_x, map_y = z["map_x"], z["map_y"]
+    assert map_x.shape == map_y.shape == (p.height, p.width) and map_x.dtype == map_y.dtype == np.float32
+    img = np.tile(np.arange(p.width, dtype=np.float32), (p.height, 1))
+    fixed = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR)  # cv2.remap reads the download as it is
+    assert np.allclose(fixed[p.height // 2, 10 : p.width - 10], map_x[p.height // 2, 10 : p.width - 10], atol=1e-3)
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/nonsense")
+    assert status == 404 and json.loads(body)["error"].startswith("unknown export format 'nonsense'")
+
+
+def test_the_dashboard_only_reads(dashboard):
+    srv, store, _stored, path = dashboard
+    before = hashlib.sha256(path.read_bytes()).hexdigest()
+    req = urllib.request.Request(srv.base + "api/lenses", method="POST", data=b"{}")
+    with pytest.raises(urllib.error.HTTPError) as e:
+        urllib.request.urlopen(req, timeout=30)
+    assert e.value.code == 405
+    for p in ("/", "/lenses/DEMO-0006", f"/model?maker={MAKER.replace(' ', '+')}&model={MODEL}", "/api/lenses"):
+        assert _get(srv, p)[0] == 200
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == before
+
+
+def test_a_token_is_required_off_localhost(dashboard):
+    path = dashboard[3]
+    with ProfileStore(path, create=False) as store, start(dashboard_app(store), token="s3cret-token") as srv:
+        status, _h, body = _get(srv, "/api/lenses")
+        assert status == 401 and b"needs its token" in body
+        assert _get(srv, "/api/lenses", token="wrong")[0] == 401
+        status, _h, body = _get(srv, "/api/lenses", token="s3cret-token")
+        assert status == 200 and len(json.loads(body)["lenses"]) == 6
