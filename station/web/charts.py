@@ -93,9 +93,20 @@ def control_chart(
         f'<text x="12" y="{(y0 + y1) / 2:.1f}" font-size="11" fill="{MUTED}" '
         f'transform="rotate(-90 12 {(y0 + y1) / 2:.1f})" text-anchor="middle">{_esc(unit)}</text>'
     )
-    for name, v, colour, dash in (("mean", mean, ACCENT, ""), ("lcl", lower, WARN, "5 3"), ("ucl", upper, WARN, "5 3")):
-        if v is None or not math.isfinite(v):
-            continue
+    limits = [
+        (name, v, colour, dash)
+        for name, v, colour, dash in (
+            ("ucl", upper, WARN, "5 3"),
+            ("mean", mean, ACCENT, ""),
+            ("lcl", lower, WARN, "5 3"),
+        )
+        if v is not None and math.isfinite(v)
+    ]
+    label_y: list[float] = []  # top to bottom, at least 11 px apart: limits close together stay readable
+    for _name, v, _c, _d in limits:
+        y = Y(v) - 3
+        label_y.append(y if not label_y else max(y, label_y[-1] + 11))
+    for (name, v, colour, dash), ly in zip(limits, label_y):
         out.append(
             f'<line class="limit {name}" x1="{x0}" x2="{x1}" y1="{Y(v):.1f}" y2="{Y(v):.1f}" stroke="{colour}"'
             + (f' stroke-dasharray="{dash}"' if dash else "")
@@ -103,7 +114,7 @@ def control_chart(
         )
         label = {"mean": "mean", "lcl": "−3σ", "ucl": "+3σ"}[name]
         out.append(
-            f'<text x="{x1 - 4}" y="{Y(v) - 3:.1f}" font-size="10" text-anchor="end" fill="{colour}">{label} {_fmt(v)}</text>'
+            f'<text x="{x1 - 4}" y="{ly:.1f}" font-size="10" text-anchor="end" fill="{colour}">{label} {_fmt(v)}</text>'
         )
     prev = None
     for i, p in enumerate(points):
