@@ -372,7 +372,8 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(PRELOAD)
     results: dict[int, FocusResult] = {}
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
         futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
         for fut in as_completed(futures):
             i = futures[fut]
@@ -384,6 +385,10 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
                 )
             results[i] = r
             on_result(r)
+    except BaseException:  # Ctrl-C: the jobs not started are dropped, not run
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
     return [results[i] for i in range(len(jobs))]
 
 

@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-EXIT_OK, EXIT_ERROR = 0, 2
+EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
 def register(subparsers: Any) -> None:
@@ -145,6 +145,11 @@ def run(args: argparse.Namespace) -> int:
     except ReprocessError as exc:
         _error(str(exc))
         return EXIT_ERROR
+    except KeyboardInterrupt:
+        done = sum(1 for o in outcomes.values() if o.ok)
+        kept = "re-processed and stored" if store is not None else "re-processed"
+        _error(f"interrupted: {done} session(s) {kept} before Ctrl-C; the others are not (run it again for them)")
+        return EXIT_INTERRUPTED
     finally:
         if store is not None:
             store.close()
