@@ -17,8 +17,9 @@ imports, planning, every job, storing into a fresh SQLite store, the table):
   imports of numpy, scipy, OpenCV and the pipeline count) and warm (a cluster that has already
   worked, as a standing one is).
 
-Each run's profiles are checked to be the same as the local pool's (every model parameter and
-figure). Prints a Markdown table and the machine's load average (other work on the machine slows
+Each run's profiles are checked to be the same as the local pool's (every figure of every focus
+setting); "jobs per worker" says how the jobs were spread over the worker processes and "job s" is
+the sum of the jobs' own wall times (their work, without start-up and scheduling). Prints a Markdown table and the machine's load average (other work on the machine slows
 every run down).
 """
 
@@ -88,6 +89,17 @@ def _figures(doc: dict) -> list[tuple]:
     return [(s["session"], e["focus"], *(e["new"][k] for k in keys)) for s in doc["sessions"] for e in s["focus"]]
 
 
+def _spread(doc: dict) -> tuple[str, float]:
+    """Jobs per worker process (most first) and the sum of the jobs' own seconds."""
+    per: dict[str, int] = {}
+    busy = 0.0
+    for s in doc["sessions"]:
+        for e in s["focus"]:
+            per[e["worker"]] = per.get(e["worker"], 0) + 1
+            busy += e["seconds"]
+    return " + ".join(str(n) for n in sorted(per.values(), reverse=True)), busy
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=6)
@@ -115,7 +127,7 @@ def main() -> int:
         )
         rows = []
         wall, ref = _reprocess(sessions, Path(tmp) / "local.sqlite", ["--workers", str(args.workers)])
-        rows.append((f"local process pool, {args.workers} processes", "–", wall, "same (reference)"))
+        rows.append((f"local process pool, {args.workers} processes", "–", wall, "same (reference)", *_spread(ref)))
         t = time.perf_counter()
         with LocalCluster(
             n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
@@ -127,7 +139,9 @@ def main() -> int:
                 )
                 same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
                 shown = f"{start:.1f}" if state == "cold" else "(already up)"
-                rows.append((f"Dask LocalCluster, {args.workers} workers x 1 thread, {state}", shown, wall, same))
+                rows.append(
+                    (f"Dask LocalCluster, {args.workers} workers x 1 thread, {state}", shown, wall, same, *_spread(doc))
+                )
         print("| runner | cluster start s | sessions | jobs | wall s | sessions/min | profiles vs local pool |")
         print("|---|---|---|---|---|---|---|")
         for name, st, wall, same in rows:
