@@ -93,10 +93,16 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
+
+_T = TypeVar("_T")
+_R = TypeVar("_R")
 
 __all__ = ["EdgeChain", "detect_edges", "edge_points", "auto_thresholds", "gradient_noise"]
 
@@ -401,7 +407,87 @@ def _peak_offset(a: np.ndarray, m0: np.ndarray, b: np.ndarray, interpolation: st
 _CV_INPUT = (np.uint8, np.uint16, np.int16, np.float32)
 
 
-def _nms_points(image, sigma, low, high, interpolation="continuous"):
+THREADS = 2
+"""Threads of the per-pixel stages (candidate points, sub-pixel refinement) on large images."""
+PARALLEL_MIN_PX = 3_000_000
+"""Images smaller than this are processed by one thread (no thread start-up cost)."""
+PARALLEL_MIN_POINTS = 100_000
+"""Point sets smaller than this are refined by one thread."""
+
+
+def _threaded(fn: Callable[[_T], _R], parts: Sequence[_T]) -> list[_R]:
+    """``[fn(p) for p in parts]``, by :data:`THREADS` threads when there are several parts (numpy and
+    OpenCV release the GIL in these array operations; each part is independent, so the results are
+    exactly those of one thread)."""
+    if len(parts) < 2:
+        return [fn(p) for p in parts]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=min(THREADS, len(parts))) as ex:
+        return list(ex.map(fn, parts))
+
+
+def _bands(lo: int, hi: int, n: int) -> list[tuple[int, int]]:
+    """``[lo, hi)`` cut into ``n`` contiguous ranges."""
+    cuts = np.linspace(lo, hi, max(1, n) + 1).astype(int)
+    return [(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+
+_Band = tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]
+
+
+def _band_points(
+    band: tuple[int, int],
+    mod: NDArray[np.float32],
+    gx: NDArray[np.float32],
+    gy: NDArray[np.float32],
+    low: float,
+    interpolation: str,
+) -> _Band:
+    """Non-maximum suppression on the rows ``band`` (the 2-pixel border excluded), in raster order:
+    ``(flat index, modulus, gradient (N, 2), 3-point sub-pixel offset along the NMS axis, along_x)``
+    of the points kept (``along_x``: the NMS axis is x)."""
+    r0, r1 = band
+    w = mod.shape[1]
+    mask = mod[r0:r1] > np.float32(low)  # bool: flatnonzero is ~6x faster than on uint8
+    mask[:, :2] = False
+    mask[:, -2:] = False
+    idx = np.flatnonzero(mask) + r0 * w
+    del mask
+    mflat = mod.ravel()
+    gxf = gx.ravel()[idx]
+    gyf = gy.ravel()[idx]
+    m0 = mflat[idx]
+    ml = mflat[idx - 1]
+    mr = mflat[idx + 1]
+    mu = mflat[idx - w]
+    md = mflat[idx + w]
+    ax = np.abs(gxf)
+    ay = np.abs(gyf)
+    along_x = (ax >= ay) & (m0 > ml) & (m0 >= mr)
+    along_y = ~along_x & (ay >= ax) & (m0 > mu) & (m0 >= md)
+    keep = along_x | along_y
+    along_x = along_x[keep]
+    idx = idx[keep]
+    m064 = m0[keep].astype(np.float64)
+    a = np.where(along_x, ml[keep], mu[keep]).astype(np.float64)
+    b = np.where(along_x, mr[keep], md[keep]).astype(np.float64)
+    off = _peak_offset(a, m064, b, "parabola" if interpolation == "parabola" else "gaussian")
+    grad = np.column_stack([gxf[keep], gyf[keep]]).astype(np.float64)
+    return idx, m064, grad, off, along_x
+
+
+def _nms_points(
+    image: NDArray[Any], sigma: float, low: float | None, high: float | None, interpolation: str = "continuous"
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.intp],
+    tuple[int, int],
+    _Refiner | None,
+    float,
+]:
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"sigma must be >= 0, got {sigma}")
     img = np.asarray(image)
@@ -421,38 +507,16 @@ def _nms_points(image, sigma, low, high, interpolation="continuous"):
     del img  # keep the peak memory down on large images
     low, high = _resolve_thresholds(low, high, lambda raw=raw: _thresholds_from_gradient(raw, gx, gy, sigma))
     del raw
-    # candidates: modulus above low, 2-pixel border excluded (5x5 chaining)
-    mask = mod > np.float32(low)  # bool: flatnonzero is ~6x faster than on uint8
-    mask[:2] = False
-    mask[-2:] = False
-    mask[:, :2] = False
-    mask[:, -2:] = False
-    idx = np.flatnonzero(mask)
-    mflat = mod.ravel()
-    gxf = gx.ravel()[idx]
-    gyf = gy.ravel()[idx]
-    m0 = mflat[idx]
-    ml = mflat[idx - 1]
-    mr = mflat[idx + 1]
-    mu = mflat[idx - w]
-    md = mflat[idx + w]
-    ax = np.abs(gxf)
-    ay = np.abs(gyf)
-    along_x = (ax >= ay) & (m0 > ml) & (m0 >= mr)
-    along_y = ~along_x & (ay >= ax) & (m0 > mu) & (m0 >= md)
-    keep = along_x | along_y
-    along_x = along_x[keep]
-    idx = idx[keep]
+    # candidates: modulus above low, 2-pixel border excluded (5x5 chaining); by bands of rows on large images
+    n_bands = THREADS if h * w >= PARALLEL_MIN_PX else 1
+    parts = _threaded(lambda bd: _band_points(bd, mod, gx, gy, low, interpolation), _bands(2, h - 2, n_bands))
+    idx, m0, grad, off, along_x = (np.concatenate([p[k] for p in parts]) for k in range(5))
+    del parts
     r, c = np.divmod(idx, w)
-    m0 = m0[keep].astype(np.float64)
-    a = np.where(along_x, ml[keep], mu[keep]).astype(np.float64)
-    b = np.where(along_x, mr[keep], md[keep]).astype(np.float64)
-    off = _peak_offset(a, m0, b, "parabola" if interpolation == "parabola" else "gaussian")
     x = c.astype(np.float64) + np.where(along_x, off, 0.0)
     y = r.astype(np.float64) + np.where(along_x, 0.0, off)
     xy = np.column_stack([x, y])
-    grad = np.column_stack([gxf[keep], gyf[keep]]).astype(np.float64)
-    refine = _Refiner(sv, sh, along_x, r, c, off, sigma) if continuous else None
+    refine = _Refiner(sv, sh, along_x, r, c, off, sigma) if continuous and sv is not None and sh is not None else None
     return xy, grad, m0, idx, (h, w), refine, high
 
 
@@ -470,15 +534,21 @@ class _Refiner:
         w = self.sv.shape[1]
         ax = self.along_x[sel]
         r, c, off = self.r[sel], self.c[sel], self.off[sel]
-        for part, s_img, tap, cross, pos, base, col in (
-            (ax, self.sv, 1, w, c, r * w, 0),
-            (~ax, self.sh, w, 1, r, c, 1),
-        ):
-            if part.any():
-                u = _refine_continuous(s_img, pos[part], base[part], tap, cross, off[part], self.sigma)
-                ok = ~np.isnan(u)
-                idx = sel[part][ok]
-                xy[idx, col] = (c if col == 0 else r)[part][ok] + u[ok]
+        jobs = []  # (column of xy, points, image smoothed across the axis, tap, cross): by chunks on many points
+        for part, s_img, tap, cross, col in ((ax, self.sv, 1, w, 0), (~ax, self.sh, w, 1, 1)):
+            where = np.flatnonzero(part)
+            n_chunks = THREADS if len(where) >= PARALLEL_MIN_POINTS else 1
+            jobs += [(col, ch, s_img, tap, cross) for ch in np.array_split(where, n_chunks) if len(ch)]
+
+        def run(job: tuple[int, NDArray[np.intp], NDArray[np.float32], int, int]) -> NDArray[np.float64]:
+            col, ch, s_img, tap, cross = job
+            pos, base = (c[ch], r[ch] * w) if col == 0 else (r[ch], c[ch])
+            u: NDArray[np.float64] = _refine_continuous(s_img, pos, base, tap, cross, off[ch], self.sigma)
+            return u
+
+        for (col, ch, *_), u in zip(jobs, _threaded(run, jobs)):
+            ok = ~np.isnan(u)
+            xy[sel[ch[ok]], col] = (c if col == 0 else r)[ch[ok]] + u[ok]
         return xy
 
 

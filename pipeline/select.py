@@ -187,7 +187,7 @@ def cross_validate(
     settings = (width, height, folds, warm_start, stop_factor, fit_kw)
     ref = _cv_candidate((first, lines, float("inf"), settings))
     ref_mse = ref.cv_d**2 if np.isfinite(ref.cv_d) else float("inf")
-    others = [c for c in candidates if c is not first]
+    others = [c for c in candidates if c != first]
     done = dict(zip(others, map_fn(_cv_candidate, [(c, lines, ref_mse, settings) for c in others])))
     done[first] = ref
     return tuple(done[c] for c in candidates), folds

@@ -21,12 +21,20 @@ Where things are (one idea, one room):
 one source of the version every profile, model file and session records.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
-try:
-    __version__ = version("harp-station")
-except PackageNotFoundError:  # pragma: no cover - running from a tree that was never installed
-    __version__ = "0+unknown"
 
-SOFTWARE = f"harp-station {__version__}"
-"""How provenance records name this software."""
+def __getattr__(name: str) -> Any:
+    """``__version__`` and ``SOFTWARE`` (how provenance records name this software), read from the
+    installed distribution on first use: a command that never asks (``harp measure``) does not pay
+    for importing ``importlib.metadata``."""
+    if name not in ("__version__", "SOFTWARE"):
+        raise AttributeError(f"module 'station' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        v = version("harp-station")
+    except PackageNotFoundError:  # pragma: no cover - running from a tree that was never installed
+        v = "0+unknown"
+    globals().update(__version__=v, SOFTWARE=f"harp-station {v}")
+    return globals()[name]

@@ -100,13 +100,9 @@ def _num(v):
 
 
 def _measure_one(job: tuple[str, int]):
+    """``(path, ImageMeasurement)`` of one shot (each shot is measured once)."""
     path, t = job
     return path, measure_file(path, t)[1]
-
-
-def _measure(paths, t, map_fn=map):
-    """Each shot measured once: ``[(path, ImageMeasurement)]`` in the given order."""
-    return list(map_fn(_measure_one, [(path, t) for path in paths]))
 
 
 def _ignore_sigint() -> None:  # in a worker: Ctrl-C is the command's to handle (no worker traceback)
@@ -165,17 +161,25 @@ def calibrate(args) -> dict:
         raise CalibrateError(f"{args.out}: cannot write model file ({out_dir}: {reason})")
     if Path(args.out).is_dir():
         raise CalibrateError(f"{args.out}: cannot write model file (is a directory)")
-    with _workers(len(args.images) + len(args.holdout) if cand is None else len(args.images)) as map_fn:
-        return _calibrate(args, cand, map_fn)
+    # the shots are measured by worker processes forked now (numpy and OpenCV loaded) while this process
+    # imports the fitting (scipy.optimize); the fits then run in workers forked after that import, which
+    # they share instead of importing it each
+    paths = list(args.images) + list(args.holdout)
+    with _workers(len(paths)) as map_fn:
+        measuring = map_fn(_measure_one, [(path, args.t) for path in paths])  # a pool's map starts at once
+        import pipeline.select  # noqa: F401  (the fitting's imports, while the shots are measured)
+        import station.calibration  # noqa: F401
+
+        measured = list(measuring)
+    with _workers(2) as map_fn:
+        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn)
 
 
-def _calibrate(args, cand: FitSpec | None, map_fn) -> dict:
+def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
     from station.calibration import calibrate_shots
     from station.files import write_profile
     from station.provenance import make_provenance
 
-    fit_m = _measure(args.images, args.t, map_fn)
-    hold_m = _measure(args.holdout, args.t, map_fn)
     sizes = {(m.width, m.height) for _, m in fit_m + hold_m}
     if len(sizes) > 1:
         listing = ", ".join(f"{p} {m.width}x{m.height}" for p, m in fit_m + hold_m)

@@ -306,3 +306,24 @@ def test_edges_near_the_image_border_stay_accurate():
     # sigma = 0 (no smoothing) and sigma < 0.5 (log-parabola fallback) still work
     assert len(detect_edges(render_step((40, 40), 30, (20.2, 19.7), blur=1.0), sigma=0)) == 1
     assert len(detect_edges(render_step((40, 40), 30, (20.2, 19.7)), sigma=0.4)) == 1
+
+
+def test_two_threads_give_exactly_the_points_of_one(monkeypatch):
+    """Large images are processed by bands of rows and chunks of points in two threads (issue 8 item 6):
+    the chains are bit for bit those of one thread (here on a small harp, the size limits lowered)."""
+    import pipeline.edges as edges
+    from pipeline.models.radial import RadialModel
+    from pipeline.render import HarpScene, render_harp
+
+    lens = RadialModel.for_image(480, 360, k=(1.0, 0.0, 0.03))
+    img = render_harp(480, 360, HarpScene(angle_deg=35.0, spacing_px=30.0), lens=lens, noise_sigma=1.5, seed=4).image
+    monkeypatch.setattr(edges, "THREADS", 1)
+    one = detect_edges(img)
+    monkeypatch.setattr(edges, "THREADS", 2)
+    monkeypatch.setattr(edges, "PARALLEL_MIN_PX", 1)
+    monkeypatch.setattr(edges, "PARALLEL_MIN_POINTS", 1)
+    monkeypatch.setattr(edges, "_bands", lambda lo, hi, n: [(lo, lo + 97), (lo + 97, hi)] if n > 1 else [(lo, hi)])
+    two = detect_edges(img)
+    assert len(one) == len(two) >= 20
+    for a, b in zip(one, two):
+        assert np.array_equal(a.xy, b.xy) and np.array_equal(a.grad, b.grad)

@@ -157,7 +157,7 @@ def test_unwritable_out_is_reported_before_any_work(shots, tmp_path, capsys, mon
     def no_measuring(*a, **k):
         raise AssertionError("measured although the model file cannot be written")
 
-    monkeypatch.setattr(cc, "_measure", no_measuring)
+    monkeypatch.setattr(cc, "_measure_one", no_measuring)
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     for out, reason in (
