@@ -171,7 +171,7 @@ def calibrate(args) -> dict:
         import station.calibration  # noqa: F401
 
         measured = list(measuring)
-    with _workers(2) as map_fn:
+    with _workers(2 if cand is None else 1) as map_fn:  # a given model: one fit, no candidates to share out
         return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn)
 
 
