@@ -34,6 +34,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.polynomial import polynomial as P
+from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from pipeline.edgeset import FitFailure, FitResult, collect, summarise
@@ -73,28 +74,52 @@ def _line_terms(lines, center, scale, powers):
     return out
 
 
-def _quartic_one(lines, center, scale, power=2):
-    """Coefficients (ascending) of E(k) for u = x + k rho^power (x - c)."""
-    total = np.zeros(5)
-    for x0, v in _line_terms(lines, center, scale, [power]):
-        v = v[0]
-        n = len(x0)
+def _quartic_one(
+    lines: Sequence[np.ndarray], center: np.ndarray, scale: float, power: int = 2
+) -> NDArray[np.float64]:
+    """Coefficients (ascending) of E(k) for u = x + k rho^power (x - c).
 
-        def moment(i, j):
-            return (
-                np.array(
-                    [
-                        np.dot(x0[:, i], x0[:, j]),
-                        np.dot(x0[:, i], v[:, j]) + np.dot(v[:, i], x0[:, j]),
-                        np.dot(v[:, i], v[:, j]),
-                    ]
-                )
-                / n
-            )
+    Per line, with centred points ``x0`` and the centred displacement basis ``v``, every second
+    moment of ``u = x0 + k v`` is ``m_ij(k) = (x0_i.x0_j + k (x0_i.v_j + v_i.x0_j) + k^2 v_i.v_j) / n``;
+    ``E`` is the mean over the lines of ``m_00 m_11 - m_01^2``. All lines at once (sums per line).
+    """
+    pts = [q for q in (np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines) if len(q) >= 3]
+    if not pts:
+        raise ValueError("need at least one line of >= 3 points")
+    counts = np.array([len(q) for q in pts])
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    xy = np.concatenate(pts)
+    q = xy - center
+    rho2 = np.sum(q * q, axis=1) / scale**2
+    basis = (rho2 ** (power // 2))[:, None] * q
 
-        e = P.polysub(P.polymul(moment(0, 0), moment(1, 1)), P.polymul(moment(0, 1), moment(0, 1)))
-        total[: len(e)] += e
-    return total / max(len(lines), 1)
+    def centred(a: NDArray[np.float64]) -> NDArray[np.float64]:
+        mean = np.add.reduceat(a, starts, axis=0) / counts[:, None]
+        out: NDArray[np.float64] = a - np.repeat(mean, counts, axis=0)
+        return out
+
+    x0, v = centred(xy), centred(basis)
+
+    def moment(i: int, j: int) -> tuple[NDArray[np.float64], ...]:
+        def dot(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+            out: NDArray[np.float64] = np.add.reduceat(a * b, starts) / counts
+            return out
+
+        return dot(x0[:, i], x0[:, j]), dot(x0[:, i], v[:, j]) + dot(v[:, i], x0[:, j]), dot(v[:, i], v[:, j])
+
+    a, b, c = moment(0, 0), moment(1, 1), moment(0, 1)
+    # the product of two quadratics in k, per line, minus the square of the third; summed over the lines
+    e = np.array(
+        [
+            a[0] * b[0] - c[0] * c[0],
+            a[0] * b[1] + a[1] * b[0] - 2.0 * c[0] * c[1],
+            a[0] * b[2] + a[1] * b[1] + a[2] * b[0] - (2.0 * c[0] * c[2] + c[1] * c[1]),
+            a[1] * b[2] + a[2] * b[1] - 2.0 * c[1] * c[2],
+            a[2] * b[2] - c[2] * c[2],
+        ]
+    ).sum(axis=1)
+    out: NDArray[np.float64] = e / max(len(lines), 1)
+    return out
 
 
 def alvarez_initial_k(lines: Sequence[np.ndarray], width: int, height: int, center=None) -> float:
