@@ -74,9 +74,7 @@ def _line_terms(lines, center, scale, powers):
     return out
 
 
-def _quartic_one(
-    lines: Sequence[np.ndarray], center: np.ndarray, scale: float, power: int = 2
-) -> NDArray[np.float64]:
+def _quartic_one(lines: Sequence[np.ndarray], center: np.ndarray, scale: float, power: int = 2) -> NDArray[np.float64]:
     """Coefficients (ascending) of E(k) for u = x + k rho^power (x - c).
 
     Per line, with centred points ``x0`` and the centred displacement basis ``v``, every second
