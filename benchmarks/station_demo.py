@@ -10,7 +10,8 @@ profile with the simulated camera's true lens at that focus
 (:func:`drivers.sim.lens.lens_for_focus`) modulo the best homography
 (:func:`pipeline.compare.compare_models`, 10 px grid), and prints a
 Markdown table: focus, holdout d, bootstrap field uncertainty, field error
-against the truth (RMS, max), plus wall and CPU time of the whole session
+against the truth (RMS, max), the exit code and QA verdict, plus wall and CPU time of the
+whole session beside the duration ``harp session plan`` estimated for it
 (process and its children), how long the session report at its end took
 (from the manifest's timestamps), and the machine's load average, since
 other work on the machine slows a session down.
@@ -60,7 +61,7 @@ def main() -> int:
         wall = time.perf_counter() - t0
         c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         load1 = os.getloadavg()[0]
-        if proc.returncode:
+        if proc.returncode not in (0, 1):  # 1: finished, QA verdict FAIL (reported below)
             print(proc.stderr, file=sys.stderr)
             return 1
         cpu = (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
@@ -82,8 +83,15 @@ def main() -> int:
         recs = [json.loads(line) for line in (Path(tmp) / "s" / "demo" / "manifest.jsonl").open()]
         t_of = {r["kind"]: r["t"] for r in recs}
         report = f"{t_of['report'] - t_of['qa_session']:.1f} s" if "report" in t_of else "not written"
+        from station.config import load_config
+        from station.session.estimate import estimate_plan
+
+        estimate = estimate_plan(load_config(cfg)).seconds
+        verdict = json.loads((Path(tmp) / "s" / "demo" / "results.json").read_text())["verdict"]
+        print(f"\nexit code {proc.returncode}, QA verdict {verdict} (results.json)")
         print(
-            f"\nwall {wall:.1f} s, CPU {cpu:.1f} s (session and its worker processes), "
+            f"\nwall {wall:.1f} s (`harp session plan` estimated {estimate:.0f} s), CPU {cpu:.1f} s "
+            f"(session and its worker processes), "
             f"of which the session report (Markdown + HTML, {len(list((Path(tmp) / 's' / 'demo' / 'report').glob('*.png')))} PNGs) "
             f"{report}; load average {load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores"
         )

@@ -239,12 +239,14 @@ class Verdict:
         return self.metrics
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON of ``harp qa --json`` (checks as their text lines)."""
+        """JSON of ``harp qa --json`` and ``results.json``: every check typed (name, value,
+        comparison, limit, passed, text), the thresholds it was judged with."""
         return {
             "verdict": self.verdict,
             "passed": self.passed,
             "reasons": list(self.reasons),
-            "checks": [c.text for c in self.checks],
+            "checks": [c.to_dict() for c in self.checks],
+            "thresholds": dict(self.thresholds),
             "figures": dict(self.metrics),
         }
 

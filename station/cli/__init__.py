@@ -7,8 +7,9 @@ Each sub-command lives in its own module ``station.cli.<name>`` (``measure``,
 (:mod:`station.calibration`, :mod:`station.session`, :mod:`station.qa`,
 :mod:`station.store`, :mod:`pipeline`) and prints; :mod:`station.cli.inputs` holds the
 input helpers they share (one-line input errors, reading and measuring photos).
-Exit codes: 0 success, 1 a verdict of FAIL (``harp qa``), 2 bad input or an error,
-130 interrupted, 141 standard output closed early.
+Exit codes (:mod:`station.exit_codes`): 0 success (a verdict of PASS), 1 a verdict of FAIL
+(``harp qa``, ``harp session run|resume``; ``harp profile export`` of a failed profile),
+2 bad input or an error, 130 interrupted, 141 standard output closed early.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ COMMAND_MODULES = [
     "station.cli.live",
     "station.cli.serve",
     "station.cli.reprocess",
+    "station.cli.config",
+    "station.cli.devices",
 ]
 
 

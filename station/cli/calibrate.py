@@ -82,7 +82,7 @@ def register(subparsers) -> None:
         action="store_true",
         help="radial: pull the distortion centre towards the image centre (see pipeline.select)",
     )
-    p.add_argument("--out", required=True, metavar="MODEL", help="model file to write (YAML)")
+    p.add_argument("-o", "--out", required=True, metavar="MODEL", help="model file to write (YAML)")
     p.add_argument(
         "--holdout",
         nargs="+",
@@ -90,7 +90,7 @@ def register(subparsers) -> None:
         metavar="IMAGE",
         help="shots never used in the fit: corrected by the model and measured",
     )
-    p.add_argument("--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument("-t", "--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 

@@ -5,7 +5,7 @@ CORRECTION is any file :func:`pipeline.exports.registry.read_correction` reads
 OpenCV calibration (FileStorage YAML or XML with ``camera_matrix`` +
 ``distortion_coefficients``, pin-hole or fisheye), a ROS camera_info YAML
 (plumb_bob, rational_polynomial, equidistant), a lensfun XML (``<lensdatabase>``;
-``--lens`` picks a lens of a database holding several, ``--focal`` a calibration), a
+``--lens`` picks a lens of a database holding several, ``--focal-mm`` a calibration), a
 mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of the harp
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
@@ -58,12 +58,18 @@ def register(subparsers) -> None:
         "--already-corrected", action="store_true", help="images were corrected by other software: only measure them"
     )
     p.add_argument(
-        "--focal", type=float, default=None, help="lensfun: focal length (mm) of the calibration entry to use"
+        "--focal-mm",
+        dest="focal",
+        type=float,
+        default=None,
+        help="lensfun: focal length (mm) of the calibration entry to use",
     )
     p.add_argument(
         "--lens", default=None, metavar="NAME", help="lensfun: the lens ('maker model' or 'model') of a database"
     )
-    p.add_argument("-t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument(
+        "-t", "--t", dest="t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 

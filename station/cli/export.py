@@ -81,7 +81,7 @@ class ExportError(InputError):
 def add_export_options(p) -> None:
     """The options ``harp export`` and ``harp profile export`` share."""
     p.add_argument("--format", required=True, choices=FORMAT_CHOICES, help="export format (listed below)")
-    p.add_argument("-o", "--output", metavar="FILE", help="write here (default: stdout, text formats only)")
+    p.add_argument("-o", "--out", dest="output", metavar="FILE", help="write here (default: stdout, text formats only)")
     p.add_argument(
         "--coeffs",
         type=int,
@@ -90,7 +90,11 @@ def add_export_options(p) -> None:
     )
     p.add_argument("--xml", action="store_true", help="opencv: FileStorage XML instead of YAML (also -o *.xml)")
     p.add_argument(
-        "--focal", type=float, default=None, help="opencv/ros/mrcal: focal length of the camera matrix in pixels"
+        "--focal-px",
+        dest="focal",
+        type=float,
+        default=None,
+        help="opencv/ros/mrcal: focal length of the camera matrix in pixels",
     )
     p.add_argument(
         "--lensfun-model", choices=("ptlens", "poly5", "poly3"), default="ptlens", help="lensfun distortion model"
@@ -181,7 +185,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     from pipeline.exports.registry import ExportOptions
 
     if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
-        raise ExportError(f"--focal: expected a focal length > 0 px, got {args.focal:g}")
+        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
     return ExportOptions(
         coeffs=args.coeffs,

@@ -49,6 +49,7 @@ def register(subparsers) -> None:
     )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
     p.add_argument(
+        "-t",
         "--t",
         type=positive_int,
         default=30,

@@ -1,27 +1,32 @@
-"""``harp session run CONFIG [--out DIR]`` and ``harp session resume DIR``.
+"""``harp session run CONFIG``, ``resume DIR``, ``plan CONFIG``, ``list [DIR]``.
 
-``run`` creates a session directory (under ``--out``, default the
-configuration's ``store.sessions_dir``), opens the station and performs the
-whole plan; ``resume`` reopens an interrupted session and captures only what
-is missing. When the session finishes, both write its report into
-``DIR/report/`` (``report.md`` and ``index.html`` with PNG plots: distortion
-field, residual per edge, one overlay per orientation, uncertainty map,
-verdict), from the measurements the session kept; ``--no-report`` skips it.
-Exit 0 when the session finished, 2 on bad input or when the session stopped
-(the message says why; the frames are kept).
+``run`` creates a session directory (under ``--out``, default the configuration's
+``store.sessions_dir``), opens the station and performs the whole plan; ``resume``
+reopens an interrupted session and captures only what is missing. When the session
+finishes, both judge it (QA), write its report into ``DIR/report/`` and its results into
+``DIR/results.json``; ``--no-report`` skips the report. ``plan`` prints the capture plan
+with an estimated duration, touching no device; ``list`` lists the sessions of a
+directory with their state (complete / failed / interrupted / running) and verdict.
+Exit codes of ``run`` / ``resume``: 0 finished and PASS, 1 finished and FAIL, 2 bad input
+or the session stopped (the frames are kept; the message says how to go on), 130
+interrupted. ``--json`` prints the session's results (``results.json``) on stdout and the
+progress on stderr.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import sys
 from pathlib import Path
 
 from station import __version__
+from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "session", help="run or resume a calibration session", description=__doc__.split("\n\n")[1]
+        "session", help="run, resume, plan or list calibration sessions", description=__doc__.split("\n\n")[1]
     )
     sub = p.add_subparsers(dest="session_command", metavar="ACTION")
     run = sub.add_parser("run", help="run a session from a station configuration")
@@ -41,21 +46,49 @@ def register(subparsers) -> None:
         action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
         action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")
         action.add_argument(
+            "--json",
+            action="store_true",
+            help="print the session's results (results.json) on stdout; progress on stderr",
+        )
+        action.add_argument(
             "--live",
             action="store_true",
             help="show the session on the live page (http://127.0.0.1:8013/; it stays until Ctrl-C after the end)",
         )
         action.add_argument("--live-port", type=int, default=8013, help="port of the live page (0: any free port)")
-    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
+    plan = sub.add_parser("plan", help="the capture plan and its estimated duration (touches no device)")
+    plan.add_argument("config", type=Path, help="station configuration (YAML)")
+    plan.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    plan.set_defaults(func=_plan)
+    ls = sub.add_parser("list", help="sessions with their state and verdict")
+    ls.add_argument(
+        "directory", type=Path, nargs="?", default=None, help="where the sessions are (default: ./sessions)"
+    )
+    ls.add_argument("--config", type=Path, default=None, help="list the sessions of this configuration's sessions_dir")
+    ls.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    ls.set_defaults(func=_list)
+    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), EXIT_ERROR)[1])
 
 
 def _error(msg: str) -> int:
     print(f"harp session: {msg}", file=sys.stderr)
-    return 2
+    return EXIT_ERROR
+
+
+def _load(path: Path):
+    """The configuration at ``path`` with the checks no device is needed for; ConfigError otherwise."""
+    from station.config import load_config
+    from station.config_check import check_config
+
+    config = load_config(path)
+    checked = check_config(config)
+    if checked.errors:
+        raise checked.errors[0]
+    return config, checked.warnings
 
 
 def _run(args) -> int:
-    from station.config import ConfigError, check_port, load_config
+    from station.config import ConfigError, check_port
     from station.session.directory import SessionDir
 
     if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
@@ -63,7 +96,7 @@ def _run(args) -> int:
             f"--name {args.name!r}: expected a plain directory name (no '/'); use --out for the parent directory"
         )
     try:
-        config = load_config(args.config)
+        config, _warnings = _load(args.config)
         check_port(config)  # before creating anything
     except ConfigError as exc:
         return _error(str(exc))
@@ -74,7 +107,7 @@ def _run(args) -> int:
         print(f"session directory: {s.path}", file=sys.stderr)
         return s
 
-    return _execute(config, new_session, args.quiet, report=not args.no_report, live=_live(args), store_name=args.store)
+    return _execute(config, new_session, args, report=not args.no_report)
 
 
 def _resume(args) -> int:
@@ -86,18 +119,28 @@ def _resume(args) -> int:
     except (ConfigError, SessionError) as exc:
         return _error(str(exc))
     if session.finished:
-        session.close()
-        print(f"harp session: {args.session_dir}: already finished, nothing to do", file=sys.stderr)
-        return 0
-    return _execute(
-        session.config,
-        lambda: session,
-        args.quiet,
-        opened=session,
-        report=not args.no_report,
-        live=_live(args),
-        store_name=args.store,
-    )
+        with session:
+            return _already_finished(session, args)
+    return _execute(session.config, lambda: session, args, opened=session, report=not args.no_report)
+
+
+def _already_finished(session, args) -> int:
+    """A finished session resumed: nothing to capture; its exit code is its verdict's."""
+    from station.qa.results import read_results, session_results, state_exit_code, write_results
+
+    results = read_results(session.path)
+    if results is None or results.get("state") != "complete":  # killed before results.json was written
+        try:
+            results = session_results(session)
+            write_results(session, results)
+        except (OSError, ValueError) as exc:
+            return _error(f"{session.path}: finished, but its results cannot be gathered: {exc}")
+    code = state_exit_code("complete", results.get("verdict"))
+    verdict = results.get("verdict") or "none"
+    print(f"harp session: {args.session_dir}: already finished (QA verdict {verdict}), nothing to do", file=sys.stderr)
+    if args.json:
+        print(json.dumps(results, indent=1))
+    return EXIT_OK if code is None else code
 
 
 def _live(args) -> int | None:
@@ -105,11 +148,11 @@ def _live(args) -> int | None:
     return args.live_port if getattr(args, "live", False) else None
 
 
-def _execute(
-    config, get_session, quiet: bool, opened=None, report: bool = True, live: int | None = None, store_name=None
-) -> int:
+def _execute(config, get_session, args, opened=None, report: bool = True) -> int:
+    """Run the session (with ``--live``: shown on the live page, which stays until Ctrl-C after the end)."""
+    live = _live(args)
     if live is None:
-        return _execute_session(config, get_session, quiet, opened, report, store_name=store_name)
+        return _execute_session(config, get_session, args, opened, report)
     from station.live.session_tap import live_session_page
     from station.web.serve import ServeError
 
@@ -121,8 +164,8 @@ def _execute(
             opened.close()
         return _error(f"--live: {exc}")
     try:
-        code = _execute_session(config, get_session, quiet, opened, report, tap=tap, store_name=store_name)
-        if code == 130:
+        code = _execute_session(config, get_session, args, opened, report, tap=tap)
+        if code == EXIT_INTERRUPTED:
             return code
         print("harp session: the live page shows the result until Ctrl-C", file=sys.stderr, flush=True)
         try:
@@ -136,26 +179,28 @@ def _execute(
         page.__exit__(None, None, None)
 
 
-def _execute_session(
-    config, get_session, quiet: bool, opened=None, report: bool = True, tap=None, store_name=None
-) -> int:
+def _execute_session(config, get_session, args, opened=None, report: bool = True, tap=None) -> int:
     from rich.console import Console
 
     from station.config import ConfigError
     from station.session.devices import open_station
     from station.session.directory import SessionError
     from station.session.run import run_session
-    from station.store import ProfileStore, StoreError
-    from station.store.resolve import store_location
+    from station.store import StoreError
 
     started = []  # the session directory, once there is one
+    result = None
     try:
-        with open_station(config) as (camera, turntable), ProfileStore(store_location(store_name, config)) as store:
+        # the devices first: a station that cannot open creates no empty store
+        with open_station(config) as (camera, turntable), _open_store(config, args.store) as store:
             with get_session() as session:
                 started.append(session.path)
                 if tap is not None:
                     session = tap(session)  # the live page subscribes to the session's records and frames
-                console = None if quiet else (Console() if sys.stdout.isatty() else Console(width=120))
+                console = None
+                if not args.quiet:
+                    out = sys.stderr if args.json else sys.stdout
+                    console = Console(file=out) if out.isatty() else Console(file=out, width=120)
                 result = run_session(session, camera, turntable, store=store, console=console, report=report)
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
@@ -167,11 +212,150 @@ def _execute_session(
                 f"interrupted; every frame captured so far is kept in {started[0]}; "
                 f"continue with: harp session resume {started[0]}"
             )
-        return 130
+            if args.json:
+                _print_results_of(started[0])
+        return EXIT_INTERRUPTED
     finally:
         if opened is not None:
             opened.close()
-    if result.exit_code:
+    if args.json:
+        out = result.results or {"session": str(started[0]), "exit_code": result.exit_code, "message": result.message}
+        print(json.dumps(out, indent=1))
+    if result.exit_code == EXIT_ERROR:
         return _error(result.message)
     print(result.message, file=sys.stderr)
-    return 0
+    return result.exit_code
+
+
+def _open_store(config, store_name=None):
+    """The store the session writes (``--store``, else the configuration's; :mod:`station.store.resolve`)."""
+    from station.store import ProfileStore
+    from station.store.resolve import store_location
+
+    return ProfileStore(store_location(store_name, config))
+
+
+def _print_results_of(session_dir: Path) -> None:
+    from station.qa.results import read_results
+
+    results = read_results(session_dir)
+    if results is not None:
+        print(json.dumps(results, indent=1))
+
+
+# ----------------------------------------------------------------- plan
+def _plan(args) -> int:
+    from station.config import ConfigError
+    from station.session.estimate import estimate_plan
+    from station.tables import print_table
+
+    try:
+        config, warnings = _load(args.config)
+    except ConfigError as exc:
+        return _error(str(exc))
+    for w in warnings:
+        print(f"harp session: warning: {w}", file=sys.stderr)
+    est = estimate_plan(config)
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "config": str(config.path),
+                    "lens": [config.lens.maker, config.lens.model, config.lens.serial],
+                    "focus_settings": list(config.focus_settings),
+                    "orientations_deg": list(config.capture.orientations_deg),
+                    "frames": est.frames,
+                    "moves": est.moves,
+                    "focus_locks": est.focus_locks,
+                    "fits": est.fits,
+                    "estimated_seconds": round(est.seconds, 1),
+                    "assumptions": est.assumptions,
+                    "steps": [
+                        {
+                            "focus_idx": r.focus_idx if r.focus_idx >= 0 else None,
+                            "focus": r.focus if math.isfinite(r.focus) else None,
+                            "what": r.what,
+                            "orientation_deg": r.orientation_deg,
+                            "frames": r.frames,
+                            "estimated_seconds": round(r.seconds, 2),
+                        }
+                        for r in est.rows
+                    ],
+                },
+                indent=1,
+            )
+        )
+        return EXIT_OK
+    print_table(
+        ("focus", "step", "orientation (deg)", "frames", "estimated (s)"),
+        [
+            (
+                f"{r.focus:g}" if math.isfinite(r.focus) else "",
+                r.what,
+                f"{r.orientation_deg:g}" if r.orientation_deg is not None else "",
+                str(r.frames) if r.frames else "",
+                f"{r.seconds:.1f}",
+            )
+            for r in est.rows
+        ],
+        title=f"capture plan of {config.path} ({config.lens.label()})",
+        right=("focus", "orientation (deg)", "frames", "estimated (s)"),
+    )
+    minutes, seconds = divmod(int(round(est.seconds)), 60)
+    print(
+        f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
+        f"{config.capture.frames_per_orientation} frames = {est.frames} frames, {est.moves} moves, "
+        f"{est.fits} fits; estimated duration {minutes} min {seconds:02d} s",
+        file=sys.stderr,
+    )
+    for a in est.assumptions:
+        print(f"assumed: {a}", file=sys.stderr)
+    return EXIT_OK
+
+
+# ----------------------------------------------------------------- list
+def _list(args) -> int:
+    from station.config import ConfigError, load_config
+    from station.session.states import sessions_in
+    from station.tables import print_table
+
+    if args.directory is not None and args.config is not None:
+        return _error("give a directory or --config, not both")
+    if args.config is not None:
+        try:
+            root = load_config(args.config).sessions_dir
+        except ConfigError as exc:
+            return _error(str(exc))
+    else:
+        root = args.directory if args.directory is not None else Path("sessions")
+    if not root.is_dir():
+        return _error(f"{root}: no such directory (name one, or --config CONFIG for its store.sessions_dir)")
+    found, problems = sessions_in(root)
+    for p in problems:
+        print(f"harp session: warning: {p}", file=sys.stderr)
+    if args.json:
+        print(json.dumps({"directory": str(root.resolve()), "sessions": [s.to_dict() for s in found]}, indent=1))
+        return EXIT_OK
+    if not found:
+        print(f"no sessions in {root}", file=sys.stderr)
+        return EXIT_OK
+    print_table(
+        ("session", "state", "verdict", "lens", "profiles", "frames", "created", "last activity", "path"),
+        [
+            (
+                s.name,
+                s.state,
+                s.verdict or "",
+                s.lens,
+                f"{s.profiles}/{s.focus_settings}",
+                str(s.frames),
+                s.created or "",
+                s.last or "",
+                str(s.path),
+            )
+            for s in found
+        ],
+        title=f"sessions in {root}",
+        right=("frames",),
+    )
+    return EXIT_OK

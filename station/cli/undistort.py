@@ -39,7 +39,9 @@ def register(subparsers) -> None:
     )
     p.add_argument("model", metavar="MODEL", help="harp model file")
     p.add_argument("images", metavar="IMAGE", nargs="+", help="distorted images")
-    p.add_argument("-o", "--output-dir", metavar="DIR", required=True, help="directory for corrected images")
+    p.add_argument(
+        "-o", "--out", dest="output_dir", metavar="DIR", required=True, help="directory for corrected images"
+    )
     p.add_argument(
         "--interpolation",
         choices=sorted(INTERPOLATIONS),

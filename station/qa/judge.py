@@ -33,7 +33,7 @@ def judge_session(
     session: Any, *, store: Any = None, note: Callable[[str], None] = lambda _t: None
 ) -> SessionQA | None:
     """Judge, record and say the QA of every profile of an open session directory (None: no profile yet)."""
-    from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_profiles
+    from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_measurements, session_profiles
 
     config = session.config
     profiles = session_profiles(session.path)
@@ -43,10 +43,15 @@ def judge_session(
     verdicts = []
     for f, p in profiles:
         focus = p.focus if p.focus is not None else config.focus_settings[f]
-        v = qa_verdict(p, config.qa)
+        # the stored model judged on the edges it was fitted on (kept in measurements/)
+        v = qa_verdict(p, config.qa, measurements=session_measurements(session, f))
         verdicts.append(v)
         pid = stored.get(f)
-        session.append(QARecorded(f, v.verdict, list(v.reasons), dict(v.metrics)))
+        session.append(
+            QARecorded(
+                f, v.verdict, list(v.reasons), dict(v.metrics), [c.to_dict() for c in v.checks], dict(v.thresholds)
+            )
+        )
         if store is not None:
             if pid is not None:  # the profile's own verdict, once per profile however often resumed
                 store.record_verdict(pid, v, session_dir=str(session.path.resolve()))
@@ -54,7 +59,7 @@ def judge_session(
                 store.put_qa_result(verdict=v, session_dir=str(session.path.resolve()), focus=focus)
         note(
             f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
-            + ("; ".join(v.reasons) if v.reasons else "; ".join(c.text for c in v.checks))
+            + "; ".join(c.text for c in v.checks if c.passed is (False if not v.passed else True))
         )
     w, h = profiles[0][1].width, profiles[0][1].height
     try:

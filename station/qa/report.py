@@ -43,6 +43,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from station.profile import Profile, Verdict
+from station.qa.evidence import stored_measurement, stored_uncertainty
 from station.session import layout
 
 REPORT_MD = "report.md"
@@ -224,6 +225,28 @@ def _fmt(v, nd=4) -> str:
     return f"{v:.{nd}f}" if isinstance(v, float) else str(v)
 
 
+DEFINITIONS = (
+    "Straightness (Tang et al. 2012): d is the root mean square distance of the measured edge points to "
+    "their edge's regression line, and d_max the root mean square over the edges of each edge's peak-to-peak "
+    "distance to its line, both in pixels (0 for perfectly straight edges); the holdout d is d of edges "
+    "the correction was not fitted on, corrected by it."
+)
+"""The one sentence every report defines d and d_max with."""
+
+
+def _check_rows(verdict: Verdict) -> list[str]:
+    """The checks of a verdict as a Markdown table: what was compared, and what happened."""
+    rows = [
+        "| check | value (px) | must be | limit (px) | result | what happened |",
+        "|:---|---:|:---:|---:|:---:|:---|",
+    ]
+    for c in verdict.checks:
+        result = "reported" if c.passed is None else ("PASS" if c.passed else "**FAIL**")
+        limit = "-" if c.limit is None else f"{c.limit:g}"
+        rows.append(f"| {c.name} | {_fmt(c.value)} | {c.comparison} | {limit} | {result} | {c.text} |")
+    return rows
+
+
 def write_report(
     out_dir,
     title: str,
@@ -233,13 +256,27 @@ def write_report(
     thresholds=None,
     interpolation: Sequence = (),
     notes: Sequence[str] = (),
+    context: Sequence[tuple[str, str]] = (),
+    warnings: Sequence[str] = (),
 ) -> Path:
-    """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path."""
+    """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path.
+
+    ``context``: (what, value) rows shown under the verdict (date, station, software,
+    configuration and its SHA-256, devices); ``warnings``: lines shown as warnings (a device
+    that reported another identity than the configuration's)."""
+    import datetime as _dt
+
     from station.qa.overlay import write_overlay
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", ""]
+    md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", "", DEFINITIONS, ""]
+    written = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    md += ["| | |", "|:---|:---|", f"| report written | {written} |"]
+    md += [f"| {k} | {v} |" for k, v in context]
+    md.append("")
+    for w in warnings:
+        md += [f"> **warning**: {w}", ""]
     if thresholds is not None:
         md += [
             "Thresholds: "
@@ -286,7 +323,8 @@ def write_report(
         md += [f"## {label}", ""]
         if e.source:
             md += [f"Profile: `{e.source}`", ""]
-        md += ["Checks: " + ("; ".join(c.text for c in e.verdict.checks) or "-"), ""]
+        md += [f"Verdict at focus {e.focus:g}: **{e.verdict.verdict}**", ""]
+        md += _check_rows(e.verdict) + [""]
         if e.verdict.reasons:
             md += ["Reasons for FAIL:", ""] + [f"- {r}" for r in e.verdict.reasons] + [""]
         name = f"field_f{i}.png"
@@ -389,40 +427,27 @@ def markdown_to_html(md: str, title: str = "") -> str:
             body.append("<p>" + "<br>\n".join(para) + "</p>")
     style = (
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+        ".verdict{padding:2px 8px;border-radius:3px;color:#fff}"
+        ".verdict.pass{background:#1a7f37}.verdict.fail{background:#cf222e}"
         "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
         "img{max-width:100%;display:block;margin:0.5em 0}"
         "blockquote{color:#444;border-left:3px solid #bbb;margin-left:0;padding-left:1em}"
     )
+    page = "\n".join(body)
+    # the verdicts in colour: green PASS, red FAIL (the Markdown says the same in words)
+    page = re.sub(
+        r"<strong>(Verdict(?: at focus [^:<]*)?: )(PASS|FAIL)</strong>",
+        lambda m: f'<strong class="verdict {m.group(2).lower()}">{m.group(1)}{m.group(2)}</strong>',
+        page,
+    )
+    page = page.replace("<strong>FAIL</strong>", '<strong class="verdict fail">FAIL</strong>')
     return (
         f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
-        f"<style>{style}</style></head>\n<body>\n" + "\n".join(body) + "\n</body></html>\n"
+        f"<style>{style}</style></head>\n<body>\n" + page + "\n</body></html>\n"
     )
 
 
 # ------------------------------------------------------- session evidence
-def _last_record(session, kind: str, **match) -> dict | None:
-    found = None
-    for r in session.of_kind(kind):
-        if all(r.get(k) == v for k, v in match.items()):
-            found = r
-    return found
-
-
-def stored_measurement(session, focus_idx: int, orientation_idx: int):
-    """The ``ImageMeasurement`` the executor kept for the shot's current attempt, or None
-    (no ``measurements/*.npz`` for it, or written by an incompatible version)."""
-    from station.session.directory import SessionError
-    from station.session.evidence import measurement_from_arrays
-
-    rec = _last_record(session, "measure", focus_idx=focus_idx, orientation_idx=orientation_idx)
-    if rec is None or "file" not in rec or rec.get("attempt") != session.attempt(focus_idx, orientation_idx):
-        return None
-    try:
-        return measurement_from_arrays(session.read_arrays(rec["file"], rec.get("sha256")))
-    except (OSError, ValueError, KeyError, SessionError):
-        return None
-
-
 def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
     """Averaged, measured shots of one focus setting of an open
     :class:`station.session_dir.SessionDir` (orientations with no frames are skipped).
@@ -442,22 +467,6 @@ def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
         m = stored_measurement(session, focus_idx, o)
         shots.append(Shot(float(deg), image, m if m is not None else measure_image(image, t=t)))
     return shots
-
-
-def stored_uncertainty(session, focus_idx: int, model):
-    """The bootstrap uncertainty map the executor kept for a focus setting, or None."""
-    from station.session.directory import SessionError
-    from station.session.evidence import uncertainty_from_arrays
-
-    rec = _last_record(session, "fit", focus_idx=focus_idx)
-    if rec is None or not rec.get("uncertainty_file"):
-        return None
-    try:
-        return uncertainty_from_arrays(
-            session.read_arrays(rec["uncertainty_file"], rec.get("uncertainty_sha256")), model
-        )
-    except (OSError, ValueError, SessionError):
-        return None
 
 
 def session_evidence(
@@ -522,7 +531,47 @@ def write_session_report(
         )
         for (f, p), v in zip(profiles, verdicts)
     ]
-    return write_report(out_dir, title, evidence, overall, thresholds=thresholds, interpolation=interpolation)
+    context, warnings = session_context(session)
+    return write_report(
+        out_dir,
+        title,
+        evidence,
+        overall,
+        thresholds=thresholds,
+        interpolation=interpolation,
+        context=context,
+        warnings=warnings,
+    )
+
+
+def session_context(session) -> tuple[list[tuple[str, str]], list[str]]:
+    """The report's (what, value) rows of a session — started, station, software, configuration
+    (path and SHA-256 of the copy the session ran), the devices as they reported themselves
+    beside the configuration — and one warning per device that reported another identity."""
+    from station.qa.results import config_record, device_identities, identity_warnings
+
+    cfg = session.config
+    conf = config_record(session)
+    devices = device_identities(session)
+    cam = devices["camera"]
+    reported = "; ".join(f"{c['maker']} {c['model']} serial {c['serial']}" for c in cam["reported"]) or "no frame"
+    body = cam["configured"]
+    tt = devices["turntable"]
+    rows = [
+        ("session started", str(session.meta.get("created", "-"))),
+        ("session", f"`{session.path}`"),
+        ("station", cfg.station.id),
+        ("software", f"harp station {session.meta.get('software_version') or '-'}"),
+        ("configuration", f"`{conf['path']}` (SHA-256 of the copy it ran, `{conf['copy']}`: `{conf['sha256']}`)"),
+        ("lens", cfg.lens.label()),
+        (
+            "camera",
+            f"reported by the device ({cam['driver']}): {reported}; configured: {body['maker']} {body['model']} "
+            f"serial {body['serial']}" + {True: " (matches)", False: " (**does not match**)", None: ""}[cam["matches"]],
+        ),
+        ("turntable", f"{tt['driver']} on `{tt['port']}` (the driver reports no identity)"),
+    ]
+    return rows, identity_warnings(devices)
 
 
 def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, spec, *, n_boot: int = 20, seed: int = 0):

@@ -1,37 +1,76 @@
-"""Factory QA: a PASS / FAIL verdict for a lens profile against thresholds.
+"""Factory QA: a PASS / FAIL verdict for a lens profile, judging the stored model itself.
 
-Checks (each enabled by its threshold, from the configuration's ``qa``
-section or the command line):
+Every check is a typed :class:`station.profile.Check` (name, value, comparison, limit,
+passed, text) whose text says what happened: ``holdout d 0.0012 px > 0.001 px: FAIL``
+for a check that failed, ``... <= 0.05 px: PASS`` for one that held, ``...: reported,
+no threshold`` for a figure that is shown but not judged. The checks, in order:
 
-* ``max_holdout_d_px``: the cross-validated straightness after correction
-  (leave-one-orientation-out ``holdout d``) must not exceed it — the
-  correction must generalise to shots it was not fitted on;
-* ``max_distortion_px``: the largest displacement of the correction over the
-  image, modulo the best homography (a lens out of its specification);
-* ``max_reference_deviation_px``: the largest field difference, modulo the
-  best homography, from a golden reference profile of the same lens model
-  (:func:`pipeline.compare.compare_models`).
+``holdout_d``
+    the cross-validated straightness after correction must not exceed
+    ``max_holdout_d_px``: the correction must straighten shots it was not fitted on.
+    When the measured edges the profile was fitted on are at hand (a session's
+    ``measurements/``, :class:`Measurements`) and ``recompute=True``, the holdout d
+    is *recomputed* from them (leave one orientation out, refitting the profile's
+    spec, :func:`station.calibration.calibrate_shots`) and that value is judged;
+``holdout_d_stored``
+    (only when recomputed) the stored holdout d must agree with the recomputed one
+    within :data:`HOLDOUT_AGREEMENT_PX` + :data:`HOLDOUT_AGREEMENT_REL` of it: a
+    profile whose figures do not belong to its measurements fails;
+``corrected_d``
+    (measurements at hand) the straightness of those edges corrected by the
+    profile's *stored model* must not exceed ``max_holdout_d_px``: a model that was
+    changed after calibration (issue 14: ``k1 = 5.0``) no longer straightens them;
+``defined``
+    the correction is defined over the whole image: its inverse returns every
+    point of a grid over the image (corners and borders included) to within
+    :data:`DEFINED_TOL_PX` (a correction that folds the image, or whose inverse
+    does not exist at the corners, fails);
+``distortion_max``
+    the largest displacement of the correction over the image, modulo the best
+    homography (:func:`distortion_magnitude`), must not exceed
+    ``max_distortion_px`` (a lens out of its specification); reported when unset;
+``distortion_recorded``
+    (the profile carries the verdict it was judged with at calibration) the
+    distortion recomputed from the model must equal the one recorded then, within
+    :data:`RECORDED_AGREEMENT_PX` + :data:`RECORDED_AGREEMENT_REL`: the model is
+    the one that was judged;
+``reference_deviation_max``
+    (a golden reference is given) the largest field difference, modulo the best
+    homography, from the reference (:func:`pipeline.compare.compare_models`) must
+    not exceed ``max_reference_deviation_px``.
 
-A profile with no holdout figure, or a correction that is not finite over
-the image, FAILs with that reason. Figures that are not judged (e.g. the
-field uncertainty, or a distortion with no threshold) are still reported.
-
-:func:`qa_verdict` is the entry point for one :class:`station.profile.Profile`;
-:func:`evaluate` is the same on a model. Each judged figure is a typed
-:class:`station.profile.Check` (value, comparison, limit, passed) of the
-:class:`station.profile.Verdict`.
+A FAIL has one reason per failed check. :func:`qa_verdict` judges one
+:class:`station.profile.Profile`; :func:`evaluate` the same on a bare model.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from station.config import QAConfig
-from station.profile import Check, Profile, Verdict
+from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
 
 THRESHOLD_FIELDS = ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px")
+
+DEFINED_TOL_PX = 0.01
+"""Largest round trip (inverse, then correction) error over the image grid of a defined correction, px."""
+
+HOLDOUT_AGREEMENT_PX = 0.001
+HOLDOUT_AGREEMENT_REL = 0.05
+"""A stored holdout d agrees with the recomputed one within 0.001 px + 5 % of it."""
+
+RECORDED_AGREEMENT_PX = 0.01
+RECORDED_AGREEMENT_REL = 0.01
+"""The distortion recomputed from a model agrees with the one recorded at calibration within 0.01 px + 1 %."""
+
+PASS, FAIL = "PASS", "FAIL"
+
+_NEGATION = {"<=": ">", "<": ">=", ">": "<=", ">=": "<"}
 
 
 def thresholds_from(obj: Any = None, **overrides) -> QAConfig:
@@ -60,6 +99,14 @@ def thresholds_from(obj: Any = None, **overrides) -> QAConfig:
     return QAConfig(**values)
 
 
+def calibrated_thresholds(profile: Profile) -> dict[str, float | None] | None:
+    """The thresholds a profile was judged with when it was calibrated (its stored verdict's), or None."""
+    if profile.qa is None or not profile.qa.thresholds:
+        return None
+    known = {k: profile.qa.thresholds.get(k) for k in THRESHOLD_FIELDS}
+    return known if known.get("max_holdout_d_px") is not None else None
+
+
 def grid_step(width: int, height: int) -> float:
     """Spacing (px) of the grid on which QA compares corrections (:func:`distortion_magnitude`)."""
     return max(8.0, max(width, height) / 80)
@@ -74,8 +121,75 @@ def distortion_magnitude(model, width: int, height: int) -> tuple[float, float]:
     return c.rms, c.max
 
 
-def _finite(v) -> bool:
-    return isinstance(v, (int, float)) and math.isfinite(v)
+def round_trip_error(model, width: int, height: int, n: int = 9) -> float:
+    """Largest distance (px) between a point of an ``n`` x ``n`` grid over the image (its
+    corners and borders included) and the correction applied to the correction's inverse
+    at that point (``inf`` where the inverse does not exist or is not finite)."""
+    xs = np.linspace(0.0, width - 1.0, n)
+    ys = np.linspace(0.0, height - 1.0, n)
+    xx, yy = np.meshgrid(xs, ys)
+    q = np.stack([xx.ravel(), yy.ravel()], axis=1)
+    with np.errstate(all="ignore"):
+        try:
+            u = model.undistort_points(q)
+            back = model.distort_points(u)
+            err = np.hypot(*(back - q).T)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            return math.inf
+    if not np.all(np.isfinite(u)) or not np.all(np.isfinite(err)):
+        return math.inf
+    return float(err.max())
+
+
+def _fmt(v: float | None, digits: int) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def judged(
+    name: str, label: str, value: float | None, comparison: str, limit: float, *, digits: int = 4, unit: str = "px"
+) -> Check:
+    """A judged check: ``value comparison limit`` (None / non-finite value: FAIL), its text
+    stating what happened (the comparison that holds, then PASS or FAIL)."""
+    ok = value is not None and math.isfinite(value) and _holds(value, comparison, limit)
+    shown = comparison if ok else _NEGATION[comparison]
+    if value is None or not math.isfinite(value):
+        text = f"{label}: {'none' if value is None else 'not finite'}: {FAIL}"
+    else:
+        text = f"{label} {value:.{digits}f} {unit} {shown} {limit:g} {unit}: {PASS if ok else FAIL}"
+    return Check(name, _finite(value), comparison, float(limit), bool(ok), text)
+
+
+def reported(name: str, label: str, value: float | None, comparison: str = "<=", *, digits: int = 4) -> Check:
+    """A figure shown but not judged (no threshold)."""
+    return Check(
+        name, _finite(value), comparison, None, None, f"{label} {_fmt(value, digits)} px: reported, no threshold"
+    )
+
+
+def _holds(value: float, comparison: str, limit: float) -> bool:
+    return {
+        "<=": value <= limit,
+        "<": value < limit,
+        ">": value > limit,
+        ">=": value >= limit,
+    }[comparison]
+
+
+def _finite(v) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """The measured edges a profile was fitted on: per shot (orientation), its edges as (M, 2)
+    arrays of distorted pixels, and where they come from (said in the check texts)."""
+
+    shots: Sequence[Sequence[np.ndarray]]
+    source: str
+
+    @property
+    def n_edges(self) -> int:
+        return sum(len(s) for s in self.shots)
 
 
 def evaluate(
@@ -86,76 +200,137 @@ def evaluate(
     thresholds: QAConfig,
     reference=None,
     extra: Mapping[str, Any] | None = None,
+    *,
+    measurements: Measurements | None = None,
+    recomputed_holdout_d: float | None = None,
+    recorded: Mapping[str, Any] | None = None,
 ) -> Verdict:
-    """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`).
+    """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`); see the module docstring.
 
-    ``reference`` is the golden correction of the same lens model for this
-    image size (or ``None``: that check is skipped, and reported as such when
-    a threshold is set). ``extra`` figures (e.g. the field uncertainty) are
-    reported with the verdict, not judged.
+    ``holdout_d``: the stored holdout figure; ``recomputed_holdout_d``: the one recomputed
+    from ``measurements`` (judged instead, and compared with the stored one);
+    ``measurements``: the edges the model was fitted on (the ``corrected_d`` check);
+    ``recorded``: the metrics of the verdict the profile was judged with at calibration (the
+    ``distortion_recorded`` check); ``reference``: the golden correction of the same lens model
+    for this image size (None: not compared; said when a threshold is set); ``extra``: figures
+    reported with the verdict, not judged (the field uncertainty).
     """
     from pipeline.compare import compare_models
 
-    reasons: list[str] = []
     checks: list[Check] = []
-    metrics: dict = {"holdout_d_px": holdout_d}
+    reasons: list[str] = []
+    metrics: dict[str, Any] = {"holdout_d_px": holdout_d}
     metrics.update({k: v for k, v in (extra or {}).items() if v is not None})
 
+    def add(check: Check, why: str = "") -> None:
+        checks.append(check)
+        if check.passed is False:
+            reasons.append(check.text.rsplit(": ", 1)[0] + (f": {why}" if why else ""))
+
     t = thresholds.max_holdout_d_px
-    if not _finite(holdout_d):
-        reasons.append("no cross-validated (holdout) straightness for this profile")
+    judged_holdout = holdout_d
+    label = "holdout d"
+    if recomputed_holdout_d is not None:
+        judged_holdout = recomputed_holdout_d
+        label = "holdout d (recomputed from the measurements)"
+        metrics.update(holdout_d_px=recomputed_holdout_d, holdout_d_stored_px=holdout_d)
+    if judged_holdout is None:
+        add(
+            Check("holdout_d", None, "<=", t, False, f"holdout d: none recorded: {FAIL}"),
+            "no cross-validated (holdout) straightness for this profile",
+        )
     else:
-        ok = holdout_d <= t
-        checks.append(Check("holdout_d", holdout_d, "<=", t, ok, f"holdout d {holdout_d:.4f} px <= {t:g} px"))
-        if not ok:
-            reasons.append(
-                f"holdout d {holdout_d:.4f} px > {t:g} px: the correction does not "
-                "straighten shots it was not fitted on well enough"
-            )
+        add(
+            judged("holdout_d", label, judged_holdout, "<=", t),
+            "the correction does not straighten shots it was not fitted on well enough",
+        )
+    if recomputed_holdout_d is not None and holdout_d is not None:
+        tol = HOLDOUT_AGREEMENT_PX + HOLDOUT_AGREEMENT_REL * recomputed_holdout_d
+        diff = abs(holdout_d - recomputed_holdout_d)
+        ok = diff <= tol
+        c = Check(
+            "holdout_d_stored",
+            diff,
+            "<=",
+            tol,
+            ok,
+            f"stored holdout d {holdout_d:.4f} px vs recomputed {recomputed_holdout_d:.4f} px: "
+            f"difference {diff:.4f} px {'<=' if ok else '>'} {tol:.4f} px: {PASS if ok else FAIL}",
+        )
+        add(c, "the stored figures do not belong to the measurements this profile was fitted on")
+
+    if measurements is not None and measurements.shots:
+        from pipeline.edgeset import corrected_straightness
+
+        edges = [np.asarray(p, np.float64) for s in measurements.shots for p in s if len(p) >= 3]
+        with np.errstate(all="ignore"):
+            d_corr = corrected_straightness(model, edges)[0] if edges else math.nan
+        metrics["corrected_d_px"] = _finite(d_corr)
+        add(
+            judged(
+                "corrected_d",
+                f"d of the {len(measurements.shots)} measured shots ({measurements.source}) corrected by this model",
+                _finite(d_corr),
+                "<=",
+                t,
+            ),
+            "the stored correction does not straighten the shots it was fitted on",
+        )
+
+    rt = round_trip_error(model, width, height)
+    metrics["round_trip_px"] = _finite(rt)
+    add(
+        judged(
+            "defined", "correction's inverse round trip over the image, corners included,", rt, "<=", DEFINED_TOL_PX
+        ),
+        "the correction is not defined over the whole image (its inverse does not return the corners)",
+    )
 
     try:
-        rms, mx = distortion_magnitude(model, width, height)
-    except (ValueError, FloatingPointError):
+        with np.errstate(all="ignore"):
+            rms, mx = distortion_magnitude(model, width, height)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         rms = mx = math.nan
-    metrics.update(distortion_rms_px=rms, distortion_max_px=mx)
+    metrics.update(distortion_rms_px=_finite(rms), distortion_max_px=_finite(mx))
+    lim = thresholds.max_distortion_px
+    label = "distortion max (modulo homography)"
     if not (math.isfinite(rms) and math.isfinite(mx)):
-        reasons.append("the correction is not finite over the whole image")
-    elif thresholds.max_distortion_px is not None:
-        lim = thresholds.max_distortion_px
-        ok = mx <= lim
-        checks.append(Check("distortion_max", mx, "<=", lim, ok, f"distortion max {mx:.3f} px <= {lim:g} px"))
-        if not ok:
-            reasons.append(f"distortion {mx:.3f} px (max over the image, modulo homography) > {lim:g} px")
+        add(
+            Check("distortion_max", None, "<=", lim, False, f"{label}: not finite over the image: {FAIL}"),
+            "the correction is not finite over the whole image",
+        )
+    elif lim is not None:
+        add(judged("distortion_max", label, mx, "<=", lim, digits=3), "the lens is out of its specification")
+    else:
+        add(reported("distortion_max", label, mx, digits=3))
+
+    then = _finite((recorded or {}).get("distortion_max_px"))
+    if then is not None and math.isfinite(mx):
+        tol = RECORDED_AGREEMENT_PX + RECORDED_AGREEMENT_REL * then
+        diff = abs(mx - then)
+        ok = diff <= tol
+        add(
+            Check(
+                "distortion_recorded",
+                diff,
+                "<=",
+                tol,
+                ok,
+                f"distortion max {mx:.3f} px now, {then:.3f} px when judged at calibration: difference "
+                f"{diff:.3f} px {'<=' if ok else '>'} {tol:.3f} px: {PASS if ok else FAIL}",
+            ),
+            "the correction was changed after it was calibrated and judged",
+        )
 
     lim = thresholds.max_reference_deviation_px
     if reference is not None:
         c = compare_models(model, reference, width, height, step=grid_step(width, height))
         metrics.update(reference_rms_px=c.rms, reference_max_px=c.max)
+        label = f"deviation from the reference max (RMS {c.rms:.4f} px)"
         if lim is not None:
-            ok = c.max <= lim
-            checks.append(
-                Check(
-                    "reference_deviation_max",
-                    c.max,
-                    "<=",
-                    lim,
-                    ok,
-                    f"deviation from reference max {c.max:.4f} px <= {lim:g} px",
-                )
-            )
-            if not ok:
-                reasons.append(f"deviates from the reference by {c.max:.4f} px max ({c.rms:.4f} px RMS) > {lim:g} px")
+            add(judged("reference_deviation_max", label, c.max, "<=", lim), "deviates from the reference")
         else:
-            checks.append(
-                Check(
-                    "reference_deviation_max",
-                    c.max,
-                    "<=",
-                    None,
-                    None,
-                    f"deviation from reference max {c.max:.4f} px: reported only (no threshold)",
-                )
-            )
+            add(reported("reference_deviation_max", label, c.max))
     elif lim is not None:
         checks.append(
             Check(
@@ -164,12 +339,12 @@ def evaluate(
                 "<=",
                 lim,
                 None,
-                "deviation from reference: not checked (no reference given)",
+                "deviation from the reference: not checked, no reference given",
             )
         )
 
     return Verdict(
-        "FAIL" if reasons else "PASS",
+        FAIL if reasons else PASS,
         tuple(reasons),
         metrics,
         tuple(checks),
@@ -177,23 +352,53 @@ def evaluate(
     )
 
 
-def _num(v) -> float | None:
-    return float(v) if _finite(v) else None
-
-
 def reported_figures(profile: Profile) -> dict[str, float | None]:
     """The figures of a profile QA reports without judging them (px)."""
     m = profile.merit
     unc = m.field_uncertainty
     return {
-        "holdout_d_max_px": _num(m.holdout.d_max) if m.holdout else None,
-        "fit_d_px": _num(m.fit.d) if m.fit else None,
-        "field_uncertainty_rms_px": _num(unc.rms) if unc else None,
-        "field_uncertainty_max_px": _num(unc.max) if unc else None,
+        "holdout_d_max_px": _finite(m.holdout.d_max) if m.holdout else None,
+        "fit_d_px": _finite(m.fit.d) if m.fit else None,
+        "field_uncertainty_rms_px": _finite(unc.rms) if unc else None,
+        "field_uncertainty_max_px": _finite(unc.max) if unc else None,
     }
 
 
-def qa_verdict(profile: Profile, thresholds=None, reference=None) -> Verdict:
+def recompute_holdout(profile: Profile, measurements: Measurements, map_fn=map) -> tuple[float | None, str]:
+    """(holdout d, note): the leave-one-orientation-out holdout d of ``profile`` recomputed from
+    ``measurements`` by refitting its spec exactly as a session does
+    (:func:`station.calibration.calibrate_shots`); (None, why) when it cannot be."""
+    from station.calibration import calibrate_shots
+
+    hold = profile.merit.holdout
+    if profile.spec is None:
+        return None, "not recomputed: the profile does not record which model was fitted"
+    if hold is not None and hold.scheme not in (None, HOLDOUT_LEAVE_ONE_ORIENTATION_OUT):
+        return None, f"not recomputed: its holdout comes from {hold.scheme}, not from these measurements"
+    if len(measurements.shots) < 2:
+        return None, "not recomputed: fewer than 2 measured shots"
+    cal = calibrate_shots(
+        [list(s) for s in measurements.shots],
+        profile.width,
+        profile.height,
+        profile.spec,
+        holdout="orientations",
+        map_fn=map_fn,
+    )
+    if cal.failure is not None or cal.merit.holdout is None or cal.merit.holdout.d is None:
+        return None, f"not recomputed: {cal.failure or 'no holdout figure'}"
+    return float(cal.merit.holdout.d), ""
+
+
+def qa_verdict(
+    profile: Profile,
+    thresholds=None,
+    reference=None,
+    *,
+    measurements: Measurements | None = None,
+    recompute: bool = False,
+    map_fn=map,
+) -> Verdict:
     """The QA verdict of one profile.
 
     Parameters
@@ -206,11 +411,17 @@ def qa_verdict(profile: Profile, thresholds=None, reference=None) -> Verdict:
     reference : DistortionModel or Profile, optional
         The golden reference correction of the same lens model; a profile must be
         for the same image size (ValueError otherwise).
+    measurements : Measurements, optional
+        The edges the profile was fitted on (a session's kept measurements): the
+        stored model is judged on them (``corrected_d``).
+    recompute : bool
+        With ``measurements``, recompute the holdout d from them and judge that
+        (:func:`recompute_holdout`; a few fits, ``map_fn`` maps them).
 
     Returns
     -------
     Verdict
-        ``passed``, ``reasons`` (one per failed check), ``figures`` (px), ``checks``.
+        ``passed``, ``reasons`` (one per failed check), ``figures`` (px), ``checks``, ``thresholds``.
     """
     if isinstance(reference, Profile):
         if (reference.width, reference.height) != (profile.width, profile.height):
@@ -219,21 +430,30 @@ def qa_verdict(profile: Profile, thresholds=None, reference=None) -> Verdict:
                 f"{profile.width}x{profile.height}: they cannot be compared"
             )
         reference = reference.model
+    recomputed = None
+    extra = reported_figures(profile)
+    if measurements is not None and recompute:
+        recomputed, note = recompute_holdout(profile, measurements, map_fn=map_fn)
+        if note:
+            extra["holdout_note"] = note
     return evaluate(
         profile.model,
         profile.width,
         profile.height,
-        _num(profile.merit.holdout_d),
+        _finite(profile.merit.holdout_d),
         thresholds_from(thresholds),
         reference=reference,
-        extra=reported_figures(profile),
+        extra=extra,
+        measurements=measurements,
+        recomputed_holdout_d=recomputed,
+        recorded=profile.qa.metrics if profile.qa is not None else None,
     )
 
 
 def combine(verdicts) -> str:
     """PASS only if every verdict passed (and there is at least one)."""
     verdicts = list(verdicts)
-    return "PASS" if verdicts and all(v.passed for v in verdicts) else "FAIL"
+    return PASS if verdicts and all(v.passed for v in verdicts) else FAIL
 
 
 def session_profiles(session_path) -> list[tuple[int, Profile]]:
@@ -243,6 +463,20 @@ def session_profiles(session_path) -> list[tuple[int, Profile]]:
     from station.session import layout
 
     return [(f, Profile.from_model_file(read_model_file(p))) for f, p in layout.profile_files(session_path)]
+
+
+def session_measurements(session, focus_idx: int) -> Measurements | None:
+    """The measured edges a session kept for one focus setting (``measurements/``, the shots'
+    current attempts), or None when any orientation lacks its kept measurement."""
+    from station.qa.evidence import stored_measurement
+
+    shots = []
+    for o in range(len(session.config.capture.orientations_deg)):
+        m = stored_measurement(session, focus_idx, o)
+        if m is None:
+            return None
+        shots.append([np.asarray(ln.points, np.float64) for ln in m.lines])
+    return Measurements(shots, f"{session.path.name}/measurements, focus index {focus_idx}")
 
 
 def interpolation_error(models_by_focus: dict, width: int, height: int):

@@ -131,6 +131,8 @@ class SessionResult:
     frames_saved: int = 0
     faults: int = 0
     focus: list[FocusSummary] = field(default_factory=list)
+    verdict: str | None = None  # the session's QA verdict, once judged (station.session.run)
+    results: dict[str, Any] | None = None  # what DIR/results.json holds (station.qa.results)
 
 
 class Executor:
@@ -460,9 +462,10 @@ class Executor:
         )
         # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
         # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
-        from station.qa.verdicts import qa_verdict
+        from station.qa.verdicts import qa_verdict, session_measurements
 
-        profile = profile.with_(qa=qa_verdict(profile, cfg.qa))
+        # the stored model judged on the edges it was fitted on, as the QA after the executor does
+        profile = profile.with_(qa=qa_verdict(profile, cfg.qa, measurements=session_measurements(self.session, f)))
         write_profile(path, profile)
         profile_id = None
         if self.store is not None:

@@ -10,6 +10,7 @@ Layout (paths relative to the session directory ``DIR``)::
     profiles/focus{f}.yaml           the profile (model file) of focus setting f
     profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
     report/                          the session report (station.qa.report)
+    results.json                     the session's results for scripts (station.qa.results)
 
 ``f``, ``o``, ``a``, ``i`` are indices: of the focus setting in ``focus.settings``, of
 the orientation in ``capture.orientations_deg``, of the capture attempt (the number of
@@ -30,6 +31,7 @@ FRAMES = "frames"
 MEASUREMENTS = "measurements"
 PROFILES = "profiles"
 REPORT = "report"
+RESULTS = "results.json"
 
 WRITTEN_DIRS = (FRAMES, MEASUREMENTS, PROFILES)
 """Subdirectories written atomically (a kill may leave a ``.*.tmp*`` temporary there)."""

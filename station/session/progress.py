@@ -124,8 +124,11 @@ class ConsoleProgress:
         self.console.print(text)
 
     def finish(self, session_path: Any, interrupted: bool = False) -> None:
-        """Stop the bars; print the summary table (unless interrupted: the command says what to do)."""
-        from rich.table import Table
+        """Stop the bars; print the summary table (unless interrupted: the command says what to do).
+
+        On a terminal a rich table; otherwise tab-separated text with one header line
+        (:func:`station.tables.print_table`), units in the headers."""
+        from station.tables import print_table
 
         if self._progress is not None:
             self._progress.stop()
@@ -133,35 +136,43 @@ class ConsoleProgress:
         if interrupted or self.config is None:
             return
         cfg = self.config
-        t = Table(title=f"{cfg.lens.label()} on {cfg.camera_body.label()}\n{session_path}")
-        for col in (
+        columns = (
             "focus",
             "shots",
-            "recapt.",
+            "recaptures",
             "edges",
-            "fit d",
-            "fit d_max",
-            "holdout d",
-            "holdout d_max",
-            "unc. rms",
-            "unc. max",
+            "fit d (px)",
+            "fit d_max (px)",
+            "holdout d (px)",
+            "holdout d_max (px)",
+            "unc. rms (px)",
+            "unc. max (px)",
             "model",
             "profile",
-        ):
-            t.add_column(col, justify="right")
+        )
         figures = ("fit_d", "fit_d_max", "holdout_d", "holdout_d_max", "uncertainty_rms", "uncertainty_max")
+        rows = []
         for row in self.tally.rows.values():
             fit = row.fit
-            t.add_row(
-                f"{row.focus:g}",
-                str(row.shots),
-                str(row.recaptures),
-                str(row.lines),
-                *(_fmt(getattr(fit, name) if fit else None) for name in figures),
-                str(fit.model.get("model", "?")) if fit else "-",
-                f"#{row.profile_id}" if row.profile_id is not None else "-",
+            rows.append(
+                (
+                    f"{row.focus:g}",
+                    str(row.shots),
+                    str(row.recaptures),
+                    str(row.lines),
+                    *(_fmt(getattr(fit, name) if fit else None) for name in figures),
+                    str(fit.model.get("model", "?")) if fit else "",
+                    f"#{row.profile_id}" if row.profile_id is not None else "",
+                )
             )
-        self.console.print(t)
+        stream = self.console.file
+        print_table(
+            columns,
+            rows,
+            title=f"{cfg.lens.label()} on {cfg.camera_body.label()}\n{session_path}",
+            right=columns[:-2],
+            stream=stream,
+        )
         self.console.print(f"frames saved this run: {self.tally.frames_saved}, device faults: {self.tally.faults}")
 
     def _advance(self, task: str) -> None:
@@ -170,4 +181,4 @@ class ConsoleProgress:
 
 
 def _fmt(v: Any) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.4f}"
+    return "" if v is None or not math.isfinite(v) else f"{v:.4f}"

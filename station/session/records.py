@@ -158,6 +158,8 @@ class QARecorded(Record):
     verdict: str
     reasons: list[str]
     metrics: Mapping[str, Any]
+    checks: list[Mapping[str, Any]] = field(default_factory=list)  # station.profile.Check.to_dict() each
+    thresholds: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -5,18 +5,26 @@ open: the executor performs what the session lacks (:mod:`station.session.execut
 with :class:`station.session.progress.ConsoleProgress` showing it); when the plan is
 done, QA judges every profile (:func:`station.qa.judge.judge_session`), the report is
 written into ``DIR/report`` (:func:`station.qa.report.write_session_report`, from the
-measurements the session kept) and a ``finished`` record closes the session. A session
-stopped by a fault skips QA and the report; one killed during QA or the report is
-finished by its next ``resume`` (nothing left to capture, QA and report again).
+measurements the session kept), the results into ``DIR/results.json``
+(:mod:`station.qa.results`) and a ``finished`` record closes the session. A session
+stopped by a fault skips QA and the report (its ``results.json`` says ``failed``); one
+killed during QA or the report is finished by its next ``resume`` (nothing left to
+capture, QA and report again).
+
+The result's exit code binds (:mod:`station.exit_codes`): 0 when the session finished
+and its verdict is PASS, 1 when it finished and its verdict is FAIL, 2 when it stopped.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import time
 from collections.abc import Callable
 from typing import Any
 
 from drivers.protocols import Camera, Turntable
+from station.exit_codes import EXIT_FAIL
 from station.session import layout
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_OK, Executor, SessionResult
@@ -42,9 +50,13 @@ def run_session(
     executor = Executor(session, camera, turntable, store=store, sleep=sleep)
     if console is not None:
         executor.subscribe(ConsoleProgress(console, executor.tally))
-    result = executor.run()
+    try:
+        result = executor.run()
+    except KeyboardInterrupt:
+        _results(session, None)
+        raise
     if result.exit_code != EXIT_OK:
-        return result
+        return dataclasses.replace(result, results=_results(session, None))
     note = console.print if console is not None else (lambda _text: None)
     from station.qa.judge import judge_session
 
@@ -52,7 +64,33 @@ def run_session(
     if report and qa is not None:
         _write_report(session, qa, note)
     session.append(Finished())
-    return result
+    results = _results(session, qa)
+    if qa is None:
+        return dataclasses.replace(result, results=results)
+    if qa.overall != "PASS":
+        return dataclasses.replace(
+            result,
+            exit_code=EXIT_FAIL,
+            message=f"session finished, QA verdict FAIL: {session.path}",
+            verdict=qa.overall,
+            results=results,
+        )
+    return dataclasses.replace(
+        result, message=f"session finished, QA verdict PASS: {session.path}", verdict=qa.overall, results=results
+    )
+
+
+def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
+    """Write ``DIR/results.json`` (:mod:`station.qa.results`); returns what it holds (None: not written)."""
+    from station.qa.results import session_results, write_results
+
+    try:
+        results = session_results(session, qa)
+    except (OSError, ValueError):  # a damaged profile file: QA and resume say so; the frames are kept
+        return None
+    with contextlib.suppress(OSError):
+        write_results(session, results)
+    return results
 
 
 def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> None:

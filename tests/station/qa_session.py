@@ -36,8 +36,8 @@ def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGL
     d["focus"]["settings"] = list(focus)
     d["capture"]["orientations_deg"] = list(angles)
     d["capture"]["frames_per_orientation"] = 1
-    d["pipeline"].update(degree=3, bootstrap=4, workers=1)
-    d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 5.0}
+    d["pipeline"].update(degree=4, bootstrap=4, workers=1)
+    d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 10.0}
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     root.mkdir(parents=True, exist_ok=True)
     path = root / "station.yaml"

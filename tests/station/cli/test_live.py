@@ -155,6 +155,7 @@ def test_session_run_live_shows_the_session_on_the_page(tmp_path):
         (fit,) = ses["fits"]
         assert fit["holdout_d"] is not None and fit["holdout_d"] < 0.05
         assert ses["qa"] and ses["qa"][0]["verdict"] in ("PASS", "FAIL")
+        verdicts = {q["verdict"] for q in ses["qa"]}
         assert s["figures"]["strings_found"] >= 4  # the session's last frame, assessed
         assert s["turntable"] is None and s["camera"] is None  # the page only shows: the session drives
         req = urllib.request.Request(
@@ -163,8 +164,15 @@ def test_session_run_live_shows_the_session_on_the_page(tmp_path):
         with pytest.raises(urllib.error.HTTPError) as err:
             urllib.request.urlopen(req, timeout=10)
         assert err.value.code == 400
+        # the page shows "finished" once the record is written; the command then writes results.json
+        # and says it waits for Ctrl-C: interrupt only then (earlier is an interrupted run, exit 130)
+        said = []
+        while not (said and "the live page shows the result until Ctrl-C" in said[-1]):
+            said.append(p.stderr.readline())
+            assert said[-1], "".join(said)
     finally:
         p.send_signal(signal.SIGINT)
         out, err = p.communicate(timeout=60)
-    assert p.returncode == 0, err
+    err = "".join(said) + err
+    assert p.returncode == (1 if "FAIL" in verdicts else 0), err  # the verdict binds (issue 9)
     assert "session finished" in err and (tmp_path / "sessions" / "s" / "manifest.jsonl").exists()

@@ -62,8 +62,8 @@ def test_fail_on_threshold_is_exit_1(session, capsys):
     assert all("holdout d" in p["reasons"][0] for p in out["profiles"])
     code, out, _ = qa_json(capsys, session, "--max-distortion", "0.01", "--no-record")
     assert code == 1 and all(p["reasons"][0].startswith("distortion") for p in out["profiles"])
-    code, text, _ = qa(capsys, session, "--max-distortion", "0.01", "--no-record")
-    assert code == 1 and text.rstrip().endswith("QA: FAIL")
+    code, text, err = qa(capsys, session, "--max-distortion", "0.01", "--no-record")
+    assert code == 1 and err.rstrip().endswith("QA: FAIL")
 
 
 def test_reference_model_file(session, tmp_path, capsys):

@@ -47,7 +47,8 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
     assert "bootstrap" in md or "uncertainty" in md
     page = (out / "index.html").read_text()  # the same report as a page embedding the same PNGs
     assert sorted(re.findall(r'<img alt="[^"]*" src="([^"]+)">', page)) == sorted(links)
-    assert "<strong>Verdict: FAIL</strong>" in page and "&gt; 0.01 px" in page
+    assert '<strong class="verdict fail">Verdict: FAIL</strong>' in page and "&gt; 0.01 px" in page
+    assert ".verdict.fail{background:#cf222e}" in page  # the verdict in colour
 
 
 def test_residuals_drop_after_correction(session):
@@ -98,7 +99,7 @@ def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(session, t
     with SessionDir.open(auto) as s:
         assert s.config.pipeline.model == "auto"
     ((_, prof),) = session_profiles(auto)
-    assert prof.spec is not None and prof.spec.label == "radial3+tangential"
+    assert prof.spec is not None and prof.spec.label == "radial4+tangential"
     real = pipeline.uncertainty.bootstrap_field_uncertainty
     specs = []
 

@@ -1,18 +1,56 @@
-"""QA verdicts on corrections with exact answers."""
+"""QA verdicts on corrections with exact answers: truthful checks, and the stored model itself judged."""
 
+import dataclasses
 import math
 
+import numpy as np
+import pytest
+
+from drivers.sim.lens import lens_for_focus
+from pipeline.fitspec import FitSpec
 from pipeline.models.base import IdentityModel
 from pipeline.models.radial import RadialModel
+from station.calibration import calibrate_shots
 from station.config import QAConfig
-from station.qa.verdicts import combine, distortion_magnitude, evaluate
+from station.profile import Holdout, Merit, Profile, Provenance
+from station.qa.verdicts import (
+    Measurements,
+    combine,
+    distortion_magnitude,
+    evaluate,
+    qa_verdict,
+    round_trip_error,
+)
+from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 400, 300
+ANGLES = (0.0, 45.0, 90.0, 135.0)
+SPEC = FitSpec("radial", 4, tangential=True)
+
+
+def by_name(v):
+    return {c.name: c for c in v.checks}
+
+
+def tampered(model, k1=5.0):
+    """The model with its first-order radial coefficient replaced (issue 14's tampered profile)."""
+    return dataclasses.replace(model, k=(model.k[0], k1, *model.k[2:]))
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    """The demo lens at 400x300 calibrated from exact edge points (tiny noise), its edges, and the truth."""
+    truth = lens_for_focus(0.5, W, H)
+    shots = harp_point_sets(truth, W, H, ANGLES, spacing=30.0, step=12.0, noise=0.003, seed=4)
+    cal = calibrate_shots(shots, W, H, SPEC, holdout="orientations")
+    assert cal.failure is None, cal.failure
+    return cal.profile(W, H, provenance=Provenance()), Measurements(shots, "exact points"), truth
 
 
 def test_identity_has_no_distortion():
     rms, mx = distortion_magnitude(IdentityModel(), W, H)
     assert rms < 1e-9 and mx < 1e-9
+    assert round_trip_error(IdentityModel(), W, H) == 0.0
 
 
 def test_thresholds():
@@ -20,11 +58,34 @@ def test_thresholds():
     _rms, mx = distortion_magnitude(lens, W, H)
     assert 0.1 < mx < 3.0  # 0.01 * s at the corners, less modulo homography
     ok = evaluate(lens, W, H, 0.01, QAConfig(max_holdout_d_px=0.02, max_distortion_px=mx + 0.01))
-    assert ok.passed and ok.reasons == () and len(ok.checks) == 2
+    assert ok.passed and ok.reasons == ()
+    assert [c.name for c in ok.checks] == ["holdout_d", "defined", "distortion_max"]
+    assert all(c.passed for c in ok.checks)
     bad = evaluate(lens, W, H, 0.03, QAConfig(max_holdout_d_px=0.02, max_distortion_px=mx - 0.01))
     assert bad.verdict == "FAIL" and len(bad.reasons) == 2
     assert bad.reasons[0].startswith("holdout d 0.0300 px > 0.02 px")
     assert math.isclose(bad.metrics["distortion_max_px"], mx)
+
+
+def test_every_check_says_truthfully_what_happened():
+    # issue 9: "Checks: holdout d 0.0012 px <= 0.001 px" was written above "Reasons for FAIL: ... > 0.001 px"
+    lens = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.01))
+    _rms, mx = distortion_magnitude(lens, W, H)
+    failed = by_name(evaluate(lens, W, H, 0.0012, QAConfig(max_holdout_d_px=0.001, max_distortion_px=mx / 2)))
+    c = failed["holdout_d"]
+    assert (c.value, c.comparison, c.limit, c.passed) == (0.0012, "<=", 0.001, False)
+    assert c.text == "holdout d 0.0012 px > 0.001 px: FAIL"
+    d = failed["distortion_max"]
+    assert d.passed is False and d.text == f"distortion max (modulo homography) {mx:.3f} px > {mx / 2:g} px: FAIL"
+    held = by_name(evaluate(lens, W, H, 0.0012, QAConfig(max_holdout_d_px=0.05)))
+    assert held["holdout_d"].passed is True and held["holdout_d"].text == "holdout d 0.0012 px <= 0.05 px: PASS"
+    shown = held["distortion_max"]  # no threshold: reported, not judged
+    assert shown.passed is None and shown.limit is None and shown.text.endswith("reported, no threshold")
+    assert shown.value == pytest.approx(mx)
+    # the typed check survives its JSON form
+    from station.profile import Check
+
+    assert Check.from_dict(c.to_dict()) == c
 
 
 def test_reference_deviation_and_missing_holdout():
@@ -33,8 +94,67 @@ def test_reference_deviation_and_missing_holdout():
     q = QAConfig(max_holdout_d_px=1.0, max_reference_deviation_px=0.01)
     assert evaluate(a, W, H, 0.01, q, reference=a).passed
     v = evaluate(a, W, H, 0.01, q, reference=b)
-    assert not v.passed and "deviates from the reference" in v.reasons[0]
+    assert not v.passed and "deviation from the reference" in v.reasons[0]
+    assert by_name(v)["reference_deviation_max"].text.endswith("> 0.01 px: FAIL")
     v = evaluate(a, W, H, None, q)
     assert not v.passed and "no cross-validated" in v.reasons[0]
-    assert "not checked (no reference given)" in v.checks[-1].text
+    assert by_name(v)["holdout_d"].text == "holdout d: none recorded: FAIL"
+    assert "not checked, no reference given" in v.checks[-1].text and v.checks[-1].passed is None
     assert combine([]) == "FAIL" and combine([evaluate(a, W, H, 0.0, q)]) == "PASS"
+
+
+def test_a_correction_not_defined_at_the_corners_fails():
+    # issue 14: k1 = 5.0 written into a stored profile, 259 px of distortion, passed `harp qa LENS`
+    good = lens_for_focus(0.5, 1280, 960)
+    bad = tampered(good)
+    # truth independent of the check: the correction maps the corners where no inverse brings them back
+    corners = np.array([[0.0, 0.0], [1279.0, 0.0], [1279.0, 959.0], [0.0, 959.0]])
+    assert not np.allclose(bad.distort_points(bad.undistort_points(corners)), corners, atol=1.0, equal_nan=False)
+    v = qa_verdict(Profile(bad, 1280, 960, merit=Merit(holdout=Holdout(0.001))))  # default thresholds
+    assert not v.passed
+    c = by_name(v)["defined"]
+    assert c.passed is False and "corners" in c.text and c.text.endswith("FAIL")
+    assert any("not defined over the whole image" in r for r in v.reasons)
+    assert by_name(qa_verdict(Profile(good, 1280, 960, merit=Merit(holdout=Holdout(0.001)))))["defined"].passed
+
+
+def test_the_stored_model_is_judged_on_its_measurements(calibrated):
+    profile, measured, truth = calibrated
+    v = qa_verdict(profile, measurements=measured)
+    c = by_name(v)["corrected_d"]
+    assert v.passed and c.passed and c.value < 0.01
+    # a model changed after calibration no longer straightens the edges it was fitted on
+    # (a mild change here, still defined everywhere, so only this check can see it)
+    changed = profile.with_(model=tampered(profile.model, k1=0.02))
+    assert round_trip_error(changed.model, W, H) < 1e-6
+    v = qa_verdict(changed, measurements=measured)
+    c = by_name(v)["corrected_d"]
+    assert not v.passed and c.passed is False and c.value > 0.05
+    assert any("does not straighten the shots it was fitted on" in r for r in v.reasons)
+
+
+def test_a_model_changed_after_its_verdict_fails_without_measurements(calibrated):
+    profile, _measured, _truth = calibrated
+    judged = profile.with_(qa=qa_verdict(profile))
+    again = qa_verdict(judged)
+    assert again.passed and by_name(again)["distortion_recorded"].passed
+    changed = judged.with_(model=tampered(profile.model, k1=0.02))
+    v = qa_verdict(changed)
+    c = by_name(v)["distortion_recorded"]
+    assert not v.passed and c.passed is False and "when judged at calibration" in c.text
+
+
+def test_holdout_recomputed_from_the_measurements(calibrated):
+    profile, measured, _truth = calibrated
+    v = qa_verdict(profile, measurements=measured, recompute=True)
+    checks = by_name(v)
+    assert v.passed and checks["holdout_d_stored"].passed
+    assert checks["holdout_d"].value == pytest.approx(profile.merit.holdout_d, abs=1e-9)
+    assert "recomputed" in checks["holdout_d"].text
+    # a stored holdout d that does not belong to the measurements: the recomputed one is judged
+    lied = profile.with_(merit=dataclasses.replace(profile.merit, holdout=Holdout(1e-6, None, None, ())))
+    v = qa_verdict(lied, QAConfig(max_holdout_d_px=0.05), measurements=measured, recompute=True)
+    checks = by_name(v)
+    assert checks["holdout_d"].value == pytest.approx(profile.merit.holdout_d, abs=1e-9)
+    assert not v.passed and checks["holdout_d_stored"].passed is False
+    assert v.metrics["holdout_d_stored_px"] == 1e-6

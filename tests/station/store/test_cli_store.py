@@ -12,15 +12,17 @@ from station.cli import main
 from station.store import ProfileStore
 from station.store.location import parse_store
 from tests.station.store.conftest import tamper
-from tests.station.store.test_database import put, verdict
+from tests.station.store.test_database import THRESHOLDS, profile, put
 
 REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"
 
 
-def config_naming(dirpath: Path, store_url: str) -> Path:
-    """A station configuration in ``dirpath`` whose store is ``store_url`` (a file named relative to it)."""
+def config_naming(dirpath: Path, store_url: str, **qa) -> Path:
+    """A station configuration in ``dirpath`` whose store is ``store_url`` (a file named relative to it),
+    with ``qa`` thresholds over the demo's."""
     d = yaml.safe_load(DEMO.read_text())
+    d["qa"].update(qa)
     loc = parse_store(store_url)
     d["store"] = (
         {"path": str(Path("..") / loc.path.parent.name / loc.path.name)}
@@ -34,10 +36,13 @@ def config_naming(dirpath: Path, store_url: str) -> Path:
 
 
 def test_profile_and_qa_find_the_store_by_url_or_config(store_url, tmp_path, monkeypatch, capsys):
+    from station.qa.verdicts import qa_verdict
+
     with ProfileStore(store_url) as st:
-        for focus in (0.0, 0.5, 1.0):
-            put(st, focus=focus, qa=verdict(0.012))
-    cfg = config_naming(tmp_path / "cfg", store_url)
+        for focus in (0.0, 0.5, 1.0):  # judged as a session does, under a 10 px distortion limit
+            p = profile(focus=focus)
+            st.put_profile(p.with_(qa=qa_verdict(p, {**THRESHOLDS, "max_distortion_px": 10.0})))
+    cfg = config_naming(tmp_path / "cfg", store_url, max_distortion_px=5.0)
     other = tmp_path / "elsewhere"
     other.mkdir()
     monkeypatch.chdir(other)  # relative paths in the config are relative to the config, not here
@@ -48,7 +53,8 @@ def test_profile_and_qa_find_the_store_by_url_or_config(store_url, tmp_path, mon
         assert "S1" in capsys.readouterr().out
         assert main(["profile", *opts, "show", "S1", "--focus", "0.5"]) == 0
         capsys.readouterr()
-        # --config also brings its thresholds: the demo's max_distortion_px 5 fails this 5.9 px lens
+        # --store: judged under the thresholds it was calibrated with (10 px: PASS); --config brings its
+        # own thresholds (max_distortion_px 5 fails this 5.9 px lens)
         code = main(["qa", "S1", *opts, "--json"])
         out = json.loads(capsys.readouterr().out)
         assert len(out["profiles"]) == 3

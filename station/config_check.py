@@ -1,0 +1,83 @@
+"""Checks of a station configuration that need no device: ``harp config check`` and ``harp session run``.
+
+:func:`station.config.load_config` validates every field on its own (types, ranges, known
+keys). :func:`check_config` adds what only the whole configuration tells, without opening
+anything:
+
+* **errors** (the session could not succeed, :class:`~station.config.ConfigError`, one line
+  naming the field): a session locks focus at each of ``focus.settings`` before it captures,
+  so a camera whose driver sets focus only through a configured feature must name it
+  (:data:`FOCUS_SETTING`: the GenICam driver needs ``focus_feature``); a configuration that
+  can lock focus on nothing is refused before any device is opened or directory created;
+* **warnings** (true on this machine now, may be fine where the station runs): a turntable
+  port that does not exist here, a store or sessions directory that cannot be created.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from station.config import Config, ConfigError
+
+FOCUS_SETTING = {"aravis": "focus_feature"}
+"""Camera drivers that lock focus only through a configured setting: driver -> the setting's key."""
+
+
+@dataclass(frozen=True)
+class ConfigCheck:
+    """What :func:`check_config` found: ``errors`` (the session cannot run) and ``warnings``."""
+
+    errors: list[ConfigError] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+def check_config(config: Config) -> ConfigCheck:
+    """The checks of the module docstring on a loaded configuration."""
+    errors: list[ConfigError] = []
+    warnings: list[str] = []
+    cam = config.station.camera
+    key = FOCUS_SETTING.get(cam.driver)
+    if key is not None and not cam.settings.get(key):
+        settings = ", ".join(f"{f:g}" for f in config.focus_settings)
+        errors.append(
+            config.error(
+                f"station.camera.{key}",
+                f"expected the camera's focus feature (a session locks focus at each of focus.settings: "
+                f"{settings}); without it the {cam.driver} driver can lock focus on nothing. "
+                f"Name the vendor's focus feature (see `harp devices`)",
+            )
+        )
+    port = config.station.turntable.port
+    if config.simulation is None and "://" not in port and not os.path.exists(port):
+        warnings.append(
+            f"{config.path}: station.turntable.port: {port!r} does not exist on this machine "
+            f"(plug the turntable in, or see `harp devices` for the ports found)"
+        )
+    targets = [("store.sessions_dir", config.sessions_dir)]
+    if config.store_path is not None:
+        targets.append(("store.path", config.store_path.parent))
+    for where, directory in targets:
+        reason = _not_creatable(Path(directory))
+        if reason:
+            warnings.append(f"{config.path}: {where}: {directory}: {reason}")
+    return ConfigCheck(errors, warnings)
+
+
+def _not_creatable(directory: Path) -> str | None:
+    """Why ``directory`` could not be created or written by this user (None: it can)."""
+    p = directory
+    while not p.exists():
+        if p.parent == p:
+            return "no existing parent directory"
+        p = p.parent
+    if not p.is_dir():
+        return f"{p} is a file, not a directory"
+    if not os.access(p, os.W_OK | os.X_OK):
+        return f"{p} is not writable by this user"
+    return None

@@ -1,0 +1,157 @@
+"""How long a session will take, from its plan alone (``harp session plan CONFIG``; no device touched).
+
+:func:`estimate_plan` walks :func:`station.session.plan.plan_session` (every shot taken to
+pass) and adds up, per step:
+
+* a move: the angle to travel at the turntable's speed (trapezoidal profile: speed and
+  acceleration), plus :data:`MOVE_OVERHEAD_S` for the commands and the idle poll; the speed
+  is the emulator's for a simulated station, else :data:`TURNTABLE_SPEED_DEG_S` (an
+  assumption the output states: real stages are configured per installation);
+* settling: ``capture.settle_s``;
+* a frame: the exposure plus :data:`FRAME_OVERHEAD_S` (trigger, read-out, transfer, the
+  atomic write) plus, for the simulated camera, rendering (:data:`RENDER_S_PER_MPX`);
+* measuring a shot: :data:`MEASURE_S_PER_MPX` per megapixel of the frame;
+* a fit: the full fit and one leave-one-orientation-out refit per orientation
+  (:data:`FIT_S_PER_ORIENTATION` each), then the bootstrap replicates (as many refits) spread
+  over ``pipeline.workers`` processes;
+* once at the end: QA and the report (:data:`REPORT_S_PER_FOCUS` per focus setting).
+
+The processing constants were measured on the demo session (``benchmarks/station_demo.py``
+prints the estimate beside the measured wall time); a slower machine, a busy one, or a lens
+with more strings takes longer. It is an estimate for planning a line, not a promise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from station.config import Config
+from station.session.plan import Capture, Fit, LockFocus, Measure, Move, Settle, Store, plan_session
+
+TURNTABLE_SPEED_DEG_S = 20.0
+"""Assumed speed of a real turntable (deg/s) when the configuration does not simulate one."""
+TURNTABLE_ACCEL_DEG_S2 = 40.0
+"""Assumed acceleration of a real turntable (deg/s²)."""
+MOVE_OVERHEAD_S = 0.05
+FOCUS_OVERHEAD_S = 0.2
+FRAME_OVERHEAD_S = 0.05
+RENDER_S_PER_MPX = 0.10
+MEASURE_S_PER_MPX = 0.35
+FIT_S_PER_ORIENTATION = 0.12
+REPORT_S_PER_FOCUS = 2.0
+
+
+@dataclass(frozen=True)
+class PlanRow:
+    """One orientation of one focus setting (or a fit): what happens and how long it takes (s)."""
+
+    focus_idx: int
+    focus: float
+    what: str
+    orientation_deg: float | None = None
+    frames: int = 0
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class PlanEstimate:
+    """The plan as rows, its totals and the assumptions behind the duration."""
+
+    rows: list[PlanRow]
+    frames: int
+    moves: int
+    focus_locks: int
+    fits: int
+    seconds: float
+    assumptions: list[str] = field(default_factory=list)
+
+
+def move_seconds(distance_deg: float, speed: float, accel: float) -> float:
+    """Time of a trapezoidal (or triangular) move over ``distance_deg``."""
+    d = abs(distance_deg)
+    if d == 0:
+        return 0.0
+    d_ramp = speed * speed / accel  # accelerating to full speed and back
+    if d <= d_ramp:
+        return 2.0 * math.sqrt(d / accel)
+    return 2.0 * speed / accel + (d - d_ramp) / speed
+
+
+def _sensor_mpx(config: Config) -> float | None:
+    s = config.station.camera.settings
+    w, h = s.get("width"), s.get("height")
+    if isinstance(w, (int, float)) and isinstance(h, (int, float)) and w > 0 and h > 0:
+        return float(w) * float(h) / 1e6
+    roi = s.get("roi")
+    if isinstance(roi, (list, tuple)) and len(roi) == 4:
+        return float(roi[2]) * float(roi[3]) / 1e6
+    return None
+
+
+def estimate_plan(config: Config) -> PlanEstimate:
+    """The capture plan of ``config`` with an estimated duration (see the module docstring)."""
+    cap = config.capture
+    assumptions = []
+    if config.simulation is not None:
+        emu = config.simulation.emulator
+        speed = float(emu.get("speed_deg_s", 360.0))
+        accel = float(emu.get("accel_deg_s2", 3600.0))
+        assumptions.append(f"simulated turntable: {speed:g} deg/s, {accel:g} deg/s²")
+    else:
+        speed, accel = TURNTABLE_SPEED_DEG_S, TURNTABLE_ACCEL_DEG_S2
+        assumptions.append(f"turntable speed assumed {speed:g} deg/s, acceleration {accel:g} deg/s² (not configured)")
+    mpx = _sensor_mpx(config)
+    if mpx is None:
+        mpx = 5.0
+        assumptions.append("sensor size not in the configuration: 5 megapixels assumed")
+    render = RENDER_S_PER_MPX * mpx if config.station.camera.driver == "sim" else 0.0
+    frame_s = cap.exposure_us / 1e6 + FRAME_OVERHEAD_S + render
+    n_o = len(cap.orientations_deg)
+    pc = config.pipeline
+    fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
+    rows: list[PlanRow] = []
+    stage = 0.0  # a session homes the turntable first
+    frames = moves = locks = fits = 0
+    current: dict[str, float] = {}
+    for step in plan_session(config):
+        match step:
+            case LockFocus():
+                locks += 1
+                current["extra"] = current.get("extra", 0.0) + FOCUS_OVERHEAD_S
+            case Move(focus_idx=f, orientation_idx=o, degrees=deg):
+                moves += 1
+                current = {"f": f, "o": o, "deg": deg, "frames": 0, "s": current.get("extra", 0.0)}
+                current["s"] += MOVE_OVERHEAD_S + move_seconds(deg - stage, speed, accel)
+                stage = deg
+            case Settle(seconds=sec):
+                current["s"] = current.get("s", 0.0) + sec
+            case Capture():
+                frames += 1
+                current["frames"] = current.get("frames", 0) + 1
+                current["s"] = current.get("s", 0.0) + frame_s
+            case Measure(focus_idx=f, orientation_idx=o):
+                current["s"] = current.get("s", 0.0) + MEASURE_S_PER_MPX * mpx
+                rows.append(
+                    PlanRow(
+                        f,
+                        config.focus_settings[f],
+                        "capture + measure",
+                        cap.orientations_deg[o],
+                        int(current.get("frames", 0)),
+                        float(current["s"]),
+                    )
+                )
+                current = {}
+            case Fit(focus_idx=f):
+                fits += 1
+                what = f"fit ({n_o} orientations held out in turn" + (
+                    f", {pc.bootstrap} bootstrap replicates)" if pc.bootstrap else ")"
+                )
+                rows.append(PlanRow(f, config.focus_settings[f], what, seconds=fit_s))
+            case Store(focus_idx=f):
+                pass
+    report_s = REPORT_S_PER_FOCUS * len(config.focus_settings) * mpx / 1.23
+    rows.append(PlanRow(-1, math.nan, "QA, report, results.json", seconds=report_s))
+    total = sum(r.seconds for r in rows)
+    return PlanEstimate(rows, frames, moves, locks, fits, total, assumptions)

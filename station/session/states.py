@@ -1,0 +1,157 @@
+"""What state a session directory is in, from its manifest (for ``harp session list`` and ``results.json``).
+
+=================  ===================================================================
+state              meaning
+=================  ===================================================================
+``complete``       a ``finished`` record: captured, fitted, judged (QA) and reported
+``failed``         stopped by a fault: the last stop is an ``aborted`` record with a reason
+                   other than the user's interrupt (device fault, a shot that kept failing
+                   its checks, a failed fit); ``harp session resume DIR`` continues it
+``interrupted``    stopped by the user (Ctrl-C) or killed (no ``finished``, no fault as the
+                   last stop); ``harp session resume DIR`` continues it
+``running``        another process holds the session directory's lock right now
+=================  ===================================================================
+"""
+
+from __future__ import annotations
+
+import fcntl
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+COMPLETE, FAILED, INTERRUPTED, RUNNING = "complete", "failed", "interrupted", "running"
+STATES = (COMPLETE, FAILED, INTERRUPTED, RUNNING)
+
+USER_INTERRUPT = "interrupted by the user"
+"""The reason of the ``aborted`` record a Ctrl-C leaves (:mod:`station.session.executor`)."""
+
+
+def session_state(records: Iterable[Mapping[str, Any]]) -> str:
+    """``complete``, ``failed`` or ``interrupted`` from a session's manifest records (in order)."""
+    last_stop: Mapping[str, Any] | None = None
+    for r in records:
+        kind = r.get("kind")
+        if kind == "finished":
+            return COMPLETE
+        if kind == "aborted":
+            last_stop = r
+        elif kind in ("start", "resume"):
+            last_stop = None  # a later run: its own stop (or none, if killed) counts
+    if last_stop is not None and last_stop.get("reason") != USER_INTERRUPT:
+        return FAILED
+    return INTERRUPTED
+
+
+def in_use(session_dir: str | Path) -> bool:
+    """True when another process holds the session directory's lock (a session running in it)."""
+    lock = Path(session_dir) / ".lock"
+    if not lock.exists():
+        return False
+    try:
+        with open(lock, "a+") as fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            fcntl.flock(fh, fcntl.LOCK_UN)
+    except OSError:
+        return False
+    return False
+
+
+@dataclass(frozen=True)
+class SessionSummary:
+    """One session directory as ``harp session list`` shows it."""
+
+    name: str
+    path: Path
+    state: str
+    verdict: str | None
+    lens: str
+    focus_settings: int
+    profiles: int
+    frames: int
+    created: str | None
+    last: str | None
+    stop_reason: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "path": str(self.path.resolve()),
+            "state": self.state,
+            "verdict": self.verdict,
+            "lens": self.lens,
+            "focus_settings": self.focus_settings,
+            "profiles": self.profiles,
+            "frames": self.frames,
+            "created": self.created,
+            "last_activity": self.last,
+            "stop_reason": self.stop_reason,
+        }
+
+
+def summarise(session_dir: str | Path) -> SessionSummary:
+    """The :class:`SessionSummary` of a session directory, read without locking it (a session may be
+    running in it). Raises SessionError (one line) for a directory that is not a readable session."""
+    import datetime as _dt
+    import json
+
+    from station.session.directory import SessionError, read_manifest
+    from station.session.layout import MANIFEST, SESSION_FILE
+
+    path = Path(session_dir)
+    try:
+        meta = json.loads((path / SESSION_FILE).read_text(encoding="utf-8"))
+        if not isinstance(meta, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as exc:
+        raise SessionError(f"{path / SESSION_FILE}: cannot be read ({exc})") from None
+    records, _ = read_manifest(path / MANIFEST)
+    state = RUNNING if in_use(path) else session_state(records)
+    verdicts = [r.get("verdict") for r in records if r.get("kind") == "qa_session"]
+    stops = [r.get("reason") for r in records if r.get("kind") == "aborted"]
+    n_focus = None
+    try:
+        import yaml
+
+        cfg = yaml.safe_load((path / "config.yaml").read_text(encoding="utf-8")) or {}
+        n_focus = len((cfg.get("focus") or {}).get("settings") or [])
+    except (OSError, ValueError, AttributeError, yaml.YAMLError):
+        pass
+    lens = meta.get("lens")
+    times = [r["t"] for r in records if isinstance(r.get("t"), (int, float))]
+    last = _dt.datetime.fromtimestamp(max(times), _dt.UTC).isoformat(timespec="seconds") if times else None
+    return SessionSummary(
+        name=path.name,
+        path=path,
+        state=state,
+        verdict=verdicts[-1] if verdicts else None,
+        lens=" ".join(str(x) for x in lens) if isinstance(lens, list) else "",
+        focus_settings=n_focus if n_focus is not None else 0,
+        profiles=len({r.get("focus_idx") for r in records if r.get("kind") == "stored"}),
+        frames=sum(1 for r in records if r.get("kind") == "frame"),
+        created=meta.get("created"),
+        last=last,
+        stop_reason=stops[-1] if stops and state in (FAILED, INTERRUPTED) else None,
+    )
+
+
+def sessions_in(root: str | Path) -> tuple[list[SessionSummary], list[str]]:
+    """Every session directory directly under ``root``, oldest first, and one line per
+    directory that looks like a session but cannot be read."""
+    from station.session.directory import SessionError
+    from station.session.layout import SESSION_FILE
+
+    found, problems = [], []
+    for d in sorted(Path(root).iterdir()):
+        if not (d / SESSION_FILE).is_file():
+            continue
+        try:
+            found.append(summarise(d))
+        except SessionError as exc:
+            problems.append(str(exc))
+    found.sort(key=lambda s: (s.created or "", s.name))
+    return found, problems

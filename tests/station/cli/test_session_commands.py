@@ -1,0 +1,141 @@
+"""The operational commands (issue 9 item 5): ``harp config check``, ``harp session plan``,
+``harp session list`` and ``harp devices`` — their tables (tab-separated when stdout is not a
+terminal, units in the headers) and their ``--json``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from station.cli import main
+from station.config import load_config
+from station.session.directory import SessionDir
+from station.session.records import Aborted, Finished, SessionVerdict, Started
+
+REPO = Path(__file__).resolve().parents[3]
+DEMO = REPO / "configs" / "demo.yaml"
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def tsv(out: str) -> list[list[str]]:
+    """Rows of tab-separated output, every row as wide as the header."""
+    rows = [line.split("\t") for line in out.splitlines()]
+    assert rows and all(len(r) == len(rows[0]) for r in rows), out
+    return rows
+
+
+def demo_copy(tmp_path: Path, **changes) -> Path:
+    d = yaml.safe_load(DEMO.read_text())
+    d["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"}
+    for k, v in changes.items():
+        d[k] = v
+    p = tmp_path / "demo.yaml"
+    p.write_text(yaml.safe_dump(d))
+    return p
+
+
+def test_config_check(tmp_path, capsys):
+    code, out, err = run(capsys, "config", "check", DEMO)
+    assert code == 0 and err == "" and out.startswith(f"{DEMO}: OK (3 focus settings x 8 orientations x 2 frames")
+    code, out, _ = run(capsys, "config", "check", DEMO, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True and doc["error"] is None and doc["warnings"] == []
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(DEMO.read_text().replace("frames_per_orientation: 2", "frames_per_orientation: two"))
+    code, out, err = run(capsys, "config", "check", bad, "--json")
+    assert code == 2 and err.count("\n") == 1 and "capture.frames_per_orientation" in err
+    assert json.loads(out)["ok"] is False
+    assert not (tmp_path / "sessions").exists() and not (tmp_path / "p.sqlite").exists()
+
+
+def test_session_plan_touches_nothing_and_counts_the_plan(tmp_path, capsys):
+    cfg = demo_copy(tmp_path)
+    code, out, err = run(capsys, "session", "plan", cfg, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    # truth from the configuration: 3 focus settings x 8 orientations x 2 frames
+    assert (doc["frames"], doc["moves"], doc["focus_locks"], doc["fits"]) == (48, 24, 3, 3)
+    captures = [s for s in doc["steps"] if s["what"] == "capture + measure"]
+    assert [s["orientation_deg"] for s in captures[:8]] == [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5]
+    assert all(s["frames"] == 2 for s in captures) and len(captures) == 24
+    assert 5 < doc["estimated_seconds"] < 120
+    assert doc["estimated_seconds"] == pytest.approx(sum(s["estimated_seconds"] for s in doc["steps"]), abs=0.5)
+    code, out, err = run(capsys, "session", "plan", cfg)
+    rows = tsv(out)
+    assert rows[0] == ["focus", "step", "orientation (deg)", "frames", "estimated (s)"]
+    assert len(rows) == 1 + 24 + 3 + 1
+    assert "48 frames, 24 moves, 3 fits; estimated duration" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.yaml"]  # no session, no store
+
+
+def session_with(root: Path, config, name: str, records) -> Path:
+    with SessionDir.create(root, config, name=name) as s:
+        for r in records:
+            s.append(r)
+    return root / name
+
+
+def test_session_list_states_and_verdicts(tmp_path, capsys):
+    config = load_config(demo_copy(tmp_path))
+    root = tmp_path / "sessions"
+    session_with(root, config, "a-complete", [Started("0"), SessionVerdict("FAIL"), Finished()])
+    session_with(root, config, "b-failed", [Started("0"), Aborted("move turntable to 45 deg failed 3 times")])
+    session_with(root, config, "c-interrupted", [Started("0"), Aborted("interrupted by the user")])
+    session_with(root, config, "d-killed", [Started("0")])
+    # a fault, then a resume that was killed: interrupted (the last run's stop counts)
+    session_with(root, config, "e-resumed", [Started("0"), Aborted("camera timeout"), {"kind": "resume"}])
+    (root / "not-a-session").mkdir()
+    running = SessionDir.open(session_with(root, config, "f-running", [Started("0")]))
+    try:
+        code, out, err = run(capsys, "session", "list", "--config", tmp_path / "demo.yaml", "--json")
+        assert code == 0, err
+        listed = {s["name"]: s for s in json.loads(out)["sessions"]}
+        code, tsv_out, _ = run(capsys, "session", "list", root)
+    finally:
+        running.close()
+    assert {n: (s["state"], s["verdict"]) for n, s in listed.items()} == {
+        "a-complete": ("complete", "FAIL"),
+        "b-failed": ("failed", None),
+        "c-interrupted": ("interrupted", None),
+        "d-killed": ("interrupted", None),
+        "e-resumed": ("interrupted", None),
+        "f-running": ("running", None),
+    }
+    assert listed["b-failed"]["stop_reason"] == "move turntable to 45 deg failed 3 times"
+    assert listed["a-complete"]["lens"] == "Simulated Optics SIM-12mm DEMO-0001"
+    rows = tsv(tsv_out)
+    assert rows[0][:3] == ["session", "state", "verdict"] and len(rows) == 7
+    assert run(capsys, "session", "list", tmp_path / "absent")[0] == 2
+
+
+def test_devices_lists_the_fakes_with_snippets(tmp_path, capsys):
+    from drivers.sim.zaber_emulator import start_zaber_emulator
+    from tests.drivers.fake_v4l2 import FakeV4L2Camera
+
+    emu = start_zaber_emulator()
+    try:
+        with FakeV4L2Camera(tmp_path / "video0", formats=("GREY",), width=80, height=60):
+            pattern = str(tmp_path / "video*")
+            code, out, err = run(capsys, "devices", "--v4l2", pattern, "--port", emu.port_path, "--probe", "--json")
+            assert code == 0, err
+            doc = json.loads(out)
+            code, table, _ = run(capsys, "devices", "--v4l2", pattern, "--port", emu.port_path)
+    finally:
+        emu.stop()
+    by_device = {d["device"]: d for d in doc["devices"]}
+    cam = by_device[str(tmp_path / "video0")]
+    assert cam["kind"] == "camera" and cam["driver"] == "v4l2" and cam["config"]["device"] == str(tmp_path / "video0")
+    port = by_device[emu.port_path]
+    assert port["driver"] == "zaber" and port["config"]["port"] == emu.port_path and doc["probed"] is True
+    rows = tsv(table)
+    assert rows[0] == ["kind", "driver", "device", "description", "problem", "config snippet"]
+    unprobed = [r for r in rows[1:] if r[2] == emu.port_path]
+    assert unprobed and unprobed[0][1] == ""  # not probed: the driver is unknown, nothing was written to it
