@@ -1,14 +1,21 @@
-"""``harp profile list | show LENS [--focus F] | export LENS --focus F --format ...``.
+"""``harp profile list | show LENS [--focus F] | show --id N | export LENS --focus F | export --id N``.
 
 Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://``), or
 ``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else
 ``profiles/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
 error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
-part of "maker model serial". ``export`` converts the newest profile at that focus (or the
-correction interpolated between the calibrated focus settings) with the options,
-figures and warnings of ``harp export`` (:mod:`station.cli.export`); the profile
-brings the lens, camera body and optics of its session's configuration and the
-session's measured edges of its fitting shots. Exit 0 on success, 2 on bad input or a damaged store.
+part of "maker model serial"; ``--id N`` names one stored profile. The **current** profile of a
+lens at a focus setting is its newest one, unless that one failed QA: a failed profile is never
+current (:meth:`station.store.database.ProfileStore.latest_by_focus`). ``show`` and ``export`` use
+only current profiles, for one focus setting or the correction interpolated between the
+calibrated ones, unless ``--allow-failed`` is given (then each failed profile used is said on
+stderr). ``export`` converts with the options, figures and warnings of ``harp export``
+(:mod:`station.cli.export`); the profile brings the lens, camera body and optics of its
+session's configuration and the session's measured edges of its fitting shots. ``--json``
+prints one JSON object; off a terminal the tables are tab-separated text with a header.
+Exit 0 on success; 1 when the profile asked for failed QA (``export``, ``show --focus``: one line
+naming the lens, focus and failed check; ``--allow-failed`` to use it anyway); 2 on bad input or
+a damaged store.
 """
 
 from __future__ import annotations
@@ -17,9 +24,13 @@ import argparse
 import json
 import math
 import sys
+from typing import Any
 
 from station.cli.export import add_export_options, formats_epilog
+from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.store.resolve import add_store_options
+
+ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
 
 
 def register(subparsers) -> None:
@@ -30,11 +41,17 @@ def register(subparsers) -> None:
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
     store_opt = argparse.ArgumentParser(add_help=False)  # --store / --config also after the action
     add_store_options(store_opt, suppress=True)
-    ls = sub.add_parser("list", help="every stored profile", parents=[store_opt])
+    ls = sub.add_parser(
+        "list", help="every stored profile, with its verdict and whether it is current", parents=[store_opt]
+    )
+    ls.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     ls.set_defaults(func=_list)
-    show = sub.add_parser("show", help="the profiles of one lens", parents=[store_opt])
-    show.add_argument("lens", metavar="LENS")
-    show.add_argument("--focus", type=float, default=None, help="one focus setting in detail")
+    show = sub.add_parser("show", help="the current profiles of one lens (or one profile by --id)", parents=[store_opt])
+    show.add_argument("lens", metavar="LENS", nargs="?", default=None)
+    show.add_argument("--focus", type=float, default=None, help="one focus setting in detail (interpolated if needed)")
+    show.add_argument("--id", type=int, default=None, metavar="N", help="the stored profile #N, whatever its verdict")
+    show.add_argument("--allow-failed", action="store_true", help=ALLOW_FAILED_HELP)
+    show.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     show.set_defaults(func=_show)
     ex = sub.add_parser(
         "export",
@@ -42,23 +59,34 @@ def register(subparsers) -> None:
         parents=[store_opt],
         epilog=formats_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Export the newest profile of LENS at --focus (interpolated between calibrated focus "
-        "settings when it is not one): the formats, options, figures and exit codes of harp export.",
+        description="Export the current profile of LENS at --focus (interpolated between calibrated focus "
+        "settings when it is not one), or the stored profile --id N: the formats, options, figures and exit "
+        "codes of harp export. A profile that failed QA is refused (exit 1) unless --allow-failed.",
     )
-    ex.add_argument("lens", metavar="LENS")
-    ex.add_argument("--focus", type=float, required=True)
+    ex.add_argument("lens", metavar="LENS", nargs="?", default=None)
+    ex.add_argument("--focus", type=float, default=None, help="the focus setting (with LENS)")
+    ex.add_argument("--id", type=int, default=None, metavar="N", help="export the stored profile #N")
+    ex.add_argument("--allow-failed", action="store_true", help="export a profile that failed QA (said on stderr)")
     add_export_options(ex)
     ex.set_defaults(func=_export)
-    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
+    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), EXIT_ERROR)[1])
 
 
 class _Fail(Exception):
     """A one-line error for the user (printed by :func:`_error`, exit 2)."""
 
 
+class _Refused(Exception):
+    """A profile that failed QA was asked for without ``--allow-failed`` (one line, exit 1)."""
+
+
 def _error(msg: str) -> int:
     print(f"harp profile: {msg}", file=sys.stderr)
-    return 2
+    return EXIT_ERROR
+
+
+def _warn(msg: str) -> None:
+    print(f"harp profile: warning: {msg}", file=sys.stderr)
 
 
 def _open(args):
@@ -74,7 +102,7 @@ def _console():
 
 
 def _num(v, nd=4) -> str:
-    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
+    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
 
 
 def _with_store(fn):
@@ -85,143 +113,347 @@ def _with_store(fn):
         try:
             with _open(args) as store:
                 return fn(args, store)
+        except _Refused as exc:
+            print(f"harp profile: {exc}", file=sys.stderr)
+            return EXIT_FAIL
         except (StoreError, ConfigError, _Fail) as exc:
             return _error(str(exc))
 
     return wrapped
 
 
-@_with_store
-def _list(args, store) -> int:
-    from rich.table import Table
-
-    errors: list = []
-    profiles = store.profiles(errors=errors)  # the readable rows; each damaged one reported below
-    if not profiles and not errors:
-        print(f"no profiles in {store.path}")
-        return 0
-    t = Table(title=f"profiles in {store.path}")
-    for col in ("id", "lens", "camera", "focus", "model", "holdout d", "holdout d_max", "created", "station"):
-        t.add_column(col, justify="right" if col in ("id", "focus", "holdout d", "holdout d_max") else "left")
-    for p in profiles:
-        hold = p.merit.holdout
-        t.add_row(
-            f"#{p.id}",
-            _ident(p.lens),
-            _ident(p.camera),
-            f"{p.focus:g}",
-            p.model.name,
-            _num(hold.d if hold else None),
-            _num(hold.d_max if hold else None),
-            p.stored_at or "-",
-            p.provenance.station or "-",
-        )
-    _console().print(t)
-    for exc in errors:
-        _error(str(exc))
-    return 2 if errors else 0
-
-
+# ------------------------------------------------------------------ helpers
 def _ident(identity) -> str:
     return "-" if identity is None else f"{identity.maker} {identity.model} {identity.serial}"
 
 
-def _select(store, lens_query: str, focus: float | None):
-    lens = store.find_lens(lens_query)
-    latest = store.latest_by_focus(lens[0])
-    if focus is None:
-        return lens, latest
-    hits = [p for p in latest if math.isclose(p.focus, focus, rel_tol=0, abs_tol=1e-9)]
-    if not hits:
-        known = ", ".join(f"{p.focus:g}" for p in latest) or "none"
-        raise _Fail(f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} (calibrated focus settings: {known})")
-    return lens, hits
+def _lens_label(lens) -> str:
+    """``lens Acme 50mm serial S1`` of a store lens row ``(id, maker, model, serial)``."""
+    return f"lens {lens[1]} {lens[2]} serial {lens[3]}"
 
 
-def _interpolated(lens, profiles, focus: float):
-    """The correction at an uncalibrated ``focus``: (model, width, height, note, loo)."""
+def _lens_of(p) -> tuple[int | None, str, str, str]:
+    lens = p.lens
+    return (None, lens.maker, lens.model, lens.serial) if lens is not None else (None, "-", "-", "-")
+
+
+def _failed(p) -> bool:
+    return p.qa is not None and not p.qa.passed
+
+
+def _verdict(p) -> str:
+    return "" if p.qa is None else p.qa.verdict
+
+
+def failed_checks(p) -> str:
+    """What failed in a profile's verdict, for one line: the failed checks as they were judged."""
+    v = p.qa
+    if v is None:
+        return "not judged"
+    texts = [c.text.rsplit(": ", 1)[0] for c in v.checks if c.passed is False]
+    return "; ".join(texts or list(v.reasons) or ["failed QA"])
+
+
+def _failed_line(lens, p) -> str:
+    return f"{_lens_label(lens)}, focus {p.focus:g}: profile #{p.id} failed QA ({failed_checks(p)})"
+
+
+def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
+    """One stored profile as plain data (``--json``)."""
+    fit, hold, unc = p.merit.fit, p.merit.holdout, p.merit.field_uncertainty
+    ident = lambda i: None if i is None else {"maker": i.maker, "model": i.model, "serial": i.serial}  # noqa: E731
+    return _plain(
+        {
+            "id": p.id,
+            "lens": ident(p.lens),
+            "camera": ident(p.camera),
+            "focus": p.focus,
+            "width": p.width,
+            "height": p.height,
+            "model": p.model.name,
+            "spec": p.spec.label if p.spec is not None else None,
+            "fit": fit.to_dict() if fit else None,
+            "holdout": hold.to_dict() if hold else None,
+            "field_uncertainty": unc.to_dict() if unc else None,
+            "verdict": _verdict(p) or None,
+            "current": current,
+            "qa": p.qa.to_dict() if p.qa is not None else None,
+            "created": p.stored_at,
+            "station": p.provenance.station,
+            "session_dir": p.provenance.session_dir,
+            "software_version": p.provenance.software_version,
+        }
+    )
+
+
+def _plain(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if hasattr(v, "item") and callable(v.item):  # numpy scalar
+        return _plain(v.item())
+    return v
+
+
+def _newest_and_current(store, lens_id: int, allow_failed: bool):
+    """``(used, left_out)``: the profiles a command uses for a lens — its current ones (the store
+    decides which, :meth:`~station.store.database.ProfileStore.latest_by_focus`), or with
+    ``allow_failed`` the newest of every focus setting — and the newest ones left out (failed QA)."""
+    newest = store.latest_by_focus(lens_id, allow_failed=True)
+    if allow_failed:
+        return newest, []
+    current = {p.id for p in store.latest_by_focus(lens_id)}
+    return [p for p in newest if p.id in current], [p for p in newest if p.id not in current]
+
+
+def _say_used(lens, used, left_out) -> None:
+    for p in used:
+        if _failed(p):
+            _warn(f"{_failed_line(lens, p)}: used because of --allow-failed")
+    for p in left_out:
+        print(f"harp profile: {_failed_line(lens, p)}: not current, left out (--allow-failed uses it)", file=sys.stderr)
+
+
+def _at_focus(profiles, focus: float):
+    hits = [p for p in profiles if math.isclose(p.focus, focus, rel_tol=0, abs_tol=1e-9)]
+    return hits[0] if hits else None
+
+
+def _interpolated(lens, profiles, focus: float, left_out=()):
+    """The correction at an uncalibrated ``focus``: (model, width, height, note, loo, method)."""
     from pipeline.interpolate import FocusInterpolator, leave_one_out_error
 
     sizes = {(p.width, p.height) for p in profiles}
-    if len(sizes) != 1:
-        raise _Fail(f"lens {' '.join(lens[1:])}: profiles of different image sizes; cannot interpolate")
-    ((w, h),) = sizes
+    if len(sizes) > 1:
+        raise _Fail(f"{_lens_label(lens)}: profiles of different image sizes; cannot interpolate")
     models = {p.focus: p.model for p in profiles}
-    known = ", ".join(f"{p.focus:g}" for p in profiles)
+    known = ", ".join(f"{p.focus:g}" for p in profiles) or "none"
     if len(models) < 2 or not min(models) < focus < max(models):
-        raise _Fail(
-            f"lens {' '.join(lens[1:])}: no profile at focus {focus:g} and it is not between "
+        msg = (
+            f"{_lens_label(lens)}: no current profile at focus {focus:g} and it is not between "
             f"two calibrated focus settings ({known}); no extrapolation"
         )
+        every = [p.focus for p in (*profiles, *left_out)]
+        if left_out and len(every) >= 2 and min(every) < focus < max(every):
+            raise _Refused(msg + "; left out: " + "; ".join(_failed_line(lens, p) for p in left_out))
+        raise _Fail(msg)
+    ((w, h),) = sizes
     interp = FocusInterpolator(models, w, h)
     model = interp.at(focus)
     loo = leave_one_out_error(models, w, h)
-    note = (
-        f"focus {focus:g} is not calibrated: correction field interpolated "
-        f"({getattr(interp, 'method', 'auto')}) between the calibrated settings {known}"
+    method = getattr(interp, "method", "auto")
+    note = f"focus {focus:g} is not calibrated: correction field interpolated ({method}) between the settings {known}"
+    return model, w, h, note, loo, method
+
+
+# --------------------------------------------------------------------- list
+@_with_store
+def _list(args, store) -> int:
+    from station.store import StoreError
+    from station.tables import print_table
+
+    errors: list = []
+    profiles = store.profiles(errors=errors)  # the readable rows; each damaged one reported below
+    current: set[int] = set()
+    for lens in store.lenses():
+        try:
+            current.update(p.id for p in store.latest_by_focus(lens[0]))
+        except StoreError:
+            pass  # a damaged row of this lens: reported with the listing's errors
+    if args.json:
+        out = {
+            "store": str(store.path),
+            "profiles": [_profile_json(p, p.id in current) for p in profiles],
+            "errors": [str(e) for e in errors],
+        }
+        print(json.dumps(out, indent=1))
+    elif not profiles and not errors:
+        print(f"no profiles in {store.path}", file=sys.stderr)
+        return EXIT_OK
+    else:
+        rows = []
+        for p in profiles:
+            hold = p.merit.holdout
+            dist = (p.qa.metrics if p.qa is not None else {}).get("distortion_max_px")
+            rows.append(
+                (
+                    f"#{p.id}",
+                    _ident(p.lens),
+                    _ident(p.camera),
+                    f"{p.focus:g}",
+                    p.model.name,
+                    _verdict(p),
+                    "yes" if p.id in current else "no",
+                    _num(hold.d if hold else None),
+                    _num(hold.d_max if hold else None),
+                    _num(dist, 2),
+                    p.stored_at or "",
+                    p.provenance.station or "",
+                )
+            )
+        columns = (
+            "id",
+            "lens",
+            "camera",
+            "focus",
+            "model",
+            "verdict",
+            "current",
+            "holdout d (px)",
+            "holdout d_max (px)",
+            "distortion max (px)",
+            "created (UTC)",
+            "station",
+        )
+        print_table(
+            columns,
+            rows,
+            title=f"profiles in {store.path}",
+            right=("id", "focus", "holdout d (px)", "holdout d_max (px)", "distortion max (px)"),
+        )
+    for exc in errors:
+        _error(str(exc))
+    return EXIT_ERROR if errors else EXIT_OK
+
+
+# --------------------------------------------------------------------- show
+PROFILE_COLUMNS = (
+    "focus",
+    "id",
+    "verdict",
+    "camera",
+    "model",
+    "fit d (px)",
+    "fit d_max (px)",
+    "holdout d (px)",
+    "holdout d_max (px)",
+    "field unc. rms (px)",
+    "field unc. max (px)",
+    "created (UTC)",
+)
+
+
+def _profile_row(p) -> tuple[str, ...]:
+    fit, hold, unc = p.merit.fit, p.merit.holdout, p.merit.field_uncertainty
+    return (
+        f"{p.focus:g}",
+        f"#{p.id}",
+        _verdict(p),
+        _ident(p.camera),
+        p.model.name,
+        _num(fit.d if fit else None),
+        _num(fit.d_max if fit else None),
+        _num(hold.d if hold else None),
+        _num(hold.d_max if hold else None),
+        _num(unc.rms if unc else None),
+        _num(unc.max if unc else None),
+        p.stored_at or "",
     )
-    return model, w, h, note, loo
 
 
 @_with_store
 def _show(args, store) -> int:
-    from rich.table import Table
-
+    if args.id is not None:
+        if args.lens is not None or args.focus is not None:
+            raise _Fail("--id N names one profile: give no LENS or --focus with it")
+        p = store.profile(args.id)
+        if p is None:
+            raise _Fail(f"no profile #{args.id} in {store.path}")
+        lens = _lens_of(p)
+        if _failed(p):
+            _warn(f"{_failed_line(lens, p)}: it is not a current profile")
+        return _print_profiles(args, lens, [p], [], detail=True)
+    if args.lens is None:
+        raise _Fail("name a LENS (serial, maker/model/serial, #lens-id) or a profile with --id N")
+    lens = store.find_lens(args.lens)
+    used, left_out = _newest_and_current(store, lens[0], args.allow_failed)
+    if args.focus is None:
+        _say_used(lens, used, left_out)
+        return _print_profiles(args, lens, used, left_out)
+    p = _at_focus(used, args.focus)
+    if p is not None:
+        _say_used(lens, [p], [])
+        return _print_profiles(args, lens, [p], [], detail=True)
+    failed_here = _at_focus(left_out, args.focus)
+    if failed_here is not None:
+        raise _Refused(f"{_failed_line(lens, failed_here)}: no current profile at this focus (--allow-failed shows it)")
+    model, w, h, note, loo, method = _interpolated(lens, used, args.focus, left_out)
+    _say_used(lens, used, left_out)
+    if args.json:
+        out = {
+            "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
+            "focus": args.focus,
+            "interpolated": {
+                "method": method,
+                "note": note,
+                "from_profiles": [q.id for q in used],
+                "width": w,
+                "height": h,
+                "leave_one_out": [{"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo],
+                "model": model.to_dict(),
+            },
+            "left_out": [_profile_json(q, False) for q in left_out],
+        }
+        print(json.dumps(_plain(out), indent=1))
+        return EXIT_OK
     console = _console()
-    if args.focus is not None:
-        lens, latest = _select(store, args.lens, None)
-        if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
-            model, w, h, note, loo = _interpolated(lens, latest, args.focus)
-            console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
-            console.print(note)
-            for e in loo:
-                console.print(
-                    f"interpolation error measured by leaving focus {e.focus:g} out: "
-                    f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)"
-                )
-            if not loo:
-                console.print("interpolation error: not measurable (needs >= 3 calibrated settings)")
-            return 0
-    lens, profiles = _select(store, args.lens, args.focus)
-    t = Table(title=f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]} (newest profile per focus)")
-    for col in (
-        "focus",
-        "id",
-        "camera",
-        "model",
-        "fit d",
-        "fit d_max",
-        "holdout d",
-        "holdout d_max",
-        "field unc. rms",
-        "field unc. max",
-        "created",
-    ):
-        t.add_column(col, justify="right")
-    for p in profiles:
-        fit, hold, unc = p.merit.fit, p.merit.holdout, p.merit.field_uncertainty
-        t.add_row(
-            f"{p.focus:g}",
-            f"#{p.id}",
-            _ident(p.camera),
-            p.model.name,
-            _num(fit.d if fit else None),
-            _num(fit.d_max if fit else None),
-            _num(hold.d if hold else None),
-            _num(hold.d_max if hold else None),
-            _num(unc.rms if unc else None),
-            _num(unc.max if unc else None),
-            p.stored_at or "-",
-        )
-    console.print(t)
-    if args.focus is not None:
-        p = profiles[0]
+    console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
+    console.print(note)
+    for e in loo:
         console.print(
-            f"image {p.width}x{p.height}, session {p.provenance.session_dir}, station {p.provenance.station}, "
-            f"software {p.provenance.software_version}"
+            f"interpolation error measured by leaving focus {e.focus:g} out: "
+            f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)"
         )
-        console.print_json(json.dumps(p.model.to_dict()))
-    return 0
+    if not loo:
+        console.print("interpolation error: not measurable (needs >= 3 calibrated settings)")
+    return EXIT_OK
+
+
+def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> int:
+    from station.tables import print_table
+
+    if args.json:
+        out = {
+            "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
+            "profiles": [_profile_json(p, not _failed(p) if not detail else None) for p in profiles],
+            "left_out": [_profile_json(p, False) for p in left_out],
+        }
+        if detail:
+            out["profiles"][0]["model_parameters"] = _plain(profiles[0].model.to_dict())
+        print(json.dumps(out, indent=1))
+        return EXIT_OK
+    who = f"lens #{lens[0]}: " if lens[0] is not None else "lens "
+    print_table(
+        PROFILE_COLUMNS,
+        [_profile_row(p) for p in profiles],
+        title=f"{who}{lens[1]} {lens[2]} serial {lens[3]}" + ("" if detail else " (current profile per focus)"),
+        right=PROFILE_COLUMNS[:2] + PROFILE_COLUMNS[5:11],
+    )
+    if detail:
+        p = profiles[0]
+        err = sys.stderr
+        print(
+            f"image {p.width}x{p.height}, session {p.provenance.session_dir}, station {p.provenance.station}, "
+            f"software {p.provenance.software_version}",
+            file=err,
+        )
+        for c in p.qa.checks if p.qa is not None else ():
+            print(f"check: {c.text}", file=err)
+        print(json.dumps(_plain(p.model.to_dict())), file=err)
+    return EXIT_OK
+
+
+# ------------------------------------------------------------------- export
+def _allowed(args, lens, p) -> None:
+    """Refuse a profile that failed QA (exit 1) unless ``--allow-failed`` (then say so)."""
+    if not _failed(p):
+        return
+    if not args.allow_failed:
+        raise _Refused(f"{_failed_line(lens, p)}; not exported (--allow-failed exports it anyway)")
+    _warn(f"{_failed_line(lens, p)}: exported because of --allow-failed")
 
 
 @_with_store
@@ -231,37 +463,53 @@ def _export(args, store) -> int:
     from station.export_source import FittingEdges
     from station.profile import Merit, Profile, Provenance
 
-    lens, latest = _select(store, args.lens, None)
-    if not any(math.isclose(p.focus, args.focus, abs_tol=1e-9) for p in latest):
-        model, w, h, note, loo = _interpolated(lens, latest, args.focus)
-        nearest = min(latest, key=lambda p: abs(p.focus - args.focus))
-        profile = Profile(
-            model=model,
-            width=w,
-            height=h,
-            merit=Merit(
-                extra={
-                    "interpolation_leave_one_out": [
-                        {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo
-                    ]
-                }
-            ),
-            lens=nearest.lens,
-            camera=nearest.camera,
-            optics=nearest.optics,
-            focus=args.focus,
-            provenance=Provenance(extra={"note": note, "from_profiles": [p.id for p in latest]}),
-        )
-        what = f"interpolated focus {args.focus:g}"
-        known = ", ".join(f"{p.focus:g}" for p in latest)
-        edges = FittingEdges(None, f"none: the correction is interpolated between the focus settings {known}")
+    edges = None
+    if args.id is not None:
+        if args.lens is not None or args.focus is not None:
+            raise _Fail("--id N names one profile: give no LENS or --focus with it")
+        profile = store.profile(args.id)
+        if profile is None:
+            raise _Fail(f"no profile #{args.id} in {store.path}")
+        _allowed(args, _lens_of(profile), profile)
+        what = f"profile #{profile.id}"
     else:
-        _lens, (profile,) = _select(store, args.lens, args.focus)
-        what, edges = f"profile #{profile.id}", None
+        if args.lens is None or args.focus is None:
+            raise _Fail("name LENS and --focus F, or a stored profile with --id N")
+        lens = store.find_lens(args.lens)
+        newest = store.latest_by_focus(lens[0], allow_failed=True)
+        hit = _at_focus(newest, args.focus)
+        if hit is not None:
+            _allowed(args, lens, hit)
+            profile, what = hit, f"profile #{hit.id}"
+        else:
+            used, left_out = _newest_and_current(store, lens[0], args.allow_failed)
+            model, w, h, note, loo, _method = _interpolated(lens, used, args.focus, left_out)
+            _say_used(lens, used, left_out)
+            nearest = min(used, key=lambda p: abs(p.focus - args.focus))
+            profile = Profile(
+                model=model,
+                width=w,
+                height=h,
+                merit=Merit(
+                    extra={
+                        "interpolation_leave_one_out": [
+                            {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo
+                        ]
+                    }
+                ),
+                lens=nearest.lens,
+                camera=nearest.camera,
+                optics=nearest.optics,
+                focus=args.focus,
+                provenance=Provenance(extra={"note": note, "from_profiles": [p.id for p in used]}),
+            )
+            what = f"interpolated focus {args.focus:g}"
+            known = ", ".join(f"{p.focus:g}" for p in used)
+            edges = FittingEdges(None, f"none: the correction is interpolated between the focus settings {known}")
     try:
         ex, fig = export_profile(args, profile, what=what, edges=edges)
         write_output(args, ex)
     except InputError as exc:
         raise _Fail(str(exc)) from None
     report(args, ex, fig, "harp profile")
-    return 0
+    return EXIT_OK

@@ -275,7 +275,9 @@ def test_profile_commands(uninterrupted, capsys):
     out = capsys.readouterr().out
     assert "DEMO-0001" in out and "radial" in out
     assert main(["profile", "show", "DEMO-0001", "--store", store]) == 0
-    assert "lens #1" in capsys.readouterr().out
+    header, *rows = capsys.readouterr().out.splitlines()  # off a terminal: tab-separated, a header with units
+    assert header.split("\t")[:3] == ["focus", "id", "verdict"] and "holdout d (px)" in header.split("\t")
+    assert [r.split("\t")[0] for r in rows] == ["0", "1"] and all(r.split("\t")[2] == "PASS" for r in rows)
     assert main(["profile", "export", "DEMO-0001", "--focus", "1", "--format", "json", "--store", store]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["image"] == {"width": W, "height": H}
