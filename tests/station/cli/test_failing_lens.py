@@ -91,6 +91,29 @@ def test_resume_and_list_keep_saying_fail(failed, capsys):
     assert code == 0 and (listed["state"], listed["verdict"]) == ("complete", "FAIL")
 
 
+def test_the_failed_profiles_are_not_current_and_not_exported(failed, capsys):
+    _, results, _, base = failed
+    store = base / "profiles.sqlite"
+    ids = [f["profile_id"] for f in results["focus"]]
+    code, out, err = run(capsys, "profile", "show", "DEMO-0001", "--store", store, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["profiles"] == [] and [p["id"] for p in doc["left_out"]] == ids
+    assert all(p["verdict"] == "FAIL" for p in doc["left_out"]) and err.count("not current") == 2
+    code, out, err = run(capsys, "profile", "export", "DEMO-0001", "--focus", "0", "--format", "json", "--store", store)
+    assert code == 1 and out == "" and err.count("\n") == 1
+    assert err.startswith(f"harp profile: lens Simulated Optics SIM-12mm serial DEMO-0001, focus 0: profile #{ids[0]}")
+    assert f"holdout d {results['focus'][0]['holdout']['d']:.4f} px > {LIMIT:g} px" in err and "not exported" in err
+    code, out, err = run(
+        capsys, "profile", "export", "DEMO-0001", "--focus", "0", "--format", "json", "--store", store, "--allow-failed"
+    )
+    assert code == 0 and json.loads(out)["model"] and "warning" in err and "--allow-failed" in err
+    # between the two failed settings: nothing to interpolate from but failed profiles
+    code, out, err = run(
+        capsys, "profile", "export", "DEMO-0001", "--focus", "0.5", "--format", "json", "--store", store
+    )
+    assert code == 1 and out == "" and "failed QA" in err
+
+
 def test_qa_of_the_lens_uses_the_thresholds_it_was_calibrated_under(failed, capsys):
     _, results, _, base = failed
     store = base / "profiles.sqlite"
