@@ -32,7 +32,11 @@ def register(subparsers) -> None:
     run = sub.add_parser("run", help="run a session from a station configuration")
     run.add_argument("config", type=Path, help="station configuration (YAML)")
     run.add_argument(
-        "--out", type=Path, default=None, help="parent directory of the session directory (default: store.sessions_dir)"
+        "-o",
+        "--out",
+        type=Path,
+        default=None,
+        help="parent directory of the session directory (default: store.sessions_dir)",
     )
     run.add_argument("--name", default=None, help="session directory name (default: time + lens serial)")
     run.set_defaults(func=_run)
