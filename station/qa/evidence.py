@@ -16,6 +16,21 @@ def _last_record(session, kind: str, **match) -> dict | None:
     return found
 
 
+_MEASUREMENTS: dict[tuple[str, str], tuple[tuple[int, int], object]] = {}
+"""Measurements read, by (file, SHA-256), with the file's (size, mtime) when read: the store step,
+QA and the report of one session read the same files. A file changed since (damaged, rewritten) is
+read, and its checksum checked, again."""
+_MEASUREMENTS_MAX = 512
+
+
+def _stamp(path) -> tuple[int, int] | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
+
+
 def stored_measurement(session, focus_idx: int, orientation_idx: int):
     """The ``ImageMeasurement`` the executor kept for the shot's current attempt, or None
     (no ``measurements/*.npz`` for it, or written by an incompatible version)."""
@@ -25,10 +40,22 @@ def stored_measurement(session, focus_idx: int, orientation_idx: int):
     rec = _last_record(session, "measure", focus_idx=focus_idx, orientation_idx=orientation_idx)
     if rec is None or "file" not in rec or rec.get("attempt") != session.attempt(focus_idx, orientation_idx):
         return None
+    sha = rec.get("sha256")
+    path = session.path / rec["file"]
+    key = (str(path), str(sha))
+    stamp = _stamp(path)
+    hit = _MEASUREMENTS.get(key)
+    if sha and stamp is not None and hit is not None and hit[0] == stamp:
+        return hit[1]
     try:
-        return measurement_from_arrays(session.read_arrays(rec["file"], rec.get("sha256")))
+        m = measurement_from_arrays(session.read_arrays(rec["file"], sha))
     except (OSError, ValueError, KeyError, SessionError):
         return None
+    if sha and stamp is not None:
+        if len(_MEASUREMENTS) >= _MEASUREMENTS_MAX:
+            _MEASUREMENTS.clear()
+        _MEASUREMENTS[key] = (stamp, m)
+    return m
 
 
 def stored_uncertainty(session, focus_idx: int, model):

@@ -142,18 +142,24 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
 
 def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
     """``(orientation index, edge index, rms before, rms after)`` per measured edge (px)."""
-    from pipeline.edgeset import edge_residuals
+    from pipeline.edgeset import edge_figures, tls
 
-    rows = []
+    keys, pts = [], []
     for o, s in enumerate(shots):
         for i, ln in enumerate(s.measurement.lines):
-            p = np.asarray(ln.points, np.float64)
-            if len(p) < 3:
-                continue
-            before = float(np.sqrt(np.mean(edge_residuals(p) ** 2)))
-            after = float(np.sqrt(np.mean(edge_residuals(model.undistort_points(p)) ** 2)))
-            rows.append((o, i, before, after))
-    return rows
+            p = np.asarray(ln.points, np.float64).reshape(-1, 2)
+            if len(p) >= 3:
+                keys.append((o, i))
+                pts.append(p)
+    if not pts:
+        return []
+    # every edge at once: one correction call, one TLS pass (per-edge lines, as edge_residuals does)
+    counts = np.array([len(p) for p in pts])
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    u = np.concatenate(pts)
+    before = edge_figures(tls(u, starts, counts)[0], starts, counts)[0]
+    after = edge_figures(tls(model.undistort_points(u), starts, counts)[0], starts, counts)[0]
+    return [(o, i, float(b), float(a)) for (o, i), b, a in zip(keys, before, after)]
 
 
 def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> Path:

@@ -183,3 +183,23 @@ def test_a_tampered_stored_profile_fails_qa(failed, capsys, tmp_path):
     tampered = doc["profiles"][1]
     assert code == 1 and tampered["measurements"] is None and "not at hand" in tampered["notes"][0]
     assert {"defined", "distortion_recorded"} <= {c["name"] for c in tampered["checks"] if c["passed"] is False}
+
+
+def test_kept_measurements_are_read_once_and_again_when_damaged(failed, tmp_path):
+    import shutil
+
+    from station.qa.evidence import stored_measurement
+    from station.session.directory import SessionDir
+
+    _, _, _, base = failed
+    copy = tmp_path / "copy"
+    shutil.copytree(base / "sessions" / "f", copy)
+    with SessionDir.open(copy) as s:
+        first = stored_measurement(s, 0, 0)
+        assert first is not None and stored_measurement(s, 0, 0) is first  # store step, QA, report: one read
+        rec = [r for r in s.of_kind("measure") if (r["focus_idx"], r["orientation_idx"]) == (0, 0)][-1]
+        f = copy / rec["file"]
+        data = bytearray(f.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        f.write_bytes(bytes(data))
+        assert stored_measurement(s, 0, 0) is None  # damaged since: read again, its checksum fails
