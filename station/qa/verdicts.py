@@ -260,16 +260,14 @@ def evaluate(
         add(c, "the stored figures do not belong to the measurements this profile was fitted on")
 
     if measurements is not None and measurements.shots:
-        from pipeline.edgeset import corrected_straightness
-
-        edges = [np.asarray(p, np.float64) for s in measurements.shots for p in s if len(p) >= 3]
         with np.errstate(all="ignore"):
-            d_corr = corrected_straightness(model, edges)[0] if edges else math.nan
-        metrics["corrected_d_px"] = _finite(d_corr)
+            d_corr, n_kept, n_out = corrected_d(model, measurements.shots, width, height)
+        metrics.update(corrected_d_px=_finite(d_corr), corrected_d_outlier_edges=n_out)
         add(
             judged(
                 "corrected_d",
-                f"d of the {len(measurements.shots)} measured shots ({measurements.source}) corrected by this model",
+                f"d of the {len(measurements.shots)} measured shots ({measurements.source}; {n_kept} edges, "
+                f"{n_out} outliers left out as the fit does) corrected by this model",
                 _finite(d_corr),
                 "<=",
                 t,
@@ -350,6 +348,41 @@ def evaluate(
         tuple(checks),
         {k: getattr(thresholds, k) for k in THRESHOLD_FIELDS},
     )
+
+
+def _fit_rejection() -> tuple[float, float]:
+    """(reject_factor, max_reject_fraction) of the fit (:func:`pipeline.fit.fit_distortion`'s defaults)."""
+    import inspect
+
+    from pipeline.fit import fit_distortion
+
+    params = inspect.signature(fit_distortion).parameters
+    return float(params["reject_factor"].default), float(params["max_reject_fraction"].default)
+
+
+def corrected_d(model, shots: Sequence[Sequence[np.ndarray]], width: int, height: int) -> tuple[float, int, int]:
+    """``(d, kept, outliers)``: the straightness of the measured edges of ``shots`` corrected by
+    ``model``, the edges chosen as the fit chooses them — the edges :func:`pipeline.edgeset.collect`
+    accepts, less the outliers: an edge whose RMS residual after correction exceeds ``reject_factor``
+    x the median edge RMS, the worst ``max_reject_fraction`` of the edges at most
+    (:func:`pipeline.fit.fit_distortion`). A correction that does not straighten the edges raises
+    every edge's residual with the median, so it cannot hide behind the rule. NaN when no edge is usable."""
+    from pipeline.edgeset import EdgeSet, collect, edge_figures, straightness_of, tls
+
+    edges, _rejected = collect([list(s) for s in shots], width, height)
+    if not isinstance(edges, EdgeSet) or edges.n_edges == 0:
+        return math.nan, 0, 0
+    u = model.undistort_points(edges.xy)
+    if not np.all(np.isfinite(u)):
+        return math.nan, edges.n_edges, 0
+    rms, _ = edge_figures(tls(u, edges.starts, edges.counts)[0], edges.starts, edges.counts)
+    factor, fraction = _fit_rejection()
+    bad = np.flatnonzero(rms > factor * max(float(np.median(rms)), 1e-6))
+    bad = bad[np.argsort(rms[bad])[::-1][: int(fraction * edges.n_edges)]]
+    keep = np.ones(edges.n_edges, bool)
+    keep[bad] = False
+    pieces = [u[a : a + c] for a, c, k in zip(edges.starts, edges.counts, keep) if k]
+    return float(straightness_of(pieces)[0]), len(pieces), len(bad)
 
 
 def reported_figures(profile: Profile) -> dict[str, float | None]:

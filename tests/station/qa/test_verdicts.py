@@ -123,6 +123,8 @@ def test_the_stored_model_is_judged_on_its_measurements(calibrated):
     v = qa_verdict(profile, measurements=measured)
     c = by_name(v)["corrected_d"]
     assert v.passed and c.passed and c.value < 0.01
+    # the edges chosen as the fit chose them: the fit's own d on its shots, recomputed from the stored model
+    assert c.value == pytest.approx(profile.merit.fit.d, rel=1e-9)
     # a model changed after calibration no longer straightens the edges it was fitted on
     # (a mild change here, still defined everywhere, so only this check can see it)
     changed = profile.with_(model=tampered(profile.model, k1=0.02))
