@@ -55,6 +55,7 @@ def build_store(archive, dst: Path) -> tuple[Path, dict]:
                 merit = replace(p.merit, holdout=replace(h, d=h.d * hold, d_max=h.d_max * hold))
                 q = p.with_(
                     id=None,
+                    qa=None,  # another lens: judged afresh below, not against the real lens's recorded verdict
                     lens=replace(p.lens, serial=serial),
                     model=_scaled(p.model, dist),
                     merit=merit,

@@ -106,7 +106,14 @@ def test_api_lens_has_every_profile_check_plot_and_download(served):
         assert p["current"] is True and p["verdict"] == want.qa.verdict == "PASS"
         assert p["figures"]["holdout_d_px"] == want.merit.holdout.d
         assert {c["name"]: c["value"] for c in p["checks"]} == {c.name: c.value for c in want.qa.checks}
-        assert {c["name"] for c in p["checks"]} == {"holdout_d", "distortion_max"}
+        # the session's QA judged the stored model itself (issue 9, issue 14 item 6)
+        assert {c["name"] for c in p["checks"]} == {
+            "holdout_d",
+            "corrected_d",
+            "defined",
+            "distortion_max",
+            "distortion_recorded",
+        }
         assert [d["format"] for d in p["downloads"]] == list(FORMATS)
         assert p["plots"] == {
             "field": f"/profiles/{p['id']}/field.png",
