@@ -188,7 +188,10 @@ def cross_validate(
     ref = _cv_candidate((first, lines, float("inf"), settings))
     ref_mse = ref.cv_d**2 if np.isfinite(ref.cv_d) else float("inf")
     others = [c for c in candidates if c != first]
-    done = dict(zip(others, map_fn(_cv_candidate, [(c, lines, ref_mse, settings) for c in others])))
+    # the largest candidates first (the costliest: a pool's workers then finish about together);
+    # each row depends on its candidate and the reference only, not on the order
+    order = sorted(others, key=lambda c: -n_params(c, width, height))
+    done = dict(zip(order, map_fn(_cv_candidate, [(c, lines, ref_mse, settings) for c in order])))
     done[first] = ref
     return tuple(done[c] for c in candidates), folds
 
