@@ -134,6 +134,7 @@ def _workers(n_jobs: int):
         yield pool.map
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        gc.unfreeze()  # this process collects them again (a long-lived caller, a test session)
 
 
 def _spec(args) -> FitSpec | None:
