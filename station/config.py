@@ -434,7 +434,7 @@ def _device(sec: _Section, key: str, table: Mapping[str, str], kind: str) -> _Se
     name = dev.data.get("driver", _MISSING)
     if name is _MISSING or name is None:
         raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})")
-    if name not in table:
+    if not isinstance(name, str) or name not in table:
         raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})", name)
     return dev
 
@@ -593,6 +593,8 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     elif turntable.port == EMULATOR_PORT:
         raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)
 
+    _check_what_the_devices_allow(path, turntable, camera, orientations, focus_settings)
+
     return Config(
         path=path,
         base_dir=base,
@@ -624,6 +626,51 @@ def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:
     except StoreError as exc:
         raise ConfigError(so.file, so._p("url"), f"expected a store URL: {exc}") from None
     return loc.path, url
+
+
+ROTARY_RANGE = (0.0, 360.0)
+"""Orientations of a rotary stage without configured ``limits``: ``[0, 360)`` degrees."""
+
+
+def _check_what_the_devices_allow(
+    path: Path,
+    turntable: TurntableConfig,
+    camera: DeviceConfig,
+    orientations: tuple[float, ...],
+    focus_settings: tuple[float, ...],
+) -> None:
+    """What can be known without the devices: orientations within the turntable's configured
+    ``limits`` (inclusive) or, without them, ``[0, 360)`` for the rotary stages; focus settings
+    within the simulated lens's range. The devices' own ranges are checked once they are open
+    (:func:`station.session.devices.check_against_devices`)."""
+    limits = turntable.settings.get("limits")
+    if limits is not None:
+        ok = (
+            isinstance(limits, (list, tuple))
+            and len(limits) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in limits)
+            and limits[0] < limits[1]
+        )
+        if not ok:
+            raise ConfigError(path, "station.turntable.limits", f"expected [min, max] in degrees, got {_show(limits)}")
+        lo, hi = float(limits[0]), float(limits[1])
+        inside, shown = (lambda d: lo <= d <= hi), f"[{lo:g}, {hi:g}] (station.turntable.limits)"
+    else:
+        lo, hi = ROTARY_RANGE
+        inside, shown = (lambda d: lo <= d < hi), f"[{lo:g}, {hi:g}) for a rotary stage"
+    for i, deg in enumerate(orientations):
+        if not inside(deg):
+            raise ConfigError(path, f"capture.orientations_deg[{i}]", f"expected an angle in {shown}, got {deg:g}")
+    if camera.driver == "sim":
+        from drivers.sim.lens import FOCUS_RANGE
+
+        for i, f in enumerate(focus_settings):
+            if not FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]:
+                raise ConfigError(
+                    path,
+                    f"focus.settings[{i}]",
+                    f"expected a focus in [{FOCUS_RANGE[0]:g}, {FOCUS_RANGE[1]:g}] (the simulated lens), got {f:g}",
+                )
 
 
 def check_port(config: Config) -> None:

@@ -9,16 +9,53 @@ float and rounded back to the input depth. An alpha channel is dropped.
 
 Every failure raises :class:`ImageReadError` with a one-line message that
 names the file and the reason: missing, a directory, unreadable
-(permissions), empty, not an image, truncated, unsupported layout.
+(permissions), empty, not an image, truncated, unsupported layout, not a
+regular file, too large.
+
+Reading is bounded. Only regular files are read: a device (``/dev/zero``), a
+FIFO or a socket is refused before it is opened (it could be endless or block
+forever). An image whose header claims more than ``max_pixels`` pixels is
+refused before anything is decoded (:func:`header_size` reads the width and
+height of PNG, TIFF, JPEG, PNM, BMP and WebP headers); other formats are checked
+after decoding, which OpenCV itself bounds at 2^30 pixels. The default limit is
+:data:`MAX_PIXELS` (200 megapixels), or the environment variable
+``HARP_MAX_IMAGE_PIXELS``; a file larger than any image of that many pixels
+could be (:func:`max_file_bytes`) is refused without reading it all.
 """
 
 from __future__ import annotations
 
 import os
+import stat
+import struct
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+MAX_PIXELS = 200_000_000
+"""Default pixel-count limit of :func:`read_unchanged` (``HARP_MAX_IMAGE_PIXELS`` overrides it)."""
+
+MAX_PIXELS_ENV = "HARP_MAX_IMAGE_PIXELS"
+
+
+def max_pixels_limit() -> int:
+    """The pixel-count limit in force: ``HARP_MAX_IMAGE_PIXELS`` when set to an integer >= 1, else :data:`MAX_PIXELS`."""
+    text = os.environ.get(MAX_PIXELS_ENV, "").strip()
+    if text:
+        try:
+            value = int(float(text))
+        except ValueError:
+            value = 0
+        if value >= 1:
+            return value
+    return MAX_PIXELS
+
+
+def max_file_bytes(max_pixels: int) -> int:
+    """Largest file accepted for ``max_pixels``: 16 bytes a pixel (32-bit float RGBA) plus 1 MiB of headers."""
+    return 16 * int(max_pixels) + (1 << 20)
 
 
 class ImageReadError(Exception):
@@ -64,12 +101,14 @@ def _pnm_truncated(data: bytes) -> str | None:
     return None
 
 
-def read_unchanged(path) -> np.ndarray:
+def read_unchanged(path, *, max_pixels: int | None = None) -> np.ndarray:
     """Read an image file keeping its channels and bit depth (``cv2.IMREAD_UNCHANGED``).
 
     Parameters
     ----------
     path : str or Path
+    max_pixels : int, optional
+        Refuse an image of more pixels than this (default :func:`max_pixels_limit`).
 
     Returns
     -------
@@ -80,22 +119,17 @@ def read_unchanged(path) -> np.ndarray:
     Raises
     ------
     ImageReadError
-        With a one-line reason naming the file: missing, a directory,
-        unreadable, empty, truncated, not an image.
+        With a one-line reason naming the file: missing, a directory, not a
+        regular file, unreadable, empty, too large, truncated, not an image.
     """
     p = Path(path)
-    if not p.exists():
-        raise ImageReadError(p, "no such file")
-    if p.is_dir():
-        raise ImageReadError(p, "is a directory, not an image file")
-    if not os.access(p, os.R_OK):
-        raise ImageReadError(p, "permission denied")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
+    limit = max_pixels_limit() if max_pixels is None else int(max_pixels)
+    data = _read_regular_file(p, max_file_bytes(limit))
     if not data:
         raise ImageReadError(p, "empty file")
+    size = header_size(data)
+    if size is not None and size[0] * size[1] > limit:
+        raise ImageReadError(p, _too_large(size[0], size[1], limit))
     reason = _pnm_truncated(data)
     if reason:
         raise ImageReadError(p, reason)
@@ -104,27 +138,194 @@ def read_unchanged(path) -> np.ndarray:
     if _looks_truncated(data):
         raise ImageReadError(p, "truncated image data")
     buf = np.frombuffer(data, np.uint8)
-    with _quiet_opencv():
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    try:
+        with _quiet_opencv():
+            img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # OpenCV's own size limit, or a decoder that gave up
+        raise ImageReadError(p, "not a readable image (corrupt, or larger than the decoder allows)") from None
+    except MemoryError:
+        raise ImageReadError(p, "too large to decode in the memory available") from None
     if img is None:
         raise ImageReadError(p, "not a readable image (unknown format or corrupt/truncated data)")
+    if img.shape[0] * img.shape[1] > limit:
+        raise ImageReadError(p, _too_large(img.shape[1], img.shape[0], limit))
     return img
 
 
-def read_grey(path) -> np.ndarray:
+def _too_large(w: int, h: int, limit: int) -> str:
+    return (
+        f"image too large: {w}x{h} = {w * h} pixels, the limit is {limit} (set {MAX_PIXELS_ENV} to read larger images)"
+    )
+
+
+def _read_regular_file(p: Path, max_bytes: int) -> bytes:
+    """The bytes of the regular file ``p`` (at most ``max_bytes``), or :class:`ImageReadError`."""
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise ImageReadError(p, "no such file") from None
+    except OSError as exc:
+        raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ImageReadError(p, "is a directory, not an image file")
+    if not stat.S_ISREG(st.st_mode):
+        raise ImageReadError(p, f"not a regular file ({_file_kind(st.st_mode)}); give an image file")
+    if not os.access(p, os.R_OK):
+        raise ImageReadError(p, "permission denied")
+    if st.st_size > max_bytes:
+        raise ImageReadError(p, f"file too large for an image: {st.st_size} bytes (at most {max_bytes})")
+    try:
+        # O_NONBLOCK: should the path have become a FIFO since the stat, opening it does not hang
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            raise ImageReadError(p, "not a regular file; give an image file")
+        try:
+            data = f.read(max_bytes + 1)
+        except OSError as exc:
+            raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
+    if len(data) > max_bytes:
+        raise ImageReadError(p, f"file too large for an image (more than {max_bytes} bytes)")
+    return data
+
+
+def _file_kind(mode: int) -> str:
+    if stat.S_ISCHR(mode):
+        return "a character device"
+    if stat.S_ISBLK(mode):
+        return "a block device"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a plain file"
+
+
+def header_size(data: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` claimed by the header of a PNG, TIFF, JPEG, PNM, BMP or WebP file;
+    None for another format or a header too short or malformed to tell (the decoder then judges)."""
+    try:
+        if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
+            return struct.unpack(">II", data[16:24])
+        if data[:4] in (b"II*\x00", b"MM\x00*"):
+            return _tiff_size(data)
+        if data[:2] == b"\xff\xd8":
+            return _jpeg_size(data)
+        if data[:1] == b"P" and data[1:2] in b"123456":
+            return _pnm_size(data)
+        if data[:2] == b"BM" and len(data) >= 26:
+            w, h = struct.unpack("<ii", data[18:26])
+            return abs(w), abs(h)
+        if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+            return _webp_size(data)
+    except (struct.error, IndexError, ValueError):
+        return None
+    return None
+
+
+def _tiff_size(data: bytes) -> tuple[int, int] | None:
+    """Width and height (tags 256, 257) of the first image file directory."""
+    e = "<" if data[:2] == b"II" else ">"
+    (ifd,) = struct.unpack(e + "I", data[4:8])
+    (n,) = struct.unpack(e + "H", data[ifd : ifd + 2])
+    found: dict[int, int] = {}
+    for k in range(n):
+        entry = data[ifd + 2 + 12 * k : ifd + 14 + 12 * k]
+        tag, typ, _count = struct.unpack(e + "HHI", entry[:8])
+        if tag in (256, 257):
+            found[tag] = struct.unpack(e + ("H" if typ == 3 else "I"), entry[8:10] if typ == 3 else entry[8:12])[0]
+    if 256 in found and 257 in found:
+        return found[256], found[257]
+    return None
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """Width and height of the first start-of-frame marker (SOF0..SOF15 but DHT/JPG/DAC)."""
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        (length,) = struct.unpack(">H", data[i + 2 : i + 4])
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            h, w = struct.unpack(">HH", data[i + 5 : i + 9])
+            return w, h
+        if marker == 0xDA:  # start of scan before any frame header
+            return None
+        i += 2 + length
+    return None
+
+
+def _pnm_size(data: bytes) -> tuple[int, int] | None:
+    fields: list[int] = []
+    i, n = 2, min(len(data), 4096)
+    while len(fields) < 2 and i < n:
+        c = data[i : i + 1]
+        if c == b"#":
+            while i < n and data[i : i + 1] not in (b"\n", b"\r"):
+                i += 1
+        elif c.isspace():
+            i += 1
+        else:
+            j = i
+            while j < n and data[j : j + 1].isdigit():
+                j += 1
+            if j == i:
+                return None
+            fields.append(int(data[i:j]))
+            i = j
+    return (fields[0], fields[1]) if len(fields) == 2 else None
+
+
+def _webp_size(data: bytes) -> tuple[int, int] | None:
+    kind = data[12:16]
+    if kind == b"VP8X":
+        w = int.from_bytes(data[24:27], "little") + 1
+        h = int.from_bytes(data[27:30], "little") + 1
+        return w, h
+    if kind == b"VP8 ":
+        w, h = struct.unpack("<HH", data[26:30])
+        return w & 0x3FFF, h & 0x3FFF
+    if kind == b"VP8L":
+        bits = int.from_bytes(data[21:25], "little")
+        return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+    return None
+
+
+def read_grey(path, *, max_pixels: int | None = None) -> np.ndarray:
     """Read an image file as a 2-D grey ``image[y, x]``: ``uint8`` or ``uint16``
     (float TIFFs as float32).
 
     Raises :class:`ImageReadError` as :func:`read_unchanged` does, and for an
     unsupported layout or pixel type, or an image under 16x16.
     """
-    return _to_grey(read_unchanged(path), Path(path))
+    return _to_grey(read_unchanged(path, max_pixels=max_pixels), Path(path))
 
 
 class _quiet_opencv:
-    """Silence OpenCV's own log lines (our error message says it all)."""
+    """Silence OpenCV's own log lines and what its codecs print straight to the C-level
+    stderr ("libpng error: ...", "Corrupt JPEG data: ...") while decoding: our one-line error
+    says it all. (File descriptor 2 points at /dev/null meanwhile, for the whole process: the
+    ``harp`` commands decode in their main thread.)"""
 
     def __enter__(self):
+        self._saved_fd = None
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+            null = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(null, 2)
+            finally:
+                os.close(null)
+            self._saved_fd = saved
+        except (OSError, ValueError, AttributeError):  # no fd 2 to redirect: leave it
+            pass
         self._lg = getattr(getattr(cv2, "utils", None), "logging", None)
         self._old = None
         if self._lg is not None:
@@ -138,6 +339,9 @@ class _quiet_opencv:
     def __exit__(self, *exc):
         if self._lg is not None and self._old is not None:
             self._lg.setLogLevel(self._old)
+        if self._saved_fd is not None:
+            os.dup2(self._saved_fd, 2)
+            os.close(self._saved_fd)
         return False
 
 

@@ -10,6 +10,11 @@ input helpers they share (one-line input errors, reading and measuring photos).
 Exit codes (:mod:`station.exit_codes`): 0 success (a verdict of PASS), 1 a verdict of FAIL
 (``harp qa``, ``harp session run|resume``; ``harp profile export`` of a failed profile),
 2 bad input or an error, 130 interrupted, 141 standard output closed early.
+
+Whatever a command lets through ends here as one line on stderr and exit 2, never a
+traceback: an ``OSError`` names the file, the reason and what to do
+(:func:`station.files.describe_os_error`: a full disk, permissions), anything else is
+an internal error (``HARP_DEBUG=1`` shows its traceback).
 """
 
 from __future__ import annotations
@@ -134,6 +139,32 @@ def main(argv: list[str] | None = None) -> int:
         if exc.code == 1 and _stdout_is_devnull():
             return 141
         raise
+    except MemoryError:
+        print(f"{_prog(args)}: out of memory; give smaller inputs or fewer at once", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file a command did not expect to fail (a full disk, permissions)
+        from station.files import describe_os_error
+
+        print(f"{_prog(args)}: {describe_os_error(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: still one line and exit 2 (never 1, which means QA FAIL)
+        if os.environ.get(DEBUG_ENV):
+            raise
+        text = " ".join(str(exc).split()) or "(no message)"
+        print(
+            f"{_prog(args)}: internal error: {type(exc).__name__}: {text} "
+            f"(please report it; {DEBUG_ENV}=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        return 2
+
+
+DEBUG_ENV = "HARP_DEBUG"
+"""Set to any value to let an unexpected exception print its traceback."""
+
+
+def _prog(args: argparse.Namespace) -> str:
+    return f"harp {args.command}" if getattr(args, "command", None) else "harp"
 
 
 def _stdout_is_devnull() -> bool:

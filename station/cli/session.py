@@ -43,10 +43,27 @@ def register(subparsers) -> None:
     res = sub.add_parser("resume", help="continue an interrupted session")
     res.add_argument("session_dir", type=Path, help="the session directory")
     res.set_defaults(func=_resume)
+    rep = sub.add_parser(
+        "repair",
+        help="check a session's files and re-derive what the frames and the manifest allow",
+        description="Check every file of a session against its manifest; re-derive what can be re-derived "
+        "(session.json, config.yaml from its source, damaged manifest lines, measurements, uncertainty maps and "
+        "profiles, fitted again from the frames without the devices) and say what cannot. Exit 0 when nothing is "
+        "left damaged (captures still needed are done by harp session resume), 2 otherwise.",
+    )
+    rep.add_argument("session_dir", type=Path, help="the session directory")
+    rep.add_argument("--base-dir", default=None, help="for a rebuilt session.json: where the configuration's "
+                     "relative paths resolve (default: the session directory's grandparent)")  # fmt: skip
+    rep.add_argument(
+        "--recapture", type=int, action="append", default=[], metavar="F",
+        help="capture focus setting F (its index) again whole at the next resume (repeatable)",
+    )  # fmt: skip
+    rep.set_defaults(func=_repair)
     from station.store.resolve import add_store_options
 
-    for action in (run, res):
+    for action in (run, res, rep):
         add_store_options(action, config=False)  # --store PATH|URL instead of the configuration's store
+    for action in (run, res):
         action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
         action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")
         action.add_argument(
@@ -122,6 +139,12 @@ def _resume(args) -> int:
         session = SessionDir.open(args.session_dir)
     except (ConfigError, SessionError) as exc:
         return _error(str(exc))
+    from station.session.integrity import check_session, summary
+
+    damage = check_session(session)
+    if damage:  # found before anything is captured, fitted or judged again
+        session.close()
+        return _error(summary(session.path, damage))
     if session.finished:
         with session:
             return _already_finished(session, args)
@@ -145,6 +168,58 @@ def _already_finished(session, args) -> int:
     if args.json:
         print(json.dumps(results, indent=1))
     return EXIT_OK if code is None else code
+
+
+def _repair(args) -> int:
+    from station.session.directory import SessionDir, SessionError
+    from station.session.integrity import check_session, needs_capture, repair_files, repair_session
+
+    try:
+        done = repair_files(args.session_dir, base_dir=args.base_dir)
+        session = SessionDir.open(args.session_dir)
+    except SessionError as exc:
+        return _error(str(exc))
+    for line in done:
+        print(f"re-derived: {line}", file=sys.stderr)
+    with session:
+        try:
+            report = repair_session(session, tuple(args.recapture))
+        except ValueError as exc:
+            return _error(str(exc))
+        for line in report.fixed:
+            print(f"repaired: {line}", file=sys.stderr)
+        for line in report.cannot:
+            print(f"cannot re-derive: {line}", file=sys.stderr)
+        pending = report.refit and needs_capture(session)  # shots still to capture: resume fits it with them
+        if report.refit and not pending:
+            code = _refit(session, args.store)
+            if code:
+                return code
+        left = check_session(session)
+    if pending:
+        print("harp session: the reopened focus settings are fitted with the shots still to capture", file=sys.stderr)
+    if report.resume or pending or (report.refit and left):
+        print(f"harp session: then: harp session resume {args.session_dir}", file=sys.stderr)
+    elif not done and not report.fixed and not report.cannot:
+        print(f"harp session: {args.session_dir}: every file matches the manifest, nothing to repair", file=sys.stderr)
+    return 2 if report.cannot else 0
+
+
+def _refit(session, store_name=None) -> int:
+    """Measure, fit and store the reopened focus settings again, then QA and the report: no devices."""
+    from station.session.run import run_session
+    from station.store import ProfileStore, StoreError
+    from station.store.resolve import store_location
+
+    try:
+        with ProfileStore(store_location(store_name, session.config)) as store:
+            result = run_session(session, None, None, store=store, console=None)
+    except StoreError as exc:
+        return _error(str(exc))
+    if result.exit_code:
+        return _error(result.message)
+    print(f"repaired: {result.message}", file=sys.stderr)
+    return 0
 
 
 def _live(args) -> int | None:

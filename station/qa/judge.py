@@ -7,10 +7,16 @@ verdict in the manifest (``qa``) and the store (``qa_results``, and with its pro
 measures the focus-interpolation error (leave one calibrated focus out,
 ``interpolation``) and records the session's verdict (``qa_session``). What it finds
 is also said, one line each, through ``note`` (the console of ``harp session run``).
+
+Judging again — a session resumed after a kill during QA or the report — records nothing
+twice: a record equal to one written since the last profile was stored is not appended
+again, and the store keeps a profile's verdict once per profile and session
+(``record_verdict`` replaces it).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -27,6 +33,36 @@ class SessionQA:
     verdicts: Sequence[Verdict]
     overall: str
     interpolation: Sequence[Any]
+
+
+def _append_once(session: Any, record: Any) -> None:
+    """Append ``record`` unless the same record was written since the last profile was stored
+    (``stored`` / ``reopened``: a new round of QA)."""
+    same = _normal(record.to_json())
+    for r in reversed(session.records):
+        if r.get("kind") in ("stored", "reopened"):
+            break
+        if r.get("kind") == same["kind"] and _normal({k: v for k, v in r.items() if k != "t"}) == same:
+            return
+    session.append(record)
+
+
+def _normal(d: dict) -> Any:
+    """``d`` as it reads back from the manifest (JSON types)."""
+    return json.loads(json.dumps(d, default=_plain))
+
+
+def _plain(o: Any) -> Any:
+    from station.session.directory import json_default
+
+    return json_default(o)
+
+
+def _in_store(store: Any, session_dir: str, focus: float) -> bool:
+    """Whether the store holds this session's verdict for a focus setting without a stored profile."""
+    return any(
+        r.get("profile_id") is None and r.get("focus") == focus for r in store.qa_results(session_dir=session_dir)
+    )
 
 
 def judge_session(
@@ -47,16 +83,18 @@ def judge_session(
         v = qa_verdict(p, config.qa, measurements=session_measurements(session, f))
         verdicts.append(v)
         pid = stored.get(f)
-        session.append(
+        _append_once(
+            session,
             QARecorded(
                 f, v.verdict, list(v.reasons), dict(v.metrics), [c.to_dict() for c in v.checks], dict(v.thresholds)
-            )
+            ),
         )
         if store is not None:
+            session_dir = str(session.path.resolve())
             if pid is not None:  # the profile's own verdict, once per profile however often resumed
-                store.record_verdict(pid, v, session_dir=str(session.path.resolve()))
-            else:
-                store.put_qa_result(verdict=v, session_dir=str(session.path.resolve()), focus=focus)
+                store.record_verdict(pid, v, session_dir=session_dir)
+            elif not _in_store(store, session_dir, focus):  # no stored profile: one history row, once
+                store.put_qa_result(verdict=v, session_dir=session_dir, focus=focus)
         note(
             f"QA focus {focus:g}: [{'green' if v.passed else 'red'}]{v.verdict}[/] "
             + "; ".join(c.text for c in v.checks if c.passed is (False if not v.passed else True))
@@ -70,12 +108,12 @@ def judge_session(
         loo = []
         note(f"focus interpolation: not available ({exc})")
     for e in loo:
-        session.append(InterpolationError(e.focus, e.rms_px, e.max_px))
+        _append_once(session, InterpolationError(e.focus, e.rms_px, e.max_px))
         note(
             f"focus interpolation error at {e.focus:g} (left out, interpolated from the "
             f"others): RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px"
         )
     overall = combine(verdicts)
-    session.append(SessionVerdict(overall))
+    _append_once(session, SessionVerdict(overall))
     note(f"QA verdict: [{'bold green' if overall == 'PASS' else 'bold red'}]{overall}")
     return SessionQA(profiles, verdicts, overall, loo)

@@ -3,6 +3,14 @@
 Problems opening a device become a :class:`station.config.ConfigError`
 naming the configuration field to look at (one line), e.g. an unreachable
 turntable port names ``station.turntable.port``.
+
+Once the devices are open, :func:`check_against_devices` holds the configuration
+against what they report they can do — the turntable's travel
+(:class:`drivers.protocols.TurntableRanges`: the configured limits within the
+device's own, read at open) for every orientation, the camera's focus, exposure and
+gain ranges (:class:`drivers.protocols.CameraRanges`) for the focus settings and the
+capture settings — so that ``harp session run`` refuses, naming the field, before the
+session directory is created, instead of failing at the first move.
 """
 
 from __future__ import annotations
@@ -12,6 +20,7 @@ from collections.abc import Iterator
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
+from drivers.protocols import CameraRanges, Range, TurntableRanges
 from station.config import Config, check_port
 
 
@@ -36,8 +45,11 @@ def _created(config: Config) -> Iterator[tuple]:
 
 
 @contextlib.contextmanager
-def open_station(config: Config) -> Iterator[tuple]:
-    """Create and open the configured devices; yield ``(camera, turntable)``; close on exit."""
+def open_station(config: Config, *, check: bool = True) -> Iterator[tuple]:
+    """Create and open the configured devices; yield ``(camera, turntable)``; close on exit.
+
+    ``check``: hold the configuration against the devices' ranges first
+    (:func:`check_against_devices`, a :class:`~station.config.ConfigError` naming the field)."""
     with _created(config) as (camera, turntable):
         try:
             camera.open()
@@ -52,11 +64,54 @@ def open_station(config: Config) -> Iterator[tuple]:
                     f"cannot open the turntable at {config.station.turntable.port!r}: {_one_line(exc)}",
                 ) from None
             try:
+                if check:
+                    check_against_devices(config, camera, turntable)
                 yield camera, turntable
             finally:
                 _quiet_close(turntable)
         finally:
             _quiet_close(camera)
+
+
+def check_against_devices(config: Config, camera: object, turntable: object) -> None:
+    """Raise :class:`~station.config.ConfigError` naming the field when the configuration asks
+    for what the open devices report they cannot do (see the module docstring)."""
+    cap = config.capture
+    if isinstance(turntable, TurntableRanges):
+        travel = _range(config, turntable.travel_range, "station.turntable")
+        if travel is not None:
+            for i, deg in enumerate(cap.orientations_deg):
+                if deg not in travel:
+                    raise config.error(
+                        f"capture.orientations_deg[{i}]",
+                        f"expected an angle the turntable can reach, {deg:g}° is outside {travel} ({travel.source});"
+                        " change the orientation or the turntable's limits",
+                    )
+    if isinstance(camera, CameraRanges):
+        focus = _range(config, camera.focus_range, "station.camera")
+        if focus is not None:
+            for i, f in enumerate(config.focus_settings):
+                if f not in focus:
+                    raise config.error(
+                        f"focus.settings[{i}]",
+                        f"expected a focus setting the camera has, {f:g} is outside {focus} ({focus.source})",
+                    )
+        for key, value, get in (
+            ("exposure_us", cap.exposure_us, camera.exposure_range),
+            ("gain_db", cap.gain_db, camera.gain_range),
+        ):
+            r = _range(config, get, "station.camera")
+            if r is not None and value not in r:
+                raise config.error(
+                    f"capture.{key}", f"expected a value the camera accepts, {value:g} is outside {r} ({r.source})"
+                )
+
+
+def _range(config: Config, get, section: str) -> Range | None:
+    try:
+        return get()
+    except (DriverError, OSError) as exc:
+        raise config.error(section, f"cannot read the device's ranges: {_one_line(exc)}") from None
 
 
 def _quiet_close(device) -> None:

@@ -16,7 +16,9 @@ Records are read back as plain mappings (:meth:`SessionDir.of_kind`,
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import errno
 import fcntl
 import hashlib
 import io
@@ -29,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from station.config import Config, load_config
-from station.files import atomic_write_bytes
+from station.config import Config, ConfigError, load_config
+from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import frame_key, stored_key
@@ -67,6 +69,19 @@ def decode_pgm(data: bytes) -> np.ndarray:
     return img.astype(np.uint16) if maxval >= 256 else img.copy()
 
 
+def read_session_file(path: Path) -> dict:
+    """The mapping in ``DIR/session.json``; a damaged one is a :class:`SessionError` saying what to do."""
+    f = Path(path) / SESSION_FILE
+    try:
+        meta = json.loads(f.read_text(encoding="utf-8"))
+        if not isinstance(meta, dict) or not isinstance(meta.get("base_dir"), str):
+            raise ValueError("not a session description (no base_dir)")
+    except (ValueError, UnicodeDecodeError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SessionError(f"{f}: damaged ({reason}); run: harp session repair {path}") from None
+    return meta
+
+
 # --------------------------------------------------------------- manifest
 def read_manifest(path: Path) -> tuple[list[dict], int]:
     """Complete records of a manifest and the byte length they occupy.
@@ -92,7 +107,9 @@ def read_manifest(path: Path) -> tuple[list[dict], int]:
                 raise ValueError("not an object")
         except ValueError:
             if data[nl + 1 :].strip():
-                raise SessionError(f"{path}: line {len(records) + 1}: corrupt manifest record") from None
+                raise SessionError(
+                    f"{path}: line {len(records) + 1}: corrupt manifest record; run: harp session repair {path.parent}"
+                ) from None
             break  # torn last line
         records.append(rec)
         pos = good = nl + 1
@@ -108,8 +125,8 @@ class SessionDir:
 
     def __init__(self, path: Path, records: list[dict], good_len: int):
         self.path = Path(path)
-        self.meta = json.loads((self.path / SESSION_FILE).read_text())
-        self._lock_fh = open(self.path / ".lock", "a+")
+        self.meta = read_session_file(self.path)
+        self._lock_fh = open(self.path / layout.LOCK, "a+")
         try:
             fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -121,7 +138,8 @@ class SessionDir:
                 fh.truncate(good_len)
                 fh.flush()
                 os.fsync(fh.fileno())
-        self._manifest = open(manifest, "ab")
+        self._manifest = open(manifest, "ab", buffering=0)  # unbuffered: a failed append is cut back whole
+        self._manifest_size = good_len
         self.records = records
         # temporary files of writes a kill interrupted (never renamed into place)
         for sub in layout.WRITTEN_DIRS:
@@ -129,6 +147,42 @@ class SessionDir:
                 for tmp in (self.path / sub).glob(".*.tmp*"):
                     tmp.unlink(missing_ok=True)
         self.config: Config | None = None
+        try:
+            self.hold_reserve()
+        except SessionError:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------ space
+    def hold_reserve(self) -> None:
+        """Hold :data:`~station.session.layout.RESERVE_BYTES` of disk in ``.reserve`` (allocated,
+        not sparse), so that when a write finds the disk full, :meth:`release_reserve` makes room for
+        the ``aborted`` record. A disk too full for it is a :class:`SessionError` naming what to do."""
+        p = self.path / layout.RESERVE
+        with contextlib.suppress(OSError):
+            if p.stat().st_size >= layout.RESERVE_BYTES:
+                return
+        try:
+            fd = os.open(p, os.O_WRONLY | os.O_CREAT, 0o600)
+            try:
+                os.posix_fallocate(fd, 0, layout.RESERVE_BYTES)
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            p.unlink(missing_ok=True)
+            raise SessionError(
+                describe_os_error(
+                    OSError(exc.errno, exc.strerror, str(self.path)),
+                    f"free some space, then: harp session resume {self.path}"
+                    if exc.errno in (errno.ENOSPC, errno.EDQUOT)
+                    else None,
+                )
+            ) from None
+
+    def release_reserve(self) -> None:
+        """Give the reserved space back (a write found the disk full); :meth:`hold_reserve` at the next open."""
+        (self.path / layout.RESERVE).unlink(missing_ok=True)
 
     # ------------------------------------------------------------ lifecycle
     @classmethod
@@ -146,9 +200,17 @@ class SessionDir:
             raise SessionError(f"{path}: already exists") from None
         except OSError as exc:
             raise SessionError(f"{path}: cannot create session directory: {exc.strerror}") from None
+        try:
+            return cls._fill(path, config, now, software_version)
+        except OSError as exc:
+            raise SessionError(f"cannot create the session: {describe_os_error(exc)}") from None
+
+    @classmethod
+    def _fill(cls, path: Path, config: Config, now: _dt.datetime, software_version: str) -> SessionDir:
         for sub in layout.WRITTEN_DIRS:
             (path / sub).mkdir()
-        atomic_write_bytes(path / CONFIG_COPY, config.path.read_bytes())
+        config_bytes = config.path.read_bytes()
+        atomic_write_bytes(path / CONFIG_COPY, config_bytes)
         meta = {
             "format": 1,
             "created": now.isoformat(timespec="seconds"),
@@ -157,6 +219,7 @@ class SessionDir:
             "station_id": config.station.id,
             "software_version": software_version,
             "lens": [config.lens.maker, config.lens.model, config.lens.serial],
+            "config_sha256": hashlib.sha256(config_bytes).hexdigest(),
         }
         atomic_write_bytes(path / SESSION_FILE, (json.dumps(meta, indent=1) + "\n").encode())
         s = cls(path, [], 0)
@@ -173,6 +236,11 @@ class SessionDir:
         s = cls(path, records, good)
         try:
             s.config = load_config(path / CONFIG_COPY, base_dir=s.meta["base_dir"])
+        except ConfigError as exc:
+            s.close()
+            raise SessionError(
+                f"{exc} (the session's copy of its configuration; harp session repair {path} says what can be done)"
+            ) from None
         except Exception:
             s.close()
             raise
@@ -194,10 +262,19 @@ class SessionDir:
         """Append one record to the manifest, durably (flush + fsync); returns the line's mapping."""
         data = record.to_json() if isinstance(record, Record) else dict(record)
         record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **data}
-        line = json.dumps(record, separators=(",", ":"), default=json_default) + "\n"
-        self._manifest.write(line.encode())
-        self._manifest.flush()
-        os.fsync(self._manifest.fileno())
+        line = (json.dumps(record, separators=(",", ":"), default=json_default) + "\n").encode()
+        fd = self._manifest.fileno()
+        start = self._manifest_size
+        try:
+            view = memoryview(line)
+            while view:
+                view = view[os.write(fd, view) :]
+            os.fsync(fd)
+        except OSError as exc:  # a full disk: cut the part written, so the manifest stays whole
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, start)
+            raise OSError(exc.errno, exc.strerror, str(self.path / MANIFEST)) from None
+        self._manifest_size = start + len(line)
         self.records.append(record)
         return record
 
@@ -278,8 +355,11 @@ class SessionDir:
                 and (self.path / r["file"]).is_file()
             ):
                 keys.add(frame_key(r["focus_idx"], r["orientation_idx"], r["frame_idx"]))
-        for r in self.of_kind("stored"):
-            keys.add(stored_key(r["focus_idx"]))
+        for r in self.records:  # a later ``reopened`` record takes a stored focus setting back
+            if r.get("kind") == "stored":
+                keys.add(stored_key(r["focus_idx"]))
+            elif r.get("kind") == "reopened":
+                keys.discard(stored_key(r["focus_idx"]))
         return keys
 
     @property

@@ -37,6 +37,7 @@ in the session directory, an ``aborted`` record names the cause, and
 from __future__ import annotations
 
 import contextlib
+import errno
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -45,12 +46,13 @@ from typing import Any, TypeVar
 import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
-from drivers.protocols import Camera, Frame, IndexedCapture, Recoverable, Turntable
+from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
 from station import __version__
 from station.calibration import Calibration, calibrate_shots
+from station.files import describe_os_error
 from station.profile import Profile
 from station.session import layout
-from station.session.directory import SessionDir
+from station.session.directory import SessionDir, SessionError
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.plan import (
     Capture,
@@ -67,11 +69,13 @@ from station.session.plan import (
     plan_session,
 )
 from station.session.processing import (
+    FrameStats,
     ShotMeasurement,
     average_frames,
     exposure_problems,
+    frame_damage,
+    frame_stats,
     full_scale,
-    garbage_rows,
     measure_shot,
     shot_problems,
 )
@@ -92,7 +96,8 @@ from station.session.records import (
 )
 from station.session.workers import FitWorkers
 
-#: a stage read-back further than this from the target is a fault (degrees)
+#: a stage read-back further than this (or than the travel range's tolerance) from the target
+#: stops the session (degrees)
 POSITION_TOLERANCE_DEG = 0.05
 
 EXIT_OK = 0
@@ -173,6 +178,13 @@ class Executor:
         self._stage_deg: float | None = None
         self._focus: float | None = None
         self._size: tuple[int, int] | None = None
+        # frame checks: the statistics of a trusted frame (of an accepted shot, or one that passed
+        # against such a frame), with its shot (focus, orientation, attempt); frames of a shot not
+        # yet judged against one (the first shot of a session) wait in _candidates
+        self._reference: tuple[tuple[int, int, int], FrameStats] | None = None
+        self._reference_loaded = False
+        self._prepared = False
+        self._candidates: dict[tuple[int, int], FrameStats] = {}
 
     # ================================================================ run
     def run(self) -> SessionResult:
@@ -189,7 +201,6 @@ class Executor:
             sub.start(self.config, past, n_capture, n_process)
         try:
             try:
-                self._prepare()
                 plan = plan_session(self.config, done)
                 step = next(plan, None)
                 while step is not None:
@@ -203,14 +214,36 @@ class Executor:
                 self._finish(interrupted=True)
                 raise
             except SessionAborted as exc:
-                self._emit(Aborted(str(exc)))
-                self._finish()
-                n = self.tally.frames_saved
-                return self._result(EXIT_ABORTED, f"session stopped: {exc}; {n} new frames kept in {s.path}")
+                return self._abort(str(exc))
+            except OSError as exc:  # the session directory cannot be written (a full disk)
+                return self._abort(self.disk_problem(exc))
+            except SessionError as exc:  # a session file found damaged while working
+                return self._abort(str(exc))
+            except Exception as exc:  # a bug: recorded, then the caller says it in one line
+                self._abort(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())}")
+                raise
         finally:
             self.workers.close()
         self._finish()
         return self._result(EXIT_OK, f"session finished: {s.path}")
+
+    def disk_problem(self, exc: OSError) -> str:
+        """One line for a write the session directory refused, with what to do."""
+        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        action = f"free some space, then: harp session resume {self.session.path}" if full else None
+        return describe_os_error(exc, action)
+
+    def _abort(self, reason: str) -> SessionResult:
+        """Record why the session stopped (``aborted``), close the subscribers, return exit 2."""
+        s = self.session
+        s.release_reserve()  # whatever filled the disk, the record fits in the space held back
+        try:
+            self._emit(Aborted(reason))
+        except OSError as exc:
+            reason += f" (not recorded in the manifest: {describe_os_error(exc)})"
+        self._finish()
+        n = self.tally.frames_saved
+        return self._result(EXIT_ABORTED, f"session stopped: {reason}; {n} new frames kept in {s.path}")
 
     def subscribe(self, subscriber: Subscriber) -> None:
         """Hand ``subscriber`` the records and notes of the run, too."""
@@ -251,6 +284,11 @@ class Executor:
         return SessionResult(code, msg, self.tally.frames_saved, self.tally.faults, focus)
 
     def _prepare(self) -> None:
+        """Exposure, gain, home: before the first step that uses the devices (a resume or a repair
+        that only measures and fits again needs none)."""
+        if self._prepared:
+            return
+        self._prepared = True
         cap = self.config.capture
         self._retry("set exposure", lambda: self.camera.set_exposure(cap.exposure_us), self.camera)
         self._retry("set gain", lambda: self.camera.set_gain(cap.gain_db), self.camera)
@@ -261,6 +299,8 @@ class Executor:
     # ============================================================== steps
     def perform(self, step: Step) -> ShotCheck | None:
         """Perform one step of the plan; a ``Measure`` returns its check for the plan."""
+        if isinstance(step, (LockFocus, Move, Capture)):
+            self._prepare()
         match step:
             case LockFocus():
                 self._lock_focus(step)
@@ -286,18 +326,33 @@ class Executor:
         got = self._retry(f"lock focus {step.focus:g}", lambda: self.camera.lock_focus(step.focus), self.camera)
         self._focus = step.focus
         self._emit(FocusLocked(step.focus_idx, step.focus, got))
+        r = self.camera.focus_range() if isinstance(self.camera, CameraRanges) else None
+        tol = r.tolerance() if r is not None else 0.0
+        if got is not None and abs(float(got) - step.focus) > tol + 1e-9 * max(1.0, abs(step.focus)):
+            where = f" (focus range {r}, {r.source})" if r is not None else ""
+            raise SessionAborted(
+                f"camera read back focus {float(got):g} after focus {step.focus:g} was commanded{where}: "
+                "it did not take the setting; check focus.settings against the camera"
+            )
 
     def _move(self, step: Move) -> None:
         timeout = self.config.capture.move_timeout_s
 
         def move() -> float:
-            got = float(self.turntable.move_to(step.degrees, timeout=timeout))
-            if abs(got - step.degrees) > POSITION_TOLERANCE_DEG:
-                raise DeviceFault(f"turntable stopped at {got:.3f} deg, commanded {step.degrees:g}")
-            return got
+            return float(self.turntable.move_to(step.degrees, timeout=timeout))
 
         self._stage_deg = None
-        self._stage_deg = self._retry(f"move turntable to {step.degrees:g} deg", move, self.turntable)
+        got = self._retry(f"move turntable to {step.degrees:g} deg", move, self.turntable)
+        travel = self.turntable.travel_range() if isinstance(self.turntable, TurntableRanges) else None
+        tol = max(POSITION_TOLERANCE_DEG, travel.tolerance() if travel is not None else 0.0)
+        if abs(got - step.degrees) > tol:
+            # the driver reported no fault, yet the stage is elsewhere: a device that clamps or
+            # is configured differently; capturing here would store frames at the wrong angle
+            raise SessionAborted(
+                f"turntable read back {got:.4f} deg after a move to {step.degrees:g} deg (tolerance {tol:g}): "
+                "check its limits and steps_per_degree against capture.orientations_deg"
+            )
+        self._stage_deg = got
 
     def _capture(self, step: Capture) -> None:
         timeout = self.config.capture.timeout_s
@@ -317,13 +372,45 @@ class Executor:
                 raise CaptureError(f"corrupt frame: {img.dtype} array of shape {img.shape}")
             if self._size and img.shape != (self._size[1], self._size[0]):
                 raise CaptureError(f"corrupt frame: shape {img.shape}, sensor is {self._size[0]}x{self._size[1]}")
-            bad = garbage_rows(img, full_scale(img.dtype, _bit_depth(frame)))
-            if bad:
-                raise CaptureError(f"corrupt frame: {bad} rows of garbage")
+            self._check_frame(step, img, full_scale(img.dtype, _bit_depth(frame)))
             return frame
 
         where = f"capture focus {step.focus_idx} orientation {step.orientation_idx} frame {step.frame_idx}"
         self._pending[(step.focus_idx, step.orientation_idx, step.frame_idx)] = self._retry(where, grab, self.camera)
+
+    def _check_frame(self, step: Capture, img: np.ndarray, full: float) -> None:
+        """A frame damaged in transfer raises CaptureError (a device fault: captured again).
+
+        Judged on its own and against the reference frame (:func:`~station.session.processing.frame_damage`);
+        a frame that passes against a reference becomes the reference."""
+        stats = frame_stats(img, full)
+        ref = self._frame_reference()
+        shot = (step.focus_idx, step.orientation_idx, self.session.attempt(step.focus_idx, step.orientation_idx))
+        same = ref is not None and ref[0] == shot
+        damage = frame_damage(stats, ref[1] if ref is not None else None, same_pose=same)
+        if damage:
+            raise CaptureError(f"corrupt frame: {damage}")
+        if ref is not None:
+            self._reference = (shot, stats)
+        else:
+            self._candidates[shot[:2]] = stats
+
+    def _frame_reference(self) -> tuple[tuple[int, int, int], FrameStats] | None:
+        """The reference frame; on resume, the last frame of the last accepted shot on disk."""
+        if self._reference is None and not self._reference_loaded:
+            self._reference_loaded = True
+            for r in reversed(list(self.session.of_kind(ShotMeasured.kind))):
+                frames = self.session.frames(r["focus_idx"], r["orientation_idx"])
+                if not frames or frames[-1]["attempt"] != r["attempt"]:
+                    continue
+                try:
+                    img = self.session.read_frame(frames[-1])
+                except (OSError, ValueError, SessionError):
+                    continue  # damaged or missing: another shot will do, or the next accepted one
+                full = full_scale(img.dtype, frames[-1]["meta"].get("bit_depth"))
+                self._reference = ((r["focus_idx"], r["orientation_idx"], r["attempt"]), frame_stats(img, full))
+                break
+        return self._reference
 
     def _save(self, step: Save) -> None:
         frame = self._pending.pop((step.focus_idx, step.orientation_idx, step.frame_idx))
@@ -352,6 +439,9 @@ class Executor:
             self._emit(ShotRejected(f, o, attempt, list(problems)))
             return ShotCheck(f, o, attempt, tuple(problems))
         self._shots[(f, o)] = m
+        candidate = self._candidates.pop((f, o), None)
+        if self._reference is None and candidate is not None:  # the first accepted shot: its frames are the reference
+            self._reference = ((f, o, attempt), candidate)
         saved = self.session.write_arrays(layout.measurement_file(f, o, attempt), measurement_arrays(m.measurement))
         self._emit(ShotMeasured(f, o, attempt, m.n_lines, m.d, m.d_max, m.angle_deg, saved["file"], saved["sha256"]))
         return ShotCheck(f, o, attempt)
@@ -421,7 +511,7 @@ class Executor:
         return w, h
 
     def _store(self, step: Store) -> None:
-        from station.files import write_profile
+        from station.files import sha256_file, write_profile
         from station.provenance import make_provenance
 
         f = step.focus_idx
@@ -467,6 +557,7 @@ class Executor:
         # the stored model judged on the edges it was fitted on, as the QA after the executor does
         profile = profile.with_(qa=qa_verdict(profile, cfg.qa, measurements=session_measurements(self.session, f)))
         write_profile(path, profile)
+        digest = sha256_file(path)
         profile_id = None
         if self.store is not None:
             from station.store import StoreError
@@ -477,7 +568,7 @@ class Executor:
                 raise SessionAborted(f"{exc}; then continue with: harp session resume {self.session.path}") from None
             profile = profile.with_(id=profile_id)
         self._profiles[f] = profile
-        self._emit(Stored(f, profile_id, rel))
+        self._emit(Stored(f, profile_id, rel, digest))
 
     # ============================================================ faults
     def _retry(self, what: str, fn: Callable[[], T], device: Any = None) -> T:

@@ -11,6 +11,8 @@ Layout (paths relative to the session directory ``DIR``)::
     profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
     report/                          the session report (station.qa.report)
     results.json                     the session's results for scripts (station.qa.results)
+    .lock                            flock'ed while a process has the session open
+    .reserve                         space held back so that a full disk can still be recorded
 
 ``f``, ``o``, ``a``, ``i`` are indices: of the focus setting in ``focus.settings``, of
 the orientation in ``capture.orientations_deg``, of the capture attempt (the number of
@@ -32,6 +34,10 @@ MEASUREMENTS = "measurements"
 PROFILES = "profiles"
 REPORT = "report"
 RESULTS = "results.json"
+LOCK = ".lock"
+RESERVE = ".reserve"
+RESERVE_BYTES = 256 * 1024
+"""Size of ``.reserve``: released when a write finds the disk full, so the ``aborted`` record still fits."""
 
 WRITTEN_DIRS = (FRAMES, MEASUREMENTS, PROFILES)
 """Subdirectories written atomically (a kill may leave a ``.*.tmp*`` temporary there)."""

@@ -23,6 +23,7 @@ kind               record
 ``qa_session``     :class:`SessionVerdict` — the session's verdict
 ``report``         :class:`ReportWritten` or :class:`ReportFailed`
 ``aborted``        :class:`Aborted` — why the session stopped
+``reopened``       :class:`Reopened` — ``harp session repair``: a stored focus setting is fitted again
 ``finished``       :class:`Finished` — the session is complete (QA and report included)
 =================  ===============================================================
 """
@@ -137,9 +138,22 @@ class FitFailed(Record):
 @dataclass(frozen=True)
 class Stored(Record):
     kind: ClassVar[str] = "stored"
+    optional: ClassVar[tuple[str, ...]] = ("sha256",)
     focus_idx: int
     profile_id: int | None
     model_file: str
+    sha256: str | None = None  # of the profile file (sessions before issue 14 have none)
+
+
+@dataclass(frozen=True)
+class Reopened(Record):
+    """A stored focus setting whose profile, uncertainty map or measurements were damaged on disk
+    (or whose frames are to be captured again): it counts as not stored, so that it is measured,
+    fitted and stored again from its frames (:mod:`station.session.integrity`)."""
+
+    kind: ClassVar[str] = "reopened"
+    focus_idx: int
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -218,6 +232,7 @@ _TYPES: tuple[type[Record], ...] = (
     ReportWritten,
     ReportFailed,
     Aborted,
+    Reopened,
     Finished,
 )
 

@@ -9,7 +9,9 @@ measurements the session kept), the results into ``DIR/results.json``
 (:mod:`station.qa.results`) and a ``finished`` record closes the session. A session
 stopped by a fault skips QA and the report (its ``results.json`` says ``failed``); one
 killed during QA or the report is finished by its next ``resume`` (nothing left to
-capture, QA and report again).
+capture, QA and report again). A write that fails there (a full disk) or a store that
+refuses the verdict stops the session with an ``aborted`` record and exit 2, like one
+during capture.
 
 The result's exit code binds (:mod:`station.exit_codes`): 0 when the session finished
 and its verdict is PASS, 1 when it finished and its verdict is FAIL, 2 when it stopped.
@@ -19,17 +21,20 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import time
 from collections.abc import Callable
 from typing import Any
 
 from drivers.protocols import Camera, Turntable
 from station.exit_codes import EXIT_FAIL
+from station.files import describe_os_error
 from station.session import layout
 from station.session.directory import SessionDir
-from station.session.executor import EXIT_OK, Executor, SessionResult
+from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor, SessionResult
 from station.session.progress import ConsoleProgress
-from station.session.records import Finished, ReportFailed, ReportWritten
+from station.session.records import Aborted, Finished, ReportFailed, ReportWritten
+from station.store.errors import StoreError
 
 
 def run_session(
@@ -60,10 +65,28 @@ def run_session(
     note = console.print if console is not None else (lambda _text: None)
     from station.qa.judge import judge_session
 
-    qa = judge_session(session, store=store, note=note)
-    if report and qa is not None:
-        _write_report(session, qa, note)
-    session.append(Finished())
+    try:
+        qa = judge_session(session, store=store, note=note)
+        if report and qa is not None:
+            _write_report(session, qa, note)
+        session.append(Finished())
+    except (OSError, StoreError) as exc:  # a full disk, a store refusing the verdict: recorded, resumed from there
+        reason = (
+            executor.disk_problem(exc)
+            if isinstance(exc, OSError)
+            else f"{exc}; then continue with: harp session resume {session.path}"
+        )
+        session.release_reserve()
+        try:
+            session.append(Aborted(reason))
+        except OSError as again:
+            reason += f" (not recorded in the manifest: {describe_os_error(again)})"
+        return dataclasses.replace(
+            result,
+            exit_code=EXIT_ABORTED,
+            message=f"session stopped after capture, in QA: {reason}",
+            results=_results(session, None),
+        )
     results = _results(session, qa)
     if qa is None:
         return dataclasses.replace(result, results=results)
@@ -111,6 +134,8 @@ def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> 
             interpolation=qa.interpolation,
         )
     except (OSError, ValueError) as exc:  # the profiles are stored; say so, do not lose the session
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise  # a full disk: the session stops and its resume writes the report once space is freed
         session.append(ReportFailed(f"{type(exc).__name__}: {exc}"))
         note(f"[red]report not written: {type(exc).__name__}: {exc}")
         return

@@ -210,3 +210,38 @@ def test_bad_optics_are_one_line_naming_the_field(tmp_path, section, values, mes
     d = demo_data()
     d[section].update(values)
     assert message in error_of(tmp_path, d)
+
+
+# -------------------------------------------- what the hardware can do, known without it (issue 14 item 3)
+@pytest.mark.parametrize(
+    "orientations,bad,expected",
+    [
+        ([0, 90, 400], 2, "expected an angle in [0, 360) for a rotary stage, got 400"),
+        ([-30, 0, 90], 0, "expected an angle in [0, 360) for a rotary stage, got -30"),
+        ([0, 180, 360], 2, "expected an angle in [0, 360) for a rotary stage, got 360"),
+    ],
+)
+def test_orientations_outside_a_rotary_stage(tmp_path, orientations, bad, expected):
+    d = demo_data()
+    d["capture"]["orientations_deg"] = orientations
+    assert error_of(tmp_path, d).endswith(f"capture.orientations_deg[{bad}]: {expected}")
+
+
+def test_orientations_within_configured_limits(tmp_path):
+    d = demo_data()
+    d["station"]["turntable"]["limits"] = [-90, 90]
+    d["capture"]["orientations_deg"] = [-90, -30, 30, 90]
+    assert load_config(write(tmp_path, d)).capture.orientations_deg == (-90.0, -30.0, 30.0, 90.0)
+    d["capture"]["orientations_deg"] = [-30, 30, 120]
+    assert error_of(tmp_path, d).endswith(
+        "capture.orientations_deg[2]: expected an angle in [-90, 90] (station.turntable.limits), got 120"
+    )
+    d["station"]["turntable"]["limits"] = [90, -90]
+    assert error_of(tmp_path, d).endswith("station.turntable.limits: expected [min, max] in degrees, got [90, -90]")
+
+
+def test_focus_outside_the_simulated_lens(tmp_path):
+    # focus 7.0 was clamped to 1.0 by the simulated camera, stored as 7.0 and spoilt the interpolation
+    d = demo_data()
+    d["focus"]["settings"] = [0, 0.5, 7.0]
+    assert error_of(tmp_path, d).endswith("focus.settings[2]: expected a focus in [0, 1] (the simulated lens), got 7")

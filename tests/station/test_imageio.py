@@ -87,3 +87,89 @@ def test_errors_name_the_file_and_reason(tmp_path, grey):
             read_grey(path)
         msg = str(exc.value)
         assert msg.startswith(str(path)) and reason in msg and "\n" not in msg, (name, msg)
+
+
+# ------------------------------------------------------- bounded reading (issue 14 item 8)
+def _png_header(w, h):
+    import struct
+    import zlib
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
+
+
+def _tiff_header(w, h, order="<"):
+    import struct
+
+    # one IFD: width, height (LONG), bits per sample 8, one strip of a few bytes
+    entries = [(256, 4, 1, w), (257, 4, 1, h), (258, 3, 1, 8), (273, 4, 1, 8 + 2 + 12 * 5 + 4), (279, 4, 1, 16)]
+    body = struct.pack(order + "H", len(entries))
+    for tag, typ, count, value in entries:
+        v = struct.pack(order + ("HH" if typ == 3 else "I"), *((value, 0) if typ == 3 else (value,)))
+        body += struct.pack(order + "HHI", tag, typ, count) + v
+    body += struct.pack(order + "I", 0)
+    head = (b"II*\x00" if order == "<" else b"MM\x00*") + struct.pack(order + "I", 8)
+    return head + body + b"\0" * 16
+
+
+@pytest.mark.parametrize(
+    "name,data",
+    [
+        ("huge.png", _png_header(100_000, 100_000)),
+        ("huge.tif", _tiff_header(100_000, 100_000)),
+        ("huge-be.tiff", _tiff_header(100_000, 100_000, ">")),
+        ("huge.pgm", b"P5\n100000 100000\n255\n" + b"\0" * 100),
+    ],
+    ids=["png", "tiff", "tiff-big-endian", "pgm"],
+)
+def test_header_claiming_a_huge_image_is_refused_before_decoding(tmp_path, monkeypatch, name, data):
+    from station import imageio
+
+    def no_decode(*a, **k):
+        raise AssertionError("decoded")
+
+    monkeypatch.setattr(imageio.cv2, "imdecode", no_decode)
+    p = tmp_path / name
+    p.write_bytes(data)
+    with pytest.raises(ImageReadError) as exc:
+        read_grey(p)
+    msg = str(exc.value)
+    assert msg.startswith(str(p)) and "image too large: 100000x100000" in msg and "HARP_MAX_IMAGE_PIXELS" in msg
+    assert "\n" not in msg
+
+
+def test_pixel_limit_is_configurable(tmp_path, grey, monkeypatch):
+    p = tmp_path / "g.png"
+    cv2.imwrite(str(p), grey)  # 50x40 = 2000 pixels
+    assert read_grey(p, max_pixels=2000).shape == (40, 50)
+    with pytest.raises(ImageReadError, match="2000 pixels, the limit is 1999"):
+        read_grey(p, max_pixels=1999)
+    monkeypatch.setenv("HARP_MAX_IMAGE_PIXELS", "1000")
+    with pytest.raises(ImageReadError, match="the limit is 1000"):
+        read_grey(p)
+
+
+def test_only_regular_files_are_read(tmp_path):
+    import os
+    import threading
+
+    fifo = tmp_path / "pipe.pgm"
+    os.mkfifo(fifo)
+    out = []
+
+    def read(path):
+        try:
+            read_grey(path)
+        except ImageReadError as exc:
+            out.append(str(exc))
+
+    for path in ("/dev/zero", fifo):  # endless, and one that would block forever
+        t = threading.Thread(target=read, args=(path,), daemon=True)
+        t.start()
+        t.join(10)
+        assert not t.is_alive(), f"{path}: still reading"
+    assert out[0] == "/dev/zero: not a regular file (a character device); give an image file"
+    assert out[1] == f"{fifo}: not a regular file (a FIFO); give an image file"

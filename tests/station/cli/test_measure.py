@@ -380,3 +380,39 @@ def test_measure_imports_only_what_it_uses(files):
         unused |= mods & {"pipeline.fit", "pipeline.select", "station.calibration", "station.cli.calibrate"}
         assert not unused, sorted(unused)
         assert ("station.edge_points" in mods) == bool(extra)
+
+
+def test_huge_header_device_and_fifo_are_refused_and_the_others_measured(files, tmp_path):
+    # issue 14 item 8: a PNG header claiming 100000x100000 (a cv2.error traceback, the good files'
+    # results lost), /dev/zero (memory exhausted) and a FIFO (hung): one line each, whole process
+    import struct
+    import zlib
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+
+    huge = tmp_path / "huge.png"
+    huge.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", 100_000, 100_000, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(b"\0" * 64))
+        + chunk(b"IEND", b"")
+    )
+    fifo = tmp_path / "pipe.pgm"
+    os.mkfifo(fifo)
+    good = [str(files["pgm"]), str(files["png16"])]
+    p = subprocess.run(
+        [sys.executable, "-m", "station.cli", "measure", "--json", good[0], str(huge), "/dev/zero", str(fifo), good[1]],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    doc = json.loads(p.stdout)
+    assert [im["path"] for im in doc["images"]] == good and all(im["n_lines"] >= 10 for im in doc["images"])
+    err = p.stderr.strip().splitlines()
+    assert len(err) == 3, err
+    assert err[0].startswith(f"harp measure: {huge}: image too large: 100000x100000")
+    assert err[1] == "harp measure: /dev/zero: not a regular file (a character device); give an image file"
+    assert err[2] == f"harp measure: {fifo}: not a regular file (a FIFO); give an image file"

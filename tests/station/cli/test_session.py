@@ -429,3 +429,125 @@ def test_setting_the_simulator_refuses_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "station.camera" in err and "8x480" in err, err
     assert not (tmp_path / "sessions").exists()
+
+
+def test_orientation_beyond_the_turntable_travel_is_refused_before_the_session_exists(tmp_path, capsys):
+    # issue 14 item 3: the stage's limit.max is read at open; an orientation past it passed
+    # validation, created the session directory, then failed at the move
+    cfg = small_config(tmp_path)
+    d = yaml.safe_load(cfg.read_text())
+    d["capture"]["orientations_deg"] = [0, 45, 90, 200]
+    d["simulation"]["emulator"] = {"limit_max": 768000}  # 180 deg at 4266.6667 microsteps per degree
+    cfg.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    # 768000 microsteps at 4266.6667 per degree is 179.9999986 deg
+    assert (
+        "capture.orientations_deg[3]: expected an angle the turntable can reach, 200° is outside [0, 179.9999986]°"
+        in err
+    )
+    assert "device limit.min/limit.max" in err
+    assert not (tmp_path / "sessions").exists()  # nothing created
+
+
+@pytest.mark.parametrize(
+    "field,value,says",
+    [
+        ("exposure_us", 5.0, "5 is outside [20, 1000000] µs (simulated sensor)"),
+        ("gain_db", 30.0, "30 is outside [0, 24] dB"),
+    ],
+)
+def test_capture_setting_the_camera_cannot_do_is_refused_before_the_session_exists(
+    tmp_path, capsys, field, value, says
+):
+    # issue 14 item 3: the camera's ranges are read at open; a setting outside them is one line naming
+    # the field, before the session directory exists (not a failure at the first set_exposure)
+    cfg = small_config(tmp_path, **{field: value})
+    assert main(["session", "run", str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"capture.{field}: expected a value the camera accepts, {says}" in err, err
+    assert not (tmp_path / "sessions").exists()
+
+
+def test_focus_beyond_the_range_the_camera_reports_at_open_is_refused(tmp_path):
+    # issue 14 item 3: focus.settings [0, 0.5, 7.0] was clamped by the device to 1.0 and stored as 7.0.
+    # The simulated lens's range is also checked on load (test_config.py); here the range the open
+    # camera reports is what refuses it (as for a V4L2 or GenICam camera, known only at open)
+    import dataclasses
+
+    from station.config import ConfigError, load_config
+    from station.session.devices import check_against_devices, open_station
+
+    config = load_config(small_config(tmp_path))
+    with open_station(config, check=False) as (camera, turntable):
+        check_against_devices(config, camera, turntable)  # the demo settings are within range
+        bad = dataclasses.replace(config, focus_settings=(0.0, 0.5, 7.0))
+        with pytest.raises(ConfigError) as exc:
+            check_against_devices(bad, camera, turntable)
+    msg = str(exc.value)
+    assert "\n" not in msg and "focus.settings[2]" in msg
+    assert "expected a focus setting the camera has, 7 is outside [0, 1] (simulated lens focus range)" in msg
+
+
+@pytest.fixture()
+def small_disk(tmp_path):
+    """A 2 MiB tmpfs mounted in the test's directory (root only; unmounted afterwards).
+
+    ``remount(size)`` grows it: the space freed that a stopped session waits for."""
+    import shutil
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a size-limited tmpfs needs root (CI runs as root)")
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m,mode=0755", "harp-test-disk", str(mnt)], check=True)
+
+    def remount(size: str) -> None:
+        subprocess.run(["mount", "-o", f"remount,size={size}", str(mnt)], check=True)
+
+    try:
+        yield mnt, remount
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
+        shutil.rmtree(mnt, ignore_errors=True)
+
+
+def test_full_disk_stops_with_one_line_then_resumes_once_space_is_freed(small_disk, tmp_path):
+    # issue 14 item 1: frames on a full file system gave an OSError traceback, exit 1, no `aborted`
+    # record and a partial temporary frame file
+    mnt, remount = small_disk
+    remount("1m")  # 1 MiB: three 300 kB frames and the session's own files
+    cfg = small_config(tmp_path, focus=(0.5,))  # the store stays on the roomy disk: its full disk is the store's own
+    d = yaml.safe_load(cfg.read_text())
+    d["pipeline"].update(bootstrap=0, workers=1)
+    cfg.write_text(yaml.safe_dump(d))
+    proc = harp("session", "run", cfg, "--out", mnt, "--name", "s", "--quiet", "--no-report")
+    out, err = proc.communicate(timeout=300)
+    session = mnt / "s"
+    assert proc.returncode == 2, err
+    assert "Traceback" not in err, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"harp session: session stopped: {session}/")  # a frame or a measurement file
+    assert "No space left on device; free some space, then: harp session resume" in last
+    recs = manifest(session)
+    assert recs[-1]["kind"] == "aborted" and "No space left on device" in recs[-1]["reason"]
+    kept = [r for r in recs if r["kind"] == "frame"]
+    assert 0 < len(kept) < N_ORI * N_FRAMES
+    assert all((session / r["file"]).is_file() for r in kept)
+    assert not list(session.rglob("*.tmp*"))  # no partial temporary left behind
+    # still full: resuming stops again the same way, and loses nothing
+    proc = harp("session", "resume", session, "--quiet", "--no-report")
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in err and err.count("\n") == 1, err
+    assert "No space left on device" in err and f"harp session resume {session}" in err
+    recs = manifest(session)
+    assert recs[-1]["kind"] == "aborted" and not list(session.rglob("*.tmp*"))
+    assert all((session / r["file"]).is_file() for r in recs if r["kind"] == "frame")
+    remount("64m")  # space freed
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
+    recs = manifest(session)
+    keys = Counter((r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in recs if r["kind"] == "frame")
+    assert len(keys) == N_ORI * N_FRAMES and set(keys.values()) == {1}
+    assert recs[-1]["kind"] == "finished" and not list(session.rglob("*.tmp*"))
+    frame_hashes(session)  # every frame file matches its checksum

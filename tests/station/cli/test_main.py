@@ -1,0 +1,39 @@
+"""The ``harp`` entry point: whatever a command lets through is one line on stderr and exit 2."""
+
+import errno
+
+import pytest
+
+import station.cli.export
+from station.cli import main
+
+
+def _raising(exc):
+    def run(args):
+        raise exc
+
+    return run
+
+
+def test_unexpected_error_is_one_line_exit_2(monkeypatch, capsys):
+    monkeypatch.setattr(station.cli.export, "run", _raising(KeyError("centre\nmissing")))
+    assert main(["export", "lens.yaml", "--format", "json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("harp export: internal error: KeyError:")
+    assert "HARP_DEBUG=1" in err and "Traceback" not in err
+    monkeypatch.setenv("HARP_DEBUG", "1")
+    with pytest.raises(KeyError):
+        main(["export", "lens.yaml", "--format", "json"])
+
+
+def test_os_error_names_the_file_and_what_to_do(monkeypatch, capsys):
+    full = OSError(errno.ENOSPC, "No space left on device", "/srv/out/lens.yaml")
+    monkeypatch.setattr(station.cli.export, "run", _raising(full))
+    assert main(["export", "lens.yaml", "--format", "json"]) == 2
+    assert capsys.readouterr().err == (
+        "harp export: /srv/out/lens.yaml: No space left on device; "
+        "free some space on that file system and run the command again\n"
+    )
+    monkeypatch.setattr(station.cli.export, "run", _raising(MemoryError()))
+    assert main(["export", "lens.yaml", "--format", "json"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
