@@ -34,12 +34,14 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.polynomial import polynomial as P
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
 from pipeline.edgeset import FitFailure, FitResult, collect, summarise
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialModel
+
+Floats = NDArray[np.float64]
 
 
 def alvarez_energy(lines: Sequence[np.ndarray], model: DistortionModel | None = None) -> float:
@@ -58,7 +60,9 @@ def alvarez_energy(lines: Sequence[np.ndarray], model: DistortionModel | None = 
     return float(np.mean(vals))
 
 
-def _line_terms(lines, center, scale, powers):
+def _line_terms(
+    lines: Sequence[np.ndarray], center: Floats, scale: float, powers: Sequence[int]
+) -> list[tuple[Floats, Floats]]:
     """Per line: centred x (N,2) and the centred displacement basis (K, N, 2)."""
     out = []
     for p in lines:
@@ -120,7 +124,7 @@ def _quartic_one(lines: Sequence[np.ndarray], center: np.ndarray, scale: float, 
     return out
 
 
-def alvarez_initial_k(lines: Sequence[np.ndarray], width: int, height: int, center=None) -> float:
+def alvarez_initial_k(lines: Sequence[np.ndarray], width: int, height: int, center: ArrayLike | None = None) -> float:
     """Closed-form minimiser of E over k2 of ``u = c + (1 + k2 rho^2)(x - c)``.
 
     ``rho`` is normalised by half the image diagonal; ``c`` defaults to the
@@ -183,7 +187,7 @@ def fit_alvarez(
         )
     A, B, C = (np.asarray(m) for m in zip(*mats))  # each (L, 3, 3)
 
-    def energy_grad(z):
+    def energy_grad(z: Floats) -> tuple[float, Floats]:
         kap = np.array([1.0, z[0], z[1] if n_k == 2 else 0.0])
         sa, sb, sc = (np.einsum("a,lab,b->l", kap, M, kap) for M in (A, B, C))
         ga, gb, gc = (2 * np.einsum("lab,b->la", M, kap) for M in (A, B, C))

@@ -110,6 +110,9 @@ MIN_SIGMA_CONTINUOUS = 0.5
 LOW_FACTOR = 4.0
 HIGH_FACTOR = 8.0
 
+Floats = NDArray[np.float64]
+Ints = NDArray[np.int64]
+
 # 5x5 neighbourhood used for chaining (centre excluded), as in the IPOL code.
 _NEIGH = [(dx, dy) for dy in range(-2, 3) for dx in range(-2, 3) if (dx, dy) != (0, 0)]
 
@@ -187,7 +190,9 @@ def _kernels(sigma: float) -> tuple[np.ndarray, np.ndarray]:
     return g.astype(np.float32), d.astype(np.float32)
 
 
-def _separable_gradient(img: np.ndarray, sigma: float):
+def _separable_gradient(
+    img: np.ndarray, sigma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Gradient of the Gaussian-smoothed image by centred differences.
 
     Returns ``gx, gy, mod, sv, sh`` where ``sv`` (``sh``) is the image
@@ -215,7 +220,16 @@ def _refine_radius(sigma: float) -> int:
     return int(np.ceil(4.0 * sigma)) + 2
 
 
-def _refine_continuous(s_img, pos, base, tap, cross, u0, sigma, n_iter=2):
+def _refine_continuous(
+    s_img: np.ndarray,
+    pos: NDArray[np.intp],
+    base: NDArray[np.intp],
+    tap: int,
+    cross: int,
+    u0: Floats,
+    sigma: float,
+    n_iter: int = 2,
+) -> Floats:
     """Maximise the continuous gradient modulus along one image axis.
 
     A point sits at coordinate ``pos`` along its NMS axis and at flat index
@@ -328,7 +342,7 @@ def gradient_noise(gx: np.ndarray, gy: np.ndarray) -> float:
     m = np.hypot(gx[2:-2:k, 2:-2:k].astype(np.float64), gy[2:-2:k, 2:-2:k].astype(np.float64)).ravel()
     if m.size == 0:
         return 0.0
-    s = float(np.median(m)) / np.sqrt(2.0 * np.log(2.0))
+    s: float = float(np.median(m)) / np.sqrt(2.0 * np.log(2.0))
     c = 3.0
     trunc_median = np.sqrt(-2.0 * np.log(1.0 - 0.5 * (1.0 - np.exp(-0.5 * c * c))))
     for _ in range(4):
@@ -339,7 +353,7 @@ def gradient_noise(gx: np.ndarray, gy: np.ndarray) -> float:
     return s
 
 
-def _thresholds_from_gradient(img, gx, gy, sigma):
+def _thresholds_from_gradient(img: np.ndarray, gx: np.ndarray, gy: np.ndarray, sigma: float) -> tuple[float, float]:
     sig_g = max(gradient_noise(gx, gy), _noise_floor(img) * _gradient_noise_gain(sigma))
     return LOW_FACTOR * sig_g, HIGH_FACTOR * sig_g
 
@@ -499,13 +513,20 @@ def _nms_points(
     if interpolation not in ("continuous", "gaussian", "parabola"):
         raise ValueError(f"unknown interpolation {interpolation!r} (use 'continuous', 'gaussian' or 'parabola')")
     continuous = interpolation == "continuous" and sigma >= MIN_SIGMA_CONTINUOUS
+    sv: np.ndarray | None
+    sh: np.ndarray | None
     if sigma > 0:
         gx, gy, mod, sv, sh = _separable_gradient(img, sigma)
     else:
         gx, gy, mod = _gradient(img)
         sv = sh = None
     del img  # keep the peak memory down on large images
-    low, high = _resolve_thresholds(low, high, lambda raw=raw: _thresholds_from_gradient(raw, gx, gy, sigma))
+
+    def auto(raw: np.ndarray = raw) -> tuple[float, float]:
+        return _thresholds_from_gradient(raw, gx, gy, sigma)
+
+    low, high = _resolve_thresholds(low, high, auto)
+    del auto
     del raw
     # candidates: modulus above low, 2-pixel border excluded (5x5 chaining); by bands of rows on large images
     n_bands = THREADS if h * w >= PARALLEL_MIN_PX else 1
@@ -516,6 +537,7 @@ def _nms_points(
     x = c.astype(np.float64) + np.where(along_x, off, 0.0)
     y = r.astype(np.float64) + np.where(along_x, 0.0, off)
     xy = np.column_stack([x, y])
+    # continuous implies sigma > 0, hence the smoothed images sv, sh
     refine = _Refiner(sv, sh, along_x, r, c, off, sigma) if continuous and sv is not None and sh is not None else None
     return xy, grad, m0, idx, (h, w), refine, high
 
@@ -523,7 +545,16 @@ def _nms_points(
 class _Refiner:
     """Deferred continuous sub-pixel step (run only on the points that are kept)."""
 
-    def __init__(self, sv, sh, along_x, r, c, off, sigma):
+    def __init__(
+        self,
+        sv: np.ndarray,
+        sh: np.ndarray,
+        along_x: NDArray[np.bool_],
+        r: NDArray[np.intp],
+        c: NDArray[np.intp],
+        off: Floats,
+        sigma: float,
+    ) -> None:
         self.sv, self.sh, self.along_x = sv, sh, along_x
         self.r, self.c, self.off, self.sigma = r, c, off, sigma
 
@@ -552,16 +583,18 @@ class _Refiner:
         return xy
 
 
-def _resolve_thresholds(low, high, auto):
+def _resolve_thresholds(
+    low: float | None, high: float | None, auto: Callable[[], tuple[float, float]]
+) -> tuple[float, float]:
     """Fill the ``None`` thresholds from ``auto()`` -> (low, high) and check them."""
     if low is None or high is None:
         alow, ahigh = auto()
-        if low is None and high is None:
-            low, high = alow, ahigh
-        elif low is None:
+        if high is not None:  # only low is None
             low = min(alow, float(high))
-        else:
+        elif low is not None:  # only high is None
             high = max(ahigh, float(low))
+        else:
+            low, high = alow, ahigh
     low = float(low)
     high = float(high)
     if not (np.isfinite(low) and np.isfinite(high)) or low < 0 or high < low:
@@ -613,7 +646,7 @@ def edge_points(
 # --------------------------------------------------------------------------- #
 # chaining
 # --------------------------------------------------------------------------- #
-def _link(xy, grad, idx, shape):
+def _link(xy: Floats, grad: Floats, idx: NDArray[np.intp], shape: tuple[int, int]) -> tuple[Ints, Ints]:
     """Vectorised IPOL chaining; returns next/prev arrays (-1 = none).
 
     Every point looks for the nearest compatible neighbour forward and
@@ -718,7 +751,7 @@ def _path_components(cn: np.ndarray, cp: np.ndarray) -> tuple[int, np.ndarray]:
     return int(uniq.size), clab.astype(np.int64)
 
 
-def _order_chains(nxt, prv):
+def _order_chains(nxt: Ints, prv: Ints) -> tuple[Ints, NDArray[np.intp]]:
     """Label linked components and order their points along the links.
 
     Returns ``(labels, order)`` where ``order`` sorts points by (label,

@@ -55,10 +55,12 @@ References
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from pipeline.compare import compare_models, fit_homography, image_grid
@@ -72,8 +74,11 @@ GAUGES = ("lsq", "corners")
 DEFAULT_STEP_PX = 32.0
 """Grid spacing of the interpolated field (px); the bicubic error is O(step^4)."""
 
+ModelsByFocus: TypeAlias = Mapping[float, DistortionModel] | Iterable[tuple[float, DistortionModel]]
+"""Calibrated corrections by focus setting: a mapping focus -> model, or ``(focus, model)`` pairs."""
 
-def _as_pairs(models_by_focus) -> list[tuple[float, DistortionModel]]:
+
+def _as_pairs(models_by_focus: ModelsByFocus) -> list[tuple[float, DistortionModel]]:
     items = list(models_by_focus.items()) if isinstance(models_by_focus, Mapping) else list(models_by_focus)
     pairs = []
     for item in items:
@@ -149,14 +154,14 @@ class FocusInterpolator:
 
     def __init__(
         self,
-        models_by_focus,
+        models_by_focus: ModelsByFocus,
         width: int,
         height: int,
         *,
         method: str = "auto",
         gauge: str = "lsq",
         step: float = DEFAULT_STEP_PX,
-    ):
+    ) -> None:
         if method not in METHODS:
             raise ValueError(f"unknown interpolation method {method!r}; known: {', '.join(METHODS)}")
         if gauge not in GAUGES:
@@ -207,7 +212,8 @@ class FocusInterpolator:
         if self._interp is None:
             k = int(np.clip(np.searchsorted(self.focus, f, side="right") - 1, 0, len(self.focus) - 2))
             a = (f - self.focus[k]) / (self.focus[k + 1] - self.focus[k])
-            return (1 - a) * self._field[k] + a * self._field[k + 1]
+            u: NDArray[np.float64] = (1 - a) * self._field[k] + a * self._field[k + 1]
+            return u
         return np.asarray(self._interp(f))
 
     def at(self, focus: float) -> GridFieldModel:
@@ -230,7 +236,7 @@ class FocusInterpolator:
 
 
 def interpolate_correction(
-    models_by_focus,
+    models_by_focus: ModelsByFocus,
     focus: float,
     width: int,
     height: int,
@@ -256,12 +262,12 @@ class LeaveOneOut:
     rms_px: float
     max_px: float
 
-    def __iter__(self):  # unpacks as (focus, rms_px, max_px)
+    def __iter__(self) -> Iterator[float]:  # unpacks as (focus, rms_px, max_px)
         return iter((self.focus, self.rms_px, self.max_px))
 
 
 def leave_one_out_error(
-    models_by_focus,
+    models_by_focus: ModelsByFocus,
     width: int,
     height: int,
     *,

@@ -17,6 +17,7 @@ References
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import HomographyModel, apply_homography
@@ -54,7 +55,8 @@ def homography_from_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         raise ValueError("4-corner homography is degenerate (corners collinear or not finite)")
     hn = np.append(np.linalg.solve(a, b), 1.0).reshape(3, 3)
     h = np.linalg.inv(td) @ hn @ ts
-    return h / h[2, 2]
+    out: NDArray[np.float64] = h / h[2, 2]
+    return out
 
 
 def corner_homography(model: DistortionModel, width: int, height: int) -> np.ndarray:
@@ -118,4 +120,5 @@ def fit_homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
             break
     hn = np.append(p, 1.0).reshape(3, 3)
     h = np.linalg.inv(td) @ hn @ ts
-    return h / h[2, 2]
+    out: NDArray[np.float64] = h / h[2, 2]
+    return out

@@ -88,6 +88,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -227,7 +228,9 @@ def _ideal_border(lens: DistortionModel, width: int, height: int, step: float = 
     return lens.undistort_points(pts)
 
 
-def _check(width, height, scene, bit_depth, noise_sigma, exposure, seed):
+def _check(
+    width: int, height: int, scene: HarpScene, bit_depth: int, noise_sigma: float, exposure: float, seed: int
+) -> None:
     if int(width) != width or int(height) != height or width < 2 or height < 2:
         raise ValueError(f"image size must be integers >= 2, got {width}x{height}")
     if bit_depth not in (8, 16):
@@ -262,7 +265,7 @@ def edge_peak_offset(string_width_px: float, sigma_px: float) -> float:
 
     # gradient near the edge at q = -w/2 + t:  g(t) = phi(t/s) - phi((t - w)/s)
     # g'(t) = 0  <=>  t phi(t/s) = (t - w) phi((t - w)/s); solve by bisection on [-w/2, 0]
-    def h(t):
+    def h(t: float) -> float:
         return t * math.exp(-0.5 * (t / s) ** 2) - (t - w) * math.exp(-0.5 * ((t - w) / s) ** 2)
 
     lo, hi = -0.5 * w, 0.0
@@ -429,9 +432,9 @@ def render_harp(
             if y0 >= y1:
                 continue
             x0, x1 = max(0, int(sp.x - rad)), min(width, int(sp.x + rad) + 2)
-            gx = (np.arange(x0, x1) - sp.x) ** 2
-            gy = (np.arange(y0, y1) - sp.y) ** 2
-            val[y0 - r0 : y1 - r0, x0:x1] *= 1.0 - sp.depth * np.exp(-(gy[:, None] + gx[None, :]) / (2 * sp.sigma**2))
+            dx2 = (np.arange(x0, x1) - sp.x) ** 2
+            dy2 = (np.arange(y0, y1) - sp.y) ** 2
+            val[y0 - r0 : y1 - r0, x0:x1] *= 1.0 - sp.depth * np.exp(-(dy2[:, None] + dx2[None, :]) / (2 * sp.sigma**2))
         val *= exposure * scene.background * level
         # noise: one generator per block of NOISE_BLOCK_ROWS rows, seeded by (seed, block),
         # so that the image does not depend on chunking or threads
@@ -469,7 +472,7 @@ def render_harp(
 
 # ---------------------------------------------------------------- truth
 def visible_edges(
-    rendered_or_edges,
+    rendered_or_edges: Rendered | Iterable[EdgeTruth],
     lens: DistortionModel | None = None,
     width: int | None = None,
     height: int | None = None,
@@ -523,7 +526,7 @@ def visible_edges(
 
 
 def true_edge_curves(
-    rendered_or_edges,
+    rendered_or_edges: Rendered | Iterable[EdgeTruth],
     lens: DistortionModel | None = None,
     width: int | None = None,
     height: int | None = None,

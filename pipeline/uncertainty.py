@@ -42,10 +42,12 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.compare import fit_homography
 from pipeline.edgeset import FitFailure, FitResult
@@ -57,6 +59,13 @@ RESAMPLE = ("edges", "images")
 DEFAULT_N_BOOT = 20
 GRID_CELLS = 16
 """Default uncertainty grid: this many cells along the longer image side."""
+
+RefitJob: TypeAlias = tuple[Sequence[Sequence[np.ndarray]], int, int, dict[str, Any]]
+"""One replicate fit for :func:`refit_job`: ``(lines_per_image, width, height, fit_kwargs)``."""
+RefitOutcome: TypeAlias = tuple[DistortionModel | None, str | None]
+"""``(model, None)`` or ``(None, reason)``."""
+MapFn: TypeAlias = Callable[[Callable[[RefitJob], RefitOutcome], Iterable[RefitJob]], Iterable[RefitOutcome]]
+"""A ``map``-like runner of the replicate fits (``map`` itself, a process pool's ``map``)."""
 
 
 @dataclass(frozen=True)
@@ -80,7 +89,7 @@ class FieldUncertainty:
     model: DistortionModel
     failures: tuple[str, ...] = ()
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain data (for JSON / a profile's details)."""
         return {
             "rms_px": self.rms,
@@ -113,12 +122,13 @@ def field_spread(
     for m in models:
         _, r = fit_homography(m.undistort_points(grid), ref)
         res.append(r)
-    res = np.stack(res)  # (B, N, 2)
-    var = np.sum(np.var(res, axis=0, ddof=1), axis=1)
-    return np.sqrt(var).reshape(xx.shape)
+    stacked = np.stack(res)  # (B, N, 2)
+    var = np.sum(np.var(stacked, axis=0, ddof=1), axis=1)
+    spread: NDArray[np.float64] = np.sqrt(var).reshape(xx.shape)
+    return spread
 
 
-def refit_job(job: tuple) -> tuple[DistortionModel | None, str | None]:
+def refit_job(job: RefitJob) -> RefitOutcome:
     """One replicate fit ``(lines_per_image, width, height, fit_kwargs)`` -> ``(model, None)``
     or ``(None, reason)``; module-level so that a process pool can run it."""
     lines, width, height, kw = job
@@ -139,7 +149,7 @@ def bootstrap_field_uncertainty(
     resample: str = "edges",
     cells: int = GRID_CELLS,
     full_fit: FitResult | None = None,
-    map_fn=map,
+    map_fn: MapFn = map,
 ) -> FieldUncertainty | FitFailure:
     """Bootstrap the correction fit and map the spread of the fitted field.
 
@@ -212,12 +222,13 @@ def bootstrap_field_uncertainty(
         else:
             sample = [data[k] for k in rng.integers(0, len(data), len(data))]
         jobs.append((sample, width, height, rkw))
-    models, failures = [], []
+    models: list[DistortionModel] = []
+    failures: list[str] = []
     n_failed = 0
     for model, reason in map_fn(refit_job, jobs):
         if model is None:
             n_failed += 1
-            if len(failures) < 3:
+            if len(failures) < 3 and reason is not None:  # (a failed replicate always has a reason)
                 failures.append(reason)
             continue
         models.append(model)

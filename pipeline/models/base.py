@@ -14,6 +14,7 @@ from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 INVERSE_TOL_PX = 1e-9
 """Accuracy in pixels to which :meth:`DistortionModel.distort_points` inverts."""
@@ -40,7 +41,7 @@ class DistortionModel(ABC):
         """
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         # start: first-order inverse  x0 = 2 t - U(t)
-        x = 2 * target - self.undistort_points(target)
+        x: NDArray[np.float64] = 2 * target - self.undistort_points(target)
         h = 1e-4
         done = np.zeros(len(x), bool)
         for _ in range(max_iter):
@@ -81,12 +82,12 @@ class DistortionModel(ABC):
 
     # ------------------------------------------------------------- file form
     @abstractmethod
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Parameters as plain YAML/JSON-able data, with ``"model": name``."""
 
     @classmethod
     @abstractmethod
-    def from_dict(cls, d: dict) -> DistortionModel:
+    def from_dict(cls, d: dict[str, Any]) -> DistortionModel:
         """Inverse of :meth:`to_dict`."""
 
 
@@ -95,17 +96,17 @@ class IdentityModel(DistortionModel):
 
     name = "identity"
 
-    def undistort_points(self, xy):
+    def undistort_points(self, xy: np.ndarray) -> np.ndarray:
         return np.asarray(xy, dtype=np.float64).reshape(-1, 2).copy()
 
-    def distort_points(self, xy, max_iter: int = 50):
+    def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
         return np.asarray(xy, dtype=np.float64).reshape(-1, 2).copy()
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {"model": self.name}
 
     @classmethod
-    def from_dict(cls, d):
+    def from_dict(cls, d: dict[str, Any]) -> IdentityModel:
         return cls()
 
 

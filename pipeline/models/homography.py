@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +42,7 @@ class HomographyModel(DistortionModel):
     homography: tuple[tuple[float, float, float], ...]
     name: str = field(default="homography", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         h = np.asarray(self.homography, dtype=np.float64)
         if h.shape != (3, 3) or not np.all(np.isfinite(h)) or abs(np.linalg.det(h)) < 1e-15:
             raise ValueError("HomographyModel needs a finite, invertible 3x3 homography")
@@ -52,15 +53,15 @@ class HomographyModel(DistortionModel):
     def matrix(self) -> np.ndarray:
         return np.asarray(self.homography, dtype=np.float64)
 
-    def undistort_points(self, xy):
+    def undistort_points(self, xy: np.ndarray) -> np.ndarray:
         return apply_homography(self.matrix, self.base.undistort_points(xy))
 
-    def distort_points(self, xy, max_iter: int = 50):
+    def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
         return self.base.distort_points(apply_homography(np.linalg.inv(self.matrix), xy), max_iter)
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "base": self.base.to_dict(), "homography": [list(r) for r in self.homography]}
 
     @classmethod
-    def from_dict(cls, d):
+    def from_dict(cls, d: dict[str, Any]) -> HomographyModel:
         return cls(base=model_from_dict(d["base"]), homography=tuple(tuple(r) for r in d["homography"]))

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.models.base import DistortionModel
+
+Floats = NDArray[np.float64]
 
 #: accuracy (px) to which :meth:`LensfunModel.undistort_points` inverts the radial polynomial
 LENSFUN_INVERSE_TOL_PX = 1e-9
@@ -60,7 +64,7 @@ class LensfunModel(DistortionModel):
     coord_scale: float = 1.0
     name: str = field(default="lensfun", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.kind not in LENSFUN_TERMS:
             raise ValueError(f"unsupported lensfun distortion model {self.kind!r}; supported: {sorted(LENSFUN_TERMS)}")
         terms = tuple(float(v) for v in self.terms)
@@ -88,7 +92,7 @@ class LensfunModel(DistortionModel):
         s = self.unit
         return ((self.width - 1) / 2.0 + s * self.center[0], (self.height - 1) / 2.0 + s * self.center[1])
 
-    def radial_factor(self, ru: np.ndarray) -> np.ndarray:
+    def radial_factor(self, ru: Floats) -> Floats:
         """``R_d / R_u`` as a function of the ideal normalised radius."""
         t = self.terms
         if self.kind == "poly3":
@@ -99,7 +103,7 @@ class LensfunModel(DistortionModel):
         a, b, c = t
         return ((a * ru + b) * ru + c) * ru + 1 - a - b - c
 
-    def _radial_derivative(self, ru):
+    def _radial_derivative(self, ru: Floats) -> Floats:
         """d R_d / d R_u."""
         t = self.terms
         if self.kind == "poly3":
@@ -144,7 +148,7 @@ class LensfunModel(DistortionModel):
         return np.stack([x0 + s * ratio * xi, y0 + s * ratio * eta], axis=1)
 
     # ----------------------------------------------------------- file form
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "model": self.name,
             "kind": self.kind,
@@ -155,7 +159,7 @@ class LensfunModel(DistortionModel):
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> LensfunModel:
+    def from_dict(cls, d: dict[str, Any]) -> LensfunModel:
         kind = d["kind"]
         if kind not in LENSFUN_TERMS:
             raise ValueError(f"unsupported lensfun distortion model {kind!r}")

@@ -7,9 +7,11 @@ be used, compared and evaluated like any harp correction.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from pipeline.models.base import DistortionModel
 
@@ -61,7 +63,7 @@ class OpenCVModel(DistortionModel):
     dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
     name: str = field(default="opencv", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for a in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, a, float(getattr(self, a)))
         dist = tuple(float(v) for v in np.asarray(self.dist, dtype=np.float64).ravel())
@@ -73,7 +75,7 @@ class OpenCVModel(DistortionModel):
 
     # ------------------------------------------------------------- matrices
     @classmethod
-    def from_matrices(cls, camera_matrix, dist_coeffs) -> OpenCVModel:
+    def from_matrices(cls, camera_matrix: ArrayLike, dist_coeffs: ArrayLike) -> OpenCVModel:
         """From a 3x3 camera matrix and a coefficient vector (skew must be 0)."""
         k = np.asarray(camera_matrix, dtype=np.float64)
         if k.shape != (3, 3):
@@ -130,10 +132,10 @@ class OpenCVModel(DistortionModel):
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-14)
         undist = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4; OpenCV 5 takes criteria directly
         if undist is not None:
-            x = undist(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, k, crit)
+            x_cv = undist(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, k, crit)
         else:
-            x = cv2.undistortPoints(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, None, k, crit)
-        x = x.reshape(-1, 2).astype(np.float64)
+            x_cv = cv2.undistortPoints(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, None, k, crit)
+        x: NDArray[np.float64] = x_cv.reshape(-1, 2).astype(np.float64)
         h = 1e-3
         done = np.zeros(len(x), bool)
         for _ in range(max_iter):
@@ -158,7 +160,7 @@ class OpenCVModel(DistortionModel):
         return cv2.initUndistortRectifyMap(k, self.dist_coeffs, None, k, (int(width), int(height)), cv2.CV_32FC1)
 
     # ------------------------------------------------------------ file form
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "model": self.name,
             "camera_matrix": self.camera_matrix.tolist(),
@@ -166,5 +168,5 @@ class OpenCVModel(DistortionModel):
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> OpenCVModel:
+    def from_dict(cls, d: dict[str, Any]) -> OpenCVModel:
         return cls.from_matrices(d["camera_matrix"], d["distortion_coefficients"])

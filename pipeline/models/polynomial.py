@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from pipeline.models.base import INVERSE_TOL_PX, DistortionModel
+
+Floats = NDArray[np.float64]
 
 
 def monomial_exponents(degree: int) -> list[tuple[int, int]]:
@@ -36,12 +40,14 @@ def monomials(xi: np.ndarray, eta: np.ndarray, degree: int) -> np.ndarray:
 def poly_eval(coef: np.ndarray, xi: np.ndarray, eta: np.ndarray, degree: int) -> np.ndarray:
     """``sum c_ij xi^i eta^j`` (coefficients in :func:`monomial_exponents` order), nested Horner."""
     idx = {e: k for k, e in enumerate(monomial_exponents(degree))}
-    out = None
+    out: np.ndarray | None = None
     for j in range(degree, -1, -1):  # Horner in eta over inner Horner polynomials in xi
         inner = np.full_like(xi, coef[idx[degree - j, j]])
         for i in range(degree - j - 1, -1, -1):
             inner = inner * xi + coef[idx[i, j]]
         out = inner if out is None else out * eta + inner
+    if out is None:
+        raise ValueError(f"polynomial degree must be >= 0, got {degree}")
     return out
 
 
@@ -98,7 +104,7 @@ class PolynomialModel(DistortionModel):
     scale: float = 1000.0
     name: str = field(default="poly", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "center", tuple(float(v) for v in self.center))
         object.__setattr__(self, "degree", int(self.degree))
         object.__setattr__(self, "a", tuple(float(v) for v in self.a))
@@ -139,7 +145,7 @@ class PolynomialModel(DistortionModel):
         """Parameter vector in the documented order (``a`` then ``b``)."""
         return np.asarray(self.a + self.b, dtype=np.float64)
 
-    def _normalised(self, xy):
+    def _normalised(self, xy: ArrayLike) -> tuple[Floats, Floats]:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         return (xy[:, 0] - self.center[0]) / self.scale, (xy[:, 1] - self.center[1]) / self.scale
 
@@ -162,7 +168,7 @@ class PolynomialModel(DistortionModel):
         s = self.scale
         da_x, da_y = _derivative_coefficients(a, self.degree)
         db_x, db_y = _derivative_coefficients(b, self.degree)
-        x = 2 * target - self.undistort_points(target)
+        x: Floats = 2 * target - self.undistort_points(target)
         done = np.zeros(len(x), bool)
         for _ in range(max_iter):
             xi, eta = self._normalised(x)
@@ -187,7 +193,7 @@ class PolynomialModel(DistortionModel):
         x[~done] = np.nan
         return x
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "model": self.name,
             "center": list(self.center),
@@ -198,7 +204,7 @@ class PolynomialModel(DistortionModel):
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> PolynomialModel:
+    def from_dict(cls, d: dict[str, Any]) -> PolynomialModel:
         return cls(
             center=tuple(d["center"]),
             degree=int(d["degree"]),
@@ -253,7 +259,8 @@ class PolynomialParametrisation:
             for i, e in enumerate(monomial_exponents(init.degree)):
                 full[idx[e]] = init.a[i]
                 full[self.m + idx[e]] = init.b[i]
-            return np.linalg.lstsq(self.T, full - self.t0, rcond=None)[0]
+            theta: Floats = np.linalg.lstsq(self.T, full - self.t0, rcond=None)[0]
+            return theta
         return np.zeros(self.n)
 
     def model(self, th: np.ndarray) -> PolynomialModel:
