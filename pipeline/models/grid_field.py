@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.models.base import DistortionModel
+
+
+class _Spline(Protocol):
+    """What the model uses of a ``scipy.interpolate.RectBivariateSpline`` (scipy has no type information)."""
+
+    def ev(self, yi: NDArray[np.float64], xi: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,10 +50,13 @@ class GridFieldModel(DistortionModel):
     dy: np.ndarray
     width: int
     height: int
-    info: dict = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
     name: str = field(default="grid_field", init=False, repr=False)
+    # the splines of dx and dy, built by __post_init__ (derived: not parameters)
+    _sx: _Spline = field(init=False, repr=False, compare=False)
+    _sy: _Spline = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         dx = np.array(self.dx, dtype=np.float64)
         dy = np.array(self.dy, dtype=np.float64)
         if dx.ndim != 2 or dx.shape != dy.shape or min(dx.shape) < 4:
@@ -81,11 +92,12 @@ class GridFieldModel(DistortionModel):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         return np.stack([self._sx.ev(xy[:, 1], xy[:, 0]), self._sy.ev(xy[:, 1], xy[:, 0])], axis=1)
 
-    def undistort_points(self, xy):
+    def undistort_points(self, xy: np.ndarray) -> np.ndarray:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        return xy + self.displacement(xy)
+        xu: NDArray[np.float64] = xy + self.displacement(xy)
+        return xu
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {
             "model": self.name,
             "origin": list(self.origin),
@@ -98,7 +110,7 @@ class GridFieldModel(DistortionModel):
         }
 
     @classmethod
-    def from_dict(cls, d):
+    def from_dict(cls, d: dict[str, Any]) -> GridFieldModel:
         return cls(
             origin=tuple(d["origin"]),
             step=float(d["step"]),

@@ -12,7 +12,9 @@ radial factor; its Jacobian columns follow from the same basis.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, TypedDict, Unpack
 
 import numpy as np
 
@@ -55,6 +57,14 @@ def division_basis(rho2: np.ndarray, terms: int) -> list[np.ndarray]:
     for _ in range(terms - 1):
         out.append(out[-1] * rho2)
     return out[:terms]
+
+
+class RadialTerms(TypedDict, total=False):
+    """The optional terms of a :class:`RadialModel`, as keywords (:meth:`RadialModel.for_image`)."""
+
+    tangential: tuple[float, float] | None
+    prism: tuple[float, float, float, float] | None
+    division: tuple[float, ...] | None
 
 
 @dataclass(frozen=True)
@@ -106,7 +116,7 @@ class RadialModel(DistortionModel):
     division: tuple[float, ...] | None = None
     name: str = field(default="radial", init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "center", tuple(float(v) for v in self.center))
         object.__setattr__(self, "k", tuple(float(v) for v in self.k))
         if self.tangential is not None:
@@ -123,7 +133,14 @@ class RadialModel(DistortionModel):
             raise ValueError(f"RadialModel scale must be > 0, got {self.scale}")
 
     @classmethod
-    def for_image(cls, width: int, height: int, k=(1.0,), center=None, **kw) -> RadialModel:
+    def for_image(
+        cls,
+        width: int,
+        height: int,
+        k: Sequence[float] = (1.0,),
+        center: tuple[float, float] | None = None,
+        **kw: Unpack[RadialTerms],
+    ) -> RadialModel:
         """Model with ``scale`` = half diagonal and centre (default) at the image centre."""
         if center is None:
             center = ((width - 1) / 2.0, (height - 1) / 2.0)
@@ -160,8 +177,8 @@ class RadialModel(DistortionModel):
             yu = yu + c * ty
         return np.stack([self.center[0] + s * xu, self.center[1] + s * yu], axis=1)
 
-    def to_dict(self) -> dict:
-        d = {"model": self.name, "center": list(self.center), "k": list(self.k), "scale": self.scale}
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"model": self.name, "center": list(self.center), "k": list(self.k), "scale": self.scale}
         if self.tangential is not None:
             d["tangential"] = list(self.tangential)
         if self.prism is not None:
@@ -171,7 +188,7 @@ class RadialModel(DistortionModel):
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> RadialModel:
+    def from_dict(cls, d: dict[str, Any]) -> RadialModel:
         return cls(
             center=tuple(d["center"]),
             k=tuple(d["k"]),
