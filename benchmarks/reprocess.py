@@ -142,11 +142,15 @@ def main() -> int:
                 rows.append(
                     (f"Dask LocalCluster, {args.workers} workers x 1 thread, {state}", shown, wall, same, *_spread(doc))
                 )
-        print("| runner | cluster start s | sessions | jobs | wall s | sessions/min | profiles vs local pool |")
-        print("|---|---|---|---|---|---|---|")
-        for name, st, wall, same in rows:
+        print(
+            "| runner | cluster start s | sessions | jobs | wall s | sessions/min | jobs per worker | job s (sum) "
+            "| profiles vs local pool |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|")
+        for name, st, wall, same, spread, busy in rows:
             print(
-                f"| {name} | {st} | {len(sessions)} | {jobs} | {wall:.1f} | {60 * len(sessions) / wall:.1f} | {same} |"
+                f"| {name} | {st} | {len(sessions)} | {jobs} | {wall:.1f} | {60 * len(sessions) / wall:.1f} "
+                f"| {spread} | {busy:.1f} | {same} |"
             )
         print()
         print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip())
