@@ -15,7 +15,9 @@ imports, planning, every job, storing into a fresh SQLite store, the table):
 * on a Dask ``LocalCluster`` of N worker processes with one thread each (``--scheduler``), started
   before the command (its start-up time is its own column), twice: workers cold (their first
   imports of numpy, scipy, OpenCV and the pipeline count) and warm (a cluster that has already
-  worked, as a standing one is).
+  worked, as a standing one is);
+* on the local pool again (the machine's other work changes while the benchmark runs: the two
+  local runs say by how much).
 
 Each run's profiles are checked to be the same as the local pool's (every figure of every focus
 setting); "jobs per worker" says how the jobs were spread over the worker processes and "job s" is
@@ -142,6 +144,9 @@ def main() -> int:
                 rows.append(
                     (f"Dask LocalCluster, {args.workers} workers x 1 thread, {state}", shown, wall, same, *_spread(doc))
                 )
+        wall, doc = _reprocess(sessions, Path(tmp) / "local2.sqlite", ["--workers", str(args.workers)])
+        same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
+        rows.append((f"local process pool, {args.workers} processes, again", "–", wall, same, *_spread(doc)))
         print(
             "| runner | cluster start s | sessions | jobs | wall s | sessions/min | jobs per worker | job s (sum) "
             "| profiles vs local pool |"

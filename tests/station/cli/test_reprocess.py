@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import re
 import shutil
 import uuid
 
@@ -215,3 +216,44 @@ def test_a_scheduler_that_cannot_be_used_is_one_line_and_creates_no_store(factor
     assert code == 2 and out == ""
     assert err.startswith("harp reprocess: ") and needle in err and err.count("\n") == 1
     assert not store.exists()
+
+
+def test_ctrl_c_is_one_line_exit_130_and_what_was_stored_is_whole(factory_archive, tmp_path):
+    """Ctrl-C at the terminal (SIGINT to the whole process group: the command and its pool) while
+    the sessions are re-processed: one line, exit 130, and every session in the store complete."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    sessions = []
+    for name in ("a", "b", "c"):
+        shutil.copytree(factory_archive.session, tmp_path / name)
+        sessions.append(tmp_path / name)
+    store = tmp_path / "st.sqlite"
+    cmd = [
+        sys.executable,
+        "-m",
+        "station.cli",
+        "reprocess",
+        *map(str, sessions),
+        "--workers",
+        "2",
+        "--store",
+        str(store),
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.time() + 120
+    while not store.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)  # the store is opened once the jobs are planned, just before they start
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    m = re.match(r"harp reprocess: interrupted: (\d) session\(s\) re-processed and stored before Ctrl-C", err)
+    assert m, err
+    with ProfileStore(store, create=False) as st:
+        stored = [p for p in st.profiles()]
+    assert len(stored) == 2 * int(m.group(1))  # both focus settings of each session said stored, no more
