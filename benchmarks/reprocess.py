@@ -15,7 +15,8 @@ imports, planning, every job, storing into a fresh SQLite store, the table):
 * on a Dask ``LocalCluster`` of N worker processes with one thread each (``--scheduler``), started
   before the command (its start-up time is its own column), twice: workers cold (their first
   imports of numpy, scipy, OpenCV and the pipeline count) and warm (a cluster that has already
-  worked, as a standing one is);
+  worked, as a standing one is); then the same on a cluster whose workers' statistical profiler is
+  off (``distributed.worker.profile.enabled: false``; it samples the running job's stack every 10 ms);
 * on the local pool again (the machine's other work changes while the benchmark runs: the two
   local runs say by how much).
 
@@ -102,6 +103,32 @@ def _spread(doc: dict) -> tuple[str, float]:
     return " + ".join(str(n) for n in sorted(per.values(), reverse=True)), busy
 
 
+def _cluster_rows(sessions: list[Path], tmp: Path, args: argparse.Namespace, ref: dict, profile: bool) -> list[tuple]:
+    """Cold and warm runs on a new LocalCluster, its workers' statistical profiler on or off."""
+    import dask
+    from dask.distributed import LocalCluster
+
+    rows = []
+    what = "" if profile else ", profiler off"
+    t = time.perf_counter()
+    with (
+        dask.config.set({"distributed.worker.profile.enabled": profile}),
+        LocalCluster(
+            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+        ) as cluster,
+    ):
+        start = time.perf_counter() - t
+        for i, state in enumerate(("cold", "warm")):
+            wall, doc = _reprocess(
+                sessions, tmp / f"dask{int(profile)}{i}.sqlite", ["--scheduler", cluster.scheduler_address]
+            )
+            same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
+            shown = f"{start:.1f}" if state == "cold" else "(already up)"
+            name = f"Dask LocalCluster, {args.workers} workers x 1 thread{what}, {state}"
+            rows.append((name, shown, wall, same, *_spread(doc)))
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sessions", type=int, default=6)
@@ -114,8 +141,6 @@ def main() -> int:
     ap.add_argument("--bootstrap", type=int, default=4)
     ap.add_argument("--archive", type=Path, default=None, help="keep (or reuse) the archive here")
     args = ap.parse_args()
-
-    from dask.distributed import LocalCluster
 
     with tempfile.TemporaryDirectory(prefix="harp-reprocess-bench-") as tmp:
         root = args.archive or Path(tmp) / "archive"
@@ -130,20 +155,8 @@ def main() -> int:
         rows = []
         wall, ref = _reprocess(sessions, Path(tmp) / "local.sqlite", ["--workers", str(args.workers)])
         rows.append((f"local process pool, {args.workers} processes", "–", wall, "same (reference)", *_spread(ref)))
-        t = time.perf_counter()
-        with LocalCluster(
-            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
-        ) as cluster:
-            start = time.perf_counter() - t
-            for i, state in enumerate(("cold", "warm")):
-                wall, doc = _reprocess(
-                    sessions, Path(tmp) / f"dask{i}.sqlite", ["--scheduler", cluster.scheduler_address]
-                )
-                same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
-                shown = f"{start:.1f}" if state == "cold" else "(already up)"
-                rows.append(
-                    (f"Dask LocalCluster, {args.workers} workers x 1 thread, {state}", shown, wall, same, *_spread(doc))
-                )
+        for profile in (True, False):
+            rows += _cluster_rows(sessions, Path(tmp), args, ref, profile)
         wall, doc = _reprocess(sessions, Path(tmp) / "local2.sqlite", ["--workers", str(args.workers)])
         same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
         rows.append((f"local process pool, {args.workers} processes, again", "–", wall, same, *_spread(doc)))

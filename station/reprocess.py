@@ -29,11 +29,12 @@ instead of adding another.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -371,10 +372,12 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
 
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(PRELOAD)
+    _start_forkserver_deaf_to_ctrl_c()
     results: dict[int, FocusResult] = {}
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
-        futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
+        with _ctrl_c_deferred():  # submitting starts the workers: none is left half-started
+            futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
         for fut in as_completed(futures):
             i = futures[fut]
             try:
@@ -385,11 +388,54 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
                 )
             results[i] = r
             on_result(r)
-    except BaseException:  # Ctrl-C: the jobs not started are dropped, not run
+    except BaseException:  # Ctrl-C: the jobs not started are dropped, the running ones stopped
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.join(5)
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown()
     return [results[i] for i in range(len(jobs))]
+
+
+@contextlib.contextmanager
+def _ctrl_c_deferred() -> Iterator[None]:
+    """Ctrl-C inside this block is raised (KeyboardInterrupt) when it ends, not in its middle."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def _start_forkserver_deaf_to_ctrl_c() -> None:
+    """Start the forkserver (if it is not running) with SIGINT ignored, which it and the pool's
+    workers it forks keep: Ctrl-C at the terminal reaches the whole process group, and only this
+    process should answer it (one line, the workers stopped) — not the forkserver with a traceback
+    from the middle of its imports, nor each worker with its own."""
+    import signal
+    import threading
+    from multiprocessing import forkserver
+
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()  # fork + exec: an ignored signal stays ignored across exec
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:
