@@ -15,8 +15,10 @@ imports, planning, every job, storing into a fresh SQLite store, the table):
 * on a Dask ``LocalCluster`` of N worker processes with one thread each (``--scheduler``), started
   before the command (its start-up time is its own column), twice: workers cold (their first
   imports of numpy, scipy, OpenCV and the pipeline count) and warm (a cluster that has already
-  worked, as a standing one is); then the same on a cluster whose workers' statistical profiler is
-  off (``distributed.worker.profile.enabled: false``; it samples the running job's stack every 10 ms);
+  worked, as a standing one is); then the same on a cluster whose workers start without Dask's
+  ``MALLOC_TRIM_THRESHOLD_=65536`` (``distributed.nanny.pre-spawn-environ: {}``): that setting
+  returns freed memory to the system at once, and the pipeline's many large temporary arrays then
+  cost page faults each time;
 * on the local pool again (the machine's other work changes while the benchmark runs: the two
   local runs say by how much).
 
@@ -103,16 +105,18 @@ def _spread(doc: dict) -> tuple[str, float]:
     return " + ".join(str(n) for n in sorted(per.values(), reverse=True)), busy
 
 
-def _cluster_rows(sessions: list[Path], tmp: Path, args: argparse.Namespace, ref: dict, profile: bool) -> list[tuple]:
-    """Cold and warm runs on a new LocalCluster, its workers' statistical profiler on or off."""
+def _cluster_rows(sessions: list[Path], tmp: Path, args: argparse.Namespace, ref: dict, trim: bool) -> list[tuple]:
+    """Cold and warm runs on a new LocalCluster: Dask's worker environment as it comes
+    (``MALLOC_TRIM_THRESHOLD_=65536``), or without it (``trim=False``: glibc's own malloc)."""
     import dask
     from dask.distributed import LocalCluster
 
     rows = []
-    what = "" if profile else ", profiler off"
+    what = "" if trim else ", no MALLOC_TRIM_THRESHOLD_"
+    environ = dask.config.get("distributed.nanny.pre-spawn-environ") if trim else {}
     t = time.perf_counter()
     with (
-        dask.config.set({"distributed.worker.profile.enabled": profile}),
+        dask.config.set({"distributed.nanny.pre-spawn-environ": environ}),
         LocalCluster(
             n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
         ) as cluster,
@@ -120,7 +124,7 @@ def _cluster_rows(sessions: list[Path], tmp: Path, args: argparse.Namespace, ref
         start = time.perf_counter() - t
         for i, state in enumerate(("cold", "warm")):
             wall, doc = _reprocess(
-                sessions, tmp / f"dask{int(profile)}{i}.sqlite", ["--scheduler", cluster.scheduler_address]
+                sessions, tmp / f"dask{int(trim)}{i}.sqlite", ["--scheduler", cluster.scheduler_address]
             )
             same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
             shown = f"{start:.1f}" if state == "cold" else "(already up)"
@@ -155,8 +159,8 @@ def main() -> int:
         rows = []
         wall, ref = _reprocess(sessions, Path(tmp) / "local.sqlite", ["--workers", str(args.workers)])
         rows.append((f"local process pool, {args.workers} processes", "–", wall, "same (reference)", *_spread(ref)))
-        for profile in (True, False):
-            rows += _cluster_rows(sessions, Path(tmp), args, ref, profile)
+        for trim in (True, False):
+            rows += _cluster_rows(sessions, Path(tmp), args, ref, trim)
         wall, doc = _reprocess(sessions, Path(tmp) / "local2.sqlite", ["--workers", str(args.workers)])
         same = "same" if _figures(doc) == _figures(ref) else "DIFFERENT"
         rows.append((f"local process pool, {args.workers} processes, again", "–", wall, same, *_spread(doc)))
