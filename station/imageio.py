@@ -67,14 +67,13 @@ class ImageReadError(Exception):
         super().__init__(f"{self.path}: {reason}")
 
 
-def _pnm_truncated(data: bytes) -> str | None:
-    """For a binary PNM (P5/P6), a reason if the pixel data is short."""
-    if len(data) < 2 or data[:1] != b"P" or data[1:2] not in (b"5", b"6"):
-        return None
+def _pnm_header_fields(data: bytes, count: int, limit: int) -> tuple[list[int], int] | None:
+    """The first ``count`` numbers of a PNM header (after the magic, comments skipped), read from
+    ``data[:limit]``, and the index just past the last one; ``None`` when a field is not a number.
+    Fewer than ``count`` numbers come back when the header ends before them."""
     fields: list[int] = []
-    i = 2
-    n = len(data)
-    while len(fields) < 3 and i < n:
+    i, n = 2, min(len(data), limit)
+    while len(fields) < count and i < n:
         c = data[i : i + 1]
         if c == b"#":
             while i < n and data[i : i + 1] not in (b"\n", b"\r"):
@@ -86,9 +85,21 @@ def _pnm_truncated(data: bytes) -> str | None:
             while j < n and data[j : j + 1].isdigit():
                 j += 1
             if j == i:
-                return "malformed PNM header"
+                return None
             fields.append(int(data[i:j]))
             i = j
+    return fields, i
+
+
+def _pnm_truncated(data: bytes) -> str | None:
+    """For a binary PNM (P5/P6), a reason if the pixel data is short."""
+    if len(data) < 2 or data[:1] != b"P" or data[1:2] not in (b"5", b"6"):
+        return None
+    n = len(data)
+    header = _pnm_header_fields(data, 3, n)
+    if header is None:
+        return "malformed PNM header"
+    fields, i = header
     if len(fields) < 3:
         return "truncated PNM header"
     i += 1  # the single whitespace after maxval
@@ -262,23 +273,10 @@ def _jpeg_size(data: bytes) -> tuple[int, int] | None:
 
 
 def _pnm_size(data: bytes) -> tuple[int, int] | None:
-    fields: list[int] = []
-    i, n = 2, min(len(data), 4096)
-    while len(fields) < 2 and i < n:
-        c = data[i : i + 1]
-        if c == b"#":
-            while i < n and data[i : i + 1] not in (b"\n", b"\r"):
-                i += 1
-        elif c.isspace():
-            i += 1
-        else:
-            j = i
-            while j < n and data[j : j + 1].isdigit():
-                j += 1
-            if j == i:
-                return None
-            fields.append(int(data[i:j]))
-            i = j
+    header = _pnm_header_fields(data, 2, 4096)
+    if header is None:
+        return None
+    fields = header[0]
     return (fields[0], fields[1]) if len(fields) == 2 else None
 
 
