@@ -104,7 +104,7 @@ from numpy.typing import NDArray
 from scipy.special import ndtr
 
 from pipeline.edges import auto_thresholds, detect_edges
-from pipeline.grouping import MIN_PIECE_PX, REJECT_REASONS, Grouping, group_string_edges
+from pipeline.grouping import MIN_PIECE_PX, REJECT_REASONS, Grouping, group_string_edges, points_bbox
 
 Points = NDArray[np.float64]
 Floats = NDArray[np.float64]
@@ -884,12 +884,7 @@ class RejectedMark:
     @property
     def bbox(self) -> tuple[float, float, float, float]:
         """``(x_min, y_min, x_max, y_max)`` in the frame's pixels."""
-        return (
-            float(self.xy[:, 0].min()),
-            float(self.xy[:, 1].min()),
-            float(self.xy[:, 0].max()),
-            float(self.xy[:, 1].max()),
-        )
+        return points_bbox(self.xy)
 
 
 @dataclass(frozen=True)

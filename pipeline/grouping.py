@@ -229,6 +229,11 @@ class ChainLike(Protocol):
     def grad(self) -> NDArray[np.float64]: ...
 
 
+def points_bbox(xy: Points) -> tuple[float, float, float, float]:
+    """``(x_min, y_min, x_max, y_max)`` of an ``(N, 2)`` array of points (x = column, y = row)."""
+    return (float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max()))
+
+
 @dataclass(frozen=True)
 class StringEdge:
     """One string edge: its points ordered along the edge.
@@ -275,12 +280,7 @@ class RejectedGroup:
     @property
     def bbox(self) -> tuple[float, float, float, float]:
         """``(x_min, y_min, x_max, y_max)``."""
-        return (
-            float(self.xy[:, 0].min()),
-            float(self.xy[:, 1].min()),
-            float(self.xy[:, 0].max()),
-            float(self.xy[:, 1].max()),
-        )
+        return points_bbox(self.xy)
 
 
 @dataclass(frozen=True)
