@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Any
+
+from station.cli.web_options import add_serve_options
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 
@@ -33,13 +34,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("config", type=Path, help="station configuration (YAML)")
     p.add_argument("--once", action="store_true", help="check one shot, print the assessment and exit (0 pass, 1 fail)")
     p.add_argument("--json", action="store_true", help="with --once: print the assessment as one JSON object")
-    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8013, help="port to serve on (default 8013; 0: any free port)")
-    p.add_argument(
-        "--token",
-        default=os.environ.get("HARP_WEB_TOKEN"),
-        help="token the page requires (needed for a --host other than 127.0.0.1; default $HARP_WEB_TOKEN)",
-    )
+    add_serve_options(p, port=8013, token_help="token the page requires")
     p.set_defaults(func=run)
 
 

@@ -15,7 +15,6 @@ there or cannot be read, an address that cannot be used): one line on stderr.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from typing import Any
 
@@ -24,6 +23,7 @@ DEFAULT_PORT = 8014
 
 
 def register(subparsers: Any) -> None:
+    from station.cli.web_options import add_serve_options
     from station.store.resolve import add_store_options
 
     p = subparsers.add_parser(
@@ -33,15 +33,7 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_store_options(p)
-    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")
-    p.add_argument(
-        "--port", type=int, default=DEFAULT_PORT, help=f"port to serve on (default {DEFAULT_PORT}; 0: any free port)"
-    )
-    p.add_argument(
-        "--token",
-        default=os.environ.get("HARP_WEB_TOKEN"),
-        help="token every request must carry (needed for a --host other than 127.0.0.1; default $HARP_WEB_TOKEN)",
-    )
+    add_serve_options(p, port=DEFAULT_PORT, token_help="token every request must carry")
     p.set_defaults(func=run)
 
 
