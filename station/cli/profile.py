@@ -28,6 +28,7 @@ from typing import Any
 
 from station.cli.export import add_export_options, formats_epilog
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
+from station.plain_json import plain
 from station.store.resolve import add_store_options
 
 ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
@@ -162,7 +163,7 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
     """One stored profile as plain data (``--json``)."""
     fit, hold, unc = p.merit.fit, p.merit.holdout, p.merit.field_uncertainty
     ident = lambda i: None if i is None else {"maker": i.maker, "model": i.model, "serial": i.serial}  # noqa: E731
-    return _plain(
+    return plain(
         {
             "id": p.id,
             "lens": ident(p.lens),
@@ -184,18 +185,6 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
             "software_version": p.provenance.software_version,
         }
     )
-
-
-def _plain(v):
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if hasattr(v, "item") and callable(v.item):  # numpy scalar
-        return _plain(v.item())
-    return v
 
 
 def _newest_and_current(store, lens_id: int, allow_failed: bool):
@@ -397,7 +386,7 @@ def _show(args, store) -> int:
             },
             "left_out": [_profile_json(q, False) for q in left_out],
         }
-        print(json.dumps(_plain(out), indent=1))
+        print(json.dumps(plain(out), indent=1))
         return EXIT_OK
     console = _console()
     console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
@@ -422,7 +411,7 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
             "left_out": [_profile_json(p, False) for p in left_out],
         }
         if detail:
-            out["profiles"][0]["model_parameters"] = _plain(profiles[0].model.to_dict())
+            out["profiles"][0]["model_parameters"] = plain(profiles[0].model.to_dict())
         print(json.dumps(out, indent=1))
         return EXIT_OK
     who = f"lens #{lens[0]}: " if lens[0] is not None else "lens "
@@ -442,7 +431,7 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         )
         for c in p.qa.checks if p.qa is not None else ():
             print(f"check: {c.text}", file=err)
-        print(json.dumps(_plain(p.model.to_dict())), file=err)
+        print(json.dumps(plain(p.model.to_dict())), file=err)
     return EXIT_OK
 
 

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from station.exit_codes import EXIT_ERROR, verdict_exit_code
+from station.plain_json import plain
 from station.session import layout
 from station.store import DEFAULT_STORE
 
@@ -315,16 +316,6 @@ def _lens_context(items: list[Item]) -> list[tuple[str, str]]:
     return rows
 
 
-def _plain(v):
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    return v
-
-
 def run(args) -> int:
     from station.config import ConfigError, load_config
     from station.qa.verdicts import combine, interpolation_error, qa_verdict
@@ -416,7 +407,7 @@ def run(args) -> int:
             "interpolation": [{"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px} for r in interpolation],
             "report": str(report) if report else None,
         }
-        print(json.dumps(_plain(out), indent=1))
+        print(json.dumps(plain(out), indent=1))
     else:
         _print_checks(items, results, interpolation, overall, report)
     return verdict_exit_code(overall)
@@ -429,7 +420,7 @@ def _record(args, config, session, items, results) -> None:
     try:
         with _store(args, config, create=True) as store:
             for it, v in zip(items, results):
-                metrics = _plain({**v.metrics, "focus": it.focus})
+                metrics = plain({**v.metrics, "focus": it.focus})
                 store.put_qa_result(
                     verdict=v,
                     metrics=metrics,

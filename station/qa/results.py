@@ -28,31 +28,16 @@ Format (``format: harp-session-results``, ``format_version: 1``)::
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, verdict_exit_code
+from station.plain_json import plain
 from station.session import layout
 
 FORMAT = "harp-session-results"
 FORMAT_VERSION = 1
-
-
-def _plain(obj: Any) -> Any:
-    """JSON-safe plain data (non-finite floats as null, numpy scalars as numbers, paths as text)."""
-    if isinstance(obj, Mapping):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, Path):
-        return str(obj)
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalar
-        return _plain(obj.item())
-    return obj
 
 
 def _ident(maker: str, model: str, serial: str) -> dict[str, str]:
@@ -177,7 +162,7 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
             }
         )
     reports = [r for r in records if r.get("kind") == "report" and r.get("file")]
-    return _plain(
+    return plain(
         {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
