@@ -5,6 +5,8 @@ Where things are (one idea, one room):
 * :mod:`station.config` — the station configuration (YAML → frozen dataclasses);
 * :mod:`station.profile` — a profile: the one :class:`~station.profile.Profile` record
   and its conversions to the model file and the store row;
+* :mod:`station.profile_choice` — which profile of a lens a command uses at a focus setting,
+  and why (current, failed, interpolated);
 * :mod:`station.calibration` — ``calibrate_shots``: measured shots → a profile's content
   (``harp calibrate`` and every session);
 * :mod:`station.store` — the SQLite profile store;
@@ -15,7 +17,8 @@ Where things are (one idea, one room):
 * :mod:`station.session` — a session: plan, executor, records, progress, the session
   directory and its layout, devices;
 * :mod:`station.qa` — verdicts, a session's QA, the report, overlays;
-* :mod:`station.cli` — the ``harp`` command, one module per command.
+* :mod:`station.cli` — the ``harp`` command, one module per command: parsing, calling and
+  printing only.
 
 ``__version__`` is the installed distribution's version (``importlib.metadata``), the
 one source of the version every profile, model file and session records.

@@ -4,7 +4,9 @@
   (imports inside functions count: a late import is still a dependency);
 * the layers point one way: ``pipeline`` imports neither ``drivers`` nor ``station``,
   ``drivers`` does not import ``station``;
-* no private name (``_x``) is imported from another module.
+* no private name (``_x``) is imported from another module;
+* nothing outside ``station.cli`` imports it: the command line parses, calls and prints, so
+  no other module can need what it holds.
 
 The checker itself is tested on a small made-up tree, so that a broken checker
 cannot pass the real one.
@@ -118,6 +120,18 @@ def layer_violations(graph: dict[str, set[str]]) -> list[str]:
     return out
 
 
+def cli_importers(graph: dict[str, set[str]]) -> list[str]:
+    """Modules outside ``station.cli`` that import one of its modules."""
+    inside = lambda m: m == "station.cli" or m.startswith("station.cli.")  # noqa: E731
+    return [
+        f"{a} imports {b}"
+        for a, targets in sorted(graph.items())
+        if not inside(a)
+        for b in sorted(targets)
+        if inside(b)
+    ]
+
+
 @pytest.fixture(scope="module")
 def real():
     return import_graph(REPO)
@@ -140,6 +154,12 @@ def test_no_private_name_imported_across_modules(real):
     assert private == []
 
 
+def test_nothing_outside_the_command_line_imports_it(real):
+    graph, _ = real
+    assert "station.cli.export" in graph["station.cli.profile"]  # cli modules are seen
+    assert cli_importers(graph) == []
+
+
 def test_the_checker_sees_what_it_must(tmp_path):
     for rel, text in {
         "pipeline/__init__.py": "",
@@ -149,6 +169,9 @@ def test_the_checker_sees_what_it_must(tmp_path):
         "drivers/__init__.py": "",
         "station/__init__.py": "",
         "station/x.py": "import drivers\n_hidden = 1\n",
+        "station/cli/__init__.py": "from station.cli import y\n",
+        "station/cli/y.py": "from station import x\n",
+        "station/z.py": "def f():\n    from station.cli.y import g\n",
     }.items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(text)
@@ -157,3 +180,4 @@ def test_the_checker_sees_what_it_must(tmp_path):
     assert cycles(graph) == [["pipeline.a", "pipeline.b"]]
     assert layer_violations(graph) == ["pipeline.c imports station.x"]
     assert private == ["pipeline/c.py:1: pipeline.c imports _hidden from station.x"]
+    assert cli_importers(graph) == ["station.z imports station.cli.y"]

@@ -222,7 +222,7 @@ def export_profile(args, profile, *, model_dir=None, what: str | None = None, ed
     Raises ExportError (one line) on bad options or a model the format cannot take.
     """
     from pipeline.exports.registry import FORMATS, write_export
-    from station.export_source import FittingEdges, export_source, fitting_edges, measured_edges
+    from station.export_source import export_source
 
     if args.json and not args.output:
         raise ExportError("--json needs -o FILE (without it stdout is the exported file)")
@@ -231,25 +231,33 @@ def export_profile(args, profile, *, model_dir=None, what: str | None = None, ed
     lens = lens_overrides(args)
     existing = _existing_lensfun(args)
     options = export_options(args, existing, str(args.output))
-    if args.format == "json":
-        edges = FittingEdges(None, "not used by the json format")
-    elif edges is not None:
-        pass
-    elif args.no_shots:
-        edges = FittingEdges(None, "not measured (--no-shots)")
-    elif args.shots:
-        try:
-            edges = measured_edges(args.shots, profile.provenance.t or 30)
-        except ValueError as exc:
-            raise ExportError(str(exc)) from None
-    else:
-        edges = fitting_edges(profile, model_dir)
+    edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:
         raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
     return ex, figures(ex, source, edges)
+
+
+def _fitting_edges(args, profile, model_dir, known):
+    """The fitting shots' edges an export states its residual d on: none for the json format; else
+    ``known`` when the caller gave them; none with ``--no-shots``; the ``--shots`` measured; else
+    found from the profile (:func:`station.export_source.fitting_edges`)."""
+    from station.export_source import FittingEdges, fitting_edges, measured_edges
+
+    if args.format == "json":
+        return FittingEdges(None, "not used by the json format")
+    if known is not None:
+        return known
+    if args.no_shots:
+        return FittingEdges(None, "not measured (--no-shots)")
+    if args.shots:
+        try:
+            return measured_edges(args.shots, profile.provenance.t or 30)
+        except ValueError as exc:
+            raise ExportError(str(exc)) from None
+    return fitting_edges(profile, model_dir)
 
 
 def figures(ex, source, edges) -> dict:

@@ -73,33 +73,8 @@ def run(args: argparse.Namespace) -> int:
         return _error(" ".join(str(exc).split()))
 
 
-def apply_session_settings(config: Any, camera: Any) -> None:
-    """The session's exposure and gain (focus: the first focus setting), as the executor sets them."""
-    cap = config.capture
-    camera.set_exposure(cap.exposure_us)
-    camera.set_gain(cap.gain_db)
-    if config.focus_settings:
-        camera.lock_focus(config.focus_settings[0])
-
-
-def live_station(config: Any, camera: Any, turntable: Any, **kw: Any) -> Any:
-    """The :class:`~station.live.runner.LiveStation` of a configuration's devices."""
-    from station.live.runner import LiveStation
-
-    return LiveStation(
-        camera,
-        turntable,
-        orientations=config.capture.orientations_deg,
-        checks=config.capture.checks,
-        expected_angle=config.station.harp.expected_angle,
-        capture_timeout_s=config.capture.timeout_s,
-        move_timeout_s=config.capture.move_timeout_s,
-        title=f"{config.station.id} · {config.lens.label()}",
-        **kw,
-    )
-
-
 def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -> int:
+    from station.live.devices import apply_session_settings, live_station
     from station.live.web import live_app
     from station.web.serve import ServeError, serve
 
@@ -116,38 +91,14 @@ def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -
 
 
 def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:
-    import numpy as np
+    from station.live.devices import check_once
 
-    from pipeline.assess import assess_frame
-    from station.live.checks import check_shot
-
-    apply_session_settings(config, camera)
-    stage = float(turntable.position()) if turntable is not None else None
-    n = config.capture.frames_per_orientation
-    frames = [camera.capture(config.capture.timeout_s) for _ in range(n)]
-    images = [np.asarray(f.image) for f in frames]
-    bit_depth = 8 if frames[0].image.dtype == np.uint8 else None
-    expected = config.station.harp.expected_angle(stage if stage is not None else 0.0)
-    verdict = check_shot(images, config.capture.checks, config.pipeline, expected, bit_depth)
-    image = images[0] if n == 1 else np.mean(np.stack(images), axis=0)
-    a = assess_frame(image, full_scale=float(np.iinfo(images[0].dtype).max))
-    out: dict[str, Any] = {
-        "pass": verdict.passed,
-        "problems": list(verdict.problems),
-        "frames_averaged": n,
-        "stage_deg": stage,
-        "expected_angle_deg": expected,
-        "focus": frames[-1].focus,
-        "exposure_us": frames[-1].exposure_us,
-        "gain_db": frames[-1].gain_db,
-        "session_measurement": {"string_edges": verdict.n_lines, "angle_deg": verdict.angle_deg, "d_px": verdict.d},
-        "assessment": a.to_dict(),
-    }
+    out = check_once(config, camera, turntable)
     if as_json:
         print(json.dumps(out, allow_nan=False))
     else:
         _print_once(out)
-    return EXIT_PASS if verdict.passed else EXIT_FAIL
+    return EXIT_PASS if out["pass"] else EXIT_FAIL
 
 
 def _print_once(o: dict[str, Any]) -> None:

@@ -6,7 +6,8 @@ Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://`
 error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
 part of "maker model serial"; ``--id N`` names one stored profile. The **current** profile of a
 lens at a focus setting is its newest one, unless that one failed QA: a failed profile is never
-current (:meth:`station.store.database.ProfileStore.latest_by_focus`). ``show`` and ``export`` use
+current (:meth:`station.store.database.ProfileStore.latest_by_focus`; what a command uses and
+why, and the focus interpolation: :mod:`station.profile_choice`). ``show`` and ``export`` use
 only current profiles, for one focus setting or the correction interpolated between the
 calibrated ones, unless ``--allow-failed`` is given (then each failed profile used is said on
 stderr). ``export`` converts with the options, figures and warnings of ``harp export``
@@ -29,6 +30,17 @@ from typing import Any
 from station.cli.export import add_export_options, formats_epilog
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.plain_json import plain
+from station.profile_choice import (
+    ChoiceError,
+    FailedQA,
+    at_focus,
+    current_and_left_out,
+    failed_line,
+    interpolate,
+    is_failed,
+    lens_row,
+    verdict_text,
+)
 from station.store.resolve import add_store_options
 
 ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
@@ -114,10 +126,10 @@ def _with_store(fn):
         try:
             with _open(args) as store:
                 return fn(args, store)
-        except _Refused as exc:
+        except (_Refused, FailedQA) as exc:
             print(f"harp profile: {exc}", file=sys.stderr)
             return EXIT_FAIL
-        except (StoreError, ConfigError, _Fail) as exc:
+        except (StoreError, ConfigError, _Fail, ChoiceError) as exc:
             return _error(str(exc))
 
     return wrapped
@@ -126,37 +138,6 @@ def _with_store(fn):
 # ------------------------------------------------------------------ helpers
 def _ident(identity) -> str:
     return "-" if identity is None else f"{identity.maker} {identity.model} {identity.serial}"
-
-
-def _lens_label(lens) -> str:
-    """``lens Acme 50mm serial S1`` of a store lens row ``(id, maker, model, serial)``."""
-    return f"lens {lens[1]} {lens[2]} serial {lens[3]}"
-
-
-def _lens_of(p) -> tuple[int | None, str, str, str]:
-    lens = p.lens
-    return (None, lens.maker, lens.model, lens.serial) if lens is not None else (None, "-", "-", "-")
-
-
-def _failed(p) -> bool:
-    return p.qa is not None and not p.qa.passed
-
-
-def _verdict(p) -> str:
-    return "" if p.qa is None else p.qa.verdict
-
-
-def failed_checks(p) -> str:
-    """What failed in a profile's verdict, for one line: the failed checks as they were judged."""
-    v = p.qa
-    if v is None:
-        return "not judged"
-    texts = [c.text.rsplit(": ", 1)[0] for c in v.checks if c.passed is False]
-    return "; ".join(texts or list(v.reasons) or ["failed QA"])
-
-
-def _failed_line(lens, p) -> str:
-    return f"{_lens_label(lens)}, focus {p.focus:g}: profile #{p.id} failed QA ({failed_checks(p)})"
 
 
 def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
@@ -176,7 +157,7 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
             "fit": fit.to_dict() if fit else None,
             "holdout": hold.to_dict() if hold else None,
             "field_uncertainty": unc.to_dict() if unc else None,
-            "verdict": _verdict(p) or None,
+            "verdict": verdict_text(p) or None,
             "current": current,
             "qa": p.qa.to_dict() if p.qa is not None else None,
             "created": p.stored_at,
@@ -187,55 +168,12 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
     )
 
 
-def _newest_and_current(store, lens_id: int, allow_failed: bool):
-    """``(used, left_out)``: the profiles a command uses for a lens — its current ones (the store
-    decides which, :meth:`~station.store.database.ProfileStore.latest_by_focus`), or with
-    ``allow_failed`` the newest of every focus setting — and the newest ones left out (failed QA)."""
-    newest = store.latest_by_focus(lens_id, allow_failed=True)
-    if allow_failed:
-        return newest, []
-    current = {p.id for p in store.latest_by_focus(lens_id)}
-    return [p for p in newest if p.id in current], [p for p in newest if p.id not in current]
-
-
 def _say_used(lens, used, left_out) -> None:
     for p in used:
-        if _failed(p):
-            _warn(f"{_failed_line(lens, p)}: used because of --allow-failed")
+        if is_failed(p):
+            _warn(f"{failed_line(lens, p)}: used because of --allow-failed")
     for p in left_out:
-        print(f"harp profile: {_failed_line(lens, p)}: not current, left out (--allow-failed uses it)", file=sys.stderr)
-
-
-def _at_focus(profiles, focus: float):
-    hits = [p for p in profiles if math.isclose(p.focus, focus, rel_tol=0, abs_tol=1e-9)]
-    return hits[0] if hits else None
-
-
-def _interpolated(lens, profiles, focus: float, left_out=()):
-    """The correction at an uncalibrated ``focus``: (model, width, height, note, loo, method)."""
-    from pipeline.interpolate import FocusInterpolator, leave_one_out_error
-
-    sizes = {(p.width, p.height) for p in profiles}
-    if len(sizes) > 1:
-        raise _Fail(f"{_lens_label(lens)}: profiles of different image sizes; cannot interpolate")
-    models = {p.focus: p.model for p in profiles}
-    known = ", ".join(f"{p.focus:g}" for p in profiles) or "none"
-    if len(models) < 2 or not min(models) < focus < max(models):
-        msg = (
-            f"{_lens_label(lens)}: no current profile at focus {focus:g} and it is not between "
-            f"two calibrated focus settings ({known}); no extrapolation"
-        )
-        every = [p.focus for p in (*profiles, *left_out)]
-        if left_out and len(every) >= 2 and min(every) < focus < max(every):
-            raise _Refused(msg + "; left out: " + "; ".join(_failed_line(lens, p) for p in left_out))
-        raise _Fail(msg)
-    ((w, h),) = sizes
-    interp = FocusInterpolator(models, w, h)
-    model = interp.at(focus)
-    loo = leave_one_out_error(models, w, h)
-    method = getattr(interp, "method", "auto")
-    note = f"focus {focus:g} is not calibrated: correction field interpolated ({method}) between the settings {known}"
-    return model, w, h, note, loo, method
+        print(f"harp profile: {failed_line(lens, p)}: not current, left out (--allow-failed uses it)", file=sys.stderr)
 
 
 # --------------------------------------------------------------------- list
@@ -274,7 +212,7 @@ def _list(args, store) -> int:
                     _ident(p.camera),
                     f"{p.focus:g}",
                     p.model.name,
-                    _verdict(p),
+                    verdict_text(p),
                     "yes" if p.id in current else "no",
                     _num(hold.d if hold else None),
                     _num(hold.d_max if hold else None),
@@ -330,7 +268,7 @@ def _profile_row(p) -> tuple[str, ...]:
     return (
         f"{p.focus:g}",
         f"#{p.id}",
-        _verdict(p),
+        verdict_text(p),
         _ident(p.camera),
         p.model.name,
         _num(fit.d if fit else None),
@@ -351,32 +289,33 @@ def _show(args, store) -> int:
         p = store.profile(args.id)
         if p is None:
             raise _Fail(f"no profile #{args.id} in {store.path}")
-        lens = _lens_of(p)
-        if _failed(p):
-            _warn(f"{_failed_line(lens, p)}: it is not a current profile")
+        lens = lens_row(p)
+        if is_failed(p):
+            _warn(f"{failed_line(lens, p)}: it is not a current profile")
         return _print_profiles(args, lens, [p], [], detail=True)
     if args.lens is None:
         raise _Fail("name a LENS (serial, maker/model/serial, #lens-id) or a profile with --id N")
     lens = store.find_lens(args.lens)
-    used, left_out = _newest_and_current(store, lens[0], args.allow_failed)
+    used, left_out = current_and_left_out(store, lens[0], args.allow_failed)
     if args.focus is None:
         _say_used(lens, used, left_out)
         return _print_profiles(args, lens, used, left_out)
-    p = _at_focus(used, args.focus)
+    p = at_focus(used, args.focus)
     if p is not None:
         _say_used(lens, [p], [])
         return _print_profiles(args, lens, [p], [], detail=True)
-    failed_here = _at_focus(left_out, args.focus)
+    failed_here = at_focus(left_out, args.focus)
     if failed_here is not None:
-        raise _Refused(f"{_failed_line(lens, failed_here)}: no current profile at this focus (--allow-failed shows it)")
-    model, w, h, note, loo, method = _interpolated(lens, used, args.focus, left_out)
+        raise _Refused(f"{failed_line(lens, failed_here)}: no current profile at this focus (--allow-failed shows it)")
+    interp = interpolate(lens, used, args.focus, left_out)
+    model, w, h, note, loo = interp.model, interp.width, interp.height, interp.note, interp.leave_one_out
     _say_used(lens, used, left_out)
     if args.json:
         out = {
             "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
             "focus": args.focus,
             "interpolated": {
-                "method": method,
+                "method": interp.method,
                 "note": note,
                 "from_profiles": [q.id for q in used],
                 "width": w,
@@ -407,7 +346,7 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
     if args.json:
         out = {
             "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
-            "profiles": [_profile_json(p, not _failed(p) if not detail else None) for p in profiles],
+            "profiles": [_profile_json(p, not is_failed(p) if not detail else None) for p in profiles],
             "left_out": [_profile_json(p, False) for p in left_out],
         }
         if detail:
@@ -438,11 +377,11 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
 # ------------------------------------------------------------------- export
 def _allowed(args, lens, p) -> None:
     """Refuse a profile that failed QA (exit 1) unless ``--allow-failed`` (then say so)."""
-    if not _failed(p):
+    if not is_failed(p):
         return
     if not args.allow_failed:
-        raise _Refused(f"{_failed_line(lens, p)}; not exported (--allow-failed exports it anyway)")
-    _warn(f"{_failed_line(lens, p)}: exported because of --allow-failed")
+        raise _Refused(f"{failed_line(lens, p)}; not exported (--allow-failed exports it anyway)")
+    _warn(f"{failed_line(lens, p)}: exported because of --allow-failed")
 
 
 @_with_store
@@ -450,7 +389,6 @@ def _export(args, store) -> int:
     from station.cli.export import export_profile, report, write_output
     from station.cli.inputs import InputError
     from station.export_source import FittingEdges
-    from station.profile import Merit, Profile, Provenance
 
     edges = None
     if args.id is not None:
@@ -459,42 +397,26 @@ def _export(args, store) -> int:
         profile = store.profile(args.id)
         if profile is None:
             raise _Fail(f"no profile #{args.id} in {store.path}")
-        _allowed(args, _lens_of(profile), profile)
+        _allowed(args, lens_row(profile), profile)
         what = f"profile #{profile.id}"
     else:
         if args.lens is None or args.focus is None:
             raise _Fail("name LENS and --focus F, or a stored profile with --id N")
         lens = store.find_lens(args.lens)
         newest = store.latest_by_focus(lens[0], allow_failed=True)
-        hit = _at_focus(newest, args.focus)
+        hit = at_focus(newest, args.focus)
         if hit is not None:
             _allowed(args, lens, hit)
             profile, what = hit, f"profile #{hit.id}"
         else:
-            used, left_out = _newest_and_current(store, lens[0], args.allow_failed)
-            model, w, h, note, loo, _method = _interpolated(lens, used, args.focus, left_out)
+            used, left_out = current_and_left_out(store, lens[0], args.allow_failed)
+            interp = interpolate(lens, used, args.focus, left_out)
             _say_used(lens, used, left_out)
-            nearest = min(used, key=lambda p: abs(p.focus - args.focus))
-            profile = Profile(
-                model=model,
-                width=w,
-                height=h,
-                merit=Merit(
-                    extra={
-                        "interpolation_leave_one_out": [
-                            {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in loo
-                        ]
-                    }
-                ),
-                lens=nearest.lens,
-                camera=nearest.camera,
-                optics=nearest.optics,
-                focus=args.focus,
-                provenance=Provenance(extra={"note": note, "from_profiles": [p.id for p in used]}),
-            )
+            profile = interp.profile()
             what = f"interpolated focus {args.focus:g}"
-            known = ", ".join(f"{p.focus:g}" for p in used)
-            edges = FittingEdges(None, f"none: the correction is interpolated between the focus settings {known}")
+            edges = FittingEdges(
+                None, f"none: the correction is interpolated between the focus settings {interp.known()}"
+            )
     try:
         ex, fig = export_profile(args, profile, what=what, edges=edges)
         write_output(args, ex)

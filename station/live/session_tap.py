@@ -118,7 +118,7 @@ def live_session_page(
     The page's server runs on a background thread (the session runs in the foreground);
     raises :class:`station.web.ServeError` (one line) when the address cannot be used.
     """
-    from station.cli.live import live_station
+    from station.live.devices import live_station
     from station.live.web import live_app
     from station.web.serve import start
 

@@ -3,6 +3,8 @@
 * :mod:`station.qa.verdicts` — PASS / FAIL of a profile against thresholds, typed checks;
 * :mod:`station.qa.judge` — judging every profile of a session (recorded in the
   manifest and the store) and the focus-interpolation error, after the executor;
+* :mod:`station.qa.targets` — what ``harp qa`` judges (a session's profiles or a stored lens's
+  newest ones), the measurements, thresholds and reference each is judged with, the report of it;
 * :mod:`station.qa.report` — the Markdown / HTML report with its plots;
 * :mod:`station.qa.overlay` — overlay PNGs of a measurement.
 """

@@ -45,8 +45,8 @@ def wait_for(cond: Callable[[], Any], timeout: float = 30.0, what: str = "condit
 @contextlib.contextmanager
 def running_live(config_path: Path, **kw: Any) -> Iterator[tuple[Any, Any, Any]]:
     """``(live_station, camera, simulated station)`` on the simulated devices, started."""
-    from station.cli.live import apply_session_settings, live_station
     from station.config import load_config
+    from station.live.devices import apply_session_settings, live_station
     from station.session.simulated import simulated_devices
 
     config = load_config(config_path)

@@ -1,0 +1,176 @@
+"""Which profile of a lens a command uses at a focus setting, and why.
+
+The **current** profile of a lens at a focus setting is its newest one, unless that one failed
+QA: a failed profile is never current, and an older passing one does not stand in for it (the
+store decides, :meth:`station.store.database.ProfileStore.latest_by_focus`). From that,
+``harp profile show`` and ``harp profile export`` (:mod:`station.cli.profile`) take
+
+* :func:`current_and_left_out` — the profiles used for a lens (its current ones, or with
+  ``allow_failed`` the newest of every focus setting) and the newest ones left out;
+* :func:`at_focus` — the profile of a list at one calibrated focus setting;
+* :func:`interpolate` — the correction at a focus setting between calibrated ones
+  (:class:`Interpolated`: the correction field interpolated, its leave-one-out error), and
+  :meth:`Interpolated.profile` — it as a :class:`~station.profile.Profile` to export;
+* :func:`is_failed`, :func:`verdict_text`, :func:`failed_checks`, :func:`failed_line` — what a
+  profile's verdict says, in the words every command prints.
+
+A lens is the store's lens row ``(id, maker, model, serial)`` (:data:`LensRow`; ``id`` is
+``None`` for the lens a profile names). Two errors, each one line: :class:`ChoiceError` (no
+profile to use; exit 2) and :class:`FailedQA` (the profile asked for failed QA; exit 1).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline.models.base import DistortionModel
+from station.profile import Merit, Profile, Provenance
+
+LensRow = tuple[int | None, str, str, str]
+"""A lens: ``(store id or None, maker, model, serial)``."""
+
+FOCUS_TOL = 1e-9
+"""Two focus settings closer than this are the same setting."""
+
+
+class ChoiceError(Exception):
+    """No profile to use (one line naming the lens and focus; exit 2)."""
+
+
+class FailedQA(Exception):
+    """The profile asked for failed QA and failed ones were not allowed (one line; exit 1)."""
+
+
+# ------------------------------------------------------------------ words
+def lens_row(p: Profile) -> LensRow:
+    """The lens a profile names (``id`` None), ``-`` for what it does not record."""
+    lens = p.lens
+    return (None, lens.maker, lens.model, lens.serial) if lens is not None else (None, "-", "-", "-")
+
+
+def lens_label(lens: LensRow) -> str:
+    """``lens Acme 50mm serial S1`` of a lens row."""
+    return f"lens {lens[1]} {lens[2]} serial {lens[3]}"
+
+
+def is_failed(p: Profile) -> bool:
+    """The profile was judged and failed QA (one not judged has not failed)."""
+    return p.qa is not None and not p.qa.passed
+
+
+def verdict_text(p: Profile) -> str:
+    """``PASS``, ``FAIL``, or empty when not judged."""
+    return "" if p.qa is None else p.qa.verdict
+
+
+def failed_checks(p: Profile) -> str:
+    """What failed in a profile's verdict, for one line: the failed checks as they were judged."""
+    v = p.qa
+    if v is None:
+        return "not judged"
+    texts = [c.text.rsplit(": ", 1)[0] for c in v.checks if c.passed is False]
+    return "; ".join(texts or list(v.reasons) or ["failed QA"])
+
+
+def failed_line(lens: LensRow, p: Profile) -> str:
+    """``lens … serial S, focus F: profile #N failed QA (the failed checks)``."""
+    assert p.focus is not None
+    return f"{lens_label(lens)}, focus {p.focus:g}: profile #{p.id} failed QA ({failed_checks(p)})"
+
+
+# ----------------------------------------------------------------- choice
+def current_and_left_out(store: Any, lens_id: int, allow_failed: bool) -> tuple[list[Profile], list[Profile]]:
+    """``(used, left_out)``: the profiles a command uses for a lens — its current ones (the store
+    decides which, :meth:`~station.store.database.ProfileStore.latest_by_focus`), or with
+    ``allow_failed`` the newest of every focus setting — and the newest ones left out (failed QA)."""
+    newest = store.latest_by_focus(lens_id, allow_failed=True)
+    if allow_failed:
+        return newest, []
+    current = {p.id for p in store.latest_by_focus(lens_id)}
+    return [p for p in newest if p.id in current], [p for p in newest if p.id not in current]
+
+
+def at_focus(profiles: Iterable[Profile], focus: float) -> Profile | None:
+    """The first of ``profiles`` at the focus setting ``focus``, or None."""
+    for p in profiles:
+        if p.focus is not None and math.isclose(p.focus, focus, rel_tol=0, abs_tol=FOCUS_TOL):
+            return p
+    return None
+
+
+# ---------------------------------------------------------- interpolation
+@dataclass(frozen=True)
+class Interpolated:
+    """The correction of a lens at an uncalibrated focus setting, interpolated between its profiles.
+
+    ``leave_one_out`` is :func:`pipeline.interpolate.leave_one_out_error` of the profiles
+    (empty with fewer than three); ``note`` says what was done, for the user.
+    """
+
+    focus: float
+    model: DistortionModel
+    width: int
+    height: int
+    method: str
+    note: str
+    leave_one_out: tuple[Any, ...]
+    from_profiles: tuple[Profile, ...]
+
+    def profile(self) -> Profile:
+        """The interpolated correction as a profile to export: the lens, camera and optics of the
+        nearest calibrated profile, the leave-one-out error in its merit, the note and the
+        profiles it comes from in its provenance."""
+        nearest = min(self.from_profiles, key=lambda p: abs((p.focus or 0.0) - self.focus))
+        loo = [{"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in self.leave_one_out]
+        return Profile(
+            model=self.model,
+            width=self.width,
+            height=self.height,
+            merit=Merit(extra={"interpolation_leave_one_out": loo}),
+            lens=nearest.lens,
+            camera=nearest.camera,
+            optics=nearest.optics,
+            focus=self.focus,
+            provenance=Provenance(extra={"note": self.note, "from_profiles": [p.id for p in self.from_profiles]}),
+        )
+
+    def known(self) -> str:
+        """The calibrated focus settings it comes from, ``0, 0.5, 1``."""
+        return ", ".join(f"{p.focus:g}" for p in self.from_profiles)
+
+
+def interpolate(
+    lens: LensRow, profiles: Sequence[Profile], focus: float, left_out: Sequence[Profile] = ()
+) -> Interpolated:
+    """The correction at an uncalibrated ``focus``, from the calibrated ``profiles`` around it.
+
+    Never extrapolates: a ``focus`` outside the calibrated ones is a :class:`ChoiceError`, or a
+    :class:`FailedQA` when the profiles ``left_out`` (failed QA) would have bracketed it (the line
+    names them). Profiles of different image sizes are a :class:`ChoiceError`.
+    """
+    from pipeline.interpolate import FocusInterpolator, leave_one_out_error
+
+    sizes = {(p.width, p.height) for p in profiles}
+    if len(sizes) > 1:
+        raise ChoiceError(f"{lens_label(lens)}: profiles of different image sizes; cannot interpolate")
+    models = {p.focus: p.model for p in profiles}
+    known = ", ".join(f"{p.focus:g}" for p in profiles) or "none"
+    if len(models) < 2 or not min(models) < focus < max(models):
+        msg = (
+            f"{lens_label(lens)}: no current profile at focus {focus:g} and it is not between "
+            f"two calibrated focus settings ({known}); no extrapolation"
+        )
+        every = [p.focus for p in (*profiles, *left_out) if p.focus is not None]
+        if left_out and len(every) >= 2 and min(every) < focus < max(every):
+            raise FailedQA(msg + "; left out: " + "; ".join(failed_line(lens, p) for p in left_out))
+        raise ChoiceError(msg)
+    ((w, h),) = sizes
+    interp = FocusInterpolator(models, w, h)
+    model = interp.at(focus)
+    loo = leave_one_out_error(models, w, h)
+    method = getattr(interp, "method", "auto")
+    note = f"focus {focus:g} is not calibrated: correction field interpolated ({method}) between the settings {known}"
+    return Interpolated(focus, model, w, h, method, note, tuple(loo), tuple(profiles))
