@@ -330,6 +330,17 @@ def _dust_spots(scene: HarpScene, width: int, height: int) -> tuple[DustSpot, ..
 
 
 # ---------------------------------------------------------------- render
+def ideal_grid(lens: DistortionModel, width: int, height: int) -> np.ndarray:
+    """The ideal coordinates ``lens.undistort_points`` of every pixel centre, shape ``(height, width, 2)``.
+
+    What :func:`render_harp` evaluates the scene at; pass it as ``ideal=`` to render many
+    frames through one lens without mapping every pixel again (``16 * width * height`` bytes).
+    """
+    gx, gy = np.meshgrid(np.arange(int(width), dtype=np.float64), np.arange(int(height), dtype=np.float64))
+    u = lens.undistort_points(np.stack([gx.ravel(), gy.ravel()], 1))
+    return np.ascontiguousarray(u, dtype=np.float64).reshape(int(height), int(width), 2)
+
+
 def render_harp(
     width: int,
     height: int,
@@ -343,6 +354,7 @@ def render_harp(
     electrons_per_level: float = 40.0,
     chunk_pixels: int = 1 << 20,
     threads: int | None = None,
+    ideal: np.ndarray | None = None,
 ) -> Rendered:
     """Render a harp image of ``width`` x ``height`` pixels with exact truth.
 
@@ -363,6 +375,11 @@ def render_harp(
     chunk_pixels : pixels evaluated at once (bounds memory on 24 MP images).
     threads : chunks rendered in parallel (default: CPU count); the result
         does not depend on it.
+    ideal : optional ``(height, width, 2)`` array of the ideal coordinates of
+        every pixel centre, :func:`ideal_grid` ``(lens, width, height)``: when
+        many frames are rendered through one lens (a simulated camera at one
+        focus), computing it once saves about half of each render. The image
+        is the same as without it.
 
     Returns
     -------
@@ -399,6 +416,10 @@ def render_harp(
     r2_corner = c[0] ** 2 + c[1] ** 2
     a_vig = ((1.0 - scene.vignetting) ** -0.5 - 1.0) / r2_corner
 
+    if ideal is not None and (ideal.shape != (height, width, 2) or identity):
+        raise ValueError(
+            f"ideal must be ideal_grid(lens, {width}, {height}) of a non-identity lens, got shape {ideal.shape}"
+        )
     image = np.empty((height, width), np.uint8 if bit_depth == 8 else np.uint16)
     xs = np.arange(width, dtype=np.float64)
     dust = _dust_spots(scene, width, height)
@@ -407,6 +428,9 @@ def render_harp(
         yy = np.arange(r0, r1, dtype=np.float64)
         if identity:
             q = (n[0] * xs)[None, :] + (n[1] * yy)[:, None]
+        elif ideal is not None:
+            q = ideal[r0:r1].reshape(-1, 2) @ n
+            q = q.reshape(r1 - r0, width)
         else:
             gx, gy = np.meshgrid(xs, yy)
             u = lens.undistort_points(np.stack([gx.ravel(), gy.ravel()], 1))

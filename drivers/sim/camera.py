@@ -85,8 +85,10 @@ from drivers.errors import DeviceDisconnected, DeviceTimeout
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
 from drivers.sim.world import SimWorld
-from pipeline.render import HarpScene, Rendered, render_harp
+from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
+IDEAL_CACHE_PIXELS = 6_000_000
+"""Largest sensor (pixels) whose lens map the camera keeps between frames (16 bytes per pixel: 96 MB)."""
 EXPOSURE_RANGE_US = (20.0, 1_000_000.0)
 GAIN_RANGE_DB = (0.0, 24.0)
 _FOCUS = Range(FOCUS_RANGE[0], FOCUS_RANGE[1], "", "simulated lens focus range")
@@ -202,6 +204,8 @@ class SimulatedCamera:
         self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
+        # the lens applied to every pixel, for the focus it was computed at (render saves half its time)
+        self._ideal: tuple[float, np.ndarray] | None = None
         self._bit_depth = int(bit_depth)
         self.seed = int(seed)
         self.noise_sigma = float(noise_sigma)
@@ -425,11 +429,13 @@ class SimulatedCamera:
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
+        lens = lens_for_focus(focus, w, h)
         return render_harp(
             w,
             h,
             scene,
-            lens=lens_for_focus(focus, w, h),
+            lens=lens,
+            ideal=self._ideal_grid(float(focus), lens),
             noise_sigma=self.noise_sigma,
             shot_noise=self.shot_noise,
             bit_depth=self._bit_depth,
@@ -437,6 +443,16 @@ class SimulatedCamera:
             exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
+
+    def _ideal_grid(self, focus: float, lens: Any) -> np.ndarray | None:
+        """The lens at ``focus`` applied to every pixel centre, kept for the next frame at that focus
+        (sensors up to :data:`IDEAL_CACHE_PIXELS`; larger ones map every frame anew)."""
+        w, h = self._size
+        if w * h > IDEAL_CACHE_PIXELS:
+            return None
+        if self._ideal is None or self._ideal[0] != focus:
+            self._ideal = (focus, ideal_grid(lens, w, h))
+        return self._ideal[1]
 
     def capture(self, timeout: float = 5.0) -> Frame:
         """Render one frame now; raises DeviceTimeout/DeviceDisconnected on injected faults."""

@@ -162,9 +162,13 @@ def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, fl
     return [(o, i, float(b), float(a)) for (o, i), b, a in zip(keys, before, after)]
 
 
-def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> Path:
-    """Per-edge RMS residual before / after correction, grouped by orientation (log scale)."""
-    rows = edge_residual_table(shots, model)
+def plot_edge_residuals(
+    rows: Sequence[tuple[int, int, float, float]], orientations_deg: Sequence[float], path, title: str = ""
+) -> Path:
+    """Per-edge RMS residual before / after correction, grouped by orientation (log scale).
+
+    ``rows``: :func:`edge_residual_table` of the shots; ``orientations_deg``: the stage angle of
+    each shot (the labels of the groups)."""
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     if rows:
         before = np.array([r[2] for r in rows])
@@ -182,7 +186,7 @@ def plot_edge_residuals(shots: Sequence[Shot], model, path, title: str = "") -> 
             ax.text(
                 idx.mean(),
                 1.02,
-                f"{shots[o].orientation_deg:g}°",
+                f"{orientations_deg[o]:g}°",
                 transform=ax.get_xaxis_transform(),
                 ha="center",
                 fontsize=8,
@@ -222,6 +226,66 @@ def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Pat
         loc="left",
     )
     return _save(fig, path)
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One PNG of the report: which drawing (a key of :data:`FIGURE_KINDS`), its arguments (the
+    PNG's path last)."""
+
+    kind: str
+    args: tuple
+    kwargs: dict
+
+    @property
+    def path(self) -> Path:
+        return Path(self.args[-1])
+
+
+def _write_overlay(image: np.ndarray, m: Any, path, title: str = "") -> Path:
+    from station.qa.overlay import write_overlay
+
+    return write_overlay(path, image, m, title=title)
+
+
+FIGURE_KINDS = {
+    "field": plot_field,
+    "residuals": plot_edge_residuals,
+    "uncertainty": plot_uncertainty,
+    "overlay": _write_overlay,
+}
+"""The drawings of the report, by :attr:`Figure.kind`."""
+
+PARALLEL_MIN_FIGURES = 6
+"""Fewer figures than this are drawn in this process (starting workers would cost more)."""
+
+
+def draw_figure(fig: Figure) -> Path:
+    """Draw one figure; returns its path."""
+    return FIGURE_KINDS[fig.kind](*fig.args, **fig.kwargs)
+
+
+def draw_figures(figures: Sequence[Figure], workers: int = 1) -> None:
+    """Draw ``figures``, in ``workers`` processes when there are enough of them.
+
+    The figures are independent PNGs (a session of 3 focus settings x 8 orientations has 33),
+    so on a machine with several cores they are drawn at once, in the processes of
+    :class:`station.session.workers.FitWorkers` (forkserver: the session process may still run
+    device threads). An error in any figure (a full disk) is raised here, as in this process."""
+    if workers <= 1 or len(figures) < PARALLEL_MIN_FIGURES:
+        for fig in figures:
+            draw_figure(fig)
+        return
+    from station.session.workers import FitWorkers
+
+    pool = FitWorkers(workers)
+    try:
+        # the slow plots first, then the overlays: the processes end at about the same time
+        order = sorted(figures, key=lambda f: f.kind == "overlay")
+        for _ in pool.map(draw_figure, order):
+            pass
+    finally:
+        pool.close()
 
 
 # ------------------------------------------------------------------ report
@@ -264,17 +328,18 @@ def write_report(
     notes: Sequence[str] = (),
     context: Sequence[tuple[str, str]] = (),
     warnings: Sequence[str] = (),
+    workers: int = 1,
 ) -> Path:
     """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path.
 
     ``context``: (what, value) rows shown under the verdict (date, station, software,
     configuration and its SHA-256, devices); ``warnings``: lines shown as warnings (a device
-    that reported another identity than the configuration's)."""
+    that reported another identity than the configuration's); ``workers``: processes that
+    draw the PNGs (:func:`draw_figures`)."""
     import datetime as _dt
 
-    from station.qa.overlay import write_overlay
-
     out = Path(out_dir)
+    figures: list[Figure] = []
     out.mkdir(parents=True, exist_ok=True)
     md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", "", DEFINITIONS, ""]
     written = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -334,15 +399,19 @@ def write_report(
         if e.verdict.reasons:
             md += ["Reasons for FAIL:", ""] + [f"- {r}" for r in e.verdict.reasons] + [""]
         name = f"field_f{i}.png"
-        plot_field(e.model, e.width, e.height, out / name, title=f"{title}, {label}")
+        figures.append(Figure("field", (e.model, e.width, e.height, out / name), {"title": f"{title}, {label}"}))
         md += ["### Distortion field", "", f"![distortion field]({name})", ""]
         if e.shots:
             name = f"residuals_f{i}.png"
-            plot_edge_residuals(e.shots, e.model, out / name, title=f"{title}, {label}")
+            rows = edge_residual_table(e.shots, e.model)
+            angles = [s.orientation_deg for s in e.shots]
+            figures.append(Figure("residuals", (rows, angles, out / name), {"title": f"{title}, {label}"}))
             md += ["### Residual per edge", "", f"![residual per edge]({name})", ""]
         if e.uncertainty is not None:
             name = f"uncertainty_f{i}.png"
-            plot_uncertainty(e.uncertainty, e.width, e.height, out / name, title=f"{title}, {label}")
+            figures.append(
+                Figure("uncertainty", (e.uncertainty, e.width, e.height, out / name), {"title": f"{title}, {label}"})
+            )
             md += ["### Field uncertainty", "", f"![field uncertainty]({name})", ""]
         elif e.uncertainty_note:
             md += ["### Field uncertainty", "", e.uncertainty_note, ""]
@@ -350,8 +419,12 @@ def write_report(
             md += ["### Overlays (edges coloured by their distance to their own line, before correction)", ""]
             for j, s in enumerate(e.shots):
                 name = f"overlay_f{i}_o{j}.png"
-                write_overlay(out / name, s.image, s.measurement, title=f"{label}, stage {s.orientation_deg:g} deg")
+                caption = f"{label}, stage {s.orientation_deg:g} deg"
+                # float32 holds an average of a few 8- or 16-bit frames for display (half the bytes to a worker)
+                image = np.asarray(s.image, np.float32)
+                figures.append(Figure("overlay", (image, s.measurement, out / name), {"title": caption}))
                 md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
+    draw_figures(figures, workers)
     path = out / REPORT_MD
     text = "\n".join(md) + "\n"
     path.write_text(text)
@@ -547,6 +620,7 @@ def write_session_report(
         interpolation=interpolation,
         context=context,
         warnings=warnings,
+        workers=session.config.pipeline.workers,
     )
 
 

@@ -200,6 +200,8 @@ class Executor:
         for sub in self.subscribers:
             sub.start(self.config, past, n_capture, n_process)
         try:
+            if any(isinstance(x, Fit) for x in listed):
+                self.workers.warm_up()  # the fit's processes start while the session captures
             try:
                 plan = plan_session(self.config, done)
                 step = next(plan, None)

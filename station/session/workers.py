@@ -9,6 +9,7 @@ cannot shut its pool down) and ignore Ctrl-C, which the session process handles.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
@@ -16,8 +17,9 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty"]
-"""Modules the forkserver imports once, so that each worker starts warm."""
+PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
+"""Modules the forkserver imports once, so that each worker starts warm (the fits' and the
+report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
 
 
 class FitWorkers:
@@ -26,11 +28,16 @@ class FitWorkers:
     def __init__(self, n: int) -> None:
         self.n = int(n)
         self._pool: Any = None
+        self._warming: threading.Thread | None = None
 
     @property
     def map(self) -> Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]]:
         if self.n <= 1:
             return map
+        self._join_warming()
+        return self._create().map
+
+    def _create(self) -> Any:
         if self._pool is None:
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor
@@ -41,10 +48,34 @@ class FitWorkers:
             self._pool = ProcessPoolExecutor(
                 max_workers=self.n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
             )
-        return self._pool.map
+        return self._pool
+
+    def warm_up(self) -> None:
+        """Start the pool's processes now, in the background (``n > 1``; a no-op otherwise).
+
+        The forkserver imports :data:`PRELOAD` (a second or two) and forks the workers while
+        the session captures, on the other core, instead of when the first fit needs them.
+        Returns at once; :attr:`map` and :meth:`close` wait for the start to end."""
+        if self.n <= 1 or self._pool is not None:
+            return
+        pool = self._create()  # the forkserver is started here, from this (main) thread
+
+        def spawn() -> None:  # blocks until the forkserver has imported PRELOAD and forked
+            with contextlib.suppress(Exception):  # a pool that cannot start fails again, visibly, in map
+                for f in [pool.submit(int) for _ in range(self.n)]:
+                    f.result()
+
+        self._warming = threading.Thread(target=spawn, name="harp-pool-warm-up", daemon=True)
+        self._warming.start()
+
+    def _join_warming(self) -> None:
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
 
     def close(self) -> None:
         """Shut the pool down (pending fits are cancelled)."""
+        self._join_warming()
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
             self._pool = None

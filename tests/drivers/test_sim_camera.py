@@ -253,3 +253,24 @@ def test_demo_lens_is_a_realistic_decentred_barrel_that_changes_with_focus():
     assert 2 < moves[0].mean() - moves[-1].mean() < 5  # "changing with focus by a few pixels"
     with pytest.raises(ValueError, match="focus"):
         lens_for_focus(1.2, 1280, 960)
+
+
+def test_frames_with_the_kept_lens_map_equal_frames_mapped_anew(monkeypatch):
+    """The camera keeps the lens map of the focus it renders at; across focus changes every frame
+    is the one a camera that maps every pixel anew for each frame renders."""
+    import drivers.sim.camera as sim_camera
+
+    def frames(cache_pixels: int) -> list[np.ndarray]:
+        monkeypatch.setattr(sim_camera, "IDEAL_CACHE_PIXELS", cache_pixels)
+        world = SimWorld(stage_deg=30.0)
+        out = []
+        with SimulatedCamera(world, **SMALL, seed=3) as cam:
+            for k, focus in enumerate((0.0, 1.0, 1.0, 0.0)):
+                cam.lock_focus(focus)
+                world.set_stage(30.0 + 10.0 * k)
+                out.append(cam.capture().image)
+        return out
+
+    kept, anew = frames(10**9), frames(0)
+    assert all(np.array_equal(a, b) for a, b in zip(kept, anew))
+    assert not np.array_equal(kept[0], kept[3])  # the poses differ: the comparison can fail

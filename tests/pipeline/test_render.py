@@ -18,6 +18,7 @@ from pipeline.render import (
     EdgeTruth,
     HarpScene,
     edge_peak_offset,
+    ideal_grid,
     render_harp,
     true_edge_curves,
     visible_edges,
@@ -226,3 +227,19 @@ def test_image_does_not_depend_on_chunking_or_threads():
     assert np.array_equal(one.image, many.image)
     with pytest.raises(ValueError, match="seed"):
         render_harp(W, H, scene, seed=-1)
+
+
+def test_a_precomputed_lens_map_gives_the_same_image():
+    lens = LENSES["decentred"]
+    grid = ideal_grid(lens, W, H)
+    # the map is the lens at every pixel centre (x = column, y = row)
+    assert grid.shape == (H, W, 2)
+    assert np.allclose(grid[7, 11], lens.undistort_points(np.array([[11.0, 7.0]]))[0], atol=1e-12)
+    for angle in (0.0, 52.0, 133.0):
+        scene = HarpScene(angle_deg=angle, dust=2, frame=True)
+        kw = dict(lens=lens, noise_sigma=1.5, seed=5, chunk_pixels=W * 16)
+        assert np.array_equal(render_harp(W, H, scene, **kw).image, render_harp(W, H, scene, ideal=grid, **kw).image)
+    with pytest.raises(ValueError, match="ideal"):
+        render_harp(W, H + 1, HarpScene(), lens=lens, ideal=grid)
+    with pytest.raises(ValueError, match="ideal"):
+        render_harp(W, H, HarpScene(), ideal=grid)  # the identity lens has no map to pass

@@ -115,3 +115,31 @@ def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(session, t
     md = (out / "report.md").read_text()
     assert "uncertainty_f0.png" in md and "not available" not in md
     png(out / "uncertainty_f0.png")
+
+
+def test_figures_drawn_in_worker_processes_are_the_ones_drawn_here(session, tmp_path):
+    from station.qa.report import PARALLEL_MIN_FIGURES, Figure, draw_figures
+
+    ((_, prof),) = session_profiles(session)
+    with SessionDir.open(session) as s:
+        shots = session_shots(s, 0, t=30)
+    rows = edge_residual_table(shots, prof.model)
+
+    def figures(out):
+        out.mkdir()
+        figs = [Figure("field", (prof.model, prof.width, prof.height, out / "field.png"), {"title": "t"})]
+        figs.append(Figure("residuals", (rows, [sh.orientation_deg for sh in shots], out / "res.png"), {}))
+        figs += [Figure("overlay", (sh.image, sh.measurement, out / f"o{j}.png"), {}) for j, sh in enumerate(shots)]
+        return figs
+
+    here, there = figures(tmp_path / "here"), figures(tmp_path / "there")
+    assert len(there) >= PARALLEL_MIN_FIGURES  # the workers are used
+    draw_figures(here, workers=1)
+    draw_figures(there, workers=2)
+    for a, b in zip(here, there):
+        assert np.array_equal(png(a.path), png(b.path))
+    # an error in a worker is raised here, as it would be in this process
+    broken = figures(tmp_path / "broken")
+    broken[-1] = Figure("overlay", (shots[0].image, shots[0].measurement, tmp_path / "missing" / "o.png"), {})
+    with pytest.raises(OSError, match="missing"):
+        draw_figures(broken, workers=2)
