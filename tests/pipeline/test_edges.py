@@ -308,9 +308,11 @@ def test_edges_near_the_image_border_stay_accurate():
     assert len(detect_edges(render_step((40, 40), 30, (20.2, 19.7)), sigma=0.4)) == 1
 
 
-def test_two_threads_give_exactly_the_points_of_one(monkeypatch):
-    """Large images are processed by bands of rows and chunks of points in two threads (issue 8 item 6):
-    the chains are bit for bit those of one thread (here on a small harp, the size limits lowered)."""
+def test_bands_threads_and_the_provisional_threshold_give_exactly_the_points_of_one_pass(monkeypatch):
+    """The dense stage runs by bands of rows, by two threads on large images, with a provisional
+    lower threshold from a few noise rows (issue 8 item 6): the chains are bit for bit those of one
+    band over the whole image with the exact threshold (here on a small harp, the limits lowered),
+    also when the provisional threshold comes out too high and the bands are searched again."""
     import pipeline.edges as edges
     from pipeline.models.radial import RadialModel
     from pipeline.render import HarpScene, render_harp
@@ -318,12 +320,17 @@ def test_two_threads_give_exactly_the_points_of_one(monkeypatch):
     lens = RadialModel.for_image(480, 360, k=(1.0, 0.0, 0.03))
     img = render_harp(480, 360, HarpScene(angle_deg=35.0, spacing_px=30.0), lens=lens, noise_sigma=1.5, seed=4).image
     monkeypatch.setattr(edges, "THREADS", 1)
+    monkeypatch.setattr(edges, "BAND_PX", 10**9)  # one band
+    monkeypatch.setattr(edges, "NOISE_BOUND_ROWS", 10**9)  # the exact threshold first
     one = detect_edges(img)
     monkeypatch.setattr(edges, "THREADS", 2)
     monkeypatch.setattr(edges, "PARALLEL_MIN_PX", 1)
-    monkeypatch.setattr(edges, "PARALLEL_MIN_POINTS", 1)
-    monkeypatch.setattr(edges, "_bands", lambda lo, hi, n: [(lo, lo + 97), (lo + 97, hi)] if n > 1 else [(lo, hi)])
-    two = detect_edges(img)
-    assert len(one) == len(two) >= 20
-    for a, b in zip(one, two):
+    monkeypatch.setattr(edges, "BAND_PX", 480 * 23)  # bands of 23 rows
+    monkeypatch.setattr(edges, "NOISE_BOUND_ROWS", 8)
+    banded = detect_edges(img)
+    monkeypatch.setattr(edges, "NOISE_BOUND_FACTOR", 3.0)  # provisional threshold above the exact one
+    again = detect_edges(img)
+    assert len(one) == len(banded) == len(again) >= 20
+    for a, b, c in zip(one, banded, again):
         assert np.array_equal(a.xy, b.xy) and np.array_equal(a.grad, b.grad)
+        assert np.array_equal(a.xy, c.xy) and np.array_equal(a.grad, c.grad)
