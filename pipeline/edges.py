@@ -60,6 +60,11 @@ Devernay [2]_ algorithm, fully vectorised with numpy/OpenCV:
    above ``low``) is kept when at least one of its points has modulus above
    ``high``.
 
+Steps 1-4 run by bands of rows (two threads on large images): each band's smoothed images,
+gradient and modulus are computed from the image rows it needs, into buffers that stay in the
+processor cache, bit for bit as on the whole image; only the points the NMS keeps leave a band.
+The gradient modulus is ``sqrt(gx**2 + gy**2)`` in float32, each operation rounded on its own.
+
 Automatic thresholds
 --------------------
 When ``low``/``high`` are ``None`` they are derived from the noise of the
@@ -474,6 +479,8 @@ NOISE_BOUND_ROWS = 24
 """Rows of the noise sample used for the provisional lower threshold (see :func:`_nms_points`)."""
 NOISE_BOUND_FACTOR = 0.8
 """Provisional lower threshold = this fraction of the noise measured on those rows."""
+LINK_BAND_PX = 4_000_000
+"""Pixels of one band of the chaining's label map (int32)."""
 
 
 def _threaded(fn: Callable[[_T], _R], parts: Sequence[_T]) -> list[_R]:
@@ -806,8 +813,6 @@ def _link(xy: Floats, grad: Floats, idx: NDArray[np.intp], shape: tuple[int, int
     """
     h, w = shape
     n = xy.shape[0]
-    lab = np.full(h * w, -1, np.int32)  # a memset: cheaper than scattering -1 around points
-    lab[idx] = np.arange(n, dtype=np.int32)
     ex, ey = xy[:, 0], xy[:, 1]
     gx, gy = grad[:, 0], grad[:, 1]
     fwd = np.full(n, -1, np.int64)
@@ -816,29 +821,42 @@ def _link(xy: Floats, grad: Floats, idx: NDArray[np.intp], shape: tuple[int, int
     bck_d = np.full(n, np.inf)
     ring1 = [(ox, oy) for ox, oy in _NEIGH if max(abs(ox), abs(oy)) == 1]
     ring2 = [(ox, oy) for ox, oy in _NEIGH if max(abs(ox), abs(oy)) == 2]
-    pts = np.arange(n)
-    for ring in (ring1, ring2):
-        if ring is ring2:
-            pts = np.nonzero((fwd < 0) | (bck < 0))[0]
-        base = idx[pts]
-        for ox, oy in ring:  # IPOL scan order; ties keep the first
-            nb = lab[base + (oy * w + ox)]
-            has = nb >= 0
-            e = pts[has]
-            t = nb[has].astype(np.int64)
-            dx = ex[t] - ex[e]
-            dy = ey[t] - ey[e]
-            cf = gy[e] * dx - gx[e] * dy  # side of the gradient of e w.r.t. e -> t
-            ct = gy[t] * dx - gx[t] * dy  # same for the gradient of t
-            d2 = dx * dx + dy * dy
-            comp = cf * ct > 0
-            f = comp & (cf > 0) & (d2 < fwd_d[e])
-            fwd_d[e[f]] = d2[f]
-            fwd[e[f]] = t[f]
-            b = comp & (cf < 0) & (d2 < bck_d[e])
-            bck_d[e[b]] = d2[b]
-            bck[e[b]] = t[b]
-    del lab
+    # label map of the points by bands of rows (with the 2 rows around each band), not of the whole image
+    rows = max(8, LINK_BAND_PX // max(w, 1))
+    lab_buf = np.empty(min(h, rows + 4) * w, np.int32)
+    for b0 in range(0, h, rows):
+        b1 = min(h, b0 + rows)
+        p0, p1 = (int(v) for v in np.searchsorted(idx, [b0 * w, b1 * w]))
+        if p0 == p1:
+            continue
+        l0, l1 = max(0, b0 - 2) * w, min(h, b1 + 2) * w
+        q0, q1 = (int(v) for v in np.searchsorted(idx, [l0, l1]))
+        lab = lab_buf[: l1 - l0]
+        lab.fill(-1)
+        lab[idx[q0:q1] - l0] = np.arange(q0, q1, dtype=np.int32)
+        pts = np.arange(p0, p1)
+        for ring in (ring1, ring2):
+            if ring is ring2:
+                pts = pts[(fwd[pts] < 0) | (bck[pts] < 0)]
+            base = idx[pts] - l0
+            for ox, oy in ring:  # IPOL scan order; ties keep the first
+                nb = lab[base + (oy * w + ox)]
+                has = nb >= 0
+                e = pts[has]
+                t = nb[has].astype(np.int64)
+                dx = ex[t] - ex[e]
+                dy = ey[t] - ey[e]
+                cf = gy[e] * dx - gx[e] * dy  # side of the gradient of e w.r.t. e -> t
+                ct = gy[t] * dx - gx[t] * dy  # same for the gradient of t
+                d2 = dx * dx + dy * dy
+                comp = cf * ct > 0
+                f = comp & (cf > 0) & (d2 < fwd_d[e])
+                fwd_d[e[f]] = d2[f]
+                fwd[e[f]] = t[f]
+                b = comp & (cf < 0) & (d2 < bck_d[e])
+                bck_d[e[b]] = d2[b]
+                bck[e[b]] = t[b]
+    del lab_buf
     nxt = np.full(n, -1, np.int64)
     prv = np.full(n, -1, np.int64)
     # 1. mutual choices: consistent by construction (one out-link, one in-link each)
@@ -1003,8 +1021,8 @@ def detect_edges(
     .. [3] J. Canny, "A computational approach to edge detection", IEEE TPAMI
        8(6), 1986.
     """
-    # chaining and hysteresis use the 3-point sub-pixel positions; the continuous
-    # refinement (< 0.1 px) is then computed for the kept points only
+    # chaining and hysteresis use the 3-point sub-pixel positions; the continuous ones
+    # (< 0.1 px away, computed in the bands) are those of the points kept
     pts, shape, high = _nms_points(image, sigma, low, high, interpolation)
     if pts.idx.shape[0] == 0:
         return []
