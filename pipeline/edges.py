@@ -296,15 +296,26 @@ def _refine_continuous(
     ok = np.ones(u.shape, bool)
     # Gaussian and derivatives on the taps -r-1..r+1: G(t + 1) at tap m is G(t) at tap m - 1
     me = np.arange(-r - 1, r + 2, dtype=np.float32)[None, :]
+    t, e0, e1, e2 = (np.empty((u.shape[0], nt + 2), np.float32) for _ in range(4))
+    dif = np.empty((u.shape[0], nt), np.float32)
+    k0, k1 = np.float32(-0.5) * inv, -inv
     for _ in range(n_iter):
-        t = u.astype(np.float32)[:, None] - me
-        e0 = np.exp(-0.5 * inv * t * t)
-        e1 = -inv * t * e0
-        e2 = (inv * t * t - np.float32(1.0)) * inv * e0
+        # e0 = exp(-0.5 inv t^2), e1 = -inv t e0, e2 = (inv t^2 - 1) inv e0, written in place
+        np.subtract(u.astype(np.float32)[:, None], me, out=t)
+        np.multiply(t, k0, out=e0)
+        e0 *= t
+        np.exp(e0, out=e0)
+        np.multiply(t, k1, out=e1)
+        e1 *= e0
+        np.multiply(t, inv, out=e2)
+        e2 *= t
+        e2 -= np.float32(1.0)
+        e2 *= inv
+        e2 *= e0
         # centre taps -r..r are columns 1..2r+1; G(t+1) -> columns 0..2r; G(t-1) -> 2..2r+2
-        a0 = np.einsum("ij,ij->i", s0, e0[:, :-2] - e0[:, 2:]) * 0.5  # along the axis
-        a1 = np.einsum("ij,ij->i", s0, e1[:, :-2] - e1[:, 2:]) * 0.5
-        a2 = np.einsum("ij,ij->i", s0, e2[:, :-2] - e2[:, 2:]) * 0.5
+        a0 = np.einsum("ij,ij->i", s0, np.subtract(e0[:, :-2], e0[:, 2:], out=dif)) * 0.5  # along the axis
+        a1 = np.einsum("ij,ij->i", s0, np.subtract(e1[:, :-2], e1[:, 2:], out=dif)) * 0.5
+        a2 = np.einsum("ij,ij->i", s0, np.subtract(e2[:, :-2], e2[:, 2:], out=dif)) * 0.5
         c0 = np.einsum("ij,ij->i", sc, e0[:, 1:-1])  # across the axis
         c1 = np.einsum("ij,ij->i", sc, e1[:, 1:-1])
         c2 = np.einsum("ij,ij->i", sc, e2[:, 1:-1])
@@ -915,19 +926,43 @@ def _path_components(cn: np.ndarray, cp: np.ndarray) -> tuple[int, np.ndarray]:
     return int(uniq.size), clab.astype(np.int64)
 
 
+def _rank_to_tail(cn: Ints) -> tuple[Ints, Ints]:
+    """List ranking of disjoint paths (``cn``: successor, -1 at a path's last node) by pointer
+    jumping with saturating pointers (Wyllie): each node's distance to its path's last node
+    and that node. Nodes on a cycle (no last node) end with a pointer to a node that has a
+    successor; their distances are then meaningless."""
+    m = cn.size
+    has = cn >= 0
+    ptr = np.where(has, cn, np.arange(m, dtype=np.int64))
+    dist = has.astype(np.int64)
+    active = np.flatnonzero(has)
+    for _ in range(max(1, int(np.ceil(np.log2(max(m, 2))))) + 1):
+        if not active.size:
+            break
+        p = ptr[active]
+        dist[active] += dist[p]
+        pp = ptr[p]
+        ptr[active] = pp
+        active = active[ptr[pp] != pp]
+    return dist, ptr
+
+
 def _order_chains(nxt: Ints, prv: Ints) -> tuple[Ints, NDArray[np.intp]]:
     """Label linked components and order their points along the links.
 
     Returns ``(labels, order)`` where ``order`` sorts points by (label,
-    position along the chain). Unlinked points are singleton components.
-    Cycles are opened at their smallest index.
+    position along the chain). Linked components are labelled ``0, 1, ...`` in the
+    order of their smallest point index, unlinked points (singleton components) after
+    them. Cycles are opened at their smallest index.
     """
     n = nxt.size
-    linked = np.nonzero((nxt >= 0) | (prv >= 0))[0]
+    linked = np.flatnonzero((nxt >= 0) | (prv >= 0))
     m = linked.size
     lab = np.empty(n, np.int64)
     single = np.ones(n, bool)
     single[linked] = False
+    pos = np.zeros(n, np.int64)
+    ncomp = 0
     if m:
         # compact numbering of the linked points
         comp_of = np.full(n, -1, np.int64)
@@ -936,31 +971,29 @@ def _order_chains(nxt: Ints, prv: Ints) -> tuple[Ints, NDArray[np.intp]]:
         cn[nxt[linked] < 0] = -1  # (index -1 picked the last entry)
         cp = comp_of[prv[linked]]
         cp[prv[linked] < 0] = -1
-        ncomp, clab = _path_components(cn, cp)
-        comp_has_head = np.zeros(ncomp, bool)
-        comp_has_head[clab[cp < 0]] = True
-        cyc = ~comp_has_head[clab]
-        if cyc.any():
-            first = np.full(ncomp, m, np.int64)
-            np.minimum.at(first, clab[cyc], np.nonzero(cyc)[0])
-            hd = first[first < m]
+        # paths: distance to the last point, which names the component
+        dist, tail = _rank_to_tail(cn)
+        cyc = np.flatnonzero(cn[tail] >= 0)
+        if cyc.size:  # cycles: opened at their smallest index, ranked again
+            loc = np.full(m, -1, np.int64)
+            loc[cyc] = np.arange(cyc.size)
+            ncyc, clab = _path_components(loc[cn[cyc]], loc[cp[cyc]])
+            first = np.full(ncyc, cyc.size, np.int64)
+            np.minimum.at(first, clab, np.arange(cyc.size))
+            hd = cyc[first]
             cn[cp[hd]] = -1
             cp[hd] = -1
-        # list ranking by pointer jumping: distance to the tail
-        dist = (cn >= 0).astype(np.int64)
-        ptr = cn.copy()
-        active = np.nonzero(ptr >= 0)[0]
-        while active.size:
-            p = ptr[active]
-            dist[active] += dist[p]
-            ptr[active] = ptr[p]
-            active = active[ptr[active] >= 0]
-        lab[linked] = clab
-        pos = np.zeros(n, np.int64)
+            sub = cn[cyc]
+            d2, t2 = _rank_to_tail(np.where(sub >= 0, loc[np.maximum(sub, 0)], -1))
+            dist[cyc] = d2
+            tail[cyc] = cyc[t2]
+        # label = rank of the component's smallest index
+        key = np.full(m, m, np.int64)
+        np.minimum.at(key, tail, np.arange(m))
+        uniq, clab = np.unique(key[tail], return_inverse=True)
+        ncomp = int(uniq.size)
+        lab[linked] = clab.ravel()
         pos[linked] = -dist
-    else:
-        ncomp = 0
-        pos = np.zeros(n, np.int64)
     lab[single] = ncomp + np.arange(int(single.sum()))
     order = np.lexsort((pos, lab))
     return lab, order

@@ -499,6 +499,7 @@ class _Pairing:
         self.ghat: Points = g / np.maximum(self.gmag, 1e-12)[:, None]
         self.pid: NDArray[np.int32] = np.concatenate(pid)
         lab = np.full((h, w), -1, np.int32)
+        flat = lab.ravel()  # flat indices: the same cells, cheaper than (row, column) pairs
         ij = np.rint(self.xy).astype(np.int32)
         inside = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
         src = np.nonzero(inside)[0].astype(np.int32)
@@ -506,16 +507,17 @@ class _Pairing:
         # piece points win over extra points: write the extras first
         order = np.argsort(self.pid[src] >= 0, kind="stable")
         src, ij = src[order], ij[order]
-        lab[ij[:, 1], ij[:, 0]] = src
+        x, y = ij[:, 0].astype(np.intp), ij[:, 1].astype(np.intp)
+        flat[y * w + x] = src
         # also fill the free 4-neighbours (pieces first), so that a ray cannot
         # slip between two diagonal pixels of an 8-connected edge
-        for sel in (self.pid[src] >= 0, self.pid[src] < 0):
-            for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                x2, y2 = ij[sel, 0] + dx, ij[sel, 1] + dy
-                ok = (x2 >= 0) & (x2 < w) & (y2 >= 0) & (y2 < h)
-                x2, y2, s2 = x2[ok], y2[ok], src[sel][ok]
-                free = lab[y2, x2] < 0
-                lab[y2[free], x2[free]] = s2[free]
+        for sel in (np.flatnonzero(self.pid[src] >= 0), np.flatnonzero(self.pid[src] < 0)):
+            sx, sy, ss = x[sel], y[sel], src[sel]
+            for dx, dy, ok in ((1, 0, sx < w - 1), (-1, 0, sx > 0), (0, 1, sy < h - 1), (0, -1, sy > 0)):
+                f2 = (sy[ok] + dy) * w + (sx[ok] + dx)
+                s2 = ss[ok]
+                free = flat[f2] < 0
+                flat[f2[free]] = s2[free]
         self.lab = lab
 
     def set_pieces(self, pieces: Sequence[_Piece], starts: Sequence[int] | None = None) -> None:
@@ -552,7 +554,7 @@ class _Pairing:
         yi = np.rint(p0[:, 1:2] + sign * g0[:, 1:2] * steps[None, :]).astype(np.int32)
         ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
         hit = np.full(xi.shape, -1, np.int32)
-        hit[ok] = self.lab[yi[ok], xi[ok]]
+        hit[ok] = self.lab.ravel()[yi[ok].astype(np.intp) * w + xi[ok]]
         valid = hit >= 0
         hs = np.where(valid, hit, 0)
         valid &= (self.pid[hs] != self.pid[sample][:, None]) & (self.pid[hs] >= 0)
@@ -582,11 +584,12 @@ class _Pairing:
         own = self.pid[idx]
         gmin = CROWD_MIN_CONTRAST * self.gmag[idx]
         out = np.zeros(len(idx), bool)
+        lab = self.lab.ravel()
         for k in steps:  # a few steps; vectorised over all points
             xi = np.rint(p0[:, 0] + g0[:, 0] * k).astype(np.int32)
             yi = np.rint(p0[:, 1] + g0[:, 1] * k).astype(np.int32)
             ok = np.nonzero((xi >= 0) & (xi < w) & (yi >= 0) & (yi < h) & ~out)[0]
-            hit = self.lab[yi[ok], xi[ok]]
+            hit = lab[yi[ok].astype(np.intp) * w + xi[ok]]
             j = np.maximum(hit, 0)
             out[ok] |= (hit >= 0) & (self.pid[j] != own[ok]) & (self.gmag[j] >= gmin[ok])
         res: Mask = np.repeat(out, CROWD_STRIDE)[: self.n]
