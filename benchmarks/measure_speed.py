@@ -8,7 +8,11 @@ Per image, the median over ``--repeat`` runs of:
 
 * ``harp measure --json IMAGE`` as a **whole process** (``python -m station.cli``, started
   with ``subprocess``: interpreter start-up, imports, image decode, measurement, JSON),
-  with its user + system CPU time (``resource.getrusage`` of the children);
+  with its user and system CPU time (``os.wait4``), Python's bytecode cache in use as after
+  a first run (in a temporary ``PYTHONPYCACHEPREFIX``, written by the uncounted warm-up
+  run), and again without any
+  bytecode cache (``PYTHONDONTWRITEBYTECODE=1``, as in the development sandbox: every
+  project module compiled at each start);
 * in process: the PNG/PGM decode (``station.imageio.read_grey``) and
   :func:`pipeline.measure.measure_image` split into its stages: sub-pixel edges
   (``detect_edges``), grouping (``group_string_edges``), per-edge smoothing +
@@ -28,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import shutil
 import subprocess
 import sys
@@ -62,17 +65,29 @@ def _median_time(fn, repeat):
     return float(np.median(ts))
 
 
-def whole_process(path: Path, repeat: int) -> tuple[float, float]:
-    """Median wall and CPU (user + sys) seconds of ``harp measure --json path`` as a process."""
-    walls, cpus = [], []
-    for _ in range(repeat + 1):  # the first run warms the file cache, not counted
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+def whole_process(path: Path, repeat: int, pycache: Path | None) -> tuple[float, float, float]:
+    """Median wall, user and system seconds of ``harp measure --json path`` as a process; with
+    ``pycache`` the bytecode cache lives there, else none is written (``PYTHONDONTWRITEBYTECODE``)."""
+    env = dict(os.environ)
+    if pycache is None:
+        env["PYTHONDONTWRITEBYTECODE"] = "1"
+        env.pop("PYTHONPYCACHEPREFIX", None)
+    else:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(pycache)
+    walls, users, syss = [], [], []
+    for _ in range(repeat + 1):  # the first run warms the file (and bytecode) cache, not counted
         t0 = time.perf_counter()
-        subprocess.run([*HARP, "measure", "--json", str(path)], check=True, stdout=subprocess.DEVNULL, cwd=ROOT)
+        proc = subprocess.Popen([*HARP, "measure", "--json", str(path)], stdout=subprocess.DEVNULL, cwd=ROOT, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)  # this child's own CPU time
         walls.append(time.perf_counter() - t0)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpus.append((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
-    return float(np.median(walls[1:])), float(np.median(cpus[1:]))
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            raise SystemExit(f"harp measure {path} exited with {proc.returncode}")
+        users.append(usage.ru_utime)
+        syss.append(usage.ru_stime)
+    med = [float(np.median(v[1:])) for v in (walls, users, syss)]
+    return med[0], med[1], med[2]
 
 
 def unneeded_imports(path: Path) -> str:
@@ -86,7 +101,7 @@ def unneeded_imports(path: Path) -> str:
     return out.stdout.strip().splitlines()[-1]
 
 
-def bench(name, path, repeat):
+def bench(name, path, repeat, pycache):
     img = read_grey(path)
     h, w = img.shape
     stage = {}
@@ -101,10 +116,13 @@ def bench(name, path, repeat):
     canny = _median_time(
         lambda: cv2.Canny(img if img.dtype == np.uint8 else (img >> 8).astype(np.uint8), 20, 40), repeat
     )
-    proc_wall, proc_cpu = whole_process(path, repeat)
+    proc_wall, proc_user, proc_sys = whole_process(path, repeat, pycache)
+    raw_wall, raw_user, raw_sys = whole_process(path, repeat, None)
     m = measure_image(img)
     return (
-        f"| {name} | {w}x{h} ({w * h / 1e6:.1f} MP) | {m.n_lines} | {proc_wall:.2f} | {proc_cpu:.2f} | "
+        f"| {name} | {w}x{h} ({w * h / 1e6:.1f} MP) | {m.n_lines} | {proc_wall:.2f} | "
+        f"{proc_user + proc_sys:.2f} ({proc_user:.2f} + {proc_sys:.2f}) | {raw_wall:.2f} | "
+        f"{raw_user + raw_sys:.2f} | "
         f"{stage['decode']:.2f} | {total:.2f} | {stage['edges']:.2f} | {stage['group']:.2f} | "
         f"{stage['per-edge']:.2f} | {canny:.3f} | {unneeded_imports(path)} |"
     )
@@ -142,13 +160,14 @@ def main(argv=None):
     )
     print()
     print(
-        "| image | size | edges found | `harp measure` whole process | its CPU s | decode | measure_image | "
+        "| image | size | edges found | `harp measure` whole process | its CPU s (user + sys) | "
+        "same, no bytecode cache | its CPU s | decode | measure_image | "
         "- sub-pixel edges | - grouping | - per-edge smoothing+straightness | cv2.Canny | scipy modules imported |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     try:
         for name, path in cases:
-            print(bench(name, path, args.repeat), flush=True)
+            print(bench(name, path, args.repeat, tmp / "pycache"), flush=True)
         if args.profile and not args.no_24mp:
             import cProfile
             import pstats
