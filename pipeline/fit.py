@@ -100,6 +100,9 @@ class Parametrisation(Protocol):
     def model(self, th: np.ndarray) -> DistortionModel: ...
     def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]: ...
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]: ...
+    def project(
+        self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def make_parametrisation(
@@ -132,26 +135,103 @@ def make_parametrisation(
 
 
 # ------------------------------------------------------------- objective
+def _projected(
+    param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """``(r, a, P, T)``: the residuals, the positions along the lines and (``jac``) the Jacobian of
+    the corrected points projected on each point's line normal (``P``) and direction (``T``)."""
+    u, _ = param.evaluate(edges.xy, th, jac=False)
+    r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts)
+    if not jac:
+        return r, a, None, None
+    p_mat, t_mat = param.project(edges.xy, th, nrm, tan)
+    return r, a, p_mat, t_mat
+
+
+def _line_turn(
+    p_mat: np.ndarray, t_mat: np.ndarray, r: np.ndarray, a: np.ndarray, st: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per edge: ``(sum of P, d phi / d theta)``, the rotation of its TLS line (Golub-Pereyra).
+
+    ``d phi = sum_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i (a_i^2 - r_i^2)``; the
+    means drop out because ``sum a = sum r = 0`` on each edge (distances from its centroid)."""
+    sum_p = np.add.reduceat(p_mat, st, axis=0)
+    num = np.add.reduceat(a[:, None] * p_mat + r[:, None] * t_mat, st, axis=0)
+    den = np.add.reduceat(a * a - r * r, st)
+    return sum_p, num / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]
+
+
 def residuals_and_jacobian(
     param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool = True
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Signed distances of the corrected points to their own edge's TLS line, and (``jac``)
-    their analytic Jacobian in ``theta``, the line's motion included (variable projection)."""
-    u, du = param.evaluate(edges.xy, th, jac)
-    st, ct = edges.starts, edges.counts
-    r, a, nrm, tan, _ = tls(u, st, ct)
-    if not jac or du is None:
+    their analytic Jacobian in ``theta``, the line's motion included (variable projection):
+    ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`)."""
+    r, a, p_mat, t_mat = _projected(param, edges, th, jac)
+    if p_mat is None or t_mat is None:
         return r, None
-    # the line's normal and tangent are constant along an edge: project first, then centre per edge
-    # (n . (du - mean du) = n . du - mean(n . du)), on (N, n) arrays instead of (N, 2, n)
-    n_d = nrm[:, 0, None] * du[:, 0, :] + nrm[:, 1, None] * du[:, 1, :]
-    t_d = tan[:, 0, None] * du[:, 0, :] + tan[:, 1, None] * du[:, 1, :]
-    n_d -= np.repeat(np.add.reduceat(n_d, st, axis=0) / ct[:, None], ct, axis=0)
-    t_d -= np.repeat(np.add.reduceat(t_d, st, axis=0) / ct[:, None], ct, axis=0)
-    num = np.add.reduceat(a[:, None] * n_d + r[:, None] * t_d, st, axis=0)
+    st, ct = edges.starts, edges.counts
+    sum_p, dphi = _line_turn(p_mat, t_mat, r, a, st)
+    j = p_mat - np.repeat(sum_p / ct[:, None], ct, axis=0)
+    j -= np.repeat(dphi, ct, axis=0) * a[:, None]
+    return r, j
+
+
+def normal_equations(
+    param: Parametrisation,
+    edges: EdgeSet,
+    th: np.ndarray,
+    groups: Sequence[int] | None = None,
+    edge_weights: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``J^T W J``, ``J^T W r`` and ``r^T W r`` of :func:`residuals_and_jacobian` at ``th`` without
+    forming ``J`` (``W``: the per-edge ``edge_weights``, default 1), per group of edges: ``groups``
+    are the edge indices where each group starts (the edges of a group contiguous; default one
+    group), the results stacked ``(G, n, n)``, ``(G, n)``, ``(G,)``.
+
+    With ``Pc`` the per-edge centred ``P``, ``J = Pc - a dphi``, so per edge
+    ``J^T J = P^T P - n mean P mean P^T - S dphi^T - dphi S^T + (sum a^2) dphi dphi^T`` with
+    ``S = sum a Pc`` and ``J^T r = P^T r - mean P sum r - dphi sum a r`` (the last two terms zero to
+    rounding). A Gauss-Newton or Levenberg-Marquardt step needs only these (``n x n``), not the
+    ``N x n`` Jacobian."""
+    r, a, p_mat, t_mat = _projected(param, edges, th, True)
+    assert p_mat is not None and t_mat is not None
+    st, ct = edges.starts, edges.counts
+    sum_p = np.add.reduceat(p_mat, st, axis=0)
+    sum_ap = np.add.reduceat(a[:, None] * p_mat, st, axis=0)
+    sum_rt = np.add.reduceat(r[:, None] * t_mat, st, axis=0)
     den = np.add.reduceat(a * a - r * r, st)
-    dphi = num / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]
-    return r, n_d - np.repeat(dphi, ct, axis=0) * a[:, None]
+    dphi = (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]  # as _line_turn
+    mean_p = sum_p / ct[:, None]
+    sum_a = np.add.reduceat(a, st)
+    sum_r = np.add.reduceat(r, st)
+    sum_aa = np.add.reduceat(a * a, st)
+    sum_ar = np.add.reduceat(a * r, st)
+    s_ap = sum_ap - mean_p * sum_a[:, None]  # sum a Pc
+    w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    w_pt = None if edge_weights is None else np.repeat(w, ct)
+    bounds = [0] if groups is None else [int(g) for g in groups]
+    bounds.append(edges.n_edges)
+    n = p_mat.shape[1]
+    ata = np.empty((len(bounds) - 1, n, n))
+    atb = np.empty((len(bounds) - 1, n))
+    ss = np.empty(len(bounds) - 1)
+    for g, (e0, e1) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        p0 = int(st[e0]) if e0 < edges.n_edges else len(r)
+        p1 = int(st[e1]) if e1 < edges.n_edges else len(r)
+        pg, rg = p_mat[p0:p1], r[p0:p1]
+        if w_pt is not None:
+            rw = rg * w_pt[p0:p1]
+            pw = pg * w_pt[p0:p1, None]
+        else:
+            rw, pw = rg, pg
+        we = w[e0:e1]
+        mp, dp, sp = mean_p[e0:e1], dphi[e0:e1], s_ap[e0:e1]
+        cross = (sp * we[:, None]).T @ dp
+        ata[g] = pw.T @ pg - (mp.T * (ct[e0:e1] * we)) @ mp - cross - cross.T + (dp.T * (sum_aa[e0:e1] * we)) @ dp
+        atb[g] = pw.T @ rg - mp.T @ (sum_r[e0:e1] * we) - dp.T @ (sum_ar[e0:e1] * we)
+        ss[g] = rw @ rg
+    return ata, atb, ss
 
 
 def _solve(
@@ -165,16 +245,28 @@ def _solve(
     n_pts = len(edges.xy)
     sw = None if edge_weights is None else np.repeat(np.sqrt(edge_weights), edges.counts)
 
+    last: dict[str, tuple[bytes, np.ndarray]] = {}  # the optimiser asks twice for some points: once is enough
+
     def fun(th: np.ndarray) -> np.ndarray:
+        key = th.tobytes()
+        if "fun" in last and last["fun"][0] == key:
+            return last["fun"][1].copy()
         r, _ = residuals_and_jacobian(param, edges, th, jac=False)
         g, _ = param.regularisation(th, n_pts)
-        return np.concatenate([r if sw is None else r * sw, g])
+        out = np.concatenate([r if sw is None else r * sw, g])
+        last["fun"] = (key, out)
+        return out.copy()
 
     def jac(th: np.ndarray) -> np.ndarray:
+        key = th.tobytes()
+        if "jac" in last and last["jac"][0] == key:
+            return last["jac"][1].copy()
         _, j = residuals_and_jacobian(param, edges, th, jac=True)
         assert j is not None
         _, jg = param.regularisation(th, n_pts)
-        return np.vstack([j if sw is None else j * sw[:, None], jg])
+        out = np.vstack([j if sw is None else j * sw[:, None], jg])
+        last["jac"] = (key, out)
+        return out.copy()
 
     return least_squares(
         fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12

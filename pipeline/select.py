@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.edgeset import FitResult, collect, held_out_residuals
-from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, residuals_and_jacobian
+from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
 
@@ -222,12 +222,15 @@ def _cv_candidate(job: tuple[FitSpec, list[list[np.ndarray]], float, tuple[Any, 
             f">= {np.sqrt(stop_factor):g}x the CV d {np.sqrt(ref_mse):.4g} px of {FALLBACK.label}"
         )
         todo = []
+    start: _FoldStart | None = None
+    if full and todo:
+        start = _FoldStart(cand, lines_per_image, outliers, folds, width, height, full.model, fit_kw)
     for k, (train, held) in enumerate(todo):
         model: DistortionModel | None = None
         fd = float("nan")
         if full:
             kept = [[p for p in shot if id(p) not in outliers] for shot in train]
-            step = _gauss_newton_fold(cand, kept, width, height, full.model, fit_kw)
+            step = _gauss_newton_fold(cand, kept, width, height, full.model, fit_kw, start.fold(k) if start else None)
             if step is not None:
                 model, fd = step
             else:  # Gauss-Newton did not converge: the final least-squares pass from the full fit
@@ -288,6 +291,56 @@ GN_RTOL = 1e-10
 """A fold has converged when a step lowers its cost by less than this fraction."""
 
 
+class _FoldStart:
+    """The first Gauss-Newton step of every leave-one-shot-out fold, from one evaluation.
+
+    Every fold starts from the fit on all shots, ``theta0``, and its training edges are all kept
+    edges but one shot's; the edges' terms of the normal equations are independent, so they are
+    computed once per shot at ``theta0`` (:func:`pipeline.fit.normal_equations`) and each fold's
+    first step sums the other shots' (``folds='images'`` only; otherwise :meth:`fold` is None)."""
+
+    def __init__(
+        self,
+        cand: FitSpec,
+        lines_per_image: Sequence[Sequence[np.ndarray]],
+        outliers: set[int],
+        folds: str,
+        width: int,
+        height: int,
+        start: DistortionModel,
+        fit_kw: dict[str, Any],
+    ) -> None:
+        self.blocks: dict[int, tuple[np.ndarray, np.ndarray, float]] | None = None
+        if folds != "images":
+            return
+        kept = [[p for p in shot if id(p) not in outliers] for shot in lines_per_image]
+        edges, _ = collect(kept, width, height)
+        if not edges:
+            return
+        param = make_parametrisation(width, height, cand, w_center=fit_kw.get("w_center"), ridge=fit_kw.get("ridge"))
+        self.theta0 = param.theta0(start)
+        first = np.flatnonzero(np.diff(edges.image, prepend=-1))  # edges are listed shot by shot
+        with np.errstate(all="ignore"):
+            ata, atb, ss = normal_equations(param, edges, self.theta0, [int(e) for e in first])
+        if not (np.all(np.isfinite(ata)) and np.all(np.isfinite(atb))):
+            return
+        self.blocks = {int(edges.image[e]): (ata[g], atb[g], float(ss[g])) for g, e in enumerate(first)}
+
+    def fold(self, held: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+        """``(theta0, sum J^T J, sum J^T r, sum r^2)`` over the shots but ``held`` (no regularisation)."""
+        if self.blocks is None:
+            return None
+        parts = [v for k, v in self.blocks.items() if k != held]
+        if not parts:
+            return None
+        return (
+            self.theta0,
+            np.sum([p[0] for p in parts], axis=0),
+            np.sum([p[1] for p in parts], axis=0),
+            float(sum(p[2] for p in parts)),
+        )
+
+
 def _gauss_newton_fold(
     cand: FitSpec,
     kept: Sequence[Sequence[np.ndarray]],
@@ -295,42 +348,60 @@ def _gauss_newton_fold(
     height: int,
     start: DistortionModel,
     fit_kw: dict[str, Any],
+    first: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
 ) -> tuple[DistortionModel, float] | None:
     """The least-squares fit of ``kept`` (the fold's training edges, the full fit's outliers left out)
     by Gauss-Newton steps from ``start`` (the fit on all shots), the objective of
     :func:`pipeline.fit.fit_distortion`'s final pass: ``(model, its d)``, or None when a step does
-    not lower the cost or it has not converged (the caller then runs that pass itself)."""
+    not lower the cost or it has not converged (the caller then runs that pass itself).
+
+    Each step solves the normal equations (:func:`pipeline.fit.normal_equations`); a trial point
+    is first evaluated without its Jacobian (the last one, converged, needs none); ``first``: the
+    normal equations at the start, already summed (:class:`_FoldStart`)."""
     edges, _ = collect(kept, width, height)
     if not edges or edges.n_edges < MIN_EDGES:
         return None
     param = make_parametrisation(width, height, cand, w_center=fit_kw.get("w_center"), ridge=fit_kw.get("ridge"))
-    th = param.theta0(start)
     n_pts = len(edges.xy)
 
-    def evaluate(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None:
-        r, jac = residuals_and_jacobian(param, edges, t)
+    def regularised(t: np.ndarray, ata: np.ndarray, atb: np.ndarray, ss: float) -> tuple[np.ndarray, np.ndarray, float]:
         g, jg = param.regularisation(t, n_pts)
-        if jac is None or not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):
-            return None
-        return r, jac, g, jg, float(r @ r + g @ g)
+        return ata + jg.T @ jg, atb + jg.T @ g, ss + float(g @ g)
 
-    cur = evaluate(th)
-    if cur is None:
-        return None
+    def equations(t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        ata, atb, _ = normal_equations(param, edges, t)
+        a, b, _ = regularised(t, ata[0], atb[0], 0.0)
+        return (a, b) if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else None
+
+    if first is not None:
+        th = first[0]
+        a, b, cost = regularised(th, first[1], first[2], first[3])
+    else:
+        th = param.theta0(start)
+        r0, _ = residuals_and_jacobian(param, edges, th, jac=False)
+        eq = equations(th)
+        if eq is None or not np.all(np.isfinite(r0)):
+            return None
+        g0, _ = param.regularisation(th, n_pts)
+        (a, b), cost = eq, float(r0 @ r0 + g0 @ g0)
     for _ in range(GN_MAX_STEPS):
-        r, jac, g, jg, cost = cur
-        a = jac.T @ jac + jg.T @ jg
-        b = jac.T @ r + jg.T @ g
         try:
             th_new = th - np.linalg.solve(a, b)
         except np.linalg.LinAlgError:
             return None
-        new = evaluate(th_new)
-        if new is None or new[4] > cost * (1.0 + 1e-12):
+        r, _ = residuals_and_jacobian(param, edges, th_new, jac=False)
+        g, _ = param.regularisation(th_new, n_pts)
+        if not np.all(np.isfinite(r)):
             return None
-        th, cur = th_new, new
-        if cost - new[4] <= GN_RTOL * cost:
-            return param.model(th), float(np.sqrt(np.mean(new[0] ** 2)))
+        new_cost = float(r @ r + g @ g)
+        if not np.isfinite(new_cost) or new_cost > cost * (1.0 + 1e-12):
+            return None
+        if cost - new_cost <= GN_RTOL * cost:
+            return param.model(th_new), float(np.sqrt(np.mean(r**2)))
+        eq = equations(th_new)
+        if eq is None:
+            return None
+        (a, b), th, cost = eq, th_new, new_cost
     return None
 
 

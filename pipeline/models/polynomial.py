@@ -295,6 +295,16 @@ class PolynomialParametrisation:
             return u, None
         return u, d
 
+    def project(
+        self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The Jacobian of the corrected points projected on the unit vectors ``nrm`` and ``tan``
+        (per point, ``(N, 2)``): ``(P, T)``, each ``(N, n)``, ``P[i] = nrm[i] . du_i/dtheta``."""
+        _, d = self._basis(xy)
+        p_mat = nrm[:, 0, None] * d[:, 0, :] + nrm[:, 1, None] * d[:, 1, :]
+        t_mat = tan[:, 0, None] * d[:, 0, :] + tan[:, 1, None] * d[:, 1, :]
+        return p_mat, t_mat
+
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
         """Ridge residuals and their Jacobian rows."""
         if self.ridge <= 0:

@@ -271,50 +271,125 @@ class RadialParametrisation:
             division=div,
         )
 
-    def _linear_part(self, xy: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Corrected points and the Jacobian columns of ``theta[2:]`` (x and y parts)."""
+    def _offsets(self, xy: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised offsets ``(xi, eta)`` of ``xy`` from the centre of ``theta``."""
         c = self.c0 + self.s * th[:2]
-        xi = (xy[:, 0] - c[0]) / self.s
-        eta = (xy[:, 1] - c[1]) / self.s
-        powers, extra = radial_basis(xi, eta, self.degree, self.tangential, self.prism)
-        # k0 = 1 is fixed: the columns of k1..kN, then the extra terms
-        cols_k = [pw for pw in powers[1:]]
-        if not self.division:
-            bx = np.stack([pw * xi for pw in cols_k] + [t[0] for t in extra], axis=1)
-            by = np.stack([pw * eta for pw in cols_k] + [t[1] for t in extra], axis=1)
-            lin = th[2:]
-            u = np.stack([c[0] + self.s * (xi + bx @ lin), c[1] + self.s * (eta + by @ lin)], axis=1)
-            return u, self.s * bx, self.s * by
-        nk, ne = self.degree, len(extra)
-        num = 1.0 + sum((th[2 + m] * pw for m, pw in enumerate(cols_k)), np.zeros_like(xi))
-        even = division_basis(xi * xi + eta * eta, self.division)
-        dco = th[2 + nk + 2 * self.tangential + 4 * self.prism :]
-        den = 1.0 + sum((dj * ev for dj, ev in zip(dco, even)), np.zeros_like(xi))
-        f = num / den
-        ext = th[2 + nk : 2 + nk + ne]
-        ex = sum((cc * t[0] for cc, t in zip(ext, extra)), np.zeros_like(xi))
-        ey = sum((cc * t[1] for cc, t in zip(ext, extra)), np.zeros_like(xi))
-        u = np.stack([c[0] + self.s * (f * xi + ex), c[1] + self.s * (f * eta + ey)], axis=1)
-        bx = np.stack(
-            [pw * xi / den for pw in cols_k] + [t[0] for t in extra] + [-f * ev * xi / den for ev in even], axis=1
-        )
-        by = np.stack(
-            [pw * eta / den for pw in cols_k] + [t[1] for t in extra] + [-f * ev * eta / den for ev in even], axis=1
-        )
-        return u, self.s * bx, self.s * by
+        return (xy[:, 0] - c[0]) / self.s, (xy[:, 1] - c[1]) / self.s
+
+    def _radial_factor(
+        self, xi: np.ndarray, eta: np.ndarray, th: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray | None, list[np.ndarray]]:
+        """``(f, powers (N, degree) of rho^1..rho^N, extra terms, denominator or None, rho^2j terms)``."""
+        rho2 = xi * xi + eta * eta
+        rho = np.sqrt(rho2)
+        nk = self.degree
+        w = np.empty((len(xi), nk))
+        if nk:
+            w[:, 0] = rho
+            for m in range(1, nk):
+                np.multiply(w[:, m - 1], rho, out=w[:, m])
+        f = 1.0 + w @ th[2 : 2 + nk]
+        extra: list[tuple[np.ndarray, np.ndarray]] = []
+        if self.tangential:
+            xe2 = 2.0 * xi * eta
+            extra += [(xe2, rho2 + 2.0 * eta * eta), (rho2 + 2.0 * xi * xi, xe2)]
+        if self.prism:
+            z = np.zeros_like(rho)
+            rho4 = rho2 * rho2
+            extra += [(rho2, z), (rho4, z), (z, rho2), (z, rho4)]
+        den = None
+        even: list[np.ndarray] = []
+        if self.division:
+            even = division_basis(rho2, self.division)
+            den = 1.0 + sum((dj * ev for dj, ev in zip(th[self.n - self.division :], even)), np.zeros_like(xi))
+            f = f / den
+        return f, w, extra, den, even
+
+    def _corrected(
+        self, xi: np.ndarray, eta: np.ndarray, th: np.ndarray, f: np.ndarray, extra: list[tuple[np.ndarray, np.ndarray]]
+    ) -> np.ndarray:
+        c = self.c0 + self.s * th[:2]
+        gx, gy = f * xi, f * eta
+        i = 2 + self.degree
+        for cc, (tx, ty) in zip(th[i : i + len(extra)], extra, strict=True):
+            if cc:
+                gx += cc * tx
+                gy += cc * ty
+        return np.stack([c[0] + self.s * gx, c[1] + self.s * gy], axis=1)
 
     def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)``."""
-        u, bx, by = self._linear_part(xy, th)
+        xi, eta = self._offsets(xy, th)
+        f, w, extra, den, even = self._radial_factor(xi, eta, th)
+        u = self._corrected(xi, eta, th, f, extra)
         if not jac:
             return u, None
         d = np.empty((len(xy), 2, self.n))
-        d[:, 0, 2:], d[:, 1, 2:] = bx, by
+        cols = self._linear_columns(xi, eta, f, w, extra, den, even)
+        for j, (cx, cy) in enumerate(cols, start=2):
+            d[:, 0, j], d[:, 1, j] = cx, cy
+        d[:, :, 2:] *= self.s
         gxx, gxy, gyx, gyy = self._offset_derivatives(xy, th)
         # centre c = c0 + s dc moves xi, eta by -dc: du/d(dc_x) = s ((1, 0) - dg/dxi), likewise for y
         d[:, 0, 0], d[:, 1, 0] = self.s * (1.0 - gxx), -self.s * gyx
         d[:, 0, 1], d[:, 1, 1] = -self.s * gxy, self.s * (1.0 - gyy)
         return u, d
+
+    def _linear_columns(
+        self,
+        xi: np.ndarray,
+        eta: np.ndarray,
+        f: np.ndarray,
+        w: np.ndarray,
+        extra: list[tuple[np.ndarray, np.ndarray]],
+        den: np.ndarray | None,
+        even: list[np.ndarray],
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The (x, y) parts of the Jacobian columns of ``theta[2:]``, without the factor ``s``."""
+        wk = w if den is None else w / den[:, None]
+        cols = [(wk[:, m] * xi, wk[:, m] * eta) for m in range(self.degree)]
+        cols += extra
+        if den is not None:
+            cols += [(-f * ev * xi / den, -f * ev * eta / den) for ev in even]
+        return cols
+
+    def project(
+        self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The Jacobian of the corrected points projected on the unit vectors ``nrm`` and ``tan``
+        (per point, ``(N, 2)``): ``(P, T)``, each ``(N, n)``, ``P[i] = nrm[i] . du_i/dtheta``.
+
+        The radial columns are ``s rho^m (n . (xi, eta))`` (over ``D`` with a denominator): one
+        product of the powers with the projected offset, no ``(N, 2, n)`` array."""
+        xi, eta = self._offsets(xy, th)
+        f, w, extra, den, even = self._radial_factor(xi, eta, th)
+        s = self.s
+        nx, ny, tx, ty = nrm[:, 0], nrm[:, 1], tan[:, 0], tan[:, 1]
+        n_pts, nk = len(xy), self.degree
+        p_mat = np.empty((n_pts, self.n))
+        t_mat = np.empty((n_pts, self.n))
+        pn = s * (nx * xi + ny * eta)
+        pt = s * (tx * xi + ty * eta)
+        if den is not None:
+            pn, pt = pn / den, pt / den
+        np.multiply(w, pn[:, None], out=p_mat[:, 2 : 2 + nk])
+        np.multiply(w, pt[:, None], out=t_mat[:, 2 : 2 + nk])
+        i = 2 + nk
+        for ex, ey in extra:
+            p_mat[:, i] = s * (nx * ex + ny * ey)
+            t_mat[:, i] = s * (tx * ex + ty * ey)
+            i += 1
+        for ev in even:
+            p_mat[:, i] = -f * ev * pn
+            t_mat[:, i] = -f * ev * pt
+            i += 1
+        gxx, gxy, gyx, gyy = self._offset_derivatives(xy, th)
+        # centre columns: du/d(dc_x) = s ((1, 0) - dg/dxi), du/d(dc_y) = s ((0, 1) - dg/deta)
+        dxx, dxy = s * (1.0 - gxx), -s * gyx
+        dyx, dyy = -s * gxy, s * (1.0 - gyy)
+        p_mat[:, 0], t_mat[:, 0] = nx * dxx + ny * dxy, tx * dxx + ty * dxy
+        p_mat[:, 1], t_mat[:, 1] = nx * dyx + ny * dyy, tx * dyx + ty * dyy
+        return p_mat, t_mat
 
     def _offset_derivatives(
         self, xy: np.ndarray, th: np.ndarray

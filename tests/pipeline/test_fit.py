@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from pipeline.compare import compare_models
-from pipeline.edgeset import FitFailure, FitResult, collect, corrected_straightness
-from pipeline.fit import fit_distortion, make_parametrisation, residuals_and_jacobian
+from pipeline.edgeset import FitFailure, FitResult, collect, corrected_straightness, tls
+from pipeline.fit import fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FitSpec, parse
 from pipeline.models import PolynomialModel, RadialModel
 from pipeline.select import select_model
@@ -80,6 +80,41 @@ def test_analytic_jacobian_matches_finite_differences(kind, kw):
             - residuals_and_jacobian(param, edges, th - e, jac=False)[0]
         ) / 2e-7
     assert np.abs(j - num).max() < 1e-4 * np.abs(num).max()
+
+
+@pytest.mark.parametrize(
+    "kind,kw",
+    [
+        ("radial", dict(degree=4, tangential=True, prism=True)),
+        ("radial", dict(degree=2, tangential=True, prism=True, division=2)),
+        ("poly", dict(degree=5)),
+    ],
+)
+def test_projected_jacobian_and_normal_equations_match_the_jacobian(kind, kw):
+    """``project`` is the model's Jacobian projected on the line normals/directions, and the normal
+    equations built from it (per shot, per-edge weights) are those of the explicit Jacobian (itself
+    checked against finite differences above)."""
+    shots = harp_point_sets(DECENTRED, W, H, (10, 70, 130), noise=0.01, seed=2)
+    edges, _ = collect(shots, W, H)
+    param = make_parametrisation(W, H, FitSpec(kind, **kw))
+    th = np.random.default_rng(4).normal(0, 1e-3, param.n)
+    u, du = param.evaluate(edges.xy, th)
+    _, _, nrm, tan, _ = tls(u, edges.starts, edges.counts)
+    p_mat, t_mat = param.project(edges.xy, th, nrm, tan)
+    assert np.allclose(p_mat, np.einsum("ik,ikj->ij", nrm, du), rtol=1e-12, atol=1e-9 * np.abs(du).max())
+    assert np.allclose(t_mat, np.einsum("ik,ikj->ij", tan, du), rtol=1e-12, atol=1e-9 * np.abs(du).max())
+    r, j = residuals_and_jacobian(param, edges, th)
+    w = np.random.default_rng(5).uniform(0.2, 1.0, edges.n_edges)
+    first = [int(e) for e in np.flatnonzero(np.diff(edges.image, prepend=-1))]
+    ata, atb, ss = normal_equations(param, edges, th, first, edge_weights=w)
+    assert len(ata) == len(first) == 3
+    wp = np.repeat(w, edges.counts)
+    for g, img in enumerate(np.unique(edges.image)):
+        sel = np.repeat(edges.image == img, edges.counts)
+        jw = j[sel] * wp[sel, None]
+        assert np.allclose(ata[g], jw.T @ j[sel], rtol=1e-9, atol=1e-9 * np.abs(ata[g]).max())
+        assert np.allclose(atb[g], jw.T @ r[sel], rtol=1e-7, atol=1e-9 * np.abs(jw.T @ j[sel]).max() ** 0.5)
+        assert ss[g] == pytest.approx(float((r[sel] * wp[sel]) @ r[sel]), rel=1e-12)
 
 
 def test_poly_gauge_is_fixed():
