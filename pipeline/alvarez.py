@@ -35,7 +35,6 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.polynomial import polynomial as P
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import minimize
 
 from pipeline.edgeset import FitFailure, FitResult, collect, summarise
 from pipeline.models.base import DistortionModel
@@ -155,6 +154,8 @@ def fit_alvarez(
     :class:`RadialModel` with ``k = (1, 0, k1, 0, k2)`` (centre fixed, default
     the image centre), or a :class:`pipeline.edgeset.FitFailure`.
     """
+    from scipy.optimize import minimize  # the two-coefficient fit only (the fit's start needs none)
+
     edges, rejected = collect(lines_per_image, width, height)
     if not edges:
         return edges

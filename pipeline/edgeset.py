@@ -271,18 +271,18 @@ def tls(
     normal, tangent : (N, 2) unit normal and direction of the point's line
     phi : (E,) direction angle of each line (radians)
     """
-    m = np.add.reduceat(u, starts, axis=0) / counts[:, None]
-    dev = u - np.repeat(m, counts, axis=0)
-    sxx = np.add.reduceat(dev[:, 0] ** 2, starts)
-    syy = np.add.reduceat(dev[:, 1] ** 2, starts)
-    sxy = np.add.reduceat(dev[:, 0] * dev[:, 1], starts)
+    ux, uy = u[:, 0], u[:, 1]
+    dx = ux - np.repeat(np.add.reduceat(ux, starts) / counts, counts)
+    dy = uy - np.repeat(np.add.reduceat(uy, starts) / counts, counts)
+    sxx = np.add.reduceat(dx * dx, starts)
+    syy = np.add.reduceat(dy * dy, starts)
+    sxy = np.add.reduceat(dx * dy, starts)
     phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # direction of the line
-    c, s = np.cos(phi), np.sin(phi)
-    nrm = np.repeat(np.stack([-s, c], axis=1), counts, axis=0)
-    tan = np.repeat(np.stack([c, s], axis=1), counts, axis=0)
-    r = np.einsum("ij,ij->i", dev, nrm)
-    a = np.einsum("ij,ij->i", dev, tan)
-    return r, a, nrm, tan, phi
+    c = np.repeat(np.cos(phi), counts)
+    s = np.repeat(np.sin(phi), counts)
+    r = dy * c - dx * s
+    a = dx * c + dy * s
+    return r, a, np.stack([-s, c], axis=1), np.stack([c, s], axis=1), phi
 
 
 def edge_residuals(points: np.ndarray) -> np.ndarray:
@@ -302,13 +302,18 @@ def held_out_residuals(model: DistortionModel, lines: Sequence[np.ndarray]) -> n
     """Residuals ``r`` of the edges ``lines`` after correction by ``model``, all edges
     concatenated; edges with fewer than 3 points or non-finite points are skipped, as
     the fit skips them (NaN from the correction itself stays)."""
-    pts = [np.asarray(p, dtype=np.float64) for p in lines if len(p) >= 3]
-    pts = [p for p in pts if np.all(np.isfinite(p))]
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines if len(p) >= 3]
     if not pts:
         return np.zeros(0)
     counts = np.array([len(p) for p in pts])
+    allp = np.concatenate(pts)
+    finite = np.logical_and.reduceat(np.isfinite(allp).all(axis=1), np.cumsum(counts) - counts)
+    if not finite.all():
+        if not finite.any():
+            return np.zeros(0)
+        allp, counts = allp[np.repeat(finite, counts)], counts[finite]
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-    return tls(model.undistort_points(np.concatenate(pts)), starts, counts)[0]
+    return tls(model.undistort_points(allp), starts, counts)[0]
 
 
 def straightness_of(points_list: Sequence[np.ndarray]) -> tuple[float, float]:

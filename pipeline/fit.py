@@ -13,8 +13,12 @@ they are recomputed from the corrected points at every evaluation (variable
 projection); the Jacobian is analytic, including the derivative of the line
 (centroid and angle) with respect to :math:`\theta` and the centre columns of
 the radial model. It is minimised by
-Levenberg–Marquardt (``scipy.optimize.least_squares``), all edges of all
-images at once, in coordinates normalised by half the image diagonal.
+Levenberg–Marquardt, all edges of all images at once, in coordinates normalised
+by half the image diagonal: MINPACK's algorithm (trust region, scaling, stopping
+rules) on the normal equations :math:`J^T J`, :math:`J^T r`, which the per-edge
+moments give without forming the :math:`N \times n` Jacobian
+(:func:`normal_equations`); MINPACK itself (``scipy.optimize.least_squares``)
+when that cannot finish.
 
 Uniqueness (gauge). Straight lines stay straight under any homography, so the
 data determine the correction only up to a homography (8 degrees of freedom);
@@ -66,10 +70,10 @@ References
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-from scipy.optimize import OptimizeResult, least_squares
 
 from pipeline.alvarez import alvarez_initial_k
 from pipeline.edgeset import (
@@ -86,6 +90,9 @@ from pipeline.fitspec import FREE_CENTER_WEIGHT, FitSpec, spec_problem
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialParametrisation
 from pipeline.models.radial import RadialParametrisation
+
+if TYPE_CHECKING:
+    from scipy.optimize import OptimizeResult
 
 MIN_EDGES = 4
 """A fit needs at least this many usable edges."""
@@ -139,7 +146,8 @@ def _projected(
     param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     """``(r, a, P, T)``: the residuals, the positions along the lines and (``jac``) the Jacobian of
-    the corrected points projected on each point's line normal (``P``) and direction (``T``)."""
+    the corrected points projected on each point's line normal (``P``) and direction (``T``), one row
+    per parameter (``(n, N)``)."""
     u, _ = param.evaluate(edges.xy, th, jac=False)
     r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts)
     if not jac:
@@ -150,31 +158,32 @@ def _projected(
 
 def _line_turn(
     p_mat: np.ndarray, t_mat: np.ndarray, r: np.ndarray, a: np.ndarray, st: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per edge: ``(sum of P, d phi / d theta)``, the rotation of its TLS line (Golub-Pereyra).
-
-    ``d phi = sum_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i (a_i^2 - r_i^2)``; the
-    means drop out because ``sum a = sum r = 0`` on each edge (distances from its centroid)."""
-    sum_p = np.add.reduceat(p_mat, st, axis=0)
-    num = np.add.reduceat(a[:, None] * p_mat + r[:, None] * t_mat, st, axis=0)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per edge (columns, ``(n, E)``): the sums of ``P`` and of ``a P``, and ``d phi / d theta``, the
+    rotation of its TLS line (Golub-Pereyra):
+    ``d phi = sum_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i (a_i^2 - r_i^2)``; the means
+    drop out because ``sum a = sum r = 0`` on each edge (distances from its centroid)."""
+    sum_p = np.add.reduceat(p_mat, st, axis=1)
+    sum_ap = np.add.reduceat(p_mat * a, st, axis=1)
+    sum_rt = np.add.reduceat(t_mat * r, st, axis=1)
     den = np.add.reduceat(a * a - r * r, st)
-    return sum_p, num / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]
+    return sum_p, sum_ap, (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)
 
 
 def residuals_and_jacobian(
     param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool = True
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Signed distances of the corrected points to their own edge's TLS line, and (``jac``)
-    their analytic Jacobian in ``theta``, the line's motion included (variable projection):
-    ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`)."""
+    their analytic Jacobian ``(N, n)`` in ``theta``, the line's motion included (variable
+    projection): ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`)."""
     r, a, p_mat, t_mat = _projected(param, edges, th, jac)
     if p_mat is None or t_mat is None:
         return r, None
     st, ct = edges.starts, edges.counts
-    sum_p, dphi = _line_turn(p_mat, t_mat, r, a, st)
-    j = p_mat - np.repeat(sum_p / ct[:, None], ct, axis=0)
-    j -= np.repeat(dphi, ct, axis=0) * a[:, None]
-    return r, j
+    sum_p, _, dphi = _line_turn(p_mat, t_mat, r, a, st)
+    j = p_mat - np.repeat(sum_p / ct, ct, axis=1)
+    j -= np.repeat(dphi, ct, axis=1) * a
+    return r, j.T
 
 
 def normal_equations(
@@ -197,41 +206,192 @@ def normal_equations(
     r, a, p_mat, t_mat = _projected(param, edges, th, True)
     assert p_mat is not None and t_mat is not None
     st, ct = edges.starts, edges.counts
-    sum_p = np.add.reduceat(p_mat, st, axis=0)
-    sum_ap = np.add.reduceat(a[:, None] * p_mat, st, axis=0)
-    sum_rt = np.add.reduceat(r[:, None] * t_mat, st, axis=0)
-    den = np.add.reduceat(a * a - r * r, st)
-    dphi = (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)[:, None]  # as _line_turn
-    mean_p = sum_p / ct[:, None]
+    sum_p, sum_ap, dphi = _line_turn(p_mat, t_mat, r, a, st)
+    mean_p = sum_p / ct
     sum_a = np.add.reduceat(a, st)
     sum_r = np.add.reduceat(r, st)
     sum_aa = np.add.reduceat(a * a, st)
     sum_ar = np.add.reduceat(a * r, st)
-    s_ap = sum_ap - mean_p * sum_a[:, None]  # sum a Pc
+    s_ap = sum_ap - mean_p * sum_a  # sum a Pc
     w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
     w_pt = None if edge_weights is None else np.repeat(w, ct)
     bounds = [0] if groups is None else [int(g) for g in groups]
     bounds.append(edges.n_edges)
-    n = p_mat.shape[1]
+    n = p_mat.shape[0]
     ata = np.empty((len(bounds) - 1, n, n))
     atb = np.empty((len(bounds) - 1, n))
     ss = np.empty(len(bounds) - 1)
     for g, (e0, e1) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
         p0 = int(st[e0]) if e0 < edges.n_edges else len(r)
         p1 = int(st[e1]) if e1 < edges.n_edges else len(r)
-        pg, rg = p_mat[p0:p1], r[p0:p1]
+        pg, rg = p_mat[:, p0:p1], r[p0:p1]
         if w_pt is not None:
             rw = rg * w_pt[p0:p1]
-            pw = pg * w_pt[p0:p1, None]
+            pw = pg * w_pt[p0:p1]
         else:
             rw, pw = rg, pg
         we = w[e0:e1]
-        mp, dp, sp = mean_p[e0:e1], dphi[e0:e1], s_ap[e0:e1]
-        cross = (sp * we[:, None]).T @ dp
-        ata[g] = pw.T @ pg - (mp.T * (ct[e0:e1] * we)) @ mp - cross - cross.T + (dp.T * (sum_aa[e0:e1] * we)) @ dp
-        atb[g] = pw.T @ rg - mp.T @ (sum_r[e0:e1] * we) - dp.T @ (sum_ar[e0:e1] * we)
+        mp, dp, sp = mean_p[:, e0:e1], dphi[:, e0:e1], s_ap[:, e0:e1]
+        cross = (sp * we) @ dp.T
+        ata[g] = pw @ pg.T - (mp * (ct[e0:e1] * we)) @ mp.T - cross - cross.T + (dp * (sum_aa[e0:e1] * we)) @ dp.T
+        atb[g] = pw @ rg - mp @ (sum_r[e0:e1] * we) - dp @ (sum_ar[e0:e1] * we)
         ss[g] = rw @ rg
     return ata, atb, ss
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """What a least-squares run found (the fields of scipy's ``OptimizeResult`` that are used)."""
+
+    x: np.ndarray
+    cost: float  # half the sum of squares, as scipy reports it
+    nfev: int
+    status: int  # > 0 converged, 0 evaluation budget spent
+    message: str
+
+
+LM_TOL = 1e-12
+"""MINPACK's ``ftol``, ``xtol`` and ``gtol`` as the fit sets them: relative reductions of the sum of squares,
+trust-region radius relative to the scaled parameters, cosine of the gradient with the residuals."""
+LM_FACTOR = 100.0
+"""MINPACK's ``factor``: the first trust-region radius, times the scaled parameters' length."""
+
+
+def _lm_step(a: np.ndarray, b: np.ndarray, diag: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
+    """The Levenberg-Marquardt step ``h`` of ``(a + par D^2) h = -b``, ``D = diag(diag)``: the
+    Gauss-Newton step (``par = 0``) when ``|D h| <= 1.1 delta``, else ``par > 0`` with ``|D h|``
+    within 10 % of ``delta`` (MINPACK's ``lmpar`` criterion), found by safeguarded Newton steps on
+    ``1 / |D h(par)|`` over the eigen-decomposition of the scaled ``a`` (Moré 1978)."""
+    inv = 1.0 / diag
+    lam, vec = np.linalg.eigh(a * inv[:, None] * inv[None, :])
+    c = vec.T @ (b * inv)
+    c2 = c * c
+    lam = np.maximum(lam, 0.0)
+    floor = 1e-14 * max(float(lam[-1]), 1e-300)
+
+    def norm_at(par: float) -> tuple[float, float]:
+        den = lam + par
+        return float(np.sqrt(np.sum(c2 / (den * den)))), -2.0 * float(np.sum(c2 / (den * den * den)))
+
+    if lam[0] > floor and norm_at(0.0)[0] <= 1.1 * delta:
+        return -(vec @ (c / lam)) * inv, 0.0
+    lo, hi = 0.0, float(np.sqrt(np.sum(c2))) / delta  # |D h(hi)| <= delta
+    par = max(1e-3 * hi, floor)
+    for _ in range(50):
+        q, dq2 = norm_at(par)
+        if abs(q - delta) <= 0.1 * delta:
+            break
+        if q > delta:
+            lo = par
+        else:
+            hi = par
+        # Newton on 1/q - 1/delta (nearly linear in par): d(1/q)/dpar = -dq2 / (2 q^3)
+        new = par - (1.0 / q - 1.0 / delta) / (-dq2 / (2.0 * q**3)) if dq2 != 0 else 0.5 * (lo + hi)
+        par = new if lo < new < hi else 0.5 * (lo + hi)
+    return -(vec @ (c / (lam + par))) * inv, par
+
+
+def _levenberg_marquardt(
+    param: Parametrisation,
+    edges: EdgeSet,
+    th0: np.ndarray,
+    edge_weights: np.ndarray | None,
+    max_nfev: int,
+) -> _Solution | None:
+    """MINPACK's Levenberg-Marquardt (``lmder``: a trust region on the step scaled by the running
+    maximum of the Jacobian's column norms, its radius update and its stopping rules) on the normal
+    equations (:func:`normal_equations`, ``n x n``) instead of a QR factorisation of the ``N x n``
+    Jacobian. None when it cannot go on (non-finite equations, the evaluation budget spent): the
+    caller then runs MINPACK itself.
+
+    References
+    ----------
+    .. [1] J. J. Moré, "The Levenberg-Marquardt algorithm: implementation and theory", Numerical
+       Analysis, LNM 630, Springer, 1978.
+    .. [2] J. J. Moré, B. S. Garbow, K. E. Hillstrom, *User guide for MINPACK-1*, ANL-80-74, 1980.
+    """
+    n_pts = len(edges.xy)
+    sw = None if edge_weights is None else np.repeat(edge_weights, edges.counts)
+
+    def cost(t: np.ndarray) -> float:
+        r, _ = residuals_and_jacobian(param, edges, t, jac=False)
+        g, _ = param.regularisation(t, n_pts)
+        c = float((r if sw is None else r * sw) @ r + g @ g)
+        return c if np.isfinite(c) else float("inf")
+
+    def equations(t: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        ata, atb, _ = normal_equations(param, edges, t, edge_weights=edge_weights)
+        g, jg = param.regularisation(t, n_pts)
+        a = ata[0] + jg.T @ jg
+        b = atb[0] + jg.T @ g
+        return (a, b) if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else None
+
+    eps = float(np.finfo(np.float64).eps)
+    x = np.asarray(th0, dtype=np.float64).copy()
+    f = cost(x)
+    nfev = 1
+    if not np.isfinite(f):
+        return None
+    diag = np.zeros(len(x))
+    delta = xnorm = 0.0
+    first = True
+    while True:
+        eq = equations(x)
+        if eq is None:
+            return None
+        a, b = eq
+        col = np.sqrt(np.maximum(np.diag(a), 0.0))
+        if first:
+            diag = np.where(col > 0, col, 1.0)
+            xnorm = float(np.linalg.norm(diag * x))
+            delta = LM_FACTOR * xnorm if xnorm > 0 else LM_FACTOR
+        if f == 0.0:
+            return _Solution(x, 0.0, nfev, 1, "zero residual")
+        nz = col > 0
+        if not nz.any() or float(np.max(np.abs(b[nz]) / (col[nz] * np.sqrt(f)))) <= LM_TOL:
+            return _Solution(x, 0.5 * f, nfev, 4, "the gradient is orthogonal to the residuals (gtol)")
+        diag = np.maximum(diag, col)
+        while True:
+            try:
+                h, par = _lm_step(a, b, diag, delta)
+            except np.linalg.LinAlgError:
+                return None
+            pnorm = float(np.linalg.norm(diag * h))
+            if first:
+                delta = min(delta, pnorm)
+            f_new = cost(x + h)
+            nfev += 1
+            actred = 1.0 - f_new / f if 0.1 * np.sqrt(f_new) < np.sqrt(f) else -1.0
+            jh2 = float(h @ a @ h) / f
+            dp2 = par * pnorm * pnorm / f
+            prered = jh2 + 2.0 * dp2
+            dirder = -(jh2 + dp2)
+            ratio = actred / prered if prered != 0 else 0.0
+            if ratio <= 0.25:
+                temp = 0.5 if actred >= 0 else 0.5 * dirder / (dirder + 0.5 * actred)
+                if 0.1 * np.sqrt(f_new) >= np.sqrt(f) or temp < 0.1:
+                    temp = 0.1
+                delta = temp * min(delta, pnorm / 0.1)
+            elif par == 0.0 or ratio >= 0.75:
+                delta = pnorm / 0.5
+            accepted = ratio >= 1e-4
+            if accepted:
+                x = x + h
+                f = f_new
+                xnorm = float(np.linalg.norm(diag * x))
+                first = False
+            if abs(actred) <= LM_TOL and prered <= LM_TOL and 0.5 * ratio <= 1.0:
+                return _Solution(x, 0.5 * f, nfev, 2, "both actual and predicted relative reductions below ftol")
+            if delta <= LM_TOL * xnorm:
+                return _Solution(x, 0.5 * f, nfev, 3, "the trust region is below xtol of the parameters")
+            if nfev >= max_nfev:
+                return None
+            if abs(actred) <= eps and prered <= eps and 0.5 * ratio <= 1.0:
+                return _Solution(x, 0.5 * f, nfev, 2, "no further reduction is possible (machine precision)")
+            if delta <= eps * xnorm:
+                return _Solution(x, 0.5 * f, nfev, 3, "no further improvement is possible (machine precision)")
+            if accepted:
+                break
 
 
 def _solve(
@@ -240,8 +400,26 @@ def _solve(
     th0: np.ndarray,
     edge_weights: np.ndarray | None = None,
     max_nfev: int = 200,
+) -> _Solution:
+    """Levenberg–Marquardt on the residuals, optionally weighted per edge: on the normal equations
+    (:func:`_levenberg_marquardt`), or MINPACK's on the Jacobian when that one cannot finish."""
+    sol = _levenberg_marquardt(param, edges, th0, edge_weights, max_nfev)
+    if sol is not None:
+        return sol
+    ref = _solve_minpack(param, edges, th0, edge_weights, max_nfev)
+    return _Solution(np.asarray(ref.x), float(ref.cost), int(ref.nfev), int(ref.status), str(ref.message))
+
+
+def _solve_minpack(
+    param: Parametrisation,
+    edges: EdgeSet,
+    th0: np.ndarray,
+    edge_weights: np.ndarray | None = None,
+    max_nfev: int = 200,
 ) -> OptimizeResult:
     """Levenberg–Marquardt (MINPACK) on the residuals, optionally weighted per edge."""
+    from scipy.optimize import least_squares  # only when the normal-equations solver cannot finish
+
     n_pts = len(edges.xy)
     sw = None if edge_weights is None else np.repeat(np.sqrt(edge_weights), edges.counts)
 

@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.edgeset import FitResult, collect, held_out_residuals
+from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_residuals
 from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
@@ -230,7 +230,9 @@ def _cv_candidate(job: tuple[FitSpec, list[list[np.ndarray]], float, tuple[Any, 
         fd = float("nan")
         if full:
             kept = [[p for p in shot if id(p) not in outliers] for shot in train]
-            step = _gauss_newton_fold(cand, kept, width, height, full.model, fit_kw, start.fold(k) if start else None)
+            step = _gauss_newton_fold(
+                cand, kept, width, height, full.model, fit_kw, *(start.fold(k) if start else (None, None))
+            )
             if step is not None:
                 model, fd = step
             else:  # Gauss-Newton did not converge: the final least-squares pass from the full fit
@@ -325,20 +327,24 @@ class _FoldStart:
         if not (np.all(np.isfinite(ata)) and np.all(np.isfinite(atb))):
             return
         self.blocks = {int(edges.image[e]): (ata[g], atb[g], float(ss[g])) for g, e in enumerate(first)}
+        self.edges = edges
 
-    def fold(self, held: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
-        """``(theta0, sum J^T J, sum J^T r, sum r^2)`` over the shots but ``held`` (no regularisation)."""
+    def fold(self, held: int) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, float] | None, EdgeSet | None]:
+        """``(theta0, sum J^T J, sum J^T r, sum r^2)`` over the shots but ``held`` (no regularisation),
+        and the fold's edge set (the full fit's kept edges but shot ``held``'s)."""
         if self.blocks is None:
-            return None
+            return None, None
         parts = [v for k, v in self.blocks.items() if k != held]
-        if not parts:
-            return None
-        return (
+        keep = self.edges.image != held
+        if not parts or not keep.any():
+            return None, None
+        first = (
             self.theta0,
             np.sum([p[0] for p in parts], axis=0),
             np.sum([p[1] for p in parts], axis=0),
             float(sum(p[2] for p in parts)),
         )
+        return first, self.edges.subset(keep)
 
 
 def _gauss_newton_fold(
@@ -349,6 +355,7 @@ def _gauss_newton_fold(
     start: DistortionModel,
     fit_kw: dict[str, Any],
     first: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
+    fold_edges: EdgeSet | None = None,
 ) -> tuple[DistortionModel, float] | None:
     """The least-squares fit of ``kept`` (the fold's training edges, the full fit's outliers left out)
     by Gauss-Newton steps from ``start`` (the fit on all shots), the objective of
@@ -357,8 +364,9 @@ def _gauss_newton_fold(
 
     Each step solves the normal equations (:func:`pipeline.fit.normal_equations`); a trial point
     is first evaluated without its Jacobian (the last one, converged, needs none); ``first``: the
-    normal equations at the start, already summed (:class:`_FoldStart`)."""
-    edges, _ = collect(kept, width, height)
+    normal equations at the start, already summed, and ``fold_edges`` the edge set of ``kept``
+    (:class:`_FoldStart`)."""
+    edges = collect(kept, width, height)[0] if fold_edges is None else fold_edges
     if not edges or edges.n_edges < MIN_EDGES:
         return None
     param = make_parametrisation(width, height, cand, w_center=fit_kw.get("w_center"), ridge=fit_kw.get("ridge"))
@@ -407,8 +415,12 @@ def _gauss_newton_fold(
 
 def _held_out_counts(held: Sequence[np.ndarray]) -> np.ndarray:
     """Points of each held-out edge that :func:`pipeline.edgeset.held_out_residuals` keeps (same rule)."""
-    kept = [np.asarray(p, dtype=np.float64) for p in held if len(p) >= 3]
-    return np.array([len(p) for p in kept if np.all(np.isfinite(p))], dtype=np.int64)
+    kept = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in held if len(p) >= 3]
+    if not kept:
+        return np.zeros(0, dtype=np.int64)
+    counts = np.array([len(p) for p in kept], dtype=np.int64)
+    finite = np.logical_and.reduceat(np.isfinite(np.concatenate(kept)).all(axis=1), np.cumsum(counts) - counts)
+    return counts[finite]
 
 
 def paired_difference(row: CVRow, best: CVRow) -> tuple[float, float]:

@@ -270,39 +270,42 @@ class PolynomialParametrisation:
         )
 
     def _basis(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Monomials of ``xy`` and the (constant) Jacobian, kept for the last ``xy`` (a fit
-        evaluates the same points at every iteration)."""
+        """Monomials ``(N, m)`` of ``xy`` and the (constant) Jacobian's x and y parts as rows
+        ``(2, n, N)``, kept for the last ``xy`` (a fit evaluates the same points at every iteration)."""
         cached = getattr(self, "_cached", None)
         if cached is not None and cached[0] is xy:
             return cached[1], cached[2]
         c = self.ident.center
         mon = monomials((xy[:, 0] - c[0]) / self.s, (xy[:, 1] - c[1]) / self.s, self.degree)
-        d = np.empty((len(xy), 2, self.n))
-        d[:, 0, :] = self.s * (mon @ self.T[: self.m])
-        d[:, 1, :] = self.s * (mon @ self.T[self.m :])
-        d.setflags(write=False)
-        self._cached = (xy, mon, d)
-        return mon, d
+        rows = np.empty((2, self.n, len(xy)))
+        np.matmul(self.s * self.T[: self.m].T, mon.T, out=rows[0])
+        np.matmul(self.s * self.T[self.m :].T, mon.T, out=rows[1])
+        rows.setflags(write=False)
+        self._cached = (xy, mon, rows)
+        return mon, rows
 
     def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)`` (read-only:
-        linear in ``theta``, it does not change between iterations)."""
+        """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)`` (linear in
+        ``theta``, it does not change between iterations)."""
         c = self.ident.center
-        mon, d = self._basis(xy)
+        mon, rows = self._basis(xy)
         full = self.t0 + self.T @ th
         u = np.stack([c[0] + self.s * (mon @ full[: self.m]), c[1] + self.s * (mon @ full[self.m :])], axis=1)
         if not jac:
             return u, None
-        return u, d
+        return u, rows.transpose(2, 0, 1)
 
     def project(
         self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """The Jacobian of the corrected points projected on the unit vectors ``nrm`` and ``tan``
-        (per point, ``(N, 2)``): ``(P, T)``, each ``(N, n)``, ``P[i] = nrm[i] . du_i/dtheta``."""
-        _, d = self._basis(xy)
-        p_mat = nrm[:, 0, None] * d[:, 0, :] + nrm[:, 1, None] * d[:, 1, :]
-        t_mat = tan[:, 0, None] * d[:, 0, :] + tan[:, 1, None] * d[:, 1, :]
+        (per point, ``(N, 2)``), one row per parameter: ``(P, T)``, each ``(n, N)``,
+        ``P[:, i] = nrm[i] . du_i/dtheta``."""
+        _, rows = self._basis(xy)
+        p_mat = rows[0] * nrm[:, 0]
+        p_mat += rows[1] * nrm[:, 1]
+        t_mat = rows[0] * tan[:, 0]
+        t_mat += rows[1] * tan[:, 1]
         return p_mat, t_mat
 
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:

@@ -279,16 +279,16 @@ class RadialParametrisation:
     def _radial_factor(
         self, xi: np.ndarray, eta: np.ndarray, th: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray | None, list[np.ndarray]]:
-        """``(f, powers (N, degree) of rho^1..rho^N, extra terms, denominator or None, rho^2j terms)``."""
+        """``(f, powers (degree, N) rho^1..rho^N, extra terms, denominator or None, rho^2j terms)``."""
         rho2 = xi * xi + eta * eta
         rho = np.sqrt(rho2)
         nk = self.degree
-        w = np.empty((len(xi), nk))
+        w = np.empty((nk, len(xi)))
         if nk:
-            w[:, 0] = rho
+            w[0] = rho
             for m in range(1, nk):
-                np.multiply(w[:, m - 1], rho, out=w[:, m])
-        f = 1.0 + w @ th[2 : 2 + nk]
+                np.multiply(w[m - 1], rho, out=w[m])
+        f = 1.0 + th[2 : 2 + nk] @ w
         extra: list[tuple[np.ndarray, np.ndarray]] = []
         if self.tangential:
             xe2 = 2.0 * xi * eta
@@ -346,8 +346,8 @@ class RadialParametrisation:
         even: list[np.ndarray],
     ) -> list[tuple[np.ndarray, np.ndarray]]:
         """The (x, y) parts of the Jacobian columns of ``theta[2:]``, without the factor ``s``."""
-        wk = w if den is None else w / den[:, None]
-        cols = [(wk[:, m] * xi, wk[:, m] * eta) for m in range(self.degree)]
+        wk = w if den is None else w / den
+        cols = [(wk[m] * xi, wk[m] * eta) for m in range(self.degree)]
         cols += extra
         if den is not None:
             cols += [(-f * ev * xi / den, -f * ev * eta / den) for ev in even]
@@ -357,38 +357,43 @@ class RadialParametrisation:
         self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """The Jacobian of the corrected points projected on the unit vectors ``nrm`` and ``tan``
-        (per point, ``(N, 2)``): ``(P, T)``, each ``(N, n)``, ``P[i] = nrm[i] . du_i/dtheta``.
+        (per point, ``(N, 2)``), one row per parameter: ``(P, T)``, each ``(n, N)``,
+        ``P[:, i] = nrm[i] . du_i/dtheta``.
 
-        The radial columns are ``s rho^m (n . (xi, eta))`` (over ``D`` with a denominator): one
+        The radial rows are ``s rho^m (n . (xi, eta))`` (over ``D`` with a denominator): one
         product of the powers with the projected offset, no ``(N, 2, n)`` array."""
         xi, eta = self._offsets(xy, th)
         f, w, extra, den, even = self._radial_factor(xi, eta, th)
         s = self.s
         nx, ny, tx, ty = nrm[:, 0], nrm[:, 1], tan[:, 0], tan[:, 1]
         n_pts, nk = len(xy), self.degree
-        p_mat = np.empty((n_pts, self.n))
-        t_mat = np.empty((n_pts, self.n))
+        p_mat = np.empty((self.n, n_pts))
+        t_mat = np.empty((self.n, n_pts))
         pn = s * (nx * xi + ny * eta)
         pt = s * (tx * xi + ty * eta)
         if den is not None:
             pn, pt = pn / den, pt / den
-        np.multiply(w, pn[:, None], out=p_mat[:, 2 : 2 + nk])
-        np.multiply(w, pt[:, None], out=t_mat[:, 2 : 2 + nk])
+        np.multiply(w, pn, out=p_mat[2 : 2 + nk])
+        np.multiply(w, pt, out=t_mat[2 : 2 + nk])
         i = 2 + nk
+        snx, sny, stx, sty = s * nx, s * ny, s * tx, s * ty
         for ex, ey in extra:
-            p_mat[:, i] = s * (nx * ex + ny * ey)
-            t_mat[:, i] = s * (tx * ex + ty * ey)
+            np.multiply(snx, ex, out=p_mat[i])
+            p_mat[i] += sny * ey
+            np.multiply(stx, ex, out=t_mat[i])
+            t_mat[i] += sty * ey
             i += 1
         for ev in even:
-            p_mat[:, i] = -f * ev * pn
-            t_mat[:, i] = -f * ev * pt
+            fe = -f * ev
+            np.multiply(fe, pn, out=p_mat[i])
+            np.multiply(fe, pt, out=t_mat[i])
             i += 1
         gxx, gxy, gyx, gyy = self._offset_derivatives(xy, th)
-        # centre columns: du/d(dc_x) = s ((1, 0) - dg/dxi), du/d(dc_y) = s ((0, 1) - dg/deta)
+        # centre rows: du/d(dc_x) = s ((1, 0) - dg/dxi), du/d(dc_y) = s ((0, 1) - dg/deta)
         dxx, dxy = s * (1.0 - gxx), -s * gyx
         dyx, dyy = -s * gxy, s * (1.0 - gyy)
-        p_mat[:, 0], t_mat[:, 0] = nx * dxx + ny * dxy, tx * dxx + ty * dxy
-        p_mat[:, 1], t_mat[:, 1] = nx * dyx + ny * dyy, tx * dyx + ty * dyy
+        p_mat[0], t_mat[0] = nx * dxx + ny * dxy, tx * dxx + ty * dxy
+        p_mat[1], t_mat[1] = nx * dyx + ny * dyy, tx * dyx + ty * dyy
         return p_mat, t_mat
 
     def _offset_derivatives(
