@@ -63,16 +63,16 @@ def _sha256(path: Path) -> str:
 # ------------------------------------------------------------------ session
 def session_edges(session_dir: str | os.PathLike, focus: float) -> FittingEdges:
     """The edges a session measured at ``focus`` (see the module docstring, item 1)."""
-    from station.session.directory import read_manifest
+    from station.session.directory import read_records
     from station.session.evidence import measurement_from_arrays
     from station.session.layout import MANIFEST
-    from station.session.records import FocusLocked, ShotMeasured, ShotRejected, from_json
+    from station.session.records import FocusLocked, ShotMeasured, ShotRejected
 
     root = Path(session_dir)
     if not (root / MANIFEST).is_file():
         return FittingEdges(None, f"session {root} not found (no {MANIFEST})")
     try:
-        records = [from_json(r) for r in read_manifest(root / MANIFEST)[0]]
+        records = read_records(root / MANIFEST)
     except (OSError, ValueError) as exc:
         return FittingEdges(None, f"session {root}: cannot read its manifest ({exc})")
     idx = {r.focus_idx for r in records if isinstance(r, FocusLocked) and _same(r.focus, focus)}

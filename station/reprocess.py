@@ -41,6 +41,7 @@ from typing import Any
 
 from station import SOFTWARE, __version__
 from station.profile import Profile
+from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
 BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -107,7 +108,7 @@ def _software_versions() -> dict[str, str]:
 
 
 # --------------------------------------------------- the session, read only
-class ArchivedSession:
+class ArchivedSession(ManifestReads):
     """A session directory opened for reading only: its meta, manifest records and configuration.
 
     Unlike :class:`station.session.directory.SessionDir` it takes no lock and writes nothing
@@ -133,7 +134,8 @@ class ArchivedSession:
         except (OSError, ValueError) as exc:
             raise ValueError(f"{meta_file}: cannot read ({_one_line(exc)})") from None
         try:
-            self.records, _ = read_manifest(self.path / MANIFEST)
+            self.lines, _ = read_manifest(self.path / MANIFEST)
+            self.typed = parse(self.lines)
         except (OSError, SessionError) as exc:
             raise ValueError(_one_line(exc)) from None
         try:
@@ -141,33 +143,16 @@ class ArchivedSession:
         except ConfigError as exc:
             raise ValueError(_one_line(exc)) from None
 
-    def of_kind(self, kind: str) -> list[dict[str, Any]]:
-        return [r for r in self.records if r.get("kind") == kind]
-
-    def attempt(self, f: int, o: int) -> int:
-        """The accepted attempt of a shot: the number of times it was rejected."""
-        return sum(1 for r in self.of_kind("reject") if (r.get("focus_idx"), r.get("orientation_idx")) == (f, o))
-
-    def frames(self, f: int, o: int) -> list[dict[str, Any]]:
-        """The frame records of a shot's accepted attempt, by frame index (the last record wins)."""
-        a = self.attempt(f, o)
-        by_idx = {
-            r["frame_idx"]: r
-            for r in self.of_kind("frame")
-            if (r.get("focus_idx"), r.get("orientation_idx"), r.get("attempt")) == (f, o, a)
-        }
-        return [by_idx[i] for i in sorted(by_idx)]
-
-    def read_frame(self, record: dict[str, Any]) -> Any:
+    def read_frame(self, record: FrameSaved) -> Any:
         """The frame of a record, checked against the manifest's SHA-256."""
         from station.session.directory import decode_pgm
 
-        path = self.path / record["file"]
+        path = self.path / record.file
         try:
             data = path.read_bytes()
         except OSError as exc:
             raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
-        if hashlib.sha256(data).hexdigest() != record.get("sha256"):
+        if hashlib.sha256(data).hexdigest() != record.sha256:
             raise ValueError(f"{path}: checksum does not match the session manifest (damaged frame)")
         try:
             return decode_pgm(data)
@@ -176,7 +161,7 @@ class ArchivedSession:
 
     def stored_focus(self) -> dict[int, int | None]:
         """``{focus_idx: store id}`` of every focus setting the session stored a profile for."""
-        return {int(r["focus_idx"]): r.get("profile_id") for r in self.of_kind("stored")}
+        return {int(f): pid for f, pid in self.stored_ids().items()}
 
     def old_profile(self, f: int) -> OldProfile:
         """The profile the session stored for focus setting ``f`` (its model file) and its verdict."""
@@ -188,15 +173,13 @@ class ArchivedSession:
             profile = Profile.from_model_file(read_model_file(self.path / layout.profile_file(f)))
         except (OSError, ValueError):
             pass
-        judged = [r for r in self.of_kind("qa") if r.get("focus_idx") == f]
-        verdict = str(judged[-1].get("verdict")) if judged else None
+        judged = [r for r in self.of_type(QARecorded) if r.focus_idx == f]
+        verdict = str(judged[-1].verdict) if judged else None
         if profile is not None and profile.qa is None and judged:  # the session's verdict, from its manifest
             from station.profile import Verdict
 
             last = judged[-1]
-            profile = profile.with_(
-                qa=Verdict(str(last.get("verdict")), tuple(last.get("reasons") or ()), dict(last.get("metrics") or {}))
-            )
+            profile = profile.with_(qa=Verdict(str(last.verdict), tuple(last.reasons or ()), dict(last.metrics or {})))
         stored = self.stored_focus().get(f)
         software = profile.provenance.software if profile is not None else None
         if software is None and self.meta.get("software_version"):
@@ -296,13 +279,13 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         elif size != (w, h):
             raise ValueError(f"{where}: orientation {o} frames are {w}x{h}, the others {size[0]}x{size[1]}")
         m = measure_shot(average_frames(images), cfg.pipeline)
-        stage = records[-1].get("meta", {}).get("stage_deg")
+        stage = (records[-1].meta or {}).get("stage_deg")
         expected = cfg.station.harp.expected_angle(commanded if stage is None else stage)
         problems = shot_problems(m, expected, cfg.capture.checks)
         if problems:
             raise ValueError(f"{where}: orientation {o}: {'; '.join(problems)}")
         shots.append(list(m.lines))
-        frame_files += [s.path / r["file"] for r in records]
+        frame_files += [s.path / r.file for r in records]
     assert size is not None
     w, h = size
     pc = cfg.pipeline

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from drivers.protocols import CameraIdentity, Frame
+from station.session.records import ShotMeasured
 
 
 class SessionTap:
@@ -61,8 +62,8 @@ class SessionTap:
         frame_idx: int,
         image: np.ndarray,
         metadata: dict[str, Any] | None = None,
-    ) -> dict[str, Any]:
-        out: dict[str, Any] = self._session.write_frame(focus_idx, orientation_idx, frame_idx, image, metadata)
+    ) -> Any:
+        out = self._session.write_frame(focus_idx, orientation_idx, frame_idx, image, metadata)
         meta = metadata or {}
         cam = meta.get("camera") or ["", "", ""]
         frame = Frame(
@@ -78,7 +79,7 @@ class SessionTap:
         self._live.show_frame(
             frame, stage_deg=stage, focus_idx=focus_idx, orientation_idx=orientation_idx, frame_idx=frame_idx
         )
-        self._show(out)
+        self._show(self._session.lines[-1])  # the frame's line as written
         return out
 
     # -- what the page shows ---------------------------------------------------------------
@@ -95,7 +96,7 @@ class SessionTap:
             shown = {k: v for k, v in record.items() if k != "meta"}
         n_f, n_o, total = self._totals
         f, o = self._where
-        done = sum(1 for r in self._session.records if r.get("kind") == "measure")
+        done = sum(1 for _ in self._session.of_type(ShotMeasured))
         focus = self._config.focus_settings[f] if f < n_f else None
         shown["progress"] = {
             "focus_idx": f,

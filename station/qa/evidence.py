@@ -7,14 +7,7 @@ says so or measures again. Light: no plotting library is imported here.
 
 from __future__ import annotations
 
-
-def _last_record(session, kind: str, **match) -> dict | None:
-    found = None
-    for r in session.of_kind(kind):
-        if all(r.get(k) == v for k, v in match.items()):
-            found = r
-    return found
-
+from station.session.records import FitFailed, Fitted, ShotMeasured
 
 _MEASUREMENTS: dict[tuple[str, str], tuple[tuple[int, int], object]] = {}
 """Measurements read, by (file, SHA-256), with the file's (size, mtime) when read: the store step,
@@ -37,18 +30,18 @@ def stored_measurement(session, focus_idx: int, orientation_idx: int):
     from station.session.directory import SessionError
     from station.session.evidence import measurement_from_arrays
 
-    rec = _last_record(session, "measure", focus_idx=focus_idx, orientation_idx=orientation_idx)
-    if rec is None or "file" not in rec or rec.get("attempt") != session.attempt(focus_idx, orientation_idx):
+    rec = session.last(ShotMeasured, focus_idx=focus_idx, orientation_idx=orientation_idx)
+    if rec is None or not rec.file or rec.attempt != session.attempt(focus_idx, orientation_idx):
         return None
-    sha = rec.get("sha256")
-    path = session.path / rec["file"]
+    sha = rec.sha256
+    path = session.path / rec.file
     key = (str(path), str(sha))
     stamp = _stamp(path)
     hit = _MEASUREMENTS.get(key)
     if sha and stamp is not None and hit is not None and hit[0] == stamp:
         return hit[1]
     try:
-        m = measurement_from_arrays(session.read_arrays(rec["file"], sha))
+        m = measurement_from_arrays(session.read_arrays(rec.file, sha))
     except (OSError, ValueError, KeyError, SessionError):
         return None
     if sha and stamp is not None:
@@ -63,12 +56,10 @@ def stored_uncertainty(session, focus_idx: int, model):
     from station.session.directory import SessionError
     from station.session.evidence import uncertainty_from_arrays
 
-    rec = _last_record(session, "fit", focus_idx=focus_idx)
-    if rec is None or not rec.get("uncertainty_file"):
+    rec = session.last((Fitted, FitFailed), focus_idx=focus_idx)  # the last fit: a failed one has no map
+    if not isinstance(rec, Fitted) or not rec.uncertainty_file:
         return None
     try:
-        return uncertainty_from_arrays(
-            session.read_arrays(rec["uncertainty_file"], rec.get("uncertainty_sha256")), model
-        )
+        return uncertainty_from_arrays(session.read_arrays(rec.uncertainty_file, rec.uncertainty_sha256), model)
     except (OSError, ValueError, SessionError):
         return None

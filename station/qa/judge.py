@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from station.profile import Profile, Verdict
-from station.session.records import InterpolationError, QARecorded, SessionVerdict
+from station.session.records import InterpolationError, QARecorded, Reopened, SessionVerdict, Stored
 
 
 @dataclass(frozen=True)
@@ -39,10 +39,10 @@ def _append_once(session: Any, record: Any) -> None:
     """Append ``record`` unless the same record was written since the last profile was stored
     (``stored`` / ``reopened``: a new round of QA)."""
     same = _normal(record.to_json())
-    for r in reversed(session.records):
-        if r.get("kind") in ("stored", "reopened"):
+    for r in reversed(session.typed):
+        if isinstance(r, (Stored, Reopened)):
             break
-        if r.get("kind") == same["kind"] and _normal({k: v for k, v in r.items() if k != "t"}) == same:
+        if r.kind == record.kind and _normal(r.to_json()) == same:
             return
     session.append(record)
 
@@ -75,7 +75,7 @@ def judge_session(
     profiles = session_profiles(session.path)
     if not profiles:
         return None
-    stored = {r["focus_idx"]: r.get("profile_id") for r in session.of_kind("stored")}
+    stored = session.stored_ids()
     verdicts = []
     for f, p in profiles:
         focus = p.focus if p.focus is not None else config.focus_settings[f]

@@ -35,6 +35,7 @@ from typing import Any
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, verdict_exit_code
 from station.plain_json import plain
 from station.session import layout
+from station.session.records import FrameSaved, InterpolationError, QARecorded, ReportWritten, SessionVerdict
 
 FORMAT = "harp-session-results"
 FORMAT_VERSION = 1
@@ -54,8 +55,8 @@ def device_identities(session: Any) -> dict[str, dict[str, Any]]:
     cfg = session.config
     body = cfg.camera_body
     seen: list[list[str]] = []
-    for r in session.of_kind("frame"):
-        cam = (r.get("meta") or {}).get("camera")
+    for r in session.of_type(FrameSaved):
+        cam = (r.meta or {}).get("camera")
         if isinstance(cam, (list, tuple)) and len(cam) == 3 and list(cam) not in seen:
             seen.append([str(x) for x in cam])
     reported = [_ident(*c) for c in seen]
@@ -112,9 +113,8 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
     from station.session.states import session_state
 
     cfg = session.config
-    records = list(session.records)
-    state = session_state(records)
-    stored = {r["focus_idx"]: r.get("profile_id") for r in session.of_kind("stored")}
+    state = session_state(session.typed)
+    stored = session.stored_ids()
     if qa is not None:
         pairs = list(qa.profiles)
         verdicts: dict[int, Any] = {f: v for (f, _p), v in zip(qa.profiles, qa.verdicts)}
@@ -123,19 +123,18 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
     else:
         pairs = session_profiles(session.path)
         verdicts = {}
-        for r in session.of_kind("qa"):
-            verdicts[r["focus_idx"]] = Verdict(
-                r["verdict"],
-                tuple(r.get("reasons") or ()),
-                dict(r.get("metrics") or {}),
-                tuple(_checks(r.get("checks"))),
-                dict(r.get("thresholds") or {}),
+        for r in session.of_type(QARecorded):
+            verdicts[r.focus_idx] = Verdict(
+                r.verdict,
+                tuple(r.reasons or ()),
+                dict(r.metrics or {}),
+                tuple(_checks(r.checks)),
+                dict(r.thresholds or {}),
             )
-        last = [r for r in records if r.get("kind") == "qa_session"]
-        overall = last[-1]["verdict"] if last else None
+        last = session.last(SessionVerdict)
+        overall = last.verdict if last is not None else None
         interpolation = [
-            {"focus": r["focus"], "rms_px": r["rms_px"], "max_px": r["max_px"]}
-            for r in session.of_kind("interpolation")
+            {"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px} for r in session.of_type(InterpolationError)
         ]
     focus = []
     for f, p in pairs:
@@ -161,7 +160,7 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
                 "figures": dict(v.metrics) if v is not None else {},
             }
         )
-    reports = [r for r in records if r.get("kind") == "report" and r.get("file")]
+    reports = [r for r in session.of_type(ReportWritten) if r.file]
     return plain(
         {
             "format": FORMAT,
@@ -180,7 +179,7 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
             "thresholds": dict(cfg.qa.__dict__),
             "focus": focus,
             "interpolation": interpolation,
-            "report": reports[-1]["file"] if reports else None,
+            "report": reports[-1].file if reports else None,
         }
     )
 

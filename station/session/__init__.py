@@ -4,7 +4,8 @@
   from each shot's check result);
 * :mod:`station.session.executor` — the one executor performing the plan on a camera
   and a turntable (retries, device recovery), emitting typed manifest records;
-* :mod:`station.session.records` — those records (one dataclass per manifest kind);
+* :mod:`station.session.records` — those records (one dataclass per manifest kind), and
+  how every reader reads them back typed (``parse``, ``ManifestReads``);
 * :mod:`station.session.progress` — progress bars and the summary table, a subscriber
   to the records;
 * :mod:`station.session.run` — a whole session: the executor, then QA and the report

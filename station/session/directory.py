@@ -9,9 +9,11 @@ record is in the manifest (it is renamed into place, fsync'ed, *then*
 recorded). A torn last line, left by a kill in the middle of a write, is
 dropped when the manifest is read and cut off before the next append, so a
 resumed session continues exactly where the last complete record left it.
-Records are read back as plain mappings (:meth:`SessionDir.of_kind`,
-:meth:`SessionDir.frames`); a ``reject`` record supersedes the shot's frames
-(the next attempt captures it again).
+Records are read back typed (:class:`~station.session.records.ManifestReads`:
+:meth:`~station.session.records.ManifestReads.of_type`, ``frames``, ``attempt``;
+:func:`read_records` without opening the session), the lines as written beside them
+(``lines``); a ``reject`` record supersedes the shot's frames (the next attempt captures
+it again).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import io
 import json
 import os
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +38,17 @@ from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import frame_key, stored_key
-from station.session.records import FrameSaved, Record
+from station.session.records import (
+    Finished,
+    FrameSaved,
+    ManifestReads,
+    Record,
+    Reopened,
+    ShotRejected,
+    Stored,
+    from_json,
+    parse,
+)
 
 
 class SessionError(RuntimeError):
@@ -116,7 +128,12 @@ def read_manifest(path: Path) -> tuple[list[dict], int]:
     return records, good
 
 
-class SessionDir:
+def read_records(path: Path) -> list[Record]:
+    """The typed records of a manifest file (:func:`read_manifest`, :func:`station.session.records.parse`)."""
+    return parse(read_manifest(path)[0])
+
+
+class SessionDir(ManifestReads):
     """One session's directory. Create with :meth:`create`, reopen with :meth:`open`.
 
     Holds an exclusive ``flock`` on the directory while open, so two processes
@@ -140,7 +157,8 @@ class SessionDir:
                 os.fsync(fh.fileno())
         self._manifest = open(manifest, "ab", buffering=0)  # unbuffered: a failed append is cut back whole
         self._manifest_size = good_len
-        self.records = records
+        self.lines = records
+        self.typed = parse(records)
         # temporary files of writes a kill interrupted (never renamed into place)
         for sub in layout.WRITTEN_DIRS:
             if (self.path / sub).is_dir():
@@ -275,7 +293,10 @@ class SessionDir:
                 os.ftruncate(fd, start)
             raise OSError(exc.errno, exc.strerror, str(self.path / MANIFEST)) from None
         self._manifest_size = start + len(line)
-        self.records.append(record)
+        self.lines.append(record)
+        typed = from_json(record)
+        if typed is not None:
+            self.typed.append(typed)
         return record
 
     def write_frame(
@@ -285,17 +306,18 @@ class SessionDir:
         frame_idx: int,
         image: np.ndarray,
         metadata: dict[str, Any] | None = None,
-    ) -> dict:
-        """Write a frame atomically, then record it in the manifest."""
+    ) -> FrameSaved:
+        """Write a frame atomically, then record it in the manifest; returns its record (with its time)."""
         attempt = self.attempt(focus_idx, orientation_idx)
         rel = layout.frame_file(focus_idx, orientation_idx, attempt, frame_idx)
         data = encode_pgm(image)
         atomic_write_bytes(self.path / rel, data)
-        return self.append(
+        line = self.append(
             FrameSaved(
                 focus_idx, orientation_idx, frame_idx, attempt, rel, hashlib.sha256(data).hexdigest(), metadata or {}
             )
         )
+        return FrameSaved(**{k: v for k, v in line.items() if k != "kind"})
 
     def write_arrays(self, relpath: str, arrays: dict[str, np.ndarray]) -> dict:
         """Write ``arrays`` as an ``.npz`` at ``relpath`` (inside the session) atomically;
@@ -317,54 +339,32 @@ class SessionDir:
             return {k: z[k] for k in z.files}
 
     # ---------------------------------------------------------------- reads
-    def of_kind(self, kind: str) -> Iterator[dict]:
-        return (r for r in self.records if r.get("kind") == kind)
-
-    def attempt(self, focus_idx: int, orientation_idx: int) -> int:
-        """Current capture attempt of a shot: the number of times it was rejected."""
-        return sum(
-            1 for r in self.of_kind("reject") if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx
-        )
-
-    def frames(self, focus_idx: int, orientation_idx: int) -> list[dict]:
-        """Frame records of the shot's current attempt, by frame index (last wins)."""
-        a = self.attempt(focus_idx, orientation_idx)
-        by_idx = {
-            r["frame_idx"]: r
-            for r in self.of_kind("frame")
-            if r["focus_idx"] == focus_idx and r["orientation_idx"] == orientation_idx and r["attempt"] == a
-        }
-        return [by_idx[i] for i in sorted(by_idx)]
-
-    def read_frame(self, record: dict, verify: bool = True) -> np.ndarray:
-        data = (self.path / record["file"]).read_bytes()
-        if verify and hashlib.sha256(data).hexdigest() != record["sha256"]:
-            raise SessionError(f"{self.path / record['file']}: checksum does not match the manifest")
+    def read_frame(self, record: FrameSaved, verify: bool = True) -> np.ndarray:
+        data = (self.path / record.file).read_bytes()
+        if verify and hashlib.sha256(data).hexdigest() != record.sha256:
+            raise SessionError(f"{self.path / record.file}: checksum does not match the manifest")
         return decode_pgm(data)
 
     def done_keys(self) -> set[tuple]:
         """Keys for :func:`station.plan.plan_session` of what this session already has."""
         keys = set()
         attempts: dict[tuple, int] = {}
-        for r in self.of_kind("reject"):
-            k = (r["focus_idx"], r["orientation_idx"])
+        for rej in self.of_type(ShotRejected):
+            k = (rej.focus_idx, rej.orientation_idx)
             attempts[k] = attempts.get(k, 0) + 1
-        for r in self.of_kind("frame"):
-            if (
-                r["attempt"] == attempts.get((r["focus_idx"], r["orientation_idx"]), 0)
-                and (self.path / r["file"]).is_file()
-            ):
-                keys.add(frame_key(r["focus_idx"], r["orientation_idx"], r["frame_idx"]))
-        for r in self.records:  # a later ``reopened`` record takes a stored focus setting back
-            if r.get("kind") == "stored":
-                keys.add(stored_key(r["focus_idx"]))
-            elif r.get("kind") == "reopened":
-                keys.discard(stored_key(r["focus_idx"]))
+        for r in self.of_type(FrameSaved):
+            if r.attempt == attempts.get((r.focus_idx, r.orientation_idx), 0) and (self.path / r.file).is_file():
+                keys.add(frame_key(r.focus_idx, r.orientation_idx, r.frame_idx))
+        for rec in self.typed:  # a later ``reopened`` record takes a stored focus setting back
+            if isinstance(rec, Stored):
+                keys.add(stored_key(rec.focus_idx))
+            elif isinstance(rec, Reopened):
+                keys.discard(stored_key(rec.focus_idx))
         return keys
 
     @property
     def finished(self) -> bool:
-        return any(True for _ in self.of_kind("finished"))
+        return any(isinstance(r, Finished) for r in self.typed)
 
 
 def json_default(o: Any) -> Any:

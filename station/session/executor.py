@@ -86,7 +86,6 @@ from station.session.records import (
     FitFailed,
     Fitted,
     FocusLocked,
-    FrameSaved,
     Record,
     Resumed,
     ShotMeasured,
@@ -190,8 +189,8 @@ class Executor:
     def run(self) -> SessionResult:
         """Perform what the session still lacks; QA, the report and ``finished`` are the caller's."""
         s = self.session
-        past = list(s.records)
-        resumed = any(r.get("kind") == Started.kind for r in past)
+        past = list(s.typed)
+        resumed = any(isinstance(r, Started) for r in past)
         self._emit(Resumed(__version__) if resumed else Started(__version__))
         done = s.done_keys()
         listed = list(plan_session(self.config, done))  # every shot taken to pass: the totals of the bars
@@ -401,16 +400,16 @@ class Executor:
         """The reference frame; on resume, the last frame of the last accepted shot on disk."""
         if self._reference is None and not self._reference_loaded:
             self._reference_loaded = True
-            for r in reversed(list(self.session.of_kind(ShotMeasured.kind))):
-                frames = self.session.frames(r["focus_idx"], r["orientation_idx"])
-                if not frames or frames[-1]["attempt"] != r["attempt"]:
+            for r in reversed(list(self.session.of_type(ShotMeasured))):
+                frames = self.session.frames(r.focus_idx, r.orientation_idx)
+                if not frames or frames[-1].attempt != r.attempt:
                     continue
                 try:
                     img = self.session.read_frame(frames[-1])
                 except (OSError, ValueError, SessionError):
                     continue  # damaged or missing: another shot will do, or the next accepted one
-                full = full_scale(img.dtype, frames[-1]["meta"].get("bit_depth"))
-                self._reference = ((r["focus_idx"], r["orientation_idx"], r["attempt"]), frame_stats(img, full))
+                full = full_scale(img.dtype, (frames[-1].meta or {}).get("bit_depth"))
+                self._reference = ((r.focus_idx, r.orientation_idx, r.attempt), frame_stats(img, full))
                 break
         return self._reference
 
@@ -428,10 +427,10 @@ class Executor:
             "bit_depth": _bit_depth(frame),
             "extra": _jsonable(frame.extra),
         }
-        rec = self.session.write_frame(
+        saved = self.session.write_frame(
             step.focus_idx, step.orientation_idx, step.frame_idx, np.asarray(frame.image), meta
         )
-        self._publish(FrameSaved(**{k: v for k, v in rec.items() if k not in ("kind", "t")}))
+        self._publish(saved)
 
     def _measure(self, step: Measure) -> ShotCheck:
         f, o = step.focus_idx, step.orientation_idx
@@ -454,13 +453,13 @@ class Executor:
         if len(records) != n:  # cannot happen unless the directory was tampered with
             raise SessionAborted(f"focus {f} orientation {o}: {len(records)} of {n} frames on disk")
         images = [self.session.read_frame(r) for r in records]
-        bit_depth = records[0]["meta"].get("bit_depth")
+        bit_depth = (records[0].meta or {}).get("bit_depth")
         image = average_frames(images)
         problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), self.config.capture.checks)
         if problems:
             return problems, None
         m = measure_shot(image, self.config.pipeline)
-        stage = records[-1]["meta"].get("stage_deg")
+        stage = (records[-1].meta or {}).get("stage_deg")
         if stage is None:
             stage = self.config.capture.orientations_deg[o]
         expected = self.config.station.harp.expected_angle(stage)
@@ -521,7 +520,7 @@ class Executor:
         cal = self._calibrations[f]
         w, h = self._image_size(f)
         frames = [
-            self.session.path / r["file"]
+            self.session.path / r.file
             for o in range(len(cfg.capture.orientations_deg))
             for r in self.session.frames(f, o)
         ]

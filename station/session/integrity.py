@@ -37,7 +37,16 @@ from pathlib import Path
 
 from station.files import atomic_write_bytes
 from station.session import layout
-from station.session.records import Reopened, ShotRejected
+from station.session.records import (
+    FitFailed,
+    Fitted,
+    Reopened,
+    ShotMeasured,
+    ShotRejected,
+    Started,
+    Stored,
+    parse,
+)
 
 
 @dataclass(frozen=True)
@@ -79,38 +88,38 @@ def check_session(session) -> list[Damage]:
     cfg = session.config
     n_o = len(cfg.capture.orientations_deg)
     stored: set[int] = set()
-    last_stored: dict[int, dict] = {}
-    for r in session.records:
-        if r.get("kind") == "stored":
-            stored.add(r["focus_idx"])
-            last_stored[r["focus_idx"]] = r
-        elif r.get("kind") == "reopened":
-            stored.discard(r["focus_idx"])
+    last_stored: dict[int, Stored] = {}
+    for r in session.typed:
+        if isinstance(r, Stored):
+            stored.add(r.focus_idx)
+            last_stored[r.focus_idx] = r
+        elif isinstance(r, Reopened):
+            stored.discard(r.focus_idx)
     out: list[Damage] = []
     for f in range(len(cfg.focus_settings)):
         for o in range(n_o):
-            for r in session.frames(f, o):
-                problem = _file_problem(session.path / r["file"], r["sha256"])
+            for frame in session.frames(f, o):
+                problem = _file_problem(session.path / frame.file, frame.sha256)
                 if problem is None or (problem == "missing" and f not in stored):
                     continue  # a frame missing from a setting not stored yet is simply captured again
                 how = "" if f in stored else "recapture"
-                out.append(Damage(r["file"], problem, f, o, how))
+                out.append(Damage(frame.file, problem, f, o, how))
         if f not in stored:
             continue
         attempts = {o: session.attempt(f, o) for o in range(n_o)}
-        for r in _last_of(session, "measure", f):
-            if r.get("attempt") == attempts.get(r["orientation_idx"]) and r.get("file"):
-                problem = _file_problem(session.path / r["file"], r.get("sha256"))
+        for m in _last_measured(session, f):
+            if m.attempt == attempts.get(m.orientation_idx) and m.file:
+                problem = _file_problem(session.path / m.file, m.sha256)
                 if problem:
-                    out.append(Damage(r["file"], problem, f, r["orientation_idx"], "refit"))
-        fit = next(iter(_last_of(session, "fit", f, by_orientation=False)), None)
-        if fit is not None and fit.get("uncertainty_file"):
-            problem = _file_problem(session.path / fit["uncertainty_file"], fit.get("uncertainty_sha256"))
+                    out.append(Damage(m.file, problem, f, m.orientation_idx, "refit"))
+        fit = session.last((Fitted, FitFailed), focus_idx=f)  # the last fit: a failed one has no map
+        if isinstance(fit, Fitted) and fit.uncertainty_file:
+            problem = _file_problem(session.path / fit.uncertainty_file, fit.uncertainty_sha256)
             if problem:
-                out.append(Damage(fit["uncertainty_file"], problem, f, None, "refit"))
+                out.append(Damage(fit.uncertainty_file, problem, f, None, "refit"))
         rec = last_stored[f]
-        rel = rec.get("model_file") or layout.profile_file(f)
-        problem = _file_problem(session.path / rel, rec.get("sha256"))
+        rel = rec.model_file or layout.profile_file(f)
+        problem = _file_problem(session.path / rel, rec.sha256)
         if problem is None:
             from pipeline.model_file import read_model_file
 
@@ -123,12 +132,12 @@ def check_session(session) -> list[Damage]:
     return out
 
 
-def _last_of(session, kind: str, focus_idx: int, by_orientation: bool = True) -> list[dict]:
-    """The last record of ``kind`` for ``focus_idx`` (per orientation when ``by_orientation``)."""
-    last: dict = {}
-    for r in session.of_kind(kind):
-        if r.get("focus_idx") == focus_idx:
-            last[r.get("orientation_idx") if by_orientation else None] = r
+def _last_measured(session, focus_idx: int) -> list[ShotMeasured]:
+    """The last ``measure`` record of each orientation of ``focus_idx``."""
+    last: dict[int, ShotMeasured] = {}
+    for r in session.of_type(ShotMeasured):
+        if r.focus_idx == focus_idx:
+            last[r.orientation_idx] = r
     return list(last.values())
 
 
@@ -189,7 +198,7 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
             f"{layout.MANIFEST}: dropped {dropped} damaged line{'s' if dropped != 1 else ''} "
             f"(the original is kept as {layout.MANIFEST}.damaged); what they recorded is checked below"
         )
-    records, _ = read_manifest(manifest)
+    records = parse(read_manifest(manifest)[0])
     # session.json
     meta = None
     try:
@@ -203,8 +212,8 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
                 "the session cannot be re-derived"
             )
         guess = base_dir if base_dir is not None else str(path.resolve().parent.parent)
-        start = next((r for r in records if r.get("kind") == "start"), {})
-        created = _dt.datetime.fromtimestamp(float(start.get("t", 0) or 0), _dt.UTC)
+        start = next((r for r in records if isinstance(r, Started)), None)
+        created = _dt.datetime.fromtimestamp(float(start.t or 0) if start is not None else 0.0, _dt.UTC)
         text = (path / layout.CONFIG_COPY).read_bytes()
         meta = {
             "format": 1,
@@ -212,7 +221,7 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
             "config_source": "",
             "base_dir": guess,
             "station_id": "",
-            "software_version": start.get("software_version", ""),
+            "software_version": (start.software_version if start is not None else None) or "",
             "lens": [],
             "config_sha256": hashlib.sha256(text).hexdigest(),
             "repaired": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -288,7 +297,7 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
         reopen[f] = "captured again (harp session repair --recapture)"
         report.fixed.append(f"focus setting {f}: every shot will be captured again by harp session resume")
         report.resume = True
-    stored = {r["focus_idx"] for r in session.of_kind("stored")}
+    stored = set(session.stored_ids())
     for f, why in sorted(reopen.items()):
         if f in stored:
             session.append(Reopened(f, why))

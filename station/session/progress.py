@@ -14,7 +14,7 @@ tally as rich progress bars, the notes and the summary table.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -25,7 +25,7 @@ from station.session.records import Fault, Fitted, FrameSaved, Record, ShotMeasu
 class Subscriber(Protocol):
     """What the executor tells those who follow a session."""
 
-    def start(self, config: Config, past: Iterable[Mapping[str, Any]], n_capture: int, n_process: int) -> None: ...
+    def start(self, config: Config, past: Iterable[Record], n_capture: int, n_process: int) -> None: ...
     def record(self, record: Record) -> None: ...
     def note(self, text: str) -> None: ...
     def finish(self, session_path: Any, interrupted: bool = False) -> None: ...
@@ -53,11 +53,11 @@ class Tally:
         self.faults = 0
         self._recaptured: set[tuple[int, int, int]] = set()
 
-    def start(self, config: Config, past: Iterable[Mapping[str, Any]], n_capture: int, n_process: int) -> None:
+    def start(self, config: Config, past: Iterable[Record], n_capture: int, n_process: int) -> None:
         self.rows = {f: FocusRow(f, v) for f, v in enumerate(config.focus_settings)}
         for r in past:  # profiles stored before a resume
-            if r.get("kind") == Stored.kind and r.get("focus_idx") in self.rows:
-                self.rows[r["focus_idx"]].profile_id = r.get("profile_id")
+            if isinstance(r, Stored) and r.focus_idx in self.rows:
+                self.rows[r.focus_idx].profile_id = r.profile_id
 
     def record(self, record: Record) -> None:
         match record:
@@ -93,7 +93,7 @@ class ConsoleProgress:
         self._progress: Any = None
         self._tasks: dict[str, Any] = {}
 
-    def start(self, config: Config, past: Iterable[Mapping[str, Any]], n_capture: int, n_process: int) -> None:
+    def start(self, config: Config, past: Iterable[Record], n_capture: int, n_process: int) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.config = config

@@ -7,6 +7,14 @@ JSON object per line, ``{"t": <unix time>, "kind": <kind>, ...fields}``. The exe
 (:mod:`station.session.progress`) receive them as they are written. The JSON of each
 record is its fields in order (``None`` fields that are optional are left out).
 
+Reading is typed too: :func:`from_json` (one line) and :func:`parse` (a manifest's lines)
+return these records, each with the time its line was written (``t``); lines of other
+versions read for what they hold (unknown keys and kinds left out, missing fields their
+defaults or ``None``). :class:`ManifestReads` is what every reader asks of them (records of a
+type, the last one matching, a shot's current attempt and frames, the stored focus settings),
+for the open session directory (:class:`station.session.directory.SessionDir`) and the
+read-only archived session (:mod:`station.reprocess`) alike.
+
 =================  ===============================================================
 kind               record
 =================  ===============================================================
@@ -31,22 +39,30 @@ kind               record
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 
 @dataclass(frozen=True)
 class Record:
-    """Base of the manifest records; ``kind`` names the record in the file."""
+    """Base of the manifest records; ``kind`` names the record in the file.
+
+    ``t`` is the time the line was written (unix seconds), set on records read back from a
+    manifest (:func:`parse`); a record about to be written has none (the session directory
+    stamps the line). It takes no part in comparisons.
+    """
 
     kind: ClassVar[str] = ""
     optional: ClassVar[tuple[str, ...]] = ()
     """Fields left out of the JSON when ``None``."""
+    t: float | None = field(default=None, kw_only=True, compare=False)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind}
         for f in dataclasses.fields(self):
+            if f.name == "t":
+                continue
             v = getattr(self, f.name)
             if v is None and f.name in self.optional:
                 continue
@@ -238,18 +254,85 @@ _TYPES: tuple[type[Record], ...] = (
 
 
 def from_json(d: Mapping[str, Any]) -> Record | None:
-    """The typed record of a manifest line (``None`` for a kind or shape this software does not know)."""
+    """The typed record of one manifest line (``None`` for a kind this software does not know).
+
+    Lines written by other versions read for what they hold: keys this software does not know
+    are left out (the line as written stays in :attr:`ManifestReads.lines`), and a field an
+    older line did not write reads as its default, else ``None``. Where two records share a
+    kind (``fit``: :class:`Fitted` / :class:`FitFailed`; ``report``), the line is the one whose
+    fields it holds.
+    """
+    best: tuple[tuple[int, int], type[Record], list[str], set[str]] | None = None
     for cls in _TYPES:
         if cls.kind != d.get("kind"):
             continue
-        names = {f.name for f in dataclasses.fields(cls)}
+        fields = [f for f in dataclasses.fields(cls) if f.name != "t"]
+        names = [f.name for f in fields]
         required = {
             f.name
-            for f in dataclasses.fields(cls)
+            for f in fields
             if f.default is dataclasses.MISSING
             and f.default_factory is dataclasses.MISSING
             and f.name not in cls.optional
         }
-        if required <= set(d) and set(d) - {"kind", "t"} <= names:
-            return cls(**{k: v for k, v in d.items() if k in names})
-    return None
+        missing = required - set(d)
+        score = (len(missing), -len(set(d) & set(names)))
+        if best is None or score < best[0]:
+            best = (score, cls, names, missing)
+    if best is None:
+        return None
+    _score, cls, names, missing = best
+    values = {k: d[k] for k in names if k in d}
+    values.update(dict.fromkeys(missing))
+    t = d.get("t")
+    return cls(**values, t=float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) else None)
+
+
+def parse(lines: Iterable[Mapping[str, Any]]) -> list[Record]:
+    """The typed records of manifest lines, in order (lines of unknown kinds left out)."""
+    return [r for r in map(from_json, lines) if r is not None]
+
+
+R = TypeVar("R", bound=Record)
+
+
+class ManifestReads:
+    """What a session's manifest says, read as typed records (shared by the session directory,
+    :class:`station.session.directory.SessionDir`, and the read-only archived session of
+    :mod:`station.reprocess`). ``lines`` are the manifest's lines as written (every key), ``typed``
+    their records (:func:`parse`)."""
+
+    lines: list[dict[str, Any]]
+    typed: list[Record]
+
+    def of_type(self, cls: type[R] | tuple[type[R], ...]) -> Iterator[R]:
+        """The records of one type (or of any of a tuple of types), in the order written."""
+        return (r for r in self.typed if isinstance(r, cls))
+
+    def last(self, cls: type[R] | tuple[type[R], ...], **match: Any) -> R | None:
+        """The last record of type ``cls`` (or any of a tuple) whose fields equal ``match``, or None."""
+        found = None
+        for r in self.of_type(cls):
+            if all(getattr(r, k, None) == v for k, v in match.items()):
+                found = r
+        return found
+
+    def attempt(self, focus_idx: int, orientation_idx: int) -> int:
+        """Current capture attempt of a shot: the number of times it was rejected."""
+        return sum(
+            1 for r in self.of_type(ShotRejected) if (r.focus_idx, r.orientation_idx) == (focus_idx, orientation_idx)
+        )
+
+    def frames(self, focus_idx: int, orientation_idx: int) -> list[FrameSaved]:
+        """Frame records of the shot's current attempt, by frame index (last wins)."""
+        a = self.attempt(focus_idx, orientation_idx)
+        by_idx = {
+            r.frame_idx: r
+            for r in self.of_type(FrameSaved)
+            if (r.focus_idx, r.orientation_idx, r.attempt) == (focus_idx, orientation_idx, a)
+        }
+        return [by_idx[i] for i in sorted(by_idx)]
+
+    def stored_ids(self) -> dict[int, int | None]:
+        """``{focus_idx: store id}`` of every ``stored`` record (the last one of a focus setting wins)."""
+        return {r.focus_idx: r.profile_id for r in self.of_type(Stored)}

@@ -16,10 +16,22 @@ state              meaning
 from __future__ import annotations
 
 import fcntl
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from station.session.records import (
+    Aborted,
+    Finished,
+    FrameSaved,
+    Record,
+    Resumed,
+    SessionVerdict,
+    Started,
+    Stored,
+    parse,
+)
 
 COMPLETE, FAILED, INTERRUPTED, RUNNING = "complete", "failed", "interrupted", "running"
 STATES = (COMPLETE, FAILED, INTERRUPTED, RUNNING)
@@ -28,18 +40,17 @@ USER_INTERRUPT = "interrupted by the user"
 """The reason of the ``aborted`` record a Ctrl-C leaves (:mod:`station.session.executor`)."""
 
 
-def session_state(records: Iterable[Mapping[str, Any]]) -> str:
+def session_state(records: Iterable[Record]) -> str:
     """``complete``, ``failed`` or ``interrupted`` from a session's manifest records (in order)."""
-    last_stop: Mapping[str, Any] | None = None
+    last_stop: Aborted | None = None
     for r in records:
-        kind = r.get("kind")
-        if kind == "finished":
+        if isinstance(r, Finished):
             return COMPLETE
-        if kind == "aborted":
+        if isinstance(r, Aborted):
             last_stop = r
-        elif kind in ("start", "resume"):
+        elif isinstance(r, (Started, Resumed)):
             last_stop = None  # a later run: its own stop (or none, if killed) counts
-    if last_stop is not None and last_stop.get("reason") != USER_INTERRUPT:
+    if last_stop is not None and last_stop.reason != USER_INTERRUPT:
         return FAILED
     return INTERRUPTED
 
@@ -109,10 +120,11 @@ def summarise(session_dir: str | Path) -> SessionSummary:
             raise ValueError("not a JSON object")
     except (OSError, ValueError) as exc:
         raise SessionError(f"{path / SESSION_FILE}: cannot be read ({exc})") from None
-    records, _ = read_manifest(path / MANIFEST)
+    lines, _ = read_manifest(path / MANIFEST)
+    records = parse(lines)
     state = RUNNING if in_use(path) else session_state(records)
-    verdicts = [r.get("verdict") for r in records if r.get("kind") == "qa_session"]
-    stops = [r.get("reason") for r in records if r.get("kind") == "aborted"]
+    verdicts = [r.verdict for r in records if isinstance(r, SessionVerdict)]
+    stops = [r.reason for r in records if isinstance(r, Aborted)]
     n_focus = None
     try:
         import yaml
@@ -122,7 +134,7 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     except (OSError, ValueError, AttributeError, yaml.YAMLError):
         pass
     lens = meta.get("lens")
-    times = [r["t"] for r in records if isinstance(r.get("t"), (int, float))]
+    times = [r["t"] for r in lines if isinstance(r.get("t"), (int, float))]  # lines of any kind count
     last = _dt.datetime.fromtimestamp(max(times), _dt.UTC).isoformat(timespec="seconds") if times else None
     return SessionSummary(
         name=path.name,
@@ -131,8 +143,8 @@ def summarise(session_dir: str | Path) -> SessionSummary:
         verdict=verdicts[-1] if verdicts else None,
         lens=" ".join(str(x) for x in lens) if isinstance(lens, list) else "",
         focus_settings=n_focus if n_focus is not None else 0,
-        profiles=len({r.get("focus_idx") for r in records if r.get("kind") == "stored"}),
-        frames=sum(1 for r in records if r.get("kind") == "frame"),
+        profiles=len({r.focus_idx for r in records if isinstance(r, Stored)}),
+        frames=sum(1 for r in records if isinstance(r, FrameSaved)),
         created=meta.get("created"),
         last=last,
         stop_reason=stops[-1] if stops and state in (FAILED, INTERRUPTED) else None,

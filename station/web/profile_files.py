@@ -201,21 +201,22 @@ def _session_uncertainty(root: Path, f: int, model: Any) -> Any:
     """The bootstrap map a session kept for focus index ``f`` (SHA-256 checked), or None."""
     import numpy as np
 
-    from station.session.directory import read_manifest
+    from station.session.directory import read_records
     from station.session.evidence import uncertainty_from_arrays
     from station.session.layout import MANIFEST
+    from station.session.records import Fitted
 
     try:
-        records, _ = read_manifest(root / MANIFEST)
+        records = read_records(root / MANIFEST)
     except (OSError, ValueError):
         return None
-    fits = [r for r in records if r.get("kind") == "fit" and r.get("focus_idx") == f and r.get("uncertainty_file")]
+    fits = [r for r in records if isinstance(r, Fitted) and r.focus_idx == f and r.uncertainty_file]
     if not fits:
         return None
     rec = fits[-1]
     try:
-        data = (root / rec["uncertainty_file"]).read_bytes()
-        if hashlib.sha256(data).hexdigest() != rec.get("uncertainty_sha256"):
+        data = (root / rec.uncertainty_file).read_bytes()
+        if hashlib.sha256(data).hexdigest() != rec.uncertainty_sha256:
             return None
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             return uncertainty_from_arrays({k: z[k] for k in z.files}, model)

@@ -190,6 +190,7 @@ def test_kept_measurements_are_read_once_and_again_when_damaged(failed, tmp_path
 
     from station.qa.evidence import stored_measurement
     from station.session.directory import SessionDir
+    from station.session.records import ShotMeasured
 
     _, _, _, base = failed
     copy = tmp_path / "copy"
@@ -197,8 +198,8 @@ def test_kept_measurements_are_read_once_and_again_when_damaged(failed, tmp_path
     with SessionDir.open(copy) as s:
         first = stored_measurement(s, 0, 0)
         assert first is not None and stored_measurement(s, 0, 0) is first  # store step, QA, report: one read
-        rec = [r for r in s.of_kind("measure") if (r["focus_idx"], r["orientation_idx"]) == (0, 0)][-1]
-        f = copy / rec["file"]
+        rec = s.last(ShotMeasured, focus_idx=0, orientation_idx=0)
+        f = copy / rec.file
         data = bytearray(f.read_bytes())
         data[len(data) // 2] ^= 0xFF
         f.write_bytes(bytes(data))

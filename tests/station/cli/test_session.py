@@ -20,6 +20,7 @@ from station.cli import main
 from station.config import load_config
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
+from station.session.records import Fault, FrameSaved
 from station.session.simulated import simulated_devices
 from station.store import ProfileStore
 
@@ -327,8 +328,8 @@ def test_emulator_and_camera_faults_are_retried(tmp_path):
         sim.camera.fail_next(1, "corrupt")
         sim.camera.fail_next(1, "disconnect")
         result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
-        faults = Counter(r["error"] for r in s.of_kind("fault"))
-        n_frames = len(list(s.of_kind("frame")))
+        faults = Counter(r.error for r in s.of_type(Fault))
+        n_frames = len(list(s.of_type(FrameSaved)))
     assert result.exit_code == EXIT_OK, result.message
     assert faults["DeviceTimeout"] >= 3 and faults["CaptureError"] == 1
     assert faults["DeviceDisconnected"] == 1 and faults["DeviceFault"] >= 1
@@ -342,7 +343,7 @@ def test_unplugged_turntable_stops_cleanly(tmp_path):
         sim.turntable.open()
         sim.emulator.emulator.inject("vanish", at=0.5)  # unplugged during the first move
         result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
-        recs = list(s.records)
+        recs = list(s.lines)
     assert result.exit_code == EXIT_ABORTED
     assert "failed 3 times" in result.message and "DeviceDisconnected" in result.message
     assert "\n" not in result.message and recs[-1]["kind"] == "aborted"

@@ -40,7 +40,7 @@ def run(session, cam, stage, store=None):
 
 def frame_records(path):
     with SessionDir.open(path) as s:
-        return list(s.of_kind("frame")), list(s.records)
+        return [r for r in s.lines if r["kind"] == "frame"], list(s.lines)
 
 
 def test_complete_session_stores_a_profile(tmp_path):
@@ -126,7 +126,7 @@ def test_bad_shot_is_recaptured(tmp_path):
     cam = FakeCamera(stage, images={2: over})  # orientation 1 over-exposed once
     with SessionDir.create(tmp_path, cfg, name="s") as s:
         result, _ = run(s, cam, stage)
-        assert s.frames(0, 1)[0]["attempt"] == 1
+        assert s.frames(0, 1)[0].attempt == 1
     assert result.exit_code == EXIT_OK and result.focus[0].recaptures == 1
     frames, records = frame_records(tmp_path / "s")
     (rej,) = [r for r in records if r["kind"] == "reject"]

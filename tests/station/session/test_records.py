@@ -53,3 +53,23 @@ def test_the_manifest_layout_of_some_kinds():
     assert fit["kind"] == "fit" and "uncertainty_file" not in fit  # absent when not computed
     assert r.from_json({"kind": "fit", "focus_idx": 1, "failure": "x"}) == r.FitFailed(1, "x")
     assert r.from_json({"kind": "no-such-kind"}) is None
+
+
+def test_lines_of_other_versions_read_for_what_they_hold():
+    # a key this software does not know is left out; the time of the line is kept (not compared)
+    newer = r.from_json({"t": 12.5, "kind": "stored", "focus_idx": 1, "profile_id": 3, "model_file": "p.yaml", "x": 1})
+    assert newer == r.Stored(1, 3, "p.yaml") and newer.t == 12.5
+    # an older line without sha256 (issue 14) or checks (issue 9): the defaults; without a field: None
+    assert r.from_json({"kind": "stored", "focus_idx": 2}) == r.Stored(2, None, None)
+    old_qa = r.from_json({"kind": "qa", "focus_idx": 0, "verdict": "PASS", "reasons": [], "metrics": {}})
+    assert old_qa == r.QARecorded(0, "PASS", [], {}) and old_qa.checks == [] and old_qa.thresholds == {}
+    # two records of one kind: the one whose fields the line holds
+    assert isinstance(r.from_json(EXAMPLES[6].to_json()), r.Fitted)
+    assert r.from_json({"kind": "report", "failure": "disk full", "x": 0}) == r.ReportFailed("disk full")
+    assert r.from_json({"kind": "report", "file": "a.md", "html": "a.html"}) == r.ReportWritten("a.md", "a.html")
+    # parse: in order, unknown kinds left out
+    assert r.parse([{"kind": "finished"}, {"kind": "from-the-future"}, {"kind": "start", "software_version": "9"}]) == [
+        r.Finished(),
+        r.Started("9"),
+    ]
+    assert "t" not in r.Started("1").to_json()  # the directory stamps the line when it is written

@@ -13,6 +13,7 @@ import pytest
 from station.cli import main
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK
+from station.session.records import Aborted, FrameSaved
 from station.session.run import run_session
 from station.store import ProfileStore
 from tests.station.fakes import FakeCamera, FakeStage
@@ -83,9 +84,9 @@ def test_full_disk_at_the_store_step_stops_with_exit_2_and_resumes(tmp_path, cap
             msg = result.message
             assert "\n" not in msg and str(store_path) in msg and "no space left" in msg
             assert f"harp session resume {s.path}" in msg
-            aborted = list(s.of_kind("aborted"))
-            assert len(aborted) == 1 and "no space left" in aborted[0]["reason"]
-            assert len(list(s.of_kind("frame"))) == 4  # every frame of focus 0 kept (stopped at its store step)
+            aborted = list(s.of_type(Aborted))
+            assert len(aborted) == 1 and "no space left" in aborted[0].reason
+            assert len(list(s.of_type(FrameSaved))) == 4  # every frame of focus 0 kept (stopped at its store step)
         with ProfileStore(store_path) as store:
             assert store.profiles() == []  # nothing half-written
         filler.unlink()  # space freed: resume through the command
