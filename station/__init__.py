@@ -13,7 +13,9 @@ Where things are (one idea, one room):
 * :mod:`station.export_source` — what an export of a profile is made from (lens and
   camera, holdout ``d``, the fitting shots' edges), for :mod:`pipeline.exports`;
 * :mod:`station.files` (atomic writes, model files), :mod:`station.provenance`,
-  :mod:`station.imageio` (reading photographs);
+  :mod:`station.imageio` (reading photographs), :mod:`station.inputs` (bad input as one
+  line, photographs read and measured), :mod:`station.evaluation` (the residual distortion
+  of any correction, ``harp evaluate``);
 * :mod:`station.session` — a session: plan, executor, records, progress, the session
   directory and its layout, devices;
 * :mod:`station.qa` — verdicts, a session's QA, the report, overlays;

@@ -5,8 +5,9 @@ Each sub-command lives in its own module ``station.cli.<name>`` (``measure``,
 ``qa``, ``live``, ``serve``, ``reprocess``) exposing ``register(subparsers)``; the parser it adds sets
 ``func(args) -> int``. A command module parses, calls the domain code
 (:mod:`station.calibration`, :mod:`station.session`, :mod:`station.qa`,
-:mod:`station.store`, :mod:`pipeline`) and prints; :mod:`station.cli.inputs` holds the
-input helpers they share (one-line input errors, reading and measuring photos).
+:mod:`station.store`, :mod:`pipeline`) and prints — nothing else imports it; the input
+helpers they share (one-line input errors, reading and measuring photos) are
+:mod:`station.inputs`, their ``argparse`` types :mod:`station.cli.inputs`.
 Exit codes (:mod:`station.exit_codes`): 0 success (a verdict of PASS), 1 a verdict of FAIL
 (``harp qa``, ``harp session run|resume``; ``harp profile export`` of a failed profile),
 2 bad input or an error, 130 interrupted, 141 standard output closed early.

@@ -40,7 +40,8 @@ import numpy as np
 
 from pipeline.edgeset import straightness_of
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
-from station.cli.inputs import InputError, measure_file, positive_int
+from station.cli.inputs import positive_int
+from station.inputs import InputError, measure_file
 
 
 class CalibrateError(InputError):

@@ -44,7 +44,7 @@ import math
 import sys
 from pathlib import Path
 
-from station.cli.inputs import InputError
+from station.inputs import InputError
 
 FORMAT_CHOICES = (
     "auto",

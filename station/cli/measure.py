@@ -40,7 +40,8 @@ import numpy as np
 
 from pipeline.measure import ImageMeasurement
 from pipeline.straightness import straightness
-from station.cli.inputs import InputError, measure_file, positive_int
+from station.cli.inputs import positive_int
+from station.inputs import InputError, measure_file
 
 
 def register(subparsers) -> None:

@@ -387,8 +387,8 @@ def _allowed(args, lens, p) -> None:
 @_with_store
 def _export(args, store) -> int:
     from station.cli.export import export_profile, report, write_output
-    from station.cli.inputs import InputError
     from station.export_source import FittingEdges
+    from station.inputs import InputError
 
     edges = None
     if args.id is not None:

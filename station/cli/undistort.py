@@ -20,8 +20,8 @@ import numpy as np
 
 from pipeline.model_file import read_model_file
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
-from station.cli.inputs import InputError, read_image
 from station.files import atomic_write_bytes
+from station.inputs import InputError, read_image
 
 INTERPOLATIONS = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 WRITABLE = (".pgm", ".ppm", ".pnm", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
