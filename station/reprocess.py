@@ -541,9 +541,40 @@ def finish_session(session_dir: str, results: Sequence[FocusResult], store: Any 
     return SessionOutcome(session_dir, tuple(results), None, tuple(profiles), tuple(old_ids))
 
 
-def group_by_session(jobs: Sequence[FocusJob], results: Sequence[FocusResult]) -> dict[str, list[FocusResult]]:
-    """Results by session directory (in the jobs' order)."""
-    out: dict[str, list[FocusResult]] = {}
-    for j, r in zip(jobs, results):
-        out.setdefault(j.session_dir, []).append(r)
-    return out
+class SessionCollector:
+    """Gathers the focus results of each session as they arrive (any order, from any worker) and,
+    when a session's last one arrives, finishes it (:func:`finish_session`) and stores its new
+    profiles in ``store`` (None: a dry run). ``outcomes`` holds every session finished so far;
+    ``on_outcome`` is told each one. A store error while storing is the session's failure (the
+    profiles stored before it stay)."""
+
+    def __init__(
+        self,
+        jobs: Sequence[FocusJob],
+        store: Any = None,
+        on_outcome: Callable[[SessionOutcome], None] = lambda _o: None,
+    ) -> None:
+        self.store, self.on_outcome = store, on_outcome
+        self.expected: dict[str, int] = {}
+        for j in jobs:
+            self.expected[j.session_dir] = self.expected.get(j.session_dir, 0) + 1
+        self.arrived: dict[str, list[FocusResult]] = {}
+        self.outcomes: dict[str, SessionOutcome] = {}
+
+    def __call__(self, r: FocusResult) -> None:
+        from station.store import StoreError
+
+        got = self.arrived.setdefault(r.job.session_dir, [])
+        got.append(r)
+        if len(got) < self.expected[r.job.session_dir]:
+            return
+        got.sort(key=lambda x: x.job.focus_idx)
+        outcome = finish_session(r.job.session_dir, got, self.store)
+        if outcome.ok and self.store is not None:
+            try:
+                for p in outcome.profiles:
+                    outcome.new_ids.append(self.store.put_profile(p))
+            except StoreError as exc:
+                outcome = replace(outcome, failure=_one_line(exc), profiles=(), old_ids=(), new_ids=[])
+        self.outcomes[r.job.session_dir] = outcome
+        self.on_outcome(outcome)

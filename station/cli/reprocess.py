@@ -66,9 +66,8 @@ def run(args: argparse.Namespace) -> int:
     from station.config import ConfigError
     from station.reprocess import (
         ArchivedSession,
-        FocusResult,
         ReprocessError,
-        finish_session,
+        SessionCollector,
         plan_jobs,
         probe_scheduler,
         run_jobs,
@@ -115,33 +114,17 @@ def run(args: argparse.Namespace) -> int:
             _error(" ".join(str(exc).split()))
             return EXIT_ERROR
 
-    expected: dict[str, int] = {}
-    for j in jobs:
-        expected[j.session_dir] = expected.get(j.session_dir, 0) + 1
-    arrived: dict[str, list[FocusResult]] = {}
-    outcomes: dict[str, Any] = {}
-    t0 = time.perf_counter()
-
-    def on_result(r: FocusResult) -> None:
-        got = arrived.setdefault(r.job.session_dir, [])
-        got.append(r)
-        if len(got) < expected[r.job.session_dir]:
-            return
-        got.sort(key=lambda x: x.job.focus_idx)
-        outcome = finish_session(r.job.session_dir, got, store)
-        if outcome.ok and store is not None:
-            try:
-                for p in outcome.profiles:
-                    outcome.new_ids.append(store.put_profile(p))
-            except StoreError as exc:
-                outcome = type(outcome)(outcome.session_dir, outcome.results, " ".join(str(exc).split()))
-        outcomes[r.job.session_dir] = outcome
+    def say_failure(outcome: Any) -> None:
         if not outcome.ok:
             _error(outcome.failure or "failed")
 
+    collect = SessionCollector(jobs, store, on_outcome=say_failure)
+    outcomes = collect.outcomes
+    t0 = time.perf_counter()
+
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     try:
-        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=on_result)
+        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)
     except ReprocessError as exc:
         _error(str(exc))
         return EXIT_ERROR

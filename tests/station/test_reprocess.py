@@ -54,3 +54,30 @@ def test_scheduler_address_is_checked_before_dask_is_asked():
         probe_scheduler("localhost:8786")
     with pytest.raises(ReprocessError, match="cannot reach the Dask scheduler at tcp://127.0.0.1:9"):
         probe_scheduler("tcp://127.0.0.1:9")
+
+
+def test_a_session_is_finished_and_stored_when_its_last_focus_result_arrives(tmp_path):
+    from station.reprocess import FocusResult, OldProfile, SessionCollector, reprocess_key
+    from station.store import ProfileStore
+    from tests.station.store.test_database import profile
+
+    old = OldProfile(None, None, "PASS", "harp-station 0.0.1")
+    ok = lambda d, f: FocusResult(FocusJob(d, f), 0.5 * f, profile(focus=0.5 * f, session=d), old)  # noqa: E731
+    jobs = [FocusJob("/a", 0), FocusJob("/a", 1), FocusJob("/b", 0)]
+    told = []
+    with ProfileStore(tmp_path / "p.sqlite") as store:
+        collect = SessionCollector(jobs, store, on_outcome=told.append)
+        collect(ok("/a", 1))  # any order: /a is finished only with both of its focus settings
+        collect(FocusResult(FocusJob("/b", 0), 0.0, None, None, failure="frame damaged"))
+        assert [o.session_dir for o in told] == ["/b"] and not told[0].ok and told[0].failure == "frame damaged"
+        collect(ok("/a", 0))
+        a = collect.outcomes["/a"]
+        assert a.ok and [r.job.focus_idx for r in a.results] == [0, 1] and len(a.new_ids) == 2
+        stored = [store.profile(i) for i in a.new_ids]
+    assert [p.focus for p in stored] == [0.0, 0.5] and {p.provenance.session_dir for p in stored} == {
+        reprocess_key("/a")
+    }
+    assert stored[0].provenance.extra["reprocess"]["old_software"] == "harp-station 0.0.1"
+    dry = SessionCollector(jobs[:1])  # no store: finished, nothing stored
+    dry(ok("/a", 0))
+    assert dry.outcomes["/a"].ok and dry.outcomes["/a"].new_ids == [] and len(dry.outcomes["/a"].profiles) == 1
