@@ -153,15 +153,12 @@ def _resume(args) -> int:
 
 def _already_finished(session, args) -> int:
     """A finished session resumed: nothing to capture; its exit code is its verdict's."""
-    from station.qa.results import read_results, session_results, state_exit_code, write_results
+    from station.qa.results import finished_results, state_exit_code
 
-    results = read_results(session.path)
-    if results is None or results.get("state") != "complete":  # killed before results.json was written
-        try:
-            results = session_results(session)
-            write_results(session, results)
-        except (OSError, ValueError) as exc:
-            return _error(f"{session.path}: finished, but its results cannot be gathered: {exc}")
+    try:
+        results = finished_results(session)
+    except (OSError, ValueError) as exc:
+        return _error(f"{session.path}: finished, but its results cannot be gathered: {exc}")
     code = state_exit_code("complete", results.get("verdict"))
     verdict = results.get("verdict") or "none"
     print(f"harp session: {args.session_dir}: already finished (QA verdict {verdict}), nothing to do", file=sys.stderr)

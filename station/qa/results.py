@@ -214,6 +214,16 @@ def write_results(session: Any, results: Mapping[str, Any]) -> Path:
     return path
 
 
+def finished_results(session: Any) -> dict[str, Any]:
+    """The results of a finished session: its ``results.json`` when that says complete, else (killed
+    before it was written) gathered again and written. OSError / ValueError when they cannot be."""
+    results = read_results(session.path)
+    if results is None or results.get("state") != "complete":
+        results = session_results(session)
+        write_results(session, results)
+    return results
+
+
 def read_results(session_dir: str | Path) -> dict[str, Any] | None:
     """The ``results.json`` of a session directory, or None when it has none (or it cannot be read)."""
     path = Path(session_dir) / layout.RESULTS

@@ -48,3 +48,20 @@ def test_a_camera_that_is_not_the_configured_one_is_warned_about(tmp_path):
         copy = s.path / "config.yaml"
         assert results["config"]["sha256"] == hashlib.sha256(copy.read_bytes()).hexdigest()
         assert results["state"] == "interrupted" and results["verdict"] is None and results["exit_code"] == 130
+
+
+def test_a_finished_session_killed_before_its_results_gets_them_gathered_once(tmp_path):
+    import json
+
+    from station.qa.results import finished_results, read_results
+    from station.session.records import Finished, SessionVerdict
+
+    with session_configured_as(tmp_path, "SIM-0001") as s:
+        s.append(SessionVerdict("PASS"))
+        s.append(Finished())
+        assert read_results(s.path) is None  # killed after "finished", before results.json
+        got = finished_results(s)
+        assert got["state"] == "complete" and got["verdict"] == "PASS" and read_results(s.path) == got
+        written = json.loads((s.path / "results.json").read_text())
+        (s.path / "results.json").write_text(json.dumps({**written, "station": "as written"}))
+        assert finished_results(s)["station"] == "as written"  # a complete results.json is what it says
