@@ -578,22 +578,25 @@ class _Dense:
             self.local.bufs = bufs
         return [b[:rows] for b in bufs]
 
-    def gradient(self, block: NDArray[Any]) -> tuple[NDArray[np.float32], ...]:
+    def gradient(self, block: NDArray[Any], rows: tuple[int, int] | None = None) -> tuple[NDArray[np.float32], ...]:
         """``gx, gy, mod, sv, sh`` of a block of rows (``sv``, ``sh``: smoothed in y / x only;
-        ``None``-free: for ``sigma = 0`` they are the unsmoothed block)."""
+        for ``sigma = 0`` they are not computed). With ``rows = (lo, hi)``, ``gx`` and ``mod`` are
+        only computed on the block's rows ``[lo, hi)`` (``gx`` is a filter along x: each row on its
+        own), the others hold anything."""
         sv, sh, gx, gy, mod = self._buffers(block.shape[0])
+        lo, hi = (0, block.shape[0]) if rows is None else rows
         if self.sigma > 0:
             b = cv2.BORDER_REFLECT
             # 1-D passes with filter2D (faster than sepFilter2D with a unit kernel)
             cv2.filter2D(block, cv2.CV_32F, self.g[:, None], dst=sv, borderType=b)
             cv2.filter2D(block, cv2.CV_32F, self.g[None, :], dst=sh, borderType=b)
-            cv2.filter2D(sv, cv2.CV_32F, self.d[None, :], dst=gx, borderType=b)
+            cv2.filter2D(sv[lo:hi], cv2.CV_32F, self.d[None, :], dst=gx[lo:hi], borderType=b)
             cv2.filter2D(sh, cv2.CV_32F, self.d[:, None], dst=gy, borderType=b)
         else:
             b = cv2.BORDER_REPLICATE
             cv2.Sobel(block, cv2.CV_32F, 1, 0, dst=gx, ksize=1, scale=0.5, borderType=b)
             cv2.Sobel(block, cv2.CV_32F, 0, 1, dst=gy, ksize=1, scale=0.5, borderType=b)
-        _modulus(gx, gy, mod)
+        _modulus(gx[lo:hi], gy[lo:hi], mod[lo:hi])
         return gx, gy, mod, sv, sh
 
     def rows_block(self, r0: int, r1: int) -> tuple[int, NDArray[Any]]:
@@ -627,8 +630,8 @@ class _Dense:
         ``sample``) the gradient at the noise samples of these rows."""
         h, w = self.h, self.w
         a0, block = self.rows_block(r0, r1)
-        gx, gy, mod, sv, sh = self.gradient(block)
         o0, o1 = r0 - a0, r1 - a0
+        gx, gy, mod, sv, sh = self.gradient(block, (o0 - 1, o1 + 1))  # the NMS looks one row up and down
         if sample:
             sr = self.noise_rows[(self.noise_rows >= r0) & (self.noise_rows < r1)] - a0
             sgx = gx[sr][:, self.noise_cols].astype(np.float64)

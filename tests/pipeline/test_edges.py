@@ -334,3 +334,45 @@ def test_bands_threads_and_the_provisional_threshold_give_exactly_the_points_of_
     for a, b, c in zip(one, banded, again):
         assert np.array_equal(a.xy, b.xy) and np.array_equal(a.grad, b.grad)
         assert np.array_equal(a.xy, c.xy) and np.array_equal(a.grad, c.grad)
+
+
+def test_chains_are_ordered_along_their_links_paths_and_cycles():
+    """The chaining's ordering (list ranking by pointer jumping, issue 8 item 6) against a plain walk
+    along the links: each component contiguous, in the order of its links, components in the order
+    of their smallest point, a cycle opened at its smallest point, unlinked points last."""
+    from pipeline.edges import _order_chains
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        n = int(rng.integers(1, 600))
+        ids = rng.permutation(n)
+        nxt = np.full(n, -1, np.int64)
+        prv = np.full(n, -1, np.int64)
+        i = 0
+        while i < n:
+            seg = ids[i : i + int(rng.integers(1, 80))]
+            i += len(seg)
+            nxt[seg[:-1]], prv[seg[1:]] = seg[1:], seg[:-1]
+            if len(seg) >= 2 and rng.random() < 0.3:  # close it
+                nxt[seg[-1]], prv[seg[0]] = seg[0], seg[-1]
+        seen = np.zeros(n, bool)
+        comps = []
+        for p in range(n):  # components by smallest point
+            if seen[p] or (nxt[p] < 0 and prv[p] < 0):
+                continue
+            start = p
+            while prv[start] >= 0 and prv[start] != p:  # back to the head of a path
+                start = prv[start]
+            if prv[start] == p:  # a cycle: opened at its smallest point, p
+                start = p
+            walk = [start]
+            while nxt[walk[-1]] >= 0 and nxt[walk[-1]] != start:
+                walk.append(int(nxt[walk[-1]]))
+            seen[walk] = True
+            comps.append(walk)
+        singles = [p for p in range(n) if nxt[p] < 0 and prv[p] < 0]
+        expected = [p for c in comps for p in c] + singles
+        lab, order = _order_chains(nxt, prv)
+        assert order.tolist() == expected
+        sizes = [len(c) for c in comps] + [1] * len(singles)
+        assert lab[order].tolist() == [k for k, s in enumerate(sizes) for _ in range(s)]
