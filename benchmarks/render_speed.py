@@ -7,11 +7,13 @@ Usage::
 Renders an 8-bit harp (strings 3 px wide, 60 px apart, 30 degrees, read noise
 1.5, vignetting 0.3) at 2 MP (1761 x 1174, the size of the real photos) and
 24 MP (6000 x 4000), without distortion and through the simulated camera's
-demo lens (``drivers.sim.lens.lens_for_focus``), and times
+demo lens (``drivers.sim.lens.lens_for_focus``) -- mapping every pixel through
+the lens, and with the lens map computed once (``ideal=ideal_grid(...)``, what the
+simulated camera does for the frames at one focus) -- and times
 ``true_edge_curves`` on the result. Median of ``--repeat`` runs; the CPU
 time (all threads, ``time.process_time``) is given too because wall time on
 a shared machine depends on the load. Prints a Markdown table (results:
-benchmarks/render_speed.md).
+benchmarks/RESULTS-render.md).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.sim.lens import lens_for_focus
-from pipeline.render import HarpScene, render_harp, true_edge_curves
+from pipeline.render import HarpScene, ideal_grid, render_harp, true_edge_curves
 
 SIZES = [("2 MP", 1761, 1174), ("24 MP", 6000, 4000)]
 
@@ -58,8 +60,11 @@ def main(argv=None) -> int:
     for name, w, h in SIZES:
         if args.no_24mp and w * h > 5e6:
             continue
-        for lens_name, lens in [("identity", None), ("demo lens, focus 0.5", lens_for_focus(0.5, w, h))]:
-            t_r, c_r, r = _median_time(lambda: render_harp(w, h, scene, lens=lens, seed=1), args.repeat)
+        demo = lens_for_focus(0.5, w, h)
+        cases = [("identity", None, None), ("demo lens, focus 0.5", demo, None)]
+        cases.append(("demo lens, focus 0.5, lens map kept", demo, ideal_grid(demo, w, h)))
+        for lens_name, lens, grid in cases:
+            t_r, c_r, r = _median_time(lambda: render_harp(w, h, scene, lens=lens, seed=1, ideal=grid), args.repeat)
             t_t, _, curves = _median_time(lambda: true_edge_curves(r), args.repeat)
             print(f"| {name} ({w}x{h}) | {lens_name} | {t_r:.3f} | {c_r:.3f} | {t_t:.3f} | {len(curves)} |")
     return 0

@@ -301,6 +301,7 @@ def write_qa_report(directory: Path, title: str, targets: list[Target], judged: 
         notes=notes,
         context=context,
         warnings=warnings,
+        workers=session.config.pipeline.workers if session is not None else 1,
     )
 
 
