@@ -177,28 +177,45 @@ def cross_validate(
     its fit on all shots already leaves a mean square above ``stop_factor`` times the
     reference's CV mean square (held-out residuals are larger than a fit's own), or when the
     held-out squared residuals of its folds so far exceed that; ``None``: never.
-    ``map_fn``: a ``map`` over the other candidates (a process pool's; the table keeps the
-    candidates' order and does not depend on it).
+    ``map_fn``: a ``map`` over the candidates (a process pool's; the table keeps the candidates'
+    order and does not depend on it), called twice: the reference's row with the others' fits on all
+    shots, then the others' folds.
     """
     if folds == "auto":
         folds = "images" if len(lines_per_image) >= 3 else "edges"
     lines = [list(s) for s in lines_per_image]
     first = FALLBACK if FALLBACK in candidates else candidates[0]
     settings = (width, height, folds, warm_start, stop_factor, fit_kw)
-    ref = _cv_candidate((first, lines, float("inf"), settings))
-    ref_mse = ref.cv_d**2 if np.isfinite(ref.cv_d) else float("inf")
     others = [c for c in candidates if c != first]
     # the largest candidates first (the costliest: a pool's workers then finish about together);
     # each row depends on its candidate and the reference only, not on the order
     order = sorted(others, key=lambda c: -n_params(c, width, height))
-    done = dict(zip(order, map_fn(_cv_candidate, [(c, lines, ref_mse, settings) for c in order])))
+    # first the reference's whole row and, meanwhile, the other candidates' fits on all shots (they do
+    # not need the reference); then the other candidates' folds, which the reference may stop
+    first_pass = list(map_fn(_first_pass, [(c, lines, settings, c == first) for c in [first, *order]]))
+    ref = first_pass[0]
+    ref_mse = ref.cv_d**2 if np.isfinite(ref.cv_d) else float("inf")
+    jobs = [(c, lines, ref_mse, settings, full) for c, full in zip(order, first_pass[1:], strict=True)]
+    done = dict(zip(order, map_fn(_cv_candidate, jobs)))
     done[first] = ref
     return tuple(done[c] for c in candidates), folds
 
 
-def _cv_candidate(job: tuple[FitSpec, list[list[np.ndarray]], float, tuple[Any, ...]]) -> CVRow:
-    """The :class:`CVRow` of one candidate (see :func:`cross_validate`); a picklable job for a pool."""
-    cand, lines_per_image, ref_mse, (width, height, folds, warm_start, stop_factor, fit_kw) = job
+def _first_pass(job: tuple[FitSpec, list[list[np.ndarray]], tuple[Any, ...], bool]) -> Any:
+    """The reference's :class:`CVRow`, or another candidate's fit on all shots (None without warm
+    starts); a picklable job for a pool (:func:`cross_validate`)."""
+    cand, lines_per_image, settings, is_reference = job
+    if is_reference:
+        return _cv_candidate((cand, lines_per_image, float("inf"), settings))
+    width, height, _, warm_start, _, fit_kw = settings
+    return fit_distortion(lines_per_image, width, height, **cand.fit_arguments(), **fit_kw) if warm_start else None
+
+
+def _cv_candidate(job: tuple[Any, ...]) -> CVRow:
+    """The :class:`CVRow` of one candidate (see :func:`cross_validate`); a picklable job for a pool:
+    ``(candidate, lines, reference CV mean square, settings)``, and its fit on all shots when it is
+    already done (:func:`_first_pass`)."""
+    cand, lines_per_image, ref_mse, (width, height, folds, warm_start, stop_factor, fit_kw) = job[:4]
     fl = cv_folds(lines_per_image, folds)
     n_held = float(sum(int(_held_out_counts(held).sum()) for _, held in fl))
     fold_d: list[float] = []
@@ -207,7 +224,10 @@ def _cv_candidate(job: tuple[FitSpec, list[list[np.ndarray]], float, tuple[Any, 
     ss_all: list[np.ndarray] = []
     n_all: list[np.ndarray] = []
     failure: str | None = None
-    full = fit_distortion(lines_per_image, width, height, **cand.fit_arguments(), **fit_kw) if warm_start else None
+    if len(job) > 4:
+        full = job[4]
+    else:
+        full = fit_distortion(lines_per_image, width, height, **cand.fit_arguments(), **fit_kw) if warm_start else None
     outliers: set[int] = set()
     if full:
         outliers = {id(lines_per_image[e.image][e.line]) for e in full.rejected if e.reason.startswith("outlier")}

@@ -16,8 +16,9 @@ polynomial (default degree 5); ``--division M`` adds a division (rational)
 denominator to the radial factor (wide-angle lenses). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
 protocol). On a machine with two cores or more the shots are measured, and the
-candidates cross-validated, by two worker processes (the results do not depend on
-it). ``--json`` prints one object::
+candidates cross-validated, by two worker processes (three shots, or any odd number,
+by three at once: none waits for another's last shot); the results do not depend on
+it. ``--json`` prints one object::
 
     {"model": path, "choice": {"model", "degree", "tangential", "prism", "label", "reason", ...},
      "before": {"d", "d_max"}, "fit": {"d", "d_max"}, "holdout": {"d", "d_max", "images": [...]},
@@ -113,15 +114,19 @@ def _ignore_sigint() -> None:  # in a worker: Ctrl-C is the command's to handle 
 
 
 @contextlib.contextmanager
-def _workers(n_jobs: int):
+def _workers(n_jobs: int, balance: bool = False):
     """A ``map`` over ``min(2, cores)`` worker processes (forked before any image is processed),
-    or the built-in ``map`` on one core or for a single job."""
+    or the built-in ``map`` on one core or for a single job. ``balance``: one more worker when the
+    jobs do not divide evenly among them (three shots on two workers: all three measured at once
+    take 1.5 shot-times on two cores, not two; one more shot's memory at a time)."""
     import os
 
     n = min(2, os.cpu_count() or 1, n_jobs)
     if n < 2:
         yield map
         return
+    if balance and n_jobs > n and n_jobs % n:
+        n += 1
     import gc
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
@@ -169,10 +174,10 @@ def calibrate(args) -> dict:
     if Path(args.out).is_dir():
         raise CalibrateError(f"{args.out}: cannot write model file (is a directory)")
     # the shots are measured by worker processes forked now (numpy and OpenCV loaded) while this process
-    # imports the fitting (scipy.optimize); the fits then run in workers forked after that import, which
-    # they share instead of importing it each
+    # imports the fitting; the fits then run in workers forked after that import, which they share
+    # instead of importing it each
     paths = list(args.images) + list(args.holdout)
-    with _workers(len(paths)) as map_fn:
+    with _workers(len(paths), balance=True) as map_fn:
         measuring = map_fn(_measure_one, [(path, args.t) for path in paths])  # a pool's map starts at once
         import pipeline.select  # noqa: F401  (the fitting's imports, while the shots are measured)
         import station.calibration  # noqa: F401

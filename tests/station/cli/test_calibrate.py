@@ -221,3 +221,26 @@ def test_workers_give_the_same_choice_and_figures_as_one_process(shots, tmp_path
     monkeypatch.undo()
     code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], "--out", tmp_path / "t.yaml")
     assert code == 0 and "(stopped)" in out
+
+
+_BARRIER = None
+
+
+def _meet(_):
+    """A job that returns only when three jobs run at once (forked workers inherit the barrier)."""
+    return _BARRIER.wait(timeout=30)
+
+
+def test_three_shots_are_measured_at_once(monkeypatch):
+    """Three shots on two cores: three workers, so that no worker measures two shots while another
+    waits (with two, the third job could not start before one of the first two returned)."""
+    import multiprocessing as mp
+    import os
+
+    from station.cli import calibrate
+
+    global _BARRIER
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    _BARRIER = mp.get_context("fork").Barrier(3)
+    with calibrate._workers(3, balance=True) as map_fn:
+        assert sorted(map_fn(_meet, range(3))) == [0, 1, 2]
