@@ -256,8 +256,9 @@ FIGURE_KINDS = {
 }
 """The drawings of the report, by :attr:`Figure.kind`."""
 
-PARALLEL_MIN_FIGURES = 6
-"""Fewer figures than this are drawn in this process (starting workers would cost more)."""
+PARALLEL_MIN_FIGURES = 12
+"""Fewer figures than this are drawn in this process (handing them to workers would cost more than
+it saves; a session of 3 focus settings x 8 orientations has 33)."""
 
 
 def draw_figure(fig: Figure) -> Path:
