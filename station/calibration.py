@@ -224,3 +224,36 @@ def calibrate_shots(
         details["bootstrap_scheme"] = BOOTSTRAP_SCHEME
     merit = Merit(fit=fit_figures, holdout=hold, before=before, field_uncertainty=unc_summary)
     return Calibration(full, spec, selection, merit, tuple(per_shot), unc, details)
+
+
+def size_problem(shots: Sequence[tuple[str, int, int]]) -> str | None:
+    """Why shots ``(name, width, height)`` cannot be calibrated together (one model fits one
+    image size), or None."""
+    if len({(w, h) for _, w, h in shots}) <= 1:
+        return None
+    listing = ", ".join(f"{p} {w}x{h}" for p, w, h in shots)
+    return f"images of different sizes ({listing}): one model fits one image size"
+
+
+def shot_count_problem(n_shots: int, spec: FitSpec | None) -> str | None:
+    """Why ``n_shots`` shots cannot choose a model (``spec`` None), or None."""
+    if spec is None and n_shots < 2:
+        return (
+            "need at least 2 shots at different harp orientations "
+            "(one orientation cannot constrain the distortion along the strings)"
+        )
+    return None
+
+
+def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -> str | None:
+    """A warning when the correction leaves the held-out edges ``held_lines`` (uncorrected)
+    less straight than they were (``holdout_d`` after correction): it does not generalise."""
+    from pipeline.edgeset import straightness_of
+
+    d0, _ = straightness_of(list(held_lines))
+    if holdout_d is not None and holdout_d > d0:
+        return (
+            f"the model leaves the held-out shots less straight than uncorrected (d {d0:.4f} px "
+            f"before, {holdout_d:.4f} px after): it does not generalise to other orientations"
+        )
+    return None

@@ -39,7 +39,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.edgeset import straightness_of
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
 from station.cli.inputs import positive_int
 from station.inputs import InputError, measure_file
@@ -188,22 +187,18 @@ def calibrate(args) -> dict:
 
 
 def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
-    from station.calibration import calibrate_shots
+    from station.calibration import calibrate_shots, holdout_warning, shot_count_problem, size_problem
     from station.files import write_profile
     from station.provenance import make_provenance
 
-    sizes = {(m.width, m.height) for _, m in fit_m + hold_m}
-    if len(sizes) > 1:
-        listing = ", ".join(f"{p} {m.width}x{m.height}" for p, m in fit_m + hold_m)
-        raise CalibrateError(f"images of different sizes ({listing}): one model fits one image size")
-    width, height = sizes.pop()
+    problem = size_problem([(str(p), m.width, m.height) for p, m in fit_m + hold_m])
+    if problem:
+        raise CalibrateError(problem)
+    width, height = fit_m[0][1].width, fit_m[0][1].height
     shots = [[ln.points for ln in m.lines] for _, m in fit_m]
-
-    if cand is None and len(shots) < 2:
-        raise CalibrateError(
-            "need at least 2 shots at different harp orientations "
-            "(one orientation cannot constrain the distortion along the strings)"
-        )
+    problem = shot_count_problem(len(shots), cand)
+    if problem:
+        raise CalibrateError(problem)
     held = [[ln.points for ln in m.lines] for _, m in hold_m]
     cal = calibrate_shots(
         shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
@@ -250,12 +245,9 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
         ]
         hold = cal.merit.holdout
         report["holdout"] = {"d": _num(hold.d), "d_max": _num(hold.d_max), "images": per}
-        d0, _ = straightness_of([ln.points for _, m in hold_m for ln in m.lines])
-        if hold.d is not None and hold.d > d0:
-            report["warnings"].append(
-                f"the model leaves the held-out shots less straight than uncorrected (d {d0:.4f} px "
-                f"before, {hold.d:.4f} px after): it does not generalise to other orientations"
-            )
+        warning = holdout_warning([ln.points for _, m in hold_m for ln in m.lines], hold.d)
+        if warning:
+            report["warnings"].append(warning)
     profile = cal.profile(
         width,
         height,
