@@ -336,9 +336,14 @@ def ideal_grid(lens: DistortionModel, width: int, height: int) -> np.ndarray:
     What :func:`render_harp` evaluates the scene at; pass it as ``ideal=`` to render many
     frames through one lens without mapping every pixel again (``16 * width * height`` bytes).
     """
-    gx, gy = np.meshgrid(np.arange(int(width), dtype=np.float64), np.arange(int(height), dtype=np.float64))
+    return _ideal_rows(lens, int(width), 0, int(height))
+
+
+def _ideal_rows(lens: DistortionModel, width: int, r0: int, r1: int) -> np.ndarray:
+    """Rows ``r0:r1`` of :func:`ideal_grid`, shape ``(r1 - r0, width, 2)``."""
+    gx, gy = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(r0, r1, dtype=np.float64))
     u = lens.undistort_points(np.stack([gx.ravel(), gy.ravel()], 1))
-    return np.ascontiguousarray(u, dtype=np.float64).reshape(int(height), int(width), 2)
+    return np.ascontiguousarray(u, dtype=np.float64).reshape(r1 - r0, width, 2)
 
 
 def render_harp(
@@ -428,13 +433,9 @@ def render_harp(
         yy = np.arange(r0, r1, dtype=np.float64)
         if identity:
             q = (n[0] * xs)[None, :] + (n[1] * yy)[:, None]
-        elif ideal is not None:
-            q = ideal[r0:r1].reshape(-1, 2) @ n
-            q = q.reshape(r1 - r0, width)
         else:
-            gx, gy = np.meshgrid(xs, yy)
-            u = lens.undistort_points(np.stack([gx.ravel(), gy.ravel()], 1))
-            q = (u @ n).reshape(r1 - r0, width)
+            rows = ideal[r0:r1] if ideal is not None else _ideal_rows(lens, width, r0, r1)
+            q = (rows.reshape(-1, 2) @ n).reshape(r1 - r0, width)
         q -= base
         dd = q - p * np.round(q / p)
         cover = np.zeros_like(dd)

@@ -283,8 +283,7 @@ def draw_figures(figures: Sequence[Figure], workers: int = 1) -> None:
     try:
         # the slow plots first, then the overlays: the processes end at about the same time
         order = sorted(figures, key=lambda f: f.kind == "overlay")
-        for _ in pool.map(draw_figure, order):
-            pass
+        list(pool.map(draw_figure, order))
     finally:
         pool.close()
 
