@@ -217,6 +217,41 @@ def test_uint16_and_float_inputs_give_the_same_points():
     assert lo16 / lo8 == pytest.approx(257, rel=0.1)
 
 
+def _trimmed_rayleigh_scale(gx, gy):
+    """The estimator of gradient_noise's docstring, written out plainly: median of the modulus,
+    then four times the median of the moduli below 3 sigma over the truncated Rayleigh median."""
+    m = np.hypot(np.asarray(gx, np.float64), np.asarray(gy, np.float64)).ravel()
+    s = np.median(m) / np.sqrt(2 * np.log(2))
+    trunc = np.sqrt(-2 * np.log(1 - 0.5 * (1 - np.exp(-4.5))))
+    for _ in range(4):
+        kept = m[m < 3 * s]
+        if kept.size == 0:
+            break
+        s = np.median(kept) / trunc
+    return float(s)
+
+
+def test_gradient_noise_equals_the_plain_trimmed_median_estimator():
+    # odd and even sample counts, edges covering a varying share of the samples, integer-valued
+    # gradients (ties), an all-zero gradient
+    for seed in range(24):
+        rng = np.random.default_rng(seed)
+        h, w = 40 + seed, 57 + 3 * seed
+        gx = rng.normal(0, 1.5, (h, w))
+        gy = rng.normal(0, 1.5, (h, w))
+        gx[:, :: 3 + seed % 7] += rng.uniform(5, 60)
+        if seed % 4 == 1:
+            gx, gy = np.round(gx), np.round(gy)
+        if seed == 23:
+            gx, gy = np.zeros((h, w)), np.zeros((h, w))
+        expected = _trimmed_rayleigh_scale(gx[2:-2, 2:-2], gy[2:-2, 2:-2])  # < 5e5 samples: all, 2 px border off
+        assert gradient_noise(gx, gy) == expected, seed
+    # by hand: moduli 1, 2, 3, 4 (all below 3 sigma): the median 2.5 over the truncated Rayleigh median
+    g = np.zeros((5, 8))
+    g[2, 2:6] = [1.0, 2.0, 3.0, 4.0]
+    assert gradient_noise(g, np.zeros_like(g)) == pytest.approx(2.5 / np.sqrt(-2 * np.log(0.5 + 0.5 * np.exp(-4.5))))
+
+
 def test_gradient_noise_is_measured_on_the_gradient_and_robust_to_edges():
     rng = np.random.default_rng(4)
     # white noise std 2 through Gaussian(1) + centred differences: gain 0.1586 (impulse response)
