@@ -105,32 +105,34 @@ def run(args: argparse.Namespace) -> int:
     for msg in failed.values():
         _error(msg)
     store = None
-    if not args.dry_run and jobs:
+    outcomes: dict[str, Any] = {}
+    try:  # Ctrl-C from the store's opening on: the line says what was stored before it
+        if not args.dry_run and jobs:
+            try:
+                first = ArchivedSession(jobs[0].session_dir).config
+                loc = location_from_args(args, first)
+                store = open_store(loc, write=True)
+            except (StoreError, ConfigError) as exc:
+                _error(" ".join(str(exc).split()))
+                return EXIT_ERROR
+
+        def say_failure(outcome: Any) -> None:
+            if not outcome.ok:
+                _error(outcome.failure or "failed")
+
+        collect = SessionCollector(jobs, store, on_outcome=say_failure)
+        outcomes = collect.outcomes
+        t0 = time.perf_counter()
+
+        workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         try:
-            first = ArchivedSession(jobs[0].session_dir).config
-            loc = location_from_args(args, first)
-            store = open_store(loc, write=True)
-        except (StoreError, ConfigError) as exc:
-            _error(" ".join(str(exc).split()))
+            run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)
+        except ReprocessError as exc:
+            _error(str(exc))
             return EXIT_ERROR
-
-    def say_failure(outcome: Any) -> None:
-        if not outcome.ok:
-            _error(outcome.failure or "failed")
-
-    collect = SessionCollector(jobs, store, on_outcome=say_failure)
-    outcomes = collect.outcomes
-    t0 = time.perf_counter()
-
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    try:
-        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)
-    except ReprocessError as exc:
-        _error(str(exc))
-        return EXIT_ERROR
     except KeyboardInterrupt:
         done = sum(1 for o in outcomes.values() if o.ok)
-        kept = "re-processed and stored" if store is not None else "re-processed"
+        kept = "re-processed and stored" if not args.dry_run else "re-processed"
         _error(f"interrupted: {done} session(s) {kept} before Ctrl-C; the others are not (run it again for them)")
         return EXIT_INTERRUPTED
     finally:
