@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
+from station.ctrl_c import start_forkserver_deaf_to_ctrl_c
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -355,7 +356,7 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
 
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(PRELOAD)
-    _start_forkserver_deaf_to_ctrl_c()
+    start_forkserver_deaf_to_ctrl_c()
     results: dict[int, FocusResult] = {}
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
@@ -400,25 +401,6 @@ def _ctrl_c_deferred() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
     if caught:
         raise KeyboardInterrupt
-
-
-def _start_forkserver_deaf_to_ctrl_c() -> None:
-    """Start the forkserver (if it is not running) with SIGINT ignored, which it and the pool's
-    workers it forks keep: Ctrl-C at the terminal reaches the whole process group, and only this
-    process should answer it (one line, the workers stopped) — not the forkserver with a traceback
-    from the middle of its imports, nor each worker with its own."""
-    import signal
-    import threading
-    from multiprocessing import forkserver
-
-    if threading.current_thread() is not threading.main_thread():
-        forkserver.ensure_running()
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        forkserver.ensure_running()  # fork + exec: an ignored signal stays ignored across exec
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:

@@ -28,6 +28,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from station.ctrl_c import deliver_dropped_ctrl_c
+
 COMMAND_MODULES = [
     "station.cli.measure",
     "station.cli.calibrate",
@@ -112,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     # there). Set before numpy is first imported (by the command's module); the user's setting wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     _keep_freed_memory()
+    deliver_dropped_ctrl_c()  # a Ctrl-C that CPython drops (in a weakref callback) is delivered again
     try:  # Ctrl-C while the sub-commands import numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)
     except KeyboardInterrupt:

@@ -17,6 +17,8 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
+from station.ctrl_c import start_forkserver_deaf_to_ctrl_c
+
 PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
 """Modules the forkserver imports once, so that each worker starts warm (the fits' and the
 report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
@@ -44,7 +46,7 @@ class FitWorkers:
 
             ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
             ctx.set_forkserver_preload(PRELOAD)
-            _start_forkserver_ignoring_sigint()
+            start_forkserver_deaf_to_ctrl_c()
             self._pool = ProcessPoolExecutor(
                 max_workers=self.n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
             )
@@ -79,23 +81,6 @@ class FitWorkers:
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
             self._pool = None
-
-
-def _start_forkserver_ignoring_sigint() -> None:
-    """Start multiprocessing's forkserver with SIGINT ignored (inherited through
-    exec): it spends a second or two importing the preloaded modules before it
-    ignores SIGINT itself, and a Ctrl-C to the process group in that time would
-    print its KeyboardInterrupt traceback. Only the session process handles Ctrl-C."""
-    from multiprocessing import forkserver
-
-    if threading.current_thread() is not threading.main_thread():
-        forkserver.ensure_running()  # signal handlers can only be set from the main thread
-        return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        forkserver.ensure_running()
-    finally:
-        signal.signal(signal.SIGINT, old)
 
 
 def _exit_with_session(pid: int, period_s: float = 0.5) -> None:

@@ -1,0 +1,73 @@
+"""Ctrl-C is the command's: delivered to it once, never lost, never a worker's traceback.
+
+A Ctrl-C at the terminal sends SIGINT to the whole process group: the ``harp`` process and
+every worker it started. Only the ``harp`` process answers it (one line, exit 130, what was
+kept said); this module holds the two pieces that make that hold where CPython alone does not.
+
+* :func:`deliver_dropped_ctrl_c`: CPython raises the ``KeyboardInterrupt`` in whatever Python
+  code the main thread runs at that moment. When that is a weakref callback or a ``__del__`` (the
+  import system runs one whenever a module lock is dropped), the exception cannot propagate:
+  CPython prints "Exception ignored in ..." with a traceback and goes on, and the command runs to
+  its end as if the key had not been pressed (seen: ``harp reprocess`` interrupted while it
+  imported its pool). The hook installed here keeps such an interrupt off stderr and has it
+  delivered again to the main thread once the callback has returned.
+* :func:`start_forkserver_deaf_to_ctrl_c`: multiprocessing's forkserver imports its preloaded
+  modules (a second or two) before it ignores SIGINT itself, and the workers it forks would
+  each print a traceback. It is started with SIGINT *blocked* in the starting thread, a mask
+  it and its workers inherit through fork and exec; a Ctrl-C meanwhile stays pending in this
+  process and is raised here as soon as the forkserver is started (ignoring SIGINT instead, as
+  before, dropped a Ctrl-C pressed in that moment).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from typing import Any
+
+
+def deliver_dropped_ctrl_c() -> None:
+    """Install (once per process) the ``sys.unraisablehook`` that delivers again a Ctrl-C that
+    CPython had to drop in a weakref callback or ``__del__``: nothing on stderr, and the
+    ``KeyboardInterrupt`` raised in the main thread a moment later (``_thread.interrupt_main``
+    from a helper thread, which runs once the main thread lets it, i.e. after the callback).
+    Any other unraisable exception goes to the hook that was there before."""
+    previous = sys.unraisablehook
+    if getattr(previous, "_harp_ctrl_c", False):
+        return
+
+    def hook(unraisable: Any) -> None:
+        if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            import _thread
+
+            # a bare thread: threading.Thread.start would wait for it here, and the interrupt
+            # would land in this hook again
+            _thread.start_new_thread(_thread.interrupt_main, ())
+            return
+        previous(unraisable)
+
+    hook._harp_ctrl_c = True  # type: ignore[attr-defined]
+    sys.unraisablehook = hook
+
+
+def start_forkserver_deaf_to_ctrl_c() -> None:
+    """Start multiprocessing's forkserver (if it is not running) with SIGINT blocked, so that it
+    and every worker it forks never see a Ctrl-C; a Ctrl-C during the start is raised here, in
+    the calling (main) thread, right after it.
+
+    The resource tracker is started first: starting it blocks and then *unblocks* SIGINT in the
+    calling thread (CPython's own way to start it deaf), which would undo the block. From a
+    thread other than the main one SIGINT is not delivered anyway: the forkserver is simply
+    started."""
+    from multiprocessing import forkserver, resource_tracker
+
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()
+        return
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        forkserver.ensure_running()  # fork + exec: the blocked mask is inherited
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
