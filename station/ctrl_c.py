@@ -2,7 +2,7 @@
 
 A Ctrl-C at the terminal sends SIGINT to the whole process group: the ``harp`` process and
 every worker it started. Only the ``harp`` process answers it (one line, exit 130, what was
-kept said); this module holds the two pieces that make that hold where CPython alone does not.
+kept said); this module holds the pieces that make that hold where CPython alone does not.
 
 * :func:`deliver_dropped_ctrl_c`: CPython raises the ``KeyboardInterrupt`` in whatever Python
   code the main thread runs at that moment. When that is a weakref callback or a ``__del__`` (the
@@ -17,13 +17,22 @@ kept said); this module holds the two pieces that make that hold where CPython a
   it and its workers inherit through fork and exec; a Ctrl-C meanwhile stays pending in this
   process and is raised here as soon as the forkserver is started (ignoring SIGINT instead, as
   before, dropped a Ctrl-C pressed in that moment).
+* :func:`sigint_blocked`: the same for worker processes forked directly (``harp calibrate``'s
+  pool): forked inside it, they never run their parent's Ctrl-C handling.
+* :func:`forget_handled_ctrl_c`: CPython 3.11 marks a ``KeyboardInterrupt`` that leaves an
+  ``exec()`` or ``eval()`` of a string as unhandled even when it is caught further up, and then
+  ends the process by SIGINT instead of with its exit code (dataclasses and namedtuples are made
+  that way: a Ctrl-C while a module defining one was imported made ``harp calibrate`` print its
+  "interrupted" line and then die by SIGINT, -2 for a Python caller, instead of exiting 130).
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 
@@ -51,6 +60,24 @@ def deliver_dropped_ctrl_c() -> None:
     sys.unraisablehook = hook
 
 
+@contextlib.contextmanager
+def sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in the calling thread inside the block; a Ctrl-C meanwhile is raised
+    (``KeyboardInterrupt``) as soon as the block ends, not dropped. Processes forked or started
+    inside it inherit the block: they never see a Ctrl-C, not even before their own set-up has
+    run (a forked child runs on its parent's Python stack until then, and a ``KeyboardInterrupt``
+    there once made a worker print the parent's "interrupted" line, or hold its pool's queue lock
+    forever). Outside the main thread it does nothing (signals are the main thread's)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def start_forkserver_deaf_to_ctrl_c() -> None:
     """Start multiprocessing's forkserver (if it is not running) with SIGINT blocked, so that it
     and every worker it forks never see a Ctrl-C; a Ctrl-C during the start is raised here, in
@@ -66,8 +93,20 @@ def start_forkserver_deaf_to_ctrl_c() -> None:
         forkserver.ensure_running()
         return
     resource_tracker.ensure_running()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
+    with sigint_blocked():
         forkserver.ensure_running()  # fork + exec: the blocked mask is inherited
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def forget_handled_ctrl_c() -> None:
+    """Clear CPython's "unhandled KeyboardInterrupt" mark (``_Py_UnhandledKeyboardInterrupt``), for a
+    process whose command has answered the Ctrl-C itself: its exit code (130, or what it decided)
+    is then the process's, not a death by SIGINT. The mark is set, wrongly, when a
+    ``KeyboardInterrupt`` leaves an ``exec``/``eval`` of a string, however it is caught afterwards.
+    A no-op where the interpreter does not expose it."""
+    import ctypes
+
+    try:
+        flag = ctypes.c_int.in_dll(ctypes.pythonapi, "_Py_UnhandledKeyboardInterrupt")
+    except (ValueError, AttributeError):  # not this interpreter's symbol (another version or build)
+        return
+    flag.value = 0

@@ -28,7 +28,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from station.ctrl_c import deliver_dropped_ctrl_c
+from station.ctrl_c import deliver_dropped_ctrl_c, forget_handled_ctrl_c
 
 COMMAND_MODULES = [
     "station.cli.measure",
@@ -109,6 +109,15 @@ class _Version(argparse.Action):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``harp`` command ``argv`` (default ``sys.argv[1:]``); returns its exit code."""
+    try:
+        return _main(argv)
+    finally:
+        # every Ctrl-C reached a command's handler and its exit code says so: not a death by SIGINT
+        forget_handled_ctrl_c()
+
+
+def _main(argv: list[str] | None) -> int:
     # The station's linear algebra is small (fits of <= ~100 parameters): OpenBLAS's own threads only
     # spin against each other and against the worker processes of harp calibrate (1.7x the CPU time
     # there). Set before numpy is first imported (by the command's module); the user's setting wins.
@@ -152,6 +161,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{_prog(args)}: {describe_os_error(exc)}", file=sys.stderr)
         return 2
     except Exception as exc:  # a bug: still one line and exit 2 (never 1, which means QA FAIL)
+        if _caused_by_ctrl_c(exc):  # a Ctrl-C that Python wrapped (raised while a class was made)
+            print("harp: interrupted", file=sys.stderr)
+            return 130
         if os.environ.get(DEBUG_ENV):
             raise
         text = " ".join(str(exc).split()) or "(no message)"
@@ -165,6 +177,20 @@ def main(argv: list[str] | None = None) -> int:
 
 DEBUG_ENV = "HARP_DEBUG"
 """Set to any value to let an unexpected exception print its traceback."""
+
+
+def _caused_by_ctrl_c(exc: BaseException) -> bool:
+    """A ``KeyboardInterrupt`` is in the chain of causes and contexts of ``exc``: Python wraps one
+    raised in certain hooks (``__set_name__`` while a class body, e.g. a dataclass, is made, gives
+    ``RuntimeError: Error calling __set_name__ ...``), which is still the user's Ctrl-C."""
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 def _prog(args: argparse.Namespace) -> str:

@@ -41,6 +41,7 @@ import numpy as np
 
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
 from station.cli.inputs import positive_int
+from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
 
 
@@ -135,8 +136,13 @@ def _workers(n_jobs: int, balance: bool = False):
     # collector would walk (2-4x fewer page faults)
     gc.freeze()
     pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=_ignore_sigint)
+
+    def map_fn(fn, *iterables):
+        with sigint_blocked():  # the first submit forks the workers: none runs this process's Ctrl-C
+            return pool.map(fn, *iterables)
+
     try:
-        yield pool.map
+        yield map_fn
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         gc.unfreeze()  # this process collects them again (a long-lived caller, a test session)

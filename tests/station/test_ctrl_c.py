@@ -105,3 +105,38 @@ def test_forkserver_started_deaf_to_ctrl_c_and_a_ctrl_c_during_its_start_is_not_
         "worker still serves: True main caught: 1",
     ], proc.stderr
     assert proc.stderr == ""  # no traceback from the forkserver or the worker
+
+
+# A Ctrl-C that leaves an exec() of a string (dataclasses and namedtuples are made that way) and is
+# then handled: CPython 3.11 still ends the process by SIGINT when its main code returns (as
+# ``python -m station.cli`` does: runpy hands the exit code back), whatever the code said.
+CTRL_C_OUT_OF_EXEC = """
+import sys
+if sys.argv[1] == "harp":
+    import station.cli.measure
+    from station.cli import main
+
+    def run(args):
+        exec("raise KeyboardInterrupt")  # the Ctrl-C lands while a dataclass is being made
+
+    station.cli.measure.run = run
+    print(main(["measure", "photo.png"]))
+else:
+    try:
+        exec("raise KeyboardInterrupt")
+    except KeyboardInterrupt:
+        print(130)
+"""
+
+
+@pytest.mark.parametrize("process", ["plain python", "harp"])
+def test_a_handled_ctrl_c_is_not_turned_into_a_death_by_sigint(process):
+    proc = subprocess.run(
+        [sys.executable, "-c", CTRL_C_OUT_OF_EXEC, process.split()[-1]], capture_output=True, text=True, timeout=60
+    )
+    assert proc.stdout == "130\n"  # handled, either way
+    if process == "plain python":  # the premise: the process then dies by SIGINT all the same
+        assert proc.returncode == -2, (proc.returncode, proc.stderr)
+        return
+    assert proc.returncode == 0, proc.stderr  # the script's own end: main's 130 was printed, not lost
+    assert proc.stderr == "harp: interrupted\n"

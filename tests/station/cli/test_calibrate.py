@@ -244,3 +244,44 @@ def test_three_shots_are_measured_at_once(monkeypatch):
     _BARRIER = mp.get_context("fork").Barrier(3)
     with calibrate._workers(3, balance=True) as map_fn:
         assert sorted(map_fn(_meet, range(3))) == [0, 1, 2]
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(c) for c in f.read().split()]
+    except OSError:
+        return []
+
+
+@pytest.mark.parametrize("moment", ["as its workers are forked", "while they measure"])
+def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, moment):
+    """Ctrl-C at the terminal (SIGINT to the whole process group: the command and its forked workers)
+    at a moment the process table shows, not after a delay: the command's one line, exit 130, no
+    traceback from a worker, no model file, no half-written file, no worker left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out_path = tmp_path / "lens.yaml"
+    photos = sorted(real_harp_dir.glob("*.pgm"))
+    cmd = [sys.executable, "-m", "station.cli", "calibrate", *map(str, photos * 2), "--out", str(out_path)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not _children(proc.pid) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.001)
+    if moment == "while they measure":
+        time.sleep(0.1)
+    assert proc.poll() is None, proc.communicate()
+    workers = _children(proc.pid)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (out, err)
+    assert err == "harp: interrupted\n"
+    assert not out_path.exists() and list(tmp_path.iterdir()) == []
+    deadline = time.monotonic() + 10
+    while any(os.path.exists(f"/proc/{w}") for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(os.path.exists(f"/proc/{w}") for w in workers)

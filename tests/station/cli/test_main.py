@@ -37,3 +37,21 @@ def test_os_error_names_the_file_and_what_to_do(monkeypatch, capsys):
     monkeypatch.setattr(station.cli.export, "run", _raising(MemoryError()))
     assert main(["export", "lens.yaml", "--format", "json"]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_a_ctrl_c_that_python_wrapped_in_another_error_is_still_exit_130(monkeypatch, capsys):
+    """A Ctrl-C landing while a class is made (a dataclass's field) reaches the command as
+    ``RuntimeError: Error calling __set_name__ ...`` (its cause the KeyboardInterrupt): not an
+    internal error, the interrupt it is."""
+
+    def run(args):
+        class Field:
+            def __set_name__(self, owner, name):
+                raise KeyboardInterrupt  # the Ctrl-C, arriving here
+
+        class Frame:
+            extra = Field()
+
+    monkeypatch.setattr(station.cli.export, "run", run)
+    assert main(["export", "lens.yaml", "--format", "json"]) == 130
+    assert capsys.readouterr().err == "harp: interrupted\n"
