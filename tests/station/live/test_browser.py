@@ -42,12 +42,14 @@ def test_live_page_shows_strings_focus_and_moves_the_turntable(page, live_page_s
     page.goto(srv.url)
     page.wait_for_function("() => Number(document.querySelector('#strings-found').dataset.count) >= 4", timeout=30_000)
     assert page.locator("#strings-table tbody tr").count() >= 4
-    # the overlay drew the edges found over the frame
-    drawn = page.evaluate(
-        """() => { const c = document.getElementById('overlay'); const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-                   let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n; }"""
+    # the overlay draws the edges found over the frame once that frame has loaded (the figures arrive
+    # first: reading the canvas once, right after them, found it still blank on a fast machine)
+    page.wait_for_function(
+        """() => { const c = document.getElementById('overlay'); if (!c.width || !c.height) return false;
+                   const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                   let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n > 1000; }""",
+        timeout=30_000,
     )
-    assert drawn > 1000
     # the frame is a separate image request, replaced at every refresh (naturalWidth is 0 while the next
     # one loads): wait for a loaded frame of the downscaled width, 640 px
     page.wait_for_function("() => document.getElementById('frame').naturalWidth === 640", timeout=30_000)
