@@ -277,7 +277,12 @@ def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, 
     assert proc.poll() is None, proc.communicate()
     workers = _children(proc.pid)
     os.killpg(proc.pid, signal.SIGINT)
-    out, err = proc.communicate(timeout=60)
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:  # a hang (as before the workers were forked deaf): fail, leave nothing
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        pytest.fail(f"harp calibrate did not end after Ctrl-C: {err}")
     assert proc.returncode == 130, (out, err)
     assert err == "harp: interrupted\n"
     assert not out_path.exists() and list(tmp_path.iterdir()) == []
