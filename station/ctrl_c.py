@@ -18,7 +18,9 @@ kept said); this module holds the pieces that make that hold where CPython alone
   process and is raised here as soon as the forkserver is started (ignoring SIGINT instead, as
   before, dropped a Ctrl-C pressed in that moment).
 * :func:`sigint_blocked`: the same for worker processes forked directly (``harp calibrate``'s
-  pool): forked inside it, they never run their parent's Ctrl-C handling.
+  pool): forked inside it, they never run their parent's Ctrl-C handling; and for a stretch
+  that must not be cut in the middle (``harp reprocess`` submitting its jobs: no worker left
+  half-started), the Ctrl-C then raised as the stretch ends.
 * :func:`forget_handled_ctrl_c`: CPython 3.11 marks a ``KeyboardInterrupt`` that leaves an
   ``exec()`` or ``eval()`` of a string as unhandled even when it is caught further up, and then
   ends the process by SIGINT instead of with its exit code (dataclasses and namedtuples are made

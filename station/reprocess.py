@@ -29,18 +29,17 @@ instead of adding another.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
-from station.ctrl_c import start_forkserver_deaf_to_ctrl_c
+from station.ctrl_c import sigint_blocked, start_forkserver_deaf_to_ctrl_c
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -360,7 +359,7 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
     results: dict[int, FocusResult] = {}
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
-        with _ctrl_c_deferred():  # submitting starts the workers: none is left half-started
+        with sigint_blocked():  # submitting starts the workers: none is left half-started
             futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
         for fut in as_completed(futures):
             i = futures[fut]
@@ -382,25 +381,6 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
         raise
     pool.shutdown()
     return [results[i] for i in range(len(jobs))]
-
-
-@contextlib.contextmanager
-def _ctrl_c_deferred() -> Iterator[None]:
-    """Ctrl-C inside this block is raised (KeyboardInterrupt) when it ends, not in its middle."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, _frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        raise KeyboardInterrupt
 
 
 def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:
