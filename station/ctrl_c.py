@@ -87,13 +87,10 @@ def start_forkserver_deaf_to_ctrl_c() -> None:
 
     The resource tracker is started first: starting it blocks and then *unblocks* SIGINT in the
     calling thread (CPython's own way to start it deaf), which would undo the block. From a
-    thread other than the main one SIGINT is not delivered anyway: the forkserver is simply
-    started."""
+    thread other than the main one SIGINT is not delivered anyway (:func:`sigint_blocked` does
+    nothing there): the forkserver is simply started."""
     from multiprocessing import forkserver, resource_tracker
 
-    if threading.current_thread() is not threading.main_thread():
-        forkserver.ensure_running()
-        return
     resource_tracker.ensure_running()
     with sigint_blocked():
         forkserver.ensure_running()  # fork + exec: the blocked mask is inherited

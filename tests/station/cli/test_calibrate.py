@@ -8,6 +8,7 @@ from pipeline.compare import compare_models
 from pipeline.models import RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
+from tests.station.processes import group_members
 
 W, H = 640, 480
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(330, 230), tangential=(0.001, 0.0))
@@ -275,7 +276,6 @@ def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, 
     if moment == "while they measure":
         time.sleep(0.1)
     assert proc.poll() is None, proc.communicate()
-    workers = _children(proc.pid)
     os.killpg(proc.pid, signal.SIGINT)
     try:
         out, err = proc.communicate(timeout=60)
@@ -287,6 +287,6 @@ def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, 
     assert err == "harp: interrupted\n"
     assert not out_path.exists() and list(tmp_path.iterdir()) == []
     deadline = time.monotonic() + 10
-    while any(os.path.exists(f"/proc/{w}") for w in workers) and time.monotonic() < deadline:
+    while group_members(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not any(os.path.exists(f"/proc/{w}") for w in workers)
+    assert group_members(proc.pid) == []  # the workers ended too

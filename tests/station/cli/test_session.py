@@ -23,6 +23,7 @@ from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
 from station.session.records import Fault, FrameSaved
 from station.session.simulated import simulated_devices
 from station.store import ProfileStore
+from tests.station.processes import group_members
 
 REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"
@@ -57,19 +58,6 @@ def harp(*args) -> subprocess.Popen:
         text=True,
         start_new_session=True,
     )
-
-
-def group_members(pgid: int) -> list[int]:
-    """Live (non-zombie) processes of a process group, from /proc."""
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            out.append(int(stat.parent.name))
-    return out
 
 
 def manifest(session: Path, killed: bool = False) -> list[dict]:
