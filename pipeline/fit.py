@@ -86,7 +86,7 @@ from pipeline.edgeset import (
     summarise,
     tls,
 )
-from pipeline.fitspec import FREE_CENTER_WEIGHT, FitSpec, spec_problem
+from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, spec_problem
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialParametrisation
 from pipeline.models.radial import RadialParametrisation
@@ -96,6 +96,10 @@ if TYPE_CHECKING:
 
 MIN_EDGES = 4
 """A fit needs at least this many usable edges."""
+
+FAR_CENTRE = 0.05
+"""A free distortion centre farther than this from the image centre (in half image diagonals) is
+checked against the fit started from the centre-prior solution (:func:`fit_distortion`)."""
 
 
 class Parametrisation(Protocol):
@@ -607,6 +611,21 @@ def fit_distortion(
         with np.errstate(all="ignore"):
             sol = _solve(param, edges, th, max_nfev=max_nfev)
             n_iter += sol.nfev
+            if (
+                init is None
+                and isinstance(param, RadialParametrisation)
+                and param.w_center < CENTER_PRIOR_WEIGHT
+                and float(np.hypot(*sol.x[:2])) > FAR_CENTRE
+            ):
+                # continuation: a free centre that ended far from the image centre may sit in a local
+                # minimum (a lens decentred by 60 px on 1000x750 with tangential and prism terms ended
+                # 300 px away); the same fit started from its centre-prior solution, the lower cost kept
+                held = make_parametrisation(width, height, spec, w_center=CENTER_PRIOR_WEIGHT, ridge=ridge)
+                pre = _solve(held, edges, th, max_nfev=max_nfev)
+                alt = _solve(param, edges, pre.x, max_nfev=max_nfev)
+                n_iter += pre.nfev + alt.nfev
+                if alt.cost < sol.cost:
+                    sol = alt
             th = sol.x
             if robust and n_e > MIN_EDGES:
                 r, _ = residuals_and_jacobian(param, edges, th, jac=False)
