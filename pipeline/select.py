@@ -5,9 +5,8 @@ tangential / thin-prism terms, centre prior) is fitted
 with one shot left out, and the left-out shot's edges are corrected by that
 fit and measured: the *holdout* ``d`` (the paper's protocol: a correction is
 judged on shots it was not fitted on). The CV figure of a candidate is the
-RMS of the holdout residuals pooled over all folds. The choice is the
-simplest candidate (fewest parameters) that is *as good as the best* by the
-one-standard-error rule [2]_ on paired held-out differences: with
+RMS of the holdout residuals pooled over all folds. Candidates are compared by
+the one-standard-error rule [2]_ on paired held-out differences: with
 :math:`S_{c,e}` the sum of squared held-out residuals of candidate :math:`c`
 on held-out edge :math:`e` (:math:`n_e` points, :math:`N` in all, the same
 edges for every candidate), :math:`D_e = S_{c,e} - S_{b,e}` against the best
@@ -18,11 +17,22 @@ candidate :math:`b`,
 
 and :math:`c` is as good as :math:`b` when :math:`\Delta \le` ``n_se`` SE (the
 held-out edges are the independent units; the points of one edge are not).
-A richer model must earn its parameters on unseen shots, and a simpler one is
+A richer model must earn its parameters on unseen data, and a simpler one is
 not taken when it is measurably worse: a relative tolerance on the CV ``d``
 would hide a real model error under the measurement's noise floor (on a
 wide-angle lens with thin strings, radial k up to rho^4 is 6 % above the
 floor, 6.7 SE, and off by 0.45 px in the corners).
+
+The choice has two tiers (:func:`select_model`). Leave-one-shot-out folds fit
+one orientation fewer than the final model has, and with three to six shots
+that is what decides them: the decentering terms and a free centre are poorly
+determined by two or three orientations, so the shots' own systematic errors
+(string bends, each orientation's measurement bias) move them far in the folds,
+and a model without them, or with a centre prior, wins the folds and loses on
+new shots once every orientation is in the fit. So leave-one-shot-out only sets
+aside what fails on an unseen orientation (:data:`ORIENTATION_TOLERANCE`), and
+the choice among the rest is cross-validated on alternate strings of every shot,
+each fit with every orientation.
 
 With fewer than three shots, a shot cannot be left out (the rest would have
 one orientation), so the folds leave out every other string (pair of
