@@ -590,10 +590,12 @@ def select_model(
     With three shots or more (``folds`` 'images') the choice has two tiers:
 
     1. **Orientations.** Each candidate is fitted with one shot left out and measured on it
-       (:func:`cross_validate`): the candidates that generalise to an unseen orientation are those
-       within ``n_se`` paired standard errors (:func:`paired_difference`) or within
-       ``orientation_tolerance`` (:data:`ORIENTATION_TOLERANCE`) of the best CV d. A model that
-       over-fits the orientations it saw (a free polynomial, too few terms) is left out here.
+       (:func:`cross_validate`). When the candidate with fewest parameters within ``n_se`` paired
+       standard errors (:func:`paired_difference`) of the best is a flexible one (:func:`is_flexible`:
+       a free polynomial), it is the choice: only unseen orientations can judge a model that bends
+       to the orientations it is fitted on. Otherwise the radial candidates that generalise to an
+       unseen orientation are those within ``n_se`` paired standard errors or within
+       ``orientation_tolerance`` (:data:`ORIENTATION_TOLERANCE`) of the best radial CV d.
     2. **Strings, with every orientation in the fit.** Those candidates are cross-validated again
        with alternate strings of every shot held out (``folds='edges'``), so that each fit has every
        orientation the final model has; the choice is the candidate with fewest parameters within
@@ -654,7 +656,19 @@ def select_model(
             f"CV d {best_row.cv_d:.4f} px; the generalisation to an unseen orientation is not checked"
         )
         return _with_support(Selection(pick.candidate, reason, mode, table), lines_per_image)
-    general = _within(ok, best_row, n_se, orientation_tolerance)
+    first = min(_within(ok, best_row, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+    if is_flexible(first.candidate):
+        # a free polynomial (or field) that wins the folds is judged by them alone: with every
+        # orientation in the fit it would bend to those orientations and win again, seen or not
+        reason = (
+            f"{first.candidate.label}: leave-one-shot-out CV d {first.cv_d:.4f} px, fewest parameters "
+            f"({first.n_params}) within {se_text} (paired over the held-out edges) of the best CV d "
+            f"{best_row.cv_d:.4f} px, ahead of every radial model on unseen orientations"
+        )
+        return _with_support(Selection(first.candidate, reason, mode, table), lines_per_image)
+    radial = [r for r in ok if not is_flexible(r.candidate)]
+    best_radial = min(radial, key=lambda r: r.cv_d)
+    general = _within(radial, best_radial, n_se, orientation_tolerance)
     fits = {r.candidate: r.full_fit for r in general if r.full_fit is not None}
     strings, _ = cross_validate(
         lines_per_image,
@@ -685,9 +699,16 @@ def select_model(
     tol = f"{100 * orientation_tolerance:g} %"
     reason = (
         f"{choice.label}: generalises to an unseen orientation (leave-one-shot-out CV d "
-        f"{loso[choice].cv_d:.4f} px, within {se_text} or {tol} of the best {best_row.cv_d:.4f} px); {tier2}"
+        f"{loso[choice].cv_d:.4f} px, within {se_text} or {tol} of the best radial model's "
+        f"{best_radial.cv_d:.4f} px); {tier2}"
     )
     return _with_support(Selection(choice, reason, mode, table, strings), lines_per_image)
+
+
+def is_flexible(spec: FitSpec) -> bool:
+    """Whether ``spec`` can bend to the orientations it is fitted on (a free polynomial): such a
+    candidate is judged by leave-one-shot-out alone (:func:`select_model`)."""
+    return spec.kind != "radial"
 
 
 def _with_support(sel: Selection, lines_per_image: Sequence[Sequence[np.ndarray]]) -> Selection:
