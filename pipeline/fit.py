@@ -86,7 +86,7 @@ from pipeline.edgeset import (
     summarise,
     tls,
 )
-from pipeline.fitspec import FREE_CENTER_WEIGHT, FitSpec, spec_problem
+from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, spec_problem
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialParametrisation
 from pipeline.models.radial import RadialParametrisation
@@ -96,6 +96,10 @@ if TYPE_CHECKING:
 
 MIN_EDGES = 4
 """A fit needs at least this many usable edges."""
+
+FAR_CENTRE = 0.05
+"""A free distortion centre farther than this from the image centre (in half image diagonals) is
+checked against the fit started from the centre-prior solution (:func:`fit_distortion`)."""
 
 
 class Parametrisation(Protocol):
@@ -240,7 +244,7 @@ def normal_equations(
 
 
 @dataclass(frozen=True)
-class _Solution:
+class Solution:
     """What a least-squares run found (the fields of scipy's ``OptimizeResult`` that are used)."""
 
     x: np.ndarray
@@ -297,7 +301,7 @@ def _levenberg_marquardt(
     th0: np.ndarray,
     edge_weights: np.ndarray | None,
     max_nfev: int,
-) -> _Solution | None:
+) -> Solution | None:
     """MINPACK's Levenberg-Marquardt (``lmder``: a trust region on the step scaled by the running
     maximum of the Jacobian's column norms, its radius update and its stopping rules) on the normal
     equations (:func:`normal_equations`, ``n x n``) instead of a QR factorisation of the ``N x n``
@@ -346,10 +350,10 @@ def _levenberg_marquardt(
             xnorm = float(np.linalg.norm(diag * x))
             delta = LM_FACTOR * xnorm if xnorm > 0 else LM_FACTOR
         if f == 0.0:
-            return _Solution(x, 0.0, nfev, 1, "zero residual")
+            return Solution(x, 0.0, nfev, 1, "zero residual")
         nz = col > 0
         if not nz.any() or float(np.max(np.abs(b[nz]) / (col[nz] * np.sqrt(f)))) <= LM_TOL:
-            return _Solution(x, 0.5 * f, nfev, 4, "the gradient is orthogonal to the residuals (gtol)")
+            return Solution(x, 0.5 * f, nfev, 4, "the gradient is orthogonal to the residuals (gtol)")
         diag = np.maximum(diag, col)
         while True:
             try:
@@ -381,33 +385,33 @@ def _levenberg_marquardt(
                 xnorm = float(np.linalg.norm(diag * x))
                 first = False
             if abs(actred) <= LM_TOL and prered <= LM_TOL and 0.5 * ratio <= 1.0:
-                return _Solution(x, 0.5 * f, nfev, 2, "both actual and predicted relative reductions below ftol")
+                return Solution(x, 0.5 * f, nfev, 2, "both actual and predicted relative reductions below ftol")
             if delta <= LM_TOL * xnorm:
-                return _Solution(x, 0.5 * f, nfev, 3, "the trust region is below xtol of the parameters")
+                return Solution(x, 0.5 * f, nfev, 3, "the trust region is below xtol of the parameters")
             if nfev >= max_nfev:
                 return None
             if abs(actred) <= eps and prered <= eps and 0.5 * ratio <= 1.0:
-                return _Solution(x, 0.5 * f, nfev, 2, "no further reduction is possible (machine precision)")
+                return Solution(x, 0.5 * f, nfev, 2, "no further reduction is possible (machine precision)")
             if delta <= eps * xnorm:
-                return _Solution(x, 0.5 * f, nfev, 3, "no further improvement is possible (machine precision)")
+                return Solution(x, 0.5 * f, nfev, 3, "no further improvement is possible (machine precision)")
             if accepted:
                 break
 
 
-def _solve(
+def solve(
     param: Parametrisation,
     edges: EdgeSet,
     th0: np.ndarray,
     edge_weights: np.ndarray | None = None,
     max_nfev: int = 200,
-) -> _Solution:
+) -> Solution:
     """Levenberg–Marquardt on the residuals, optionally weighted per edge: on the normal equations
     (:func:`_levenberg_marquardt`), or MINPACK's on the Jacobian when that one cannot finish."""
     sol = _levenberg_marquardt(param, edges, th0, edge_weights, max_nfev)
     if sol is not None:
         return sol
     ref = _solve_minpack(param, edges, th0, edge_weights, max_nfev)
-    return _Solution(np.asarray(ref.x), float(ref.cost), int(ref.nfev), int(ref.status), str(ref.message))
+    return Solution(np.asarray(ref.x), float(ref.cost), int(ref.nfev), int(ref.status), str(ref.message))
 
 
 def _solve_minpack(
@@ -605,8 +609,23 @@ def fit_distortion(
     rejected = list(rejected)
     try:
         with np.errstate(all="ignore"):
-            sol = _solve(param, edges, th, max_nfev=max_nfev)
+            sol = solve(param, edges, th, max_nfev=max_nfev)
             n_iter += sol.nfev
+            if (
+                init is None
+                and isinstance(param, RadialParametrisation)
+                and param.w_center < CENTER_PRIOR_WEIGHT
+                and float(np.hypot(*sol.x[:2])) > FAR_CENTRE
+            ):
+                # continuation: a free centre that ended far from the image centre may sit in a local
+                # minimum (a lens decentred by 60 px on 1000x750 with tangential and prism terms ended
+                # 300 px away); the same fit started from its centre-prior solution, the lower cost kept
+                held = make_parametrisation(width, height, spec, w_center=CENTER_PRIOR_WEIGHT, ridge=ridge)
+                pre = solve(held, edges, th, max_nfev=max_nfev)
+                alt = solve(param, edges, pre.x, max_nfev=max_nfev)
+                n_iter += pre.nfev + alt.nfev
+                if alt.cost < sol.cost:
+                    sol = alt
             th = sol.x
             if robust and n_e > MIN_EDGES:
                 r, _ = residuals_and_jacobian(param, edges, th, jac=False)
@@ -615,7 +634,7 @@ def fit_distortion(
                 weights = np.minimum(1.0, scale / np.maximum(rms, 1e-12))  # Huber weights per edge
                 weighted = bool(np.any(weights < 1.0))
                 if weighted:  # (all weights 1: the weighted problem is the one just solved)
-                    sol = _solve(param, edges, th, edge_weights=weights, max_nfev=max_nfev)
+                    sol = solve(param, edges, th, edge_weights=weights, max_nfev=max_nfev)
                     n_iter += sol.nfev
                     th = sol.x
                     r, _ = residuals_and_jacobian(param, edges, th, jac=False)
@@ -648,7 +667,7 @@ def fit_distortion(
                     if problem:
                         return FitFailure("after rejecting outlier edges, " + problem)
                 if weighted or len(bad):  # (else the final plain fit is the first one)
-                    sol = _solve(param, edges, th, max_nfev=max_nfev)
+                    sol = solve(param, edges, th, max_nfev=max_nfev)
                     n_iter += sol.nfev
                     th = sol.x
     except (ValueError, np.linalg.LinAlgError) as exc:

@@ -38,3 +38,45 @@ def harp_point_sets(lens, width, height, angles_deg, spacing=50.0, step=30.0, no
                 lines.append(p + rng.normal(0.0, noise, p.shape))
         shots.append(lines)
     return shots
+
+
+def turning_harp_point_sets(
+    lens, width, height, turntable_deg, bends, *, angle0=20.0, axis=None, spacing=60.0, string_width=3.0,
+    step=30.0, noise=0.003, seed=0, margin=5.0,
+):  # fmt: skip
+    """Edge point sets of a harp turning on a turntable, its strings bent (test helper, exact truth).
+
+    The harp's strings run at ``angle0 + turntable`` degrees about ``axis`` (ideal pixels, default the
+    image centre); string ``k`` (offset ``(k - K/2) spacing`` from the axis, ``K = len(bends)``) lies at
+    ``q = q_k + delta_k(u)`` with ``delta_k(u) = sum_j bends[k][j] P_{j+2}(u)``, ``u`` the position along
+    the string from the axis in half image diagonals (the model of :mod:`pipeline.harp_shape`, written
+    out here on its own). Both edges of each string (``q +- string_width / 2``) are sampled every
+    ``step`` px, mapped through ``lens.distort_points`` and given Gaussian noise. Returns the shots
+    (lists of (M, 2) arrays, the two edges of a string next to each other) and the offsets ``q_k``."""
+    rng = np.random.default_rng(seed)
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if axis is None else np.asarray(axis, float)
+    half = 0.5 * np.hypot(width, height)
+    n_str = len(bends)
+    offsets = (np.arange(n_str) - (n_str - 1) / 2.0) * spacing
+    shots = []
+    for theta in turntable_deg:
+        a = np.radians(angle0 + theta)
+        d = np.array([np.cos(a), np.sin(a)])
+        n = np.array([-d[1], d[0]])
+        lines = []
+        for q, coef in zip(offsets, bends):
+            t = np.arange(-1.6 * half, 1.6 * half, step)
+            u = t / half
+            p2, p3, p4 = 0.5 * (3 * u**2 - 1), 0.5 * (5 * u**3 - 3 * u), (35 * u**4 - 30 * u**2 + 3) / 8
+            dev = coef[0] * p2 + coef[1] * p3 + coef[2] * p4
+            for side in (-0.5, 0.5):
+                ideal = c + t[:, None] * d + (q + side * string_width + dev)[:, None] * n
+                dist = lens.distort_points(ideal)
+                ok = np.all(np.isfinite(dist), axis=1) & np.all(
+                    (dist > margin) & (dist < [width - 1 - margin, height - 1 - margin]), axis=1
+                )
+                p = dist[ok]
+                if len(p) >= 8:
+                    lines.append(p + rng.normal(0.0, noise, p.shape))
+        shots.append(lines)
+    return shots, offsets

@@ -1,0 +1,240 @@
+"""Does the model choice hold on unseen shots? Held-out d of every candidate and of the choice.
+
+Usage::
+
+    .venv/bin/python benchmarks/model_choice.py [--real DIR] [--lenses 20] [--fit-shots 3,4,6]
+        [--population points] [--skip-real]
+
+Two parts (issue 19 items 2 and 5):
+
+* **The real photographs** (``../shared/data/real-harp`` or ``$HARP_REAL_DATA``): every split of the
+  three shots into two fitted and one held out. For each candidate of ``harp calibrate``
+  (:data:`pipeline.select.DEFAULT_CANDIDATES`) fitted on the two, the held-out shot's d, measured
+  on whole strings (the measurement of ``harp measure``, ends kept) and on the paper's interior-only
+  points (``smoothing="gaussian"``: 3 sigma = 72 px dropped at both ends of every piece); the choice
+  made on the two shots (:func:`pipeline.select.select_model`) and its ratio to the best candidate on
+  the held-out shot. Then the choice on all three shots (leave-one-shot-out and alternate-string tables).
+* **A seeded population of lenses**: for each lens, ``n`` shots to fit and three unseen shots at other
+  orientations; the choice made on the ``n`` shots against the best candidate on the unseen ones
+  (held-out d, whole strings) and the old rule (leave-one-shot-out alone, one standard error). With
+  ``--population points`` the shots are point sets: ideal strings of a harp of 15 strings 125 px
+  apart on 1761x1174 mapped through an exact lens (radial k1..k3, decentering, thin prism, centre up to
+  30 px off), each string bent by its own Legendre P2..P4 terms (harp-fixed, 0.015 px each) plus a
+  bend of its own in every shot (0.015 px), every shot moved by a smooth field of its own (quadratic
+  and cubic terms, 0.04 px each: an orientation's own measurement bias), raw points every pixel with
+  0.06 px noise smoothed as the measurement does (``smooth_subsample``, t = 30).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pipeline.edgeset import held_out_residuals
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.models import RadialModel
+from pipeline.resample import smooth_subsample
+from pipeline.select import DEFAULT_CANDIDATES, CVRow, paired_difference, select_model
+
+REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
+
+
+def held_d(model, lines: Sequence[np.ndarray]) -> float:
+    r = held_out_residuals(model, lines)
+    return float(np.sqrt(np.mean(r**2))) if len(r) else float("nan")
+
+
+def old_rule(table: Sequence[CVRow]) -> FitSpec:
+    """The choice before issue 19: leave-one-shot-out alone, fewest parameters within one SE."""
+    ok = [r for r in table if np.isfinite(r.cv_d)]
+    best = min(ok, key=lambda r: r.cv_d)
+    good = [r for r in ok if r is best or (lambda d: np.isfinite(d[0]) and d[0] <= d[1])(paired_difference(r, best))]
+    return min(good, key=lambda r: (r.n_params, r.cv_d)).candidate
+
+
+# ------------------------------------------------------------------------ real photographs
+def real_part(directory: Path) -> None:
+    import cv2
+
+    from pipeline.measure import measure_image
+
+    names = sorted(p.name for p in directory.glob("*.pgm"))
+    if len(names) < 3:
+        print(f"(no real photographs in {directory}: part skipped)")
+        return
+    whole, interior = {}, {}
+    size = (0, 0)
+    for n in names:
+        img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
+        size = (img.shape[1], img.shape[0])
+        whole[n] = [ln.points for ln in measure_image(img).lines]
+        interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
+    w, h = size
+    print(f"## Real photographs ({directory.name}: {', '.join(names)}), {w}x{h}")
+    print()
+    for held in names:
+        fit_on = [n for n in names if n != held]
+        t0 = time.perf_counter()
+        sel = select_model([whole[n] for n in fit_on], w, h)
+        t_sel = time.perf_counter() - t0
+        rows = []
+        for c in DEFAULT_CANDIDATES:
+            f = fit_distortion([whole[n] for n in fit_on], w, h, **c.fit_arguments())
+            if not f:
+                rows.append((c, float("nan"), float("nan"), float("nan")))
+                continue
+            rows.append((c, f.d_after, held_d(f.model, whole[held]), held_d(f.model, interior[held])))
+        best = min(r[2] for r in rows if np.isfinite(r[2]))
+        best_i = min(r[3] for r in rows if np.isfinite(r[3]))
+        print(f"### fitted on {' + '.join(fit_on)}, {held} held out (choice in {t_sel:.1f} s)")
+        print()
+        print("| candidate | fit d px | held-out d, whole strings px | held-out d, interior only px | choice |")
+        print("|---|---:|---:|---:|---|")
+        for c, fd, hd, hi in rows:
+            mark = "**chosen**" if c == sel.choice else ""
+            print(f"| {c.label} | {fd:.4f} | {hd:.4f} | {hi:.4f} | {mark} |")
+        ch = next(r for r in rows if r[0] == sel.choice)
+        print()
+        print(
+            f"choice {sel.choice.label}: held-out d {ch[2]:.4f} px whole ({ch[2] / best:.3f}x the best "
+            f"{best:.4f}), {ch[3]:.4f} px interior ({ch[3] / best_i:.3f}x the best {best_i:.4f})"
+        )
+        print(f"reason: {sel.reason}")
+        print()
+    sel = select_model([whole[n] for n in names], w, h)
+    print("### all three shots: the choice")
+    print()
+    print(f"{sel.choice.label}: {sel.reason}")
+    print()
+    strings = {r.candidate: r for r in sel.strings_table}
+    print("| candidate | params | leave-one-shot-out CV d px | per fold | alternate-string CV d px (tier 2) |")
+    print("|---|---:|---:|---|---:|")
+    for r in sel.table:
+        s = strings.get(r.candidate)
+        folds = " ".join(f"{v:.4f}" for v in r.fold_d)
+        cv = f"{r.cv_d:.4f}" if np.isfinite(r.cv_d) else f">= {r.cv_d_bound:.4f} (stopped)"
+        print(f"| {r.candidate.label} | {r.n_params} | {cv} | {folds} | {'' if s is None else f'{s.cv_d:.4f}'} |")
+    print()
+
+
+# ------------------------------------------------------------------------ point population
+W_PT, H_PT = 1761, 1174
+
+
+def _legendre_bend(u: np.ndarray, c: np.ndarray) -> np.ndarray:
+    return c[0] * 0.5 * (3 * u**2 - 1) + c[1] * 0.5 * (5 * u**3 - 3 * u) + c[2] * (35 * u**4 - 30 * u**2 + 3) / 8
+
+
+def point_lens(seed: int) -> RadialModel:
+    rng = np.random.default_rng(seed)
+    c = ((W_PT - 1) / 2 + rng.normal(0, 15), (H_PT - 1) / 2 + rng.normal(0, 15))
+    return RadialModel.for_image(
+        W_PT,
+        H_PT,
+        k=(1.0, 0.0, rng.uniform(-0.06, 0.08), 0.0, rng.normal(0, 0.02), 0.0, rng.normal(0, 0.005)),
+        center=c,
+        tangential=tuple(rng.normal(0, 8e-4, 2)),
+        prism=(rng.normal(0, 6e-4), 0.0, rng.normal(0, 6e-4), 0.0),
+    )
+
+
+def point_shot(lens: RadialModel, harp_bends: np.ndarray, angle: float, seed: int) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    field = rng.normal(0, 0.04, (2, 6))
+    t = np.radians(angle)
+    d, n = np.array([np.cos(t), np.sin(t)]), np.array([-np.sin(t), np.cos(t)])
+    c0 = np.array([(W_PT - 1) / 2, (H_PT - 1) / 2])
+    half = 0.5 * np.hypot(W_PT, H_PT) * 1.15
+    lines = []
+    for k, hb in enumerate(harp_bends):
+        q = (k - (len(harp_bends) - 1) / 2) * 125.0
+        own = rng.normal(0, 0.015, 3)
+        s = np.arange(-half, half, 1.0)
+        dev = _legendre_bend(s / half, hb) + _legendre_bend(s / half, own)
+        for side in (-1.4, 1.4):
+            p = lens.distort_points(c0 + (q + side + dev)[:, None] * n + s[:, None] * d)
+            xn, yn = (p[:, 0] - W_PT / 2) / (W_PT / 2), (p[:, 1] - H_PT / 2) / (H_PT / 2)
+            basis = np.stack([xn * xn, xn * yn, yn * yn, xn**3, xn * yn * yn, yn**3])
+            p = p + np.column_stack([field[0] @ basis, field[1] @ basis])
+            ok = np.all(np.isfinite(p), 1) & np.all((p > 5) & (p < [W_PT - 6, H_PT - 6]), 1)
+            idx = np.flatnonzero(ok)
+            if len(idx) < 100:
+                continue
+            runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+            idx = max(runs, key=len)
+            lines.append(smooth_subsample(p[idx] + rng.normal(0, 0.06, (len(idx), 2)), 30))
+    return lines
+
+
+def population_part(n_lenses: int, fit_counts: Sequence[int]) -> None:
+    print(
+        "## Population (point sets): chosen model's held-out d on 3 unseen shots over the best candidate's "
+        f"({n_lenses} seeded lenses per row)"
+    )
+    print()
+    print("| shots fitted | rule | worst ratio | mean ratio | lenses > 1.05 | median best held-out d px |")
+    print("|---:|---|---:|---:|---:|---:|")
+    for nfit in fit_counts:
+        ratios: dict[str, list[float]] = {"two tiers (now)": [], "leave-one-shot-out alone (before)": []}
+        bests = []
+        for seed in range(n_lenses):
+            lens = point_lens(seed)
+            rng = np.random.default_rng(seed + 7)
+            harp = rng.normal(0, 0.015, (15, 3))
+            base = rng.uniform(0, 180)
+            fa = [(base + 180 * i / nfit + rng.normal(0, 5)) % 180 for i in range(nfit)]
+            ta = [(base + 90 / nfit + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
+            fs = [point_shot(lens, harp, a, seed * 100 + i) for i, a in enumerate(fa)]
+            ts = [point_shot(lens, harp, a, seed * 100 + 50 + i) for i, a in enumerate(ta)]
+            sel = select_model(fs, W_PT, H_PT)
+            unseen = {}
+            for r in sel.table:
+                f = r.full_fit or fit_distortion(fs, W_PT, H_PT, **r.candidate.fit_arguments())
+                if f:
+                    unseen[r.candidate] = held_d(f.model, [p for s in ts for p in s])
+            best = min(unseen.values())
+            bests.append(best)
+            ratios["two tiers (now)"].append(unseen[sel.choice] / best)
+            ratios["leave-one-shot-out alone (before)"].append(unseen[old_rule(sel.table)] / best)
+        for rule, v in ratios.items():
+            a = np.array(v)
+            print(
+                f"| {nfit} | {rule} | {a.max():.3f} | {a.mean():.3f} | {int(np.sum(a > 1.05))} / {len(a)} | "
+                f"{np.median(bests):.4f} |"
+            )
+    print()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--real", type=Path, default=REAL)
+    ap.add_argument("--skip-real", action="store_true")
+    ap.add_argument("--population", choices=("points", "none"), default="points")
+    ap.add_argument("--lenses", type=int, default=20)
+    ap.add_argument("--fit-shots", default="3,4,6")
+    args = ap.parse_args(argv)
+    print(
+        f"# Model choice on unseen shots ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
+        f"`benchmarks/model_choice.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    t0 = time.perf_counter()
+    if not args.skip_real:
+        real_part(args.real)
+    if args.population == "points":
+        population_part(args.lenses, [int(v) for v in args.fit_shots.split(",")])
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

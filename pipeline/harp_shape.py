@@ -1,0 +1,516 @@
+r"""The harp checks itself: each string's own deviation from straightness, fitted with the lens.
+
+A harp string is straight to a few micrometres, not exactly: it may bow, sag, carry a kink or the
+twist of a braid. On one shot such a bend is indistinguishable from lens distortion. But the
+station knows each shot's turntable angle, and a string keeps its shape *on the harp* as the harp
+turns, while the lens's correction stays *on the sensor*: a bend that moves with the turntable is
+the string's, one that stays is the lens's. This module fits both at once.
+
+Model
+-----
+The harp is seen turned by the turntable angle :math:`\theta_i` in shot :math:`i`: its strings run
+at :math:`\phi_i = \phi_0 + \sigma\theta_i` in the ideal image (:math:`\sigma = \pm 1`, the sense in
+which the camera sees the turntable turn), with unit direction :math:`t_i` and normal :math:`n_i`,
+about a centre :math:`c` (the turntable axis, in ideal pixels). A point :math:`x` of shot :math:`i`
+has harp coordinates :math:`u = t_i\cdot(U(x) - c)/s` along the strings (:math:`s` half the image
+diagonal) and :math:`q = n_i\cdot(U(x) - c)` across them. String :math:`k` lies at
+:math:`q = q_k + \delta_k(u)` with its deviation
+
+.. math:: \delta_k(u) = \sum_{j \in J} a_{kj} P_j(u),
+
+:math:`P_j` the Legendre polynomials, :math:`J = \{2, 3, 4\}` by default (a bow, an S, a W:
+the constant and linear parts are the string's own line, free in every shot anyway). The fit
+minimises the straightness objective of :mod:`pipeline.fit` of the points corrected by the lens
+*and* moved back by their string's deviation, :math:`U_\theta(x) - \delta_k(u)\,n_i`, over the
+lens parameters :math:`\theta` and every :math:`a_{kj}` at once (Levenberg-Marquardt on the
+normal equations, :func:`pipeline.fit.solve`), with a weak ridge on the :math:`a_{kj}`
+(:data:`STRING_RIDGE`).
+
+What can and cannot be separated
+--------------------------------
+* A deviation that turns with the harp is separated from the lens's correction by the different
+  places and directions the string takes in the image: it needs the string in two shots or more
+  at different angles (strings seen in one shot get no deviation terms).
+* A rotationally symmetric (radial) lens correction about the turntable axis bends a line at
+  distance :math:`q` from the axis the same way whatever its direction: for a harp turning about
+  the distortion centre it is *exactly* a set of string deviations :math:`\delta_k` depending on
+  :math:`q_k` only. That part cannot be told apart by turning the harp; the ridge gives it to the
+  lens (no penalty there), which is the physical reading (a harp whose strings bow in proportion
+  to a radial law of their distance from the axis is not plausible). The farther the axis from the
+  distortion centre, the better the separation.
+* A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
+  of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
+* Without turntable angles (loose photographs) nothing ties a string of one shot to a string of
+  another: string deviations cannot be separated from the lens at all, and a bent string shows
+  only as residual straightness.
+
+The strings are identified across shots by their distance from the axis :math:`c`, which is
+found by making those distances agree between shots. For a harp with uniform spacing :math:`p`
+this is ambiguous by whole strings unless the axis is known to within about :math:`p/2`: the
+search assumes the turntable axis within :data:`AXIS_SEARCH` pitches of the image centre.
+
+References
+----------
+.. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision camera distortion
+   measurements with a calibration harp", JOSA A 29(10), 2012 (string straightness, Sect. 2).
+.. [2] G. H. Golub, V. Pereyra, "Separable nonlinear least squares: the variable projection
+   method and its applications", Inverse Problems 19(2), 2003.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.edgeset import FitFailure, FitResult, collect, tls
+from pipeline.fit import fit_distortion, make_parametrisation, normal_equations, solve
+from pipeline.fitspec import FitSpec
+from pipeline.models.base import DistortionModel
+
+Floats = NDArray[np.float64]
+
+DEVIATION_TERMS: tuple[int, ...] = (2, 3, 4)
+"""Legendre degrees of a string's deviation along the harp coordinate ``u``."""
+
+STRING_RIDGE = 0.02
+"""Weight of the ridge on the deviation coefficients: a coefficient of ``a`` px costs like a residual
+of ``STRING_RIDGE * a`` px on every point (a bend of 0.02 px like 4e-4 px: it fixes what turning the
+harp cannot see and shrinks what it sees by far less than its standard error)."""
+
+MAX_ANGLE_SPREAD_DEG = 3.0
+"""Largest spread of the shots' string angles about ``phi_0 + sigma * theta`` that is accepted."""
+
+AXIS_SEARCH = 0.6
+"""Half-width, in string pitches, of the search for the turntable axis around the image centre."""
+
+BEND_LIMIT_PX = 0.02
+"""Default QA limit of a string's bend (largest ``|delta_k|`` over where it was seen)."""
+
+
+def legendre(u: Floats, degrees: Sequence[int]) -> Floats:
+    """``P_j(u)`` for every degree ``j`` in ``degrees``, rows in that order (Bonnet's recursion)."""
+    u = np.asarray(u, dtype=np.float64)
+    top = max(degrees) if degrees else 0
+    p = [np.ones_like(u), u]
+    for n in range(1, top):
+        p.append(((2 * n + 1) * u * p[n] - n * p[n - 1]) / (n + 1))
+    return np.array([p[j] for j in degrees]).reshape(len(degrees), *u.shape)
+
+
+@dataclass(frozen=True)
+class HarpFrame:
+    """Where the harp is in every shot: strings at ``angle0_deg + sign * turntable`` (degrees, in the
+    ideal image), turning about ``centre`` (ideal pixels); harp coordinates along the strings in units
+    of ``scale_px`` (half the image diagonal)."""
+
+    angle0_deg: float
+    sign: int
+    centre: tuple[float, float]
+    scale_px: float
+    pitch_px: float
+
+    def direction(self, turntable_deg: float) -> Floats:
+        """Unit direction of the strings in a shot at ``turntable_deg``."""
+        a = np.radians(self.angle0_deg + self.sign * turntable_deg)
+        return np.array([np.cos(a), np.sin(a)])
+
+    def normal(self, turntable_deg: float) -> Floats:
+        """Unit normal ``(-sin, cos)`` of the strings: the direction in which ``q`` grows."""
+        d = self.direction(turntable_deg)
+        return np.array([-d[1], d[0]])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "angle0_deg": self.angle0_deg,
+            "sign": self.sign,
+            "centre": list(self.centre),
+            "scale_px": self.scale_px,
+            "pitch_px": self.pitch_px,
+        }
+
+
+@dataclass(frozen=True)
+class StringShape:
+    """One string's fitted deviation :math:`\\delta_k(u) = \\sum_j a_j P_j(u)` (pixels of the ideal image).
+
+    ``offset_px``: its distance ``q_k`` from the axis; ``span``: the range of ``u`` where it was seen;
+    ``bend_px``: the largest ``|delta_k|`` over that range, ``bend_se_px`` its standard error (from the
+    fit's covariance, at the place of the largest deviation); ``shots``: in how many shots it was seen
+    (deviation terms need two or more: otherwise ``coefficients`` is empty and ``bend_px`` NaN)."""
+
+    index: int
+    offset_px: float
+    degrees: tuple[int, ...]
+    coefficients: tuple[float, ...]
+    standard_errors: tuple[float, ...]
+    span: tuple[float, float]
+    shots: int
+    edges: int
+    points: int
+    bend_px: float
+    bend_se_px: float
+
+    def deviation(self, u: Floats) -> Floats:
+        """``delta_k(u)`` (pixels); zero where the string has no deviation terms."""
+        u = np.asarray(u, dtype=np.float64)
+        if not self.coefficients:
+            return np.zeros_like(u)
+        out: Floats = np.asarray(self.coefficients) @ legendre(u.ravel(), self.degrees)
+        return out.reshape(u.shape)
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(v: float) -> float | None:
+            return float(v) if np.isfinite(v) else None
+
+        return {
+            "index": self.index,
+            "offset_px": self.offset_px,
+            "degrees": list(self.degrees),
+            "coefficients": list(self.coefficients),
+            "standard_errors": list(self.standard_errors),
+            "span": list(self.span),
+            "shots": self.shots,
+            "edges": self.edges,
+            "points": self.points,
+            "bend_px": num(self.bend_px),
+            "bend_se_px": num(self.bend_se_px),
+        }
+
+
+@dataclass(frozen=True)
+class HarpShapeFit:
+    """The lens fitted with every string's deviation (:func:`fit_harp_shape`).
+
+    ``model`` the lens correction fitted jointly, ``plain`` the fit without string terms (its start);
+    ``d_after`` the straightness of the points corrected by both, ``d_lens_only`` of the same points
+    corrected by ``model`` alone (pixels)."""
+
+    model: DistortionModel
+    plain: FitResult
+    frame: HarpFrame
+    strings: tuple[StringShape, ...]
+    d_after: float
+    d_lens_only: float
+    n_params: int
+
+    @property
+    def worst(self) -> StringShape | None:
+        """The string with the largest bend (None when no string has deviation terms)."""
+        bent = [s for s in self.strings if np.isfinite(s.bend_px)]
+        return max(bent, key=lambda s: s.bend_px) if bent else None
+
+    def bent_strings(self, limit_px: float = BEND_LIMIT_PX) -> tuple[StringShape, ...]:
+        """The strings bent beyond ``limit_px``."""
+        return tuple(s for s in self.strings if np.isfinite(s.bend_px) and s.bend_px > limit_px)
+
+    def __bool__(self) -> Literal[True]:  # a result is true, a FitFailure false
+        return True
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "frame": self.frame.to_dict(),
+            "strings": [s.to_dict() for s in self.strings],
+            "d_after": self.d_after,
+            "d_lens_only": self.d_lens_only,
+            "n_params": self.n_params,
+            "model": self.model.to_dict(),
+        }
+
+
+# ------------------------------------------------------------------ the harp frame
+def _circular_mean_180(angles_deg: Floats) -> tuple[float, float]:
+    """Mean and spread (RMS of the wrapped differences) of line directions, degrees modulo 180."""
+    two = np.radians(2.0 * np.asarray(angles_deg))
+    mean = 0.5 * np.degrees(np.arctan2(np.mean(np.sin(two)), np.mean(np.cos(two)))) % 180.0
+    diff = (np.asarray(angles_deg) - mean + 90.0) % 180.0 - 90.0
+    return float(mean), float(np.sqrt(np.mean(diff**2)))
+
+
+def _edge_angle(u: Floats) -> float:
+    d = u - u.mean(axis=0)
+    sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
+    return float(np.degrees(0.5 * np.arctan2(2.0 * sxy, sxx - syy)) % 180.0)
+
+
+def _clusters(q: Floats, gap: float) -> NDArray[np.intp]:
+    """Labels 0, 1, ... of 1-D single-linkage clusters (a gap wider than ``gap`` separates), in order."""
+    order = np.argsort(q)
+    labels = np.empty(len(q), dtype=np.intp)
+    labels[order] = np.concatenate([[0], np.cumsum(np.diff(q[order]) > gap)])
+    return labels
+
+
+def harp_frame(
+    corrected: Sequence[Sequence[Floats]], turntable_deg: Sequence[float], width: int, height: int
+) -> tuple[HarpFrame, list[list[int]]] | FitFailure:
+    """The harp's frame in the shots (:class:`HarpFrame`) and each edge's string number.
+
+    ``corrected``: per shot, its edges corrected by a lens fit (ideal pixels). The strings' angle at
+    turntable 0 and the sense of rotation come from the shots' line directions; the axis from making
+    the strings' distances from it agree between shots (module docstring); the strings are the
+    clusters of those distances, numbered from the lowest ``q``.
+    """
+    if len(corrected) != len(turntable_deg):
+        return FitFailure(f"{len(corrected)} shots but {len(turntable_deg)} turntable angles")
+    angles = np.array([_circular_mean_180(np.array([_edge_angle(e) for e in shot]))[0] for shot in corrected])
+    theta = np.asarray(turntable_deg, dtype=np.float64)
+    best: tuple[float, int, float] | None = None
+    for sign in (1, -1):
+        mean, spread = _circular_mean_180(angles - sign * theta)
+        if best is None or spread < best[0]:
+            best = (spread, sign, mean)
+    assert best is not None
+    spread, sign, angle0 = best
+    if spread > MAX_ANGLE_SPREAD_DEG:
+        return FitFailure(
+            f"the shots' string angles do not follow the turntable angles (spread {spread:.1f} deg about "
+            f"angle0 {sign:+d} x turntable): wrong angles, or the harp moved on the turntable"
+        )
+    scale = 0.5 * float(np.hypot(width, height))
+    # per edge: its offset along its shot's harp normal, and that normal
+    normals = [HarpFrame(angle0, sign, (0.0, 0.0), scale, 1.0).normal(t) for t in theta]
+    offsets = [np.array([float(nrm @ e.mean(axis=0)) for e in shot]) for nrm, shot in zip(normals, corrected)]
+    spacing = []
+    for o in offsets:
+        c = np.sort(o)
+        gaps = np.diff(c)
+        gaps = gaps[gaps > 0.25 * (np.max(gaps) if len(gaps) else 0.0)]  # the string widths are not pitches
+        if len(gaps):
+            spacing.append(float(np.median(gaps)))
+    if not spacing:
+        return FitFailure("too few strings to find the harp's pitch")
+    pitch = float(np.median(spacing))
+    nn = np.concatenate([np.repeat(nrm[None, :], len(o), axis=0) for nrm, o in zip(normals, offsets)])
+    oo = np.concatenate(offsets)
+    shot_of = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)])
+    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+
+    def score(c: Floats) -> tuple[float, NDArray[np.intp]]:
+        q = oo - nn @ c
+        lab = _clusters(q, pitch / 3.0)
+        means = np.bincount(lab, weights=q) / np.bincount(lab)
+        # a cluster holding two edges of one shot more than a string's width apart mixes two strings
+        ss = float(np.sum((q - means[lab]) ** 2))
+        return ss, lab
+
+    steps = np.linspace(-AXIS_SEARCH, AXIS_SEARCH, 13) * pitch
+    grid = [c0 + np.array([dx, dy]) for dx in steps for dy in steps]
+    c_best = min(grid, key=lambda c: score(c)[0])
+    # refine: given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
+    for _ in range(3):
+        lab = score(c_best)[1]
+        k = int(lab.max()) + 1
+        a = np.zeros((len(oo), 2 + k))
+        a[:, :2] = nn
+        a[np.arange(len(oo)), 2 + lab] = 1.0
+        sol, *_ = np.linalg.lstsq(a, oo, rcond=None)
+        c_best = sol[:2]
+    lab = score(c_best)[1]
+    per_shot: list[list[int]] = [[int(v) for v in lab[shot_of == i]] for i in range(len(corrected))]
+    frame = HarpFrame(float(angle0), int(sign), (float(c_best[0]), float(c_best[1])), scale, pitch)
+    return frame, per_shot
+
+
+# ------------------------------------------------------------------ the joint fit
+class _WithStrings:
+    """Lens parameters and string deviation coefficients, for :func:`pipeline.fit.solve` on one edge set.
+
+    ``theta = [lens theta, a_kj for every string with terms]``; the corrected points are
+    ``U(x) - delta_k(u) n`` (module docstring), ``u`` and ``n`` per point fixed from the start."""
+
+    def __init__(
+        self, lens: Any, string_of: NDArray[np.intp], basis: Floats, normal: Floats, n_strings: int, ridge: float
+    ) -> None:
+        self.lens = lens
+        self.string_of = string_of  # per point: index among the strings with terms, or -1
+        self.basis = basis  # (m, N) Legendre values per point
+        self.normal = normal  # (N, 2) harp normal per point
+        self.m = basis.shape[0]
+        self.k = n_strings
+        self.n = int(lens.n) + self.k * self.m
+        self.ridge = ridge
+        has = string_of >= 0
+        self._cols = [(np.flatnonzero(has & (string_of == s))) for s in range(n_strings)]
+
+    def theta0(self, init: DistortionModel | None) -> Floats:
+        out: Floats = np.concatenate([self.lens.theta0(init), np.zeros(self.k * self.m)])
+        return out
+
+    def model(self, th: Floats) -> DistortionModel:
+        m: DistortionModel = self.lens.model(th[: self.lens.n])
+        return m
+
+    def deviation(self, th: Floats) -> Floats:
+        """``delta_k(u)`` per point (0 for points of strings without terms)."""
+        a = th[self.lens.n :].reshape(self.k, self.m)
+        out = np.zeros(len(self.string_of))
+        for s, idx in enumerate(self._cols):
+            out[idx] = a[s] @ self.basis[:, idx]
+        return out
+
+    def evaluate(self, xy: Floats, th: Floats, jac: bool = True) -> tuple[Floats, Any]:
+        u, _ = self.lens.evaluate(xy, th[: self.lens.n], jac=False)
+        return u - self.deviation(th)[:, None] * self.normal, None
+
+    def regularisation(self, th: Floats, n_points: int) -> tuple[Floats, Floats]:
+        g, jg = self.lens.regularisation(th[: self.lens.n], n_points)
+        w = np.sqrt(max(n_points, 1)) * self.ridge
+        ks = self.k * self.m
+        jr = np.zeros((ks, self.n))
+        jr[:, self.lens.n :] = w * np.eye(ks)
+        jl = np.zeros((len(g), self.n))
+        jl[:, : self.lens.n] = jg
+        rows: Floats = np.concatenate([g, w * th[self.lens.n :]])
+        return rows, np.vstack([jl, jr])
+
+    def project(self, xy: Floats, th: Floats, nrm: Floats, tan: Floats) -> tuple[Floats, Floats]:
+        p_l, t_l = self.lens.project(xy, th[: self.lens.n], nrm, tan)
+        p_mat = np.zeros((self.n, len(xy)))
+        t_mat = np.zeros((self.n, len(xy)))
+        p_mat[: self.lens.n], t_mat[: self.lens.n] = p_l, t_l
+        dn = -np.einsum("ij,ij->i", self.normal, nrm)  # d(point)/d(delta) projected: -n_harp . n_line
+        dt = -np.einsum("ij,ij->i", self.normal, tan)
+        for s, idx in enumerate(self._cols):
+            r0 = self.lens.n + s * self.m
+            p_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dn[idx]
+            t_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dt[idx]
+        return p_mat, t_mat
+
+
+def fit_harp_shape(
+    lines_per_image: Sequence[Sequence[Floats]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    spec: FitSpec,
+    *,
+    degrees: Sequence[int] = DEVIATION_TERMS,
+    ridge: float = STRING_RIDGE,
+    plain: FitResult | None = None,
+    max_nfev: int = 200,
+) -> HarpShapeFit | FitFailure:
+    """Fit the lens ``spec`` and every string's deviation together (module docstring).
+
+    Parameters
+    ----------
+    lines_per_image : per shot, its edges (distorted pixels), as for :func:`pipeline.fit.fit_distortion`.
+    turntable_deg : the turntable angle of each shot, degrees.
+    width, height : the image size.
+    spec : the lens model.
+    degrees : Legendre degrees of each deviation (>= 2).
+    ridge : weight of the ridge on the deviation coefficients (:data:`STRING_RIDGE`).
+    plain : the fit of ``spec`` without string terms, when already made (its outliers are left out).
+
+    Returns
+    -------
+    HarpShapeFit or FitFailure
+        A failure (falsy, with its reason) when the plain fit fails, the angles do not match the
+        shots, or the joint fit does not converge to finite values.
+    """
+    degrees = tuple(int(j) for j in degrees)
+    if not degrees or min(degrees) < 2:
+        return FitFailure(f"deviation degrees must be >= 2 (0 and 1 are the line itself), got {degrees}")
+    if len(turntable_deg) != len(lines_per_image):
+        return FitFailure(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
+    if plain is None:
+        fitted = fit_distortion(lines_per_image, width, height, **spec.fit_arguments())
+        if not fitted:
+            return fitted
+        plain = fitted
+    out = {(r.image, r.line) for r in plain.rejected}
+    kept = [
+        [np.asarray(p, np.float64) for j, p in enumerate(s) if (i, j) not in out] for i, s in enumerate(lines_per_image)
+    ]
+    edges, _ = collect(kept, width, height)
+    if not edges:
+        return edges
+    model0 = plain.model
+    by_shot: list[list[Floats]] = [[] for _ in kept]
+    for e, pts in enumerate(edges.lines()):
+        by_shot[int(edges.image[e])].append(model0.undistort_points(pts))
+    present = [i for i, s in enumerate(by_shot) if s]
+    framed = harp_frame([by_shot[i] for i in present], [turntable_deg[i] for i in present], width, height)
+    if not framed:
+        return framed
+    frame, labels = framed
+    edge_string = np.empty(edges.n_edges, dtype=np.intp)
+    cursor = {i: 0 for i in present}
+    for e in range(edges.n_edges):
+        i = int(edges.image[e])
+        edge_string[e] = labels[present.index(i)][cursor[i]]
+        cursor[i] += 1
+    # strings seen in two shots or more get deviation terms
+    shots_of = {int(k): {int(edges.image[e]) for e in np.flatnonzero(edge_string == k)} for k in np.unique(edge_string)}
+    with_terms = sorted(k for k, v in shots_of.items() if len(v) >= 2)
+    slot = {k: s for s, k in enumerate(with_terms)}
+    ideal = model0.undistort_points(edges.xy)
+    point_edge = np.repeat(np.arange(edges.n_edges), edges.counts)
+    point_shot = edges.image[point_edge]
+    normals = np.array([frame.normal(float(turntable_deg[i])) for i in range(len(lines_per_image))])
+    directions = np.array([frame.direction(float(turntable_deg[i])) for i in range(len(lines_per_image))])
+    rel = ideal - np.asarray(frame.centre)
+    u = np.einsum("ij,ij->i", rel, directions[point_shot]) / frame.scale_px
+    q = np.einsum("ij,ij->i", rel, normals[point_shot])
+    string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
+    basis = legendre(u, degrees)
+    lens = make_parametrisation(width, height, spec)
+    param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge)
+    th0 = param.theta0(model0)
+    with np.errstate(all="ignore"):
+        try:
+            sol = solve(param, edges, th0, max_nfev=max_nfev)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            return FitFailure(f"the joint fit of lens and strings failed: {exc}")
+    th = sol.x
+    if not np.all(np.isfinite(th)):
+        return FitFailure("the joint fit of lens and strings diverged (non-finite parameters)")
+    joint = param.model(th)
+    corrected, _ = param.evaluate(edges.xy, th, jac=False)
+    r_joint = tls(corrected, edges.starts, edges.counts)[0]
+    r_lens = tls(joint.undistort_points(edges.xy), edges.starts, edges.counts)[0]
+    # standard errors of the coefficients: (J^T J)^-1 sigma^2 at the solution
+    ata, _, ss = normal_equations(param, edges, th)
+    _, jg = param.regularisation(th, len(edges.xy))
+    dof = max(len(edges.xy) - param.n, 1)
+    cov = np.linalg.pinv(ata[0] + jg.T @ jg) * float(ss[0]) / dof
+    coefs = th[lens.n :].reshape(len(with_terms), len(degrees))
+    strings = []
+    for k in sorted(shots_of):
+        sel = np.flatnonzero(edge_string == k)
+        pts = np.isin(point_edge, sel)
+        span = (float(u[pts].min()), float(u[pts].max()))
+        offset = float(np.median(q[pts]))
+        if k in slot:
+            s = slot[k]
+            a = coefs[s]
+            block = slice(lens.n + s * len(degrees), lens.n + (s + 1) * len(degrees))
+            c_k = cov[block, block]
+            grid = np.linspace(span[0], span[1], 201)
+            pb = legendre(grid, degrees)
+            dev = a @ pb
+            at = int(np.argmax(np.abs(dev)))
+            bend = float(abs(dev[at]))
+            bend_se = float(np.sqrt(max(pb[:, at] @ c_k @ pb[:, at], 0.0)))
+            se = tuple(float(v) for v in np.sqrt(np.maximum(np.diag(c_k), 0.0)))
+            a_t = tuple(float(v) for v in a)
+        else:
+            bend, bend_se, se, a_t = float("nan"), float("nan"), (), ()
+        strings.append(
+            StringShape(
+                int(k), offset, degrees if a_t else (), a_t, se, span, len(shots_of[k]), len(sel), int(pts.sum()),
+                bend, bend_se,
+            )
+        )  # fmt: skip
+    return HarpShapeFit(
+        model=joint,
+        plain=plain,
+        frame=frame,
+        strings=tuple(strings),
+        d_after=float(np.sqrt(np.mean(r_joint**2))),
+        d_lens_only=float(np.sqrt(np.mean(r_lens**2))),
+        n_params=param.n,
+    )

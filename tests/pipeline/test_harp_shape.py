@@ -1,0 +1,79 @@
+"""The harp checks itself (issue 19 item 4): strings' own bends fitted with the lens, on shots of a
+turning harp whose strings are bent by known amounts (truth: the generator's exact geometry,
+``tests.pipeline.harp_points.turning_harp_point_sets``, and the exact lens map)."""
+
+import numpy as np
+import pytest
+
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape, legendre
+from pipeline.models import RadialModel
+from tests.pipeline.harp_points import turning_harp_point_sets
+
+W, H = 1000, 750
+LENS = RadialModel.for_image(
+    W, H, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4), prism=(4e-4, 0.0, -3e-4, 0.0)
+)
+SPEC = FitSpec("radial", 4, True, True)
+TURNS = (0, 30, 60, 90, 120, 150)
+
+
+def _true_bend(coef, span):
+    u = np.linspace(span[0], span[1], 401)
+    return float(np.max(np.abs(np.asarray(coef) @ legendre(u, (2, 3, 4)))))
+
+
+def _fits(bends, turns=TURNS, given=None, **kw):
+    shots, _ = turning_harp_point_sets(LENS, W, H, turns, bends, axis=(497, 378), seed=4, **kw)
+    plain = fit_distortion(shots, W, H, **SPEC.fit_arguments())
+    return plain, fit_harp_shape(shots, turns if given is None else given, W, H, SPEC, plain=plain)
+
+
+def test_bent_strings_are_found_and_the_lens_is_freed_of_them():
+    bends = np.zeros((11, 3))
+    bends[4] = (0.05, 0.0, 0.0)  # a bow of 0.05 px (P2)
+    bends[6] = (0.0, 0.04, -0.02)  # an S and a W
+    plain, fit = _fits(bends)
+    assert fit, fit
+    assert fit.frame.sign == 1 and fit.frame.angle0_deg == pytest.approx(20.0, abs=0.2)
+    assert np.hypot(fit.frame.centre[0] - 497, fit.frame.centre[1] - 378) < 2.0
+    found = {s.index: s for s in fit.strings}
+    assert sorted(found) == list(range(11)) and all(s.shots == len(TURNS) for s in fit.strings)
+    for k in (4, 6):  # recovered within 20 %
+        assert found[k].bend_px == pytest.approx(_true_bend(bends[k], found[k].span), rel=0.2)
+    assert all(found[k].bend_px < 0.006 for k in found if k not in (4, 6))
+    assert {s.index for s in fit.bent_strings(BEND_LIMIT_PX)} == {4, 6}
+    # the lens no longer bends itself to the strings: closer to the exact lens, and the lines straighter
+    plain_err = compare_models(plain.model, LENS, W, H, step=25).rms
+    joint_err = compare_models(fit.model, LENS, W, H, step=25).rms
+    assert joint_err < 0.5 * plain_err
+    assert fit.d_after < 0.7 * plain.d_after
+    d = fit.to_dict()
+    assert d["strings"][4]["bend_px"] == pytest.approx(found[4].bend_px) and d["frame"]["sign"] == 1
+
+
+def test_a_straight_harp_shows_no_bend_and_costs_the_lens_nothing():
+    plain, fit = _fits(np.zeros((11, 3)))
+    assert fit and max(s.bend_px for s in fit.strings) < 0.004 and not fit.bent_strings()
+    assert (
+        compare_models(fit.model, LENS, W, H, step=25).rms
+        < 1.1 * compare_models(plain.model, LENS, W, H, step=25).rms + 2e-4
+    )
+
+
+def test_a_turntable_seen_turning_the_other_way():
+    bends = np.zeros((11, 3))
+    bends[5] = (0.04, 0.0, 0.0)
+    turns = tuple(-t for t in TURNS)
+    _, fit = _fits(bends, turns=turns, given=TURNS)  # the harp turns clockwise in the image
+    assert fit and fit.frame.sign == -1
+    assert {s.index for s in fit.bent_strings()} == {5}
+
+
+def test_angles_that_do_not_match_the_shots_are_refused():
+    _, fit = _fits(np.zeros((11, 3)), given=(0, 90, 30, 150, 60, 120))
+    assert not fit and "do not follow the turntable angles" in fit.reason
+    _, fit = _fits(np.zeros((11, 3)), given=(0, 30))
+    assert not fit and "6 shots but 2 turntable angles" in fit.reason
