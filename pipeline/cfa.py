@@ -211,3 +211,33 @@ def measure_mosaic(
         for p in planes
     }
     return MosaicMeasurement(check_pattern(pattern), int(w), int(h), out)
+
+
+def measure_channels(
+    image: NDArray[Any],
+    t: int = 30,
+    sigma: float = 1.0,
+    smoothing: SmoothingMethod = "local-quadratic",
+    order: str = "RGB",
+) -> MosaicMeasurement:
+    """Measure every string edge in each channel of a colour image (already demosaiced).
+
+    ``image[y, x, channel]`` with channels in ``order`` (``"RGB"``, or ``"BGR"`` as
+    OpenCV reads files; a fourth, alpha channel is ignored). Each channel is measured
+    on every pixel (:func:`pipeline.measure.measure_image`); the result's ``planes`` are
+    ``"R"``, ``"G"``, ``"B"`` and its ``pattern`` is ``order``. A demosaiced image has
+    had its colours interpolated across the pattern: the edges of one channel are
+    pulled towards the others', so a TCA measured on it is smaller than the lens's (a
+    camera RAW file, :func:`measure_mosaic`, does not have this bias).
+    """
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] < 3:
+        raise ValueError(f"a colour image has 3 channels, got shape {img.shape}")
+    if sorted(order.upper()) != ["B", "G", "R"]:
+        raise ValueError(f"channel order must be RGB or BGR, got {order!r}")
+    h, w = img.shape[:2]
+    planes = {
+        c: measure_image(np.ascontiguousarray(img[:, :, order.upper().index(c)]), t=t, sigma=sigma, smoothing=smoothing)
+        for c in "RGB"
+    }
+    return MosaicMeasurement(order.upper(), int(w), int(h), planes)
