@@ -1,4 +1,4 @@
-"""``harp tca IMAGE... [--t 30] [--degree 3] [--json] [--out FILE]``: lateral chromatic aberration.
+"""``harp tca IMAGE... [--t 30] [--degree 3] [--json] [-o FILE]``: lateral chromatic aberration.
 
 Each shot (a camera RAW file, measured per CFA plane on the mosaic without demosaicing,
 or a colour PNG/TIFF/PPM/JPEG, per channel) is measured per channel
@@ -36,7 +36,7 @@ def register(subparsers) -> None:
     p.add_argument("-t", "--t", type=positive_int, default=30, help="along-edge subsampling (default 30)")
     p.add_argument("--degree", type=positive_int, default=3, help="total degree of each channel's field (default 3)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--out", metavar="FILE", help="write the fields and lensfun terms (.yaml or .json)")
+    p.add_argument("-o", "--out", metavar="FILE", help="write the fields and lensfun terms (.yaml or .json)")
     p.set_defaults(func=run)
 
 
