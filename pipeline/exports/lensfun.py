@@ -47,6 +47,8 @@ import numpy as np
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import LensInfo
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
+from pipeline.models.tca_model import LensfunTca
+from pipeline.vignetting import LensfunVignetting
 
 DEFAULT_MAKER = "harp station"
 DEFAULT_MODEL = "harp calibration"
@@ -61,6 +63,10 @@ class LensfunEntry:
     model: LensfunModel
     lens: LensInfo = field(default_factory=LensInfo)
     error: ConversionError | None = None
+    tca: LensfunTca | None = None
+    vignetting: LensfunVignetting | None = None
+    aperture: float = 8.0
+    distance: float = 1000.0
 
     @property
     def maker(self) -> str:
@@ -142,6 +148,29 @@ def _distortion_element(entry: LensfunEntry) -> ET.Element:
     return ET.Element("distortion", attrs)
 
 
+def _colour_elements(entry: LensfunEntry) -> list[ET.Element]:
+    """The ``<tca>`` and ``<vignetting>`` elements of a calibration (issue 24), when it has them."""
+    out = []
+    if entry.tca is not None:
+        out.append(ET.Element("tca", entry.tca.element_attributes(entry.focal)))
+    if entry.vignetting is not None:
+        attrs = entry.vignetting.element_attributes(entry.focal, entry.aperture, entry.distance)
+        out.append(ET.Element("vignetting", attrs))
+    return out
+
+
+def _put_colour(cal: ET.Element, entry: LensfunEntry, after: ET.Element) -> None:
+    """Put the colour elements after ``after``, replacing those of the same focal (and aperture, distance)."""
+    for new in reversed(_colour_elements(entry)):
+        for old in cal.findall(new.tag):
+            if all(math.isclose(float(old.get(k, "nan")), float(new.get(k, "nan"))) for k in _COLOUR_KEYS[new.tag]):
+                cal.remove(old)
+        cal.insert(list(cal).index(after) + 1, new)
+
+
+_COLOUR_KEYS = {"tca": ("focal",), "vignetting": ("focal", "aperture", "distance")}
+
+
 def _new_lens(entry: LensfunEntry) -> ET.Element:
     lens = ET.Element("lens")
     ET.SubElement(lens, "maker").text = entry.maker
@@ -197,17 +226,20 @@ def add_to_database(root: ET.Element, entry: LensfunEntry) -> str:
                     cal.remove(before)
                     pos -= 1
                 cal.insert(pos, ET.Comment(_xml_comment(entry.note())))
-                cal.insert(pos + 1, _distortion_element(entry))
+                cal.insert(pos + 1, dist := _distortion_element(entry))
+                _put_colour(cal, entry, dist)
                 was = f" (it was: {(before.text or '').strip().split(';')[0]})" if before is not None else ""
                 return f"replaced the calibration of {entry.maker} {entry.lens_model} at {entry.focal:g} mm{was}"
         cal.append(ET.Comment(_xml_comment(entry.note())))
-        cal.append(_distortion_element(entry))
+        cal.append(dist := _distortion_element(entry))
+        _put_colour(cal, entry, dist)
         return f"added focal {entry.focal:g} mm to lens {entry.maker} {entry.lens_model}"
     lens = _new_lens(entry)
     cal = lens.find("calibration")
     assert cal is not None
     cal.append(ET.Comment(_xml_comment(entry.note())))
-    cal.append(_distortion_element(entry))
+    cal.append(dist := _distortion_element(entry))
+    _put_colour(cal, entry, dist)
     lenses = root.findall("lens")
     root.insert(list(root).index(lenses[-1]) + 1 if lenses else len(root), lens)
     return f"added lens {entry.maker} {entry.lens_model} ({entry.mount}, crop factor {entry.cropfactor:g})"

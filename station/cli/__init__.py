@@ -44,6 +44,7 @@ COMMAND_MODULES = [
     "station.cli.reprocess",
     "station.cli.config",
     "station.cli.devices",
+    "station.cli.tca",
 ]
 
 
