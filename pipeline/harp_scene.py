@@ -74,7 +74,8 @@ The back-lit sheet
 harp): a lamp at distance :math:`D` behind a Lambertian diffuser lights it as
 :math:`(1 + |p - p_L|^2/D^2)^{-3/2}` (the :math:`\cos^3` law of a point source on a
 plane), times :math:`1 + m(p)`, the sheet's mottle, a stationary Gaussian random texture
-of RMS :math:`m` and correlation length ``mottle_scale_px`` (paper and opal diffusers:
+of RMS :math:`m` and autocorrelation :math:`\exp(-r^2/\ell^2)`, :math:`\ell` = ``mottle_scale_px``
+(paper and opal diffusers:
 fibre flocs of 0.5–3 mm, 0.5–2 % RMS).
 
 References
@@ -341,11 +342,12 @@ def edge_offsets(
 # ---------------------------------------------------------------- the sheet
 @lru_cache(maxsize=8)
 def _mottle_tile(seed: int, n: int) -> np.ndarray:
-    """A periodic ``n x n`` Gaussian random texture of unit RMS, correlation length 4 cells."""
+    """A periodic ``n x n`` Gaussian random texture of unit RMS, autocorrelation ``exp(-r^2 / 16)`` (r in cells):
+    white noise filtered by a Gaussian of 2 cells, correlation length (1/e) 4 cells."""
     rng = np.random.default_rng([seed, 0x5EE7])
     f = np.fft.fftfreq(n)
     k2 = f[:, None] ** 2 + f[None, :] ** 2
-    spectrum = np.fft.fft2(rng.standard_normal((n, n))) * np.exp(-2.0 * math.pi**2 * 16.0 * k2)
+    spectrum = np.fft.fft2(rng.standard_normal((n, n))) * np.exp(-2.0 * math.pi**2 * 4.0 * k2)
     tex = np.real(np.fft.ifft2(spectrum))
     tex -= tex.mean()
     out: np.ndarray = tex / tex.std()
