@@ -40,6 +40,7 @@ the simulated population (its percentile; "in" when within the population's 5-95
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -181,24 +182,56 @@ def session_statistics(ms: list[ImageMeasurement]) -> list[dict[str, float]]:
 
 
 # ---------------------------------------------------------------- simulated sessions
-def simulated_session(seed: int, clean: bool = False) -> tuple[list[dict[str, float]], dict[str, object]]:
+def simulated_session(
+    seed: int,
+    clean: bool = False,
+    coil_set: float | None = None,
+    field_max: float | None = None,
+    shot_decentre: float = 0.0,
+    bow_px: float = 0.0,
+) -> tuple[list[dict[str, float]], dict[str, object]]:
     """Render, measure and analyse one simulated session (module docstring)."""
-    from pipeline.harp_scene import Harp, HarpMount
-    from pipeline.lens_population import lens_population
-    from pipeline.realism import Effects, realistic_session, render_shots
+    from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
+    from pipeline.lens_population import lens_population, shot_to_shot
+    from pipeline.realism import Effects, realistic_session, render_shot, render_shots, shot_seed
     from pipeline.sensor import Development, Sensor
 
-    lens = lens_population(2026, seed + 1, W, H, field=True)[seed]
+    fields = (0.005, 0.04 if field_max is None else field_max)
+    lens = lens_population(2026, seed + 1, W, H, field=True, field_rms_px=fields)[seed]
     rng = np.random.default_rng([seed, 0xBE7C])
     angles = [a + float(rng.normal(0.0, 3.0)) for a in REAL_ANGLES]
-    s = realistic_session(seed, W, H, spacing_px=(110.0, 140.0), string_width_px=(2.4, 3.1), angle0_deg=angles[0])
+    s = realistic_session(
+        seed,
+        W,
+        H,
+        spacing_px=(110.0, 140.0),
+        string_width_px=(2.4, 3.1),
+        angle0_deg=angles[0],
+        coil_set_variation=COIL_SET_VARIATION if coil_set is None else coil_set,
+    )
     harp, mount, effects = s.harp, s.mount, s.effects
     if clean:
         harp = Harp.straight(len(harp.strings), harp.spacing_px, 2 * harp.strings[0].radius_px, harp.first_position_px)
         effects = Effects(sensor=Sensor(exposure=0.8, read_noise_e=1.5 * 25000.0 / 255.0), development=Development())
         mount = HarpMount(mount.centre, mount.angle0_deg, mount.direction)
+    if bow_px > 0:  # sensitivity: every string bowed by modes of N(0, bow_px), on top of its physics
+        extra = np.random.default_rng([seed, 0xB0E]).normal(0.0, bow_px, (len(harp.strings), 3))
+        strings = tuple(
+            dataclasses.replace(st, bow_px=tuple(float(b + e) for b, e in zip(st.bow_px, extra[i])))
+            for i, st in enumerate(harp.strings)
+        )
+        harp = dataclasses.replace(harp, strings=strings)
     turntable = [mount.direction * (a - angles[0]) for a in angles]
-    shots = render_shots(lens.model, harp, mount, turntable, W, H, effects, seed=seed)
+    if shot_decentre > 0:  # sensitivity: the lens's decentering changes between shots
+        jitter = np.random.default_rng([seed, 0x5407])
+        shots = tuple(
+            render_shot(
+                shot_to_shot(lens.model, jitter, shot_decentre), harp, mount, t, W, H, effects, shot_seed(seed, i)
+            )
+            for i, t in enumerate(turntable)
+        )
+    else:
+        shots = render_shots(lens.model, harp, mount, turntable, W, H, effects, seed=seed)
     ms = [measure_image(sh.image, t=30) for sh in shots]
     info = {
         "lens": lens.serial,
@@ -210,7 +243,9 @@ def simulated_session(seed: int, clean: bool = False) -> tuple[list[dict[str, fl
     return session_statistics(ms), info
 
 
-def _job(args: tuple[int, bool]) -> tuple[int, bool, list[dict[str, float]], dict[str, object], float]:
+def _job(
+    args: tuple[int, bool, float | None, float | None, float, float],
+) -> tuple[int, bool, list[dict[str, float]], dict[str, object], float]:
     import threadpoolctl
 
     t0 = time.perf_counter()
@@ -257,6 +292,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--clean", type=int, default=6, help="sessions of the clean simulator, for comparison")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument(
+        "--coil-set", type=float, default=None, help="coil-set variation of the strings (default: the documented 0.3)"
+    )
+    ap.add_argument(
+        "--field-max", type=float, default=None, help="largest lens-field RMS px (default: the documented 0.04)"
+    )
+    ap.add_argument(
+        "--shot-decentre", type=float, default=0.0, help="sensitivity: p1, p2 change by N(0, this) per shot"
+    )
+    ap.add_argument("--bow", type=float, default=0.0, help="sensitivity: extra string bows, N(0, this) px per mode")
+    ap.add_argument(
         "--real",
         default=os.environ.get("HARP_REAL_DATA", str(Path(__file__).resolve().parents[2] / "shared/data/real-harp")),
     )
@@ -266,7 +311,8 @@ def main(argv: list[str] | None = None) -> int:
 
     real_ms = [measure_image(read_grey(Path(args.real) / f"{n}.pgm"), t=30) for n in REAL]
     real = session_statistics(real_ms)
-    jobs = [(s, False) for s in range(args.seeds)] + [(s, True) for s in range(args.clean)]
+    jobs = [(s, False, args.coil_set, args.field_max, args.shot_decentre, args.bow) for s in range(args.seeds)]
+    jobs += [(s, True, None, args.field_max, 0.0, 0.0) for s in range(args.clean)]
     sim: list[dict[str, float]] = []
     clean: list[dict[str, float]] = []
     infos = []
@@ -286,7 +332,12 @@ def main(argv: list[str] | None = None) -> int:
             )
     print(
         f"# Realistic simulator against the three real photographs: radial4+tangential+prism residuals "
-        f"({args.seeds} simulated sessions x 3 shots, {args.clean} clean sessions; {os.cpu_count()} CPUs, "
+        f"({args.seeds} simulated sessions x 3 shots, {args.clean} clean sessions; coil-set variation "
+        f"{args.coil_set if args.coil_set is not None else 'default'}, lens field up to "
+        f"{args.field_max if args.field_max is not None else 0.04} px"
+        + (f", decentering changing by N(0, {args.shot_decentre:g}) between shots" if args.shot_decentre else "")
+        + (f", extra string bows N(0, {args.bow:g}) px per mode" if args.bow else "")
+        + f"; {os.cpu_count()} CPUs, "
         f"{time.perf_counter() - t0:.0f} s)"
     )
     print()

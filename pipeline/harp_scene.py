@@ -636,6 +636,7 @@ def draw_harp(
     offset_px: float | None = None,
     visible_px: float | None = None,
     transmission: float = 0.0,
+    coil_set_variation: float = COIL_SET_VARIATION,
 ) -> Harp:
     """A harp with physically drawn string shapes (module docstring), from a seed.
 
@@ -650,6 +651,9 @@ def draw_harp(
     offset_px : ``b`` of the harp's middle (None: drawn within half a pitch).
     visible_px : half the length over which kinks are placed (default: half the span).
     transmission : the strings' transmission.
+    coil_set_variation : the largest variation of the coil set along a span, as a fraction of
+        the coil's curvature (default :data:`COIL_SET_VARIATION`; 1 is the most a spool can
+        leave: a string cut from one end of the coil's curvature to the other).
     """
     if n_strings < 1 or not spacing_px > width_px > 0 or not span_px > 0:
         raise ValueError("draw_harp needs n_strings >= 1, spacing_px > width_px > 0 and span_px > 0")
@@ -672,7 +676,7 @@ def draw_harp(
         ph = string_physics(mat, diameter, tension, span_mm)
         lam_mm = ph["stiffness_length_mm"]
         # bow: -lambda^2 * (coil-set variation along the span), over modes 1..3
-        dkappa = float(rng.uniform(0.0, COIL_SET_VARIATION)) / float(rng.uniform(*mat.coil_radius_mm))  # 1/mm
+        dkappa = float(rng.uniform(0.0, coil_set_variation)) / float(rng.uniform(*mat.coil_radius_mm))  # 1/mm
         weights = rng.standard_normal(3) / np.array([1.0, 2.0, 3.0])
         weights /= max(float(np.abs(weights).sum()), 1e-12)
         bow = tuple(float(v) for v in lam_mm * lam_mm * dkappa * weights / mm_per_px)

@@ -138,10 +138,16 @@ class RippleLens(DistortionModel):
         s = self.base.scale
         v = (xy - np.asarray(self.image_centre)) / s
         out: np.ndarray = np.zeros_like(v)
+        x, y = np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+        w = np.empty_like(x)
         for a, (kx, ky), ph in zip(self.amplitudes, self.wavevectors, self.phases, strict=True):
-            w = -s * a * np.sin(kx * v[:, 0] + ky * v[:, 1] + ph)
-            out[:, 0] += w * kx
-            out[:, 1] += w * ky
+            np.multiply(x, kx, out=w)  # w = -s a sin(kappa . v + phi), in place
+            w += ky * y
+            w += ph
+            np.sin(w, out=w)
+            w *= -s * a
+            out[:, 0] += kx * w
+            out[:, 1] += ky * w
         return out
 
     def undistort_points(self, xy: np.ndarray) -> np.ndarray:
@@ -275,3 +281,28 @@ def lens_population(
         d = design if design is not None else DESIGNS[names[int(rng.integers(len(names)))]]
         out.append(draw_lens(rng, i, width, height, d, field, field_rms_px, bad_fraction))
     return tuple(out)
+
+
+def shot_to_shot(
+    model: DistortionModel, rng: np.random.Generator, tangential_sd: float, centre_sd_px: float = 0.0
+) -> DistortionModel:
+    """``model`` with its decentering changed as between two shots of an unstable lens.
+
+    Adds :math:`N(0, \\sigma_p)` to :math:`p_1, p_2` and :math:`N(0, \\sigma_c)` px to the
+    distortion centre of a :class:`~pipeline.models.radial.RadialModel` (or of a
+    :class:`RippleLens`'s radial part): what an image stabiliser that re-centres, a zoom
+    or focus group with play, or a lens knocked between shots does (consumer zoom lenses'
+    interior orientation changes between images; Shortis et al., IAPRS XXXVI-5, 2006;
+    Sanz-Ablanedo et al., Sensors 10(3), 2010). Off in every population: a sensitivity
+    test (``benchmarks/realism.py --shot-decentre``), with no documented default magnitude.
+    """
+    base = model.base if isinstance(model, RippleLens) else model
+    if not isinstance(base, RadialModel):
+        raise TypeError(f"shot_to_shot needs a RadialModel or RippleLens, got {type(model).__name__}")
+    p = base.tangential or (0.0, 0.0)
+    tang = (p[0] + float(rng.normal(0, tangential_sd)), p[1] + float(rng.normal(0, tangential_sd)))
+    centre = (base.center[0] + float(rng.normal(0, centre_sd_px)), base.center[1] + float(rng.normal(0, centre_sd_px)))
+    moved = RadialModel(centre, base.k, base.scale, tang, base.prism, base.division)
+    if isinstance(model, RippleLens):
+        return RippleLens(moved, model.image_centre, model.amplitudes, model.wavevectors, model.phases)
+    return moved

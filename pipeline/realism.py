@@ -69,7 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from pipeline.harp_scene import Backlight, Harp, HarpMount, HarpPose, draw_harp, edge_offsets
+from pipeline.harp_scene import COIL_SET_VARIATION, Backlight, Harp, HarpMount, HarpPose, draw_harp, edge_offsets
 from pipeline.models.base import DistortionModel, IdentityModel
 from pipeline.optics import PIXEL_BOX_VARIANCE, FieldBlur, Vignetting
 from pipeline.render import EdgeTruth, ideal_border
@@ -105,6 +105,8 @@ JPEG_QUALITY = (90, 97)
 """A camera's "fine" JPEG, libjpeg scale."""
 SPAN = (1.3, 1.8)
 """The strings' free length in image diagonals (the frame stays outside the image)."""
+KEEP_LENS_MAP_SAMPLES = 12_000_000
+"""Largest number of raw samples whose lens map :func:`render_shots` keeps for all its shots (16 bytes each)."""
 AXIS_OFFSET = 0.01
 """Standard deviation of the turntable axis from the image centre, per axis, in image diagonals."""
 
@@ -324,9 +326,17 @@ def render_shots(
     effects: Effects = Effects(),
     seed: int = 0,
 ) -> tuple[Shot, ...]:
-    """One :func:`render_shot` per turntable angle, shot ``i`` seeded :func:`shot_seed` ``(seed, i)``."""
+    """One :func:`render_shot` per turntable angle, shot ``i`` seeded :func:`shot_seed` ``(seed, i)``.
+
+    The lens is applied to every raw sample once for all the shots (:func:`raw_ideal_grid`)
+    when there are at most :data:`KEEP_LENS_MAP_SAMPLES` of them.
+    """
+    f = raw_scale(effects.sensor, effects.development)
+    ideal = None
+    if lens is not None and len(turntable_angles_deg) > 1 and width * height * f * f <= KEEP_LENS_MAP_SAMPLES:
+        ideal = raw_ideal_grid(lens, width, height, effects)
     return tuple(
-        render_shot(lens, harp, mount, ang, width, height, effects, shot_seed(seed, i))
+        render_shot(lens, harp, mount, ang, width, height, effects, shot_seed(seed, i), ideal=ideal)
         for i, ang in enumerate(turntable_angles_deg)
     )
 
@@ -404,6 +414,7 @@ def realistic_session(
     jpeg: bool = False,
     demosaic: str | None = None,
     tone: str | None = None,
+    coil_set_variation: float = COIL_SET_VARIATION,
 ) -> Session:
     """A harp (:func:`~pipeline.harp_scene.draw_harp`), its mount and the camera's effects
     (:func:`draw_effects`), drawn from ``seed`` for ``width`` x ``height`` images.
@@ -411,7 +422,7 @@ def realistic_session(
     ``spacing_px`` and ``string_width_px`` are values or ``(low, high)`` ranges drawn
     uniformly (what the set-up's distance and the strings make of the image);
     ``angle0_deg`` the strings' angle at turntable 0 (None: drawn); the other arguments
-    go to :func:`draw_harp` and :func:`draw_effects`.
+    go to :func:`~pipeline.harp_scene.draw_harp` and :func:`draw_effects`.
     """
     rng = np.random.default_rng([int(seed), 0x4A5B])
 
@@ -434,6 +445,7 @@ def realistic_session(
         float(rng.uniform(*SPAN)) * diag,
         material=material,
         visible_px=0.5 * diag,
+        coil_set_variation=coil_set_variation,
     )
     mount = HarpMount(
         centre,

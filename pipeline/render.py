@@ -58,6 +58,9 @@ chunked or threaded). All grey levels (``background``, ``string_level``, ``frame
 
 Ground truth
 ------------
+(The realistic simulator, :mod:`pipeline.realism`, renders bent strings: its
+:class:`EdgeTruth` carry a ``shape``, the edge's displacement along the normal, and
+:func:`visible_edges` traces those bent ideal curves through the lens the same way.)
 The two edges of string :math:`k` are the ideal lines
 :math:`q = kp \mp w/2`, i.e. ``{p : n . p = offset}`` (:class:`EdgeTruth`). The
 distorted edge is exactly the image of that line by the lens

@@ -13,6 +13,7 @@ from pipeline.lens_population import (
     TANGENTIAL_SPREAD,
     RippleLens,
     lens_population,
+    shot_to_shot,
 )
 from pipeline.models import RadialModel, model_from_dict
 
@@ -90,3 +91,16 @@ def test_a_ripple_lens_reads_back_and_inverts():
     assert np.abs(m.undistort_points(m.distort_points(xy)) - xy).max() < 1e-8
     with pytest.raises(ValueError, match="design"):
         lens_population(0, 1, W, H, design="fisheye")
+
+
+def test_shot_to_shot_changes_only_the_decentering():
+    p = lens_population(4, 1, W, H, field=True)[0]
+    moved = shot_to_shot(p.model, np.random.default_rng(0), tangential_sd=1e-4, centre_sd_px=0.5)
+    assert isinstance(moved, RippleLens) and moved.amplitudes == p.model.amplitudes
+    assert moved.base.k == p.parametric.k and moved.base.prism == p.parametric.prism
+    dt = np.subtract(moved.base.tangential, p.parametric.tangential)
+    dc = np.subtract(moved.base.center, p.parametric.center)
+    assert 0 < np.abs(dt).max() < 5e-4 and 0 < np.abs(dc).max() < 2.5
+    same = shot_to_shot(p.parametric, np.random.default_rng(0), 0.0)
+    xy = _grid(50.0)
+    assert np.array_equal(same.undistort_points(xy), p.parametric.undistort_points(xy))
