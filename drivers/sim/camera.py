@@ -93,7 +93,7 @@ import hashlib
 import math
 import time
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -102,10 +102,10 @@ from drivers.errors import DeviceDisconnected, DeviceTimeout
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
 from drivers.sim.world import SimWorld
-from pipeline.harp_scene import HarpMount
-from pipeline.realism import Session, Shot, raw_ideal_grid, realistic_session, render_shot
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
-from pipeline.sensor import raw_scale
+
+if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
+    from pipeline.realism import Session, Shot
 
 IDEAL_CACHE_PIXELS = 6_000_000
 """Largest sensor (pixels) whose lens map the camera keeps between frames (16 bytes per pixel: 96 MB)."""
@@ -243,6 +243,8 @@ class SimulatedCamera:
         self.jpeg_quality = None if jpeg_quality is None else int(jpeg_quality)
         self.realism: Session | None = None
         if self.realism_seed is not None:
+            from pipeline.realism import realistic_session
+
             self.realism = realistic_session(
                 self.realism_seed,
                 int(width),
@@ -525,6 +527,10 @@ class SimulatedCamera:
 
     def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
         """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
+        from pipeline.harp_scene import HarpMount
+        from pipeline.realism import raw_ideal_grid, render_shot
+        from pipeline.sensor import raw_scale
+
         assert self.realism is not None
         w, h = self._size
         eff = self.realism.effects

@@ -104,3 +104,23 @@ def test_jpeg_frames_and_null_keys():
     assert cam.render(angle_deg=10.0, index=0).effects.development.jpeg_quality == 90
     plain = _camera(realism_seed=None, jpeg_quality=None)
     assert plain.realism is None and isinstance(plain.render(angle_deg=10.0, index=0), Rendered)
+
+
+def test_a_clean_camera_does_not_import_the_realistic_simulator():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import sys, drivers\n"
+        "from drivers.sim.world import SimWorld\n"
+        "cam = drivers.open_camera({'driver': 'sim', 'width': 64, 'height': 48}, world=SimWorld())\n"
+        "cam.open(); cam.capture()\n"
+        "print(' '.join(m for m in sys.modules if m.startswith('pipeline.')))\n"
+    )
+    repo = Path(__file__).resolve().parents[2]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=repo, timeout=120)
+    assert done.returncode == 0, done.stderr
+    mods = set(done.stdout.split())
+    assert "pipeline.render" in mods
+    assert not mods & {"pipeline.realism", "pipeline.harp_scene", "pipeline.sensor", "pipeline.optics"}
