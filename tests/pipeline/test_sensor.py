@@ -81,9 +81,9 @@ def test_jpeg_roundtrip_at_high_quality_is_close():
 
 
 # ------------------------------------------------------------------ edges of straight strings
-W, H = 640, 480
+W, H = 512, 384
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03), center=(W / 2 + 9, H / 2 - 6), tangential=(0.001, -0.0005))
-HARP = Harp.straight(15, 50.0, 3.0, 7.0)
+HARP = Harp.straight(17, 40.0, 3.0, 7.0)
 CFA = Sensor(cfa="RGGB", channel_response=(0.5, 1.0, 0.7))
 CASES = {
     "clean": Effects(development=Development(bit_depth=16)),
