@@ -58,6 +58,9 @@ chunked or threaded). All grey levels (``background``, ``string_level``, ``frame
 
 Ground truth
 ------------
+(The realistic simulator, :mod:`pipeline.realism`, renders bent strings: its
+:class:`EdgeTruth` carry a ``shape``, the edge's displacement along the normal, and
+:func:`visible_edges` traces those bent ideal curves through the lens the same way.)
 The two edges of string :math:`k` are the ideal lines
 :math:`q = kp \mp w/2`, i.e. ``{p : n . p = offset}`` (:class:`EdgeTruth`). The
 distorted edge is exactly the image of that line by the lens
@@ -91,6 +94,7 @@ import os
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from scipy.special import ndtr
@@ -162,10 +166,25 @@ class HarpScene:
         return (-math.sin(a), math.cos(a))
 
 
+class EdgeShape(Protocol):
+    """How far a bent edge lies from its straight line: a displacement along the normal.
+
+    Called with positions ``s`` along the line (``s = t . p`` with ``t = (n_y, -n_x)``,
+    ideal pixels), returns the displacement (ideal pixels, along ``+n``) of the edge
+    there. :class:`pipeline.harp_scene.EdgeProfile` is the one the realistic
+    simulator uses (a string's sag, bow, kink and twist).
+    """
+
+    def __call__(self, s: np.ndarray) -> np.ndarray: ...
+
+
 @dataclass(frozen=True)
 class EdgeTruth:
-    """One string edge: the ideal line ``{p : n . p = offset}``.
+    """One string edge: the ideal curve ``{p : n . p = offset + shape(t . p)}``, ``t = (n_y, -n_x)``.
 
+    Without ``shape`` (the clean renderer's strings) the edge is the straight ideal
+    line ``{p : n . p = offset}``; with it, it is that line bent by
+    ``shape(s)`` along the normal at the position ``s`` along it (:class:`EdgeShape`).
     ``side`` is -1 for the edge at smaller ``n . p`` (crossing it along +n
     enters the string: the image gets darker for dark strings, brighter for
     bright ones) and +1 for the other one.
@@ -175,6 +194,59 @@ class EdgeTruth:
     side: int
     normal: tuple[float, float]
     offset: float
+    shape: EdgeShape | None = None
+
+    @property
+    def along(self) -> tuple[float, float]:
+        """The unit vector ``t = (n_y, -n_x)`` along the edge; ``s = t . p`` is the position on it."""
+        return (self.normal[1], -self.normal[0])
+
+    def displacement(self, s: np.ndarray) -> np.ndarray:
+        """``shape(s)``, the edge's distance from its straight line along ``+n`` (zeros without a shape)."""
+        s = np.asarray(s, np.float64)
+        return np.zeros_like(s) if self.shape is None else np.asarray(self.shape(s), np.float64)
+
+    def ideal_points(self, s: np.ndarray) -> np.ndarray:
+        """The ideal points of the edge at positions ``s`` along it: ``(offset + shape(s)) n + s t``, ``(N, 2)``."""
+        s = np.asarray(s, np.float64).ravel()
+        n = np.asarray(self.normal, np.float64)
+        t = np.asarray(self.along, np.float64)
+        return (self.offset + self.displacement(s))[:, None] * n[None, :] + s[:, None] * t[None, :]
+
+    def level(self, u: np.ndarray) -> np.ndarray:
+        """``n . u - offset - shape(t . u)`` of ideal points ``u`` ``(N, 2)``: zero exactly on the edge.
+
+        Its zero set is the edge; near it, it is the distance along ``n`` from the edge
+        (to first order in the edge's slope ``shape'``).
+        """
+        u = np.asarray(u, np.float64).reshape(-1, 2)
+        n = np.asarray(self.normal, np.float64)
+        t = np.asarray(self.along, np.float64)
+        out: np.ndarray = u @ n - self.offset
+        if self.shape is not None:
+            out = out - self.displacement(u @ t)
+        return out
+
+
+@runtime_checkable
+class TruthSource(Protocol):
+    """What the truth functions need of a rendered image: its edges, lens and size.
+
+    :class:`Rendered` (the clean renderer) and :class:`pipeline.realism.Shot` (the
+    realistic simulator) both are one.
+    """
+
+    @property
+    def edges(self) -> tuple[EdgeTruth, ...]: ...
+
+    @property
+    def lens(self) -> DistortionModel: ...
+
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -213,8 +285,9 @@ class Rendered:
 
 
 # ---------------------------------------------------------------- helpers
-def _ideal_border(lens: DistortionModel, width: int, height: int, step: float = 8.0) -> np.ndarray:
-    """Ideal coordinates of points along the image border (the ideal footprint)."""
+def ideal_border(lens: DistortionModel, width: int, height: int, step: float = 8.0) -> np.ndarray:
+    """Ideal coordinates ``lens.undistort_points`` of points every ``step`` px along the border of
+    the image (its pixel-area outline, ``-0.5 .. width - 0.5``): the outline of the ideal footprint."""
     xs = np.append(np.arange(-0.5, width - 0.5, step), width - 0.5)
     ys = np.append(np.arange(-0.5, height - 0.5, step), height - 0.5)
     pts = np.concatenate(
@@ -287,7 +360,7 @@ def string_edges(scene: HarpScene, lens: DistortionModel, width: int, height: in
     n = np.asarray(scene.normal)
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     base = float(n @ c) + scene.phase_px
-    q = _ideal_border(lens, width, height) @ n - base
+    q = ideal_border(lens, width, height) @ n - base
     q = q[np.isfinite(q)]
     w2 = 0.5 * scene.string_width_px
     k0 = math.ceil((q.min() - w2) / scene.spacing_px)
@@ -302,7 +375,7 @@ def string_edges(scene: HarpScene, lens: DistortionModel, width: int, height: in
 def _frame_offset(scene: HarpScene, lens: DistortionModel, width: int, height: int) -> float:
     """Ideal offset ``n . p`` of the frame's inner edge."""
     n = np.asarray(scene.normal)
-    q = _ideal_border(lens, width, height) @ n
+    q = ideal_border(lens, width, height) @ n
     q = q[np.isfinite(q)]
     if scene.frame_side > 0:
         return float(q.max() - scene.frame_depth_px)
@@ -497,7 +570,7 @@ def render_harp(
 
 # ---------------------------------------------------------------- truth
 def visible_edges(
-    rendered_or_edges: Rendered | Iterable[EdgeTruth],
+    rendered_or_edges: TruthSource | Iterable[EdgeTruth],
     lens: DistortionModel | None = None,
     width: int | None = None,
     height: int | None = None,
@@ -506,7 +579,7 @@ def visible_edges(
     min_length_px: float = 50.0,
 ) -> list[tuple[EdgeTruth, np.ndarray]]:
     """Like :func:`true_edge_curves` but pairs each curve with its :class:`EdgeTruth`."""
-    if isinstance(rendered_or_edges, Rendered):
+    if isinstance(rendered_or_edges, TruthSource):
         r = rendered_or_edges
         edges = r.edges
         lens = r.lens if lens is None else lens
@@ -518,18 +591,17 @@ def visible_edges(
             raise ValueError("lens, width and height are required when passing edges")
     if not step > 0:
         raise ValueError(f"step must be > 0, got {step}")
-    border = _ideal_border(lens, width, height)
+    border = ideal_border(lens, width, height)
     border = border[np.all(np.isfinite(border), axis=1)]
     lo = np.array([margin, margin])
     hi = np.array([width - 1 - margin, height - 1 - margin])
     result = []
     for e in edges:
-        nx, ny = e.normal
-        t_dir = np.array([ny, -nx])  # along the line
+        t_dir = np.asarray(e.along)  # along the line
         t_b = border @ t_dir
         span = t_b.max() - t_b.min()
         t = np.arange(t_b.min() - 0.05 * span, t_b.max() + 0.05 * span + step, step)
-        ideal = e.offset * np.array([nx, ny])[None, :] + t[:, None] * t_dir[None, :]
+        ideal = e.ideal_points(t)
         # only points whose ideal position is near the footprint need inverting
         pts = lens.distort_points(ideal)
         inside = np.all(np.isfinite(pts), axis=1)
@@ -551,7 +623,7 @@ def visible_edges(
 
 
 def true_edge_curves(
-    rendered_or_edges: Rendered | Iterable[EdgeTruth],
+    rendered_or_edges: TruthSource | Iterable[EdgeTruth],
     lens: DistortionModel | None = None,
     width: int | None = None,
     height: int | None = None,
@@ -563,7 +635,8 @@ def true_edge_curves(
 
     Parameters
     ----------
-    rendered_or_edges : a :class:`Rendered` (its lens and size are used unless
+    rendered_or_edges : a :class:`Rendered` or any :class:`TruthSource` (a realistic
+        :class:`pipeline.realism.Shot`; its lens and size are used unless
         given) or a sequence of :class:`EdgeTruth` (then ``lens``, ``width``
         and ``height`` are required).
     margin : points closer than this to the image border are dropped. The
@@ -578,7 +651,8 @@ def true_edge_curves(
     Returns
     -------
     list of (N, 2) float64 arrays
-        ``lens.distort_points`` of points on each ideal edge line, ordered
+        ``lens.distort_points`` of points on each ideal edge (the straight line, or the
+        bent curve :meth:`EdgeTruth.ideal_points` of an edge with a shape), ordered
         along the line direction ``(n_y, -n_x)``; one contiguous run per edge
         (the longest, if the lens folds the line out of the image and back),
         in the order of ``edges``.

@@ -66,6 +66,23 @@ gradient peak change, and every sharpness score is best at :math:`f^*`. The
 demo lens's distortion changes with focus as before
 (:func:`drivers.sim.lens.lens_for_focus`).
 
+Realistic rendering (off by default: the demo's frames are unchanged). With
+``realism_seed`` = :math:`n` the camera draws, from :math:`n`, a physical harp, its mount
+and the camera's effects (:func:`pipeline.realism.realistic_session`: bent strings,
+field-dependent blur, an uneven back-light that turns with the harp, vignetting, shot
+and read noise, a Bayer sensor with demosaicing and a tone curve), with the scene's
+``spacing_px`` and ``string_width_px`` as the harp's pitch and width and
+``harp_offset_deg`` as the strings' angle at stage 0; each frame is then
+:func:`pipeline.realism.render_shot` at the stage angle of its exposure (the harp's
+strings keep their shapes as it turns: the full 360° of the stage matter, not the
+string angle modulo 180°), through the demo lens at the current focus, with the
+exposure scale and gain applied to the sensor (``exposure`` times the scale; gain
+lowers the electrons per grey level) and the defocus model on the drawn PSF.
+``jpeg_quality`` (1–100, 8-bit only) adds JPEG compression. The frame's truth is
+:attr:`SimulatedCamera.last_rendered` (a :class:`pipeline.realism.Shot`), the seed in
+``extra["sim"]["realism_seed"]``. A realistic frame costs several times a clean one
+(a half-size conversion renders four samples per pixel).
+
 Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
 """
 
@@ -76,7 +93,7 @@ import hashlib
 import math
 import time
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -86,6 +103,9 @@ from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
 from drivers.sim.world import SimWorld
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
+
+if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
+    from pipeline.realism import Session, Shot
 
 IDEAL_CACHE_PIXELS = 6_000_000
 """Largest sensor (pixels) whose lens map the camera keeps between frames (16 bytes per pixel: 96 MB)."""
@@ -129,6 +149,8 @@ _CAMERA_KEYS = (
     "harp_offset_deg",
     "best_focus",
     "defocus_blur_px",
+    "realism_seed",
+    "jpeg_quality",
 )
 CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
@@ -169,6 +191,10 @@ class SimulatedCamera:
     best_focus, defocus_blur_px : the defocus model (module docstring);
         ``best_focus=None`` (default) or ``defocus_blur_px=0`` renders every
         focus setting sharp.
+    realism_seed : render with the realistic simulator, its harp and effects drawn
+        from this seed (module docstring, *Realistic rendering*); None (default): the
+        clean renderer.
+    jpeg_quality : with ``realism_seed``, JPEG-compress every frame at this quality.
     """
 
     def __init__(
@@ -189,6 +215,8 @@ class SimulatedCamera:
         serial: str = "SIM-0001",
         best_focus: float | None = None,
         defocus_blur_px: float = 0.0,
+        realism_seed: int | None = None,
+        jpeg_quality: int | None = None,
     ):
         if int(width) != width or int(height) != height or width < 16 or height < 16:
             raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
@@ -200,6 +228,31 @@ class SimulatedCamera:
             raise ValueError(f"sim camera: defocus_blur_px must be >= 0, got {defocus_blur_px!r}")
         if defocus_blur_px > 0 and best_focus is None:
             raise ValueError("sim camera: defocus_blur_px needs best_focus (the focus setting that is sharp)")
+        if realism_seed is not None and (
+            isinstance(realism_seed, bool) or int(realism_seed) != realism_seed or realism_seed < 0
+        ):
+            raise ValueError(f"sim camera: realism_seed must be a non-negative integer or null, got {realism_seed!r}")
+        if jpeg_quality is not None:
+            if realism_seed is None:
+                raise ValueError("sim camera: jpeg_quality needs realism_seed (the clean renderer writes no JPEG)")
+            if isinstance(jpeg_quality, bool) or int(jpeg_quality) != jpeg_quality or not 1 <= jpeg_quality <= 100:
+                raise ValueError(f"sim camera: jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
+            if bit_depth != 8:
+                raise ValueError("sim camera: jpeg_quality needs bit_depth 8 (Mono8)")
+        self.realism_seed = None if realism_seed is None else int(realism_seed)
+        self.jpeg_quality = None if jpeg_quality is None else int(jpeg_quality)
+        self.realism: Session | None = None
+        if self.realism_seed is not None:
+            from pipeline.realism import realistic_session
+
+            self.realism = realistic_session(
+                self.realism_seed,
+                int(width),
+                int(height),
+                spacing_px=scene.spacing_px,
+                string_width_px=scene.string_width_px,
+                angle0_deg=0.0,
+            )
         self.best_focus = None if best_focus is None else _FOCUS.check("sim camera", "best_focus", best_focus)
         self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
@@ -221,8 +274,9 @@ class SimulatedCamera:
         self._pose_counts: dict[tuple[float, float], int] = {}
         self._next_index: int | None = None
         self._faults: deque[str] = deque()
-        #: the :class:`pipeline.render.Rendered` behind the last frame (exact truth), or None
-        self.last_rendered: Rendered | None = None
+        #: the :class:`pipeline.render.Rendered` (clean) or :class:`pipeline.realism.Shot` (realistic)
+        #: behind the last frame (exact truth), or None
+        self.last_rendered: Rendered | Shot | None = None
         # render once with the scene at angle 0 to validate it now, not at the first capture
         render_harp(16, 16, dataclasses.replace(scene, angle_deg=0.0), noise_sigma=0.0)
 
@@ -244,7 +298,19 @@ class SimulatedCamera:
         scene_kw: dict[str, Any] = {}
         try:
             for key, value in cfg.items():
-                if key in ("width", "height", "bit_depth", "seed", "dust", "dust_seed", "frame_side"):
+                if key in ("realism_seed", "jpeg_quality") and value is None:
+                    pass
+                elif key in (
+                    "width",
+                    "height",
+                    "bit_depth",
+                    "seed",
+                    "dust",
+                    "dust_seed",
+                    "frame_side",
+                    "realism_seed",
+                    "jpeg_quality",
+                ):
                     if isinstance(value, bool) or int(value) != value:
                         raise ValueError(f"must be an integer, got {value!r}")
                     value = int(value)
@@ -414,18 +480,33 @@ class SimulatedCamera:
             return self._next_index
         return self._pose_counts.get(_pose(focus, angle_deg), 0)
 
-    def render(self, index: int | None = None, angle_deg: float | None = None, focus: float | None = None) -> Rendered:
+    def render(
+        self,
+        index: int | None = None,
+        angle_deg: float | None = None,
+        focus: float | None = None,
+        stage_deg: float | None = None,
+    ) -> Rendered | Shot:
         """Render what the camera sees (no fault, no counter change).
 
         ``angle_deg`` and ``focus`` default to the world's current string
         angle and focus; ``index`` (default: the next capture's at that pose)
-        is the capture index at the pose, which selects the noise.
+        is the capture index at the pose, which selects the noise. A realistic
+        camera (``realism_seed``) renders the harp at stage angle ``stage_deg``
+        (default: ``angle_deg`` minus the harp offset, or the world's stage now).
         """
         w, h = self._size
-        angle_deg = self.world.string_angle_deg() if angle_deg is None else angle_deg
+        if stage_deg is None and angle_deg is None:
+            stage_deg = self.world.stage_at()
+        if angle_deg is None:
+            assert stage_deg is not None
+            angle_deg = (stage_deg + self.world.harp_offset_deg) % 180.0
         focus = self.world.focus if focus is None else focus
         index = self._index_at(focus, angle_deg) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
+        if self.realism is not None:
+            stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
+            return self._render_realistic(stage, focus, noise_seed(self.seed, focus, angle_deg, index), gain_lin)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
@@ -443,6 +524,38 @@ class SimulatedCamera:
             exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
+
+    def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
+        """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
+        from pipeline.harp_scene import HarpMount
+        from pipeline.realism import raw_ideal_grid, render_shot
+        from pipeline.sensor import raw_scale
+
+        assert self.realism is not None
+        w, h = self._size
+        eff = self.realism.effects
+        sensor = dataclasses.replace(
+            eff.sensor,
+            exposure=eff.sensor.exposure * self.exposure_scale(),
+            full_well_e=eff.sensor.full_well_e / gain_lin,
+        )
+        development = dataclasses.replace(eff.development, bit_depth=self._bit_depth, jpeg_quality=self.jpeg_quality)
+        blur = eff.blur
+        if self.best_focus is not None and self.defocus_blur_px > 0:
+            blur = dataclasses.replace(
+                blur, sigma_px=math.hypot(blur.sigma_px, self.defocus_blur_px * (focus - self.best_focus))
+            )
+        effects = dataclasses.replace(eff, sensor=sensor, development=development, blur=blur)
+        m = self.realism.mount
+        mount = HarpMount(m.centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
+        lens = lens_for_focus(focus, w, h)
+        ideal = None
+        if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
+            key = float(focus) + 10.0  # a cache entry apart from the clean renderer's
+            if self._ideal is None or self._ideal[0] != key:
+                self._ideal = (key, raw_ideal_grid(lens, w, h, effects))
+            ideal = self._ideal[1]
+        return render_shot(lens, self.realism.harp, mount, stage_deg, w, h, effects, seed=seed % (2**63), ideal=ideal)
 
     def _ideal_grid(self, focus: float, lens: Any) -> np.ndarray | None:
         """The lens at ``focus`` applied to every pixel centre, kept for the next frame at that focus
@@ -473,21 +586,22 @@ class SimulatedCamera:
         angle = (stage + offset) % 180.0
         index = self._index_at(focus, angle)
         seed = noise_seed(self.seed, focus, angle, index)
-        r = self.render(index=index, angle_deg=angle, focus=focus)
+        r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage)
         self.last_rendered = r
         image = r.image
-        extra: dict[str, Any] = {
-            "sim": {
-                "string_angle_deg": angle,
-                "stage_deg": float(stage),
-                "harp_offset_deg": float(offset),
-                "lens": r.lens.to_dict(),
-                "seed": seed,
-                "pose_index": index,
-                "blur_px": r.scene.blur_px,
-                "exposure_scale": self.exposure_scale(),
-            },
+        sim: dict[str, Any] = {
+            "string_angle_deg": angle,
+            "stage_deg": float(stage),
+            "harp_offset_deg": float(offset),
+            "lens": r.lens.to_dict(),
+            "seed": seed,
+            "pose_index": index,
+            "blur_px": r.scene.blur_px if isinstance(r, Rendered) else r.effects.blur.sigma_px,
+            "exposure_scale": self.exposure_scale(),
         }
+        if self.realism_seed is not None:
+            sim["realism_seed"] = self.realism_seed
+        extra: dict[str, Any] = {"sim": sim}
         if fault == "corrupt":
             h = image.shape[0]
             rng = np.random.default_rng([seed, 1_000_003])

@@ -1,14 +1,16 @@
 r"""Ground truth for measured harp edges: the whole visible edge, exactly (test helper).
 
 For each string edge of a rendered shot (the ideal line
-``{p : n . p = offset}`` of :class:`pipeline.render.EdgeTruth`) the truth is
-its exact image through the lens, over *everything visible in the image*:
+``{p : n . p = offset}`` of :class:`pipeline.render.EdgeTruth`, or for a bent string
+of the realistic simulator, :mod:`pipeline.realism`, that line bent by the edge's
+shape, ``{p : n . p = offset + shape(t . p)}``) the truth is its exact image through
+the lens, over *everything visible in the image*:
 
-1. the distorted curve is ``{x : U(x) in the ideal line}``, with ``U`` the
+1. the distorted curve is ``{x : U(x) in the ideal curve}``, with ``U`` the
    lens map the renderer evaluated per pixel (``lens.undistort_points``, a
    closed-form map of :mod:`tests.pipeline.lenses` or any exact map). It is
    traced by solving ``U(x) = p`` with Newton's method for ideal points ``p``
-   every ``DENSE_STEP`` px along the line (continuation from the image
+   every ``DENSE_STEP`` px along the line (:meth:`~pipeline.render.EdgeTruth.ideal_points`) (continuation from the image
    centre outwards), to ``1e-10`` px;
 2. it is kept where it lies inside the image minus ``MARGIN_PX`` (the border
    where the detector's smoothing kernel, radius ``ceil(4 sigma)`` = 4 px for
@@ -38,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pipeline.render import EdgeTruth, Rendered
+from pipeline.render import EdgeTruth, TruthSource
 
 MARGIN_PX = 4.0
 """Border of the image without an image-only gradient (detector kernel radius ceil(4 sigma), sigma = 1)."""
@@ -128,6 +130,9 @@ def exact_curves(lens, edges: tuple[EdgeTruth, ...] | list[EdgeTruth], width: in
             tau = tau0 + sgn * COARSE_STEP * k
             idx = np.flatnonzero(alive)
             p = off[idx, None] * nrm[idx] + tau[idx, None] * u[idx]
+            for j, i in enumerate(idx):  # a bent edge: its displacement along the normal (EdgeTruth.shape)
+                if edges[i].shape is not None:
+                    p[j] += edges[i].displacement(tau[i : i + 1])[0] * nrm[i]
             xs = _solve(lens, p, x[idx])
             finite = np.all(np.isfinite(xs), axis=1)
             inbox = finite & np.all((xs >= lo) & (xs <= hi), axis=1)
@@ -160,7 +165,7 @@ def exact_curves(lens, edges: tuple[EdgeTruth, ...] | list[EdgeTruth], width: in
         t0, t1 = t_all[max(near[0] - 1, 0)], t_all[min(near[-1] + 1, len(t_all) - 1)]
         fine = np.arange(t0, t1 + 1e-9, DENSE_STEP)
         x0 = np.column_stack([np.interp(fine, t_all, p_all[:, 0]), np.interp(fine, t_all, p_all[:, 1])])
-        dense = _solve(lens, e.offset * nrm[i][None] + fine[:, None] * u[i][None], x0)
+        dense = _solve(lens, e.ideal_points(fine), x0)
         out.append(dense[np.all(np.isfinite(dense), axis=1)])
     return out
 
@@ -201,13 +206,17 @@ def visible_pieces(curve: np.ndarray, width: int, height: int, margin: float = M
 
 
 def _onto_curve(lens, edge: EdgeTruth, p: np.ndarray) -> np.ndarray:
-    """Newton steps along the gradient of ``n . U(x) - offset`` put ``p`` on the exact curve."""
-    n = np.asarray(edge.normal, np.float64)
+    """Newton steps along the gradient of ``F(x) = edge.level(U(x))`` (``n . U(x) - offset`` for a
+    straight edge, minus the edge's displacement for a bent one) put ``p`` on the exact curve."""
     x = p.copy()
     for _ in range(8):
-        f = lens.undistort_points(x) @ n - edge.offset
-        gx = (lens.undistort_points(x + [_H, 0]) @ n - lens.undistort_points(x - [_H, 0]) @ n) / (2 * _H)
-        gy = (lens.undistort_points(x + [0, _H]) @ n - lens.undistort_points(x - [0, _H]) @ n) / (2 * _H)
+        f = edge.level(lens.undistort_points(x))
+        gx = (edge.level(lens.undistort_points(x + [_H, 0])) - edge.level(lens.undistort_points(x - [_H, 0]))) / (
+            2 * _H
+        )
+        gy = (edge.level(lens.undistort_points(x + [0, _H])) - edge.level(lens.undistort_points(x - [0, _H]))) / (
+            2 * _H
+        )
         g2 = gx * gx + gy * gy
         x = x - (f / g2)[:, None] * np.column_stack([gx, gy])
         if np.max(np.abs(f)) < 1e-11:
@@ -227,7 +236,7 @@ def grid_points(lens, edge: EdgeTruth, piece: np.ndarray, t: int) -> np.ndarray:
     return q
 
 
-def whole_edges(r: Rendered, t: int = 30, margin: float = MARGIN_PX, min_length_px: float = 1.0) -> list[TrueEdge]:
+def whole_edges(r: TruthSource, t: int = 30, margin: float = MARGIN_PX, min_length_px: float = 1.0) -> list[TrueEdge]:
     """Every string edge of ``r`` visible in the image, whole (module docstring)."""
     out = []
     for e, curve in zip(r.edges, exact_curves(r.lens, r.edges, r.width, r.height)):
@@ -358,7 +367,7 @@ class Comparison:
     duplicated: list[int]  # true edges found more than once
 
 
-def compare(r: Rendered, m, min_found_fraction: float = 0.1, max_dist: float = 1.5) -> Comparison:
+def compare(r: TruthSource, m, min_found_fraction: float = 0.1, max_dist: float = 1.5) -> Comparison:
     """Match ``m`` to the whole-edge truth of ``r``; truth figures over the matched edges."""
     truths = whole_edges(r, t=m.t)
     matches = match_lines(truths, m, max_dist)

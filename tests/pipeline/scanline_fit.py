@@ -30,6 +30,13 @@ def _cross(curve: np.ndarray, level: float, along: int) -> float:
 
 def _fit_string(profile: np.ndarray, pos: np.ndarray, x1: float, x2: float) -> tuple[float, float]:
     """Least-squares crossings of the blurred-string model on one scanline."""
+    c1, c2, _ = fit_string_profile(profile, pos, x1, x2)
+    return c1, c2
+
+
+def fit_string_profile(profile: np.ndarray, pos: np.ndarray, x1: float, x2: float) -> tuple[float, float, float]:
+    """Least-squares crossings ``c1``, ``c2`` and blur ``s`` (along the scanline) of the
+    blurred-string model on one scanline (module docstring), started at ``x1``, ``x2``."""
     xm = 0.5 * (x1 + x2)
 
     def model(p):
@@ -38,7 +45,7 @@ def _fit_string(profile: np.ndarray, pos: np.ndarray, x1: float, x2: float) -> t
 
     p0 = [profile.max(), 0.0, 0.8, x1 + 0.3, x2 - 0.3, 1.0]
     fit = least_squares(lambda p: model(p) - profile, p0, x_scale=[100, 1e-3, 0.1, 0.1, 0.1, 0.1])
-    return float(fit.x[3]), float(fit.x[4])
+    return float(fit.x[3]), float(fit.x[4]), abs(float(fit.x[5]))
 
 
 def scanline_errors(r: Rendered, n_per_edge: int = 3, truth: Rendered | None = None) -> np.ndarray:
