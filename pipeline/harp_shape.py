@@ -30,7 +30,11 @@ What can and cannot be separated
 --------------------------------
 * A deviation that turns with the harp is separated from the lens's correction by the different
   places and directions the string takes in the image: it needs the string in two shots or more
-  at different angles (strings seen in one shot get no deviation terms).
+  at different angles (strings seen in one shot, or over less than :data:`MIN_SPAN`, get no
+  deviation terms).
+* Only bends on scales longer than the along-edge smoothing are seen (:math:`\sigma = 0.8\sqrt{t^2-1}`,
+  24 px at t = 30): a kink a few pixels long is smoothed away before any fit, and P2..P4 hold the
+  smooth part of a string's shape over the stretch of it the image shows.
 * A rotationally symmetric (radial) lens correction about the turntable axis bends a line at
   distance :math:`q` from the axis the same way whatever its direction: for a harp turning about
   the distortion centre it is *exactly* a set of string deviations :math:`\delta_k` depending on
@@ -84,8 +88,17 @@ harp cannot see and shrinks what it sees by far less than its standard error).""
 MAX_ANGLE_SPREAD_DEG = 3.0
 """Largest spread of the shots' string angles about ``phi_0 + sigma * theta`` that is accepted."""
 
+GAUGE_WEIGHT = 1.0
+"""Weight of the constraint holding the string deviations off what a radial lens term can imitate
+(:func:`_radial_gauge`): per point, like the ridge."""
+
 AXIS_SEARCH = 0.6
 """Half-width, in string pitches, of the search for the turntable axis around the image centre."""
+
+MIN_SPAN = 0.8
+"""Shortest stretch of ``u`` (half image diagonals) over which a string must be seen, in all its shots
+together, to get deviation terms: over a shorter one P2..P4 are barely determined and the ridge
+shrinks them to nothing (the outermost strings, seen only in the corners)."""
 
 BEND_LIMIT_PX = 0.02
 """Default QA limit of a string's bend (largest ``|delta_k|`` over where it was seen)."""
@@ -323,7 +336,14 @@ class _WithStrings:
     ``U(x) - delta_k(u) n`` (module docstring), ``u`` and ``n`` per point fixed from the start."""
 
     def __init__(
-        self, lens: Any, string_of: NDArray[np.intp], basis: Floats, normal: Floats, n_strings: int, ridge: float
+        self,
+        lens: Any,
+        string_of: NDArray[np.intp],
+        basis: Floats,
+        normal: Floats,
+        n_strings: int,
+        ridge: float,
+        gauge: Floats | None = None,
     ) -> None:
         self.lens = lens
         self.string_of = string_of  # per point: index among the strings with terms, or -1
@@ -333,6 +353,7 @@ class _WithStrings:
         self.k = n_strings
         self.n = int(lens.n) + self.k * self.m
         self.ridge = ridge
+        self.gauge = np.zeros((0, self.k * self.m)) if gauge is None else gauge  # rows: directions held at 0
         has = string_of >= 0
         self._cols = [(np.flatnonzero(has & (string_of == s))) for s in range(n_strings)]
 
@@ -362,10 +383,14 @@ class _WithStrings:
         ks = self.k * self.m
         jr = np.zeros((ks, self.n))
         jr[:, self.lens.n :] = w * np.eye(ks)
+        wg = np.sqrt(max(n_points, 1)) * GAUGE_WEIGHT
+        jq = np.zeros((len(self.gauge), self.n))
+        jq[:, self.lens.n :] = wg * self.gauge
         jl = np.zeros((len(g), self.n))
         jl[:, : self.lens.n] = jg
-        rows: Floats = np.concatenate([g, w * th[self.lens.n :]])
-        return rows, np.vstack([jl, jr])
+        a = th[self.lens.n :]
+        rows: Floats = np.concatenate([g, w * a, wg * (self.gauge @ a)])
+        return rows, np.vstack([jl, jr, jq])
 
     def project(self, xy: Floats, th: Floats, nrm: Floats, tan: Floats) -> tuple[Floats, Floats]:
         p_l, t_l = self.lens.project(xy, th[: self.lens.n], nrm, tan)
@@ -379,6 +404,43 @@ class _WithStrings:
             p_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dn[idx]
             t_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dt[idx]
         return p_mat, t_mat
+
+
+def _radial_gauge(
+    lens: Any,
+    model0: DistortionModel,
+    xy: Floats,
+    normal: Floats,
+    string_of: NDArray[np.intp],
+    basis: Floats,
+    u: Floats,
+    n_strings: int,
+) -> Floats:
+    """The string-deviation directions a radial lens term can imitate, one unit row per radial term.
+
+    Each radial coefficient ``k_j`` moves the corrected points along the harp normal by
+    ``P_j = n . dU/dk_j``; on every string that motion, fitted by the string's own line and P2..P4
+    in ``u``, has P2..P4 coefficients ``g_j``: a set of deviations ``a = -g_j dk_j`` and the lens
+    change ``dk_j`` leave every edge as it was (exactly so when the turntable axis is the
+    distortion centre, module docstring). Holding ``g_j . a = 0`` gives that part to the lens."""
+    if not hasattr(lens, "degree") or n_strings == 0:
+        return np.zeros((0, n_strings * basis.shape[0]))
+    th = lens.theta0(model0)
+    tan = np.column_stack([normal[:, 1], -normal[:, 0]])
+    p_mat, _ = lens.project(xy, th, normal, tan)
+    m = basis.shape[0]
+    rows = []
+    for j in range(2, 2 + int(lens.degree)):  # the radial coefficients k_1..k_N of theta
+        g = np.zeros(n_strings * m)
+        for s in range(n_strings):
+            idx = np.flatnonzero(string_of == s)
+            design = np.vstack([np.ones(len(idx)), u[idx], basis[:, idx]]).T
+            c, *_ = np.linalg.lstsq(design, p_mat[j, idx], rcond=None)
+            g[s * m : (s + 1) * m] = c[2:]
+        norm = float(np.linalg.norm(g))
+        if norm > 0:
+            rows.append(g / norm)
+    return np.array(rows).reshape(-1, n_strings * m)
 
 
 def fit_harp_shape(
@@ -443,10 +505,6 @@ def fit_harp_shape(
         i = int(edges.image[e])
         edge_string[e] = labels[present.index(i)][cursor[i]]
         cursor[i] += 1
-    # strings seen in two shots or more get deviation terms
-    shots_of = {int(k): {int(edges.image[e]) for e in np.flatnonzero(edge_string == k)} for k in np.unique(edge_string)}
-    with_terms = sorted(k for k, v in shots_of.items() if len(v) >= 2)
-    slot = {k: s for s, k in enumerate(with_terms)}
     ideal = model0.undistort_points(edges.xy)
     point_edge = np.repeat(np.arange(edges.n_edges), edges.counts)
     point_shot = edges.image[point_edge]
@@ -455,10 +513,17 @@ def fit_harp_shape(
     rel = ideal - np.asarray(frame.centre)
     u = np.einsum("ij,ij->i", rel, directions[point_shot]) / frame.scale_px
     q = np.einsum("ij,ij->i", rel, normals[point_shot])
+    # strings seen in two shots or more, over MIN_SPAN of u or more, get deviation terms
+    shots_of = {int(k): {int(edges.image[e]) for e in np.flatnonzero(edge_string == k)} for k in np.unique(edge_string)}
+    point_string = edge_string[point_edge]
+    reach = {k: float(np.ptp(u[point_string == k])) for k in shots_of}
+    with_terms = sorted(k for k, v in shots_of.items() if len(v) >= 2 and reach[k] >= MIN_SPAN)
+    slot = {k: s for s, k in enumerate(with_terms)}
     string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
     basis = legendre(u, degrees)
     lens = make_parametrisation(width, height, spec)
-    param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge)
+    gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
+    param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge)
     th0 = param.theta0(model0)
     with np.errstate(all="ignore"):
         try:

@@ -1,0 +1,145 @@
+"""The harp checks itself (issue 19 item 4) on the realistic simulator: string bends found, the lens freed.
+
+Usage::
+
+    .venv/bin/python benchmarks/harp_health.py [--seeds 8] [--size 1000x750]
+
+Per seed: a lens of the seeded population (``pipeline.lens_population``), a harp drawn with
+physical string shapes and a camera's effects (``pipeline.realism.realistic_session``: field-dependent
+blur, vignetting, an uneven back-light turning with the harp, shot noise, Bayer and demosaicing), two
+interior strings bent on purpose (bow modes of 0.06 and 0.05 px over the span), six shots at turntable
+angles 0..150 degrees, measured as ``harp measure`` does. Fitted: ``radial4+tangential+prism`` alone
+(``fit_distortion``) and with every string's deviation (``pipeline.harp_shape.fit_harp_shape``, the
+turntable angles given). Truth: the exact lens (field error modulo homography over the whole image,
+``compare_models``) and each string's exact centre line (``Harp.strings[k].deviation``) projected on
+the fitted family (Legendre P2..P4 over the stretch of the string the shots show).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape, legendre
+from pipeline.lens_population import lens_population
+from pipeline.measure import measure_image
+from pipeline.realism import realistic_session, render_shots
+
+TURNS = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
+SPEC = FitSpec("radial", 4, True, True)
+
+
+def true_bend(harp, k: int, span: tuple[float, float], scale: float, along: int) -> float:
+    """String ``k``'s exact deviation, projected on P2..P4 over ``span`` (the fitted family), at its largest."""
+    u = np.linspace(span[0], span[1], 401)
+    dev = harp.strings[k].deviation(along * u * scale)
+    basis = np.vstack([np.ones_like(u), u, legendre(u, (2, 3, 4))])
+    c, *_ = np.linalg.lstsq(basis.T, dev, rcond=None)
+    return float(np.max(np.abs(c[2:] @ basis[2:])))
+
+
+def one(seed: int, w: int, h: int) -> dict[str, object]:
+    lens = lens_population(seed, 1, w, h)[0].model
+    ses = realistic_session(seed, w, h, spacing_px=60.0, string_width_px=3.0)
+    strings = list(ses.harp.strings)
+    mid = len(strings) // 2
+    forced = (mid - 2, mid + 1)
+    strings[forced[0]] = dataclasses.replace(strings[forced[0]], bow_px=(0.06, 0.0, 0.0))
+    strings[forced[1]] = dataclasses.replace(strings[forced[1]], bow_px=(0.0, 0.05, 0.0))
+    harp = dataclasses.replace(ses.harp, strings=tuple(strings))
+    t0 = time.perf_counter()
+    shots = render_shots(lens, harp, ses.mount, TURNS, w, h, ses.effects, seed=seed)
+    lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+    t_render = time.perf_counter() - t0
+    plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
+    t0 = time.perf_counter()
+    fit = fit_harp_shape(lines, TURNS, w, h, SPEC, plain=plain)
+    t_fit = time.perf_counter() - t0
+    if not fit:
+        return {"seed": seed, "failure": fit.reason}
+    pos = np.array([s.position_px for s in harp.strings])
+    sign = min((1, -1), key=lambda g: sum(float(np.min(np.abs(pos - g * s.offset_px))) for s in fit.strings))
+    pairs = []  # (true bend, fitted bend, forced?)
+    for s in fit.strings:
+        if not np.isfinite(s.bend_px):
+            continue
+        k = int(np.argmin(np.abs(pos - sign * s.offset_px)))
+        tb = max(true_bend(harp, k, s.span, fit.frame.scale_px, a) for a in (1, -1))
+        pairs.append((tb, s.bend_px, k in forced))
+    return {
+        "seed": seed,
+        "field_plain": compare_models(plain.model, lens, w, h, step=20).rms,
+        "field_joint": compare_models(fit.model, lens, w, h, step=20).rms,
+        "d_plain": plain.d_after,
+        "d_joint": fit.d_after,
+        "pairs": pairs,
+        "axis_err": float(np.hypot(*(np.asarray(fit.frame.centre) - np.asarray(ses.mount.centre)))),
+        "t_render": t_render,
+        "t_fit": t_fit,
+        "strings": len(fit.strings),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--size", default="1000x750")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    print(
+        f"# Harp self-check on the realistic simulator, {w}x{h}, 6 turntable angles ({os.cpu_count()} CPUs, "
+        f"load {os.getloadavg()[0]:.1f}; `benchmarks/harp_health.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    print(
+        "| seed | strings | axis error px | field RMS, lens alone px | field RMS, with strings px | d alone | "
+        "d with strings | forced bends: true / fitted px | other strings: largest true / fitted px | "
+        f"flagged > {BEND_LIMIT_PX} px (forced / others) | render+measure s | fit s |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|---:|---:|")
+    ratios, gains, fp = [], [], 0
+    for seed in range(args.seeds):
+        r = one(seed, w, h)
+        if "failure" in r:
+            print(f"| {seed} | failed: {r['failure']} |")
+            continue
+        pairs = r["pairs"]
+        forced = [(a, b) for a, b, f in pairs if f]
+        others = [(a, b) for a, b, f in pairs if not f]
+        ratios += [b / a for a, b in forced if a > 0.01]
+        gains.append(r["field_joint"] / r["field_plain"])
+        flag_f = sum(b > BEND_LIMIT_PX for _, b in forced)
+        flag_o = sum(b > BEND_LIMIT_PX for a, b in others)
+        fp += sum(b > BEND_LIMIT_PX and a < 0.5 * BEND_LIMIT_PX for a, b in others)
+        big = max(others, key=lambda p: p[0]) if others else (float("nan"), float("nan"))
+        print(
+            f"| {seed} | {r['strings']} | {r['axis_err']:.2f} | {r['field_plain']:.4f} | {r['field_joint']:.4f} | "
+            f"{r['d_plain']:.4f} | {r['d_joint']:.4f} | "
+            + ", ".join(f"{a:.4f} / {b:.4f}" for a, b in forced)
+            + f" | {big[0]:.4f} / {big[1]:.4f} | {flag_f} / {flag_o} | {r['t_render']:.0f} | {r['t_fit']:.1f} |"
+        )
+    print()
+    if ratios:
+        a = np.array(ratios)
+        print(
+            f"forced bends recovered: fitted / true {a.min():.2f}..{a.max():.2f} (median {np.median(a):.2f}), "
+            f"{int(np.sum(np.abs(a - 1) <= 0.2))} of {len(a)} within 20 %; field error with strings / alone: "
+            f"median {np.median(gains):.2f}, worst {max(gains):.2f}; strings flagged whose true bend is below "
+            f"{0.5 * BEND_LIMIT_PX} px: {fp}"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
