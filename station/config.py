@@ -453,20 +453,26 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
     ------
     ConfigError : one line naming the file, the field and what was expected.
     """
-    from station.config_reader import read_config_text
+    from station.config_reader import ConfigReadError, read_config_text
 
     path = Path(path)
-    return parse_config(read_config_text(path), path, base_dir)
+    try:
+        text = read_config_text(path)
+    except ConfigReadError as exc:
+        raise ConfigError(path, exc.field, exc.expected) from None
+    return parse_config(text, path, base_dir)
 
 
 def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
     """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
     path = Path(path).absolute()
     base = Path(base_dir).absolute() if base_dir is not None else path.parent
-    from station.config_reader import load_yaml
+    from station.config_reader import ConfigReadError, load_yaml
 
     try:
-        data = load_yaml(text, path)
+        data = load_yaml(text)
+    except ConfigReadError as exc:
+        raise ConfigError(path, exc.field, exc.expected) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "(file)"

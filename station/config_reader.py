@@ -1,10 +1,11 @@
 """Reading a configuration file safely: bounded bytes, bounded YAML, no YAML 1.1 surprises.
 
-A configuration path is read the way images are (:func:`station.files.read_regular_file`): a
+A configuration path is read the way images are (:func:`station.bounded_read.read_regular_file`): a
 regular file only (a FIFO, a device or a directory is refused at once, never opened for a blocking
 read), at most :data:`MAX_CONFIG_BYTES`. The YAML document is composed (not yet constructed) and its
 node tree checked before any value is built, each problem one :class:`station.config.ConfigError`
-naming the field's path:
+naming the field's path (raised here as :class:`ConfigReadError`, which :mod:`station.config` turns
+into its ``ConfigError`` with the file's name):
 
 * nesting deeper than :data:`MAX_DEPTH` levels (a configuration has four);
 * an integer with more than :data:`MAX_DIGITS` digits (Python refuses to build one of more than
@@ -38,56 +39,61 @@ MAX_DIGITS = 30
 _PLAIN_BOOLEANS = {"true", "false"}
 
 
+class ConfigReadError(ValueError):
+    """A configuration file refused before its values are read: ``field`` (a dotted path or
+    ``(file)``) and what was ``expected``."""
+
+    def __init__(self, field: str, expected: str):
+        self.field = field
+        self.expected = expected
+        super().__init__(f"{field}: {expected}")
+
+
 def read_config_text(path: str | os.PathLike) -> str:
-    """The text of the configuration file ``path``, or :class:`station.config.ConfigError` naming it."""
-    from station.config import ConfigError
-    from station.files import BoundedReadError, read_regular_file
+    """The text of the configuration file ``path``, or :class:`ConfigReadError`."""
+    from station.bounded_read import BoundedReadError, read_regular_file
 
     p = Path(path)
     try:
         data = read_regular_file(p, MAX_CONFIG_BYTES, what="a configuration file")
     except BoundedReadError as exc:
-        raise ConfigError(p, "(file)", exc.reason) from None
+        raise ConfigReadError("(file)", exc.reason) from None
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ConfigError(p, "(file)", f"expected UTF-8 text (byte {exc.start} is not)") from None
+        raise ConfigReadError("(file)", f"expected UTF-8 text (byte {exc.start} is not)") from None
 
 
-def load_yaml(text: str, path: str | os.PathLike) -> Any:
+def load_yaml(text: str) -> Any:
     """The YAML document ``text`` as Python values, after :func:`check_yaml_nodes` on its node tree."""
     import yaml
-
-    from station.config import ConfigError
 
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except RecursionError:
-        raise ConfigError(path, "(file)", f"nesting deeper than {MAX_DEPTH} levels") from None
+        raise ConfigReadError("(file)", f"nesting deeper than {MAX_DEPTH} levels") from None
     if node is None:
         return None
-    check_yaml_nodes(node, path)
+    check_yaml_nodes(node)
     return yaml.safe_load(text)
 
 
-def check_yaml_nodes(root: Any, path: str | os.PathLike) -> None:
+def check_yaml_nodes(root: Any) -> None:
     """Refuse what :mod:`station.config_reader` lists, naming the field (dotted path) where it is."""
     import yaml
-
-    from station.config import ConfigError
 
     stack: list[tuple[Any, str, int]] = [(root, "", 1)]
     while stack:
         node, where, depth = stack.pop()
         name = where or "(top level)"
         if depth > MAX_DEPTH:
-            raise ConfigError(path, name, f"nesting deeper than {MAX_DEPTH} levels")
+            raise ConfigReadError(name, f"nesting deeper than {MAX_DEPTH} levels")
         if isinstance(node, yaml.MappingNode):
             for key, value in node.value:
                 if not (isinstance(key, yaml.ScalarNode) and key.tag == "tag:yaml.org,2002:str"):
                     shown = key.value if isinstance(key, yaml.ScalarNode) else "a mapping or list"
-                    raise ConfigError(
-                        path, name, f"keys must be names, got {shown!r} (line {key.start_mark.line + 1}); quote it"
+                    raise ConfigReadError(
+                        name, f"keys must be names, got {shown!r} (line {key.start_mark.line + 1}); quote it"
                     )
                 stack.append((value, f"{where}.{key.value}" if where else str(key.value), depth + 1))
         elif isinstance(node, yaml.SequenceNode):
@@ -95,12 +101,11 @@ def check_yaml_nodes(root: Any, path: str | os.PathLike) -> None:
                 stack.append((item, f"{name}[{i}]", depth + 1))
         elif isinstance(node, yaml.ScalarNode):
             if node.tag == "tag:yaml.org,2002:bool" and node.value.lower() not in _PLAIN_BOOLEANS:
-                raise ConfigError(
-                    path,
+                raise ConfigReadError(
                     name,
                     f"{node.value!r} is read by YAML as a boolean; write true or false, or quote it for text",
                 )
             if node.tag == "tag:yaml.org,2002:int":
                 digits = sum(ch.isdigit() for ch in node.value)
                 if digits > MAX_DIGITS:
-                    raise ConfigError(path, name, f"an integer of {digits} digits (at most {MAX_DIGITS})")
+                    raise ConfigReadError(name, f"an integer of {digits} digits (at most {MAX_DIGITS})")

@@ -170,7 +170,7 @@ def _too_large(w: int, h: int, limit: int) -> str:
 
 def _read_regular_file(p: Path, max_bytes: int) -> bytes:
     """The bytes of the regular file ``p`` (at most ``max_bytes``), or :class:`ImageReadError`."""
-    from station.files import BoundedReadError, read_regular_file
+    from station.bounded_read import BoundedReadError, read_regular_file
 
     try:
         return read_regular_file(p, max_bytes, what="an image file")
