@@ -193,7 +193,14 @@ def calibrate(args) -> dict:
 
 
 def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
-    from station.calibration import calibrate_shots, holdout_warning, shot_count_problem, size_problem
+    from station.calibration import (
+        GIVEN_ON_COMMAND_LINE,
+        calibrate_shots,
+        holdout_warning,
+        selection_record,
+        shot_count_problem,
+        size_problem,
+    )
     from station.files import write_profile
     from station.provenance import make_provenance
 
@@ -209,11 +216,10 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
     cal = calibrate_shots(
         shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
     )
+    selection = selection_record(cal.selection, GIVEN_ON_COMMAND_LINE)
     if cal.selection is not None:
         choice = cal.selection.to_dict()
-        selection = {"reason": cal.selection.reason, "folds": cal.selection.folds}
     else:
-        selection = {"reason": "given on the command line", "folds": "none"}
         choice = {**cal.spec.to_dict(), **selection, "table": []}
     res = cal.fit
     if not res:
