@@ -309,18 +309,19 @@ def focus_profile(
     provenance: Provenance,
     given_by: str = GIVEN_BY_CONFIG,
     details: Mapping[str, Any] | None = None,
+    judge: Callable[..., Any] | None = None,
     measurements: Any = None,
 ) -> Profile:
     """The judged profile of a focus setting's calibration ``cal`` (:func:`calibrate_focus`).
 
     The session's identities (lens, camera body, focus, optics), the selection record
     (:func:`selection_record`), the capture's details (orientations, frames per orientation,
-    ``t``) plus ``details``, and the QA verdict against ``config.qa`` on ``measurements`` (the
-    edges it was fitted on, :class:`station.qa.verdicts.Measurements`; None: not re-judged on
-    edges). Raises ValueError for a failed calibration.
+    ``t``) plus ``details``, and ``judge(profile, config.qa, measurements=measurements)``
+    (:func:`station.qa.verdicts.qa_verdict`, passed in: the QA imports this module) on
+    ``measurements`` (the edges it was fitted on, :class:`station.qa.verdicts.Measurements`;
+    None: not re-judged on edges). ``judge`` None: not judged. Raises ValueError for a failed
+    calibration.
     """
-    from station.qa.verdicts import qa_verdict
-
     profile = cal.profile(
         width,
         height,
@@ -340,4 +341,6 @@ def focus_profile(
             "t": config.pipeline.t,
         },
     )
-    return profile.with_(qa=qa_verdict(profile, config.qa, measurements=measurements))
+    if judge is None:
+        return profile
+    return profile.with_(qa=judge(profile, config.qa, measurements=measurements))

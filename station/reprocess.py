@@ -253,7 +253,7 @@ def _spec(job: FocusJob, config: Any) -> Any:
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
     from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
     from station.provenance import make_provenance
-    from station.qa.verdicts import Measurements
+    from station.qa.verdicts import Measurements, qa_verdict
     from station.session import layout
     from station.session.processing import average_frames, measure_shot, shot_problems
 
@@ -301,6 +301,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         provenance=make_provenance(frame_files, t=cfg.pipeline.t, command="harp reprocess", station=cfg.station.id),
         given_by=GIVEN_ON_COMMAND_LINE if job.spec else GIVEN_BY_CONFIG,
         details={"session_model_file": str(s.path / layout.profile_file(f))},
+        judge=qa_verdict,
         measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}"),
     )
     return focus, profile, old

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
+from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
@@ -92,7 +93,9 @@ def register(subparsers) -> None:
         metavar="IMAGE",
         help="shots never used in the fit: corrected by the model and measured",
     )
-    p.add_argument("-t", "--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument(
+        "-t", "--t", type=positive_int, default=DEFAULT_T, help=f"along-edge subsampling factor (default {DEFAULT_T})"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 

@@ -527,7 +527,7 @@ class Executor:
         # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
         # its lens row in one transaction (issues 9, 12); the QA after the executor says it again,
         # the stored model judged on the edges it was fitted on, as the QA after the executor does
-        from station.qa.verdicts import session_measurements
+        from station.qa.verdicts import qa_verdict, session_measurements
 
         profile = focus_profile(
             cal,
@@ -543,6 +543,7 @@ class Executor:
                 session_dir=str(self.session.path.resolve()),
             ),
             details={"model_file": str(path)},
+            judge=qa_verdict,
             measurements=session_measurements(self.session, f),
         )
         write_profile(path, profile)
