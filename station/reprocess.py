@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
-from station.ctrl_c import sigint_blocked, start_forkserver_deaf_to_ctrl_c
+from station.ctrl_c import sigint_blocked
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -337,14 +337,12 @@ def run_jobs(
 
 
 def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(PRELOAD)
-    start_forkserver_deaf_to_ctrl_c()
+    from station.pool import forkserver_pool
+
     results: dict[int, FocusResult] = {}
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    pool = forkserver_pool(workers, PRELOAD)
     try:
         with sigint_blocked():  # submitting starts the workers: none is left half-started
             futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}

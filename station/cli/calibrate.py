@@ -110,12 +110,6 @@ def _measure_one(job: tuple[str, int]):
     return path, measure_file(path, t)[1]
 
 
-def _ignore_sigint() -> None:  # in a worker: Ctrl-C is the command's to handle (no worker traceback)
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 @contextlib.contextmanager
 def _workers(n_jobs: int, balance: bool = False):
     """A ``map`` over ``min(2, cores)`` worker processes (forked before any image is processed),
@@ -134,11 +128,13 @@ def _workers(n_jobs: int, balance: bool = False):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from station.pool import ignore_ctrl_c
+
     # the objects alive now (modules, the shots' points) are left alone by the garbage collector from
     # here on: a forked worker then copies only the memory pages it writes, not every page the
     # collector would walk (2-4x fewer page faults)
     gc.freeze()
-    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=ignore_ctrl_c)
 
     def map_fn(fn, *iterables):
         with sigint_blocked():  # the first submit forks the workers: none runs this process's Ctrl-C
