@@ -175,10 +175,10 @@ def point_shot(lens: RadialModel, harp_bends: np.ndarray, angle: float, seed: in
     return lines
 
 
-def population_part(n_lenses: int, fit_counts: Sequence[int]) -> None:
+def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 0) -> None:
     print(
         "## Population (point sets): chosen model's held-out d on 3 unseen shots over the best candidate's "
-        f"({n_lenses} seeded lenses per row)"
+        f"({n_lenses} seeded lenses per row, seeds {first_seed}..{first_seed + n_lenses - 1})"
     )
     print()
     print("| shots fitted | rule | worst ratio | mean ratio | lenses > 1.05 | median best held-out d px |")
@@ -186,7 +186,7 @@ def population_part(n_lenses: int, fit_counts: Sequence[int]) -> None:
     for nfit in fit_counts:
         ratios: dict[str, list[float]] = {"two tiers (now)": [], "leave-one-shot-out alone (before)": []}
         bests = []
-        for seed in range(n_lenses):
+        for seed in range(first_seed, first_seed + n_lenses):
             lens = point_lens(seed)
             rng = np.random.default_rng(seed + 7)
             harp = rng.normal(0, 0.015, (15, 3))
@@ -220,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--skip-real", action="store_true")
     ap.add_argument("--population", choices=("points", "none"), default="points")
     ap.add_argument("--lenses", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds first..first+lenses-1 (a fresh population)")
     ap.add_argument("--fit-shots", default="3,4,6")
     args = ap.parse_args(argv)
     print(
@@ -231,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.skip_real:
         real_part(args.real)
     if args.population == "points":
-        population_part(args.lenses, [int(v) for v in args.fit_shots.split(",")])
+        population_part(args.lenses, [int(v) for v in args.fit_shots.split(",")], args.first_seed)
     print(f"({time.perf_counter() - t0:.0f} s)")
     return 0
 

@@ -52,6 +52,14 @@ def _driver_class(table: Mapping[str, str], kind: str, cfg: Mapping[str, Any]) -
     return getattr(importlib.import_module(module), cls)
 
 
+def driver_config_keys(table: Mapping[str, str], name: str) -> frozenset[str]:
+    """The configuration keys the driver ``name`` of ``table`` accepts (its class's ``CONFIG_KEYS``,
+    ``driver`` included), without creating or opening anything."""
+    module, cls = table[name].split(":")
+    keys: frozenset[str] = getattr(importlib.import_module(module), cls).CONFIG_KEYS
+    return keys | {"driver"}
+
+
 def open_camera(cfg: Mapping[str, Any], **context: Any) -> Camera:
     """Create (not open) the camera driver named by ``cfg["driver"]``."""
     return cast(Camera, _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(dict(cfg), **context))

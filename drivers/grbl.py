@@ -164,6 +164,9 @@ class GrblTurntable:
         How far from the target an idle axis may be (status has 3 decimals).
     """
 
+    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
+    """Keys of this driver's configuration section (``driver`` included or implied)."""
+
     def __init__(
         self,
         port: str,

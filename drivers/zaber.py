@@ -170,6 +170,9 @@ class ZaberTurntable:
         How far from the target an idle axis may be and count as arrived.
     """
 
+    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
+    """Keys of this driver's configuration section (``driver`` included or implied)."""
+
     def __init__(
         self,
         port: str,

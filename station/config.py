@@ -454,22 +454,20 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
     ------
     ConfigError : one line naming the file, the field and what was expected.
     """
+    from station.config_reader import read_config_text
+
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(path, "(file)", "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(path, "(file)", f"cannot read: {exc}") from None
-    return parse_config(text, path, base_dir)
+    return parse_config(read_config_text(path), path, base_dir)
 
 
 def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
     """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
     path = Path(path).absolute()
     base = Path(base_dir).absolute() if base_dir is not None else path.parent
+    from station.config_reader import load_yaml
+
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text, path)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "(file)"

@@ -26,7 +26,6 @@ could be (:func:`max_file_bytes`) is refused without reading it all.
 from __future__ import annotations
 
 import os
-import stat
 import struct
 import sys
 from pathlib import Path
@@ -171,47 +170,12 @@ def _too_large(w: int, h: int, limit: int) -> str:
 
 def _read_regular_file(p: Path, max_bytes: int) -> bytes:
     """The bytes of the regular file ``p`` (at most ``max_bytes``), or :class:`ImageReadError`."""
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise ImageReadError(p, "no such file") from None
-    except OSError as exc:
-        raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise ImageReadError(p, "is a directory, not an image file")
-    if not stat.S_ISREG(st.st_mode):
-        raise ImageReadError(p, f"not a regular file ({_file_kind(st.st_mode)}); give an image file")
-    if not os.access(p, os.R_OK):
-        raise ImageReadError(p, "permission denied")
-    if st.st_size > max_bytes:
-        raise ImageReadError(p, f"file too large for an image: {st.st_size} bytes (at most {max_bytes})")
-    try:
-        # O_NONBLOCK: should the path have become a FIFO since the stat, opening it does not hang
-        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
-    with os.fdopen(fd, "rb") as f:
-        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-            raise ImageReadError(p, "not a regular file; give an image file")
-        try:
-            data = f.read(max_bytes + 1)
-        except OSError as exc:
-            raise ImageReadError(p, f"cannot read: {exc.strerror or exc}") from None
-    if len(data) > max_bytes:
-        raise ImageReadError(p, f"file too large for an image (more than {max_bytes} bytes)")
-    return data
+    from station.files import BoundedReadError, read_regular_file
 
-
-def _file_kind(mode: int) -> str:
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISBLK(mode):
-        return "a block device"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a plain file"
+    try:
+        return read_regular_file(p, max_bytes, what="an image file")
+    except BoundedReadError as exc:
+        raise ImageReadError(p, exc.reason) from None
 
 
 def header_size(data: bytes) -> tuple[int, int] | None:

@@ -197,6 +197,9 @@ class SimulatedCamera:
     jpeg_quality : with ``realism_seed``, JPEG-compress every frame at this quality.
     """
 
+    CONFIG_KEYS: frozenset[str] = frozenset(CONFIG_KEYS)
+    """Keys of this driver's configuration section."""
+
     def __init__(
         self,
         world: SimWorld | None = None,

@@ -160,7 +160,11 @@ def render_overlay(image: np.ndarray, m: ImageMeasurement, title: str = "") -> n
 
 def write_overlay(path, image: np.ndarray, m: ImageMeasurement, title: str = "") -> Path:
     """Write the overlay PNG to ``path``; returns the path."""
+    from station.files import atomic_write_bytes
+
     out = Path(path)
-    if not cv2.imwrite(str(out), render_overlay(image, m, title)):
-        raise OSError(f"{out}: cannot write PNG")
+    ok, png = cv2.imencode(".png", render_overlay(image, m, title))
+    if not ok:
+        raise ValueError(f"{out}: the overlay could not be encoded as PNG")
+    atomic_write_bytes(out, png.tobytes())  # a full disk is an OSError with its errno, not a libpng message
     return out

@@ -9,9 +9,11 @@ measurements the session kept), the results into ``DIR/results.json``
 (:mod:`station.qa.results`) and a ``finished`` record closes the session. A session
 stopped by a fault skips QA and the report (its ``results.json`` says ``failed``); one
 killed during QA or the report is finished by its next ``resume`` (nothing left to
-capture, QA and report again). A write that fails there (a full disk) or a store that
-refuses the verdict stops the session with an ``aborted`` record and exit 2, like one
-during capture.
+capture, QA and report again). A write that fails there (a full disk, a report figure
+that cannot be written) or a store that refuses the verdict stops the session with an
+``aborted`` record, "stopped after capture, in QA" or "in the report" and the resume
+line, and exit 2, like one during capture: a session whose report is missing or
+truncated is never "finished".
 
 The result's exit code binds (:mod:`station.exit_codes`): 0 when the session finished
 and its verdict is PASS, 1 when it finished and its verdict is FAIL, 2 when it stopped.
@@ -65,17 +67,20 @@ def run_session(
     note = console.print if console is not None else (lambda _text: None)
     from station.qa.judge import judge_session
 
+    stage = "QA"
     try:
         qa = judge_session(session, store=store, note=note)
         if report and qa is not None:
+            stage = "the report"
             _write_report(session, qa, note)
+        stage = "QA"
         session.append(Finished())
-    except (OSError, StoreError) as exc:  # a full disk, a store refusing the verdict: recorded, resumed from there
-        reason = (
-            executor.disk_problem(exc)
-            if isinstance(exc, OSError)
-            else f"{exc}; then continue with: harp session resume {session.path}"
-        )
+    except (OSError, StoreError, ReportError) as exc:  # a full disk, a store refusing the verdict, a report
+        # that could not be written: recorded, resumed from there — never "finished"
+        if isinstance(exc, OSError):
+            reason = executor.disk_problem(exc)
+        else:
+            reason = f"{exc}; then continue with: harp session resume {session.path}"
         session.release_reserve()
         try:
             session.append(Aborted(reason))
@@ -84,7 +89,7 @@ def run_session(
         return dataclasses.replace(
             result,
             exit_code=EXIT_ABORTED,
-            message=f"session stopped after capture, in QA: {reason}",
+            message=f"session stopped after capture, in {stage}: {reason}",
             results=_results(session, None),
         )
     results = _results(session, qa)
@@ -101,6 +106,10 @@ def run_session(
     return dataclasses.replace(
         result, message=f"session finished, QA verdict PASS: {session.path}", verdict=qa.overall, results=results
     )
+
+
+class ReportError(Exception):
+    """The session report could not be written (not for a full disk: that is an ``OSError``)."""
 
 
 def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
@@ -133,12 +142,12 @@ def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> 
             thresholds=cfg.qa,
             interpolation=qa.interpolation,
         )
-    except (OSError, ValueError) as exc:  # the profiles are stored; say so, do not lose the session
+    except (OSError, ValueError) as exc:  # the profiles are stored; the session stops, its resume writes it
         if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
             raise  # a full disk: the session stops and its resume writes the report once space is freed
-        session.append(ReportFailed(f"{type(exc).__name__}: {exc}"))
-        note(f"[red]report not written: {type(exc).__name__}: {exc}")
-        return
+        what = describe_os_error(exc) if isinstance(exc, OSError) and exc.strerror else f"{type(exc).__name__}: {exc}"
+        session.append(ReportFailed(what))
+        raise ReportError(f"report not written: {what}") from None
     rel = path.relative_to(session.path)
     session.append(ReportWritten(str(rel), str(rel.with_name(REPORT_HTML))))
     note(f"report: {path} (and {REPORT_HTML})")

@@ -166,3 +166,21 @@ def test_too_few_orientations_for_the_choice_are_said():
     assert support_problem(FitSpec("radial", 4), shots) is None
     three = harp_point_sets(DECENTRED, W, H, (0, 60, 120), noise=0.005, seed=5)
     assert support_problem(FitSpec("poly", 5), three) and support_problem(FitSpec("radial", 4, True), three) is None
+
+
+def test_a_flexible_model_needs_a_clear_lead_over_the_radial_ones():
+    """A lens with real non-radial structure: the polynomial is far ahead of every radial model on
+    unseen orientations and is chosen; asked for a lead it does not have, the choice is radial and
+    the reason says by how much the polynomial won the folds."""
+    from tests.pipeline.rendered_shots import nonradial_lens
+
+    lens = nonradial_lens()
+    shots = harp_point_sets(lens, W, H, (0, 36, 72, 108, 144), noise=0.005, seed=4)
+    sel = select_model(shots, W, H, candidates=CANDS, stop_factor=None)
+    assert sel.choice == FitSpec("poly", 5)
+    assert "paired standard errors ahead of every radial model" in sel.reason
+    lead = float(sel.reason.split("px, ")[-1].split(" paired")[0])
+    assert lead > 2.0
+    strict = select_model(shots, W, H, candidates=CANDS, stop_factor=None, flexible_margin_se=lead + 1)
+    assert strict.choice.kind == "radial"
+    assert f"won the folds by only {lead:.1f} paired standard errors" in strict.reason

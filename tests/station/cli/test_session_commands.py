@@ -56,6 +56,18 @@ def test_config_check(tmp_path, capsys):
     assert not (tmp_path / "sessions").exists() and not (tmp_path / "p.sqlite").exists()
 
 
+def test_config_check_refuses_an_unknown_camera_key(tmp_path, capsys):
+    # issue 25: keys elsewhere were refused, those under camera passed "OK" (the driver saw them only
+    # when a session opened it); the driver's own key list, read without opening anything
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["camera"]["exposure_typo_us"] = 5000
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(d))
+    code, out, err = run(capsys, "config", "check", bad)
+    assert code == 2 and err.count("\n") == 1
+    assert "station.camera.exposure_typo_us: unknown key for the sim camera (known: " in err
+
+
 def test_session_plan_touches_nothing_and_counts_the_plan(tmp_path, capsys):
     cfg = demo_copy(tmp_path)
     code, out, err = run(capsys, "session", "plan", cfg, "--json")

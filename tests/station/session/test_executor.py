@@ -350,7 +350,9 @@ def test_full_disk_in_qa_or_the_report_stops_then_resume_finishes(tmp_path, monk
         with SessionDir.create(disk, cfg, name="s") as s, ProfileStore(cfg.store_path) as store:
             result = run_session(s, FakeCamera(stage), stage, store=store, sleep=lambda _s: None, report=True)
         assert result.exit_code == EXIT_ABORTED and "\n" not in result.message
-        assert result.message.startswith("session stopped after capture, in QA: ")
+        assert result.message.startswith(
+            f"session stopped after capture, in {'QA' if where == 'qa' else 'the report'}: "
+        )
         assert f"No space left on device; free some space, then: harp session resume {disk / 's'}" in result.message
         recs = [json.loads(line) for line in (disk / "s" / "manifest.jsonl").read_text().splitlines()]
         assert recs[-1]["kind"] == "aborted" and "No space left on device" in recs[-1]["reason"]
@@ -368,3 +370,38 @@ def test_full_disk_in_qa_or_the_report_stops_then_resume_finishes(tmp_path, monk
         assert kinds.count("qa_session") == 1 and kinds.count("report") == 1 and kinds[-1] == "finished"
         assert [r for r in recs if r["kind"] == "report"][0].get("failure") is None and (disk / "s" / "report").is_dir()
         assert Counter(r["profile_id"] for r in rows) == {1: 1, 2: 1}
+
+
+def test_a_report_that_cannot_be_written_stops_the_session_never_finished(tmp_path, monkeypatch):
+    """Issue 25: a report whose write fails (here a figure refused by its writer, not a full disk)
+    stops the session "in the report" with the resume line and exit 2 — before, it was recorded,
+    said in red and the session "finished, QA verdict PASS"; resume then writes it and finishes."""
+    import station.qa.report
+
+    cfg = make_config(tmp_path, focus=(0.0,), orientations=(0, 60, 120))
+    real = station.qa.report.write_session_report
+    calls = []
+
+    def refusing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise OSError("libpng error: Write Error")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(station.qa.report, "write_session_report", refusing)
+    stage = FakeStage()
+    with SessionDir.create(tmp_path, cfg, name="s") as s, ProfileStore(cfg.store_path) as store:
+        result = run_session(s, FakeCamera(stage), stage, store=store, sleep=lambda _s: None, report=True)
+    assert result.exit_code == EXIT_ABORTED and "\n" not in result.message and "finished" not in result.message
+    assert result.message.startswith("session stopped after capture, in the report: report not written: ")
+    assert "libpng error: Write Error" in result.message
+    assert result.message.endswith(f"then continue with: harp session resume {tmp_path / 's'}")
+    kinds = [json.loads(line)["kind"] for line in (tmp_path / "s" / "manifest.jsonl").read_text().splitlines()]
+    assert kinds[-2:] == ["report", "aborted"] and "finished" not in kinds
+    stage = FakeStage()
+    with SessionDir.open(tmp_path / "s") as s, ProfileStore(cfg.store_path) as store:
+        result = run_session(s, FakeCamera(stage), stage, store=store, sleep=lambda _s: None, report=True)
+    assert result.exit_code == EXIT_OK and result.frames_saved == 0
+    recs = [json.loads(line) for line in (tmp_path / "s" / "manifest.jsonl").read_text().splitlines()]
+    assert recs[-1]["kind"] == "finished" and recs[-2]["kind"] == "report" and recs[-2].get("failure") is None
+    assert (tmp_path / "s" / "report" / "report.md").is_file()

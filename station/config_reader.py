@@ -1,0 +1,106 @@
+"""Reading a configuration file safely: bounded bytes, bounded YAML, no YAML 1.1 surprises.
+
+A configuration path is read the way images are (:func:`station.files.read_regular_file`): a
+regular file only (a FIFO, a device or a directory is refused at once, never opened for a blocking
+read), at most :data:`MAX_CONFIG_BYTES`. The YAML document is composed (not yet constructed) and its
+node tree checked before any value is built, each problem one :class:`station.config.ConfigError`
+naming the field's path:
+
+* nesting deeper than :data:`MAX_DEPTH` levels (a configuration has four);
+* an integer with more than :data:`MAX_DIGITS` digits (Python refuses to build one of more than
+  4300 digits, and no field of a station needs more than a few);
+* a mapping key that is not a string (``1: x`` — YAML reads it as the integer 1);
+* a boolean spelled the YAML 1.1 way (``yes``, ``no``, ``on``, ``off``, any case): PyYAML reads
+  ``yes`` as true, which a user writing a name or a serial meant as text; write ``true`` or
+  ``false``, or quote the text.
+
+References
+----------
+.. [1] YAML 1.1 boolean type, https://yaml.org/type/bool.html (the spellings PyYAML resolves).
+.. [2] Python's integer string conversion length limit, ``sys.set_int_max_str_digits`` (3.11).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+MAX_CONFIG_BYTES = 1 << 20
+"""A configuration file's largest size (1 MiB; the shipped ones are under 4 kB)."""
+
+MAX_DEPTH = 16
+"""Deepest nesting of mappings and lists accepted (a station configuration has four levels)."""
+
+MAX_DIGITS = 30
+"""Most digits of an integer in a configuration (the largest field, a seed, needs 20)."""
+
+_PLAIN_BOOLEANS = {"true", "false"}
+
+
+def read_config_text(path: str | os.PathLike) -> str:
+    """The text of the configuration file ``path``, or :class:`station.config.ConfigError` naming it."""
+    from station.config import ConfigError
+    from station.files import BoundedReadError, read_regular_file
+
+    p = Path(path)
+    try:
+        data = read_regular_file(p, MAX_CONFIG_BYTES, what="a configuration file")
+    except BoundedReadError as exc:
+        raise ConfigError(p, "(file)", exc.reason) from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(p, "(file)", f"expected UTF-8 text (byte {exc.start} is not)") from None
+
+
+def load_yaml(text: str, path: str | os.PathLike) -> Any:
+    """The YAML document ``text`` as Python values, after :func:`check_yaml_nodes` on its node tree."""
+    import yaml
+
+    from station.config import ConfigError
+
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except RecursionError:
+        raise ConfigError(path, "(file)", f"nesting deeper than {MAX_DEPTH} levels") from None
+    if node is None:
+        return None
+    check_yaml_nodes(node, path)
+    return yaml.safe_load(text)
+
+
+def check_yaml_nodes(root: Any, path: str | os.PathLike) -> None:
+    """Refuse what :mod:`station.config_reader` lists, naming the field (dotted path) where it is."""
+    import yaml
+
+    from station.config import ConfigError
+
+    stack: list[tuple[Any, str, int]] = [(root, "", 1)]
+    while stack:
+        node, where, depth = stack.pop()
+        name = where or "(top level)"
+        if depth > MAX_DEPTH:
+            raise ConfigError(path, name, f"nesting deeper than {MAX_DEPTH} levels")
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if not (isinstance(key, yaml.ScalarNode) and key.tag == "tag:yaml.org,2002:str"):
+                    shown = key.value if isinstance(key, yaml.ScalarNode) else "a mapping or list"
+                    raise ConfigError(
+                        path, name, f"keys must be names, got {shown!r} (line {key.start_mark.line + 1}); quote it"
+                    )
+                stack.append((value, f"{where}.{key.value}" if where else str(key.value), depth + 1))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                stack.append((item, f"{name}[{i}]", depth + 1))
+        elif isinstance(node, yaml.ScalarNode):
+            if node.tag == "tag:yaml.org,2002:bool" and node.value.lower() not in _PLAIN_BOOLEANS:
+                raise ConfigError(
+                    path,
+                    name,
+                    f"{node.value!r} is read by YAML as a boolean; write true or false, or quote it for text",
+                )
+            if node.tag == "tag:yaml.org,2002:int":
+                digits = sum(ch.isdigit() for ch in node.value)
+                if digits > MAX_DIGITS:
+                    raise ConfigError(path, name, f"an integer of {digits} digits (at most {MAX_DIGITS})")
