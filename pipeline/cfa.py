@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.measure import ImageMeasurement, LineMeasurement, Rejection, measure_image
-from pipeline.resample import SmoothingMethod
+from pipeline.resample import DEFAULT_T, SmoothingMethod
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 """The Bayer patterns, named row by row from the top-left pixel."""
@@ -173,7 +173,7 @@ class MosaicMeasurement:
 def measure_mosaic(
     mosaic: NDArray[Any],
     pattern: str,
-    t: int = 30,
+    t: int = DEFAULT_T,
     sigma: float = 1.0,
     smoothing: SmoothingMethod = "local-quadratic",
 ) -> MosaicMeasurement:
@@ -215,7 +215,7 @@ def measure_mosaic(
 
 def measure_channels(
     image: NDArray[Any],
-    t: int = 30,
+    t: int = DEFAULT_T,
     sigma: float = 1.0,
     smoothing: SmoothingMethod = "local-quadratic",
     order: str = "RGB",

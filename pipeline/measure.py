@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from pipeline.edges import detect_edges
 from pipeline.grouping import Grouping, group_string_edges
-from pipeline.resample import MAX_EXTEND_PX, METHODS, SmoothingMethod, resample_polyline, smooth_subsample
+from pipeline.resample import DEFAULT_T, MAX_EXTEND_PX, METHODS, SmoothingMethod, resample_polyline, smooth_subsample
 from pipeline.straightness import hf_rms, straightness
 
 BRIDGE_GAP_PX = 6.0
@@ -275,7 +275,7 @@ def measure_grouping(
     grouping: Grouping,
     width: int,
     height: int,
-    t: int = 30,
+    t: int = DEFAULT_T,
     smoothing: SmoothingMethod = "local-quadratic",
     border: float | None = None,
 ) -> ImageMeasurement:
@@ -352,7 +352,7 @@ def _bbox(xy: Points) -> tuple[float, float, float, float]:
 
 def measure_image(
     image: NDArray[Any],
-    t: int = 30,
+    t: int = DEFAULT_T,
     sigma: float = 1.0,
     low: float | None = None,
     high: float | None = None,

@@ -82,6 +82,7 @@ __all__ = [
     "METHODS",
     "TRUNCATE",
     "SmoothingMethod",
+    "DEFAULT_T",
     "noise_gain",
     "resample_polyline",
     "smooth_subsample",
@@ -89,6 +90,9 @@ __all__ = [
     "subsample_grid",
 ]
 
+DEFAULT_T = 30
+"""The default along-edge subsampling factor ``t`` (Tang et al. 2012): the one place it is named,
+the measurement functions, the configuration (``pipeline.t``) and the commands' ``--t`` import it."""
 TRUNCATE = 3.0
 """The Gaussian window is truncated at ``TRUNCATE`` standard deviations."""
 MAX_EXTEND_PX = 3.0
@@ -239,7 +243,7 @@ def _valid_gaussian(r: Points, t: int, sig: float) -> Points:
 
 def smooth_subsample(
     xy: ArrayLike,
-    t: int = 30,
+    t: int = DEFAULT_T,
     step: float = 1.0,
     method: SmoothingMethod = "local-quadratic",
     extend: tuple[float, float] = (0.0, 0.0),
@@ -316,7 +320,7 @@ def smooth_subsample(
     return _local_quadratic(r, subsample_grid(length + e0 + e1, t_int) - e0, sig)
 
 
-def noise_gain(position: float, length: float, t: int = 30) -> float:
+def noise_gain(position: float, length: float, t: int = DEFAULT_T) -> float:
     """Noise standard deviation of the local-quadratic point at ``position`` (samples)
     on a piece ``length`` samples long, relative to the plain Gaussian in the middle
     of a long edge (module docstring, "Noise at the ends"; independent sample noise).

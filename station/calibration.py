@@ -76,13 +76,6 @@ class Calibration:
     details: Mapping[str, Any] = field(default_factory=dict)
     failure: str | None = None
 
-    @property
-    def selection_record(self) -> dict[str, Any]:
-        """How the spec was chosen, as a profile keeps it (``reason``, ``folds``)."""
-        if self.selection is None:
-            return {"reason": "given", "folds": "none"}
-        return {"reason": self.selection.reason, "folds": self.selection.folds}
-
     def profile(
         self,
         width: int,
@@ -94,7 +87,8 @@ class Calibration:
         focus: float | None = None,
         selection: Mapping[str, Any] | None = None,
     ) -> Profile:
-        """The profile of this calibration (raises ValueError for a failed one)."""
+        """The profile of this calibration (raises ValueError for a failed one); ``selection``:
+        its record (None: :func:`selection_record` of this calibration's selection)."""
         if self.failure is not None or not self.fit:
             raise ValueError(f"no profile of a failed calibration: {self.failure}")
         return Profile(
@@ -102,7 +96,7 @@ class Calibration:
             width=int(width),
             height=int(height),
             spec=self.spec,
-            selection=dict(self.selection_record if selection is None else selection),
+            selection=dict(selection_record(self.selection) if selection is None else selection),
             merit=self.merit,
             lens=lens,
             camera=camera,
@@ -257,3 +251,96 @@ def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -
             f"before, {holdout_d:.4f} px after): it does not generalise to other orientations"
         )
     return None
+
+
+# ------------------------------------------------------- a focus setting
+GIVEN_BY_CONFIG = "pipeline.model of the configuration"
+"""The selection reason of a spec the session's configuration names (``pipeline.model``)."""
+GIVEN_ON_COMMAND_LINE = "given on the command line"
+"""The selection reason of a spec a command's option names (``harp calibrate --model``, ``harp reprocess --spec``)."""
+
+
+def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG) -> dict[str, Any]:
+    """How the spec was chosen, as a profile keeps it: ``{"reason", "folds"}``.
+
+    ``selection``: the :class:`pipeline.select.Selection` of an automatic choice (its reason and
+    folds), or None for a given spec (``given_by``: :data:`GIVEN_BY_CONFIG` or
+    :data:`GIVEN_ON_COMMAND_LINE`; folds ``"none"``). The one place a selection reason is written.
+    """
+    if selection is None:
+        return {"reason": given_by, "folds": "none"}
+    return {"reason": selection.reason, "folds": selection.folds}
+
+
+def calibrate_focus(
+    shots: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    pipeline: Any,
+    focus_idx: int,
+    spec: FitSpec | None,
+    *,
+    map_fn: MapFn = map,
+) -> Calibration:
+    """The calibration of one focus setting of a session: its orientations' edges (``shots``, one
+    per orientation) fitted by :func:`calibrate_shots` with each orientation held out in turn,
+    the configuration's bootstrap (``pipeline.bootstrap``) and seed (``pipeline.seed + 1000 *
+    focus_idx``). ``spec``: what to fit (None: chosen by cross-validation). The executor and
+    ``harp reprocess`` both call this, so re-processing fits what the session fitted."""
+    return calibrate_shots(
+        [list(s) for s in shots],
+        width,
+        height,
+        spec,
+        holdout="orientations",
+        bootstrap=pipeline.bootstrap,
+        seed=pipeline.seed + 1000 * focus_idx,
+        map_fn=map_fn,
+    )
+
+
+def focus_profile(
+    cal: Calibration,
+    width: int,
+    height: int,
+    config: Any,
+    focus_idx: int,
+    *,
+    provenance: Provenance,
+    given_by: str = GIVEN_BY_CONFIG,
+    details: Mapping[str, Any] | None = None,
+    judge: Callable[..., Any] | None = None,
+    measurements: Any = None,
+) -> Profile:
+    """The judged profile of a focus setting's calibration ``cal`` (:func:`calibrate_focus`).
+
+    The session's identities (lens, camera body, focus, optics), the selection record
+    (:func:`selection_record`), the capture's details (orientations, frames per orientation,
+    ``t``) plus ``details``, and ``judge(profile, config.qa, measurements=measurements)``
+    (:func:`station.qa.verdicts.qa_verdict`, passed in: the QA imports this module) on
+    ``measurements`` (the edges it was fitted on, :class:`station.qa.verdicts.Measurements`;
+    None: not re-judged on edges). ``judge`` None: not judged. Raises ValueError for a failed
+    calibration.
+    """
+    profile = cal.profile(
+        width,
+        height,
+        provenance=provenance,
+        lens=config.lens,
+        camera=config.camera_body,
+        focus=config.focus_settings[focus_idx],
+        selection=selection_record(cal.selection, given_by),
+    )
+    profile = profile.with_(
+        optics=config.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
+        details={
+            **profile.details,
+            **dict(details or {}),
+            "orientations_deg": list(config.capture.orientations_deg),
+            "frames_per_orientation": config.capture.frames_per_orientation,
+            "t": config.pipeline.t,
+        },
+    )
+    if judge is None:
+        return profile
+    return profile.with_(qa=judge(profile, config.qa, measurements=measurements))

@@ -16,6 +16,7 @@ from typing import Any
 
 from pipeline.cfa import MosaicMeasurement, measure_channels, measure_mosaic
 from pipeline.edgeset import FitFailure
+from pipeline.resample import DEFAULT_T
 from pipeline.tca import DEFAULT_TCA_DEGREE, LensfunTcaFit, TcaFit, channel_pairs, fit_tca, lensfun_tca
 from station.imageio import ImageReadError
 from station.inputs import NO_STRINGS, InputError, read_image
@@ -24,7 +25,7 @@ from station.raw import is_raw_path, read_raw
 MONO = "a grey image has one channel: TCA needs a colour image or a camera RAW file (a monochrome camera has no TCA)"
 
 
-def measure_colour_file(path, t: int = 30) -> MosaicMeasurement:
+def measure_colour_file(path, t: int = DEFAULT_T) -> MosaicMeasurement:
     """Read one colour shot and measure it per channel (module docstring); InputError naming the file."""
     try:
         if is_raw_path(path):

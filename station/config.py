@@ -32,6 +32,7 @@ import yaml
 
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
 from pipeline.fitspec import KINDS, FitSpec
+from pipeline.resample import DEFAULT_T
 from station.store.errors import StoreError
 from station.store.location import SQLITE, StoreLocation, parse_store
 
@@ -230,7 +231,7 @@ class CaptureConfig:
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    t: int = 30
+    t: int = DEFAULT_T
     model: str = "radial"
     degree: int | None = None  # None: the fit's default for the model
     tangential: bool = False  # radial model: decentering terms p1, p2
@@ -558,7 +559,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
 
     pp = top.section("pipeline", keys_of(PipelineConfig), optional=True)
     pipe = PipelineConfig(
-        t=pp.number("t", 30, min=1, integer=True),
+        t=pp.number("t", DEFAULT_T, min=1, integer=True),
         model=pp.string("model", "radial"),
         degree=pp.number("degree", None, min=1, integer=True),
         tangential=pp.boolean("tangential", False),

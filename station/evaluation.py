@@ -18,6 +18,7 @@ from pipeline.evaluate import corrected_points
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.normalise import corner_homography
+from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.inputs import NO_STRINGS, InputError, measure_grey, read_image
 
@@ -59,7 +60,9 @@ def _sd(st) -> dict:
     return {"d": float(st.d), "d_max": float(st.d_max)}
 
 
-def evaluate(correction_path: str, image_paths, *, already_corrected=False, focal=None, lens_name=None, t=30) -> dict:
+def evaluate(
+    correction_path: str, image_paths, *, already_corrected=False, focal=None, lens_name=None, t=DEFAULT_T
+) -> dict:
     """The JSON report of ``harp evaluate`` (see the module docstring); raises InputError (one line)."""
     images, size, errors = [], None, []
     for path in image_paths:  # a bad shot is reported and skipped; the others are evaluated

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.exports.registry import ExportSource
+from pipeline.resample import DEFAULT_T
 from station.profile import Profile
 
 
@@ -156,7 +157,7 @@ def provenance_edges(profile: Profile, model_dir: str | os.PathLike | None = Non
             return FittingEdges(None, f"fitting shot {hit}: cannot read ({exc.strerror or exc})")
         found.append(hit)
     try:
-        return measured_edges(found, prov.t or 30)
+        return measured_edges(found, prov.t or DEFAULT_T)
     except ValueError as exc:
         return FittingEdges(None, str(exc))
 

@@ -6,7 +6,7 @@ re-does one focus setting of one archived session directory exactly as the execu
 (:mod:`station.session.executor`): the frames of each orientation's accepted attempt averaged
 (checked against the manifest's SHA-256), measured (:func:`station.session.processing.measure_shot`
 with the session's ``pipeline.t``) and checked (strings found at the expected angle), fitted by
-:func:`station.calibration.calibrate_shots` (leave one orientation out, the session's bootstrap
+:func:`station.calibration.calibrate_focus` (leave one orientation out, the session's bootstrap
 and seed), and judged against the session's ``qa`` thresholds. It only *reads* the session
 directory (no lock, nothing written), so an archive can be read-only, and it never raises for
 a bad session: a :class:`FocusResult` carries the new profile or a one-line ``failure``.
@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
-from station.ctrl_c import sigint_blocked, start_forkserver_deaf_to_ctrl_c
+from station.ctrl_c import sigint_blocked
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -251,9 +251,9 @@ def _spec(job: FocusJob, config: Any) -> Any:
 
 
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
-    from station.calibration import calibrate_shots
+    from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
     from station.provenance import make_provenance
-    from station.qa.verdicts import qa_verdict
+    from station.qa.verdicts import Measurements, qa_verdict
     from station.session import layout
     from station.session.processing import average_frames, measure_shot, shot_problems
 
@@ -288,36 +288,23 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         frame_files += [s.path / r.file for r in records]
     assert size is not None
     w, h = size
-    pc = cfg.pipeline
-    spec = _spec(job, cfg)
-    cal = calibrate_shots(
-        shots, w, h, spec, holdout="orientations", bootstrap=pc.bootstrap, seed=pc.seed + 1000 * f, map_fn=map
-    )
+    cal = calibrate_focus(shots, w, h, cfg.pipeline, f, _spec(job, cfg))
     if cal.failure or not cal.fit:
         raise ValueError(f"{where}: the fit failed: {cal.failure}")
     old = s.old_profile(f)
-    profile = cal.profile(
+    profile = focus_profile(
+        cal,
         w,
         h,
-        provenance=make_provenance(frame_files, t=pc.t, command="harp reprocess", station=cfg.station.id),
-        lens=cfg.lens,
-        camera=cfg.camera_body,
-        focus=focus,
-        selection=None
-        if cal.selection is not None
-        else {"reason": "given" if job.spec else "pipeline.model of the configuration"},
+        cfg,
+        f,
+        provenance=make_provenance(frame_files, t=cfg.pipeline.t, command="harp reprocess", station=cfg.station.id),
+        given_by=GIVEN_ON_COMMAND_LINE if job.spec else GIVEN_BY_CONFIG,
+        details={"session_model_file": str(s.path / layout.profile_file(f))},
+        judge=qa_verdict,
+        measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}"),
     )
-    profile = profile.with_(
-        optics=cfg.optics,
-        details={
-            **profile.details,
-            "orientations_deg": list(cfg.capture.orientations_deg),
-            "frames_per_orientation": n,
-            "t": pc.t,
-            "session_model_file": str(s.path / layout.profile_file(f)),
-        },
-    )
-    return focus, profile.with_(qa=qa_verdict(profile, cfg.qa)), old
+    return focus, profile, old
 
 
 # --------------------------------------------------------- where it runs
@@ -350,14 +337,12 @@ def run_jobs(
 
 
 def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(PRELOAD)
-    start_forkserver_deaf_to_ctrl_c()
+    from station.pool import forkserver_pool
+
     results: dict[int, FocusResult] = {}
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    pool = forkserver_pool(workers, PRELOAD)
     try:
         with sigint_blocked():  # submitting starts the workers: none is left half-started
             futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}

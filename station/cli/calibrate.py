@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
+from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
@@ -92,7 +93,9 @@ def register(subparsers) -> None:
         metavar="IMAGE",
         help="shots never used in the fit: corrected by the model and measured",
     )
-    p.add_argument("-t", "--t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)")
+    p.add_argument(
+        "-t", "--t", type=positive_int, default=DEFAULT_T, help=f"along-edge subsampling factor (default {DEFAULT_T})"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -105,12 +108,6 @@ def _measure_one(job: tuple[str, int]):
     """``(path, ImageMeasurement)`` of one shot (each shot is measured once)."""
     path, t = job
     return path, measure_file(path, t)[1]
-
-
-def _ignore_sigint() -> None:  # in a worker: Ctrl-C is the command's to handle (no worker traceback)
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @contextlib.contextmanager
@@ -131,11 +128,13 @@ def _workers(n_jobs: int, balance: bool = False):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from station.pool import ignore_ctrl_c
+
     # the objects alive now (modules, the shots' points) are left alone by the garbage collector from
     # here on: a forked worker then copies only the memory pages it writes, not every page the
     # collector would walk (2-4x fewer page faults)
     gc.freeze()
-    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=ignore_ctrl_c)
 
     def map_fn(fn, *iterables):
         with sigint_blocked():  # the first submit forks the workers: none runs this process's Ctrl-C
@@ -193,7 +192,14 @@ def calibrate(args) -> dict:
 
 
 def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
-    from station.calibration import calibrate_shots, holdout_warning, shot_count_problem, size_problem
+    from station.calibration import (
+        GIVEN_ON_COMMAND_LINE,
+        calibrate_shots,
+        holdout_warning,
+        selection_record,
+        shot_count_problem,
+        size_problem,
+    )
     from station.files import write_profile
     from station.provenance import make_provenance
 
@@ -209,11 +215,10 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
     cal = calibrate_shots(
         shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
     )
+    selection = selection_record(cal.selection, GIVEN_ON_COMMAND_LINE)
     if cal.selection is not None:
         choice = cal.selection.to_dict()
-        selection = {"reason": cal.selection.reason, "folds": cal.selection.folds}
     else:
-        selection = {"reason": "given on the command line", "folds": "none"}
         choice = {**cal.spec.to_dict(), **selection, "table": []}
     res = cal.fit
     if not res:

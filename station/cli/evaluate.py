@@ -26,6 +26,7 @@ import json
 import sys
 from pathlib import Path
 
+from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -60,7 +61,12 @@ def register(subparsers) -> None:
         "--lens", default=None, metavar="NAME", help="lensfun: the lens ('maker model' or 'model') of a database"
     )
     p.add_argument(
-        "-t", "--t", dest="t", type=positive_int, default=30, help="along-edge subsampling factor (default 30)"
+        "-t",
+        "--t",
+        dest="t",
+        type=positive_int,
+        default=DEFAULT_T,
+        help=f"along-edge subsampling factor (default {DEFAULT_T})",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)

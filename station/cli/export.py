@@ -44,6 +44,7 @@ import math
 import sys
 from pathlib import Path
 
+from pipeline.resample import DEFAULT_T
 from station.inputs import InputError
 
 FORMAT_CHOICES = (
@@ -254,7 +255,7 @@ def _fitting_edges(args, profile, model_dir, known):
         return FittingEdges(None, "not measured (--no-shots)")
     if args.shots:
         try:
-            return measured_edges(args.shots, profile.provenance.t or 30)
+            return measured_edges(args.shots, profile.provenance.t or DEFAULT_T)
         except ValueError as exc:
             raise ExportError(str(exc)) from None
     return fitting_edges(profile, model_dir)

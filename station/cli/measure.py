@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.measure import ImageMeasurement
+from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.cli.inputs import positive_int
 from station.inputs import InputError, measure_file
@@ -53,8 +54,8 @@ def register(subparsers) -> None:
         "-t",
         "--t",
         type=positive_int,
-        default=30,
-        help="along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default 30)",
+        default=DEFAULT_T,
+        help=f"along-edge subsampling factor; blur sigma 0.8*sqrt(t^2-1) px (default {DEFAULT_T})",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     p.add_argument("--overlay", metavar="DIR", help="write an overlay PNG per image into DIR")

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -33,7 +34,9 @@ def register(subparsers) -> None:
         description=__doc__.split("\n\n")[0],
     )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="colour or camera RAW harp shots, harp turned between")
-    p.add_argument("-t", "--t", type=positive_int, default=30, help="along-edge subsampling (default 30)")
+    p.add_argument(
+        "-t", "--t", type=positive_int, default=DEFAULT_T, help=f"along-edge subsampling (default {DEFAULT_T})"
+    )
     p.add_argument("--degree", type=positive_int, default=3, help="total degree of each channel's field (default 3)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--out", metavar="FILE", help="write the fields and lensfun terms (.yaml or .json)")

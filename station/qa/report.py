@@ -39,6 +39,8 @@ from typing import Any
 import matplotlib
 import numpy as np
 
+from pipeline.resample import DEFAULT_T
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
@@ -527,7 +529,7 @@ def markdown_to_html(md: str, title: str = "") -> str:
 
 
 # ------------------------------------------------------- session evidence
-def session_shots(session, focus_idx: int, t: int = 30) -> list[Shot]:
+def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
     """Averaged, measured shots of one focus setting of an open
     :class:`station.session_dir.SessionDir` (orientations with no frames are skipped).
 

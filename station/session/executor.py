@@ -5,7 +5,7 @@ moves the turntable (``move_to`` returns when idle), captures and saves each fra
 atomically in the session directory, averages and checks each shot (exposure,
 strings found, string angle = commanded orientation + harp offset within a
 tolerance) and sends the check back to the plan, which decides whether to capture
-the shot again; fits each focus setting (:func:`station.calibration.calibrate_shots`,
+the shot again; fits each focus setting (:func:`station.calibration.calibrate_focus`,
 leave one orientation out) and stores its profile (model file and store row from
 the same :class:`station.profile.Profile`).
 
@@ -48,7 +48,7 @@ import numpy as np
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
 from station import __version__
-from station.calibration import Calibration, calibrate_shots
+from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.files import describe_os_error
 from station.profile import Profile
 from station.session import layout
@@ -469,15 +469,13 @@ class Executor:
         f = step.focus_idx
         n_o = len(self.config.capture.orientations_deg)
         w, h = self._image_size(f)
-        pc = self.config.pipeline
-        cal = calibrate_shots(
+        cal = calibrate_focus(
             [list(self._shots[(f, o)].lines) for o in range(n_o)],
             w,
             h,
-            pc.spec,
-            holdout="orientations",
-            bootstrap=pc.bootstrap,
-            seed=pc.seed + 1000 * f,
+            self.config.pipeline,
+            f,
+            self.config.pipeline.spec,
             map_fn=self.workers.map,
         )
         self._calibrations[f] = cal
@@ -526,9 +524,17 @@ class Executor:
         ]
         rel = layout.profile_file(f)
         path = self.session.path / rel
-        profile = cal.profile(
+        # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
+        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again,
+        # the stored model judged on the edges it was fitted on, as the QA after the executor does
+        from station.qa.verdicts import qa_verdict, session_measurements
+
+        profile = focus_profile(
+            cal,
             w,
             h,
+            cfg,
+            f,
             provenance=make_provenance(
                 frames,
                 t=cfg.pipeline.t,
@@ -536,27 +542,10 @@ class Executor:
                 station=cfg.station.id,
                 session_dir=str(self.session.path.resolve()),
             ),
-            lens=cfg.lens,
-            camera=cfg.camera_body,
-            focus=cfg.focus_settings[f],
-            selection=None if cal.selection is not None else {"reason": "pipeline.model of the configuration"},
+            details={"model_file": str(path)},
+            judge=qa_verdict,
+            measurements=session_measurements(self.session, f),
         )
-        profile = profile.with_(
-            optics=cfg.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
-            details={
-                **profile.details,
-                "model_file": str(path),
-                "orientations_deg": list(cfg.capture.orientations_deg),
-                "frames_per_orientation": cfg.capture.frames_per_orientation,
-                "t": cfg.pipeline.t,
-            },
-        )
-        # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
-        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
-        from station.qa.verdicts import qa_verdict, session_measurements
-
-        # the stored model judged on the edges it was fitted on, as the QA after the executor does
-        profile = profile.with_(qa=qa_verdict(profile, cfg.qa, measurements=session_measurements(self.session, f)))
         write_profile(path, profile)
         digest = sha256_file(path)
         profile_id = None

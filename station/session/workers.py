@@ -1,8 +1,8 @@
 """The process pool of a session's fits (cross-validation and bootstrap replicates).
 
 :class:`FitWorkers` creates the pool on first use (``pipeline.workers`` > 1; else
-plain ``map``) with the ``forkserver`` start method — the session process runs
-device threads, so it must not fork — and shuts it down with :meth:`FitWorkers.close`.
+plain ``map``) under the station's pool policy (:func:`station.pool.forkserver_pool`:
+``forkserver`` — the session process runs device threads, so it must not fork) and shuts it down with :meth:`FitWorkers.close`.
 Its workers end themselves when the session process is gone (a SIGKILLed session
 cannot shut its pool down) and ignore Ctrl-C, which the session process handles.
 """
@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from station.ctrl_c import start_forkserver_deaf_to_ctrl_c
+from station.pool import forkserver_pool
 
 PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
 """Modules the forkserver imports once, so that each worker starts warm (the fits' and the
@@ -41,15 +40,7 @@ class FitWorkers:
 
     def _create(self) -> Any:
         if self._pool is None:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-
-            ctx = mp.get_context("forkserver")  # not fork: this process runs device threads
-            ctx.set_forkserver_preload(PRELOAD)
-            start_forkserver_deaf_to_ctrl_c()
-            self._pool = ProcessPoolExecutor(
-                max_workers=self.n, mp_context=ctx, initializer=_exit_with_session, initargs=(os.getpid(),)
-            )
+            self._pool = forkserver_pool(self.n, PRELOAD, _exit_with_session, (os.getpid(),))
         return self._pool
 
     def warm_up(self) -> None:
@@ -87,10 +78,8 @@ def _exit_with_session(pid: int, period_s: float = 0.5) -> None:
     """Process-pool initializer: the worker ends itself once the session process
     ``pid`` is gone. A SIGKILLed session cannot shut its pool down, and its idle
     workers would otherwise wait on the pool's queue (and keep its forkserver) forever.
-    Ctrl-C reaches the whole process group: the session process handles it (the
-    frames are kept, the pool is shut down), so the workers ignore SIGINT instead
-    of each printing a KeyboardInterrupt traceback."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    (SIGINT is ignored by the pool's policy, :mod:`station.pool`: the session process
+    handles Ctrl-C, the frames are kept, the pool is shut down.)"""
 
     def watch() -> None:
         while True:

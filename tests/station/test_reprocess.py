@@ -81,3 +81,40 @@ def test_a_session_is_finished_and_stored_when_its_last_focus_result_arrives(tmp
     dry = SessionCollector(jobs[:1])  # no store: finished, nothing stored
     dry(ok("/a", 0))
     assert dry.outcomes["/a"].ok and dry.outcomes["/a"].new_ids == [] and len(dry.outcomes["/a"].profiles) == 1
+
+
+def test_reprocessing_a_session_rebuilds_the_profile_it_stored(factory_archive):
+    """Issue 22 item 1: the session and ``harp reprocess`` build a focus setting's profile by the
+    same builder (station.calibration.calibrate_focus / focus_profile): re-processing the frames
+    with the session's configuration gives the model, spec, selection and verdict it stored."""
+    import numpy as np
+
+    for f in (0, 1):
+        r = reprocess_focus(FocusJob(str(factory_archive.session), f))
+        assert r.failure is None, r.failure
+        old = r.old.profile
+        assert old is not None and r.profile is not None
+        assert r.profile.spec == old.spec and r.profile.selection == old.selection
+        a, b = r.profile.model.to_dict(), old.model.to_dict()
+        assert a.keys() == b.keys()
+        for k in a:
+            if isinstance(a[k], (int, float, list)):
+                np.testing.assert_allclose(np.asarray(a[k], float), np.asarray(b[k], float), rtol=1e-9, atol=1e-12)
+            else:
+                assert a[k] == b[k], k
+        assert r.profile.qa is not None and old.qa is not None
+        assert r.profile.qa.verdict == old.qa.verdict == r.old.verdict
+        assert [c.split(":")[0] for c in r.profile.qa.reasons] == [c.split(":")[0] for c in old.qa.reasons]
+
+
+def test_the_selection_reasons_are_written_in_one_place():
+    """Issue 22 item 1: the reason a given spec is recorded with is written once
+    (station.calibration), the session, ``harp calibrate`` and ``harp reprocess`` import it."""
+    from pathlib import Path
+
+    from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE
+
+    root = Path(__file__).resolve().parents[2] / "station"
+    for text in (GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE):
+        holders = [p.relative_to(root).as_posix() for p in root.rglob("*.py") if text in p.read_text()]
+        assert holders == ["calibration.py"], (text, holders)
