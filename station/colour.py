@@ -87,3 +87,39 @@ def tca_document(fits: dict[str, TcaFit], lensfun: dict[str, LensfunTcaFit], pat
             for k, v in lensfun.items()
         },
     }
+
+
+def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
+    """The red and blue :class:`~pipeline.models.tca_model.TcaField` of a ``harp tca --out`` file.
+
+    Returns ``{"R": field, "B": field}``; an :class:`~station.inputs.InputError` naming the file when
+    it is not a harp TCA file (YAML or JSON), lacks a channel, or is for another image size.
+    """
+    import json
+
+    import yaml
+
+    from pipeline.models.tca_model import TcaField
+    from station.bounded_read import BoundedReadError, read_regular_file
+
+    p = Path(path)
+    try:
+        text = read_regular_file(p, 1 << 20, what="a harp TCA file").decode("utf-8")
+        doc = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except BoundedReadError as exc:
+        raise InputError(f"{p}: {exc.reason}") from None
+    except (ValueError, yaml.YAMLError) as exc:
+        raise InputError(f"{p}: not a harp TCA file ({type(exc).__name__}); write one with harp tca --out") from None
+    if not isinstance(doc, dict) or doc.get("format") != "harp-tca":
+        raise InputError(f"{p}: not a harp TCA file (no 'format: harp-tca'); write one with harp tca --out")
+    fields: dict[str, Any] = {}
+    for ch in "RB":
+        try:
+            fields[ch] = TcaField.from_dict(doc["channels"][ch]["field"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{p}: channels.{ch}.field: missing or malformed ({exc})") from None
+        if (fields[ch].width, fields[ch].height) != (width, height):
+            raise InputError(
+                f"{p}: the TCA is for {fields[ch].width}x{fields[ch].height} images, the model for {width}x{height}"
+            )
+    return fields

@@ -7,6 +7,12 @@ format, channels and bit depth, under the same file name in ``DIR``. The
 model's image size must match the images'. An image that cannot be read or has
 another size is named on stderr (one line) and skipped; the others are still
 corrected. Exit 0 on success, 2 on bad input.
+
+``--tca FILE`` (a ``harp tca --out`` file) corrects lateral chromatic aberration too:
+green through the model, red and blue each through its own correction, the model after
+the channel's TCA field (:class:`pipeline.models.tca_model.ChannelModel`,
+:math:`U_c(x) = U_g(T_c(x))`), so that the three channels of the corrected image
+coincide. It needs colour images (BGR as OpenCV reads them); a grey one is refused.
 """
 
 from __future__ import annotations
@@ -50,6 +56,11 @@ def register(subparsers) -> None:
         "straight to 0.001 px where cubic leaves 0.008 px and linear 0.013 px)",
     )
     p.add_argument("--overwrite", action="store_true", help="replace existing files in DIR")
+    p.add_argument(
+        "--tca",
+        metavar="FILE",
+        help="also correct lateral chromatic aberration: red and blue through their own fields (a harp tca --out file)",
+    )
     p.set_defaults(func=run)
 
 
@@ -71,6 +82,13 @@ def _run(args) -> int:
         mf = read_model_file(args.model)
     except ValueError as exc:
         raise UndistortError(str(exc)) from None
+    channels = None
+    if getattr(args, "tca", None):
+        from pipeline.models.tca_model import ChannelModel
+        from station.colour import read_tca_file
+
+        fields = read_tca_file(args.tca, mf.width, mf.height)
+        channels = {ch: ChannelModel(mf.model, f) for ch, f in fields.items()}
     out_dir = Path(args.output_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UndistortError(f"{out_dir}: exists and is not a directory")
@@ -98,25 +116,46 @@ def _run(args) -> int:
     status = 0
     for path in args.images:  # a bad image is named on stderr; the others are still corrected
         try:
-            _correct_one(args, mf, Path(path), out_dir, cache)
+            _correct_one(args, mf, Path(path), out_dir, cache, channels)
         except InputError as exc:
             print(f"harp undistort: {exc}", file=sys.stderr)
             status = 2
     return status
 
 
-def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict) -> None:
+def _maps(cache: dict, key: tuple, model, w: int, h: int, what: str):
+    """The undistortion maps of ``model`` for ``w x h`` images, computed once (``cache[key]``)."""
+    if key not in cache:
+        t0 = time.perf_counter()
+        cache[key] = fast_undistortion_maps(model, w, h, step=DEFAULT_STEP_PX)
+        m = cache[key]
+        print(
+            f"maps for {w}x{h}{what}: {time.perf_counter() - t0:.2f} s "
+            f"(interpolation error <= {m.interp_error_px:.1e} px)"
+        )
+    return cache[key]
+
+
+def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict, channels: dict | None = None) -> None:
     """Correct one image into ``out_dir``; InputError (one line) if it cannot be."""
     img = read_image(p, grey=False)
     h, w = img.shape[:2]
     if (w, h) != (mf.width, mf.height):
         raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for {mf.width}x{mf.height} images")
-    if (w, h) not in cache:
-        t0 = time.perf_counter()
-        cache[(w, h)] = fast_undistortion_maps(mf.model, w, h, step=DEFAULT_STEP_PX)
-        m = cache[(w, h)]
-        print(f"maps for {w}x{h}: {time.perf_counter() - t0:.2f} s (interpolation error <= {m.interp_error_px:.1e} px)")
-    out = undistort_image(img, cache[(w, h)], INTERPOLATIONS[args.interpolation])
+    kernel = INTERPOLATIONS[args.interpolation]
+    if channels is None:
+        out = undistort_image(img, _maps(cache, (w, h), mf.model, w, h, ""), kernel)
+    else:
+        if img.ndim != 3 or img.shape[2] < 3:
+            raise UndistortError(f"{p}: a grey image has no colour channels to correct for TCA; drop --tca for it")
+        out = img.copy()
+        for index, ch in ((2, "R"), (1, "G"), (0, "B")):  # OpenCV's BGR order
+            model = mf.model if ch == "G" else channels[ch]
+            maps = _maps(cache, (w, h, ch), model, w, h, f", {ch}")
+            out[..., index] = undistort_image(np.ascontiguousarray(img[..., index]), maps, kernel)
+        if img.shape[2] > 3:  # an alpha channel follows the green (reference) geometry
+            maps = _maps(cache, (w, h, "G"), mf.model, w, h, ", G")
+            out[..., 3:] = undistort_image(np.ascontiguousarray(img[..., 3:]), maps, kernel).reshape(h, w, -1)
     target = out_dir / p.name
     params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []
     try:

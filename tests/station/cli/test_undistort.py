@@ -97,3 +97,83 @@ def test_output_dir_that_cannot_be_created_is_one_line(setup, tmp_path, capsys):
     assert main(["undistort", str(model), str(grey), "-o", str(blocker / "out")]) == 2
     err = capsys.readouterr().err
     assert err == f"harp undistort: {blocker / 'out'}: cannot create the output directory (Not a directory)\n"
+
+
+def _colour_shot(angle: float, seed: int, tca) -> np.ndarray:
+    """A BGR harp shot, each channel rendered through its own exact map (green: LENS; red and blue:
+    LENS after the closed-form TCA of tests/pipeline/colour_lenses.py)."""
+    from tests.pipeline.colour_lenses import ChannelLens
+
+    scene = HarpScene(angle_deg=angle, spacing_px=40.0, string_width_px=8.0, blur_px=1.0)
+    lenses = {"R": ChannelLens(LENS, tca["R"]), "G": LENS, "B": ChannelLens(LENS, tca["B"])}
+    planes = {
+        c: render_harp(W, H, scene, lens=m, noise_sigma=0.5, seed=seed + i).image
+        for i, (c, m) in enumerate(lenses.items())
+    }
+    return np.dstack([planes["B"], planes["G"], planes["R"]])
+
+
+def _channel_offset(img: np.ndarray, index: int) -> float:
+    """Median |offset| (px) of channel ``index``'s edges from green's, along green's normals."""
+    from pipeline.tca import edge_offsets
+
+    ref = [ln.points for ln in measure_image(np.ascontiguousarray(img[..., 1])).lines]
+    ch = [ln.points for ln in measure_image(np.ascontiguousarray(img[..., index])).lines]
+    return float(np.median(np.abs(edge_offsets(ch, ref).offset)))
+
+
+def test_tca_corrected_channels_coincide(tmp_path, capsys):
+    """Issue 24 item 2: `harp undistort --tca` with the fields `harp tca` measured on four other
+    shots: the corrected red and blue edges lie on green's (truth: the shots' exact per-channel maps)."""
+    from tests.pipeline.colour_lenses import colour_lens
+
+    tca = colour_lens(W, H, strength=3.0)["tca"]  # red ~1 px, blue ~0.8 px at the corners
+    shots = []
+    for i, ang in enumerate((5.0, 50.0, 95.0, 140.0)):
+        p = tmp_path / f"fit{i}.png"
+        assert cv2.imwrite(str(p), _colour_shot(ang, 10 * i, tca))
+        shots.append(str(p))
+    assert main(["tca", *shots, "--out", str(tmp_path / "tca.yaml")]) == 0
+    model = tmp_path / "lens.yaml"
+    write_model_file(model, LENS, width=W, height=H)
+    test = tmp_path / "test.png"
+    shot = _colour_shot(27.0, 99, tca)
+    assert cv2.imwrite(str(test), shot)
+    capsys.readouterr()
+    assert main(["undistort", str(model), str(test), "-o", str(tmp_path / "plain")]) == 0
+    assert (
+        main(["undistort", str(model), str(test), "-o", str(tmp_path / "tca"), "--tca", str(tmp_path / "tca.yaml")])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "maps for 480x360, R" in out and "maps for 480x360, B" in out
+    plain = cv2.imread(str(tmp_path / "plain" / "test.png"), cv2.IMREAD_UNCHANGED)
+    fixed = cv2.imread(str(tmp_path / "tca" / "test.png"), cv2.IMREAD_UNCHANGED)
+    for index in (2, 0):  # red, blue
+        before, after = _channel_offset(plain, index), _channel_offset(fixed, index)
+        print(f"channel {index}: median offset from green {before:.4f} px without --tca, {after:.4f} px with")
+        assert before > 0.1 and after < 0.02 and after < before / 8, (index, before, after)
+    np.testing.assert_array_equal(fixed[..., 1], plain[..., 1])  # green: the model alone, as before
+
+
+def test_tca_needs_colour_images_and_a_tca_file(setup, tmp_path, capsys):
+    d, model, grey, png16, colour, image = setup
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: something-else\n")
+    assert main(["undistort", str(model), str(colour), "-o", str(tmp_path / "o"), "--tca", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad.yaml: not a harp TCA file" in err
+    from pipeline.models.tca_model import TcaField
+
+    doc = {"format": "harp-tca", "channels": {c: {"field": TcaField.zero(W, H, 3).to_dict()} for c in "RB"}}
+    ok = tmp_path / "zero.json"
+    import json
+
+    ok.write_text(json.dumps(doc))
+    assert main(["undistort", str(model), str(grey), "-o", str(tmp_path / "o2"), "--tca", str(ok)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a grey image has no colour channels" in err
+    other = {"format": "harp-tca", "channels": {c: {"field": TcaField.zero(W + 2, H, 3).to_dict()} for c in "RB"}}
+    ok.write_text(json.dumps(other))
+    assert main(["undistort", str(model), str(colour), "-o", str(tmp_path / "o3"), "--tca", str(ok)]) == 2
+    assert "the TCA is for 482x360 images, the model for 480x360" in capsys.readouterr().err
