@@ -216,6 +216,32 @@ class HarpShapeFit:
         bent = [s for s in self.strings if np.isfinite(s.bend_px)]
         return max(bent, key=lambda s: s.bend_px) if bent else None
 
+    def own_bends(self, samples: int = 201) -> dict[int, float]:
+        r"""Each string's bend *apart from what all strings share* (pixels): the largest
+        :math:`|\delta_k(u) - \tilde\delta(u)|` over the string's span, :math:`\tilde\delta` the
+        median of the *other* strings' deviations at :math:`u` (where at least half of them reach). A part common to every string (a whole harp's
+        sag, or a lens term the model lacks, which the fit can only put into the strings) is not one
+        string's fault and cannot be told from the lens; a single bent string stands out of it. Strings
+        without deviation terms are left out."""
+        bent = [st for st in self.strings if st.coefficients]
+        if not bent:
+            return {}
+        u = np.linspace(-1.0, 1.0, samples)
+        dev = np.vstack([st.deviation(u) for st in bent])
+        inside = np.vstack([(u >= st.span[0]) & (u <= st.span[1]) for st in bent])
+        enough = max(3, len(bent) // 2)  # where fewer strings reach, the median is not the others' (none taken)
+        out = {}
+        for i, st in enumerate(bent):
+            others = np.delete(np.arange(len(bent)), i)
+            common = np.zeros(samples)
+            for j in range(samples):
+                reach = others[inside[others, j]]
+                if len(reach) >= enough:
+                    common[j] = np.median(dev[reach, j])
+            own = np.abs(dev[i] - common)[inside[i]]
+            out[st.index] = float(own.max()) if own.size else float("nan")
+        return out
+
     def bent_strings(self, limit_px: float = BEND_LIMIT_PX) -> tuple[StringShape, ...]:
         """The strings bent beyond ``limit_px``."""
         return tuple(s for s in self.strings if np.isfinite(s.bend_px) and s.bend_px > limit_px)

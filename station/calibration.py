@@ -23,6 +23,7 @@ per-shot figures); :meth:`Calibration.profile` makes the
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -272,6 +273,73 @@ def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG) -> dict[st
     return {"reason": selection.reason, "folds": selection.folds}
 
 
+OUTLIER_FACTOR = 3.0
+"""A string is bent (QA) when its own bend exceeds the limit *and* this many times the median string's.
+A lens term the fitted model lacks bends the fits of many strings at once (a test session of straight
+strings whose model left d = 0.019 px showed own bends of 0.05-0.06 px on several strings); one bent
+string stands out of the others. When the median string itself is beyond the limit the harp cannot be
+told from the lens and QA says so without judging."""
+
+MIN_HEALTH_ORIENTATIONS = 3
+"""Turntable angles the harp's self-check needs: with two, a string's bend and the lens's terms
+trade (each string is seen along two lines only), and the bends found are not the strings'."""
+
+
+def harp_health(
+    shots: Sequence[Sequence[np.ndarray]], turntable_deg: Sequence[float], width: int, height: int, spec: FitSpec
+) -> dict[str, Any]:
+    """The harp's self-check (issue 19 item 4) as a profile keeps it (``details["harp_health"]``).
+
+    Every string's own bend fitted beside the lens ``spec`` with the shots' turntable angles
+    (:func:`pipeline.harp_shape.fit_harp_shape`): per string its bend, its own bend apart from what
+    every string shares (:meth:`pipeline.harp_shape.HarpShapeFit.own_bends`: a common part is a whole
+    harp's or a lens term's, not one string's fault) and the standard error (px); the worst string and
+    the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, as QA judges them;
+    ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
+    """
+    from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape
+
+    def num(v: float) -> float | None:
+        return float(v) if np.isfinite(v) else None
+
+    from pipeline.select import distinct_orientations
+
+    if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
+        return {
+            "limit_px": BEND_LIMIT_PX,
+            "failure": f"needs >= {MIN_HEALTH_ORIENTATIONS} turntable angles 10 deg apart to tell a string's bend "
+            f"from the lens (the plan has {distinct_orientations(turntable_deg)})",
+        }
+    hs = fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, spec)
+    if not hs:
+        return {"limit_px": BEND_LIMIT_PX, "failure": str(getattr(hs, "reason", "the joint fit failed"))}
+    own = {k: v for k, v in hs.own_bends().items() if np.isfinite(v)}
+    worst = max(own, key=lambda k: own[k]) if own else None
+    typical = float(np.median(list(own.values()))) if own else float("nan")
+    by_index = {s.index: s for s in hs.strings}
+    return {
+        "limit_px": BEND_LIMIT_PX,
+        "worst_string": worst,
+        "worst_bend_px": None if worst is None else own[worst],
+        "worst_bend_se_px": None if worst is None else num(by_index[worst].bend_se_px),
+        "bent_strings": sorted(k for k, v in own.items() if v > BEND_LIMIT_PX and v > OUTLIER_FACTOR * typical),
+        "typical_bend_px": typical,
+        "strings": [
+            {
+                "index": s.index,
+                "bend_px": num(s.bend_px),
+                "own_bend_px": own.get(s.index),
+                "bend_se_px": num(s.bend_se_px),
+                "shots": s.shots,
+                "span": [float(s.span[0]), float(s.span[1])],
+            }
+            for s in hs.strings
+        ],
+        "d_with_strings_px": num(hs.d_after),
+        "d_lens_only_px": num(hs.d_lens_only),
+    }
+
+
 def calibrate_focus(
     shots: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -281,13 +349,16 @@ def calibrate_focus(
     spec: FitSpec | None,
     *,
     map_fn: MapFn = map,
+    turntable_deg: Sequence[float] | None = None,
 ) -> Calibration:
     """The calibration of one focus setting of a session: its orientations' edges (``shots``, one
     per orientation) fitted by :func:`calibrate_shots` with each orientation held out in turn,
     the configuration's bootstrap (``pipeline.bootstrap``) and seed (``pipeline.seed + 1000 *
     focus_idx``). ``spec``: what to fit (None: chosen by cross-validation). The executor and
-    ``harp reprocess`` both call this, so re-processing fits what the session fitted."""
-    return calibrate_shots(
+    ``harp reprocess`` both call this, so re-processing fits what the session fitted.
+    ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
+    (:func:`harp_health`, kept in ``details["harp_health"]``)."""
+    cal = calibrate_shots(
         [list(s) for s in shots],
         width,
         height,
@@ -297,6 +368,10 @@ def calibrate_focus(
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
     )
+    if turntable_deg is None or cal.failure is not None or cal.spec is None:
+        return cal
+    health = harp_health(shots, turntable_deg, width, height, cal.spec)
+    return dataclasses.replace(cal, details={**cal.details, "harp_health": health})
 
 
 def focus_profile(

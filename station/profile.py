@@ -366,6 +366,8 @@ class Profile:
             merit["choice"] = {**self.spec.to_dict(), **dict(self.selection)}
         if self.qa is not None:
             merit["qa"] = self.qa.to_record()
+        if self.details.get("harp_health"):  # the harp's self-check: QA judges it from the file too
+            merit["harp_health"] = _plain(dict(self.details["harp_health"]))
         p = self.provenance
         prov: dict[str, Any] = {}
         if p.created_utc is not None:
@@ -401,6 +403,7 @@ class Profile:
         merit_doc = dict(mf.merit or {})
         choice = merit_doc.pop("choice", None)
         qa_doc = merit_doc.pop("qa", None)
+        health = merit_doc.pop("harp_health", None)
         spec, selection = _spec_of_choice(choice)
         prov = dict(mf.provenance or {})
         return cls(
@@ -417,6 +420,7 @@ class Profile:
             provenance=_provenance_of(prov),
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
+            details={"harp_health": dict(health)} if isinstance(health, Mapping) else {},
         )
 
     # -------------------------------------------------------------- store row

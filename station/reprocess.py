@@ -288,7 +288,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         frame_files += [s.path / r.file for r in records]
     assert size is not None
     w, h = size
-    cal = calibrate_focus(shots, w, h, cfg.pipeline, f, _spec(job, cfg))
+    cal = calibrate_focus(shots, w, h, cfg.pipeline, f, _spec(job, cfg), turntable_deg=cfg.capture.orientations_deg)
     if cal.failure or not cal.fit:
         raise ValueError(f"{where}: the fit failed: {cal.failure}")
     old = s.old_profile(f)

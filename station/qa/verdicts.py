@@ -204,6 +204,7 @@ def evaluate(
     measurements: Measurements | None = None,
     recomputed_holdout_d: float | None = None,
     recorded: Mapping[str, Any] | None = None,
+    harp_health: Mapping[str, Any] | None = None,
 ) -> Verdict:
     """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`); see the module docstring.
 
@@ -213,7 +214,9 @@ def evaluate(
     ``recorded``: the metrics of the verdict the profile was judged with at calibration (the
     ``distortion_recorded`` check); ``reference``: the golden correction of the same lens model
     for this image size (None: not compared; said when a threshold is set); ``extra``: figures
-    reported with the verdict, not judged (the field uncertainty).
+    reported with the verdict, not judged (the field uncertainty); ``harp_health``: the harp's
+    self-check (:func:`station.calibration.harp_health`): the session fails when a string is bent
+    beyond its limit (the harp, not the lens: the correction would carry the string's bend).
     """
     from pipeline.compare import compare_models
 
@@ -340,6 +343,41 @@ def evaluate(
                 "deviation from the reference: not checked, no reference given",
             )
         )
+
+    if harp_health:
+        limit = float(harp_health.get("limit_px") or 0.02)
+        worst = harp_health.get("worst_bend_px")
+        typical = harp_health.get("typical_bend_px")
+        if harp_health.get("failure") or worst is None:
+            why = harp_health.get("failure") or "no string seen in two shots"
+            checks.append(Check("string_bend_max", None, "<=", limit, None, f"harp self-check: not made ({why})"))
+        elif typical is not None and typical > limit:
+            metrics["string_bend_max_px"] = worst
+            checks.append(
+                Check(
+                    "string_bend_max",
+                    _finite(worst),
+                    "<=",
+                    limit,
+                    None,
+                    f"harp self-check: not judged: the median string bends by {typical:.4f} px (> {limit:g} px), "
+                    "which a lens term the model lacks does as well as a bent harp",
+                )
+            )
+        else:
+            bent = list(harp_health.get("bent_strings") or [])
+            k = bent[0] if bent else harp_health.get("worst_string")
+            metrics["string_bend_max_px"] = worst
+            beyond = f" and {worst / typical:.0f}x the median string's" if bent and typical else ""
+            text = (
+                f"harp: largest string bend (string {k}) {worst:.4f} px {'>' if bent else '<='} {limit:g} px"
+                f"{beyond}: {FAIL if bent else PASS}"
+            )
+            add(
+                Check("string_bend_max", _finite(worst), "<=", limit, not bent, text),
+                f"string {k} of the harp is bent by {worst:.4f} px (limit {limit:g} px): the correction "
+                "would carry its bend; straighten or replace the string, then capture again",
+            )
 
     return Verdict(
         FAIL if reasons else PASS,
@@ -480,6 +518,7 @@ def qa_verdict(
         measurements=measurements,
         recomputed_holdout_d=recomputed,
         recorded=profile.qa.metrics if profile.qa is not None else None,
+        harp_health=(profile.details or {}).get("harp_health"),
     )
 
 

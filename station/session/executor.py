@@ -477,6 +477,7 @@ class Executor:
             f,
             self.config.pipeline.spec,
             map_fn=self.workers.map,
+            turntable_deg=self.config.capture.orientations_deg,
         )
         self._calibrations[f] = cal
         if cal.failure or not cal.fit:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pipeline.fitspec import parse
 from station.calibration import holdout_warning, shot_count_problem, size_problem
@@ -35,3 +36,45 @@ def _line_residuals(p: np.ndarray) -> np.ndarray:
     c = p - p.mean(0)
     _, _, vt = np.linalg.svd(c, full_matrices=False)
     return c @ vt[1]
+
+
+def test_a_session_fit_checks_the_harp_and_qa_fails_a_bent_string():
+    """Issue 19 item 4 in the station: a focus setting fitted with its turntable angles carries the
+    harp's self-check, and QA fails when a string is bent beyond the limit, naming the string; a
+    straight harp passes that check. Truth: the generator's exact bends (a 0.05 px bow of string 4)."""
+    from pipeline.fitspec import FitSpec
+    from pipeline.harp_shape import BEND_LIMIT_PX
+    from pipeline.models import RadialModel
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig, QAConfig
+    from station.qa.verdicts import evaluate
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
+    turns = (0, 30, 60, 90, 120, 150)
+    spec = FitSpec("radial", 4, True, True)
+    results = {}
+    for name, bow in (("bent", 0.05), ("straight", 0.0)):
+        bends = np.zeros((11, 3))
+        bends[4] = (bow, 0.0, 0.0)
+        shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), seed=4)
+        cal = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=turns)
+        health = cal.details["harp_health"]
+        verdict = evaluate(cal.fit.model, w, h, 0.001, QAConfig(), harp_health=health)
+        results[name] = (health, verdict)
+    health, verdict = results["bent"]
+    assert health["worst_string"] == 4 and health["bent_strings"] == [4] and health["limit_px"] == BEND_LIMIT_PX
+    u = np.linspace(*health["strings"][4]["span"], 401)  # where the string was seen (half diagonals)
+    truth = float(np.max(np.abs(0.05 * 0.5 * (3 * u**2 - 1))))  # the bow's largest |delta| there
+    assert health["worst_bend_px"] == pytest.approx(truth, rel=0.2)  # recovered within 20 %
+    assert verdict.verdict == "FAIL" and any("string 4 of the harp is bent" in r for r in verdict.reasons)
+    check = next(c for c in verdict.checks if c.name == "string_bend_max")
+    assert check.passed is False and check.value == health["worst_bend_px"]
+    health, verdict = results["straight"]
+    assert health["bent_strings"] == [] and health["worst_bend_px"] < 0.01
+    assert next(c for c in verdict.checks if c.name == "string_bend_max").passed is True
+    assert verdict.verdict == "PASS"
+    # no angles (photographs): no self-check, nothing judged
+    shots, _ = turning_harp_point_sets(lens, w, h, turns[:3], np.zeros((11, 3)), seed=4)
+    assert "harp_health" not in calibrate_focus(shots, w, h, PipelineConfig(), 0, spec).details
