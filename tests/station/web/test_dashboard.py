@@ -113,6 +113,7 @@ def test_api_lens_has_every_profile_check_plot_and_download(served):
             "defined",
             "distortion_max",
             "distortion_recorded",
+            "string_bend_max",  # the harp's self-check (issue 19 item 4)
         }
         assert [d["format"] for d in p["downloads"]] == list(FORMATS)
         assert p["plots"] == {

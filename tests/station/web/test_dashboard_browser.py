@@ -64,7 +64,7 @@ def test_a_lens_page_shows_its_plots_and_its_downloads_load_in_opencv(page, dash
     assert page.locator("img.plot").count() == 4  # field and uncertainty of both profiles
     checks = page.locator("article.profile").first.locator("tr.check")
     # every check the session's QA made, in its order (issue 9: the stored model itself is judged)
-    names = ["holdout_d", "corrected_d", "defined", "distortion_max", "distortion_recorded"]
+    names = ["holdout_d", "corrected_d", "defined", "distortion_max", "distortion_recorded", "string_bend_max"]
     assert checks.evaluate_all("rs => rs.map(r => r.dataset.check)") == names
     assert page.locator("article.profile").first.locator("tr.check.passed").count() == len(names)
     _shot(page, "dashboard-lens.png")
