@@ -70,6 +70,14 @@ def check_config(config: Config) -> ConfigCheck:
             f"{config.path}: station.turntable.port: {port!r} does not exist on this machine "
             f"(plug the turntable in, or see `harp devices` for the ports found)"
         )
+    sessions = Path(config.sessions_dir)
+    if sessions.exists() and not sessions.is_dir():
+        errors.append(
+            config.error(
+                "store.sessions_dir",
+                f"expected a directory for the sessions, {sessions} is a file; name a directory (it is created)",
+            )
+        )
     targets = [("store.sessions_dir", config.sessions_dir)]
     if config.store_path is not None:
         targets.append(("store.path", config.store_path.parent))

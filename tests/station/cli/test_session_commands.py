@@ -68,6 +68,18 @@ def test_config_check_refuses_an_unknown_camera_key(tmp_path, capsys):
     assert "station.camera.exposure_typo_us: unknown key for the sim camera (known: " in err
 
 
+def test_config_check_refuses_sessions_dir_naming_a_file(tmp_path, capsys):
+    # issue 25: a sessions_dir that is a regular file passed with a warning, then every session failed
+    d = yaml.safe_load(DEMO.read_text())
+    (tmp_path / "afile").write_text("not a directory")
+    d["store"]["sessions_dir"] = str(tmp_path / "afile")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(d))
+    code, out, err = run(capsys, "config", "check", bad)
+    assert code == 2 and err.count("\n") == 1
+    assert f"store.sessions_dir: expected a directory for the sessions, {tmp_path / 'afile'} is a file" in err
+
+
 def test_session_plan_touches_nothing_and_counts_the_plan(tmp_path, capsys):
     cfg = demo_copy(tmp_path)
     code, out, err = run(capsys, "session", "plan", cfg, "--json")
