@@ -200,7 +200,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
         shot_count_problem,
         size_problem,
     )
-    from station.files import write_profile
+    from station.files import sha256_file, write_profile
     from station.provenance import make_provenance
 
     problem = size_problem([(str(p), m.width, m.height) for p, m in fit_m + hold_m])
@@ -266,7 +266,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
             args.images,
             t=args.t,
             command=["harp", "calibrate", *sys.argv[2:]],
-            holdout=[{"path": str(p)} for p, _ in hold_m],
+            holdout=[{"path": str(p), "sha256": sha256_file(p)} for p, _ in hold_m],
         ),
         selection=selection,
     )

@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import cv2
 import pytest
@@ -65,6 +66,14 @@ def test_radial_fit_with_holdout_json(shots, tmp_path, capsys):
     assert compare_models(model, LENS, W, H).rms < 0.01
     text = out_path.read_text()
     assert "holdout" in text and "sha256" in text
+    # issue 21 item 9: the held-out shot's checksum too, as every fitted shot's (hashlib on the file's bytes)
+    import hashlib
+
+    import yaml
+
+    prov = yaml.safe_load(text)["provenance"]
+    want = hashlib.sha256(Path(shots[93.0]).read_bytes()).hexdigest()
+    assert prov["holdout"] == [{"path": str(shots[93.0]), "sha256": want}]
 
 
 def test_auto_chooses_by_cross_validation_and_says_so(shots, tmp_path, capsys):
