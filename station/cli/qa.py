@@ -100,6 +100,15 @@ def _store(args, config, create=False):
     return open_store(store_location(args.store, config), write=create)
 
 
+def _looks_like_path(text: str) -> bool:
+    """Whether a QA target that does not exist was meant as a path (not a lens of the store): it starts
+    like one (``/``, ``./``, ``../``, ``~``), ends with ``/``, or its directory part exists — a lens
+    name such as ``50mm f/1.8`` is none of these."""
+    if text.startswith(("/", "./", "../", "~")) or text.endswith("/"):
+        return True
+    return "/" in text and Path(text).parent.is_dir()
+
+
 def run(args) -> int:
     from station.config import ConfigError, load_config
     from station.session.directory import SessionDir, SessionError
@@ -117,6 +126,10 @@ def run(args) -> int:
                 config = config or session.config
             elif target.exists() and target.is_dir():
                 raise QAInputError(f"{target}: not a session directory (no {layout.SESSION_FILE})")
+            elif not target.exists() and _looks_like_path(args.target):
+                raise QAInputError(
+                    f"{target}: no such session directory (check the path; `harp session list` lists the sessions)"
+                )
             if session is not None:
                 items = session_targets(session)
             else:

@@ -103,10 +103,14 @@ def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
     [
         (["no-such-lens", "--store", "{store}"], "no lens matching"),
         (["{tmp}"], "not a session directory"),
+        # issue 21 item 4: a path that does not exist is a missing path, not a lens the store lacks
+        (["{tmp}/sessions/nothere", "--store", "{store}"], "no such session directory"),
+        (["./nothere", "--store", "{store}"], "no such session directory"),
+        (["SIM 50mm f/1.8", "--store", "{store}"], "no lens matching"),
         (["{session}", "--reference", "{ref}"], "--reference needs a threshold"),
         (["{session}", "--reference", "{ref}", "--max-reference-deviation", "1"], "is for 640x480 images"),
         (["{session}", "--reference", "{tmp}/missing.yaml", "--max-reference-deviation", "1"], "no such model file"),
-        (["{session}", "--reference", "#99", "--max-reference-deviation", "1"], "no profile #99"),
+        (["{session}", "--reference", "#99", "--max-reference-deviation", "1", "--store", "{store}"], "no profile #99"),
     ],
 )
 def test_errors_are_one_line_exit_2(session, tmp_path, capsys, args, message):
