@@ -44,7 +44,9 @@ def test_the_lens_list_shows_the_demo_lenses_and_their_verdicts(page, dashboard)
         "1",
         "0",
     ]
-    assert page.locator("#per-day svg rect.bar.passed").get_attribute("data-count") == "5"
+    # one bar per day: a store filled across midnight has two, so the passed calibrations are summed
+    counts = page.locator("#per-day svg rect.bar.passed").evaluate_all("bs => bs.map(b => +b.dataset.count)")
+    assert sum(counts) == 5
     _shot(page, "dashboard-lenses.png")
 
 
