@@ -157,24 +157,37 @@ def conversion_error(
     height: int,
     n_long: int = ERROR_GRID_LONG,
     edges: Sequence[Array] | None = None,
+    export: str = "the export",
+    remedy: str = "try another format (--format auto picks the closest)",
 ) -> ConversionError:
     """Compare two corrections over the image: 4-corner normalised, and modulo best homography.
 
     ``edges``: the measured edge points (distorted pixels) of the shots ``ours``
     was fitted on; with them the figures include the straightness the export
-    leaves on those shots.
+    leaves on those shots. ``export`` names the export family (e.g. "the OpenCV
+    5-coefficient pin-hole model") in the error raised when its correction is not
+    defined over the image, so that the message blames the format, not the harp's model;
+    ``remedy`` is what that message tells the user to do.
     """
     g = image_grid(width, height, n_long)
     uo = ours.undistort_points(g)
     ut = theirs.undistort_points(g)
     ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
+    cannot = f"{export} cannot represent this lens over the whole image"
     if ok.sum() < 0.99 * len(g):
         raise ValueError(
-            f"the export's correction is undefined on {np.sum(~ok)} of {len(g)} grid "
-            f"points (its polynomial is not invertible over the image)"
+            f"{cannot}: its correction is undefined on {np.sum(~ok)} of {len(g)} grid points "
+            f"(its polynomial does not invert there); {remedy}"
         )
     no = apply_homography(corner_homography(ours, width, height), uo[ok])
-    nt = apply_homography(corner_homography(theirs, width, height), ut[ok])
+    try:
+        hc = corner_homography(theirs, width, height)
+    except ValueError:
+        raise ValueError(
+            f"{cannot}: its correction is not defined at the image corners "
+            f"(its polynomial does not invert there); {remedy}"
+        ) from None
+    nt = apply_homography(hc, ut[ok])
     e = np.linalg.norm(nt - no, axis=1)
     h = fit_homography(nt, no)
     e_h = np.linalg.norm(apply_homography(h, nt) - no, axis=1)
@@ -455,7 +468,13 @@ def fit_opencv(
             best = (score, cand)
     assert best is not None
     out = best[1]
-    return out, conversion_error(model, out, width, height, edges=edges)
+    family = f"the OpenCV {n_coeffs}-coefficient pin-hole model"
+    more = [str(n) for n in OPENCV_STAGES if n > n_coeffs]
+    remedy = "export it as a fisheye (--format auto picks the closest)"
+    if more:
+        alts = more[0] if len(more) == 1 else f"{', '.join(more[:-1])} or {more[-1]}"
+        remedy = f"export with more coefficients (--coeffs {alts}) or as a fisheye (--format auto picks the closest)"
+    return out, conversion_error(model, out, width, height, edges=edges, export=family, remedy=remedy)
 
 
 FISHEYE_FOCAL_STARTS = (0.2, 0.3, 0.45, 0.7, 1.0, 1.6, 3.0)
@@ -524,7 +543,7 @@ def fit_fisheye(
         out = free(th)
     else:
         out = fixed(float(focal))(th)
-    return out, conversion_error(model, out, width, height, edges=edges)
+    return out, conversion_error(model, out, width, height, edges=edges, export="the OpenCV fisheye model")
 
 
 def fit_lensfun(
@@ -571,4 +590,4 @@ def fit_lensfun(
     th, _, _ = _least_squares(prob, maker(kind), theta0, h8)
     candidates.append(maker(kind)(th))
     out = min(candidates, key=lambda m: mod_h_rms(model, m, width, height))
-    return out, conversion_error(model, out, width, height, edges=edges)
+    return out, conversion_error(model, out, width, height, edges=edges, export=f"the lensfun {kind} model")

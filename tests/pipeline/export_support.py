@@ -78,6 +78,26 @@ class RealModel:
     edges: tuple[np.ndarray, ...]
 
 
+def wide_radial(fov_deg: float, width: int, height: int, centre_offset: tuple[float, float] = (3.0, -2.0)):
+    """A harp RadialModel of an equisolid lens whose diagonal field of view is ``fov_deg``.
+
+    The correction ratio :math:`r_u / r_d` of :class:`EquisolidLens` (f set so that the half
+    diagonal is at half the field of view) sampled at 200 radii and fitted by a degree-6
+    polynomial in :math:`\\rho` (lens construction, not a result of the code under test).
+    """
+    from pipeline.models import RadialModel
+
+    half = 0.5 * float(np.hypot(width - 1, height - 1))
+    f = half / (2 * np.sin(np.radians(fov_deg / 2) / 2))
+    rho = np.linspace(0.0, 1.0, 200)
+    rd = rho * half
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(rho > 0, f * np.tan(2 * np.arcsin(rd / (2 * f))) / np.maximum(rd, 1e-9), 1.0)
+    k = np.linalg.lstsq(np.stack([rho**i for i in range(7)], axis=1), ratio, rcond=None)[0]
+    c = ((width - 1) / 2.0 + centre_offset[0], (height - 1) / 2.0 + centre_offset[1])
+    return RadialModel.for_image(width, height, k=tuple(float(v) for v in k), center=c)
+
+
 @cache
 def real_model(held: int, directory: str) -> RealModel:
     """radial4 + tangential + prism (free centre, the recommended model), fit on the two other photos."""

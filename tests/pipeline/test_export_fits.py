@@ -7,7 +7,7 @@ import pytest
 from pipeline.exports.fit import fit_fisheye, fit_opencv
 from pipeline.models import RadialModel
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
-from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, mod_h, real_model
+from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, mod_h, real_model, wide_radial
 
 W, H = 400, 300
 # decentred barrel with tangential and thin-prism terms (a correction none of OpenCV's families holds exactly)
@@ -102,3 +102,17 @@ def test_fisheye_with_nominal_focal_keeps_it_and_finds_the_lens_series():
     fm, fe = fit_fisheye(WIDE, WIDE_W, WIDE_H, focal=WIDE.f)
     assert fm.fx == WIDE.f and fe.rms_mod_h_px < 1e-4
     np.testing.assert_allclose(fm.dist, (-1 / 24, 1 / 1920, -1 / 322560, 1 / 92897280), rtol=0.02, atol=1e-9)
+
+
+def test_a_pinhole_family_that_cannot_hold_a_wide_lens_is_named_with_what_to_do():
+    """A 115 deg lens: OpenCV's 5-coefficient polynomial does not invert at the corners. The
+    error names that export family and the alternatives, not "the correction" (the harp's)."""
+    lens = wide_radial(115.0, 1200, 900)
+    assert np.all(np.isfinite(lens.undistort_points(np.array([[0.0, 0.0], [1199.0, 899.0]]))))  # ours is defined
+    with pytest.raises(ValueError) as e:
+        fit_opencv(lens, 1200, 900, n_coeffs=5, n_long=40)
+    msg = str(e.value)
+    assert msg.startswith("the OpenCV 5-coefficient pin-hole model cannot represent this lens"), msg
+    assert "--coeffs 8, 12 or 14" in msg and "--format auto" in msg
+    _m, err = fit_opencv(lens, 1200, 900, n_coeffs=12, n_long=40)  # a family that can: a stated error
+    assert err.max_mod_h_px < 0.5

@@ -38,7 +38,7 @@ from pipeline.models import RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
 from station.config import Identity, Optics
-from station.files import write_profile
+from station.files import write_model_file, write_profile
 from station.profile import HOLDOUT_SHOTS, Holdout, Merit, Profile
 from station.provenance import make_provenance
 from tests.pipeline.export_support import (
@@ -50,6 +50,7 @@ from tests.pipeline.export_support import (
     mrcal_in_consumer,
     opencv_maps,
     ros_in_consumer,
+    wide_radial,
 )
 
 W, H = 400, 300
@@ -488,6 +489,16 @@ def test_bad_options_exit_2_with_one_line_and_nothing_written(model_source, tmp_
     code, stdout, stderr = run_main("export", model_source.model_file, *args)
     assert code == 2 and stdout == "" and not out.exists()
     assert stderr.startswith("harp export: ") and message in stderr and stderr.count("\n") == 1, stderr
+
+
+def test_coeffs_5_on_a_wide_lens_names_the_export_family_exit_2_nothing_written(tmp_path):
+    model = tmp_path / "wide.yaml"
+    write_model_file(model, wide_radial(115.0, 1200, 900), width=1200, height=900)
+    out = tmp_path / "out.yaml"
+    code, stdout, stderr = run_main("export", model, "--format", "opencv", "--coeffs", "5", "-o", out)
+    assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
+    assert stderr.startswith("harp export: the OpenCV 5-coefficient pin-hole model cannot represent this lens")
+    assert "--coeffs 8, 12 or 14" in stderr and "--format auto" in stderr
 
 
 def test_unwritable_output_exit_2(model_source, tmp_path):
