@@ -35,7 +35,7 @@ from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_ch
 from pipeline.exports.lensfun import LensfunEntry, lensfun_database_text, read_lensfun_text
 from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
-from pipeline.exports.ros import read_ros_text, ros_text
+from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.models.base import DistortionModel
 from pipeline.models.remap_model import RemapModel
 
@@ -237,7 +237,8 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
         text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(conversion_warnings(fmt, src, err)))
+    warnings = conversion_warnings(fmt, src, err) + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
+    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
 
 
 def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:

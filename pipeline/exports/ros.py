@@ -45,6 +45,14 @@ ROS_FIELDS = (
 )
 ROS_DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
 ROS_FISHEYE_MODEL = "equidistant"
+ROS_EQUIDISTANT_READERS = (
+    "distortion_model 'equidistant' is read by the C++ image_geometry (PinholeCameraModel, since "
+    "vision_opencv pull request #358, 2020); ROS 1's Python image_geometry (e.g. Debian's "
+    "python3-image-geometry 1.16.2) ignores distortion_model and applies these 4 coefficients as "
+    "plumb_bob, which is wrong by hundreds of pixels on a wide lens: check that your consumer reads "
+    "'equidistant', or export --format ros (pin-hole) for it"
+)
+"""Which ROS consumers read an ``equidistant`` camera_info, stated in the file and warned on export."""
 
 
 def _mat(a: npt.ArrayLike) -> dict[str, Any]:
@@ -82,7 +90,8 @@ def ros_text(
         "projection_matrix": _mat(np.hstack([k, np.zeros((3, 1))])),
     }
     head = "# ROS camera_info calibration exported by harp station\n"
-    lines = [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
+    readers = [ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else []
+    lines = [*readers, *(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
     head += "".join(f"# {line}\n" for line in lines)
     return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))
 

@@ -31,6 +31,7 @@ import pytest
 import yaml
 
 from pipeline.edgeset import corrected_straightness
+from pipeline.exports.ros import ROS_EQUIDISTANT_READERS
 from pipeline.fitspec import FitSpec
 from pipeline.measure import measure_image
 from pipeline.model_file import read_model_file
@@ -376,7 +377,9 @@ def test_a_warning_exactly_when_the_export_is_less_exact_than_the_calibration(bo
             continue
         c = fig["conversion"]
         worse = max(c["rms_mod_h_px"], c["d_px"]) > fig["holdout_d"]
-        assert bool(fig["warnings"]) == worse, (fmt, c, fig["holdout_d"])
+        readers = fmt == "ros-equidistant"  # and one warning naming the ROS consumers that read the file
+        assert (fig["warnings"][-1:] == [ROS_EQUIDISTANT_READERS]) == readers, fmt
+        assert (len(fig["warnings"]) > readers) == worse, (fmt, c, fig["holdout_d"])
         if worse:
             assert "exceeds the model's own holdout d" in lines[0]
             warned.add(fmt)
@@ -596,3 +599,19 @@ def test_fitting_shots_from_a_session_only_with_the_manifests_checksums(session_
     victim.write_bytes(victim.read_bytes()[:-10] + b"0123456789")
     got = session_edges(copy, 0.0)
     assert got.edges is None and got.source == f"{victim}: checksum does not match the session manifest"
+
+
+def test_ros_equidistant_file_and_export_state_which_ros_consumers_read_it(model_source, tmp_path):
+    """ROS 1's Python image_geometry ignores distortion_model (checked below in Debian's own package):
+    the file says so in its header and the export warns on stderr."""
+    out = tmp_path / "eq.yaml"
+    code, _stdout, stderr = run_main("export", model_source.model_file, "--format", "ros-equidistant", "-o", out)
+    assert code == 0, stderr
+    head = [ln for ln in out.read_text().splitlines() if ln.startswith("#")]
+    assert any("'equidistant' is read by the C++ image_geometry" in ln and "plumb_bob" in ln for ln in head)
+    assert "harp export: warning: distortion_model 'equidistant'" in stderr
+    src = Path("/usr/lib/python3/dist-packages/image_geometry/cameramodels.py")  # Debian python3-image-geometry
+    assert src.exists() and "equidistant" not in src.read_text()  # the statement about ROS 1 Python holds
+    plain = tmp_path / "pin.yaml"
+    code, _o, stderr = run_main("export", model_source.model_file, "--format", "ros", "-o", plain)
+    assert code == 0 and "equidistant" not in plain.read_text() and "'equidistant' is read" not in stderr
