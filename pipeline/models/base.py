@@ -2,9 +2,10 @@
 
 A model maps *distorted* pixel coordinates (what the camera recorded) to
 *ideal* (undistorted, pin-hole) pixel coordinates: ``undistort_points``.
-Its inverse ``distort_points`` is computed by Newton iterations on the
-forward map to an accuracy of ``INVERSE_TOL_PX`` unless a subclass has a
-closed form. Coordinates follow the convention of :mod:`pipeline`.
+Its inverse ``distort_points`` is computed by the safeguarded Newton iterations of
+:mod:`pipeline.models.inverse` on the forward map to an accuracy of ``INVERSE_TOL_PX``
+unless a subclass has a closed form; ``distort_inverse`` also says, per point, why there is
+no inverse (NaN) where there is none. Coordinates follow the convention of :mod:`pipeline`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+
+from pipeline.models.inverse import Inverse, newton_inverse
 
 INVERSE_TOL_PX = 1e-9
 """Accuracy in pixels to which :meth:`DistortionModel.distort_points` inverts."""
@@ -32,35 +34,26 @@ class DistortionModel(ABC):
         """Map distorted pixel coordinates ``(N, 2)`` to ideal ones."""
 
     def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
-        """Inverse of :meth:`undistort_points`, by Newton iterations (Jacobian by
-        central differences).
+        """Inverse of :meth:`undistort_points`: :attr:`Inverse.points` of :meth:`distort_inverse`.
 
-        Accurate to ``INVERSE_TOL_PX`` (1e-9 px, on ``undistort_points(x)``)
-        wherever the forward map is invertible (a point where it does not
-        converge within ``max_iter`` iterations is returned as NaN).
+        Accurate to ``INVERSE_TOL_PX`` (1e-9 px, on ``undistort_points(x)``) wherever the
+        forward map is invertible; NaN elsewhere (:meth:`distort_inverse` says why).
+        """
+        return self.distort_inverse(xy, max_iter).points
+
+    def distort_inverse(self, xy: np.ndarray, max_iter: int = 50) -> Inverse:
+        """:meth:`distort_points` with, per point, why there is no inverse
+        (:data:`pipeline.models.inverse.INVERSE_REASONS`).
+
+        Generic: damped Newton (:func:`pipeline.models.inverse.newton_inverse`, Jacobian by
+        central differences) from the first-order inverse ``2 t - U(t)``; a model that knows
+        the domain where it is invertible overrides this (:class:`~pipeline.models.radial.RadialModel`).
         """
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        # start: first-order inverse  x0 = 2 t - U(t)
-        x: NDArray[np.float64] = 2 * target - self.undistort_points(target)
-        h = 1e-4
-        done = np.zeros(len(x), bool)
-        for _ in range(max_iter):
-            fx = self.undistort_points(x)
-            r = fx - target
-            done = np.all(np.abs(r) < INVERSE_TOL_PX, axis=1)
-            if done.all():
-                break
-            jx = (self.undistort_points(x + [h, 0]) - self.undistort_points(x - [h, 0])) / (2 * h)
-            jy = (self.undistort_points(x + [0, h]) - self.undistort_points(x - [0, h])) / (2 * h)
-            a, b, c, d = jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]
-            det = a * d - b * c
-            dx = (d * r[:, 0] - b * r[:, 1]) / det
-            dy = (-c * r[:, 0] + a * r[:, 1]) / det
-            step = np.stack([dx, dy], axis=1)
-            step[done] = 0.0
-            x = x - step
-        x[~done] = np.nan
-        return x
+        with np.errstate(invalid="ignore", over="ignore"):
+            start = 2 * target - self.undistort_points(target)
+        start = np.where(np.isfinite(start), start, target)
+        return newton_inverse(self.undistort_points, target, start, tol=INVERSE_TOL_PX, h=1e-4, max_iter=max_iter)
 
     def undistortion_maps(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """float32 maps for ``cv2.remap`` producing the corrected image.

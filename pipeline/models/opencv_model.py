@@ -7,17 +7,21 @@ be used, compared and evaluated like any harp correction.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import cv2
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from pipeline.models.base import DistortionModel
+from pipeline.models.inverse import OUTSIDE_DOMAIN, Inverse, monotonic_reach, newton_inverse, radial_start
 
 #: accuracy (px) to which :meth:`OpenCVModel.undistort_points` inverts the projection
 OPENCV_INVERSE_TOL_PX = 1e-8
 _VALID_NCOEFFS = (4, 5, 8, 12, 14)
+#: largest normalised ideal radius ``r = tan(angle)`` (85 deg) :meth:`OpenCVModel.undistort_points` inverts to
+OPENCV_REACH_LIMIT = 11.5
 
 
 @dataclass(frozen=True)
@@ -44,9 +48,11 @@ class OpenCVModel(DistortionModel):
     :meth:`distort_points` is this closed form (in numpy, tested equal to
     ``cv2.projectPoints`` to 1e-9 px; by ``cv2.projectPoints`` itself with tilt);
     :meth:`undistort_points` (the correction, distorted -> ideal, pixels in the
-    same camera matrix) starts from ``cv2.undistortPoints(Iter)`` (OpenCV's iterative inverse) and finishes
-    with Newton steps on the closed form, to ``OPENCV_INVERSE_TOL_PX`` (1e-8 px)
-    wherever the projection is invertible (NaN where it does not converge).
+    same camera matrix) starts from the exact inverse of the radial part (bracketed on the radius
+    inside :attr:`reach`, where the radial part increases: before its first fold or pole) and
+    finishes with damped Newton steps on the closed form kept inside that disc
+    (:func:`pipeline.models.inverse.newton_inverse`), to ``OPENCV_INVERSE_TOL_PX`` (1e-8 px)
+    wherever the projection is invertible; NaN elsewhere (:meth:`undistort_inverse` says why).
 
     References
     ----------
@@ -123,36 +129,55 @@ class OpenCVModel(DistortionModel):
         out, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), self.camera_matrix, self.dist_coeffs)
         return out.reshape(-1, 2)
 
+    def radial_map(self, r: np.ndarray) -> np.ndarray:
+        """The radial part of the projection, ``r * (1 + k1 r^2 + ...) / (1 + k4 r^2 + ...)`` (normalised radii)."""
+        d = np.zeros(8)
+        d[: min(len(self.dist), 8)] = self.dist[:8]
+        k1, k2, _p1, _p2, k3, k4, k5, k6 = d
+        r = np.asarray(r, dtype=np.float64)
+        r2 = r * r
+        num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out: np.ndarray = np.where(den > 0, r * num / den, np.nan)
+        return out
+
+    @cached_property
+    def reach(self) -> float:
+        """Normalised ideal radius up to which the radial part of the projection increases (its first
+        fold or pole; at most ``OPENCV_REACH_LIMIT``): the domain of :meth:`undistort_points`."""
+        return monotonic_reach(self.radial_map, OPENCV_REACH_LIMIT, step=2e-3)
+
     def undistort_points(self, xy: np.ndarray, max_iter: int = 20) -> np.ndarray:
-        """Distorted -> ideal pixels: cv2.undistortPoints(Iter) then Newton to 1e-8 px."""
+        """Distorted -> ideal pixels, to 1e-8 px (:meth:`undistort_inverse`)."""
+        return self.undistort_inverse(xy, max_iter).points
+
+    def undistort_inverse(self, xy: np.ndarray, max_iter: int = 20) -> Inverse:
+        """:meth:`undistort_points` with, per point, why there is no inverse (see the class docstring)."""
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if len(target) == 0:
-            return target.copy()
-        k = self.camera_matrix
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-14)
-        undist = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4; OpenCV 5 takes criteria directly
-        if undist is not None:
-            x_cv = undist(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, k, crit)
-        else:
-            x_cv = cv2.undistortPoints(target.reshape(-1, 1, 2), k, self.dist_coeffs, None, None, k, crit)
-        x: NDArray[np.float64] = x_cv.reshape(-1, 2).astype(np.float64)
-        h = 1e-3
-        done = np.zeros(len(x), bool)
-        for _ in range(max_iter):
-            r = self.distort_points(x) - target
-            done = np.all(np.abs(r) < OPENCV_INVERSE_TOL_PX, axis=1)
-            if done.all():
-                break
-            jx = (self.distort_points(x + [h, 0]) - self.distort_points(x - [h, 0])) / (2 * h)
-            jy = (self.distort_points(x + [0, h]) - self.distort_points(x - [0, h])) / (2 * h)
-            a, b, c, d = jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]
-            det = a * d - b * c
-            with np.errstate(divide="ignore", invalid="ignore"):
-                step = np.stack([(d * r[:, 0] - b * r[:, 1]) / det, (-c * r[:, 0] + a * r[:, 1]) / det], axis=1)
-            step[done] = 0.0
-            x = x - step
-        x[~done] = np.nan
-        return x
+        f, c = np.array([self.fx, self.fy]), np.array([self.cx, self.cy])
+        off = (target - c) / f
+        rd = np.hypot(off[:, 0], off[:, 1])
+        reach = self.reach
+        r, ok = radial_start(self.radial_map, rd, reach, tol=0.1 * OPENCV_INVERSE_TOL_PX / max(self.fx, self.fy))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            unit = np.where(rd[:, None] > 0, off / rd[:, None], 0.0)
+        start = c + f * np.minimum(r, reach * (1 - 1e-9))[:, None] * unit
+        pure = not any(self.dist[2:4]) and not any(self.dist[8:])  # no tangential, prism or tilt terms
+        if pure:
+            start[~ok] = np.nan
+
+        def inside(x: np.ndarray) -> np.ndarray:
+            n = (x - c) / f
+            out: np.ndarray = np.hypot(n[:, 0], n[:, 1]) < reach
+            return out
+
+        inv = newton_inverse(
+            self.distort_points, target, start, tol=OPENCV_INVERSE_TOL_PX, h=1e-3, max_iter=max_iter, inside=inside
+        )
+        if pure:
+            inv.reason[~ok & np.all(np.isfinite(target), axis=1)] = OUTSIDE_DOMAIN
+        return inv
 
     def undistortion_maps(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """``cv2.initUndistortRectifyMap`` with the same camera matrix (OpenCV's own maps)."""

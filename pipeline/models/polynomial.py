@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.models.base import INVERSE_TOL_PX, DistortionModel
+from pipeline.models.inverse import Inverse, newton_inverse
 
 Floats = NDArray[np.float64]
 
@@ -85,9 +86,10 @@ class PolynomialModel(DistortionModel):
     monomial order of :func:`monomial_exponents` (``1, xi, eta, xi^2, xi eta,
     eta^2, xi^3, ...``); ``(n + 1)(n + 2)/2`` coefficients each.
 
-    :meth:`distort_points` (the inverse) uses Newton iterations with the
-    analytic Jacobian, accurate to ``INVERSE_TOL_PX`` (1e-9 px) wherever the
-    map is invertible; points where it does not converge are NaN.
+    :meth:`distort_points` (the inverse) uses the damped Newton iterations of
+    :func:`pipeline.models.inverse.newton_inverse` with the analytic Jacobian, accurate to
+    ``INVERSE_TOL_PX`` (1e-9 px) wherever the map is invertible; points where it does not
+    converge, or where the map folds, are NaN (:meth:`distort_inverse` says why).
 
     References
     ----------
@@ -160,38 +162,23 @@ class PolynomialModel(DistortionModel):
             axis=1,
         )
 
-    def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
-        """Inverse of :meth:`undistort_points` by Newton iterations (analytic Jacobian)."""
+    def distort_inverse(self, xy: np.ndarray, max_iter: int = 50) -> Inverse:
+        """Inverse of :meth:`undistort_points`: damped Newton with the analytic Jacobian
+        (:func:`pipeline.models.inverse.newton_inverse`) from the first-order inverse ``2 t - U(t)``."""
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        a = np.asarray(self.a)
-        b = np.asarray(self.b)
-        s = self.scale
+        a, b = np.asarray(self.a), np.asarray(self.b)
         da_x, da_y = _derivative_coefficients(a, self.degree)
         db_x, db_y = _derivative_coefficients(b, self.degree)
-        x: Floats = 2 * target - self.undistort_points(target)
-        done = np.zeros(len(x), bool)
-        for _ in range(max_iter):
+
+        def jacobian(x: Floats) -> tuple[Floats, Floats, Floats, Floats]:
             xi, eta = self._normalised(x)
-            r = (
-                np.stack(
-                    [
-                        self.center[0] + s * poly_eval(a, xi, eta, self.degree),
-                        self.center[1] + s * poly_eval(b, xi, eta, self.degree),
-                    ],
-                    axis=1,
-                )
-                - target
-            )
-            done = np.all(np.abs(r) < INVERSE_TOL_PX, axis=1)
-            if done.all():
-                break
             j11, j12, j21, j22 = (poly_eval(c, xi, eta, self.degree) for c in (da_x, da_y, db_x, db_y))
-            det = j11 * j22 - j12 * j21
-            step = np.stack([(j22 * r[:, 0] - j12 * r[:, 1]) / det, (-j21 * r[:, 0] + j11 * r[:, 1]) / det], axis=1)
-            step[done] = 0.0
-            x = x - step
-        x[~done] = np.nan
-        return x
+            return j11, j12, j21, j22
+
+        start = 2 * target - self.undistort_points(target)
+        return newton_inverse(
+            self.undistort_points, target, start, tol=INVERSE_TOL_PX, h=0.0, max_iter=max_iter, jacobian=jacobian
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {

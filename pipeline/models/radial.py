@@ -14,11 +14,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, TypedDict, Unpack
 
 import numpy as np
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import INVERSE_TOL_PX, DistortionModel
+from pipeline.models.inverse import OUTSIDE_DOMAIN, Inverse, monotonic_reach, newton_inverse, radial_start
+
+RADIAL_REACH_LIMIT = 8.0
+"""Largest normalised distorted radius (in half image diagonals) :class:`RadialModel` inverts to."""
 
 
 def radial_basis(
@@ -176,6 +181,64 @@ class RadialModel(DistortionModel):
             xu = xu + c * tx
             yu = yu + c * ty
         return np.stack([self.center[0] + s * xu, self.center[1] + s * yu], axis=1)
+
+    def radial_map(self, rho: np.ndarray) -> np.ndarray:
+        r"""The radial part of the correction, :math:`\rho_u = \rho\,f(\rho)` (normalised radii)."""
+        rho = np.asarray(rho, dtype=np.float64)
+        a = np.abs(rho)
+        num = np.zeros_like(a)
+        for km in reversed(self.k):
+            num = num * a + km
+        den = np.ones_like(a)
+        if self.division is not None:
+            den = np.zeros_like(a)
+            for dj in reversed((1.0, *self.division)):
+                den = den * a * a + dj
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out: np.ndarray = np.where(den > 0, rho * num / den, np.nan)
+        return out
+
+    @cached_property
+    def reach(self) -> float:
+        """Normalised distorted radius up to which the radial part increases (its first fold or
+        pole; at most ``RADIAL_REACH_LIMIT``): the domain where :meth:`distort_points` looks for
+        an inverse."""
+        return monotonic_reach(self.radial_map, RADIAL_REACH_LIMIT)
+
+    def distort_inverse(self, xy: np.ndarray, max_iter: int = 50) -> Inverse:
+        """Inverse of :meth:`undistort_points` inside the disc of radius :attr:`reach`.
+
+        Starts from the exact inverse of the radial part on the radius (bracketed by
+        :func:`~pipeline.models.inverse.radial_start`), then damped Newton on the whole map
+        (:func:`~pipeline.models.inverse.newton_inverse`) kept inside the disc. A point whose
+        inverse would lie beyond the radial part's fold or pole is NaN (``OUTSIDE_DOMAIN``),
+        never a far-away root of the polynomial.
+        """
+        target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        s, c = self.scale, np.asarray(self.center)
+        off = (target - c) / s
+        rt = np.hypot(off[:, 0], off[:, 1])
+        reach = self.reach
+        rho, ok = radial_start(self.radial_map, rt, reach, tol=0.1 * INVERSE_TOL_PX / s)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            unit = np.where(rt[:, None] > 0, off / rt[:, None], 0.0)
+        pure = self.tangential is None and self.prism is None
+        rho = np.minimum(rho, reach * (1 - 1e-9))
+        start = c + s * rho[:, None] * unit
+        if pure:  # beyond the radial part's range: no inverse in the domain
+            start[~ok] = np.nan
+
+        def inside(x: np.ndarray) -> np.ndarray:
+            d = (x - c) / s
+            out: np.ndarray = np.hypot(d[:, 0], d[:, 1]) < reach
+            return out
+
+        inv = newton_inverse(
+            self.undistort_points, target, start, tol=INVERSE_TOL_PX, h=1e-4, max_iter=max_iter, inside=inside
+        )
+        if pure:
+            inv.reason[~ok & np.all(np.isfinite(target), axis=1)] = OUTSIDE_DOMAIN
+        return inv
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"model": self.name, "center": list(self.center), "k": list(self.k), "scale": self.scale}

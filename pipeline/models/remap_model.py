@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.models.base import DistortionModel
+from pipeline.models.inverse import Inverse, newton_inverse
 
 Array = npt.NDArray[np.float64]
 
@@ -24,14 +25,18 @@ class RemapModel(DistortionModel):
     the distorted image at :math:`(m_x[j, i], m_y[j, i])`: the maps sample the
     projection ideal -> distorted at the pixel centres of the output. Between
     pixel centres the projection is the bilinear interpolation of the maps
-    (``scipy.ndimage.map_coordinates``, ``order=1``; points outside the map are
-    extrapolated from the border cells):
+    (``scipy.ndimage.map_coordinates``, ``order=1``; :meth:`distort_points` extrapolates
+    points outside the map from the border cells):
 
     .. math::
         D(x, y) = \sum_{a, b \in \{0, 1\}} w_a(x)\,w_b(y)\;m[\lfloor y\rfloor + b, \lfloor x\rfloor + a]
 
     :meth:`distort_points` is :math:`D`; :meth:`undistort_points` (the
-    correction) inverts it by Newton iterations to ``REMAP_INVERSE_TOL_PX``.
+    correction) inverts it by damped Newton iterations to ``REMAP_INVERSE_TOL_PX``
+    (:func:`pipeline.models.inverse.newton_inverse`) *inside the map's defined area*
+    :math:`[0, W-1] \times [0, H-1]` only: a distorted point whose ideal position lies
+    outside (not in the corrected image the maps describe) is NaN, never extrapolated
+    (:meth:`undistort_inverse` says why: ``OUTSIDE_DOMAIN``).
     Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64.
     """
 
@@ -77,27 +82,26 @@ class RemapModel(DistortionModel):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         return np.stack([self._bilinear(self.map_x, xy), self._bilinear(self.map_y, xy)], axis=1)
 
+    def inside(self, xy: Array) -> npt.NDArray[np.bool_]:
+        """Where ideal points lie in the map's defined area ``[0, W-1] x [0, H-1]``."""
+        out: npt.NDArray[np.bool_] = (
+            (xy[:, 0] >= 0) & (xy[:, 0] <= self.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= self.height - 1)
+        )
+        return out
+
     def undistort_points(self, xy: Array, max_iter: int = 50) -> Array:
-        """Distorted -> ideal, Newton iterations on :meth:`distort_points`."""
+        """Distorted -> ideal, inside the map's defined area (NaN outside; :meth:`undistort_inverse`)."""
+        return self.undistort_inverse(xy, max_iter).points
+
+    def undistort_inverse(self, xy: Array, max_iter: int = 50) -> Inverse:
+        """:meth:`undistort_points` with, per point, why there is no inverse (see the class docstring)."""
         target = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        x = target.copy()
-        h = 0.25
-        done = np.zeros(len(x), bool)
-        for _ in range(max_iter):
-            r = self.distort_points(x) - target
-            done = np.all(np.abs(r) < REMAP_INVERSE_TOL_PX, axis=1)
-            if done.all():
-                break
-            jx = (self.distort_points(x + [h, 0]) - self.distort_points(x - [h, 0])) / (2 * h)
-            jy = (self.distort_points(x + [0, h]) - self.distort_points(x - [0, h])) / (2 * h)
-            a, b, c, d = jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]
-            det = a * d - b * c
-            with np.errstate(divide="ignore", invalid="ignore"):
-                step = np.stack([(d * r[:, 0] - b * r[:, 1]) / det, (-c * r[:, 0] + a * r[:, 1]) / det], axis=1)
-            step[done] = 0.0
-            x = x - step
-        x[~done] = np.nan
-        return x
+        start = np.stack(
+            [np.clip(target[:, 0], 0.0, self.width - 1.0), np.clip(target[:, 1], 0.0, self.height - 1.0)], axis=1
+        )
+        return newton_inverse(
+            self.distort_points, target, start, tol=REMAP_INVERSE_TOL_PX, h=0.25, max_iter=max_iter, inside=self.inside
+        )
 
     def undistortion_maps(self, width: int, height: int) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
         """The maps themselves (for their own size)."""
