@@ -8,6 +8,12 @@ figures are in pixels of an image of the original size, whatever scaling the
 correction applies), and measure the straightness :math:`d`, :math:`d_{max}`
 of :math:`H(U(p))` (Tang et al. 2012, Sect. 2 and 5).
 
+A correction defined only on part of the distorted image (a maps file or STMap holds the
+corrected image ``[0, W-1] x [0, H-1]`` only, which a wide lens's corners fall outside of) is
+never extrapolated: :func:`corrected_edges` leaves out the edge points outside its domain
+(``OUTSIDE_DOMAIN`` of :meth:`~pipeline.models.base.DistortionModel.undistort_inverse`) and
+counts them.
+
 References
 ----------
 .. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel,
@@ -18,11 +24,13 @@ References
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
+from pipeline.models.inverse import INVERSE_REASONS, OUTSIDE_DOMAIN
 from pipeline.normalise import corner_homography
 from pipeline.straightness import Straightness, straightness
 
@@ -42,6 +50,61 @@ def corrected_points(
             raise ValueError("the correction is undefined at some edge points (not invertible there)")
         out.append(q)
     return out
+
+
+MIN_EDGE_POINTS = 3
+"""Fewest points an edge keeps after :func:`corrected_edges` leaves some out (else it is left out)."""
+
+
+@dataclass(frozen=True)
+class CorrectedEdges:
+    """The corrected, 4-corner normalised edges :func:`corrected_edges` keeps, and what it left out.
+
+    Attributes
+    ----------
+    points : list of (N_l, 2) arrays
+        ``H(U(p))`` of the edges kept (each with at least ``MIN_EDGE_POINTS`` points).
+    kept : list of int
+        Index in the input of each kept edge.
+    n_points : int
+        Edge points given.
+    n_excluded : int
+        Edge points left out: outside the correction's domain, or on an edge left with fewer than
+        ``MIN_EDGE_POINTS``.
+    """
+
+    points: list[np.ndarray]
+    kept: list[int]
+    n_points: int
+    n_excluded: int
+
+
+def corrected_edges(
+    point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int, height: int
+) -> CorrectedEdges:
+    """``H(U(p))`` for every edge point inside the correction's domain (see the module docstring).
+
+    Raises ValueError if the correction is undefined at a point *inside* its domain, or the
+    4-corner normalisation is undefined.
+    """
+    h = corner_homography(correction, width, height)
+    out, kept, n, n_out = [], [], 0, 0
+    for i, p in enumerate(point_sets):
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+        inv = correction.undistort_inverse(p)
+        n += len(p)
+        bad = ~inv.ok & (inv.reason != OUTSIDE_DOMAIN)
+        if bad.any():
+            why = INVERSE_REASONS[int(inv.reason[bad][0])]
+            raise ValueError(f"the correction is undefined at {int(bad.sum())} edge points ({why})")
+        keep = inv.ok
+        if keep.sum() < MIN_EDGE_POINTS:
+            n_out += len(p)
+            continue
+        n_out += int((~keep).sum())
+        out.append(apply_homography(h, inv.points[keep]))
+        kept.append(i)
+    return CorrectedEdges(points=out, kept=kept, n_points=n, n_excluded=n_out)
 
 
 def residual_straightness(

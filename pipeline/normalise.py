@@ -60,9 +60,9 @@ def homography_from_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 
 def corner_homography(model: DistortionModel, width: int, height: int) -> np.ndarray:
-    """``H`` mapping the model's corrected image corners back to the original corners."""
-    q = image_corners(width, height)
-    u = model.undistort_points(q)
+    """``H`` mapping the model's corrected image corners back to the original corners
+    (:meth:`~pipeline.models.base.DistortionModel.normalisation_points`)."""
+    u, q = model.normalisation_points(width, height)
     if not np.all(np.isfinite(u)):
         raise ValueError("the correction is not defined at the image corners")
     return homography_from_4(u, q)

@@ -3,8 +3,11 @@
 :func:`load_correction` reads any correction file :func:`pipeline.exports.registry.read_correction`
 reads (the format detected from its content) as a model for the shots' image size;
 :func:`evaluate` measures the string edges of the shots (taken through the lens, uncorrected),
-corrects them (:func:`pipeline.evaluate.corrected_points`), normalises them by the homography of
-the 4 corrected image corners and reports their straightness before and after; with
+corrects them (:func:`pipeline.evaluate.corrected_edges`), normalises them by the homography of
+the 4 corrected image corners and reports their straightness before and after; edge points a
+maps file or STMap does not cover (their ideal position is outside the corrected image it holds,
+as at a wide lens's borders) are left out, never extrapolated, and counted (``n_excluded`` of
+``n_points``, per image and in all; the after figures are on the points kept); with
 ``already_corrected`` the shots were corrected by other software and are only measured. A shot
 that cannot be read, has another size than the first, or holds no string is reported in
 ``errors`` and left out. Every other problem is an :class:`EvaluateError` (one line naming the file).
@@ -14,9 +17,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.evaluate import corrected_points
+from pipeline.evaluate import corrected_edges
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
+from pipeline.models.remap_model import RemapModel
 from pipeline.normalise import corner_homography
 from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
@@ -60,6 +64,16 @@ def _sd(st) -> dict:
     return {"d": float(st.d), "d_max": float(st.d_max)}
 
 
+def _normalisation(model: DistortionModel | None) -> str:
+    """How the corrected points were normalised (what the figures are in)."""
+    if isinstance(model, RemapModel) and model.corners_ideal is None:
+        return (
+            "the maps' own corners (the file stores no corrected image corners: "
+            "figures not comparable with a model file's 4-corner ones)"
+        )
+    return "4 corrected image corners" if model is not None else "none"
+
+
 def evaluate(
     correction_path: str, image_paths, *, already_corrected=False, focal=None, lens_name=None, t=DEFAULT_T
 ) -> dict:
@@ -93,10 +107,11 @@ def evaluate(
     else:
         model, kind = load_correction(correction_path, w, h, focal, lens_name)
     before_all, after_all, per_image = [], [], []
+    n_points = n_excluded = 0
     for path, img in images:
         meas = measure_grey(path, img, t, require_strings=False)
         pts = [ln.points for ln in meas.lines]
-        entry = {"path": str(path), "n_lines": len(pts)}
+        entry: dict = {"path": str(path), "n_lines": len(pts)}
         if not pts:
             entry.update(before=None, after=None, note="no string edge found")
             per_image.append(entry)
@@ -111,12 +126,15 @@ def evaluate(
                     after = [apply_homography(hc, p) for p in pts]
                 before = None
             else:
-                after = corrected_points(pts, model, w, h)
-                before = pts
+                ce = corrected_edges(pts, model, w, h)
+                after, before = ce.points, pts
+                entry.update(n_points=ce.n_points, n_excluded=ce.n_excluded)
+                n_points += ce.n_points
+                n_excluded += ce.n_excluded
         except ValueError as exc:
             raise EvaluateError(f"{correction_path}: {exc}") from None
         entry["before"] = _sd(straightness(before)) if before is not None else None
-        entry["after"] = _sd(straightness(after))
+        entry["after"] = _sd(straightness(after)) if after else None
         per_image.append(entry)
         after_all += after
         if before is not None:
@@ -136,6 +154,9 @@ def evaluate(
         "before": _sd(straightness(before_all)) if before_all else None,
         "after": _sd(straightness(after_all)),
         "n_lines": len(after_all),
+        "n_points": n_points,
+        "n_excluded": n_excluded,
+        "normalisation": _normalisation(model),
         "images": per_image,
         "errors": errors,
     }

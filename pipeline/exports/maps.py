@@ -9,7 +9,10 @@ inverse, interpolated between exact nodes with a stated error), so that
 **maps** (``.npz``, ``numpy.load``): ``map_x``, ``map_y`` float32 (H, W),
 ``width``, ``height``, and ``interp_rms_px`` / ``interp_max_px`` (the
 interpolation error of the maps against the exact inverse, measured at
-pixels), ``convention`` (text). Pixel centres at integers, x = column,
+pixels), ``convention`` (text) and ``corners_ideal`` (4, 2) float64: the corrected
+positions of the distorted image's corners (top-left, top-right, bottom-right,
+bottom-left pixel centres), which ``harp evaluate``'s 4-corner normalisation needs and
+which a wide lens's maps do not reach. Pixel centres at integers, x = column,
 y = row, as in ``cv2.remap``.
 
 **stmap** (``.exr``, 32-bit float, channels R, G, B; ZIP compression, lossless):
@@ -25,7 +28,8 @@ source is :math:`(m_x, m_y)` (our pixel-centre coordinates):
 (the identity STMap is ``R = (x + 0.5)/width``, ``G = (y + 0.5)/height`` in
 Nuke's bottom-up pixel coordinates; the ``x / (width - 1)`` variant seen in
 some tutorials is half a pixel off at the borders). The header carries a
-``comments`` attribute with the convention and the figures.
+``comments`` attribute with the convention and the figures, and the line
+``harp corners_ideal: x0 y0 x1 y1 x2 y2 x3 y3`` (the same corners as the maps' ``corners_ideal``).
 
 References
 ----------
@@ -58,6 +62,7 @@ STMAP_CONVENTION = (
     "STMap (Nuke/Natron): R = (src_x + 0.5) / width, G = 1 - (src_y + 0.5) / height, B = 0; "
     "src = position in the distorted image of each corrected pixel, pixel centres at integers, rows from the top"
 )
+CORNERS_TAG = "harp corners_ideal:"
 EXR_MAGIC = b"\x76\x2f\x31\x01"
 NPZ_MAGIC = b"PK\x03\x04"
 
@@ -89,12 +94,24 @@ def export_maps(model: DistortionModel, width: int, height: int, step: int = DEF
     return fast_undistortion_maps(model, width, height, step=step)
 
 
-def maps_npz_bytes(maps: RemapMaps, accuracy: MapAccuracy, notes: tuple[str, ...] = ()) -> bytes:
-    """The ``.npz`` file: float32 maps, size, convention, measured interpolation error."""
+def corners_ideal(model: DistortionModel, width: int, height: int) -> Array | None:
+    """The model's corrected positions of the image corners ``(4, 2)`` (None where it has none)."""
+    from pipeline.normalise import image_corners
+
+    u = np.asarray(model.undistort_points(image_corners(width, height)), dtype=np.float64)
+    return u if np.all(np.isfinite(u)) else None
+
+
+def maps_npz_bytes(
+    maps: RemapMaps, accuracy: MapAccuracy, notes: tuple[str, ...] = (), corners: Array | None = None
+) -> bytes:
+    """The ``.npz`` file: float32 maps, size, convention, measured interpolation error, corrected corners."""
     h, w = maps.map_x.shape
     buf = io.BytesIO()
+    extra: dict[str, Any] = {} if corners is None else {"corners_ideal": np.asarray(corners, np.float64).reshape(4, 2)}
     np.savez_compressed(
         buf,
+        **extra,
         map_x=np.asarray(maps.map_x, dtype=np.float32),
         map_y=np.asarray(maps.map_y, dtype=np.float32),
         width=np.int64(w),
@@ -117,7 +134,12 @@ def read_maps_npz(data: bytes, name: str = "<maps>") -> RemapModel:
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             if "map_x" not in z or "map_y" not in z:
                 raise ValueError(f"{name}: .npz without map_x and map_y arrays")
-            return RemapModel(map_x=z["map_x"], map_y=z["map_y"])
+            corners = z["corners_ideal"] if "corners_ideal" in z else None
+            return RemapModel(
+                map_x=z["map_x"],
+                map_y=z["map_y"],
+                corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
+            )
     except (OSError, zipfile.BadZipFile, EOFError) as exc:
         raise ValueError(f"{name}: not a readable .npz maps file ({type(exc).__name__})") from None
     except ValueError as exc:
@@ -139,15 +161,18 @@ def maps_from_stmap(r: Array, g: Array) -> tuple[Array, Array]:
     return np.asarray(r, np.float64) * w - 0.5, (1.0 - np.asarray(g, np.float64)) * h - 0.5
 
 
-def stmap_exr_bytes(maps: RemapMaps, notes: tuple[str, ...] = ()) -> bytes:
+def stmap_exr_bytes(maps: RemapMaps, notes: tuple[str, ...] = (), corners: Array | None = None) -> bytes:
     """The STMap as a 32-bit float OpenEXR file (written by the OpenEXR library)."""
     import OpenEXR  # imported where used: only STMap exports pay for it
 
     r, g = stmap_channels(np.asarray(maps.map_x, np.float64), np.asarray(maps.map_y, np.float64))
+    lines = [STMAP_CONVENTION, *notes]
+    if corners is not None:
+        lines.append(CORNERS_TAG + "".join(f" {float(v)!r}" for v in np.asarray(corners, dtype=np.float64).ravel()))
     header: dict[str, Any] = {
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
-        "comments": "\n".join([STMAP_CONVENTION, *notes]),
+        "comments": "\n".join(lines),
     }
     channels = {"R": r, "G": g, "B": np.zeros_like(r)}
     buf = io.BytesIO()
@@ -171,7 +196,22 @@ def read_stmap_exr(data: bytes, name: str = "<stmap>") -> RemapModel:
                 raise ValueError(f"{name}: EXR without R and G channels (not an STMap)")
             r = np.asarray(ch["R"].pixels, dtype=np.float64)
             g = np.asarray(ch["G"].pixels, dtype=np.float64)
+            comments = f.header().get("comments", "")
     except (RuntimeError, OSError) as exc:
         raise ValueError(f"{name}: not a readable OpenEXR file ({str(exc).splitlines()[0][:120]})") from None
     mx, my = maps_from_stmap(r, g)
-    return RemapModel(map_x=mx, map_y=my)
+    return RemapModel(map_x=mx, map_y=my, corners_ideal=_stmap_corners(str(comments), name))
+
+
+def _stmap_corners(comments: str, name: str) -> tuple[tuple[float, float], ...] | None:
+    """The ``harp corners_ideal:`` line of an STMap's comments (None without one)."""
+    for line in comments.splitlines():
+        if line.startswith(CORNERS_TAG):
+            try:
+                v = [float(t) for t in line[len(CORNERS_TAG) :].split()]
+            except ValueError:
+                v = []
+            if len(v) != 8 or not all(np.isfinite(v)):
+                raise ValueError(f"{name}: comments line {CORNERS_TAG!r} must hold 8 finite numbers")
+            return tuple((v[2 * i], v[2 * i + 1]) for i in range(4))
+    return None

@@ -259,14 +259,23 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
 def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     maps = maps_fmt.export_maps(src.model, src.width, src.height)
     acc = maps_fmt.map_accuracy(src.model, maps.map_x, maps.map_y)
-    converted = RemapModel(map_x=maps.map_x, map_y=maps.map_y)
+    corners = maps_fmt.corners_ideal(src.model, src.width, src.height)
+    converted = RemapModel(
+        map_x=maps.map_x,
+        map_y=maps.map_y,
+        corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
+    )
     err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges)
     note = (
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
     )
     notes = (note, *_lens_notes(src))
-    data = maps_fmt.maps_npz_bytes(maps, acc, notes) if fmt == "maps" else maps_fmt.stmap_exr_bytes(maps, notes)
+    data = (
+        maps_fmt.maps_npz_bytes(maps, acc, notes, corners)
+        if fmt == "maps"
+        else maps_fmt.stmap_exr_bytes(maps, notes, corners)
+    )
     return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.models.inverse import Inverse, newton_inverse
+from pipeline.models.inverse import INVERTED, NOT_CONVERGED, Inverse, newton_inverse
 
 INVERSE_TOL_PX = 1e-9
 """Accuracy in pixels to which :meth:`DistortionModel.distort_points` inverts."""
@@ -54,6 +54,25 @@ class DistortionModel(ABC):
             start = 2 * target - self.undistort_points(target)
         start = np.where(np.isfinite(start), start, target)
         return newton_inverse(self.undistort_points, target, start, tol=INVERSE_TOL_PX, h=1e-4, max_iter=max_iter)
+
+    def undistort_inverse(self, xy: np.ndarray) -> Inverse:
+        """:meth:`undistort_points` with, per point, why it is NaN where it is
+        (:data:`pipeline.models.inverse.INVERSE_REASONS`). Generic: NaN is ``NOT_CONVERGED``;
+        models whose correction is itself an inverse say more (``OUTSIDE_DOMAIN``: a maps file's
+        point outside the corrected image it holds)."""
+        u = np.asarray(self.undistort_points(xy), dtype=np.float64).reshape(-1, 2)
+        ok = np.all(np.isfinite(u), axis=1)
+        return Inverse(points=u, reason=np.where(ok, INVERTED, NOT_CONVERGED).astype(np.int8))
+
+    def normalisation_points(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, q)``: 4 corrected points and the 4 distorted-image points the 4-corner
+        normalisation (:func:`pipeline.normalise.corner_homography`) maps them to: the corrected
+        image corners ``U(q_i)`` and the corners ``q_i`` (a maps file overrides this with the
+        corners it stores)."""
+        from pipeline.normalise import image_corners  # normalise imports this module
+
+        q = image_corners(width, height)
+        return self.undistort_points(q), q
 
     def undistortion_maps(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """float32 maps for ``cv2.remap`` producing the corrected image.

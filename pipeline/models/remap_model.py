@@ -37,11 +37,21 @@ class RemapModel(DistortionModel):
     :math:`[0, W-1] \times [0, H-1]` only: a distorted point whose ideal position lies
     outside (not in the corrected image the maps describe) is NaN, never extrapolated
     (:meth:`undistort_inverse` says why: ``OUTSIDE_DOMAIN``).
-    Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64.
+    The 4-corner normalisation (:func:`pipeline.normalise.corner_homography`) needs the
+    corrected positions of the distorted image's corners, which a wide lens's maps do not
+    reach (they hold the corrected image only): ``corners_ideal`` carries them when the maps
+    file stores them (harp's exports do: the model's own ``U(q_i)``,
+    :meth:`normalisation_points`). Without them the normalisation is that of the maps' own
+    corners: their corners ``c_i`` go to where the maps read them, ``m(c_i)``; no point is
+    extrapolated either way.
+
+    Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64; ``corners_ideal`` (4, 2) or None,
+    the corrected positions of the corners of :func:`pipeline.normalise.image_corners`, in order.
     """
 
     map_x: Array
     map_y: Array
+    corners_ideal: tuple[tuple[float, float], ...] | None = None
     name: str = field(default="remap", init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -55,6 +65,11 @@ class RemapModel(DistortionModel):
         my.setflags(write=False)
         object.__setattr__(self, "map_x", mx)
         object.__setattr__(self, "map_y", my)
+        if self.corners_ideal is not None:
+            c = np.asarray(self.corners_ideal, dtype=np.float64)
+            if c.shape != (4, 2) or not np.all(np.isfinite(c)):
+                raise ValueError(f"remap corners_ideal must be 4 finite (x, y) points, got shape {c.shape}")
+            object.__setattr__(self, "corners_ideal", tuple((float(x), float(y)) for x, y in c))
 
     @property
     def width(self) -> int:
@@ -103,6 +118,17 @@ class RemapModel(DistortionModel):
             self.distort_points, target, start, tol=REMAP_INVERSE_TOL_PX, h=0.25, max_iter=max_iter, inside=self.inside
         )
 
+    def normalisation_points(self, width: int, height: int) -> tuple[Array, Array]:
+        """The stored corrected corners and the image corners; without them, the maps' own corners
+        and where the maps read them (see the class docstring)."""
+        from pipeline.normalise import image_corners  # normalise imports the models
+
+        q = image_corners(width, height)
+        if self.corners_ideal is not None:
+            return np.asarray(self.corners_ideal, dtype=np.float64), q
+        c = image_corners(self.width, self.height)
+        return c, self.distort_points(c)
+
     def undistortion_maps(self, width: int, height: int) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
         """The maps themselves (for their own size)."""
         if (int(width), int(height)) != (self.width, self.height):
@@ -110,8 +136,16 @@ class RemapModel(DistortionModel):
         return self.map_x.astype(np.float32), self.map_y.astype(np.float32)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"model": self.name, "map_x": self.map_x.tolist(), "map_y": self.map_y.tolist()}
+        d: dict[str, Any] = {"model": self.name, "map_x": self.map_x.tolist(), "map_y": self.map_y.tolist()}
+        if self.corners_ideal is not None:
+            d["corners_ideal"] = [list(c) for c in self.corners_ideal]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RemapModel:
-        return cls(map_x=np.asarray(d["map_x"], dtype=np.float64), map_y=np.asarray(d["map_y"], dtype=np.float64))
+        corners = d.get("corners_ideal")
+        return cls(
+            map_x=np.asarray(d["map_x"], dtype=np.float64),
+            map_y=np.asarray(d["map_y"], dtype=np.float64),
+            corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
+        )

@@ -9,7 +9,10 @@ OpenCV calibration (FileStorage YAML or XML with ``camera_matrix`` +
 mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of the harp
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
-their straightness reported before and after (:mod:`pipeline.evaluate`).
+their straightness reported before and after (:mod:`pipeline.evaluate`). Edge points a
+maps file or STMap does not cover (outside the corrected image it holds: a wide lens's
+borders) are left out, never extrapolated, and their number printed (JSON: ``n_excluded``
+of ``n_points``).
 
 ``--already-corrected``: the images were corrected by other software; they
 are only measured (CORRECTION may be ``none``; when it is known, the
@@ -107,4 +110,11 @@ def run(args) -> int:
         print(f"{Path(e['path']).name[:40]:40s} {e['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
     b, a = _fmt(rep["before"]), _fmt(rep["after"])
     print(f"{'all':40s} {rep['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
+    if rep.get("n_excluded"):
+        print(
+            f"{rep['n_excluded']} of {rep['n_points']} edge points left out: outside the area the correction "
+            "defines (a maps file or STMap holds the corrected image only); the after figures are on the others"
+        )
+    if rep["normalisation"] not in ("4 corrected image corners", "none"):
+        print(f"normalised by {rep['normalisation']}")
     return status

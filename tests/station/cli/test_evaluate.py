@@ -1,19 +1,28 @@
 """``harp evaluate``: residual distortion of any correction; the OpenCV export round trip."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
 
 import cv2
 import numpy as np
 import pytest
 
+from pipeline.evaluate import corrected_points
 from pipeline.exports.fit import fit_opencv
 from pipeline.exports.lensfun import lensfun_text
 from pipeline.exports.opencv import opencv_text
 from pipeline.exports.ros import ros_text
 from pipeline.models import LensfunModel, RadialModel
 from pipeline.render import HarpScene, render_harp
+from pipeline.resample import DEFAULT_T
+from pipeline.straightness import straightness
 from station.cli import main
 from station.files import write_model_file
+from station.inputs import measure_grey, read_image
+from tests.pipeline.export_support import wide_radial
 
 W, H = 640, 480
 # barrel lens with an odd radial term: OpenCV's even polynomial cannot represent it exactly
@@ -155,3 +164,75 @@ def test_none_without_already_corrected_says_what_is_missing(shots, capsys):
     assert main(["evaluate", "none", shots[0]]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--already-corrected" in err
+
+
+# ------------------------------------------------ maps and STMap of a wide lens (issue 20 item 5)
+def harp_subprocess(*args, timeout=300):
+    """``harp ARGS`` as a user runs it (its own process group, killed with it on every exit path)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "station.cli", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode, out, err
+
+
+@pytest.mark.parametrize("fov", [115.0, 93.0])
+def test_maps_and_stmap_of_a_wide_lens_are_not_extrapolated(tmp_path, fov):
+    """The maps of a wide lens hold the corrected image only: the edge points near the shots'
+    borders have no ideal position in them. harp evaluate leaves those out and says how many (the
+    truth: the points the lens itself corrects to outside [0, W-1] x [0, H-1]), and the figure of
+    the maps / STMap is the lens's own on the points kept, in the same 4-corner frame (before the
+    fix it extrapolated the maps: 0.63 px for 0.023)."""
+    lens = wide_radial(fov, W, H)
+    paths = []
+    for i, angle in enumerate((3.0, 93.0)):
+        r = render_harp(W, H, HarpScene(angle_deg=angle, spacing_px=40.0), lens=lens, noise_sigma=1.5, seed=20 + i)
+        p = tmp_path / f"wide{i}.pgm"
+        assert cv2.imwrite(str(p), r.image)
+        paths.append(p)
+    model_file = tmp_path / "lens.yaml"
+    write_model_file(model_file, lens, width=W, height=H)
+    reports = {}
+    for fmt, name in (("maps", "m.npz"), ("stmap", "m.exr")):
+        code, _out, err = harp_subprocess("export", model_file, "--format", fmt, "-o", tmp_path / name)
+        assert code == 0, err
+        code, out, err = harp_subprocess("evaluate", tmp_path / name, *paths, "--json")
+        assert code == 0, err
+        reports[fmt] = json.loads(out)
+    code, out, err = harp_subprocess("evaluate", tmp_path / name, *paths)
+    assert code == 0 and "edge points left out: outside the area the correction defines" in out, out
+    code, out, err = harp_subprocess("evaluate", model_file, *paths, "--json")
+    assert code == 0, err
+    whole = json.loads(out)
+    assert whole["n_excluded"] == 0 and whole["n_points"] > 0
+
+    # truth: the lens's own evaluation on the edge points its corrected image holds
+    edges = [ln.points for p in paths for ln in measure_grey(str(p), read_image(str(p)), DEFAULT_T).lines]
+    kept, n_out = [], 0
+    for e in edges:
+        u = lens.undistort_points(e)
+        ok = (u[:, 0] >= 0) & (u[:, 0] <= W - 1) & (u[:, 1] >= 0) & (u[:, 1] <= H - 1)
+        if ok.sum() >= 3:
+            kept.append(e[ok])
+            n_out += int((~ok).sum())
+        else:
+            n_out += len(e)
+    truth = straightness(corrected_points(kept, lens, W, H))
+    assert n_out > 0.2 * whole["n_points"]  # a wide lens: the maps miss much of the shots
+    for fmt, rep in reports.items():
+        assert rep["kind"] == fmt and rep["n_points"] == whole["n_points"]
+        assert rep["normalisation"] == "4 corrected image corners"
+        assert abs(rep["n_excluded"] - n_out) <= 0.002 * rep["n_points"], (fmt, rep["n_excluded"], n_out)
+        assert rep["n_lines"] == len(kept)
+        assert rep["after"]["d"] == pytest.approx(truth.d, rel=0.01), (fmt, rep["after"], truth)
+        assert rep["after"]["d_max"] == pytest.approx(truth.d_max, rel=0.02), (fmt, rep["after"], truth)
+        assert rep["before"] == whole["before"]
