@@ -251,7 +251,11 @@ def conversion_error_in_frame(
     ut = theirs.undistort_points(g[keep])
     e = np.linalg.norm(ut - uo[keep], axis=1)
     e = np.where(np.isfinite(e), e, np.inf)
-    lines = straight_lines_through(ours, width, height, normalise=False)
+    lines = []
+    for ln in straight_lines_through(ours, width, height, normalise=False):
+        ok = _inside(ours.undistort_points(ln), width, height)  # the lines inside the corrected image
+        if ok.sum() >= 2:
+            lines.append(ln[ok])
     st = straightness([theirs.undistort_points(ln) for ln in lines])
     shots: tuple[float, float, float, float] = (float("nan"),) * 4
     if edges is not None and len(edges) > 0:

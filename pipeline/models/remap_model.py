@@ -15,6 +15,9 @@ Array = npt.NDArray[np.float64]
 
 #: accuracy (px) to which :meth:`RemapModel.undistort_points` inverts the bilinear map
 REMAP_INVERSE_TOL_PX = 1e-7
+#: how far (px) :meth:`RemapModel.undistort_points` reaches beyond the maps' defined area
+#: ``[0, W-1] x [0, H-1]``: a point on its border inverts despite the float32 rounding of the maps
+REMAP_DOMAIN_MARGIN_PX = 0.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,7 +37,7 @@ class RemapModel(DistortionModel):
     :meth:`distort_points` is :math:`D`; :meth:`undistort_points` (the
     correction) inverts it by damped Newton iterations to ``REMAP_INVERSE_TOL_PX``
     (:func:`pipeline.models.inverse.newton_inverse`) *inside the map's defined area*
-    :math:`[0, W-1] \times [0, H-1]` only: a distorted point whose ideal position lies
+    :math:`[0, W-1] \times [0, H-1]` only (to ``REMAP_DOMAIN_MARGIN_PX``): a distorted point whose ideal position lies
     outside (not in the corrected image the maps describe) is NaN, never extrapolated
     (:meth:`undistort_inverse` says why: ``OUTSIDE_DOMAIN``).
     The 4-corner normalisation (:func:`pipeline.normalise.corner_homography`) needs the
@@ -98,10 +101,11 @@ class RemapModel(DistortionModel):
         return np.stack([self._bilinear(self.map_x, xy), self._bilinear(self.map_y, xy)], axis=1)
 
     def inside(self, xy: Array) -> npt.NDArray[np.bool_]:
-        """Where ideal points lie in the map's defined area ``[0, W-1] x [0, H-1]``."""
-        out: npt.NDArray[np.bool_] = (
-            (xy[:, 0] >= 0) & (xy[:, 0] <= self.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= self.height - 1)
-        )
+        """Where ideal points lie in the map's defined area ``[0, W-1] x [0, H-1]`` (widened by
+        ``REMAP_DOMAIN_MARGIN_PX``)."""
+        m = REMAP_DOMAIN_MARGIN_PX
+        x, y = xy[:, 0], xy[:, 1]
+        out: npt.NDArray[np.bool_] = (x >= -m) & (x <= self.width - 1 + m) & (y >= -m) & (y <= self.height - 1 + m)
         return out
 
     def undistort_points(self, xy: Array, max_iter: int = 50) -> Array:

@@ -31,12 +31,14 @@ import pytest
 import yaml
 
 from pipeline.edgeset import corrected_straightness
+from pipeline.evaluate import corrected_points
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS
 from pipeline.fitspec import FitSpec
 from pipeline.measure import measure_image
 from pipeline.model_file import read_model_file
 from pipeline.models import RadialModel
 from pipeline.render import HarpScene, render_harp
+from pipeline.straightness import straightness
 from station.cli import main
 from station.config import Identity, Optics
 from station.files import write_model_file, write_profile
@@ -389,6 +391,19 @@ def test_a_warning_exactly_when_the_export_is_less_exact_than_the_calibration(bo
 
 
 # ---------------------------------------------------------- harp evaluate
+def _lens_on_its_corrected_image(shots) -> float:
+    """d of LENS (4-corner normalised) on the edge points of ``shots`` it corrects to inside the
+    image: those a maps file holds."""
+    kept = []
+    for p in shots:
+        for ln in measure_image(cv2.imread(str(p), cv2.IMREAD_UNCHANGED), t=30).lines:
+            u = LENS.undistort_points(ln.points)
+            ok = (u[:, 0] >= 0) & (u[:, 0] <= W - 1) & (u[:, 1] >= 0) & (u[:, 1] <= H - 1)
+            if ok.sum() >= 3:
+                kept.append(ln.points[ok])
+    return float(straightness(corrected_points(kept, LENS, W, H)).d)
+
+
 def test_harp_evaluate_reads_every_format(model_source, exported):
     def evaluate(path, *extra):
         code, out, err = run_main("evaluate", path, *model_source.shots, "--json", *extra)
@@ -415,8 +430,9 @@ def test_harp_evaluate_reads_every_format(model_source, exported):
         after = rep["after"]["d"]
         if fmt in ("json",):
             assert after == floor["after"]["d"]
-        elif fmt in ("maps", "stmap"):  # the correction itself, to the maps' interpolation error
-            assert abs(after - floor["after"]["d"]) < 1e-3, (fmt, after, floor["after"])
+        elif fmt in ("maps", "stmap"):  # the correction itself on the points the maps hold
+            assert rep["n_excluded"] > 0 and rep["n_points"] == floor["n_points"], fmt
+            assert abs(after - _lens_on_its_corrected_image(model_source.shots)) < 1e-3, (fmt, after)
         else:  # the file holds what the export stated for these very shots
             assert after == pytest.approx(run.fig["conversion"]["shots_d_px"], abs=2e-5), fmt
 
