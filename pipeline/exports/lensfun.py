@@ -67,6 +67,7 @@ class LensfunEntry:
     vignetting: LensfunVignetting | None = None
     aperture: float = 8.0
     distance: float = 1000.0
+    crop_note: str | None = None
 
     @property
     def maker(self) -> str:
@@ -108,7 +109,9 @@ class LensfunEntry:
             parts.append(f"camera {self.lens.camera_body}")
         if self.lens.focal_mm is None:
             parts.append(f"focal {DEFAULT_FOCAL_MM:g} mm is a placeholder (no nominal focal configured)")
-        if self.lens.crop_factor is None:
+        if self.crop_note is not None:
+            parts.append(self.crop_note)
+        elif self.lens.crop_factor is None:
             parts.append("crop factor 1 assumed (none configured)")
         if self.error is not None:
             parts.extend(self.error.lines())
