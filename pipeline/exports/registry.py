@@ -32,7 +32,13 @@ import numpy.typing as npt
 from pipeline.exports import maps as maps_fmt
 from pipeline.exports.fit import ConversionError, conversion_error_in_frame, fit_fisheye, fit_lensfun, fit_opencv
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
-from pipeline.exports.lensfun import LensfunEntry, lensfun_database_text, read_lensfun_text
+from pipeline.exports.lensfun import (
+    LensfunEntry,
+    installed_lens,
+    lens_names,
+    lensfun_database_text,
+    read_lensfun_text,
+)
 from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
@@ -93,6 +99,9 @@ class ExportOptions:
     camera_name: str | None = None
     existing: bytes | None = None
     existing_name: str = "<existing>"
+    installed_lensfun: tuple[tuple[str, str], ...] = ()
+    """The lensfun databases lensfun loads on this machine, ``(path, XML text)``: a lensfun export
+    under the name of a lens in one of them is refused (see :func:`~pipeline.exports.lensfun.installed_lens`)."""
 
 
 @dataclass(frozen=True)
@@ -284,13 +293,25 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
     lens, crop_how, warnings = lensfun_crop_factor(
         src.lens.with_overrides(crop_factor=opt.crop_factor, mount=opt.mount), src.width, src.height
     )
+    maker, model = lens_names(lens)
+    clash = installed_lens(opt.installed_lensfun, maker, model)
+    if clash is not None:
+        raise ValueError(
+            f"lensfun: lens '{model}' of {maker} is in the installed lensfun database "
+            f"{clash}; lensfun merges lenses by name, so a file under that name replaces that entry's calibrations "
+            "(its TCA, vignetting, other focal lengths): export under another name (--lens-model, e.g. with the "
+            "serial number)"
+        )
     m, err = fit_lensfun(
         src.model, src.width, src.height, kind=opt.lensfun_model, fit_center=opt.lensfun_center, edges=src.edges
     )
     existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
     entry = LensfunEntry(model=m, lens=lens, error=err, crop_note=crop_how)
     text, done = lensfun_database_text([entry], existing, opt.existing_name)
-    notes = list(done)
+    notes = [
+        d for d in done if not d.startswith("replaced ")
+    ]  # replacing a calibration in the user's file is warned of
+    warnings += [f"lensfun: {d}" for d in done if d.startswith("replaced ")]
     if crop_how is not None:
         notes.append(f"lensfun: {crop_how}")
     if lens.focal_mm is None:

@@ -1,11 +1,15 @@
-"""The lensfun export as lensfun needs it: the camera's crop factor (issue 20 item 3)."""
+"""The lensfun export as lensfun needs it: the camera's crop factor, no clash with an installed lens
+(issue 20 item 3)."""
 
 import math
+from pathlib import Path
 
+import lensfunpy
 import numpy as np
 import pytest
 
 from pipeline.exports.lens import LensInfo
+from pipeline.exports.lensfun import installed_lens, read_lensfun_text
 from pipeline.exports.registry import ExportOptions, ExportSource, write_export
 from pipeline.models import RadialModel
 from tests.pipeline.export_support import compare_points, lensfun_in_consumer
@@ -80,3 +84,87 @@ def test_a_configured_crop_factor_that_the_pixel_pitch_contradicts_is_warned_of(
     agree = write_export("lensfun", _src(pixel_pitch_um=15.0), ExportOptions(crop_factor=7.2))
     assert not [w for w in agree.warnings if "crop factor" in w]
     assert np.isfinite(agree.error.max_px)
+
+
+# ----------------------------------------------- a lens lensfun already has
+def _bundled() -> list[tuple[str, str]]:
+    root = Path(lensfunpy.__file__).parent / "db_files"
+    return [(str(p), p.read_text(encoding="utf-8")) for p in sorted(root.glob("*.xml"))]
+
+
+def test_installed_lens_finds_a_lens_of_lensfuns_own_database_by_any_of_its_names():
+    dbs = _bundled()
+    for model in ("Canon EF 50mm f/1.8 MkII", "canon ef 50mm  F/1.8 II"):  # the plain and the lang="en" name
+        assert Path(installed_lens(dbs, "Canon", model)).name == "slr-canon.xml"
+    assert installed_lens(dbs, "Canon", "Canon EF 50mm f/1.8 MkII (harp SN 4711)") is None
+    assert installed_lens(dbs, "Nikon", "Canon EF 50mm f/1.8 MkII") is None
+
+
+def test_why_a_clash_is_refused_lensfun_drops_the_installed_entrys_tca():
+    """Lensfun itself, loading its database and a file with a lens of the same name: the entry's TCA is gone."""
+    lens = LensInfo(lens_maker="Canon", lens_model="Canon EF 50mm f/1.8 MkII", mount="Canon EF", focal_mm=50.0)
+    xml = write_export("lensfun", ExportSource(BARREL, W, H, lens=lens), ExportOptions(crop_factor=1.0)).data.decode()
+
+    def tca(db) -> object:
+        (ln,) = [x for x in db.lenses if x.model == "Canon EF 50mm f/1.8 MkII" and x.crop_factor == 1.0]
+        mod = lensfunpy.Modifier(ln, 1.0, W, H)
+        mod.initialize(50.0, 2.8, 1000.0, flags=lensfunpy.ModifyFlags.TCA)
+        return mod.apply_subpixel_distortion()
+
+    assert tca(lensfunpy.Database(load_common=False)) is not None  # the installed entry has a TCA
+    assert tca(lensfunpy.Database(xml=xml, load_common=False)) is None  # merged with ours: lost
+    with pytest.raises(ValueError, match=r"is in the installed lensfun database .*slr-canon\.xml.*--lens-model"):
+        write_export(
+            "lensfun",
+            ExportSource(BARREL, W, H, lens=lens),
+            ExportOptions(crop_factor=1.0, installed_lensfun=tuple(_bundled())),
+        )
+
+
+def test_a_second_focus_setting_into_the_same_file_is_said_to_replace_the_first():
+    """lensfun has no focus axis for distortion: one calibration per focal length survives, and the export says so."""
+    lens = LensInfo(lens_maker="Harp", lens_model="Focus 6", mount="C", focal_mm=6.0, crop_factor=7.2, focus=0.0)
+    first = write_export("lensfun", ExportSource(BARREL, W, H, lens=lens))
+    other = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03))
+    second = write_export(
+        "lensfun",
+        ExportSource(other, W, H, lens=LensInfo(**{**lens.__dict__, "focus": 1.0})),
+        ExportOptions(existing=first.data, existing_name="mine.xml"),
+    )
+    (w,) = [w for w in second.warnings if "replaced" in w]
+    assert "no focus axis" in w and "focus 1 calibration replaced the focus 0 one" in w
+    xml = second.data.decode()
+    assert xml.count("<distortion ") == 1 and "focus setting 1 (" in xml and "focus setting 0 (" not in xml
+    # what is left is the second one
+    kept = read_lensfun_text(xml, W, H, "mine.xml")
+    pts = np.column_stack([np.linspace(0, W - 1, 50), np.linspace(0, H - 1, 50)])
+    assert np.max(np.abs(kept.undistort_points(pts) - second.converted.undistort_points(pts))) < 1e-9
+    assert np.max(np.abs(kept.undistort_points(pts) - first.converted.undistort_points(pts))) > 0.1
+
+
+def test_another_centre_at_another_focal_is_refused_since_lensfun_holds_one_centre_per_lens():
+    base = dict(lens_maker="Harp", lens_model="Zoom 6-12", mount="C", crop_factor=7.2)
+    wide = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.04), center=(166.0, 117.0))
+    tele = RadialModel.for_image(W, H, k=(1.0, 0.0, -0.02), center=(152.0, 123.0))
+    first = write_export("lensfun", ExportSource(wide, W, H, lens=LensInfo(focal_mm=6.0, **base)))
+    again = ExportOptions(existing=first.data, existing_name="zoom.xml")
+    with pytest.raises(
+        ValueError, match=r"zoom\.xml: lens Harp Zoom 6-12 .* calibrations at 6 mm .*--lensfun-no-center"
+    ):
+        write_export("lensfun", ExportSource(tele, W, H, lens=LensInfo(focal_mm=12.0, **base)), again)
+    # the same focal again: its centre goes with it (nothing else uses the old one)
+    same = write_export("lensfun", ExportSource(tele, W, H, lens=LensInfo(focal_mm=6.0, **base)), again)
+    xml = same.data.decode()
+    assert xml.count("<lens>") == 1 and xml.count("<distortion ") == 1 and xml.count("<center ") == 1
+    kept = read_lensfun_text(xml, W, H, "zoom.xml")
+    pts = np.column_stack([np.linspace(0, W - 1, 50), np.linspace(0, H - 1, 50)])
+    assert np.max(np.abs(kept.undistort_points(pts) - same.converted.undistort_points(pts))) < 1e-9
+    # without fitted centres both focal lengths go into one lens
+    plain = ExportOptions(lensfun_center=False)
+    a = write_export("lensfun", ExportSource(wide, W, H, lens=LensInfo(focal_mm=6.0, **base)), plain)
+    b = write_export(
+        "lensfun",
+        ExportSource(tele, W, H, lens=LensInfo(focal_mm=12.0, **base)),
+        ExportOptions(lensfun_center=False, existing=a.data),
+    )
+    assert b.data.decode().count("<lens>") == 1 and b.data.decode().count("<distortion ") == 2

@@ -521,6 +521,29 @@ def test_lensfun_without_a_crop_factor_exit_2_names_what_to_give_nothing_written
     assert "<cropfactor>7.2111</cropfactor>" in out.read_text()
 
 
+def test_lensfun_under_the_name_of_an_installed_lens_exit_2_nothing_written(tmp_path, monkeypatch):
+    """lensfunpy's own database has the Canon EF 50mm f/1.8 MkII: a file under that name would replace it."""
+    monkeypatch.delenv("HARP_LENSFUN_DIRS", raising=False)
+    model = tmp_path / "lens.yaml"
+    write_model_file(model, wide_radial(60.0, 400, 300), width=400, height=300)
+    out = tmp_path / "mine.xml"
+    name = ["--lens-maker", "Canon", "--lens-model", "Canon EF 50mm f/1.8 MkII", "--crop", "1", "--focal-mm", "50"]
+    code, stdout, stderr = run_main("export", model, "--format", "lensfun", *name, "-o", out)
+    assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
+    assert "is in the installed lensfun database" in stderr and "slr-canon.xml" in stderr
+    assert "--lens-model" in stderr
+    # under its own name it is written; and adding to one's own database in a lensfun directory is no clash
+    own = ["--lens-maker", "Canon", "--lens-model", "Canon EF 50mm f/1.8 MkII (harp SN 4711)", "--crop", "1"]
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(tmp_path))
+    for _ in range(2):
+        code, stdout, stderr = run_main("export", model, "--format", "lensfun", *own, "--focal-mm", "50", "-o", out)
+        assert code == 0, stderr
+    assert "replaced the calibration" in stderr
+    other = tmp_path / "other.xml"
+    code, _, stderr = run_main("export", model, "--format", "lensfun", *own, "-o", other)
+    assert code == 2 and "mine.xml" in stderr and not other.exists()
+
+
 def test_unwritable_output_exit_2(model_source, tmp_path):
     code, _, stderr = run_main(
         "export", model_source.model_file, "--format", "json", "-o", tmp_path / "no" / "such" / "dir.json"
