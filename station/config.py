@@ -214,6 +214,9 @@ class CheckConfig:
     max_saturated_fraction: float = 0.01  # of pixels at the top code value
     min_dynamic_range: float = 0.2  # (p99 - p1) / full scale
     max_recaptures: int = 2
+    # px: harp live's focus check, the median 10-90 % string edge width (a sharp harp: 1.3-2 px;
+    # the live demo's lens 0.17 off its best focus: 4 px); the session itself does not assess focus
+    max_edge_width_px: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -537,6 +540,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         max_saturated_fraction=ck.number("max_saturated_fraction", d.max_saturated_fraction, min=0),
         min_dynamic_range=ck.number("min_dynamic_range", d.min_dynamic_range, min=0),
         max_recaptures=ck.number("max_recaptures", d.max_recaptures, min=0, integer=True),
+        max_edge_width_px=ck.number("max_edge_width_px", d.max_edge_width_px, positive=True),
     )
     rt = cp.section("retries", keys_of(RetryConfig), optional=True)
     r = RetryConfig()
