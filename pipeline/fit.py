@@ -41,6 +41,11 @@ the fit fixes them as follows.
   ridge on the coefficients of degree >= 2 fixes what few orientations cannot
   see (e.g. with only horizontal and vertical strings, any ``x_u = g(x)``,
   ``y_u = h(y)`` keeps every string straight).
+* ``radial`` with a residual field (:mod:`pipeline.models.radial_field`): the radial
+  part as above; the field's affine part (translation, rotation, scale, shear: invisible,
+  and the null space of its roughness penalty) is held at zero by a penalty on its
+  projection, and its first-order projective (quadratic) part, like everything it could
+  bend along strings few orientations cannot see, by the roughness penalty.
 
 What to fit is a :class:`pipeline.fitspec.FitSpec` (its ``fit_arguments()`` are the
 keyword arguments of :func:`fit_distortion`); each model's free parameters live beside

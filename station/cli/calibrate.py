@@ -13,7 +13,9 @@ says what it chose. ``--model radial`` fits the radial model with free centre
 ``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
 towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
-denominator to the radial factor (wide-angle lenses). ``--holdout`` shots are never used in the
+denominator to the radial factor (wide-angle lenses); ``--field 8x6[@PENALTY]`` a residual
+field of 8 x 6 cubic B-spline control points on top of it (:mod:`pipeline.models.radial_field`;
+the automatic choice does not offer fields). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
 protocol). On a machine with two cores or more the shots are measured, and the
 candidates cross-validated, by two worker processes (three shots, or any odd number,
@@ -39,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec, parse
 from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
@@ -84,6 +86,15 @@ def register(subparsers) -> None:
         "--center-prior",
         action="store_true",
         help="radial: pull the distortion centre towards the image centre (see pipeline.select)",
+    )
+    p.add_argument(
+        "--field",
+        default=None,
+        metavar="NXxNY[@PENALTY]",
+        help=(
+            "radial: add a residual field of NX x NY cubic B-spline control points and its roughness penalty "
+            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field)"
+        ),
     )
     p.add_argument("-o", "--out", required=True, metavar="MODEL", help="model file to write (YAML)")
     p.add_argument(
@@ -149,19 +160,45 @@ def _workers(n_jobs: int, balance: bool = False):
 
 def _spec(args) -> FitSpec | None:
     """The FitSpec the options ask for (None: --model auto)."""
+    field = getattr(args, "field", None)
     if args.model == "auto":
-        if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior or args.division:
+        if (
+            args.degree is not None
+            or args.no_tangential
+            or args.no_prism
+            or args.center_prior
+            or args.division
+            or field is not None
+        ):
             raise CalibrateError(
-                "--degree/--no-tangential/--no-prism/--center-prior/--division need --model radial or poly"
+                "--degree/--no-tangential/--no-prism/--center-prior/--division/--field need --model radial or poly"
             )
         return None
-    if args.model == "poly" and (args.no_tangential or args.no_prism or args.center_prior or args.division):
-        raise CalibrateError("--no-tangential/--no-prism/--center-prior/--division apply to --model radial only")
+    if args.model == "poly" and (
+        args.no_tangential or args.no_prism or args.center_prior or args.division or field is not None
+    ):
+        raise CalibrateError(
+            "--no-tangential/--no-prism/--center-prior/--division/--field apply to --model radial only"
+        )
+    grid, penalty = None, None
+    if field is not None:
+        try:
+            with_field = parse(f"radial+field{field}")
+        except ValueError as exc:
+            raise CalibrateError(f"--field {field}: {str(exc).split(': ', 1)[-1]}") from None
+        grid, penalty = with_field.field, with_field.field_penalty
     try:
         if args.model == "poly":
             return FitSpec("poly", args.degree)
         return FitSpec(
-            "radial", args.degree, not args.no_tangential, not args.no_prism, args.center_prior, args.division
+            "radial",
+            args.degree,
+            not args.no_tangential,
+            not args.no_prism,
+            args.center_prior,
+            args.division,
+            field=grid,
+            field_penalty=penalty,
         )
     except ValueError as exc:
         option = "--division" if "division" in str(exc) else "--degree"

@@ -6,7 +6,7 @@ import pytest
 
 from pipeline import load_model
 from pipeline.compare import compare_models
-from pipeline.models import RadialModel
+from pipeline.models import RadialFieldModel, RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
 from tests.station.processes import group_members
@@ -204,6 +204,24 @@ def test_division_option(shots, tmp_path, capsys):
     code, out, err = _run(capsys, shots[3.0], shots[63.0], "--model", "radial", "--division", "7", "--out", out_path)
     assert code == 2 and err.count("\n") == 1 and "--division" in err and "0..3" in err
     code, out, err = _run(capsys, shots[3.0], shots[63.0], "--division", "1", "--out", out_path)
+    assert code == 2 and "need --model radial" in err
+
+
+def test_field_option(shots, tmp_path, capsys):
+    """``--field`` adds a residual field to the radial model: the model file holds it, the label names it;
+    on this radial lens it stays near the radial fit. A bad grid is one line, exit 2."""
+    out_path = tmp_path / "field.yaml"
+    four = (shots[3.0], shots[63.0], shots[123.0], shots[93.0])
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "6x5@0.01", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["choice"]["label"] == "radial4+tangential+prism+field6x5@0.01" and rep["fit"]["d"] < 0.01
+    model = load_model(out_path)
+    assert isinstance(model, RadialFieldModel) and model.shape == (5, 6)
+    assert compare_models(model, LENS, W, H).rms < 0.01
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "6x2", "--out", out_path)
+    assert code == 2 and err.count("\n") == 1 and "--field 6x2" in err and "4..24" in err
+    code, out, err = _run(capsys, *four, "--field", "6x5", "--out", out_path)
     assert code == 2 and "need --model radial" in err
 
 
