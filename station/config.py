@@ -34,7 +34,7 @@ from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
 from pipeline.fitspec import KINDS, FitSpec
 from pipeline.resample import DEFAULT_T
 from station.store.errors import StoreError
-from station.store.location import SQLITE, StoreLocation, parse_store
+from station.store.location import SQLITE, StoreLocation, parse_store, user_store_path
 
 AUTO_MODEL = "auto"
 """``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
@@ -620,9 +620,12 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
 
 def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:
     """``store.path`` (a file, relative to the configuration) or ``store.url`` (``sqlite:///`` or
-    ``postgresql://``, :mod:`station.store.location`): exactly one of them."""
-    if ("path" in so.data) == ("url" in so.data):
-        raise so.err("path", "exactly one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://)")
+    ``postgresql://``, :mod:`station.store.location`): at most one of them; neither is the per-user
+    default store (:func:`~station.store.location.user_store_path`), the one every command finds."""
+    if "path" in so.data and "url" in so.data:
+        raise so.err("path", "one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://), not both")
+    if "path" not in so.data and "url" not in so.data:
+        return user_store_path(), None
     if "path" in so.data:
         return Path(os.path.normpath(base / so.string("path"))), None
     url = so.string("url")
