@@ -15,7 +15,8 @@ towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
 denominator to the radial factor (wide-angle lenses); ``--field 8x6[@PENALTY]`` a residual
 field of 8 x 6 cubic B-spline control points on top of it (:mod:`pipeline.models.radial_field`;
-the automatic choice does not offer fields). ``--holdout`` shots are never used in the
+``--model auto`` does not offer fields), ``--field auto`` the radial model or it with the field
+whose knots and penalty win the cross-validation (:func:`pipeline.select.field_candidates`). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
 protocol). On a machine with two cores or more the shots are measured, and the
 candidates cross-validated, by two worker processes (three shots, or any odd number,
@@ -90,10 +91,11 @@ def register(subparsers) -> None:
     p.add_argument(
         "--field",
         default=None,
-        metavar="NXxNY[@PENALTY]",
+        metavar="NXxNY[@PENALTY]|auto",
         help=(
             "radial: add a residual field of NX x NY cubic B-spline control points and its roughness penalty "
-            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field)"
+            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field); auto: the radial model, or it with the "
+            "field whose knots and penalty win the cross-validation (pipeline.select.field_candidates)"
         ),
     )
     p.add_argument("-o", "--out", required=True, metavar="MODEL", help="model file to write (YAML)")
@@ -181,7 +183,7 @@ def _spec(args) -> FitSpec | None:
             "--no-tangential/--no-prism/--center-prior/--division/--field apply to --model radial only"
         )
     grid, penalty = None, None
-    if field is not None:
+    if field is not None and field != "auto":
         try:
             with_field = parse(f"radial+field{field}")
         except ValueError as exc:
@@ -208,6 +210,12 @@ def _spec(args) -> FitSpec | None:
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
     cand = _spec(args)
+    cands = None
+    if getattr(args, "field", None) == "auto":  # the field's knots and penalty chosen by cross-validation
+        from pipeline.select import field_candidates
+
+        assert cand is not None
+        cands, cand = field_candidates(cand), None
     out_dir = Path(args.out).parent
     if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
         reason = "not a directory" if out_dir.exists() else "no such directory"
@@ -225,10 +233,10 @@ def calibrate(args) -> dict:
 
         measured = list(measuring)
     with _workers(2 if cand is None else 1) as map_fn:  # a given model: one fit, no candidates to share out
-        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn)
+        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn, cands)
 
 
-def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
+def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, cands=None) -> dict:
     from station.calibration import (
         GIVEN_ON_COMMAND_LINE,
         calibrate_shots,
@@ -250,7 +258,14 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
         raise CalibrateError(problem)
     held = [[ln.points for ln in m.lines] for _, m in hold_m]
     cal = calibrate_shots(
-        shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
+        shots,
+        width,
+        height,
+        cand,
+        held_out=held,
+        image_sizes=[(m.width, m.height) for _, m in fit_m],
+        map_fn=map_fn,
+        candidates=cands,
     )
     selection = selection_record(cal.selection, GIVEN_ON_COMMAND_LINE)
     if cal.selection is not None:
@@ -325,7 +340,7 @@ def _print(report: dict) -> None:
     if ch.get("table"):
         t = Table(title="cross-validation (holdout d, px)")
         for c in ("candidate", "params", "CV d", "per fold"):
-            t.add_column(c)
+            t.add_column(c, overflow="fold" if c == "candidate" else "ellipsis")  # long labels: folded, not cut
         for r in ch["table"]:
             if r["cv_d"] is not None:
                 cv = f"{r['cv_d']:.4f}"

@@ -225,6 +225,21 @@ def test_field_option(shots, tmp_path, capsys):
     assert code == 2 and "need --model radial" in err
 
 
+def test_field_auto_chooses_knots_and_penalty_by_cross_validation(shots, tmp_path, capsys):
+    """``--field auto``: the radial model and it with every field of ``field_candidates`` are
+    cross-validated; on this radial lens the radial model wins and the table lists the fields."""
+    out_path = tmp_path / "auto-field.yaml"
+    four = (shots[3.0], shots[63.0], shots[123.0], shots[93.0])
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "auto", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    labels = [r["label"] for r in rep["choice"]["table"]]
+    assert labels[0] == "radial4+tangential+prism" and len(labels) == 7
+    assert all("+field" in lab for lab in labels[1:])
+    assert rep["choice"]["label"] == "radial4+tangential+prism", rep["choice"]["reason"]
+    assert isinstance(load_model(out_path), RadialModel)
+
+
 def test_workers_give_the_same_choice_and_figures_as_one_process(shots, tmp_path, capsys, monkeypatch):
     """Issue 8 item 6: shots measured and candidates cross-validated by two worker processes; the
     report is the one a single process writes, and hopeless candidates are shown as stopped."""
