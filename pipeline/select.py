@@ -756,8 +756,10 @@ FIELD_GRIDS: tuple[tuple[int, int], ...] = ((8, 6), (12, 9))
 
 FIELD_PENALTIES: tuple[float, ...] = (1e-4, 1e-3, 1e-2)
 """Roughness weights :func:`field_candidates` offers (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`):
-on 1000 x 750 images with 0.005 px point noise, 1e-4-3e-4 follows a field of 0.05 px RMS and 0.6-2
-half-diagonal wavelengths to 0.002-0.003 px, 1e-2 keeps it near zero (``benchmarks/residual_field.py``)."""
+on five orientations of 1000 x 750 point sets with 0.005 px noise, 1e-4-3e-4 follows a field of 0.05 px RMS
+and 0.6-2 half-diagonal wavelengths (:mod:`pipeline.lens_population`) to 0.002-0.003 px of field error (the
+radial model: 0.02-0.035), 1e-2 keeps the field near zero; on the realistic simulator the cross-validation
+chose 1e-3 or 1e-4 (``benchmarks/residual_field.py``)."""
 
 
 def field_candidates(

@@ -182,10 +182,10 @@ def test_maps_export_a_field_model_exactly_and_the_others_state_their_error():
     (1e-3 px); every other format: a fit with its stated conversion error, and the error is true."""
     m = _some_field_model()
     src = ExportSource(m, W, H, holdout_d=0.005)
-    maps = write_export("maps", src)
-    corr = read_correction(maps.data, "field.npz", W, H)
-    acc = map_accuracy(m, *_maps_of(corr.model))
-    assert acc.max_px < 2e-3
+    for name, file in (("maps", "field.npz"), ("stmap", "field.exr")):
+        corr = read_correction(write_export(name, src).data, file, W, H)
+        acc = map_accuracy(m, *_maps_of(corr.model))
+        assert acc.max_px < 2e-3, name
     for name in FORMATS:
         if name in ("maps", "stmap", "json", "harp", "auto"):
             continue
