@@ -104,9 +104,12 @@ def test_reference_deviation_and_missing_holdout():
 
 
 def test_a_correction_not_defined_at_the_corners_fails():
-    # issue 14: k1 = 5.0 written into a stored profile, 259 px of distortion, passed `harp qa LENS`
+    # issue 14: a coefficient written into a stored profile. k1 = -5 folds the radial map at a tenth
+    # of the half diagonal (rho (1 - 5 rho ...) stops increasing there), so the corners have no
+    # inverse. (k1 = +5, issue 14's 259 px, is monotonic and has an exact inverse since the shared
+    # safeguarded inverse, issue 20 item 9: the recorded figures catch it, tests below.)
     good = lens_for_focus(0.5, 1280, 960)
-    bad = tampered(good)
+    bad = tampered(good, k1=-5.0)
     # truth independent of the check: the correction maps the corners where no inverse brings them back
     corners = np.array([[0.0, 0.0], [1279.0, 0.0], [1279.0, 959.0], [0.0, 959.0]])
     assert not np.allclose(bad.distort_points(bad.undistort_points(corners)), corners, atol=1.0, equal_nan=False)
