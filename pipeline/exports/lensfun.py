@@ -67,6 +67,7 @@ class LensfunEntry:
     vignetting: LensfunVignetting | None = None
     aperture: float = 8.0
     distance: float = 1000.0
+    stamp: tuple[str, ...] = ()
 
     @property
     def maker(self) -> str:
@@ -99,7 +100,7 @@ class LensfunEntry:
     def note(self) -> str:
         """The comment written beside the calibration."""
         m = self.model
-        parts = [f"harp station calibration for {m.width}x{m.height} images at focal {self.focal:g} mm"]
+        parts = [*self.stamp, f"harp station calibration for {m.width}x{m.height} images at focal {self.focal:g} mm"]
         if self.lens.focus is not None:
             parts.append(f"focus setting {self.lens.focus:g} (lensfun has no focus axis for distortion)")
         if self.lens.lens_serial:

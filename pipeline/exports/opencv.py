@@ -49,13 +49,20 @@ def opencv_text(
     comment: str | None = None,
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
+    stamp: tuple[str, ...] = (),
 ) -> str:
-    """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye)."""
+    """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye); ``stamp``:
+    comment lines right after the title, before the figures."""
     fisheye = isinstance(model, OpenCVFisheyeModel)
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     kind = "fisheye (cv::fisheye, Kannala-Brandt k1..k4)" if fisheye else f"pinhole, {len(model.dist)} coefficients"
     fs.writeComment(comment or f"OpenCV {kind} distortion exported by harp station")
-    for line in [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]:
+    for line in [
+        *stamp,
+        *(error.lines() if error is not None else []),
+        *([camera.statement] if camera else []),
+        *notes,
+    ]:
         fs.writeComment(line)
     fs.write("image_width", int(width))
     fs.write("image_height", int(height))

@@ -66,6 +66,12 @@ class ExportSource:
     wide_angle : bool
         The calibration chose a wide-angle model: :data:`AUTO` then fits the
         fisheye export too and writes the closer of the two.
+    stamp : tuple of str
+        Lines every format states first, in its own comment or header
+        mechanism (a comment line each in the text formats, an XML comment in
+        lensfun, the ``notes`` of the maps and the comments of the STMap, a
+        ``stamp`` list in json): what a reader of the file must know before
+        using it, e.g. that the profile failed QA.
     """
 
     model: DistortionModel
@@ -77,6 +83,7 @@ class ExportSource:
     merit: Mapping[str, Any] = field(default_factory=dict)
     provenance: Mapping[str, Any] = field(default_factory=dict)
     wide_angle: bool = False
+    stamp: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -216,12 +223,12 @@ def _write_pinhole(
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
     notes = _lens_notes(src)
     if fmt == "opencv":
-        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp)
     elif fmt == "ros":
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
+        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp)
     else:
-        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes)
+        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp)
     return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
 
 
@@ -233,10 +240,10 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
     notes = _lens_notes(src)
     if fmt == "opencv-fisheye":
-        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp)
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
+        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp)
     warnings = conversion_warnings(fmt, src, err) + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
     return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
 
@@ -247,7 +254,9 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
         src.model, src.width, src.height, kind=opt.lensfun_model, fit_center=opt.lensfun_center, edges=src.edges
     )
     existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
-    text, done = lensfun_database_text([LensfunEntry(model=m, lens=lens, error=err)], existing, opt.existing_name)
+    text, done = lensfun_database_text(
+        [LensfunEntry(model=m, lens=lens, error=err, stamp=src.stamp)], existing, opt.existing_name
+    )
     notes = list(done)
     if lens.crop_factor is None:
         notes.append("lensfun: no crop factor configured, 1.0 written (set the camera's with --crop)")
@@ -265,7 +274,7 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
     )
-    notes = (note, *_lens_notes(src))
+    notes = (*src.stamp, note, *_lens_notes(src))
     data = maps_fmt.maps_npz_bytes(maps, acc, notes) if fmt == "maps" else maps_fmt.stmap_exr_bytes(maps, notes)
     return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
 
@@ -277,6 +286,7 @@ def harp_model_doc(src: ExportSource) -> dict[str, Any]:
     return {
         "format": HARP_FORMAT_NAME,
         "format_version": FORMAT_VERSION,
+        **({"stamp": list(src.stamp)} if src.stamp else {}),
         "model": src.model.to_dict(),
         "image": {"width": int(src.width), "height": int(src.height)},
         "merit": dict(src.merit),
@@ -294,7 +304,8 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
     text = model_file_text(
         src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
     )
-    return Export("harp", text.encode())
+    head = "".join(f"# {line}\n" for line in src.stamp)
+    return Export("harp", (head + text).encode())
 
 
 def _plain(obj: object) -> object:

@@ -69,8 +69,10 @@ def ros_text(
     camera_name: str = "camera",
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
+    stamp: tuple[str, ...] = (),
 ) -> str:
-    """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``)."""
+    """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``);
+    ``stamp``: comment lines right after the title."""
     if isinstance(model, OpenCVFisheyeModel):
         dm = ROS_FISHEYE_MODEL
     else:
@@ -91,7 +93,13 @@ def ros_text(
     }
     head = "# ROS camera_info calibration exported by harp station\n"
     readers = [ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else []
-    lines = [*readers, *(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
+    lines = [
+        *stamp,
+        *readers,
+        *(error.lines() if error is not None else []),
+        *([camera.statement] if camera else []),
+        *notes,
+    ]
     head += "".join(f"# {line}\n" for line in lines)
     return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))
 

@@ -35,6 +35,7 @@ from station.profile_choice import (
     FailedQA,
     at_focus,
     current_and_left_out,
+    export_refusal,
     failed_line,
     interpolate,
     is_failed,
@@ -108,14 +109,14 @@ def _open(args):
     return open_store(args)  # for reading: never creates a store
 
 
+def _num(v, nd=4) -> str:
+    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
+
+
 def _console():
     from rich.console import Console
 
     return Console() if sys.stdout.isatty() else Console(width=160)
-
-
-def _num(v, nd=4) -> str:
-    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
 
 
 def _with_store(fn):
@@ -377,11 +378,12 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
 # ------------------------------------------------------------------- export
 def _allowed(args, lens, p) -> None:
     """Refuse a profile that failed QA (exit 1) unless ``--allow-failed`` (then say so)."""
-    if not is_failed(p):
+    refusal = export_refusal(lens, p, "--allow-failed")
+    if refusal is None:
         return
     if not args.allow_failed:
-        raise _Refused(f"{failed_line(lens, p)}; not exported (--allow-failed exports it anyway)")
-    _warn(f"{failed_line(lens, p)}: exported because of --allow-failed")
+        raise _Refused(refusal)
+    _warn(f"{failed_line(lens, p)}: exported because of --allow-failed (the file is stamped FAILED QA)")
 
 
 @_with_store
