@@ -9,7 +9,8 @@ OpenCV calibration (FileStorage YAML or XML with ``camera_matrix`` +
 mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of the harp
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
-their straightness reported before and after (:mod:`pipeline.evaluate`).
+their straightness reported before and after (:mod:`pipeline.evaluate`), one row per
+shot and ``all`` (off a terminal tab-separated with a header line, :mod:`station.tables`).
 
 ``--already-corrected``: the images were corrected by other software; they
 are only measured (CORRECTION may be ``none``; when it is known, the
@@ -24,7 +25,6 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
 from station.cli.inputs import positive_int
@@ -73,7 +73,7 @@ def register(subparsers) -> None:
 
 
 def _fmt(sd):
-    return ("     -", "     -") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
+    return ("", "") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
 
 
 def run(args) -> int:
@@ -101,10 +101,10 @@ def run(args) -> int:
         f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
         + (", images already corrected" if rep["already_corrected"] else "")
     )
-    print(f"{'image':40s} {'lines':>5s} {'d before':>9s} {'dmax bef.':>9s} {'d after':>9s} {'dmax aft.':>9s}  (px)")
-    for e in rep["images"]:
-        b, a = _fmt(e["before"]), _fmt(e["after"])
-        print(f"{Path(e['path']).name[:40]:40s} {e['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
-    b, a = _fmt(rep["before"]), _fmt(rep["after"])
-    print(f"{'all':40s} {rep['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
+    from station.tables import print_table
+
+    columns = ("image", "lines", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)")
+    rows = [(str(e["path"]), str(e["n_lines"]), *_fmt(e["before"]), *_fmt(e["after"])) for e in rep["images"]]
+    rows.append(("all", str(rep["n_lines"]), *_fmt(rep["before"]), *_fmt(rep["after"])))
+    print_table(columns, rows, title="straightness before and after the correction", right=columns[1:])
     return status

@@ -14,6 +14,8 @@ stderr). ``export`` converts with the options, figures and warnings of ``harp ex
 (:mod:`station.cli.export`); the profile brings the lens, camera body and optics of its
 session's configuration and the session's measured edges of its fitting shots. ``--json``
 prints one JSON object; off a terminal the tables are tab-separated text with a header.
+``show --id N`` (and ``show LENS --focus F``) prints the profile's table, its image size,
+session, station and software, every QA check and its model on stdout; stderr has only warnings.
 Exit 0 on success; 1 when the profile asked for failed QA (``export``, ``show --focus``: one line
 naming the lens, focus and failed check; ``--allow-failed`` to use it anyway); 2 on bad input or
 a damaged store.
@@ -111,12 +113,6 @@ def _open(args):
 
 def _num(v, nd=4) -> str:
     return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{nd}f}"
-
-
-def _console():
-    from rich.console import Console
-
-    return Console() if sys.stdout.isatty() else Console(width=160)
 
 
 def _with_store(fn):
@@ -328,7 +324,9 @@ def _show(args, store) -> int:
         }
         print(json.dumps(plain(out), indent=1))
         return EXIT_OK
-    console = _console()
+    from station.tables import console as text_console
+
+    console = text_console()
     console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
     console.print(note)
     for e in loo:
@@ -342,7 +340,7 @@ def _show(args, store) -> int:
 
 
 def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> int:
-    from station.tables import print_table
+    from station.tables import is_terminal, print_table
 
     if args.json:
         out = {
@@ -361,17 +359,17 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         title=f"{who}{lens[1]} {lens[2]} serial {lens[3]}" + ("" if detail else " (current profile per focus)"),
         right=PROFILE_COLUMNS[:2] + PROFILE_COLUMNS[5:11],
     )
-    if detail:
+    if detail:  # the profile itself, on stdout with its table (warnings alone go to stderr)
         p = profiles[0]
-        err = sys.stderr
+        if not is_terminal():
+            print()  # off a terminal a blank line after the table
         print(
             f"image {p.width}x{p.height}, session {p.provenance.session_dir}, station {p.provenance.station}, "
-            f"software {p.provenance.software_version}",
-            file=err,
+            f"software {p.provenance.software_version}"
         )
         for c in p.qa.checks if p.qa is not None else ():
-            print(f"check: {c.text}", file=err)
-        print(json.dumps(plain(p.model.to_dict())), file=err)
+            print(f"check: {c.text}")
+        print(json.dumps(plain(p.model.to_dict())))
     return EXIT_OK
 
 

@@ -256,13 +256,12 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
 
 
 def _execute_session(config, get_session, args, opened=None, report: bool = True, tap=None) -> int:
-    from rich.console import Console
-
     from station.config import ConfigError
     from station.session.devices import open_station
     from station.session.directory import SessionError
     from station.session.run import run_session
     from station.store import StoreError
+    from station.tables import console as text_console
 
     started = []  # the session directory, once there is one
     result = None
@@ -276,7 +275,7 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
                 console = None
                 if not args.quiet:
                     out = sys.stderr if args.json else sys.stdout
-                    console = Console(file=out) if out.isatty() else Console(file=out, width=120)
+                    console = text_console(out)  # off a terminal: lines never wrapped (station.tables)
                 result = run_session(session, camera, turntable, store=store, console=console, report=report)
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))
