@@ -57,7 +57,8 @@ def print_table(
     stream: TextIO | None = None,
 ) -> None:
     """Print ``rows`` under ``columns`` (see the module docstring); ``right``: columns aligned right
-    on a terminal. Cells are strings (None: empty); tabs and line breaks in them become spaces."""
+    on a terminal, where a cell too long for its column folds onto a second line rather than being
+    cut. Cells are strings (None: empty); tabs and line breaks in them become spaces."""
     stream = stream if stream is not None else sys.stdout
     texts = [["" if v is None else str(v) for v in r] for r in rows]
     if not is_terminal(stream):
@@ -71,9 +72,10 @@ def print_table(
     from rich.table import Table
     from rich.text import Text
 
+    con = Console(file=stream)
     t = Table(title=title)
-    for c in columns:
-        t.add_column(c, justify="right" if c in right else "left")
+    for c in columns:  # a cell too long for its column folds onto the next line, never cut with an ellipsis
+        t.add_column(c, justify="right" if c in right else "left", overflow="fold")
     for r in texts:
         t.add_row(*(Text(c or "-") for c in r))
-    Console(file=stream).print(t)
+    con.print(t)
