@@ -185,10 +185,13 @@ def export_source(
     *,
     lens: Mapping[str, Any] | None = None,
     edges: FittingEdges | None = None,
+    stamp: tuple[str, ...] | None = None,
 ) -> ExportSource:
     """The :class:`ExportSource` of ``profile``; ``lens``: :class:`~pipeline.exports.lens.LensInfo`
     fields that override the profile's (None values ignored; a pixel pitch given replaces a
-    recorded sensor width and vice versa); ``edges``: the fitting shots' edges."""
+    recorded sensor width and vice versa); ``edges``: the fitting shots' edges; ``stamp``: the
+    lines the file states first (default: :func:`~station.profile_choice.failed_stamp` of the
+    profile; a correction interpolated from failed profiles gives theirs)."""
     mf = profile.to_model_file()
     over = {k: v for k, v in dict(lens or {}).items() if v is not None}
     info = profile.lens_info()
@@ -208,5 +211,5 @@ def export_source(
         merit=mf.merit,
         provenance=mf.provenance,
         wide_angle=wide_angle(profile),
-        stamp=failed_stamp(profile),
+        stamp=failed_stamp(profile) if stamp is None else tuple(stamp),
     )

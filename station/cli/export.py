@@ -214,11 +214,14 @@ def _existing_lensfun(args) -> bytes | None:
 
 
 # ------------------------------------------------------------------- export
-def export_profile(args, profile, *, model_dir=None, what: str | None = None, edges=None) -> tuple[object, dict]:
+def export_profile(
+    args, profile, *, model_dir=None, what: str | None = None, edges=None, stamp=None
+) -> tuple[object, dict]:
     """Export ``profile`` as the options ask: ``(Export, figures)``; the file is not written.
 
     ``edges``: the fitting shots' :class:`~station.export_source.FittingEdges` when the
-    caller knows them (default: found from the profile, unless the options say otherwise).
+    caller knows them (default: found from the profile, unless the options say otherwise);
+    ``stamp``: the lines the file states first (default: the profile's FAILED QA stamp, if any).
 
     Raises ExportError (one line) on bad options or a model the format cannot take.
     """
@@ -233,7 +236,7 @@ def export_profile(args, profile, *, model_dir=None, what: str | None = None, ed
     existing = _existing_lensfun(args)
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
-    source = export_source(profile, lens=lens, edges=edges)
+    source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:

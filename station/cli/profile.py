@@ -39,6 +39,7 @@ from station.profile_choice import (
     current_and_left_out,
     export_refusal,
     failed_line,
+    failed_stamp,
     interpolate,
     is_failed,
     lens_row,
@@ -390,7 +391,7 @@ def _export(args, store) -> int:
     from station.export_source import FittingEdges
     from station.inputs import InputError
 
-    edges = None
+    edges = stamp = None
     if args.id is not None:
         if args.lens is not None or args.focus is not None:
             raise _Fail("--id N names one profile: give no LENS or --focus with it")
@@ -413,12 +414,13 @@ def _export(args, store) -> int:
             interp = interpolate(lens, used, args.focus, left_out)
             _say_used(lens, used, left_out)
             profile = interp.profile()
+            stamp = tuple(line for q in used for line in failed_stamp(q))  # interpolated from failed ones
             what = f"interpolated focus {args.focus:g}"
             edges = FittingEdges(
                 None, f"none: the correction is interpolated between the focus settings {interp.known()}"
             )
     try:
-        ex, fig = export_profile(args, profile, what=what, edges=edges)
+        ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
         write_output(args, ex)
     except InputError as exc:
         raise _Fail(str(exc)) from None

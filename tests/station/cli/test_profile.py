@@ -148,3 +148,8 @@ def test_interpolation_leaves_failed_profiles_out(store, capsys):
         capsys, "profile", "export", "S2", "--focus", "0.25", "--format", "json", "--store", path, "--allow-failed"
     )
     assert code == 0 and err.count("warning") == 2  # the newest of each setting used, two of them failed
+    stamp = json.loads(out)["stamp"]  # the file names the failed profiles it was interpolated from
+    assert [line.split(" was judged")[0] for line in stamp] == [
+        f"FAILED QA: profile #{ids['S2 0.0']} at focus 0",
+        f"FAILED QA: profile #{ids['S2 1.0']} at focus 1",
+    ]
