@@ -188,6 +188,11 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
         raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
+    installed: tuple[tuple[str, str], ...] = ()
+    if args.format == "lensfun":
+        from station.lensfun_databases import installed_databases
+
+        installed = installed_databases(exclude=args.output)
     return ExportOptions(
         coeffs=args.coeffs,
         focal_px=args.focal,
@@ -197,6 +202,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         camera_name=args.camera_name,
         existing=existing,
         existing_name=existing_name,
+        installed_lensfun=installed,
     )
 
 
