@@ -41,6 +41,7 @@ import numpy as np
 
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
@@ -51,9 +52,7 @@ class CalibrateError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "calibrate", help="fit a lens distortion model from harp shots", description=__doc__.split("\n\n")[0]
-    )
+    p = subparsers.add_parser("calibrate", help=COMMANDS["calibrate"], description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
     p.add_argument(
         "--model",

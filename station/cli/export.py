@@ -45,6 +45,7 @@ import sys
 from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.inputs import InputError
 
 FORMAT_CHOICES = (
@@ -141,7 +142,7 @@ def register(subparsers) -> None:
         "export",
         epilog=formats_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        help="export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
+        help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
             "lensfun, mrcal, per-pixel maps, STMap, JSON), stating the conversion error in pixels."

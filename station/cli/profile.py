@@ -27,6 +27,7 @@ import math
 import sys
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.cli.export import add_export_options, formats_epilog
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.plain_json import plain
@@ -47,9 +48,7 @@ ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stder
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "profile", help="list, show and export stored lens profiles", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("profile", help=COMMANDS["profile"], description=__doc__.split("\n\n")[1])
     add_store_options(p)
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
     store_opt = argparse.ArgumentParser(add_help=False)  # --store / --config also after the action

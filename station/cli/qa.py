@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, verdict_exit_code
 from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
@@ -50,9 +51,7 @@ def _positive(text: str) -> float:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "qa", help="factory QA verdict of a session or a stored lens", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("qa", help=COMMANDS["qa"], description=__doc__.split("\n\n")[1])
     p.add_argument("target", metavar="SESSION_OR_LENS")
     p.add_argument(
         "--reference",

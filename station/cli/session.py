@@ -21,13 +21,12 @@ import sys
 from pathlib import Path
 
 from station import __version__
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "session", help="run, resume, plan or list calibration sessions", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("session", help=COMMANDS["session"], description=__doc__.split("\n\n")[1])
     sub = p.add_subparsers(dest="session_command", metavar="ACTION")
     run = sub.add_parser("run", help="run a session from a station configuration")
     run.add_argument("config", type=Path, help="station configuration (YAML)")
