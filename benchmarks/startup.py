@@ -8,13 +8,15 @@ Usage::
 Each command is run as the user runs it (``python -m station.cli ARGS``, started with
 ``subprocess``): interpreter start-up, imports, parsing, output. Per command, after one uncounted
 warm-up run, the minimum, median and maximum over ``--repeat`` runs of the wall time and of the
-process's user + system CPU time (``os.wait4``), the runs of this tree and of ``--before`` (the
+process's user + system CPU time (``os.wait4``), the runs of ``HEAD`` and of ``--before`` (the
 code before the change, unpacked by ``git archive`` into a temporary directory and put first on
 ``PYTHONPATH``) taking turns, A B A B ..., so a drifting machine load falls on both alike; the
-ratio is this tree's median over the earlier one's. Twice: with Python's bytecode cache (in a
-temporary ``PYTHONPYCACHEPREFIX``, written by the warm-up) and without any (an empty
-``PYTHONPYCACHEPREFIX`` and ``PYTHONDONTWRITEBYTECODE=1``: every module, the standard library's
-too, compiled at each start; an upper bound for a sandbox that writes no bytecode).
+ratio is HEAD's median over the earlier one's. Twice: with Python's bytecode cache (in a
+temporary ``PYTHONPYCACHEPREFIX``, written by the warm-up) and without
+(``PYTHONDONTWRITEBYTECODE=1``, as in the development sandbox: every module of the tree compiled
+at each start, the standard library's and the installed packages' bytecode read as installed).
+Both trees are commits unpacked by ``git archive`` (this one: ``HEAD``), so neither holds bytecode
+of its own.
 Then, per command, how many modules the process held at exit and which heavy ones among them
 (numpy, scipy, cv2, matplotlib, sqlalchemy, yaml, PIL). Target (issue 21): <= 0.25 s for
 ``--version``, ``--help`` and a typo.
@@ -53,20 +55,24 @@ def run_once(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, flo
     return wall, usage.ru_utime + usage.ru_stime
 
 
-def environment(tree: Path, pycache: Path, write: bool = True) -> dict[str, str]:
-    """``tree`` first on the path, the bytecode cache in ``pycache`` (``write`` False: none written
-    there, so none read either: every module compiled at each start)."""
-    env = dict(os.environ, PYTHONPATH=str(tree), PYTHONPYCACHEPREFIX=str(pycache))
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    if not write:
+def environment(tree: Path, pycache: Path | None) -> dict[str, str]:
+    """``tree`` first on the path; the bytecode cache in ``pycache``, or (None) none written, as
+    in a sandbox with ``PYTHONDONTWRITEBYTECODE=1``: the installed packages' and the standard
+    library's bytecode read as installed, every module of the tree compiled at each start."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    if pycache is None:
         env["PYTHONDONTWRITEBYTECODE"] = "1"
+        env.pop("PYTHONPYCACHEPREFIX", None)
+    else:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(pycache)
     return env
 
 
-def paired(args: tuple[str, ...], trees: dict[str, Path], repeat: int, cache: Path, write: bool) -> dict[str, list]:
+def paired(args: tuple[str, ...], trees: dict[str, Path], repeat: int, cache: Path | None) -> dict[str, list]:
     """Wall and CPU seconds of ``harp ARGS`` for each tree, the trees taking turns."""
     cmd = [sys.executable, "-m", "station.cli", *args]
-    envs = {name: environment(tree, cache / name, write) for name, tree in trees.items()}
+    envs = {name: environment(tree, cache and cache / name) for name, tree in trees.items()}
     for name, tree in trees.items():  # warm-up: file cache, bytecode cache
         run_once(cmd, envs[name], tree)
     got: dict[str, list] = {name: [] for name in trees}
@@ -104,18 +110,21 @@ def main() -> None:
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
     load = os.getloadavg()[0]
     print(
-        f"# harp start-up, whole process (`benchmarks/startup.py --repeat {opt.repeat}`; this tree {head.strip()}"
+        f"# harp start-up, whole process (`benchmarks/startup.py --repeat {opt.repeat}`; HEAD {head.strip()}"
         f" against {opt.before}; Python {platform.python_version()}, {os.cpu_count()} CPUs, load {load:.1f})\n"
     )
     with tempfile.TemporaryDirectory() as tmp:
-        trees = {"now": ROOT, "before": unpack(opt.before, Path(tmp) / "before")}
-        caches = (("bytecode cache in use", True), ("no bytecode cache, the standard library's included", False))
-        for n, (title, write) in enumerate(caches):
+        trees = {"now": unpack("HEAD", Path(tmp) / "now"), "before": unpack(opt.before, Path(tmp) / "before")}
+        caches = (
+            ("bytecode cache in use", Path(tmp) / "pyc"),
+            ("no bytecode written (PYTHONDONTWRITEBYTECODE=1)", None),
+        )
+        for title, cache in caches:
             print(f"## {title}: median (min-max) of {opt.repeat} runs, seconds\n")
             print("| command | wall now | wall before | CPU now | CPU before | wall now/before |")
             print("|---|---:|---:|---:|---:|---:|")
             for args in COMMANDS:
-                got = paired(args, trees, opt.repeat, Path(tmp) / f"pyc{n}", write)
+                got = paired(args, trees, opt.repeat, cache)
                 wall = {k: [w for w, _ in v] for k, v in got.items()}
                 cpu = {k: [c for _, c in v] for k, v in got.items()}
                 ratio = statistics.median(wall["now"]) / statistics.median(wall["before"])
