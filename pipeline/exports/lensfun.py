@@ -51,7 +51,7 @@ import numpy as np
 
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import LensInfo
-from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
+from pipeline.models.lensfun_model import LENSFUN_TERMS, LENSFUN_TYPES, LensfunModel, geometry_focal
 from pipeline.models.tca_model import LensfunTca
 from pipeline.vignetting import LensfunVignetting
 
@@ -192,6 +192,8 @@ def _new_lens(entry: LensfunEntry) -> ET.Element:
     ET.SubElement(lens, "mount").text = entry.mount
     ET.SubElement(lens, "cropfactor").text = repr(entry.cropfactor)
     ET.SubElement(lens, "aspect-ratio").text = repr(entry.aspect_ratio())
+    if entry.model.lens_type != "rectilinear":
+        ET.SubElement(lens, "type").text = entry.model.lens_type
     if entry.model.center != (0.0, 0.0):
         ET.SubElement(lens, "center", {"x": repr(entry.model.center[0]), "y": repr(entry.model.center[1])})
     ET.SubElement(lens, "calibration")
@@ -224,12 +226,13 @@ def _same_geometry(lens: ET.Element, entry: LensfunEntry) -> bool:
     except ValueError:
         same_ar = False
     c = _center_of(lens)
-    return same_ar and all(abs(a - b) <= CENTER_TOL for a, b in zip(c, entry.model.center))
+    same_type = (_text_of(lens, "type") or "rectilinear") == entry.model.lens_type
+    return same_ar and same_type and all(abs(a - b) <= CENTER_TOL for a, b in zip(c, entry.model.center))
 
 
 def _set_geometry(lens: ET.Element, entry: LensfunEntry) -> None:
     """Give the lens element the entry's aspect ratio and centre (it has no calibration they would change)."""
-    for tag in ("aspect-ratio", "center"):
+    for tag in ("aspect-ratio", "type", "center"):
         for el in lens.findall(tag):
             lens.remove(el)
     cal = lens.find("calibration")
@@ -237,6 +240,11 @@ def _set_geometry(lens: ET.Element, entry: LensfunEntry) -> None:
     ar = ET.Element("aspect-ratio")
     ar.text = repr(entry.aspect_ratio())
     lens.insert(at, ar)
+    if entry.model.lens_type != "rectilinear":
+        at += 1
+        typ = ET.Element("type")
+        typ.text = entry.model.lens_type
+        lens.insert(at, typ)
     if entry.model.center != (0.0, 0.0):
         lens.insert(at + 1, ET.Element("center", {"x": repr(entry.model.center[0]), "y": repr(entry.model.center[1])}))
 
@@ -270,7 +278,7 @@ def add_to_database(root: ET.Element, entry: LensfunEntry, name: str = "<existin
                 focals = ", ".join(f"{f:g}" for f in others)
                 raise ValueError(
                     f"{name}: lens {entry.maker} {entry.lens_model} (crop factor {entry.cropfactor:g}) is there with "
-                    f"another distortion centre or aspect ratio, which its calibrations at {focals} mm use, and "
+                    f"another distortion centre, aspect ratio or lens type, which its calibrations at {focals} mm use, and "
                     "lensfun holds one per lens name and crop factor: export with --lensfun-no-center, or into "
                     "another file"
                 )
@@ -462,4 +470,25 @@ def read_lensfun_text(
         ar = max(ar, 1.0 / ar)
     img_ar = max(width - 1, height - 1) / min(width - 1, height - 1)
     kappa = float(np.sqrt(ar * ar + 1) / np.sqrt(img_ar * img_ar + 1))
-    return LensfunModel(kind=kind, terms=terms, width=width, height=height, center=center, coord_scale=kappa)
+    lens_type = _text_of(lens, "type") or "rectilinear"
+    if lens_type not in LENSFUN_TYPES:
+        raise ValueError(f"{name}: lens type {lens_type!r} is not one harp reads ({', '.join(LENSFUN_TYPES)})")
+    gf = 0.0
+    if lens_type != "rectilinear":
+        try:
+            crop = float(_text_of(lens, "cropfactor") or "nan")
+            gf = geometry_focal(float(d.get("focal", "nan")), crop, ar)
+        except ValueError:
+            gf = float("nan")
+        if not (np.isfinite(gf) and gf > 0):
+            raise ValueError(f"{name}: a {lens_type} lens needs its <cropfactor> and the calibration's focal")
+    return LensfunModel(
+        kind=kind,
+        terms=terms,
+        width=width,
+        height=height,
+        center=center,
+        coord_scale=kappa,
+        lens_type=lens_type,
+        geometry_focal=gf,
+    )

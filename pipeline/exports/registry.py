@@ -43,6 +43,8 @@ from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.models.base import DistortionModel
+from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
+from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
 from pipeline.models.remap_model import RemapModel
 
 Array = npt.NDArray[np.float64]
@@ -101,6 +103,7 @@ class ExportOptions:
     xml: bool = False
     lensfun_model: str = "ptlens"
     lensfun_center: bool = True
+    lensfun_type: str = "auto"
     crop_factor: float | None = None
     mount: str | None = None
     camera_name: str | None = None
@@ -296,6 +299,76 @@ def lensfun_crop_factor(lens: LensInfo, width: int, height: int) -> tuple[LensIn
     return replace(lens, crop_factor=round(derived, 4)), how, []
 
 
+LENSFUN_FISHEYE_TRY_PX = 1.0
+""":data:`AUTO` lens type: a rectilinear lensfun fit whose max error (modulo homography) exceeds this
+(px), or a calibration that chose a wide-angle model, is tried as every lensfun fisheye type too
+(five more fits). Above what ptlens leaves on ordinary lenses (0.77 px on the shared real camera),
+below what it leaves on a fisheye (12 px on a 115 degree lens)."""
+
+LENSFUN_TYPE_MARGIN = 0.8
+"""A fisheye type replaces rectilinear only when its max error is below this fraction of rectilinear's:
+a rectilinear file needs no geometry conversion in the consumer."""
+
+
+def _fit_lensfun_type(
+    src: ExportSource, opt: ExportOptions, lens: LensInfo
+) -> tuple[LensfunModel, ConversionError, list[str]]:
+    """The lensfun fit of the lens type asked for (``opt.lensfun_type``), or for :data:`AUTO` the
+    closest of rectilinear and the fisheye types (max error modulo homography); with what to say."""
+
+    def fit(lens_type: str) -> tuple[LensfunModel, ConversionError]:
+        gf = 0.0
+        if lens_type != "rectilinear":
+            if lens.focal_mm is None:
+                raise ValueError(
+                    f"lensfun: a {lens_type} lens needs the nominal focal length (lensfun converts its geometry "
+                    "with it): give --focal-mm or lens.focal_mm"
+                )
+            w, h = src.width, src.height
+            gf = lensfun_geometry_focal(
+                float(lens.focal_mm), float(lens.crop_factor or 1.0), max(w - 1, h - 1) / min(w - 1, h - 1)
+            )
+        return fit_lensfun(
+            src.model,
+            src.width,
+            src.height,
+            kind=opt.lensfun_model,
+            fit_center=opt.lensfun_center,
+            edges=src.edges,
+            lens_type=lens_type,
+            geometry_focal=gf,
+        )
+
+    if opt.lensfun_type != AUTO:
+        m, err = fit(opt.lensfun_type)
+        return m, err, _type_notes(m)
+    m, err = fit("rectilinear")
+    if not (src.wide_angle or err.max_mod_h_px > LENSFUN_FISHEYE_TRY_PX) or lens.focal_mm is None:
+        return m, err, []
+    tried = {"rectilinear": (m, err)}
+    for t in LENSFUN_FISHEYE_TYPES:
+        try:
+            tried[t] = fit(t)
+        except ValueError:  # a type that cannot hold the lens over the image (its projection ends inside)
+            continue
+    best = min(tried, key=lambda t: tried[t][1].max_mod_h_px)
+    if best != "rectilinear" and tried[best][1].max_mod_h_px >= LENSFUN_TYPE_MARGIN * err.max_mod_h_px:
+        best = "rectilinear"
+    figures = ", ".join(f"{t} {e.max_mod_h_px:.3g}" for t, (_, e) in tried.items())
+    m, err = tried[best]
+    return m, err, [f"lensfun: lens type {best} (max error modulo homography, px: {figures})", *_type_notes(m)]
+
+
+def _type_notes(m: LensfunModel) -> list[str]:
+    if m.lens_type == "rectilinear":
+        return []
+    return [
+        f"lensfun: a {m.lens_type} lens: lensfun corrects it to the ideal {m.lens_type} projection, and lines are "
+        "straight after its geometry conversion to rectilinear too (darktable: lens correction, geometry "
+        "'rectilinear'; lensfunpy: flags DISTORTION | GEOMETRY, targeom RECTILINEAR)"
+    ]
+
+
 def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
     lens, crop_how, warnings = lensfun_crop_factor(
         src.lens.with_overrides(crop_factor=opt.crop_factor, mount=opt.mount), src.width, src.height
@@ -309,9 +382,7 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
             "(its TCA, vignetting, other focal lengths): export under another name (--lens-model, e.g. with the "
             "serial number)"
         )
-    m, err = fit_lensfun(
-        src.model, src.width, src.height, kind=opt.lensfun_model, fit_center=opt.lensfun_center, edges=src.edges
-    )
+    m, err, type_notes = _fit_lensfun_type(src, opt, lens)
     existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
     entry = LensfunEntry(model=m, lens=lens, error=err, crop_note=crop_how, stamp=src.stamp)
     text, done = lensfun_database_text([entry], existing, opt.existing_name)
@@ -319,6 +390,7 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
         d for d in done if not d.startswith("replaced ")
     ]  # replacing a calibration in the user's file is warned of
     warnings += [f"lensfun: {d}" for d in done if d.startswith("replaced ")]
+    notes += type_notes
     if crop_how is not None:
         notes.append(f"lensfun: {crop_how}")
     if lens.focal_mm is None:

@@ -12,7 +12,7 @@ from pipeline.exports.lens import LensInfo
 from pipeline.exports.lensfun import installed_lens, read_lensfun_text
 from pipeline.exports.registry import ExportOptions, ExportSource, write_export
 from pipeline.models import RadialModel
-from tests.pipeline.export_support import compare_points, lensfun_in_consumer
+from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, compare_points, lensfun_in_consumer
 
 W, H = 320, 240
 BARREL = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.04, 0.0, -0.01))
@@ -168,3 +168,80 @@ def test_another_centre_at_another_focal_is_refused_since_lensfun_holds_one_cent
         ExportOptions(lensfun_center=False, existing=a.data),
     )
     assert b.data.decode().count("<lens>") == 1 and b.data.decode().count("<distortion ") == 2
+
+
+# ------------------------------------------------------------- fisheye lenses
+LENSFUN_TYPE = {
+    "rectilinear": "RECTILINEAR",
+    "fisheye": "FISHEYE",
+    "equisolid": "FISHEYE_EQUISOLID",
+    "stereographic": "FISHEYE_STEREOGRAPHIC",
+    "orthographic": "FISHEYE_ORTHOGRAPHIC",
+    "fisheye_thoby": "FISHEYE_THOBY",
+}
+
+
+def _lensfun_corrects(xml: str, width: int, height: int, focal: float, crop: float, n: int = 30):
+    """lensfun's own correction to rectilinear (distortion, then geometry), at pixels of a grid: ``(p, q, lens)``."""
+    db = lensfunpy.Database(xml=xml, load_common=False, load_bundled=False)
+    (lens,) = db.lenses
+    mod = lensfunpy.Modifier(lens, crop, width, height)
+    flags = lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.GEOMETRY
+    mod.initialize(focal, 2.8, 1000.0, scale=1.0, targeom=lensfunpy.LensType.RECTILINEAR, flags=flags)
+    xs, ys = np.linspace(0, width - 1, n), np.linspace(0, height - 1, max(2, n * height // width))
+    p = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    q = np.array([mod.apply_geometry_distortion(float(x), float(y), 1, 1)[0, 0] for x, y in p], dtype=np.float64)
+    return p, q, lens
+
+
+@pytest.mark.parametrize("lens_type", list(LENSFUN_TYPE))
+def test_lensfun_model_of_every_lens_type_is_lensfuns_own_correction(lens_type):
+    w, h, crop, focal = 1501, 1001, 1.5, 8.0
+    terms, centre = (0.01, -0.03, 0.02), (0.02, -0.01)
+    xml = f"""<lensdatabase version="1"><lens><maker>M</maker><model>L</model><mount>X</mount>
+    <cropfactor>{crop}</cropfactor><aspect-ratio>{(w - 1) / (h - 1)!r}</aspect-ratio><type>{lens_type}</type>
+    <center x="{centre[0]}" y="{centre[1]}"/><calibration>
+    <distortion model="ptlens" focal="{focal}" a="{terms[0]}" b="{terms[1]}" c="{terms[2]}"/>
+    </calibration></lens></lensdatabase>"""
+    p, q, lens = _lensfun_corrects(xml, w, h, focal, crop)
+    assert lens.type == getattr(lensfunpy.LensType, LENSFUN_TYPE[lens_type])
+    ours = read_lensfun_text(xml, w, h, "one.xml")
+    assert ours.lens_type == lens_type
+    ok = np.all(np.isfinite(q), axis=1)
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(ours.distort_points(p[ok]), q[ok], atol=5e-4)  # lensfun computes in float32
+    back = ours.undistort_points(q[ok])
+    np.testing.assert_allclose(back, p[ok], atol=5e-4)
+
+
+def test_a_fisheye_lens_is_written_as_its_lensfun_type_and_lensfun_straightens_it():
+    """The exact equisolid lens WIDE (149 deg diagonal): as rectilinear ptlens it cannot be held; as
+    lensfun's equisolid type it is, checked by lensfun's own correction against the lens' closed form."""
+    pitch, focal = 3.0, WIDE.f * 3.0e-3  # the lens' focal length in mm at that pitch
+    lens = LensInfo(lens_maker="Harp", lens_model="Fish", mount="C", focal_mm=focal, pixel_pitch_um=pitch)
+    exp = write_export("lensfun", ExportSource(WIDE, WIDE_W, WIDE_H, lens=lens))
+    xml = exp.data.decode()
+    assert "<type>equisolid</type>" in xml
+    assert any("lens type equisolid" in n for n in exp.notes) and any("geometry conversion" in n for n in exp.notes)
+    crop = lens.derived_crop_factor(WIDE_W, WIDE_H)
+    p, q, _ = _lensfun_corrects(xml, WIDE_W, WIDE_H, focal, crop)
+    _, mx = compare_points(WIDE, p, q, WIDE_W, WIDE_H)
+    assert mx < 0.05
+    assert exp.error.max_mod_h_px < 0.05
+    # the rectilinear file the export wrote before: far off
+    rect = write_export(
+        "lensfun", ExportSource(WIDE, WIDE_W, WIDE_H, lens=lens), ExportOptions(lensfun_type="rectilinear")
+    )
+    assert "<type>" not in rect.data.decode() and rect.error.max_mod_h_px > 5.0
+    # a fisheye type needs the focal length lensfun converts the geometry with
+    with pytest.raises(ValueError, match="needs the nominal focal length"):
+        write_export(
+            "lensfun",
+            ExportSource(WIDE, WIDE_W, WIDE_H, lens=LensInfo(pixel_pitch_um=pitch)),
+            ExportOptions(lensfun_type="equisolid"),
+        )
+
+
+def test_a_rectilinear_lens_stays_rectilinear():
+    exp = write_export("lensfun", _src(pixel_pitch_um=15.0))
+    assert "<type>" not in exp.data.decode() and not any("lens type" in n for n in exp.notes)

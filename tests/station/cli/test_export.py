@@ -21,6 +21,8 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
+import re
 import subprocess
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -655,3 +657,22 @@ def test_ros_equidistant_file_and_export_state_which_ros_consumers_read_it(model
     plain = tmp_path / "pin.yaml"
     code, _o, stderr = run_main("export", model_source.model_file, "--format", "ros", "-o", plain)
     assert code == 0 and "equidistant" not in plain.read_text() and "'equidistant' is read" not in stderr
+
+
+def test_lensfun_type_choices_are_the_models_types_and_a_wide_lens_is_exported_as_fisheye(tmp_path):
+    from pipeline.models.lensfun_model import LENSFUN_TYPES
+    from station.cli.export import LENSFUN_TYPE_CHOICES
+
+    assert LENSFUN_TYPE_CHOICES == ("auto", *LENSFUN_TYPES)
+    model = tmp_path / "wide.yaml"
+    write_model_file(model, wide_radial(115.0, 640, 480), width=640, height=480)
+    out = tmp_path / "fish.xml"
+    focal = 0.5 * math.hypot(639, 479) / (2 * math.sin(math.radians(115 / 2) / 2)) * 3e-3  # wide_radial's f at 3 um
+    args = ["--pixel-pitch-um", "3", "--focal-mm", f"{focal:.6f}", "-o", out]
+    code, stdout, stderr = run_main("export", model, "--format", "lensfun", *args)
+    assert code == 0, stderr
+    # a fisheye type (which one fits a degree-6 approximation of an equisolid lens best is the fit's to say)
+    written = re.search(r"<type>(\w+)</type>", out.read_text())
+    assert written is not None and written[1] != "rectilinear" and f"lens type {written[1]}" in stdout + stderr
+    code, _, stderr = run_main("export", model, "--format", "lensfun", "--lensfun-type", "rectilinear", *args)
+    assert code == 0 and "<type>" not in out.read_text()
