@@ -340,3 +340,23 @@ def test_the_lens_document_offers_no_downloads_of_a_failed_profile(sqlite_served
             ]
     status, doc = _json(srv, "/api/lenses/DEMO-0001")
     assert all(p["downloads_failed_qa"] == [] for f in doc["focus"] for p in f["profiles"])
+
+
+def test_a_lensfun_download_under_the_name_of_an_installed_lens_is_refused(sqlite_served, tmp_path, monkeypatch):
+    """The dashboard's lensfun file is checked against the installed lensfun databases as harp export's is."""
+    srv, store, _stored = sqlite_served
+    p = next(p for p in store.profiles() if p.focus == 1.0 and p.qa is not None and p.qa.passed)
+    installed = tmp_path / "lensfun"
+    installed.mkdir()
+    (installed / "mine.xml").write_text(
+        f"""<lensdatabase version="1"><lens><maker>{p.lens.maker}</maker><model>{p.lens.model}</model>
+        <mount>C</mount><cropfactor>7.2</cropfactor></lens></lensdatabase>"""
+    )
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(installed))
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/lensfun")
+    assert status == 404
+    message = json.loads(body)["error"]
+    assert "is in the installed lensfun database" in message and "mine.xml" in message
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(tmp_path / "none"))
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/lensfun")
+    assert status == 200 and b"<lensdatabase" in body
