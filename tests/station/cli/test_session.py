@@ -221,7 +221,7 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
     assert "**Verdict: PASS**" in md
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     expected = {f"{kind}_f{f}.png" for kind in ("field", "residuals", "uncertainty") for f in range(N_FOCUS)}
-    expected |= {f"overlay_f{f}_o{o}.png" for f in range(N_FOCUS) for o in range(N_ORI)}
+    expected |= {f"overlay_f{f}_o{o}.jpg" for f in range(N_FOCUS) for o in range(N_ORI)}
     assert sorted(links) == sorted(expected)
     for name in links:
         img = cv2.imread(str(session / "report" / name))
