@@ -3,7 +3,7 @@
 A frame is what the camera gave, a 2-D ``uint8`` or ``uint16`` array, and its file holds every
 bit of it: :func:`encode_frame` writes a grey PNG of the same depth (8 or 16 bit), compressed with
 zlib level :data:`PNG_LEVEL`, the ``filtered`` strategy and libpng's adaptive choice of row filter
-per row (on the demo's 1280x960 8-bit frames 0.47 of the PGM's bytes, ~0.3 s a frame:
+per row (on the demo's 1280x960 8-bit frames 0.47 of the PGM's bytes in 0.1 s of CPU a frame:
 ``benchmarks/session_disk.py``). Camera noise is what is left after any predictor, so no lossless
 codec does much better (JPEG 2000 lossless: 0.45 in 0.43 s). :func:`decode_frame` reads a frame
 file by its first bytes, so the binary PGM (P5) frames of sessions written before (``.pgm``,
@@ -18,8 +18,9 @@ import re
 import cv2
 import numpy as np
 
-PNG_LEVEL = 6
-"""zlib level of a frame PNG (9 saves 0.1 % more in 1.3 times the time)."""
+PNG_LEVEL = 4
+"""zlib level of a frame PNG: on the demo's frames the smallest files per CPU second (level 3:
+9 % larger; level 6: as large, in 3.6 times the time)."""
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
