@@ -1,8 +1,8 @@
 """``harp profile list | show LENS [--focus F] | show --id N | export LENS --focus F | export --id N``.
 
 Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://``), or
-``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else
-``profiles/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
+``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else ``$HARP_CONFIG``'s store, else
+the per-user ``~/.local/share/harp-station/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
 error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
 part of "maker model serial"; ``--id N`` names one stored profile. The **current** profile of a
 lens at a focus setting is its newest one, unless that one failed QA: a failed profile is never

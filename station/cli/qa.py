@@ -67,7 +67,7 @@ def register(subparsers) -> None:
         metavar="PATH|URL",
         default=None,
         help=f"profile store: a SQLite file or postgresql://user@host:port/db (default: the --config's or the "
-        f"session's, else $HARP_STORE or {DEFAULT_STORE})",
+        f"session's, else $HARP_STORE, $HARP_CONFIG's store or {DEFAULT_STORE})",
     )
     p.add_argument("--config", type=Path, default=None, help="station configuration: its qa thresholds and its store")
     p.add_argument("--max-holdout-d", type=_positive, metavar="PX", help="threshold on the holdout d")

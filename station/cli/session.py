@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -83,7 +84,11 @@ def register(subparsers) -> None:
     plan.set_defaults(func=_plan)
     ls = sub.add_parser("list", help="sessions with their state and verdict")
     ls.add_argument(
-        "directory", type=Path, nargs="?", default=None, help="where the sessions are (default: ./sessions)"
+        "directory",
+        type=Path,
+        nargs="?",
+        default=None,
+        help="where the sessions are (default: the store.sessions_dir of $HARP_CONFIG, else ./sessions)",
     )
     ls.add_argument("--config", type=Path, default=None, help="list the sessions of this configuration's sessions_dir")
     ls.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -397,9 +402,12 @@ def _list(args) -> int:
 
     if args.directory is not None and args.config is not None:
         return _error("give a directory or --config, not both")
-    if args.config is not None:
+    config_path = args.config
+    if config_path is None and args.directory is None and os.environ.get("HARP_CONFIG"):
+        config_path = Path(os.environ["HARP_CONFIG"])  # the station's configuration, wherever the command runs
+    if config_path is not None:
         try:
-            root = load_config(args.config).sessions_dir
+            root = load_config(config_path).sessions_dir
         except ConfigError as exc:
             return _error(str(exc))
     else:
