@@ -253,7 +253,7 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
     out = tmp_path / "qa-report"
     assert main(["qa", str(session), "--report", str(out), "--no-record"]) == 0
     capsys.readouterr()
-    assert sorted(p.name for p in out.glob("*.png")) == sorted(expected)
+    assert sorted(p.name for p in [*out.glob("*.png"), *out.glob("*.jpg")]) == sorted(expected)
     assert "RMS" in (out / "report.md").read_text()
 
 
