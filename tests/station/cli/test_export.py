@@ -305,7 +305,7 @@ def test_maps_give_harp_undistorts_image(both, tmp_path):
     src, runs = both
     fig = _ok(runs["maps"])
     assert fig["conversion"]["max_mod_h_px"] < 0.01
-    shot = next(iter(src.shots), None) or next((src.model_file.parents[1] / "frames").glob("*.pgm"))
+    shot = next(iter(src.shots), None) or next((src.model_file.parents[1] / "frames").glob("*.png"))
     assert run_main("undistort", src.model_file, shot, "-o", tmp_path)[0] == 0
     theirs = cv2.imread(str(tmp_path / shot.name), cv2.IMREAD_UNCHANGED)
     with np.load(runs["maps"].path) as z:

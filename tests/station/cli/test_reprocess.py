@@ -35,7 +35,7 @@ def _main(argv):
 def _damage_frames(session):
     """One pixel changed in the first frame of each focus setting: the manifest's SHA-256 no longer
     matches (each job fails at its first frame)."""
-    frames = [sorted((session / "frames").glob(f"f{f}_o0_*.pgm"))[0] for f in (0, 1)]
+    frames = [sorted((session / "frames").glob(f"f{f}_o0_*.png"))[0] for f in (0, 1)]
     for frame in frames:
         data = bytearray(frame.read_bytes())
         data[-100] ^= 0x55
