@@ -42,7 +42,12 @@ them along the string); the shared :math:`(w, \sigma)` of each string are
 fitted by Gauss-Newton with those linear parameters projected out (variable
 projection, Golub & Pereyra). The string's *edge width* is the 10-90 % rise
 distance of one edge, :math:`2\,\Phi^{-1}(0.9)\,\sigma = 2.5631\,\sigma`, and
-its *contrast* :math:`|A| / \max(B, B + A)`. A pixel-integrating sensor adds
+its *contrast* :math:`|A| / \max(B, B + A)`. A string narrower than about twice
+the blur :math:`\sigma` shows only its shadow's area :math:`|A|\,w` (a narrow deep
+profile and a wide shallow one blur alike), so depth and width trade off in the
+fit; a depth beyond the background (:math:`A < -B`: light below zero, contrast
+above 1) is then read as what it must be, an opaque string (contrast 1) of the
+same shadow area :math:`w' = w\,|A|/B`. A pixel-integrating sensor adds
 :math:`1/12` px\ :sup:`2` to :math:`\sigma^2` (the variance of a unit box
 projected on any direction), so a perfectly focused edge is 0.74 px wide.
 
@@ -383,7 +388,9 @@ class StringSharpness:
         10-90 % width of one edge, ``EDGE_WIDTH_PER_SIGMA * sigma_px``.
     contrast : float
         ``|A| / max(B, B + A)``: the fraction of the brighter level the string
-        takes away (dark strings) or adds (bright ones).
+        takes away (dark strings) or adds (bright ones); at most 1 (an opaque
+        string). For a string narrower than about 2 sigma only ``contrast *
+        width_px`` (its shadow) is well determined (module docstring).
     width_px : float
         Fitted string width, px.
     angle_deg : float
@@ -786,10 +793,13 @@ def _fit_batch(
             out.append((float("nan"),) * 4 + (0, float("nan"), float("nan")))
             continue
         contrast = float(np.median(np.abs(a) / np.maximum(np.maximum(b, b + a), 1e-12)))
+        width = float(w_fit[i])
+        if contrast > 1.0:  # light below zero: an opaque string narrower than the blur (module docstring)
+            width, contrast = width * contrast, 1.0
         rel = math.sqrt(cost[i] / max(n_str[i], 1.0)) / max(float(np.median(np.abs(a))), 1e-12)
         sg = float(sig_fit[i])
         offset = float(np.median(np.abs(moved[ok])))
-        out.append((sg, EDGE_WIDTH_PER_SIGMA * sg, contrast, float(w_fit[i]), int(ok.sum()), rel, offset))
+        out.append((sg, EDGE_WIDTH_PER_SIGMA * sg, contrast, width, int(ok.sum()), rel, offset))
     return out
 
 

@@ -41,6 +41,11 @@ the fit fixes them as follows.
   ridge on the coefficients of degree >= 2 fixes what few orientations cannot
   see (e.g. with only horizontal and vertical strings, any ``x_u = g(x)``,
   ``y_u = h(y)`` keeps every string straight).
+* ``radial`` with a residual field (:mod:`pipeline.models.radial_field`): the radial
+  part as above; the field's affine part (translation, rotation, scale, shear: invisible,
+  and the null space of its roughness penalty) is held at zero by a penalty on its
+  projection, and its first-order projective (quadratic) part, like everything it could
+  bend along strings few orientations cannot see, by the roughness penalty.
 
 What to fit is a :class:`pipeline.fitspec.FitSpec` (its ``fit_arguments()`` are the
 keyword arguments of :func:`fit_distortion`); each model's free parameters live beside
@@ -90,6 +95,7 @@ from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, s
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialParametrisation
 from pipeline.models.radial import RadialParametrisation
+from pipeline.models.radial_field import RadialFieldParametrisation
 
 if TYPE_CHECKING:
     from scipy.optimize import OptimizeResult
@@ -124,14 +130,15 @@ def make_parametrisation(
     w_center: float | None = None,
     w_gauge: float = 1e-3,
     ridge: float | None = None,
-) -> RadialParametrisation | PolynomialParametrisation:
+) -> RadialParametrisation | RadialFieldParametrisation | PolynomialParametrisation:
     """The free parameters of ``spec`` for a ``width x height`` image (see module doc).
 
     ``w_center`` defaults to the spec's (:attr:`FitSpec.w_center`); ``ridge`` to 0 for
-    radial, 1e-4 for poly.
+    radial, 1e-4 for poly. A spec with a field: the radial parameters followed by the field's
+    (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`).
     """
     if spec.kind == "radial":
-        return RadialParametrisation(
+        radial = RadialParametrisation(
             width,
             height,
             int(spec.degree or 0),
@@ -141,6 +148,11 @@ def make_parametrisation(
             w_gauge,
             0.0 if ridge is None else ridge,
             spec.division,
+        )
+        if spec.field is None:
+            return radial
+        return RadialFieldParametrisation(
+            radial, width, height, (spec.field[1], spec.field[0]), float(spec.field_penalty or 0)
         )
     return PolynomialParametrisation(width, height, int(spec.degree or 0), 1e-4 if ridge is None else ridge)
 
@@ -509,6 +521,8 @@ def fit_distortion(
     prism: bool = False,
     *,
     division: int = 0,
+    field: tuple[int, int] | None = None,
+    field_penalty: float | None = None,
     image_sizes: Sequence[tuple[int, int]] | None = None,
     init: DistortionModel | None = None,
     robust: bool = True,
@@ -538,6 +552,10 @@ def fit_distortion(
     division : int
         Radial only: division (rational) denominator coefficients ``d1 .. dM`` (0..3,
         :class:`~pipeline.models.radial.RadialModel`), started at 0.
+    field, field_penalty
+        Radial only: a residual field of ``(nx, ny)`` B-spline control points and its roughness
+        weight (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`; default
+        :data:`pipeline.fitspec.DEFAULT_FIELD_PENALTY`), started at 0 (or at ``init``'s).
     image_sizes : sequence of (width, height), optional
         Size of each shot; a mismatch gives a :class:`FitFailure`.
     init : DistortionModel, optional
@@ -563,10 +581,10 @@ def fit_distortion(
     FitResult or FitFailure
         Never raises for a data problem: a :class:`FitFailure` says why.
     """
-    problem = spec_problem(model, degree, tangential, prism, division)
+    problem = spec_problem(model, degree, tangential, prism, division, field, field_penalty)
     if problem:
         return FitFailure(problem)
-    spec = FitSpec(model, degree, tangential, prism, division=division)
+    spec = FitSpec(model, degree, tangential, prism, division=division, field=field, field_penalty=field_penalty)
     if image_sizes is not None:
         sizes = {(int(w), int(h)) for w, h in image_sizes}
         if sizes != {(int(width), int(height))}:
@@ -592,7 +610,8 @@ def fit_distortion(
     if problem:
         return FitFailure(problem)
 
-    if init is None and isinstance(param, RadialParametrisation):
+    radial_like = isinstance(param, (RadialParametrisation, RadialFieldParametrisation))
+    if init is None and radial_like:
         try:
             k2 = alvarez_initial_k(edges.lines(), width, height)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
@@ -613,7 +632,7 @@ def fit_distortion(
             n_iter += sol.nfev
             if (
                 init is None
-                and isinstance(param, RadialParametrisation)
+                and isinstance(param, (RadialParametrisation, RadialFieldParametrisation))
                 and param.w_center < CENTER_PRIOR_WEIGHT
                 and float(np.hypot(*sol.x[:2])) > FAR_CENTRE
             ):

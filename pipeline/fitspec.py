@@ -31,6 +31,7 @@ References
 
 from __future__ import annotations
 
+import math
 import operator
 from dataclasses import dataclass
 from typing import Any
@@ -47,6 +48,14 @@ DEFAULT_DEGREE: dict[str, int] = {"radial": 4, "poly": 5}
 DIVISION_BOUNDS: tuple[int, int] = (0, 3)
 """Allowed number of division (denominator) coefficients of a radial spec, inclusive."""
 
+FIELD_BOUNDS: tuple[int, int] = (4, 24)
+"""Allowed control points per axis of a residual field, inclusive (4: one cubic piece)."""
+
+DEFAULT_FIELD_PENALTY = 1e-3
+"""Roughness weight of a field spec that gives none (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`:
+a thin-plate energy of ``E`` px² per half-diagonal² costs like a residual of ``penalty * sqrt(E)`` px on every
+point); the cross-validation (:func:`pipeline.select.field_candidates`) chooses among several."""
+
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
 
@@ -61,12 +70,20 @@ does on the real photos, not on a strongly decentred synthetic lens)."""
 
 
 def spec_problem(
-    kind: Any, degree: Any = None, tangential: Any = False, prism: Any = False, division: Any = 0
+    kind: Any,
+    degree: Any = None,
+    tangential: Any = False,
+    prism: Any = False,
+    division: Any = 0,
+    field: Any = None,
+    field_penalty: Any = None,
 ) -> str | None:
-    """Why ``(kind, degree, tangential, prism, division)`` is not a valid spec, or ``None``.
+    """Why ``(kind, degree, tangential, prism, division, field, field_penalty)`` is not a valid
+    spec, or ``None``.
 
     The one check of the allowed kinds and degrees (:data:`DEGREE_BOUNDS`,
-    :data:`DIVISION_BOUNDS`), used by :class:`FitSpec` and by :func:`pipeline.fit.fit_distortion`.
+    :data:`DIVISION_BOUNDS`, :data:`FIELD_BOUNDS`), used by :class:`FitSpec` and by
+    :func:`pipeline.fit.fit_distortion`.
     """
     if kind not in KINDS:
         return f"unknown model {kind!r}; use {' or '.join(repr(k) for k in KINDS)}"
@@ -90,6 +107,30 @@ def spec_problem(
         return f"division terms must be within {lo}..{hi}, got {division}"
     if kind == "poly" and division:
         return "division terms apply to the radial model only"
+    return _field_problem(kind, field, field_penalty)
+
+
+def _field_problem(kind: Any, field: Any, field_penalty: Any) -> str | None:
+    """Why a residual field ``(field, field_penalty)`` is not valid for ``kind``, or ``None``."""
+    if field is None:
+        return None if field_penalty is None else "a field penalty needs a field (field=(nx, ny))"
+    if kind != "radial":
+        return "a residual field applies to the radial model only"
+    lo, hi = FIELD_BOUNDS
+    try:
+        nx, ny = (operator.index(v) for v in field)
+        ok = not any(isinstance(v, bool) for v in field) and lo <= nx <= hi and lo <= ny <= hi
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        return f"a field needs (nx, ny) control points within {lo}..{hi} each, got {field!r}"
+    if field_penalty is not None:
+        try:
+            pen = float(field_penalty)
+        except (TypeError, ValueError):
+            pen = float("nan")
+        if isinstance(field_penalty, bool) or not math.isfinite(pen) or pen <= 0:
+            return f"the field penalty must be a number > 0, got {field_penalty!r}"
     return None
 
 
@@ -110,6 +151,12 @@ class FitSpec:
     center_prior : bool
         Radial only: pull the distortion centre towards the image centre
         (:data:`CENTER_PRIOR_WEIGHT`).
+    field : (int, int), optional
+        Radial only: a residual field of ``nx x ny`` B-spline control points over the image
+        (:class:`~pipeline.models.radial_field.RadialFieldModel`), or ``None``.
+    field_penalty : float, optional
+        The field's roughness weight; ``None``: :data:`DEFAULT_FIELD_PENALTY` (the spec then
+        holds the number).
 
     Raises
     ------
@@ -124,9 +171,13 @@ class FitSpec:
     prism: bool = False
     center_prior: bool = False
     division: int = 0
+    field: tuple[int, int] | None = None
+    field_penalty: float | None = None
 
     def __post_init__(self) -> None:
-        problem = spec_problem(self.kind, self.degree, self.tangential, self.prism, self.division)
+        problem = spec_problem(
+            self.kind, self.degree, self.tangential, self.prism, self.division, self.field, self.field_penalty
+        )
         if problem is None and self.kind == "poly" and self.center_prior:
             problem = "a centre prior applies to the radial model only"
         if problem is not None:
@@ -136,11 +187,15 @@ class FitSpec:
         object.__setattr__(self, "prism", bool(self.prism))
         object.__setattr__(self, "center_prior", bool(self.center_prior))
         object.__setattr__(self, "division", int(self.division))
+        if self.field is not None:
+            object.__setattr__(self, "field", (int(self.field[0]), int(self.field[1])))
+            pen = DEFAULT_FIELD_PENALTY if self.field_penalty is None else float(self.field_penalty)
+            object.__setattr__(self, "field_penalty", pen)
 
     @property
     def label(self) -> str:
-        """Short name, e.g. ``radial4+tangential+prism+centre-prior``, ``radial2+division1`` or
-        ``poly5`` (:func:`parse` reads it)."""
+        """Short name, e.g. ``radial4+tangential+prism+centre-prior``, ``radial2+division1``,
+        ``radial4+tangential+field8x6@0.001`` or ``poly5`` (:func:`parse` reads it)."""
         if self.kind == "poly":
             return f"poly{self.degree}"
         return (
@@ -149,6 +204,7 @@ class FitSpec:
             + ("+prism" if self.prism else "")
             + (f"+division{self.division}" if self.division else "")
             + ("+centre-prior" if self.center_prior else "")
+            + (f"+field{self.field[0]}x{self.field[1]}@{self.field_penalty:g}" if self.field else "")
         )
 
     @property
@@ -165,11 +221,14 @@ class FitSpec:
                 kw["division"] = self.division
             if self.center_prior:
                 kw["w_center"] = CENTER_PRIOR_WEIGHT
+            if self.field is not None:
+                kw.update(field=self.field, field_penalty=self.field_penalty)
         return kw
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (model files, JSON, the store): ``model`` (the kind), ``degree``,
-        ``tangential``, ``prism``, ``center_prior``, ``label`` and, when not 0, ``division``."""
+        ``tangential``, ``prism``, ``center_prior``, ``label`` and, when not 0, ``division``; with a
+        field, ``field`` ``[nx, ny]`` and ``field_penalty``."""
         d: dict[str, Any] = {
             "model": self.kind,
             "degree": self.degree,
@@ -180,6 +239,9 @@ class FitSpec:
         }
         if self.division:
             d["division"] = self.division
+        if self.field is not None:
+            d["field"] = list(self.field)
+            d["field_penalty"] = self.field_penalty
         return d
 
     @classmethod
@@ -195,6 +257,8 @@ class FitSpec:
             bool(d.get("prism", False)),
             bool(d.get("center_prior", False)),
             d.get("division", 0),
+            None if d.get("field") is None else tuple(d["field"]),
+            d.get("field_penalty"),
         )
 
 
@@ -203,8 +267,9 @@ _TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_
 
 def parse(label: str) -> FitSpec:
     """The spec of a label: ``radial``, ``radial4``, ``radial4+tangential+prism``,
-    ``radial6+tangential+centre-prior``, ``radial2+division1``, ``poly``, ``poly7`` (no
-    degree: the default).
+    ``radial6+tangential+centre-prior``, ``radial2+division1``, ``radial4+field8x6``,
+    ``radial4+tangential+field8x6@0.03`` (a field of 8 x 6 control points, its penalty), ``poly``,
+    ``poly7`` (no degree: the default).
 
     Raises
     ------
@@ -217,21 +282,45 @@ def parse(label: str) -> FitSpec:
     if kind is None:
         raise ValueError(
             f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+division<M>][+centre-prior] "
-            "or poly<degree>"
+            "[+field<nx>x<ny>[@<penalty>]] or poly<degree>"
         )
     digits = head[len(kind) :]
     if digits and not digits.isdigit():
         raise ValueError(f"{label!r}: the degree must be a whole number, got {digits!r}")
     flags: dict[str, bool] = {}
     division = 0
+    field: tuple[int, int] | None = None
+    penalty: float | None = None
     for term in terms:
         if term.startswith("division") and term[len("division") :].isdigit():
             division = int(term[len("division") :])
             continue
+        if term.startswith("field"):
+            field, penalty = _parse_field(label, term)
+            continue
         if term not in _TERMS:
-            raise ValueError(f"{label!r}: unknown term {term!r}; known: tangential, prism, division<M>, centre-prior")
+            raise ValueError(
+                f"{label!r}: unknown term {term!r}; known: tangential, prism, division<M>, centre-prior, "
+                "field<nx>x<ny>[@<penalty>]"
+            )
         flags[_TERMS[term]] = True
     try:
-        return FitSpec(kind, int(digits) if digits else None, division=division, **flags)
+        return FitSpec(
+            kind, int(digits) if digits else None, division=division, field=field, field_penalty=penalty, **flags
+        )
     except ValueError as exc:
         raise ValueError(f"{label!r}: {exc}") from None
+
+
+def _parse_field(label: str, term: str) -> tuple[tuple[int, int], float | None]:
+    """``(nx, ny), penalty`` of a label's ``field<nx>x<ny>[@<penalty>]`` term (ValueError, one line)."""
+    body, _, pen = term[len("field") :].partition("@")
+    nx, _, ny = body.partition("x")
+    if not (nx.isdigit() and ny.isdigit()):
+        raise ValueError(f"{label!r}: a field term is field<nx>x<ny>[@<penalty>], e.g. field8x6@0.01; got {term!r}")
+    if not pen:
+        return (int(nx), int(ny)), None
+    try:
+        return (int(nx), int(ny)), float(pen)
+    except ValueError:
+        raise ValueError(f"{label!r}: the field penalty must be a number, got {pen!r}") from None

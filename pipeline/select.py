@@ -507,7 +507,7 @@ other along a direction the two orientations hardly see (on the real photographs
 orientations, the third is left 2-3x less straight than when it is in the fit)."""
 
 REQUIRED_ORIENTATIONS_POLY = 4
-"""Distinct orientations a free bivariate polynomial needs: with fewer, a polynomial keeps the lines of
+"""Distinct orientations a free bivariate polynomial (or a residual field) needs: with fewer, it keeps the lines of
 the shots straight with terms an unseen orientation sees bent."""
 
 ORIENTATION_SEPARATION_DEG = 10.0
@@ -547,8 +547,8 @@ def distinct_orientations(angles_deg: Iterable[float], separation_deg: float = O
 
 def required_orientations(spec: FitSpec) -> int:
     """Distinct orientations ``spec`` needs to be well supported (:data:`REQUIRED_ORIENTATIONS_FREE`,
-    :data:`REQUIRED_ORIENTATIONS_POLY`); 2 for a radial factor alone (or one with a centre prior)."""
-    if spec.kind == "poly":
+    :data:`REQUIRED_ORIENTATIONS_POLY`, also for a residual field); 2 for a radial factor alone (or one with a centre prior)."""
+    if spec.kind == "poly" or spec.field is not None:
         return REQUIRED_ORIENTATIONS_POLY
     if (spec.tangential or spec.prism or spec.division) and not spec.center_prior:
         return REQUIRED_ORIENTATIONS_FREE
@@ -744,9 +744,36 @@ def _flexible_margin(row: CVRow, best_radial: CVRow | None) -> float:
 
 
 def is_flexible(spec: FitSpec) -> bool:
-    """Whether ``spec`` can bend to the orientations it is fitted on (a free polynomial): such a
-    candidate is judged by leave-one-shot-out alone (:func:`select_model`)."""
-    return spec.kind != "radial"
+    """Whether ``spec`` can bend to the orientations it is fitted on (a free polynomial, or a radial
+    model with a residual field): such a candidate is judged by leave-one-shot-out alone
+    (:func:`select_model`), and chosen only when it is clearly ahead of every radial model there."""
+    return spec.kind != "radial" or spec.field is not None
+
+
+FIELD_GRIDS: tuple[tuple[int, int], ...] = ((8, 6), (12, 9))
+"""Control points ``(nx, ny)`` of the residual fields :func:`field_candidates` offers (a knot every
+~150 and ~100 px on a 1000 x 750 image; both about the image's aspect)."""
+
+FIELD_PENALTIES: tuple[float, ...] = (1e-4, 1e-3, 1e-2)
+"""Roughness weights :func:`field_candidates` offers (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`):
+on five orientations of 1000 x 750 point sets with 0.005 px noise, 1e-4-3e-4 follows a field of 0.05 px RMS
+and 0.6-2 half-diagonal wavelengths (:mod:`pipeline.lens_population`) to 0.002-0.003 px of field error (the
+radial model: 0.02-0.035), 1e-2 keeps the field near zero; on the realistic simulator the cross-validation
+chose 1e-3 or 1e-4 (``benchmarks/residual_field.py``)."""
+
+
+def field_candidates(
+    base: FitSpec,
+    grids: Sequence[tuple[int, int]] = FIELD_GRIDS,
+    penalties: Sequence[float] = FIELD_PENALTIES,
+) -> tuple[FitSpec, ...]:
+    """``base`` (a radial spec without a field) and ``base`` with each residual field of ``grids`` x
+    ``penalties``: the candidates of a choice of knot density and penalty by :func:`select_model`.
+    ``base`` is always among them, so a field is chosen only when it wins on held-out shots (a field
+    is :func:`is_flexible`: it must be ahead of ``base`` by :data:`FLEXIBLE_MARGIN_SE`)."""
+    if base.kind != "radial" or base.field is not None:
+        raise ValueError(f"field candidates need a radial spec without a field, got {base.label}")
+    return (base, *(replace(base, field=g, field_penalty=p) for g in grids for p in penalties))
 
 
 def _with_support(sel: Selection, lines_per_image: Sequence[Sequence[np.ndarray]]) -> Selection:

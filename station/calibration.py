@@ -127,6 +127,7 @@ def calibrate_shots(
     bootstrap: int = 0,
     seed: int = 0,
     map_fn: MapFn = map,
+    candidates: Sequence[FitSpec] | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -141,6 +142,8 @@ def calibrate_shots(
     bootstrap : replicates of the field uncertainty (0: none; 1 is recorded as failed).
     seed : of the bootstrap resampling.
     map_fn : ``map`` over independent fits (a process pool's); results do not depend on it.
+    candidates : what the cross-validation chooses among when ``spec`` is None (default
+        :data:`pipeline.select.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     """
     from pipeline.edgeset import corrected_straightness, straightness_of
     from pipeline.fit import fit_distortion
@@ -150,7 +153,10 @@ def calibrate_shots(
     if spec is None:
         from pipeline.select import select_model
 
-        selection = select_model(lines, width, height, map_fn=map_fn)
+        if candidates is None:
+            selection = select_model(lines, width, height, map_fn=map_fn)
+        else:
+            selection = select_model(lines, width, height, candidates, map_fn=map_fn)
         spec = selection.choice
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}

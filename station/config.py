@@ -34,7 +34,7 @@ from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
 from pipeline.fitspec import KINDS, FitSpec
 from pipeline.resample import DEFAULT_T
 from station.store.errors import StoreError
-from station.store.location import SQLITE, StoreLocation, parse_store
+from station.store.location import SQLITE, StoreLocation, parse_store, user_store_path
 
 AUTO_MODEL = "auto"
 """``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
@@ -214,6 +214,9 @@ class CheckConfig:
     max_saturated_fraction: float = 0.01  # of pixels at the top code value
     min_dynamic_range: float = 0.2  # (p99 - p1) / full scale
     max_recaptures: int = 2
+    # px: harp live's focus check, the median 10-90 % string edge width (a sharp harp: 1.3-2 px;
+    # the live demo's lens 0.17 off its best focus: 4 px); the session itself does not assess focus
+    max_edge_width_px: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -537,6 +540,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         max_saturated_fraction=ck.number("max_saturated_fraction", d.max_saturated_fraction, min=0),
         min_dynamic_range=ck.number("min_dynamic_range", d.min_dynamic_range, min=0),
         max_recaptures=ck.number("max_recaptures", d.max_recaptures, min=0, integer=True),
+        max_edge_width_px=ck.number("max_edge_width_px", d.max_edge_width_px, positive=True),
     )
     rt = cp.section("retries", keys_of(RetryConfig), optional=True)
     r = RetryConfig()
@@ -620,9 +624,12 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
 
 def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:
     """``store.path`` (a file, relative to the configuration) or ``store.url`` (``sqlite:///`` or
-    ``postgresql://``, :mod:`station.store.location`): exactly one of them."""
-    if ("path" in so.data) == ("url" in so.data):
-        raise so.err("path", "exactly one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://)")
+    ``postgresql://``, :mod:`station.store.location`): at most one of them; neither is the per-user
+    default store (:func:`~station.store.location.user_store_path`), the one every command finds."""
+    if "path" in so.data and "url" in so.data:
+        raise so.err("path", "one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://), not both")
+    if "path" not in so.data and "url" not in so.data:
+        return user_store_path(), None
     if "path" in so.data:
         return Path(os.path.normpath(base / so.string("path"))), None
     url = so.string("url")

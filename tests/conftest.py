@@ -47,3 +47,24 @@ def page(browser):
         yield pg
     finally:
         ctx.close()
+
+
+def pytest_configure(config):
+    """The per-user directories the commands default to (the profile store, lensfun's user
+    databases) are a temporary directory for the whole run, never the user's own; the variables a
+    station sets for its commands are unset."""
+    import tempfile
+
+    data_home = tempfile.mkdtemp(prefix="harp-tests-xdg-")
+    config._harp_data_home = data_home
+    os.environ["XDG_DATA_HOME"] = data_home
+    for name in ("HARP_STORE", "HARP_CONFIG", "HARP_LENSFUN_DIRS"):
+        os.environ.pop(name, None)
+
+
+def pytest_unconfigure(config):
+    import shutil
+
+    data_home = getattr(config, "_harp_data_home", None)
+    if data_home:
+        shutil.rmtree(data_home, ignore_errors=True)

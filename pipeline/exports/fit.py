@@ -614,8 +614,14 @@ def fit_lensfun(
     fit_center: bool = True,
     edges: Sequence[Array] | None = None,
     n_long: int = FIT_GRID_LONG,
+    lens_type: str = "rectilinear",
+    geometry_focal: float = 0.0,
 ) -> tuple[LensfunModel, ConversionError]:
     """Closest lensfun ``poly3`` / ``poly5`` / ``ptlens`` distortion to ``model``.
+
+    ``lens_type`` other than rectilinear: a fisheye lens whose geometry conversion uses the fixed
+    ``geometry_focal`` (:func:`pipeline.models.lensfun_model.geometry_focal` of the nominal focal
+    length and crop factor; the file cannot hold another), the polynomial fitted on top of it.
 
     With ``fit_center`` (default) the distortion centre is fitted too and
     written as the lens' ``<center x y>`` offset (read by lensfun 0.3.x;
@@ -632,7 +638,15 @@ def fit_lensfun(
 
         def make(theta: Array) -> LensfunModel:
             center = (float(theta[n]), float(theta[n + 1])) if fit_center else (0.0, 0.0)
-            return LensfunModel(kind=k, terms=tuple(theta[:n]), width=width, height=height, center=center)
+            return LensfunModel(
+                kind=k,
+                terms=tuple(theta[:n]),
+                width=width,
+                height=height,
+                center=center,
+                lens_type=lens_type,
+                geometry_focal=geometry_focal,
+            )
 
         return make
 
@@ -649,4 +663,5 @@ def fit_lensfun(
     th, _, _ = _least_squares(prob, maker(kind), theta0, h8)
     candidates.append(maker(kind)(th))
     out = min(candidates, key=lambda m: mod_h_rms(model, m, width, height))
-    return out, conversion_error(model, out, width, height, edges=edges, export=f"the lensfun {kind} model")
+    family = f"the lensfun {kind} model" + (f" of a {lens_type} lens" if lens_type != "rectilinear" else "")
+    return out, conversion_error(model, out, width, height, edges=edges, export=family)

@@ -27,6 +27,9 @@ from typing import Any
 
 import numpy as np
 
+FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
+"""Diagonal of the 35 mm frame (36 x 24 mm), the reference of a crop factor: 43.27 mm."""
+
 
 @dataclass(frozen=True)
 class LensInfo:
@@ -83,6 +86,24 @@ class LensInfo:
         if self.sensor_width_mm is not None:
             return float(self.focal_mm) * int(width) / float(self.sensor_width_mm)
         return None
+
+    def derived_crop_factor(self, width: int, height: int) -> float | None:
+        r"""The crop factor the optics give for ``width`` x ``height`` images, or None without them.
+
+        :math:`c = D_{35} / D`, :math:`D_{35} = \sqrt{36^2 + 24^2}` mm (the 35 mm
+        frame's diagonal, :data:`FULL_FRAME_DIAGONAL_MM`), :math:`D` the diagonal
+        of the sensor area the images cover: :math:`p\sqrt{W^2 + H^2}` from the
+        pixel pitch :math:`p` (mm), or :math:`w_s\sqrt{W^2 + H^2}/W` from the
+        sensor width :math:`w_s` across the image width.
+        """
+        diag_px = math.hypot(int(width), int(height))
+        if self.pixel_pitch_um is not None:
+            diag_mm = float(self.pixel_pitch_um) * 1e-3 * diag_px
+        elif self.sensor_width_mm is not None:
+            diag_mm = float(self.sensor_width_mm) * diag_px / int(width)
+        else:
+            return None
+        return FULL_FRAME_DIAGONAL_MM / diag_mm
 
     @property
     def camera_body(self) -> str | None:

@@ -25,9 +25,12 @@ One database holds several lenses: :func:`lensfun_database_text` adds
 entries to an existing database, keyed by (maker, model, mount, crop
 factor): a new key adds a ``<lens>``; a lens already there gets the
 calibration at this focal added, or replaced if it had one at this focal
-(lensfun keeps one calibration per focal; what was replaced is reported). A
-lens' ``<center>`` and aspect ratio apply to all its calibrations, so a
-calibration with another fitted centre goes into a lens element of its own.
+(lensfun keeps one calibration per focal and has no focus axis for distortion:
+what was replaced, and the focus settings involved, are reported). Lensfun
+merges lenses of one name and crop factor, and a lens' ``<center>`` and aspect
+ratio apply to all its calibrations: a calibration with another centre replaces
+the lens' centre when no other focal uses it, and is refused otherwise (see
+:func:`add_to_database`).
 
 References
 ----------
@@ -38,15 +41,17 @@ References
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import LensInfo
-from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
+from pipeline.models.lensfun_model import LENSFUN_TERMS, LENSFUN_TYPES, LensfunModel, geometry_focal
 from pipeline.models.tca_model import LensfunTca
 from pipeline.vignetting import LensfunVignetting
 
@@ -54,6 +59,11 @@ DEFAULT_MAKER = "harp station"
 DEFAULT_MODEL = "harp calibration"
 DEFAULT_MOUNT = "Generic"
 DEFAULT_FOCAL_MM = 50.0
+
+
+def lens_names(lens: LensInfo) -> tuple[str, str]:
+    """``(maker, model)`` a lens is written under (the configured ones, or the defaults)."""
+    return lens.lens_maker or DEFAULT_MAKER, lens.lens_model or DEFAULT_MODEL
 
 
 @dataclass(frozen=True)
@@ -67,14 +77,15 @@ class LensfunEntry:
     vignetting: LensfunVignetting | None = None
     aperture: float = 8.0
     distance: float = 1000.0
+    crop_note: str | None = None
 
     @property
     def maker(self) -> str:
-        return self.lens.lens_maker or DEFAULT_MAKER
+        return lens_names(self.lens)[0]
 
     @property
     def lens_model(self) -> str:
-        return self.lens.lens_model or DEFAULT_MODEL
+        return lens_names(self.lens)[1]
 
     @property
     def mount(self) -> str:
@@ -108,7 +119,9 @@ class LensfunEntry:
             parts.append(f"camera {self.lens.camera_body}")
         if self.lens.focal_mm is None:
             parts.append(f"focal {DEFAULT_FOCAL_MM:g} mm is a placeholder (no nominal focal configured)")
-        if self.lens.crop_factor is None:
+        if self.crop_note is not None:
+            parts.append(self.crop_note)
+        elif self.lens.crop_factor is None:
             parts.append("crop factor 1 assumed (none configured)")
         if self.error is not None:
             parts.extend(self.error.lines())
@@ -178,6 +191,8 @@ def _new_lens(entry: LensfunEntry) -> ET.Element:
     ET.SubElement(lens, "mount").text = entry.mount
     ET.SubElement(lens, "cropfactor").text = repr(entry.cropfactor)
     ET.SubElement(lens, "aspect-ratio").text = repr(entry.aspect_ratio())
+    if entry.model.lens_type != "rectilinear":
+        ET.SubElement(lens, "type").text = entry.model.lens_type
     if entry.model.center != (0.0, 0.0):
         ET.SubElement(lens, "center", {"x": repr(entry.model.center[0]), "y": repr(entry.model.center[1])})
     ET.SubElement(lens, "calibration")
@@ -199,20 +214,74 @@ def _add_camera(root: ET.Element, entry: LensfunEntry) -> None:
     root.insert(list(root).index(cams[-1]) + 1 if cams else 0, cam)
 
 
-def add_to_database(root: ET.Element, entry: LensfunEntry) -> str:
-    """Add ``entry`` to a parsed ``<lensdatabase>`` in place; returns what was done (one line)."""
+CENTER_TOL = 1e-6
+"""Two ``<center>`` offsets closer than this (lensfun units; ~1e-4 px) are the same centre."""
+
+
+def _same_geometry(lens: ET.Element, entry: LensfunEntry) -> bool:
+    """Whether the lens element has the entry's aspect ratio and distortion centre (they apply to all its calibrations)."""
+    try:
+        same_ar = math.isclose(float(_text_of(lens, "aspect-ratio") or "nan"), entry.aspect_ratio(), rel_tol=1e-9)
+    except ValueError:
+        same_ar = False
+    c = _center_of(lens)
+    same_type = (_text_of(lens, "type") or "rectilinear") == entry.model.lens_type
+    return same_ar and same_type and all(abs(a - b) <= CENTER_TOL for a, b in zip(c, entry.model.center))
+
+
+def _set_geometry(lens: ET.Element, entry: LensfunEntry) -> None:
+    """Give the lens element the entry's aspect ratio and centre (it has no calibration they would change)."""
+    for tag in ("aspect-ratio", "type", "center"):
+        for el in lens.findall(tag):
+            lens.remove(el)
+    cal = lens.find("calibration")
+    at = list(lens).index(cal) if cal is not None else len(lens)
+    ar = ET.Element("aspect-ratio")
+    ar.text = repr(entry.aspect_ratio())
+    lens.insert(at, ar)
+    if entry.model.lens_type != "rectilinear":
+        at += 1
+        typ = ET.Element("type")
+        typ.text = entry.model.lens_type
+        lens.insert(at, typ)
+    if entry.model.center != (0.0, 0.0):
+        lens.insert(at + 1, ET.Element("center", {"x": repr(entry.model.center[0]), "y": repr(entry.model.center[1])}))
+
+
+def add_to_database(root: ET.Element, entry: LensfunEntry, name: str = "<existing>") -> str:
+    """Add ``entry`` to a parsed ``<lensdatabase>`` in place; returns what was done (one line).
+
+    Lensfun merges the lenses of one maker, model and crop factor into one, and a
+    lens' aspect ratio and ``<center>`` apply to all its calibrations. So a lens
+    already there gets this calibration (replacing the one at this focal); if its
+    centre or aspect ratio differ, they are replaced when no calibration at another
+    focal uses them, and otherwise ValueError(``name``: what to do), since one
+    file cannot hold both.
+    """
     _add_camera(root, entry)
-    ar = entry.aspect_ratio()
     for lens in root.findall("lens"):
         k = _key(lens)
         if k[:3] != (entry.maker, entry.lens_model, entry.mount) or not math.isclose(k[3], entry.cropfactor):
             continue
-        try:
-            same_ar = math.isclose(float(_text_of(lens, "aspect-ratio") or "nan"), ar, rel_tol=1e-9)
-        except ValueError:
-            same_ar = False
-        if not same_ar or _center_of(lens) != tuple(entry.model.center):
-            continue
+        if not _same_geometry(lens, entry):
+            cal_el = lens.find("calibration")
+            kids = [] if cal_el is None else [el for el in cal_el if not _is_comment(el)]
+            others = sorted(
+                {
+                    float(el.get("focal", "nan"))
+                    for el in kids
+                    if not math.isclose(float(el.get("focal", "nan")), entry.focal, rel_tol=1e-9)
+                }
+            )
+            if others:
+                focals = ", ".join(f"{f:g}" for f in others)
+                raise ValueError(
+                    f"{name}: lens {entry.maker} {entry.lens_model} (crop factor {entry.cropfactor:g}) is there with "
+                    f"another distortion centre, aspect ratio or lens type, which its calibrations at {focals} mm use, and "
+                    "lensfun holds one per lens name and crop factor: export with --lensfun-no-center, or into "
+                    "another file"
+                )
+            _set_geometry(lens, entry)
         cal = lens.find("calibration")
         if cal is None:
             cal = ET.SubElement(lens, "calibration")
@@ -228,8 +297,17 @@ def add_to_database(root: ET.Element, entry: LensfunEntry) -> str:
                 cal.insert(pos, ET.Comment(_xml_comment(entry.note())))
                 cal.insert(pos + 1, dist := _distortion_element(entry))
                 _put_colour(cal, entry, dist)
-                was = f" (it was: {(before.text or '').strip().split(';')[0]})" if before is not None else ""
-                return f"replaced the calibration of {entry.maker} {entry.lens_model} at {entry.focal:g} mm{was}"
+                old = (before.text or "").strip() if before is not None else ""
+                was = f" (it was: {old.split(';')[0]})" if old else ""
+                line = f"replaced the calibration of {entry.maker} {entry.lens_model} at {entry.focal:g} mm{was}"
+                old_focus = re.search(r"focus setting (\S+) \(", old)
+                if old_focus is not None and entry.lens.focus is not None and old_focus[1] != f"{entry.lens.focus:g}":
+                    line += (
+                        f": lensfun holds one distortion per focal length and has no focus axis, so the focus "
+                        f"{entry.lens.focus:g} calibration replaced the focus {old_focus[1]} one (keep one file per "
+                        "focus setting, or export the focus the photos are taken at)"
+                    )
+                return line
         cal.append(ET.Comment(_xml_comment(entry.note())))
         cal.append(dist := _distortion_element(entry))
         _put_colour(cal, entry, dist)
@@ -262,7 +340,7 @@ def lensfun_database_text(
 ) -> tuple[str, list[str]]:
     """Database XML holding ``entries`` (added to ``existing`` if given): ``(text, what was done)``."""
     root = parse_database(existing, name) if existing is not None else ET.Element("lensdatabase", {"version": "1"})
-    done = [add_to_database(root, e) for e in entries]
+    done = [add_to_database(root, e, name) for e in entries]
     for el in root.iter():  # re-indent from scratch
         if el.text is not None and not el.text.strip():
             el.text = None
@@ -293,6 +371,38 @@ def lensfun_text(
     )
     text, _ = lensfun_database_text([LensfunEntry(model=model, lens=info, error=error)])
     return text
+
+
+def _name(text: str) -> str:
+    return " ".join(text.split()).casefold()
+
+
+def installed_lens(databases: Sequence[tuple[str, str]], maker: str, model: str) -> str | None:
+    """The first of ``databases`` (``(name, XML text)`` pairs) with a lens of this maker and model, or None.
+
+    A lens matches when its ``<maker>`` and any of its ``<model>`` names (the
+    untranslated one or a ``lang=`` one) equal ``maker`` and ``model``, case and
+    runs of white space aside. Lensfun merges the lenses of every database it
+    loads on (maker, model, crop factor), so a file with such a lens replaces
+    the installed entry's calibrations (its TCA, vignetting, other focal
+    lengths) instead of adding to them. Unreadable files are skipped: they are
+    not ours to judge.
+    """
+    want_maker, want_model = _name(maker), _name(model)
+    for name, text in databases:
+        folded = text.casefold()
+        if want_model not in folded and xml_escape(want_model) not in folded:  # cheap filter before parsing
+            continue
+        try:
+            root = parse_database(text, name)
+        except ValueError:
+            continue
+        for lens in root.iter("lens"):
+            makers = {_name(m.text or "") for m in lens.findall("maker")}
+            models = {_name(m.text or "") for m in lens.findall("model")}
+            if want_maker in makers and want_model in models:
+                return name
+    return None
 
 
 def lensfun_lens_names(text: str, name: str = "<text>") -> list[str]:
@@ -359,4 +469,25 @@ def read_lensfun_text(
         ar = max(ar, 1.0 / ar)
     img_ar = max(width - 1, height - 1) / min(width - 1, height - 1)
     kappa = float(np.sqrt(ar * ar + 1) / np.sqrt(img_ar * img_ar + 1))
-    return LensfunModel(kind=kind, terms=terms, width=width, height=height, center=center, coord_scale=kappa)
+    lens_type = _text_of(lens, "type") or "rectilinear"
+    if lens_type not in LENSFUN_TYPES:
+        raise ValueError(f"{name}: lens type {lens_type!r} is not one harp reads ({', '.join(LENSFUN_TYPES)})")
+    gf = 0.0
+    if lens_type != "rectilinear":
+        try:
+            crop = float(_text_of(lens, "cropfactor") or "nan")
+            gf = geometry_focal(float(d.get("focal", "nan")), crop, ar)
+        except ValueError:
+            gf = float("nan")
+        if not (np.isfinite(gf) and gf > 0):
+            raise ValueError(f"{name}: a {lens_type} lens needs its <cropfactor> and the calibration's focal")
+    return LensfunModel(
+        kind=kind,
+        terms=terms,
+        width=width,
+        height=height,
+        center=center,
+        coord_scale=kappa,
+        lens_type=lens_type,
+        geometry_focal=gf,
+    )

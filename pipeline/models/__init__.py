@@ -15,11 +15,12 @@ from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.radial import RadialModel
+from pipeline.models.radial_field import RadialFieldModel
 from pipeline.models.remap_model import RemapModel
 
 MODEL_TYPES: dict[str, type[DistortionModel]] = model_types()
 """Every model class by the ``name`` its files carry: identity, radial, poly, homography,
-opencv, opencv_fisheye, lensfun, grid_field, remap."""
+opencv, opencv_fisheye, lensfun, grid_field, remap, radial_field."""
 
 __all__ = [
     "MODEL_TYPES",
@@ -31,6 +32,7 @@ __all__ = [
     "OpenCVFisheyeModel",
     "OpenCVModel",
     "PolynomialModel",
+    "RadialFieldModel",
     "RadialModel",
     "RemapModel",
     "model_from_dict",

@@ -13,7 +13,10 @@ says what it chose. ``--model radial`` fits the radial model with free centre
 ``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
 towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
-denominator to the radial factor (wide-angle lenses). ``--holdout`` shots are never used in the
+denominator to the radial factor (wide-angle lenses); ``--field 8x6[@PENALTY]`` a residual
+field of 8 x 6 cubic B-spline control points on top of it (:mod:`pipeline.models.radial_field`;
+``--model auto`` does not offer fields), ``--field auto`` the radial model or it with the field
+whose knots and penalty win the cross-validation (:func:`pipeline.select.field_candidates`). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
 protocol). On a machine with two cores or more the shots are measured, and the
 candidates cross-validated, by two worker processes (three shots, or any odd number,
@@ -39,8 +42,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec, parse
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
@@ -51,9 +55,7 @@ class CalibrateError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "calibrate", help="fit a lens distortion model from harp shots", description=__doc__.split("\n\n")[0]
-    )
+    p = subparsers.add_parser("calibrate", help=COMMANDS["calibrate"], description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
     p.add_argument(
         "--model",
@@ -84,6 +86,16 @@ def register(subparsers) -> None:
         "--center-prior",
         action="store_true",
         help="radial: pull the distortion centre towards the image centre (see pipeline.select)",
+    )
+    p.add_argument(
+        "--field",
+        default=None,
+        metavar="NXxNY[@PENALTY]|auto",
+        help=(
+            "radial: add a residual field of NX x NY cubic B-spline control points and its roughness penalty "
+            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field); auto: the radial model, or it with the "
+            "field whose knots and penalty win the cross-validation (pipeline.select.field_candidates)"
+        ),
     )
     p.add_argument("-o", "--out", required=True, metavar="MODEL", help="model file to write (YAML)")
     p.add_argument(
@@ -149,19 +161,45 @@ def _workers(n_jobs: int, balance: bool = False):
 
 def _spec(args) -> FitSpec | None:
     """The FitSpec the options ask for (None: --model auto)."""
+    field = getattr(args, "field", None)
     if args.model == "auto":
-        if args.degree is not None or args.no_tangential or args.no_prism or args.center_prior or args.division:
+        if (
+            args.degree is not None
+            or args.no_tangential
+            or args.no_prism
+            or args.center_prior
+            or args.division
+            or field is not None
+        ):
             raise CalibrateError(
-                "--degree/--no-tangential/--no-prism/--center-prior/--division need --model radial or poly"
+                "--degree/--no-tangential/--no-prism/--center-prior/--division/--field need --model radial or poly"
             )
         return None
-    if args.model == "poly" and (args.no_tangential or args.no_prism or args.center_prior or args.division):
-        raise CalibrateError("--no-tangential/--no-prism/--center-prior/--division apply to --model radial only")
+    if args.model == "poly" and (
+        args.no_tangential or args.no_prism or args.center_prior or args.division or field is not None
+    ):
+        raise CalibrateError(
+            "--no-tangential/--no-prism/--center-prior/--division/--field apply to --model radial only"
+        )
+    grid, penalty = None, None
+    if field is not None and field != "auto":
+        try:
+            with_field = parse(f"radial+field{field}")
+        except ValueError as exc:
+            raise CalibrateError(f"--field {field}: {str(exc).split(': ', 1)[-1]}") from None
+        grid, penalty = with_field.field, with_field.field_penalty
     try:
         if args.model == "poly":
             return FitSpec("poly", args.degree)
         return FitSpec(
-            "radial", args.degree, not args.no_tangential, not args.no_prism, args.center_prior, args.division
+            "radial",
+            args.degree,
+            not args.no_tangential,
+            not args.no_prism,
+            args.center_prior,
+            args.division,
+            field=grid,
+            field_penalty=penalty,
         )
     except ValueError as exc:
         option = "--division" if "division" in str(exc) else "--degree"
@@ -171,6 +209,12 @@ def _spec(args) -> FitSpec | None:
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
     cand = _spec(args)
+    cands = None
+    if getattr(args, "field", None) == "auto":  # the field's knots and penalty chosen by cross-validation
+        from pipeline.select import field_candidates
+
+        assert cand is not None
+        cands, cand = field_candidates(cand), None
     out_dir = Path(args.out).parent
     if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
         reason = "not a directory" if out_dir.exists() else "no such directory"
@@ -188,10 +232,10 @@ def calibrate(args) -> dict:
 
         measured = list(measuring)
     with _workers(2 if cand is None else 1) as map_fn:  # a given model: one fit, no candidates to share out
-        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn)
+        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn, cands)
 
 
-def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) -> dict:
+def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, cands=None) -> dict:
     from station.calibration import (
         GIVEN_ON_COMMAND_LINE,
         calibrate_shots,
@@ -213,7 +257,14 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn) ->
         raise CalibrateError(problem)
     held = [[ln.points for ln in m.lines] for _, m in hold_m]
     cal = calibrate_shots(
-        shots, width, height, cand, held_out=held, image_sizes=[(m.width, m.height) for _, m in fit_m], map_fn=map_fn
+        shots,
+        width,
+        height,
+        cand,
+        held_out=held,
+        image_sizes=[(m.width, m.height) for _, m in fit_m],
+        map_fn=map_fn,
+        candidates=cands,
     )
     selection = selection_record(cal.selection, GIVEN_ON_COMMAND_LINE)
     if cal.selection is not None:
@@ -288,7 +339,7 @@ def _print(report: dict) -> None:
     if ch.get("table"):
         t = Table(title="cross-validation (holdout d, px)")
         for c in ("candidate", "params", "CV d", "per fold"):
-            t.add_column(c)
+            t.add_column(c, overflow="fold" if c == "candidate" else "ellipsis")  # long labels: folded, not cut
         for r in ch["table"]:
             if r["cv_d"] is not None:
                 cv = f"{r['cv_d']:.4f}"

@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -34,7 +35,7 @@ from station.inputs import InputError
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "evaluate",
-        help="measure the residual distortion left by any correction",
+        help=COMMANDS["evaluate"],
         description=(
             "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
             "camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr), measured on "

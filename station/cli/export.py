@@ -45,7 +45,12 @@ import sys
 from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.inputs import InputError
+
+LENSFUN_TYPE_CHOICES = ("auto", "rectilinear", "fisheye", "equisolid", "stereographic", "orthographic", "fisheye_thoby")
+"""``--lensfun-type``: auto and :data:`pipeline.models.lensfun_model.LENSFUN_TYPES`, spelled here so
+that parsing the options imports no numerical module (a test checks they agree)."""
 
 FORMAT_CHOICES = (
     "auto",
@@ -101,6 +106,13 @@ def add_export_options(p) -> None:
         "--lensfun-model", choices=("ptlens", "poly5", "poly3"), default="ptlens", help="lensfun distortion model"
     )
     p.add_argument(
+        "--lensfun-type",
+        choices=LENSFUN_TYPE_CHOICES,
+        default="auto",
+        help="lensfun lens type (projection): auto tries the fisheye types too for a wide lens and writes the "
+        "closest; a fisheye type needs --focal-mm (lensfun converts the geometry with it)",
+    )
+    p.add_argument(
         "--lensfun-no-center",
         action="store_true",
         help="lensfun: keep the distortion centre at the image centre (no <center> element)",
@@ -141,7 +153,7 @@ def register(subparsers) -> None:
         "export",
         epilog=formats_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        help="export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
+        help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
             "lensfun, mrcal, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
@@ -188,15 +200,22 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
         raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
+    installed: tuple[tuple[str, str], ...] = ()
+    if args.format == "lensfun":
+        from station.lensfun_databases import installed_databases
+
+        installed = installed_databases(exclude=args.output)
     return ExportOptions(
         coeffs=args.coeffs,
         focal_px=args.focal,
         xml=xml,
         lensfun_model=args.lensfun_model,
         lensfun_center=not args.lensfun_no_center,
+        lensfun_type=args.lensfun_type,
         camera_name=args.camera_name,
         existing=existing,
         existing_name=existing_name,
+        installed_lensfun=installed,
     )
 
 

@@ -8,7 +8,7 @@ other than the loopback address needs ``--token``); it runs until Ctrl-C (exit 1
 frames, averaged), runs the session's acceptance checks on it (exposure, string edges found,
 string angle against the turntable's orientation) and prints one assessment: focus score,
 exposure figures, strings found, coverage. ``--json`` prints it as one JSON object. Exit 0 when
-the shot would pass the session's checks, 1 when not, 2 on an error (one line on stderr).
+the shot would pass the session's checks and the focus check (``capture.checks.max_edge_width_px``), 1 when not, 2 on an error (one line on stderr).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.cli.web_options import add_serve_options
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
@@ -27,7 +28,7 @@ EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "live",
-        help="live set-up view: focus, exposure, strings and coverage (or one check with --once)",
+        help=COMMANDS["live"],
         description=__doc__.split("\n\n")[1] + "\n\n" + __doc__.split("\n\n")[2],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -109,7 +110,8 @@ def _print_once(o: dict[str, Any]) -> None:
         return "–" if v is None else f"{v:.{d}f}"
 
     lines = [
-        f"verdict: {'PASS' if o['pass'] else 'FAIL'} (the session's checks on {o['frames_averaged']} averaged frame(s))",
+        f"verdict: {'PASS' if o['pass'] else 'FAIL'} (the session's checks and the focus check on "
+        f"{o['frames_averaged']} averaged frame(s))",
         *[f"  problem: {p}" for p in o["problems"]],
         f"focus score {f(a['focus_score'])} /px (edge 10-90 % width {f(a['edge_width_px'], 2)} px) at focus {o['focus']}",
         f"exposure {o['exposure_us']:g} us, gain {o['gain_db']:g} dB: saturated {100 * e['saturated_fraction']:.2f} %,"

@@ -41,14 +41,13 @@ import numpy as np
 from pipeline.measure import ImageMeasurement
 from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError, measure_file
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "measure", help="measure string straightness (d, d_max) in harp photos", description=__doc__.split("\n\n")[0]
-    )
+    p = subparsers.add_parser("measure", help=COMMANDS["measure"], description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
     p.add_argument(
         "-t",

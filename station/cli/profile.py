@@ -1,8 +1,8 @@
 """``harp profile list | show LENS [--focus F] | show --id N | export LENS --focus F | export --id N``.
 
 Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://``), or
-``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else
-``profiles/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
+``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else ``$HARP_CONFIG``'s store, else
+the per-user ``~/.local/share/harp-station/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
 error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
 part of "maker model serial"; ``--id N`` names one stored profile. The **current** profile of a
 lens at a focus setting is its newest one, unless that one failed QA: a failed profile is never
@@ -27,6 +27,7 @@ import math
 import sys
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.cli.export import add_export_options, formats_epilog
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.plain_json import plain
@@ -47,9 +48,7 @@ ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stder
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "profile", help="list, show and export stored lens profiles", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("profile", help=COMMANDS["profile"], description=__doc__.split("\n\n")[1])
     add_store_options(p)
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
     store_opt = argparse.ArgumentParser(add_help=False)  # --store / --config also after the action

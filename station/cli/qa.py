@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, verdict_exit_code
 from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
@@ -50,9 +51,7 @@ def _positive(text: str) -> float:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "qa", help="factory QA verdict of a session or a stored lens", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("qa", help=COMMANDS["qa"], description=__doc__.split("\n\n")[1])
     p.add_argument("target", metavar="SESSION_OR_LENS")
     p.add_argument(
         "--reference",
@@ -65,7 +64,7 @@ def register(subparsers) -> None:
         metavar="PATH|URL",
         default=None,
         help=f"profile store: a SQLite file or postgresql://user@host:port/db (default: the --config's or the "
-        f"session's, else $HARP_STORE or {DEFAULT_STORE})",
+        f"session's, else $HARP_STORE, $HARP_CONFIG's store or {DEFAULT_STORE})",
     )
     p.add_argument("--config", type=Path, default=None, help="station configuration: its qa thresholds and its store")
     p.add_argument("--max-holdout-d", type=_positive, metavar="PX", help="threshold on the holdout d")

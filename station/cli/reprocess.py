@@ -34,6 +34,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
+
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
@@ -42,7 +44,7 @@ def register(subparsers: Any) -> None:
 
     p = subparsers.add_parser(
         "reprocess",
-        help="re-measure and re-fit archived sessions with the current pipeline (local pool or Dask cluster)",
+        help=COMMANDS["reprocess"],
         description="\n\n".join(__doc__.split("\n\n")[1:]),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

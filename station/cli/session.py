@@ -17,17 +17,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 from station import __version__
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "session", help="run, resume, plan or list calibration sessions", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("session", help=COMMANDS["session"], description=__doc__.split("\n\n")[1])
     sub = p.add_subparsers(dest="session_command", metavar="ACTION")
     run = sub.add_parser("run", help="run a session from a station configuration")
     run.add_argument("config", type=Path, help="station configuration (YAML)")
@@ -83,7 +83,11 @@ def register(subparsers) -> None:
     plan.set_defaults(func=_plan)
     ls = sub.add_parser("list", help="sessions with their state and verdict")
     ls.add_argument(
-        "directory", type=Path, nargs="?", default=None, help="where the sessions are (default: ./sessions)"
+        "directory",
+        type=Path,
+        nargs="?",
+        default=None,
+        help="where the sessions are (default: the store.sessions_dir of $HARP_CONFIG, else ./sessions)",
     )
     ls.add_argument("--config", type=Path, default=None, help="list the sessions of this configuration's sessions_dir")
     ls.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -397,9 +401,12 @@ def _list(args) -> int:
 
     if args.directory is not None and args.config is not None:
         return _error("give a directory or --config, not both")
-    if args.config is not None:
+    config_path = args.config
+    if config_path is None and args.directory is None and os.environ.get("HARP_CONFIG"):
+        config_path = Path(os.environ["HARP_CONFIG"])  # the station's configuration, wherever the command runs
+    if config_path is not None:
         try:
-            root = load_config(args.config).sessions_dir
+            root = load_config(config_path).sessions_dir
         except ConfigError as exc:
             return _error(str(exc))
     else:

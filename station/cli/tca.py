@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -30,7 +31,7 @@ from station.inputs import InputError
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "tca",
-        help="lateral chromatic aberration from colour or RAW harp shots",
+        help=COMMANDS["tca"],
         description=__doc__.split("\n\n")[0],
     )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="colour or camera RAW harp shots, harp turned between")

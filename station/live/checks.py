@@ -9,7 +9,8 @@ Two uses:
 * :func:`check_shot` -- ``harp live --once``: the executor's own checks
   (:func:`station.session.processing.exposure_problems`, :func:`station.session.processing.measure_shot`,
   :func:`station.session.processing.shot_problems`) on the average of ``frames_per_orientation``
-  frames, so that its verdict is the session's.
+  frames, so that its verdict is the session's, and the focus check (:func:`focus_warnings`,
+  ``max_edge_width_px``): a set-up whose harp is blurred fails, though the session would take it.
 """
 
 from __future__ import annotations
@@ -41,9 +42,19 @@ def exposure_warnings(fig: ExposureFigures, checks: CheckConfig) -> list[str]:
     return out
 
 
+def focus_warnings(a: Assessment, checks: CheckConfig) -> list[str]:
+    """The focus check: the median string edge (10-90 %) against ``max_edge_width_px``."""
+    if math.isfinite(a.edge_width_px) and a.edge_width_px > checks.max_edge_width_px:
+        return [
+            f"out of focus: string edges {a.edge_width_px:.2f} px wide (10-90 %), limit "
+            f"{checks.max_edge_width_px:g} px: turn the focus to the through-focus peak (harp live shows it)"
+        ]
+    return []
+
+
 def live_warnings(a: Assessment, checks: CheckConfig, expected_angle: float | None = None) -> list[str]:
-    """Everything about this frame that would make the session re-capture the shot."""
-    out = exposure_warnings(a.exposure, checks)
+    """Everything about this frame that would make the session re-capture the shot, and the focus check."""
+    out = exposure_warnings(a.exposure, checks) + focus_warnings(a, checks)
     if a.n_edges < checks.min_lines:
         out.append(f"only {a.n_edges} string edges found (need {checks.min_lines})")
     elif expected_angle is not None and math.isfinite(a.angle_deg):

@@ -46,7 +46,7 @@ def check_once(config: Any, camera: Any, turntable: Any) -> dict[str, Any]:
     import numpy as np
 
     from pipeline.assess import assess_frame
-    from station.live.checks import check_shot
+    from station.live.checks import check_shot, focus_warnings
 
     apply_session_settings(config, camera)
     stage = float(turntable.position()) if turntable is not None else None
@@ -58,9 +58,10 @@ def check_once(config: Any, camera: Any, turntable: Any) -> dict[str, Any]:
     verdict = check_shot(images, config.capture.checks, config.pipeline, expected, bit_depth)
     image = images[0] if n == 1 else np.mean(np.stack(images), axis=0)
     a = assess_frame(image, full_scale=float(np.iinfo(images[0].dtype).max))
+    problems = list(verdict.problems) + focus_warnings(a, config.capture.checks)
     return {
-        "pass": verdict.passed,
-        "problems": list(verdict.problems),
+        "pass": not problems,
+        "problems": problems,
         "frames_averaged": n,
         "stage_deg": stage,
         "expected_angle_deg": expected,

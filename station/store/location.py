@@ -25,8 +25,14 @@ from station.store.errors import StoreError
 SQLITE = "sqlite"
 POSTGRESQL = "postgresql"
 
-DEFAULT_STORE = Path("profiles") / "harp-profiles.sqlite"
-"""Where the commands look for the store when none is named (what ``configs/demo.yaml`` uses)."""
+STORE_FILE = "harp-profiles.sqlite"
+"""The file name of the per-user default store."""
+
+DEFAULT_STORE = "~/.local/share/harp-station/harp-profiles.sqlite"
+"""The per-user default store as the documentation and help texts name it (``$XDG_DATA_HOME``, when
+set, replaces ``~/.local/share``): where every command looks when nothing names a store, and the
+store of a configuration without ``store.path`` / ``store.url`` (``configs/demo.yaml``). The same
+file whatever the working directory: see :func:`user_store_path`."""
 
 _PG_SCHEMES = ("postgresql", "postgres", "postgresql+psycopg")
 
@@ -98,12 +104,21 @@ def parse_store(text: str | os.PathLike[str], base: Path | None = None) -> Store
     return StoreLocation(SQLITE, path=Path(os.path.normpath(path)))
 
 
+def user_store_path() -> Path:
+    """The per-user default store: ``$XDG_DATA_HOME/harp-station/harp-profiles.sqlite``, with
+    ``~/.local/share`` for an unset ``$XDG_DATA_HOME`` (the XDG base directory specification)."""
+    data_home = os.environ.get("XDG_DATA_HOME") or os.path.join("~", ".local", "share")
+    return Path(os.path.normpath(os.path.expanduser(data_home))) / "harp-station" / STORE_FILE
+
+
 def default_store_path() -> Path:
-    """``$HARP_STORE`` as a path, else :data:`DEFAULT_STORE` (kept for callers that want a path;
+    """``$HARP_STORE`` as a path, else :func:`user_store_path` (kept for callers that want a path;
     :func:`default_store` also understands URLs)."""
-    return Path(os.environ.get("HARP_STORE") or DEFAULT_STORE)
+    env = os.environ.get("HARP_STORE")
+    return Path(env) if env else user_store_path()
 
 
 def default_store() -> StoreLocation:
-    """``$HARP_STORE`` (path or URL), else :data:`DEFAULT_STORE` in the working directory."""
-    return parse_store(os.environ.get("HARP_STORE") or DEFAULT_STORE)
+    """``$HARP_STORE`` (path or URL), else the per-user default store (:func:`user_store_path`)."""
+    env = os.environ.get("HARP_STORE")
+    return parse_store(env) if env else StoreLocation(SQLITE, path=user_store_path())

@@ -9,9 +9,12 @@ that take a store on the command line add the same two options with :func:`add_s
   ``store.url``; a relative path there is relative to the configuration file).
 
 First match wins: ``--store``, then ``--config`` (or the configuration the command already has,
-e.g. a session's), then ``$HARP_STORE``, then ``profiles/harp-profiles.sqlite`` in the working
-directory. Opening for reading never creates a store: a command that only reads fails with one line
-naming the store it looked for.
+e.g. a session's), then ``$HARP_STORE``, then the configuration ``$HARP_CONFIG`` names (a station
+sets it once for every command run on it), then the per-user default store
+``~/.local/share/harp-station/harp-profiles.sqlite`` (:data:`~station.store.location.DEFAULT_STORE`).
+None of them depends on the working directory (a relative path in a configuration is relative to
+that file). Opening for reading never creates a store: a command that only reads fails with one
+line naming the store it looked for.
 """
 
 from __future__ import annotations
@@ -27,7 +30,10 @@ if TYPE_CHECKING:
     from station.config import Config
     from station.store.database import ProfileStore
 
-STORE_HELP = f"profile store: a SQLite file or postgresql://user@host:port/db (default $HARP_STORE or {DEFAULT_STORE})"
+STORE_HELP = (
+    "profile store: a SQLite file or postgresql://user@host:port/db "
+    f"(default: $HARP_STORE, else $HARP_CONFIG's store, else {DEFAULT_STORE})"
+)
 CONFIG_HELP = "station configuration whose store to use (its store.path or store.url)"
 
 
@@ -47,9 +53,12 @@ def store_location(
 ) -> StoreLocation:
     """The store to use: ``store`` (``--store``), else the store of ``config`` (a loaded
     configuration) or of the configuration file ``config_path``, else ``$HARP_STORE``, else the
-    default. Raises StoreError (a bad store name) or ConfigError (a bad configuration)."""
+    store of the configuration ``$HARP_CONFIG`` names, else the per-user default. Raises StoreError
+    (a bad store name) or ConfigError (a bad configuration)."""
     if store is not None:
         return parse_store(store)
+    if config is None and config_path is None and not os.environ.get("HARP_STORE"):
+        config_path = os.environ.get("HARP_CONFIG") or None
     if config is None and config_path is not None:
         from station.config import load_config
 
@@ -74,6 +83,18 @@ def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool =
     for reading by default (it must exist), for writing with ``write=True`` (created, migrated and
     checked before anything is written)."""
     from station.store.database import ProfileStore
+    from station.store.errors import StoreError
+    from station.store.location import SQLITE, user_store_path
 
     loc = where if isinstance(where, StoreLocation) else location_from_args(where)
-    return ProfileStore(loc, create=write)
+    try:
+        return ProfileStore(loc, create=write)
+    except StoreError as exc:
+        old = Path("profiles") / "harp-profiles.sqlite"  # where stores were found before the per-user default
+        if exc.kind != "missing" or loc.backend != SQLITE or loc.path != user_store_path() or not old.is_file():
+            raise
+        raise StoreError(
+            f"{loc.path}: no profile store here (the per-user default); there is one at {old}: "
+            f"--store {old}, or set HARP_STORE",
+            "missing",
+        ) from None

@@ -257,3 +257,16 @@ def test_tracked_assessment_measures_the_new_frame_and_sees_a_moved_harp():
     assert m.offset_px == pytest.approx(1.5, abs=0.2)
     fresh = assess_frame(moved)
     assert not fresh.tracked and fresh.offset_px < 0.3
+
+
+@pytest.mark.parametrize("width, blur, level", [(1.0, 1.5, 0.0), (1.5, 2.0, 0.0), (3.0, 1.5, 0.0), (2.0, 2.0, 60.0)])
+def test_a_string_narrower_than_the_blur_never_has_a_contrast_above_one_and_keeps_its_shadow(width, blur, level):
+    """Only the shadow |A| w of a string narrower than ~2 sigma is measurable; light below zero is not."""
+    scene = HarpScene(angle_deg=30.0, blur_px=blur, string_width_px=width, string_level=level)
+    a = assess_frame(render_harp(360, 280, scene, seed=11).image)
+    assert a.n_strings >= 4
+    contrast = np.array([s.contrast for s in a.strings])
+    assert np.all(contrast <= 1.0) and np.all(contrast > 0)
+    shadow = np.array([s.contrast * s.width_px for s in a.strings])
+    truth = width * (1 - scene.string_level / scene.background)  # the rendered string's shadow, px
+    np.testing.assert_allclose(shadow, truth, rtol=0.06)

@@ -178,7 +178,7 @@ def test_lensfun_finds_the_lens_among_several_and_corrects_like_the_model_at_the
     src_b = ExportSource(rm.model, rm.width, rm.height, lens=other.with_overrides(focal_mm=24.0))
     both = write_export("lensfun", src_b, ExportOptions(existing=first.data))
     again = write_export("lensfun", src, ExportOptions(existing=both.data))  # the same lens again: replaced
-    assert any("replaced" in n for n in again.notes)
+    assert any("replaced" in w for w in again.warnings)  # replacing a calibration in a user's file is warned of
     db = lensfunpy.Database(xml=again.data.decode(), load_common=False, load_bundled=False)
     assert len(db.lenses) == 2
     (cam,) = db.find_cameras("Canon", "EOS 40D")

@@ -1,6 +1,7 @@
 """Configuration: the shipped configs load; every bad field is one line naming it."""
 
 import dataclasses
+import os
 from pathlib import Path
 
 import pytest
@@ -45,7 +46,8 @@ def test_demo_values_and_relative_paths():
     assert cfg.station.camera.driver == "sim"
     assert cfg.station.turntable.driver == "zaber"
     assert cfg.simulation is not None
-    assert cfg.store_path == (REPO / "profiles" / "harp-profiles.sqlite")
+    # no store.path: the per-user default store (XDG base directories), the same from every directory
+    assert cfg.store_path == Path(os.environ["XDG_DATA_HOME"]) / "harp-station" / "harp-profiles.sqlite"
     assert cfg.station.turntable.as_driver_config(port="/dev/pts/9")["port"] == "/dev/pts/9"
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.pipeline.t = 3  # frozen

@@ -6,6 +6,14 @@
   const { fmt, pct } = window.harp;
   let last = null, shownFrame = -1, pending = false;
 
+  /* Where a label of width tw (display px) starting at (x, y) is drawn so that it stays whole inside
+     a width x height picture: moved left of the right border, below the top, above the bottom. */
+  function labelAt(x, y, tw, width, height, k) {
+    const m = 2 / k, asc = 11 / k;
+    return [Math.min(Math.max(m, x), width - tw - m), Math.min(Math.max(asc + m, y), height - m)];
+  }
+  window.harpLive = { labelAt, redraw: () => last && drawOverlay(last) };
+
   function drawOverlay(s) {
     const img = $("frame"), cv = $("overlay");
     if (!s.display) return;
@@ -20,8 +28,12 @@
     const cov = s.coverage_total;
     if ($("show-coverage").checked && cov && s.figures) {
       const cell = cov.cell_px * s.display.factor;
-      ctx.fillStyle = "rgba(179, 38, 30, 0.30)";
-      cov.covered.forEach((row, j) => row.forEach((c, i) => { if (!c) ctx.fillRect(i * cell, j * cell, cell, cell); }));
+      // the cells still missing, once coverage has begun (a cell needs edges in two directions, so before
+      // the second orientation every cell is missing, and a tint over all of them would hide the picture)
+      if (cov.covered_fraction > 0) {
+        ctx.fillStyle = "rgba(179, 38, 30, 0.22)";
+        cov.covered.forEach((row, j) => row.forEach((c, i) => { if (!c) ctx.fillRect(i * cell, j * cell, cell, cell); }));
+      }
       ctx.strokeStyle = "rgba(255,255,255,0.25)";
       cov.covered.forEach((row, j) => row.forEach((c, i) => ctx.strokeRect(i * cell, j * cell, cell, cell)));
     }
@@ -33,11 +45,17 @@
     for (const r of s.rejected || []) {
       path(r.xy);
       const [x0, y0, x1, y1] = r.bbox;
-      if (Math.hypot(x1 - x0, y1 - y0) * k > 30) ctx.fillText(r.reason, Math.max(2 / k, x0), Math.max(12 / k, y0 - 3 / k));
+      if (Math.hypot(x1 - x0, y1 - y0) * k > 30) {
+        const [lx, ly] = labelAt(x0, y0 - 3 / k, ctx.measureText(r.reason).width, s.display.width, s.display.height, k);
+        ctx.fillText(r.reason, lx, ly);
+      }
     }
     ctx.fillStyle = "#fff";
     for (const st of s.strings || []) {
-      if (st.label_xy && st.edge_width_px !== null) ctx.fillText(String(st.string), st.label_xy[0] + 4 / k, st.label_xy[1]);
+      if (!st.label_xy || st.edge_width_px === null) continue;
+      const text = String(st.string);
+      const [lx, ly] = labelAt(st.label_xy[0] + 4 / k, st.label_xy[1], ctx.measureText(text).width, s.display.width, s.display.height, k);
+      ctx.fillText(text, lx, ly);
     }
   }
 

@@ -6,7 +6,7 @@ import pytest
 
 from pipeline import load_model
 from pipeline.compare import compare_models
-from pipeline.models import RadialModel
+from pipeline.models import RadialFieldModel, RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
 from tests.station.processes import group_members
@@ -205,6 +205,39 @@ def test_division_option(shots, tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and "--division" in err and "0..3" in err
     code, out, err = _run(capsys, shots[3.0], shots[63.0], "--division", "1", "--out", out_path)
     assert code == 2 and "need --model radial" in err
+
+
+def test_field_option(shots, tmp_path, capsys):
+    """``--field`` adds a residual field to the radial model: the model file holds it, the label names it;
+    on this radial lens it stays near the radial fit. A bad grid is one line, exit 2."""
+    out_path = tmp_path / "field.yaml"
+    four = (shots[3.0], shots[63.0], shots[123.0], shots[93.0])
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "6x5@0.01", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["choice"]["label"] == "radial4+tangential+prism+field6x5@0.01" and rep["fit"]["d"] < 0.01
+    model = load_model(out_path)
+    assert isinstance(model, RadialFieldModel) and model.shape == (5, 6)
+    assert compare_models(model, LENS, W, H).rms < 0.01
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "6x2", "--out", out_path)
+    assert code == 2 and err.count("\n") == 1 and "--field 6x2" in err and "4..24" in err
+    code, out, err = _run(capsys, *four, "--field", "6x5", "--out", out_path)
+    assert code == 2 and "need --model radial" in err
+
+
+def test_field_auto_chooses_knots_and_penalty_by_cross_validation(shots, tmp_path, capsys):
+    """``--field auto``: the radial model and it with every field of ``field_candidates`` are
+    cross-validated; on this radial lens the radial model wins and the table lists the fields."""
+    out_path = tmp_path / "auto-field.yaml"
+    four = (shots[3.0], shots[63.0], shots[123.0], shots[93.0])
+    code, out, err = _run(capsys, *four, "--model", "radial", "--field", "auto", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    labels = [r["label"] for r in rep["choice"]["table"]]
+    assert labels[0] == "radial4+tangential+prism" and len(labels) == 7
+    assert all("+field" in lab for lab in labels[1:])
+    assert rep["choice"]["label"] == "radial4+tangential+prism", rep["choice"]["reason"]
+    assert isinstance(load_model(out_path), RadialModel)
 
 
 def test_workers_give_the_same_choice_and_figures_as_one_process(shots, tmp_path, capsys, monkeypatch):

@@ -21,6 +21,8 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
+import re
 import subprocess
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -178,7 +180,7 @@ def session_source(tmp_path_factory) -> tuple[Source, Path]:
     d["capture"]["frames_per_orientation"] = 1
     d["pipeline"].update(bootstrap=0, workers=1)
     d["lens"].update(focal_mm=6.0, mount="C")
-    d["camera_body"].update(pixel_pitch_um=5.6, crop_factor=7.2)
+    d["camera_body"].update(pixel_pitch_um=5.6, crop_factor=15.4)  # 400x300 at 5.6 um: 2.24 x 1.68 mm
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     cfg = base / "station.yaml"
     cfg.write_text(yaml.safe_dump(d))
@@ -194,7 +196,7 @@ def session_source(tmp_path_factory) -> tuple[Source, Path]:
         ("harp station", "SimulatedCamera"),
         6.0,
         6.0 / 5.6e-3,
-        7.2,
+        15.4,
         "C",
         "harp_station_simulatedcamera",
         0.0,
@@ -504,6 +506,46 @@ def test_coeffs_5_on_a_wide_lens_names_the_export_family_exit_2_nothing_written(
     assert "--coeffs 8, 12 or 14" in stderr and "--format auto" in stderr
 
 
+def test_lensfun_without_a_crop_factor_exit_2_names_what_to_give_nothing_written(tmp_path):
+    """A bare model file has no optics: lensfun's crop factor cannot be derived, so nothing is guessed."""
+    model = tmp_path / "bare.yaml"
+    write_model_file(model, wide_radial(60.0, 400, 300), width=400, height=300)
+    out = tmp_path / "lens.xml"
+    code, stdout, stderr = run_main("export", model, "--format", "lensfun", "-o", out)
+    assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
+    assert "crop factor is not known" in stderr and "--crop FACTOR" in stderr
+    # the pixel pitch is enough: 400 x 300 at 12 um is 4.8 x 3.6 mm, a 1/3" sensor (crop factor 7.2)
+    code, stdout, stderr = run_main(
+        "export", model, "--format", "lensfun", "--pixel-pitch-um", "12", "--focal-mm", "4", "-o", out
+    )
+    assert code == 0, stderr
+    assert "crop factor 7.211 derived from the pixel pitch 12 um over 400x300 images" in stdout + stderr
+    assert "<cropfactor>7.2111</cropfactor>" in out.read_text()
+
+
+def test_lensfun_under_the_name_of_an_installed_lens_exit_2_nothing_written(tmp_path, monkeypatch):
+    """lensfunpy's own database has the Canon EF 50mm f/1.8 MkII: a file under that name would replace it."""
+    monkeypatch.delenv("HARP_LENSFUN_DIRS", raising=False)
+    model = tmp_path / "lens.yaml"
+    write_model_file(model, wide_radial(60.0, 400, 300), width=400, height=300)
+    out = tmp_path / "mine.xml"
+    name = ["--lens-maker", "Canon", "--lens-model", "Canon EF 50mm f/1.8 MkII", "--crop", "1", "--focal-mm", "50"]
+    code, stdout, stderr = run_main("export", model, "--format", "lensfun", *name, "-o", out)
+    assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
+    assert "is in the installed lensfun database" in stderr and "slr-canon.xml" in stderr
+    assert "--lens-model" in stderr
+    # under its own name it is written; and adding to one's own database in a lensfun directory is no clash
+    own = ["--lens-maker", "Canon", "--lens-model", "Canon EF 50mm f/1.8 MkII (harp SN 4711)", "--crop", "1"]
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(tmp_path))
+    for _ in range(2):
+        code, stdout, stderr = run_main("export", model, "--format", "lensfun", *own, "--focal-mm", "50", "-o", out)
+        assert code == 0, stderr
+    assert "replaced the calibration" in stderr
+    other = tmp_path / "other.xml"
+    code, _, stderr = run_main("export", model, "--format", "lensfun", *own, "-o", other)
+    assert code == 2 and "mine.xml" in stderr and not other.exists()
+
+
 def test_unwritable_output_exit_2(model_source, tmp_path):
     code, _, stderr = run_main(
         "export", model_source.model_file, "--format", "json", "-o", tmp_path / "no" / "such" / "dir.json"
@@ -615,3 +657,22 @@ def test_ros_equidistant_file_and_export_state_which_ros_consumers_read_it(model
     plain = tmp_path / "pin.yaml"
     code, _o, stderr = run_main("export", model_source.model_file, "--format", "ros", "-o", plain)
     assert code == 0 and "equidistant" not in plain.read_text() and "'equidistant' is read" not in stderr
+
+
+def test_lensfun_type_choices_are_the_models_types_and_a_wide_lens_is_exported_as_fisheye(tmp_path):
+    from pipeline.models.lensfun_model import LENSFUN_TYPES
+    from station.cli.export import LENSFUN_TYPE_CHOICES
+
+    assert LENSFUN_TYPE_CHOICES == ("auto", *LENSFUN_TYPES)
+    model = tmp_path / "wide.yaml"
+    write_model_file(model, wide_radial(115.0, 640, 480), width=640, height=480)
+    out = tmp_path / "fish.xml"
+    focal = 0.5 * math.hypot(639, 479) / (2 * math.sin(math.radians(115 / 2) / 2)) * 3e-3  # wide_radial's f at 3 um
+    args = ["--pixel-pitch-um", "3", "--focal-mm", f"{focal:.6f}", "-o", out]
+    code, stdout, stderr = run_main("export", model, "--format", "lensfun", *args)
+    assert code == 0, stderr
+    # a fisheye type (which one fits a degree-6 approximation of an equisolid lens best is the fit's to say)
+    written = re.search(r"<type>(\w+)</type>", out.read_text())
+    assert written is not None and written[1] != "rectilinear" and f"lens type {written[1]}" in stdout + stderr
+    code, _, stderr = run_main("export", model, "--format", "lensfun", "--lensfun-type", "rectilinear", *args)
+    assert code == 0 and "<type>" not in out.read_text()

@@ -55,6 +55,30 @@ def test_once_fails_a_shot_the_session_would_recapture(tmp_path, capsys, change,
     assert out["pass"] is False and any(problem in x for x in out["problems"]), out["problems"]
 
 
+def test_once_fails_a_blurred_harp_at_the_live_demos_focus_and_passes_at_the_peak(tmp_path, capsys):
+    """The live demo's lens, sharp at 0.37: at focus 0.2 the session would take the shot, the set-up check
+    does not (edge width from the simulator's documented defocus: 2.5631 sqrt(0.7^2 + (8 * 0.17)^2 + 1/12))."""
+    import math
+
+    import yaml
+
+    truth = 2.5631 * math.sqrt(0.7**2 + (8.0 * 0.17) ** 2 + 1 / 12)  # 10-90 % of the blurred edge, px
+    assert truth > 3.0
+    p = live_config(tmp_path)
+    d = yaml.safe_load(p.read_text())
+    d["focus"]["settings"] = [0.2]
+    p.write_text(yaml.safe_dump(d))
+    assert _harp_live([p, "--once", "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    (problem,) = out["problems"]
+    assert problem.startswith("out of focus: string edges") and "limit 3 px" in problem
+    assert out["assessment"]["edge_width_px"] == pytest.approx(truth, rel=0.05)
+    d["focus"]["settings"] = [0.37]
+    p.write_text(yaml.safe_dump(d))
+    assert _harp_live([p, "--once"]) == 0
+    assert "verdict: PASS" in capsys.readouterr().out
+
+
 def test_once_bad_config_is_one_line_exit_2(tmp_path, capsys):
     p = tmp_path / "bad.yaml"
     p.write_text("station: [1, 2]\n")

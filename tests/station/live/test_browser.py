@@ -50,6 +50,22 @@ def test_live_page_shows_strings_focus_and_moves_the_turntable(page, live_page_s
                    let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n > 1000; }""",
         timeout=30_000,
     )
+    # one orientation covers no cell (a cell needs edges in two directions): the frame stays visible,
+    # not tinted all over (the overlay draws the edges and labels only, a small part of the picture)
+    page.wait_for_function("() => document.querySelector('#coverage-fraction').dataset.fraction !== ''", timeout=30_000)
+    assert float(page.evaluate("() => document.querySelector('#coverage-fraction').dataset.fraction")) == 0.0
+    page.evaluate("() => window.harpLive.redraw()")  # the overlay as drawn with this coverage
+    drawn = page.evaluate(
+        """() => { const c = document.getElementById('overlay');
+                   const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                   let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n / (d.length / 4); }"""
+    )
+    assert drawn < 0.5, drawn
+    # labels stay whole inside the picture: pushed in from the right, top and bottom borders
+    at = "(a) => window.harpLive.labelAt(...a)"
+    assert page.evaluate(at, [630, 5, 40, 640, 480, 1]) == [598, 13]
+    assert page.evaluate(at, [-5, 500, 10, 640, 480, 1]) == [2, 478]
+    assert page.evaluate(at, [100, 200, 10, 640, 480, 1]) == [100, 200]
     # the frame is a separate image request, replaced at every refresh (naturalWidth is 0 while the next
     # one loads): wait for a loaded frame of the downscaled width, 640 px
     page.wait_for_function("() => document.getElementById('frame').naturalWidth === 640", timeout=30_000)

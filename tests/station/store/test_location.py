@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from station.config import ConfigError, load_config
-from station.store import DEFAULT_STORE, StoreError
+from station.store import StoreError
 from station.store.location import POSTGRESQL, SQLITE, parse_store
 from station.store.resolve import add_store_options, location_from_args, store_location
 
@@ -73,8 +73,7 @@ def test_config_store_path_or_url_relative_to_the_config(tmp_path):
     cfg = load_config(write_config(sub, {"url": "postgresql://harp@127.0.0.1:5432/harp"}))
     assert cfg.store.backend == POSTGRESQL and cfg.store_path is None
     for store, says in (
-        ({"path": "a", "url": "sqlite:///b"}, "exactly one of store.path"),
-        ({"sessions_dir": "s"}, "exactly one of store.path"),
+        ({"path": "a", "url": "sqlite:///b"}, "one of store.path .* not both"),
         ({"url": "ftp://x/y"}, "store.url"),
     ):
         with pytest.raises(ConfigError, match=says) as exc:
@@ -92,7 +91,18 @@ def test_which_store_a_command_uses(tmp_path, monkeypatch):
     def where(*argv):
         return location_from_args(parser.parse_args(list(argv)))
 
-    assert where().path == tmp_path / DEFAULT_STORE
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    user = tmp_path / "data" / "harp-station" / "harp-profiles.sqlite"  # the XDG base directory specification
+    assert where().path == user
+    assert load_config(write_config(tmp_path / "bare", {"sessions_dir": "s"})).store.path == user
+    monkeypatch.chdir(tmp_path / "cfg")
+    assert where().path == user  # wherever the command runs
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("XDG_DATA_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert where().path == tmp_path / "home" / ".local" / "share" / "harp-station" / "harp-profiles.sqlite"
+    monkeypatch.setenv("HARP_CONFIG", str(cfg))  # a station's configuration, set once for its commands
+    assert where().path == tmp_path / "stores" / "line.sqlite"
     monkeypatch.setenv("HARP_STORE", "postgresql://harp@h:1/db")
     assert where().backend == POSTGRESQL
     assert where("--config", str(cfg)).path == tmp_path / "stores" / "line.sqlite"  # the config's, not the env's
