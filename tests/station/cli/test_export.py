@@ -498,7 +498,7 @@ def test_bad_options_exit_2_with_one_line_and_nothing_written(model_source, tmp_
 
 def test_coeffs_5_on_a_wide_lens_names_the_export_family_exit_2_nothing_written(tmp_path):
     model = tmp_path / "wide.yaml"
-    write_model_file(model, wide_radial(115.0, 1200, 900), width=1200, height=900)
+    write_model_file(model, wide_radial(150.0, 1200, 900), width=1200, height=900)
     out = tmp_path / "out.yaml"
     code, stdout, stderr = run_main("export", model, "--format", "opencv", "--coeffs", "5", "-o", out)
     assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
