@@ -262,6 +262,18 @@ class QAConfig:
     max_reference_deviation_px: float | None = None
 
 
+OVERLAY_RETENTION = ("all", "failed", "none")
+"""Values of ``report.overlays``: which per-orientation overlays a session report keeps (every focus
+setting's, only those of a focus setting that failed QA, none)."""
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    """What the session report keeps (:mod:`station.qa.report`)."""
+
+    overlays: str = "all"  # one of OVERLAY_RETENTION
+
+
 @dataclass(frozen=True)
 class SimulationConfig:
     """Present only for a simulated station (see :mod:`station.session.simulated`)."""
@@ -286,6 +298,7 @@ class Config:
     capture: CaptureConfig = _at("capture")
     pipeline: PipelineConfig = _at("pipeline")
     qa: QAConfig = _at("qa")
+    report: ReportConfig = _at("report")
     store_path: Path | None = _at("store.path")  # the SQLite file of the store (None: PostgreSQL, store_url)
     sessions_dir: Path = _at("store.sessions_dir")
     simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
@@ -588,6 +601,11 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         max_reference_deviation_px=qs.number("max_reference_deviation_px", None, positive=True),
     )
 
+    rs = top.section("report", keys_of(ReportConfig), optional=True)
+    report = ReportConfig(overlays=rs.string("overlays", ReportConfig.overlays))
+    if report.overlays not in OVERLAY_RETENTION:
+        raise rs.err("overlays", f"one of {', '.join(OVERLAY_RETENTION)}", report.overlays)
+
     so = top.section("store", config_keys("store"))
     store_path, store_url = _store_of(so, base)
     sessions_dir = Path(os.path.normpath(base / so.string("sessions_dir", "sessions")))
@@ -614,6 +632,7 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         capture=capture,
         pipeline=pipe,
         qa=qa,
+        report=report,
         store_path=store_path,
         store_url=store_url,
         sessions_dir=sessions_dir,

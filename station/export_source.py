@@ -4,9 +4,11 @@
 the profile store) into the :class:`pipeline.exports.registry.ExportSource` every
 format writes from: the correction and its image size, the lens and camera
 (:meth:`~station.profile.Profile.lens_info`, with the user's overrides), the model's
-own holdout ``d``, whether the calibration chose a wide-angle model, and the edges
+own holdout ``d``, whether the calibration chose a wide-angle model, the edges
 of the shots it was fitted on, so that each export states the residual ``d`` it
-leaves on them next to the model's own figures.
+leaves on them next to the model's own figures, and — for a profile that failed QA,
+exported only on the user's override (:func:`station.profile_choice.export_refusal`) —
+the ``FAILED QA`` stamp every format states first (:func:`station.profile_choice.failed_stamp`).
 
 :func:`fitting_edges` finds those edges, in this order:
 
@@ -41,6 +43,7 @@ import numpy as np
 from pipeline.exports.registry import ExportSource
 from pipeline.resample import DEFAULT_T
 from station.profile import Profile
+from station.profile_choice import failed_stamp
 
 
 @dataclass(frozen=True)
@@ -182,10 +185,13 @@ def export_source(
     *,
     lens: Mapping[str, Any] | None = None,
     edges: FittingEdges | None = None,
+    stamp: tuple[str, ...] | None = None,
 ) -> ExportSource:
     """The :class:`ExportSource` of ``profile``; ``lens``: :class:`~pipeline.exports.lens.LensInfo`
     fields that override the profile's (None values ignored; a pixel pitch given replaces a
-    recorded sensor width and vice versa); ``edges``: the fitting shots' edges."""
+    recorded sensor width and vice versa); ``edges``: the fitting shots' edges; ``stamp``: the
+    lines the file states first (default: :func:`~station.profile_choice.failed_stamp` of the
+    profile; a correction interpolated from failed profiles gives theirs)."""
     mf = profile.to_model_file()
     over = {k: v for k, v in dict(lens or {}).items() if v is not None}
     info = profile.lens_info()
@@ -205,4 +211,5 @@ def export_source(
         merit=mf.merit,
         provenance=mf.provenance,
         wide_angle=wide_angle(profile),
+        stamp=failed_stamp(profile) if stamp is None else tuple(stamp),
     )

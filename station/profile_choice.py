@@ -12,7 +12,10 @@ store decides, :meth:`station.store.database.ProfileStore.latest_by_focus`). Fro
   (:class:`Interpolated`: the correction field interpolated, its leave-one-out error), and
   :meth:`Interpolated.profile` — it as a :class:`~station.profile.Profile` to export;
 * :func:`is_failed`, :func:`verdict_text`, :func:`failed_checks`, :func:`failed_line` — what a
-  profile's verdict says, in the words every command prints.
+  profile's verdict says, in the words every command prints;
+* :func:`export_refusal` — the rule every export of a stored profile follows (``harp profile
+  export``, the dashboard's downloads): a profile that failed QA is refused unless the user
+  overrides, and :func:`failed_stamp` — what the file of a failed profile then states first.
 
 A lens is the store's lens row ``(id, maker, model, serial)`` (:data:`LensRow`; ``id`` is
 ``None`` for the lens a profile names). Two errors, each one line: :class:`ChoiceError` (no
@@ -77,8 +80,29 @@ def failed_checks(p: Profile) -> str:
 
 def failed_line(lens: LensRow, p: Profile) -> str:
     """``lens … serial S, focus F: profile #N failed QA (the failed checks)``."""
-    assert p.focus is not None
-    return f"{lens_label(lens)}, focus {p.focus:g}: profile #{p.id} failed QA ({failed_checks(p)})"
+    focus = f", focus {p.focus:g}" if p.focus is not None else ""
+    return f"{lens_label(lens)}{focus}: profile #{p.id} failed QA ({failed_checks(p)})"
+
+
+def export_refusal(lens: LensRow, p: Profile, override: str) -> str | None:
+    """Why ``p`` is not exported (one line naming ``override``, the way to export it anyway),
+    or None when it did not fail QA. The caller refuses, or on the override says it exported it."""
+    if not is_failed(p):
+        return None
+    return f"{failed_line(lens, p)}; not exported ({override} exports it anyway)"
+
+
+def failed_stamp(p: Profile) -> tuple[str, ...]:
+    """The lines an export of ``p`` states first when it failed QA
+    (:attr:`pipeline.exports.registry.ExportSource.stamp`); none otherwise."""
+    if not is_failed(p):
+        return ()
+    what = f"profile #{p.id}" if p.id is not None else "this profile"
+    focus = f" at focus {p.focus:g}" if p.focus is not None else ""
+    return (
+        f"FAILED QA: {what}{focus} was judged {verdict_text(p)} ({failed_checks(p)}); "
+        "exported anyway: do not use it as a calibration that passed",
+    )
 
 
 # ----------------------------------------------------------------- choice

@@ -145,7 +145,7 @@ class ArchivedSession(ManifestReads):
 
     def read_frame(self, record: FrameSaved) -> Any:
         """The frame of a record, checked against the manifest's SHA-256."""
-        from station.session.directory import decode_pgm
+        from station.session.frame_files import decode_frame
 
         path = self.path / record.file
         try:
@@ -155,7 +155,7 @@ class ArchivedSession(ManifestReads):
         if hashlib.sha256(data).hexdigest() != record.sha256:
             raise ValueError(f"{path}: checksum does not match the session manifest (damaged frame)")
         try:
-            return decode_pgm(data)
+            return decode_frame(data)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
 

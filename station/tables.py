@@ -3,9 +3,12 @@
 When standard output is a terminal, :func:`print_table` draws a ``rich`` table with its
 title; when it is not (a pipe, a file, a script), it writes plain tab-separated text:
 one header line, then one line per row, no title, no colours, no padding, a missing
-value as an empty field. Column names carry their unit (``fit d (px)``,
-``focus``, ``settle (s)``), so a script reading the header knows what each field is.
-:func:`cell` formats a number the way the terminal table shows it.
+value as an empty field, nothing cut short and nothing wrapped, however long. Column
+names carry their unit (``fit d (px)``, ``focus``, ``settle (s)``), so a script reading
+the header knows what each field is. :func:`cell` formats a number the way the terminal
+table shows it. :func:`console` is the ``rich`` console for the lines a command prints
+around its tables: on a terminal as rich draws them, otherwise plain text, one line per
+line, never wrapped at any width.
 """
 
 from __future__ import annotations
@@ -23,6 +26,17 @@ def is_terminal(stream: TextIO | None = None) -> bool:
         return bool(stream.isatty())
     except (AttributeError, ValueError):  # a closed stream or a test double
         return False
+
+
+def console(stream: TextIO | None = None) -> Any:
+    """A ``rich.console.Console`` on ``stream`` (default standard output): off a terminal no colour,
+    no highlighting, and no wrapping (each printed line stays one line, whatever its length)."""
+    from rich.console import Console
+
+    stream = stream if stream is not None else sys.stdout
+    if is_terminal(stream):
+        return Console(file=stream)
+    return Console(file=stream, soft_wrap=True, no_color=True, highlight=False)
 
 
 def cell(value: Any, digits: int = 4) -> str:
@@ -43,7 +57,8 @@ def print_table(
     stream: TextIO | None = None,
 ) -> None:
     """Print ``rows`` under ``columns`` (see the module docstring); ``right``: columns aligned right
-    on a terminal. Cells are strings (None: empty); tabs and line breaks in them become spaces."""
+    on a terminal, where a cell too long for its column folds onto a second line rather than being
+    cut. Cells are strings (None: empty); tabs and line breaks in them become spaces."""
     stream = stream if stream is not None else sys.stdout
     texts = [["" if v is None else str(v) for v in r] for r in rows]
     if not is_terminal(stream):
@@ -57,9 +72,10 @@ def print_table(
     from rich.table import Table
     from rich.text import Text
 
+    con = Console(file=stream)
     t = Table(title=title)
-    for c in columns:
-        t.add_column(c, justify="right" if c in right else "left")
+    for c in columns:  # a cell too long for its column folds onto the next line, never cut with an ellipsis
+        t.add_column(c, justify="right" if c in right else "left", overflow="fold")
     for r in texts:
         t.add_row(*(Text(c or "-") for c in r))
-    Console(file=stream).print(t)
+    con.print(t)

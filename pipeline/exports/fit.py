@@ -40,13 +40,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from pipeline.evaluate import corrected_points
+from pipeline.exports.pole_free import (
+    EXTRAPOLATION_RADIUS,
+    PENALTY_WEIGHT_PX,
+    corner_radius,
+    radial_fault,
+    radial_penalty,
+)
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
@@ -56,6 +63,7 @@ from pipeline.normalise import corner_homography, fit_homography, normalise_by_c
 from pipeline.straightness import Straightness, straightness
 
 Array = npt.NDArray[np.float64]
+M = TypeVar("M", bound=DistortionModel)
 
 OPENCV_STAGES = (5, 8, 12, 14)
 """Coefficient counts of OpenCV's pin-hole model, in the order they are fitted."""
@@ -380,24 +388,37 @@ class _Problem:
 
 
 def _least_squares(
-    prob: _Problem, make: Callable[[Array], DistortionModel], theta0: Array, h0: Array, *, fix_h: bool = False
+    prob: _Problem,
+    make: Callable[[Array], M],
+    theta0: Array,
+    h0: Array,
+    *,
+    fix_h: bool = False,
+    penalty: Callable[[M, Array], Array] | None = None,
 ) -> tuple[Array, Array, float]:
     """LM over (theta, H) of ``make(theta).distort_points(H(U(x_d))) - x_d``: ``(theta, h8, cost)``.
 
-    With ``fix_h`` only ``theta`` moves (``H = h0``).
+    With ``fix_h`` only ``theta`` moves (``H = h0``). ``penalty(model, ideal)`` (ideal: the
+    grid's ideal points ``H(U(x_d))``) adds residuals, e.g. :func:`~pipeline.exports.pole_free.radial_penalty`
+    times :data:`~pipeline.exports.pole_free.PENALTY_WEIGHT_PX`.
     """
     nt = len(theta0)
+    n_pen = 0
 
     def resid(p: Array) -> Array:
         try:
             m = make(p[:nt])
         except ValueError:
-            return np.full(2 * len(prob.xd), 1e6)
+            return np.full(2 * len(prob.xd) + n_pen, 1e6)
         h8 = h0 if fix_h else p[nt:]
-        r = m.distort_points(apply_homography(prob.pixel_h(h8), prob.u)) - prob.xd
-        return np.asarray(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6).ravel(), dtype=np.float64)
+        ideal = apply_homography(prob.pixel_h(h8), prob.u)
+        r = (m.distort_points(ideal) - prob.xd).ravel()
+        if penalty is not None:
+            r = np.concatenate([r, penalty(m, ideal)])
+        return np.asarray(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6), dtype=np.float64)
 
     p0 = theta0.copy() if fix_h else np.concatenate([theta0, h0])
+    n_pen = len(resid(p0)) - 2 * len(prob.xd)
     sol = least_squares(resid, p0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=4000)
     x = np.asarray(sol.x, dtype=np.float64)
     if not float(sol.cost) <= 0.5 * float(np.sum(resid(p0) ** 2)):  # LM is monotone; keep the start if not
@@ -405,9 +426,27 @@ def _least_squares(
     return x[:nt], (h0.copy() if fix_h else x[nt:]), float(0.5 * np.sum(resid(x) ** 2))
 
 
+def _pole_free_penalty(m: OpenCVModel, ideal: Array) -> Array:
+    """Fit residuals keeping ``m``'s radial map pole-free and monotonic beyond the image (:mod:`.pole_free`)."""
+    r_max = EXTRAPOLATION_RADIUS * corner_radius(ideal, m.cx, m.cy, m.fx, m.fy)
+    return PENALTY_WEIGHT_PX * radial_penalty(m.dist, r_max)
+
+
 def placeholder_focal(width: int, height: int) -> float:
     """The focal length (px) used when none is given: the image diagonal (a scale, not a measurement)."""
     return float(np.hypot(width, height))
+
+
+def focal_rescaling(ratio: float) -> Array:
+    r"""Factors taking OpenCV coefficients for a focal :math:`f` to the same distortion for :math:`\lambda f`.
+
+    With :math:`x = \lambda x'` (normalised coordinates at :math:`f` and :math:`\lambda f`):
+    :math:`k_{1,4} \lambda^2`, :math:`k_{2,5} \lambda^4`, :math:`k_{3,6} \lambda^6`,
+    :math:`p_{1,2} \lambda`, :math:`s_{1,3} \lambda`, :math:`s_{2,4} \lambda^3`; the tilt
+    :math:`\tau_{x,y}` is kept (it has no exact equivalent: a different focal tilts differently).
+    """
+    g = float(ratio)
+    return np.array([g**2, g**4, g, g, g**6, g**2, g**4, g**6, g, g**3, g, g**3, 1.0, 1.0])
 
 
 def fit_opencv(
@@ -452,32 +491,52 @@ def fit_opencv(
     s = 0.5 * float(np.hypot(width, height))
     prob = _Problem.make(model, width, height, n_long)
 
+    scale = focal_rescaling(f / placeholder_focal(width, height))
+
     def maker(n: int) -> Callable[[Array], OpenCVModel]:
+        # theta holds the coefficients for the placeholder focal, whatever f is (the same fit
+        # for every focal, tilt apart): the stage-wise LM is sensitive to their scaling
         def make(theta: Array) -> OpenCVModel:
-            return OpenCVModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=tuple(theta[2 : 2 + n]))
+            d = tuple(theta[2 : 2 + n] * scale[:n])
+            return OpenCVModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=d)
 
         return make
 
     h8 = prob.h0()
-    # first the coefficients alone (H fixed at its linear start), so that the centre does not
-    # wander off along the centre/perspective valley, then everything
-    theta, _, _ = _least_squares(prob, maker(OPENCV_STAGES[0]), np.zeros(2 + OPENCV_STAGES[0]), h8, fix_h=True)
+    pen = _pole_free_penalty
+    # first the coefficients alone (centre at the image centre, H fixed at its linear start), then with
+    # the centre, so that the centre does not wander off along the centre/perspective valley, then everything
+    n0 = OPENCV_STAGES[0]
+    k0, _, _ = _least_squares(
+        prob, lambda k: maker(n0)(np.concatenate([[0.0, 0.0], k])), np.zeros(n0), h8, fix_h=True, penalty=pen
+    )
+    theta, _, _ = _least_squares(prob, maker(n0), np.concatenate([[0.0, 0.0], k0]), h8, fix_h=True, penalty=pen)
     best: tuple[float, OpenCVModel] | None = None
+    faults = []
     for n in (m for m in OPENCV_STAGES if m <= n_coeffs):
         theta = np.concatenate([theta, np.zeros(2 + n - len(theta))])
-        theta, h8, _ = _least_squares(prob, maker(n), theta, h8)
+        theta, h8, _ = _least_squares(prob, maker(n), theta, h8, penalty=pen)
         cand = maker(n_coeffs)(np.concatenate([theta, np.zeros(2 + n_coeffs - len(theta))]))
+        ideal = apply_homography(prob.pixel_h(h8), prob.u)
+        fault = radial_fault(cand.dist, EXTRAPOLATION_RADIUS * corner_radius(ideal, cand.cx, cand.cy, f, f))
+        if fault is not None:  # the margins are soft: a stage that still has a pole or fold is not exported
+            faults.append(f"{n} coefficients: {fault}")
+            continue
         score = mod_h_rms(model, cand, width, height)
         if best is None or score < best[0]:
             best = (score, cand)
-    assert best is not None
-    out = best[1]
     family = f"the OpenCV {n_coeffs}-coefficient pin-hole model"
     more = [str(n) for n in OPENCV_STAGES if n > n_coeffs]
     remedy = "export it as a fisheye (--format auto picks the closest)"
     if more:
         alts = more[0] if len(more) == 1 else f"{', '.join(more[:-1])} or {more[-1]}"
         remedy = f"export with more coefficients (--coeffs {alts}) or as a fisheye (--format auto picks the closest)"
+    if best is None:
+        raise ValueError(
+            f"{family} cannot represent this lens without a pole or fold within {EXTRAPOLATION_RADIUS:g}x the "
+            f"corner radius ({'; '.join(faults)}); {remedy}"
+        )
+    out = best[1]
     return out, conversion_error(model, out, width, height, edges=edges, export=family, remedy=remedy)
 
 

@@ -78,6 +78,7 @@ class LensfunEntry:
     aperture: float = 8.0
     distance: float = 1000.0
     crop_note: str | None = None
+    stamp: tuple[str, ...] = ()
 
     @property
     def maker(self) -> str:
@@ -110,7 +111,7 @@ class LensfunEntry:
     def note(self) -> str:
         """The comment written beside the calibration."""
         m = self.model
-        parts = [f"harp station calibration for {m.width}x{m.height} images at focal {self.focal:g} mm"]
+        parts = [*self.stamp, f"harp station calibration for {m.width}x{m.height} images at focal {self.focal:g} mm"]
         if self.lens.focus is not None:
             parts.append(f"focus setting {self.lens.focus:g} (lensfun has no focus axis for distortion)")
         if self.lens.lens_serial:

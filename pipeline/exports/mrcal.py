@@ -36,14 +36,18 @@ def mrcal_text(
     *,
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
+    stamp: tuple[str, ...] = (),
 ) -> str:
-    """The ``.cameramodel`` text of an OpenCV model with 4, 5, 8 or 12 coefficients."""
+    """The ``.cameramodel`` text of an OpenCV model with 4, 5, 8 or 12 coefficients; ``stamp``:
+    comment lines right after the title."""
     n = len(model.dist)
     if n not in MRCAL_LENSMODELS:
         raise ValueError(f"mrcal has LENSMODEL_OPENCV4/5/8/12, not {n} coefficients")
     intr = [model.fx, model.fy, model.cx, model.cy, *model.dist]
     lines = [f"# mrcal camera model exported by harp station ({MRCAL_LENSMODELS[n]})"]
-    lines += [f"# {s}" for s in [*(error.lines() if error else []), *([camera.statement] if camera else []), *notes]]
+    lines += [
+        f"# {s}" for s in [*stamp, *(error.lines() if error else []), *([camera.statement] if camera else []), *notes]
+    ]
     lines += [
         "{",
         f"    'lensmodel':  '{MRCAL_LENSMODELS[n]}',",

@@ -32,6 +32,7 @@ import cv2
 
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.exports.solvers import SolverNeed
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -49,13 +50,27 @@ def opencv_text(
     comment: str | None = None,
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
+    stamp: tuple[str, ...] = (),
+    solver: SolverNeed | None = None,
 ) -> str:
-    """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye)."""
+    """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye).
+
+    ``stamp``: comment lines right after the title, before the figures. With ``solver`` the file
+    states what its point solver needs (comments, and the fields ``undistort_points_default_max_px``
+    / ``undistort_points_iterations``, 0 when none suffices).
+    """
     fisheye = isinstance(model, OpenCVFisheyeModel)
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     kind = "fisheye (cv::fisheye, Kannala-Brandt k1..k4)" if fisheye else f"pinhole, {len(model.dist)} coefficients"
     fs.writeComment(comment or f"OpenCV {kind} distortion exported by harp station")
-    for line in [*(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]:
+    solver_lines = solver.lines() if solver is not None else []
+    for line in [
+        *stamp,
+        *(error.lines() if error is not None else []),
+        *solver_lines,
+        *([camera.statement] if camera else []),
+        *notes,
+    ]:
         fs.writeComment(line)
     fs.write("image_width", int(width))
     fs.write("image_height", int(height))
@@ -74,6 +89,9 @@ def opencv_text(
         if math.isfinite(error.shots_d_px):
             fs.write("conversion_shots_d_px", float(error.shots_d_px))
             fs.write("conversion_shots_d_max_px", float(error.shots_d_max_px))
+    if solver is not None:
+        fs.write("undistort_points_default_max_px", float(solver.default_max_px))
+        fs.write("undistort_points_iterations", int(solver.iterations or 0))
     return str(fs.releaseAndGetString())
 
 

@@ -42,6 +42,7 @@ from pipeline.exports.lensfun import (
 from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
+from pipeline.exports.solvers import SolverNeed, solver_need
 from pipeline.models.base import DistortionModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
@@ -74,6 +75,12 @@ class ExportSource:
     wide_angle : bool
         The calibration chose a wide-angle model: :data:`AUTO` then fits the
         fisheye export too and writes the closer of the two.
+    stamp : tuple of str
+        Lines every format states first, in its own comment or header
+        mechanism (a comment line each in the text formats, an XML comment in
+        lensfun, the ``notes`` of the maps and the comments of the STMap, a
+        ``stamp`` list in json): what a reader of the file must know before
+        using it, e.g. that the profile failed QA.
     """
 
     model: DistortionModel
@@ -85,6 +92,7 @@ class ExportSource:
     merit: Mapping[str, Any] = field(default_factory=dict)
     provenance: Mapping[str, Any] = field(default_factory=dict)
     wide_angle: bool = False
+    stamp: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -117,6 +125,7 @@ class Export:
     converted: DistortionModel | None = None
     notes: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
+    solver: SolverNeed | None = None
 
 
 @dataclass(frozen=True)
@@ -227,14 +236,21 @@ def _write_pinhole(
     if warnings and hint:
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
     notes = _lens_notes(src)
+    sn = None
     if fmt == "opencv":
-        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+        sn = solver_need(src.model, m, src.width, src.height)
+        text = opencv_text(
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+        )
     elif fmt == "ros":
+        sn = solver_need(src.model, m, src.width, src.height)
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
-    else:
-        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes)
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
+        text = ros_text(
+            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+        )
+    else:  # mrcal's unproject iterates to convergence: no solver statement
+        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp)
+    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
 
 
 def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
@@ -244,13 +260,18 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     if focal is None:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
     notes = _lens_notes(src)
+    sn = solver_need(src.model, m, src.width, src.height)
     if fmt == "opencv-fisheye":
-        text = opencv_text(m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes)
+        text = opencv_text(
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+        )
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes)
+        text = ros_text(
+            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+        )
     warnings = conversion_warnings(fmt, src, err) + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings))
+    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
 
 
 CROP_FACTOR_MISMATCH = 0.15
@@ -377,7 +398,7 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
         )
     m, err, type_notes = _fit_lensfun_type(src, opt, lens)
     existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
-    entry = LensfunEntry(model=m, lens=lens, error=err, crop_note=crop_how)
+    entry = LensfunEntry(model=m, lens=lens, error=err, crop_note=crop_how, stamp=src.stamp)
     text, done = lensfun_database_text([entry], existing, opt.existing_name)
     notes = [
         d for d in done if not d.startswith("replaced ")
@@ -406,7 +427,7 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
     )
-    notes = (note, *_lens_notes(src))
+    notes = (*src.stamp, note, *_lens_notes(src))
     data = (
         maps_fmt.maps_npz_bytes(maps, acc, notes, corners)
         if fmt == "maps"
@@ -422,6 +443,7 @@ def harp_model_doc(src: ExportSource) -> dict[str, Any]:
     return {
         "format": HARP_FORMAT_NAME,
         "format_version": FORMAT_VERSION,
+        **({"stamp": list(src.stamp)} if src.stamp else {}),
         "model": src.model.to_dict(),
         "image": {"width": int(src.width), "height": int(src.height)},
         "merit": dict(src.merit),
@@ -439,7 +461,8 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
     text = model_file_text(
         src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
     )
-    return Export("harp", text.encode())
+    head = "".join(f"# {line}\n" for line in src.stamp)
+    return Export("harp", (head + text).encode())
 
 
 def _plain(obj: object) -> object:
@@ -462,41 +485,59 @@ AUTO_MAX_FACTOR = 5.0
 default OpenCV export: 0.01 px RMS, 0.05 px max)."""
 
 
-def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
-    """OpenCV pin-hole (12 coefficients, or ``opt.coeffs``) or OpenCV fisheye, whichever converts closer.
+def consumer_max_px(ex: Export) -> float:
+    """The max error (px) a consumer of ``ex`` sees, judged with its own default solver: the worst of
+    the closed-form maps (the conversion error, modulo homography) and the default point solver."""
+    assert ex.error is not None
+    worst = ex.error.max_mod_h_px
+    if ex.solver is not None:
+        worst = max(worst, ex.solver.consumer_max_px)
+    return float(worst)
 
+
+def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
+    """OpenCV pin-hole (12 coefficients, or ``opt.coeffs``) or OpenCV fisheye, whichever its consumer finds closer.
+
+    Each candidate is judged as its consumer uses it, with OpenCV's own default solver
+    (:func:`consumer_max_px`: the closed-form maps and ``cv2.undistortPoints`` /
+    ``cv2.fisheye.undistortPoints`` with their default criteria, :mod:`pipeline.exports.solvers`).
     The fisheye model is fitted too when the calibration chose a wide-angle model
-    (``src.wide_angle``) or when the pin-hole conversion is less exact than the
-    calibration: its RMS or residual ``d`` exceeds the limit (the holdout ``d``, or
-    :data:`AUTO_BAR_PX` without one) or its max exceeds :data:`AUTO_MAX_FACTOR` times
-    the limit; the export is then the one with the smaller RMS modulo homography.
+    (``src.wide_angle``) or when the pin-hole is less exact than the calibration: its RMS or
+    residual ``d`` exceeds the limit (the holdout ``d``, or :data:`AUTO_BAR_PX` without one) or
+    its max so judged exceeds :data:`AUTO_MAX_FACTOR` times the limit; the export is then the one
+    with the smaller max so judged. The file states what its points need (:class:`SolverNeed`).
     """
     pin = _write_pinhole("opencv", src, opt, (5, 8, 12, 14), 12, hint=False)
-    assert pin.error is not None
+    assert pin.error is not None and pin.solver is not None
     n = _coeffs("opencv", opt, (5, 8, 12, 14), 12)
     held = src.holdout_d is not None and math.isfinite(src.holdout_d)
     limit = float(src.holdout_d) if held and src.holdout_d is not None else AUTO_BAR_PX
     e = pin.error
     worst = max(e.rms_mod_h_px, e.d_px if math.isfinite(e.d_px) else 0.0)
-    if not src.wide_angle and worst <= limit and e.max_mod_h_px <= AUTO_MAX_FACTOR * limit:
+    pin_max = consumer_max_px(pin)
+    if not src.wide_angle and worst <= limit and pin_max <= AUTO_MAX_FACTOR * limit:
         what = "the holdout d" if held else f"the {AUTO_BAR_PX:g} px bar"
         why = (
             f"auto: opencv (pin-hole, {n} coefficients): its conversion error (RMS {e.rms_mod_h_px:.4f} px, "
-            f"max {e.max_mod_h_px:.4f} px modulo homography) is within {what} ({limit:.4f} px), fisheye not tried"
+            f"max {pin_max:.4f} px modulo homography, maps and cv2.undistortPoints' default criteria) is within "
+            f"{what} ({limit:.4f} px), fisheye not tried"
         )
         return replace(pin, notes=(why, *pin.notes))
     fe = _write_fisheye("opencv-fisheye", src, opt)
-    assert fe.error is not None
+    assert fe.error is not None and fe.solver is not None
+    fe_max = consumer_max_px(fe)
     reason = (
         "the calibration chose a wide-angle model"
         if src.wide_angle
         else f"the pin-hole is less exact than {limit:.4f} px RMS / {AUTO_MAX_FACTOR * limit:.4f} px max"
     )
     figures = (
-        f"pin-hole ({n}) RMS {pin.error.rms_mod_h_px:.4f} / max {pin.error.max_mod_h_px:.4f} px, "
-        f"fisheye RMS {fe.error.rms_mod_h_px:.4f} / max {fe.error.max_mod_h_px:.4f} px modulo homography"
+        f"as their consumers see them, with OpenCV's default point solvers: pin-hole ({n}) RMS "
+        f"{pin.error.rms_mod_h_px:.4f} / max {pin_max:.4f} px (cv2.undistortPoints' default alone: "
+        f"{pin.solver.consumer_max_px:.4f} px), fisheye RMS {fe.error.rms_mod_h_px:.4f} / max {fe_max:.4f} px "
+        "modulo homography"
     )
-    if fe.error.rms_mod_h_px < pin.error.rms_mod_h_px:
+    if fe_max < pin_max:
         return replace(fe, notes=(f"auto: opencv-fisheye ({reason}; {figures})", *fe.notes))
     return replace(pin, notes=(f"auto: opencv (pin-hole) ({reason}; {figures})", *pin.notes))
 

@@ -30,6 +30,7 @@ import yaml
 
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.exports.solvers import SolverNeed
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -69,8 +70,13 @@ def ros_text(
     camera_name: str = "camera",
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
+    stamp: tuple[str, ...] = (),
+    solver: SolverNeed | None = None,
 ) -> str:
-    """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``)."""
+    """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``).
+
+    ``stamp``: comment lines right after the title. With ``solver`` the comments state what
+    rectifyPoint's solver needs on this lens."""
     if isinstance(model, OpenCVFisheyeModel):
         dm = ROS_FISHEYE_MODEL
     else:
@@ -91,7 +97,15 @@ def ros_text(
     }
     head = "# ROS camera_info calibration exported by harp station\n"
     readers = [ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else []
-    lines = [*readers, *(error.lines() if error is not None else []), *([camera.statement] if camera else []), *notes]
+    solver_lines = solver.lines(ros=True) if solver is not None else []
+    lines = [
+        *stamp,
+        *readers,
+        *(error.lines() if error is not None else []),
+        *solver_lines,
+        *([camera.statement] if camera else []),
+        *notes,
+    ]
     head += "".join(f"# {line}\n" for line in lines)
     return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))
 

@@ -1,9 +1,10 @@
 """The ``harp`` command line (entry point ``harp = station.cli:main``).
 
-Each sub-command lives in its own module ``station.cli.<name>`` (``measure``,
-``calibrate``, ``undistort``, ``evaluate``, ``export``, ``session``, ``profile``,
-``qa``, ``live``, ``serve``, ``reprocess``) exposing ``register(subparsers)``; the parser it adds sets
-``func(args) -> int``. A command module parses, calls the domain code
+Each sub-command lives in its own module ``station.cli.<name>`` (the names and one-line helps:
+:data:`station.cli.commands.COMMANDS`) exposing ``register(subparsers)``; the parser it adds sets
+``func(args) -> int``. Only the module of the command being run is imported (``harp --help``,
+``--version`` and a mistyped command — one line, "did you mean", exit 2 — import none), and every
+help text is shown without its reStructuredText markup (:mod:`station.cli.help_text`). A command module parses, calls the domain code
 (:mod:`station.calibration`, :mod:`station.session`, :mod:`station.qa`,
 :mod:`station.store`, :mod:`pipeline`) and prints — nothing else imports it; the input
 helpers they share (one-line input errors, reading and measuring photos) are
@@ -28,51 +29,30 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from station.cli.commands import COMMANDS, module_of, unknown_command
+from station.cli.help_text import HarpParser
 from station.ctrl_c import deliver_dropped_ctrl_c, forget_handled_ctrl_c
 
-COMMAND_MODULES = [
-    "station.cli.measure",
-    "station.cli.calibrate",
-    "station.cli.undistort",
-    "station.cli.evaluate",
-    "station.cli.export",
-    "station.cli.session",
-    "station.cli.profile",
-    "station.cli.qa",
-    "station.cli.live",
-    "station.cli.serve",
-    "station.cli.reprocess",
-    "station.cli.config",
-    "station.cli.devices",
-    "station.cli.tca",
-]
+
+def first_word(argv: Sequence[str]) -> str | None:
+    """The word ``argv`` names its sub-command by (the first that is no option), if any."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
-def _command_in(argv: list[str] | None) -> str | None:
-    """The sub-command module ``argv`` names (its first word, when it is one of ours), else None."""
-    words = sys.argv[1:] if argv is None else argv
-    if not words or words[0].startswith("-"):
-        return None
-    name = f"station.cli.{words[0]}"
-    return name if name in COMMAND_MODULES else None
-
-
-def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The ``harp`` parser. When ``argv`` names a sub-command, only that command's module is
-    imported (a command does not pay for the imports of the others); otherwise all are, for
-    the list of commands in ``--help`` and the error on an unknown one."""
-    parser = argparse.ArgumentParser(prog="harp", description="calibration-harp lens distortion station")
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``harp`` parser. Only the sub-command ``argv`` names (:func:`first_word`) is built by its
+    module; every other one is listed from :data:`~station.cli.commands.COMMANDS` with its one-line
+    help, its module not imported (``harp --help``, ``--version`` import none). ``argv`` None:
+    every sub-command built (for what walks the whole command line, as the tests do)."""
+    parser = HarpParser(prog="harp", description="calibration-harp lens distortion station")
     parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    only = _command_in(argv)
-    for name in [only] if only else COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name == name:  # sub-command not present in this build
-                continue
-            raise
-        module.register(sub)
+    wanted = set(COMMANDS) if argv is None else {first_word(argv)}
+    for name, summary in COMMANDS.items():
+        if name in wanted:
+            importlib.import_module(module_of(name)).register(sub)
+        else:
+            sub.add_parser(name, help=summary, add_help=False)
     return parser
 
 
@@ -123,9 +103,13 @@ def _main(argv: list[str] | None) -> int:
     # spin against each other and against the worker processes of harp calibrate (1.7x the CPU time
     # there). Set before numpy is first imported (by the command's module); the user's setting wins.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    _keep_freed_memory()
     deliver_dropped_ctrl_c()  # a Ctrl-C that CPython drops (in a weakref callback) is delivered again
-    try:  # Ctrl-C while the sub-commands import numpy/scipy/OpenCV: no traceback either
+    argv = sys.argv[1:] if argv is None else argv
+    word = first_word(argv)
+    if word is not None and word not in COMMANDS:
+        print(unknown_command(word), file=sys.stderr)
+        return 2
+    try:  # Ctrl-C while the sub-command's module imports numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)
     except KeyboardInterrupt:
         print("harp: interrupted", file=sys.stderr)
@@ -134,6 +118,7 @@ def _main(argv: list[str] | None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    _keep_freed_memory()
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -44,6 +44,7 @@ import numpy as np
 
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec, parse
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
@@ -54,9 +55,7 @@ class CalibrateError(InputError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "calibrate", help="fit a lens distortion model from harp shots", description=__doc__.split("\n\n")[0]
-    )
+    p = subparsers.add_parser("calibrate", help=COMMANDS["calibrate"], description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp shots used for the fit")
     p.add_argument(
         "--model",
@@ -331,16 +330,26 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
 
 
 def _print(report: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
+    """The choice, the cross-validation and straightness tables, the rejected edges and warnings
+    (:mod:`station.tables`: off a terminal tab-separated tables, nothing cut short or wrapped)."""
+    from station.tables import console, is_terminal, print_table
 
-    con = Console()
+    con = console()
+
+    def say(text: str) -> None:
+        con.print(text, markup=False, highlight=False)
+
+    def gap() -> None:  # off a terminal a blank line separates the tables
+        if not is_terminal():
+            print()
+
+    def f(v):
+        return "" if v is None else f"{v:.4f}"
+
     ch = report["choice"]
-    con.print(f"model: [bold]{ch['label']}[/bold] ({ch['reason']})")
+    say(f"model: {ch['label']} ({ch['reason']})")
     if ch.get("table"):
-        t = Table(title="cross-validation (holdout d, px)")
-        for c in ("candidate", "params", "CV d", "per fold"):
-            t.add_column(c, overflow="fold" if c == "candidate" else "ellipsis")  # long labels: folded, not cut
+        rows = []
         for r in ch["table"]:
             if r["cv_d"] is not None:
                 cv = f"{r['cv_d']:.4f}"
@@ -349,45 +358,36 @@ def _print(report: dict) -> None:
             else:
                 cv = "failed"
             folds = " ".join("-" if v is None else f"{v:.4f}" for v in r["fold_d"])
-            t.add_row(r["label"], str(r["n_params"]), cv, folds)
-        con.print(t)
-    t = Table(title="straightness (px)")
-    for c in ("shot", "edges", "d before", "d_max before", "d after", "d_max after"):
-        t.add_column(c, no_wrap=c == "shot")
-
-    def f(v):
-        return "n/a" if v is None else f"{v:.4f}"
-
+            rows.append((r["label"], str(r["n_params"]), cv, folds))
+        gap()
+        print_table(("candidate", "params", "CV d (px)", "per fold (px)"), rows, title="cross-validation (holdout d)")
     hold = report.get("holdout", {}).get("images", [])
     names = [Path(im["path"]).name for im in [*report["images"], *hold]]
 
     def label(path):  # file names, unless two shots share one (then the whole path)
         return Path(path).name if names.count(Path(path).name) == 1 else str(path)
 
-    for im in report["images"]:
-        t.add_row(
-            label(im["path"]), str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"])
-        )
-    t.add_row(
-        "fit (all)",
-        "",
-        f(report["before"]["d"]),
-        f(report["before"]["d_max"]),
-        f(report["fit"]["d"]),
-        f(report["fit"]["d_max"]),
-    )
-    for im in hold:
-        t.add_row(
-            f"holdout {label(im['path'])}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"])
-        )
+    rows = [
+        (label(im["path"]), str(im["n_edges"]), f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"]))
+        for im in report["images"]
+    ]
+    b, fit = report["before"], report["fit"]
+    rows.append(("fit (all)", "", f(b["d"]), f(b["d_max"]), f(fit["d"]), f(fit["d_max"])))
+    rows += [
+        (f"holdout {label(im['path'])}", "", f(im["d_before"]), f(im["d_max_before"]), f(im["d"]), f(im["d_max"]))
+        for im in hold
+    ]
     if "holdout" in report:
-        t.add_row("holdout (all)", "", "", "", f(report["holdout"]["d"]), f(report["holdout"]["d_max"]))
-    con.print(t)
+        rows.append(("holdout (all)", "", "", "", f(report["holdout"]["d"]), f(report["holdout"]["d_max"])))
+    columns = ("shot", "edges", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)")
+    gap()
+    print_table(columns, rows, title="straightness", right=columns[1:])
+    gap()
     for r in report["rejected"]:
-        con.print(f"rejected edge: {r['path']} line {r['line']}: {r['reason']}")
+        say(f"rejected edge: {r['path']} line {r['line']}: {r['reason']}")
     for w in report["warnings"]:
-        con.print(f"warning: {w}")
-    con.print(f"wrote {report['model']}")
+        say(f"warning: {w}")
+    say(f"wrote {report['model']}")
 
 
 def run(args) -> int:

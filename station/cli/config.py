@@ -13,11 +13,12 @@ import json
 import sys
 from pathlib import Path
 
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("config", help="check a station configuration", description=__doc__.split("\n\n")[1])
+    p = subparsers.add_parser("config", help=COMMANDS["config"], description=__doc__.split("\n\n")[1])
     sub = p.add_subparsers(dest="config_command", metavar="ACTION")
     check = sub.add_parser("check", help="validate a configuration without opening any device")
     check.add_argument("config", type=Path, metavar="CONFIG")

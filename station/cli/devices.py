@@ -13,13 +13,12 @@ from __future__ import annotations
 import json
 import sys
 
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_OK
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "devices", help="cameras and serial ports found on this machine", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("devices", help=COMMANDS["devices"], description=__doc__.split("\n\n")[1])
     p.add_argument("--probe", action="store_true", help="ask each serial port whether it is a Zaber or GRBL device")
     p.add_argument("--port", action="append", default=[], metavar="PORT", help="also list this port (repeatable)")
     p.add_argument("--include-fake", action="store_true", help="also list Aravis' own Fake camera")

@@ -9,8 +9,9 @@ OpenCV calibration (FileStorage YAML or XML with ``camera_matrix`` +
 mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of the harp
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
-their straightness reported before and after (:mod:`pipeline.evaluate`). Edge points a
-maps file or STMap does not cover (outside the corrected image it holds: a wide lens's
+their straightness reported before and after (:mod:`pipeline.evaluate`), one row per
+shot and ``all`` (off a terminal tab-separated with a header line, :mod:`station.tables`). Edge
+points a maps file or STMap does not cover (outside the corrected image it holds: a wide lens's
 borders) are left out, never extrapolated, and their number printed (JSON: ``n_excluded``
 of ``n_points``).
 
@@ -27,9 +28,9 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -37,7 +38,7 @@ from station.inputs import InputError
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "evaluate",
-        help="measure the residual distortion left by any correction",
+        help=COMMANDS["evaluate"],
         description=(
             "Residual distortion left by any correction (harp model, OpenCV YAML/XML, ROS "
             "camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr), measured on "
@@ -76,7 +77,7 @@ def register(subparsers) -> None:
 
 
 def _fmt(sd):
-    return ("     -", "     -") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
+    return ("", "") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
 
 
 def run(args) -> int:
@@ -104,12 +105,12 @@ def run(args) -> int:
         f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
         + (", images already corrected" if rep["already_corrected"] else "")
     )
-    print(f"{'image':40s} {'lines':>5s} {'d before':>9s} {'dmax bef.':>9s} {'d after':>9s} {'dmax aft.':>9s}  (px)")
-    for e in rep["images"]:
-        b, a = _fmt(e["before"]), _fmt(e["after"])
-        print(f"{Path(e['path']).name[:40]:40s} {e['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
-    b, a = _fmt(rep["before"]), _fmt(rep["after"])
-    print(f"{'all':40s} {rep['n_lines']:5d} {b[0]:>9s} {b[1]:>9s} {a[0]:>9s} {a[1]:>9s}")
+    from station.tables import print_table
+
+    columns = ("image", "lines", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)")
+    rows = [(str(e["path"]), str(e["n_lines"]), *_fmt(e["before"]), *_fmt(e["after"])) for e in rep["images"]]
+    rows.append(("all", str(rep["n_lines"]), *_fmt(rep["before"]), *_fmt(rep["after"])))
+    print_table(columns, rows, title="straightness before and after the correction", right=columns[1:])
     if rep.get("n_excluded"):
         print(
             f"{rep['n_excluded']} of {rep['n_points']} edge points left out: outside the area the correction "

@@ -45,6 +45,7 @@ import sys
 from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.inputs import InputError
 
 LENSFUN_TYPE_CHOICES = ("auto", "rectilinear", "fisheye", "equisolid", "stereographic", "orthographic", "fisheye_thoby")
@@ -152,7 +153,7 @@ def register(subparsers) -> None:
         "export",
         epilog=formats_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        help="export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
+        help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
             "lensfun, mrcal, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
@@ -232,11 +233,14 @@ def _existing_lensfun(args) -> bytes | None:
 
 
 # ------------------------------------------------------------------- export
-def export_profile(args, profile, *, model_dir=None, what: str | None = None, edges=None) -> tuple[object, dict]:
+def export_profile(
+    args, profile, *, model_dir=None, what: str | None = None, edges=None, stamp=None
+) -> tuple[object, dict]:
     """Export ``profile`` as the options ask: ``(Export, figures)``; the file is not written.
 
     ``edges``: the fitting shots' :class:`~station.export_source.FittingEdges` when the
-    caller knows them (default: found from the profile, unless the options say otherwise).
+    caller knows them (default: found from the profile, unless the options say otherwise);
+    ``stamp``: the lines the file states first (default: the profile's FAILED QA stamp, if any).
 
     Raises ExportError (one line) on bad options or a model the format cannot take.
     """
@@ -251,7 +255,7 @@ def export_profile(args, profile, *, model_dir=None, what: str | None = None, ed
     existing = _existing_lensfun(args)
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
-    source = export_source(profile, lens=lens, edges=edges)
+    source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:

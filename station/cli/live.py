@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.cli.web_options import add_serve_options
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
@@ -27,7 +28,7 @@ EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "live",
-        help="live set-up view: focus, exposure, strings and coverage (or one check with --once)",
+        help=COMMANDS["live"],
         description=__doc__.split("\n\n")[1] + "\n\n" + __doc__.split("\n\n")[2],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

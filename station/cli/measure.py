@@ -4,7 +4,9 @@ Each image is read (PGM/PNG/TIFF/JPEG, 8 or 16 bit, colour converted to
 grey), its string edges are found and measured
 (:func:`pipeline.measure.measure_image`); the command prints ``d`` and
 ``d_max`` per image and over all images (all edges of all images pooled, as
-in Tang et al. 2012) as rich tables, or with ``--json`` exactly one JSON
+in Tang et al. 2012) as two tables — every edge, then each image and ``all`` — on a
+terminal drawn by rich, otherwise tab-separated text with a header line each and a
+blank line between (:mod:`station.tables`); or with ``--json`` exactly one JSON
 object on stdout::
 
     {"d": float, "d_max": float, "n_lines": int,
@@ -41,14 +43,13 @@ import numpy as np
 from pipeline.measure import ImageMeasurement
 from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError, measure_file
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "measure", help="measure string straightness (d, d_max) in harp photos", description=__doc__.split("\n\n")[0]
-    )
+    p = subparsers.add_parser("measure", help=COMMANDS["measure"], description=__doc__.split("\n\n")[0])
     p.add_argument("images", metavar="IMAGE", nargs="+", help="harp photographs (PGM/PNG/TIFF/JPEG)")
     p.add_argument(
         "-t",
@@ -89,48 +90,65 @@ def _overlay_names(paths: list[str]) -> dict[str, str]:
 
 
 def _fmt(v) -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{v:.4f}"
+    return "" if v is None or not np.isfinite(v) else f"{v:.4f}"  # a missing figure: an empty field
+
+
+EDGE_COLUMNS = (
+    "image",
+    "string",
+    "edge",
+    "points",
+    "rms (px)",
+    "p2p (px)",
+    "angle (deg)",
+    "length (px)",
+    "hf_rms (px)",
+)
+IMAGE_COLUMNS = ("image", "size", "string width (px)", "strings", "edges", "d (px)", "d_max (px)", "rejected groups")
 
 
 def _print_tables(results: list[tuple[str, ImageMeasurement]], overall: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
+    """Every edge of every image, then d and d_max per image and over all of them
+    (:func:`station.tables.print_table`: off a terminal two tab-separated tables, a blank line between)."""
+    from station.tables import is_terminal, print_table
 
-    con = Console(file=sys.stdout, highlight=False)
-    for path, m in results:
-        tab = Table(
-            title=f"{path}  ({m.width}x{m.height}, string width {m.string_width_px:.2f} px)", title_justify="left"
+    edges = [
+        (
+            path,
+            str(ln.string_id),
+            "+" if ln.polarity > 0 else "-",
+            str(len(ln.points)),
+            f"{ln.rms:.4f}",
+            f"{ln.p2p:.4f}",
+            f"{ln.angle_deg:.2f}",
+            f"{ln.length_px:.1f}",
+            f"{ln.hf_rms:.4f}",
         )
-        for col in ("string", "edge", "points", "rms px", "p2p px", "angle deg", "length px", "hf_rms px"):
-            tab.add_column(col, justify="right")
-        for ln in m.lines:
-            tab.add_row(
-                str(ln.string_id),
-                "+" if ln.polarity > 0 else "-",
-                str(len(ln.points)),
-                f"{ln.rms:.4f}",
-                f"{ln.p2p:.4f}",
-                f"{ln.angle_deg:.2f}",
-                f"{ln.length_px:.1f}",
-                f"{ln.hf_rms:.4f}",
-            )
+        for path, m in results
+        for ln in m.lines
+    ]
+    print_table(EDGE_COLUMNS, edges, title="edges", right=EDGE_COLUMNS[1:])
+    if not is_terminal():
+        print()
+    rows = []
+    for path, m in results:
         rej = m.to_dict()["rejected"]
-        rej_text = ", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) or "none"
-        tab.caption = (
-            f"d = {_fmt(m.d)} px   d_max = {_fmt(m.d_max)} px   {m.n_lines} edges of "
-            f"{m.n_strings} strings   rejected groups: {rej_text}"
+        rows.append(
+            (
+                path,
+                f"{m.width}x{m.height}",
+                f"{m.string_width_px:.2f}",
+                str(m.n_strings),
+                str(m.n_lines),
+                _fmt(m.d),
+                _fmt(m.d_max),
+                ", ".join(f"{k}: {v}" for k, v in sorted(rej.items())),
+            )
         )
-        tab.caption_justify = "left"
-        con.print(tab)
-    summ = Table(title="overall (all edges of all images pooled)", title_justify="left")
-    for col in ("image", "size", "strings", "edges", "d px", "d_max px"):
-        summ.add_column(col, justify="right" if col != "image" else "left")
-    for path, m in results:
-        summ.add_row(
-            Path(path).name, f"{m.width}x{m.height}", str(m.n_strings), str(m.n_lines), _fmt(m.d), _fmt(m.d_max)
-        )
-    summ.add_row("all", "", "", str(overall["n_lines"]), _fmt(overall["d"]), _fmt(overall["d_max"]), style="bold")
-    con.print(summ)
+    rows.append(("all", "", "", "", str(overall["n_lines"]), _fmt(overall["d"]), _fmt(overall["d_max"]), ""))
+    print_table(
+        IMAGE_COLUMNS, rows, title="per image and overall (all edges of all images pooled)", right=IMAGE_COLUMNS[2:7]
+    )
 
 
 def run(args) -> int:

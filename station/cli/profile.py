@@ -14,6 +14,8 @@ stderr). ``export`` converts with the options, figures and warnings of ``harp ex
 (:mod:`station.cli.export`); the profile brings the lens, camera body and optics of its
 session's configuration and the session's measured edges of its fitting shots. ``--json``
 prints one JSON object; off a terminal the tables are tab-separated text with a header.
+``show --id N`` (and ``show LENS --focus F``) prints the profile's table, its image size,
+session, station and software, every QA check and its model on stdout; stderr has only warnings.
 Exit 0 on success; 1 when the profile asked for failed QA (``export``, ``show --focus``: one line
 naming the lens, focus and failed check; ``--allow-failed`` to use it anyway); 2 on bad input or
 a damaged store.
@@ -27,6 +29,7 @@ import math
 import sys
 from typing import Any
 
+from station.cli.commands import COMMANDS
 from station.cli.export import add_export_options, formats_epilog
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.plain_json import plain
@@ -35,7 +38,9 @@ from station.profile_choice import (
     FailedQA,
     at_focus,
     current_and_left_out,
+    export_refusal,
     failed_line,
+    failed_stamp,
     interpolate,
     is_failed,
     lens_row,
@@ -47,9 +52,7 @@ ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stder
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "profile", help="list, show and export stored lens profiles", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("profile", help=COMMANDS["profile"], description=__doc__.split("\n\n")[1])
     add_store_options(p)
     sub = p.add_subparsers(dest="profile_command", metavar="ACTION")
     store_opt = argparse.ArgumentParser(add_help=False)  # --store / --config also after the action
@@ -106,12 +109,6 @@ def _open(args):
     from station.store.resolve import open_store
 
     return open_store(args)  # for reading: never creates a store
-
-
-def _console():
-    from rich.console import Console
-
-    return Console() if sys.stdout.isatty() else Console(width=160)
 
 
 def _num(v, nd=4) -> str:
@@ -327,7 +324,9 @@ def _show(args, store) -> int:
         }
         print(json.dumps(plain(out), indent=1))
         return EXIT_OK
-    console = _console()
+    from station.tables import console as text_console
+
+    console = text_console()
     console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
     console.print(note)
     for e in loo:
@@ -341,7 +340,7 @@ def _show(args, store) -> int:
 
 
 def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> int:
-    from station.tables import print_table
+    from station.tables import is_terminal, print_table
 
     if args.json:
         out = {
@@ -360,28 +359,29 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         title=f"{who}{lens[1]} {lens[2]} serial {lens[3]}" + ("" if detail else " (current profile per focus)"),
         right=PROFILE_COLUMNS[:2] + PROFILE_COLUMNS[5:11],
     )
-    if detail:
+    if detail:  # the profile itself, on stdout with its table (warnings alone go to stderr)
         p = profiles[0]
-        err = sys.stderr
+        if not is_terminal():
+            print()  # off a terminal a blank line after the table
         print(
             f"image {p.width}x{p.height}, session {p.provenance.session_dir}, station {p.provenance.station}, "
-            f"software {p.provenance.software_version}",
-            file=err,
+            f"software {p.provenance.software_version}"
         )
         for c in p.qa.checks if p.qa is not None else ():
-            print(f"check: {c.text}", file=err)
-        print(json.dumps(plain(p.model.to_dict())), file=err)
+            print(f"check: {c.text}")
+        print(json.dumps(plain(p.model.to_dict())))
     return EXIT_OK
 
 
 # ------------------------------------------------------------------- export
 def _allowed(args, lens, p) -> None:
     """Refuse a profile that failed QA (exit 1) unless ``--allow-failed`` (then say so)."""
-    if not is_failed(p):
+    refusal = export_refusal(lens, p, "--allow-failed")
+    if refusal is None:
         return
     if not args.allow_failed:
-        raise _Refused(f"{failed_line(lens, p)}; not exported (--allow-failed exports it anyway)")
-    _warn(f"{failed_line(lens, p)}: exported because of --allow-failed")
+        raise _Refused(refusal)
+    _warn(f"{failed_line(lens, p)}: exported because of --allow-failed (the file is stamped FAILED QA)")
 
 
 @_with_store
@@ -390,7 +390,7 @@ def _export(args, store) -> int:
     from station.export_source import FittingEdges
     from station.inputs import InputError
 
-    edges = None
+    edges = stamp = None
     if args.id is not None:
         if args.lens is not None or args.focus is not None:
             raise _Fail("--id N names one profile: give no LENS or --focus with it")
@@ -413,12 +413,13 @@ def _export(args, store) -> int:
             interp = interpolate(lens, used, args.focus, left_out)
             _say_used(lens, used, left_out)
             profile = interp.profile()
+            stamp = tuple(line for q in used for line in failed_stamp(q))  # interpolated from failed ones
             what = f"interpolated focus {args.focus:g}"
             edges = FittingEdges(
                 None, f"none: the correction is interpolated between the focus settings {interp.known()}"
             )
     try:
-        ex, fig = export_profile(args, profile, what=what, edges=edges)
+        ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
         write_output(args, ex)
     except InputError as exc:
         raise _Fail(str(exc)) from None

@@ -14,7 +14,8 @@ compared with the limit and with what was recorded when it was calibrated. REF, 
 golden reference of the same lens model, is a harp model file, a stored profile ``#id``,
 or a lens in the store (its profile at the same focus, interpolated between its
 calibrated focus settings when needed). ``--report DIR`` writes a Markdown report with
-plots and its ``index.html``. Each result is recorded in the store's QA history (unless
+plots and its ``index.html``; ``--overlays all|failed|none`` says which focus settings keep their
+per-orientation overlays in it (default: a session's ``report.overlays``, else all). Each result is recorded in the store's QA history (unless
 ``--no-record``); it does not change the verdict a profile was calibrated with.
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 
@@ -30,6 +31,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
+from station.config import OVERLAY_RETENTION
 from station.exit_codes import EXIT_ERROR, verdict_exit_code
 from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
@@ -50,9 +53,7 @@ def _positive(text: str) -> float:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "qa", help="factory QA verdict of a session or a stored lens", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("qa", help=COMMANDS["qa"], description=__doc__.split("\n\n")[1])
     p.add_argument("target", metavar="SESSION_OR_LENS")
     p.add_argument(
         "--reference",
@@ -87,6 +88,13 @@ def register(subparsers) -> None:
         help="do not recompute the holdout d from the session's measurements (quicker; the stored one is judged)",
     )
     p.add_argument("--report", type=Path, metavar="DIR", default=None, help="write a Markdown report here")
+    p.add_argument(
+        "--overlays",
+        choices=OVERLAY_RETENTION,
+        default=None,
+        help="which focus settings keep their overlays in the report: all, failed (only those that failed QA), "
+        "none (default: the session configuration's report.overlays, else all)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--no-record", action="store_true", help="do not record the result in the store's QA history")
     p.set_defaults(func=run)
@@ -152,7 +160,9 @@ def run(args) -> int:
             report = None
             if args.report is not None:
                 try:
-                    report = write_qa_report(args.report, str(args.target), items, judged, session)
+                    report = write_qa_report(
+                        args.report, str(args.target), items, judged, session, overlays=args.overlays
+                    )
                 except OSError as exc:
                     raise QAInputError(
                         f"{args.report}: cannot write the report "

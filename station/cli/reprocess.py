@@ -6,7 +6,8 @@ it kept, exactly as the session did (its configuration's measurement, fit, boots
 thresholds; ``--model`` fits another model, ``auto`` the cross-validated choice). The new
 profiles are stored next to the old ones (``--dry-run``: not stored); each one's provenance
 names the session, the profile it re-processes and the software versions before and now. Then
-a table compares the old and new figures per session and focus setting (``--json``: one JSON
+a table compares the old and new figures per session and focus setting (off a terminal
+tab-separated, an old and a new column per figure: :mod:`station.tables`; ``--json``: one JSON
 object instead).
 
 Where it runs: a local process pool (``--workers N``, default the number of CPUs; 1: in this
@@ -34,6 +35,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from station.cli.commands import COMMANDS
+
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
@@ -42,7 +45,7 @@ def register(subparsers: Any) -> None:
 
     p = subparsers.add_parser(
         "reprocess",
-        help="re-measure and re-fit archived sessions with the current pipeline (local pool or Dask cluster)",
+        help=COMMANDS["reprocess"],
         description="\n\n".join(__doc__.split("\n\n")[1:]),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -207,57 +210,64 @@ def _document(order: list[str], outcomes: dict[str, Any], failed: dict[str, str]
     }
 
 
-def _print_table(doc: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
+FIGURES = (  # (column, key, decimals)
+    ("fit d (px)", "fit_d_px", 4),
+    ("holdout d (px)", "holdout_d_px", 4),
+    ("distortion max (px)", "distortion_max_px", 3),
+    ("uncertainty rms (px)", "field_uncertainty_rms_px", 4),
+)
 
-    console = Console() if sys.stdout.isatty() else Console(width=200)
+
+def _print_table(doc: dict) -> None:
+    """Old and new figures per session and focus setting (:func:`station.tables.print_table`): on a
+    terminal ``old → new`` in one cell; otherwise tab-separated, an ``old`` and a ``new`` column each,
+    the session's whole path."""
+    from station.tables import console, is_terminal, print_table
+
+    pairs = is_terminal()
+    say = console()
 
     def f(v: Any, nd: int = 4) -> str:
-        return "–" if v is None else f"{v:.{nd}f}"
+        return "" if v is None else f"{v:.{nd}f}"
 
-    def pair(o: dict, n: dict, key: str, nd: int = 4) -> str:
-        return f"{f(o.get(key), nd)} → {f(n.get(key), nd)}"
+    def pid(d: dict) -> str:
+        return "" if d.get("profile_id") is None else f"#{d['profile_id']}"
 
-    t = Table(title=f"re-processed on {doc['where']}: old → new (px)")
-    for col in (
-        "session",
-        "focus",
-        "profile",
-        "model",
-        "fit d",
-        "holdout d",
-        "distortion max",
-        "uncertainty rms",
-        "verdict",
-    ):
-        t.add_column(col, justify="left" if col in ("session", "model", "verdict", "profile") else "right")
+    def both(old: str, new: str) -> tuple[str, ...]:
+        return (f"{old or '–'} → {new or '–'}",) if pairs else (old, new)
+
+    names = ("profile", "model", *(c for c, _k, _n in FIGURES), "verdict")
+    columns = ["session", "focus", *(names if pairs else (f"{n} {w}" for n in names for w in ("old", "new")))]
+    if not pairs:  # the unit after old / new: "fit d old (px)"
+        columns = [c.replace(" (px) old", " old (px)").replace(" (px) new", " new (px)") for c in columns]
+    rows = []
+    width = 2 + len(names) * (1 if pairs else 2)
     for s in doc["sessions"]:
-        name = Path(s["session"]).name
+        name = Path(s["session"]).name if pairs else str(s["session"])
         if not s["focus"]:
-            t.add_row(name, "", "", "", "", "", "", "", "not re-processed")
+            rows.append((name, *[""] * (width - 2), "not re-processed"))
         for e in s["focus"]:
             o, n = e["old"], e["new"]
+            focus = f"{e['focus']:g}" if e["focus"] is not None else ""
             if e["failure"] or not s["ok"]:
-                t.add_row(name, f"{e['focus']:g}" if e["focus"] is not None else "", "", "", "", "", "", "", "failed")
+                rows.append((name, focus, *[""] * (width - 3), "failed"))
                 continue
-            ids = f"#{o['profile_id'] if o['profile_id'] is not None else '?'} → #{n['profile_id'] if n['profile_id'] is not None else '–'}"
-            model = (
-                o.get("model", "?") if o.get("model") == n.get("model") else f"{o.get('model', '?')} → {n.get('model')}"
-            )
-            t.add_row(
-                name,
-                f"{e['focus']:g}",
-                ids,
-                model,
-                pair(o, n, "fit_d_px"),
-                pair(o, n, "holdout_d_px"),
-                pair(o, n, "distortion_max_px", 3),
-                pair(o, n, "field_uncertainty_rms_px"),
-                f"{o.get('verdict') or '–'} → {n.get('verdict') or '–'}",
-            )
-    console.print(t)
+            cells: list[str] = [name, focus, *both(pid(o), pid(n)), *both(o.get("model") or "", n.get("model") or "")]
+            for _c, key, nd in FIGURES:
+                cells += both(f(o.get(key), nd), f(n.get(key), nd))
+            cells += both(o.get("verdict") or "", n.get("verdict") or "")
+            rows.append(tuple(cells))
+    print_table(
+        columns,
+        rows,
+        title=f"re-processed on {doc['where']}: old → new",
+        right=[c for c in columns if c.startswith("focus") or "(px)" in c],
+    )
+    if not pairs:
+        print()  # a blank line after the table
     stored = "stored" if doc["stored"] else "not stored (--dry-run)"
-    console.print(
-        f"{doc['reprocessed']} session(s) re-processed, {doc['failed']} failed, in {doc['wall_s']:.1f} s; new profiles {stored}"
+    say.print(
+        f"{doc['reprocessed']} session(s) re-processed, {doc['failed']} failed, in {doc['wall_s']:.1f} s; "
+        f"new profiles {stored}",
+        markup=False,
     )

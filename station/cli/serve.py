@@ -18,6 +18,8 @@ import argparse
 import sys
 from typing import Any
 
+from station.cli.commands import COMMANDS
+
 EXIT_ERROR = 2
 DEFAULT_PORT = 8014
 
@@ -28,7 +30,7 @@ def register(subparsers: Any) -> None:
 
     p = subparsers.add_parser(
         "serve",
-        help="the factory QA dashboard in the browser (read-only, over the profile store)",
+        help=COMMANDS["serve"],
         description=__doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

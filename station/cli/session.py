@@ -22,13 +22,12 @@ import sys
 from pathlib import Path
 
 from station import __version__
+from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "session", help="run, resume, plan or list calibration sessions", description=__doc__.split("\n\n")[1]
-    )
+    p = subparsers.add_parser("session", help=COMMANDS["session"], description=__doc__.split("\n\n")[1])
     sub = p.add_subparsers(dest="session_command", metavar="ACTION")
     run = sub.add_parser("run", help="run a session from a station configuration")
     run.add_argument("config", type=Path, help="station configuration (YAML)")
@@ -261,13 +260,12 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
 
 
 def _execute_session(config, get_session, args, opened=None, report: bool = True, tap=None) -> int:
-    from rich.console import Console
-
     from station.config import ConfigError
     from station.session.devices import open_station
     from station.session.directory import SessionError
     from station.session.run import run_session
     from station.store import StoreError
+    from station.tables import console as text_console
 
     started = []  # the session directory, once there is one
     result = None
@@ -281,7 +279,7 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
                 console = None
                 if not args.quiet:
                     out = sys.stderr if args.json else sys.stdout
-                    console = Console(file=out) if out.isatty() else Console(file=out, width=120)
+                    console = text_console(out)  # off a terminal: lines never wrapped (station.tables)
                 result = run_session(session, camera, turntable, store=store, console=console, report=report)
     except (ConfigError, StoreError, SessionError) as exc:
         return _error(str(exc))

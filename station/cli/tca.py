@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.resample import DEFAULT_T
+from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.inputs import InputError
 
@@ -30,7 +31,7 @@ from station.inputs import InputError
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "tca",
-        help="lateral chromatic aberration from colour or RAW harp shots",
+        help=COMMANDS["tca"],
         description=__doc__.split("\n\n")[0],
     )
     p.add_argument("images", metavar="IMAGE", nargs="+", help="colour or camera RAW harp shots, harp turned between")
@@ -90,13 +91,18 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(doc))
         return EXIT_OK
-    for img in per_image:
-        print(f"{img['path']} ({img['pattern']})")
-        for r in img["planes"]:
-            print(
-                f"  {r['plane']:<3} {r['edges']:4d} edges  d {r['d']:.4f} px  d_max {r['d_max']:.4f} px"
-                f"  median offset from green {r['median_offset_px']:.4f} px"
-            )
+    from station.tables import is_terminal, print_table
+
+    columns = ("image", "pattern", "plane", "edges", "d (px)", "d_max (px)", "median offset from green (px)")
+    planes = [
+        (img["path"], img["pattern"], r["plane"], str(r["edges"]), f"{r['d']:.4f}", f"{r['d_max']:.4f}")
+        + (f"{r['median_offset_px']:.4f}",)
+        for img in per_image
+        for r in img["planes"]
+    ]
+    print_table(columns, planes, title="colour planes", right=columns[3:])
+    if not is_terminal():
+        print()  # a blank line after the table
     for c, f in fits.items():
         print(
             f"channel {c}: TCA seen {f.offset_rms:.4f} px RMS, left by the field {f.residual_rms:.4f} px; "

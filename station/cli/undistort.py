@@ -26,6 +26,7 @@ import numpy as np
 
 from pipeline.model_file import read_model_file
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
+from station.cli.commands import COMMANDS
 from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
 
@@ -40,7 +41,7 @@ class UndistortError(InputError):
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "undistort",
-        help="correct images with a fitted model",
+        help=COMMANDS["undistort"],
         description=("Write distortion-corrected images (same format, channels and bit depth) into DIR."),
     )
     p.add_argument("model", metavar="MODEL", help="harp model file")

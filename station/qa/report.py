@@ -10,8 +10,12 @@ Per focus setting:
 * ``residuals_f<i>.png`` — RMS distance of each edge's points to its
   regression line before and after the correction (log scale), grouped by
   orientation;
-* ``overlay_f<i>_o<j>.png`` — one per orientation: the averaged frame with its
-  edges coloured by their residual (:func:`station.overlay.write_overlay`);
+* ``overlay_f<i>_o<j>.jpg`` — one per orientation: the averaged frame with its
+  edges coloured by their residual (:func:`station.qa.overlay.write_overlay`), sized for a
+  screen (at most :data:`~station.qa.overlay.SCREEN_MAX_SIDE` px, JPEG); which focus settings
+  keep them is the report's ``overlays`` (``report.overlays`` of the configuration,
+  :data:`station.config.OVERLAY_RETENTION`: ``all``, ``failed`` — only a focus setting that
+  failed QA —, ``none``);
 * ``uncertainty_f<i>.png`` — the bootstrap field uncertainty map
   (:func:`pipeline.uncertainty.bootstrap_field_uncertainty`);
 
@@ -44,6 +48,7 @@ from pipeline.resample import DEFAULT_T
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from station.config import OVERLAY_RETENTION
 from station.profile import Profile, Verdict
 from station.qa.evidence import stored_measurement, stored_uncertainty
 from station.session import layout
@@ -245,9 +250,16 @@ class Figure:
 
 
 def _write_overlay(image: np.ndarray, m: Any, path, title: str = "") -> Path:
-    from station.qa.overlay import write_overlay
+    from station.qa.overlay import SCREEN_MAX_SIDE, write_overlay
 
-    return write_overlay(path, image, m, title=title)
+    return write_overlay(path, image, m, title=title, max_side=SCREEN_MAX_SIDE)
+
+
+def keeps_overlays(overlays: str, verdict: Verdict) -> bool:
+    """Whether a focus setting of this verdict keeps its overlays under ``overlays`` (all, failed, none)."""
+    if overlays not in OVERLAY_RETENTION:
+        raise ValueError(f"overlays: expected one of {', '.join(OVERLAY_RETENTION)}, got {overlays!r}")
+    return overlays == "all" or (overlays == "failed" and verdict.verdict != "PASS")
 
 
 FIGURE_KINDS = {
@@ -331,13 +343,15 @@ def write_report(
     context: Sequence[tuple[str, str]] = (),
     warnings: Sequence[str] = (),
     workers: int = 1,
+    overlays: str = "all",
 ) -> Path:
-    """Write ``report.md`` and its PNGs into ``out_dir`` (created); returns the Markdown path.
+    """Write ``report.md`` and its pictures into ``out_dir`` (created); returns the Markdown path.
 
     ``context``: (what, value) rows shown under the verdict (date, station, software,
     configuration and its SHA-256, devices); ``warnings``: lines shown as warnings (a device
     that reported another identity than the configuration's); ``workers``: processes that
-    draw the PNGs (:func:`draw_figures`)."""
+    draw the pictures (:func:`draw_figures`); ``overlays``: which focus settings keep their
+    overlays (:func:`keeps_overlays`)."""
     import datetime as _dt
 
     out = Path(out_dir)
@@ -417,10 +431,19 @@ def write_report(
             md += ["### Field uncertainty", "", f"![field uncertainty]({name})", ""]
         elif e.uncertainty_note:
             md += ["### Field uncertainty", "", e.uncertainty_note, ""]
-        if e.shots:
+        if e.shots and not keeps_overlays(overlays, e.verdict):
+            md += [
+                "### Overlays",
+                "",
+                f"Not kept (overlays: {overlays}"
+                + ("; this focus setting passed QA)." if overlays == "failed" else ").")
+                + " `harp qa SESSION_DIR --report DIR --overlays all` draws them from the session's frames.",
+                "",
+            ]
+        elif e.shots:
             md += ["### Overlays (edges coloured by their distance to their own line, before correction)", ""]
             for j, s in enumerate(e.shots):
-                name = f"overlay_f{i}_o{j}.png"
+                name = f"overlay_f{i}_o{j}.jpg"
                 caption = f"{label}, stage {s.orientation_deg:g} deg"
                 # float32 holds an average of a few 8- or 16-bit frames for display (half the bytes to a worker)
                 image = np.asarray(s.image, np.float32)
@@ -596,9 +619,11 @@ def write_session_report(
     thresholds=None,
     interpolation: Sequence = (),
     bootstrap_if_missing: int = 0,
+    overlays: str | None = None,
 ) -> Path:
     """Report of a session's profiles: ``(focus_idx, profile)`` as
-    :func:`station.qa.session_profiles` returns them, ``verdicts`` in the same order.
+    :func:`station.qa.session_profiles` returns them, ``verdicts`` in the same order;
+    ``overlays``: which keep their overlays (None: the session configuration's ``report.overlays``).
     Returns the Markdown path."""
     evidence = [
         session_evidence(
@@ -623,6 +648,7 @@ def write_session_report(
         context=context,
         warnings=warnings,
         workers=session.config.pipeline.workers,
+        overlays=session.config.report.overlays if overlays is None else overlays,
     )
 
 

@@ -257,10 +257,14 @@ def judge_targets(
 
 
 # ----------------------------------------------------------------- report
-def write_qa_report(directory: Path, title: str, targets: list[Target], judged: Judgement, session: Any) -> Path:
+def write_qa_report(
+    directory: Path, title: str, targets: list[Target], judged: Judgement, session: Any, overlays: str | None = None
+) -> Path:
     """Write the report of ``judged`` into ``directory`` (:func:`station.qa.report.write_report`):
     for a session, each focus setting's evidence from its directory (the uncertainty map
-    bootstrapped if it kept none); for a stored lens, the stored model and figures."""
+    bootstrapped if it kept none); for a stored lens, the stored model and figures.
+    ``overlays``: which focus settings keep their overlays (None: a session's ``report.overlays``,
+    else all)."""
     from station.qa.report import FocusEvidence, session_context, session_evidence, write_report
 
     evidence = []
@@ -302,6 +306,7 @@ def write_qa_report(directory: Path, title: str, targets: list[Target], judged: 
         context=context,
         warnings=warnings,
         workers=session.config.pipeline.workers if session is not None else 1,
+        overlays=overlays or (session.config.report.overlays if session is not None else "all"),
     )
 
 

@@ -36,6 +36,7 @@ import numpy as np
 from station.config import Config, ConfigError, load_config
 from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
+from station.session.frame_files import decode_frame, encode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import frame_key, stored_key
 from station.session.records import (
@@ -53,32 +54,6 @@ from station.session.records import (
 
 class SessionError(RuntimeError):
     """A session directory that cannot be used; message is one line."""
-
-
-def encode_pgm(image: np.ndarray) -> bytes:
-    """Binary PGM (P5) of a 2-D uint8 or uint16 array (16-bit big-endian)."""
-    image = np.asarray(image)
-    if image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"a frame must be a 2-D uint8/uint16 array, got {image.dtype} {image.shape}")
-    maxval = 255 if image.dtype == np.uint8 else 65535
-    h, w = image.shape
-    body = image.astype(">u2").tobytes() if maxval == 65535 else np.ascontiguousarray(image).tobytes()
-    return f"P5\n{w} {h}\n{maxval}\n".encode("ascii") + body
-
-
-def decode_pgm(data: bytes) -> np.ndarray:
-    """Inverse of :func:`encode_pgm` (also reads PGMs with comments)."""
-    m = re.match(rb"P5\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s+(?:#[^\n]*\n\s*)*(\d+)\s", data)
-    if not m:
-        raise ValueError("not a binary PGM (P5) file")
-    w, h, maxval = (int(g) for g in m.groups())
-    dtype = np.uint8 if maxval < 256 else np.dtype(">u2")
-    n = w * h * (1 if maxval < 256 else 2)
-    body = data[m.end() : m.end() + n]
-    if len(body) != n:
-        raise ValueError(f"truncated PGM: {len(body)} of {n} bytes")
-    img = np.frombuffer(body, dtype=dtype).reshape(h, w)
-    return img.astype(np.uint16) if maxval >= 256 else img.copy()
 
 
 def read_session_file(path: Path) -> dict:
@@ -310,7 +285,7 @@ class SessionDir(ManifestReads):
         """Write a frame atomically, then record it in the manifest; returns its record (with its time)."""
         attempt = self.attempt(focus_idx, orientation_idx)
         rel = layout.frame_file(focus_idx, orientation_idx, attempt, frame_idx)
-        data = encode_pgm(image)
+        data = encode_frame(image)
         atomic_write_bytes(self.path / rel, data)
         line = self.append(
             FrameSaved(
@@ -323,7 +298,7 @@ class SessionDir(ManifestReads):
         """Write ``arrays`` as an ``.npz`` at ``relpath`` (inside the session) atomically;
         returns ``{"file": relpath, "sha256": ...}`` for the record that uses it."""
         buf = io.BytesIO()
-        np.savez(buf, **arrays)
+        np.savez_compressed(buf, **arrays)  # deflate: lossless, what np.load reads
         data = buf.getvalue()
         path = self.path / relpath
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -340,10 +315,12 @@ class SessionDir(ManifestReads):
 
     # ---------------------------------------------------------------- reads
     def read_frame(self, record: FrameSaved, verify: bool = True) -> np.ndarray:
+        """The frame of a record, exactly as captured (a PNG frame, or a PGM of an older session:
+        :func:`~station.session.frame_files.decode_frame`), checked against the manifest's SHA-256."""
         data = (self.path / record.file).read_bytes()
         if verify and hashlib.sha256(data).hexdigest() != record.sha256:
             raise SessionError(f"{self.path / record.file}: checksum does not match the manifest")
-        return decode_pgm(data)
+        return decode_frame(data)
 
     def done_keys(self) -> set[tuple]:
         """Keys for :func:`station.plan.plan_session` of what this session already has."""

@@ -5,7 +5,8 @@ Layout (paths relative to the session directory ``DIR``)::
     session.json                     what the session is (written once, atomically)
     config.yaml                      verbatim copy of the configuration it runs
     manifest.jsonl                   one JSON record per line (station.session.records)
-    frames/f{f}_o{o}_a{a}_i{i}.pgm   frame i of attempt a of orientation o at focus setting f
+    frames/f{f}_o{o}_a{a}_i{i}.png   frame i of attempt a of orientation o at focus setting f, lossless
+                                     (station.session.frame_files; .pgm in older sessions)
     measurements/f{f}_o{o}_a{a}.npz  the measured edges of that shot (station.session.evidence)
     profiles/focus{f}.yaml           the profile (model file) of focus setting f
     profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
@@ -46,7 +47,7 @@ _PROFILE = re.compile(r"focus(\d+)\.yaml")
 
 
 def frame_file(focus_idx: int, orientation_idx: int, attempt: int, frame_idx: int) -> str:
-    return f"{FRAMES}/f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.pgm"
+    return f"{FRAMES}/f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.png"
 
 
 def measurement_file(focus_idx: int, orientation_idx: int, attempt: int) -> str:

@@ -84,7 +84,8 @@ class Tally:
 
 
 class ConsoleProgress:
-    """A :class:`Tally` shown on a ``rich.console.Console``: progress bars, notes, summary table."""
+    """A :class:`Tally` shown on a ``rich.console.Console``: progress bars (on a terminal only), notes,
+    summary table."""
 
     def __init__(self, console: Any, tally: Tally) -> None:
         self.console = console
@@ -97,6 +98,8 @@ class ConsoleProgress:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.config = config
+        if not getattr(self.console, "is_terminal", False):
+            return  # progress bars only on a terminal: a pipe or a file gets the lines and the table
         self._progress = Progress(
             TextColumn("{task.description:>8}"),
             BarColumn(),

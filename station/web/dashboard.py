@@ -14,7 +14,9 @@ data (:mod:`station.web.dashboard_data`):
                                            of the passed lenses)
 ``/profiles/{id}/field.png``               the field plot (session report's, else rendered)
 ``/profiles/{id}/uncertainty.png``         the field-uncertainty plot
-``/profiles/{id}/export/{format}``         the profile in an export format (download)
+``/profiles/{id}/export/{format}``         the profile in an export format (download); a
+                                           profile that failed QA is refused (409) unless
+                                           ``?allow-failed=1``: then logged, stamped FAILED QA
 =========================================  ==================================================
 
 A serial shared by several lens models takes ``?maker=...&model=...``. Files are found from what
@@ -35,6 +37,7 @@ from starlette.routing import Route
 
 from station.web import create_app, render
 from station.web import dashboard_data as data
+from station.web.app import log
 from station.web.charts import ChartPoint, control_chart, verdict_bars
 from station.web.profile_files import ProfileFiles, Served, Unavailable
 
@@ -171,6 +174,28 @@ def _served(s: Served) -> Response:
     return Response(s.data, media_type=s.media_type, headers=headers)
 
 
+def _export_refused(request: Request, profile: Any) -> Response | None:
+    """409 for an export of a profile that failed QA (the rule of :func:`station.profile_choice.export_refusal`),
+    unless ``?allow-failed=1``: then None, and a log line names the profile and the client."""
+    from station.profile_choice import export_refusal, failed_line, lens_row
+
+    lens = lens_row(profile)
+    refusal = export_refusal(lens, profile, f"?{data.ALLOW_FAILED}=1")
+    if refusal is None:
+        return None
+    if request.query_params.get(data.ALLOW_FAILED) != "1":
+        return _err(409, refusal)
+    client = f"{request.client.host}:{request.client.port}" if request.client else "unknown client"
+    log.warning(
+        "harp serve: %s: exported as %s to client %s because of ?%s=1 (the file is stamped FAILED QA)",
+        failed_line(lens, profile),
+        request.path_params["fmt"],
+        client,
+        data.ALLOW_FAILED,
+    )
+    return None
+
+
 def _file_endpoint(what: str) -> Any:
     async def endpoint(request: Request) -> Response:
         store = _store(request)
@@ -185,6 +210,9 @@ def _file_endpoint(what: str) -> Any:
             elif what == "uncertainty":
                 s = await _call(files.uncertainty_plot, profile)
             else:
+                refused = _export_refused(request, profile)
+                if refused is not None:
+                    return refused
                 s = await _call(files.export, profile, request.path_params["fmt"])
         except Unavailable as exc:
             return _err(404, str(exc))

@@ -17,6 +17,10 @@ from typing import Any
 from urllib.parse import quote, urlencode
 
 from station.profile import Profile
+from station.profile_choice import is_failed
+
+ALLOW_FAILED = "allow-failed"
+"""The query parameter that makes the dashboard serve an export of a profile that failed QA."""
 
 
 class NotFound(LookupError):
@@ -120,7 +124,10 @@ def find_lens(store: Any, serial: str, maker: str | None = None, model: str | No
 
 # -------------------------------------------------------------- one lens
 def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
-    """What the lens page shows of one profile: figures, verdict with every check, plots, downloads."""
+    """What the lens page shows of one profile: figures, verdict with every check, plots, downloads.
+
+    A profile that failed QA has no ``downloads``: its exports are listed in ``downloads_failed_qa``,
+    each URL with ``?allow-failed=1`` (the export then says FAILED QA in the file, and the server logs it)."""
     from pipeline.exports.registry import FORMATS
 
     m = p.merit
@@ -129,6 +136,12 @@ def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
     prov = p.provenance
     reprocess = prov.extra.get("reprocess") if isinstance(prov.extra, Mapping) else None
     assert p.id is not None
+    failed = is_failed(p)  # a failed profile is not offered: only a deliberate download, stamped FAILED QA
+    query = f"?{ALLOW_FAILED}=1" if failed else ""
+    files = [
+        {"format": name, "summary": fmt.summary, "url": f"/profiles/{p.id}/export/{name}{query}"}
+        for name, fmt in FORMATS.items()
+    ]
     return {
         "id": p.id,
         "focus": p.focus,
@@ -159,10 +172,8 @@ def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
         "checks": [c.to_dict() for c in qa.checks] if qa is not None else [],
         "thresholds": dict(qa.thresholds) if qa is not None else {},
         "plots": {"field": f"/profiles/{p.id}/field.png", "uncertainty": f"/profiles/{p.id}/uncertainty.png"},
-        "downloads": [
-            {"format": name, "summary": fmt.summary, "url": f"/profiles/{p.id}/export/{name}"}
-            for name, fmt in FORMATS.items()
-        ],
+        "downloads": [] if failed else files,
+        "downloads_failed_qa": files if failed else [],
         "api": f"/api/profiles/{p.id}",
     }
 

@@ -181,10 +181,16 @@ class ProfileFiles:
             raise Unavailable(f"unknown export format {fmt!r}; known: {', '.join(FORMATS)}")
 
         def make() -> Served:
+            from pipeline.exports.registry import ExportOptions
             from station.export_source import export_source
 
+            options = ExportOptions()
+            if fmt == "lensfun":  # the same name check as harp export (pipeline.exports.lensfun.installed_lens)
+                from station.lensfun_databases import installed_databases
+
+                options = ExportOptions(installed_lensfun=installed_databases())
             try:
-                ex = write_export(fmt, export_source(p))
+                ex = write_export(fmt, export_source(p), options)
             except ValueError as exc:
                 raise Unavailable(
                     f"profile #{p.id} cannot be exported as {fmt}: {' '.join(str(exc).split())}"

@@ -35,7 +35,7 @@ def test_one_job_per_focus_setting_the_session_stored(factory_archive, tmp_path)
 
 
 def test_a_missing_frame_is_the_jobs_failure_not_an_exception(copy):
-    frame = sorted((copy / "frames").glob("f1_o2_*.pgm"))[0]
+    frame = sorted((copy / "frames").glob("f1_o2_*.png"))[0]
     frame.unlink()
     r = run_jobs([FocusJob(str(copy), 1)], workers=1)[0]
     assert r.profile is None and r.focus is None

@@ -307,7 +307,7 @@ def test_maps_give_harp_undistorts_image(both, tmp_path):
     src, runs = both
     fig = _ok(runs["maps"])
     assert fig["conversion"]["max_mod_h_px"] < 0.01
-    shot = next(iter(src.shots), None) or next((src.model_file.parents[1] / "frames").glob("*.pgm"))
+    shot = next(iter(src.shots), None) or next((src.model_file.parents[1] / "frames").glob("*.png"))
     assert run_main("undistort", src.model_file, shot, "-o", tmp_path)[0] == 0
     theirs = cv2.imread(str(tmp_path / shot.name), cv2.IMREAD_UNCHANGED)
     with np.load(runs["maps"].path) as z:
@@ -514,7 +514,7 @@ def test_bad_options_exit_2_with_one_line_and_nothing_written(model_source, tmp_
 
 def test_coeffs_5_on_a_wide_lens_names_the_export_family_exit_2_nothing_written(tmp_path):
     model = tmp_path / "wide.yaml"
-    write_model_file(model, wide_radial(115.0, 1200, 900), width=1200, height=900)
+    write_model_file(model, wide_radial(150.0, 1200, 900), width=1200, height=900)
     out = tmp_path / "out.yaml"
     code, stdout, stderr = run_main("export", model, "--format", "opencv", "--coeffs", "5", "-o", out)
     assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr

@@ -114,9 +114,17 @@ def test_tables(capsys, files):
     code = main(["measure", str(files["pgm"]), str(files["png16"])])
     out, err = capsys.readouterr()
     assert code == 0 and err == ""
-    assert "overall" in out and "harp16.png" in out and "d_max" in out
+    # off a terminal: two tab-separated tables (every edge; each image and all), a blank line between
+    edges, images = out.rstrip("\n").split("\n\n")
+    edge_rows = [l.split("\t") for l in edges.splitlines()]
+    image_rows = [l.split("\t") for l in images.splitlines()]
+    assert edge_rows[0][:4] == ["image", "string", "edge", "points"] and "d_max (px)" in image_rows[0]
+    assert all(len(r) == len(edge_rows[0]) for r in edge_rows) and all(len(r) == len(image_rows[0]) for r in image_rows)
     _, doc, _ = _json(capsys, ["measure", "--json", str(files["pgm"]), str(files["png16"])])
-    assert f"{doc['d']:.4f}" in out
+    by = {r[0]: dict(zip(image_rows[0], r)) for r in image_rows[1:]}
+    assert list(by) == [str(files["pgm"]), str(files["png16"]), "all"]
+    assert by["all"]["d (px)"] == f"{doc['d']:.4f}" and by["all"]["edges"] == str(doc["n_lines"])
+    assert len(edge_rows) - 1 == doc["n_lines"]
 
 
 def test_overlay(capsys, files, tmp_path):
@@ -157,7 +165,7 @@ def test_bad_input_is_reported_and_others_still_measured(capsys, files, bad):
     # and without --json: same one line, tables for the good ones
     code = main(["measure", good, str(files[bad])])
     out, err = capsys.readouterr()
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "overall" in out
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "\nall\t" in out
 
 
 def test_only_bad_input(capsys, files):

@@ -115,11 +115,16 @@ def test_export_refuses_a_failed_profile(store, capsys, tmp_path):
     code, out, err = run(capsys, *argv, "--allow-failed")
     assert code == 0 and json.loads(out)["model"] == OTHER
     assert err.startswith("harp profile: warning: lens Acme 50mm serial S1, focus 0.5") and "--allow-failed" in err
+    # the file says so (issue 21 item 1: the same stamp as the dashboard's)
+    assert json.loads(out)["stamp"] == [
+        f"FAILED QA: profile #{ids['failed 0.5']} at focus 0.5 was judged FAIL ({FAILED_CHECK}); "
+        "exported anyway: do not use it as a calibration that passed"
+    ]
     # by id: the same rule
     code, out, err = run(capsys, "profile", "export", "--id", ids["failed 0.5"], "--format", "json", "--store", path)
     assert code == 1 and out == "" and "not exported" in err
     code, out, _ = run(capsys, "profile", "export", "--id", ids[1.0], "--format", "json", "--store", path)
-    assert code == 0 and json.loads(out)["model"] == MODEL
+    assert code == 0 and json.loads(out)["model"] == MODEL and "stamp" not in json.loads(out)
     code, _, err = run(capsys, "profile", "export", "S1", "--format", "json", "--store", path)
     assert code == 2 and "--focus" in err and err.count("\n") == 1
 
@@ -143,3 +148,8 @@ def test_interpolation_leaves_failed_profiles_out(store, capsys):
         capsys, "profile", "export", "S2", "--focus", "0.25", "--format", "json", "--store", path, "--allow-failed"
     )
     assert code == 0 and err.count("warning") == 2  # the newest of each setting used, two of them failed
+    stamp = json.loads(out)["stamp"]  # the file names the failed profiles it was interpolated from
+    assert [line.split(" was judged")[0] for line in stamp] == [
+        f"FAILED QA: profile #{ids['S2 0.0']} at focus 0",
+        f"FAILED QA: profile #{ids['S2 1.0']} at focus 1",
+    ]

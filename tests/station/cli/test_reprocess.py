@@ -35,7 +35,7 @@ def _main(argv):
 def _damage_frames(session):
     """One pixel changed in the first frame of each focus setting: the manifest's SHA-256 no longer
     matches (each job fails at its first frame)."""
-    frames = [sorted((session / "frames").glob(f"f{f}_o0_*.pgm"))[0] for f in (0, 1)]
+    frames = [sorted((session / "frames").glob(f"f{f}_o0_*.png"))[0] for f in (0, 1)]
     for frame in frames:
         data = bytearray(frame.read_bytes())
         data[-100] ^= 0x55
@@ -139,17 +139,23 @@ def test_provenance_names_the_session_the_old_profile_and_the_versions(runs):
 
 
 def test_old_and_new_figures_are_printed(runs):
+    # off a terminal: tab-separated, an old and a new column per figure, the sessions' whole paths
     _code, out, _err = runs["local"]
-    rows = [l for l in out.splitlines() if l.startswith("│ s1 ")]
-    assert len(rows) == 2, out  # the good session's two focus settings ...
-    assert any(l.startswith("│ s1-damaged") and "failed" in l for l in out.splitlines())  # ... and the damaged one
+    header, *lines = out.split("\n\n")[0].splitlines()
+    cols = header.split("\t")
+    rows = [dict(zip(cols, l.split("\t"))) for l in lines]
+    assert all(len(l.split("\t")) == len(cols) for l in lines)
+    assert "holdout d old (px)" in cols and "verdict new" in cols and "│" not in out
+    good = [r for r in rows if r["session"] == str(runs["good"])]
+    assert len(good) == 2, out  # the good session's two focus settings ...
+    assert any(r["session"].endswith("s1-damaged") and r["verdict new"] == "failed" for r in rows)  # ... the damaged
     new = _reprocessed(runs["sqlite"])
     for old in runs["before"].values():
-        row = next(r for r in rows if f" {old.focus:g} │" in r)
-        cells = [c.strip() for c in row.strip("│").split("│")]
-        assert cells[2] == f"#{old.id} → #{new[old.focus].id}"
-        assert cells[5] == f"{old.merit.holdout.d:.4f} → {new[old.focus].merit.holdout.d:.4f}"
-        assert cells[8] == "PASS → PASS"
+        row = next(r for r in good if r["focus"] == f"{old.focus:g}")
+        assert (row["profile old"], row["profile new"]) == (f"#{old.id}", f"#{new[old.focus].id}")
+        assert row["holdout d old (px)"] == f"{old.merit.holdout.d:.4f}"
+        assert row["holdout d new (px)"] == f"{new[old.focus].merit.holdout.d:.4f}"
+        assert (row["verdict old"], row["verdict new"]) == ("PASS", "PASS")
 
 
 def test_dask_cluster_gives_the_same_profiles_as_the_local_pool(runs):

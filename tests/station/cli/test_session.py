@@ -221,7 +221,7 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
     assert "**Verdict: PASS**" in md
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     expected = {f"{kind}_f{f}.png" for kind in ("field", "residuals", "uncertainty") for f in range(N_FOCUS)}
-    expected |= {f"overlay_f{f}_o{o}.png" for f in range(N_FOCUS) for o in range(N_ORI)}
+    expected |= {f"overlay_f{f}_o{o}.jpg" for f in range(N_FOCUS) for o in range(N_ORI)}
     assert sorted(links) == sorted(expected)
     for name in links:
         img = cv2.imread(str(session / "report" / name))
@@ -253,7 +253,7 @@ def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypa
     out = tmp_path / "qa-report"
     assert main(["qa", str(session), "--report", str(out), "--no-record"]) == 0
     capsys.readouterr()
-    assert sorted(p.name for p in out.glob("*.png")) == sorted(expected)
+    assert sorted(p.name for p in [*out.glob("*.png"), *out.glob("*.jpg")]) == sorted(expected)
     assert "RMS" in (out / "report.md").read_text()
 
 

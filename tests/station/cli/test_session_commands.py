@@ -56,6 +56,24 @@ def test_config_check(tmp_path, capsys):
     assert not (tmp_path / "sessions").exists() and not (tmp_path / "p.sqlite").exists()
 
 
+@pytest.mark.parametrize("value", ["some", "yes", "[all]"])
+def test_config_check_refuses_a_bad_overlay_retention(tmp_path, capsys, value):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(DEMO.read_text() + f"report:\n  overlays: {value}\n")
+    code, out, err = run(capsys, "config", "check", bad)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"{bad}: report.overlays: " in err and ("expected " in err or "quote it" in err)
+
+
+@pytest.mark.parametrize("value", ["all", "failed", "none"])
+def test_config_check_accepts_each_overlay_retention(tmp_path, capsys, value):
+    good = tmp_path / "good.yaml"
+    good.write_text(DEMO.read_text() + f"report:\n  overlays: {value}\n")
+    code, out, err = run(capsys, "config", "check", good)
+    assert code == 0 and "OK" in out
+    assert load_config(good).report.overlays == value
+
+
 def test_config_check_refuses_an_unknown_camera_key(tmp_path, capsys):
     # issue 25: keys elsewhere were refused, those under camera passed "OK" (the driver saw them only
     # when a session opened it); the driver's own key list, read without opening anything

@@ -40,7 +40,10 @@ def test_raw_files_give_the_exact_field(tmp_path, mosaics, capsys):
     out = tmp_path / "tca.yaml"
     assert main(["tca", *paths, "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "(GBRG)" in text and "lensfun poly3" in text
+    assert "lensfun poly3" in text
+    header, *planes = text.split("\n\n")[0].splitlines()  # off a terminal: the planes tab-separated
+    assert header.split("\t")[:4] == ["image", "pattern", "plane", "edges"]
+    assert {tuple(r.split("\t")[:2]) for r in planes} == {(p, "GBRG") for p in paths}
     doc = yaml.safe_load(out.read_text())
     truth = colour_lens(W, H)["tca"]
     for ch in "RB":

@@ -36,14 +36,14 @@ def test_session_report_has_every_plot(session, tmp_path, capsys):
     assert "**Verdict: FAIL**" in md and "distortion " in md and "> 0.01 px" in md
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     expected = {"field_f0.png", "residuals_f0.png", "uncertainty_f0.png"} | {
-        f"overlay_f0_o{j}.png" for j in range(len(ANGLES))
+        f"overlay_f0_o{j}.jpg" for j in range(len(ANGLES))
     }
     assert set(links) == expected
     for name in links:
         img = png(out / name)
         assert min(img.shape[:2]) >= 300 and img.std() > 5  # a real picture, not a blank canvas
     # the overlays are the frames themselves (plus the legend panel)
-    assert png(out / "overlay_f0_o0.png").shape[1] == W
+    assert png(out / "overlay_f0_o0.jpg").shape[1] == W
     assert "bootstrap" in md or "uncertainty" in md
     page = (out / "index.html").read_text()  # the same report as a page embedding the same PNGs
     assert sorted(re.findall(r'<img alt="[^"]*" src="([^"]+)">', page)) == sorted(links)
@@ -146,3 +146,76 @@ def test_figures_drawn_in_worker_processes_are_the_ones_drawn_here(session, tmp_
     broken[-1] = Figure("overlay", (shots[0].image, shots[0].measurement, tmp_path / "missing" / "o.png"), {})
     with pytest.raises(OSError, match="missing"):
         draw_figures(broken, workers=2)
+
+
+def test_report_overlays_are_sized_for_a_screen(session, tmp_path):
+    # a 5 MP camera's overlay: shrunk to SCREEN_MAX_SIDE along its longer side, JPEG (the drawing is the
+    # full-size overlay's, averaged down)
+    from station.qa.overlay import SCREEN_MAX_SIDE, render_overlay
+    from station.qa.report import Figure, draw_figure
+
+    with SessionDir.open(session) as s:
+        shot = session_shots(s, 0, t=30)[0]
+    big = cv2.resize(np.asarray(shot.image, np.float32), (2592, 1944), interpolation=cv2.INTER_LINEAR)
+    path = draw_figure(Figure("overlay", (big, shot.measurement, tmp_path / "o.jpg"), {"title": "big"}))
+    data = path.read_bytes()
+    assert data[:2] == b"\xff\xd8" and len(data) < 400_000  # JPEG; a full-size PNG of it is ~5 MB
+    got = png(path)
+    full = render_overlay(big, shot.measurement, "big")
+    assert max(got.shape[:2]) == SCREEN_MAX_SIDE
+    assert got.shape[1] / got.shape[0] == pytest.approx(full.shape[1] / full.shape[0], rel=2e-3)
+    # the same picture: the full-size drawing shrunk the same way, within JPEG's error
+    want = cv2.resize(full, (got.shape[1], got.shape[0]), interpolation=cv2.INTER_AREA)
+    assert np.mean(np.abs(got.astype(float) - want)) < 3.0
+
+
+def overlay_files(out):
+    return sorted(p.name for p in out.glob("overlay_*"))
+
+
+@pytest.mark.parametrize(
+    "overlays, limit, kept",
+    [
+        ("all", None, True),
+        ("none", None, False),
+        ("failed", None, False),  # the session passes: nothing failed, no overlay kept
+        ("failed", "0.01", True),  # the same focus setting failing QA keeps its overlays
+    ],
+)
+def test_overlay_retention_option(session, tmp_path, capsys, overlays, limit, kept):
+    out = tmp_path / "report"
+    args = ["qa", str(session), "--report", str(out), "--overlays", overlays, "--no-record"]
+    code = main(args + (["--max-distortion", limit] if limit else []))
+    capsys.readouterr()
+    assert code == (1 if limit else 0)
+    md = (out / "report.md").read_text()
+    if kept:
+        assert overlay_files(out) == [f"overlay_f0_o{j}.jpg" for j in range(len(ANGLES))]
+        assert "Not kept" not in md
+    else:
+        assert overlay_files(out) == [] and "overlay_" not in md
+        assert f"Not kept (overlays: {overlays}" in md
+    assert sorted(p.name for p in out.glob("*.png")) == ["field_f0.png", "residuals_f0.png", "uncertainty_f0.png"]
+
+
+def test_overlay_retention_from_the_session_configuration(session, tmp_path, capsys):
+    import shutil
+
+    copy = tmp_path / "s"
+    shutil.copytree(session, copy)
+    with open(copy / "config.yaml", "a") as fh:
+        fh.write("report:\n  overlays: none\n")
+    out = tmp_path / "r1"
+    assert main(["qa", str(copy), "--report", str(out), "--no-record"]) == 0
+    assert overlay_files(out) == [] and "Not kept (overlays: none)" in (out / "report.md").read_text()
+    out = tmp_path / "r2"  # the option overrides the configuration
+    assert main(["qa", str(copy), "--report", str(out), "--overlays", "all", "--no-record"]) == 0
+    capsys.readouterr()
+    assert len(overlay_files(out)) == len(ANGLES)
+
+
+def test_overlay_retention_bad_value_is_one_line(session, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["qa", str(session), "--report", str(tmp_path / "r"), "--overlays", "some"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "--overlays" in err and "Traceback" not in err

@@ -11,11 +11,10 @@ from station.session.directory import (
     MANIFEST,
     SessionDir,
     SessionError,
-    decode_pgm,
-    encode_pgm,
     read_manifest,
     read_records,
 )
+from station.session.frame_files import decode_pgm, encode_pgm
 from station.session.plan import frame_key, stored_key
 from station.session.records import ShotMeasured, Stored
 
@@ -62,7 +61,7 @@ def test_records_read_back_typed_beside_the_lines_as_written(tmp_path):
         assert [type(r).__name__ for r in s.typed] == ["FrameSaved", "Stored", "Stored", "ShotMeasured", "ShotMeasured"]
         assert all(r.t is not None for r in s.typed) and s.stored_ids() == {0: 5, 1: 6}
         assert s.last(ShotMeasured, focus_idx=0, orientation_idx=0).file == "m1.npz"
-        assert s.last(ShotMeasured, focus_idx=1) is None and s.frames(0, 0)[0].file.endswith("_a0_i0.pgm")
+        assert s.last(ShotMeasured, focus_idx=1) is None and s.frames(0, 0)[0].file.endswith("_a0_i0.png")
     assert read_records(tmp_path / "s" / MANIFEST) == s.typed
 
 
@@ -74,7 +73,7 @@ def test_reject_supersedes_frames(tmp_path):
         s.append({"kind": "reject", "focus_idx": 1, "orientation_idx": 2, "reasons": ["dark"]})
         assert s.frames(1, 2) == [] and s.done_keys() == set()
         rec = s.write_frame(1, 2, 0, img + 5)
-        assert rec.attempt == 1 and rec.file.endswith("_a1_i0.pgm")
+        assert rec.attempt == 1 and rec.file.endswith("_a1_i0.png")
         assert s.done_keys() == {frame_key(1, 2, 0)}
 
 

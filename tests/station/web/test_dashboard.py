@@ -261,3 +261,102 @@ def test_a_token_is_required_off_localhost(dashboard):
         assert _get(srv, "/api/lenses", token="wrong")[0] == 401
         status, _h, body = _get(srv, "/api/lenses", token="s3cret-token")
         assert status == 200 and len(json.loads(body)["lenses"]) == 6
+
+
+# ------------------------------------------------------- failed profiles (issue 21 item 1)
+def _failed(store):
+    """A profile of the lens the plan makes fail QA (DEMO-0006), and the checks it failed as judged."""
+    p = next(p for p in store.profiles() if p.lens.serial == "DEMO-0006" and p.focus == 0.0)
+    assert p.qa is not None and p.qa.verdict == "FAIL"
+    return p, [c for c in p.qa.checks if c.passed is False]
+
+
+def _stamp_of(fmt, body):
+    """The text where each format states the stamp, read the way its consumers read the file."""
+    import OpenEXR
+
+    if fmt == "maps":
+        with np.load(io.BytesIO(body)) as z:
+            return str(z["notes"])
+    if fmt == "stmap":
+        with OpenEXR.File(io.BytesIO(body)) as f:  # the EXR header, as Nuke shows it
+            return str(f.header()["comments"])
+    if fmt == "json":
+        return "\n".join(json.loads(body)["stamp"])
+    return body.decode()
+
+
+def test_an_export_of_a_failed_profile_is_refused_unless_allowed(sqlite_served, caplog):
+    from pipeline.exports.registry import FORMATS
+
+    srv, store, _stored = sqlite_served
+    p, failed = _failed(store)
+    assert failed and failed[0].name == "holdout_d"  # the plan's failing lens: holdout d too large
+    for query in ("", "?allow-failed=0", "?allow-failed=yes", "?allow_failed=1"):
+        status, h, body = _get(srv, f"/profiles/{p.id}/export/opencv{query}")
+        assert status == 409 and h["content-type"] == "application/json" and "content-disposition" not in h
+        msg = json.loads(body)["error"]
+        assert msg.startswith(f"lens {MAKER} {MODEL} serial DEMO-0006, focus 0: profile #{p.id} failed QA (holdout")
+        assert msg.endswith("; not exported (?allow-failed=1 exports it anyway)")
+    # allowed: served, logged (profile and client), and every format says FAILED QA where its readers look
+    stamp = f"FAILED QA: profile #{p.id} at focus 0 was judged FAIL (holdout"
+    for fmt in FORMATS:
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="station.web"):
+            status, h, body = _get(srv, f"/profiles/{p.id}/export/{fmt}?allow-failed=1")
+        assert status == 200 and h["content-disposition"].startswith('attachment; filename="DEMO-0006-focus0-')
+        assert stamp in _stamp_of(fmt, body), fmt
+        (rec,) = [r for r in caplog.records if r.name == "station.web"]
+        line = rec.getMessage()
+        assert f"profile #{p.id} failed QA" in line and f"exported as {fmt} to client 127.0.0.1:" in line
+    # the stamp is the first comment of the text formats, and OpenCV still reads the file
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/opencv?allow-failed=1")
+    comments = [line for line in body.decode().splitlines() if line.startswith("#")]
+    assert comments[0].startswith("# OpenCV pinhole") and comments[1].startswith(f"# {stamp}")
+    fs = cv2.FileStorage(body.decode(), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    assert fs.getNode("camera_matrix").mat().shape == (3, 3)
+    fs.release()
+    # a passing profile: served without the parameter, no stamp, nothing logged
+    good = next(q for q in store.profiles() if q.lens.serial == "DEMO-0001" and q.focus == 0.0)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="station.web"):
+        for fmt in ("opencv", "json"):
+            status, _h, body = _get(srv, f"/profiles/{good.id}/export/{fmt}")
+            assert status == 200 and b"FAILED QA" not in body
+    assert not [r for r in caplog.records if r.name == "station.web"]
+
+
+def test_the_lens_document_offers_no_downloads_of_a_failed_profile(sqlite_served):
+    from pipeline.exports.registry import FORMATS
+
+    srv, store, _stored = sqlite_served
+    status, doc = _json(srv, "/api/lenses/DEMO-0006")
+    assert status == 200
+    for f in doc["focus"]:
+        for p in f["profiles"]:
+            assert p["verdict"] == "FAIL" and p["downloads"] == []
+            assert [d["url"] for d in p["downloads_failed_qa"]] == [
+                f"/profiles/{p['id']}/export/{name}?allow-failed=1" for name in FORMATS
+            ]
+    status, doc = _json(srv, "/api/lenses/DEMO-0001")
+    assert all(p["downloads_failed_qa"] == [] for f in doc["focus"] for p in f["profiles"])
+
+
+def test_a_lensfun_download_under_the_name_of_an_installed_lens_is_refused(sqlite_served, tmp_path, monkeypatch):
+    """The dashboard's lensfun file is checked against the installed lensfun databases as harp export's is."""
+    srv, store, _stored = sqlite_served
+    p = next(p for p in store.profiles() if p.focus == 1.0 and p.qa is not None and p.qa.passed)
+    installed = tmp_path / "lensfun"
+    installed.mkdir()
+    (installed / "mine.xml").write_text(
+        f"""<lensdatabase version="1"><lens><maker>{p.lens.maker}</maker><model>{p.lens.model}</model>
+        <mount>C</mount><cropfactor>7.2</cropfactor></lens></lensdatabase>"""
+    )
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(installed))
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/lensfun")
+    assert status == 404
+    message = json.loads(body)["error"]
+    assert "is in the installed lensfun database" in message and "mine.xml" in message
+    monkeypatch.setenv("HARP_LENSFUN_DIRS", str(tmp_path / "none"))
+    status, _h, body = _get(srv, f"/profiles/{p.id}/export/lensfun")
+    assert status == 200 and b"<lensdatabase" in body

@@ -96,6 +96,42 @@ def test_a_lens_page_shows_its_plots_and_its_downloads_load_in_opencv(page, dash
     fs.release()
 
 
+def test_a_failed_lens_offers_no_download_but_a_deliberate_stamped_one(page, dashboard, caplog):
+    """Issue 21 item 1: under a FAIL badge no download buttons; "download anyway (failed QA)" opens the
+    formats, whose files say FAILED QA; the address without ?allow-failed=1 answers 409 with one line."""
+    srv, store, _stored, _path = dashboard
+    page.goto(srv.url)
+    page.click('#lenses tr.lens[data-serial="DEMO-0006"] a')
+    page.wait_for_selector("#serial")
+    articles = page.locator("article.profile")
+    assert articles.count() == 2
+    for art in articles.all():
+        assert art.locator("h3 .verdict").inner_text() == "FAIL"
+        assert art.locator("a.download").count() == 0  # no download button
+        links = art.locator("a.download-failed")
+        assert links.count() > 0 and not links.first.is_visible()  # hidden until asked for
+        assert art.locator(".failed-qa p.bad").inner_text().startswith("FAIL profile #")
+    first = articles.first
+    pid = int(first.get_attribute("data-profile-id"))
+    profile = store.profile(pid)
+    summary = first.locator("details.download-anyway summary")
+    assert summary.inner_text() == "download anyway (failed QA)"
+    summary.click()
+    with caplog.at_level("WARNING", logger="station.web"), page.expect_download() as dl:
+        first.locator('a.download-failed[data-format="opencv"]').click()
+    text = Path(dl.value.path()).read_text()
+    assert f"# FAILED QA: profile #{pid} at focus {profile.focus:g} was judged FAIL (holdout" in text
+    fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)  # OpenCV still reads it
+    assert fs.getNode("camera_matrix").mat().shape == (3, 3)
+    fs.release()
+    logged = [r.getMessage() for r in caplog.records if r.name == "station.web"]
+    assert len(logged) == 1 and f"profile #{pid} failed QA" in logged[0] and "to client 127.0.0.1:" in logged[0]
+    # typed in the address bar without the parameter: refused, one line the browser shows
+    response = page.goto(srv.base + f"profiles/{pid}/export/opencv")
+    assert response is not None and response.status == 409
+    assert "not exported (?allow-failed=1 exports it anyway)" in page.inner_text("body")
+
+
 def test_the_lens_model_page_shows_the_control_limits(page, dashboard):
     srv, _store, stored, _path = dashboard
     page.goto(srv.url)
