@@ -20,13 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.models.base import DistortionModel
+from pipeline.models.base import image_corners as image_corners  # defined beside the models (no import circle)
 from pipeline.models.homography import HomographyModel, apply_homography
-
-
-def image_corners(width: int, height: int) -> np.ndarray:
-    """The 4 corner pixel centres ``(4, 2)``: top-left, top-right, bottom-right, bottom-left."""
-    w, h = float(width - 1), float(height - 1)
-    return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
 
 
 def _conditioning(p: np.ndarray) -> np.ndarray:

@@ -22,6 +22,13 @@ INVERSE_TOL_PX = 1e-9
 """Accuracy in pixels to which :meth:`DistortionModel.distort_points` inverts."""
 
 
+def image_corners(width: int, height: int) -> np.ndarray:
+    """The 4 corner pixel centres ``(4, 2)``: top-left, top-right, bottom-right, bottom-left
+    (pixel centres at integers; :mod:`pipeline.normalise` normalises by them)."""
+    w, h = float(width - 1), float(height - 1)
+    return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+
+
 class DistortionModel(ABC):
     """Base class: a named, serialisable map distorted -> ideal pixels."""
 
@@ -69,8 +76,6 @@ class DistortionModel(ABC):
         normalisation (:func:`pipeline.normalise.corner_homography`) maps them to: the corrected
         image corners ``U(q_i)`` and the corners ``q_i`` (a maps file overrides this with the
         corners it stores)."""
-        from pipeline.normalise import image_corners  # normalise imports this module
-
         q = image_corners(width, height)
         return self.undistort_points(q), q
 
