@@ -32,6 +32,7 @@ from drivers.protocols import (  # noqa: F401  (re-exported)
     Turntable,
     TurntableRanges,
 )
+from drivers.settings import Setting
 
 CAMERA_DRIVERS = {
     "v4l2": "drivers.v4l2_camera:V4L2Camera",
@@ -52,12 +53,13 @@ def _driver_class(table: Mapping[str, str], kind: str, cfg: Mapping[str, Any]) -
     return getattr(importlib.import_module(module), cls)
 
 
-def driver_config_keys(table: Mapping[str, str], name: str) -> frozenset[str]:
-    """The configuration keys the driver ``name`` of ``table`` accepts (its class's ``CONFIG_KEYS``,
-    ``driver`` included), without creating or opening anything."""
+def driver_settings(table: Mapping[str, str], name: str) -> Mapping[str, Setting]:
+    """The configuration keys the driver ``name`` of ``table`` accepts besides ``driver``, each with its
+    type, unit and range (its class's ``SETTINGS``, :mod:`drivers.settings`), without creating or
+    opening anything."""
     module, cls = table[name].split(":")
-    keys: frozenset[str] = getattr(importlib.import_module(module), cls).CONFIG_KEYS
-    return keys | {"driver"}
+    settings: Mapping[str, Setting] = getattr(importlib.import_module(module), cls).SETTINGS
+    return settings
 
 
 def open_camera(cfg: Mapping[str, Any], **context: Any) -> Camera:

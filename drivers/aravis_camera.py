@@ -57,7 +57,7 @@ import contextlib
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -73,6 +73,7 @@ from drivers.errors import (
 )
 from drivers.frames import to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
+from drivers.settings import Setting
 
 #: GenICam XML for Aravis' fake camera with SFNC exposure/gain names and focus features
 FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
@@ -182,26 +183,31 @@ class AravisCamera(CameraBase):
         GigE Vision stream packet size in bytes.
     """
 
-    CONFIG_KEYS = frozenset(
-        {
-            "driver",
-            "device",
-            "pixel_format",
-            "exposure_us",
-            "gain_db",
-            "focus",
-            "trigger",
-            "roi",
-            "focus_feature",
-            "focus_type",
-            "autofocus_feature",
-            "autofocus_off",
-            "gain_db_per_raw",
-            "buffers",
-            "fake_genicam_xml",
-            "packet_size",
-        }
-    )
+    SETTINGS: Mapping[str, Setting] = {
+        "device": Setting("the camera id, e.g. Basler-40012345 (see harp devices); null: the first camera found",
+                          "text", nullable=True),
+        "pixel_format": Setting("the pixel format", "text", choices=PIXEL_FORMATS),
+        "exposure_us": Setting("exposure applied at open (null: the device's)", "number", "µs", 0.0, 1e8, low_open=True,
+                               nullable=True),
+        "gain_db": Setting("gain applied at open (null: the device's)", "number", "dB", -20.0, 60.0, nullable=True),
+        "focus": Setting("focus applied at open (null: the device's), in the device's units", "number", "", -1e9, 1e9,
+                         nullable=True),
+        "trigger": Setting("'software', 'off' or a TriggerSource name such as Line0", "text"),
+        "roi": Setting("image region [x, y, width, height] (default: the full sensor)", "integers", "px", 0, 100000,
+                       length=(4, 4)),
+        "focus_feature": Setting("the vendor's focus feature (Integer or Float node)", "text", nullable=True),
+        "focus_type": Setting("how the focus feature is written", "text", choices=("auto", "integer", "float")),
+        "autofocus_feature": Setting("the autofocus feature, switched off before focus is set", "text",
+                                     nullable=True),
+        "autofocus_off": Setting("the value that switches autofocus off (default: Off or false)", "value",
+                                 nullable=True),
+        "gain_db_per_raw": Setting("dB per unit when the device only has GainRaw", "number", "dB", 0.0, 1000.0,
+                                   low_open=True),
+        "buffers": Setting("stream buffers queued to Aravis", "integer", "", 1, 256),
+        "fake_genicam_xml": Setting("GenICam XML for Fake_* devices", "text", nullable=True),
+        "packet_size": Setting("GigE Vision stream packet size", "integer", "bytes", 576, 65535, nullable=True),
+    }  # fmt: skip
+    CONFIG_KEYS = frozenset({"driver", *SETTINGS})
     CONFIG_NAME = "aravis camera"
 
     def __init__(

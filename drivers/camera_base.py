@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Self
 
 import numpy as np
@@ -29,6 +29,7 @@ import numpy as np
 from drivers.config_keys import check_config_keys
 from drivers.errors import DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
+from drivers.settings import Setting
 
 
 class CameraBase(abc.ABC):
@@ -36,6 +37,8 @@ class CameraBase(abc.ABC):
 
     #: every key ``from_config`` accepts (``driver`` included)
     CONFIG_KEYS: frozenset[str] = frozenset({"driver"})
+    #: each key's type, unit and range (:mod:`drivers.settings`), checked by ``from_config``
+    SETTINGS: Mapping[str, Setting] = {}
     #: how ``from_config`` errors name the driver, e.g. ``"v4l2 camera"``
     CONFIG_NAME = "camera"
     #: ``device`` when the configuration has none
@@ -49,8 +52,8 @@ class CameraBase(abc.ABC):
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> Self:
-        """Create (not open) from a config mapping; unknown keys raise ``ValueError``."""
-        check_config_keys(cls.CONFIG_NAME, cfg, cls.CONFIG_KEYS)
+        """Create (not open) from a config mapping; unknown keys and values outside ``SETTINGS`` raise ``ValueError``."""
+        check_config_keys(cls.CONFIG_NAME, cfg, cls.SETTINGS)
         kw = {k: v for k, v in cfg.items() if k != "driver"}
         make: Callable[..., Self] = cls  # the subclass's constructor: (device, **settings)
         return make(kw.pop("device", cls.DEFAULT_DEVICE), **kw)

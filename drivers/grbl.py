@@ -46,12 +46,14 @@ from __future__ import annotations
 import re
 import threading
 import time
+from collections.abc import Mapping
 from typing import Any, TypedDict
 
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.protocols import Range
 from drivers.ranges import effective_travel
+from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
 ERROR_CODES = {
@@ -102,24 +104,31 @@ _ALARM = re.compile(r"^ALARM:(\d+)$")
 _SETTING = re.compile(r"^\$(\d+)=([-+]?[0-9.]+)$")
 _AXES = "XYZABC"
 
-_CONFIG_KEYS = {
-    "driver",
-    "port",
-    "baudrate",
-    "axis",
-    "units_per_degree",
-    "steps_per_degree",
-    "steps_per_unit",
-    "feed",
-    "limits",
-    "reply_timeout",
-    "poll_interval",
-    "move_timeout",
-    "home_timeout",
-    "startup_timeout",
-    "tolerance_deg",
-    "name",
-}
+SETTINGS: dict[str, Setting] = {
+    "port": Setting("serial device, socket://host:port or rfc2217://host:port ('emulator': the simulated "
+                    "station's)", "text", default=REQUIRED),
+    "baudrate": Setting("serial speed", "integer", "baud", choices=(9600, 19200, 38400, 57600, 115200)),
+    "axis": Setting("the GRBL axis carrying the turntable", "text", choices=tuple(_AXES + _AXES.lower())),
+    "units_per_degree": Setting("GRBL units per table degree (not 0; negative: reversed)", "number", "units/deg",
+                                -1e6, 1e6),
+    "steps_per_degree": Setting("motor steps per table degree (instead of units_per_degree)", "number",
+                                "steps/deg", 0.0, 1e8, low_open=True),
+    "steps_per_unit": Setting("GRBL's $10x steps per unit (with steps_per_degree; default: the same)", "number",
+                              "steps/unit", 0.0, 1e8, low_open=True),
+    "feed": Setting("G1 feed rate (null: rapid G0 moves)", "number", "units/min", 0.0, 1e7, low_open=True,
+                    nullable=True),
+    "limits": Setting("[min, max] of the angles moves may reach (narrowed to the device's travel at open)",
+                      "numbers", "deg", -3600.0, 3600.0, length=(2, 2)),
+    "reply_timeout": Setting("wait for each reply", "number", "s", 0.0, 60.0, low_open=True),
+    "poll_interval": Setting("between position polls while moving", "number", "s", 0.0, 10.0, low_open=True),
+    "move_timeout": Setting("longest move", "number", "s", 0.0, 3600.0, low_open=True),
+    "home_timeout": Setting("longest homing", "number", "s", 0.0, 3600.0, low_open=True),
+    "startup_timeout": Setting("wait for the banner after a reset", "number", "s", 0.0, 60.0, low_open=True),
+    "tolerance_deg": Setting("how far from the target an idle axis may be", "number", "deg", 0.0, 10.0),
+    "name": Setting("how messages name the stage", "text"),
+}  # fmt: skip
+"""The keys of a GRBL turntable's configuration section, each with its type, unit and range."""
+_CONFIG_KEYS = {"driver", *SETTINGS}
 
 
 class GrblStatus(TypedDict):
@@ -166,6 +175,8 @@ class GrblTurntable:
 
     CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
     """Keys of this driver's configuration section (``driver`` included or implied)."""
+    SETTINGS: Mapping[str, Setting] = SETTINGS
+    """Each key's type, unit and range (:mod:`drivers.settings`)."""
 
     def __init__(
         self,
@@ -217,7 +228,7 @@ class GrblTurntable:
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> GrblTurntable:
-        check_config_keys("grbl turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
+        check_config_keys("grbl turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
         if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
             raise ValueError("grbl turntable: 'steps_per_unit' needs 'steps_per_degree'")

@@ -48,6 +48,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -62,6 +63,7 @@ from drivers.errors import (
 )
 from drivers.frames import to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
+from drivers.settings import Setting
 
 PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG")
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
@@ -106,21 +108,22 @@ class V4L2Camera(CameraBase):
         so new exposure/gain settings have taken effect.
     """
 
-    CONFIG_KEYS = frozenset(
-        {
-            "driver",
-            "device",
-            "pixel_format",
-            "width",
-            "height",
-            "exposure_us",
-            "gain_db",
-            "focus",
-            "gain_db_per_unit",
-            "buffers",
-            "discard_frames",
-        }
-    )
+    SETTINGS: Mapping[str, Setting] = {
+        "device": Setting("the video device node", "text"),
+        "pixel_format": Setting("the pixel format (FourCC)", "text", choices=PIXEL_FORMATS),
+        "width": Setting("requested frame width (with height; default: the device's)", "integer", "px", 1, 16384,
+                         nullable=True),
+        "height": Setting("requested frame height (with width)", "integer", "px", 1, 16384, nullable=True),
+        "exposure_us": Setting("exposure applied at open (null: the device's)", "number", "µs", 0.0, 1e8, low_open=True,
+                               nullable=True),
+        "gain_db": Setting("gain applied at open (null: the device's)", "number", "dB", -20.0, 60.0, nullable=True),
+        "focus": Setting("focus applied at open (null: the device's), in the device's units", "number", "", -1e9, 1e9,
+                         nullable=True),
+        "gain_db_per_unit": Setting("dB per gain-control unit", "number", "dB", 0.0, 1000.0, low_open=True),
+        "buffers": Setting("memory-mapped buffers", "integer", "", 1, 64),
+        "discard_frames": Setting("frames thrown away after the queue is flushed", "integer", "", 0, 100),
+    }  # fmt: skip
+    CONFIG_KEYS = frozenset({"driver", *SETTINGS})
     CONFIG_NAME = "v4l2 camera"
     DEFAULT_DEVICE = "/dev/video0"
 

@@ -48,6 +48,7 @@ from __future__ import annotations
 import re
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,6 +56,7 @@ from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
 from drivers.protocols import Range
 from drivers.ranges import effective_travel
+from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0
@@ -93,23 +95,29 @@ _REPLY = re.compile(
 _ALERT = re.compile(r"^!(?P<dev>\d+) (?P<axis>\d+) (?P<status>IDLE|BUSY) (?P<warn>--|[A-Z]{2})(?: .*)?$")
 _INFO = re.compile(r"^#(?P<dev>\d+) (?P<axis>\d+)(?: .*)?$")
 
-_CONFIG_KEYS = {
-    "driver",
-    "port",
-    "baudrate",
-    "device",
-    "device_address",
-    "axis",
-    "microsteps_per_degree",
-    "steps_per_degree",
-    "limits",
-    "reply_timeout",
-    "poll_interval",
-    "move_timeout",
-    "home_timeout",
-    "tolerance_microsteps",
-    "name",
-}
+SETTINGS: dict[str, Setting] = {
+    "port": Setting("serial device, socket://host:port or rfc2217://host:port ('emulator': the simulated "
+                    "station's)", "text", default=REQUIRED),
+    "baudrate": Setting("serial speed", "integer", "baud", choices=(9600, 19200, 38400, 57600, 115200)),
+    "device": Setting("device address on the chain", "integer", "", 0, 99),
+    "device_address": Setting("the same as device", "integer", "", 0, 99),
+    "axis": Setting("axis number", "integer", "", 0, 9),
+    "microsteps_per_degree": Setting("microsteps per degree of the stage", "number", "microsteps/deg", 0.0, 1e8,
+                                     low_open=True),
+    "steps_per_degree": Setting("the same as microsteps_per_degree", "number", "microsteps/deg", 0.0, 1e8,
+                                low_open=True),
+    "limits": Setting("[min, max] of the angles moves may reach (narrowed to the device's travel at open)",
+                      "numbers", "deg", -3600.0, 3600.0, length=(2, 2)),
+    "reply_timeout": Setting("wait for each reply", "number", "s", 0.0, 60.0, low_open=True),
+    "poll_interval": Setting("between position polls while moving", "number", "s", 0.0, 10.0, low_open=True),
+    "move_timeout": Setting("longest move", "number", "s", 0.0, 3600.0, low_open=True),
+    "home_timeout": Setting("longest homing", "number", "s", 0.0, 3600.0, low_open=True),
+    "tolerance_microsteps": Setting("how far from the target an idle axis may be", "integer", "microsteps", 0,
+                                    1_000_000),
+    "name": Setting("how messages name the stage", "text"),
+}  # fmt: skip
+"""The keys of a Zaber turntable's configuration section, each with its type, unit and range."""
+_CONFIG_KEYS = {"driver", *SETTINGS}
 
 
 def describe_flag(flag: str) -> str:
@@ -172,6 +180,8 @@ class ZaberTurntable:
 
     CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
     """Keys of this driver's configuration section (``driver`` included or implied)."""
+    SETTINGS: Mapping[str, Setting] = SETTINGS
+    """Each key's type, unit and range (:mod:`drivers.settings`)."""
 
     def __init__(
         self,
@@ -216,7 +226,7 @@ class ZaberTurntable:
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> ZaberTurntable:
-        check_config_keys("zaber turntable", cfg, _CONFIG_KEYS, {"port": "device name or pyserial URL"})
+        check_config_keys("zaber turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
         kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
         if "device_address" in cfg:
             if "device" in cfg:

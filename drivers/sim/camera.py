@@ -93,6 +93,7 @@ import hashlib
 import math
 import time
 from collections import deque
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -100,6 +101,7 @@ import numpy as np
 from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceDisconnected, DeviceTimeout
 from drivers.protocols import CameraIdentity, Frame, Range
+from drivers.settings import SEED_MAX, Setting
 from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
 from drivers.sim.world import SimWorld
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
@@ -117,42 +119,63 @@ _GAIN = Range(GAIN_RANGE_DB[0], GAIN_RANGE_DB[1], "dB", "simulated sensor")
 FAULT_KINDS = ("timeout", "corrupt", "disconnect")
 _TIMEOUT_WAIT_S = 0.05  # an injected timeout waits min(timeout, this) before raising
 
-_SCENE_KEYS = (
-    "spacing_px",
-    "string_width_px",
-    "phase_px",
-    "background",
-    "string_level",
-    "blur_px",
-    "vignetting",
-    "dust",
-    "dust_seed",
-    "frame",
-    "frame_level",
-    "frame_depth_px",
-    "frame_side",
-)
-_CAMERA_KEYS = (
-    "width",
-    "height",
-    "bit_depth",
-    "pixel_format",
-    "seed",
-    "noise_sigma",
-    "shot_noise",
-    "electrons_per_level",
-    "exposure_us",
-    "gain_db",
-    "reference_exposure_us",
-    "serial",
-    "focus",
-    "harp_offset_deg",
-    "best_focus",
-    "defocus_blur_px",
-    "realism_seed",
-    "jpeg_quality",
-)
-CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
+
+def _level(doc: str, low_open: bool = False) -> Setting:
+    """A grey level on the 8-bit scale."""
+    return Setting(doc, "number", "grey levels (8-bit)", 0.0, 255.0, low_open=low_open)
+
+
+SCENE_SETTINGS: dict[str, Setting] = {
+    "spacing_px": Setting("the harp's string pitch in the image", "number", "px", 4.0, 10000.0),
+    "string_width_px": Setting(
+        "the strings' width in the image (less than spacing_px)", "number", "px", 0.0, 1000.0, low_open=True
+    ),
+    "phase_px": Setting(
+        "offset of string 0 from the image centre, along the normal", "number", "px", -10000.0, 10000.0
+    ),
+    "background": _level("the lit sheet's level at the image centre", low_open=True),
+    "string_level": _level("the level inside a string"),
+    "blur_px": Setting("standard deviation of the optical PSF", "number", "px", 0.0, 100.0),
+    "vignetting": Setting("fractional fall-off at the image corners", "number", "", 0.0, 1.0, high_open=True),
+    "dust": Setting("number of dust shadows on the sensor", "integer", "", 0, 1000),
+    "dust_seed": Setting("seed placing the dust shadows", "integer", "", 0, SEED_MAX),
+    "frame": Setting("render the dark harp frame (a bar parallel to the strings)", "boolean"),
+    "frame_level": _level("the frame's level"),
+    "frame_depth_px": Setting("how far the frame enters the image", "number", "px", 0.0, 10000.0),
+    "frame_side": Setting("the side the frame enters by (+1: towards +n)", "integer", choices=(1, -1)),
+}
+"""The scene keys of the simulated camera (:class:`pipeline.render.HarpScene`'s fields): type, unit, range."""
+_SCENE_KEYS = tuple(SCENE_SETTINGS)
+
+SETTINGS: dict[str, Setting] = {
+    "width": Setting("sensor width", "integer", "px", 16, 8192),
+    "height": Setting("sensor height", "integer", "px", 16, 8192),
+    "bit_depth": Setting("bits per pixel (Mono8, Mono16)", "integer", choices=(8, 16)),
+    "pixel_format": Setting("an alternative to bit_depth", "text", choices=("Mono8", "Mono16")),
+    "seed": Setting("base seed of the sensor noise", "integer", "", 0, SEED_MAX),
+    "noise_sigma": _level("read noise at 0 dB"),
+    "shot_noise": Setting("add shot noise (grows with gain)", "boolean"),
+    "electrons_per_level": Setting("electrons per grey level at 0 dB (shot noise)", "number", "e-", 0.0, 1e6,
+                                   low_open=True),
+    "exposure_us": Setting("initial exposure", "number", "µs", *EXPOSURE_RANGE_US),
+    "gain_db": Setting("initial gain", "number", "dB", *GAIN_RANGE_DB),
+    "reference_exposure_us": Setting("exposure at which the scene has its nominal levels", "number", "µs", 0.0, 1e8,
+                                     low_open=True),
+    "serial": Setting("the serial number the camera reports", "text"),
+    "focus": Setting("initial focus of the simulated lens", "number", "", *FOCUS_RANGE),
+    "harp_offset_deg": Setting("the strings' angle at stage 0 (the simulated world's)", "number", "deg", -360.0,
+                               360.0),
+    "best_focus": Setting("the focus setting that is sharp (null: every setting sharp)", "number", "", *FOCUS_RANGE,
+                          nullable=True),
+    "defocus_blur_px": Setting("blur growth away from best_focus (needs best_focus)", "number", "px", 0.0, 1000.0),
+    "realism_seed": Setting("render with the realistic simulator drawn from this seed (null: clean renderer)",
+                            "integer", "", 0, SEED_MAX, nullable=True),
+    "jpeg_quality": Setting("JPEG quality of realistic 8-bit frames (null: none)", "integer", "", 1, 100,
+                            nullable=True),
+    **SCENE_SETTINGS,
+}  # fmt: skip
+"""The keys of the simulated camera's configuration section, each with its type, unit and range."""
+CONFIG_KEYS = ("driver", *SETTINGS)
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
 
 
@@ -199,6 +222,8 @@ class SimulatedCamera:
 
     CONFIG_KEYS: frozenset[str] = frozenset(CONFIG_KEYS)
     """Keys of this driver's configuration section."""
+    SETTINGS: Mapping[str, Setting] = SETTINGS
+    """Each key's type, unit and range (:mod:`drivers.settings`)."""
 
     def __init__(
         self,
@@ -295,7 +320,7 @@ class SimulatedCamera:
         bad value raises ValueError naming the key.
         """
         cfg = dict(cfg)
-        check_config_keys("sim camera", cfg, CONFIG_KEYS)
+        check_config_keys("sim camera", cfg, SETTINGS)
         world = world if world is not None else SimWorld()
         kw: dict[str, Any] = {}
         scene_kw: dict[str, Any] = {}

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from drivers.settings import SEED_MAX, Setting
 from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
 from drivers.sim.world import SimWorld
@@ -43,6 +44,23 @@ if TYPE_CHECKING:
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0  # 0.000234375 deg per microstep
 
 _FLAG_ORDER = {"F": 0, "W": 1, "N": 2}
+
+_LIMIT = (-(2**31), 2**31 - 1)
+SETTINGS: dict[str, Setting] = {
+    "address": Setting("device address the emulator answers to", "integer", "", 1, 99),
+    "microsteps_per_degree": Setting("microsteps per degree (default: the turntable's steps_per_degree)", "number",
+                                     "microsteps/deg", 0.0, 1e8, low_open=True),
+    "speed_deg_s": Setting("top speed of the emulated stage", "number", "deg/s", 0.0, 100000.0, low_open=True),
+    "accel_deg_s2": Setting("acceleration of the emulated stage", "number", "deg/s²", 0.0, 1e7, low_open=True),
+    "limit_min": Setting("the device's limit.min (null: 0)", "integer", "microsteps", *_LIMIT, nullable=True),
+    "limit_max": Setting("the device's limit.max (null: one turn)", "integer", "microsteps", *_LIMIT, nullable=True),
+    "position_deg": Setting("the stage's angle at start", "number", "deg", -360.0, 360.0),
+    "homed": Setting("start homed (else the WR flag is up until homing)", "boolean"),
+    "alerts": Setting("send alert messages", "boolean"),
+    "checksums": Setting("append checksums to replies", "boolean"),
+    "seed": Setting("seed of the injected faults' timing", "integer", "", 0, SEED_MAX),
+}  # fmt: skip
+"""The keyword arguments of :class:`ZaberEmulator` a configuration may set (``simulation.emulator``)."""
 
 
 def zaber_checksum(body: bytes) -> int:

@@ -54,17 +54,6 @@ def check_config(config: Config) -> ConfigCheck:
                 f"Name the vendor's focus feature (see `harp devices`)",
             )
         )
-    from drivers import CAMERA_DRIVERS, driver_config_keys
-
-    known = driver_config_keys(CAMERA_DRIVERS, cam.driver)
-    unknown = sorted(set(cam.settings) - known)
-    if unknown:
-        errors.append(
-            config.error(
-                f"station.camera.{unknown[0]}",
-                f"unknown key for the {cam.driver} camera (known: {', '.join(sorted(known - {'driver'}))})",
-            )
-        )
     port = config.station.turntable.port
     if config.simulation is None and "://" not in port and not os.path.exists(port):
         warnings.append(

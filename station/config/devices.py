@@ -1,57 +1,120 @@
-"""What a configuration asks of its devices, known without opening them; the turntable port."""
+"""What a configuration asks of its devices, known without opening them; the turntable port.
+
+:func:`check_the_devices` (the validator's last pass, :mod:`station.config.validate`):
+
+* the drivers are created, not opened, from their sections (a driver's checks across its own keys:
+  a simulated camera's ``pixel_format`` against its ``bit_depth``, ``jpeg_quality`` without
+  ``realism_seed``, strings as wide as their spacing; an Aravis ``autofocus_feature`` without a
+  ``focus_feature``...), and a simulated station's Zaber emulator;
+* orientations within the turntable's configured ``limits`` (inclusive) or, without them,
+  :data:`ROTARY_RANGE` for the rotary stages; focus settings within the simulated lens's range;
+* ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
+  every orientation (the image's extent across the strings over their spacing, two edges a string).
+
+The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
+"""
 
 from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
+from typing import Any
 
-from station.config.errors import ConfigError, shown
-from station.config.schema import EMULATOR_PORT, Config, DeviceConfig, TurntableConfig
+from drivers.settings import shown
+from station.config.schema import EMULATOR_PORT, Config
 
 ROTARY_RANGE = (0.0, 360.0)
 """Orientations of a rotary stage without configured ``limits``: ``[0, 360)`` degrees."""
 
 
-def check_what_the_devices_allow(
-    path: Path,
-    turntable: TurntableConfig,
-    camera: DeviceConfig,
-    orientations: tuple[float, ...],
-    focus_settings: tuple[float, ...],
-) -> None:
-    """What can be known without the devices: orientations within the turntable's configured
-    ``limits`` (inclusive) or, without them, ``[0, 360)`` for the rotary stages; focus settings
-    within the simulated lens's range. The devices' own ranges are checked once they are open
-    (:func:`station.session.devices.check_against_devices`)."""
-    limits = turntable.settings.get("limits")
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def created_devices(config: Config) -> tuple[Any, Any]:
+    """The camera and turntable drivers of ``config`` created (``from_config``), not opened; a driver
+    that refuses its settings is a :class:`ConfigError` naming its section."""
+    from drivers import open_camera, open_turntable
+    from drivers.errors import DriverError
+
+    devices = []
+    for key, section, make in (
+        ("camera", config.station.camera, open_camera),
+        ("turntable", config.station.turntable, open_turntable),
+    ):
+        try:
+            devices.append(make(section.as_driver_config()))
+        except (ValueError, TypeError, DriverError, OSError) as exc:
+            raise config.error(f"station.{key}", f"expected settings the {section.driver} {key} accepts: "
+                               f"{_one_line(exc)}") from None  # fmt: skip
+    return devices[0], devices[1]
+
+
+def check_the_devices(config: Config) -> None:
+    """The checks of the module docstring; :class:`ConfigError` naming the field."""
+    _orientations(config)
+    camera, _turntable = created_devices(config)
+    if config.simulation is not None:
+        from drivers.sim.zaber_emulator import ZaberEmulator
+
+        opts = dict(config.simulation.emulator)
+        if config.station.turntable.steps_per_degree is not None:
+            opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
+        try:
+            ZaberEmulator(None, **opts)
+        except (ValueError, TypeError) as exc:
+            raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
+    if config.station.camera.driver == "sim":
+        _simulated_lens_and_harp(config, camera)
+
+
+def _orientations(config: Config) -> None:
+    limits = config.station.turntable.settings.get("limits")
     if limits is not None:
-        ok = (
-            isinstance(limits, (list, tuple))
-            and len(limits) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in limits)
-            and limits[0] < limits[1]
-        )
-        if not ok:
-            raise ConfigError(path, "station.turntable.limits", f"expected [min, max] in degrees, got {shown(limits)}")
+        if not limits[0] < limits[1]:
+            raise config.error("station.turntable.limits", f"expected [min, max] in degrees, got {shown(limits)}")
         lo, hi = float(limits[0]), float(limits[1])
         inside, allowed = (lambda d: lo <= d <= hi), f"[{lo:g}, {hi:g}] (station.turntable.limits)"
     else:
         lo, hi = ROTARY_RANGE
         inside, allowed = (lambda d: lo <= d < hi), f"[{lo:g}, {hi:g}) for a rotary stage"
-    for i, deg in enumerate(orientations):
+    for i, deg in enumerate(config.capture.orientations_deg):
         if not inside(deg):
-            raise ConfigError(path, f"capture.orientations_deg[{i}]", f"expected an angle in {allowed}, got {deg:g}")
-    if camera.driver == "sim":
-        from drivers.sim.lens import FOCUS_RANGE
+            raise config.error(f"capture.orientations_deg[{i}]", f"expected an angle in {allowed}, got {deg:g}")
 
-        for i, f in enumerate(focus_settings):
-            if not FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]:
-                raise ConfigError(
-                    path,
-                    f"focus.settings[{i}]",
-                    f"expected a focus in [{FOCUS_RANGE[0]:g}, {FOCUS_RANGE[1]:g}] (the simulated lens), got {f:g}",
-                )
+
+def harp_edges(width: int, height: int, spacing_px: float, angle_deg: float) -> int:
+    """The most string edges a harp of pitch ``spacing_px`` at image angle ``angle_deg`` can show in a
+    ``width`` x ``height`` image: the image's extent along the strings' normal ``(-sin, cos)``,
+    ``width |sin| + height |cos|``, holds at most ``floor(extent / spacing) + 1`` strings, two edges each."""
+    a = math.radians(angle_deg)
+    extent = width * abs(math.sin(a)) + height * abs(math.cos(a))
+    return 2 * (math.floor(extent / spacing_px) + 1)
+
+
+def _simulated_lens_and_harp(config: Config, camera: Any) -> None:
+    from drivers.sim.lens import FOCUS_RANGE
+
+    for i, f in enumerate(config.focus_settings):
+        if not FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]:
+            raise config.error(
+                f"focus.settings[{i}]",
+                f"expected a focus in [{FOCUS_RANGE[0]:g}, {FOCUS_RANGE[1]:g}] (the simulated lens), got {f:g}",
+            )
+    width, height = camera.sensor_size
+    spacing = camera.scene.spacing_px
+    offset = config.simulation.harp_offset_deg if config.simulation is not None else config.station.harp.offset_deg
+    offset = config.station.camera.settings.get("harp_offset_deg", offset)
+    need = config.capture.checks.min_lines
+    for deg in config.capture.orientations_deg:
+        most = harp_edges(width, height, spacing, offset + deg)
+        if need > most:
+            raise config.error(
+                "capture.checks.min_lines",
+                f"expected at most {most}, the string edges the simulated harp can show at orientation {deg:g} deg "
+                f"({width}x{height} px, strings {spacing:g} px apart), got {need}",
+            )
 
 
 def check_port(config: Config) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from typing import Any
 
 
 class ConfigError(ValueError):
@@ -14,9 +13,3 @@ class ConfigError(ValueError):
         self.field = field_path
         self.expected = expected
         super().__init__(f"{self.file}: {field_path}: {expected}")
-
-
-def shown(v: Any) -> str:
-    """``v`` as a message quotes it: its repr, cut to 60 characters."""
-    s = repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."

@@ -1,28 +1,36 @@
-"""The station configuration's schema: the frozen dataclasses a configuration file becomes.
+"""The station configuration's schema: the frozen dataclasses a configuration file becomes, each
+field declared once with its type, unit, range and meaning.
 
-A configuration file describes one station (camera, turntable, harp), the
-lens and camera body being calibrated (their identities and, optionally, the
-optics an export needs: :class:`Optics`), what to capture (focus settings,
-orientations, frames per orientation, exposure), the pipeline parameters,
-the QA thresholds and where the profile store lives. Relative paths are
-relative to the directory holding the configuration file.
+A configuration file describes one station (camera, turntable, harp), the lens and camera body
+being calibrated (their identities and, optionally, the optics an export needs: :class:`Optics`),
+what to capture (focus settings, orientations, frames per orientation, exposure), the pipeline
+parameters, the QA thresholds and where the profile store lives. Relative paths are relative to
+the directory holding the configuration file.
 
-The keys each section accepts are the fields of its dataclass (:func:`keys_of`;
-the top level, ``focus`` and ``store`` from :class:`Config`'s field metadata,
-:func:`config_keys`), so a field added to a dataclass is a key of the file.
+Every key of the file is a field of these dataclasses, declared with :func:`setting` (its type is
+the field's annotation; its unit, range, default and meaning the :class:`drivers.settings.Setting`
+in the field's metadata) or a section (:func:`section`: a nested dataclass). The keys of the
+camera and turntable sections after ``driver`` are the chosen driver's (its class's ``SETTINGS``,
+declared beside the driver), those of ``simulation.emulator`` the Zaber emulator's
+(:data:`drivers.sim.zaber_emulator.SETTINGS`). :func:`document` gives the whole file as a tree of
+:class:`Section` — what :mod:`station.config.validate` checks, what the README's configuration
+reference lists (``scripts/config_reference.py``) and what the fuzz test breaks key by key.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
+import functools
+import types
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from pipeline.fitspec import KINDS, FitSpec
+from drivers.settings import REQUIRED, SEED_MAX, Setting, describe
+from pipeline.fitspec import DEGREE_BOUNDS, KINDS, FitSpec
 from pipeline.resample import DEFAULT_T
 from station.config.errors import ConfigError
 from station.store.location import SQLITE, StoreLocation, parse_store
@@ -36,13 +44,62 @@ FIT_MODELS = (*KINDS, AUTO_MODEL)
 #: turntable ``port`` value meaning "the emulator started by station.session.simulated"
 EMULATOR_PORT = "emulator"
 
+OVERLAY_RETENTION = ("all", "failed", "none")
+"""Values of ``report.overlays``: which per-orientation overlays a session report keeps (every focus
+setting's, only those of a focus setting that failed QA, none)."""
 
+
+def setting(
+    default: Any = REQUIRED,
+    doc: str = "",
+    unit: str = "",
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    choices: tuple[Any, ...] = (),
+    length: tuple[int, int | None] = (0, None),
+    unique: bool = False,
+    yaml: str | None = None,
+    optics: str | None = None,
+) -> Any:
+    """A dataclass field that is a key of the configuration file, declared once.
+
+    ``default`` (:data:`~drivers.settings.REQUIRED`: the key must be given) is the field's default;
+    ``yaml`` places a :class:`Config` field in the file (``"store.path"``); ``optics`` names the
+    section holding an :class:`Optics` field (``lens`` or ``camera_body``). The kind comes from the
+    annotation (:func:`fields_of`).
+    """
+    s = Setting(doc, None, unit, low, high, low_open, high_open, choices, length, unique, default is None, default)
+    meta = {"setting": s, "yaml": yaml, "optics": optics}
+    if default is REQUIRED:
+        return field(metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def section(factory: Any = REQUIRED, doc: str = "", *, yaml: str | None = None, drivers: str | None = None) -> Any:
+    """A dataclass field that is a section (a nested dataclass) of the configuration file.
+
+    ``factory`` builds its default (None: an optional section that is None when absent;
+    :data:`~drivers.settings.REQUIRED`: it must be given); ``drivers`` (``camera`` or ``turntable``)
+    says which driver table the section's ``driver`` key names.
+    """
+    meta = {"section": doc, "yaml": yaml, "drivers": drivers}
+    if factory is REQUIRED:
+        return field(metadata=meta)
+    if factory is None:
+        return field(default=None, metadata=meta)
+    return field(default_factory=factory, metadata=meta)
+
+
+# --------------------------------------------------------------------- data
 @dataclass(frozen=True)
 class DeviceConfig:
     """A driver name plus that driver's own settings (passed to ``from_config``)."""
 
-    driver: str
-    settings: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    driver: str = setting(doc="the driver")
+    settings: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}), metadata={"driver_settings": 1})
 
     def as_driver_config(self, **overrides) -> dict:
         """The mapping handed to :func:`drivers.open_camera` / ``open_turntable``."""
@@ -53,6 +110,9 @@ class DeviceConfig:
 
 @dataclass(frozen=True)
 class TurntableConfig(DeviceConfig):
+    """A turntable driver and its settings; ``port`` and ``steps_per_degree`` are two of the driver's
+    keys the station also reads (the simulated station's emulator)."""
+
     port: str = ""
     steps_per_degree: float | None = None
 
@@ -73,10 +133,12 @@ class HarpConfig:
     positive stage move increases that angle, -1 otherwise.
     """
 
-    string_width_mm: float
-    string_spacing_mm: float
-    offset_deg: float = 0.0
-    direction: int = 1
+    string_width_mm: float = setting(doc="the strings' diameter (less than their spacing)", unit="mm", low=0.0,
+                                     high=10.0, low_open=True)  # fmt: skip
+    string_spacing_mm: float = setting(doc="the distance between neighbouring strings", unit="mm", low=0.0,
+                                       high=1000.0, low_open=True)  # fmt: skip
+    offset_deg: float = setting(0.0, "the strings' angle in the image at stage 0", "deg", -360.0, 360.0)
+    direction: int = setting(1, "+1 when a positive stage move increases the string angle", choices=(1, -1))
 
     def expected_angle(self, stage_deg: float) -> float:
         return (self.offset_deg + self.direction * stage_deg) % 180.0
@@ -84,25 +146,20 @@ class HarpConfig:
 
 @dataclass(frozen=True)
 class StationConfig:
-    id: str
-    camera: DeviceConfig
-    turntable: TurntableConfig
-    harp: HarpConfig
+    id: str = setting(doc="the station's name, recorded with every profile")
+    camera: DeviceConfig = section(doc="the camera: `driver` and the driver's keys", drivers="camera")
+    turntable: TurntableConfig = section(doc="the turntable: `driver` and the driver's keys", drivers="turntable")
+    harp: HarpConfig = section(doc="the calibration harp")
 
 
 @dataclass(frozen=True)
 class Identity:
-    maker: str
-    model: str
-    serial: str
+    maker: str = setting(doc="the maker")
+    model: str = setting(doc="the model")
+    serial: str = setting(doc="the serial number (quote one that looks like a number)")
 
     def label(self) -> str:
         return f"{self.maker} {self.model} #{self.serial}"
-
-
-def _optic(section: str, check: tuple[float, float] | None, unit: str, doc: str) -> Any:
-    """An :class:`Optics` field: which YAML section holds it, its plausible range and unit."""
-    return field(default=None, metadata={"section": section, "range": check, "unit": unit, "doc": doc})
 
 
 @dataclass(frozen=True)
@@ -114,21 +171,21 @@ class Optics:
     (:func:`pipeline.exports.lens.camera_matrix_choice`) and let lensfun
     applications find the lens (:mod:`pipeline.exports.lensfun`). In the YAML
     file ``focal_mm`` and ``mount`` belong to ``lens``, the others to
-    ``camera_body`` (each field's ``section`` metadata); ``pixel_pitch_um`` and
-    ``sensor_width_mm`` are alternatives (give one).
+    ``camera_body`` (each field's ``optics`` metadata); ``pixel_pitch_um`` and
+    ``sensor_width_mm`` are alternatives (give one). The ranges are plausible
+    values for their unit, which catches a value written in the wrong unit (a
+    pitch of 0.0057 is millimetres, not µm).
     """
 
-    focal_mm: float | None = _optic("lens", (0.1, 10000.0), "mm", "the nominal focal length (at this zoom setting)")
-    mount: str | None = _optic("lens", None, "", "the lens mount, as lensfun names it (e.g. 'Canon EF')")
-    pixel_pitch_um: float | None = _optic(
-        "camera_body", (0.2, 100.0), "micrometres", "the pixel pitch of the images (after any binning)"
-    )
-    sensor_width_mm: float | None = _optic(
-        "camera_body", (0.5, 200.0), "mm", "the width of the sensor area the image covers"
-    )
-    crop_factor: float | None = _optic(
-        "camera_body", (0.1, 20.0), "", "the crop factor (35 mm diagonal / sensor diagonal)"
-    )
+    focal_mm: float | None = setting(None, "the nominal focal length (at this zoom setting)", "mm", 0.1, 10000.0,
+                                     optics="lens")  # fmt: skip
+    mount: str | None = setting(None, "the lens mount, as lensfun names it (e.g. 'Canon EF')", optics="lens")
+    pixel_pitch_um: float | None = setting(None, "the pixel pitch of the images (after any binning)", "µm", 0.2,
+                                           100.0, optics="camera_body")  # fmt: skip
+    sensor_width_mm: float | None = setting(None, "the width of the sensor area the image covers", "mm", 0.5, 200.0,
+                                            optics="camera_body")  # fmt: skip
+    crop_factor: float | None = setting(None, "the crop factor (35 mm diagonal / sensor diagonal)", "", 0.1, 20.0,
+                                        optics="camera_body")  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
         """The fields that are set (for a model file's provenance)."""
@@ -140,89 +197,80 @@ class Optics:
         if not isinstance(d, Mapping):
             return cls()
         kw: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            v = d.get(f.name)
-            if f.metadata["range"] is None:
-                if isinstance(v, str) and v.strip():
-                    kw[f.name] = v
-            elif optic_problem(f.name, v) is None and v is not None:
-                kw[f.name] = float(v)
+        for name, s in fields_of(cls).items():
+            v = d.get(name)
+            if v is not None and optic_problem(name, v) is None:
+                kw[name] = v if s.kind == "text" else float(v)
         return cls(**kw)
 
 
 def optics_keys(section: str) -> tuple[str, ...]:
     """The :class:`Optics` keys of YAML section ``section`` (``lens`` or ``camera_body``)."""
-    return tuple(f.name for f in dataclasses.fields(Optics) if f.metadata["section"] == section)
+    return tuple(f.name for f in dataclasses.fields(Optics) if f.metadata["optics"] == section)
 
 
 def optic_problem(name: str, value: Any) -> str | None:
-    """Why ``value`` is not valid for :class:`Optics` field ``name`` (the 'expected ...' text), or None.
+    """What :class:`Optics` field ``name`` expects (its meaning and :func:`~drivers.settings.describe`),
+    when ``value`` is not valid for it; None when it is (or is None)."""
+    from drivers.settings import problem
 
-    Numbers must lie in a plausible range for their unit, which catches a value
-    written in the wrong unit (a pitch of 0.0057 is millimetres, not µm).
-    """
-    (f,) = [f for f in dataclasses.fields(Optics) if f.name == name]
-    if value is None:
+    s = fields_of(Optics)[name]
+    if value is None or problem(s, value) is None:
         return None
-    lo_hi = f.metadata["range"]
-    if lo_hi is None:
-        if isinstance(value, str) and value.strip():
-            return None
-        return f"{f.metadata['doc']} (a non-empty string)"
-    lo, hi = lo_hi
-    unit = f" in {f.metadata['unit']}" if f.metadata["unit"] else ""
-    expected = f"{f.metadata['doc']}{unit} ({lo:g}..{hi:g})"
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        return expected
-    if not lo <= value <= hi:
-        return expected
-    return None
+    return f"{s.doc}, {describe(s)}"
 
 
 @dataclass(frozen=True)
 class RetryConfig:
-    attempts: int = 3
-    backoff_s: float = 0.2  # first wait; doubles after each failure
+    attempts: int = setting(3, "tries of a device command before the session stops", "", 1, 100)
+    backoff_s: float = setting(0.2, "the first wait between tries (doubles after each failure)", "s", 0.0, 60.0)
 
 
 @dataclass(frozen=True)
 class CheckConfig:
     """Acceptance of a captured shot (re-captured when a check fails)."""
 
-    min_lines: int = 4
-    angle_tolerance_deg: float = 3.0
-    max_saturated_fraction: float = 0.01  # of pixels at the top code value
-    min_dynamic_range: float = 0.2  # (p99 - p1) / full scale
-    max_recaptures: int = 2
+    min_lines: int = setting(4, "string edges a shot must show (at most what the harp gives in the image)", "", 1,
+                             1000)  # fmt: skip
+    angle_tolerance_deg: float = setting(3.0, "largest difference of the strings' angle from the expected one",
+                                         "deg", 0.0, 90.0, low_open=True)  # fmt: skip
+    max_saturated_fraction: float = setting(0.01, "largest fraction of pixels at the top code value", "", 0.0, 1.0)
+    min_dynamic_range: float = setting(0.2, "smallest (p99 - p1) / full scale", "", 0.0, 1.0)
+    max_recaptures: int = setting(2, "re-captures of a shot that fails its checks before the session stops", "", 0,
+                                  100)  # fmt: skip
     # px: harp live's focus check, the median 10-90 % string edge width (a sharp harp: 1.3-2 px;
     # the live demo's lens 0.17 off its best focus: 4 px); the session itself does not assess focus
-    max_edge_width_px: float = 3.0
+    max_edge_width_px: float = setting(3.0, "harp live's focus check: the largest median 10-90 % edge width", "px",
+                                       0.0, 100.0, low_open=True)  # fmt: skip
 
 
 @dataclass(frozen=True)
 class CaptureConfig:
-    orientations_deg: tuple[float, ...]
-    frames_per_orientation: int = 1
-    exposure_us: float = 10000.0
-    gain_db: float = 0.0
-    settle_s: float = 0.0
-    timeout_s: float = 5.0
-    move_timeout_s: float = 60.0
-    checks: CheckConfig = field(default_factory=CheckConfig)
-    retries: RetryConfig = field(default_factory=RetryConfig)
+    orientations_deg: tuple[float, ...] = setting(doc="turntable angles of the shots (within the turntable's "
+                                                  "limits, [0, 360) without them)", unit="deg", low=-3600.0,
+                                                  high=3600.0, length=(2, None), unique=True)  # fmt: skip
+    frames_per_orientation: int = setting(doc="frames captured at each orientation", low=1, high=1000)
+    exposure_us: float = setting(doc="exposure time", unit="µs", low=0.0, high=1e8, low_open=True)
+    gain_db: float = setting(0.0, "sensor gain", "dB", -20.0, 60.0)
+    settle_s: float = setting(0.0, "wait after each move before capturing", "s", 0.0, 60.0)
+    timeout_s: float = setting(5.0, "wait for a frame (more than the exposure)", "s", 0.1, 600.0)
+    move_timeout_s: float = setting(60.0, "wait for a turntable move", "s", 1.0, 3600.0)
+    checks: CheckConfig = section(CheckConfig, "acceptance of a captured shot")
+    retries: RetryConfig = section(RetryConfig, "device commands tried again")
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    t: int = DEFAULT_T
-    model: str = "radial"
-    degree: int | None = None  # None: the fit's default for the model
-    tangential: bool = False  # radial model: decentering terms p1, p2
-    prism: bool = False  # radial model: thin-prism terms s1..s4
-    center_prior: bool = False  # radial model: pull the distortion centre towards the image centre
-    bootstrap: int = 0  # replicates for the field uncertainty (0: not computed)
-    seed: int = 0  # of the bootstrap resampling
-    workers: int = 1  # processes for the cross-validation / bootstrap fits
+    t: int = setting(DEFAULT_T, "along-edge subsampling: one edge point kept in t (Tang et al. 2012)", "px", 1, 200)
+    model: str = setting("radial", "the distortion model (auto: chosen by cross-validation)", choices=FIT_MODELS)
+    degree: int | None = setting(None, "the model's degree (null: its default; radial 1..10, poly 3..11)", "",
+                                 min(b[0] for b in DEGREE_BOUNDS.values()), max(b[1] for b in DEGREE_BOUNDS.values()))  # fmt: skip
+    tangential: bool = setting(False, "radial model: decentering terms p1, p2")
+    prism: bool = setting(False, "radial model: thin-prism terms s1..s4")
+    center_prior: bool = setting(False, "radial model: pull the distortion centre towards the image centre")
+    bootstrap: int = setting(0, "replicates for the field uncertainty (0: not computed)", "", 0, 10000)
+    seed: int = setting(0, "seed of the bootstrap resampling", "", 0, SEED_MAX)
+    workers: int = setting(1, "processes for the cross-validation and bootstrap fits", "", 1, 256)
 
     @property
     def spec(self) -> FitSpec | None:
@@ -237,53 +285,53 @@ class PipelineConfig:
 
 @dataclass(frozen=True)
 class QAConfig:
-    max_holdout_d_px: float = 0.05
-    max_distortion_px: float | None = None
-    max_reference_deviation_px: float | None = None
-
-
-OVERLAY_RETENTION = ("all", "failed", "none")
-"""Values of ``report.overlays``: which per-orientation overlays a session report keeps (every focus
-setting's, only those of a focus setting that failed QA, none)."""
+    max_holdout_d_px: float = setting(0.05, "largest held-out straightness d of a profile", "px", 0.0, 100.0,
+                                      low_open=True)  # fmt: skip
+    max_distortion_px: float | None = setting(None, "largest correction over the image, modulo homography", "px",
+                                              0.0, 100000.0, low_open=True)  # fmt: skip
+    max_reference_deviation_px: float | None = setting(None, "largest deviation from the golden reference", "px",
+                                                       0.0, 1000.0, low_open=True)  # fmt: skip
 
 
 @dataclass(frozen=True)
 class ReportConfig:
     """What the session report keeps (:mod:`station.qa.report`)."""
 
-    overlays: str = "all"  # one of OVERLAY_RETENTION
+    overlays: str = setting("all", "which overlays the session report keeps", choices=OVERLAY_RETENTION)
 
 
 @dataclass(frozen=True)
 class SimulationConfig:
     """Present only for a simulated station (see :mod:`station.session.simulated`)."""
 
-    harp_offset_deg: float = 0.0
-    emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    harp_offset_deg: float = setting(0.0, "the strings' angle at stage 0 in the simulated world", "deg", -360.0,
+                                     360.0)  # fmt: skip
+    emulator: Mapping[str, Any] = field(
+        default_factory=lambda: MappingProxyType({}), metadata={"emulator_settings": "the Zaber emulator's options"}
+    )
 
 
-def _at(yaml_path: str | None) -> Any:
-    """Metadata of a :class:`Config` field: where it is in the YAML file (None: not from the file)."""
-    return field(metadata={"yaml": yaml_path})
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Config:
-    path: Path = _at(None)  # the file it was read from (absolute)
-    base_dir: Path = _at(None)  # relative paths are resolved against this
-    station: StationConfig = _at("station")
-    lens: Identity = _at("lens")
-    camera_body: Identity = _at("camera_body")
-    focus_settings: tuple[float, ...] = _at("focus.settings")
-    capture: CaptureConfig = _at("capture")
-    pipeline: PipelineConfig = _at("pipeline")
-    qa: QAConfig = _at("qa")
-    report: ReportConfig = _at("report")
-    store_path: Path | None = _at("store.path")  # the SQLite file of the store (None: PostgreSQL, store_url)
-    sessions_dir: Path = _at("store.sessions_dir")
-    simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
-    optics: Optics = field(default_factory=Optics, metadata={"yaml": None})  # from lens and camera_body
-    store_url: str | None = field(default=None, metadata={"yaml": "store.url"})  # as given: postgresql:// or sqlite:///
+    path: Path  # the file it was read from (absolute)
+    base_dir: Path  # relative paths are resolved against this
+    station: StationConfig = section(doc="the station's devices and harp", yaml="station")
+    lens: Identity = section(doc="the lens calibrated (and its optics for exports)", yaml="lens")
+    camera_body: Identity = section(doc="the camera body (and its optics for exports)", yaml="camera_body")
+    focus_settings: tuple[float, ...] = setting(doc="lens focus positions, in the focus feature's units",
+                                                low=-1e9, high=1e9, length=(1, None), unique=True,
+                                                yaml="focus.settings")  # fmt: skip
+    capture: CaptureConfig = section(doc="what to capture", yaml="capture")
+    pipeline: PipelineConfig = section(PipelineConfig, "what to fit", yaml="pipeline")
+    qa: QAConfig = section(QAConfig, "the QA thresholds", yaml="qa")
+    report: ReportConfig = section(ReportConfig, "the session report", yaml="report")
+    store_path: Path | None = setting(None, "the SQLite file of the profile store (null and no url: the per-user "
+                                      "store)", yaml="store.path")  # fmt: skip
+    store_url: str | None = setting(None, "the store as a URL (sqlite:///FILE or postgresql://...), instead of "
+                                    "store.path", yaml="store.url")  # fmt: skip
+    sessions_dir: Path = setting(Path("sessions"), "where session directories are created", yaml="store.sessions_dir")
+    simulation: SimulationConfig | None = section(None, "present only for a simulated station", yaml="simulation")
+    optics: Optics = field(default_factory=Optics)  # from lens and camera_body
 
     @property
     def store(self) -> StoreLocation:
@@ -297,20 +345,147 @@ class Config:
         return ConfigError(self.path, field_path, expected)
 
 
-def keys_of(cls: type) -> tuple[str, ...]:
-    """The YAML keys of a section: the fields of its dataclass, in order."""
-    return tuple(f.name for f in dataclasses.fields(cls))
+# --------------------------------------------------------------- the document
+_KINDS = {int: "integer", float: "number", bool: "boolean", str: "text", Path: "text"}
 
 
-def config_keys(section: str = "") -> tuple[str, ...]:
-    """The keys of the top level (``""``) or of ``focus`` / ``store``, from :class:`Config`'s field metadata."""
-    out: list[str] = []
+def _kind(annotation: Any) -> tuple[str, bool]:
+    """``(kind, nullable)`` of a field annotation (``float | None`` -> ``("number", True)``)."""
+    nullable = False
+    if isinstance(annotation, types.UnionType) or typing.get_origin(annotation) is typing.Union:
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        nullable = len(args) < len(typing.get_args(annotation))
+        (annotation,) = args
+    if typing.get_origin(annotation) is tuple:
+        return "numbers", nullable
+    return _KINDS[annotation], nullable
+
+
+@functools.cache
+def fields_of(cls: type) -> dict[str, Setting]:
+    """The :func:`setting` fields of dataclass ``cls`` with their kind filled in from the annotation."""
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for f in dataclasses.fields(cls):
+        s = f.metadata.get("setting")
+        if s is not None:
+            kind, nullable = _kind(hints[f.name])
+            out[f.name] = dataclasses.replace(s, kind=kind, nullable=nullable or s.nullable)
+    return out
+
+
+@dataclass(frozen=True)
+class Section:
+    """A mapping of the configuration file: its dotted ``path`` (``""``: the top level), its keys in
+    order (a :class:`~drivers.settings.Setting` or a :class:`Section` each), whether it must be given,
+    and for a driver's section the table its ``driver`` key names (``camera``, ``turntable``) and, once
+    chosen, the driver."""
+
+    path: str
+    keys: Mapping[str, Setting | Section]
+    required: bool = True
+    doc: str = ""
+    drivers: str = ""
+    driver: str = ""
+
+    def key_path(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path else key
+
+    def with_driver(self, name: str) -> Section:
+        """This driver section with the keys of driver ``name`` after ``driver``."""
+        from drivers import driver_settings
+
+        keys = dict(self.keys)
+        keys.update(driver_settings(DRIVER_TABLES[self.drivers], name))
+        return dataclasses.replace(self, keys=MappingProxyType(keys), driver=name)
+
+    def leaves(self) -> list[tuple[str, Setting]]:
+        """``(dotted path, setting)`` of every key below, in order."""
+        out: list[tuple[str, Setting]] = []
+        for key, spec in self.keys.items():
+            if isinstance(spec, Section):
+                out.extend(spec.leaves())
+            else:
+                out.append((self.key_path(key), spec))
+        return out
+
+
+def _driver_tables() -> dict[str, Mapping[str, str]]:
+    from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
+
+    return {"camera": CAMERA_DRIVERS, "turntable": TURNTABLE_DRIVERS}
+
+
+DRIVER_TABLES = _driver_tables()
+"""The driver table a driver section names its driver from (:data:`drivers.CAMERA_DRIVERS`...)."""
+
+
+def _section_of(cls: type, path: str, required: bool, doc: str, drivers: str = "", extra: Any = ()) -> Section:
+    keys: dict[str, Setting | Section] = {}
+    for f in dataclasses.fields(cls):
+        if "section" in f.metadata:
+            sub = typing.get_type_hints(cls)[f.name]
+            keys[f.name] = _section_of(
+                sub,
+                f"{path}.{f.name}" if path else f.name,
+                f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+                f.metadata["section"],
+                f.metadata["drivers"] or "",
+            )
+        elif "emulator_settings" in f.metadata:
+            from drivers.sim.zaber_emulator import SETTINGS
+
+            keys[f.name] = Section(f"{path}.{f.name}", MappingProxyType(dict(SETTINGS)), False,
+                                   f.metadata["emulator_settings"])  # fmt: skip
+    for name, s in fields_of(cls).items():
+        if name == "driver" and drivers:
+            s = dataclasses.replace(s, doc=f"the {drivers} driver", choices=tuple(sorted(DRIVER_TABLES[drivers])))
+        keys[name] = s
+    keys.update(extra)
+    order = [f.name for f in dataclasses.fields(cls)]
+    ordered = dict(sorted(keys.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
+    return Section(path, MappingProxyType(ordered), required, doc, drivers)
+
+
+@functools.cache
+def document() -> Section:
+    """The configuration file as a tree of :class:`Section` (the driver sections with ``driver`` only:
+    :meth:`Section.with_driver` adds a driver's keys)."""
+    top: dict[str, Any] = {}
+    hints = typing.get_type_hints(Config)
     for f in dataclasses.fields(Config):
         where = f.metadata.get("yaml")
         if where is None:
             continue
         head, _, rest = where.partition(".")
-        key = head if not section else (rest if head == section else "")
-        if key and key not in out:
-            out.append(key)
-    return tuple(out)
+        if "section" in f.metadata:
+            extra = {n: s for n, s in fields_of(Optics).items() if f.metadata and optics_keys(head) and n in
+                     optics_keys(head)}  # fmt: skip
+            top[head] = _section_of(
+                _unoptional(hints[f.name]),
+                head,
+                f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+                f.metadata["section"],
+                extra=extra,
+            )
+            continue
+        s = fields_of(Config)[f.name]
+        if not rest:
+            top[head] = s
+        else:
+            top.setdefault(head, {})[rest] = s
+    for head, v in list(top.items()):
+        if isinstance(v, dict):
+            required = any(s.default is REQUIRED for s in v.values())
+            top[head] = Section(head, MappingProxyType(v), required, SECTION_DOCS.get(head, ""))
+    return Section("", MappingProxyType(top), True, "the station configuration")
+
+
+SECTION_DOCS = {"focus": "the focus settings of the session", "store": "where profiles and sessions are kept"}
+"""Meaning of the sections that gather :class:`Config` fields (``focus.settings``, ``store.*``)."""
+
+
+def _unoptional(annotation: Any) -> Any:
+    if isinstance(annotation, types.UnionType):
+        (annotation,) = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return annotation

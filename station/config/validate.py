@@ -1,164 +1,49 @@
-"""Reading and validating a configuration file into :class:`station.config.schema.Config`.
+"""The one validator of a configuration file: :func:`load_config` / :func:`parse_config`.
 
-Every problem is reported as a :class:`~station.config.errors.ConfigError` whose message is ONE
-line naming the file, the dotted path of the field and what was expected, e.g.::
+Three passes, each problem one :class:`~station.config.errors.ConfigError` naming the file, the
+dotted path of the field, what was expected (its range and unit) and the value found::
 
-    configs/demo.yaml: capture.frames_per_orientation: expected an integer >= 1, got 'two'
+    configs/demo.yaml: capture.timeout_s: expected a number in [0.1, 600] s, got 0.001
+
+1. :func:`check_document` walks the document (:func:`station.config.schema.document`) over the
+   YAML: every section a mapping, no unknown key, every value of its kind and within its range
+   (:func:`drivers.settings.problem`), a driver section with the chosen driver's own keys;
+2. the values become the frozen dataclasses of :mod:`station.config.schema`;
+3. what only several fields tell (:func:`check_across`): the strings narrower than their spacing, one
+   of ``pixel_pitch_um`` and ``sensor_width_mm``, a degree the model allows, one of ``store.path``
+   and ``store.url`` and a URL that parses, a frame timeout longer than the exposure, the emulator
+   port of a simulated station, and what the devices allow (:mod:`station.config.devices`).
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
 import os
+import typing
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-import yaml
-
-from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
-from pipeline.resample import DEFAULT_T
-from station.config.devices import check_what_the_devices_allow
-from station.config.errors import ConfigError, shown
+from drivers.settings import REQUIRED, Setting, describe, problem, shown, split_item
+from station.config.devices import check_the_devices
+from station.config.errors import ConfigError
 from station.config.schema import (
     EMULATOR_PORT,
-    FIT_MODELS,
-    OVERLAY_RETENTION,
-    CaptureConfig,
-    CheckConfig,
     Config,
     DeviceConfig,
-    HarpConfig,
     Identity,
     Optics,
-    PipelineConfig,
-    QAConfig,
-    ReportConfig,
-    RetryConfig,
+    Section,
     SimulationConfig,
     StationConfig,
     TurntableConfig,
-    config_keys,
-    keys_of,
-    optic_problem,
+    document,
+    fields_of,
     optics_keys,
 )
 from station.store.errors import StoreError
 from station.store.location import parse_store, user_store_path
-
-_MISSING = object()
-
-
-class _Section:
-    """A mapping being validated, knowing its dotted path and the file."""
-
-    def __init__(self, file: Path, path: str, data: Any, known: tuple[str, ...] | None = None):
-        self.file, self.path = file, path
-        if not isinstance(data, Mapping):
-            raise ConfigError(file, path or "(top level)", f"expected a mapping, got {shown(data)}")
-        self.data = data
-        if known is not None:
-            for key in data:
-                if key not in known:
-                    raise ConfigError(file, self._p(key), f"unknown field; expected one of {', '.join(known)}")
-
-    def _p(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else str(key)
-
-    def err(self, key: str, expected: str, value: Any = _MISSING) -> ConfigError:
-        got = "missing" if value is _MISSING else f"got {shown(value)}"
-        return ConfigError(self.file, self._p(key), f"expected {expected}, {got}")
-
-    def get(self, key: str, default: Any = _MISSING) -> Any:
-        if key in self.data and self.data[key] is not None:
-            return self.data[key]
-        if default is _MISSING:
-            raise self.err(key, "a value")
-        return default
-
-    def section(self, key: str, known: tuple[str, ...] | None = None, optional: bool = False):
-        if optional and self.data.get(key) is None:
-            return _Section(self.file, self._p(key), {}, known)
-        if key not in self.data:
-            raise self.err(key, "a mapping")
-        return _Section(self.file, self._p(key), self.data[key], known)
-
-    def _given(self, key: str, default: Any, kind: str) -> Any:
-        """The value of ``key``, ``default`` when absent or null, an error when there is none."""
-        v = self.data.get(key, _MISSING)
-        if v is _MISSING or v is None:
-            if default is _MISSING:
-                raise self.err(key, kind)
-            return _MISSING
-        return v
-
-    def string(self, key: str, default: Any = _MISSING) -> str:
-        v = self._given(key, default, "a string")
-        if v is _MISSING:
-            return default
-        if isinstance(v, bool) or not isinstance(v, (str, int, float)):
-            raise self.err(key, "a string", v)
-        v = str(v)
-        if not v.strip():
-            raise self.err(key, "a non-empty string", v)
-        return v
-
-    def number(
-        self,
-        key: str,
-        default: Any = _MISSING,
-        *,
-        min: float | None = None,
-        positive: bool = False,
-        integer: bool = False,
-    ) -> Any:
-        kind = "an integer" if integer else "a number"
-        if positive:
-            kind += " > 0"
-        elif min is not None:
-            kind += f" >= {min:g}"
-        v = self._given(key, default, kind)
-        if v is _MISSING:
-            return default
-        ok = isinstance(v, int) if integer else isinstance(v, (int, float))
-        if isinstance(v, bool) or not ok or (not integer and not math.isfinite(v)):
-            raise self.err(key, kind, v)
-        if (positive and not v > 0) or (min is not None and v < min):
-            raise self.err(key, kind, v)
-        return int(v) if integer else float(v)
-
-    def boolean(self, key: str, default: Any = _MISSING) -> bool:
-        v = self._given(key, default, "true or false")
-        if v is _MISSING:
-            return default
-        if not isinstance(v, bool):
-            raise self.err(key, "true or false", v)
-        return v
-
-    def number_list(self, key: str, *, min_len: int = 1) -> tuple[float, ...]:
-        v = self.data.get(key, _MISSING)
-        expected = f"a list of at least {min_len} number{'s' if min_len > 1 else ''}"
-        if v is _MISSING or v is None:
-            raise self.err(key, expected)
-        if not isinstance(v, list) or len(v) < min_len:
-            raise self.err(key, expected, v)
-        for i, item in enumerate(v):
-            if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-                raise ConfigError(self.file, f"{self._p(key)}[{i}]", f"expected a number, got {shown(item)}")
-        if len(set(v)) != len(v):
-            raise self.err(key, "a list without repeated values", v)
-        return tuple(float(x) for x in v)
-
-
-def _device(sec: _Section, key: str, table: Mapping[str, str], kind: str) -> _Section:
-    dev = sec.section(key)
-    name = dev.data.get("driver", _MISSING)
-    if name is _MISSING or name is None:
-        raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})")
-    if not isinstance(name, str) or name not in table:
-        raise dev.err("driver", f"a {kind} driver name (one of {', '.join(sorted(table))})", name)
-    return dev
 
 
 def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
@@ -187,10 +72,12 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
 
 def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
     """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
-    path = Path(path).absolute()
-    base = Path(base_dir).absolute() if base_dir is not None else path.parent
+    import yaml
+
     from station.config.reader import ConfigReadError, load_yaml
 
+    path = Path(path).absolute()
+    base = Path(base_dir).absolute() if base_dir is not None else path.parent
     try:
         data = load_yaml(text)
     except ConfigReadError as exc:
@@ -198,167 +85,186 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "(file)"
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ConfigError(path, where, f"expected valid YAML: {problem}") from None
+        problem_text = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(path, where, f"expected valid YAML: {problem_text}") from None
     if data is None:
         raise ConfigError(path, "(top level)", "expected a mapping, got an empty file")
-    top = _Section(path, "", data, config_keys())
+    check_document(document(), data, path)
+    config = _config(data, path, base)
+    check_across(config)
+    return config
 
-    st = top.section("station", keys_of(StationConfig))
-    cam = _device(st, "camera", CAMERA_DRIVERS, "camera")
-    camera = DeviceConfig(cam.data["driver"], MappingProxyType({k: v for k, v in cam.data.items() if k != "driver"}))
-    tt = _device(st, "turntable", TURNTABLE_DRIVERS, "turntable")
-    turntable = TurntableConfig(
-        driver=tt.data["driver"],
-        settings=MappingProxyType(
-            {k: v for k, v in tt.data.items() if k not in ("driver", "port", "steps_per_degree")}
-        ),
-        port=tt.string("port"),
-        steps_per_degree=tt.number("steps_per_degree", None, positive=True),
-    )
-    hp = st.section("harp", keys_of(HarpConfig))
-    direction = hp.number("direction", 1, integer=True)
-    if direction not in (1, -1):
-        raise hp.err("direction", "1 or -1", direction)
-    harp = HarpConfig(
-        string_width_mm=hp.number("string_width_mm", positive=True),
-        string_spacing_mm=hp.number("string_spacing_mm", positive=True),
-        offset_deg=hp.number("offset_deg", 0.0),
-        direction=direction,
-    )
-    station = StationConfig(id=st.string("id"), camera=camera, turntable=turntable, harp=harp)
 
-    optic_values: dict[str, Any] = {}
+# ------------------------------------------------------------------ pass 1: the document
+def check_document(sec: Section, data: Any, file: Path) -> None:
+    """Raise :class:`ConfigError` at the first key of ``data`` that ``sec`` does not declare, or whose
+    value is missing, of another kind or out of its range (the module docstring, pass 1)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(file, sec.path or "(top level)", f"expected a mapping, got {shown(data)}")
+    if sec.drivers:
+        s = sec.keys["driver"]
+        assert isinstance(s, Setting)
+        name = data.get("driver")
+        if name is None:
+            raise ConfigError(file, sec.key_path("driver"), f"expected a {sec.drivers} driver, {describe(s)}, missing")
+        text = problem(s, name)
+        if text is not None:
+            raise ConfigError(file, sec.key_path("driver"), f"expected a {sec.drivers} driver, {text[9:]}")
+        sec = sec.with_driver(name)
+    for key in data:
+        if key not in sec.keys:
+            known = ", ".join(k for k in sec.keys if k != "driver")
+            if sec.driver:
+                expected = f"unknown key for the {sec.driver} {sec.drivers} (known: {known})"
+            else:
+                expected = f"unknown field; expected one of {known}"
+            raise ConfigError(file, sec.key_path(key), expected)
+    for key, spec in sec.keys.items():
+        value = data.get(key)
+        if isinstance(spec, Section):
+            if value is None:
+                if spec.required:
+                    raise ConfigError(file, spec.path, "expected a mapping, missing")
+                continue
+            check_document(spec, value, file)
+            continue
+        if value is None and not (key in data and spec.nullable):
+            if spec.default is REQUIRED:
+                raise ConfigError(file, sec.key_path(key), f"expected {describe(spec)}, missing")
+            continue
+        text = problem(spec, value)
+        if text is not None:
+            item, expected = split_item(text)
+            raise ConfigError(file, sec.key_path(key) + item, expected)
 
-    def identity(key: str) -> Identity:
-        s = top.section(key, (*keys_of(Identity), *optics_keys(key)))
-        for name in optics_keys(key):
-            v = s.data.get(name)
-            problem = optic_problem(name, v)
-            if problem is not None:
-                raise s.err(name, problem, v)
+
+# ------------------------------------------------------------------ pass 2: the dataclasses
+def _value(s: Setting, v: Any) -> Any:
+    if v is None:
+        return None
+    if s.kind == "number":
+        return float(v)
+    if s.kind == "integer":
+        return int(v)
+    if s.kind == "numbers":
+        return tuple(float(x) for x in v)
+    return v
+
+
+def build(cls: type, data: Mapping[str, Any]) -> Any:
+    """Dataclass ``cls`` of checked mapping ``data``: its :func:`~station.config.schema.setting` fields
+    and sections, the defaults where a key is absent or null."""
+    kw: dict[str, Any] = {}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        v = data.get(f.name)
+        if "section" in f.metadata:
             if v is not None:
-                optic_values[name] = v if isinstance(v, str) else float(v)
-        return Identity(s.string("maker"), s.string("model"), s.string("serial"))
+                kw[f.name] = build(hints[f.name], v)
+        elif "emulator_settings" in f.metadata:
+            kw[f.name] = MappingProxyType(dict(v or {}))
+    for name, s in fields_of(cls).items():
+        if data.get(name) is not None:
+            kw[name] = _value(s, data[name])
+    return cls(**kw)
 
-    lens, body = identity("lens"), identity("camera_body")
-    if "pixel_pitch_um" in optic_values and "sensor_width_mm" in optic_values:
-        raise ConfigError(path, "camera_body.sensor_width_mm", "expected pixel_pitch_um or sensor_width_mm, not both")
-    optics = Optics(**optic_values)
 
-    fo = top.section("focus", config_keys("focus"))
-    focus_settings = fo.number_list("settings")
+def _device(cls: type[DeviceConfig], data: Mapping[str, Any]) -> DeviceConfig:
+    own = ("driver", "port", "steps_per_degree") if cls is TurntableConfig else ("driver",)
+    settings = MappingProxyType({k: v for k, v in data.items() if k not in own})
+    if cls is TurntableConfig:
+        spd = data.get("steps_per_degree")
+        return TurntableConfig(data["driver"], settings, str(data["port"]), None if spd is None else float(spd))
+    return DeviceConfig(data["driver"], settings)
 
-    cp = top.section("capture", keys_of(CaptureConfig))
-    ck = cp.section("checks", keys_of(CheckConfig), optional=True)
-    d = CheckConfig()
-    checks = CheckConfig(
-        min_lines=ck.number("min_lines", d.min_lines, min=1, integer=True),
-        angle_tolerance_deg=ck.number("angle_tolerance_deg", d.angle_tolerance_deg, positive=True),
-        max_saturated_fraction=ck.number("max_saturated_fraction", d.max_saturated_fraction, min=0),
-        min_dynamic_range=ck.number("min_dynamic_range", d.min_dynamic_range, min=0),
-        max_recaptures=ck.number("max_recaptures", d.max_recaptures, min=0, integer=True),
-        max_edge_width_px=ck.number("max_edge_width_px", d.max_edge_width_px, positive=True),
+
+def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
+    st = data["station"]
+    station = StationConfig(
+        id=st["id"],
+        camera=_device(DeviceConfig, st["camera"]),
+        turntable=_device(TurntableConfig, st["turntable"]),
+        harp=build(fields_type(StationConfig, "harp"), st["harp"]),
     )
-    rt = cp.section("retries", keys_of(RetryConfig), optional=True)
-    r = RetryConfig()
-    retries = RetryConfig(
-        attempts=rt.number("attempts", r.attempts, min=1, integer=True),
-        backoff_s=rt.number("backoff_s", r.backoff_s, min=0),
-    )
-    orientations = cp.number_list("orientations_deg", min_len=2)
-    capture = CaptureConfig(
-        orientations_deg=orientations,
-        frames_per_orientation=cp.number("frames_per_orientation", min=1, integer=True),
-        exposure_us=cp.number("exposure_us", positive=True),
-        gain_db=cp.number("gain_db", 0.0),
-        settle_s=cp.number("settle_s", 0.0, min=0),
-        timeout_s=cp.number("timeout_s", 5.0, positive=True),
-        move_timeout_s=cp.number("move_timeout_s", 60.0, positive=True),
-        checks=checks,
-        retries=retries,
-    )
-
-    pp = top.section("pipeline", keys_of(PipelineConfig), optional=True)
-    pipe = PipelineConfig(
-        t=pp.number("t", DEFAULT_T, min=1, integer=True),
-        model=pp.string("model", "radial"),
-        degree=pp.number("degree", None, min=1, integer=True),
-        tangential=pp.boolean("tangential", False),
-        prism=pp.boolean("prism", False),
-        center_prior=pp.boolean("center_prior", False),
-        bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
-        seed=pp.number("seed", 0, min=0, integer=True),
-        workers=pp.number("workers", 1, min=1, integer=True),
-    )
-    if pipe.model not in FIT_MODELS:
-        raise pp.err("model", f"a distortion model name (one of {', '.join(FIT_MODELS)})", pipe.model)
-    try:
-        pipe.spec  # noqa: B018  (validates degree and terms against pipeline.fitspec)
-    except ValueError as exc:
-        raise ConfigError(path, "pipeline.degree", f"expected a degree the model allows: {exc}") from None
-
-    qs = top.section("qa", keys_of(QAConfig), optional=True)
-    q = QAConfig()
-    qa = QAConfig(
-        max_holdout_d_px=qs.number("max_holdout_d_px", q.max_holdout_d_px, positive=True),
-        max_distortion_px=qs.number("max_distortion_px", None, positive=True),
-        max_reference_deviation_px=qs.number("max_reference_deviation_px", None, positive=True),
-    )
-
-    rs = top.section("report", keys_of(ReportConfig), optional=True)
-    report = ReportConfig(overlays=rs.string("overlays", ReportConfig.overlays))
-    if report.overlays not in OVERLAY_RETENTION:
-        raise rs.err("overlays", f"one of {', '.join(OVERLAY_RETENTION)}", report.overlays)
-
-    so = top.section("store", config_keys("store"))
-    store_path, store_url = _store_of(so, base)
-    sessions_dir = Path(os.path.normpath(base / so.string("sessions_dir", "sessions")))
-
-    simulation = None
-    if "simulation" in top.data:
-        sm = top.section("simulation", keys_of(SimulationConfig))
-        emu = sm.section("emulator", optional=True)
-        simulation = SimulationConfig(
-            harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))
-        )
-    elif turntable.port == EMULATOR_PORT:
-        raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)
-
-    check_what_the_devices_allow(path, turntable, camera, orientations, focus_settings)
-
+    optics = {}
+    for part in ("lens", "camera_body"):
+        for name in optics_keys(part):
+            v = data[part].get(name)
+            if v is not None:
+                optics[name] = _value(fields_of(Optics)[name], v)
+    store = data.get("store") or {}
+    store_path, store_url = _store_of(store, path, base)
+    sections = {k: build(fields_type(Config, k), data[k]) for k in ("capture", "pipeline", "qa", "report") if
+                data.get(k) is not None}  # fmt: skip
     return Config(
         path=path,
         base_dir=base,
         station=station,
-        lens=lens,
-        camera_body=body,
-        focus_settings=focus_settings,
-        capture=capture,
-        pipeline=pipe,
-        qa=qa,
-        report=report,
+        lens=build(Identity, data["lens"]),
+        camera_body=build(Identity, data["camera_body"]),
+        focus_settings=tuple(float(f) for f in data["focus"]["settings"]),
+        **sections,
         store_path=store_path,
         store_url=store_url,
-        sessions_dir=sessions_dir,
-        simulation=simulation,
-        optics=optics,
+        sessions_dir=Path(os.path.normpath(base / store.get("sessions_dir", "sessions"))),
+        simulation=None if data.get("simulation") is None else build(SimulationConfig, data["simulation"]),
+        optics=Optics(**optics),
     )
 
 
-def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:
+def fields_type(cls: type, name: str) -> Any:
+    """The annotation of field ``name`` of dataclass ``cls``, resolved."""
+    return typing.get_type_hints(cls)[name]
+
+
+def _store_of(store: Mapping[str, Any], path: Path, base: Path) -> tuple[Path | None, str | None]:
     """``store.path`` (a file, relative to the configuration) or ``store.url`` (``sqlite:///`` or
     ``postgresql://``, :mod:`station.store.location`): at most one of them; neither is the per-user
     default store (:func:`~station.store.location.user_store_path`), the one every command finds."""
-    if "path" in so.data and "url" in so.data:
-        raise so.err("path", "one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://), not both")
-    if "path" not in so.data and "url" not in so.data:
-        return user_store_path(), None
-    if "path" in so.data:
-        return Path(os.path.normpath(base / so.string("path"))), None
-    url = so.string("url")
+    if store.get("path") is not None and store.get("url") is not None:
+        raise ConfigError(
+            path, "store.path", "expected one of store.path (a SQLite file) and store.url (sqlite:/// or "
+            "postgresql://), not both",
+        )  # fmt: skip
+    if store.get("url") is not None:
+        url = store["url"]
+        try:
+            loc = parse_store(url, base)
+        except StoreError as exc:
+            raise ConfigError(path, "store.url", f"expected a store URL: {exc}") from None
+        return loc.path, url
+    if store.get("path") is not None:
+        return Path(os.path.normpath(base / store["path"])), None
+    return user_store_path(), None
+
+
+# ------------------------------------------------------------------ pass 3: across fields
+def check_across(config: Config) -> None:
+    """What only several fields tell (the module docstring, pass 3)."""
+    harp = config.station.harp
+    if not harp.string_width_mm < harp.string_spacing_mm:
+        raise config.error(
+            "station.harp.string_width_mm",
+            f"expected less than station.harp.string_spacing_mm ({harp.string_spacing_mm:g} mm), got "
+            f"{harp.string_width_mm:g}",
+        )
+    if config.optics.pixel_pitch_um is not None and config.optics.sensor_width_mm is not None:
+        raise config.error("camera_body.sensor_width_mm", "expected pixel_pitch_um or sensor_width_mm, not both")
     try:
-        loc = parse_store(url, base)
-    except StoreError as exc:
-        raise ConfigError(so.file, so._p("url"), f"expected a store URL: {exc}") from None
-    return loc.path, url
+        config.pipeline.spec  # noqa: B018  (validates degree and terms against pipeline.fitspec)
+    except ValueError as exc:
+        raise config.error("pipeline.degree", f"expected a degree the model allows: {exc}") from None
+    cap = config.capture
+    if not cap.timeout_s > cap.exposure_us / 1e6:
+        raise config.error(
+            "capture.timeout_s",
+            f"expected more than the exposure (capture.exposure_us {cap.exposure_us:g} µs = "
+            f"{cap.exposure_us / 1e6:g} s), got {cap.timeout_s:g}",
+        )
+    tt = config.station.turntable
+    if config.simulation is None and tt.port == EMULATOR_PORT:
+        raise config.error(
+            "station.turntable.port", f"expected a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' "
+            f"section), got {tt.port!r}",
+        )  # fmt: skip
+    check_the_devices(config)

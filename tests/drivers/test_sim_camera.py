@@ -110,10 +110,13 @@ def test_config_errors_name_the_key():
         SimulatedCamera.from_config({"shot_noise": "yes"})
     with pytest.raises(ValueError, match="spacing_px"):
         SimulatedCamera.from_config({"spacing_px": 2.0})
-    with pytest.raises(ValueError, match=r"'focus': .*focus 7 is outside the range \[0, 1\]"):
+    # each key against its declaration (drivers.settings: the range, the unit, the value)
+    with pytest.raises(ValueError, match=r"config key 'focus': expected a number in \[0, 1\], got 7.0"):
         SimulatedCamera.from_config({"focus": 7.0})
-    with pytest.raises(ValueError, match=r"exposure 5 µs is outside"):
+    with pytest.raises(ValueError, match=r"config key 'exposure_us': expected a number in \[20, 1000000\] µs, got 5"):
         SimulatedCamera.from_config({"exposure_us": 5})
+    with pytest.raises(ValueError, match=r"config key 'bit_depth': expected one of 8, 16, got 12"):
+        SimulatedCamera.from_config({"bit_depth": 12})
     with pytest.raises(ValueError, match="needs best_focus"):
         SimulatedCamera.from_config({"defocus_blur_px": 3.0})
     cam = SimulatedCamera.from_config(

@@ -67,7 +67,7 @@ def test_missing_field(tmp_path):
     d = demo_data()
     del d["lens"]["serial"]
     msg = error_of(tmp_path, d)
-    assert "lens.serial: expected a string, missing" in msg
+    assert "lens.serial: expected a string (one line, at most 200 characters), missing" in msg
 
 
 def test_missing_section(tmp_path):
@@ -79,32 +79,34 @@ def test_missing_section(tmp_path):
 def test_wrong_type(tmp_path):
     d = demo_data()
     d["capture"]["frames_per_orientation"] = "two"
-    assert "capture.frames_per_orientation: expected an integer >= 1, got 'two'" in error_of(tmp_path, d)
+    assert "capture.frames_per_orientation: expected an integer in [1, 1000], got 'two'" in error_of(tmp_path, d)
 
 
 def test_wrong_list_item(tmp_path):
     d = demo_data()
     d["capture"]["orientations_deg"][2] = "45deg"
-    assert "capture.orientations_deg[2]: expected a number, got '45deg'" in error_of(tmp_path, d)
+    assert "capture.orientations_deg[2]: expected a number in [-3600, 3600] deg, got '45deg'" in error_of(tmp_path, d)
 
 
 def test_negative_number(tmp_path):
     d = demo_data()
     d["station"]["harp"]["string_spacing_mm"] = -1
-    assert "station.harp.string_spacing_mm: expected a number > 0, got -1" in error_of(tmp_path, d)
+    assert "station.harp.string_spacing_mm: expected a number in (0, 1000] mm, got -1" in error_of(tmp_path, d)
 
 
 def test_unknown_camera_driver(tmp_path):
     d = demo_data()
     d["station"]["camera"]["driver"] = "webcam9000"
     msg = error_of(tmp_path, d)
-    assert "station.camera.driver: expected a camera driver name (one of aravis, sim, v4l2), got 'webcam9000'" in msg
+    assert "station.camera.driver: expected a camera driver, one of aravis, sim, v4l2, got 'webcam9000'" in msg
 
 
 def test_unknown_turntable_driver(tmp_path):
     d = demo_data()
     d["station"]["turntable"]["driver"] = "thorlabs"
-    assert "station.turntable.driver: expected a turntable driver name" in error_of(tmp_path, d)
+    assert "station.turntable.driver: expected a turntable driver, one of grbl, zaber, got 'thorlabs'" in error_of(
+        tmp_path, d
+    )
 
 
 def test_unknown_field_is_named(tmp_path):
@@ -116,7 +118,7 @@ def test_unknown_field_is_named(tmp_path):
 def test_unknown_model(tmp_path):
     d = demo_data()
     d["pipeline"]["model"] = "fisheye9"
-    assert "pipeline.model: expected a distortion model name" in error_of(tmp_path, d)
+    assert "pipeline.model: expected one of radial, poly, auto, got 'fisheye9'" in error_of(tmp_path, d)
 
 
 def test_emulator_port_needs_simulation(tmp_path):
@@ -198,12 +200,13 @@ def test_optics_fields_of_lens_and_camera_body(tmp_path):
 @pytest.mark.parametrize(
     "section, values, message",
     [
-        ("camera_body", {"pixel_pitch_um": 0.0057}, "camera_body.pixel_pitch_um: expected the pixel pitch of the "
-         "images (after any binning) in micrometres (0.2..100), got 0.0057"),
-        ("lens", {"focal_mm": 0}, "lens.focal_mm: expected the nominal focal length"),
-        ("lens", {"focal_mm": "50mm"}, "lens.focal_mm: expected the nominal focal length"),
-        ("lens", {"mount": ""}, "lens.mount: expected the lens mount"),
-        ("camera_body", {"crop_factor": True}, "camera_body.crop_factor: expected the crop factor"),
+        # a pitch written in millimetres is outside the micrometre range
+        ("camera_body", {"pixel_pitch_um": 0.0057}, "camera_body.pixel_pitch_um: expected a number in [0.2, 100] µm, "
+         "got 0.0057"),
+        ("lens", {"focal_mm": 0}, "lens.focal_mm: expected a number in [0.1, 10000] mm, got 0"),
+        ("lens", {"focal_mm": "50mm"}, "lens.focal_mm: expected a number in [0.1, 10000] mm, got '50mm'"),
+        ("lens", {"mount": ""}, "lens.mount: expected a string (one line, at most 200 characters), got ''"),
+        ("camera_body", {"crop_factor": True}, "camera_body.crop_factor: expected a number in [0.1, 20], got True"),
         ("camera_body", {"pixel_pitch_um": 3.45, "sensor_width_mm": 5.0}, "expected pixel_pitch_um or sensor_width_mm"),
         ("lens", {"pixel_pitch_um": 3.45}, "lens.pixel_pitch_um: unknown field"),
     ],

@@ -408,15 +408,16 @@ def test_session_name_must_be_a_plain_directory_name(tmp_path, capsys, name):
 
 
 def test_setting_the_simulator_refuses_is_one_line_exit_2(tmp_path, capsys):
-    # passes the schema (an integer) but not the simulated camera: no traceback, and not
-    # exit 1 (which means QA FAIL)
+    # each key within its range, but a combination the simulated camera refuses (JPEG needs the
+    # realistic renderer): no traceback, and not exit 1 (which means QA FAIL); since issue 25 the
+    # driver is created (not opened) when the configuration is read, so it is refused there
     cfg = small_config(tmp_path)
     d = yaml.safe_load(cfg.read_text())
-    d["station"]["camera"]["width"] = 8
+    d["station"]["camera"]["jpeg_quality"] = 90
     cfg.write_text(yaml.safe_dump(d))
     assert main(["session", "run", str(cfg), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "station.camera" in err and "8x480" in err, err
+    assert err.count("\n") == 1 and "station.camera: " in err and "jpeg_quality needs realism_seed" in err, err
     assert not (tmp_path / "sessions").exists()
 
 
