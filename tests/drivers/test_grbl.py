@@ -281,7 +281,10 @@ def test_from_config_with_steps_per_degree_and_a_fourth_axis():
         ({"driver": "grbl", "port": "x", "axis": "Q"}, "config key 'axis': expected one of X, Y, Z, A, B, C, x"),
         ({"driver": "grbl", "port": "x", "units_per_degree": 1, "steps_per_degree": 2}, "not both"),
         ({"driver": "grbl", "port": "x", "steps_per_unit": 2}, "'steps_per_unit' needs 'steps_per_degree'"),
-        ({"driver": "grbl", "port": "x", "feed": -5}, r"config key 'feed': expected a number in \(0, 10000000\] units/min, got -5"),
+        (
+            {"driver": "grbl", "port": "x", "feed": -5},
+            r"config key 'feed': expected a number in \(0, 10000000\] units/min, got -5",
+        ),
     ],
 )
 def test_bad_config_names_the_problem(cfg, message):
