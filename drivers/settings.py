@@ -30,6 +30,7 @@ References
 
 from __future__ import annotations
 
+import datetime
 import math
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -79,19 +80,19 @@ class Setting:
     def has_range(self) -> bool:
         return self.low is not None or self.high is not None
 
-    def range_text(self) -> str:
+    def range_text(self, with_unit: bool = True) -> str:
         """``[0.05, 600] s``, ``(0, 10] mm``, ``>= 1``, ``one of 8, 16`` or ``""`` (no range)."""
         if self.choices:
-            return "one of " + ", ".join(_plain(c) for c in self.choices)
-        unit = f" {self.unit}" if self.unit else ""
+            return "one of " + ", ".join(plain(c) for c in self.choices)
+        unit = f" {self.unit}" if self.unit and with_unit else ""
         if self.low is not None and self.high is not None:
             lo, hi = "(" if self.low_open else "[", ")" if self.high_open else "]"
-            return f"{lo}{_plain(self.low)}, {_plain(self.high)}{hi}{unit}"
+            return f"{lo}{plain(self.low)}, {plain(self.high)}{hi}{unit}"
         if self.low is not None:
-            return f"{'>' if self.low_open else '>='} {_plain(self.low)}{unit}"
+            return f"{'>' if self.low_open else '>='} {plain(self.low)}{unit}"
         if self.high is not None:
-            return f"{'<' if self.high_open else '<='} {_plain(self.high)}{unit}"
-        return self.unit
+            return f"{'<' if self.high_open else '<='} {plain(self.high)}{unit}"
+        return unit.strip()
 
     def inside(self, v: float) -> bool:
         """``v`` (a finite number) within the range (or one of the choices)."""
@@ -104,7 +105,8 @@ class Setting:
         return True
 
 
-def _plain(v: Any) -> str:
+def plain(v: Any) -> str:
+    """A number as the messages and the reference write it (``5.0`` -> ``5``, ``1e-05``)."""
     if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
         return str(int(v))
     if isinstance(v, float):
@@ -174,8 +176,11 @@ def problem(s: Setting, value: Any) -> str | None:
         return None if isinstance(value, bool) else f"expected true or false, {got}"
     if kind == "text":
         if not isinstance(value, str):
-            quote = " (quote it)" if is_number(value) else ""
-            return f"expected {describe(s)}{quote}, {got}"
+            # a number, a boolean or a date YAML made of unquoted text (``serial: 0123`` is 83)
+            quote = isinstance(value, int | float | datetime.date)
+            return f"expected {describe(s)}, {got}" + (
+                "; quote it (YAML read the unquoted text as a value)" if quote else ""
+            )
         if not value.strip() or len(value) > MAX_TEXT or any(ord(c) < 32 or c == "\x7f" for c in value):
             return f"expected {describe(s)}, {got}"
         if s.choices and value not in s.choices:

@@ -1,9 +1,9 @@
 """``harp session run CONFIG``, ``resume DIR``, ``plan CONFIG``, ``list [DIR]``.
 
 ``run`` creates a session directory (under ``--out``, default the configuration's
-``store.sessions_dir``), opens the station and performs the whole plan; ``resume``
-reopens an interrupted session and captures only what is missing. When the session
-finishes, both judge it (QA), write its report into ``DIR/report/`` and its results into
+``store.sessions_dir``), opens the station and performs the whole plan (one estimated longer than
+4 h only with ``--yes``); ``resume`` reopens an interrupted session and captures only what is
+missing. When the session finishes, both judge it (QA), write its report into ``DIR/report/`` and its results into
 ``DIR/results.json``; ``--no-report`` skips the report. ``plan`` prints the capture plan
 with an estimated duration, touching no device; ``list`` lists the sessions of a
 directory with their state (complete / failed / interrupted / running) and verdict.
@@ -39,6 +39,12 @@ def register(subparsers) -> None:
         help="parent directory of the session directory (default: store.sessions_dir)",
     )
     run.add_argument("--name", default=None, help="session directory name (default: time + lens serial)")
+    run.add_argument(
+        "--yes",
+        action="store_true",
+        help="start a plan estimated longer than 4 h (harp session plan shows the estimate); without it such a "
+        "plan is refused with exit 2",
+    )
     run.set_defaults(func=_run)
     res = sub.add_parser("resume", help="continue an interrupted session")
     res.add_argument("session_dir", type=Path, help="the session directory")
@@ -112,6 +118,25 @@ def _load(path: Path):
     return config, checked.warnings
 
 
+def _long_plan(config, yes: bool) -> str | None:
+    """The refusal of a plan estimated longer than CONFIRM_PLAN_HOURS without ``--yes``; a plan longer
+    than WARN_PLAN_HOURS (or a long one with ``--yes``) is warned of on stderr."""
+    from station.session.estimate import CONFIRM_PLAN_HOURS, long_plan, plan_summary
+
+    long = long_plan(config)
+    if long is None:
+        return None
+    est, warning = long
+    if est.seconds > CONFIRM_PLAN_HOURS * 3600 and not yes:
+        return (
+            f"{config.path}: focus.settings, capture.orientations_deg, capture.frames_per_orientation: "
+            f"{plan_summary(config, est)}, more than {CONFIRM_PLAN_HOURS:g} h: run again with --yes to start it, "
+            "or plan fewer focus settings, orientations or frames (harp session plan shows the steps)"
+        )
+    print(f"harp session: warning: {warning}", file=sys.stderr)
+    return None
+
+
 def _run(args) -> int:
     from station.config import ConfigError, check_port
     from station.session.directory import SessionDir
@@ -125,6 +150,9 @@ def _run(args) -> int:
         check_port(config)  # before creating anything
     except ConfigError as exc:
         return _error(str(exc))
+    refused = _long_plan(config, args.yes)
+    if refused is not None:
+        return _error(refused)
     root = args.out if args.out is not None else config.sessions_dir
 
     def new_session():  # created only once the devices are open
@@ -332,9 +360,12 @@ def _plan(args) -> int:
         config, warnings = _load(args.config)
     except ConfigError as exc:
         return _error(str(exc))
-    for w in warnings:
+    from station.session.estimate import long_plan
+
+    long = long_plan(config)
+    for w in [*warnings, *([long[1]] if long else [])]:
         print(f"harp session: warning: {w}", file=sys.stderr)
-    est = estimate_plan(config)
+    est = long[0] if long else estimate_plan(config)
     if args.json:
         print(
             json.dumps(
@@ -381,10 +412,11 @@ def _plan(args) -> int:
         right=("focus", "orientation (deg)", "frames", "estimated (s)"),
     )
     minutes, seconds = divmod(int(round(est.seconds)), 60)
+    took = f"{minutes} min {seconds:02d} s" if minutes < 60 else f"{est.seconds / 3600:.1f} h"
     print(
         f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
         f"{config.capture.frames_per_orientation} frames = {est.frames} frames, {est.moves} moves, "
-        f"{est.fits} fits; estimated duration {minutes} min {seconds:02d} s",
+        f"{est.fits} fits; estimated duration {took}",
         file=sys.stderr,
     )
     for a in est.assumptions:

@@ -12,6 +12,7 @@ into its ``ConfigError`` with the file's name):
   4300 digits, and no field of a station needs more than a few);
 * a mapping key that is not a string (``1: x`` — YAML reads it as the integer 1);
 * a key given twice in one mapping (PyYAML keeps the last one without a word);
+* a tag outside the core schema (``!!python/object...``, ``!!binary``, ``!custom``);
 * a boolean spelled the YAML 1.1 way (``yes``, ``no``, ``on``, ``off``, any case): PyYAML reads
   ``yes`` as true, which a user writing a name or a serial meant as text; write ``true`` or
   ``false``, or quote the text.
@@ -38,6 +39,10 @@ MAX_DIGITS = 30
 """Most digits of an integer in a configuration (the largest field, a seed, needs 20)."""
 
 _PLAIN_BOOLEANS = {"true", "false"}
+
+_CORE_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("str", "int", "float", "bool", "null", "seq", "map", "timestamp")}
+"""The tags a configuration's values may carry: the YAML core schema's (and timestamps, which a text field
+then refuses with "quote it"); ``!!python/...``, ``!!binary``, ``!!set`` and custom tags are refused."""
 
 
 class ConfigReadError(ValueError):
@@ -103,6 +108,12 @@ def check_yaml_nodes(root: Any) -> None:
             continue
         visited.add(id(node))
         name = where or "(top level)"
+        if node.tag not in _CORE_TAGS:
+            raise ConfigReadError(
+                name,
+                f"the tag {node.tag.replace('tag:yaml.org,2002:', '!!')!r} is not a configuration value "
+                f"(line {node.start_mark.line + 1}); remove it",
+            )
         if depth > MAX_DEPTH:
             raise ConfigReadError(name, f"nesting deeper than {MAX_DEPTH} levels")
         if isinstance(node, yaml.MappingNode):

@@ -25,7 +25,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from drivers.settings import REQUIRED, Setting, describe, problem, shown, split_item
+from drivers.settings import REQUIRED, Setting, describe, plain, problem, shown, split_item
 from station.config.devices import check_the_devices
 from station.config.errors import ConfigError
 from station.config.schema import (
@@ -228,6 +228,11 @@ def _store_of(store: Mapping[str, Any], path: Path, base: Path) -> tuple[Path | 
         )  # fmt: skip
     if store.get("url") is not None:
         url = store["url"]
+        if "://" not in url:
+            raise ConfigError(
+                path, "store.url", f"expected a store URL (sqlite:///FILE or postgresql://user@host/database; a "
+                f"file goes in store.path), got {shown(url)}",
+            )  # fmt: skip
         try:
             loc = parse_store(url, base)
         except StoreError as exc:
@@ -245,8 +250,8 @@ def check_across(config: Config) -> None:
     if not harp.string_width_mm < harp.string_spacing_mm:
         raise config.error(
             "station.harp.string_width_mm",
-            f"expected less than station.harp.string_spacing_mm ({harp.string_spacing_mm:g} mm), got "
-            f"{harp.string_width_mm:g}",
+            f"expected less than station.harp.string_spacing_mm ({plain(harp.string_spacing_mm)} mm), got "
+            f"{plain(harp.string_width_mm)}",
         )
     if config.optics.pixel_pitch_um is not None and config.optics.sensor_width_mm is not None:
         raise config.error("camera_body.sensor_width_mm", "expected pixel_pitch_um or sensor_width_mm, not both")
@@ -258,8 +263,8 @@ def check_across(config: Config) -> None:
     if not cap.timeout_s > cap.exposure_us / 1e6:
         raise config.error(
             "capture.timeout_s",
-            f"expected more than the exposure (capture.exposure_us {cap.exposure_us:g} µs = "
-            f"{cap.exposure_us / 1e6:g} s), got {cap.timeout_s:g}",
+            f"expected more than the exposure (capture.exposure_us {plain(cap.exposure_us)} µs = "
+            f"{plain(cap.exposure_us / 1e6)} s), got {plain(cap.timeout_s)}",
         )
     tt = config.station.turntable
     if config.simulation is None and tt.port == EMULATOR_PORT:

@@ -16,6 +16,15 @@ pass) and adds up, per step:
   over ``pipeline.workers`` processes;
 * once at the end: QA and the report (:data:`REPORT_S_PER_FOCUS` per focus setting).
 
+Every focus setting has the same steps when every shot passes, so the plan of the first is walked
+and repeated for the others; only their first move differs (from the previous focus setting's last
+orientation instead of the home position). A plan of 100000 orientations is estimated in a second
+or two, not the minutes walking every one of its steps would take.
+
+A plan longer than :data:`WARN_PLAN_HOURS` is warned of by ``harp config check`` and
+``harp session plan`` (:func:`long_plan`); one longer than :data:`CONFIRM_PLAN_HOURS` is started by
+``harp session run`` only with ``--yes``.
+
 The processing constants were measured on the demo session (``benchmarks/station_demo.py``
 prints the estimate beside the measured wall time); a slower machine, a busy one, or a lens
 with more strings takes longer. It is an estimate for planning a line, not a promise.
@@ -23,6 +32,7 @@ with more strings takes longer. It is an estimate for planning a line, not a pro
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -40,6 +50,11 @@ RENDER_S_PER_MPX = 0.10
 MEASURE_S_PER_MPX = 0.35
 FIT_S_PER_ORIENTATION = 0.12
 REPORT_S_PER_FOCUS = 2.0
+
+WARN_PLAN_HOURS = 1.0
+"""A plan estimated longer than this is warned of (``harp config check``, ``harp session plan``)."""
+CONFIRM_PLAN_HOURS = 4.0
+"""A plan estimated longer than this is started by ``harp session run`` only with ``--yes``."""
 
 
 @dataclass(frozen=True)
@@ -110,11 +125,11 @@ def estimate_plan(config: Config) -> PlanEstimate:
     n_o = len(cap.orientations_deg)
     pc = config.pipeline
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
-    rows: list[PlanRow] = []
+    first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
     stage = 0.0  # a session homes the turntable first
     frames = moves = locks = fits = 0
     current: dict[str, float] = {}
-    for step in plan_session(config):
+    for step in plan_session(dataclasses.replace(config, focus_settings=config.focus_settings[:1])):
         match step:
             case LockFocus():
                 locks += 1
@@ -132,7 +147,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                 current["s"] = current.get("s", 0.0) + frame_s
             case Measure(focus_idx=f, orientation_idx=o):
                 current["s"] = current.get("s", 0.0) + MEASURE_S_PER_MPX * mpx
-                rows.append(
+                first.append(
                     PlanRow(
                         f,
                         config.focus_settings[f],
@@ -148,10 +163,55 @@ def estimate_plan(config: Config) -> PlanEstimate:
                 what = f"fit ({n_o} orientations held out in turn" + (
                     f", {pc.bootstrap} bootstrap replicates)" if pc.bootstrap else ")"
                 )
-                rows.append(PlanRow(f, config.focus_settings[f], what, seconds=fit_s))
+                first.append(PlanRow(f, config.focus_settings[f], what, seconds=fit_s))
             case Store(focus_idx=f):
                 pass
+    o = cap.orientations_deg
+    back = move_seconds(o[0] - o[-1], speed, accel) - move_seconds(o[0] - 0.0, speed, accel)
+    rows: list[PlanRow] = []
+    for f, focus in enumerate(config.focus_settings):
+        for k, r in enumerate(first):
+            extra = back if f and k == 0 else 0.0
+            rows.append(PlanRow(f, focus, r.what, r.orientation_deg, r.frames, r.seconds + extra))
+    n_f = len(config.focus_settings)
+    frames, moves, locks, fits = frames * n_f, moves * n_f, locks * n_f, fits * n_f
     report_s = REPORT_S_PER_FOCUS * len(config.focus_settings) * mpx / 1.23
     rows.append(PlanRow(-1, math.nan, "QA, report, results.json", seconds=report_s))
     total = sum(r.seconds for r in rows)
     return PlanEstimate(rows, frames, moves, locks, fits, total, assumptions)
+
+
+def plan_summary(config: Config, est: PlanEstimate) -> str:
+    """``3 focus settings x 8 orientations x 2 frames = 48 frames, an estimated 37 s``."""
+    cap = config.capture
+    return (
+        f"{len(config.focus_settings)} focus settings x {len(cap.orientations_deg)} orientations x "
+        f"{cap.frames_per_orientation} frames = {est.frames} frames, an estimated {duration(est.seconds)}"
+    )
+
+
+def duration(seconds: float) -> str:
+    """``37 s``, ``12 min 5 s``, ``3.4 h``."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        minutes, sec = divmod(int(round(seconds)), 60)
+        return f"{minutes} min {sec} s"
+    return f"{seconds / 3600:.1f} h"
+
+
+def long_plan(config: Config) -> tuple[PlanEstimate, str] | None:
+    """The estimate and a warning naming the fields when the plan is estimated longer than
+    :data:`WARN_PLAN_HOURS`; None when it is not."""
+    est = estimate_plan(config)
+    if est.seconds <= WARN_PLAN_HOURS * 3600:
+        return None
+    confirm = (
+        f"; harp session run starts a plan longer than {CONFIRM_PLAN_HOURS:g} h only with --yes"
+        if est.seconds > CONFIRM_PLAN_HOURS * 3600
+        else ""
+    )
+    return est, (
+        f"{config.path}: focus.settings, capture.orientations_deg, capture.frames_per_orientation: "
+        f"{plan_summary(config, est)} (more than {WARN_PLAN_HOURS:g} h){confirm}"
+    )
