@@ -147,8 +147,7 @@ def test_both_a_store_path_and_a_store_url(capsys, tmp_path):
     d = demo()
     d["store"] = {"path": "p.sqlite", "url": "sqlite:///q.sqlite"}
     assert refused(capsys, tmp_path, d) == (
-        "store.path: expected one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://), "
-        "not both"
+        "store.path: expected one of store.path (a SQLite file) and store.url (sqlite:/// or postgresql://), not both"
     )
 
 
@@ -251,7 +250,10 @@ def test_several_configurations_in_one_check(capsys, tmp_path):
     bad.write_text(yaml.safe_dump(_with("capture.settle_s", -1)))
     code, out, err = check(capsys, DEMO, str(bad), str(REPO / "configs" / "live-demo.yaml"))
     assert code == 2
-    assert out.count(": OK (") == 2 and err == f"harp config: {bad}: capture.settle_s: expected a number in [0, 60] s, got -1\n"
+    assert (
+        out.count(": OK (") == 2
+        and err == f"harp config: {bad}: capture.settle_s: expected a number in [0, 60] s, got -1\n"
+    )
 
 
 def test_the_shipped_configurations_pass(capsys):
