@@ -389,10 +389,13 @@ def detect_board(
     if sv[1] < 1e-3 * sv[0]:
         return BoardRejected(name, f"the {len(ids)} board corners lie on one line")
     pts, refined = refine_corners(img, spec, ids, pts)
+    found = len(ids)
     ids, pts = ids[refined], pts[refined]
     if len(ids) < min_corners:
         return BoardRejected(
-            name, f"too few board corners: {len(ids)} < {min_corners} large enough to measure (board too small?)"
+            name,
+            f"too few board corners: {len(ids)} of the {found} found large enough to measure < {min_corners} "
+            "(the board too small in the image?)",
         )
     w = edge_width(img, pts)
     if not w <= max_edge_width_px:
