@@ -213,6 +213,27 @@ def table(rows: list[dict]) -> str:
             within = f"{int(np.sum(z <= 2))}/{z.size}"
         held = np.sqrt(np.mean([r["held"] ** 2 for r in sel]))
         out.append(f"| {lens} | {n} | {method} | {' / '.join(f'{v:.3f}' for v in rms)} | {within} | {held:.4f} |")
+    out.append("")
+    for harp in ("harp exact", "harp fitted"):
+        z = np.concatenate([np.abs(r["err"]) / r["sd"] for r in rows if r["method"] == harp])
+        better = worse = 0
+        held_better = 0
+        for lens, n, method in keys:
+            if method != harp:
+                continue
+            mine = [r for r in rows if (r["lens"], r["n"], r["method"]) == (lens, n, harp)]
+            cv = [r for r in rows if (r["lens"], r["n"], r["method"]) == (lens, n, "cv2 rational")]
+            a = np.sqrt(np.mean(np.array([r["err"] for r in mine]) ** 2, axis=0))
+            b = np.sqrt(np.mean(np.array([r["err"] for r in cv]) ** 2, axis=0))
+            better += int(np.sum(a < b))
+            worse += int(np.sum(a >= b))
+            held_better += int(np.mean([r["held"] for r in mine]) < np.mean([r["held"] for r in cv]))
+        cells = sum(1 for k in keys if k[2] == harp)
+        out.append(
+            f"- {harp}: {int(np.sum(z <= 2))} of {z.size} parameter estimates within their stated 2 sigma "
+            f"({100 * np.mean(z <= 2):.0f} %; a normal error: 95 %); K error below cv2 rational's in {better} of "
+            f"{better + worse} (lens, views, parameter) cells; held-out error below it in {held_better} of {cells}"
+        )
     return "\n".join(out)
 
 
