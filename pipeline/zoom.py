@@ -47,7 +47,9 @@ Setting = tuple[float, float]
 _TOL = 1e-9
 
 
-def _pairs(models: Mapping[Setting, DistortionModel] | Iterable[tuple[Setting, DistortionModel]]) -> dict[float, dict[float, DistortionModel]]:
+def _pairs(
+    models: Mapping[Setting, DistortionModel] | Iterable[tuple[Setting, DistortionModel]],
+) -> dict[float, dict[float, DistortionModel]]:
     items = list(models.items()) if isinstance(models, Mapping) else list(models)
     out: dict[float, dict[float, DistortionModel]] = {}
     for (z, f), m in items:
