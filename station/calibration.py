@@ -174,7 +174,7 @@ def calibrate_shots(
         "warnings": list(full.warnings),
     }
     if selection is not None:
-        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason, "folds": selection.folds}
+        details["selection"] = {"choice": selection.choice.label, **selection_record(selection)}
 
     hold: Holdout | None = None
     per_shot: list[HeldOutShot] = []

@@ -23,7 +23,7 @@ import dataclasses
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -31,16 +31,10 @@ from typing import Any
 import yaml
 
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
-from pipeline.fitspec import KINDS, FitSpec
+from pipeline.fitspec import AUTO, FitSpec, parse_choice
 from pipeline.resample import DEFAULT_T
 from station.store.errors import StoreError
 from station.store.location import SQLITE, StoreLocation, parse_store, user_store_path
-
-AUTO_MODEL = "auto"
-"""``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
-
-#: values of ``pipeline.model``: a model kind of :mod:`pipeline.fitspec`, or auto
-FIT_MODELS = (*KINDS, AUTO_MODEL)
 
 #: turntable ``port`` value meaning "the emulator started by station.session.simulated"
 EMULATOR_PORT = "emulator"
@@ -235,24 +229,29 @@ class CaptureConfig:
 @dataclass(frozen=True)
 class PipelineConfig:
     t: int = DEFAULT_T
-    model: str = "radial"
-    degree: int | None = None  # None: the fit's default for the model
-    tangential: bool = False  # radial model: decentering terms p1, p2
-    prism: bool = False  # radial model: thin-prism terms s1..s4
-    center_prior: bool = False  # radial model: pull the distortion centre towards the image centre
+    model: str = "radial"  # a fit label (pipeline.fitspec.parse: radial4+tangential, poly5) or auto
+    # each given term sets the label's (older configurations spell the spec so); None: the label's
+    degree: int | None = None
+    tangential: bool | None = None  # radial model: decentering terms p1, p2
+    prism: bool | None = None  # radial model: thin-prism terms s1..s4
+    center_prior: bool | None = None  # radial model: pull the distortion centre towards the image centre
     bootstrap: int = 0  # replicates for the field uncertainty (0: not computed)
     seed: int = 0  # of the bootstrap resampling
     workers: int = 1  # processes for the cross-validation / bootstrap fits
 
     @property
     def spec(self) -> FitSpec | None:
-        """What to fit (:class:`pipeline.fitspec.FitSpec`); ``None`` for ``model: auto``
-        (chosen by cross-validation). The radial-only flags are ignored for ``poly``."""
-        if self.model == AUTO_MODEL:
+        """What to fit (:class:`pipeline.fitspec.FitSpec`): ``model`` read by
+        :func:`pipeline.fitspec.parse_choice` (None for ``auto``: chosen by cross-validation)
+        with the terms given beside it; the radial-only terms are ignored for ``poly``.
+        ValueError (one line) for a label or degree the fit does not allow."""
+        spec = parse_choice(self.model)
+        if spec is None:
             return None
-        if self.model == "poly":
-            return FitSpec("poly", self.degree)
-        return FitSpec(self.model, self.degree, self.tangential, self.prism, self.center_prior)
+        terms = {"degree": self.degree}
+        if spec.kind == "radial":
+            terms.update(tangential=self.tangential, prism=self.prism, center_prior=self.center_prior)
+        return replace(spec, **{k: v for k, v in terms.items() if v is not None})
 
 
 @dataclass(frozen=True)
@@ -579,15 +578,19 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         t=pp.number("t", DEFAULT_T, min=1, integer=True),
         model=pp.string("model", "radial"),
         degree=pp.number("degree", None, min=1, integer=True),
-        tangential=pp.boolean("tangential", False),
-        prism=pp.boolean("prism", False),
-        center_prior=pp.boolean("center_prior", False),
+        tangential=pp.boolean("tangential", None),
+        prism=pp.boolean("prism", None),
+        center_prior=pp.boolean("center_prior", None),
         bootstrap=pp.number("bootstrap", 0, min=0, integer=True),
         seed=pp.number("seed", 0, min=0, integer=True),
         workers=pp.number("workers", 1, min=1, integer=True),
     )
-    if pipe.model not in FIT_MODELS:
-        raise pp.err("model", f"a distortion model name (one of {', '.join(FIT_MODELS)})", pipe.model)
+    try:
+        parse_choice(pipe.model)
+    except ValueError as exc:
+        raise ConfigError(
+            path, "pipeline.model", f"expected a distortion model name (a fit label, or {AUTO}): {exc}"
+        ) from None
     try:
         pipe.spec  # noqa: B018  (validates degree and terms against pipeline.fitspec)
     except ValueError as exc:

@@ -241,13 +241,9 @@ def reprocess_focus(job: FocusJob) -> FocusResult:
 
 
 def _spec(job: FocusJob, config: Any) -> Any:
-    from pipeline.fitspec import parse
+    from pipeline.fitspec import parse_choice
 
-    if job.spec is None:
-        return config.pipeline.spec
-    if job.spec == "auto":
-        return None
-    return parse(job.spec)
+    return config.pipeline.spec if job.spec is None else parse_choice(job.spec)
 
 
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:

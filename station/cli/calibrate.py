@@ -9,7 +9,7 @@ and provenance.
 cross-validation over the given shots (:func:`pipeline.select.select_model`:
 leave one shot out, correct it with the fit on the others, measure it) and
 says what it chose. ``--model radial`` fits the radial model with free centre
-(default degree 4, with tangential and thin-prism terms unless
+(:data:`pipeline.fitspec.FULL_RADIAL`: degree 4, with tangential and thin-prism terms unless
 ``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
 towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec, parse
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec, parse
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
@@ -191,13 +191,13 @@ def _spec(args) -> FitSpec | None:
     try:
         if args.model == "poly":
             return FitSpec("poly", args.degree)
-        return FitSpec(
-            "radial",
-            args.degree,
-            not args.no_tangential,
-            not args.no_prism,
-            args.center_prior,
-            args.division,
+        return replace(
+            FULL_RADIAL,
+            degree=args.degree,
+            tangential=not args.no_tangential,
+            prism=not args.no_prism,
+            center_prior=args.center_prior,
+            division=args.division,
             field=grid,
             field_penalty=penalty,
         )

@@ -84,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.workers is not None:
         _error("--workers is for the local pool; the cluster's workers are the scheduler's")
         return EXIT_ERROR
-    if args.model is not None and args.model != "auto":
-        from pipeline.fitspec import parse
+    if args.model is not None:
+        from pipeline.fitspec import parse_choice
 
         try:
-            parse(args.model)
+            parse_choice(args.model)
         except ValueError as exc:
             _error(f"--model {args.model}: {exc}")
             return EXIT_ERROR
