@@ -103,7 +103,7 @@ def _error(msg: str) -> int:
 def _load(path: Path):
     """The configuration at ``path`` with the checks no device is needed for; ConfigError otherwise."""
     from station.config import load_config
-    from station.config_check import check_config
+    from station.config.check import check_config
 
     config = load_config(path)
     checked = check_config(config)
