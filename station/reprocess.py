@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
-from station.ctrl_c import sigint_blocked
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -335,13 +334,11 @@ def run_jobs(
 def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
     from concurrent.futures import as_completed
 
-    from station.pool import forkserver_pool
+    from station.pool import WorkerPool
 
     results: dict[int, FocusResult] = {}
-    pool = forkserver_pool(workers, PRELOAD)
-    try:
-        with sigint_blocked():  # submitting starts the workers: none is left half-started
-            futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
+    with WorkerPool(workers, PRELOAD) as pool:  # Ctrl-C: the jobs not started dropped, the running ones stopped
+        futures = {fut: i for i, fut in enumerate(pool.submit_all(reprocess_focus, jobs))}
         for fut in as_completed(futures):
             i = futures[fut]
             try:
@@ -352,15 +349,6 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
                 )
             results[i] = r
             on_result(r)
-    except BaseException:  # Ctrl-C: the jobs not started are dropped, the running ones stopped
-        procs = list((getattr(pool, "_processes", None) or {}).values())
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            proc.join(5)
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown()
     return [results[i] for i in range(len(jobs))]
 
 

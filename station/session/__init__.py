@@ -15,7 +15,6 @@
   that names every path in it;
 * :mod:`station.session.processing` — averaging and checking shots;
   :mod:`station.session.evidence` — measurements and uncertainty maps kept as ``.npz``;
-* :mod:`station.session.workers` — the process pool of the fits;
 * :mod:`station.session.devices`, :mod:`station.session.simulated` — opening the
   configured (or simulated) camera and turntable.
 """

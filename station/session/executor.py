@@ -16,7 +16,8 @@ report are not the executor's: :func:`station.session.run.run_session` runs them
 once the plan is done. Each accepted shot's measured edges and each focus setting's
 bootstrap uncertainty map are kept in the session directory
 (:mod:`station.session.layout`) so that they need not measure anything again. The
-fits run on :class:`station.session.workers.FitWorkers`.
+fits run on a :class:`station.pool.WorkerPool` (``pipeline.workers`` processes), started while the
+session captures.
 
 A camera with the :class:`drivers.protocols.IndexedCapture` capability (the
 simulator) is told before each capture which frame of the shot it is taking
@@ -50,6 +51,7 @@ from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recov
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.files import describe_os_error
+from station.pool import WorkerPool
 from station.profile import Profile
 from station.session import layout
 from station.session.directory import SessionDir, SessionError
@@ -93,11 +95,14 @@ from station.session.records import (
     Started,
     Stored,
 )
-from station.session.workers import FitWorkers
 
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
 POSITION_TOLERANCE_DEG = 0.05
+
+PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
+"""Modules the fits' forkserver imports once, so that each worker starts warm (the fits' and the
+report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
 
 EXIT_OK = 0
 EXIT_ABORTED = 2
@@ -169,7 +174,7 @@ class Executor:
         self.sleep = sleep
         self.tally = Tally()
         self.subscribers: list[Subscriber] = [self.tally, *subscribers]
-        self.workers = FitWorkers(self.config.pipeline.workers)
+        self.workers = WorkerPool(self.config.pipeline.workers, PRELOAD)
         self._pending: dict[tuple[int, int, int], Frame] = {}
         self._shots: dict[tuple[int, int], ShotMeasurement] = {}
         self._calibrations: dict[int, Calibration] = {}
