@@ -43,7 +43,7 @@ from pipeline.fitspec import FitSpec, parse
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
-from station.config import Identity, Optics
+from station.equipment import Identity, Optics
 
 HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
 """Hold-out scheme of a session: each orientation corrected by the fit on the others."""

@@ -296,8 +296,9 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         provenance=make_provenance(frame_files, t=cfg.pipeline.t, command="harp reprocess", station=cfg.station.id),
         given_by=GIVEN_ON_COMMAND_LINE if job.spec else GIVEN_BY_CONFIG,
         details={"session_model_file": str(s.path / layout.profile_file(f))},
-        judge=qa_verdict,
-        measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}"),
+        judge=lambda p: qa_verdict(
+            p, cfg.qa, measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}")
+        ),
     )
     return focus, profile, old
 

@@ -25,8 +25,6 @@ from station.config.schema import (
     Config,
     DeviceConfig,
     HarpConfig,
-    Identity,
-    Optics,
     PipelineConfig,
     QAConfig,
     ReportConfig,
@@ -36,10 +34,9 @@ from station.config.schema import (
     TurntableConfig,
     config_keys,
     keys_of,
-    optic_problem,
-    optics_keys,
 )
 from station.config.validate import load_config, parse_config
+from station.equipment import Identity, Optics, optic_problem, optics_keys
 
 __all__ = [
     "EMULATOR_PORT",

@@ -30,8 +30,6 @@ from station.config.schema import (
     Config,
     DeviceConfig,
     HarpConfig,
-    Identity,
-    Optics,
     PipelineConfig,
     QAConfig,
     ReportConfig,
@@ -41,9 +39,8 @@ from station.config.schema import (
     TurntableConfig,
     config_keys,
     keys_of,
-    optic_problem,
-    optics_keys,
 )
+from station.equipment import Identity, Optics, optic_problem, optics_keys
 from station.store.errors import StoreError
 from station.store.location import parse_store, user_store_path
 
