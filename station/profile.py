@@ -47,7 +47,7 @@ from pipeline.intrinsics import Intrinsics
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
-from station.config import Identity, Optics
+from station.equipment import Identity, Optics
 
 HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
 """Hold-out scheme of a session: each orientation corrected by the fit on the others."""
@@ -605,16 +605,8 @@ def _spec_of_details(details: Mapping[str, Any]) -> tuple[FitSpec | None, dict[s
     selection = {k: sel[k] for k in ("reason", "folds") if k in sel}
     if isinstance(fit, Mapping) and fit.get("model") is not None:
         try:
-            w = fit.get("w_center")
-            spec = FitSpec(
-                fit["model"],
-                fit.get("degree"),
-                bool(fit.get("tangential", False)),
-                bool(fit.get("prism", False)),
-                w is not None and w > 1e-4,
-            )
-            return spec, selection
-        except ValueError:
+            return FitSpec.from_fit_arguments(dict(fit)), selection
+        except (ValueError, TypeError):
             pass
     if sel.get("choice"):
         try:
