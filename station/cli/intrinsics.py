@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
-from station.store.resolve import add_store_options
+from station.cli.store_options import add_store_options
 
 
 def register(subparsers) -> None:
@@ -89,7 +89,7 @@ def run(args) -> int:
             profile = Profile.from_model_file(read_model_file(model_path))
             where = model_path
         else:
-            from station.store.resolve import open_store
+            from station.cli.store_options import open_store
 
             shots = list(args.inputs)
             store = open_store(args)
