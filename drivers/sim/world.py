@@ -29,6 +29,9 @@ class SimWorld:
         Focus position; written by the simulated camera's ``lock_focus``.
     harp_offset_deg : float
         Angle of the strings in the image when the stage is at 0°.
+    zoom : float or None
+        Focal length (mm) of the simulated zoom lens (:func:`drivers.sim.lens.zoom_lens`), written by
+        the camera's ``set_zoom``; None: the camera has the fixed demo lens.
 
     Thread-safe: the stage function is called under the emulator's own lock,
     ``focus`` and ``harp_offset_deg`` are plain floats.
@@ -38,6 +41,7 @@ class SimWorld:
         self._stage_deg = float(stage_deg)
         self.focus = float(focus)
         self.harp_offset_deg = float(harp_offset_deg)
+        self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None
         self._lock = threading.Lock()

@@ -194,6 +194,14 @@ class Config:
     simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
     optics: Optics = field(default_factory=Optics, metadata={"yaml": None})  # from lens and camera_body
     store_url: str | None = field(default=None, metadata={"yaml": "store.url"})  # as given: postgresql:// or sqlite:///
+    # a zoom lens (issue 23): the focal lengths (mm, > 0, >= 2 distinct) a zoom session calibrates, each an
+    # ordinary session at every focus setting; () none
+    zoom_settings: tuple[float, ...] = field(default=(), metadata={"yaml": "zoom.settings"})
+    # the camera's zoom feature value at each focal length (device units: the simulator's are mm,
+    # V4L2 zoom_absolute's and GenICam Zoom's the device's); () the focal lengths themselves
+    zoom_positions: tuple[float, ...] = field(default=(), metadata={"yaml": "zoom.positions"})
+    # the focal length (mm, > 0) of this session: set in the part of a zoom session that captures it
+    focal: float | None = field(default=None, metadata={"yaml": "zoom.focal"})
 
     @property
     def store(self) -> StoreLocation:
@@ -213,7 +221,7 @@ def keys_of(cls: type) -> tuple[str, ...]:
 
 
 def config_keys(section: str = "") -> tuple[str, ...]:
-    """The keys of the top level (``""``) or of ``focus`` / ``store``, from :class:`Config`'s field metadata."""
+    """The keys of the top level (``""``) or of ``focus`` / ``store`` / ``zoom``, from :class:`Config`'s field metadata."""
     out: list[str] = []
     for f in dataclasses.fields(Config):
         where = f.metadata.get("yaml")
