@@ -293,6 +293,17 @@ def conversion_error_in_frame(
     )
 
 
+def ideal_homography(
+    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = ERROR_GRID_LONG
+) -> Array:
+    """The homography ``H`` taking ``theirs``' ideal pixels to ``ours`` (``U_ours ~ H(U_theirs)``), least
+    squares over the image: the one the conversion error modulo homography is measured after."""
+    g = image_grid(width, height, n_long)
+    uo, ut = ours.undistort_points(g), theirs.undistort_points(g)
+    ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
+    return fit_homography(ut[ok], uo[ok])
+
+
 def mod_h_rms(ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 64) -> float:
     """RMS distance of the two corrections modulo the best homography (inf if undefined somewhere)."""
     g = image_grid(width, height, n_long)
