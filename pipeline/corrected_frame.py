@@ -218,7 +218,9 @@ def rectangles(model: DistortionModel, width: int, height: int) -> tuple[Array, 
     return inner, outer
 
 
-def corrected_frame(model: DistortionModel, width: int, height: int, choice: FrameChoice | None = None) -> CorrectedFrame:
+def corrected_frame(
+    model: DistortionModel, width: int, height: int, choice: FrameChoice | None = None
+) -> CorrectedFrame:
     """The corrected image of ``model`` for ``width`` x ``height`` photos as ``choice`` asks (module docstring)."""
     choice = choice or FrameChoice()
     p0 = principal_point(model, width, height)
@@ -271,5 +273,7 @@ def rectification(frame: CorrectedFrame, h_ideal: Array, camera_matrix: Array, f
     m = np.linalg.inv(new_k) @ frame.matrix @ np.asarray(h_ideal, dtype=np.float64) @ np.asarray(camera_matrix)
     det = float(np.linalg.det(m))
     if not (math.isfinite(det) and det > 0):
-        raise ValueError("the export's ideal frame is mirrored or degenerate: it cannot be rectified to the corrected image")
+        raise ValueError(
+            "the export's ideal frame is mirrored or degenerate: it cannot be rectified to the corrected image"
+        )
     return np.asarray(m / np.cbrt(det), dtype=np.float64), new_k
