@@ -27,8 +27,9 @@ barrel lens). :func:`corrected_frame` builds the others, from a :class:`FrameCho
   (every source pixel; for VFX, the canvas a CG render must cover).
 
 The rectangles are found as OpenCV finds them, from the corrected images of the photo's border
-(:data:`BORDER_SAMPLES` points along each side, pixel centres ``0 … W-1``; OpenCV samples 9 points
-``x W/8`` per side, i.e. to one pixel beyond the last pixel centre).
+(:data:`BORDER_SAMPLES` points along each side, pixel centres ``0 … W-1``; OpenCV 5 samples 9 per
+side, with its default 5-iteration point solver: on a lens whose extremes lie at the sides' middles
+and the corners the two agree to 1e-4 in the scale and 0.001 px in the principal point).
 
 For a pin-hole or fisheye export with camera matrix :math:`K_e`, whose ideal pixels :math:`p` are
 ours up to the homography its conversion fitted (:math:`u = H(p)`, :mod:`pipeline.exports.fit`), the
