@@ -21,7 +21,10 @@ same record), ``harp calibrate`` writes it, QA judges it, the report shows it an
   (:class:`Provenance`: time, software, command, images with SHA-256, station,
   session, plus free-form ``extra``);
 * its store id (``id``), the store's time (``stored_at``) and free-form fit
-  diagnostics (``details``).
+  diagnostics (``details``);
+* the camera matrix measured with this correction held fixed, once measured
+  (``intrinsics``: :class:`pipeline.intrinsics.Intrinsics`, values, standard deviations,
+  source; ``harp intrinsics``), which every export uses.
 
 Conversions: :meth:`Profile.to_model_file` / :meth:`Profile.from_model_file` (the
 YAML model file, :mod:`pipeline.model_file`) and :meth:`Profile.to_row` /
@@ -40,10 +43,11 @@ from typing import Any
 
 from pipeline.exports.lens import LensInfo
 from pipeline.fitspec import FitSpec, parse
+from pipeline.intrinsics import Intrinsics
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
-from station.config import Identity, Optics
+from station.equipment import Identity, Optics
 
 HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
 """Hold-out scheme of a session: each orientation corrected by the fit on the others."""
@@ -335,6 +339,7 @@ class Profile:
     details: Mapping[str, Any] = field(default_factory=dict)
     id: int | None = None
     stored_at: str | None = None
+    intrinsics: Intrinsics | None = None
 
     def with_(self, **changes: Any) -> Profile:
         """A copy with ``changes`` (e.g. ``qa=verdict`` once judged, ``id=`` once stored)."""
@@ -395,7 +400,7 @@ class Profile:
         if self.id is not None:
             prov["profile_id"] = self.id
         prov.update(p.extra)
-        return ModelFile(self.model, int(self.width), int(self.height), merit, prov)
+        return ModelFile(self.model, int(self.width), int(self.height), merit, prov, intrinsics=self.intrinsics)
 
     @classmethod
     def from_model_file(cls, mf: ModelFile) -> Profile:
@@ -421,6 +426,7 @@ class Profile:
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
             details={"harp_health": dict(health)} if isinstance(health, Mapping) else {},
+            intrinsics=mf.intrinsics,
         )
 
     # -------------------------------------------------------------- store row
@@ -472,6 +478,7 @@ class Profile:
             "provenance_json": json.dumps(_plain(mf.provenance)),
             "qa_json": json.dumps(_plain(self.qa.to_record())) if self.qa is not None else None,
             "verdict": self.qa.verdict if self.qa is not None else None,
+            "intrinsics_json": json.dumps(self.intrinsics.to_dict()) if self.intrinsics is not None else None,
         }
 
     @classmethod
@@ -524,6 +531,7 @@ class Profile:
             session_dir=base.session_dir or row.get("session_dir"),
         )
         qa_json = row.get("qa_json")
+        intr_json = row.get("intrinsics_json")
         lens, camera = row.get("lens"), row.get("camera")
         return cls(
             model=model_from_dict(json.loads(row["model_json"])),
@@ -541,6 +549,7 @@ class Profile:
             details=details,
             id=int(row["id"]) if row.get("id") is not None else None,
             stored_at=row.get("created_at"),
+            intrinsics=Intrinsics.from_dict(json.loads(intr_json)) if intr_json else None,
         )
 
 
@@ -596,16 +605,8 @@ def _spec_of_details(details: Mapping[str, Any]) -> tuple[FitSpec | None, dict[s
     selection = {k: sel[k] for k in ("reason", "folds") if k in sel}
     if isinstance(fit, Mapping) and fit.get("model") is not None:
         try:
-            w = fit.get("w_center")
-            spec = FitSpec(
-                fit["model"],
-                fit.get("degree"),
-                bool(fit.get("tangential", False)),
-                bool(fit.get("prism", False)),
-                w is not None and w > 1e-4,
-            )
-            return spec, selection
-        except ValueError:
+            return FitSpec.from_fit_arguments(dict(fit)), selection
+        except (ValueError, TypeError):
             pass
     if sel.get("choice"):
         try:

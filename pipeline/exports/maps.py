@@ -66,7 +66,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.corrected_frame import CorrectedFrame
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, image_corners
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, RemapMaps, fast_undistortion_maps
 
@@ -123,8 +123,6 @@ def export_maps(
 def corners_ideal(model: DistortionModel, width: int, height: int, frame: CorrectedFrame | None = None) -> Array | None:
     """The corrected positions of the image corners ``(4, 2)`` (in ``frame``'s pixels when given; None
     where the model has none)."""
-    from pipeline.normalise import image_corners
-
     u = np.asarray(model.undistort_points(image_corners(width, height)), dtype=np.float64)
     if frame is not None:
         u = frame.from_ideal(u)

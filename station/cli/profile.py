@@ -2,7 +2,7 @@
 
 Reads the profile store: ``--store PATH|URL`` (a SQLite file or ``postgresql://``), or
 ``--config CONFIG`` (that station's store), else ``$HARP_STORE``, else ``$HARP_CONFIG``'s store, else
-the per-user ``~/.local/share/harp-station/harp-profiles.sqlite`` (:mod:`station.store.resolve`); a store that is not there is an
+the per-user ``~/.local/share/harp-station/harp-profiles.sqlite`` (:mod:`station.cli.store_options`); a store that is not there is an
 error, never created. LENS is a lens serial, ``maker/model/serial``, ``#id``, or any unambiguous
 part of "maker model serial"; ``--id N`` names one stored profile. The **current** profile of a
 lens at a focus setting is its newest one, unless that one failed QA: a failed profile is never
@@ -31,6 +31,7 @@ from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.export import add_export_options, formats_epilog
+from station.cli.store_options import add_store_options
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.plain_json import plain
 from station.profile_choice import (
@@ -46,7 +47,6 @@ from station.profile_choice import (
     lens_row,
     verdict_text,
 )
-from station.store.resolve import add_store_options
 
 ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
 
@@ -106,7 +106,7 @@ def _warn(msg: str) -> None:
 
 
 def _open(args):
-    from station.store.resolve import open_store
+    from station.cli.store_options import open_store
 
     return open_store(args)  # for reading: never creates a store
 

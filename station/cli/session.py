@@ -59,7 +59,7 @@ def register(subparsers) -> None:
         help="capture focus setting F (its index) again whole at the next resume (repeatable)",
     )  # fmt: skip
     rep.set_defaults(func=_repair)
-    from station.store.resolve import add_store_options
+    from station.cli.store_options import add_store_options
 
     for action in (run, res, rep):
         add_store_options(action, config=False)  # --store PATH|URL instead of the configuration's store
@@ -103,7 +103,7 @@ def _error(msg: str) -> int:
 def _load(path: Path):
     """The configuration at ``path`` with the checks no device is needed for; ConfigError otherwise."""
     from station.config import load_config
-    from station.config_check import check_config
+    from station.config.check import check_config
 
     config = load_config(path)
     checked = check_config(config)
@@ -208,9 +208,9 @@ def _repair(args) -> int:
 
 def _refit(session, store_name=None) -> int:
     """Measure, fit and store the reopened focus settings again, then QA and the report: no devices."""
-    from station.session.run import run_session
+    from station.cli.store_options import store_location
+    from station.session_run import run_session
     from station.store import ProfileStore, StoreError
-    from station.store.resolve import store_location
 
     try:
         with ProfileStore(store_location(store_name, session.config)) as store:
@@ -263,7 +263,7 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
     from station.config import ConfigError
     from station.session.devices import open_station
     from station.session.directory import SessionError
-    from station.session.run import run_session
+    from station.session_run import run_session
     from station.store import StoreError
     from station.tables import console as text_console
 
@@ -307,9 +307,9 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
 
 
 def _open_store(config, store_name=None):
-    """The store the session writes (``--store``, else the configuration's; :mod:`station.store.resolve`)."""
+    """The store the session writes (``--store``, else the configuration's; :mod:`station.cli.store_options`)."""
+    from station.cli.store_options import store_location
     from station.store import ProfileStore
-    from station.store.resolve import store_location
 
     return ProfileStore(store_location(store_name, config))
 

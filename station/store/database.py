@@ -54,6 +54,7 @@ from station.store.migrate import check_integrity, ensure_schema
 from station.store.schema import cameras, lenses, profiles, qa_results
 
 if TYPE_CHECKING:
+    from pipeline.intrinsics import Intrinsics
     from station.profile import Profile, Verdict
 
 #: the columns a profile row is written with (:meth:`station.profile.Profile.to_row`, ids resolved)
@@ -84,6 +85,7 @@ PROFILE_COLUMNS = (
     "verdict",
     "distortion_max",
     "distortion_rms",
+    "intrinsics_json",
 )
 
 FOCUS_TOL = 1e-9
@@ -257,6 +259,21 @@ class ProfileStore:
             self._session_verdict(conn, int(profile_id), verdict, session_dir or got[0], float(got[1]))
 
         self._write("recording the verdict", tx)
+
+    def set_intrinsics(self, profile_id: int, intrinsics: Intrinsics) -> None:
+        """Keep the camera matrix measured with a stored profile's distortion (``harp intrinsics --id``),
+        replacing any earlier one. One transaction; StoreError when there is no such profile."""
+
+        def tx(conn: sa.Connection) -> None:
+            done = conn.execute(
+                sa.update(profiles)
+                .where(profiles.c.id == int(profile_id))
+                .values(intrinsics_json=json.dumps(_json_safe(intrinsics.to_dict())))
+            )
+            if done.rowcount != 1:
+                raise StoreError(f"{self.location}: no profile #{profile_id} to keep a camera matrix for", "missing")
+
+        self._write("storing the camera matrix", tx)
 
     def put_qa_result(
         self,

@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from station.config import parse_config
-from station.config_check import check_config
+from station.config.check import check_config
 from station.session.devices import open_station
 
 REPO = Path(__file__).resolve().parents[2]
