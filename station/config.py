@@ -276,10 +276,16 @@ class ReportConfig:
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Present only for a simulated station (see :mod:`station.session.simulated`)."""
+    """Present only for a simulated station (see :mod:`station.session.simulated`).
+
+    ``lens_spread``: the manufacturing spread of the simulated lens, in units of the population's
+    (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
+    ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
+    for every serial."""
 
     harp_offset_deg: float = 0.0
     emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    lens_spread: float = field(default=0.0, metadata={"range": (0.0, 5.0)})
 
 
 def _at(yaml_path: str | None) -> Any:
@@ -324,6 +330,13 @@ _MISSING = object()
 def keys_of(cls: type) -> tuple[str, ...]:
     """The YAML keys of a section: the fields of its dataclass, in order."""
     return tuple(f.name for f in dataclasses.fields(cls))
+
+
+def _range(cls: type, name: str) -> tuple[float, float]:
+    """The ``range`` metadata of field ``name`` of dataclass ``cls``."""
+    (f,) = [f for f in dataclasses.fields(cls) if f.name == name]
+    lo, hi = f.metadata["range"]
+    return float(lo), float(hi)
 
 
 def config_keys(section: str = "") -> tuple[str, ...]:
@@ -614,8 +627,14 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     if "simulation" in top.data:
         sm = top.section("simulation", keys_of(SimulationConfig))
         emu = sm.section("emulator", optional=True)
+        lo, hi = _range(SimulationConfig, "lens_spread")
+        spread = sm.number("lens_spread", lo, min=lo)
+        if spread > hi:
+            raise sm.err("lens_spread", f"a number in [{lo:g}, {hi:g}] (times the population's spread)", spread)
         simulation = SimulationConfig(
-            harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))
+            harp_offset_deg=sm.number("harp_offset_deg", 0.0),
+            emulator=MappingProxyType(dict(emu.data)),
+            lens_spread=spread,
         )
     elif turntable.port == EMULATOR_PORT:
         raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)

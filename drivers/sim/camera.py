@@ -4,7 +4,8 @@ r"""A simulated grey camera looking at the calibration harp.
 :meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
 at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
 the moment of the exposure* (stage angle + harp offset), through the demo
-lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`),
+lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`; the unit of
+the lens the world holds, ``SimWorld.lens_unit``: one serial of a population),
 with the camera's exposure and gain, and sensor noise that is a function of
 the physical situation only (see *Noise seeds* below).
 
@@ -260,8 +261,9 @@ class SimulatedCamera:
         self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
-        # the lens applied to every pixel, for the focus it was computed at (render saves half its time)
-        self._ideal: tuple[float, np.ndarray] | None = None
+        # the lens applied to every pixel, for the (renderer, focus, lens unit) it was computed at
+        # (render saves half its time)
+        self._ideal: tuple[tuple[object, ...], np.ndarray] | None = None
         self._bit_depth = int(bit_depth)
         self.seed = int(seed)
         self.noise_sigma = float(noise_sigma)
@@ -513,7 +515,7 @@ class SimulatedCamera:
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
-        lens = lens_for_focus(focus, w, h)
+        lens = lens_for_focus(focus, w, h, self.world.lens_unit)
         return render_harp(
             w,
             h,
@@ -551,10 +553,10 @@ class SimulatedCamera:
         effects = dataclasses.replace(eff, sensor=sensor, development=development, blur=blur)
         m = self.realism.mount
         mount = HarpMount(m.centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
-        lens = lens_for_focus(focus, w, h)
+        lens = lens_for_focus(focus, w, h, self.world.lens_unit)
         ideal = None
         if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
-            key = float(focus) + 10.0  # a cache entry apart from the clean renderer's
+            key = ("raw", float(focus), self.world.lens_unit)  # a cache entry apart from the clean renderer's
             if self._ideal is None or self._ideal[0] != key:
                 self._ideal = (key, raw_ideal_grid(lens, w, h, effects))
             ideal = self._ideal[1]
@@ -566,8 +568,9 @@ class SimulatedCamera:
         w, h = self._size
         if w * h > IDEAL_CACHE_PIXELS:
             return None
-        if self._ideal is None or self._ideal[0] != focus:
-            self._ideal = (focus, ideal_grid(lens, w, h))
+        key = ("clean", float(focus), self.world.lens_unit)
+        if self._ideal is None or self._ideal[0] != key:
+            self._ideal = (key, ideal_grid(lens, w, h))
         return self._ideal[1]
 
     def capture(self, timeout: float = 5.0) -> Frame:

@@ -28,16 +28,34 @@ focus 0 and 12.4 px max, 3.1 px RMS at focus 1. Because the coefficients act on
 normalised coordinates, the same lens gives proportionally larger displacements on
 a larger sensor.
 
+A population (the configuration's ``simulation.lens_spread``, :func:`lens_unit`): each lens
+serial a different unit of this design, reproducibly. :math:`\sigma` = ``lens_spread``
+scales the manufacturing spread of :mod:`pipeline.lens_population`
+(:func:`pipeline.lens_population.draw_spread`, drawn from a seed that is a hash of the serial):
+:math:`k_2, k_4` and a :math:`\rho^6` term :math:`k_6` get normal deviations of
+:math:`\sigma\,(0.003, 0.0015, 0.0005)` (the ``wide`` design's, the 12 mm-like), the distortion
+centre :math:`\sigma\cdot 0.005\,s` per axis (decentre of the sensor), :math:`p_1, p_2`
+:math:`\sigma\cdot 3\cdot10^{-4}` more (element decentring), a thin prism (element and sensor
+tilt, terms the demo lens lacks) of :math:`\sigma\cdot(3, 1, 3, 1)\cdot10^{-4}`, and one unit in
+20 is the odd bad lens, its decentring and tilt 4 times that. The deviations do not depend on focus.
+:math:`\sigma = 0` (the default) is the nominal lens above for every serial.
+
 References
 ----------
 .. [1] D. C. Brown, "Decentering distortion of lenses", Photogrammetric
    Engineering 32(3), 1966.
+.. [2] J. Weng, P. Cohen, M. Herniou, "Camera calibration with distortion models and
+   accuracy evaluation", IEEE TPAMI 14(10), 1992 (thin prism).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 
+import numpy as np
+
+from pipeline.lens_population import DESIGNS, UnitSpread, draw_spread
 from pipeline.models.radial import RadialModel
 
 FOCUS_RANGE = (0.0, 1.0)
@@ -47,10 +65,25 @@ K2 = (0.040, -0.08)  # k2(f) = K2[0] * (1 + K2[1] f)
 K4 = (-0.004, 0.10)  # k4(f) = K4[0] * (1 + K4[1] f)
 TANGENTIAL = (6.0e-4, -4.0e-4)
 CENTRE_SHIFT = (0.012, -0.009)  # in units of s
+BAD_FRACTION = 0.05
+"""Share of badly assembled units in a population (``lens_spread`` > 0)."""
 
 
-def lens_for_focus(focus: float, width: int, height: int) -> RadialModel:
-    """The demo lens at focus position ``focus`` (in [0, 1]) for a ``width`` x ``height`` sensor.
+def lens_unit(serial: str, spread: float) -> UnitSpread:
+    """The unit of the demo lens that carries serial number ``serial``, for a manufacturing spread
+    ``spread`` (module docstring): the same serial always gives the same unit, another serial
+    another one. ``spread = 0`` gives the nominal lens (every deviation 0). ValueError for a spread
+    that is negative or not finite."""
+    sp = float(spread)
+    if not (math.isfinite(sp) and sp >= 0):
+        raise ValueError(f"lens_spread must be a finite number >= 0, got {spread}")
+    seed = int.from_bytes(hashlib.sha256(f"harp simulated lens|{serial}".encode()).digest()[:8], "little")
+    return draw_spread(np.random.default_rng(seed), DESIGNS["wide"].k_spread, BAD_FRACTION, sp)
+
+
+def lens_for_focus(focus: float, width: int, height: int, unit: UnitSpread | None = None) -> RadialModel:
+    """The demo lens at focus position ``focus`` (in [0, 1]) for a ``width`` x ``height`` sensor;
+    ``unit`` (:func:`lens_unit`) makes it that unit of the design instead of the nominal lens.
 
     Raises ValueError for a focus outside :data:`FOCUS_RANGE` or a bad size.
     """
@@ -63,6 +96,20 @@ def lens_for_focus(focus: float, width: int, height: int) -> RadialModel:
     centre = ((width - 1) / 2.0 + CENTRE_SHIFT[0] * s, (height - 1) / 2.0 + CENTRE_SHIFT[1] * s)
     k2 = K2[0] * (1.0 + K2[1] * f)
     k4 = K4[0] * (1.0 + K4[1] * f)
+    if unit is None or unit == NOMINAL:
+        return RadialModel.for_image(
+            int(width), int(height), k=(1.0, 0.0, k2, 0.0, k4), center=centre, tangential=TANGENTIAL
+        )
+    centre = (centre[0] + unit.centre[0] * s, centre[1] + unit.centre[1] * s)
     return RadialModel.for_image(
-        int(width), int(height), k=(1.0, 0.0, k2, 0.0, k4), center=centre, tangential=TANGENTIAL
+        int(width),
+        int(height),
+        k=(1.0, 0.0, k2 + unit.dk[0], 0.0, k4 + unit.dk[1], 0.0, unit.dk[2]),
+        center=centre,
+        tangential=(TANGENTIAL[0] + unit.tangential[0], TANGENTIAL[1] + unit.tangential[1]),
+        prism=unit.prism,
     )
+
+
+NOMINAL = UnitSpread((0.0, 0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0), False)
+"""The unit without deviations (``lens_spread`` 0): the nominal demo lens."""
