@@ -1,6 +1,6 @@
 """The one bounded reader of input files: regular files only, never a blocking open, size-limited.
 
-Images (:mod:`station.imageio`), configuration files (:mod:`station.config_reader`) and TCA files
+Images (:mod:`station.imageio`), configuration files (:mod:`station.config.reader`) and TCA files
 are read through :func:`read_regular_file`, so that a FIFO, a device or an endless file given where a
 file is expected is refused in one line instead of hanging or exhausting memory.
 """

@@ -92,24 +92,69 @@ def lens_for_focus(focus: float, width: int, height: int, unit: UnitSpread | Non
         raise ValueError(f"focus must be in [{FOCUS_RANGE[0]}, {FOCUS_RANGE[1]}], got {focus}")
     if int(width) < 2 or int(height) < 2:
         raise ValueError(f"sensor size must be at least 2x2, got {width}x{height}")
-    s = 0.5 * math.hypot(width, height)
-    centre = ((width - 1) / 2.0 + CENTRE_SHIFT[0] * s, (height - 1) / 2.0 + CENTRE_SHIFT[1] * s)
     k2 = K2[0] * (1.0 + K2[1] * f)
     k4 = K4[0] * (1.0 + K4[1] * f)
+    return _unit_of(int(width), int(height), k2, k4, TANGENTIAL, unit)
+
+
+def _unit_of(
+    width: int, height: int, k2: float, k4: float, tangential: tuple[float, float], unit: UnitSpread | None
+) -> RadialModel:
+    """The nominal lens ``k2``, ``k4``, ``tangential`` (centre shifted by :data:`CENTRE_SHIFT`) with the
+    deviations of ``unit`` (None or :data:`NOMINAL`: the nominal lens itself)."""
+    s = 0.5 * math.hypot(width, height)
+    centre = ((width - 1) / 2.0 + CENTRE_SHIFT[0] * s, (height - 1) / 2.0 + CENTRE_SHIFT[1] * s)
     if unit is None or unit == NOMINAL:
-        return RadialModel.for_image(
-            int(width), int(height), k=(1.0, 0.0, k2, 0.0, k4), center=centre, tangential=TANGENTIAL
-        )
-    centre = (centre[0] + unit.centre[0] * s, centre[1] + unit.centre[1] * s)
+        return RadialModel.for_image(width, height, k=(1.0, 0.0, k2, 0.0, k4), center=centre, tangential=tangential)
     return RadialModel.for_image(
-        int(width),
-        int(height),
+        width,
+        height,
         k=(1.0, 0.0, k2 + unit.dk[0], 0.0, k4 + unit.dk[1], 0.0, unit.dk[2]),
-        center=centre,
-        tangential=(TANGENTIAL[0] + unit.tangential[0], TANGENTIAL[1] + unit.tangential[1]),
+        center=(centre[0] + unit.centre[0] * s, centre[1] + unit.centre[1] * s),
+        tangential=(tangential[0] + unit.tangential[0], tangential[1] + unit.tangential[1]),
         prism=unit.prism,
     )
 
 
 NOMINAL = UnitSpread((0.0, 0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0), False)
 """The unit without deviations (``lens_spread`` 0): the nominal demo lens."""
+
+
+ZOOM_FOCAL_RANGE_MM = (12.0, 36.0)
+"""Focal lengths (mm) of the simulated zoom lens, wide end to long end (a camera refuses others)."""
+
+ZOOM_K2 = (0.045, -0.025)  # k2 at the wide and at the long end (barrel -> pincushion)
+ZOOM_K4 = (-0.005, 0.002)
+
+
+def zoom_lens(
+    focal_mm: float, focus: float, width: int, height: int, unit: UnitSpread | None = None
+) -> RadialModel:
+    r"""The simulated zoom lens at focal length ``focal_mm`` and focus ``focus`` (in [0, 1]).
+
+    As real zooms do, its distortion goes from barrel at the wide end to pincushion at the long
+    end: with :math:`z = (f_{mm} - 12) / (36 - 12) \in [0, 1]` the zoom position,
+
+    .. math::
+        k_2(z, f) = \bigl(0.045 (1 - z) - 0.025 z\bigr)(1 - 0.08 f), \qquad
+        k_4(z) = -0.005 (1 - z) + 0.002 z
+
+    in the equation of :func:`lens_for_focus` (same normalisation, decentring terms scaled by
+    :math:`1 - 0.5 z` and centre shift): :math:`k_2 > 0` (barrel) below :math:`z = 0.64`
+    (27.4 mm), :math:`< 0` (pincushion) above. ``unit`` (:func:`lens_unit`) adds that unit's
+    manufacturing deviations, as to the demo lens. Raises ValueError outside
+    :data:`ZOOM_FOCAL_RANGE_MM` or :data:`FOCUS_RANGE`.
+    """
+    fm, f = float(focal_mm), float(focus)
+    lo, hi = ZOOM_FOCAL_RANGE_MM
+    if not (math.isfinite(fm) and lo <= fm <= hi):
+        raise ValueError(f"focal length must be in [{lo:g}, {hi:g}] mm, got {focal_mm}")
+    if not (math.isfinite(f) and FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]):
+        raise ValueError(f"focus must be in [{FOCUS_RANGE[0]}, {FOCUS_RANGE[1]}], got {focus}")
+    if int(width) < 2 or int(height) < 2:
+        raise ValueError(f"sensor size must be at least 2x2, got {width}x{height}")
+    z = (fm - lo) / (hi - lo)
+    k2 = (ZOOM_K2[0] * (1 - z) + ZOOM_K2[1] * z) * (1.0 + K2[1] * f)
+    k4 = ZOOM_K4[0] * (1 - z) + ZOOM_K4[1] * z
+    tang = (TANGENTIAL[0] * (1 - 0.5 * z), TANGENTIAL[1] * (1 - 0.5 * z))
+    return _unit_of(int(width), int(height), k2, k4, tang, unit)

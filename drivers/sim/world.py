@@ -36,6 +36,9 @@ class SimWorld:
     lens_unit : UnitSpread or None
         Which unit of the demo lens is on the camera (:func:`drivers.sim.lens.lens_unit`: its
         manufacturing deviations); None is the nominal lens.
+    zoom : float or None
+        Focal length (mm) of the simulated zoom lens (:func:`drivers.sim.lens.zoom_lens`), written by
+        the camera's ``set_zoom``; None: the camera has the fixed demo lens.
 
     Thread-safe: the stage function is called under the emulator's own lock,
     ``focus`` and ``harp_offset_deg`` are plain floats.
@@ -52,6 +55,7 @@ class SimWorld:
         self.focus = float(focus)
         self.harp_offset_deg = float(harp_offset_deg)
         self.lens_unit = lens_unit
+        self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None
         self._lock = threading.Lock()

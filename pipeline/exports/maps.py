@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, image_corners
 from pipeline.models.remap_model import RemapModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, RemapMaps, fast_undistortion_maps
 
@@ -96,8 +96,6 @@ def export_maps(model: DistortionModel, width: int, height: int, step: int = DEF
 
 def corners_ideal(model: DistortionModel, width: int, height: int) -> Array | None:
     """The model's corrected positions of the image corners ``(4, 2)`` (None where it has none)."""
-    from pipeline.normalise import image_corners
-
     u = np.asarray(model.undistort_points(image_corners(width, height)), dtype=np.float64)
     return u if np.all(np.isfinite(u)) else None
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 
 import cv2
+import numpy as np
 
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.lens import CameraMatrixChoice
@@ -79,6 +80,8 @@ def opencv_text(
     fs.write("distortion_model", "fisheye" if fisheye else "pinhole")
     if camera is not None:
         fs.write("camera_matrix_kind", camera.kind)
+        if camera.sd is not None:  # a measured camera matrix: 1 sigma of fx, fy, cx, cy
+            fs.write("camera_matrix_sd_fx_fy_cx_cy", np.asarray(camera.sd, np.float64).reshape(1, 4))
     if error is not None:
         fs.write("conversion_rms_px", float(error.rms_px))
         fs.write("conversion_max_px", float(error.max_px))

@@ -30,7 +30,16 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.exports import maps as maps_fmt
-from pipeline.exports.fit import ConversionError, conversion_error_in_frame, fit_fisheye, fit_lensfun, fit_opencv
+from pipeline.exports.fit import (
+    ConversionError,
+    conversion_error_in_frame,
+    fit_fisheye,
+    fit_fisheye_camera,
+    fit_lensfun,
+    fit_opencv,
+    fit_opencv_camera,
+    frame_error,
+)
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
 from pipeline.exports.lensfun import (
     LensfunEntry,
@@ -43,6 +52,7 @@ from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
+from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.models.base import DistortionModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
@@ -81,6 +91,10 @@ class ExportSource:
         lensfun, the ``notes`` of the maps and the comments of the STMap, a
         ``stamp`` list in json): what a reader of the file must know before
         using it, e.g. that the profile failed QA.
+    intrinsics : Intrinsics, optional
+        The camera matrix measured with this correction held fixed (``harp intrinsics``):
+        the OpenCV, ROS and mrcal exports use it (:func:`measured_camera`), the others say
+        how they hold it.
     """
 
     model: DistortionModel
@@ -93,6 +107,7 @@ class ExportSource:
     provenance: Mapping[str, Any] = field(default_factory=dict)
     wide_angle: bool = False
     stamp: tuple[str, ...] = ()
+    intrinsics: Intrinsics | None = None
 
 
 @dataclass(frozen=True)
@@ -207,8 +222,64 @@ def _fisheye_hint(fmt: str, src: ExportSource, err: ConversionError, focal: floa
     return []
 
 
+def measured_camera(src: ExportSource) -> tuple[CameraMatrixChoice | None, list[str]]:
+    """The measured camera matrix of ``src`` as an export's choice, or None with why it is not used:
+    ``(choice, warnings)``. Not used (a warning each): measured for another image size, or with
+    another distortion than ``src.model`` (its digest differs: the lens was calibrated again since).
+    A camera matrix with skew is refused (ValueError): the OpenCV, ROS and mrcal files hold none."""
+    i = src.intrinsics
+    if i is None:
+        return None, []
+    if (i.width, i.height) != (int(src.width), int(src.height)):
+        return None, [
+            f"the measured camera matrix is for {i.width}x{i.height} images, not {src.width}x{src.height}: not used"
+        ]
+    if i.distortion and i.distortion != distortion_digest(src.model):
+        return None, [
+            "the measured camera matrix was measured with another distortion than this profile's: not used "
+            "(run harp intrinsics again with this model)"
+        ]
+    if i.skew_fitted and abs(i.skew) > 1e-9 * i.fx:
+        raise ValueError(
+            f"the measured camera matrix has skew {i.skew:.4g} px, which OpenCV, ROS and mrcal files cannot hold; "
+            "measure it again without --skew"
+        )
+    return (
+        CameraMatrixChoice(
+            i.fx,
+            "measured",
+            i.source,
+            camera=(i.fx, i.fy, i.cx, i.cy),
+            sd=(i.sd[0], i.sd[1], i.sd[2], i.sd[3]),
+            text=i.statement(),
+        ),
+        [],
+    )
+
+
 def _camera(src: ExportSource, opt: ExportOptions) -> CameraMatrixChoice:
+    if opt.focal_px is None:
+        measured, _ = measured_camera(src)
+        if measured is not None:
+            return measured
     return camera_matrix_choice(src.lens, src.width, src.height, opt.focal_px)
+
+
+def _measured_lines(src: ExportSource, cam: CameraMatrixChoice, converted: DistortionModel) -> list[str]:
+    """With a measured camera matrix, the conversion error in the camera's own frame."""
+    if cam.camera is None:
+        return []
+    rms, mx = frame_error(src.model, converted, src.width, src.height)
+    return [
+        f"distortion fitted with the measured camera matrix fixed, in its frame (no homography): "
+        f"RMS {rms:.4f} px, max {mx:.4f} px from the harp correction"
+    ]
+
+
+def _camera_warnings(src: ExportSource, opt: ExportOptions) -> list[str]:
+    if opt.focal_px is not None and src.intrinsics is not None:
+        return ["--focal-px given: the measured camera matrix is not used"]
+    return measured_camera(src)[1]
 
 
 def _lens_notes(src: ExportSource) -> tuple[str, ...]:
@@ -231,11 +302,15 @@ def _write_pinhole(
 ) -> Export:
     n = _coeffs(fmt, opt, allowed, default)
     cam = _camera(src, opt)
-    m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
-    warnings = conversion_warnings(fmt, src, err)
-    if warnings and hint:
+    if cam.camera is not None:
+        m, err = fit_opencv_camera(src.model, src.width, src.height, cam.camera, n_coeffs=n, edges=src.edges)
+    else:
+        m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
+    warnings = _camera_warnings(src, opt) + conversion_warnings(fmt, src, err)
+    if warnings and hint and cam.camera is None:
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
-    notes = _lens_notes(src)
+    measured = tuple(_measured_lines(src, cam, m))
+    notes = (*_lens_notes(src), *measured)
     sn = None
     if fmt == "opencv":
         sn = solver_need(src.model, m, src.width, src.height)
@@ -250,16 +325,20 @@ def _write_pinhole(
         )
     else:  # mrcal's unproject iterates to convergence: no solver statement
         text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp)
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
+    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
 
 
 def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     cam = _camera(src, opt)
     focal = None if cam.kind == "placeholder" else cam.focal_px
-    m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    if cam.camera is not None:
+        m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
+    else:
+        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
     if focal is None:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
-    notes = _lens_notes(src)
+    measured = tuple(_measured_lines(src, cam, m))
+    notes = (*_lens_notes(src), *measured)
     sn = solver_need(src.model, m, src.width, src.height)
     if fmt == "opencv-fisheye":
         text = opencv_text(
@@ -270,8 +349,12 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         text = ros_text(
             m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
         )
-    warnings = conversion_warnings(fmt, src, err) + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
+    warnings = (
+        _camera_warnings(src, opt)
+        + conversion_warnings(fmt, src, err)
+        + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
+    )
+    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
 
 
 CROP_FACTOR_MISMATCH = 0.15
@@ -409,6 +492,16 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
         notes.append(f"lensfun: {crop_how}")
     if lens.focal_mm is None:
         notes.append("lensfun: no nominal focal length configured, filed under 50 mm")
+    measured, why_not = measured_camera(src)
+    if measured is not None:
+        notes.append(
+            "lensfun holds no camera matrix (it files the lens under its nominal focal length): the measured one "
+            f"(fx {measured.camera[0]:.3f}, fy {measured.camera[1]:.3f}, cx {measured.camera[2]:.3f}, "
+            f"cy {measured.camera[3]:.3f} px) is not in this file"
+            if measured.camera is not None
+            else ""
+        )
+    warnings += why_not
     warnings += conversion_warnings("lensfun", src, err)
     return Export("lensfun", text.encode(), err, m, tuple(notes), tuple(warnings))
 
@@ -427,13 +520,19 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
     )
-    notes = (*src.stamp, note, *_lens_notes(src))
+    measured, why_not = measured_camera(src)
+    k_note = (
+        (f"the corrected image is the measured camera's ideal image: {measured.statement}",)
+        if measured is not None
+        else ()
+    )
+    notes = (*src.stamp, note, *k_note, *_lens_notes(src))
     data = (
         maps_fmt.maps_npz_bytes(maps, acc, notes, corners)
         if fmt == "maps"
         else maps_fmt.stmap_exr_bytes(maps, notes, corners)
     )
-    return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
+    return Export(fmt, data, err, converted, (note, *k_note), tuple(why_not + conversion_warnings(fmt, src, err)))
 
 
 def harp_model_doc(src: ExportSource) -> dict[str, Any]:
@@ -448,6 +547,7 @@ def harp_model_doc(src: ExportSource) -> dict[str, Any]:
         "image": {"width": int(src.width), "height": int(src.height)},
         "merit": dict(src.merit),
         "provenance": dict(src.provenance),
+        **({"intrinsics": src.intrinsics.to_dict()} if src.intrinsics is not None else {}),
     }
 
 
@@ -459,7 +559,12 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
     from pipeline.model_file import model_file_text
 
     text = model_file_text(
-        src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
+        src.model,
+        width=src.width,
+        height=src.height,
+        merit=dict(src.merit),
+        provenance=dict(src.provenance),
+        intrinsics=src.intrinsics,
     )
     head = "".join(f"# {line}\n" for line in src.stamp)
     return Export("harp", (head + text).encode())

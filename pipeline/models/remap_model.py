@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, image_corners
 from pipeline.models.inverse import Inverse, newton_inverse
 
 Array = npt.NDArray[np.float64]
@@ -49,7 +49,7 @@ class RemapModel(DistortionModel):
     extrapolated either way.
 
     Parameters: ``map_x``, ``map_y`` (H, W), float32 or float64; ``corners_ideal`` (4, 2) or None,
-    the corrected positions of the corners of :func:`pipeline.normalise.image_corners`, in order.
+    the corrected positions of the corners of :func:`pipeline.models.base.image_corners`, in order.
     """
 
     map_x: Array
@@ -125,8 +125,6 @@ class RemapModel(DistortionModel):
     def normalisation_points(self, width: int, height: int) -> tuple[Array, Array]:
         """The stored corrected corners and the image corners; without them, the maps' own corners
         and where the maps read them (see the class docstring)."""
-        from pipeline.normalise import image_corners  # normalise imports the models
-
         q = image_corners(width, height)
         if self.corners_ideal is not None:
             return np.asarray(self.corners_ideal, dtype=np.float64), q

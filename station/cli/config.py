@@ -1,7 +1,7 @@
 """``harp config check CONFIG [--json]``: validate a station configuration, opening nothing.
 
 Every field is checked (:func:`station.config.load_config`), then what only the whole
-configuration tells (:func:`station.config_check.check_config`: a camera that could lock
+configuration tells (:func:`station.config.check.check_config`: a camera that could lock
 focus on nothing is an error; a turntable port missing on this machine, a store directory
 that cannot be created are warnings). Exit 0 when the configuration is usable (warnings on
 stderr), 2 with one line naming the file and field when it is not.
@@ -29,7 +29,7 @@ def register(subparsers) -> None:
 
 def _check(args) -> int:
     from station.config import ConfigError, load_config
-    from station.config_check import check_config
+    from station.config.check import check_config
 
     try:
         config = load_config(args.config)

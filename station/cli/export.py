@@ -167,7 +167,7 @@ def register(subparsers) -> None:
 # ------------------------------------------------------------------ options
 def lens_overrides(args) -> dict:
     """The :class:`~pipeline.exports.lens.LensInfo` fields the options set (checked; ExportError)."""
-    from station.config import optic_problem
+    from station.equipment import optic_problem
 
     out = {}
     for opt, (name, kind) in LENS_OPTIONS.items():

@@ -54,6 +54,7 @@ from station.store.migrate import check_integrity, ensure_schema
 from station.store.schema import cameras, lenses, profiles, qa_results
 
 if TYPE_CHECKING:
+    from pipeline.intrinsics import Intrinsics
     from station.profile import Profile, Verdict
 
 #: the columns a profile row is written with (:meth:`station.profile.Profile.to_row`, ids resolved)
@@ -84,6 +85,8 @@ PROFILE_COLUMNS = (
     "verdict",
     "distortion_max",
     "distortion_rms",
+    "intrinsics_json",
+    "focal",
 )
 
 FOCUS_TOL = 1e-9
@@ -272,6 +275,21 @@ class ProfileStore:
 
         self._write("recording the verdict", tx)
 
+    def set_intrinsics(self, profile_id: int, intrinsics: Intrinsics) -> None:
+        """Keep the camera matrix measured with a stored profile's distortion (``harp intrinsics --id``),
+        replacing any earlier one. One transaction; StoreError when there is no such profile."""
+
+        def tx(conn: sa.Connection) -> None:
+            done = conn.execute(
+                sa.update(profiles)
+                .where(profiles.c.id == int(profile_id))
+                .values(intrinsics_json=json.dumps(_json_safe(intrinsics.to_dict())))
+            )
+            if done.rowcount != 1:
+                raise StoreError(f"{self.location}: no profile #{profile_id} to keep a camera matrix for", "missing")
+
+        self._write("storing the camera matrix", tx)
+
     def put_qa_result(
         self,
         *,
@@ -410,19 +428,25 @@ class ProfileStore:
         return hits[0]
 
     def latest_by_focus(self, lens_id: int, *, allow_failed: bool = False) -> list[Profile]:
-        """The **current** profiles of a lens, by focus: the newest profile of each focus setting.
+        """The **current** profiles of a lens, by focus: the newest profile of each focus setting
+        (of a zoom lens: of each (focal, focus) setting, ordered by focal then focus).
 
         A focus setting whose newest profile failed QA has no current profile — it is left out,
         and an older passing profile does not stand in for it — unless ``allow_failed=True``
         (then the newest is returned whatever its verdict; ``p.qa.passed`` tells). A profile not
         judged yet (``p.qa is None``) is current. Callers that must say *why* a focus is missing
         (``profile export`` naming the failed check) ask again with ``allow_failed=True``."""
-        newest: dict[float, Profile] = {}
+        newest: dict[tuple[float, float], Profile] = {}  # by (focal, focus): a zoom lens's settings
         for p in self.profiles(lens_id):  # newest first within a focus
             assert p.focus is not None
-            if not any(math.isclose(p.focus, f, rel_tol=0, abs_tol=FOCUS_TOL) for f in newest):
-                newest[p.focus] = p
-        return [newest[f] for f in sorted(newest) if allow_failed or newest[f].qa is None or newest[f].qa.passed]
+            key = (-1.0 if p.focal is None else p.focal, p.focus)
+            if not any(
+                math.isclose(key[0], z, rel_tol=0, abs_tol=FOCUS_TOL)
+                and math.isclose(key[1], f, rel_tol=0, abs_tol=FOCUS_TOL)
+                for z, f in newest
+            ):
+                newest[key] = p
+        return [newest[k] for k in sorted(newest) if allow_failed or newest[k].qa is None or newest[k].qa.passed]
 
     def current_profile(self, lens_id: int, focus: float, *, allow_failed: bool = False) -> Profile | None:
         """The current profile of a lens at one calibrated focus setting (see :meth:`latest_by_focus`), or None."""

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from station.config import ConfigError, load_config
-from station.config_reader import MAX_CONFIG_BYTES, MAX_DEPTH, MAX_DIGITS
+from station.config.reader import MAX_CONFIG_BYTES, MAX_DEPTH, MAX_DIGITS
 
 from .test_config import demo_data, write
 

@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from station.config import parse_config
-from station.config_check import check_config
+from station.config.check import check_config
 from station.session.devices import open_station
 
 REPO = Path(__file__).resolve().parents[2]
@@ -28,7 +28,13 @@ CONFIGS = sorted((REPO / "configs").glob("*.yaml"))
 
 
 def test_every_shipped_config_is_covered():
-    assert {p.name for p in CONFIGS} == {"demo.yaml", "live-demo.yaml", "aravis-zaber.yaml", "v4l2-grbl.yaml"}
+    assert {p.name for p in CONFIGS} == {
+        "demo.yaml",
+        "demo-zoom.yaml",
+        "live-demo.yaml",
+        "aravis-zaber.yaml",
+        "v4l2-grbl.yaml",
+    }
 
 
 @contextlib.contextmanager

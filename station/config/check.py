@@ -19,7 +19,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from station.config import Config, ConfigError
+from station.config.errors import ConfigError
+from station.config.schema import Config
 
 FOCUS_SETTING = {"aravis": "focus_feature"}
 """Camera drivers that lock focus only through a configured setting: driver -> the setting's key."""

@@ -79,7 +79,7 @@ def load_yaml(text: str) -> Any:
 
 
 def check_yaml_nodes(root: Any) -> None:
-    """Refuse what :mod:`station.config_reader` lists, naming the field (dotted path) where it is."""
+    """Refuse what :mod:`station.config.reader` lists, naming the field (dotted path) where it is."""
     import yaml
 
     stack: list[tuple[Any, str, int]] = [(root, "", 1)]
