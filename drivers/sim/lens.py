@@ -127,9 +127,7 @@ ZOOM_K2 = (0.045, -0.025)  # k2 at the wide and at the long end (barrel -> pincu
 ZOOM_K4 = (-0.005, 0.002)
 
 
-def zoom_lens(
-    focal_mm: float, focus: float, width: int, height: int, unit: UnitSpread | None = None
-) -> RadialModel:
+def zoom_lens(focal_mm: float, focus: float, width: int, height: int, unit: UnitSpread | None = None) -> RadialModel:
     r"""The simulated zoom lens at focal length ``focal_mm`` and focus ``focus`` (in [0, 1]).
 
     As real zooms do, its distortion goes from barrel at the wide end to pincushion at the long

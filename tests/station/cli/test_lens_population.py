@@ -21,7 +21,7 @@ import yaml
 from drivers.sim.lens import lens_for_focus, lens_unit
 from pipeline.compare import compare_models
 from station.store import ProfileStore
-from tests.station.cli.test_session import H, REPO, W, small_config
+from tests.station.cli.test_session import REPO, H, W, small_config
 
 SERIALS = ("LINE-0002", "LINE-0003")
 SPREAD = 2.0
