@@ -15,7 +15,8 @@ same record), ``harp calibrate`` writes it, QA judges it, the report shows it an
   written (``Merit.extra``), so nothing read is lost;
 * the QA verdict with its checks (:class:`Verdict`, :class:`Check`: value,
   comparison, limit, passed), once judged;
-* what it is of (``lens``, ``camera``, ``focus``; the configured ``optics``: nominal
+* what it is of (``lens``, ``camera``, ``focus``, and for a zoom lens ``focal``, the focal
+  length setting in mm (None: a fixed lens); the configured ``optics``: nominal
   focal length, mount, pixel pitch or sensor width, crop factor, for exports —
   :meth:`Profile.lens_info`) and where it comes from
   (:class:`Provenance`: time, software, command, images with SHA-256, station,
@@ -312,6 +313,7 @@ _PROVENANCE_KEYS = (
     "command",
     "images",
     "focus",
+    "focal",
     "lens",
     "camera",
     "optics",
@@ -340,6 +342,7 @@ class Profile:
     id: int | None = None
     stored_at: str | None = None
     intrinsics: Intrinsics | None = None
+    focal: float | None = None
 
     def with_(self, **changes: Any) -> Profile:
         """A copy with ``changes`` (e.g. ``qa=verdict`` once judged, ``id=`` once stored)."""
@@ -357,7 +360,7 @@ class Profile:
             camera_model=cam.model if cam else None,
             mount=o.mount,
             crop_factor=o.crop_factor,
-            focal_mm=o.focal_mm,
+            focal_mm=self.focal if self.focal is not None else o.focal_mm,  # a zoom setting: its focal
             pixel_pitch_um=o.pixel_pitch_um,
             sensor_width_mm=o.sensor_width_mm,
             focus=self.focus,
@@ -387,6 +390,8 @@ class Profile:
             prov["images"] = [{"path": path, "sha256": sha} for path, sha in p.images]
         if self.focus is not None:
             prov["focus"] = self.focus
+        if self.focal is not None:
+            prov["focal"] = self.focal
         if self.lens is not None:
             prov["lens"] = [self.lens.maker, self.lens.model, self.lens.serial]
         if self.camera is not None:
@@ -422,6 +427,7 @@ class Profile:
             lens=_identity(prov.get("lens")),
             camera=_identity(prov.get("camera")),
             focus=_num(prov.get("focus")),
+            focal=_num(prov.get("focal")),
             provenance=_provenance_of(prov),
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
@@ -458,6 +464,7 @@ class Profile:
             "lens": (self.lens.maker, self.lens.model, self.lens.serial),
             "camera": (self.camera.maker, self.camera.model, self.camera.serial),
             "focus": float(self.focus),
+            "focal": float(self.focal) if self.focal is not None else None,
             "model_name": self.model.name,
             "model_json": json.dumps(_plain(self.model.to_dict())),
             "width": int(self.width),
@@ -544,6 +551,7 @@ class Profile:
             lens=Identity(*lens) if lens else None,
             camera=Identity(*camera) if camera else None,
             focus=_num(row.get("focus")),
+            focal=_num(row.get("focal")),
             provenance=provenance,
             optics=Optics.from_dict(prov_doc.get("optics")),
             details=details,

@@ -54,6 +54,7 @@ FULL = Profile(
     lens=Identity("Acme", "12mm", "L-1"),
     camera=Identity("Cam", "Body", "C-1"),
     focus=0.5,
+    focal=12.0,
     optics=Optics(focal_mm=12.0, mount="C", pixel_pitch_um=3.45, crop_factor=5.6),
     provenance=Provenance(
         created_utc="2026-12-01T18:11:21Z",
