@@ -4,7 +4,8 @@ r"""A simulated grey camera looking at the calibration harp.
 :meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
 at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
 the moment of the exposure* (stage angle + harp offset), through the demo
-lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`),
+lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`; the unit of
+the lens the world holds, ``SimWorld.lens_unit``: one serial of a population),
 with the camera's exposure and gain, and sensor noise that is a function of
 the physical situation only (see *Noise seeds* below).
 
@@ -269,8 +270,9 @@ class SimulatedCamera:
         self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
-        # the lens applied to every pixel, for the focus it was computed at (render saves half its time)
-        self._ideal: tuple[tuple[float, float | None], np.ndarray] | None = None
+        # the lens applied to every pixel, for the (renderer, focus, focal length, lens unit) it was
+        # computed at (render saves half its time)
+        self._ideal: tuple[tuple[object, ...], np.ndarray] | None = None
         self._bit_depth = int(bit_depth)
         self.seed = int(seed)
         self.noise_sigma = float(noise_sigma)
@@ -437,11 +439,12 @@ class SimulatedCamera:
 
     def lens_at(self, focus: float) -> Any:
         """The lens the harp is rendered through at ``focus``: the zoom lens at the world's focal length
-        (:func:`drivers.sim.lens.zoom_lens`), or the fixed demo lens (:func:`drivers.sim.lens.lens_for_focus`)."""
+        (:func:`drivers.sim.lens.zoom_lens`), or the fixed demo lens (:func:`drivers.sim.lens.lens_for_focus`),
+        each the unit ``world.lens_unit`` (its manufacturing deviations; None: the nominal lens)."""
         w, h = self._size
         if self.world.zoom is not None:
-            return zoom_lens(self.world.zoom, focus, w, h)
-        return lens_for_focus(focus, w, h)
+            return zoom_lens(self.world.zoom, focus, w, h, self.world.lens_unit)
+        return lens_for_focus(focus, w, h, self.world.lens_unit)
 
     def blur_at(self, focus: float) -> float:
         """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
@@ -592,7 +595,7 @@ class SimulatedCamera:
         lens = self.lens_at(focus)
         ideal = None
         if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
-            key = (float(focus) + 10.0, self.world.zoom)  # a cache entry apart from the clean renderer's
+            key = ("raw", float(focus), self.world.zoom, self.world.lens_unit)  # apart from the clean renderer's
             if self._ideal is None or self._ideal[0] != key:
                 self._ideal = (key, raw_ideal_grid(lens, w, h, effects))
             ideal = self._ideal[1]
@@ -604,7 +607,7 @@ class SimulatedCamera:
         w, h = self._size
         if w * h > IDEAL_CACHE_PIXELS:
             return None
-        key = (focus, self.world.zoom)
+        key = ("clean", float(focus), self.world.zoom, self.world.lens_unit)
         if self._ideal is None or self._ideal[0] != key:
             self._ideal = (key, ideal_grid(lens, w, h))
         return self._ideal[1]

@@ -46,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from pipeline.corrected_frame import CorrectedFrame
 from pipeline.evaluate import corrected_points
 from pipeline.exports.pole_free import (
     EXTRAPOLATION_RADIUS,
@@ -241,27 +242,43 @@ def conversion_error_in_frame(
     height: int,
     n_long: int = ERROR_GRID_LONG,
     edges: Sequence[Array] | None = None,
+    frame: CorrectedFrame | None = None,
+    whole_photo: bool = False,
 ) -> ConversionError:
-    """Conversion error of an export in *our own* ideal frame, over the corrected image only.
+    """Conversion error of an export in *our own* corrected image, over the corrected image only.
 
     For per-pixel maps (``maps``, ``stmap``): they hold our correction itself,
-    for the pixels of the corrected image ``[0, W-1] x [0, H-1]``; a distorted
-    point whose ideal image falls outside is not in the corrected image and is
-    not compared. No homography is applied (the frames are the same), so both
+    for the pixels of the corrected image (``[0, W-1] x [0, H-1]``, or ``frame``'s:
+    :mod:`pipeline.corrected_frame`, whose pixels ``theirs`` returns); a distorted
+    point whose corrected image falls outside is not in the corrected image and is
+    not compared (``whole_photo``: every point of the photo is, for a redistort map that holds
+    the correction at every photo pixel). No homography is applied (the frames are the same), so both
     the "4-corner" and the "modulo homography" figures are the plain distance
-    ``|U_theirs(x) - U_ours(x)|``; the straightness figures are on lines of our
+    ``|U_theirs(x) - A(U_ours(x))|``; the straightness figures are on lines of our
     ideal frame inside the corrected image, and on the fitting shots' edge
     points that appear in it.
     """
+    fr = frame or CorrectedFrame.identity(width, height)
+    ow, oh = fr.width, fr.height
+
+    def ours_q(p: Array) -> Array:
+        return fr.from_ideal(ours.undistort_points(p))
+
+    def keep_of(q: Array) -> npt.NDArray[np.bool_]:
+        if whole_photo:
+            ok: npt.NDArray[np.bool_] = np.all(np.isfinite(q), axis=1)
+            return ok
+        return _inside(q, ow, oh)
+
     g = image_grid(width, height, n_long)
-    uo = ours.undistort_points(g)
-    keep = _inside(uo, width, height)
+    uo = ours_q(g)
+    keep = keep_of(uo)
     ut = theirs.undistort_points(g[keep])
     e = np.linalg.norm(ut - uo[keep], axis=1)
     e = np.where(np.isfinite(e), e, np.inf)
     lines = []
     for ln in straight_lines_through(ours, width, height, normalise=False):
-        ok = _inside(ours.undistort_points(ln), width, height)  # the lines inside the corrected image
+        ok = keep_of(ours_q(ln))  # the lines inside the corrected image
         if ok.sum() >= 2:
             lines.append(ln[ok])
     st = straightness([theirs.undistort_points(ln) for ln in lines])
@@ -270,12 +287,12 @@ def conversion_error_in_frame(
         kept = []
         for p in edges:
             p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
-            ok = _inside(ours.undistort_points(p), width, height)
+            ok = keep_of(ours_q(p))
             if ok.sum() >= 2:
                 kept.append(p[ok])
         if kept:
             sh = straightness([theirs.undistort_points(p) for p in kept])
-            so = straightness([ours.undistort_points(p) for p in kept])
+            so = straightness([ours_q(p) for p in kept])
             shots = (sh.d, sh.d_max, so.d, so.d_max)
     rms, mx = float(np.sqrt(np.mean(e**2))), float(e.max())
     return ConversionError(
@@ -291,6 +308,17 @@ def conversion_error_in_frame(
         model_shots_d_px=shots[2],
         model_shots_d_max_px=shots[3],
     )
+
+
+def ideal_homography(
+    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = ERROR_GRID_LONG
+) -> Array:
+    """The homography ``H`` taking ``theirs``' ideal pixels to ``ours`` (``U_ours ~ H(U_theirs)``), least
+    squares over the image: the one the conversion error modulo homography is measured after."""
+    g = image_grid(width, height, n_long)
+    uo, ut = ours.undistort_points(g), theirs.undistort_points(g)
+    ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
+    return fit_homography(ut[ok], uo[ok])
 
 
 def mod_h_rms(ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 64) -> float:

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
 from pipeline.exports.fit import (
     ConversionError,
@@ -40,6 +41,7 @@ from pipeline.exports.fit import (
     fit_opencv_camera,
     frame_error,
 )
+from pipeline.exports.frame import FrameStatement, frame_statement
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
 from pipeline.exports.lensfun import (
     LensfunEntry,
@@ -56,7 +58,7 @@ from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.models.base import DistortionModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
-from pipeline.models.remap_model import RemapModel
+from pipeline.models.remap_model import CorrectionMapModel, RemapModel
 
 Array = npt.NDArray[np.float64]
 
@@ -125,6 +127,9 @@ class ExportOptions:
     camera_name: str | None = None
     existing: bytes | None = None
     existing_name: str = "<existing>"
+    frame: FrameChoice = field(default_factory=FrameChoice)
+    """The corrected image (``--size``, ``--scale``, ``--alpha``, ``--overscan``; :mod:`pipeline.corrected_frame`):
+    the maps and STMaps hold it, the pin-hole and fisheye files state the ``R`` and ``newK`` that write it."""
     installed_lensfun: tuple[tuple[str, str], ...] = ()
     """The lensfun databases lensfun loads on this machine, ``(path, XML text)``: a lensfun export
     under the name of a lens in one of them is refused (see :func:`~pipeline.exports.lensfun.installed_lens`)."""
@@ -265,6 +270,16 @@ def _camera(src: ExportSource, opt: ExportOptions) -> CameraMatrixChoice:
     return camera_matrix_choice(src.lens, src.width, src.height, opt.focal_px)
 
 
+def _frame_of(
+    fmt: str, src: ExportSource, opt: ExportOptions, m: DistortionModel, k: Any, focal: float
+) -> FrameStatement:
+    """The export's ``R`` and ``newK`` for the corrected image the options ask (ValueError naming the format)."""
+    try:
+        return frame_statement(src.model, m, k, src.width, src.height, opt.frame, focal)
+    except ValueError as exc:
+        raise ValueError(f"{fmt}: {exc}") from None
+
+
 def _measured_lines(src: ExportSource, cam: CameraMatrixChoice, converted: DistortionModel) -> list[str]:
     """With a measured camera matrix, the conversion error in the camera's own frame."""
     if cam.camera is None:
@@ -311,20 +326,30 @@ def _write_pinhole(
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
     measured = tuple(_measured_lines(src, cam, m))
     notes = (*_lens_notes(src), *measured)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
     sn = None
     if fmt == "opencv":
         sn = solver_need(src.model, m, src.width, src.height)
         text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
         )
     elif fmt == "ros":
         sn = solver_need(src.model, m, src.width, src.height)
         name = opt.camera_name or src.lens.ros_camera_name()
         text = ros_text(
-            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m,
+            src.width,
+            src.height,
+            err,
+            camera_name=name,
+            camera=cam,
+            notes=notes,
+            stamp=src.stamp,
+            solver=sn,
+            frame=fr,
         )
     else:  # mrcal's unproject iterates to convergence: no solver statement
-        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp)
+        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp, frame=fr)
     return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
 
 
@@ -335,6 +360,7 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
     else:
         m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
     if focal is None:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
     measured = tuple(_measured_lines(src, cam, m))
@@ -342,12 +368,21 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     sn = solver_need(src.model, m, src.width, src.height)
     if fmt == "opencv-fisheye":
         text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
         )
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
         text = ros_text(
-            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m,
+            src.width,
+            src.height,
+            err,
+            camera_name=name,
+            camera=cam,
+            notes=notes,
+            stamp=src.stamp,
+            solver=sn,
+            frame=fr,
         )
     warnings = (
         _camera_warnings(src, opt)
@@ -506,16 +541,27 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
     return Export("lensfun", text.encode(), err, m, tuple(notes), tuple(warnings))
 
 
+def _corrected(fmt: str, src: ExportSource, opt: ExportOptions) -> Any:
+    """The corrected image the options ask (ValueError naming the format)."""
+    try:
+        return corrected_frame(src.model, src.width, src.height, opt.frame)
+    except ValueError as exc:
+        raise ValueError(f"{fmt}: {exc}") from None
+
+
 def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
-    maps = maps_fmt.export_maps(src.model, src.width, src.height)
-    acc = maps_fmt.map_accuracy(src.model, maps.map_x, maps.map_y)
-    corners = maps_fmt.corners_ideal(src.model, src.width, src.height)
+    frame = _corrected(fmt, src, opt)
+    fr = None if frame.is_identity and (frame.width, frame.height) == (src.width, src.height) else frame
+    maps = maps_fmt.export_maps(src.model, src.width, src.height, frame=fr)
+    exact = src.model if fr is None else _in_frame(src.model, fr)
+    acc = maps_fmt.map_accuracy(exact, maps.map_x, maps.map_y)
+    corners = maps_fmt.corners_ideal(src.model, src.width, src.height, fr)
     converted = RemapModel(
         map_x=maps.map_x,
         map_y=maps.map_y,
         corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
     )
-    err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges)
+    err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges, frame=fr)
     note = (
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
@@ -526,13 +572,39 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
         if measured is not None
         else ()
     )
-    notes = (*src.stamp, note, *k_note, *_lens_notes(src))
+    notes = (*src.stamp, note, f"{frame.describe()} ({opt.frame.describe()})", *k_note, *_lens_notes(src))
     data = (
-        maps_fmt.maps_npz_bytes(maps, acc, notes, corners)
+        maps_fmt.maps_npz_bytes(maps, acc, notes, corners, fr, (src.width, src.height))
         if fmt == "maps"
-        else maps_fmt.stmap_exr_bytes(maps, notes, corners)
+        else maps_fmt.stmap_exr_bytes(maps, notes, corners, (src.width, src.height))
     )
     return Export(fmt, data, err, converted, (note, *k_note), tuple(why_not + conversion_warnings(fmt, src, err)))
+
+
+def _in_frame(model: DistortionModel, frame: Any) -> DistortionModel:
+    """``model`` with its corrected points in ``frame``'s pixels."""
+    from pipeline.models.homography import HomographyModel
+
+    a = frame.matrix
+    rows = tuple((float(r[0]), float(r[1]), float(r[2])) for r in a)
+    return HomographyModel(base=model, homography=rows)
+
+
+def _write_stmap_redistort(src: ExportSource, opt: ExportOptions) -> Export:
+    fmt = "stmap-redistort"
+    frame = _corrected(fmt, src, opt)
+    qx, qy = maps_fmt.redistort_map(src.model, src.width, src.height, frame)
+    converted = CorrectionMapModel(map_x=np.nan_to_num(qx, nan=-1.0), map_y=np.nan_to_num(qy, nan=-1.0))
+    err = conversion_error_in_frame(
+        src.model, converted, src.width, src.height, edges=src.edges, frame=frame, whole_photo=True
+    )
+    note = (
+        f"the redistort STMap of the corrected image {frame.width}x{frame.height} ({opt.frame.describe()}): "
+        "apply it to a render of that image to put it back into the lens' distortion"
+    )
+    notes = (*src.stamp, note, frame.describe(), *_lens_notes(src))
+    data = maps_fmt.stmap_redistort_exr_bytes(qx, qy, (frame.width, frame.height), notes)
+    return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
 
 
 def harp_model_doc(src: ExportSource) -> dict[str, Any]:
@@ -677,12 +749,14 @@ def _read_mrcal(data: bytes, req: ReadRequest) -> Correction:
 
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
     m = maps_fmt.read_maps_npz(data, req.name)
-    return Correction(m, (m.width, m.height), "maps")
+    return Correction(m, maps_fmt.maps_source_size(data) or (m.width, m.height), "maps")
 
 
 def _read_stmap(data: bytes, req: ReadRequest) -> Correction:
-    m = maps_fmt.read_stmap_exr(data, req.name)
-    return Correction(m, (m.width, m.height), "stmap")
+    m = maps_fmt.read_stmap_exr(data, req.name, (req.width, req.height))
+    if isinstance(m, CorrectionMapModel):
+        return Correction(m, (m.map_x.shape[1], m.map_x.shape[0]), "stmap-redistort")
+    return Correction(m, None, "stmap")
 
 
 def _sniff_harp(d: bytes) -> bool:
@@ -786,6 +860,16 @@ FORMATS: dict[str, ExportFormat] = {
             lambda s, o: _write_maps("stmap", s, o),
             _read_stmap,
             maps_fmt.sniff_exr,
+        ),
+        ExportFormat(
+            "stmap-redistort",
+            "the redistort STMap of an STMap pair (32-bit float OpenEXR): a render of the corrected image back "
+            "into the lens' distortion",
+            ".exr",
+            True,
+            _write_stmap_redistort,
+            _read_stmap,
+            _never,
         ),
         ExportFormat("json", "harp model file as JSON", ".json", False, _write_json, _read_harp, _never),
         ExportFormat("harp", "harp model file (YAML)", ".yaml", False, _write_harp, _read_harp, _sniff_harp),

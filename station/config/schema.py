@@ -166,10 +166,16 @@ class ReportConfig:
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Present only for a simulated station (see :mod:`station.session.simulated`)."""
+    """Present only for a simulated station (see :mod:`station.session.simulated`).
+
+    ``lens_spread``: the manufacturing spread of the simulated lens, in units of the population's
+    (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
+    ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
+    for every serial; its ``range`` metadata is what the file may give."""
 
     harp_offset_deg: float = 0.0
     emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    lens_spread: float = field(default=0.0, metadata={"range": (0.0, 5.0)})
 
 
 def _at(yaml_path: str | None) -> Any:

@@ -8,6 +8,7 @@ line naming the file, the dotted path of the field and what was expected, e.g.::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping
@@ -146,6 +147,13 @@ class _Section:
         if len(set(v)) != len(v):
             raise self.err(key, "a list without repeated values", v)
         return tuple(float(x) for x in v)
+
+
+def _range(cls: type, name: str) -> tuple[float, float]:
+    """The ``range`` metadata of field ``name`` of dataclass ``cls``."""
+    (f,) = [f for f in dataclasses.fields(cls) if f.name == name]
+    lo, hi = f.metadata["range"]
+    return float(lo), float(hi)
 
 
 def _device(sec: _Section, key: str, table: Mapping[str, str], kind: str) -> _Section:
@@ -320,8 +328,14 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     if "simulation" in top.data:
         sm = top.section("simulation", keys_of(SimulationConfig))
         emu = sm.section("emulator", optional=True)
+        lo, hi = _range(SimulationConfig, "lens_spread")
+        spread = sm.number("lens_spread", lo, min=lo)
+        if spread > hi:
+            raise sm.err("lens_spread", f"a number in [{lo:g}, {hi:g}] (times the population's spread)", spread)
         simulation = SimulationConfig(
-            harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))
+            harp_offset_deg=sm.number("harp_offset_deg", 0.0),
+            emulator=MappingProxyType(dict(emu.data)),
+            lens_spread=spread,
         )
     elif turntable.port == EMULATOR_PORT:
         raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)

@@ -97,6 +97,16 @@ def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
+def _iso_utc(text: str) -> str:
+    """``text`` (ISO 8601; naive means UTC) as the store writes times: UTC, to the second."""
+    try:
+        t = _dt.datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    except ValueError:
+        raise StoreError(f"cannot store the profile: stored_at {text!r} is not an ISO 8601 time") from None
+    t = t.replace(tzinfo=_dt.UTC) if t.tzinfo is None else t.astimezone(_dt.UTC)
+    return t.isoformat(timespec="seconds")
+
+
 def _finite(v: Any) -> float | None:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
@@ -174,11 +184,13 @@ class ProfileStore:
             conn.execute(sa.select(table.c.id).where(*(table.c[k] == v for k, v in values.items()))).scalar_one()
         )
 
-    def put_profile(self, profile: Profile) -> int:
+    def put_profile(self, profile: Profile, *, stored_at: str | None = None) -> int:
         """Store a profile — its lens and camera rows, the profile, and (when ``profile.qa`` is set)
         its verdict with thresholds and checks and the session's ``qa_results`` row — in one
         transaction; returns its id. The same session and focus again (a resumed session)
-        replaces the row, keeping its id.
+        replaces the row, keeping its id. ``stored_at`` (ISO 8601 UTC, default now) is the time
+        the row records, which dates the calibration on the dashboard: a copy of another store
+        passes the original's ``profile.stored_at`` to keep its history.
 
         Raises StoreError when the profile lacks what a row needs (lens, camera, focus, session
         directory, station) or the store cannot be written (nothing is then written)."""
@@ -194,12 +206,14 @@ class ProfileStore:
             "distortion_rms": _finite(dist.get("distortion_rms_px")),
         }
 
+        when = _now() if stored_at is None else _iso_utc(stored_at)
+
         def tx(conn: sa.Connection) -> int:
             values = {
                 **values_base,
                 "lens_id": self._ident(conn, lenses, tuple(row["lens"])),
                 "camera_id": self._ident(conn, cameras, tuple(row["camera"])),
-                "created_at": _now(),
+                "created_at": when,
             }
             stmt = _insert(self.backend)(profiles).values(values)
             stmt = stmt.on_conflict_do_update(
@@ -467,20 +481,26 @@ class ProfileStore:
             yield d
 
     # ========================================================= dashboard
-    def lens_models(self) -> list[dashboard.LensModel]:
-        """Every lens model (maker, model): lenses, calibrations, how many passed / failed. See
-        :func:`station.store.dashboard.lens_models`."""
-        return self._read("reading the lens models", dashboard.lens_models)
+    def lens_models(self, window: dashboard.Window = dashboard.EVERYTHING) -> list[dashboard.LensModel]:
+        """Every lens model (maker, model): lenses, calibrations, how many passed / failed (in
+        ``window``). See :func:`station.store.dashboard.lens_models`."""
+        return self._read("reading the lens models", lambda conn: dashboard.lens_models(conn, window))
 
-    def verdict_counts(self, maker: str | None = None, model: str | None = None) -> list[dashboard.VerdictCount]:
+    def verdict_counts(
+        self, maker: str | None = None, model: str | None = None, window: dashboard.Window = dashboard.EVERYTHING
+    ) -> list[dashboard.VerdictCount]:
         """Pass / fail counts of calibrations per lens model, station and day (UTC). See
         :func:`station.store.dashboard.verdict_counts`."""
-        return self._read("reading the verdict counts", lambda conn: dashboard.verdict_counts(conn, maker, model))
+        return self._read(
+            "reading the verdict counts", lambda conn: dashboard.verdict_counts(conn, maker, model, window)
+        )
 
-    def lens_summaries(self, maker: str | None = None, model: str | None = None) -> list[dashboard.LensSummary]:
-        """Every lens with its profiles, calibrations and newest calibration's verdict. See
-        :func:`station.store.dashboard.lens_summaries`."""
-        return self._read("reading the lenses", lambda conn: dashboard.lens_summaries(conn, maker, model))
+    def lens_summaries(
+        self, maker: str | None = None, model: str | None = None, window: dashboard.Window = dashboard.EVERYTHING
+    ) -> list[dashboard.LensSummary]:
+        """Every lens with its profiles, calibrations and newest calibration's verdict and failed
+        checks. See :func:`station.store.dashboard.lens_summaries`."""
+        return self._read("reading the lenses", lambda conn: dashboard.lens_summaries(conn, maker, model, window))
 
     def lens_history(self, lens_id: int, *, errors: list[StoreError] | None = None) -> dict[float, list[Profile]]:
         """Every profile of a lens by focus setting, newest first, each with its verdict and checks (``p.qa``)."""
