@@ -19,6 +19,10 @@ Kinds (:data:`KINDS`):
 * ``value`` — any one scalar (text, number or boolean: a value written to a device feature as is);
 * ``mapping`` — a mapping whose keys another declaration gives (a driver's section).
 
+A dataclass declares its fields with :func:`setting` (the kind comes from the field's annotation,
+:func:`fields_of`): the station's configuration (:mod:`station.config.schema`) and its lens and camera
+body (:mod:`station.equipment`).
+
 A range is ``[low, high]``, an end excluded with ``low_open`` / ``high_open`` (``(0, 10]``); ``choices``
 replaces it with a list of values. ``nullable`` lets ``null`` stand for "not set" (the default).
 
@@ -30,9 +34,14 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
+import functools
 import math
+import types
+import typing
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 Kind = Literal["integer", "number", "boolean", "text", "numbers", "integers", "value", "mapping"]
@@ -232,3 +241,56 @@ def shown(v: Any) -> str:
     """``v`` as a message quotes it: its repr, cut to 60 characters."""
     s = repr(v)
     return s if len(s) <= 60 else s[:57] + "..."
+
+
+def setting(
+    default: Any = REQUIRED,
+    doc: str = "",
+    unit: str = "",
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    choices: tuple[Any, ...] = (),
+    length: tuple[int, int | None] = (0, None),
+    unique: bool = False,
+    **where: Any,
+) -> Any:
+    """A dataclass field that is a key of a configuration file, declared once: ``default``
+    (:data:`REQUIRED`: the key must be given; None: it may be null) and the :class:`Setting` in the
+    field's metadata (``"setting"``), with ``where`` as further metadata (where the key sits in the
+    file). The kind comes from the field's annotation (:func:`fields_of`)."""
+    s = Setting(doc, None, unit, low, high, low_open, high_open, choices, length, unique, default is None, default)
+    meta = {"setting": s, **where}
+    if default is REQUIRED:
+        return dataclasses.field(metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+_ANNOTATION_KINDS: dict[Any, Kind] = {int: "integer", float: "number", bool: "boolean", str: "text", Path: "text"}
+
+
+def _kind(annotation: Any) -> tuple[Kind, bool]:
+    """``(kind, nullable)`` of a field annotation (``float | None`` -> ``("number", True)``)."""
+    nullable = False
+    if isinstance(annotation, types.UnionType) or typing.get_origin(annotation) is typing.Union:
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        nullable = len(args) < len(typing.get_args(annotation))
+        (annotation,) = args
+    if typing.get_origin(annotation) is tuple:
+        return "numbers", nullable
+    return _ANNOTATION_KINDS[annotation], nullable
+
+
+@functools.cache
+def fields_of(cls: type) -> dict[str, Setting]:
+    """The :func:`setting` fields of dataclass ``cls``, their kind filled in from the annotation."""
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for f in dataclasses.fields(cls):
+        s = f.metadata.get("setting")
+        if s is not None:
+            kind, nullable = _kind(hints[f.name])
+            out[f.name] = dataclasses.replace(s, kind=kind, nullable=nullable or s.nullable)
+    return out

@@ -16,12 +16,14 @@ can fit:
   simplest radial distortion.
 
 The spec is the one spelling of "what to fit" everywhere: the configuration
-(``pipeline.model/degree/tangential/prism/center_prior``), ``harp calibrate``'s
-options, the cross-validated model selection (:mod:`pipeline.select`), the bootstrap,
+(``pipeline.model``: a label or ``auto``), ``harp calibrate``'s and ``harp reprocess``'s
+``--model``, the cross-validated model selection (:mod:`pipeline.select`), the bootstrap,
 and every stored profile (the spec that was actually fitted, so QA and reports refit
-exactly that). Its :attr:`~FitSpec.label` is a short name such as
-``radial4+tangential+prism`` that :func:`parse` reads back; :meth:`FitSpec.fit_arguments`
-gives the keyword arguments of :func:`pipeline.fit.fit_distortion`.
+exactly that); its defaults are the dataclass's. Its :attr:`~FitSpec.label` is a short name
+such as ``radial4+tangential+prism`` that :func:`parse` reads back (:func:`parse_choice` also
+reads :data:`AUTO`: left to the cross-validation); :meth:`FitSpec.fit_arguments` gives the
+keyword arguments of :func:`pipeline.fit.fit_distortion` and :meth:`FitSpec.from_fit_arguments`
+reads them back.
 
 References
 ----------
@@ -38,6 +40,9 @@ from typing import Any
 
 KINDS: tuple[str, ...] = ("radial", "poly")
 """The model families a spec can name."""
+
+AUTO = "auto"
+"""The choice that names no spec: what to fit is chosen by cross-validation (:mod:`pipeline.select`)."""
 
 DEGREE_BOUNDS: dict[str, tuple[int, int]] = {"radial": (1, 10), "poly": (3, 11)}
 """Allowed degrees per kind, inclusive: radial = highest power of rho, poly = total degree."""
@@ -225,6 +230,25 @@ class FitSpec:
                 kw.update(field=self.field, field_penalty=self.field_penalty)
         return kw
 
+    @classmethod
+    def from_fit_arguments(cls, kw: Any) -> FitSpec:
+        """Inverse of :meth:`fit_arguments` (a centre prior: a ``w_center`` ten times the free
+        centre's or more). ValueError (one line) for arguments no spec gives."""
+        if not isinstance(kw, dict):
+            raise ValueError(f"fit arguments must be a mapping, got {type(kw).__name__}")
+        w = kw.get("w_center")
+        field = kw.get("field")
+        return cls(
+            str(kw.get("model")),
+            kw.get("degree"),
+            bool(kw.get("tangential", False)),
+            bool(kw.get("prism", False)),
+            w is not None and w > 10 * FREE_CENTER_WEIGHT,
+            kw.get("division", 0),
+            None if field is None else tuple(field),
+            kw.get("field_penalty"),
+        )
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data (model files, JSON, the store): ``model`` (the kind), ``degree``,
         ``tangential``, ``prism``, ``center_prior``, ``label`` and, when not 0, ``division``; with a
@@ -260,6 +284,12 @@ class FitSpec:
             None if d.get("field") is None else tuple(d["field"]),
             d.get("field_penalty"),
         )
+
+
+FULL_RADIAL = FitSpec("radial", tangential=True, prism=True)
+"""The radial model with its decentering and thin-prism terms, degree 4 (12 parameters): what
+``harp calibrate --model radial`` fits unless told ``--no-tangential`` / ``--no-prism``, and the
+model selection's fallback (:data:`pipeline.select.FALLBACK`)."""
 
 
 _TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_prior", "center-prior": "center_prior"}
@@ -310,6 +340,12 @@ def parse(label: str) -> FitSpec:
         )
     except ValueError as exc:
         raise ValueError(f"{label!r}: {exc}") from None
+
+
+def parse_choice(label: str) -> FitSpec | None:
+    """What a ``model`` option or setting names: the spec of a label (:func:`parse`), or None for
+    :data:`AUTO` (chosen by cross-validation). ValueError (one line) as :func:`parse`."""
+    return None if str(label).strip().lower() == AUTO else parse(label)
 
 
 def _parse_field(label: str, term: str) -> tuple[tuple[int, int], float | None]:

@@ -61,7 +61,7 @@ import numpy as np
 
 from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_residuals
 from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
-from pipeline.fitspec import FitSpec
+from pipeline.fitspec import FULL_RADIAL, FitSpec
 from pipeline.models.base import DistortionModel
 
 DEFAULT_CANDIDATES: tuple[FitSpec, ...] = tuple(
@@ -75,7 +75,7 @@ DEFAULT_CANDIDATES: tuple[FitSpec, ...] = tuple(
 a centre prior); the division (rational) radial factor with one denominator term over k up to rho^2 (plain,
 +tangential, +tangential+prism) and rho^4 (+tangential+prism), for wide-angle lenses; poly 3, 5, 7."""
 
-FALLBACK = FitSpec("radial", 4, True, True)
+FALLBACK = FULL_RADIAL
 """Choice when no cross-validation is possible: physically motivated, generalises across orientations."""
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.edgeset import FitFailure, FitResult
 from pipeline.fitspec import FitSpec
-from station.config import Identity
+from station.equipment import Identity
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
     HOLDOUT_SHOTS,
@@ -174,7 +174,7 @@ def calibrate_shots(
         "warnings": list(full.warnings),
     }
     if selection is not None:
-        details["selection"] = {"choice": selection.choice.label, "reason": selection.reason, "folds": selection.folds}
+        details["selection"] = {"choice": selection.choice.label, **selection_record(selection)}
 
     hold: Holdout | None = None
     per_shot: list[HeldOutShot] = []
@@ -390,18 +390,15 @@ def focus_profile(
     provenance: Provenance,
     given_by: str = GIVEN_BY_CONFIG,
     details: Mapping[str, Any] | None = None,
-    judge: Callable[..., Any] | None = None,
-    measurements: Any = None,
+    judge: Callable[[Profile], Any] | None = None,
 ) -> Profile:
     """The judged profile of a focus setting's calibration ``cal`` (:func:`calibrate_focus`).
 
-    The session's identities (lens, camera body, focus, optics), the selection record
+    The session's identities (lens, camera body, focus, a zoom session's focal length, optics), the selection record
     (:func:`selection_record`), the capture's details (orientations, frames per orientation,
-    ``t``) plus ``details``, and ``judge(profile, config.qa, measurements=measurements)``
-    (:func:`station.qa.verdicts.qa_verdict`, passed in: the QA imports this module) on
-    ``measurements`` (the edges it was fitted on, :class:`station.qa.verdicts.Measurements`;
-    None: not re-judged on edges). ``judge`` None: not judged. Raises ValueError for a failed
-    calibration.
+    ``t``) plus ``details``, and the verdict ``judge(profile)`` (QA, passed in: the QA imports
+    this module; :func:`station.qa.verdicts.qa_verdict` of the configuration's thresholds on the
+    edges it was fitted on). ``judge`` None: not judged. Raises ValueError for a failed calibration.
     """
     profile = cal.profile(
         width,
@@ -413,6 +410,7 @@ def focus_profile(
         selection=selection_record(cal.selection, given_by),
     )
     profile = profile.with_(
+        focal=getattr(config, "focal", None),  # a zoom session's part: its focal length (mm)
         optics=config.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
         details={
             **profile.details,
@@ -424,4 +422,4 @@ def focus_profile(
     )
     if judge is None:
         return profile
-    return profile.with_(qa=judge(profile, config.qa, measurements=measurements))
+    return profile.with_(qa=judge(profile))

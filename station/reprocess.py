@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import Any
 
 from station import SOFTWARE, __version__
-from station.ctrl_c import sigint_blocked
 from station.profile import Profile
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 
@@ -241,13 +240,9 @@ def reprocess_focus(job: FocusJob) -> FocusResult:
 
 
 def _spec(job: FocusJob, config: Any) -> Any:
-    from pipeline.fitspec import parse
+    from pipeline.fitspec import parse_choice
 
-    if job.spec is None:
-        return config.pipeline.spec
-    if job.spec == "auto":
-        return None
-    return parse(job.spec)
+    return config.pipeline.spec if job.spec is None else parse_choice(job.spec)
 
 
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
@@ -301,8 +296,9 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         provenance=make_provenance(frame_files, t=cfg.pipeline.t, command="harp reprocess", station=cfg.station.id),
         given_by=GIVEN_ON_COMMAND_LINE if job.spec else GIVEN_BY_CONFIG,
         details={"session_model_file": str(s.path / layout.profile_file(f))},
-        judge=qa_verdict,
-        measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}"),
+        judge=lambda p: qa_verdict(
+            p, cfg.qa, measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}")
+        ),
     )
     return focus, profile, old
 
@@ -339,13 +335,11 @@ def run_jobs(
 def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
     from concurrent.futures import as_completed
 
-    from station.pool import forkserver_pool
+    from station.pool import WorkerPool
 
     results: dict[int, FocusResult] = {}
-    pool = forkserver_pool(workers, PRELOAD)
-    try:
-        with sigint_blocked():  # submitting starts the workers: none is left half-started
-            futures = {pool.submit(reprocess_focus, j): i for i, j in enumerate(jobs)}
+    with WorkerPool(workers, PRELOAD) as pool:  # Ctrl-C: the jobs not started dropped, the running ones stopped
+        futures = {fut: i for i, fut in enumerate(pool.submit_all(reprocess_focus, jobs))}
         for fut in as_completed(futures):
             i = futures[fut]
             try:
@@ -356,15 +350,6 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
                 )
             results[i] = r
             on_result(r)
-    except BaseException:  # Ctrl-C: the jobs not started are dropped, the running ones stopped
-        procs = list((getattr(pool, "_processes", None) or {}).values())
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            proc.join(5)
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown()
     return [results[i] for i in range(len(jobs))]
 
 

@@ -2,6 +2,9 @@
 
 * no import circle between the modules of ``pipeline``, ``drivers`` and ``station``
   (imports inside functions count: a late import is still a dependency);
+* no circle between their subpackages either (``station.session``, ``station.qa``,
+  ``station.store``, ``pipeline.models``, ...; a top-level module is one of its own): a
+  package that imports another is not imported by it, by any way round, late imports counted;
 * the layers point one way: ``pipeline`` imports neither ``drivers`` nor ``station``,
   ``drivers`` does not import ``station``;
 * no private name (``_x``) is imported from another module;
@@ -109,6 +112,24 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return sorted(found)
 
 
+def subpackage(module: str) -> str:
+    """The subpackage a module belongs to: its first two names (``station.session.run`` ->
+    ``station.session``; a top-level module, ``station.profile``, is its own)."""
+    return ".".join(module.split(".")[:2])
+
+
+def subpackage_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The import graph between subpackages (:func:`subpackage`) of a module graph."""
+    out: dict[str, set[str]] = {}
+    for a, targets in graph.items():
+        out.setdefault(subpackage(a), set())
+        for b in targets:
+            out.setdefault(subpackage(b), set())
+            if subpackage(a) != subpackage(b):
+                out[subpackage(a)].add(subpackage(b))
+    return out
+
+
 def layer_violations(graph: dict[str, set[str]]) -> list[str]:
     out = []
     for a, targets in graph.items():
@@ -143,6 +164,16 @@ def test_no_import_circles(real):
     assert cycles(graph) == []
 
 
+def test_no_circles_between_subpackages(real):
+    """Issue 22 item 3: e.g. the session and the QA, or the configuration, the store and the profile,
+    once imported each other (one way at module level, the other inside functions)."""
+    graph, _ = real
+    sub = subpackage_graph(graph)
+    assert {"station.session", "station.qa", "station.store", "station.config"} <= set(sub)
+    assert "station.session" in sub["station.qa"]  # edges between subpackages are seen
+    assert cycles(sub) == []
+
+
 def test_layers_point_one_way(real):
     graph, _ = real
     assert "pipeline.edgeset" in graph["pipeline.fit"]  # edges are seen
@@ -172,6 +203,11 @@ def test_the_checker_sees_what_it_must(tmp_path):
         "station/cli/__init__.py": "from station.cli import y\n",
         "station/cli/y.py": "from station import x\n",
         "station/z.py": "def f():\n    from station.cli.y import g\n",
+        "station/p/__init__.py": "",
+        "station/p/a.py": "from station.q.b import thing\n",
+        "station/q/__init__.py": "",
+        "station/q/b.py": "def f():\n    from station.p import c\n",
+        "station/p/c.py": "",
     }.items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(text)
@@ -181,3 +217,5 @@ def test_the_checker_sees_what_it_must(tmp_path):
     assert layer_violations(graph) == ["pipeline.c imports station.x"]
     assert private == ["pipeline/c.py:1: pipeline.c imports _hidden from station.x"]
     assert cli_importers(graph) == ["station.z imports station.cli.y"]
+    # station.p.a -> station.q.b -> station.p.c is no circle of modules (above), but one of subpackages
+    assert ["station.p", "station.q"] in cycles(subpackage_graph(graph))

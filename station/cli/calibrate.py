@@ -9,7 +9,7 @@ and provenance.
 cross-validation over the given shots (:func:`pipeline.select.select_model`:
 leave one shot out, correct it with the fit on the others, measure it) and
 says what it chose. ``--model radial`` fits the radial model with free centre
-(default degree 4, with tangential and thin-prism terms unless
+(:data:`pipeline.fitspec.FULL_RADIAL`: degree 4, with tangential and thin-prism terms unless
 ``--no-tangential`` / ``--no-prism``; ``--center-prior`` pulls the centre
 towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
@@ -42,11 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FitSpec, parse
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec, parse
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
-from station.ctrl_c import sigint_blocked
 from station.inputs import InputError, measure_file
 
 
@@ -124,39 +123,20 @@ def _measure_one(job: tuple[str, int]):
 
 @contextlib.contextmanager
 def _workers(n_jobs: int, balance: bool = False):
-    """A ``map`` over ``min(2, cores)`` worker processes (forked before any image is processed),
-    or the built-in ``map`` on one core or for a single job. ``balance``: one more worker when the
-    jobs do not divide evenly among them (three shots on two workers: all three measured at once
-    take 1.5 shot-times on two cores, not two; one more shot's memory at a time)."""
+    """A ``map`` over ``min(2, cores)`` worker processes forked from this process (it runs no
+    thread: :class:`station.pool.WorkerPool`), or the built-in ``map`` on one core or for a single
+    job. ``balance``: one more worker when the jobs do not divide evenly among them (three shots
+    on two workers: all three measured at once take 1.5 shot-times on two cores, not two; one
+    more shot's memory at a time)."""
     import os
 
+    from station.pool import WorkerPool
+
     n = min(2, os.cpu_count() or 1, n_jobs)
-    if n < 2:
-        yield map
-        return
-    if balance and n_jobs > n and n_jobs % n:
+    if n >= 2 and balance and n_jobs > n and n_jobs % n:
         n += 1
-    import gc
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    from station.pool import ignore_ctrl_c
-
-    # the objects alive now (modules, the shots' points) are left alone by the garbage collector from
-    # here on: a forked worker then copies only the memory pages it writes, not every page the
-    # collector would walk (2-4x fewer page faults)
-    gc.freeze()
-    pool = ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("fork"), initializer=ignore_ctrl_c)
-
-    def map_fn(fn, *iterables):
-        with sigint_blocked():  # the first submit forks the workers: none runs this process's Ctrl-C
-            return pool.map(fn, *iterables)
-
-    try:
-        yield map_fn
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        gc.unfreeze()  # this process collects them again (a long-lived caller, a test session)
+    with WorkerPool(n, fork=True) as pool:
+        yield pool.map
 
 
 def _spec(args) -> FitSpec | None:
@@ -191,13 +171,13 @@ def _spec(args) -> FitSpec | None:
     try:
         if args.model == "poly":
             return FitSpec("poly", args.degree)
-        return FitSpec(
-            "radial",
-            args.degree,
-            not args.no_tangential,
-            not args.no_prism,
-            args.center_prior,
-            args.division,
+        return replace(
+            FULL_RADIAL,
+            degree=args.degree,
+            tangential=not args.no_tangential,
+            prism=not args.no_prism,
+            center_prior=args.center_prior,
+            division=args.division,
             field=grid,
             field_penalty=penalty,
         )

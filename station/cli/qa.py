@@ -101,9 +101,9 @@ def register(subparsers) -> None:
 
 
 def _store(args, config, create=False):
-    """The store (:mod:`station.store.resolve`): ``--store``, else that of ``config`` (``--config``,
+    """The store (:mod:`station.cli.store_options`): ``--store``, else that of ``config`` (``--config``,
     or the session's), else ``$HARP_STORE``, else the default. For reading unless ``create``."""
-    from station.store.resolve import open_store, store_location
+    from station.cli.store_options import open_store, store_location
 
     return open_store(store_location(args.store, config), write=create)
 

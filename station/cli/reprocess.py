@@ -41,7 +41,7 @@ EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
 def register(subparsers: Any) -> None:
-    from station.store.resolve import add_store_options
+    from station.cli.store_options import add_store_options
 
     p = subparsers.add_parser(
         "reprocess",
@@ -66,6 +66,7 @@ def _error(msg: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from station.cli.store_options import location_from_args, open_store
     from station.config import ConfigError
     from station.reprocess import (
         ArchivedSession,
@@ -76,7 +77,6 @@ def run(args: argparse.Namespace) -> int:
         run_jobs,
     )
     from station.store import StoreError
-    from station.store.resolve import location_from_args, open_store
 
     if args.workers is not None and args.workers < 1:
         _error("--workers must be at least 1")
@@ -84,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.workers is not None:
         _error("--workers is for the local pool; the cluster's workers are the scheduler's")
         return EXIT_ERROR
-    if args.model is not None and args.model != "auto":
-        from pipeline.fitspec import parse
+    if args.model is not None:
+        from pipeline.fitspec import parse_choice
 
         try:
-            parse(args.model)
+            parse_choice(args.model)
         except ValueError as exc:
             _error(f"--model {args.model}: {exc}")
             return EXIT_ERROR

@@ -25,8 +25,8 @@ DEFAULT_PORT = 8014
 
 
 def register(subparsers: Any) -> None:
+    from station.cli.store_options import add_store_options
     from station.cli.web_options import add_serve_options
-    from station.store.resolve import add_store_options
 
     p = subparsers.add_parser(
         "serve",
@@ -45,9 +45,9 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from station.cli.store_options import open_store
     from station.config import ConfigError
     from station.store import StoreError
-    from station.store.resolve import open_store
     from station.web.serve import ServeError, check_bind
 
     try:

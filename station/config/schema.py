@@ -24,22 +24,17 @@ import functools
 import types
 import typing
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from drivers.settings import REQUIRED, SEED_MAX, Setting, describe
-from pipeline.fitspec import DEGREE_BOUNDS, KINDS, FitSpec
+from drivers.settings import REQUIRED, SEED_MAX, Setting, fields_of, setting
+from pipeline.fitspec import DEGREE_BOUNDS, FitSpec, parse_choice
 from pipeline.resample import DEFAULT_T
 from station.config.errors import ConfigError
+from station.equipment import Identity, Optics, optics_keys
 from station.store.location import SQLITE, StoreLocation, parse_store
-
-AUTO_MODEL = "auto"
-"""``pipeline.model`` meaning: chosen per focus setting by cross-validation (:mod:`pipeline.select`)."""
-
-#: values of ``pipeline.model``: a model kind of :mod:`pipeline.fitspec`, or auto
-FIT_MODELS = (*KINDS, AUTO_MODEL)
 
 #: turntable ``port`` value meaning "the emulator started by station.session.simulated"
 EMULATOR_PORT = "emulator"
@@ -47,35 +42,6 @@ EMULATOR_PORT = "emulator"
 OVERLAY_RETENTION = ("all", "failed", "none")
 """Values of ``report.overlays``: which per-orientation overlays a session report keeps (every focus
 setting's, only those of a focus setting that failed QA, none)."""
-
-
-def setting(
-    default: Any = REQUIRED,
-    doc: str = "",
-    unit: str = "",
-    low: float | None = None,
-    high: float | None = None,
-    *,
-    low_open: bool = False,
-    high_open: bool = False,
-    choices: tuple[Any, ...] = (),
-    length: tuple[int, int | None] = (0, None),
-    unique: bool = False,
-    yaml: str | None = None,
-    optics: str | None = None,
-) -> Any:
-    """A dataclass field that is a key of the configuration file, declared once.
-
-    ``default`` (:data:`~drivers.settings.REQUIRED`: the key must be given) is the field's default;
-    ``yaml`` places a :class:`Config` field in the file (``"store.path"``); ``optics`` names the
-    section holding an :class:`Optics` field (``lens`` or ``camera_body``). The kind comes from the
-    annotation (:func:`fields_of`).
-    """
-    s = Setting(doc, None, unit, low, high, low_open, high_open, choices, length, unique, default is None, default)
-    meta = {"setting": s, "yaml": yaml, "optics": optics}
-    if default is REQUIRED:
-        return field(metadata=meta)
-    return field(default=default, metadata=meta)
 
 
 def section(factory: Any = REQUIRED, doc: str = "", *, yaml: str | None = None, drivers: str | None = None) -> Any:
@@ -153,74 +119,6 @@ class StationConfig:
 
 
 @dataclass(frozen=True)
-class Identity:
-    maker: str = setting(doc="the maker")
-    model: str = setting(doc="the model")
-    serial: str = setting(doc="the serial number (quote one that looks like a number)")
-
-    def label(self) -> str:
-        return f"{self.maker} {self.model} #{self.serial}"
-
-
-@dataclass(frozen=True)
-class Optics:
-    """What the configuration says about the optics, for exports (every field optional).
-
-    The harp measures the *shape* of the distortion, not these: they make an
-    export's camera matrix nominal instead of a placeholder
-    (:func:`pipeline.exports.lens.camera_matrix_choice`) and let lensfun
-    applications find the lens (:mod:`pipeline.exports.lensfun`). In the YAML
-    file ``focal_mm`` and ``mount`` belong to ``lens``, the others to
-    ``camera_body`` (each field's ``optics`` metadata); ``pixel_pitch_um`` and
-    ``sensor_width_mm`` are alternatives (give one). The ranges are plausible
-    values for their unit, which catches a value written in the wrong unit (a
-    pitch of 0.0057 is millimetres, not µm).
-    """
-
-    focal_mm: float | None = setting(None, "the nominal focal length (at this zoom setting)", "mm", 0.1, 10000.0,
-                                     optics="lens")  # fmt: skip
-    mount: str | None = setting(None, "the lens mount, as lensfun names it (e.g. 'Canon EF')", optics="lens")
-    pixel_pitch_um: float | None = setting(None, "the pixel pitch of the images (after any binning)", "µm", 0.2,
-                                           100.0, optics="camera_body")  # fmt: skip
-    sensor_width_mm: float | None = setting(None, "the width of the sensor area the image covers", "mm", 0.5, 200.0,
-                                            optics="camera_body")  # fmt: skip
-    crop_factor: float | None = setting(None, "the crop factor (35 mm diagonal / sensor diagonal)", "", 0.1, 20.0,
-                                        optics="camera_body")  # fmt: skip
-
-    def to_dict(self) -> dict[str, Any]:
-        """The fields that are set (for a model file's provenance)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if getattr(self, f.name) is not None}
-
-    @classmethod
-    def from_dict(cls, d: Any) -> Optics:
-        """The optics of a :meth:`to_dict` mapping; a value that is not valid is left out."""
-        if not isinstance(d, Mapping):
-            return cls()
-        kw: dict[str, Any] = {}
-        for name, s in fields_of(cls).items():
-            v = d.get(name)
-            if v is not None and optic_problem(name, v) is None:
-                kw[name] = v if s.kind == "text" else float(v)
-        return cls(**kw)
-
-
-def optics_keys(section: str) -> tuple[str, ...]:
-    """The :class:`Optics` keys of YAML section ``section`` (``lens`` or ``camera_body``)."""
-    return tuple(f.name for f in dataclasses.fields(Optics) if f.metadata["optics"] == section)
-
-
-def optic_problem(name: str, value: Any) -> str | None:
-    """What :class:`Optics` field ``name`` expects (its meaning and :func:`~drivers.settings.describe`),
-    when ``value`` is not valid for it; None when it is (or is None)."""
-    from drivers.settings import problem
-
-    s = fields_of(Optics)[name]
-    if value is None or problem(s, value) is None:
-        return None
-    return f"{s.doc}, {describe(s)}"
-
-
-@dataclass(frozen=True)
 class RetryConfig:
     attempts: int = setting(3, "tries of a device command before the session stops", "", 1, 100)
     backoff_s: float = setting(0.2, "the first wait between tries (doubles after each failure)", "s", 0.0, 60.0)
@@ -262,25 +160,32 @@ class CaptureConfig:
 @dataclass(frozen=True)
 class PipelineConfig:
     t: int = setting(DEFAULT_T, "along-edge subsampling: one edge point kept in t (Tang et al. 2012)", "px", 1, 200)
-    model: str = setting("radial", "the distortion model (auto: chosen by cross-validation)", choices=FIT_MODELS)
-    degree: int | None = setting(None, "the model's degree (null: its default; radial 1..10, poly 3..11)", "",
+    model: str = setting("radial", "what to fit: a fit label (radial4+tangential, poly5, ...) or auto (chosen by "
+                         "cross-validation)")  # fmt: skip
+    # each given term sets the label's (older configurations spell the spec so); None: the label's
+    degree: int | None = setting(None, "the model's degree (null: the label's; radial 1..10, poly 3..11)", "",
                                  min(b[0] for b in DEGREE_BOUNDS.values()), max(b[1] for b in DEGREE_BOUNDS.values()))  # fmt: skip
-    tangential: bool = setting(False, "radial model: decentering terms p1, p2")
-    prism: bool = setting(False, "radial model: thin-prism terms s1..s4")
-    center_prior: bool = setting(False, "radial model: pull the distortion centre towards the image centre")
+    tangential: bool | None = setting(None, "radial model: decentering terms p1, p2 (null: the label's)")
+    prism: bool | None = setting(None, "radial model: thin-prism terms s1..s4 (null: the label's)")
+    center_prior: bool | None = setting(None, "radial model: pull the distortion centre towards the image centre "
+                                        "(null: the label's)")  # fmt: skip
     bootstrap: int = setting(0, "replicates for the field uncertainty (0: not computed)", "", 0, 10000)
     seed: int = setting(0, "seed of the bootstrap resampling", "", 0, SEED_MAX)
     workers: int = setting(1, "processes for the cross-validation and bootstrap fits", "", 1, 256)
 
     @property
     def spec(self) -> FitSpec | None:
-        """What to fit (:class:`pipeline.fitspec.FitSpec`); ``None`` for ``model: auto``
-        (chosen by cross-validation). The radial-only flags are ignored for ``poly``."""
-        if self.model == AUTO_MODEL:
+        """What to fit (:class:`pipeline.fitspec.FitSpec`): ``model`` read by
+        :func:`pipeline.fitspec.parse_choice` (None for ``auto``: chosen by cross-validation)
+        with the terms given beside it; the radial-only terms are ignored for ``poly``.
+        ValueError (one line) for a label or degree the fit does not allow."""
+        spec = parse_choice(self.model)
+        if spec is None:
             return None
-        if self.model == "poly":
-            return FitSpec("poly", self.degree)
-        return FitSpec(self.model, self.degree, self.tangential, self.prism, self.center_prior)
+        terms = {"degree": self.degree}
+        if spec.kind == "radial":
+            terms.update(tangential=self.tangential, prism=self.prism, center_prior=self.center_prior)
+        return replace(spec, **{k: v for k, v in terms.items() if v is not None})
 
 
 @dataclass(frozen=True)
@@ -302,13 +207,20 @@ class ReportConfig:
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Present only for a simulated station (see :mod:`station.session.simulated`)."""
+    """Present only for a simulated station (see :mod:`station.session.simulated`).
+
+    ``lens_spread``: the manufacturing spread of the simulated lens, in units of the population's
+    (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
+    ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
+    for every serial."""
 
     harp_offset_deg: float = setting(0.0, "the strings' angle at stage 0 in the simulated world", "deg", -360.0,
                                      360.0)  # fmt: skip
     emulator: Mapping[str, Any] = field(
         default_factory=lambda: MappingProxyType({}), metadata={"emulator_settings": "the Zaber emulator's options"}
     )
+    lens_spread: float = setting(0.0, "the simulated lens's manufacturing spread, drawn from lens.serial (0: the "
+                                 "nominal demo lens for every serial)", "× the population's spread", 0.0, 5.0)  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -332,6 +244,18 @@ class Config:
     sessions_dir: Path = setting(Path("sessions"), "where session directories are created", yaml="store.sessions_dir")
     simulation: SimulationConfig | None = section(None, "present only for a simulated station", yaml="simulation")
     optics: Optics = field(default_factory=Optics)  # from lens and camera_body
+    # a zoom lens (issue 23): the focal lengths a zoom session calibrates, each an ordinary session at
+    # every focus setting; () none
+    zoom_settings: tuple[float, ...] = setting((), "a zoom session's focal lengths (none: a fixed lens)", "mm", 0.0,
+                                               10000.0, low_open=True, length=(2, None), unique=True,
+                                               yaml="zoom.settings")  # fmt: skip
+    # the camera's zoom feature value at each focal length; () the focal lengths themselves
+    zoom_positions: tuple[float, ...] = setting((), "the camera's zoom value at each focal length, in the device's "
+                                                "units (none: the focal lengths)", "", -1e9, 1e9,
+                                                yaml="zoom.positions")  # fmt: skip
+    # the focal length of this session: set in the part of a zoom session that captures it
+    focal: float | None = setting(None, "the focal length of this session (a zoom session's part)", "mm", 0.0,
+                                  10000.0, low_open=True, yaml="zoom.focal")  # fmt: skip
 
     @property
     def store(self) -> StoreLocation:
@@ -346,34 +270,6 @@ class Config:
 
 
 # --------------------------------------------------------------- the document
-_KINDS = {int: "integer", float: "number", bool: "boolean", str: "text", Path: "text"}
-
-
-def _kind(annotation: Any) -> tuple[str, bool]:
-    """``(kind, nullable)`` of a field annotation (``float | None`` -> ``("number", True)``)."""
-    nullable = False
-    if isinstance(annotation, types.UnionType) or typing.get_origin(annotation) is typing.Union:
-        args = [a for a in typing.get_args(annotation) if a is not type(None)]
-        nullable = len(args) < len(typing.get_args(annotation))
-        (annotation,) = args
-    if typing.get_origin(annotation) is tuple:
-        return "numbers", nullable
-    return _KINDS[annotation], nullable
-
-
-@functools.cache
-def fields_of(cls: type) -> dict[str, Setting]:
-    """The :func:`setting` fields of dataclass ``cls`` with their kind filled in from the annotation."""
-    hints = typing.get_type_hints(cls)
-    out = {}
-    for f in dataclasses.fields(cls):
-        s = f.metadata.get("setting")
-        if s is not None:
-            kind, nullable = _kind(hints[f.name])
-            out[f.name] = dataclasses.replace(s, kind=kind, nullable=nullable or s.nullable)
-    return out
-
-
 @dataclass(frozen=True)
 class Section:
     """A mapping of the configuration file: its dotted ``path`` (``""``: the top level), its keys in
@@ -459,8 +355,7 @@ def document() -> Section:
             continue
         head, _, rest = where.partition(".")
         if "section" in f.metadata:
-            extra = {n: s for n, s in fields_of(Optics).items() if f.metadata and optics_keys(head) and n in
-                     optics_keys(head)}  # fmt: skip
+            extra = {n: s for n, s in fields_of(Optics).items() if n in optics_keys(head)}
             top[head] = _section_of(
                 _unoptional(hints[f.name]),
                 head,
@@ -481,7 +376,11 @@ def document() -> Section:
     return Section("", MappingProxyType(top), True, "the station configuration")
 
 
-SECTION_DOCS = {"focus": "the focus settings of the session", "store": "where profiles and sessions are kept"}
+SECTION_DOCS = {
+    "focus": "the focus settings of the session",
+    "store": "where profiles and sessions are kept",
+    "zoom": "a zoom lens: the focal lengths of a zoom session",
+}
 """Meaning of the sections that gather :class:`Config` fields (``focus.settings``, ``store.*``)."""
 
 

@@ -10,7 +10,8 @@ dotted path of the field, what was expected (its range and unit) and the value f
    (:func:`drivers.settings.problem`), a driver section with the chosen driver's own keys;
 2. the values become the frozen dataclasses of :mod:`station.config.schema`;
 3. what only several fields tell (:func:`check_across`): the strings narrower than their spacing, one
-   of ``pixel_pitch_um`` and ``sensor_width_mm``, a degree the model allows, one of ``store.path``
+   of ``pixel_pitch_um`` and ``sensor_width_mm``, a fit label and degree the model allows, ``zoom``'s
+   settings, positions and focal, one of ``store.path``
    and ``store.url`` and a URL that parses, a frame timeout longer than the exposure, the emulator
    port of a simulated station, and what the devices allow (:mod:`station.config.devices`).
 """
@@ -25,23 +26,22 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from drivers.settings import REQUIRED, Setting, describe, plain, problem, shown, split_item
+from drivers.settings import REQUIRED, Setting, describe, fields_of, plain, problem, shown, split_item
+from pipeline.fitspec import AUTO, parse_choice
 from station.config.devices import check_the_devices
 from station.config.errors import ConfigError
 from station.config.schema import (
     EMULATOR_PORT,
     Config,
     DeviceConfig,
-    Identity,
-    Optics,
+    HarpConfig,
     Section,
     SimulationConfig,
     StationConfig,
     TurntableConfig,
     document,
-    fields_of,
-    optics_keys,
 )
+from station.equipment import Identity, Optics, optics_keys
 from station.store.errors import StoreError
 from station.store.location import parse_store, user_store_path
 
@@ -184,7 +184,7 @@ def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
         id=st["id"],
         camera=_device(DeviceConfig, st["camera"]),
         turntable=_device(TurntableConfig, st["turntable"]),
-        harp=build(fields_type(StationConfig, "harp"), st["harp"]),
+        harp=build(HarpConfig, st["harp"]),
     )
     optics = {}
     for part in ("lens", "camera_body"):
@@ -194,8 +194,12 @@ def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
                 optics[name] = _value(fields_of(Optics)[name], v)
     store = data.get("store") or {}
     store_path, store_url = _store_of(store, path, base)
-    sections = {k: build(fields_type(Config, k), data[k]) for k in ("capture", "pipeline", "qa", "report") if
-                data.get(k) is not None}  # fmt: skip
+    sections = {k: build(typing.get_type_hints(Config)[k], data[k]) for k in ("capture", "pipeline", "qa", "report")
+                if data.get(k) is not None}  # fmt: skip
+    zoom = data.get("zoom") or {}
+    zoom_values = {f: _value(fields_of(Config)[f], zoom.get(key)) for f, key in
+                   (("zoom_settings", "settings"), ("zoom_positions", "positions"), ("focal", "focal"))
+                   if zoom.get(key) is not None}  # fmt: skip
     return Config(
         path=path,
         base_dir=base,
@@ -209,12 +213,8 @@ def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
         sessions_dir=Path(os.path.normpath(base / store.get("sessions_dir", "sessions"))),
         simulation=None if data.get("simulation") is None else build(SimulationConfig, data["simulation"]),
         optics=Optics(**optics),
+        **zoom_values,
     )
-
-
-def fields_type(cls: type, name: str) -> Any:
-    """The annotation of field ``name`` of dataclass ``cls``, resolved."""
-    return typing.get_type_hints(cls)[name]
 
 
 def _store_of(store: Mapping[str, Any], path: Path, base: Path) -> tuple[Path | None, str | None]:
@@ -256,9 +256,16 @@ def check_across(config: Config) -> None:
     if config.optics.pixel_pitch_um is not None and config.optics.sensor_width_mm is not None:
         raise config.error("camera_body.sensor_width_mm", "expected pixel_pitch_um or sensor_width_mm, not both")
     try:
+        parse_choice(config.pipeline.model)
+    except ValueError as exc:
+        raise config.error(
+            "pipeline.model", f"expected a distortion model name (a fit label, or {AUTO}): {exc}"
+        ) from None
+    try:
         config.pipeline.spec  # noqa: B018  (validates degree and terms against pipeline.fitspec)
     except ValueError as exc:
         raise config.error("pipeline.degree", f"expected a degree the model allows: {exc}") from None
+    _zoom(config)
     cap = config.capture
     if not cap.timeout_s > cap.exposure_us / 1e6:
         raise config.error(
@@ -273,3 +280,18 @@ def check_across(config: Config) -> None:
             f"section), got {tt.port!r}",
         )  # fmt: skip
     check_the_devices(config)
+
+
+def _zoom(config: Config) -> None:
+    """``zoom``: ``settings`` (a zoom session's focal lengths) with optional ``positions`` (the camera's
+    zoom value at each, as many), or ``focal`` (one focal length: a zoom session's part), not both."""
+    if config.zoom_settings and config.focal is not None:
+        raise config.error("zoom.focal", "expected zoom.settings (a zoom session) or zoom.focal (one focal length), "
+                           "not both")  # fmt: skip
+    if config.zoom_positions and not config.zoom_settings:
+        raise config.error("zoom.positions", "expected zoom.settings beside it (the focal length of each position)")
+    if config.zoom_positions and len(config.zoom_positions) != len(config.zoom_settings):
+        raise config.error(
+            "zoom.positions", f"expected one zoom position per focal length ({len(config.zoom_settings)}), got "
+            f"{shown(list(config.zoom_positions))}",
+        )  # fmt: skip

@@ -10,7 +10,7 @@ shows.
 
 Why at the directory and not as an executor subscriber (:class:`station.session.progress.Subscriber`):
 the page also shows what comes after the executor -- QA's verdicts (:mod:`station.qa.judge`),
-the report and ``finished`` are appended by :func:`station.session.run.run_session` once the
+the report and ``finished`` are appended by :func:`station.session_run.run_session` once the
 executor's subscribers have been told it is done -- and the frames themselves, which a
 subscriber sees only as file names (``FrameSaved``). Every record passes through
 ``append`` exactly once, so this sees the manifest as it is written, in order.

@@ -285,15 +285,15 @@ def draw_figures(figures: Sequence[Figure], workers: int = 1) -> None:
 
     The figures are independent PNGs (a session of 3 focus settings x 8 orientations has 33),
     so on a machine with several cores they are drawn at once, in the processes of
-    :class:`station.session.workers.FitWorkers` (forkserver: the session process may still run
-    device threads). An error in any figure (a full disk) is raised here, as in this process."""
+    a :class:`station.pool.WorkerPool` (forkserver: the session process may still run device
+    threads). An error in any figure (a full disk) is raised here, as in this process."""
     if workers <= 1 or len(figures) < PARALLEL_MIN_FIGURES:
         for fig in figures:
             draw_figure(fig)
         return
-    from station.session.workers import FitWorkers
+    from station.pool import WorkerPool
 
-    pool = FitWorkers(workers)
+    pool = WorkerPool(workers, ["station.qa.report"])
     try:
         # the slow plots first, then the overlays: the processes end at about the same time
         order = sorted(figures, key=lambda f: f.kind == "overlay")

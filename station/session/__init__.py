@@ -8,14 +8,14 @@
   how every reader reads them back typed (``parse``, ``ManifestReads``);
 * :mod:`station.session.progress` — progress bars and the summary table, a subscriber
   to the records;
-* :mod:`station.session.run` — a whole session: the executor, then QA and the report
-  (:mod:`station.qa`), then ``finished``;
 * :mod:`station.session.directory` — the session directory (atomic frames, the
   append-only manifest, resume) and :mod:`station.session.layout`, the one place
   that names every path in it;
 * :mod:`station.session.processing` — averaging and checking shots;
   :mod:`station.session.evidence` — measurements and uncertainty maps kept as ``.npz``;
-* :mod:`station.session.workers` — the process pool of the fits;
 * :mod:`station.session.devices`, :mod:`station.session.simulated` — opening the
   configured (or simulated) camera and turntable.
+
+A whole session (the executor, then QA and the report, then ``finished``) is
+:mod:`station.session_run`, above this package and the QA (:mod:`station.qa`).
 """

@@ -12,11 +12,12 @@ the same :class:`station.profile.Profile`).
 Every fact is a typed manifest record (:mod:`station.session.records`) appended to
 the session directory and handed to the subscribers (:mod:`station.session.progress`:
 the tally behind :class:`SessionResult`, progress bars and the summary). QA and the
-report are not the executor's: :func:`station.session.run.run_session` runs them
+report are not the executor's: :func:`station.session_run.run_session` runs them
 once the plan is done. Each accepted shot's measured edges and each focus setting's
 bootstrap uncertainty map are kept in the session directory
 (:mod:`station.session.layout`) so that they need not measure anything again. The
-fits run on :class:`station.session.workers.FitWorkers`.
+fits run on a :class:`station.pool.WorkerPool` (``pipeline.workers`` processes), started while the
+session captures.
 
 A camera with the :class:`drivers.protocols.IndexedCapture` capability (the
 simulator) is told before each capture which frame of the shot it is taking
@@ -50,6 +51,7 @@ from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recov
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.files import describe_os_error
+from station.pool import WorkerPool
 from station.profile import Profile
 from station.session import layout
 from station.session.directory import SessionDir, SessionError
@@ -93,11 +95,14 @@ from station.session.records import (
     Started,
     Stored,
 )
-from station.session.workers import FitWorkers
 
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
 POSITION_TOLERANCE_DEG = 0.05
+
+PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
+"""Modules the fits' forkserver imports once, so that each worker starts warm (the fits' and the
+report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
 
 EXIT_OK = 0
 EXIT_ABORTED = 2
@@ -135,7 +140,7 @@ class SessionResult:
     frames_saved: int = 0
     faults: int = 0
     focus: list[FocusSummary] = field(default_factory=list)
-    verdict: str | None = None  # the session's QA verdict, once judged (station.session.run)
+    verdict: str | None = None  # the session's QA verdict, once judged (station.session_run)
     results: dict[str, Any] | None = None  # what DIR/results.json holds (station.qa.results)
 
 
@@ -147,6 +152,8 @@ class Executor:
     session : the session directory (its ``config`` is the plan's input).
     camera, turntable : opened drivers satisfying the protocols.
     store : a :class:`station.store.ProfileStore` (``None``: do not store).
+    judge : ``judge(profile, focus_idx)``, the QA verdict of a focus setting's profile, stored with it
+        (``None``: stored unjudged; :func:`station.session_run.run_session` passes the QA's).
     subscribers : receive the records and notes (:class:`station.session.progress.Subscriber`).
     sleep : the back-off sleep (tests pass a recorder).
     """
@@ -158,10 +165,12 @@ class Executor:
         turntable: Turntable,
         *,
         store: Any = None,
+        judge: Callable[[Profile, int], Any] | None = None,
         subscribers: Sequence[Subscriber] = (),
         sleep: Callable[[float], None] = time.sleep,
     ):
         self.session = session
+        self.judge = judge
         self.config = session.config
         self.camera = camera
         self.turntable = turntable
@@ -169,7 +178,7 @@ class Executor:
         self.sleep = sleep
         self.tally = Tally()
         self.subscribers: list[Subscriber] = [self.tally, *subscribers]
-        self.workers = FitWorkers(self.config.pipeline.workers)
+        self.workers = WorkerPool(self.config.pipeline.workers, PRELOAD)
         self._pending: dict[tuple[int, int, int], Frame] = {}
         self._shots: dict[tuple[int, int], ShotMeasurement] = {}
         self._calibrations: dict[int, Calibration] = {}
@@ -526,10 +535,7 @@ class Executor:
         rel = layout.profile_file(f)
         path = self.session.path / rel
         # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
-        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again,
-        # the stored model judged on the edges it was fitted on, as the QA after the executor does
-        from station.qa.verdicts import qa_verdict, session_measurements
-
+        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
         profile = focus_profile(
             cal,
             w,
@@ -544,8 +550,7 @@ class Executor:
                 session_dir=str(self.session.path.resolve()),
             ),
             details={"model_file": str(path)},
-            judge=qa_verdict,
-            measurements=session_measurements(self.session, f),
+            judge=None if self.judge is None else (lambda p: self.judge(p, f)),
         )
         write_profile(path, profile)
         digest = sha256_file(path)

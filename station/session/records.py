@@ -3,7 +3,7 @@
 A session directory's ``manifest.jsonl`` (:mod:`station.session.directory`) holds one
 JSON object per line, ``{"t": <unix time>, "kind": <kind>, ...fields}``. The executor
 (:mod:`station.session.executor`), QA (:mod:`station.qa.judge`) and the session run
-(:mod:`station.session.run`) write these records; subscribers
+(:mod:`station.session_run`) write these records; subscribers
 (:mod:`station.session.progress`) receive them as they are written. The JSON of each
 record is its fields in order (``None`` fields that are optional are left out).
 

@@ -3,8 +3,8 @@
 Rooms:
 
 * :mod:`station.store.location` — a store named by a path or URL (``sqlite:///…``,
-  ``postgresql://user@host:port/db``); :mod:`station.store.resolve` — which store a command
-  uses (``--store``, ``--config``, ``$HARP_STORE``, the default), the one place that decides it;
+  ``postgresql://user@host:port/db``; which store a command uses, ``--store``, ``--config``,
+  ``$HARP_STORE`` or the default, is the command line's: :mod:`station.cli.store_options`);
 * :mod:`station.store.database` — :class:`ProfileStore`: opening (for reading or writing,
   integrity checked before writing), one transaction per write with retries, the queries;
 * :mod:`station.store.dashboard` — read queries for the factory QA dashboard;

@@ -32,3 +32,28 @@ def test_division_bounds_and_kinds():
         parse("radial2+divisionx")
     assert spec_problem("radial", 2, division=1.5) is not None
     assert spec_problem("radial", 2, division=lo) is None
+
+
+def test_a_choice_is_a_label_or_auto():
+    """Issue 22 item 2: ``model`` settings and options read by one function: a label, or auto (None)."""
+    from pipeline.fitspec import AUTO, parse_choice
+
+    assert parse_choice(AUTO) is None and parse_choice(" Auto ") is None
+    assert parse_choice("radial6+prism") == FitSpec("radial", 6, prism=True)
+    assert parse_choice("poly") == FitSpec("poly", 5)
+    with pytest.raises(ValueError, match="'automatic': unknown model"):
+        parse_choice("automatic")
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        FitSpec("radial", 6, True, False, True),
+        FitSpec("radial", 2, division=1),
+        FitSpec("radial", 4, True, True, field=(8, 6), field_penalty=0.01),
+        FitSpec("poly", 7),
+    ],
+)
+def test_fit_arguments_read_back(spec):
+    """The fit's keyword arguments (kept by schema-2 store rows) give back the spec that made them."""
+    assert FitSpec.from_fit_arguments(spec.fit_arguments()) == spec

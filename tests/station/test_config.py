@@ -118,7 +118,7 @@ def test_unknown_field_is_named(tmp_path):
 def test_unknown_model(tmp_path):
     d = demo_data()
     d["pipeline"]["model"] = "fisheye9"
-    assert "pipeline.model: expected one of radial, poly, auto, got 'fisheye9'" in error_of(tmp_path, d)
+    assert "pipeline.model: expected a distortion model name" in error_of(tmp_path, d)
 
 
 def test_emulator_port_needs_simulation(tmp_path):
@@ -182,6 +182,25 @@ def test_the_keys_a_section_accepts_are_its_dataclass_fields(tmp_path):
     assert "pipeline.degree: expected a degree the model allows: radial degree must be within 1..10, got 11" in (
         error_of(tmp_path, d)
     )
+
+
+def test_the_model_is_a_fit_label_or_auto(tmp_path):
+    """Issue 22 item 2: ``pipeline.model`` is read by pipeline.fitspec.parse_choice; the older term keys
+    beside it set the label's terms."""
+    from pipeline.fitspec import FitSpec
+
+    d = demo_data()
+    for key in ("degree", "tangential", "prism", "center_prior"):
+        d["pipeline"].pop(key, None)
+    d["pipeline"]["model"] = "radial6+prism+division1"
+    assert load_config(write(tmp_path, d)).pipeline.spec == FitSpec("radial", 6, prism=True, division=1)
+    d["pipeline"]["tangential"] = True
+    assert load_config(write(tmp_path, d)).pipeline.spec == FitSpec("radial", 6, True, True, division=1)
+    d["pipeline"]["model"] = "auto"
+    assert load_config(write(tmp_path, d)).pipeline.spec is None
+    d["pipeline"]["model"] = "radial4+fisheye"
+    msg = error_of(tmp_path, d)
+    assert "pipeline.model: expected a distortion model name (a fit label, or auto):" in msg and "'fisheye'" in msg
 
 
 def test_optics_fields_of_lens_and_camera_body(tmp_path):

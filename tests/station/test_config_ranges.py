@@ -188,16 +188,17 @@ def test_sessions_dir_naming_a_regular_file(capsys, tmp_path):
         ("exposure_us: 10000", "exposure_us: 1e4", "capture.exposure_us: expected a number in (0, 100000000] µs, got '1e4' (YAML reads it as text: write 10000"),
         ("settle_s: 0.0", "settle_s: .nan", "capture.settle_s: expected a number in [0, 60] s, got nan"),
         ("settle_s: 0.0", "settle_s: .inf", "capture.settle_s: expected a number in [0, 60] s, got inf"),
-        ("gain_db: 0\n", "gain_db: 0\n  gain_db: 6\n", "capture: the key 'gain_db' is given twice (line 44); YAML keeps only the last"),
+        ("gain_db: 0\n", "gain_db: 0\n  gain_db: 6\n", "capture: the key 'gain_db' is given twice (line {next}); YAML keeps only the last"),
         ("seed: 7", "seed: !!python/object/apply:os.system ['true']", "station.camera.seed: the tag '!!python/object/apply:os.system' is not a configuration value"),
-        ("frames_per_orientation: 2", "frames_per_orientation: 2\n  3: x", "capture: keys must be names, got '3' (line 42); quote it"),
+        ("frames_per_orientation: 2", "frames_per_orientation: 2\n  3: x", "capture: keys must be names, got '3' (line {next}); quote it"),
     ],
 )  # fmt: skip
 def test_yaml_oddities_are_one_line_naming_the_field(capsys, tmp_path, old, new, message):
     text = DEMO.read_text()
     assert old in text
     line = refused(capsys, tmp_path, text.replace(old, new, 1).replace("sessions_dir: ../sessions", "sessions_dir: s"))
-    assert line.startswith(message), line
+    next_line = text[: text.index(old)].count("\n") + 2  # the line after the one replaced
+    assert line.startswith(message.replace("{next}", str(next_line))), line
 
 
 # ------------------------------------------------------------------ long plans

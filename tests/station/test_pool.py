@@ -25,3 +25,80 @@ def test_forkserver_workers_ignore_ctrl_c_and_run_the_callers_initializer():
         assert list(pool.map(_disposition, [0])) == [(signal.SIG_IGN, "ran")]
     finally:
         pool.shutdown(cancel_futures=True)
+
+
+# the session's pool (formerly station.session.workers.FitWorkers): started ahead of the first fit,
+# shut down on close
+
+
+def _pid(_: int) -> int:
+    import os
+
+    return os.getpid()
+
+
+def test_warm_up_starts_the_processes_that_map_then_uses():
+    import os
+
+    from station.pool import WorkerPool
+
+    pool = WorkerPool(2)
+    try:
+        pool.warm_up()  # returns at once; the processes start in the background
+        assert pool._pool is not None
+        pool.warm_up()  # a second call changes nothing
+        assert list(pool.map(abs, [-3, 2, -1])) == [3, 2, 1]
+        pids = set(pool.map(_pid, range(8)))
+        assert os.getpid() not in pids and 1 <= len(pids) <= 2
+    finally:
+        pool.close()
+    assert pool._pool is None
+
+
+def test_one_worker_means_no_processes():
+    from station.pool import WorkerPool
+
+    pool = WorkerPool(1)
+    pool.warm_up()
+    assert pool._pool is None and pool.map is map
+    pool.close()
+
+
+def test_forked_workers_ignore_ctrl_c_too():
+    """One policy for both start methods: a forked worker ignores SIGINT as a forkserver's does."""
+    from station.pool import WorkerPool
+
+    with WorkerPool(2, fork=True) as pool:
+        assert [d for d, _ in pool.map(_disposition, [0, 1])] == [signal.SIG_IGN, signal.SIG_IGN]
+
+
+def _sleep(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+def test_an_exception_leaving_the_pool_stops_its_running_workers():
+    """Ctrl-C (any exception) inside ``with WorkerPool``: the running workers are terminated at once,
+    not awaited (their jobs would take a minute)."""
+    import os
+    import time
+
+    import pytest
+
+    from station.pool import WorkerPool
+
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt), WorkerPool(2, ["station.pool"]) as pool:
+        futures = pool.submit_all(_sleep, [60.0, 60.0, 60.0])
+        while not any(f.running() for f in futures):
+            time.sleep(0.01)
+        pids = list(pool._pool._processes)
+        raise KeyboardInterrupt
+    assert time.monotonic() - t0 < 30
+    assert len(pids) == 2
+    assert not any(f.done() and not f.cancelled() and f.exception() is None for f in futures)  # none ran to its end
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)

@@ -12,7 +12,7 @@ from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, Device
 from station.config import load_config
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK
-from station.session.run import run_session
+from station.session_run import run_session
 from station.store import ProfileStore
 from tests.station.fakes import FakeCamera, FakeStage, H, W
 

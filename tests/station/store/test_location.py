@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 import yaml
 
+from station.cli.store_options import add_store_options, location_from_args, store_location
 from station.config import ConfigError, load_config
 from station.store import StoreError
 from station.store.location import POSTGRESQL, SQLITE, parse_store
-from station.store.resolve import add_store_options, location_from_args, store_location
 
 REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"

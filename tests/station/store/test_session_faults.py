@@ -14,7 +14,7 @@ from station.cli import main
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK
 from station.session.records import Aborted, FrameSaved
-from station.session.run import run_session
+from station.session_run import run_session
 from station.store import ProfileStore
 from tests.station.fakes import FakeCamera, FakeStage
 from tests.station.session.test_executor import make_config

@@ -2,7 +2,8 @@
 
 :func:`run_session` is what ``harp session run`` / ``resume`` do once the devices are
 open: the executor performs what the session lacks (:mod:`station.session.executor`,
-with :class:`station.session.progress.ConsoleProgress` showing it); when the plan is
+with :class:`station.session.progress.ConsoleProgress` showing it, each focus setting's profile
+judged by the QA as it is stored: :func:`judge_focus`); when the plan is
 done, QA judges every profile (:func:`station.qa.judge.judge_session`), the report is
 written into ``DIR/report`` (:func:`station.qa.report.write_session_report`, from the
 measurements the session kept), the results into ``DIR/results.json``
@@ -15,6 +16,9 @@ that cannot be written) or a store that refuses the verdict stops the session wi
 line, and exit 2, like one during capture: a session whose report is missing or
 truncated is never "finished".
 
+It stands above both the session (:mod:`station.session`) and the QA (:mod:`station.qa`, which
+reads session directories): the session knows nothing of the QA, whose judging it is handed.
+
 The result's exit code binds (:mod:`station.exit_codes`): 0 when the session finished
 and its verdict is PASS, 1 when it finished and its verdict is FAIL, 2 when it stopped.
 """
@@ -26,7 +30,7 @@ import dataclasses
 import errno
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivers.protocols import Camera, Turntable
 from station.exit_codes import EXIT_FAIL
@@ -37,6 +41,9 @@ from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor, SessionRes
 from station.session.progress import ConsoleProgress
 from station.session.records import Aborted, Finished, ReportFailed, ReportWritten
 from station.store.errors import StoreError
+
+if TYPE_CHECKING:
+    from station.profile import Profile, Verdict
 
 
 def run_session(
@@ -54,7 +61,7 @@ def run_session(
     ``console``: a ``rich.console.Console`` for progress, summary, QA lines (None: silent);
     ``report``: write ``DIR/report`` once the plan is done.
     """
-    executor = Executor(session, camera, turntable, store=store, sleep=sleep)
+    executor = Executor(session, camera, turntable, store=store, judge=judge_focus(session), sleep=sleep)
     if console is not None:
         executor.subscribe(ConsoleProgress(console, executor.tally))
     try:
@@ -106,6 +113,18 @@ def run_session(
     return dataclasses.replace(
         result, message=f"session finished, QA verdict PASS: {session.path}", verdict=qa.overall, results=results
     )
+
+
+def judge_focus(session: SessionDir) -> Callable[[Profile, int], Verdict]:
+    """``judge(profile, focus_idx)``: the QA verdict of a focus setting's profile under the session's
+    thresholds, the stored model judged on the edges it was fitted on (the measurements the session
+    kept), as the QA after the executor judges it (:func:`station.qa.verdicts.qa_verdict`)."""
+    from station.qa.verdicts import qa_verdict, session_measurements
+
+    def judge(profile: Profile, focus_idx: int) -> Verdict:
+        return qa_verdict(profile, session.config.qa, measurements=session_measurements(session, focus_idx))
+
+    return judge
 
 
 class ReportError(Exception):
