@@ -175,7 +175,7 @@ def interpolate(
     :class:`FailedQA` when the profiles ``left_out`` (failed QA) would have bracketed it (the line
     names them). Profiles of different image sizes are a :class:`ChoiceError`.
     """
-    from pipeline.interpolate import FocusInterpolator, leave_one_out_error
+    from pipeline.interpolate import FocusInterpolator, leave_one_out_error  # defers scipy
 
     sizes = {(p.width, p.height) for p in profiles}
     if len(sizes) > 1:

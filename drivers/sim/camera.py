@@ -246,7 +246,7 @@ class SimulatedCamera:
         self.jpeg_quality = None if jpeg_quality is None else int(jpeg_quality)
         self.realism: Session | None = None
         if self.realism_seed is not None:
-            from pipeline.realism import realistic_session
+            from pipeline.realism import realistic_session  # defers pipeline.realism: a clean camera never needs it
 
             self.realism = realistic_session(
                 self.realism_seed,
@@ -530,9 +530,9 @@ class SimulatedCamera:
 
     def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
         """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
-        from pipeline.harp_scene import HarpMount
-        from pipeline.realism import raw_ideal_grid, render_shot
-        from pipeline.sensor import raw_scale
+        from pipeline.harp_scene import HarpMount  # defers pipeline.harp_scene
+        from pipeline.realism import raw_ideal_grid, render_shot  # defers pipeline.realism
+        from pipeline.sensor import raw_scale  # defers pipeline.sensor
 
         assert self.realism is not None
         w, h = self._size

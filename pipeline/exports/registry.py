@@ -43,6 +43,7 @@ from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
+from pipeline.model_file import FORMAT_VERSION, model_file_text, parse_model_text
 from pipeline.models.base import DistortionModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
@@ -438,8 +439,6 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
 
 def harp_model_doc(src: ExportSource) -> dict[str, Any]:
     """The model-file record of a source (the layout of :mod:`pipeline.model_file`)."""
-    from pipeline.model_file import FORMAT_VERSION
-
     return {
         "format": HARP_FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -456,8 +455,6 @@ def _write_json(src: ExportSource, opt: ExportOptions) -> Export:
 
 
 def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
-    from pipeline.model_file import model_file_text
-
     text = model_file_text(
         src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
     )
@@ -544,8 +541,6 @@ def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
 
 # ------------------------------------------------------------------ readers
 def _read_harp(data: bytes, req: ReadRequest) -> Correction:
-    from pipeline.model_file import parse_model_text
-
     mf = parse_model_text(_text(data, req.name), req.name)
     return Correction(mf.model, (mf.width, mf.height), f"harp:{mf.model.name}")
 

@@ -25,8 +25,10 @@ import cv2
 import numpy as np
 
 from pipeline.model_file import read_model_file
+from pipeline.models.tca_model import ChannelModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.commands import COMMANDS
+from station.colour import read_tca_file
 from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
 
@@ -85,9 +87,6 @@ def _run(args) -> int:
         raise UndistortError(str(exc)) from None
     channels = None
     if getattr(args, "tca", None):
-        from pipeline.models.tca_model import ChannelModel
-        from station.colour import read_tca_file
-
         fields = read_tca_file(args.tca, mf.width, mf.height)
         channels = {ch: ChannelModel(mf.model, f) for ch, f in fields.items()}
     out_dir = Path(args.output_dir)

@@ -20,6 +20,7 @@ from typing import Any
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.sim.world import SimWorld
+from drivers.sim.zaber_emulator import start_zaber_emulator
 from station.config import EMULATOR_PORT, Config
 
 
@@ -43,8 +44,6 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     The devices are created but not opened. The emulator is stopped on exit.
     ``emulator_overrides`` reach ``start_zaber_emulator``.
     """
-    from drivers.sim.zaber_emulator import start_zaber_emulator
-
     if config.simulation is None:
         raise ValueError(f"{config.path}: simulation: expected a mapping for a simulated station, missing")
     world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg)

@@ -128,7 +128,7 @@ def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
 
     A profile that failed QA has no ``downloads``: its exports are listed in ``downloads_failed_qa``,
     each URL with ``?allow-failed=1`` (the export then says FAILED QA in the file, and the server logs it)."""
-    from pipeline.exports.registry import FORMATS
+    from pipeline.exports.registry import FORMATS  # defers scipy
 
     m = p.merit
     unc = m.field_uncertainty
@@ -237,7 +237,7 @@ FIGURES = (
 def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
     """A lens model's drift: per focus setting, each lens's newest distortion magnitude and holdout
     d in calibration order, with control limits (mean ± 3σ of the lenses that passed)."""
-    from station.store.dashboard import control_limits
+    from station.store.dashboard import control_limits  # defers sqlalchemy
 
     points = store.model_trend(maker, model)
     if not points and not any(m.maker == maker and m.model == model for m in store.lens_models()):
