@@ -45,7 +45,6 @@ from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
-from station.edge_points import edge_points_bytes
 from station.files import atomic_write_bytes
 from station.inputs import InputError, measure_file
 from station.qa.overlay import write_overlay
@@ -204,6 +203,8 @@ def run(args) -> int:
         overall = {"d": None, "d_max": None, "n_lines": 0}
 
     if points_path is not None:
+        from station.edge_points import edge_points_bytes  # defers station.edge_points: --points only
+
         try:
             atomic_write_bytes(points_path, edge_points_bytes(results, points_path.suffix.lower()))
         except OSError as exc:
