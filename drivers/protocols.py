@@ -197,3 +197,20 @@ class IndexedCapture(Protocol):
     def set_capture_index(self, index: int) -> None:
         """The next capture is frame ``index`` of this shot (``attempt * frames_per_orientation + frame``)."""
         ...
+
+
+@runtime_checkable
+class Zoomable(Protocol):
+    """A camera with a zoom lens it can drive (the simulator's zoom lens, V4L2 ``zoom_absolute``,
+    GenICam ``Zoom``). Positions are in the device's own units (the simulator's: millimetres of
+    focal length); a station maps each calibrated focal length to one (``zoom.positions``)."""
+
+    def zoom_range(self) -> Range | None:
+        """The positions ``set_zoom`` accepts, or None when the device has no zoom."""
+        ...
+
+    def set_zoom(self, position: float) -> float:
+        """Drive the zoom to ``position``; returns the read-back. OutOfRange outside :meth:`zoom_range`."""
+        ...
+
+    def get_zoom(self) -> float | None: ...

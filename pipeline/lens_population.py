@@ -206,6 +206,44 @@ def _grid(width: int, height: int, step: float = 20.0) -> np.ndarray:
     return np.stack([gx.ravel(), gy.ravel()], 1)
 
 
+@dataclass(frozen=True)
+class UnitSpread:
+    """What makes one unit of a lens design differ from the design (module docstring).
+
+    ``dk`` are the deviations of :math:`k_1, k_2, k_3` from the nominal values, ``centre`` the
+    distortion centre's offset from the image centre in half-diagonals :math:`s` (x, y),
+    ``tangential`` the decentering :math:`p_1, p_2`, ``prism`` the thin prism
+    :math:`s_1 \\dots s_4` (tilt); ``bad`` whether it is the odd badly assembled unit (its
+    decentering and tilt :data:`BAD_FACTOR` times the spread).
+    """
+
+    dk: tuple[float, float, float]
+    centre: tuple[float, float]
+    tangential: tuple[float, float]
+    prism: tuple[float, float, float, float]
+    bad: bool
+
+
+def draw_spread(
+    rng: np.random.Generator,
+    k_spread: tuple[float, float, float],
+    bad_fraction: float = 0.05,
+    scale: float = 1.0,
+) -> UnitSpread:
+    """One unit's :class:`UnitSpread`, drawn from ``rng``: normal deviations of standard deviation
+    ``scale`` times ``k_spread``, :data:`CENTRE_SPREAD`, :data:`TANGENTIAL_SPREAD` and
+    :data:`PRISM_SPREAD` (times :data:`BAD_FACTOR` for a bad unit, drawn with probability
+    ``bad_fraction``). ``scale = 0`` is the nominal lens (every deviation 0, never bad)."""
+    dk = tuple(float(rng.normal(0.0, scale * sd)) for sd in k_spread)
+    centre = (float(rng.normal(0, scale * CENTRE_SPREAD)), float(rng.normal(0, scale * CENTRE_SPREAD)))
+    bad = bool(rng.uniform() < bad_fraction) and scale > 0
+    f = scale * (BAD_FACTOR if bad else 1.0)
+    tang = (float(rng.normal(0, f * TANGENTIAL_SPREAD)), float(rng.normal(0, f * TANGENTIAL_SPREAD)))
+    p2, p4 = f * PRISM_SPREAD[0], f * PRISM_SPREAD[1]
+    prism = (float(rng.normal(0, p2)), float(rng.normal(0, p4)), float(rng.normal(0, p2)), float(rng.normal(0, p4)))
+    return UnitSpread((dk[0], dk[1], dk[2]), centre, tang, prism, bad)
+
+
 def draw_lens(
     rng: np.random.Generator,
     index: int,
@@ -216,19 +254,17 @@ def draw_lens(
     field_rms_px: tuple[float, float] = (0.005, 0.04),
     bad_fraction: float = 0.05,
 ) -> PopulationLens:
-    """One lens of ``design`` with its manufacturing spread, drawn from ``rng`` (module docstring)."""
+    """One lens of ``design`` with its manufacturing spread (:func:`draw_spread`), drawn from ``rng``
+    (module docstring)."""
     s = 0.5 * math.hypot(width, height)
     c0 = ((width - 1) / 2.0, (height - 1) / 2.0)
-    k = [float(rng.normal(m, sd)) for m, sd in zip(design.k, design.k_spread)]
-    centre = (c0[0] + float(rng.normal(0, CENTRE_SPREAD)) * s, c0[1] + float(rng.normal(0, CENTRE_SPREAD)) * s)
-    bad = bool(rng.uniform() < bad_fraction)
-    f = BAD_FACTOR if bad else 1.0
-    tang = (float(rng.normal(0, f * TANGENTIAL_SPREAD)), float(rng.normal(0, f * TANGENTIAL_SPREAD)))
-    p2, p4 = f * PRISM_SPREAD[0], f * PRISM_SPREAD[1]
-    prism = (float(rng.normal(0, p2)), float(rng.normal(0, p4)), float(rng.normal(0, p2)), float(rng.normal(0, p4)))
+    unit = draw_spread(rng, design.k_spread, bad_fraction)
+    k = [m + d for m, d in zip(design.k, unit.dk, strict=True)]
+    centre = (c0[0] + unit.centre[0] * s, c0[1] + unit.centre[1] * s)
     base = RadialModel.for_image(
-        width, height, k=(1.0, 0.0, k[0], 0.0, k[1], 0.0, k[2]), center=centre, tangential=tang, prism=prism
-    )
+        width, height, k=(1.0, 0.0, k[0], 0.0, k[1], 0.0, k[2]), center=centre, tangential=unit.tangential,
+        prism=unit.prism,
+    )  # fmt: skip
     model: DistortionModel = base
     rms = 0.0
     if field:
@@ -238,12 +274,12 @@ def draw_lens(
         kappa = tuple((2 * math.pi / L * math.cos(t), 2 * math.pi / L * math.sin(t)) for L, t in zip(lam, direction))
         amps = rng.standard_normal(RIPPLE_WAVES) * lam / (2 * math.pi)  # each wave's displacement ~ N(0, 1) s
         phases = tuple(float(v) for v in rng.uniform(0, 2 * math.pi, RIPPLE_WAVES))
-        unit = RippleLens(base, c0, tuple(float(a) for a in amps), kappa, phases)
-        now = float(np.sqrt(np.mean(np.sum(unit.ripple(_grid(width, height)) ** 2, axis=1))))
+        ripple = RippleLens(base, c0, tuple(float(a) for a in amps), kappa, phases)
+        now = float(np.sqrt(np.mean(np.sum(ripple.ripple(_grid(width, height)) ** 2, axis=1))))
         scale = target / now
         model = RippleLens(base, c0, tuple(float(a) * scale for a in amps), kappa, phases)
         rms = target
-    return PopulationLens(index, design.name, model, base, rms, bad)
+    return PopulationLens(index, design.name, model, base, rms, unit.bad)
 
 
 def lens_population(

@@ -15,6 +15,8 @@ their SHA-256), passed in here as plain data. Layout (format version 1)::
     merit: {fit: {d: .., d_max: ..}, holdout: {d: .., d_max: ..}, ...}
     provenance: {created_utc: .., software: harp-station 0.1.0, t: 30,
                  command: .., images: [{path: .., sha256: ..}, ..]}
+    intrinsics: {fx: .., fy: .., cx: .., cy: .., sd: {..}, source: .., ...}   # optional:
+                 # the camera matrix measured with this distortion (pipeline.intrinsics)
 
 Any defect (not YAML, not our format, unknown version, unknown model, bad
 parameters) raises :class:`ValueError` with a one-line message naming the file and
@@ -30,6 +32,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pipeline.intrinsics import Intrinsics
 from pipeline.models import MODEL_TYPES, model_from_dict
 from pipeline.models.base import DistortionModel
 
@@ -48,11 +51,17 @@ class ModelFile:
     merit: dict[str, Any] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     path: str | None = None
+    intrinsics: Intrinsics | None = None
 
     def text(self) -> str:
         """The file's text (:func:`model_file_text`)."""
         return model_file_text(
-            self.model, width=self.width, height=self.height, merit=self.merit, provenance=self.provenance
+            self.model,
+            width=self.width,
+            height=self.height,
+            merit=self.merit,
+            provenance=self.provenance,
+            intrinsics=self.intrinsics,
         )
 
 
@@ -78,9 +87,11 @@ def model_file_text(
     height: int,
     merit: dict[str, Any] | None = None,
     provenance: dict[str, Any] | None = None,
+    intrinsics: Intrinsics | None = None,
 ) -> str:
     """The text of a model file holding ``model`` for ``width x height`` images, with its
-    figures of merit and provenance (plain data: numpy values and tuples are converted).
+    figures of merit and provenance (plain data: numpy values and tuples are converted)
+    and, when measured, the camera matrix (:class:`pipeline.intrinsics.Intrinsics`).
 
     Raises TypeError for something that is not a model, ValueError for a size <= 0.
     """
@@ -96,6 +107,8 @@ def model_file_text(
         "merit": _plain(merit or {}),
         "provenance": _plain(provenance or {}),
     }
+    if intrinsics is not None:
+        doc["intrinsics"] = _plain(intrinsics.to_dict())
     header = (
         "# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
         "# pixel centres at integers). Load with pipeline.load_model(path).\n"
@@ -145,7 +158,15 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     prov = doc.get("provenance") or {}
     if not isinstance(merit, dict) or not isinstance(prov, dict):
         raise ValueError(f"{name}: 'merit' and 'provenance' must be mappings")
-    return ModelFile(model=model, width=width, height=height, merit=merit, provenance=prov, path=name)
+    intrinsics = None
+    if doc.get("intrinsics") is not None:
+        try:
+            intrinsics = Intrinsics.from_dict(doc["intrinsics"])
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+    return ModelFile(
+        model=model, width=width, height=height, merit=merit, provenance=prov, path=name, intrinsics=intrinsics
+    )
 
 
 def _foreign_format(text: str) -> str | None:

@@ -384,7 +384,7 @@ def focus_profile(
 ) -> Profile:
     """The judged profile of a focus setting's calibration ``cal`` (:func:`calibrate_focus`).
 
-    The session's identities (lens, camera body, focus, optics), the selection record
+    The session's identities (lens, camera body, focus, a zoom session's focal length, optics), the selection record
     (:func:`selection_record`), the capture's details (orientations, frames per orientation,
     ``t``) plus ``details``, and the verdict ``judge(profile)`` (QA, passed in: the QA imports
     this module; :func:`station.qa.verdicts.qa_verdict` of the configuration's thresholds on the
@@ -400,6 +400,7 @@ def focus_profile(
         selection=selection_record(cal.selection, given_by),
     )
     profile = profile.with_(
+        focal=getattr(config, "focal", None),  # a zoom session's part: its focal length (mm)
         optics=config.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
         details={
             **profile.details,

@@ -210,4 +210,5 @@ def export_source(
         provenance=mf.provenance,
         wide_angle=wide_angle(profile),
         stamp=failed_stamp(profile) if stamp is None else tuple(stamp),
+        intrinsics=profile.intrinsics,
     )

@@ -15,13 +15,17 @@ same record), ``harp calibrate`` writes it, QA judges it, the report shows it an
   written (``Merit.extra``), so nothing read is lost;
 * the QA verdict with its checks (:class:`Verdict`, :class:`Check`: value,
   comparison, limit, passed), once judged;
-* what it is of (``lens``, ``camera``, ``focus``; the configured ``optics``: nominal
+* what it is of (``lens``, ``camera``, ``focus``, and for a zoom lens ``focal``, the focal
+  length setting in mm (None: a fixed lens); the configured ``optics``: nominal
   focal length, mount, pixel pitch or sensor width, crop factor, for exports —
   :meth:`Profile.lens_info`) and where it comes from
   (:class:`Provenance`: time, software, command, images with SHA-256, station,
   session, plus free-form ``extra``);
 * its store id (``id``), the store's time (``stored_at``) and free-form fit
-  diagnostics (``details``).
+  diagnostics (``details``);
+* the camera matrix measured with this correction held fixed, once measured
+  (``intrinsics``: :class:`pipeline.intrinsics.Intrinsics`, values, standard deviations,
+  source; ``harp intrinsics``), which every export uses.
 
 Conversions: :meth:`Profile.to_model_file` / :meth:`Profile.from_model_file` (the
 YAML model file, :mod:`pipeline.model_file`) and :meth:`Profile.to_row` /
@@ -40,6 +44,7 @@ from typing import Any
 
 from pipeline.exports.lens import LensInfo
 from pipeline.fitspec import FitSpec, parse
+from pipeline.intrinsics import Intrinsics
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
@@ -308,6 +313,7 @@ _PROVENANCE_KEYS = (
     "command",
     "images",
     "focus",
+    "focal",
     "lens",
     "camera",
     "optics",
@@ -335,6 +341,8 @@ class Profile:
     details: Mapping[str, Any] = field(default_factory=dict)
     id: int | None = None
     stored_at: str | None = None
+    intrinsics: Intrinsics | None = None
+    focal: float | None = None
 
     def with_(self, **changes: Any) -> Profile:
         """A copy with ``changes`` (e.g. ``qa=verdict`` once judged, ``id=`` once stored)."""
@@ -352,7 +360,7 @@ class Profile:
             camera_model=cam.model if cam else None,
             mount=o.mount,
             crop_factor=o.crop_factor,
-            focal_mm=o.focal_mm,
+            focal_mm=self.focal if self.focal is not None else o.focal_mm,  # a zoom setting: its focal
             pixel_pitch_um=o.pixel_pitch_um,
             sensor_width_mm=o.sensor_width_mm,
             focus=self.focus,
@@ -382,6 +390,8 @@ class Profile:
             prov["images"] = [{"path": path, "sha256": sha} for path, sha in p.images]
         if self.focus is not None:
             prov["focus"] = self.focus
+        if self.focal is not None:
+            prov["focal"] = self.focal
         if self.lens is not None:
             prov["lens"] = [self.lens.maker, self.lens.model, self.lens.serial]
         if self.camera is not None:
@@ -395,7 +405,7 @@ class Profile:
         if self.id is not None:
             prov["profile_id"] = self.id
         prov.update(p.extra)
-        return ModelFile(self.model, int(self.width), int(self.height), merit, prov)
+        return ModelFile(self.model, int(self.width), int(self.height), merit, prov, intrinsics=self.intrinsics)
 
     @classmethod
     def from_model_file(cls, mf: ModelFile) -> Profile:
@@ -417,10 +427,12 @@ class Profile:
             lens=_identity(prov.get("lens")),
             camera=_identity(prov.get("camera")),
             focus=_num(prov.get("focus")),
+            focal=_num(prov.get("focal")),
             provenance=_provenance_of(prov),
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
             details={"harp_health": dict(health)} if isinstance(health, Mapping) else {},
+            intrinsics=mf.intrinsics,
         )
 
     # -------------------------------------------------------------- store row
@@ -452,6 +464,7 @@ class Profile:
             "lens": (self.lens.maker, self.lens.model, self.lens.serial),
             "camera": (self.camera.maker, self.camera.model, self.camera.serial),
             "focus": float(self.focus),
+            "focal": float(self.focal) if self.focal is not None else None,
             "model_name": self.model.name,
             "model_json": json.dumps(_plain(self.model.to_dict())),
             "width": int(self.width),
@@ -472,6 +485,7 @@ class Profile:
             "provenance_json": json.dumps(_plain(mf.provenance)),
             "qa_json": json.dumps(_plain(self.qa.to_record())) if self.qa is not None else None,
             "verdict": self.qa.verdict if self.qa is not None else None,
+            "intrinsics_json": json.dumps(self.intrinsics.to_dict()) if self.intrinsics is not None else None,
         }
 
     @classmethod
@@ -524,6 +538,7 @@ class Profile:
             session_dir=base.session_dir or row.get("session_dir"),
         )
         qa_json = row.get("qa_json")
+        intr_json = row.get("intrinsics_json")
         lens, camera = row.get("lens"), row.get("camera")
         return cls(
             model=model_from_dict(json.loads(row["model_json"])),
@@ -536,11 +551,13 @@ class Profile:
             lens=Identity(*lens) if lens else None,
             camera=Identity(*camera) if camera else None,
             focus=_num(row.get("focus")),
+            focal=_num(row.get("focal")),
             provenance=provenance,
             optics=Optics.from_dict(prov_doc.get("optics")),
             details=details,
             id=int(row["id"]) if row.get("id") is not None else None,
             stored_at=row.get("created_at"),
+            intrinsics=Intrinsics.from_dict(json.loads(intr_json)) if intr_json else None,
         )
 
 

@@ -7,9 +7,12 @@ store decides, :meth:`station.store.database.ProfileStore.latest_by_focus`). Fro
 
 * :func:`current_and_left_out` — the profiles used for a lens (its current ones, or with
   ``allow_failed`` the newest of every focus setting) and the newest ones left out;
-* :func:`at_focus` — the profile of a list at one calibrated focus setting;
+* :func:`at_focus` — the profile of a list at one calibrated focus setting (of a zoom lens,
+  :func:`at_setting`: at one calibrated (focal, focus) setting);
 * :func:`interpolate` — the correction at a focus setting between calibrated ones
-  (:class:`Interpolated`: the correction field interpolated, its leave-one-out error), and
+  (:class:`Interpolated`: the correction field interpolated, its leave-one-out error), of a
+  zoom lens :func:`interpolate_zoom` — between calibrated (focal, focus) settings, in both,
+  never extrapolated, the leave-one-out error per axis — and
   :meth:`Interpolated.profile` — it as a :class:`~station.profile.Profile` to export;
 * :func:`is_failed`, :func:`verdict_text`, :func:`failed_checks`, :func:`failed_line` — what a
   profile's verdict says, in the words every command prints;
@@ -81,6 +84,8 @@ def failed_checks(p: Profile) -> str:
 def failed_line(lens: LensRow, p: Profile) -> str:
     """``lens … serial S, focus F: profile #N failed QA (the failed checks)``."""
     focus = f", focus {p.focus:g}" if p.focus is not None else ""
+    if p.focal is not None:
+        focus = f", focal {p.focal:g} mm{focus}"
     return f"{lens_label(lens)}{focus}: profile #{p.id} failed QA ({failed_checks(p)})"
 
 
@@ -125,6 +130,30 @@ def at_focus(profiles: Iterable[Profile], focus: float) -> Profile | None:
     return None
 
 
+def is_zoom(profiles: Iterable[Profile]) -> bool:
+    """Some of ``profiles`` are of a zoom lens's settings (they record a focal length)."""
+    return any(p.focal is not None for p in profiles)
+
+
+def at_setting(profiles: Iterable[Profile], focal: float | None, focus: float) -> Profile | None:
+    """The first of ``profiles`` at the setting (``focal``, ``focus``); ``focal`` None: a fixed lens's."""
+    for p in profiles:
+        same_focal = (
+            p.focal is None
+            if focal is None
+            else p.focal is not None and math.isclose(p.focal, focal, rel_tol=0, abs_tol=FOCUS_TOL)
+        )
+        if same_focal and p.focus is not None and math.isclose(p.focus, focus, rel_tol=0, abs_tol=FOCUS_TOL):
+            return p
+    return None
+
+
+def setting_text(focal: float | None, focus: float | None) -> str:
+    """``focal 24 mm, focus 0.5`` (or ``focus 0.5`` of a fixed lens)."""
+    f = f"focus {focus:g}" if focus is not None else "focus ?"
+    return f if focal is None else f"focal {focal:g} mm, {f}"
+
+
 # ---------------------------------------------------------- interpolation
 @dataclass(frozen=True)
 class Interpolated:
@@ -142,13 +171,29 @@ class Interpolated:
     note: str
     leave_one_out: tuple[Any, ...]
     from_profiles: tuple[Profile, ...]
+    focal: float | None = None
+
+    def loo_rows(self) -> list[dict[str, Any]]:
+        """The leave-one-out errors as plain rows (a zoom lens's with their ``axis`` and ``focal``)."""
+        rows = []
+        for e in self.leave_one_out:
+            row: dict[str, Any] = {"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px}
+            if hasattr(e, "axis"):
+                row = {"axis": e.axis, "focal": e.focal, **row}
+            rows.append(row)
+        return rows
 
     def profile(self) -> Profile:
         """The interpolated correction as a profile to export: the lens, camera and optics of the
         nearest calibrated profile, the leave-one-out error in its merit, the note and the
         profiles it comes from in its provenance."""
-        nearest = min(self.from_profiles, key=lambda p: abs((p.focus or 0.0) - self.focus))
-        loo = [{"focus": e.focus, "rms_px": e.rms_px, "max_px": e.max_px} for e in self.leave_one_out]
+
+        def dist(p: Profile) -> tuple[float, float]:
+            dz = 0.0 if self.focal is None or p.focal is None else abs(p.focal - self.focal)
+            return dz, abs((p.focus or 0.0) - self.focus)
+
+        nearest = min(self.from_profiles, key=dist)
+        loo = self.loo_rows()
         return Profile(
             model=self.model,
             width=self.width,
@@ -158,6 +203,7 @@ class Interpolated:
             camera=nearest.camera,
             optics=nearest.optics,
             focus=self.focus,
+            focal=self.focal,
             provenance=Provenance(extra={"note": self.note, "from_profiles": [p.id for p in self.from_profiles]}),
         )
 
@@ -198,3 +244,39 @@ def interpolate(
     method = getattr(interp, "method", "auto")
     note = f"focus {focus:g} is not calibrated: correction field interpolated ({method}) between the settings {known}"
     return Interpolated(focus, model, w, h, method, note, tuple(loo), tuple(profiles))
+
+
+def interpolate_zoom(
+    lens: LensRow, profiles: Sequence[Profile], focal: float, focus: float, left_out: Sequence[Profile] = ()
+) -> Interpolated:
+    """The correction of a zoom lens at an uncalibrated setting (``focal``, ``focus``), from the
+    calibrated settings around it (:class:`pipeline.zoom.ZoomInterpolator`: along focus at each
+    focal length, then along the focal length). Never extrapolates: a setting outside the
+    calibrated ranges is a :class:`ChoiceError` naming them, or a :class:`FailedQA` when profiles
+    ``left_out`` (failed QA) are at the focal lengths it would need."""
+    from pipeline.zoom import ZoomInterpolator, leave_one_out_by_axis  # defers scipy
+
+    zoom = [p for p in profiles if p.focal is not None and p.focus is not None]
+    sizes = {(p.width, p.height) for p in zoom}
+    if len(sizes) > 1:
+        raise ChoiceError(f"{lens_label(lens)}: profiles of different image sizes; cannot interpolate")
+    if not zoom:
+        raise ChoiceError(f"{lens_label(lens)}: no current profile of a focal length setting")
+    models = {(p.focal, p.focus): p.model for p in zoom}
+    ((w, h),) = sizes
+    interp = ZoomInterpolator(models, w, h)
+    known = "; ".join(f"{z:g} mm: focus {', '.join(f'{f:g}' for f in sorted(row))}" for z, row in interp.grid.items())
+    try:
+        model = interp.at(focal, focus)
+    except ValueError as exc:
+        msg = f"{lens_label(lens)}: no current profile at {setting_text(focal, focus)} ({exc}); calibrated: {known}"
+        near = [p for p in left_out if p.focal is not None]
+        if near:
+            raise FailedQA(msg + "; left out: " + "; ".join(failed_line(lens, p) for p in near)) from None
+        raise ChoiceError(msg) from None
+    loo = leave_one_out_by_axis(models, w, h)
+    note = (
+        f"{setting_text(focal, focus)} is not calibrated: correction field interpolated along focus, then along "
+        f"the focal length ({interp.method}), between the settings {known}"
+    )
+    return Interpolated(focus, model, w, h, interp.method, note, tuple(loo), tuple(zoom), focal=focal)

@@ -4,7 +4,8 @@ r"""A simulated grey camera looking at the calibration harp.
 :meth:`~SimulatedCamera.capture` renders the harp (:func:`pipeline.render.render_harp`)
 at the string angle of the shared :class:`~drivers.sim.world.SimWorld` *at
 the moment of the exposure* (stage angle + harp offset), through the demo
-lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`),
+lens at the world's current focus (:func:`drivers.sim.lens.lens_for_focus`; the unit of
+the lens the world holds, ``SimWorld.lens_unit``: one serial of a population),
 with the camera's exposure and gain, and sensor noise that is a function of
 the physical situation only (see *Noise seeds* below).
 
@@ -43,6 +44,11 @@ positions), exposure :data:`EXPOSURE_RANGE_US` (20 µs to 1 s), gain
 :data:`GAIN_RANGE_DB` (0 to 24 dB). A value outside raises
 :class:`~drivers.errors.OutOfRange` (a ``ValueError`` in ``from_config``);
 nothing is clamped. Read-back is exact.
+
+Zoom (off by default). With ``zoom: MM`` configured the camera has the simulated zoom lens
+(:func:`drivers.sim.lens.zoom_lens`: barrel at 12 mm, pincushion at 36 mm) at that focal length,
+driven by :meth:`SimulatedCamera.set_zoom` (:class:`drivers.protocols.Zoomable`); its frames' noise
+seeds include the focal length. Without it, the fixed demo lens as before.
 
 Defocus (off by default, so frames are unchanged unless configured). With
 ``best_focus`` = :math:`f^*` and ``defocus_blur_px`` = :math:`k` the lens is
@@ -98,9 +104,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DeviceDisconnected, DeviceTimeout
+from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
-from drivers.sim.lens import FOCUS_RANGE, lens_for_focus
+from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, lens_for_focus, zoom_lens
 from drivers.sim.world import SimWorld
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
@@ -112,6 +118,7 @@ IDEAL_CACHE_PIXELS = 6_000_000
 EXPOSURE_RANGE_US = (20.0, 1_000_000.0)
 GAIN_RANGE_DB = (0.0, 24.0)
 _FOCUS = Range(FOCUS_RANGE[0], FOCUS_RANGE[1], "", "simulated lens focus range")
+_ZOOM = Range(ZOOM_FOCAL_RANGE_MM[0], ZOOM_FOCAL_RANGE_MM[1], "mm", "simulated zoom lens")
 _EXPOSURE = Range(EXPOSURE_RANGE_US[0], EXPOSURE_RANGE_US[1], "µs", "simulated sensor")
 _GAIN = Range(GAIN_RANGE_DB[0], GAIN_RANGE_DB[1], "dB", "simulated sensor")
 FAULT_KINDS = ("timeout", "corrupt", "disconnect")
@@ -151,12 +158,13 @@ _CAMERA_KEYS = (
     "defocus_blur_px",
     "realism_seed",
     "jpeg_quality",
+    "zoom",
 )
 CONFIG_KEYS = ("driver",) + _CAMERA_KEYS + _SCENE_KEYS
 """Keys accepted by :meth:`SimulatedCamera.from_config`."""
 
 
-def noise_seed(seed: int, focus: float, angle_deg: float, index: int) -> int:
+def noise_seed(seed: int, focus: float, angle_deg: float, index: int, zoom: float | None = None) -> int:
     """Noise seed of the ``index``-th capture at a pose (focus, string angle).
 
     A 64-bit hash of ``seed``, ``focus`` (to 1e-6), the string angle (to
@@ -166,6 +174,8 @@ def noise_seed(seed: int, focus: float, angle_deg: float, index: int) -> int:
     """
     angle = round(float(angle_deg) % 180.0, 3) % 180.0
     key = f"{int(seed)}|{round(float(focus), 6):.6f}|{angle:.3f}|{int(index)}".encode()
+    if zoom is not None:  # a zoom lens's frames differ by focal length too (the fixed lens's are unchanged)
+        key += f"|z{round(float(zoom), 6):.6f}".encode()
     return int.from_bytes(hashlib.sha256(key).digest()[:8], "little")
 
 
@@ -260,8 +270,9 @@ class SimulatedCamera:
         self.defocus_blur_px = float(defocus_blur_px)
         self.world = world if world is not None else SimWorld()
         self._size = (int(width), int(height))
-        # the lens applied to every pixel, for the focus it was computed at (render saves half its time)
-        self._ideal: tuple[float, np.ndarray] | None = None
+        # the lens applied to every pixel, for the (renderer, focus, focal length, lens unit) it was
+        # computed at (render saves half its time)
+        self._ideal: tuple[tuple[object, ...], np.ndarray] | None = None
         self._bit_depth = int(bit_depth)
         self.seed = int(seed)
         self.noise_sigma = float(noise_sigma)
@@ -337,6 +348,8 @@ class SimulatedCamera:
                     kw["bit_depth"] = bd
                 elif key == "focus":
                     world.focus = _FOCUS.check("sim camera", "focus", value)
+                elif key == "zoom":
+                    world.zoom = _ZOOM.check("sim camera", "zoom", value)
                 elif key == "harp_offset_deg":
                     world.harp_offset_deg = value
                 elif key != "driver":
@@ -405,6 +418,31 @@ class SimulatedCamera:
     def gain_range(self) -> Range:
         """:data:`GAIN_RANGE_DB`, in dB."""
         return _GAIN
+
+    def zoom_range(self) -> Range | None:
+        """The simulated zoom lens's focal lengths (mm), or None for the fixed demo lens (no ``zoom`` configured)."""
+        return _ZOOM if self.world.zoom is not None else None
+
+    def set_zoom(self, position: float) -> float:
+        """Drive the zoom lens to focal length ``position`` (mm); :class:`OutOfRange` outside
+        :data:`drivers.sim.lens.ZOOM_FOCAL_RANGE_MM`, DriverError for the fixed lens."""
+        self._require_open("set zoom")
+        if self.world.zoom is None:
+            raise DriverError(f"{self.name}: the fixed demo lens has no zoom (configure zoom: MM for the zoom lens)")
+        self.world.zoom = _ZOOM.check(self.name, "zoom", position)
+        return self.world.zoom
+
+    def get_zoom(self) -> float | None:
+        return self.world.zoom
+
+    def lens_at(self, focus: float) -> Any:
+        """The lens the harp is rendered through at ``focus``: the zoom lens at the world's focal length
+        (:func:`drivers.sim.lens.zoom_lens`), or the fixed demo lens (:func:`drivers.sim.lens.lens_for_focus`),
+        each the unit ``world.lens_unit`` (its manufacturing deviations; None: the nominal lens)."""
+        w, h = self._size
+        if self.world.zoom is not None:
+            return zoom_lens(self.world.zoom, focus, w, h, self.world.lens_unit)
+        return lens_for_focus(focus, w, h, self.world.lens_unit)
 
     def blur_at(self, focus: float) -> float:
         """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
@@ -509,11 +547,12 @@ class SimulatedCamera:
         gain_lin = 10.0 ** (self._gain / 20.0)
         if self.realism is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
-            return self._render_realistic(stage, focus, noise_seed(self.seed, focus, angle_deg, index), gain_lin)
+            seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom)
+            return self._render_realistic(stage, focus, seed, gain_lin)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
-        lens = lens_for_focus(focus, w, h)
+        lens = self.lens_at(focus)
         return render_harp(
             w,
             h,
@@ -523,7 +562,7 @@ class SimulatedCamera:
             noise_sigma=self.noise_sigma,
             shot_noise=self.shot_noise,
             bit_depth=self._bit_depth,
-            seed=noise_seed(self.seed, focus, angle_deg, index),
+            seed=noise_seed(self.seed, focus, angle_deg, index, self.world.zoom),
             exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
@@ -551,10 +590,10 @@ class SimulatedCamera:
         effects = dataclasses.replace(eff, sensor=sensor, development=development, blur=blur)
         m = self.realism.mount
         mount = HarpMount(m.centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
-        lens = lens_for_focus(focus, w, h)
+        lens = self.lens_at(focus)
         ideal = None
         if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
-            key = float(focus) + 10.0  # a cache entry apart from the clean renderer's
+            key = ("raw", float(focus), self.world.zoom, self.world.lens_unit)  # apart from the clean renderer's
             if self._ideal is None or self._ideal[0] != key:
                 self._ideal = (key, raw_ideal_grid(lens, w, h, effects))
             ideal = self._ideal[1]
@@ -566,8 +605,9 @@ class SimulatedCamera:
         w, h = self._size
         if w * h > IDEAL_CACHE_PIXELS:
             return None
-        if self._ideal is None or self._ideal[0] != focus:
-            self._ideal = (focus, ideal_grid(lens, w, h))
+        key = ("clean", float(focus), self.world.zoom, self.world.lens_unit)
+        if self._ideal is None or self._ideal[0] != key:
+            self._ideal = (key, ideal_grid(lens, w, h))
         return self._ideal[1]
 
     def capture(self, timeout: float = 5.0) -> Frame:

@@ -16,6 +16,10 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pipeline.lens_population import UnitSpread
 
 
 class SimWorld:
@@ -29,15 +33,29 @@ class SimWorld:
         Focus position; written by the simulated camera's ``lock_focus``.
     harp_offset_deg : float
         Angle of the strings in the image when the stage is at 0°.
+    lens_unit : UnitSpread or None
+        Which unit of the demo lens is on the camera (:func:`drivers.sim.lens.lens_unit`: its
+        manufacturing deviations); None is the nominal lens.
+    zoom : float or None
+        Focal length (mm) of the simulated zoom lens (:func:`drivers.sim.lens.zoom_lens`), written by
+        the camera's ``set_zoom``; None: the camera has the fixed demo lens.
 
     Thread-safe: the stage function is called under the emulator's own lock,
     ``focus`` and ``harp_offset_deg`` are plain floats.
     """
 
-    def __init__(self, stage_deg: float = 0.0, focus: float = 0.0, harp_offset_deg: float = 0.0):
+    def __init__(
+        self,
+        stage_deg: float = 0.0,
+        focus: float = 0.0,
+        harp_offset_deg: float = 0.0,
+        lens_unit: UnitSpread | None = None,
+    ):
         self._stage_deg = float(stage_deg)
         self.focus = float(focus)
         self.harp_offset_deg = float(harp_offset_deg)
+        self.lens_unit = lens_unit
+        self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None
         self._lock = threading.Lock()

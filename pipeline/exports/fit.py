@@ -46,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from pipeline.corrected_frame import CorrectedFrame
 from pipeline.evaluate import corrected_points
 from pipeline.exports.pole_free import (
     EXTRAPOLATION_RADIUS,
@@ -241,27 +242,43 @@ def conversion_error_in_frame(
     height: int,
     n_long: int = ERROR_GRID_LONG,
     edges: Sequence[Array] | None = None,
+    frame: CorrectedFrame | None = None,
+    whole_photo: bool = False,
 ) -> ConversionError:
-    """Conversion error of an export in *our own* ideal frame, over the corrected image only.
+    """Conversion error of an export in *our own* corrected image, over the corrected image only.
 
     For per-pixel maps (``maps``, ``stmap``): they hold our correction itself,
-    for the pixels of the corrected image ``[0, W-1] x [0, H-1]``; a distorted
-    point whose ideal image falls outside is not in the corrected image and is
-    not compared. No homography is applied (the frames are the same), so both
+    for the pixels of the corrected image (``[0, W-1] x [0, H-1]``, or ``frame``'s:
+    :mod:`pipeline.corrected_frame`, whose pixels ``theirs`` returns); a distorted
+    point whose corrected image falls outside is not in the corrected image and is
+    not compared (``whole_photo``: every point of the photo is, for a redistort map that holds
+    the correction at every photo pixel). No homography is applied (the frames are the same), so both
     the "4-corner" and the "modulo homography" figures are the plain distance
-    ``|U_theirs(x) - U_ours(x)|``; the straightness figures are on lines of our
+    ``|U_theirs(x) - A(U_ours(x))|``; the straightness figures are on lines of our
     ideal frame inside the corrected image, and on the fitting shots' edge
     points that appear in it.
     """
+    fr = frame or CorrectedFrame.identity(width, height)
+    ow, oh = fr.width, fr.height
+
+    def ours_q(p: Array) -> Array:
+        return fr.from_ideal(ours.undistort_points(p))
+
+    def keep_of(q: Array) -> npt.NDArray[np.bool_]:
+        if whole_photo:
+            ok: npt.NDArray[np.bool_] = np.all(np.isfinite(q), axis=1)
+            return ok
+        return _inside(q, ow, oh)
+
     g = image_grid(width, height, n_long)
-    uo = ours.undistort_points(g)
-    keep = _inside(uo, width, height)
+    uo = ours_q(g)
+    keep = keep_of(uo)
     ut = theirs.undistort_points(g[keep])
     e = np.linalg.norm(ut - uo[keep], axis=1)
     e = np.where(np.isfinite(e), e, np.inf)
     lines = []
     for ln in straight_lines_through(ours, width, height, normalise=False):
-        ok = _inside(ours.undistort_points(ln), width, height)  # the lines inside the corrected image
+        ok = keep_of(ours_q(ln))  # the lines inside the corrected image
         if ok.sum() >= 2:
             lines.append(ln[ok])
     st = straightness([theirs.undistort_points(ln) for ln in lines])
@@ -270,12 +287,12 @@ def conversion_error_in_frame(
         kept = []
         for p in edges:
             p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
-            ok = _inside(ours.undistort_points(p), width, height)
+            ok = keep_of(ours_q(p))
             if ok.sum() >= 2:
                 kept.append(p[ok])
         if kept:
             sh = straightness([theirs.undistort_points(p) for p in kept])
-            so = straightness([ours.undistort_points(p) for p in kept])
+            so = straightness([ours_q(p) for p in kept])
             shots = (sh.d, sh.d_max, so.d, so.d_max)
     rms, mx = float(np.sqrt(np.mean(e**2))), float(e.max())
     return ConversionError(
@@ -291,6 +308,17 @@ def conversion_error_in_frame(
         model_shots_d_px=shots[2],
         model_shots_d_max_px=shots[3],
     )
+
+
+def ideal_homography(
+    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = ERROR_GRID_LONG
+) -> Array:
+    """The homography ``H`` taking ``theirs``' ideal pixels to ``ours`` (``U_ours ~ H(U_theirs)``), least
+    squares over the image: the one the conversion error modulo homography is measured after."""
+    g = image_grid(width, height, n_long)
+    uo, ut = ours.undistort_points(g), theirs.undistort_points(g)
+    ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
+    return fit_homography(ut[ok], uo[ok])
 
 
 def mod_h_rms(ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 64) -> float:
@@ -668,4 +696,107 @@ def fit_lensfun(
     candidates.append(maker(kind)(th))
     out = min(candidates, key=lambda m: mod_h_rms(model, m, width, height))
     family = f"the lensfun {kind} model" + (f" of a {lens_type} lens" if lens_type != "rectilinear" else "")
+    return out, conversion_error(model, out, width, height, edges=edges, export=family)
+
+
+def _in_frame_problem(model: DistortionModel, width: int, height: int, n_long: int) -> tuple[_Problem, Array]:
+    """The fitting data and the conditioned identity homography: the export's ideal frame is ours."""
+    prob = _Problem.make(model, width, height, n_long)
+    return prob, np.array([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+
+
+def frame_error(
+    ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = ERROR_GRID_LONG
+) -> tuple[float, float]:
+    """RMS and max (px) of ``|U_theirs(x) - U_ours(x)|`` over the image, no homography: how far an
+    export with a measured camera matrix is from the correction in the camera's own ideal frame."""
+    g = image_grid(width, height, n_long)
+    e = np.linalg.norm(theirs.undistort_points(g) - ours.undistort_points(g), axis=1)
+    e = np.where(np.isfinite(e), e, np.inf)
+    return float(np.sqrt(np.mean(e**2))), float(e.max())
+
+
+def fit_opencv_camera(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    camera: tuple[float, float, float, float],
+    *,
+    n_coeffs: int = 12,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
+) -> tuple[OpenCVModel, ConversionError]:
+    r"""Closest OpenCV pin-hole distortion to ``model`` *with a measured camera matrix*.
+
+    ``camera = (fx, fy, cx, cy)`` was measured in the ideal frame of ``model``
+    (:mod:`pipeline.intrinsics`): the export must then reproduce the correction in that frame,
+    so the homography of :func:`fit_opencv` is held at the identity and the camera matrix fixed;
+    only the coefficients are fitted (in stages, 5 -> 8 -> 12 -> 14, pole-free as there):
+
+    .. math::
+        \min_{\theta} \sum_{x_d \in G} \| D_{\theta, K}(U(x_d)) - x_d \|^2 .
+
+    The conversion error is reported as by :func:`fit_opencv` (the figures ``harp evaluate``
+    sees); :func:`frame_error` gives it in the camera's frame.
+    """
+    if n_coeffs not in OPENCV_STAGES:
+        raise ValueError(f"OpenCV export supports {', '.join(map(str, OPENCV_STAGES))} coefficients, got {n_coeffs}")
+    fx, fy, cx, cy = (float(v) for v in camera)
+    prob, h_id = _in_frame_problem(model, width, height, n_long)
+    scale = focal_rescaling(fx / placeholder_focal(width, height))
+
+    def maker(n: int) -> Callable[[Array], OpenCVModel]:
+        def make(theta: Array) -> OpenCVModel:
+            return OpenCVModel(fx=fx, fy=fy, cx=cx, cy=cy, dist=tuple(theta[:n] * scale[:n]))
+
+        return make
+
+    pen = _pole_free_penalty
+    theta = np.zeros(0)
+    best: tuple[float, OpenCVModel] | None = None
+    faults = []
+    for n in (m for m in OPENCV_STAGES if m <= n_coeffs):
+        theta = np.concatenate([theta, np.zeros(n - len(theta))])
+        theta, _, _ = _least_squares(prob, maker(n), theta, h_id, fix_h=True, penalty=pen)
+        cand = maker(n_coeffs)(np.concatenate([theta, np.zeros(n_coeffs - len(theta))]))
+        fault = radial_fault(cand.dist, EXTRAPOLATION_RADIUS * corner_radius(prob.u, cx, cy, fx, fy))
+        if fault is not None:
+            faults.append(f"{n} coefficients: {fault}")
+            continue
+        score = frame_error(model, cand, width, height, n_long=64)[0]
+        if best is None or score < best[0]:
+            best = (score, cand)
+    family = f"the OpenCV {n_coeffs}-coefficient pin-hole model with the measured camera matrix"
+    remedy = "export with more coefficients (--coeffs) or as a fisheye"
+    if best is None:
+        raise ValueError(
+            f"{family} cannot represent this lens without a pole or fold within {EXTRAPOLATION_RADIUS:g}x the "
+            f"corner radius ({'; '.join(faults)}); {remedy}"
+        )
+    out = best[1]
+    return out, conversion_error(model, out, width, height, edges=edges, export=family, remedy=remedy)
+
+
+def fit_fisheye_camera(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    camera: tuple[float, float, float, float],
+    *,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
+) -> tuple[OpenCVFisheyeModel, ConversionError]:
+    """:func:`fit_fisheye` with a measured camera matrix: ``k1..k4`` alone fitted, the camera matrix
+    fixed and the homography held at the identity (as :func:`fit_opencv_camera`)."""
+    fx, fy, cx, cy = (float(v) for v in camera)
+    prob, h_id = _in_frame_problem(model, width, height, n_long)
+
+    def make(theta: Array) -> OpenCVFisheyeModel:
+        return OpenCVFisheyeModel(
+            fx=fx, fy=fy, cx=cx, cy=cy, dist=(float(theta[0]), float(theta[1]), float(theta[2]), float(theta[3]))
+        )
+
+    th, _, _ = _least_squares(prob, make, np.zeros(4), h_id, fix_h=True)
+    out = make(th)
+    family = "the OpenCV fisheye model with the measured camera matrix"
     return out, conversion_error(model, out, width, height, edges=edges, export=family)

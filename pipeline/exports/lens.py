@@ -10,7 +10,11 @@ the camera matrix of an OpenCV / ROS / mrcal export is therefore either
   measurement of it;
 - **placeholder**: a scale (the image diagonal in pixels) the distortion
   coefficients are expressed in, chosen for the conversion. It must not be
-  used for 3-D work (angles, triangulation); every export says so.
+  used for 3-D work (angles, triangulation); every export says so;
+- **measured**: fx, fy, cx, cy measured from board views with the harp's
+  distortion held fixed (:mod:`pipeline.intrinsics`, ``harp intrinsics``), with
+  their standard deviations; every export that has a camera matrix then uses it
+  (and the distortion is fitted in its frame), and says so.
 
 References
 ----------
@@ -131,16 +135,23 @@ class CameraMatrixChoice:
     """The focal length of an export's camera matrix and what it means.
 
     ``kind`` is ``"nominal"`` (from the configuration), ``"given"`` (set by the
-    user in pixels) or ``"placeholder"`` (a scale for the conversion).
+    user in pixels), ``"placeholder"`` (a scale for the conversion) or
+    ``"measured"`` (``camera``: fx, fy, cx, cy measured, ``sd`` their standard
+    deviations, ``text`` the statement, :meth:`pipeline.intrinsics.Intrinsics.statement`).
     """
 
     focal_px: float
     kind: str
     source: str
+    camera: tuple[float, float, float, float] | None = None
+    sd: tuple[float, float, float, float] | None = None
+    text: str | None = None
 
     @property
     def statement(self) -> str:
         """One line for the export's comments."""
+        if self.text is not None:
+            return self.text
         if self.kind == "placeholder":
             return (
                 f"camera matrix: PLACEHOLDER scale fx = fy = {self.focal_px:.6g} px ({self.source}), chosen for the "

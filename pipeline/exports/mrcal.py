@@ -22,6 +22,7 @@ import ast
 from typing import Any
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -37,16 +38,33 @@ def mrcal_text(
     camera: CameraMatrixChoice | None = None,
     notes: tuple[str, ...] = (),
     stamp: tuple[str, ...] = (),
+    frame: FrameStatement | None = None,
 ) -> str:
     """The ``.cameramodel`` text of an OpenCV model with 4, 5, 8 or 12 coefficients; ``stamp``:
-    comment lines right after the title."""
+    comment lines right after the title. With ``frame``, the keys ``harp_rectification_matrix``,
+    ``harp_new_camera_matrix`` and ``harp_new_imagersize`` (mrcal ignores keys it does not know): a ray
+    ``v`` that ``mrcal.unproject`` gives is at ``newK R v`` in harp undistort's corrected image."""
     n = len(model.dist)
     if n not in MRCAL_LENSMODELS:
         raise ValueError(f"mrcal has LENSMODEL_OPENCV4/5/8/12, not {n} coefficients")
     intr = [model.fx, model.fy, model.cx, model.cy, *model.dist]
     lines = [f"# mrcal camera model exported by harp station ({MRCAL_LENSMODELS[n]})"]
     lines += [
-        f"# {s}" for s in [*stamp, *(error.lines() if error else []), *([camera.statement] if camera else []), *notes]
+        f"# {s}"
+        for s in [
+            *stamp,
+            *(error.lines() if error else []),
+            *([camera.statement] if camera else []),
+            *(
+                [
+                    f"corrected image = harp undistort's with {frame.choice.describe()}: {frame.frame.describe()}",
+                    "a ray v of mrcal.unproject is at harp_new_camera_matrix @ harp_rectification_matrix @ v in it",
+                ]
+                if frame is not None
+                else []
+            ),
+            *notes,
+        ]
     ]
     lines += [
         "{",
@@ -56,9 +74,19 @@ def mrcal_text(
         "    # extrinsics are rt_fromref",
         "    'extrinsics': [ 0.0, 0.0, 0.0, 0.0, 0.0, 0.0 ],",
         f"    'imagersize': [ {int(width)}, {int(height)} ],",
-        "}",
     ]
+    if frame is not None:
+        lines += [
+            f"    'harp_rectification_matrix': {_rows(frame.rotation)},",
+            f"    'harp_new_camera_matrix': {_rows(frame.new_k)},",
+            f"    'harp_new_imagersize': [ {frame.size[0]}, {frame.size[1]} ],",
+        ]
+    lines += ["}"]
     return "\n".join(lines) + "\n"
+
+
+def _rows(m: Any) -> str:
+    return "[ " + ", ".join("[ " + ", ".join(repr(float(v)) for v in row) + " ]" for row in m) + " ]"
 
 
 def sniff_mrcal(head: bytes) -> bool:

@@ -7,7 +7,9 @@ pin-hole model of ``cv::undistort`` / ``cv::initUndistortRectifyMap``; 1 x 4
 ``k1..k4`` for ``cv::fisheye``), ``distortion_model`` (``pinhole`` or
 ``fisheye``: which OpenCV functions take the coefficients),
 ``camera_matrix_kind`` (``nominal`` / ``given`` / ``placeholder``, see
-:mod:`pipeline.exports.lens`) and the conversion error
+:mod:`pipeline.exports.lens`), ``rectification_matrix``, ``new_camera_matrix``, ``new_image_width`` and
+``new_image_height`` (with ``initUndistortRectifyMap(K, D, R, newK, size)`` they write harp undistort's
+corrected image, :mod:`pipeline.exports.frame`) and the conversion error
 ``conversion_rms_px`` / ``conversion_max_px`` (4-corner normalised),
 ``conversion_rms_mod_h_px`` / ``conversion_max_mod_h_px`` (modulo
 homography), ``conversion_d_px`` / ``conversion_d_max_px`` (straightness
@@ -29,8 +31,10 @@ from __future__ import annotations
 import math
 
 import cv2
+import numpy as np
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
@@ -52,8 +56,13 @@ def opencv_text(
     notes: tuple[str, ...] = (),
     stamp: tuple[str, ...] = (),
     solver: SolverNeed | None = None,
+    frame: FrameStatement | None = None,
 ) -> str:
     """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye).
+
+    With ``frame`` the file holds ``rectification_matrix``, ``new_camera_matrix``, ``new_image_width``
+    and ``new_image_height``: with them OpenCV writes harp undistort's corrected image
+    (:mod:`pipeline.exports.frame`).
 
     ``stamp``: comment lines right after the title, before the figures. With ``solver`` the file
     states what its point solver needs (comments, and the fields ``undistort_points_default_max_px``
@@ -69,6 +78,7 @@ def opencv_text(
         *(error.lines() if error is not None else []),
         *solver_lines,
         *([camera.statement] if camera else []),
+        *(frame.lines(fisheye) if frame is not None else []),
         *notes,
     ]:
         fs.writeComment(line)
@@ -77,8 +87,15 @@ def opencv_text(
     fs.write("camera_matrix", model.camera_matrix)
     fs.write("distortion_coefficients", model.dist_coeffs.reshape(1, -1))
     fs.write("distortion_model", "fisheye" if fisheye else "pinhole")
+    if frame is not None:
+        fs.write("rectification_matrix", frame.rotation)
+        fs.write("new_camera_matrix", frame.new_k)
+        fs.write("new_image_width", int(frame.size[0]))
+        fs.write("new_image_height", int(frame.size[1]))
     if camera is not None:
         fs.write("camera_matrix_kind", camera.kind)
+        if camera.sd is not None:  # a measured camera matrix: 1 sigma of fx, fy, cx, cy
+            fs.write("camera_matrix_sd_fx_fy_cx_cy", np.asarray(camera.sd, np.float64).reshape(1, 4))
     if error is not None:
         fs.write("conversion_rms_px", float(error.rms_px))
         fs.write("conversion_max_px", float(error.max_px))

@@ -29,8 +29,19 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
-from pipeline.exports.fit import ConversionError, conversion_error_in_frame, fit_fisheye, fit_lensfun, fit_opencv
+from pipeline.exports.fit import (
+    ConversionError,
+    conversion_error_in_frame,
+    fit_fisheye,
+    fit_fisheye_camera,
+    fit_lensfun,
+    fit_opencv,
+    fit_opencv_camera,
+    frame_error,
+)
+from pipeline.exports.frame import FrameStatement, frame_statement
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
 from pipeline.exports.lensfun import (
     LensfunEntry,
@@ -43,11 +54,13 @@ from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
+from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.model_file import FORMAT_VERSION, model_file_text, parse_model_text
 from pipeline.models.base import DistortionModel
+from pipeline.models.homography import HomographyModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
-from pipeline.models.remap_model import RemapModel
+from pipeline.models.remap_model import CorrectionMapModel, RemapModel
 
 Array = npt.NDArray[np.float64]
 
@@ -82,6 +95,10 @@ class ExportSource:
         lensfun, the ``notes`` of the maps and the comments of the STMap, a
         ``stamp`` list in json): what a reader of the file must know before
         using it, e.g. that the profile failed QA.
+    intrinsics : Intrinsics, optional
+        The camera matrix measured with this correction held fixed (``harp intrinsics``):
+        the OpenCV, ROS and mrcal exports use it (:func:`measured_camera`), the others say
+        how they hold it.
     """
 
     model: DistortionModel
@@ -94,6 +111,7 @@ class ExportSource:
     provenance: Mapping[str, Any] = field(default_factory=dict)
     wide_angle: bool = False
     stamp: tuple[str, ...] = ()
+    intrinsics: Intrinsics | None = None
 
 
 @dataclass(frozen=True)
@@ -111,6 +129,9 @@ class ExportOptions:
     camera_name: str | None = None
     existing: bytes | None = None
     existing_name: str = "<existing>"
+    frame: FrameChoice = field(default_factory=FrameChoice)
+    """The corrected image (``--size``, ``--scale``, ``--alpha``, ``--overscan``; :mod:`pipeline.corrected_frame`):
+    the maps and STMaps hold it, the pin-hole and fisheye files state the ``R`` and ``newK`` that write it."""
     installed_lensfun: tuple[tuple[str, str], ...] = ()
     """The lensfun databases lensfun loads on this machine, ``(path, XML text)``: a lensfun export
     under the name of a lens in one of them is refused (see :func:`~pipeline.exports.lensfun.installed_lens`)."""
@@ -208,8 +229,74 @@ def _fisheye_hint(fmt: str, src: ExportSource, err: ConversionError, focal: floa
     return []
 
 
+def measured_camera(src: ExportSource) -> tuple[CameraMatrixChoice | None, list[str]]:
+    """The measured camera matrix of ``src`` as an export's choice, or None with why it is not used:
+    ``(choice, warnings)``. Not used (a warning each): measured for another image size, or with
+    another distortion than ``src.model`` (its digest differs: the lens was calibrated again since).
+    A camera matrix with skew is refused (ValueError): the OpenCV, ROS and mrcal files hold none."""
+    i = src.intrinsics
+    if i is None:
+        return None, []
+    if (i.width, i.height) != (int(src.width), int(src.height)):
+        return None, [
+            f"the measured camera matrix is for {i.width}x{i.height} images, not {src.width}x{src.height}: not used"
+        ]
+    if i.distortion and i.distortion != distortion_digest(src.model):
+        return None, [
+            "the measured camera matrix was measured with another distortion than this profile's: not used "
+            "(run harp intrinsics again with this model)"
+        ]
+    if i.skew_fitted and abs(i.skew) > 1e-9 * i.fx:
+        raise ValueError(
+            f"the measured camera matrix has skew {i.skew:.4g} px, which OpenCV, ROS and mrcal files cannot hold; "
+            "measure it again without --skew"
+        )
+    return (
+        CameraMatrixChoice(
+            i.fx,
+            "measured",
+            i.source,
+            camera=(i.fx, i.fy, i.cx, i.cy),
+            sd=(i.sd[0], i.sd[1], i.sd[2], i.sd[3]),
+            text=i.statement(),
+        ),
+        [],
+    )
+
+
 def _camera(src: ExportSource, opt: ExportOptions) -> CameraMatrixChoice:
+    if opt.focal_px is None:
+        measured, _ = measured_camera(src)
+        if measured is not None:
+            return measured
     return camera_matrix_choice(src.lens, src.width, src.height, opt.focal_px)
+
+
+def _frame_of(
+    fmt: str, src: ExportSource, opt: ExportOptions, m: DistortionModel, k: Any, focal: float
+) -> FrameStatement:
+    """The export's ``R`` and ``newK`` for the corrected image the options ask (ValueError naming the format)."""
+    try:
+        return frame_statement(src.model, m, k, src.width, src.height, opt.frame, focal)
+    except ValueError as exc:
+        raise ValueError(f"{fmt}: {exc}") from None
+
+
+def _measured_lines(src: ExportSource, cam: CameraMatrixChoice, converted: DistortionModel) -> list[str]:
+    """With a measured camera matrix, the conversion error in the camera's own frame."""
+    if cam.camera is None:
+        return []
+    rms, mx = frame_error(src.model, converted, src.width, src.height)
+    return [
+        f"distortion fitted with the measured camera matrix fixed, in its frame (no homography): "
+        f"RMS {rms:.4f} px, max {mx:.4f} px from the harp correction"
+    ]
+
+
+def _camera_warnings(src: ExportSource, opt: ExportOptions) -> list[str]:
+    if opt.focal_px is not None and src.intrinsics is not None:
+        return ["--focal-px given: the measured camera matrix is not used"]
+    return measured_camera(src)[1]
 
 
 def _lens_notes(src: ExportSource) -> tuple[str, ...]:
@@ -232,47 +319,79 @@ def _write_pinhole(
 ) -> Export:
     n = _coeffs(fmt, opt, allowed, default)
     cam = _camera(src, opt)
-    m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
-    warnings = conversion_warnings(fmt, src, err)
-    if warnings and hint:
+    if cam.camera is not None:
+        m, err = fit_opencv_camera(src.model, src.width, src.height, cam.camera, n_coeffs=n, edges=src.edges)
+    else:
+        m, err = fit_opencv(src.model, src.width, src.height, n_coeffs=n, focal=cam.focal_px, edges=src.edges)
+    warnings = _camera_warnings(src, opt) + conversion_warnings(fmt, src, err)
+    if warnings and hint and cam.camera is None:
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
-    notes = _lens_notes(src)
+    measured = tuple(_measured_lines(src, cam, m))
+    notes = (*_lens_notes(src), *measured)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
     sn = None
     if fmt == "opencv":
         sn = solver_need(src.model, m, src.width, src.height)
         text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
         )
     elif fmt == "ros":
         sn = solver_need(src.model, m, src.width, src.height)
         name = opt.camera_name or src.lens.ros_camera_name()
         text = ros_text(
-            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m,
+            src.width,
+            src.height,
+            err,
+            camera_name=name,
+            camera=cam,
+            notes=notes,
+            stamp=src.stamp,
+            solver=sn,
+            frame=fr,
         )
     else:  # mrcal's unproject iterates to convergence: no solver statement
-        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp)
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
+        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp, frame=fr)
+    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
 
 
 def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     cam = _camera(src, opt)
     focal = None if cam.kind == "placeholder" else cam.focal_px
-    m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    if cam.camera is not None:
+        m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
+    else:
+        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
     if focal is None:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
-    notes = _lens_notes(src)
+    measured = tuple(_measured_lines(src, cam, m))
+    notes = (*_lens_notes(src), *measured)
     sn = solver_need(src.model, m, src.width, src.height)
     if fmt == "opencv-fisheye":
         text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
         )
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
         text = ros_text(
-            m, src.width, src.height, err, camera_name=name, camera=cam, notes=notes, stamp=src.stamp, solver=sn
+            m,
+            src.width,
+            src.height,
+            err,
+            camera_name=name,
+            camera=cam,
+            notes=notes,
+            stamp=src.stamp,
+            solver=sn,
+            frame=fr,
         )
-    warnings = conversion_warnings(fmt, src, err) + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
-    return Export(fmt, text.encode(), err, m, (cam.statement,), tuple(warnings), sn)
+    warnings = (
+        _camera_warnings(src, opt)
+        + conversion_warnings(fmt, src, err)
+        + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
+    )
+    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
 
 
 CROP_FACTOR_MISMATCH = 0.15
@@ -410,30 +529,81 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
         notes.append(f"lensfun: {crop_how}")
     if lens.focal_mm is None:
         notes.append("lensfun: no nominal focal length configured, filed under 50 mm")
+    measured, why_not = measured_camera(src)
+    if measured is not None:
+        notes.append(
+            "lensfun holds no camera matrix (it files the lens under its nominal focal length): the measured one "
+            f"(fx {measured.camera[0]:.3f}, fy {measured.camera[1]:.3f}, cx {measured.camera[2]:.3f}, "
+            f"cy {measured.camera[3]:.3f} px) is not in this file"
+            if measured.camera is not None
+            else ""
+        )
+    warnings += why_not
     warnings += conversion_warnings("lensfun", src, err)
     return Export("lensfun", text.encode(), err, m, tuple(notes), tuple(warnings))
 
 
+def _corrected(fmt: str, src: ExportSource, opt: ExportOptions) -> Any:
+    """The corrected image the options ask (ValueError naming the format)."""
+    try:
+        return corrected_frame(src.model, src.width, src.height, opt.frame)
+    except ValueError as exc:
+        raise ValueError(f"{fmt}: {exc}") from None
+
+
 def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
-    maps = maps_fmt.export_maps(src.model, src.width, src.height)
-    acc = maps_fmt.map_accuracy(src.model, maps.map_x, maps.map_y)
-    corners = maps_fmt.corners_ideal(src.model, src.width, src.height)
+    frame = _corrected(fmt, src, opt)
+    fr = None if frame.is_identity and (frame.width, frame.height) == (src.width, src.height) else frame
+    maps = maps_fmt.export_maps(src.model, src.width, src.height, frame=fr)
+    exact = src.model if fr is None else _in_frame(src.model, fr)
+    acc = maps_fmt.map_accuracy(exact, maps.map_x, maps.map_y)
+    corners = maps_fmt.corners_ideal(src.model, src.width, src.height, fr)
     converted = RemapModel(
         map_x=maps.map_x,
         map_y=maps.map_y,
         corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
     )
-    err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges)
+    err = conversion_error_in_frame(src.model, converted, src.width, src.height, edges=src.edges, frame=fr)
     note = (
         f"maps = harp undistort's (nodes every {maps.step} px, bicubic between); interpolation error against the "
         f"exact inverse at {acc.n_points} pixels: RMS {acc.rms_px:.2e} px, max {acc.max_px:.2e} px"
     )
-    notes = (*src.stamp, note, *_lens_notes(src))
-    data = (
-        maps_fmt.maps_npz_bytes(maps, acc, notes, corners)
-        if fmt == "maps"
-        else maps_fmt.stmap_exr_bytes(maps, notes, corners)
+    measured, why_not = measured_camera(src)
+    k_note = (
+        (f"the corrected image is the measured camera's ideal image: {measured.statement}",)
+        if measured is not None
+        else ()
     )
+    notes = (*src.stamp, note, f"{frame.describe()} ({opt.frame.describe()})", *k_note, *_lens_notes(src))
+    data = (
+        maps_fmt.maps_npz_bytes(maps, acc, notes, corners, fr, (src.width, src.height))
+        if fmt == "maps"
+        else maps_fmt.stmap_exr_bytes(maps, notes, corners, (src.width, src.height))
+    )
+    return Export(fmt, data, err, converted, (note, *k_note), tuple(why_not + conversion_warnings(fmt, src, err)))
+
+
+def _in_frame(model: DistortionModel, frame: Any) -> DistortionModel:
+    """``model`` with its corrected points in ``frame``'s pixels."""
+    a = frame.matrix
+    rows = tuple((float(r[0]), float(r[1]), float(r[2])) for r in a)
+    return HomographyModel(base=model, homography=rows)
+
+
+def _write_stmap_redistort(src: ExportSource, opt: ExportOptions) -> Export:
+    fmt = "stmap-redistort"
+    frame = _corrected(fmt, src, opt)
+    qx, qy = maps_fmt.redistort_map(src.model, src.width, src.height, frame)
+    converted = CorrectionMapModel(map_x=np.nan_to_num(qx, nan=-1.0), map_y=np.nan_to_num(qy, nan=-1.0))
+    err = conversion_error_in_frame(
+        src.model, converted, src.width, src.height, edges=src.edges, frame=frame, whole_photo=True
+    )
+    note = (
+        f"the redistort STMap of the corrected image {frame.width}x{frame.height} ({opt.frame.describe()}): "
+        "apply it to a render of that image to put it back into the lens' distortion"
+    )
+    notes = (*src.stamp, note, frame.describe(), *_lens_notes(src))
+    data = maps_fmt.stmap_redistort_exr_bytes(qx, qy, (frame.width, frame.height), notes)
     return Export(fmt, data, err, converted, (note,), tuple(conversion_warnings(fmt, src, err)))
 
 
@@ -447,6 +617,7 @@ def harp_model_doc(src: ExportSource) -> dict[str, Any]:
         "image": {"width": int(src.width), "height": int(src.height)},
         "merit": dict(src.merit),
         "provenance": dict(src.provenance),
+        **({"intrinsics": src.intrinsics.to_dict()} if src.intrinsics is not None else {}),
     }
 
 
@@ -456,7 +627,12 @@ def _write_json(src: ExportSource, opt: ExportOptions) -> Export:
 
 def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
     text = model_file_text(
-        src.model, width=src.width, height=src.height, merit=dict(src.merit), provenance=dict(src.provenance)
+        src.model,
+        width=src.width,
+        height=src.height,
+        merit=dict(src.merit),
+        provenance=dict(src.provenance),
+        intrinsics=src.intrinsics,
     )
     head = "".join(f"# {line}\n" for line in src.stamp)
     return Export("harp", (head + text).encode())
@@ -567,12 +743,14 @@ def _read_mrcal(data: bytes, req: ReadRequest) -> Correction:
 
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
     m = maps_fmt.read_maps_npz(data, req.name)
-    return Correction(m, (m.width, m.height), "maps")
+    return Correction(m, maps_fmt.maps_source_size(data) or (m.width, m.height), "maps")
 
 
 def _read_stmap(data: bytes, req: ReadRequest) -> Correction:
-    m = maps_fmt.read_stmap_exr(data, req.name)
-    return Correction(m, (m.width, m.height), "stmap")
+    m = maps_fmt.read_stmap_exr(data, req.name, (req.width, req.height))
+    if isinstance(m, CorrectionMapModel):
+        return Correction(m, (m.map_x.shape[1], m.map_x.shape[0]), "stmap-redistort")
+    return Correction(m, None, "stmap")
 
 
 def _sniff_harp(d: bytes) -> bool:
@@ -676,6 +854,16 @@ FORMATS: dict[str, ExportFormat] = {
             lambda s, o: _write_maps("stmap", s, o),
             _read_stmap,
             maps_fmt.sniff_exr,
+        ),
+        ExportFormat(
+            "stmap-redistort",
+            "the redistort STMap of an STMap pair (32-bit float OpenEXR): a render of the corrected image back "
+            "into the lens' distortion",
+            ".exr",
+            True,
+            _write_stmap_redistort,
+            _read_stmap,
+            _never,
         ),
         ExportFormat("json", "harp model file as JSON", ".json", False, _write_json, _read_harp, _never),
         ExportFormat("harp", "harp model file (YAML)", ".yaml", False, _write_harp, _read_harp, _sniff_harp),

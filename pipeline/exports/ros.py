@@ -6,8 +6,9 @@ The file ``camera_info_manager`` loads: ``image_width``, ``image_height``,
 fisheye ``k1..k4`` of ``cv::fisheye``, which ROS 2's image_geometry
 rectifies; Debian's python image_geometry 1.16 rectifies only the first
 two), ``distortion_coefficients``,
-``rectification_matrix`` (identity: monocular) and ``projection_matrix``
-(``[K | 0]``), each matrix as ``{rows, cols, data}``. The conversion error
+``rectification_matrix`` and ``projection_matrix`` (``R`` and ``[newK | 0]`` of
+:mod:`pipeline.exports.frame`: image_geometry then writes harp undistort's corrected image; without a
+frame, identity and ``[K | 0]``), each matrix as ``{rows, cols, data}``. The conversion error
 and what the camera matrix means (nominal or a placeholder scale, see
 :mod:`pipeline.exports.lens`) are stated in leading comments (the format has
 no field for them).
@@ -29,6 +30,7 @@ import numpy.typing as npt
 import yaml
 
 from pipeline.exports.fit import ConversionError
+from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
@@ -72,11 +74,14 @@ def ros_text(
     notes: tuple[str, ...] = (),
     stamp: tuple[str, ...] = (),
     solver: SolverNeed | None = None,
+    frame: FrameStatement | None = None,
 ) -> str:
     """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``).
 
     ``stamp``: comment lines right after the title. With ``solver`` the comments state what
-    rectifyPoint's solver needs on this lens."""
+    rectifyPoint's solver needs on this lens. With ``frame`` the rectification and projection matrices
+    are its ``R`` and ``[newK | 0]`` (image_geometry then writes harp undistort's corrected image); ROS
+    rectifies to the raw image's size, so a frame of another size is refused (ValueError)."""
     if isinstance(model, OpenCVFisheyeModel):
         dm = ROS_FISHEYE_MODEL
     else:
@@ -85,6 +90,14 @@ def ros_text(
             raise ValueError(f"ROS camera_info supports 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {n}")
         dm = ROS_DISTORTION_MODELS[n]
     k = model.camera_matrix
+    rect, proj = np.eye(3), k
+    if frame is not None:
+        if frame.size != (int(width), int(height)):
+            raise ValueError(
+                f"ROS rectifies to the raw image's size ({width}x{height}): a corrected image of "
+                f"{frame.size[0]}x{frame.size[1]} cannot be written in a camera_info; use --scale or --alpha without --size"
+            )
+        rect, proj = frame.rotation, frame.new_k
     doc = {
         "image_width": int(width),
         "image_height": int(height),
@@ -92,8 +105,8 @@ def ros_text(
         "camera_matrix": _mat(k),
         "distortion_model": dm,
         "distortion_coefficients": _mat(model.dist_coeffs.reshape(1, -1)),
-        "rectification_matrix": _mat(np.eye(3)),
-        "projection_matrix": _mat(np.hstack([k, np.zeros((3, 1))])),
+        "rectification_matrix": _mat(rect),
+        "projection_matrix": _mat(np.hstack([proj, np.zeros((3, 1))])),
     }
     head = "# ROS camera_info calibration exported by harp station\n"
     readers = [ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else []
@@ -104,6 +117,7 @@ def ros_text(
         *(error.lines() if error is not None else []),
         *solver_lines,
         *([camera.statement] if camera else []),
+        *(frame.lines(isinstance(model, OpenCVFisheyeModel)) if frame is not None else []),
         *notes,
     ]
     head += "".join(f"# {line}\n" for line in lines)

@@ -151,3 +151,59 @@ class RemapModel(DistortionModel):
             map_y=np.asarray(d["map_y"], dtype=np.float64),
             corners_ideal=None if corners is None else tuple((float(x), float(y)) for x, y in corners),
         )
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionMapModel(DistortionModel):
+    r"""Correction sampled at every pixel of the photo: ``map_x[j, i], map_y[j, i]`` is where the photo's
+    pixel :math:`(i, j)` lies corrected (a redistort STMap read back).
+
+    :meth:`undistort_points` is the bilinear interpolation of the maps, inside the photo
+    :math:`[0, W-1] \times [0, H-1]` (to ``REMAP_DOMAIN_MARGIN_PX``; NaN outside, never extrapolated):
+
+    .. math::
+        U(x, y) = \sum_{a, b \in \{0, 1\}} w_a(x)\,w_b(y)\;m[\lfloor y\rfloor + b, \lfloor x\rfloor + a]
+
+    :meth:`distort_points` its inverse by the generic damped Newton iterations of
+    :class:`~pipeline.models.base.DistortionModel`.
+    """
+
+    map_x: Array
+    map_y: Array
+    name: str = field(default="correction_map", init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        mx = np.asarray(self.map_x, dtype=np.float64)
+        my = np.asarray(self.map_y, dtype=np.float64)
+        if mx.ndim != 2 or mx.shape != my.shape or min(mx.shape) < 2:
+            raise ValueError(f"correction maps must be two equal (H, W) arrays, got {mx.shape} and {my.shape}")
+        if not (np.all(np.isfinite(mx)) and np.all(np.isfinite(my))):
+            raise ValueError("correction maps hold non-finite values")
+        mx.setflags(write=False)
+        my.setflags(write=False)
+        object.__setattr__(self, "map_x", mx)
+        object.__setattr__(self, "map_y", my)
+
+    def undistort_points(self, xy: Array) -> Array:
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        w, h = self.map_x.shape[1], self.map_x.shape[0]
+        m = REMAP_DOMAIN_MARGIN_PX
+        inside = (xy[:, 0] >= -m) & (xy[:, 0] <= w - 1 + m) & (xy[:, 1] >= -m) & (xy[:, 1] <= h - 1 + m)
+        x = np.clip(xy[:, 0], 0.0, w - 1.0)
+        y = np.clip(xy[:, 1], 0.0, h - 1.0)
+        i = np.minimum(np.floor(x).astype(np.int64), w - 2)
+        j = np.minimum(np.floor(y).astype(np.int64), h - 2)
+        fx, fy = (x - i)[:, None], (y - j)[:, None]
+        out = np.empty((len(xy), 2))
+        for k, mp in enumerate((self.map_x, self.map_y)):
+            v = (mp[j, i] * (1 - fx[:, 0]) + mp[j, i + 1] * fx[:, 0]) * (1 - fy[:, 0])
+            out[:, k] = v + (mp[j + 1, i] * (1 - fx[:, 0]) + mp[j + 1, i + 1] * fx[:, 0]) * fy[:, 0]
+        out[~inside] = np.nan
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"model": self.name, "map_x": self.map_x.tolist(), "map_y": self.map_y.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CorrectionMapModel:
+        return cls(map_x=np.asarray(d["map_x"], dtype=np.float64), map_y=np.asarray(d["map_y"], dtype=np.float64))

@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "config": "check a station configuration",
     "devices": "cameras and serial ports found on this machine",
     "tca": "lateral chromatic aberration from colour or RAW harp shots",
+    "intrinsics": "the camera matrix from board shots, with the harp's distortion held fixed",
 }
 """Sub-command name -> its one-line help, in the order ``harp --help`` lists them."""
 

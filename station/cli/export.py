@@ -10,7 +10,9 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
     lensfun          lensfun database XML (ptlens); -o an existing database adds the lens to it
     mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
-    stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's
+    stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
+    stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
+                     lens' distortion
     json             the harp model file as JSON
     auto             opencv or opencv-fisheye, whichever converts closer (the fisheye model is
                      tried for a wide-angle calibration or when the pin-hole one is less exact
@@ -30,6 +32,10 @@ optics (nominal focal length, pixel pitch or sensor width, crop factor, mount); 
 override them. With the nominal focal length and the pixel pitch (or sensor width) the
 camera matrix is nominal; otherwise the file says it is a placeholder scale.
 
+Corrected image (``--size``, ``--scale``, ``--alpha``, ``--overscan``; :mod:`pipeline.corrected_frame`): the
+same as ``harp undistort``'s with the same options; the maps and STMaps hold it, the OpenCV, ROS and mrcal
+files state the rectification ``R`` and ``newK`` with which their consumer writes it.
+
 Output: the file goes to ``-o FILE`` (written atomically) or to stdout (text formats); the
 figures go to stdout with ``-o`` (stderr without, so that stdout stays the file), warnings
 to stderr, one line each (``harp export: warning: ...``); ``--json`` (with ``-o``) prints
@@ -46,6 +52,7 @@ from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
+from station.cli.frame_options import add_frame_options, frame_choice
 from station.equipment import optic_problem
 from station.files import atomic_write_bytes
 from station.inputs import InputError
@@ -65,6 +72,7 @@ FORMAT_CHOICES = (
     "mrcal",
     "maps",
     "stmap",
+    "stmap-redistort",
     "json",
 )
 """The ``--format`` values (the registry's formats other than ``harp``, plus ``auto``)."""
@@ -141,6 +149,7 @@ def add_export_options(p) -> None:
     )
     s.add_argument("--no-shots", action="store_true", help="do not measure the fitting shots again")
     p.add_argument("--json", action="store_true", help="with -o: print the figures as one JSON object")
+    add_frame_options(p)
 
 
 def formats_epilog() -> str:
@@ -215,6 +224,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         existing=existing,
         existing_name=existing_name,
         installed_lensfun=installed,
+        frame=frame_choice(args),
     )
 
 

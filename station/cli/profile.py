@@ -30,7 +30,7 @@ import sys
 from typing import Any
 
 from station.cli.commands import COMMANDS
-from station.cli.export import add_export_options, export_profile, formats_epilog, report, write_output
+from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
 from station.cli.store_options import add_store_options, open_store
 from station.config import ConfigError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
@@ -40,13 +40,17 @@ from station.profile_choice import (
     ChoiceError,
     FailedQA,
     at_focus,
+    at_setting,
     current_and_left_out,
     export_refusal,
     failed_line,
     failed_stamp,
     interpolate,
+    interpolate_zoom,
     is_failed,
+    is_zoom,
     lens_row,
+    setting_text,
     verdict_text,
 )
 from station.store import StoreError
@@ -54,6 +58,10 @@ from station.tables import console as text_console
 from station.tables import is_terminal, print_table
 
 ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
+FOCAL_HELP = (
+    "a zoom lens's focal length setting (mm), with --focus (interpolated in both if needed); lensfun "
+    "export of a zoom lens without it: one calibration per calibrated focal length"
+)
 
 
 def register(subparsers) -> None:
@@ -70,6 +78,7 @@ def register(subparsers) -> None:
     show = sub.add_parser("show", help="the current profiles of one lens (or one profile by --id)", parents=[store_opt])
     show.add_argument("lens", metavar="LENS", nargs="?", default=None)
     show.add_argument("--focus", type=float, default=None, help="one focus setting in detail (interpolated if needed)")
+    show.add_argument("--focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
     show.add_argument("--id", type=int, default=None, metavar="N", help="the stored profile #N, whatever its verdict")
     show.add_argument("--allow-failed", action="store_true", help=ALLOW_FAILED_HELP)
     show.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -86,6 +95,7 @@ def register(subparsers) -> None:
     )
     ex.add_argument("lens", metavar="LENS", nargs="?", default=None)
     ex.add_argument("--focus", type=float, default=None, help="the focus setting (with LENS)")
+    ex.add_argument("--focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
     ex.add_argument("--id", type=int, default=None, metavar="N", help="export the stored profile #N")
     ex.add_argument("--allow-failed", action="store_true", help="export a profile that failed QA (said on stderr)")
     add_export_options(ex)
@@ -147,6 +157,7 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
             "lens": ident(p.lens),
             "camera": ident(p.camera),
             "focus": p.focus,
+            "focal": p.focal,
             "width": p.width,
             "height": p.height,
             "model": p.model.name,
@@ -291,9 +302,12 @@ def _show(args, store) -> int:
         raise _Fail("name a LENS (serial, maker/model/serial, #lens-id) or a profile with --id N")
     lens = store.find_lens(args.lens)
     used, left_out = current_and_left_out(store, lens[0], args.allow_failed)
+    zoom = _zoom_setting(args, lens, used + left_out)
     if args.focus is None:
         _say_used(lens, used, left_out)
         return _print_profiles(args, lens, used, left_out)
+    if zoom:
+        return _show_zoom(args, lens, used, left_out)
     p = at_focus(used, args.focus)
     if p is not None:
         _say_used(lens, [p], [])
@@ -334,6 +348,68 @@ def _show(args, store) -> int:
     return EXIT_OK
 
 
+def _zoom_setting(args, lens, profiles) -> bool:
+    """Whether the lens is a zoom lens (its profiles record focal lengths); a setting asked for it
+    needs both --focal and --focus, and --focal is refused for a fixed lens."""
+    zoom = is_zoom(profiles)
+    if getattr(args, "focal", None) is not None and not zoom:
+        raise _Fail(f"{lens_label_of(lens)} has no focal length settings (not a zoom lens): give no --focal")
+    if zoom and args.focus is not None and args.focal is None:
+        raise _Fail(f"{lens_label_of(lens)} is a zoom lens: give --focal MM with --focus")
+    if zoom and args.focal is not None and args.focus is None:
+        raise _Fail("--focal needs --focus D (the setting is a focal length and a focus)")
+    return zoom
+
+
+def lens_label_of(lens) -> str:
+    return f"lens {lens[1]} {lens[2]} serial {lens[3]}"
+
+
+def _show_zoom(args, lens, used, left_out) -> int:
+    p = at_setting(used, args.focal, args.focus)
+    if p is not None:
+        _say_used(lens, [p], [])
+        return _print_profiles(args, lens, [p], [], detail=True)
+    failed_here = at_setting(left_out, args.focal, args.focus)
+    if failed_here is not None:
+        raise _Refused(
+            f"{failed_line(lens, failed_here)}: no current profile at this setting (--allow-failed shows it)"
+        )
+    interp = interpolate_zoom(lens, used, args.focal, args.focus, left_out)
+    _say_used(lens, used, left_out)
+    if args.json:
+        out = {
+            "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
+            "focal": args.focal,
+            "focus": args.focus,
+            "interpolated": {
+                "method": interp.method,
+                "note": interp.note,
+                "from_profiles": [q.id for q in interp.from_profiles],
+                "width": interp.width,
+                "height": interp.height,
+                "leave_one_out": interp.loo_rows(),
+                "model": interp.model.to_dict(),
+            },
+            "left_out": [_profile_json(q, False) for q in left_out],
+        }
+        print(json.dumps(plain(out), indent=1))
+        return EXIT_OK
+    console = text_console()
+    console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {interp.width}x{interp.height}")
+    console.print(interp.note)
+    for e in interp.leave_one_out:
+        console.print(
+            f"interpolation error along the {e.axis}, leaving {setting_text(e.focal, e.focus)} out: "
+            f"RMS {e.rms_px:.4f} px, max {e.max_px:.4f} px (modulo homography)"
+        )
+    axes = {e.axis for e in interp.leave_one_out}
+    for axis, need in (("focal", "3 focal lengths"), ("focus", "3 focus settings at a focal length")):
+        if axis not in axes:
+            console.print(f"interpolation error along the {axis}: not measurable (needs {need})")
+    return EXIT_OK
+
+
 def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> int:
     if args.json:
         out = {
@@ -346,11 +422,14 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         print(json.dumps(out, indent=1))
         return EXIT_OK
     who = f"lens #{lens[0]}: " if lens[0] is not None else "lens "
+    zoom = is_zoom(profiles)
+    columns = (("focal (mm)",) if zoom else ()) + PROFILE_COLUMNS
     print_table(
-        PROFILE_COLUMNS,
-        [_profile_row(p) for p in profiles],
-        title=f"{who}{lens[1]} {lens[2]} serial {lens[3]}" + ("" if detail else " (current profile per focus)"),
-        right=PROFILE_COLUMNS[:2] + PROFILE_COLUMNS[5:11],
+        columns,
+        [((f"{p.focal:g}" if p.focal is not None else "",) if zoom else ()) + _profile_row(p) for p in profiles],
+        title=f"{who}{lens[1]} {lens[2]} serial {lens[3]}"
+        + ("" if detail else " (current profile per focal and focus)" if zoom else " (current profile per focus)"),
+        right=(("focal (mm)",) if zoom else ()) + PROFILE_COLUMNS[:2] + PROFILE_COLUMNS[5:11],
     )
     if detail:  # the profile itself, on stdout with its table (warnings alone go to stderr)
         p = profiles[0]
@@ -383,8 +462,8 @@ def _export(args, store) -> int:
 
     edges = stamp = None
     if args.id is not None:
-        if args.lens is not None or args.focus is not None:
-            raise _Fail("--id N names one profile: give no LENS or --focus with it")
+        if args.lens is not None or args.focus is not None or args.focal is not None:
+            raise _Fail("--id N names one profile: give no LENS, --focus or --focal with it")
         profile = store.profile(args.id)
         if profile is None:
             raise _Fail(f"no profile #{args.id} in {store.path}")
@@ -395,6 +474,10 @@ def _export(args, store) -> int:
             raise _Fail("name LENS and --focus F, or a stored profile with --id N")
         lens = store.find_lens(args.lens)
         newest = store.latest_by_focus(lens[0], allow_failed=True)
+        if is_zoom(newest) and args.focal is None and args.format == "lensfun":
+            return _export_lensfun_zoom(args, store, lens)
+        if _zoom_setting(args, lens, newest):
+            return _export_zoom(args, store, lens, newest)
         hit = at_focus(newest, args.focus)
         if hit is not None:
             _allowed(args, lens, hit)
@@ -415,4 +498,73 @@ def _export(args, store) -> int:
     except InputError as exc:
         raise _Fail(str(exc)) from None
     report(args, ex, fig, "harp profile")
+    return EXIT_OK
+
+
+def _zoom_profile(args, store, lens, newest, focal: float):
+    """The profile of a zoom lens at (``focal``, ``args.focus``): a current one, or interpolated;
+    ``(profile, what, edges, stamp)``."""
+    from station.export_source import FittingEdges  # defers scipy
+
+    hit = at_setting(newest, focal, args.focus)
+    if hit is not None:
+        _allowed(args, lens, hit)
+        return hit, f"profile #{hit.id}", None, None
+    used, left_out = current_and_left_out(store, lens[0], args.allow_failed)
+    interp = interpolate_zoom(lens, used, focal, args.focus, left_out)
+    _say_used(lens, used, left_out)
+    stamp = tuple(line for q in interp.from_profiles for line in failed_stamp(q))
+    edges = FittingEdges(None, f"none: the correction is interpolated ({interp.note})")
+    return interp.profile(), f"interpolated {setting_text(focal, args.focus)}", edges, stamp
+
+
+def _export_zoom(args, store, lens, newest) -> int:
+    profile, what, edges, stamp = _zoom_profile(args, store, lens, newest, args.focal)
+    try:
+        ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
+        write_output(args, ex)
+    except InputError as exc:
+        raise _Fail(str(exc)) from None
+    report(args, ex, fig, "harp profile")
+    return EXIT_OK
+
+
+def _export_lensfun_zoom(args, store, lens) -> int:
+    """lensfun of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
+    (lensfun has no focus axis for distortion: a focus range cannot be written), in one database file;
+    each focal's profile at that focus is a current one or interpolated along focus. Written whole or
+    not at all: into a copy of ``-o`` (when it is a database), moved over it once every focal is in."""
+    import argparse
+    import os
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    newest = store.latest_by_focus(lens[0], allow_failed=True)
+    focals = sorted({p.focal for p in newest if p.focal is not None})
+    if not args.output:
+        raise _Fail("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
+    out = Path(args.output)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".xml", dir=out.parent if str(out.parent) else ".")
+    os.close(fd)
+    os.unlink(tmp)
+    try:
+        if out.is_file():
+            shutil.copyfile(out, tmp)
+        part = argparse.Namespace(**{**vars(args), "output": tmp})
+        done = []
+        for z in focals:
+            profile, what, edges, stamp = _zoom_profile(part, store, lens, newest, z)
+            try:
+                ex, fig = export_profile(part, profile, what=what, edges=edges, stamp=stamp)
+                write_output(part, ex)
+            except (InputError, ExportError) as exc:
+                raise _Fail(f"focal {z:g} mm: {str(exc).replace(tmp, str(out))}; {out} not written") from None
+            report(args, ex, fig, "harp profile")
+            done.append(f"{z:g} mm")
+        os.replace(tmp, out)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    print(f"lensfun: {len(done)} calibrations (focal {', '.join(done)}) at focus {args.focus:g} in {out}")
     return EXIT_OK

@@ -7,6 +7,9 @@ finishes, both judge it (QA), write its report into ``DIR/report/`` and its resu
 ``DIR/results.json``; ``--no-report`` skips the report. ``plan`` prints the capture plan
 with an estimated duration, touching no device; ``list`` lists the sessions of a
 directory with their state (complete / failed / interrupted / running) and verdict.
+A configuration with ``zoom.settings`` (a zoom lens's focal lengths) runs one such session per
+focal length in one zoom session directory (:mod:`station.zoom_session`); ``resume`` of that
+directory goes on with the part that stopped.
 Exit codes of ``run`` / ``resume``: 0 finished and PASS, 1 finished and FAIL, 2 bad input
 or the session stopped (the frames are kept; the message says how to go on), 130
 interrupted. ``--json`` prints the session's results (``results.json``) on stdout and the
@@ -25,6 +28,7 @@ from station import __version__
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, store_location
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
+from station.files import describe_os_error
 from station.qa.results import finished_results, read_results, state_exit_code
 from station.session.integrity import check_session, needs_capture, repair_files, repair_session, summary
 from station.session.states import sessions_in
@@ -131,6 +135,8 @@ def _run(args) -> int:
     except ConfigError as exc:
         return _error(str(exc))
     root = args.out if args.out is not None else config.sessions_dir
+    if config.zoom_settings:
+        return _run_zoom(config, root, args)
 
     def new_session():  # created only once the devices are open
         s = SessionDir.create(root, config, name=args.name, software_version=__version__)
@@ -143,7 +149,10 @@ def _run(args) -> int:
 def _resume(args) -> int:
     from station.config import ConfigError  # defers numpy, yaml
     from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+    from station.zoom_session import is_zoom_session  # defers numpy, yaml
 
+    if is_zoom_session(args.session_dir):
+        return _zoom_parts(Path(args.session_dir), args)
     try:
         session = SessionDir.open(args.session_dir)
     except (ConfigError, SessionError) as exc:
@@ -158,7 +167,87 @@ def _resume(args) -> int:
     return _execute(session.config, lambda: session, args, opened=session, report=not args.no_report)
 
 
-def _already_finished(session, args) -> int:
+def _run_zoom(config, root, args) -> int:
+    """A zoom session: one session per focal length (:mod:`station.zoom_session`)."""
+    from station import zoom_session  # defers numpy, yaml
+
+    try:
+        path = zoom_session.create(root, config, name=args.name)
+    except OSError as exc:
+        return _error(f"cannot create the zoom session: {describe_os_error(exc)}")
+    print(f"zoom session directory: {path}", file=sys.stderr)
+    return _zoom_parts(path, args)
+
+
+def _zoom_parts(path: Path, args) -> int:
+    """Run or resume every part of the zoom session at ``path``, then its results and summary."""
+    import argparse
+
+    from station import zoom_session  # defers numpy, yaml
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+
+    part_args = argparse.Namespace(**{**vars(args), "json": False})  # one JSON object: the zoom session's
+
+    def run_part(part, config, session_path) -> int:
+        if not session_path.exists():
+
+            def new_session():
+                s = SessionDir.create(path, config, name=part.name, software_version=__version__)
+                print(f"session directory: {s.path}", file=sys.stderr)
+                return s
+
+            return _execute_session(config, new_session, part_args, report=not args.no_report)
+        try:
+            session = SessionDir.open(session_path)
+        except (ConfigError, SessionError) as exc:
+            return _error(str(exc))
+        if session.finished:
+            with session:
+                return _already_finished(session, part_args, shown=session_path)
+        return _execute_session(session.config, lambda: session, part_args, opened=session, report=not args.no_report)
+
+    note = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr))
+    try:
+        meta, _parts = zoom_session.read_parts(path)
+        code, done = zoom_session.run_parts(path, run_part, note)
+    except (ValueError, ConfigError) as exc:
+        return _error(str(exc))
+    if code not in (0, 1):
+        return _error(f"zoom session stopped at {done[-1]['name']}; continue with: harp session resume {path}")
+    first = zoom_session.part_config(path, meta, zoom_session.read_parts(path)[1][0])
+    try:
+        with _open_store(first, args.store) as store:
+            results = zoom_session.zoom_results(path, done, store, tuple(meta["lens"]))
+    except (StoreError, OSError) as exc:  # one line: the parts are stored and reported already
+        return _error(f"zoom session results: {exc}")
+    _zoom_summary(results, args)
+    return code
+
+
+def _zoom_summary(results, args) -> None:
+    if args.json:
+        print(json.dumps(results, indent=1))
+        return
+    rows = [
+        (f"{s['focal']:g}", f"{s['focus']:g}", f"#{s['profile_id']}", "" if s["holdout_d_px"] is None
+         else f"{s['holdout_d_px']:.4f}", s["verdict"] or "")
+        for s in results["settings"]
+    ]  # fmt: skip
+    cols = ("focal (mm)", "focus", "profile", "holdout d (px)", "verdict")
+    print_table(cols, rows, title="zoom lens: current profile per focal length and focus", right=cols[:4])
+    for e in results["leave_one_out"]:
+        print(
+            f"interpolation error along the {e['axis']}, leaving focal {e['focal']:g} mm, focus {e['focus']:g} out: "
+            f"RMS {e['rms_px']:.4f} px, max {e['max_px']:.4f} px (modulo homography)"
+        )
+    axes = {e["axis"] for e in results["leave_one_out"]}
+    for axis, need in (("focal", "3 focal lengths"), ("focus", "3 focus settings")):
+        if axis not in axes:
+            print(f"interpolation error along the {axis}: not measurable (needs {need})")
+
+
+def _already_finished(session, args, shown=None) -> int:
     """A finished session resumed: nothing to capture; its exit code is its verdict's."""
     try:
         results = finished_results(session)
@@ -166,7 +255,8 @@ def _already_finished(session, args) -> int:
         return _error(f"{session.path}: finished, but its results cannot be gathered: {exc}")
     code = state_exit_code("complete", results.get("verdict"))
     verdict = results.get("verdict") or "none"
-    print(f"harp session: {args.session_dir}: already finished (QA verdict {verdict}), nothing to do", file=sys.stderr)
+    where = shown if shown is not None else args.session_dir
+    print(f"harp session: {where}: already finished (QA verdict {verdict}), nothing to do", file=sys.stderr)
     if args.json:
         print(json.dumps(results, indent=1))
     return EXIT_OK if code is None else code

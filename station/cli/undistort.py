@@ -8,6 +8,11 @@ model's image size must match the images'. An image that cannot be read or has
 another size is named on stderr (one line) and skipped; the others are still
 corrected. Exit 0 on success, 2 on bad input.
 
+``--size WxH``, ``--scale S``, ``--alpha A``, ``--overscan`` choose the corrected image
+(:mod:`pipeline.corrected_frame`; default: the photo's size and scale, its centre kept): the same
+as the exports' (maps, STMaps, and the ``R`` / ``newK`` of the OpenCV, ROS and mrcal files) with the
+same options.
+
 ``--tca FILE`` (a ``harp tca --out`` file) corrects lateral chromatic aberration too:
 green through the model, red and blue each through its own correction, the model after
 the channel's TCA field (:class:`pipeline.models.tca_model.ChannelModel`,
@@ -24,10 +29,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pipeline.corrected_frame import corrected_frame
 from pipeline.model_file import read_model_file
 from pipeline.models.tca_model import ChannelModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.commands import COMMANDS
+from station.cli.frame_options import add_frame_options, frame_choice
 from station.colour import read_tca_file
 from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
@@ -64,11 +71,12 @@ def register(subparsers) -> None:
         metavar="FILE",
         help="also correct lateral chromatic aberration: red and blue through their own fields (a harp tca --out file)",
     )
+    add_frame_options(p)
     p.set_defaults(func=run)
 
 
 def undistort_image(img: np.ndarray, maps, interpolation=cv2.INTER_LANCZOS4) -> np.ndarray:
-    """Corrected image (same shape and dtype), pixels from outside the input set to 0."""
+    """Corrected image (the maps' size, the input's dtype and channels), pixels from outside the input set to 0."""
     return cv2.remap(img, maps.map_x, maps.map_y, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
@@ -85,6 +93,14 @@ def _run(args) -> int:
         mf = read_model_file(args.model)
     except ValueError as exc:
         raise UndistortError(str(exc)) from None
+    choice = frame_choice(args)
+    try:
+        frame = corrected_frame(mf.model, mf.width, mf.height, choice)
+    except ValueError as exc:
+        raise UndistortError(f"{args.model}: {exc}") from None
+    if not choice.is_default:
+        print(f"{frame.describe()} ({choice.describe()})")
+    args.frame = frame
     channels = None
     if getattr(args, "tca", None):
         fields = read_tca_file(args.tca, mf.width, mf.height)
@@ -123,14 +139,14 @@ def _run(args) -> int:
     return status
 
 
-def _maps(cache: dict, key: tuple, model, w: int, h: int, what: str):
+def _maps(cache: dict, key: tuple, model, w: int, h: int, what: str, frame=None):
     """The undistortion maps of ``model`` for ``w x h`` images, computed once (``cache[key]``)."""
     if key not in cache:
         t0 = time.perf_counter()
-        cache[key] = fast_undistortion_maps(model, w, h, step=DEFAULT_STEP_PX)
+        cache[key] = fast_undistortion_maps(model, w, h, step=DEFAULT_STEP_PX, frame=frame)
         m = cache[key]
         print(
-            f"maps for {w}x{h}{what}: {time.perf_counter() - t0:.2f} s "
+            f"maps for {w}x{h}{what}{'' if frame is None else f' onto {frame.width}x{frame.height}'}: {time.perf_counter() - t0:.2f} s "
             f"(interpolation error <= {m.interp_error_px:.1e} px)"
         )
     return cache[key]
@@ -144,18 +160,19 @@ def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict, channels: dict |
         raise UndistortError(f"{p}: image is {w}x{h} but the model {args.model} is for {mf.width}x{mf.height} images")
     kernel = INTERPOLATIONS[args.interpolation]
     if channels is None:
-        out = undistort_image(img, _maps(cache, (w, h), mf.model, w, h, ""), kernel)
+        out = undistort_image(img, _maps(cache, (w, h), mf.model, w, h, "", args.frame), kernel)
     else:
         if img.ndim != 3 or img.shape[2] < 3:
             raise UndistortError(f"{p}: a grey image has no colour channels to correct for TCA; drop --tca for it")
-        out = img.copy()
+        fw, fh = args.frame.width, args.frame.height
+        out = np.zeros((fh, fw, img.shape[2]), img.dtype)
         for index, ch in ((2, "R"), (1, "G"), (0, "B")):  # OpenCV's BGR order
             model = mf.model if ch == "G" else channels[ch]
-            maps = _maps(cache, (w, h, ch), model, w, h, f", {ch}")
+            maps = _maps(cache, (w, h, ch), model, w, h, f", {ch}", args.frame)
             out[..., index] = undistort_image(np.ascontiguousarray(img[..., index]), maps, kernel)
         if img.shape[2] > 3:  # an alpha channel follows the green (reference) geometry
-            maps = _maps(cache, (w, h, "G"), mf.model, w, h, ", G")
-            out[..., 3:] = undistort_image(np.ascontiguousarray(img[..., 3:]), maps, kernel).reshape(h, w, -1)
+            maps = _maps(cache, (w, h, "G"), mf.model, w, h, ", G", args.frame)
+            out[..., 3:] = undistort_image(np.ascontiguousarray(img[..., 3:]), maps, kernel).reshape(fh, fw, -1)
     target = out_dir / p.name
     params = [cv2.IMWRITE_JPEG_QUALITY, 95] if p.suffix.lower() in (".jpg", ".jpeg") else []
     try:
@@ -165,4 +182,6 @@ def _correct_one(args, mf, p: Path, out_dir: Path, cache: dict, channels: dict |
     if not ok:
         raise UndistortError(f"{target}: OpenCV cannot write {out.dtype} images as {p.suffix}")
     atomic_write_bytes(target, encoded.tobytes())
-    print(f"wrote {target} ({w}x{h}, {out.dtype}, {1 if out.ndim == 2 else out.shape[2]} channel(s))")
+    print(
+        f"wrote {target} ({out.shape[1]}x{out.shape[0]}, {out.dtype}, {1 if out.ndim == 2 else out.shape[2]} channel(s))"
+    )

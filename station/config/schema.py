@@ -166,10 +166,16 @@ class ReportConfig:
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Present only for a simulated station (see :mod:`station.session.simulated`)."""
+    """Present only for a simulated station (see :mod:`station.session.simulated`).
+
+    ``lens_spread``: the manufacturing spread of the simulated lens, in units of the population's
+    (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
+    ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
+    for every serial; its ``range`` metadata is what the file may give."""
 
     harp_offset_deg: float = 0.0
     emulator: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    lens_spread: float = field(default=0.0, metadata={"range": (0.0, 5.0)})
 
 
 def _at(yaml_path: str | None) -> Any:
@@ -194,6 +200,14 @@ class Config:
     simulation: SimulationConfig | None = field(default=None, metadata={"yaml": "simulation"})
     optics: Optics = field(default_factory=Optics, metadata={"yaml": None})  # from lens and camera_body
     store_url: str | None = field(default=None, metadata={"yaml": "store.url"})  # as given: postgresql:// or sqlite:///
+    # a zoom lens (issue 23): the focal lengths (mm, > 0, >= 2 distinct) a zoom session calibrates, each an
+    # ordinary session at every focus setting; () none
+    zoom_settings: tuple[float, ...] = field(default=(), metadata={"yaml": "zoom.settings"})
+    # the camera's zoom feature value at each focal length (device units: the simulator's are mm,
+    # V4L2 zoom_absolute's and GenICam Zoom's the device's); () the focal lengths themselves
+    zoom_positions: tuple[float, ...] = field(default=(), metadata={"yaml": "zoom.positions"})
+    # the focal length (mm, > 0) of this session: set in the part of a zoom session that captures it
+    focal: float | None = field(default=None, metadata={"yaml": "zoom.focal"})
 
     @property
     def store(self) -> StoreLocation:
@@ -213,7 +227,7 @@ def keys_of(cls: type) -> tuple[str, ...]:
 
 
 def config_keys(section: str = "") -> tuple[str, ...]:
-    """The keys of the top level (``""``) or of ``focus`` / ``store``, from :class:`Config`'s field metadata."""
+    """The keys of the top level (``""``) or of ``focus`` / ``store`` / ``zoom``, from :class:`Config`'s field metadata."""
     out: list[str] = []
     for f in dataclasses.fields(Config):
         where = f.metadata.get("yaml")

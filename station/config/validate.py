@@ -8,6 +8,7 @@ line naming the file, the dotted path of the field and what was expected, e.g.::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping
@@ -147,6 +148,13 @@ class _Section:
         if len(set(v)) != len(v):
             raise self.err(key, "a list without repeated values", v)
         return tuple(float(x) for x in v)
+
+
+def _range(cls: type, name: str) -> tuple[float, float]:
+    """The ``range`` metadata of field ``name`` of dataclass ``cls``."""
+    (f,) = [f for f in dataclasses.fields(cls) if f.name == name]
+    lo, hi = f.metadata["range"]
+    return float(lo), float(hi)
 
 
 def _device(sec: _Section, key: str, table: Mapping[str, str], kind: str) -> _Section:
@@ -317,13 +325,20 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     if "simulation" in top.data:
         sm = top.section("simulation", keys_of(SimulationConfig))
         emu = sm.section("emulator", optional=True)
+        lo, hi = _range(SimulationConfig, "lens_spread")
+        spread = sm.number("lens_spread", lo, min=lo)
+        if spread > hi:
+            raise sm.err("lens_spread", f"a number in [{lo:g}, {hi:g}] (times the population's spread)", spread)
         simulation = SimulationConfig(
-            harp_offset_deg=sm.number("harp_offset_deg", 0.0), emulator=MappingProxyType(dict(emu.data))
+            harp_offset_deg=sm.number("harp_offset_deg", 0.0),
+            emulator=MappingProxyType(dict(emu.data)),
+            lens_spread=spread,
         )
     elif turntable.port == EMULATOR_PORT:
         raise tt.err("port", f"a serial port or URL ('{EMULATOR_PORT}' needs a 'simulation' section)", turntable.port)
 
     check_what_the_devices_allow(path, turntable, camera, orientations, focus_settings)
+    zoom_settings, zoom_positions, focal = _zoom_of(top)
 
     return Config(
         path=path,
@@ -341,7 +356,34 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
         sessions_dir=sessions_dir,
         simulation=simulation,
         optics=optics,
+        zoom_settings=zoom_settings,
+        zoom_positions=zoom_positions,
+        focal=focal,
     )
+
+
+def _zoom_of(top: _Section) -> tuple[tuple[float, ...], tuple[float, ...], float | None]:
+    """``zoom``: ``settings`` (focal lengths, mm, > 0, at least 2) with optional ``positions`` (the
+    camera's zoom value at each, as many), or ``focal`` (one focal length: a zoom session's part)."""
+    if top.data.get("zoom") is None:
+        return (), (), None
+    zs = top.section("zoom", config_keys("zoom"))
+    if "settings" in zs.data and "focal" in zs.data:
+        raise zs.err("focal", "zoom.settings (a zoom session) or zoom.focal (one focal length), not both")
+    if "settings" not in zs.data:
+        if "positions" in zs.data:
+            raise zs.err("positions", "zoom.settings beside it (the focal length of each position)")
+        return (), (), zs.number("focal", positive=True)
+    settings = zs.number_list("settings", min_len=2)
+    for i, v in enumerate(settings):
+        if not v > 0:
+            raise ConfigError(zs.file, f"zoom.settings[{i}]", f"expected a focal length > 0 mm, got {shown(v)}")
+    positions: tuple[float, ...] = ()
+    if "positions" in zs.data:
+        positions = zs.number_list("positions", min_len=len(settings))
+        if len(positions) != len(settings):
+            raise zs.err("positions", f"one zoom position per focal length ({len(settings)})", list(positions))
+    return settings, positions, None
 
 
 def _store_of(so: _Section, base: Path) -> tuple[Path | None, str | None]:

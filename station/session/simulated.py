@@ -7,7 +7,9 @@ drivers (``drivers.zaber.ZaberTurntable`` over pyserial on the pty, the
 simulated camera through the Camera protocol), exactly as it would to
 hardware. The turntable emulator writes the stage angle into the shared
 world; the camera renders the harp at that angle, through the simulated lens
-at the locked focus.
+at the locked focus: the unit of the demo lens that the configuration's
+``lens.serial`` names, with the manufacturing spread ``simulation.lens_spread``
+(:func:`drivers.sim.lens.lens_unit`).
 """
 
 from __future__ import annotations
@@ -46,7 +48,11 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     """
     if config.simulation is None:
         raise ValueError(f"{config.path}: simulation: expected a mapping for a simulated station, missing")
-    world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg)
+    from drivers.sim.lens import lens_unit  # defers cv2
+
+    # the lens on the camera: the unit of the demo lens that carries this serial (simulation.lens_spread)
+    unit = lens_unit(config.lens.serial, config.simulation.lens_spread)
+    world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg, lens_unit=unit)
     tt = config.station.turntable
     opts = dict(config.simulation.emulator)
     if tt.steps_per_degree is not None:

@@ -1,16 +1,21 @@
 """Read queries for the factory QA dashboard (issue 12 item 4), over one store connection.
 
-They read only the indexed columns of ``profiles`` / ``lenses`` (no JSON is decoded), so they stay
-fast on a store of many thousand profiles. A **calibration** is one session of one lens (its
+They read the indexed columns of ``profiles`` / ``lenses``, and decode a profile's QA record only
+where a page shows what it holds (the failed checks of a lens's newest failed calibration, the
+limits the newest profiles were judged with), so they stay fast on a store of many thousand
+profiles. A **calibration** is one session of one lens (its
 profiles share ``session_dir``); its verdict is FAIL when any of its profiles failed QA, PASS when
 every one passed, and *unjudged* otherwise. Days are UTC dates (``YYYY-MM-DD``) of the calibration's
 first stored profile. Call them through :class:`station.store.ProfileStore`
 (``store.lens_models()``, ``store.verdict_counts()``, ``store.model_trend()``,
-``store.lens_history()``); :func:`control_limits` is plain arithmetic over their results.
+``store.lens_history()``); :func:`control_limits` is plain arithmetic over their results. A
+:class:`Window` selects the calibrations of a date range and a station.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -47,9 +52,41 @@ class VerdictCount:
 
 
 @dataclass(frozen=True)
+class Window:
+    """Which calibrations a dashboard query counts: those whose day (UTC, ``YYYY-MM-DD``) lies in
+    ``[since, until]`` (each end optional, inclusive) made at ``station`` (None: every station)."""
+
+    since: str | None = None
+    until: str | None = None
+    station: str | None = None
+
+    def holds(self, day: str, station: str) -> bool:
+        return (
+            (self.since is None or day >= self.since)
+            and (self.until is None or day <= self.until)
+            and (self.station is None or station == self.station)
+        )
+
+
+EVERYTHING = Window()
+"""Every calibration."""
+
+
+@dataclass(frozen=True)
+class FailedCheck:
+    """A QA check that failed: the focus setting of its profile, the check's name and its text
+    (``"holdout d 0.0916 px > 0.05 px"``: value, comparison, limit)."""
+
+    focus: float
+    check: str
+    text: str
+
+
+@dataclass(frozen=True)
 class LensSummary:
     """One lens (serial): how many profiles and calibrations the store holds, and its newest
-    calibration's time (UTC), station and verdict (``"PASS"``, ``"FAIL"`` or None: not judged)."""
+    calibration's time (UTC), station and verdict (``"PASS"``, ``"FAIL"`` or None: not judged);
+    ``failures`` the checks that failed in that calibration (by focus), empty unless it failed."""
 
     lens_id: int
     maker: str
@@ -60,6 +97,7 @@ class LensSummary:
     last_at: str
     last_station: str
     last_verdict: str | None
+    failures: tuple[FailedCheck, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -78,6 +116,12 @@ class TrendPoint:
     distortion_rms: float | None
     holdout_d: float | None
     holdout_d_max: float | None
+    spec: tuple[tuple[str, str, float], ...] = ()
+    """The QA limits it was judged with: ``(check, comparison, limit)`` of each judged check."""
+
+    def limit(self, check: str) -> tuple[str, float] | None:
+        """``(comparison, limit)`` of QA check ``check`` when it was judged, else None."""
+        return next(((c, v) for name, c, v in self.spec if name == check), None)
 
 
 @dataclass(frozen=True)
@@ -91,7 +135,9 @@ class ControlLimits:
     upper: float
 
 
-def _calibrations(conn: sa.Connection, maker: str | None = None, model: str | None = None) -> list[sa.Row]:
+def _calibrations(
+    conn: sa.Connection, maker: str | None = None, model: str | None = None, window: Window = EVERYTHING
+) -> list[sa.Row]:
     p, l = profiles, lenses
     failed = sa.func.sum(sa.case((p.c.verdict == "FAIL", 1), else_=0))
     passed = sa.func.sum(sa.case((p.c.verdict == "PASS", 1), else_=0))
@@ -115,7 +161,7 @@ def _calibrations(conn: sa.Connection, maker: str | None = None, model: str | No
         q = q.where(l.c.maker == maker)
     if model is not None:
         q = q.where(l.c.model == model)
-    return list(conn.execute(q).all())
+    return [r for r in conn.execute(q).all() if window.holds(str(r.started)[:10], r.station_id)]
 
 
 def _verdict(row: sa.Row) -> str:
@@ -124,11 +170,11 @@ def _verdict(row: sa.Row) -> str:
     return "passed" if row.passed == row.n else "unjudged"
 
 
-def lens_models(conn: sa.Connection) -> list[LensModel]:
-    """Every lens model with its number of lenses and of calibrations passed / failed / unjudged,
-    by maker and model."""
+def lens_models(conn: sa.Connection, window: Window = EVERYTHING) -> list[LensModel]:
+    """Every lens model with its number of lenses and of calibrations passed / failed / unjudged
+    (in ``window``), by maker and model."""
     acc: dict[tuple[str, str], dict] = {}
-    for r in _calibrations(conn):
+    for r in _calibrations(conn, window=window):
         a = acc.setdefault((r.maker, r.model), {"lenses": set(), "passed": 0, "failed": 0, "unjudged": 0})
         a["lenses"].add(r.lens_id)
         a[_verdict(r)] += 1
@@ -140,17 +186,21 @@ def lens_models(conn: sa.Connection) -> list[LensModel]:
     ]
 
 
-def lens_summaries(conn: sa.Connection, maker: str | None = None, model: str | None = None) -> list[LensSummary]:
-    """Every lens (of one model) with its profile and calibration counts and its newest calibration,
-    by maker, model, serial."""
+def lens_summaries(
+    conn: sa.Connection, maker: str | None = None, model: str | None = None, window: Window = EVERYTHING
+) -> list[LensSummary]:
+    """Every lens (of one model) calibrated in ``window`` with its profile and calibration counts
+    there and its newest calibration there (with the checks that failed in it), by maker, model,
+    serial."""
     serials = {r.id: r.serial for r in conn.execute(sa.select(lenses.c.id, lenses.c.serial)).all()}
     acc: dict[int, dict] = {}
-    for r in _calibrations(conn, maker, model):
+    for r in _calibrations(conn, maker, model, window):
         a = acc.setdefault(r.lens_id, {"row": r, "profiles": 0, "calibrations": 0})
         a["profiles"] += r.n
         a["calibrations"] += 1
         if (str(r.started), r.last_id) > (str(a["row"].started), a["row"].last_id):
             a["row"] = r
+    failed = _failed_checks(conn, [(lid, a["row"].session_dir) for lid, a in acc.items() if a["row"].failed])
     out = []
     for lid, a in acc.items():
         r = a["row"]
@@ -167,16 +217,58 @@ def lens_summaries(conn: sa.Connection, maker: str | None = None, model: str | N
                 str(r.started),
                 r.station_id,
                 verdict,
+                failed.get((lid, r.session_dir), ()),
             )
         )
     return sorted(out, key=lambda s: (s.maker, s.model, s.serial))
 
 
-def verdict_counts(conn: sa.Connection, maker: str | None = None, model: str | None = None) -> list[VerdictCount]:
+def _qa_record(text: str | None) -> dict:
+    """A profile's stored QA record (``qa_json``), ``{}`` when absent or unreadable (the lens page
+    names an unreadable row; a summary does not fail on it)."""
+    try:
+        got = json.loads(text) if text else {}
+    except (TypeError, ValueError):
+        return {}
+    return got if isinstance(got, dict) else {}
+
+
+def _checks(record: dict) -> list[dict]:
+    checks = record.get("checks")
+    return [c for c in checks if isinstance(c, dict)] if isinstance(checks, list) else []
+
+
+def _failed_checks(
+    conn: sa.Connection, calibrations: Sequence[tuple[int, str]]
+) -> dict[tuple[int, str], tuple[FailedCheck, ...]]:
+    """The failed checks of the FAIL profiles of each ``(lens_id, session_dir)`` calibration, by focus."""
+    out: dict[tuple[int, str], list[FailedCheck]] = {}
+    wanted = set(calibrations)
+    ids = sorted({lid for lid, _ in wanted})
+    for i in range(0, len(ids), 500):
+        q = (
+            sa.select(profiles.c.lens_id, profiles.c.session_dir, profiles.c.focus, profiles.c.qa_json)
+            .where(profiles.c.verdict == "FAIL", profiles.c.lens_id.in_(ids[i : i + 500]))
+            .order_by(profiles.c.focus)
+        )
+        for r in conn.execute(q).all():
+            key = (r.lens_id, r.session_dir)
+            if key not in wanted:
+                continue
+            for c in _checks(_qa_record(r.qa_json)):
+                if c.get("passed") is False:
+                    text = str(c.get("text", "")).removesuffix(": FAIL")
+                    out.setdefault(key, []).append(FailedCheck(float(r.focus), str(c.get("name", "")), text))
+    return {k: tuple(v) for k, v in out.items()}
+
+
+def verdict_counts(
+    conn: sa.Connection, maker: str | None = None, model: str | None = None, window: Window = EVERYTHING
+) -> list[VerdictCount]:
     """Calibrations passed / failed / unjudged per (maker, model, station, day), sorted so; ``maker`` /
-    ``model`` select one lens model."""
+    ``model`` select one lens model, ``window`` the days and station."""
     acc: dict[tuple[str, str, str, str], dict[str, int]] = {}
-    for r in _calibrations(conn, maker, model):
+    for r in _calibrations(conn, maker, model, window):
         key = (r.maker, r.model, r.station_id, str(r.started)[:10])
         a = acc.setdefault(key, {"passed": 0, "failed": 0, "unjudged": 0})
         a[_verdict(r)] += 1
@@ -227,7 +319,26 @@ def model_trend(conn: sa.Connection, maker: str, model: str, focus: float | None
                 r.holdout_d,
                 r.holdout_d_max,
             )
-    return sorted(newest.values(), key=lambda t: (t.created_at, t.profile_id))
+    spec = _judged_limits(conn, [t.profile_id for t in newest.values()])
+    points = [dataclasses.replace(t, spec=spec.get(t.profile_id, ())) for t in newest.values()]
+    return sorted(points, key=lambda t: (t.created_at, t.profile_id))
+
+
+def _judged_limits(conn: sa.Connection, ids: Sequence[int]) -> dict[int, tuple[tuple[str, str, float], ...]]:
+    """``(check, comparison, limit)`` of every judged check of each profile, from its QA record."""
+    out: dict[int, tuple[tuple[str, str, float], ...]] = {}
+    ids = sorted(ids)
+    for i in range(0, len(ids), 500):
+        q = sa.select(profiles.c.id, profiles.c.qa_json).where(profiles.c.id.in_(ids[i : i + 500]))
+        for r in conn.execute(q).all():
+            got = []
+            for c in _checks(_qa_record(r.qa_json)):
+                lim = c.get("limit")
+                judged = isinstance(c.get("passed"), bool)
+                if judged and isinstance(lim, (int, float)) and not isinstance(lim, bool) and math.isfinite(lim):
+                    got.append((str(c.get("name", "")), str(c.get("comparison", "")), float(lim)))
+            out[r.id] = tuple(got)
+    return out
 
 
 def control_limits(points: Iterable[TrendPoint], figure: str = "holdout_d") -> ControlLimits | None:

@@ -54,6 +54,7 @@ from station.store.migrate import check_integrity, ensure_schema
 from station.store.schema import cameras, lenses, profiles, qa_results
 
 if TYPE_CHECKING:
+    from pipeline.intrinsics import Intrinsics
     from station.profile import Profile, Verdict
 
 #: the columns a profile row is written with (:meth:`station.profile.Profile.to_row`, ids resolved)
@@ -84,6 +85,8 @@ PROFILE_COLUMNS = (
     "verdict",
     "distortion_max",
     "distortion_rms",
+    "intrinsics_json",
+    "focal",
 )
 
 FOCUS_TOL = 1e-9
@@ -92,6 +95,16 @@ FOCUS_TOL = 1e-9
 
 def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+def _iso_utc(text: str) -> str:
+    """``text`` (ISO 8601; naive means UTC) as the store writes times: UTC, to the second."""
+    try:
+        t = _dt.datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    except ValueError:
+        raise StoreError(f"cannot store the profile: stored_at {text!r} is not an ISO 8601 time") from None
+    t = t.replace(tzinfo=_dt.UTC) if t.tzinfo is None else t.astimezone(_dt.UTC)
+    return t.isoformat(timespec="seconds")
 
 
 def _finite(v: Any) -> float | None:
@@ -171,11 +184,13 @@ class ProfileStore:
             conn.execute(sa.select(table.c.id).where(*(table.c[k] == v for k, v in values.items()))).scalar_one()
         )
 
-    def put_profile(self, profile: Profile) -> int:
+    def put_profile(self, profile: Profile, *, stored_at: str | None = None) -> int:
         """Store a profile — its lens and camera rows, the profile, and (when ``profile.qa`` is set)
         its verdict with thresholds and checks and the session's ``qa_results`` row — in one
         transaction; returns its id. The same session and focus again (a resumed session)
-        replaces the row, keeping its id.
+        replaces the row, keeping its id. ``stored_at`` (ISO 8601 UTC, default now) is the time
+        the row records, which dates the calibration on the dashboard: a copy of another store
+        passes the original's ``profile.stored_at`` to keep its history.
 
         Raises StoreError when the profile lacks what a row needs (lens, camera, focus, session
         directory, station) or the store cannot be written (nothing is then written)."""
@@ -191,12 +206,14 @@ class ProfileStore:
             "distortion_rms": _finite(dist.get("distortion_rms_px")),
         }
 
+        when = _now() if stored_at is None else _iso_utc(stored_at)
+
         def tx(conn: sa.Connection) -> int:
             values = {
                 **values_base,
                 "lens_id": self._ident(conn, lenses, tuple(row["lens"])),
                 "camera_id": self._ident(conn, cameras, tuple(row["camera"])),
-                "created_at": _now(),
+                "created_at": when,
             }
             stmt = _insert(self.backend)(profiles).values(values)
             stmt = stmt.on_conflict_do_update(
@@ -257,6 +274,21 @@ class ProfileStore:
             self._session_verdict(conn, int(profile_id), verdict, session_dir or got[0], float(got[1]))
 
         self._write("recording the verdict", tx)
+
+    def set_intrinsics(self, profile_id: int, intrinsics: Intrinsics) -> None:
+        """Keep the camera matrix measured with a stored profile's distortion (``harp intrinsics --id``),
+        replacing any earlier one. One transaction; StoreError when there is no such profile."""
+
+        def tx(conn: sa.Connection) -> None:
+            done = conn.execute(
+                sa.update(profiles)
+                .where(profiles.c.id == int(profile_id))
+                .values(intrinsics_json=json.dumps(_json_safe(intrinsics.to_dict())))
+            )
+            if done.rowcount != 1:
+                raise StoreError(f"{self.location}: no profile #{profile_id} to keep a camera matrix for", "missing")
+
+        self._write("storing the camera matrix", tx)
 
     def put_qa_result(
         self,
@@ -396,19 +428,25 @@ class ProfileStore:
         return hits[0]
 
     def latest_by_focus(self, lens_id: int, *, allow_failed: bool = False) -> list[Profile]:
-        """The **current** profiles of a lens, by focus: the newest profile of each focus setting.
+        """The **current** profiles of a lens, by focus: the newest profile of each focus setting
+        (of a zoom lens: of each (focal, focus) setting, ordered by focal then focus).
 
         A focus setting whose newest profile failed QA has no current profile — it is left out,
         and an older passing profile does not stand in for it — unless ``allow_failed=True``
         (then the newest is returned whatever its verdict; ``p.qa.passed`` tells). A profile not
         judged yet (``p.qa is None``) is current. Callers that must say *why* a focus is missing
         (``profile export`` naming the failed check) ask again with ``allow_failed=True``."""
-        newest: dict[float, Profile] = {}
+        newest: dict[tuple[float, float], Profile] = {}  # by (focal, focus): a zoom lens's settings
         for p in self.profiles(lens_id):  # newest first within a focus
             assert p.focus is not None
-            if not any(math.isclose(p.focus, f, rel_tol=0, abs_tol=FOCUS_TOL) for f in newest):
-                newest[p.focus] = p
-        return [newest[f] for f in sorted(newest) if allow_failed or newest[f].qa is None or newest[f].qa.passed]
+            key = (-1.0 if p.focal is None else p.focal, p.focus)
+            if not any(
+                math.isclose(key[0], z, rel_tol=0, abs_tol=FOCUS_TOL)
+                and math.isclose(key[1], f, rel_tol=0, abs_tol=FOCUS_TOL)
+                for z, f in newest
+            ):
+                newest[key] = p
+        return [newest[k] for k in sorted(newest) if allow_failed or newest[k].qa is None or newest[k].qa.passed]
 
     def current_profile(self, lens_id: int, focus: float, *, allow_failed: bool = False) -> Profile | None:
         """The current profile of a lens at one calibrated focus setting (see :meth:`latest_by_focus`), or None."""
@@ -443,20 +481,26 @@ class ProfileStore:
             yield d
 
     # ========================================================= dashboard
-    def lens_models(self) -> list[dashboard.LensModel]:
-        """Every lens model (maker, model): lenses, calibrations, how many passed / failed. See
-        :func:`station.store.dashboard.lens_models`."""
-        return self._read("reading the lens models", dashboard.lens_models)
+    def lens_models(self, window: dashboard.Window = dashboard.EVERYTHING) -> list[dashboard.LensModel]:
+        """Every lens model (maker, model): lenses, calibrations, how many passed / failed (in
+        ``window``). See :func:`station.store.dashboard.lens_models`."""
+        return self._read("reading the lens models", lambda conn: dashboard.lens_models(conn, window))
 
-    def verdict_counts(self, maker: str | None = None, model: str | None = None) -> list[dashboard.VerdictCount]:
+    def verdict_counts(
+        self, maker: str | None = None, model: str | None = None, window: dashboard.Window = dashboard.EVERYTHING
+    ) -> list[dashboard.VerdictCount]:
         """Pass / fail counts of calibrations per lens model, station and day (UTC). See
         :func:`station.store.dashboard.verdict_counts`."""
-        return self._read("reading the verdict counts", lambda conn: dashboard.verdict_counts(conn, maker, model))
+        return self._read(
+            "reading the verdict counts", lambda conn: dashboard.verdict_counts(conn, maker, model, window)
+        )
 
-    def lens_summaries(self, maker: str | None = None, model: str | None = None) -> list[dashboard.LensSummary]:
-        """Every lens with its profiles, calibrations and newest calibration's verdict. See
-        :func:`station.store.dashboard.lens_summaries`."""
-        return self._read("reading the lenses", lambda conn: dashboard.lens_summaries(conn, maker, model))
+    def lens_summaries(
+        self, maker: str | None = None, model: str | None = None, window: dashboard.Window = dashboard.EVERYTHING
+    ) -> list[dashboard.LensSummary]:
+        """Every lens with its profiles, calibrations and newest calibration's verdict and failed
+        checks. See :func:`station.store.dashboard.lens_summaries`."""
+        return self._read("reading the lenses", lambda conn: dashboard.lens_summaries(conn, maker, model, window))
 
     def lens_history(self, lens_id: int, *, errors: list[StoreError] | None = None) -> dict[float, list[Profile]]:
         """Every profile of a lens by focus setting, newest first, each with its verdict and checks (``p.qa``)."""

@@ -7,7 +7,9 @@
   holdout d / d_max, field uncertainty, ``distortion_max`` / ``distortion_rms`` of the correction
   as QA measured them, ``verdict``); the whole typed record (spec, selection, merit, provenance,
   the verdict with its thresholds and every check) is kept as JSON text
-  (:meth:`~station.profile.Profile.to_row`). ``verdict`` is ``PASS``, ``FAIL`` or NULL (not judged).
+  (:meth:`~station.profile.Profile.to_row`). ``verdict`` is ``PASS``, ``FAIL`` or NULL (not judged);
+  ``intrinsics_json`` the camera matrix measured with the profile's distortion (NULL: none);
+  ``focal`` the focal length setting of a zoom lens, mm (NULL: a fixed lens).
 * ``qa_results``: QA verdicts as judged, with the checks and thresholds: ``origin = 'session'``
   is the session's own verdict of its profile (at most one per profile: a resumed session replaces
   it), ``origin = 'command'`` one per run of ``harp qa``.
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import sqlalchemy as sa
 
-REVISIONS = ("0001", "0002", "0003", "0004")
+REVISIONS = ("0001", "0002", "0003", "0004", "0005", "0006")
 """Every migration revision, oldest first (a test checks them against the migration scripts)."""
 
 HEAD = REVISIONS[-1]
@@ -32,7 +34,7 @@ HEAD = REVISIONS[-1]
 LEGACY_VERSIONS = {1: "0001", 2: "0002", 3: "0003"}
 """``schema_version`` of a store written before the Alembic migrations -> the revision it equals."""
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 6
 """What ``schema_version`` holds at :data:`HEAD` (greater than any version older software knows)."""
 
 metadata = sa.MetaData()
@@ -87,11 +89,14 @@ profiles = sa.Table(
     sa.Column("verdict", sa.Text),
     sa.Column("distortion_max", sa.Float),
     sa.Column("distortion_rms", sa.Float),
+    sa.Column("intrinsics_json", sa.Text),
+    sa.Column("focal", sa.Float),
     sa.UniqueConstraint("session_dir", "focus"),
     sa.CheckConstraint("verdict IN ('PASS', 'FAIL')", name="profiles_verdict"),
 )
 sa.Index("profiles_lens_focus", profiles.c.lens_id, profiles.c.focus)
 sa.Index("profiles_created", profiles.c.created_at)
+sa.Index("profiles_lens_focal_focus", profiles.c.lens_id, profiles.c.focal, profiles.c.focus)
 
 qa_results = sa.Table(
     "qa_results",

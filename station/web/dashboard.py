@@ -6,12 +6,15 @@ data (:mod:`station.web.dashboard_data`):
 =========================================  ==================================================
 ``/``, ``/api/lenses``                     lens models with lenses and calibrations passed /
                                            failed; pass/fail counts per station and day; lenses
+                                           with their failure reason; ``?from=&to=&station=``
+                                           show the calibrations of those days and station
+``/lenses.csv``                            the lens list (same filters) as CSV
 ``/lenses/{serial}``, ``/api/lenses/...``  one lens: profiles per focus (newest first), verdict
                                            with every check, plots, downloads
 ``/api/profiles/{id}``                     one profile in full (model, merit, provenance, QA)
 ``/model?maker=&model=``, ``/api/model``   a lens model's distortion magnitude and holdout d
                                            over its serial numbers, control limits (mean ± 3σ
-                                           of the passed lenses)
+                                           of the passed lenses), spec limits (QA's)
 ``/profiles/{id}/field.png``               the field plot (session report's, else rendered)
 ``/profiles/{id}/uncertainty.png``         the field-uncertainty plot
 ``/profiles/{id}/export/{format}``         the profile in an export format (download); a
@@ -28,6 +31,7 @@ token for any other address).
 from __future__ import annotations
 
 from typing import Any
+from urllib.parse import urlencode
 
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
@@ -40,7 +44,7 @@ from station.store import StoreError
 from station.web import create_app, render
 from station.web import dashboard_data as data
 from station.web.app import log
-from station.web.charts import ChartPoint, control_chart, verdict_bars
+from station.web.charts import ChartPoint, SpecLimit, control_chart, verdict_bars
 from station.web.profile_files import ProfileFiles, Served, Unavailable
 
 
@@ -75,8 +79,30 @@ def _store_error(exc: Exception) -> str | None:
 
 
 # ------------------------------------------------------------------- JSON
+async def _lenses(request: Request) -> dict[str, Any]:
+    """The lens list of the request's filters (``?from=&to=&station=``); BadQuery for a bad one."""
+    return dict(await _call(data.lenses_doc, _store(request), data.window_of(request.query_params)))
+
+
 async def api_lenses(request: Request) -> Response:
-    return JSONResponse(await _call(data.lenses_doc, _store(request)))
+    try:
+        return JSONResponse(await _lenses(request))
+    except data.BadQuery as exc:
+        return _err(400, str(exc))
+
+
+async def lenses_csv(request: Request) -> Response:
+    try:
+        doc = await _lenses(request)
+    except data.BadQuery as exc:
+        return _err(400, str(exc))
+    name = "-".join(["harp-lenses", *(str(v) for v in doc["filter"].values() if v)])
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    return Response(
+        data.lenses_csv(doc),
+        media_type="text/csv; charset=utf-8",
+        headers={"content-disposition": f'attachment; filename="{safe}.csv"'},
+    )
 
 
 async def api_lens(request: Request) -> Response:
@@ -105,7 +131,10 @@ async def api_model(request: Request) -> Response:
 
 # ------------------------------------------------------------------ pages
 async def index(request: Request) -> Response:
-    doc = await _call(data.lenses_doc, _store(request))
+    try:
+        doc = await _lenses(request)
+    except data.BadQuery as exc:
+        return _page_error(request, 400, str(exc))
     days: dict[str, list[int]] = {}
     for c in doc["counts"]:
         d = days.setdefault(c["day"], [0, 0, 0])
@@ -113,7 +142,10 @@ async def index(request: Request) -> Response:
         d[1] += c["failed"]
         d[2] += c["unjudged"]
     bars = verdict_bars([(d, *v) for d, v in sorted(days.items())])
-    return render(request, "dashboard_index.html", doc=doc, bars=bars)
+    query = urlencode({k: v for k, v in doc["filter"].items() if v})
+    return render(
+        request, "dashboard_index.html", doc=doc, bars=bars, csv_href="/lenses.csv" + (f"?{query}" if query else "")
+    )
 
 
 async def lens_page(request: Request) -> Response:
@@ -130,18 +162,21 @@ def _charts(doc: dict[str, Any]) -> list[dict[str, Any]]:
         charts = []
         for key, fig in f["figures"].items():
             lim = fig["limits"] or {}
+            spec = fig["spec"]
             pts = [ChartPoint(p["serial"], p[key], p["verdict"], p["href"]) for p in f["points"]]
             charts.append(
                 {
                     "key": key,
                     "label": fig["label"],
                     "limits": fig["limits"],
+                    "spec": spec,
                     "outside": fig["outside"],
                     "svg": control_chart(
                         pts,
                         mean=lim.get("mean"),
                         lower=lim.get("lower"),
                         upper=lim.get("upper"),
+                        spec=SpecLimit(spec["comparison"], tuple(spec["limits"])) if spec else None,
                         title=f"{fig['label']} at focus {f['focus']:g}",
                         css_id=f"chart-{key}-{len(out)}",
                     ),
@@ -232,6 +267,7 @@ def dashboard_app(store: Any, *, title: str = "harp QA dashboard") -> Starlette:
         title,
         [
             Route("/", index),
+            Route("/lenses.csv", lenses_csv),
             Route("/lenses/{serial}", lens_page),
             Route("/model", model_page),
             Route("/api/lenses", api_lenses),

@@ -49,9 +49,48 @@ def _verdict_of(counts: Mapping[str, int]) -> str:
 
 
 # ------------------------------------------------------------ lenses page
-def lenses_doc(store: Any) -> dict[str, Any]:
+class BadQuery(ValueError):
+    """A query parameter that is not what it must be (HTTP 400); one line."""
+
+
+FILTERS = (("from", "since"), ("to", "until"), ("station", "station"))
+"""The lens list's query parameters and the :class:`station.store.dashboard.Window` fields they set."""
+
+
+def window_of(query: Mapping[str, str]) -> Any:
+    """The :class:`station.store.dashboard.Window` of a lens-list query: ``from`` / ``to`` (UTC days
+    ``YYYY-MM-DD``, inclusive) and ``station``; empty values are absent. :class:`BadQuery` otherwise."""
+    import datetime as dt
+
+    from station.store.dashboard import Window  # defers sqlalchemy
+
+    kw: dict[str, str | None] = {}
+    for param, name in FILTERS:
+        v = (query.get(param) or "").strip() or None
+        if v is not None and param != "station":
+            try:
+                v = dt.date.fromisoformat(v).isoformat()
+            except ValueError:
+                raise BadQuery(f"?{param}= must be a day as YYYY-MM-DD, got {v!r}") from None
+        kw[name] = v
+    if kw["since"] and kw["until"] and kw["since"] > kw["until"]:
+        raise BadQuery(f"?from={kw['since']} is after ?to={kw['until']}")
+    return Window(**kw)
+
+
+def failure_text(failures: Any) -> str:
+    """The failure reason of a lens list row: each failed check's text with the focus settings it
+    failed at, e.g. ``"focus 0: holdout d 0.0916 px > 0.05 px; focus 1: ..."``."""
+    return "; ".join(f"focus {f.focus:g}: {f.text}" for f in failures)
+
+
+def lenses_doc(store: Any, window: Any = None) -> dict[str, Any]:
     """Every lens model with its lenses and calibrations passed / failed, the counts per station
-    and day, and every lens with its newest calibration's verdict."""
+    and day, and every lens with its newest calibration's verdict and failure reason — of the
+    calibrations in ``window`` (:func:`window_of`; None: all), with every station of the store."""
+    from station.store.dashboard import EVERYTHING  # defers sqlalchemy
+
+    window = EVERYTHING if window is None else window
     models = [
         {
             "maker": m.maker,
@@ -64,7 +103,7 @@ def lenses_doc(store: Any) -> dict[str, Any]:
             "href": model_href(m.maker, m.model),
             "api": model_href(m.maker, m.model, api=True),
         }
-        for m in store.lens_models()
+        for m in store.lens_models(window)
     ]
     counts = [
         {
@@ -76,11 +115,12 @@ def lenses_doc(store: Any) -> dict[str, Any]:
             "failed": c.failed,
             "unjudged": c.unjudged,
         }
-        for c in store.verdict_counts()
+        for c in store.verdict_counts(window=window)
     ]
+    stations = sorted({c.station for c in store.verdict_counts()})
     lenses = []
     shared = _shared_serials(store)
-    for s in store.lens_summaries():
+    for s in store.lens_summaries(window=window):
         qual = s.serial in shared
         lenses.append(
             {
@@ -93,11 +133,47 @@ def lenses_doc(store: Any) -> dict[str, Any]:
                 "last_calibrated": s.last_at,
                 "last_station": s.last_station,
                 "last_verdict": s.last_verdict or "unjudged",
+                "failure": failure_text(s.failures),
+                "failed_checks": [{"focus": f.focus, "check": f.check, "text": f.text} for f in s.failures],
                 "href": lens_href(s.serial, s.maker if qual else None, s.model if qual else None),
                 "api": lens_href(s.serial, s.maker if qual else None, s.model if qual else None, api=True),
             }
         )
-    return {"store": str(store.location), "models": models, "counts": counts, "lenses": lenses}
+    return {
+        "store": str(store.location),
+        "filter": {param: getattr(window, name) for param, name in FILTERS},
+        "stations": stations,
+        "models": models,
+        "counts": counts,
+        "lenses": lenses,
+    }
+
+
+CSV_COLUMNS = (
+    ("serial", "serial"),
+    ("maker", "maker"),
+    ("model", "model"),
+    ("calibrations", "calibrations"),
+    ("profiles", "profiles"),
+    ("last_calibrated_utc", "last_calibrated"),
+    ("station", "last_station"),
+    ("verdict", "last_verdict"),
+    ("failure_reason", "failure"),
+)
+"""The lens list's CSV: header and the :func:`lenses_doc` lens field of each column."""
+
+
+def lenses_csv(doc: Mapping[str, Any]) -> str:
+    """The lens list of a :func:`lenses_doc` as CSV (RFC 4180: a header row, CRLF line ends)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow([name for name, _ in CSV_COLUMNS])
+    for lens in doc["lenses"]:
+        w.writerow([lens[key] for _, key in CSV_COLUMNS])
+    return buf.getvalue()
 
 
 def _shared_serials(store: Any) -> set[str]:
@@ -236,7 +312,9 @@ FIGURES = (
 
 def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
     """A lens model's drift: per focus setting, each lens's newest distortion magnitude and holdout
-    d in calibration order, with control limits (mean ± 3σ of the lenses that passed)."""
+    d in calibration order, with control limits (mean ± 3σ of the lenses that passed) and the
+    spec limits (the QA limits those profiles were judged with: ``spec`` = comparison and every
+    distinct limit, None when the check was not judged)."""
     from station.store.dashboard import control_limits  # defers sqlalchemy
 
     points = store.model_trend(maker, model)
@@ -252,8 +330,10 @@ def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
         figures = {}
         for key, label in FIGURES:
             lim = control_limits(pts, key)
+            judged = [got for t in pts if (got := t.limit(key)) is not None]
             figures[key] = {
                 "label": label,
+                "spec": None if not judged else {"comparison": judged[0][0], "limits": sorted({v for _c, v in judged})},
                 "limits": None
                 if lim is None
                 else {"n": lim.n, "mean": lim.mean, "sigma": lim.sigma, "lower": lim.lower, "upper": lim.upper},

@@ -28,7 +28,13 @@ CONFIGS = sorted((REPO / "configs").glob("*.yaml"))
 
 
 def test_every_shipped_config_is_covered():
-    assert {p.name for p in CONFIGS} == {"demo.yaml", "live-demo.yaml", "aravis-zaber.yaml", "v4l2-grbl.yaml"}
+    assert {p.name for p in CONFIGS} == {
+        "demo.yaml",
+        "demo-zoom.yaml",
+        "live-demo.yaml",
+        "aravis-zaber.yaml",
+        "v4l2-grbl.yaml",
+    }
 
 
 @contextlib.contextmanager

@@ -7,6 +7,7 @@ import sqlite3
 import pytest
 
 from pipeline.fitspec import FitSpec
+from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.model_file import parse_model_text
 from pipeline.models import RadialModel
 from station.config import Identity, Optics
@@ -53,6 +54,7 @@ FULL = Profile(
     lens=Identity("Acme", "12mm", "L-1"),
     camera=Identity("Cam", "Body", "C-1"),
     focus=0.5,
+    focal=12.0,
     optics=Optics(focal_mm=12.0, mount="C", pixel_pitch_um=3.45, crop_factor=5.6),
     provenance=Provenance(
         created_utc="2026-12-01T18:11:21Z",
@@ -65,6 +67,26 @@ FULL = Profile(
         extra={"holdout": [{"path": "x.pgm"}]},
     ),
     details={"n_points": 1234, "warnings": []},
+    intrinsics=Intrinsics(
+        fx=812.5,
+        fy=811.25,
+        cx=321.0,
+        cy=239.5,
+        skew=0.0,
+        sd=(0.25, 0.5, 0.125, 0.0625, 0.0),
+        covariance=tuple(tuple(float(i == j) / (i + 2) for j in range(5)) for i in range(5)),
+        width=W,
+        height=H,
+        rms_px=0.031,
+        holdout_rms_px=0.034,
+        n_views=6,
+        n_points=144,
+        source="harp intrinsics: 6 ChArUco views",
+        distortion=distortion_digest(MODEL),
+        holdout_per_view=(0.03, 0.032, 0.04, 0.031, 0.033, 0.035),
+        views=tuple(f"b{i}.png" for i in range(6)),
+        warnings=("fy known to 1.5 % only",),
+    ),
 )
 
 

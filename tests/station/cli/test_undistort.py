@@ -7,6 +7,7 @@ import pytest
 from pipeline.measure import measure_image
 from pipeline.models import RadialModel
 from pipeline.render import HarpScene, render_harp
+from pipeline.straightness import straightness
 from pipeline.undistort_maps import fast_undistortion_maps
 from station.cli import main
 from station.files import write_model_file
@@ -177,3 +178,32 @@ def test_tca_needs_colour_images_and_a_tca_file(setup, tmp_path, capsys):
     ok.write_text(json.dumps(other))
     assert main(["undistort", str(model), str(colour), "-o", str(tmp_path / "o3"), "--tca", str(ok)]) == 2
     assert "the TCA is for 482x360 images, the model for 480x360" in capsys.readouterr().err
+
+
+def test_alpha_one_keeps_every_pixel_of_the_photo_and_the_strings_straight(setup, tmp_path, capsys):
+    d, model, grey, _, _, image = setup
+    out = tmp_path / "alpha"
+    assert main(["undistort", str(model), str(grey), "-o", str(out), "--alpha", "1", "--size", "600x450"]) == 0
+    assert "corrected image 600x450" in capsys.readouterr().out
+    g = cv2.imread(str(out / "shot.pgm"), cv2.IMREAD_UNCHANGED)
+    assert g.shape == (450, 600)
+    # every photo pixel is kept: the bright background reaches each side of the corrected image
+    assert min(g[:, :3].max(), g[:, -3:].max(), g[:3, :].max(), g[-3:, :].max()) > 100
+    # straight strings, as in the default image up to the magnification (1.18 here) and the strings' ends
+    # at the empty border (the photo's own d is > 0.3 px); edges of 3-4 points where a string meets the empty border are not strings)
+    lines = [ln.points for ln in measure_image(g).lines if len(ln.points) >= 10]
+    assert len(lines) >= measure_image(image).n_lines - 2 and straightness(lines).d < 0.01
+
+
+def test_bad_frame_options_exit_2_with_one_line(setup, tmp_path, capsys):
+    _, model, grey, _, _, _ = setup
+    for extra, said in (
+        (["--size", "600"], "--size: expected WIDTHxHEIGHT"),
+        (["--alpha", "1.5"], "--alpha: expected a number in [0, 1]"),
+        (["--alpha", "1", "--scale", "2"], "--scale and --alpha are alternatives"),
+        (["--overscan", "--size", "600x400"], "--overscan sets the size"),
+    ):
+        assert main(["undistort", str(model), str(grey), "-o", str(tmp_path / "x"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], err
+    assert not (tmp_path / "x").exists()

@@ -225,7 +225,7 @@ def test_open_for_writing_creates_at_head(store_url, raw):
     ProfileStore(store_url).close()
     with raw.connect() as conn:
         assert conn.execute(sa.text("SELECT version_num FROM alembic_version")).scalar() == HEAD
-        assert conn.execute(sa.text("SELECT version FROM schema_version")).scalar() == 4
+        assert conn.execute(sa.text("SELECT version FROM schema_version")).scalar() == 6
     with ProfileStore(store_url, create=False) as st:
         assert st.profiles() == []
 

@@ -79,7 +79,7 @@ def test_schema3_store_written_by_the_old_code_migrates_in_place(tmp_path):
         pid = put(st, session="new", qa=verdict(0.01))
         assert st.profile(pid).qa == verdict(0.01)
     db = sqlite3.connect(path)
-    assert db.execute("SELECT version FROM schema_version").fetchone()[0] == 4  # old software now refuses it
+    assert db.execute("SELECT version FROM schema_version").fetchone()[0] == 6  # old software now refuses it
     db.close()
 
 

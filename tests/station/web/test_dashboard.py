@@ -161,10 +161,111 @@ def test_model_control_limits_are_mean_3_sigma_of_the_passed_lenses(served):
         lo, hi = _limits([p.qa.metrics["distortion_max_px"] for p in passed])
         lim = f["figures"]["distortion_max"]["limits"]
         assert lim["lower"] == pytest.approx(lo, rel=1e-9) and lim["upper"] == pytest.approx(hi, rel=1e-9)
-        # every lens once, in calibration order (the order they were stored)
-        assert [p["serial"] for p in f["points"]] == list(stored)
+        # every lens once, in calibration order (the time each was stored)
+        order = sorted(stored, key=lambda s: min((p.stored_at, p.id) for p in stored[s]))
+        assert [p["serial"] for p in f["points"]] == order
     status, err = _json(srv, "/api/model?maker=Nobody&model=X")
     assert status == 404 and "no lens model 'Nobody' 'X'" in err["error"]
+
+
+# ----------------------------------------- filters, failure reasons, CSV, spec limits (issue 21 item 2)
+STATION_OF = {"DEMO-0001": "line-1", **{s: st for s, st, _d, _h in LENSES}}  # the real session ran on line-1
+
+
+def _expected_rows(stored, since=None, until=None, station=None):
+    """The lens list a filter must give, from the stored records: each lens calibrated (its first
+    profile stored) on a day in [since, until] at the station, with the failed checks of its
+    failed profiles (by focus)."""
+    rows = {}
+    for serial, profs in stored.items():
+        day = min(p.stored_at for p in profs)[:10]
+        if (since and day < since) or (until and day > until) or (station and STATION_OF[serial] != station):
+            continue
+        failed = [p for p in sorted(profs, key=lambda p: p.focus) if p.qa.verdict == "FAIL"]
+        reason = "; ".join(
+            f"focus {p.focus:g}: {c.text.removesuffix(': FAIL')}"
+            for p in failed
+            for c in p.qa.checks
+            if c.passed is False
+        )
+        rows[serial] = {
+            "station": STATION_OF[serial],
+            "verdict": "FAIL" if failed else "PASS",
+            "failure": reason,
+            "day": day,
+        }
+    return rows
+
+
+def test_the_lens_list_filters_by_day_and_station_and_says_why_a_lens_failed(served):
+    srv, _store, stored = served
+    days = sorted({min(p.stored_at for p in ps)[:10] for ps in stored.values()})
+    assert len(days) >= 3  # the fixture spreads the lenses over days
+    for query in (
+        {},
+        {"station": "line-2"},
+        {"from": days[1]},
+        {"to": days[1]},
+        {"from": days[1], "to": days[1], "station": "line-1"},
+        {"from": days[-1], "station": "line-2"},
+    ):
+        qs = "&".join(f"{k}={v}" for k, v in query.items())
+        status, doc = _json(srv, "/api/lenses" + (f"?{qs}" if qs else ""))
+        assert status == 200, doc
+        want = _expected_rows(stored, query.get("from"), query.get("to"), query.get("station"))
+        got = {l["serial"]: l for l in doc["lenses"]}
+        assert sorted(got) == sorted(want), query
+        for serial, w in want.items():
+            assert (got[serial]["last_station"], got[serial]["last_verdict"]) == (w["station"], w["verdict"])
+            assert got[serial]["failure"] == w["failure"]
+            assert got[serial]["last_calibrated"][:10] == w["day"]
+        assert sum(m["calibrations"] for m in doc["models"]) == len(want)
+        assert sum(c["passed"] + c["failed"] for c in doc["counts"]) == len(want)
+        assert doc["stations"] == ["line-1", "line-2"]  # the filter offers every station, whatever is shown
+        assert doc["filter"] == {"from": query.get("from"), "to": query.get("to"), "station": query.get("station")}
+    # the failed lens's reason names its failed check with value and limit, at each focus
+    failing = _expected_rows(stored)["DEMO-0006"]["failure"]
+    assert failing.startswith("focus 0: holdout d ") and "> 0.05 px" in failing and "focus 1: holdout d " in failing
+    for bad, what in (("from=yesterday", "?from= must be a day as YYYY-MM-DD, got 'yesterday'"),
+                      (f"from={days[-1]}&to={days[0]}", f"?from={days[-1]} is after ?to={days[0]}")):  # fmt: skip
+        status, err = _json(srv, f"/api/lenses?{bad}")
+        assert status == 400 and err == {"error": what}
+        status, _h, body = _get(srv, f"/?{bad}")
+        assert status == 400 and what.encode() in body.replace(b"&#39;", b"'")
+
+
+def test_the_lens_list_downloads_as_csv(served):
+    import csv
+
+    srv, _store, stored = served
+    for query in ("", "?station=line-2"):
+        status, headers, body = _get(srv, "/lenses.csv" + query)
+        assert status == 200 and headers["content-type"] == "text/csv; charset=utf-8"
+        assert headers["content-disposition"].startswith('attachment; filename="harp-lenses')
+        rows = list(csv.DictReader(io.StringIO(body.decode("utf-8"), newline="")))
+        want = _expected_rows(stored, station="line-2" if query else None)
+        assert [r["serial"] for r in rows] == sorted(want)
+        for r in rows:
+            w = want[r["serial"]]
+            assert (r["maker"], r["model"], r["station"], r["verdict"]) == (MAKER, MODEL, w["station"], w["verdict"])
+            assert r["failure_reason"] == w["failure"] and r["last_calibrated_utc"][:10] == w["day"]
+            assert (r["calibrations"], r["profiles"]) == ("1", "2")
+    status, _h, body = _get(srv, "/lenses.csv?to=someday")
+    assert status == 400 and json.loads(body)["error"].startswith("?to= must be a day")
+
+
+def test_the_model_charts_carry_the_spec_limits_the_profiles_were_judged_with(served):
+    srv, _store, stored = served
+    status, doc = _json(srv, f"/api/model?maker={MAKER.replace(' ', '+')}&model={MODEL}")
+    assert status == 200
+    for f in doc["focus"]:
+        newest = [next(p for p in ps if p.focus == f["focus"]) for ps in stored.values()]
+        for key in ("holdout_d", "distortion_max"):
+            limits = {c.limit for p in newest for c in p.qa.checks if c.name == key}
+            assert f["figures"][key]["spec"] == {"comparison": "<=", "limits": sorted(limits)}
+        # the session's thresholds (the archive's configuration), as the store kept them
+        assert f["figures"]["holdout_d"]["spec"]["limits"] == [newest[0].qa.thresholds["max_holdout_d_px"]]
+        assert f["figures"]["distortion_max"]["spec"]["limits"] == [newest[0].qa.thresholds["max_distortion_px"]]
 
 
 # ------------------------------------------------------------------ files

@@ -1,0 +1,118 @@
+"""A zoom session: the simulated zoom lens calibrated over 3 focal lengths x 2 focus settings; the store
+holds it per (focal, focus); profile show interpolates in both, never extrapolates; the lensfun export
+has one calibration per focal length, read by lensfun itself.
+
+Truth: the simulated zoom lens's closed form (:func:`drivers.sim.lens.zoom_lens`), compared modulo
+homography (what a harp measures)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from drivers.sim.lens import zoom_lens
+from pipeline.compare import compare_models
+from pipeline.models import model_from_dict
+from station.cli import main
+from station.store import ProfileStore
+
+REPO = Path(__file__).resolve().parents[3]
+W, H = 320, 240
+FOCALS = (12.0, 24.0, 36.0)
+
+
+@pytest.fixture(scope="module")
+def zoom_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("zoom")
+    doc = yaml.safe_load((REPO / "configs" / "demo-zoom.yaml").read_text())
+    doc["station"]["camera"].update(width=W, height=H, spacing_px=20.0, string_width_px=4.0)
+    doc["camera_body"]["pixel_pitch_um"] = 15.0
+    doc["capture"]["orientations_deg"] = [0, 45, 90, 135]
+    doc["pipeline"]["workers"] = 1
+    doc["report"] = {"overlays": "none"}
+    doc["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    cfg = d / "zoom.yaml"
+    cfg.write_text(yaml.safe_dump(doc))
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["session", "run", str(cfg), "--quiet", "--json", "--name", "z"])
+    return d, code, json.loads(out.getvalue())
+
+
+def test_every_setting_is_stored_with_its_focal_length_and_close_to_the_lens(zoom_run):
+    d, code, results = zoom_run
+    assert code == 0
+    assert [(p["name"], p["exit_code"], p["verdict"]) for p in results["parts"]] == [
+        (f"focal-{z:g}mm", 0, "PASS") for z in FOCALS
+    ]
+    assert sorted((s["focal"], s["focus"]) for s in results["settings"]) == [(z, f) for z in FOCALS for f in (0.0, 1.0)]
+    with ProfileStore(d / "profiles.sqlite", create=False) as st:
+        ((lens_id, *_),) = st.lenses()
+        current = st.latest_by_focus(lens_id)
+    assert len(current) == 6
+    for p in current:
+        c = compare_models(p.model, zoom_lens(p.focal, p.focus, W, H), W, H, step=10.0)
+        assert c.rms < 0.03, (p.focal, p.focus, c.rms)
+    # barrel at the wide end, pincushion at the long end: the measured corrections say so too
+    for z, sign in ((12.0, 1.0), (36.0, -1.0)):
+        p = next(q for q in current if q.focal == z and q.focus == 0.0)
+        corner = p.model.undistort_points([[0.0, 0.0]])[0]
+        assert sign * (-corner[0] - corner[1]) > 0  # moved away from the centre: barrel
+    assert [(e["axis"], e["focal"]) for e in results["leave_one_out"]] == [("focal", 24.0), ("focal", 24.0)]
+    assert (d / "sessions" / "z" / "zoom-results.json").is_file()
+
+
+def test_profile_show_interpolates_in_both_and_never_extrapolates(zoom_run, capsys):
+    d, _, _ = zoom_run
+    store = ["--store", str(d / "profiles.sqlite")]
+    capsys.readouterr()
+    assert main(["profile", "show", "ZOOM-0001", "--focal", "18", "--focus", "0.5", "--json", *store]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    model = model_from_dict(doc["interpolated"]["model"])
+    c = compare_models(model, zoom_lens(18.0, 0.5, W, H), W, H, step=10.0)
+    print(f"interpolated at 18 mm, focus 0.5 against the lens: RMS {c.rms:.4f} px, max {c.max:.4f} px")
+    assert c.rms < 0.1
+    assert {r["axis"] for r in doc["interpolated"]["leave_one_out"]} == {"focal"}
+    assert main(["profile", "show", "ZOOM-0001", "--focal", "40", "--focus", "0.5", *store]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "focal 40 is outside the calibrated range [12, 36]: extrapolation refused" in err[0]
+    assert main(["profile", "show", "ZOOM-0001", "--focus", "0.5", *store]) == 2
+    assert "is a zoom lens: give --focal MM with --focus" in capsys.readouterr().err
+    assert main(["profile", "show", "ZOOM-0001", "--focal", "24", "--focus", "1", *store]) == 0
+    assert capsys.readouterr().out.splitlines()[0].startswith("focal (mm)\tfocus\tid")
+
+
+def test_lensfun_export_one_calibration_per_focal_read_by_lensfun(zoom_run, tmp_path, capsys):
+    from tests.pipeline.export_support import compare_points, lensfun_in_consumer
+
+    d, _, _ = zoom_run
+    xml = tmp_path / "zoom.xml"
+    args = ["profile", "export", "ZOOM-0001", "--focus", "0", "--format", "lensfun", "-o", str(xml)]
+    store = ["--store", str(d / "profiles.sqlite")]
+    # the decentred lens's fitted centres differ per focal: lensfun holds one per lens, refused whole
+    assert main([*args, *store]) == 2 and not xml.exists()
+    assert "--lensfun-no-center" in capsys.readouterr().err
+    assert main([*args, "--lensfun-no-center", *store]) == 0
+    text = xml.read_text()
+    assert text.count("<distortion ") == 3 and all(f'focal="{z}"' in text for z in FOCALS)
+    for z in FOCALS:
+        cam, lens, p, q = lensfun_in_consumer(
+            text, ("harp station", "SimulatedCamera"), ("Simulated Optics", "SIM-ZOOM-12-36mm"), z, W, H
+        )
+        rms, mx = compare_points(zoom_lens(z, 0.0, W, H), p, q, W, H)
+        print(f"lensfun at {z:g} mm against the lens: RMS {rms:.4f} px, max {mx:.4f} px")
+        assert rms < 0.15
+
+
+def test_resume_of_a_finished_zoom_session_does_nothing_again(zoom_run, capsys):
+    d, _, _ = zoom_run
+    capsys.readouterr()
+    assert main(["session", "resume", str(d / "sessions" / "z"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("already finished (QA verdict PASS), nothing to do") == 3
