@@ -46,6 +46,7 @@ Configuration (``drivers.open_camera``), e.g.::
       trigger: software            # or "off", "Line0", ...
       focus_feature: FocusPos      # vendor feature name (Integer or Float)
       autofocus_feature: FocusAuto # optional, set to autofocus_off ("Off")
+      zoom: 800                    # a zoom lens: its Zoom feature (zoom_feature) set at open
       focus: 412                   # optional: locked at open
 
 Unknown keys raise ``ValueError`` naming the key.
@@ -172,6 +173,9 @@ class AravisCamera(CameraBase):
         Image region; default the full sensor.
     focus_feature, focus_type, autofocus_feature, autofocus_off
         Vendor focus features (see module docstring).
+    zoom, zoom_feature : optional
+        A zoom lens: the ``zoom_feature`` (default ``"Zoom"``; Integer or Float, device units) set to
+        ``zoom`` at ``open()`` before the focus; :meth:`set_zoom` (:class:`drivers.protocols.Zoomable`).
     gain_db_per_raw : float
         dB per unit when the device only has ``GainRaw``.
     buffers : int
@@ -193,6 +197,8 @@ class AravisCamera(CameraBase):
             "trigger",
             "roi",
             "focus_feature",
+            "zoom",
+            "zoom_feature",
             "focus_type",
             "autofocus_feature",
             "autofocus_off",
@@ -215,6 +221,8 @@ class AravisCamera(CameraBase):
         trigger: str = "software",
         roi: tuple[int, int, int, int] | None = None,
         focus_feature: str | None = None,
+        zoom: float | None = None,
+        zoom_feature: str = "Zoom",
         focus_type: str = "auto",
         autofocus_feature: str | None = None,
         autofocus_off: Any = None,
@@ -242,7 +250,8 @@ class AravisCamera(CameraBase):
             raise ValueError("autofocus_feature given without focus_feature")
         self.device_id = device
         self._pixel_format = pixel_format
-        self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus}
+        self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus, "zoom": zoom}
+        self.zoom_feature = str(zoom_feature)
         self.trigger = trigger
         self._roi = roi
         self.focus_feature = focus_feature
@@ -263,6 +272,7 @@ class AravisCamera(CameraBase):
         self._exposure_feature: str | None = None
         self._gain_feature: str | None = None
         self._focus_kind: str | None = None
+        self._zoom_kind: str | None = None
         self._ranges: dict[str, Range | None] = {}
         self._lost = False  # the device stopped answering (close() then sends nothing)
 
@@ -429,7 +439,19 @@ class AravisCamera(CameraBase):
             ranges["focus"] = self._bounds(self.focus_feature, self._focus_kind, "")
         else:
             ranges["focus"] = None
+        self._zoom_kind = self._feature_kind(self.zoom_feature) if self._has(self.zoom_feature) else None
+        ranges["zoom"] = self._bounds(self.zoom_feature, self._zoom_kind, "") if self._zoom_kind else None
         return ranges
+
+    def _feature_kind(self, feature: str) -> str | None:
+        """``"integer"`` or ``"float"`` for a numeric GenICam feature, None otherwise."""
+        Aravis = aravis_module()
+        node = self._device.get_feature(feature)
+        if isinstance(node, Aravis.GcInteger) and not isinstance(node, Aravis.GcEnumeration):
+            return "integer"
+        if isinstance(node, Aravis.GcFloat):
+            return "float"
+        return None
 
     def _start_stream(self, Aravis: Any) -> None:
         cam = self._camera
@@ -572,6 +594,35 @@ class AravisCamera(CameraBase):
     def _read_focus(self) -> float:
         dev, f = self._device, self.focus_feature
         if self._focus_kind == "integer":
+            return float(self._call(f"read {f}", dev.get_integer_feature_value, f))
+        return float(self._call(f"read {f}", dev.get_float_feature_value, f))
+
+    # -- zoom -----------------------------------------------------------------------
+    def set_zoom(self, position: float) -> float:
+        """Set the zoom feature (``zoom_feature``, device units); OutOfRange outside its GenICam bounds,
+        DeviceRejected when the device has no such numeric feature."""
+        self._require_open()
+        kind = self._zoom_kind
+        if kind is None:
+            raise DeviceRejected(
+                f"{self.name}: no numeric zoom feature {self.zoom_feature!r} on the device (zoom_feature)"
+            )
+        pos = self._in_range("zoom", "zoom", self._finite_value(position, "zoom position"))
+        dev, f = self._device, self.zoom_feature
+        if kind == "integer":
+            self._call(f"{f}={round(pos)}", dev.set_integer_feature_value, f, int(round(pos)))
+        else:
+            self._call(f"{f}={pos:g}", dev.set_float_feature_value, f, pos)
+        got = self.get_zoom()
+        assert got is not None
+        return got
+
+    def get_zoom(self) -> float | None:
+        self._require_open()
+        dev, f, kind = self._device, self.zoom_feature, self._zoom_kind
+        if kind is None:
+            return None
+        if kind == "integer":
             return float(self._call(f"read {f}", dev.get_integer_feature_value, f))
         return float(self._call(f"read {f}", dev.get_float_feature_value, f))
 

@@ -27,7 +27,7 @@ from typing import Any, Self
 import numpy as np
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DriverError
+from drivers.errors import DeviceRejected, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 
 
@@ -111,6 +111,11 @@ class CameraBase(abc.ABC):
         self._require_open()
         return self._ranges.get("gain")
 
+    def zoom_range(self) -> Range | None:
+        """The zoom control's/feature's range read at ``open()`` (None: no zoom; :class:`~drivers.protocols.Zoomable`)."""
+        self._require_open()
+        return self._ranges.get("zoom")
+
     def _in_range(self, key: str, what: str, value: float) -> float:
         """``value`` checked against the range ``key`` (``OutOfRange`` outside; unchecked without one)."""
         rng = self._ranges.get(key)
@@ -121,11 +126,18 @@ class CameraBase(abc.ABC):
             raise DriverError(f"{self.name}: camera is not open")
 
     def _apply_initial_settings(self) -> None:
-        """Exposure, gain, then focus (locked), as configured; called by ``open()``."""
+        """Exposure, gain, the zoom (a zoom lens's focal length moves its focus), then focus (locked),
+        as configured; called by ``open()``."""
         if self._initial["exposure_us"] is not None:
             self.set_exposure(self._initial["exposure_us"])
         if self._initial["gain_db"] is not None:
             self.set_gain(self._initial["gain_db"])
+        zoom = self._initial.get("zoom")
+        if zoom is not None:
+            set_zoom = getattr(self, "set_zoom", None)
+            if set_zoom is None:
+                raise DeviceRejected(f"{self.name}: this driver cannot drive a zoom")
+            set_zoom(zoom)
         if self._initial["focus"] is not None:
             self.lock_focus(self._initial["focus"])
 

@@ -18,6 +18,7 @@ camera raises :class:`~drivers.errors.DeviceTimeout` instead of hanging).
   100 µs). Gain: ``gain`` (or ``analogue_gain``) in device units;
   ``gain_db_per_unit`` converts to dB (V4L2 does not define gain units).
 * Focus: continuous autofocus off, then ``focus_absolute`` (device units).
+* Zoom: ``zoom_absolute`` (device units), :meth:`V4L2Camera.set_zoom` (:class:`drivers.protocols.Zoomable`).
 
 Ranges (:class:`drivers.protocols.CameraRanges`) are the controls'
 minimum/maximum/step read at ``open()`` (``VIDIOC_QUERY_EXT_CTRL``), in µs
@@ -39,6 +40,7 @@ Configuration (``drivers.open_camera``), e.g.::
       exposure_us: 10000      # stored in 100 µs units
       gain_db: 0
       focus: 120              # focus_absolute units, locked at open
+      zoom: 300               # zoom_absolute units, set at open before the focus (a zoom lens)
 
 Unknown keys raise ``ValueError`` naming the key.
 """
@@ -74,6 +76,7 @@ _CONTROLS = {
     "gain": (("GAIN", "ANALOGUE_GAIN"), ("gain", "analogue_gain")),
     "focus_auto": (("FOCUS_AUTO",), ("focus_automatic_continuous", "focus_auto")),
     "focus": (("FOCUS_ABSOLUTE",), ("focus_absolute",)),
+    "zoom": (("ZOOM_ABSOLUTE",), ("zoom_absolute",)),
 }
 
 _DISCONNECT_ERRNOS = {errno.ENODEV, errno.ENXIO, errno.EIO, errno.EBADF}
@@ -116,6 +119,7 @@ class V4L2Camera(CameraBase):
             "exposure_us",
             "gain_db",
             "focus",
+            "zoom",
             "gain_db_per_unit",
             "buffers",
             "discard_frames",
@@ -134,6 +138,7 @@ class V4L2Camera(CameraBase):
         exposure_us: float | None = None,
         gain_db: float | None = None,
         focus: float | None = None,
+        zoom: float | None = None,
         gain_db_per_unit: float = 1.0,
         buffers: int = 2,
         discard_frames: int = 1,
@@ -153,7 +158,7 @@ class V4L2Camera(CameraBase):
         self.path = str(device)
         self._fourcc = pixel_format
         self._req_size = None if width is None or height is None else (int(width), int(height))
-        self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus}
+        self._initial = {"exposure_us": exposure_us, "gain_db": gain_db, "focus": focus, "zoom": zoom}
         self.gain_db_per_unit = float(gain_db_per_unit)
         self.n_buffers = int(buffers)
         self.discard_frames = int(discard_frames)
@@ -244,6 +249,7 @@ class V4L2Camera(CameraBase):
             "exposure": self._control_range("exposure", EXPOSURE_UNIT_US, "µs"),
             "gain": self._control_range("gain", self.gain_db_per_unit, "dB"),
             "focus": self._control_range("focus", 1.0, ""),
+            "zoom": self._control_range("zoom", 1.0, ""),
         }
         self._apply_initial_settings()
 
@@ -376,6 +382,20 @@ class V4L2Camera(CameraBase):
     def get_focus(self) -> float | None:
         self._require_open()
         ctrl = self._ctrl.get("focus")
+        return None if ctrl is None else float(self._read(ctrl))
+
+    def set_zoom(self, position: float) -> float:
+        """``zoom_absolute`` = ``round(position)`` (device units); OutOfRange outside its range,
+        DeviceRejected for a device without the control."""
+        self._require_open()
+        ctrl = self._control("zoom", "zoom_absolute")
+        pos = self._in_range("zoom", "zoom", self._finite_value(position, "zoom position"))
+        self._write(ctrl, int(round(pos)))
+        return float(self._read(ctrl))
+
+    def get_zoom(self) -> float | None:
+        self._require_open()
+        ctrl = self._ctrl.get("zoom")
         return None if ctrl is None else float(self._read(ctrl))
 
     # -- capture --------------------------------------------------------------------

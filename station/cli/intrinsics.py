@@ -138,6 +138,7 @@ def run(args) -> int:
 
 
 def _report(args, run_, result) -> None:
+    from pipeline.board import board_coverage  # defers numpy
     from pipeline.intrinsics import PARAMETERS  # defers cv2, numpy
 
     per_view = dict(zip(result.views, result.holdout_per_view))
@@ -154,6 +155,7 @@ def _report(args, run_, result) -> None:
                 for v in run_.views
             ],
             "rejected": [{"path": r.name, "reason": r.reason} for r in run_.rejected],
+            "coverage": board_coverage(list(run_.views), result.width, result.height).fraction,
             "written": args.out or (f"profile #{args.id}" if args.id is not None else None),
         }
         print(json.dumps(doc))
@@ -172,6 +174,14 @@ def _report(args, run_, result) -> None:
     krows = [(n, f"{vals[n]:.4f}", f"{sds[n]:.4f}") for n in names]
     kcols = ("parameter", "value (px)", "standard deviation (px)")
     print_table(kcols, krows, title="camera matrix", right=kcols[1:])
+    cov = board_coverage(list(run_.views), result.width, result.height)
+    tilts = result.extra.get("view_tilts_deg") or []
+    gaps = cov.missing()
+    print(
+        f"board corners reach {100 * cov.fraction:.0f} % of the image (8x6 cells)"
+        + (f"; none in: {', '.join(gaps)}" if gaps else "")
+        + (f"; views tilted {min(tilts):.0f}-{max(tilts):.0f} degrees" if tilts else "")
+    )
     held = "-" if result.holdout_rms_px is None else f"{result.holdout_rms_px:.4f} px"
     print(
         f"{result.n_views} views, {result.n_points} corners: reprojection RMS {result.rms_px:.4f} px, "

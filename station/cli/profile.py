@@ -158,6 +158,7 @@ def _profile_json(p, current: bool | None = None) -> dict[str, Any]:
             "camera": ident(p.camera),
             "focus": p.focus,
             "focal": p.focal,
+            "intrinsics": p.intrinsics.to_dict() if p.intrinsics is not None else None,
             "width": p.width,
             "height": p.height,
             "model": p.model.name,
@@ -441,6 +442,8 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         )
         for c in p.qa.checks if p.qa is not None else ():
             print(f"check: {c.text}")
+        if p.intrinsics is not None:
+            print(p.intrinsics.statement())
         print(json.dumps(plain(p.model.to_dict())))
     return EXIT_OK
 

@@ -16,7 +16,7 @@ YUYV / MJPG, controls ``auto_exposure`` (menu: 1 manual, 3 aperture
 priority), ``exposure_time_absolute`` (100 µs units, inactive while auto
 exposure is on: writing it then fails with ``EACCES``), ``gain``,
 ``focus_absolute`` (inactive while ``focus_automatic_continuous`` is on) and
-``focus_automatic_continuous``. Control names can be switched to the older
+``focus_automatic_continuous`` (and, ``with_zoom``, ``zoom_absolute``, 100-500). Control names can be switched to the older
 kernels' names (``exposure_auto``, ``exposure_absolute``, ``focus_auto``).
 Unsupported ioctls fail with ``ENOTTY`` and every request is logged in
 :attr:`FakeV4L2Camera.calls`.
@@ -78,6 +78,7 @@ class FakeV4L2Camera:
         stride_padding=0,
         old_names=False,
         with_focus=True,
+        with_zoom=False,
     ):
         self.path = str(path)
         os.mkfifo(self.path)
@@ -121,6 +122,8 @@ class FakeV4L2Camera:
                 Ctrl(int(CID.FOCUS_ABSOLUTE), "Focus, Absolute", C.INTEGER, 0, 250, 5, 0, 30),
                 Ctrl(int(CID.FOCUS_AUTO), _title(names[2]), C.BOOLEAN, 0, 1, 1, 1, 1),
             ]
+        if with_zoom:  # a UVC zoom lens: zoom_absolute in its own units
+            ctrls.append(Ctrl(int(CID.ZOOM_ABSOLUTE), "Zoom, Absolute", C.INTEGER, 100, 500, 1, 100, 100))
         self.controls = {c.id: c for c in sorted(ctrls, key=lambda c: c.id)}
         self._ino = os.stat(self.path).st_ino
         self._stack: ExitStack | None = None

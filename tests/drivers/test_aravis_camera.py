@@ -116,6 +116,26 @@ def test_focus_from_config_is_locked_at_open():
         assert cam.get_focus() == 250.0
 
 
+def test_genicam_zoom_is_driven_at_open_before_the_focus_and_after():
+    """Our fake XML's Zoom (Integer 0..2000 at 0x8020, read from the XML itself for the bounds): the
+    configured zoom is set at open; set_zoom reads it back; outside its bounds OutOfRange."""
+    from drivers.protocols import Zoomable
+
+    with fake(zoom=800, focus=250, **FOCUS_CFG) as cam:
+        assert isinstance(cam, Zoomable)
+        assert cam.get_zoom() == 800.0 and cam._device.get_integer_feature_value("Zoom") == 800
+        lo, hi = _xml_bounds("Zoom")
+        assert (cam.zoom_range().minimum, cam.zoom_range().maximum) == (lo, hi)
+        assert cam.set_zoom(1500) == 1500.0
+        with pytest.raises(OutOfRange, match=r"zoom 2500 is outside the range \[0, 2000\] \(GenICam Zoom\)"):
+            cam.set_zoom(2500)
+        assert cam.get_zoom() == 1500.0
+    with fake() as cam:  # Aravis' own fake XML has no zoom
+        assert cam.zoom_range() is None and cam.get_zoom() is None
+        with pytest.raises(DeviceRejected, match="no numeric zoom feature 'Zoom'"):
+            cam.set_zoom(10)
+
+
 def _xml_bounds(name: str) -> tuple[float, float]:
     """Min and Max of a feature, read from the GenICam XML itself (not through Aravis)."""
     for node in ET.parse(FAKE_FOCUS_XML).getroot().iter():

@@ -146,6 +146,25 @@ def test_settings_from_config_are_applied_at_open(node):
         assert (hw.value(ControlID.FOCUS_AUTO), hw.value(ControlID.FOCUS_ABSOLUTE)) == (0, 50)
 
 
+def test_zoom_absolute_is_driven_at_open_and_after(node):
+    """A UVC zoom lens (zoom_absolute 100..500 in the fake kernel): the configured zoom is set at open,
+    before the focus; set_zoom reads it back; outside its range OutOfRange; without the control one line."""
+    from drivers.protocols import Zoomable
+
+    with FakeV4L2Camera(node, with_zoom=True) as hw, camera(node, zoom=300, focus=50) as cam:
+        assert isinstance(cam, Zoomable)
+        assert hw.value(ControlID.ZOOM_ABSOLUTE) == 300 and cam.get_zoom() == 300.0
+        assert cam.zoom_range() == Range(100.0, 500.0, "", "V4L2 zoom_absolute")
+        assert cam.set_zoom(120.4) == 120.0 and hw.value(ControlID.ZOOM_ABSOLUTE) == 120
+        with pytest.raises(OutOfRange, match=r"zoom 600 is outside the range \[100, 500\] \(V4L2 zoom_absolute\)"):
+            cam.set_zoom(600)
+    plain = node.with_name("video1")
+    with FakeV4L2Camera(plain), camera(plain) as cam:
+        assert cam.zoom_range() is None and cam.get_zoom() is None
+        with pytest.raises(DeviceRejected, match="no zoom_absolute control"):
+            cam.set_zoom(200)
+
+
 def test_camera_without_focus_control(node):
     with FakeV4L2Camera(node, with_focus=False), camera(node) as cam:
         assert cam.get_focus() is None
