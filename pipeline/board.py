@@ -402,3 +402,41 @@ def detect_board(
         return BoardRejected(name, f"blurred: board edges {w:.1f} px wide > {max_edge_width_px:g} px")
     obj = spec.corners()[ids]
     return BoardView(ids=ids, image_points=pts, object_points=obj, edge_width_px=float(w), name=name)
+
+
+@dataclass(frozen=True)
+class BoardCoverage:
+    """Which cells of the image the corners of board views reach (pooled over the views).
+
+    ``covered`` (``ny``, ``nx``) booleans, ``fraction`` of the cells covered; :meth:`missing` names the
+    image regions without a corner (what a camera matrix, whose principal point and focal length the
+    whole field constrains, is then extrapolated over)."""
+
+    covered: npt.NDArray[np.bool_]
+    fraction: float
+
+    def missing(self) -> list[str]:
+        """The uncovered cells as regions: ``top-left corner``, ``bottom edge``, ``centre``, ..."""
+        ny, nx = self.covered.shape
+        out: list[str] = []
+        for j in range(ny):
+            for i in range(nx):
+                if self.covered[j, i]:
+                    continue
+                v = "top" if j == 0 else ("bottom" if j == ny - 1 else "")
+                h = "left" if i == 0 else ("right" if i == nx - 1 else "")
+                name = f"{v}-{h} corner" if v and h else (f"{v or h} edge" if v or h else "centre")
+                if name not in out:
+                    out.append(name)
+        return out
+
+
+def board_coverage(views: list[BoardView], width: int, height: int, nx: int = 8, ny: int = 6) -> BoardCoverage:
+    """The image cells (``nx`` x ``ny``) that the corners of ``views`` reach."""
+    covered = np.zeros((ny, nx), bool)
+    for v in views:
+        p = np.asarray(v.image_points, np.float64).reshape(-1, 2)
+        i = np.clip((p[:, 0] / width * nx).astype(int), 0, nx - 1)
+        j = np.clip((p[:, 1] / height * ny).astype(int), 0, ny - 1)
+        covered[j, i] = True
+    return BoardCoverage(covered, float(covered.mean()))

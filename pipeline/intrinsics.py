@@ -67,6 +67,9 @@ Array = npt.NDArray[np.float64]
 MIN_VIEWS = 3
 """Board views a camera matrix needs (4 parameters; each view's homography gives 2 equations)."""
 
+MIN_TILT_DEG = 10.0
+"""Board views all tilted less than this (degrees from facing the camera) are warned of."""
+
 PARAMETERS = ("fx", "fy", "cx", "cy", "skew")
 """The camera matrix's parameters, in the order of :attr:`Intrinsics.covariance`."""
 
@@ -452,6 +455,12 @@ def fit_intrinsics(
     cov[:nk, :nk] = cov_all[:nk, :nk]
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     warnings: list[str] = []
+    tilts = [_tilt_deg(pose[:3]) for pose in sol.poses]
+    if max(tilts) < MIN_TILT_DEG:
+        warnings.append(
+            f"every board view is within {max(tilts):.0f} degrees of facing the camera: tilt the board "
+            f"{MIN_TILT_DEG:g}-45 degrees (the focal length is seen through the perspective)"
+        )
     for name, val, s in zip(PARAMETERS[:4], k[:4], sd[:4]):
         if name in ("fx", "fy") and s > 0.01 * val:
             warnings.append(
@@ -490,7 +499,14 @@ def fit_intrinsics(
         holdout_per_view=per_view,
         views=tuple(v.name for v in prepared),
         warnings=tuple(warnings),
+        extra={"view_tilts_deg": [round(t, 2) for t in tilts]},
     )
+
+
+def _tilt_deg(rvec: Array) -> float:
+    """The angle (degrees) between a board's normal and the optical axis."""
+    r, _ = _rodrigues(rvec)
+    return float(np.degrees(np.arccos(np.clip(abs(r[2, 2]), 0.0, 1.0))))
 
 
 def view_residual(

@@ -39,9 +39,9 @@ def _check(args) -> int:
 
 def _check_one(path: Path, as_json: bool) -> dict:
     """Check one configuration: its lines printed, its JSON document returned."""
-    from station.config import ConfigError, load_config
-    from station.config.check import check_config
-    from station.session.estimate import long_plan
+    from station.config import ConfigError, load_config  # defers numpy, yaml
+    from station.config.check import check_config  # defers numpy, yaml
+    from station.session.estimate import long_plan  # defers numpy, yaml
 
     try:
         config = load_config(path)

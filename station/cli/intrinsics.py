@@ -24,7 +24,11 @@ import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
-from station.cli.store_options import add_store_options
+from station.cli.store_options import add_store_options, open_store
+from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.files import write_profile
+from station.store.errors import StoreError
+from station.tables import is_terminal, print_table
 
 
 def register(subparsers) -> None:
@@ -55,18 +59,14 @@ def register(subparsers) -> None:
 
 
 def _fail(msg: str) -> int:
-    from station.exit_codes import EXIT_ERROR
-
     print(f"harp intrinsics: {' '.join(str(msg).split())}", file=sys.stderr)
     return EXIT_ERROR
 
 
 def run(args) -> int:
-    from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, parse_board
-    from pipeline.intrinsics import MIN_VIEWS
-    from station.exit_codes import EXIT_OK
-    from station.intrinsics import measure_intrinsics
-    from station.store.errors import StoreError
+    from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, parse_board  # defers numpy
+    from pipeline.intrinsics import MIN_VIEWS  # defers cv2, numpy
+    from station.intrinsics import measure_intrinsics  # defers cv2, numpy
 
     try:
         spec = parse_board(args.board)
@@ -82,15 +82,13 @@ def run(args) -> int:
     store = None
     try:
         if args.id is None:
-            from pipeline.model_file import read_model_file
-            from station.profile import Profile
+            from pipeline.model_file import read_model_file  # defers cv2, numpy, yaml
+            from station.profile import Profile  # defers cv2, numpy, yaml
 
             model_path, shots = args.inputs[0], list(args.inputs[1:])
             profile = Profile.from_model_file(read_model_file(model_path))
             where = model_path
         else:
-            from station.cli.store_options import open_store
-
             shots = list(args.inputs)
             store = open_store(args)
             profile = store.profile(args.id)
@@ -127,8 +125,6 @@ def run(args) -> int:
         for w in result.warnings:
             print(f"harp intrinsics: warning: {w}", file=sys.stderr)
         if args.out:
-            from station.files import write_profile
-
             write_profile(args.out, profile.with_(intrinsics=result))
         elif store is not None:
             store.set_intrinsics(args.id, result)
@@ -142,7 +138,8 @@ def run(args) -> int:
 
 
 def _report(args, run_, result) -> None:
-    from pipeline.intrinsics import PARAMETERS
+    from pipeline.board import board_coverage  # defers numpy
+    from pipeline.intrinsics import PARAMETERS  # defers cv2, numpy
 
     per_view = dict(zip(result.views, result.holdout_per_view))
     if args.json:
@@ -158,12 +155,11 @@ def _report(args, run_, result) -> None:
                 for v in run_.views
             ],
             "rejected": [{"path": r.name, "reason": r.reason} for r in run_.rejected],
+            "coverage": board_coverage(list(run_.views), result.width, result.height).fraction,
             "written": args.out or (f"profile #{args.id}" if args.id is not None else None),
         }
         print(json.dumps(doc))
         return
-    from station.tables import is_terminal, print_table
-
     rows = [
         (v.name, str(v.n), f"{v.edge_width_px:.2f}", "-" if v.name not in per_view else f"{per_view[v.name]:.4f}")
         for v in run_.views
@@ -178,6 +174,14 @@ def _report(args, run_, result) -> None:
     krows = [(n, f"{vals[n]:.4f}", f"{sds[n]:.4f}") for n in names]
     kcols = ("parameter", "value (px)", "standard deviation (px)")
     print_table(kcols, krows, title="camera matrix", right=kcols[1:])
+    cov = board_coverage(list(run_.views), result.width, result.height)
+    tilts = result.extra.get("view_tilts_deg") or []
+    gaps = cov.missing()
+    print(
+        f"board corners reach {100 * cov.fraction:.0f} % of the image (8x6 cells)"
+        + (f"; none in: {', '.join(gaps)}" if gaps else "")
+        + (f"; views tilted {min(tilts):.0f}-{max(tilts):.0f} degrees" if tilts else "")
+    )
     held = "-" if result.holdout_rms_px is None else f"{result.holdout_rms_px:.4f} px"
     print(
         f"{result.n_views} views, {result.n_points} corners: reprojection RMS {result.rms_px:.4f} px, "

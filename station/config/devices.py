@@ -20,7 +20,10 @@ import math
 import os
 from typing import Any
 
+from drivers import open_camera, open_turntable
+from drivers.errors import DriverError
 from drivers.settings import shown
+from drivers.sim.zaber_emulator import ZaberEmulator
 from station.config.schema import EMULATOR_PORT, Config
 
 ROTARY_RANGE = (0.0, 360.0)
@@ -35,9 +38,6 @@ def _one_line(exc: BaseException) -> str:
 def created_devices(config: Config) -> tuple[Any, Any]:
     """The camera and turntable drivers of ``config`` created (``from_config``), not opened; a driver
     that refuses its settings is a :class:`ConfigError` naming its section."""
-    from drivers import open_camera, open_turntable
-    from drivers.errors import DriverError
-
     devices = []
     for key, section, make in (
         ("camera", config.station.camera, open_camera),
@@ -56,8 +56,6 @@ def check_the_devices(config: Config) -> None:
     _orientations(config)
     camera, _turntable = created_devices(config)
     if config.simulation is not None:
-        from drivers.sim.zaber_emulator import ZaberEmulator
-
         opts = dict(config.simulation.emulator)
         if config.station.turntable.steps_per_degree is not None:
             opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
@@ -94,7 +92,7 @@ def harp_edges(width: int, height: int, spacing_px: float, angle_deg: float) -> 
 
 
 def _simulated_lens_and_harp(config: Config, camera: Any) -> None:
-    from drivers.sim.lens import FOCUS_RANGE
+    from drivers.sim.lens import FOCUS_RANGE  # defers cv2
 
     for i, f in enumerate(config.focus_settings):
         if not FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]:

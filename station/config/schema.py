@@ -7,7 +7,7 @@ what to capture (focus settings, orientations, frames per orientation, exposure)
 parameters, the QA thresholds and where the profile store lives. Relative paths are relative to
 the directory holding the configuration file.
 
-Every key of the file is a field of these dataclasses, declared with :func:`setting` (its type is
+Every key of the file is a field of these dataclasses, declared with :func:`drivers.settings.setting` (its type is
 the field's annotation; its unit, range, default and meaning the :class:`drivers.settings.Setting`
 in the field's metadata) or a section (:func:`section`: a nested dataclass). The keys of the
 camera and turntable sections after ``driver`` are the chosen driver's (its class's ``SETTINGS``,
@@ -29,7 +29,9 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS, driver_settings
 from drivers.settings import REQUIRED, SEED_MAX, Setting, fields_of, setting
+from drivers.sim.zaber_emulator import SETTINGS as EMULATOR_SETTINGS
 from pipeline.fitspec import DEGREE_BOUNDS, FitSpec, parse_choice
 from pipeline.resample import DEFAULT_T
 from station.config.errors import ConfigError
@@ -289,8 +291,6 @@ class Section:
 
     def with_driver(self, name: str) -> Section:
         """This driver section with the keys of driver ``name`` after ``driver``."""
-        from drivers import driver_settings
-
         keys = dict(self.keys)
         keys.update(driver_settings(DRIVER_TABLES[self.drivers], name))
         return dataclasses.replace(self, keys=MappingProxyType(keys), driver=name)
@@ -306,13 +306,7 @@ class Section:
         return out
 
 
-def _driver_tables() -> dict[str, Mapping[str, str]]:
-    from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS
-
-    return {"camera": CAMERA_DRIVERS, "turntable": TURNTABLE_DRIVERS}
-
-
-DRIVER_TABLES = _driver_tables()
+DRIVER_TABLES: dict[str, Mapping[str, str]] = {"camera": CAMERA_DRIVERS, "turntable": TURNTABLE_DRIVERS}
 """The driver table a driver section names its driver from (:data:`drivers.CAMERA_DRIVERS`...)."""
 
 
@@ -329,9 +323,7 @@ def _section_of(cls: type, path: str, required: bool, doc: str, drivers: str = "
                 f.metadata["drivers"] or "",
             )
         elif "emulator_settings" in f.metadata:
-            from drivers.sim.zaber_emulator import SETTINGS
-
-            keys[f.name] = Section(f"{path}.{f.name}", MappingProxyType(dict(SETTINGS)), False,
+            keys[f.name] = Section(f"{path}.{f.name}", MappingProxyType(dict(EMULATOR_SETTINGS)), False,
                                    f.metadata["emulator_settings"])  # fmt: skip
     for name, s in fields_of(cls).items():
         if name == "driver" and drivers:

@@ -26,10 +26,13 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+import yaml
+
 from drivers.settings import REQUIRED, Setting, describe, fields_of, plain, problem, shown, split_item
 from pipeline.fitspec import AUTO, parse_choice
 from station.config.devices import check_the_devices
 from station.config.errors import ConfigError
+from station.config.reader import ConfigReadError, load_yaml, read_config_text
 from station.config.schema import (
     EMULATOR_PORT,
     Config,
@@ -60,8 +63,6 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
     ------
     ConfigError : one line naming the file, the field and what was expected.
     """
-    from station.config.reader import ConfigReadError, read_config_text
-
     path = Path(path)
     try:
         text = read_config_text(path)
@@ -72,10 +73,6 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
 
 def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike | None = None) -> Config:
     """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
-    import yaml
-
-    from station.config.reader import ConfigReadError, load_yaml
-
     path = Path(path).absolute()
     base = Path(base_dir).absolute() if base_dir is not None else path.parent
     try:

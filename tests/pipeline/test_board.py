@@ -57,3 +57,26 @@ def test_bad_shots_are_rejected_with_their_reason():
     soft = detect_board(bs.shot(0, blur=1.4), bs.spec())
     sharp = detect_board(bs.shot(0), bs.spec())
     assert soft and sharp and 3.0 < soft.edge_width_px < 4.0 and sharp.edge_width_px < 2.5
+
+
+def test_coverage_names_the_image_regions_without_a_corner():
+    from pipeline.board import BoardView, board_coverage
+
+    def view(points):
+        p = np.asarray(points, np.float64)
+        return BoardView(np.arange(len(p)), p, np.zeros((len(p), 3)), 2.0)
+
+    w, h = 800, 600
+    only_left = view([[10 + 100 * i, 10 + 100 * j] for i in range(4) for j in range(6)])  # x < 400: left half
+    cov = board_coverage([only_left], w, h)
+    assert cov.fraction == 0.5 and cov.covered[:, :4].all() and not cov.covered[:, 4:].any()
+    assert cov.missing() == [
+        "top edge",
+        "top-right corner",
+        "centre",
+        "right edge",
+        "bottom edge",
+        "bottom-right corner",
+    ]
+    full = board_coverage([only_left, view([[410 + 100 * i, 10 + 100 * j] for i in range(4) for j in range(6)])], w, h)
+    assert full.fraction == 1.0 and full.missing() == []

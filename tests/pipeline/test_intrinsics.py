@@ -54,6 +54,34 @@ def test_skew_is_fitted_when_asked_and_found_zero(views):
     assert r.holdout_rms_px is None
 
 
+def test_each_views_tilt_is_recorded_and_views_facing_the_camera_are_warned_of(views, fitted):
+    from pipeline.board import parse_board
+    from pipeline.board_render import BoardPose, render_board
+
+    # the rendered poses' tilts (15-45 degrees, drawn in tests/pipeline/board_shots.py), recomputed here
+    truth = [float(np.degrees(np.arccos(abs(p.rotation()[2, 2])))) for p in bs.poses()]
+    assert np.allclose(fitted.extra["view_tilts_deg"], truth, atol=0.2)
+    assert not any("facing the camera" in w for w in fitted.warnings)
+    # three views of a board facing the camera, moved about: the focal length is barely seen
+    spec = parse_board(bs.BOARD)
+    flat = []
+    for i, (x, y) in enumerate([(-140.0, -90.0), (-60.0, -40.0), (-100.0, -70.0)]):
+        pose = BoardPose((0.02 * i, -0.03, 0.1 * i), (x, y, 380.0 + 20 * i))
+        img = render_board(
+            spec,
+            bs.K_TRUE,
+            pose,
+            bs.LENS.undistort_points,
+            bs.W,
+            bs.H,
+            seed=50 + i,
+        )
+        flat.append(detect_board(img, spec))
+    assert all(flat)
+    r = fit_intrinsics(flat, bs.harp_model(), bs.W, bs.H, holdout=False)
+    assert any("facing the camera" in w for w in r.warnings)
+
+
 def test_too_few_views_is_a_failure_with_its_reason(views):
     got = fit_intrinsics(views[:2], bs.harp_model(), bs.W, bs.H)
     assert isinstance(got, IntrinsicsFailure) and not got

@@ -55,6 +55,7 @@ def test_model_file_gets_a_camera_matrix_within_two_sigma(shots, model_file, tmp
     assert main(["intrinsics", str(model_file), *paths, "--board", bs.BOARD, "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "camera matrix" in text and f"wrote {out}" in text
+    assert "board corners reach " in text and "% of the image (8x6 cells)" in text and "views tilted" in text
     k = read_model_file(out).intrinsics
     assert k is not None and k.n_views == bs.N_VIEWS
     for got, t, s in zip((k.fx, k.fy, k.cx, k.cy), TRUTH, k.sd):
@@ -140,6 +141,8 @@ def test_stored_profile_keeps_it_and_profile_export_uses_it(shots, tmp_path, cap
     with ProfileStore(store, create=False) as st:
         k = st.profile(pid).intrinsics
     assert k is not None and abs(k.fx - TRUTH[0]) <= 2 * k.sd[0]
+    assert main(["profile", "show", "--id", str(pid), "--store", str(store)]) == 0
+    assert "camera matrix: MEASURED fx = " in capsys.readouterr().out  # the profile says it has one
     ros = tmp_path / "camera.yaml"
     assert main(["profile", "export", "--id", str(pid), "--format", "ros", "-o", str(ros), "--store", str(store)]) == 0
     from tests.pipeline.export_support import ros_in_consumer  # Debian's ROS parser, the real consumer
