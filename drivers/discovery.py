@@ -34,7 +34,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from drivers.aravis_camera import aravis_module
 from drivers.errors import DriverError
+from drivers.v4l2_camera import fourcc_name
 
 #: grey formats in the order a discovered V4L2 camera's snippet prefers them (no conversion loss first)
 V4L2_FORMAT_PREFERENCE = ("GREY", "Y16", "YUYV", "MJPG")
@@ -96,8 +98,6 @@ def list_v4l2_devices(pattern: str = "/dev/video*") -> list[FoundDevice]:
 def _describe_v4l2(path: str) -> FoundDevice | None:
     from linuxpy.video.device import BufferType, Capability, ControlID, Device
 
-    from drivers.v4l2_camera import fourcc_name
-
     config: dict[str, Any] = {"driver": "v4l2", "device": path}
     dev = Device(path)
     try:
@@ -147,8 +147,6 @@ def list_aravis_cameras(include_fake: bool = False) -> list[FoundDevice]:
 
     :class:`~drivers.errors.DriverError` when Aravis is not installed.
     """
-    from drivers.aravis_camera import aravis_module
-
     Aravis = aravis_module()
     if include_fake:
         Aravis.enable_interface("Fake")
@@ -227,7 +225,7 @@ def probe_serial_port(port: str, timeout: float = 0.3) -> tuple[str, dict[str, A
     address), then ``?`` (GRBL realtime status, which changes nothing).
     :class:`~drivers.errors.DeviceDisconnected` if the port cannot be opened.
     """
-    from drivers.transport import SerialTransport
+    from drivers.transport import SerialTransport  # defers serial
 
     transport = SerialTransport(port, PROBE_BAUDRATE, name=f"serial port {port}")
     transport.open()

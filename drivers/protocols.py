@@ -12,6 +12,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from drivers.errors import OutOfRange
+
 
 @dataclass(frozen=True)
 class CameraIdentity:
@@ -125,8 +127,6 @@ class Range:
 
     def check(self, device: str, what: str, value: float) -> float:
         """``value`` as a float if inside, else :class:`~drivers.errors.OutOfRange` naming ``device``."""
-        from drivers.errors import OutOfRange  # here, to keep this block self-contained
-
         v = float(value)
         if not self.minimum <= v <= self.maximum:  # NaN is outside too
             raise OutOfRange(device, what, v, self.minimum, self.maximum, self.unit, self.source)

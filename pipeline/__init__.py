@@ -47,7 +47,7 @@ def __getattr__(name: str) -> Any:
     """``pipeline.load_model(path)``, the entry point named in every model file's header
     (:func:`pipeline.model_file.load_model`), imported when first used."""
     if name == "load_model":
-        from pipeline.model_file import load_model
+        from pipeline.model_file import load_model  # defers cv2, numpy, yaml
 
         return load_model
     raise AttributeError(f"module 'pipeline' has no attribute {name!r}")

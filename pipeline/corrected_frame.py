@@ -58,6 +58,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.models.base import DistortionModel
+from pipeline.models.homography import HomographyModel, apply_homography
 
 Array = npt.NDArray[np.float64]
 
@@ -173,8 +174,6 @@ def principal_point(model: DistortionModel, width: int, height: int) -> tuple[fl
     A radial model's ``center`` (a fixed point of its correction), a pin-hole or fisheye camera's
     ``(cx, cy)``, a correction followed by a homography: the homography of its base's; otherwise the
     corrected position of the photo's centre."""
-    from pipeline.models.homography import HomographyModel, apply_homography
-
     if isinstance(model, HomographyModel):
         base = principal_point(model.base, width, height)
         p = apply_homography(model.matrix, np.array([base]))[0]

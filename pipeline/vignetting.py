@@ -75,6 +75,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.edgeset import FitFailure
+from pipeline.tca import image_grid
 
 Floats = NDArray[np.float64]
 
@@ -399,8 +400,6 @@ class LensfunVignetting:
 
 def lensfun_pa(fit: VignettingFit, step: float = 8.0) -> LensfunVignetting:
     """Lensfun's ``pa`` model closest (relative, least squares) to ``fit``'s :math:`V` over the whole image."""
-    from pipeline.tca import image_grid
-
     g = image_grid(fit.width, fit.height, step)
     v = fit.relative_illumination(g)
     r2 = lensfun_radius(g, fit.width, fit.height) ** 2

@@ -30,8 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.edgeset import FitFailure, FitResult
+from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
+from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape
+from pipeline.select import distinct_orientations, select_model
+from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
@@ -145,14 +149,9 @@ def calibrate_shots(
     candidates : what the cross-validation chooses among when ``spec`` is None (default
         :data:`pipeline.select.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     """
-    from pipeline.edgeset import corrected_straightness, straightness_of
-    from pipeline.fit import fit_distortion
-
     lines = [list(s) for s in shots]
     selection = None
     if spec is None:
-        from pipeline.select import select_model
-
         if candidates is None:
             selection = select_model(lines, width, height, map_fn=map_fn)
         else:
@@ -179,8 +178,6 @@ def calibrate_shots(
     hold: Holdout | None = None
     per_shot: list[HeldOutShot] = []
     if holdout == "orientations":
-        from pipeline.uncertainty import refit_job
-
         outliers = {(r.image, r.line) for r in full.rejected}
         jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
         held_lines: list[np.ndarray] = []
@@ -211,8 +208,6 @@ def calibrate_shots(
     if bootstrap == 1:
         details["bootstrap_failed"] = "a bootstrap needs at least 2 replicates (pipeline.bootstrap: 1)"
     elif bootstrap:
-        from pipeline.uncertainty import bootstrap_field_uncertainty
-
         res = bootstrap_field_uncertainty(
             lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=full, map_fn=map_fn
         )
@@ -249,8 +244,6 @@ def shot_count_problem(n_shots: int, spec: FitSpec | None) -> str | None:
 def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -> str | None:
     """A warning when the correction leaves the held-out edges ``held_lines`` (uncorrected)
     less straight than they were (``holdout_d`` after correction): it does not generalise."""
-    from pipeline.edgeset import straightness_of
-
     d0, _ = straightness_of(list(held_lines))
     if holdout_d is not None and holdout_d > d0:
         return (
@@ -303,12 +296,9 @@ def harp_health(
     the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, as QA judges them;
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
     """
-    from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape
 
     def num(v: float) -> float | None:
         return float(v) if np.isfinite(v) else None
-
-    from pipeline.select import distinct_orientations
 
     if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
         return {

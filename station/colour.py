@@ -16,8 +16,10 @@ from typing import Any
 
 from pipeline.cfa import MosaicMeasurement, measure_channels, measure_mosaic
 from pipeline.edgeset import FitFailure
+from pipeline.models.tca_model import TcaField
 from pipeline.resample import DEFAULT_T
 from pipeline.tca import DEFAULT_TCA_DEGREE, LensfunTcaFit, TcaFit, channel_pairs, fit_tca, lensfun_tca
+from station.bounded_read import BoundedReadError, read_regular_file
 from station.imageio import ImageReadError
 from station.inputs import NO_STRINGS, InputError, read_image
 from station.raw import is_raw_path, read_raw
@@ -98,9 +100,6 @@ def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
     import json
 
     import yaml
-
-    from pipeline.models.tca_model import TcaField
-    from station.bounded_read import BoundedReadError, read_regular_file
 
     p = Path(path)
     try:

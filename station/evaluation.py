@@ -41,7 +41,7 @@ def load_correction(
     ``lensfun:<model>``, ``mrcal``, ``maps`` or ``stmap``. Raises EvaluateError (one line,
     naming the file) on any problem.
     """
-    from pipeline.exports.registry import read_correction
+    from pipeline.exports.registry import read_correction  # defers scipy, yaml
 
     p = Path(path)
     try:

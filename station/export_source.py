@@ -41,9 +41,15 @@ from typing import Any
 import numpy as np
 
 from pipeline.exports.registry import ExportSource
+from pipeline.measure import measure_image
 from pipeline.resample import DEFAULT_T
+from station.imageio import ImageReadError, read_grey
 from station.profile import Profile
 from station.profile_choice import failed_stamp
+from station.session.directory import read_records
+from station.session.evidence import measurement_from_arrays
+from station.session.layout import MANIFEST
+from station.session.records import FocusLocked, ShotMeasured, ShotRejected
 
 
 @dataclass(frozen=True)
@@ -67,11 +73,6 @@ def _sha256(path: Path) -> str:
 # ------------------------------------------------------------------ session
 def session_edges(session_dir: str | os.PathLike, focus: float) -> FittingEdges:
     """The edges a session measured at ``focus`` (see the module docstring, item 1)."""
-    from station.session.directory import read_records
-    from station.session.evidence import measurement_from_arrays
-    from station.session.layout import MANIFEST
-    from station.session.records import FocusLocked, ShotMeasured, ShotRejected
-
     root = Path(session_dir)
     if not (root / MANIFEST).is_file():
         return FittingEdges(None, f"session {root} not found (no {MANIFEST})")
@@ -117,9 +118,6 @@ def _same(a: Any, b: float) -> bool:
 # --------------------------------------------------------------- photographs
 def measured_edges(paths: Iterable[str | os.PathLike], t: int) -> FittingEdges:
     """Measure the harp shots at ``paths`` (``t``: along-edge subsampling); ValueError naming a bad one."""
-    from pipeline.measure import measure_image
-    from station.imageio import ImageReadError, read_grey
-
     edges: list[np.ndarray] = []
     names = []
     for p in paths:

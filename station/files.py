@@ -120,7 +120,7 @@ def write_model_file(
     provenance: dict[str, Any] | None = None,
 ) -> Path:
     """Write ``model`` with image size, figures of merit and provenance to ``path`` atomically."""
-    from pipeline.model_file import model_file_text
+    from pipeline.model_file import model_file_text  # defers cv2, numpy, yaml
 
     atomic_write_text(path, model_file_text(model, width=width, height=height, merit=merit, provenance=provenance))
     return Path(path)

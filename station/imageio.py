@@ -33,6 +33,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from station.bounded_read import BoundedReadError, read_regular_file
+
 MAX_PIXELS = 200_000_000
 """Default pixel-count limit of :func:`read_unchanged` (``HARP_MAX_IMAGE_PIXELS`` overrides it)."""
 
@@ -170,8 +172,6 @@ def _too_large(w: int, h: int, limit: int) -> str:
 
 def _read_regular_file(p: Path, max_bytes: int) -> bytes:
     """The bytes of the regular file ``p`` (at most ``max_bytes``), or :class:`ImageReadError`."""
-    from station.bounded_read import BoundedReadError, read_regular_file
-
     try:
         return read_regular_file(p, max_bytes, what="an image file")
     except BoundedReadError as exc:

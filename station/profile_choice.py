@@ -221,7 +221,7 @@ def interpolate(
     :class:`FailedQA` when the profiles ``left_out`` (failed QA) would have bracketed it (the line
     names them). Profiles of different image sizes are a :class:`ChoiceError`.
     """
-    from pipeline.interpolate import FocusInterpolator, leave_one_out_error
+    from pipeline.interpolate import FocusInterpolator, leave_one_out_error  # defers scipy
 
     sizes = {(p.width, p.height) for p in profiles}
     if len(sizes) > 1:
@@ -254,7 +254,7 @@ def interpolate_zoom(
     focal length, then along the focal length). Never extrapolates: a setting outside the
     calibrated ranges is a :class:`ChoiceError` naming them, or a :class:`FailedQA` when profiles
     ``left_out`` (failed QA) are at the focal lengths it would need."""
-    from pipeline.zoom import ZoomInterpolator, leave_one_out_by_axis
+    from pipeline.zoom import ZoomInterpolator, leave_one_out_by_axis  # defers scipy
 
     zoom = [p for p in profiles if p.focal is not None and p.focus is not None]
     sizes = {(p.width, p.height) for p in zoom}

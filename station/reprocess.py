@@ -38,9 +38,22 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from pipeline.fitspec import parse_choice
+from pipeline.model_file import read_model_file
 from station import SOFTWARE, __version__
-from station.profile import Profile
+from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
+from station.config import ConfigError, load_config
+from station.pool import WorkerPool
+from station.profile import Profile, Verdict
+from station.provenance import make_provenance
+from station.qa.verdicts import Measurements, qa_verdict
+from station.session import layout
+from station.session.directory import SessionError, read_manifest
+from station.session.frame_files import decode_frame
+from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
+from station.session.processing import average_frames, measure_shot, shot_problems
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
+from station.store import StoreError
 
 BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -118,10 +131,6 @@ class ArchivedSession(ManifestReads):
     def __init__(self, path: str | os.PathLike[str]) -> None:
         import json
 
-        from station.config import ConfigError, load_config
-        from station.session.directory import SessionError, read_manifest
-        from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
-
         self.path = Path(path)
         meta_file = self.path / SESSION_FILE
         if not meta_file.is_file():
@@ -144,8 +153,6 @@ class ArchivedSession(ManifestReads):
 
     def read_frame(self, record: FrameSaved) -> Any:
         """The frame of a record, checked against the manifest's SHA-256."""
-        from station.session.frame_files import decode_frame
-
         path = self.path / record.file
         try:
             data = path.read_bytes()
@@ -164,9 +171,6 @@ class ArchivedSession(ManifestReads):
 
     def old_profile(self, f: int) -> OldProfile:
         """The profile the session stored for focus setting ``f`` (its model file) and its verdict."""
-        from pipeline.model_file import read_model_file
-        from station.session import layout
-
         profile = None
         try:
             profile = Profile.from_model_file(read_model_file(self.path / layout.profile_file(f)))
@@ -175,8 +179,6 @@ class ArchivedSession(ManifestReads):
         judged = [r for r in self.of_type(QARecorded) if r.focus_idx == f]
         verdict = str(judged[-1].verdict) if judged else None
         if profile is not None and profile.qa is None and judged:  # the session's verdict, from its manifest
-            from station.profile import Verdict
-
             last = judged[-1]
             profile = profile.with_(qa=Verdict(str(last.verdict), tuple(last.reasons or ()), dict(last.metrics or {})))
         stored = self.stored_focus().get(f)
@@ -240,18 +242,10 @@ def reprocess_focus(job: FocusJob) -> FocusResult:
 
 
 def _spec(job: FocusJob, config: Any) -> Any:
-    from pipeline.fitspec import parse_choice
-
     return config.pipeline.spec if job.spec is None else parse_choice(job.spec)
 
 
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
-    from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
-    from station.provenance import make_provenance
-    from station.qa.verdicts import Measurements, qa_verdict
-    from station.session import layout
-    from station.session.processing import average_frames, measure_shot, shot_problems
-
     s = ArchivedSession(job.session_dir)
     cfg = s.config
     f = job.focus_idx
@@ -334,8 +328,6 @@ def run_jobs(
 
 def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
     from concurrent.futures import as_completed
-
-    from station.pool import WorkerPool
 
     results: dict[int, FocusResult] = {}
     with WorkerPool(workers, PRELOAD) as pool:  # Ctrl-C: the jobs not started dropped, the running ones stopped
@@ -494,8 +486,6 @@ class SessionCollector:
         self.outcomes: dict[str, SessionOutcome] = {}
 
     def __call__(self, r: FocusResult) -> None:
-        from station.store import StoreError
-
         got = self.arrived.setdefault(r.job.session_dir, [])
         got.append(r)
         if len(got) < self.expected[r.job.session_dir]:

@@ -35,6 +35,9 @@ from typing import TYPE_CHECKING, Any
 from drivers.protocols import Camera, Turntable
 from station.exit_codes import EXIT_FAIL
 from station.files import describe_os_error
+from station.qa.judge import judge_session
+from station.qa.results import session_results, write_results
+from station.qa.verdicts import qa_verdict, session_measurements
 from station.session import layout
 from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor, SessionResult
@@ -72,8 +75,6 @@ def run_session(
     if result.exit_code != EXIT_OK:
         return dataclasses.replace(result, results=_results(session, None))
     note = console.print if console is not None else (lambda _text: None)
-    from station.qa.judge import judge_session
-
     stage = "QA"
     try:
         qa = judge_session(session, store=store, note=note)
@@ -119,7 +120,6 @@ def judge_focus(session: SessionDir) -> Callable[[Profile, int], Verdict]:
     """``judge(profile, focus_idx)``: the QA verdict of a focus setting's profile under the session's
     thresholds, the stored model judged on the edges it was fitted on (the measurements the session
     kept), as the QA after the executor judges it (:func:`station.qa.verdicts.qa_verdict`)."""
-    from station.qa.verdicts import qa_verdict, session_measurements
 
     def judge(profile: Profile, focus_idx: int) -> Verdict:
         return qa_verdict(profile, session.config.qa, measurements=session_measurements(session, focus_idx))
@@ -133,8 +133,6 @@ class ReportError(Exception):
 
 def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
     """Write ``DIR/results.json`` (:mod:`station.qa.results`); returns what it holds (None: not written)."""
-    from station.qa.results import session_results, write_results
-
     try:
         results = session_results(session, qa)
     except (OSError, ValueError):  # a damaged profile file: QA and resume say so; the frames are kept
@@ -146,7 +144,7 @@ def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
 
 def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> None:
     """The session report into ``DIR/report``; a failure is recorded and said, the session kept."""
-    from station.qa.report import REPORT_HTML, write_session_report
+    from station.qa.report import REPORT_HTML, write_session_report  # defers matplotlib, PIL
 
     cfg = session.config
     title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {session.path.name}"

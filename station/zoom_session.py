@@ -30,7 +30,9 @@ from typing import Any
 import yaml
 
 from station.config import Config, load_config
+from station.config.reader import load_yaml, read_config_text
 from station.files import atomic_write_text
+from station.qa.results import read_results
 
 ZOOM_FILE = "zoom-session.json"
 RESULTS_FILE = "zoom-results.json"
@@ -63,8 +65,6 @@ def is_zoom_session(path: Path) -> bool:
 
 def part_config_text(config: Config, part: Part) -> str:
     """The configuration of one part: the zoom configuration's with ``zoom.focal`` and the camera's ``zoom``."""
-    from station.config.reader import load_yaml, read_config_text
-
     doc = load_yaml(read_config_text(config.path))
     doc["zoom"] = {"focal": part.focal}
     doc["station"]["camera"]["zoom"] = part.position
@@ -136,8 +136,7 @@ def zoom_results(
 ) -> dict[str, Any]:
     """The zoom session's results: each part's, the current profiles of the lens by (focal, focus) and
     the leave-one-out interpolation error per axis; written to ``ZOOMDIR/zoom-results.json``."""
-    from pipeline.zoom import leave_one_out_by_axis
-    from station.qa.results import read_results
+    from pipeline.zoom import leave_one_out_by_axis  # defers scipy, cv2
 
     per_part = []
     for d in parts_done:

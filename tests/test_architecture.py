@@ -9,7 +9,13 @@
   ``drivers`` does not import ``station``;
 * no private name (``_x``) is imported from another module;
 * nothing outside ``station.cli`` imports it: the command line parses, calls and prints, so
-  no other module can need what it holds.
+  no other module can need what it holds;
+* an import inside a function (a late import) of one of these packages is there to defer a
+  dependency, and says which: ``# defers NAME, ...`` on its line or the line above, each NAME a
+  module (``scipy``, ``importlib.metadata``, ``pipeline.select``) that the importing module does
+  not load itself when it is imported (its module-level imports, followed through the project's
+  modules; its packages' ``__init__`` included, ``if TYPE_CHECKING:`` blocks left out). A late
+  import that defers nothing belongs at the top of the module.
 
 The checker itself is tested on a small made-up tree, so that a broken checker
 cannot pass the real one.
@@ -18,6 +24,7 @@ cannot pass the real one.
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -73,6 +80,103 @@ def import_graph(root: Path, packages=PACKAGES) -> tuple[dict[str, set[str]], li
             if internal and imported and imported.startswith("_") and not imported.startswith("__"):
                 private.append(f"{path.relative_to(root)}:{line}: {name} imports {imported} from {module}")
     return graph, private
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _imported(name: str, path: Path, node: ast.Import | ast.ImportFrom) -> list[str]:
+    """The modules an import statement may load (``from m import x``: ``m`` and ``m.x``)."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    if node.level:
+        base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        module = ".".join(base + ([node.module] if node.module else []))
+    else:
+        module = node.module or ""
+    return [module, *(f"{module}.{alias.name}" for alias in node.names)]
+
+
+def split_imports(name: str, path: Path) -> tuple[list[ast.stmt], list[ast.stmt]]:
+    """(module-level imports, imports inside functions) of a module; ``if TYPE_CHECKING:`` blocks
+    are neither (they never run)."""
+    top: list[ast.stmt] = []
+    late: list[ast.stmt] = []
+
+    def walk(body: list[ast.stmt], in_function: bool) -> None:
+        for node in body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                (late if in_function else top).append(node)
+            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                walk(node.body, True)
+            elif isinstance(node, ast.If) and _is_type_checking(node.test):
+                walk(node.orelse, in_function)
+            else:
+                for part in ("body", "orelse", "finalbody", "handlers", "cases"):
+                    sub = getattr(node, part, None)
+                    if isinstance(sub, list):
+                        walk([n for n in sub if isinstance(n, ast.AST)], in_function)
+
+    walk(ast.parse(path.read_text(encoding="utf-8"), str(path)).body, False)
+    return top, late
+
+
+def module_level_loads(root: Path, packages=PACKAGES) -> dict[str, set[str]]:
+    """``{module: every module importing it loads}``: its module-level imports, the project's
+    modules among them followed (their packages' ``__init__`` too); other names with their parents
+    (``scipy.optimize`` -> ``scipy``, ``scipy.optimize``)."""
+    modules = module_names(root, packages)
+    direct: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        names = {".".join(name.split(".")[:i]) for i in range(1, name.count(".") + 1)}
+        for node in split_imports(name, path)[0]:
+            for target in _imported(name, path, node):
+                parts = target.split(".")
+                names |= {".".join(parts[:i]) for i in range(1, len(parts) + 1)}
+        direct[name] = names
+    loads: dict[str, set[str]] = {}
+    for name in modules:
+        seen: set[str] = set()
+        stack = [name]
+        while stack:
+            m = stack.pop()
+            if m in seen:
+                continue
+            seen.add(m)
+            stack += [t for t in direct.get(m, ()) if t in modules and t not in seen]
+            seen |= {t for t in direct.get(m, ()) if t not in modules}
+        loads[name] = seen
+    return loads
+
+
+DEFERS = re.compile(r"#\s*defers\s+([\w.]+(?:\s*,\s*[\w.]+)*)")
+
+
+def late_import_problems(root: Path, packages=PACKAGES) -> list[str]:
+    """Late imports of the project's modules that do not say what they defer (``# defers NAME, ...``
+    on the line or the line above), or that name a module the importing module loads itself."""
+    modules = module_names(root, packages)
+    loads = module_level_loads(root, packages)
+    out = []
+    for name, path in modules.items():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for node in split_imports(name, path)[1]:
+            if not any(t.split(".")[0] in packages for t in _imported(name, path, node)):
+                continue
+            where = f"{path.relative_to(root)}:{node.lineno}"
+            above = lines[node.lineno - 2].strip() if node.lineno > 1 else ""
+            said = DEFERS.search(lines[node.lineno - 1]) or (DEFERS.search(above) if above.startswith("#") else None)
+            if not said:
+                out.append(f"{where}: a late import that does not say what it defers ('# defers NAME')")
+                continue
+            loaded = sorted(n.strip() for n in said.group(1).split(",") if n.strip() in loads[name])
+            if loaded:
+                out.append(f"{where}: {name} loads {', '.join(loaded)} itself: the late import defers nothing")
+    return out
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -189,6 +293,39 @@ def test_nothing_outside_the_command_line_imports_it(real):
     graph, _ = real
     assert "station.cli.export" in graph["station.cli.profile"]  # cli modules are seen
     assert cli_importers(graph) == []
+
+
+def test_late_imports_say_what_they_defer_and_defer_it():
+    """Issue 22 item 3: a late import of the project's own modules only where it defers a dependency."""
+    assert late_import_problems(REPO) == []
+
+
+def test_the_late_import_checker_sees_what_it_must(tmp_path):
+    for rel, text in {
+        "pipeline/__init__.py": "",
+        "pipeline/heavy.py": "import scipy.optimize\n",
+        "pipeline/light.py": "import json\n",
+        "pipeline/uses.py": (
+            "import numpy\nfrom pipeline import light\n"
+            "def a():\n    from pipeline import heavy  # defers scipy\n"
+            "def b():\n    # defers scipy.optimize\n    from pipeline.heavy import thing\n"
+            "def c():\n    from pipeline import light\n"
+            "def d():\n    from pipeline.heavy import other  # defers numpy\n"
+            "def e():\n    import numpy.linalg  # not the project's: not checked\n"
+        ),
+        "pipeline/typed.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import yaml\n"
+        "def f():\n    from pipeline import heavy  # defers yaml\n",
+    }.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    loads = module_level_loads(tmp_path, ("pipeline",))
+    assert {"json", "pipeline.light", "numpy", "pipeline"} <= loads["pipeline.uses"]  # followed, packages too
+    assert "scipy" not in loads["pipeline.uses"] and {"scipy", "scipy.optimize"} <= loads["pipeline.heavy"]
+    assert "yaml" not in loads["pipeline.typed"]
+    assert late_import_problems(tmp_path, ("pipeline",)) == [
+        "pipeline/uses.py:9: a late import that does not say what it defers ('# defers NAME')",
+        "pipeline/uses.py:11: pipeline.uses loads numpy itself: the late import defers nothing",
+    ]
 
 
 def test_the_checker_sees_what_it_must(tmp_path):

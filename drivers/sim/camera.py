@@ -104,7 +104,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DeviceDisconnected, DeviceTimeout
+from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, lens_for_focus, zoom_lens
 from drivers.sim.world import SimWorld
@@ -287,7 +287,7 @@ class SimulatedCamera:
         self.jpeg_quality = None if jpeg_quality is None else int(jpeg_quality)
         self.realism: Session | None = None
         if self.realism_seed is not None:
-            from pipeline.realism import realistic_session
+            from pipeline.realism import realistic_session  # defers pipeline.realism: a clean camera never needs it
 
             self.realism = realistic_session(
                 self.realism_seed,
@@ -511,8 +511,6 @@ class SimulatedCamera:
     def set_zoom(self, position: float) -> float:
         """Drive the zoom lens to focal length ``position`` (mm); :class:`OutOfRange` outside
         :data:`drivers.sim.lens.ZOOM_FOCAL_RANGE_MM`, DriverError for the fixed lens."""
-        from drivers.errors import DriverError
-
         self._require_open("set zoom")
         if self.world.zoom is None:
             raise DriverError(f"{self.name}: the fixed demo lens has no zoom (configure zoom: MM for the zoom lens)")
@@ -656,9 +654,9 @@ class SimulatedCamera:
 
     def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
         """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
-        from pipeline.harp_scene import HarpMount
-        from pipeline.realism import raw_ideal_grid, render_shot
-        from pipeline.sensor import raw_scale
+        from pipeline.harp_scene import HarpMount  # defers pipeline.harp_scene
+        from pipeline.realism import raw_ideal_grid, render_shot  # defers pipeline.realism
+        from pipeline.sensor import raw_scale  # defers pipeline.sensor
 
         assert self.realism is not None
         w, h = self._size

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
+from drivers.sim.pty_server import serve
 from drivers.sim.world import SimWorld
 
 if TYPE_CHECKING:
@@ -372,6 +373,4 @@ class GrblEmulator(LineEmulator):
 def start_grbl_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[GrblEmulator]:
     """Start a :class:`GrblEmulator` (``opts`` are its keyword arguments) on a
     new pty; returns an :class:`~drivers.sim.pty_server.EmulatorHandle`."""
-    from drivers.sim.pty_server import serve
-
     return serve(GrblEmulator(world, **opts), name="grbl")

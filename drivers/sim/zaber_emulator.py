@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
+from drivers.sim.pty_server import serve
 from drivers.sim.world import SimWorld
 
 if TYPE_CHECKING:
@@ -249,6 +250,4 @@ class ZaberEmulator(LineEmulator):
 def start_zaber_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[ZaberEmulator]:
     """Start a :class:`ZaberEmulator` (``opts`` are its keyword arguments) on a
     new pty; returns an :class:`~drivers.sim.pty_server.EmulatorHandle`."""
-    from drivers.sim.pty_server import serve
-
     return serve(ZaberEmulator(world, **opts), name="zaber")

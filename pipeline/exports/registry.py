@@ -55,7 +55,9 @@ from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
 from pipeline.intrinsics import Intrinsics, distortion_digest
+from pipeline.model_file import FORMAT_VERSION, model_file_text, parse_model_text
 from pipeline.models.base import DistortionModel
+from pipeline.models.homography import HomographyModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
@@ -583,8 +585,6 @@ def _write_maps(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
 
 def _in_frame(model: DistortionModel, frame: Any) -> DistortionModel:
     """``model`` with its corrected points in ``frame``'s pixels."""
-    from pipeline.models.homography import HomographyModel
-
     a = frame.matrix
     rows = tuple((float(r[0]), float(r[1]), float(r[2])) for r in a)
     return HomographyModel(base=model, homography=rows)
@@ -609,8 +609,6 @@ def _write_stmap_redistort(src: ExportSource, opt: ExportOptions) -> Export:
 
 def harp_model_doc(src: ExportSource) -> dict[str, Any]:
     """The model-file record of a source (the layout of :mod:`pipeline.model_file`)."""
-    from pipeline.model_file import FORMAT_VERSION
-
     return {
         "format": HARP_FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -628,8 +626,6 @@ def _write_json(src: ExportSource, opt: ExportOptions) -> Export:
 
 
 def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
-    from pipeline.model_file import model_file_text
-
     text = model_file_text(
         src.model,
         width=src.width,
@@ -721,8 +717,6 @@ def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
 
 # ------------------------------------------------------------------ readers
 def _read_harp(data: bytes, req: ReadRequest) -> Correction:
-    from pipeline.model_file import parse_model_text
-
     mf = parse_model_text(_text(data, req.name), req.name)
     return Correction(mf.model, (mf.width, mf.height), f"harp:{mf.model.name}")
 

@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, model_from_dict
 
 Floats = NDArray[np.float64]
 
@@ -275,6 +275,4 @@ class ChannelModel(DistortionModel):
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ChannelModel:
-        from pipeline.models.base import model_from_dict
-
         return cls(model_from_dict(d["reference"]), TcaField.from_dict(d["tca"]))

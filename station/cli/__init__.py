@@ -83,7 +83,7 @@ class _Version(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help="show the version and exit")
 
     def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kw: Any) -> None:
-        from station import __version__
+        from station import __version__  # defers importlib.metadata
 
         print(f"harp station {__version__}")
         parser.exit()
@@ -142,7 +142,7 @@ def _main(argv: list[str] | None) -> int:
         print(f"{_prog(args)}: out of memory; give smaller inputs or fewer at once", file=sys.stderr)
         return 2
     except OSError as exc:  # a file a command did not expect to fail (a full disk, permissions)
-        from station.files import describe_os_error
+        from station.files import describe_os_error  # defers tempfile
 
         print(f"{_prog(args)}: {describe_os_error(exc)}", file=sys.stderr)
         return 2

@@ -46,7 +46,10 @@ from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.files import sha256_file, write_profile
 from station.inputs import InputError, measure_file
+from station.pool import WorkerPool
+from station.tables import console, is_terminal, print_table
 
 
 class CalibrateError(InputError):
@@ -130,8 +133,6 @@ def _workers(n_jobs: int, balance: bool = False):
     more shot's memory at a time)."""
     import os
 
-    from station.pool import WorkerPool
-
     n = min(2, os.cpu_count() or 1, n_jobs)
     if n >= 2 and balance and n_jobs > n and n_jobs % n:
         n += 1
@@ -191,7 +192,7 @@ def calibrate(args) -> dict:
     cand = _spec(args)
     cands = None
     if getattr(args, "field", None) == "auto":  # the field's knots and penalty chosen by cross-validation
-        from pipeline.select import field_candidates
+        from pipeline.select import field_candidates  # defers pipeline.select
 
         assert cand is not None
         cands, cand = field_candidates(cand), None
@@ -207,7 +208,7 @@ def calibrate(args) -> dict:
     paths = list(args.images) + list(args.holdout)
     with _workers(len(paths), balance=True) as map_fn:
         measuring = map_fn(_measure_one, [(path, args.t) for path in paths])  # a pool's map starts at once
-        import pipeline.select  # noqa: F401  (the fitting's imports, while the shots are measured)
+        # defers station.calibration (pipeline.select, pipeline.fit): the fitting imported while the shots are measured
         import station.calibration  # noqa: F401
 
         measured = list(measuring)
@@ -216,6 +217,7 @@ def calibrate(args) -> dict:
 
 
 def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, cands=None) -> dict:
+    # defers yaml
     from station.calibration import (
         GIVEN_ON_COMMAND_LINE,
         calibrate_shots,
@@ -224,8 +226,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
         shot_count_problem,
         size_problem,
     )
-    from station.files import sha256_file, write_profile
-    from station.provenance import make_provenance
+    from station.provenance import make_provenance  # defers yaml
 
     problem = size_problem([(str(p), m.width, m.height) for p, m in fit_m + hold_m])
     if problem:
@@ -312,8 +313,6 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
 def _print(report: dict) -> None:
     """The choice, the cross-validation and straightness tables, the rejected edges and warnings
     (:mod:`station.tables`: off a terminal tab-separated tables, nothing cut short or wrapped)."""
-    from station.tables import console, is_terminal, print_table
-
     con = console()
 
     def say(text: str) -> None:

@@ -28,8 +28,8 @@ def register(subparsers) -> None:
 
 
 def _check(args) -> int:
-    from station.config import ConfigError, load_config
-    from station.config.check import check_config
+    from station.config import ConfigError, load_config  # defers numpy, yaml
+    from station.config.check import check_config  # defers numpy, yaml
 
     try:
         config = load_config(args.config)

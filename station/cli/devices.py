@@ -15,6 +15,7 @@ import sys
 
 from station.cli.commands import COMMANDS
 from station.exit_codes import EXIT_OK
+from station.tables import is_terminal, print_table
 
 
 def register(subparsers) -> None:
@@ -35,9 +36,8 @@ def _snippet(config: dict) -> str:
 
 
 def run(args) -> int:
-    from drivers.discovery import discover, list_serial_ports
-    from drivers.errors import DriverError
-    from station.tables import is_terminal, print_table
+    from drivers.discovery import discover, list_serial_ports  # defers numpy
+    from drivers.errors import DriverError  # defers numpy
 
     found = discover(probe_serial=args.probe, include_fake=args.include_fake, v4l2_pattern=args.v4l2)
     devices, problems = list(found.devices), list(found.problems)

@@ -32,7 +32,9 @@ import sys
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.evaluation import evaluate
 from station.inputs import InputError
+from station.tables import print_table
 
 
 def register(subparsers) -> None:
@@ -81,8 +83,6 @@ def _fmt(sd):
 
 
 def run(args) -> int:
-    from station.evaluation import evaluate
-
     try:
         rep = evaluate(
             args.correction,
@@ -105,8 +105,6 @@ def run(args) -> int:
         f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
         + (", images already corrected" if rep["already_corrected"] else "")
     )
-    from station.tables import print_table
-
     columns = ("image", "lines", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)")
     rows = [(str(e["path"]), str(e["n_lines"]), *_fmt(e["before"]), *_fmt(e["after"])) for e in rep["images"]]
     rows.append(("all", str(rep["n_lines"]), *_fmt(rep["before"]), *_fmt(rep["after"])))

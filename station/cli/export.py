@@ -53,7 +53,10 @@ from pathlib import Path
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
+from station.equipment import optic_problem
+from station.files import atomic_write_bytes
 from station.inputs import InputError
+from station.lensfun_databases import installed_databases
 
 LENSFUN_TYPE_CHOICES = ("auto", "rectilinear", "fisheye", "equisolid", "stereographic", "orthographic", "fisheye_thoby")
 """``--lensfun-type``: auto and :data:`pipeline.models.lensfun_model.LENSFUN_TYPES`, spelled here so
@@ -176,8 +179,6 @@ def register(subparsers) -> None:
 # ------------------------------------------------------------------ options
 def lens_overrides(args) -> dict:
     """The :class:`~pipeline.exports.lens.LensInfo` fields the options set (checked; ExportError)."""
-    from station.equipment import optic_problem
-
     out = {}
     for opt, (name, kind) in LENS_OPTIONS.items():
         raw = getattr(args, opt, None)
@@ -204,15 +205,13 @@ def lens_overrides(args) -> dict:
 
 def export_options(args, existing: bytes | None = None, existing_name: str = "<existing>"):
     """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
-    from pipeline.exports.registry import ExportOptions
+    from pipeline.exports.registry import ExportOptions  # defers scipy, yaml
 
     if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
         raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
-        from station.lensfun_databases import installed_databases
-
         installed = installed_databases(exclude=args.output)
     return ExportOptions(
         coeffs=args.coeffs,
@@ -231,7 +230,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
 
 def _existing_lensfun(args) -> bytes | None:
     """The database at ``-o`` when it is one (lensfun exports add to it)."""
-    from pipeline.exports.registry import FORMATS
+    from pipeline.exports.registry import FORMATS  # defers scipy, yaml
 
     if args.format != "lensfun" or not args.output or not Path(args.output).is_file():
         return None
@@ -254,8 +253,8 @@ def export_profile(
 
     Raises ExportError (one line) on bad options or a model the format cannot take.
     """
-    from pipeline.exports.registry import FORMATS, write_export
-    from station.export_source import export_source
+    from pipeline.exports.registry import FORMATS, write_export  # defers scipy, yaml
+    from station.export_source import export_source  # defers scipy, yaml
 
     if args.json and not args.output:
         raise ExportError("--json needs -o FILE (without it stdout is the exported file)")
@@ -277,7 +276,7 @@ def _fitting_edges(args, profile, model_dir, known):
     """The fitting shots' edges an export states its residual d on: none for the json format; else
     ``known`` when the caller gave them; none with ``--no-shots``; the ``--shots`` measured; else
     found from the profile (:func:`station.export_source.fitting_edges`)."""
-    from station.export_source import FittingEdges, fitting_edges, measured_edges
+    from station.export_source import FittingEdges, fitting_edges, measured_edges  # defers scipy, yaml
 
     if args.format == "json":
         return FittingEdges(None, "not used by the json format")
@@ -344,8 +343,6 @@ def figure_lines(fig: dict) -> list[str]:
 
 def write_output(args, ex) -> None:
     """Write the export to ``-o`` atomically, or its text to stdout (ExportError on failure)."""
-    from station.files import atomic_write_bytes
-
     if args.output:
         try:
             atomic_write_bytes(args.output, ex.data)
@@ -371,8 +368,8 @@ def report(args, ex, fig: dict, prog: str) -> None:
 
 
 def run(args) -> int:
-    from pipeline.model_file import read_model_file
-    from station.profile import Profile
+    from pipeline.model_file import read_model_file  # defers yaml
+    from station.profile import Profile  # defers yaml
 
     try:
         mf = read_model_file(args.model)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 
+from pipeline.corrected_frame import FrameChoice
 from station.inputs import InputError
 
 
@@ -42,8 +43,6 @@ def add_frame_options(p) -> None:
 
 def frame_choice(args):
     """The :class:`~pipeline.corrected_frame.FrameChoice` of the parsed options (InputError, one line, if bad)."""
-    from pipeline.corrected_frame import FrameChoice
-
     size = None
     raw = getattr(args, "size", None)
     if raw is not None:

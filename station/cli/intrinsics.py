@@ -24,7 +24,11 @@ import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
-from station.cli.store_options import add_store_options
+from station.cli.store_options import add_store_options, open_store
+from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.files import write_profile
+from station.store.errors import StoreError
+from station.tables import is_terminal, print_table
 
 
 def register(subparsers) -> None:
@@ -71,18 +75,14 @@ def register(subparsers) -> None:
 
 
 def _fail(msg: str) -> int:
-    from station.exit_codes import EXIT_ERROR
-
     print(f"harp intrinsics: {' '.join(str(msg).split())}", file=sys.stderr)
     return EXIT_ERROR
 
 
 def run(args) -> int:
-    from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, parse_board
-    from pipeline.intrinsics import MIN_VIEWS
-    from station.exit_codes import EXIT_OK
-    from station.intrinsics import measure_intrinsics
-    from station.store.errors import StoreError
+    from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, parse_board  # defers numpy
+    from pipeline.intrinsics import MIN_VIEWS  # defers cv2, numpy
+    from station.intrinsics import measure_intrinsics  # defers cv2, numpy
 
     try:
         spec = parse_board(args.board)
@@ -102,15 +102,13 @@ def run(args) -> int:
         return _fail("give the harp MODEL file (or --id N) and the board shots")
     try:
         if args.id is None:
-            from pipeline.model_file import read_model_file
-            from station.profile import Profile
+            from pipeline.model_file import read_model_file  # defers cv2, numpy, yaml
+            from station.profile import Profile  # defers cv2, numpy, yaml
 
             model_path, shots = args.inputs[0], list(args.inputs[1:])
             profile = Profile.from_model_file(read_model_file(model_path))
             where = model_path
         else:
-            from station.cli.store_options import open_store
-
             shots = list(args.inputs)
             store = open_store(args)
             profile = store.profile(args.id)
@@ -153,8 +151,6 @@ def run(args) -> int:
         for w in result.warnings:
             print(f"harp intrinsics: warning: {w}", file=sys.stderr)
         if args.out:
-            from station.files import write_profile
-
             write_profile(args.out, profile.with_(intrinsics=result))
         elif store is not None:
             store.set_intrinsics(args.id, result)
@@ -199,8 +195,8 @@ def _capture(args, spec, profile):
 
 
 def _report(args, run_, result) -> None:
-    from pipeline.board import board_coverage
-    from pipeline.intrinsics import PARAMETERS
+    from pipeline.board import board_coverage  # defers numpy
+    from pipeline.intrinsics import PARAMETERS  # defers cv2, numpy
 
     per_view = dict(zip(result.views, result.holdout_per_view))
     if args.json:
@@ -221,8 +217,6 @@ def _report(args, run_, result) -> None:
         }
         print(json.dumps(doc))
         return
-    from station.tables import is_terminal, print_table
-
     rows = [
         (v.name, str(v.n), f"{v.edge_width_px:.2f}", "-" if v.name not in per_view else f"{per_view[v.name]:.4f}")
         for v in run_.views

@@ -21,6 +21,7 @@ from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.web_options import add_serve_options
+from station.live.devices import apply_session_settings, check_once, live_station
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 
@@ -45,7 +46,7 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from station.config import ConfigError, load_config
+    from station.config import ConfigError, load_config  # defers numpy, yaml
 
     if args.json and not args.once:
         return _error("--json needs --once (the live page is served, not printed)")
@@ -54,14 +55,14 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return _error(str(exc))
     if not args.once:
-        from station.web.serve import ServeError, check_bind
+        from station.web.serve import ServeError, check_bind  # defers jinja2, starlette, markupsafe
 
         try:
             check_bind(args.host, args.token)
         except ServeError as exc:
             return _error(str(exc))
-    from drivers.errors import DriverError
-    from station.session.devices import open_station
+    from drivers.errors import DriverError  # defers numpy
+    from station.session.devices import open_station  # defers numpy, yaml
 
     try:
         with open_station(config) as (camera, turntable):
@@ -75,9 +76,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -> int:
-    from station.live.devices import apply_session_settings, live_station
-    from station.live.web import live_app
-    from station.web.serve import ServeError, serve
+    from station.live.web import live_app  # defers scipy, cv2, jinja2, starlette
+    from station.web.serve import ServeError, serve  # defers jinja2, starlette, markupsafe
 
     apply_session_settings(config, camera)
     with live_station(config, camera, turntable) as station:
@@ -92,8 +92,6 @@ def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -
 
 
 def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:
-    from station.live.devices import check_once
-
     out = check_once(config, camera, turntable)
     if as_json:
         print(json.dumps(out, allow_nan=False))

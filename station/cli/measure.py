@@ -45,7 +45,10 @@ from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.files import atomic_write_bytes
 from station.inputs import InputError, measure_file
+from station.qa.overlay import write_overlay
+from station.tables import is_terminal, print_table
 
 
 def register(subparsers) -> None:
@@ -110,8 +113,6 @@ IMAGE_COLUMNS = ("image", "size", "string width (px)", "strings", "edges", "d (p
 def _print_tables(results: list[tuple[str, ImageMeasurement]], overall: dict) -> None:
     """Every edge of every image, then d and d_max per image and over all of them
     (:func:`station.tables.print_table`: off a terminal two tab-separated tables, a blank line between)."""
-    from station.tables import is_terminal, print_table
-
     edges = [
         (
             path,
@@ -188,8 +189,6 @@ def run(args) -> int:
             continue
         results.append((path, m))
         if overlay_dir is not None:
-            from station.qa.overlay import write_overlay
-
             try:
                 write_overlay(overlay_dir / names[path], img, m, title=Path(path).name)
             except OSError as exc:
@@ -204,8 +203,7 @@ def run(args) -> int:
         overall = {"d": None, "d_max": None, "n_lines": 0}
 
     if points_path is not None:
-        from station.edge_points import edge_points_bytes
-        from station.files import atomic_write_bytes
+        from station.edge_points import edge_points_bytes  # defers station.edge_points: --points only
 
         try:
             atomic_write_bytes(points_path, edge_points_bytes(results, points_path.suffix.lower()))

@@ -30,9 +30,11 @@ import sys
 from typing import Any
 
 from station.cli.commands import COMMANDS
-from station.cli.export import add_export_options, formats_epilog
-from station.cli.store_options import add_store_options
+from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
+from station.cli.store_options import add_store_options, open_store
+from station.config import ConfigError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
+from station.inputs import InputError
 from station.plain_json import plain
 from station.profile_choice import (
     ChoiceError,
@@ -51,6 +53,9 @@ from station.profile_choice import (
     setting_text,
     verdict_text,
 )
+from station.store import StoreError
+from station.tables import console as text_console
+from station.tables import is_terminal, print_table
 
 ALLOW_FAILED_HELP = "also use profiles that failed QA (each one is said on stderr)"
 FOCAL_HELP = (
@@ -116,8 +121,6 @@ def _warn(msg: str) -> None:
 
 
 def _open(args):
-    from station.cli.store_options import open_store
-
     return open_store(args)  # for reading: never creates a store
 
 
@@ -127,9 +130,6 @@ def _num(v, nd=4) -> str:
 
 def _with_store(fn):
     def wrapped(args) -> int:
-        from station.config import ConfigError
-        from station.store import StoreError
-
         try:
             with _open(args) as store:
                 return fn(args, store)
@@ -188,9 +188,6 @@ def _say_used(lens, used, left_out) -> None:
 # --------------------------------------------------------------------- list
 @_with_store
 def _list(args, store) -> int:
-    from station.store import StoreError
-    from station.tables import print_table
-
     errors: list = []
     profiles = store.profiles(errors=errors)  # the readable rows; each damaged one reported below
     current: set[int] = set()
@@ -339,8 +336,6 @@ def _show(args, store) -> int:
         }
         print(json.dumps(plain(out), indent=1))
         return EXIT_OK
-    from station.tables import console as text_console
-
     console = text_console()
     console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {w}x{h}")
     console.print(note)
@@ -401,8 +396,6 @@ def _show_zoom(args, lens, used, left_out) -> int:
         }
         print(json.dumps(plain(out), indent=1))
         return EXIT_OK
-    from station.tables import console as text_console
-
     console = text_console()
     console.print(f"lens #{lens[0]}: {lens[1]} {lens[2]} serial {lens[3]}, image {interp.width}x{interp.height}")
     console.print(interp.note)
@@ -419,8 +412,6 @@ def _show_zoom(args, lens, used, left_out) -> int:
 
 
 def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> int:
-    from station.tables import is_terminal, print_table
-
     if args.json:
         out = {
             "lens": {"id": lens[0], "maker": lens[1], "model": lens[2], "serial": lens[3]},
@@ -470,9 +461,7 @@ def _allowed(args, lens, p) -> None:
 
 @_with_store
 def _export(args, store) -> int:
-    from station.cli.export import export_profile, report, write_output
-    from station.export_source import FittingEdges
-    from station.inputs import InputError
+    from station.export_source import FittingEdges  # defers scipy
 
     edges = stamp = None
     if args.id is not None:
@@ -518,7 +507,7 @@ def _export(args, store) -> int:
 def _zoom_profile(args, store, lens, newest, focal: float):
     """The profile of a zoom lens at (``focal``, ``args.focus``): a current one, or interpolated;
     ``(profile, what, edges, stamp)``."""
-    from station.export_source import FittingEdges
+    from station.export_source import FittingEdges  # defers scipy
 
     hit = at_setting(newest, focal, args.focus)
     if hit is not None:
@@ -533,9 +522,6 @@ def _zoom_profile(args, store, lens, newest, focal: float):
 
 
 def _export_zoom(args, store, lens, newest) -> int:
-    from station.cli.export import export_profile, report, write_output
-    from station.inputs import InputError
-
     profile, what, edges, stamp = _zoom_profile(args, store, lens, newest, args.focal)
     try:
         ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
@@ -556,9 +542,6 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     import shutil
     import tempfile
     from pathlib import Path
-
-    from station.cli.export import ExportError, export_profile, report, write_output
-    from station.inputs import InputError
 
     newest = store.latest_by_focus(lens[0], allow_failed=True)
     focals = sorted({p.focal for p in newest if p.focal is not None})

@@ -32,12 +32,15 @@ from pathlib import Path
 from typing import Any
 
 from station.cli.commands import COMMANDS
-from station.config import OVERLAY_RETENTION
+from station.cli.store_options import open_store, store_location
+from station.config import OVERLAY_RETENTION, ConfigError, load_config
 from station.exit_codes import EXIT_ERROR, verdict_exit_code
 from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
 from station.session import layout
-from station.store import DEFAULT_STORE
+from station.session.directory import SessionDir, SessionError
+from station.store import DEFAULT_STORE, StoreError
+from station.tables import cell, is_terminal, print_table
 
 
 def _positive(text: str) -> float:
@@ -103,8 +106,6 @@ def register(subparsers) -> None:
 def _store(args, config, create=False):
     """The store (:mod:`station.cli.store_options`): ``--store``, else that of ``config`` (``--config``,
     or the session's), else ``$HARP_STORE``, else the default. For reading unless ``create``."""
-    from station.cli.store_options import open_store, store_location
-
     return open_store(store_location(args.store, config), write=create)
 
 
@@ -118,10 +119,6 @@ def _looks_like_path(text: str) -> bool:
 
 
 def run(args) -> int:
-    from station.config import ConfigError, load_config
-    from station.session.directory import SessionDir, SessionError
-    from station.store import StoreError
-
     session = None
     opened: dict[str, Any] = {}
     try:
@@ -209,8 +206,6 @@ def run(args) -> int:
 
 def _record(args, config, session, items, results) -> None:
     """One row of QA history per judged profile (the verdict a profile was calibrated with is not changed)."""
-    from station.store import StoreError
-
     try:
         with _store(args, config, create=True) as store:
             for it, v in zip(items, results):
@@ -228,8 +223,6 @@ def _record(args, config, session, items, results) -> None:
 
 def _print_checks(items, judged, report) -> None:
     """Every check of every profile, one row each (tab-separated when stdout is not a terminal)."""
-    from station.tables import cell, is_terminal, print_table
-
     rows = []
     for it, v in zip(items, judged.verdicts):
         for c in v.checks:

@@ -35,14 +35,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pipeline.fitspec import parse_choice
 from station.cli.commands import COMMANDS
+from station.cli.store_options import add_store_options, location_from_args, open_store
+from station.store import StoreError
+from station.tables import console, is_terminal, print_table
 
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
 def register(subparsers: Any) -> None:
-    from station.cli.store_options import add_store_options
-
     p = subparsers.add_parser(
         "reprocess",
         help=COMMANDS["reprocess"],
@@ -66,8 +68,9 @@ def _error(msg: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from station.cli.store_options import location_from_args, open_store
-    from station.config import ConfigError
+    from station.config import ConfigError  # defers numpy, yaml
+
+    # defers cv2, numpy, yaml
     from station.reprocess import (
         ArchivedSession,
         ReprocessError,
@@ -76,7 +79,6 @@ def run(args: argparse.Namespace) -> int:
         probe_scheduler,
         run_jobs,
     )
-    from station.store import StoreError
 
     if args.workers is not None and args.workers < 1:
         _error("--workers must be at least 1")
@@ -85,8 +87,6 @@ def run(args: argparse.Namespace) -> int:
         _error("--workers is for the local pool; the cluster's workers are the scheduler's")
         return EXIT_ERROR
     if args.model is not None:
-        from pipeline.fitspec import parse_choice
-
         try:
             parse_choice(args.model)
         except ValueError as exc:
@@ -222,8 +222,6 @@ def _print_table(doc: dict) -> None:
     """Old and new figures per session and focus setting (:func:`station.tables.print_table`): on a
     terminal ``old → new`` in one cell; otherwise tab-separated, an ``old`` and a ``new`` column each,
     the session's whole path."""
-    from station.tables import console, is_terminal, print_table
-
     pairs = is_terminal()
     say = console()
 

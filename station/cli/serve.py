@@ -19,15 +19,15 @@ import sys
 from typing import Any
 
 from station.cli.commands import COMMANDS
+from station.cli.store_options import add_store_options, open_store
+from station.cli.web_options import add_serve_options
+from station.store import StoreError
 
 EXIT_ERROR = 2
 DEFAULT_PORT = 8014
 
 
 def register(subparsers: Any) -> None:
-    from station.cli.store_options import add_store_options
-    from station.cli.web_options import add_serve_options
-
     p = subparsers.add_parser(
         "serve",
         help=COMMANDS["serve"],
@@ -45,10 +45,8 @@ def _error(msg: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from station.cli.store_options import open_store
-    from station.config import ConfigError
-    from station.store import StoreError
-    from station.web.serve import ServeError, check_bind
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.web.serve import ServeError, check_bind  # defers jinja2, starlette, markupsafe
 
     try:
         check_bind(args.host, args.token)
@@ -58,8 +56,8 @@ def run(args: argparse.Namespace) -> int:
         store = open_store(args)
     except (StoreError, ConfigError) as exc:
         return _error(str(exc))
-    from station.web import serve
-    from station.web.dashboard import dashboard_app
+    from station.web import serve  # defers jinja2, starlette, markupsafe
+    from station.web.dashboard import dashboard_app  # defers cv2, jinja2, starlette, numpy
 
     try:
         store.lens_models()  # a store that cannot be read says so now, not on the first page

@@ -26,7 +26,15 @@ from pathlib import Path
 
 from station import __version__
 from station.cli.commands import COMMANDS
+from station.cli.store_options import add_store_options, store_location
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
+from station.files import describe_os_error
+from station.qa.results import finished_results, read_results, state_exit_code
+from station.session.integrity import check_session, needs_capture, repair_files, repair_session, summary
+from station.session.states import sessions_in
+from station.store import StoreError
+from station.tables import console as text_console
+from station.tables import print_table
 
 
 def register(subparsers) -> None:
@@ -62,8 +70,6 @@ def register(subparsers) -> None:
         help="capture focus setting F (its index) again whole at the next resume (repeatable)",
     )  # fmt: skip
     rep.set_defaults(func=_repair)
-    from station.cli.store_options import add_store_options
-
     for action in (run, res, rep):
         add_store_options(action, config=False)  # --store PATH|URL instead of the configuration's store
     for action in (run, res):
@@ -105,8 +111,8 @@ def _error(msg: str) -> int:
 
 def _load(path: Path):
     """The configuration at ``path`` with the checks no device is needed for; ConfigError otherwise."""
-    from station.config import load_config
-    from station.config.check import check_config
+    from station.config import load_config  # defers numpy, yaml
+    from station.config.check import check_config  # defers numpy, yaml
 
     config = load_config(path)
     checked = check_config(config)
@@ -116,8 +122,8 @@ def _load(path: Path):
 
 
 def _run(args) -> int:
-    from station.config import ConfigError, check_port
-    from station.session.directory import SessionDir
+    from station.config import ConfigError, check_port  # defers numpy, yaml
+    from station.session.directory import SessionDir  # defers cv2, numpy, yaml
 
     if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
         return _error(
@@ -141,9 +147,9 @@ def _run(args) -> int:
 
 
 def _resume(args) -> int:
-    from station.config import ConfigError
-    from station.session.directory import SessionDir, SessionError
-    from station.zoom_session import is_zoom_session
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+    from station.zoom_session import is_zoom_session  # defers numpy, yaml
 
     if is_zoom_session(args.session_dir):
         return _zoom_parts(Path(args.session_dir), args)
@@ -151,8 +157,6 @@ def _resume(args) -> int:
         session = SessionDir.open(args.session_dir)
     except (ConfigError, SessionError) as exc:
         return _error(str(exc))
-    from station.session.integrity import check_session, summary
-
     damage = check_session(session)
     if damage:  # found before anything is captured, fitted or judged again
         session.close()
@@ -165,13 +169,11 @@ def _resume(args) -> int:
 
 def _run_zoom(config, root, args) -> int:
     """A zoom session: one session per focal length (:mod:`station.zoom_session`)."""
-    from station import zoom_session
+    from station import zoom_session  # defers numpy, yaml
 
     try:
         path = zoom_session.create(root, config, name=args.name)
     except OSError as exc:
-        from station.files import describe_os_error
-
         return _error(f"cannot create the zoom session: {describe_os_error(exc)}")
     print(f"zoom session directory: {path}", file=sys.stderr)
     return _zoom_parts(path, args)
@@ -181,10 +183,9 @@ def _zoom_parts(path: Path, args) -> int:
     """Run or resume every part of the zoom session at ``path``, then its results and summary."""
     import argparse
 
-    from station import zoom_session
-    from station.config import ConfigError
-    from station.session.directory import SessionDir, SessionError
-    from station.store import StoreError
+    from station import zoom_session  # defers numpy, yaml
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
 
     part_args = argparse.Namespace(**{**vars(args), "json": False})  # one JSON object: the zoom session's
 
@@ -225,8 +226,6 @@ def _zoom_parts(path: Path, args) -> int:
 
 
 def _zoom_summary(results, args) -> None:
-    from station.tables import print_table
-
     if args.json:
         print(json.dumps(results, indent=1))
         return
@@ -250,8 +249,6 @@ def _zoom_summary(results, args) -> None:
 
 def _already_finished(session, args, shown=None) -> int:
     """A finished session resumed: nothing to capture; its exit code is its verdict's."""
-    from station.qa.results import finished_results, state_exit_code
-
     try:
         results = finished_results(session)
     except (OSError, ValueError) as exc:
@@ -266,8 +263,7 @@ def _already_finished(session, args, shown=None) -> int:
 
 
 def _repair(args) -> int:
-    from station.session.directory import SessionDir, SessionError
-    from station.session.integrity import check_session, needs_capture, repair_files, repair_session
+    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
 
     try:
         done = repair_files(args.session_dir, base_dir=args.base_dir)
@@ -302,9 +298,8 @@ def _repair(args) -> int:
 
 def _refit(session, store_name=None) -> int:
     """Measure, fit and store the reopened focus settings again, then QA and the report: no devices."""
-    from station.cli.store_options import store_location
-    from station.session_run import run_session
-    from station.store import ProfileStore, StoreError
+    from station.session_run import run_session  # defers cv2, numpy, yaml
+    from station.store import ProfileStore, StoreError  # defers sqlalchemy
 
     try:
         with ProfileStore(store_location(store_name, session.config)) as store:
@@ -327,8 +322,8 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
     live = _live(args)
     if live is None:
         return _execute_session(config, get_session, args, opened, report)
-    from station.live.session_tap import live_session_page
-    from station.web.serve import ServeError
+    from station.live.session_tap import live_session_page  # defers numpy
+    from station.web.serve import ServeError  # defers jinja2, starlette, markupsafe
 
     try:
         page = live_session_page(config, port=live)
@@ -354,12 +349,10 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
 
 
 def _execute_session(config, get_session, args, opened=None, report: bool = True, tap=None) -> int:
-    from station.config import ConfigError
-    from station.session.devices import open_station
-    from station.session.directory import SessionError
-    from station.session_run import run_session
-    from station.store import StoreError
-    from station.tables import console as text_console
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.session.devices import open_station  # defers numpy, yaml
+    from station.session.directory import SessionError  # defers cv2, numpy, yaml
+    from station.session_run import run_session  # defers cv2, numpy, yaml
 
     started = []  # the session directory, once there is one
     result = None
@@ -402,15 +395,12 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
 
 def _open_store(config, store_name=None):
     """The store the session writes (``--store``, else the configuration's; :mod:`station.cli.store_options`)."""
-    from station.cli.store_options import store_location
-    from station.store import ProfileStore
+    from station.store import ProfileStore  # defers sqlalchemy
 
     return ProfileStore(store_location(store_name, config))
 
 
 def _print_results_of(session_dir: Path) -> None:
-    from station.qa.results import read_results
-
     results = read_results(session_dir)
     if results is not None:
         print(json.dumps(results, indent=1))
@@ -418,9 +408,8 @@ def _print_results_of(session_dir: Path) -> None:
 
 # ----------------------------------------------------------------- plan
 def _plan(args) -> int:
-    from station.config import ConfigError
-    from station.session.estimate import estimate_plan
-    from station.tables import print_table
+    from station.config import ConfigError  # defers numpy, yaml
+    from station.session.estimate import estimate_plan  # defers numpy, yaml
 
     try:
         config, warnings = _load(args.config)
@@ -488,9 +477,7 @@ def _plan(args) -> int:
 
 # ----------------------------------------------------------------- list
 def _list(args) -> int:
-    from station.config import ConfigError, load_config
-    from station.session.states import sessions_in
-    from station.tables import print_table
+    from station.config import ConfigError, load_config  # defers numpy, yaml
 
     if args.directory is not None and args.config is not None:
         return _error("give a directory or --config, not both")

@@ -24,7 +24,8 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from station.store.location import DEFAULT_STORE, StoreLocation, default_store, parse_store
+from station.store.errors import StoreError
+from station.store.location import DEFAULT_STORE, SQLITE, StoreLocation, default_store, parse_store, user_store_path
 
 if TYPE_CHECKING:
     from station.config import Config
@@ -60,7 +61,7 @@ def store_location(
     if config is None and config_path is None and not os.environ.get("HARP_STORE"):
         config_path = os.environ.get("HARP_CONFIG") or None
     if config is None and config_path is not None:
-        from station.config import load_config
+        from station.config import load_config  # defers numpy, yaml
 
         config = load_config(config_path)
     if config is not None:
@@ -82,9 +83,7 @@ def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool =
     """Open the store at ``where`` (a location, or parsed arguments with ``--store`` / ``--config``):
     for reading by default (it must exist), for writing with ``write=True`` (created, migrated and
     checked before anything is written)."""
-    from station.store.database import ProfileStore
-    from station.store.errors import StoreError
-    from station.store.location import SQLITE, user_store_path
+    from station.store.database import ProfileStore  # defers sqlalchemy
 
     loc = where if isinstance(where, StoreLocation) else location_from_args(where)
     try:

@@ -23,9 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.resample import DEFAULT_T
+from pipeline.tca import shot_offsets
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.colour import fit_channels, measure_colour_file, tca_document
+from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.files import atomic_write_text
 from station.inputs import InputError
+from station.tables import is_terminal, print_table
 
 
 def register(subparsers) -> None:
@@ -46,18 +51,12 @@ def register(subparsers) -> None:
 
 def _offsets(m, colour: str) -> float:
     """Median signed offset (px) of a channel's edges from green's, along green's normals."""
-    from pipeline.tca import shot_offsets
-
     ref = [[ln.points for ln in g.lines] for g in m.channel("G")]
     obs = shot_offsets([m.lines(colour)] * len(ref), ref)
     return float(np.median(np.abs(obs.offset))) if len(obs.offset) else float("nan")
 
 
 def run(args) -> int:
-    from station.colour import fit_channels, measure_colour_file, tca_document
-    from station.exit_codes import EXIT_ERROR, EXIT_OK
-    from station.files import atomic_write_text
-
     shots = []
     for path in args.images:
         try:
@@ -91,8 +90,6 @@ def run(args) -> int:
     if args.json:
         print(json.dumps(doc))
         return EXIT_OK
-    from station.tables import is_terminal, print_table
-
     columns = ("image", "pattern", "plane", "edges", "d (px)", "d_max (px)", "median offset from green (px)")
     planes = [
         (img["path"], img["pattern"], r["plane"], str(r["edges"]), f"{r['d']:.4f}", f"{r['d_max']:.4f}")

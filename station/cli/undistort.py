@@ -31,9 +31,11 @@ import numpy as np
 
 from pipeline.corrected_frame import corrected_frame
 from pipeline.model_file import read_model_file
+from pipeline.models.tca_model import ChannelModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
+from station.colour import read_tca_file
 from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
 
@@ -101,9 +103,6 @@ def _run(args) -> int:
     args.frame = frame
     channels = None
     if getattr(args, "tca", None):
-        from pipeline.models.tca_model import ChannelModel
-        from station.colour import read_tca_file
-
         fields = read_tca_file(args.tca, mf.width, mf.height)
         channels = {ch: ChannelModel(mf.model, f) for ch, f in fields.items()}
     out_dir = Path(args.output_dir)

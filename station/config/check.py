@@ -19,6 +19,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from drivers import CAMERA_DRIVERS, driver_config_keys
 from station.config.errors import ConfigError
 from station.config.schema import Config
 
@@ -54,8 +55,6 @@ def check_config(config: Config) -> ConfigCheck:
                 f"Name the vendor's focus feature (see `harp devices`)",
             )
         )
-    from drivers import CAMERA_DRIVERS, driver_config_keys
-
     known = driver_config_keys(CAMERA_DRIVERS, cam.driver)
     unknown = sorted(set(cam.settings) - known)
     if unknown:

@@ -43,7 +43,7 @@ def check_what_the_devices_allow(
         if not inside(deg):
             raise ConfigError(path, f"capture.orientations_deg[{i}]", f"expected an angle in {allowed}, got {deg:g}")
     if camera.driver == "sim":
-        from drivers.sim.lens import FOCUS_RANGE
+        from drivers.sim.lens import FOCUS_RANGE  # defers cv2
 
         for i, f in enumerate(focus_settings):
             if not FOCUS_RANGE[0] <= f <= FOCUS_RANGE[1]:

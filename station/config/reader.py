@@ -27,6 +27,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from station.bounded_read import BoundedReadError, read_regular_file
+
 MAX_CONFIG_BYTES = 1 << 20
 """A configuration file's largest size (1 MiB; the shipped ones are under 4 kB)."""
 
@@ -51,8 +53,6 @@ class ConfigReadError(ValueError):
 
 def read_config_text(path: str | os.PathLike) -> str:
     """The text of the configuration file ``path``, or :class:`ConfigReadError`."""
-    from station.bounded_read import BoundedReadError, read_regular_file
-
     p = Path(path)
     try:
         data = read_regular_file(p, MAX_CONFIG_BYTES, what="a configuration file")

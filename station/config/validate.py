@@ -23,6 +23,7 @@ from pipeline.fitspec import AUTO, parse_choice
 from pipeline.resample import DEFAULT_T
 from station.config.devices import check_what_the_devices_allow
 from station.config.errors import ConfigError, shown
+from station.config.reader import ConfigReadError, load_yaml, read_config_text
 from station.config.schema import (
     EMULATOR_PORT,
     OVERLAY_RETENTION,
@@ -180,8 +181,6 @@ def load_config(path: str | os.PathLike, base_dir: str | os.PathLike | None = No
     ------
     ConfigError : one line naming the file, the field and what was expected.
     """
-    from station.config.reader import ConfigReadError, read_config_text
-
     path = Path(path)
     try:
         text = read_config_text(path)
@@ -194,8 +193,6 @@ def parse_config(text: str, path: str | os.PathLike, base_dir: str | os.PathLike
     """Validate configuration ``text`` as if read from ``path`` (see :func:`load_config`)."""
     path = Path(path).absolute()
     base = Path(base_dir).absolute() if base_dir is not None else path.parent
-    from station.config.reader import ConfigReadError, load_yaml
-
     try:
         data = load_yaml(text)
     except ConfigReadError as exc:

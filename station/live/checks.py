@@ -23,7 +23,14 @@ import numpy as np
 
 from pipeline.assess import Assessment, ExposureFigures
 from station.config import CheckConfig, PipelineConfig
-from station.session.processing import angle_difference
+from station.session.processing import (
+    angle_difference,
+    average_frames,
+    exposure_problems,
+    full_scale,
+    measure_shot,
+    shot_problems,
+)
 
 
 def exposure_warnings(fig: ExposureFigures, checks: CheckConfig) -> list[str]:
@@ -89,8 +96,6 @@ def check_shot(
     bit_depth: int | None = None,
 ) -> ShotCheck:
     """The executor's checks (exposure, then strings found at the expected angle) on the averaged shot."""
-    from station.session.processing import average_frames, exposure_problems, full_scale, measure_shot, shot_problems
-
     image = average_frames(list(images))
     problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), checks)
     if problems:

@@ -24,7 +24,7 @@ def apply_session_settings(config: Any, camera: Any) -> None:
 
 def live_station(config: Any, camera: Any, turntable: Any, **kw: Any) -> Any:
     """The :class:`~station.live.runner.LiveStation` of a configuration's devices."""
-    from station.live.runner import LiveStation
+    from station.live.runner import LiveStation  # defers scipy, cv2, numpy, yaml
 
     return LiveStation(
         camera,
@@ -45,8 +45,8 @@ def check_once(config: Any, camera: Any, turntable: Any) -> dict[str, Any]:
     (``pass``, ``problems``, the frames' settings, the session's measurement, the assessment)."""
     import numpy as np
 
-    from pipeline.assess import assess_frame
-    from station.live.checks import check_shot, focus_warnings
+    from pipeline.assess import assess_frame  # defers scipy, cv2, numpy
+    from station.live.checks import check_shot, focus_warnings  # defers scipy, cv2, numpy, yaml
 
     apply_session_settings(config, camera)
     stage = float(turntable.position()) if turntable is not None else None

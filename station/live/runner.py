@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from drivers import CameraRanges, TurntableRanges
 from drivers.errors import DeviceDisconnected, DriverError
 from pipeline.assess import Assessment, Coverage, analysis_scale, assess_frame, empty_coverage, focus_peak
 from station.config import CheckConfig
@@ -204,8 +205,6 @@ class LiveStation:
             return None
         travel = None
         with contextlib.suppress(Exception):
-            from drivers import TurntableRanges
-
             if isinstance(self.turntable, TurntableRanges):
                 r = self.turntable.travel_range()
                 travel = [r.minimum, r.maximum]
@@ -226,8 +225,6 @@ class LiveStation:
 
     def _read_camera_settings(self) -> None:
         """Settings and ranges as the camera thread last read them (the web thread never touches the device)."""
-        from drivers import CameraRanges
-
         cam = self.camera
         out: dict[str, Any] = {}
         with contextlib.suppress(Exception):

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from drivers.protocols import CameraIdentity, Frame
+from station.live.devices import live_station
 from station.session.records import ShotMeasured
 
 
@@ -119,9 +120,8 @@ def live_session_page(
     The page's server runs on a background thread (the session runs in the foreground);
     raises :class:`station.web.ServeError` (one line) when the address cannot be used.
     """
-    from station.live.devices import live_station
-    from station.live.web import live_app
-    from station.web.serve import start
+    from station.live.web import live_app  # defers scipy, cv2, jinja2, starlette
+    from station.web.serve import start  # defers jinja2, starlette, markupsafe
 
     station = live_station(config, None, None)
     station.start()

@@ -27,8 +27,8 @@ def _stamp(path) -> tuple[int, int] | None:
 def stored_measurement(session, focus_idx: int, orientation_idx: int):
     """The ``ImageMeasurement`` the executor kept for the shot's current attempt, or None
     (no ``measurements/*.npz`` for it, or written by an incompatible version)."""
-    from station.session.directory import SessionError
-    from station.session.evidence import measurement_from_arrays
+    from station.session.directory import SessionError  # defers cv2, numpy, yaml
+    from station.session.evidence import measurement_from_arrays  # defers numpy
 
     rec = session.last(ShotMeasured, focus_idx=focus_idx, orientation_idx=orientation_idx)
     if rec is None or not rec.file or rec.attempt != session.attempt(focus_idx, orientation_idx):
@@ -53,8 +53,8 @@ def stored_measurement(session, focus_idx: int, orientation_idx: int):
 
 def stored_uncertainty(session, focus_idx: int, model):
     """The bootstrap uncertainty map the executor kept for a focus setting, or None."""
-    from station.session.directory import SessionError
-    from station.session.evidence import uncertainty_from_arrays
+    from station.session.directory import SessionError  # defers cv2, numpy, yaml
+    from station.session.evidence import uncertainty_from_arrays  # defers numpy
 
     rec = session.last((Fitted, FitFailed), focus_idx=focus_idx)  # the last fit: a failed one has no map
     if not isinstance(rec, Fitted) or not rec.uncertainty_file:

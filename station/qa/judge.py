@@ -21,7 +21,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import station.qa.verdicts
 from station.profile import Profile, Verdict
+from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_measurements
+from station.session.directory import json_default
 from station.session.records import InterpolationError, QARecorded, Reopened, SessionVerdict, Stored
 
 
@@ -53,8 +56,6 @@ def _normal(d: dict) -> Any:
 
 
 def _plain(o: Any) -> Any:
-    from station.session.directory import json_default
-
     return json_default(o)
 
 
@@ -69,10 +70,8 @@ def judge_session(
     session: Any, *, store: Any = None, note: Callable[[str], None] = lambda _t: None
 ) -> SessionQA | None:
     """Judge, record and say the QA of every profile of an open session directory (None: no profile yet)."""
-    from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_measurements, session_profiles
-
     config = session.config
-    profiles = session_profiles(session.path)
+    profiles = station.qa.verdicts.session_profiles(session.path)  # looked up now: tests replace it
     if not profiles:
         return None
     stored = session.stored_ids()

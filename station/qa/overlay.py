@@ -26,6 +26,7 @@ import numpy as np
 
 from pipeline.measure import ImageMeasurement
 from pipeline.straightness import fit_line
+from station.files import atomic_write_bytes
 
 REJECT_BGR = (255, 0, 255)
 LABEL_MIN_POINTS = 100
@@ -183,8 +184,6 @@ def write_overlay(
 ) -> Path:
     """Write the overlay to ``path``: PNG, or JPEG (:data:`JPEG_QUALITY`) for a ``.jpg``/``.jpeg``
     name; ``max_side``: shrunk to at most that many pixels along its longer side. Returns the path."""
-    from station.files import atomic_write_bytes
-
     out = Path(path)
     picture = render_overlay(image, m, title)
     if max_side is not None:

@@ -48,10 +48,20 @@ from pipeline.resample import DEFAULT_T
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+import pipeline.measure  # measure_image and the bootstrap called through their modules: tests replace them
+import pipeline.uncertainty
+from pipeline.compare import compare_models
+from pipeline.edgeset import edge_figures, tls
+from pipeline.models.base import IdentityModel
 from station.config import OVERLAY_RETENTION
+from station.pool import WorkerPool
 from station.profile import Profile, Verdict
 from station.qa.evidence import stored_measurement, stored_uncertainty
+from station.qa.overlay import SCREEN_MAX_SIDE, write_overlay
+from station.qa.results import config_record, device_identities, identity_warnings
+from station.qa.verdicts import grid_step
 from station.session import layout
+from station.session.processing import average_frames
 
 REPORT_MD = "report.md"
 """The report's Markdown file, in its directory."""
@@ -114,10 +124,7 @@ def _image_axes(ax, width, height):
 
 def plot_field(model, width: int, height: int, path, title: str = "", arrows: int = 24) -> Path:
     """Quiver plot of the correction's displacement modulo homography; returns the path."""
-    from pipeline.compare import compare_models
-    from pipeline.interpolate import normalised_field
-    from pipeline.models.base import IdentityModel
-    from station.qa.verdicts import grid_step
+    from pipeline.interpolate import normalised_field  # defers scipy
 
     # the same homography as the QA figure (station.qa.distortion_magnitude)
     h = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height)).homography
@@ -149,8 +156,6 @@ def plot_field(model, width: int, height: int, path, title: str = "", arrows: in
 
 def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
     """``(orientation index, edge index, rms before, rms after)`` per measured edge (px)."""
-    from pipeline.edgeset import edge_figures, tls
-
     keys, pts = [], []
     for o, s in enumerate(shots):
         for i, ln in enumerate(s.measurement.lines):
@@ -250,8 +255,6 @@ class Figure:
 
 
 def _write_overlay(image: np.ndarray, m: Any, path, title: str = "") -> Path:
-    from station.qa.overlay import SCREEN_MAX_SIDE, write_overlay
-
     return write_overlay(path, image, m, title=title, max_side=SCREEN_MAX_SIDE)
 
 
@@ -291,8 +294,6 @@ def draw_figures(figures: Sequence[Figure], workers: int = 1) -> None:
         for fig in figures:
             draw_figure(fig)
         return
-    from station.pool import WorkerPool
-
     pool = WorkerPool(workers, ["station.qa.report"])
     try:
         # the slow plots first, then the overlays: the processes end at about the same time
@@ -558,9 +559,6 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
 
     The measurement is the one the executor kept (:func:`stored_measurement`);
     a shot without one is measured now."""
-    from pipeline.measure import measure_image
-    from station.session.processing import average_frames
-
     cfg = session.config
     shots = []
     for o, deg in enumerate(cfg.capture.orientations_deg):
@@ -569,7 +567,7 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
             continue
         image = average_frames([session.read_frame(r) for r in records])
         m = stored_measurement(session, focus_idx, o)
-        shots.append(Shot(float(deg), image, m if m is not None else measure_image(image, t=t)))
+        shots.append(Shot(float(deg), image, m if m is not None else pipeline.measure.measure_image(image, t=t)))
     return shots
 
 
@@ -656,8 +654,6 @@ def session_context(session) -> tuple[list[tuple[str, str]], list[str]]:
     """The report's (what, value) rows of a session — started, station, software, configuration
     (path and SHA-256 of the copy the session ran), the devices as they reported themselves
     beside the configuration — and one warning per device that reported another identity."""
-    from station.qa.results import config_record, device_identities, identity_warnings
-
     cfg = session.config
     conf = config_record(session)
     devices = device_identities(session)
@@ -684,10 +680,8 @@ def session_context(session) -> tuple[list[tuple[str, str]], list[str]]:
 
 def shot_uncertainty(shots: Sequence[Shot], width: int, height: int, spec, *, n_boot: int = 20, seed: int = 0):
     """(FieldUncertainty or None, note) from the shots' edges, refitting ``spec`` (a FitSpec)."""
-    from pipeline.uncertainty import bootstrap_field_uncertainty
-
     lines = [[np.asarray(ln.points, np.float64) for ln in s.measurement.lines] for s in shots]
-    res = bootstrap_field_uncertainty(lines, width, height, spec, n_boot=n_boot, seed=seed)
+    res = pipeline.uncertainty.bootstrap_field_uncertainty(lines, width, height, spec, n_boot=n_boot, seed=seed)
     if not res:
         return None, f"not available: {res.reason}"
     return res, ""

@@ -33,9 +33,11 @@ from pathlib import Path
 from typing import Any
 
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, verdict_exit_code
+from station.files import atomic_write_text, sha256_file
 from station.plain_json import plain
 from station.session import layout
 from station.session.records import FrameSaved, InterpolationError, QARecorded, ReportWritten, SessionVerdict
+from station.session.states import session_state
 
 FORMAT = "harp-session-results"
 FORMAT_VERSION = 1
@@ -94,8 +96,6 @@ def identity_warnings(devices: Mapping[str, Any]) -> list[str]:
 
 def config_record(session: Any) -> dict[str, Any]:
     """Path of the configuration the session was started from, its copy in the session and the copy's SHA-256."""
-    from station.files import sha256_file
-
     copy = session.path / layout.CONFIG_COPY
     return {
         "path": session.meta.get("config_source"),
@@ -108,9 +108,8 @@ def session_results(session: Any, qa: Any = None) -> dict[str, Any]:
     """The results of an open session directory (see the module docstring); ``qa`` is the
     :class:`station.qa.judge.SessionQA` of this run (None: taken from the manifest's records,
     or no verdict yet)."""
-    from station.profile import Verdict
-    from station.qa.verdicts import session_profiles
-    from station.session.states import session_state
+    from station.profile import Verdict  # defers cv2, numpy, yaml
+    from station.qa.verdicts import session_profiles  # defers cv2, numpy, yaml
 
     cfg = session.config
     state = session_state(session.typed)
@@ -198,7 +197,7 @@ def state_exit_code(state: str, verdict: str | None) -> int | None:
 
 
 def _checks(items: Any):
-    from station.profile import Check
+    from station.profile import Check  # defers cv2, numpy, yaml
 
     for c in items or ():
         if isinstance(c, Mapping):
@@ -207,8 +206,6 @@ def _checks(items: Any):
 
 def write_results(session: Any, results: Mapping[str, Any]) -> Path:
     """Write ``results`` as ``DIR/results.json`` atomically; returns the path."""
-    from station.files import atomic_write_text
-
     path = session.path / layout.RESULTS
     atomic_write_text(path, json.dumps(results, indent=1) + "\n")
     return path

@@ -29,8 +29,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pipeline.model_file import read_model_file
+from station.config import ConfigError
 from station.profile import Profile, Verdict
+from station.qa.verdicts import (
+    calibrated_thresholds,
+    combine,
+    interpolation_error,
+    qa_verdict,
+    session_measurements,
+    session_profiles,
+    thresholds_from,
+)
 from station.session import layout
+from station.session.directory import SessionDir, SessionError
 
 REPORT_BOOTSTRAP = 20
 """Bootstrap replicates of the report's uncertainty map when the configuration sets none."""
@@ -60,8 +72,6 @@ class Target:
 # ---------------------------------------------------------------- targets
 def session_targets(session: Any) -> list[Target]:
     """Every profile of an open session (:class:`~station.session.directory.SessionDir`)."""
-    from station.qa.verdicts import session_measurements, session_profiles
-
     profiles = session_profiles(session.path)
     if not profiles:
         raise QAInputError(f"{session.path}: session has no fitted profile yet")
@@ -94,10 +104,6 @@ def attach_session_measurements(target: Target, opened: dict[str, Any]) -> None:
     """The measurements of the session a stored profile names, when its directory is at hand
     (``opened``: the sessions opened so far, by directory, ``None`` for one that cannot be read;
     the caller closes them). What could not be had is said in ``target.notes``."""
-    from station.config import ConfigError
-    from station.qa.verdicts import session_measurements
-    from station.session.directory import SessionDir, SessionError
-
     where = target.profile.provenance.session_dir
     if not where or not (Path(where) / layout.SESSION_FILE).is_file():
         target.notes.append(
@@ -134,8 +140,6 @@ def thresholds_for(
     ``None`` where not given) over ``config``'s (``--config``) over those it was calibrated under
     (``session``'s configuration, else the stored verdict's) over the defaults. Where they come
     from is set in ``target.thresholds_from``."""
-    from station.qa.verdicts import calibrated_thresholds, thresholds_from
-
     base: Any
     if config is not None:
         base, origin = config.qa, f"--config {config.path}"
@@ -157,8 +161,6 @@ def reference_model(ref: str, open_store: StoreOpener, focus: float, width: int,
     a harp model file, a stored profile ``#id``, or a lens in the store (its current profile at
     ``focus``, interpolated between its calibrated focus settings when needed)."""
     if Path(ref).is_file():
-        from pipeline.model_file import read_model_file
-
         try:
             mf = read_model_file(ref)
         except ValueError as exc:
@@ -187,7 +189,7 @@ def reference_model(ref: str, open_store: StoreOpener, focus: float, width: int,
     same = [p for p in profiles if math.isclose(p.focus, focus, abs_tol=1e-9)]
     if same:
         return same[0].model
-    from pipeline.interpolate import interpolate_correction
+    from pipeline.interpolate import interpolate_correction  # defers scipy
 
     try:
         return interpolate_correction({p.focus: p.model for p in profiles}, focus, width, height)
@@ -224,8 +226,6 @@ def judge_targets(
     with the thresholds of :func:`thresholds_for`, against the ``reference`` (needs
     ``open_store`` for a stored one, and a reference threshold), recomputing the holdout d from
     the measurements unless ``recompute`` is false."""
-    from station.qa.verdicts import combine, interpolation_error, qa_verdict
-
     verdicts, used = [], []
     for t in targets:
         if session is None:
@@ -265,6 +265,7 @@ def write_qa_report(
     bootstrapped if it kept none); for a stored lens, the stored model and figures.
     ``overlays``: which focus settings keep their overlays (None: a session's ``report.overlays``,
     else all)."""
+    # defers matplotlib, PIL
     from station.qa.report import FocusEvidence, session_context, session_evidence, write_report
 
     evidence = []
@@ -312,7 +313,7 @@ def write_qa_report(
 
 def lens_context(targets: list[Target]) -> list[tuple[str, str]]:
     """Report rows of a stored lens: each profile's calibration date, station, software and session."""
-    from station import __version__
+    from station import __version__  # defers importlib.metadata
 
     rows = [("software (this report)", f"harp station {__version__}")]
     for t in targets:

@@ -52,8 +52,16 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.compare import compare_models
+from pipeline.edgeset import EdgeSet, collect, edge_figures, straightness_of, tls
+from pipeline.fit import fit_distortion
+from pipeline.model_file import read_model_file
+from pipeline.models.base import IdentityModel
+from station.calibration import calibrate_shots
 from station.config import QAConfig
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
+from station.qa.evidence import stored_measurement
+from station.session import layout
 
 THRESHOLD_FIELDS = ("max_holdout_d_px", "max_distortion_px", "max_reference_deviation_px")
 
@@ -114,9 +122,6 @@ def grid_step(width: int, height: int) -> float:
 
 def distortion_magnitude(model, width: int, height: int) -> tuple[float, float]:
     """(RMS, max) displacement of the correction modulo the best homography, px."""
-    from pipeline.compare import compare_models
-    from pipeline.models.base import IdentityModel
-
     c = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height))
     return c.rms, c.max
 
@@ -218,8 +223,6 @@ def evaluate(
     self-check (:func:`station.calibration.harp_health`): the session fails when a string is bent
     beyond its limit (the harp, not the lens: the correction would carry the string's bend).
     """
-    from pipeline.compare import compare_models
-
     checks: list[Check] = []
     reasons: list[str] = []
     metrics: dict[str, Any] = {"holdout_d_px": holdout_d}
@@ -392,8 +395,6 @@ def _fit_rejection() -> tuple[float, float]:
     """(reject_factor, max_reject_fraction) of the fit (:func:`pipeline.fit.fit_distortion`'s defaults)."""
     import inspect
 
-    from pipeline.fit import fit_distortion
-
     params = inspect.signature(fit_distortion).parameters
     return float(params["reject_factor"].default), float(params["max_reject_fraction"].default)
 
@@ -405,8 +406,6 @@ def corrected_d(model, shots: Sequence[Sequence[np.ndarray]], width: int, height
     x the median edge RMS, the worst ``max_reject_fraction`` of the edges at most
     (:func:`pipeline.fit.fit_distortion`). A correction that does not straighten the edges raises
     every edge's residual with the median, so it cannot hide behind the rule. NaN when no edge is usable."""
-    from pipeline.edgeset import EdgeSet, collect, edge_figures, straightness_of, tls
-
     edges, _rejected = collect([list(s) for s in shots], width, height)
     if not isinstance(edges, EdgeSet) or edges.n_edges == 0:
         return math.nan, 0, 0
@@ -439,8 +438,6 @@ def recompute_holdout(profile: Profile, measurements: Measurements, map_fn=map) 
     """(holdout d, note): the leave-one-orientation-out holdout d of ``profile`` recomputed from
     ``measurements`` by refitting its spec exactly as a session does
     (:func:`station.calibration.calibrate_shots`); (None, why) when it cannot be."""
-    from station.calibration import calibrate_shots
-
     hold = profile.merit.holdout
     if profile.spec is None:
         return None, "not recomputed: the profile does not record which model was fitted"
@@ -531,17 +528,12 @@ def combine(verdicts) -> str:
 def session_profiles(session_path) -> list[tuple[int, Profile]]:
     """``(focus_idx, profile)`` of every profile a session directory holds, by focus index
     (a profile file that does not record its focus gets the session's focus setting later)."""
-    from pipeline.model_file import read_model_file
-    from station.session import layout
-
     return [(f, Profile.from_model_file(read_model_file(p))) for f, p in layout.profile_files(session_path)]
 
 
 def session_measurements(session, focus_idx: int) -> Measurements | None:
     """The measured edges a session kept for one focus setting (``measurements/``, the shots'
     current attempts), or None when any orientation lacks its kept measurement."""
-    from station.qa.evidence import stored_measurement
-
     shots = []
     for o in range(len(session.config.capture.orientations_deg)):
         m = stored_measurement(session, focus_idx, o)
@@ -554,7 +546,7 @@ def session_measurements(session, focus_idx: int) -> Measurements | None:
 def interpolation_error(models_by_focus: dict, width: int, height: int):
     """Leave-one-out focus-interpolation error (list of ``(focus, rms_px, max_px)``),
     empty with fewer than 3 calibrated settings."""
-    from pipeline.interpolate import leave_one_out_error
+    from pipeline.interpolate import leave_one_out_error  # defers scipy
 
     if len(models_by_focus) < 3:
         return []

@@ -22,13 +22,12 @@ from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.protocols import CameraRanges, Range, TurntableRanges
 from station.config import Config, check_port
+from station.session.simulated import simulated_devices
 
 
 @contextlib.contextmanager
 def _created(config: Config) -> Iterator[tuple]:
     if config.simulation is not None:
-        from station.session.simulated import simulated_devices
-
         with simulated_devices(config) as sim:
             yield sim.camera, sim.turntable
         return

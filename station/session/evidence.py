@@ -116,7 +116,7 @@ def _build(cls, values: dict):
 
 def measurement_from_arrays(arrays: dict[str, np.ndarray]):
     """The ``ImageMeasurement`` of :func:`measurement_arrays`'s output."""
-    from pipeline.measure import ImageMeasurement, LineMeasurement, Rejection
+    from pipeline.measure import ImageMeasurement, LineMeasurement, Rejection  # defers cv2
 
     if "meta" not in arrays:
         raise ValueError("stored measurement has no 'meta'")
@@ -161,7 +161,7 @@ def uncertainty_arrays(u) -> dict[str, np.ndarray]:
 
 def uncertainty_from_arrays(arrays: dict[str, np.ndarray], model):
     """The ``FieldUncertainty`` of :func:`uncertainty_arrays`'s output, for ``model``."""
-    from pipeline.uncertainty import FieldUncertainty
+    from pipeline.uncertainty import FieldUncertainty  # defers cv2
 
     try:
         return FieldUncertainty(

@@ -50,11 +50,12 @@ from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, Device
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
-from station.files import describe_os_error
+from station.files import describe_os_error, sha256_file, write_profile
 from station.pool import WorkerPool
 from station.profile import Profile
+from station.provenance import make_provenance
 from station.session import layout
-from station.session.directory import SessionDir, SessionError
+from station.session.directory import SessionDir, SessionError, json_default
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.plan import (
     Capture,
@@ -95,6 +96,7 @@ from station.session.records import (
     Started,
     Stored,
 )
+from station.store import StoreError
 
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
@@ -520,9 +522,6 @@ class Executor:
         return w, h
 
     def _store(self, step: Store) -> None:
-        from station.files import sha256_file, write_profile
-        from station.provenance import make_provenance
-
         f = step.focus_idx
         cfg = self.config
         cal = self._calibrations[f]
@@ -556,8 +555,6 @@ class Executor:
         digest = sha256_file(path)
         profile_id = None
         if self.store is not None:
-            from station.store import StoreError
-
             try:
                 profile_id = self.store.put_profile(profile)
             except StoreError as exc:  # full disk, damaged store: stop here, frames and fits kept
@@ -627,8 +624,6 @@ def _bit_depth(frame: Frame) -> int | None:
 def _jsonable(value: Any) -> Any:
     """``value`` if it survives JSON, else its ``repr`` (driver extras may be anything)."""
     import json
-
-    from station.session.directory import json_default
 
     try:
         return json.loads(json.dumps(value, default=json_default))

@@ -121,7 +121,7 @@ def check_session(session) -> list[Damage]:
         rel = rec.model_file or layout.profile_file(f)
         problem = _file_problem(session.path / rel, rec.sha256)
         if problem is None:
-            from pipeline.model_file import read_model_file
+            from pipeline.model_file import read_model_file  # defers cv2, numpy, yaml
 
             try:
                 read_model_file(session.path / rel)
@@ -166,7 +166,7 @@ class RepairReport:
 def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
     """Repairs that come before the session can be opened: ``session.json``, ``config.yaml`` and
     damaged manifest lines. Returns what was done; raises :class:`SessionError` for what cannot be."""
-    from station.session.directory import SessionError, read_manifest, read_session_file
+    from station.session.directory import SessionError, read_manifest, read_session_file  # defers cv2, numpy, yaml
 
     path = Path(path)
     done: list[str] = []
@@ -250,7 +250,7 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
 
 
 def _config_loads(copy: Path, meta: dict) -> bool:
-    from station.config import ConfigError, load_config
+    from station.config import ConfigError, load_config  # defers numpy, yaml
 
     try:
         load_config(copy, base_dir=meta["base_dir"])
@@ -307,6 +307,6 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
 
 def needs_capture(session) -> bool:
     """Whether what the session lacks includes frames (so the devices are needed)."""
-    from station.session.plan import Capture, plan_session
+    from station.session.plan import Capture, plan_session  # defers numpy, yaml
 
     return any(isinstance(step, Capture) for step in plan_session(session.config, session.done_keys()))

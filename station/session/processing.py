@@ -218,7 +218,7 @@ class ShotMeasurement:
 
 def measure_shot(image: np.ndarray, pipeline: PipelineConfig) -> ShotMeasurement:
     """Run :func:`pipeline.measure.measure_image` on an averaged shot."""
-    from pipeline.measure import measure_image
+    from pipeline.measure import measure_image  # defers cv2
 
     m = measure_image(image, t=pipeline.t)
     return shot_from_measurement(m)

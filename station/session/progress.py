@@ -20,6 +20,7 @@ from typing import Any, Protocol
 
 from station.config import Config
 from station.session.records import Fault, Fitted, FrameSaved, Record, ShotMeasured, ShotRejected, Stored
+from station.tables import print_table
 
 
 class Subscriber(Protocol):
@@ -131,8 +132,6 @@ class ConsoleProgress:
 
         On a terminal a rich table; otherwise tab-separated text with one header line
         (:func:`station.tables.print_table`), units in the headers."""
-        from station.tables import print_table
-
         if self._progress is not None:
             self._progress.stop()
             self._progress = None

@@ -22,6 +22,7 @@ from typing import Any
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.sim.world import SimWorld
+from drivers.sim.zaber_emulator import start_zaber_emulator
 from station.config import EMULATOR_PORT, Config
 
 
@@ -45,11 +46,9 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     The devices are created but not opened. The emulator is stopped on exit.
     ``emulator_overrides`` reach ``start_zaber_emulator``.
     """
-    from drivers.sim.zaber_emulator import start_zaber_emulator
-
     if config.simulation is None:
         raise ValueError(f"{config.path}: simulation: expected a mapping for a simulated station, missing")
-    from drivers.sim.lens import lens_unit
+    from drivers.sim.lens import lens_unit  # defers cv2
 
     # the lens on the camera: the unit of the demo lens that carries this serial (simulation.lens_spread)
     unit = lens_unit(config.lens.serial, config.simulation.lens_spread)

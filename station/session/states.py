@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from station.session.layout import MANIFEST, SESSION_FILE
 from station.session.records import (
     Aborted,
     Finished,
@@ -110,8 +111,7 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     import datetime as _dt
     import json
 
-    from station.session.directory import SessionError, read_manifest
-    from station.session.layout import MANIFEST, SESSION_FILE
+    from station.session.directory import SessionError, read_manifest  # defers cv2, numpy, yaml
 
     path = Path(session_dir)
     try:
@@ -154,8 +154,7 @@ def summarise(session_dir: str | Path) -> SessionSummary:
 def sessions_in(root: str | Path) -> tuple[list[SessionSummary], list[str]]:
     """Every session directory directly under ``root``, oldest first, and one line per
     directory that looks like a session but cannot be read."""
-    from station.session.directory import SessionError
-    from station.session.layout import SESSION_FILE
+    from station.session.directory import SessionError  # defers cv2, numpy, yaml
 
     found, problems = [], []
     for d in sorted(Path(root).iterdir()):

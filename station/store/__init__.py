@@ -40,7 +40,7 @@ __all__ = [
 
 def __getattr__(name: str) -> Any:
     if name == "ProfileStore":
-        from station.store.database import ProfileStore
+        from station.store.database import ProfileStore  # defers sqlalchemy
 
         return ProfileStore
     raise AttributeError(f"module 'station.store' has no attribute {name!r}")

@@ -304,7 +304,7 @@ class ProfileStore:
         ``verdict`` is a :class:`~station.profile.Verdict` (its checks and thresholds are kept) or
         ``"PASS"`` / ``"FAIL"`` with ``reasons`` and ``metrics``. Does not change which profile is
         current: that is :meth:`record_verdict`'s."""
-        from station.profile import Verdict
+        from station.profile import Verdict  # defers cv2, numpy, yaml
 
         v = (
             verdict
@@ -352,7 +352,7 @@ class ProfileStore:
         )
 
     def _profile(self, row: sa.Row) -> Profile:
-        from station.profile import Profile
+        from station.profile import Profile  # defers cv2, numpy, yaml
 
         values = dict(row._mapping)
         pid = values.get("id")

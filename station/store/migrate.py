@@ -23,7 +23,7 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
-from station.store.engine import read, write
+from station.store.engine import damaged_hint, read, write
 from station.store.errors import StoreError
 from station.store.location import POSTGRESQL, StoreLocation
 from station.store.schema import HEAD, LEGACY_VERSIONS, REVISIONS, TABLES
@@ -106,7 +106,6 @@ def check_integrity(engine: sa.Engine, loc: StoreLocation) -> None:
     readable and consistent, in O(N)); both backends: the revision is :data:`HEAD` and every table
     of :data:`~station.store.schema.TABLES` is there and can be read. Raises StoreError
     (``kind="damaged"``) naming the store and what to do."""
-    from station.store.engine import damaged_hint
 
     def check(conn: sa.Connection) -> list[str]:
         problems: list[str] = []

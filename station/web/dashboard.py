@@ -39,6 +39,8 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Route
 
+from station.profile_choice import export_refusal, failed_line, lens_row
+from station.store import StoreError
 from station.web import create_app, render
 from station.web import dashboard_data as data
 from station.web.app import log
@@ -73,8 +75,6 @@ def _lookup_status(exc: LookupError) -> int:
 
 
 def _store_error(exc: Exception) -> str | None:
-    from station.store import StoreError
-
     return " ".join(str(exc).split()) if isinstance(exc, StoreError) else None
 
 
@@ -212,8 +212,6 @@ def _served(s: Served) -> Response:
 def _export_refused(request: Request, profile: Any) -> Response | None:
     """409 for an export of a profile that failed QA (the rule of :func:`station.profile_choice.export_refusal`),
     unless ``?allow-failed=1``: then None, and a log line names the profile and the client."""
-    from station.profile_choice import export_refusal, failed_line, lens_row
-
     lens = lens_row(profile)
     refusal = export_refusal(lens, profile, f"?{data.ALLOW_FAILED}=1")
     if refusal is None:
@@ -283,7 +281,5 @@ def dashboard_app(store: Any, *, title: str = "harp QA dashboard") -> Starlette:
         nav=[("/", "Lenses"), ("/api/lenses", "JSON")],
         state={"store": store, "files": ProfileFiles()},
     )
-    from station.store import StoreError
-
     app.add_exception_handler(StoreError, store_errors)
     return app

@@ -62,7 +62,7 @@ def window_of(query: Mapping[str, str]) -> Any:
     ``YYYY-MM-DD``, inclusive) and ``station``; empty values are absent. :class:`BadQuery` otherwise."""
     import datetime as dt
 
-    from station.store.dashboard import Window
+    from station.store.dashboard import Window  # defers sqlalchemy
 
     kw: dict[str, str | None] = {}
     for param, name in FILTERS:
@@ -88,7 +88,7 @@ def lenses_doc(store: Any, window: Any = None) -> dict[str, Any]:
     """Every lens model with its lenses and calibrations passed / failed, the counts per station
     and day, and every lens with its newest calibration's verdict and failure reason — of the
     calibrations in ``window`` (:func:`window_of`; None: all), with every station of the store."""
-    from station.store.dashboard import EVERYTHING
+    from station.store.dashboard import EVERYTHING  # defers sqlalchemy
 
     window = EVERYTHING if window is None else window
     models = [
@@ -204,7 +204,7 @@ def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
 
     A profile that failed QA has no ``downloads``: its exports are listed in ``downloads_failed_qa``,
     each URL with ``?allow-failed=1`` (the export then says FAILED QA in the file, and the server logs it)."""
-    from pipeline.exports.registry import FORMATS
+    from pipeline.exports.registry import FORMATS  # defers scipy
 
     m = p.merit
     unc = m.field_uncertainty
@@ -315,7 +315,7 @@ def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
     d in calibration order, with control limits (mean ± 3σ of the lenses that passed) and the
     spec limits (the QA limits those profiles were judged with: ``spec`` = comparison and every
     distinct limit, None when the check was not judged)."""
-    from station.store.dashboard import control_limits
+    from station.store.dashboard import control_limits  # defers sqlalchemy
 
     points = store.model_trend(maker, model)
     if not points and not any(m.maker == maker and m.model == model for m in store.lens_models()):

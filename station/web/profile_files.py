@@ -34,7 +34,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pipeline.model_file import read_model_file
+from station.lensfun_databases import installed_databases
 from station.profile import Profile
+from station.session import layout
+from station.session.directory import read_records
+from station.session.evidence import uncertainty_from_arrays
+from station.session.layout import MANIFEST
+from station.session.records import Fitted
 
 CACHE_ENTRIES = 64
 
@@ -87,9 +94,6 @@ def session_focus_index(profile: Profile) -> int | None:
     """The focus index of the session profile file that holds exactly this profile's model (same
     focus, same image size, same model parameters), or None (not a session's own profile, the
     session gone, or refitted since)."""
-    from pipeline.model_file import read_model_file
-    from station.session import layout
-
     sd = profile.provenance.session_dir
     if not sd or profile.focus is None:
         return None
@@ -140,7 +144,7 @@ class ProfileFiles:
                 return Served("image/png", path=png, source="the session report")
 
         def make() -> Served:
-            from station.qa.report import plot_field
+            from station.qa.report import plot_field  # defers matplotlib, PIL
 
             data = _png(lambda out: plot_field(p.model, p.width, p.height, out, title=_label(p)))
             return Served("image/png", data=data, source="rendered from the stored model")
@@ -163,7 +167,7 @@ class ProfileFiles:
             return Served("image/png", path=png, source="the session report")
 
         def make() -> Served:
-            from station.qa.report import plot_uncertainty
+            from station.qa.report import plot_uncertainty  # defers matplotlib, PIL
 
             unc = _session_uncertainty(root, f, p.model)
             if unc is None:
@@ -175,19 +179,17 @@ class ProfileFiles:
 
     # ------------------------------------------------------------ exports
     def export(self, p: Profile, fmt: str) -> Served:
-        from pipeline.exports.registry import FORMATS, write_export
+        from pipeline.exports.registry import FORMATS, write_export  # defers scipy
 
         if fmt not in FORMATS:
             raise Unavailable(f"unknown export format {fmt!r}; known: {', '.join(FORMATS)}")
 
         def make() -> Served:
-            from pipeline.exports.registry import ExportOptions
-            from station.export_source import export_source
+            from pipeline.exports.registry import ExportOptions  # defers scipy
+            from station.export_source import export_source  # defers scipy
 
             options = ExportOptions()
             if fmt == "lensfun":  # the same name check as harp export (pipeline.exports.lensfun.installed_lens)
-                from station.lensfun_databases import installed_databases
-
                 options = ExportOptions(installed_lensfun=installed_databases())
             try:
                 ex = write_export(fmt, export_source(p), options)
@@ -206,11 +208,6 @@ class ProfileFiles:
 def _session_uncertainty(root: Path, f: int, model: Any) -> Any:
     """The bootstrap map a session kept for focus index ``f`` (SHA-256 checked), or None."""
     import numpy as np
-
-    from station.session.directory import read_records
-    from station.session.evidence import uncertainty_from_arrays
-    from station.session.layout import MANIFEST
-    from station.session.records import Fitted
 
     try:
         records = read_records(root / MANIFEST)
