@@ -22,7 +22,9 @@ from typing import Any
 from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, BoardRejected, BoardSpec, BoardView, detect_board
 from pipeline.intrinsics import Intrinsics, IntrinsicsFailure, fit_intrinsics
 from pipeline.models.base import DistortionModel
+from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
+from station.session.frame_files import encode_frame
 
 
 @dataclass(frozen=True)
@@ -120,9 +122,7 @@ def capture_board_shots(
     (:meth:`drivers.sim.camera.SimulatedCamera.board_pose`). Raises ConfigError / OSError (one line)."""
     import dataclasses
 
-    from station.files import atomic_write_bytes
-    from station.session.devices import open_station
-    from station.session.frame_files import encode_frame
+    from station.session.devices import open_station  # defers drivers
 
     cam = config.station.camera
     if config.simulation is not None and cam.driver == "sim":

@@ -108,6 +108,9 @@ from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, lens_for_focus, zoom_lens
 from drivers.sim.world import SimWorld
+from pipeline.board import parse_board
+from pipeline.board_render import BoardPose, render_board
+from pipeline.board_render import camera_matrix as board_camera_matrix
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
@@ -274,8 +277,6 @@ class SimulatedCamera:
                 raise ValueError("sim camera: jpeg_quality needs bit_depth 8 (Mono8)")
         self.board = None
         if board is not None:
-            from pipeline.board import parse_board
-
             self.board = parse_board(str(board))  # ValueError (one line) naming the label
         if not (0.0 <= float(board_tilt_deg) < 80.0):
             raise ValueError(f"sim camera: board_tilt_deg must be in [0, 80), got {board_tilt_deg!r}")
@@ -454,12 +455,10 @@ class SimulatedCamera:
     def camera_matrix(self) -> np.ndarray:
         """The simulated camera's true camera matrix (the ideal frame of its lens maps):
         ``fx = fy = focal_px``, principal point :data:`BOARD_PRINCIPAL_OFFSET` from the centre."""
-        from pipeline.board_render import camera_matrix
-
         w, h = self._size
         cx = (w - 1) / 2.0 + BOARD_PRINCIPAL_OFFSET[0] * w
         cy = (h - 1) / 2.0 + BOARD_PRINCIPAL_OFFSET[1] * w
-        return camera_matrix(self.focal_px, self.focal_px, cx, cy)
+        return board_camera_matrix(self.focal_px, self.focal_px, cx, cy)
 
     def board_pose(self, stage_deg: float) -> Any:
         """The board's pose at turntable angle ``stage_deg``: mounted on a wedge of ``board_tilt_deg``
@@ -467,8 +466,6 @@ class SimulatedCamera:
         :data:`BOARD_SWEEP` image widths off the axis in the turntable's direction, at the distance
         where it spans :data:`BOARD_FILL` of the width."""
         import cv2
-
-        from pipeline.board_render import BoardPose
 
         assert self.board is not None
         w, _ = self._size
@@ -488,8 +485,6 @@ class SimulatedCamera:
     def _board_frame(self, stage: float, focus: float, index: int, seed: int, stamp: float) -> Frame:
         """A frame of the board (``board`` configured) through the lens at ``focus``
         (:func:`pipeline.board_render.render_board`)."""
-        from pipeline.board_render import render_board
-
         assert self.board is not None
         w, h = self._size
         lens = self.lens_at(focus)

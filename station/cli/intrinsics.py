@@ -26,7 +26,7 @@ from pathlib import Path
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, open_store
 from station.exit_codes import EXIT_ERROR, EXIT_OK
-from station.files import write_profile
+from station.files import describe_os_error, write_profile
 from station.store.errors import StoreError
 from station.tables import is_terminal, print_table
 
@@ -165,9 +165,9 @@ def run(args) -> int:
 
 def _capture(args, spec, profile):
     """The board shots taken by the station of ``--config``; an exit code after one line on failure."""
-    from drivers.errors import DriverError
-    from station.config import ConfigError, load_config
-    from station.intrinsics import DEFAULT_BOARD_ANGLES, capture_board_shots
+    from drivers.errors import DriverError  # defers numpy (the drivers package)
+    from station.config import ConfigError, load_config  # defers yaml
+    from station.intrinsics import DEFAULT_BOARD_ANGLES, capture_board_shots  # defers cv2, numpy
 
     try:
         angles = (
@@ -189,8 +189,6 @@ def _capture(args, spec, profile):
     except (ConfigError, DriverError) as exc:
         return _fail(str(exc))
     except OSError as exc:
-        from station.files import describe_os_error
-
         return _fail(describe_os_error(exc))
 
 
