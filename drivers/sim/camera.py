@@ -110,10 +110,27 @@ from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import SEED_MAX, Setting
 from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, lens_for_focus, zoom_lens
 from drivers.sim.world import SimWorld
+from pipeline.board import parse_board
+from pipeline.board_render import BoardPose, render_board
+from pipeline.board_render import camera_matrix as board_camera_matrix
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
     from pipeline.realism import Session, Shot
+
+BOARD_FOCAL_PX_PER_WIDTH = 2.5
+"""The simulated camera's true focal length, in image widths (1280 px wide: 3200 px, the demo's nominal
+12 mm over 3.75 um pixels); ``focal_px`` overrides it."""
+
+BOARD_PRINCIPAL_OFFSET = (0.006, -0.004)
+"""The true principal point's offset from the image centre, in image widths (1280 px: 7.7, -5.1 px)."""
+
+BOARD_FILL = 0.5
+"""A board view spans this fraction of the image width (at the board's distance, untilted)."""
+
+BOARD_SWEEP = 0.2
+"""A board view's centre is this many image widths from the image centre, in the direction of the
+turntable angle, so that the views sweep the field."""
 
 IDEAL_CACHE_PIXELS = 6_000_000
 """Largest sensor (pixels) whose lens map the camera keeps between frames (16 bytes per pixel: 96 MB)."""
@@ -181,6 +198,10 @@ SETTINGS: dict[str, Setting] = {
                             nullable=True),
     "zoom": Setting("the simulated zoom lens, at this focal length (absent: the fixed demo lens)", "number", "mm",
                     *ZOOM_FOCAL_RANGE_MM),
+    "board": Setting("render this calibration board instead of the harp (a label of pipeline.board)", "text"),
+    "board_tilt_deg": Setting("the board's tilt on its wedge", "number", "deg", 0.0, 80.0, high_open=True),
+    "focal_px": Setting("the camera matrix's focal length of board frames (default: in proportion to width)",
+                        "number", "px", 0.0, 1e6, low_open=True),
     **SCENE_SETTINGS,
 }  # fmt: skip
 """The keys of the simulated camera's configuration section, each with its type, unit and range."""
@@ -256,6 +277,9 @@ class SimulatedCamera:
         defocus_blur_px: float = 0.0,
         realism_seed: int | None = None,
         jpeg_quality: int | None = None,
+        board: str | None = None,
+        board_tilt_deg: float = 30.0,
+        focal_px: float | None = None,
     ):
         if int(width) != width or int(height) != height or width < 16 or height < 16:
             raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
@@ -278,6 +302,15 @@ class SimulatedCamera:
                 raise ValueError(f"sim camera: jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
             if bit_depth != 8:
                 raise ValueError("sim camera: jpeg_quality needs bit_depth 8 (Mono8)")
+        self.board = None
+        if board is not None:
+            self.board = parse_board(str(board))  # ValueError (one line) naming the label
+        if not (0.0 <= float(board_tilt_deg) < 80.0):
+            raise ValueError(f"sim camera: board_tilt_deg must be in [0, 80), got {board_tilt_deg!r}")
+        self.board_tilt_deg = float(board_tilt_deg)
+        self.focal_px = float(focal_px) if focal_px is not None else BOARD_FOCAL_PX_PER_WIDTH * int(width)
+        if not (math.isfinite(self.focal_px) and self.focal_px > 0):
+            raise ValueError(f"sim camera: focal_px must be > 0, got {focal_px!r}")
         self.realism_seed = None if realism_seed is None else int(realism_seed)
         self.jpeg_quality = None if jpeg_quality is None else int(jpeg_quality)
         self.realism: Session | None = None
@@ -357,7 +390,7 @@ class SimulatedCamera:
                 elif key in ("shot_noise", "frame"):
                     if not isinstance(value, bool):
                         raise ValueError(f"must be true or false, got {value!r}")
-                elif key in ("serial", "pixel_format", "driver"):
+                elif key in ("serial", "pixel_format", "driver", "board"):
                     value = str(value)
                 elif key == "best_focus" and value is None:
                     pass
@@ -444,6 +477,54 @@ class SimulatedCamera:
     def gain_range(self) -> Range:
         """:data:`GAIN_RANGE_DB`, in dB."""
         return _GAIN
+
+    # ------------------------------------------------------------ board
+    def camera_matrix(self) -> np.ndarray:
+        """The simulated camera's true camera matrix (the ideal frame of its lens maps):
+        ``fx = fy = focal_px``, principal point :data:`BOARD_PRINCIPAL_OFFSET` from the centre."""
+        w, h = self._size
+        cx = (w - 1) / 2.0 + BOARD_PRINCIPAL_OFFSET[0] * w
+        cy = (h - 1) / 2.0 + BOARD_PRINCIPAL_OFFSET[1] * w
+        return board_camera_matrix(self.focal_px, self.focal_px, cx, cy)
+
+    def board_pose(self, stage_deg: float) -> Any:
+        """The board's pose at turntable angle ``stage_deg``: mounted on a wedge of ``board_tilt_deg``
+        on the turntable, whose axis is the optical axis (as the harp's), its centre
+        :data:`BOARD_SWEEP` image widths off the axis in the turntable's direction, at the distance
+        where it spans :data:`BOARD_FILL` of the width."""
+        import cv2
+
+        assert self.board is not None
+        w, _ = self._size
+        bw, bh = self.board.size_mm()
+        z = self.focal_px * bw / (BOARD_FILL * w)
+        th = math.radians(stage_deg)
+        r_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, th]))
+        r_tilt, _ = cv2.Rodrigues(np.array([math.radians(self.board_tilt_deg), 0.0, 0.0]))
+        rot = r_spin @ r_tilt
+        k = self.camera_matrix()
+        u = np.array([k[0, 2] + BOARD_SWEEP * w * math.cos(th), k[1, 2] + BOARD_SWEEP * w * math.sin(th), 1.0])
+        t = np.linalg.solve(k, u) * z - rot @ np.array([bw / 2, bh / 2, 0.0])
+        rvec, _ = cv2.Rodrigues(rot)
+        rv = np.asarray(rvec, np.float64).ravel()
+        return BoardPose((float(rv[0]), float(rv[1]), float(rv[2])), (float(t[0]), float(t[1]), float(t[2])))
+
+    def _board_frame(self, stage: float, focus: float, index: int, seed: int, stamp: float) -> Frame:
+        """A frame of the board (``board`` configured) through the lens at ``focus``
+        (:func:`pipeline.board_render.render_board`)."""
+        assert self.board is not None
+        w, h = self._size
+        lens = self.lens_at(focus)
+        pose = self.board_pose(stage)
+        img8 = render_board(
+            self.board, self.camera_matrix(), pose, lens.undistort_points, w, h, supersample=3,
+            noise_sigma=self.noise_sigma, seed=seed % (2**32),
+        )  # fmt: skip
+        img: np.ndarray = img8.astype(np.uint16) * 257 if self._bit_depth == 16 else img8
+        extra = {"sim": {"board": self.board.label, "stage_deg": float(stage), "board_pose": [*pose.rvec, *pose.tvec]}}
+        frame = Frame(img, stamp, self._exposure, self._gain, float(focus), self._identity, self._counter, extra)
+        self._counter += 1
+        return frame
 
     def zoom_range(self) -> Range | None:
         """The simulated zoom lens's focal lengths (mm), or None for the fixed demo lens (no ``zoom`` configured)."""
@@ -655,6 +736,8 @@ class SimulatedCamera:
         angle = (stage + offset) % 180.0
         index = self._index_at(focus, angle)
         seed = noise_seed(self.seed, focus, angle, index)
+        if self.board is not None:
+            return self._board_frame(stage, focus, index, seed, stamp)
         r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage)
         self.last_rendered = r
         image = r.image

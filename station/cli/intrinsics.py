@@ -26,7 +26,7 @@ from pathlib import Path
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, open_store
 from station.exit_codes import EXIT_ERROR, EXIT_OK
-from station.files import write_profile
+from station.files import describe_os_error, write_profile
 from station.store.errors import StoreError
 from station.tables import is_terminal, print_table
 
@@ -34,7 +34,10 @@ from station.tables import is_terminal, print_table
 def register(subparsers) -> None:
     p = subparsers.add_parser("intrinsics", help=COMMANDS["intrinsics"], description=__doc__.split("\n\n")[1])
     p.add_argument(
-        "inputs", metavar="MODEL BOARD_SHOT", nargs="+", help="the harp model file, then the board shots (--id: shots)"
+        "inputs",
+        metavar="MODEL BOARD_SHOT",
+        nargs="*",
+        help="the harp model file, then the board shots (--id: shots only; --capture: no shots)",
     )
     p.add_argument(
         "--board",
@@ -52,6 +55,19 @@ def register(subparsers) -> None:
         default=None,
         metavar="PX",
         help="a view whose board edges are wider is rejected as blurred (default 4 px)",
+    )
+    p.add_argument(
+        "--capture",
+        metavar="DIR",
+        default=None,
+        help="take the board shots with the station of --config (the board on a tilted wedge on the turntable, "
+        "one view per --angles), saved into DIR",
+    )
+    p.add_argument(
+        "--angles",
+        default=None,
+        metavar="DEG,DEG,...",
+        help="turntable angles of the captured views (default 0,45,...,315)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_store_options(p)
@@ -80,6 +96,10 @@ def run(args) -> int:
         return _fail("--min-corners must be >= 4 and --max-edge-width > 0")
     profile = None
     store = None
+    if args.capture is not None and args.config is None:
+        return _fail("--capture needs --config CONFIG (the station that takes the board shots)")
+    if args.id is None and not args.inputs:
+        return _fail("give the harp MODEL file (or --id N) and the board shots")
     try:
         if args.id is None:
             from pipeline.model_file import read_model_file  # defers cv2, numpy, yaml
@@ -98,6 +118,12 @@ def run(args) -> int:
     except (ValueError, StoreError) as exc:
         return _fail(str(exc))
     try:
+        if args.capture is not None:
+            if shots:
+                return _fail("--capture takes the board shots itself: give no BOARD_SHOT")
+            shots = _capture(args, spec, profile)
+            if isinstance(shots, int):
+                return shots
         if not shots:
             return _fail("no board shots given")
         run_ = measure_intrinsics(
@@ -135,6 +161,35 @@ def run(args) -> int:
             store.close()
     _report(args, run_, result)
     return EXIT_OK
+
+
+def _capture(args, spec, profile):
+    """The board shots taken by the station of ``--config``; an exit code after one line on failure."""
+    from drivers.errors import DriverError  # defers numpy (the drivers package)
+    from station.config import ConfigError, load_config  # defers yaml
+    from station.intrinsics import DEFAULT_BOARD_ANGLES, capture_board_shots  # defers cv2, numpy
+
+    try:
+        angles = (
+            DEFAULT_BOARD_ANGLES
+            if args.angles is None
+            else tuple(float(a) for a in args.angles.split(",") if a.strip())
+        )
+    except ValueError:
+        return _fail(f"--angles {args.angles!r}: expected degrees separated by commas, e.g. 0,45,90")
+    if len(angles) < 3:
+        return _fail("--angles: at least 3 views")
+    try:
+        config = load_config(args.config)
+        focus = profile.focus
+        note = (lambda text: None) if args.json else (lambda text: print(text, file=sys.stderr))
+        if focus is None:
+            note("harp intrinsics: the profile records no focus setting: the board shots at the camera's own focus")
+        return capture_board_shots(config, spec, args.capture, angles=angles, focus=focus, note=note)
+    except (ConfigError, DriverError) as exc:
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(describe_os_error(exc))
 
 
 def _report(args, run_, result) -> None:
