@@ -106,7 +106,9 @@ def check_document(sec: Section, data: Any, file: Path) -> None:
             raise ConfigError(file, sec.key_path("driver"), f"expected a {sec.drivers} driver, {describe(s)}, missing")
         text = problem(s, name)
         if text is not None:
-            raise ConfigError(file, sec.key_path("driver"), f"expected a {sec.drivers} driver, {text[9:]}")
+            raise ConfigError(
+                file, sec.key_path("driver"), f"expected a {sec.drivers} driver, {text.removeprefix('expected ')}"
+            )
         sec = sec.with_driver(name)
     for key in data:
         if key not in sec.keys:
