@@ -8,7 +8,7 @@ that focal length's zoom position (``zoom.positions``, default the focal lengths
 (``ZOOMDIR/focal-<F>mm.yaml``, relative paths resolved against the original's directory). The camera
 drives its zoom when it opens (the simulator's zoom lens, V4L2 ``zoom_absolute``, GenICam ``Zoom``).
 Each stored profile records its focal length (:attr:`station.profile.Profile.focal`), so the store
-holds the lens per (focal, focus) and ``harp profile show LENS --focal F --focus D`` interpolates in
+holds the lens per (focal, focus) and ``harp profile show LENS --zoom-mm F --focus D`` interpolates in
 both (:mod:`pipeline.zoom`). ``ZOOMDIR/zoom-session.json`` names the parts; once every part has run,
 ``ZOOMDIR/zoom-results.json`` holds each part's exit code and results and the interpolation's
 leave-one-out error per axis (:func:`pipeline.zoom.leave_one_out_by_axis`).

@@ -78,7 +78,7 @@ def register(subparsers) -> None:
     show = sub.add_parser("show", help="the current profiles of one lens (or one profile by --id)", parents=[store_opt])
     show.add_argument("lens", metavar="LENS", nargs="?", default=None)
     show.add_argument("--focus", type=float, default=None, help="one focus setting in detail (interpolated if needed)")
-    show.add_argument("--focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
+    show.add_argument("--zoom-mm", dest="focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
     show.add_argument("--id", type=int, default=None, metavar="N", help="the stored profile #N, whatever its verdict")
     show.add_argument("--allow-failed", action="store_true", help=ALLOW_FAILED_HELP)
     show.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -95,7 +95,7 @@ def register(subparsers) -> None:
     )
     ex.add_argument("lens", metavar="LENS", nargs="?", default=None)
     ex.add_argument("--focus", type=float, default=None, help="the focus setting (with LENS)")
-    ex.add_argument("--focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
+    ex.add_argument("--zoom-mm", dest="focal", type=float, default=None, metavar="MM", help=FOCAL_HELP)
     ex.add_argument("--id", type=int, default=None, metavar="N", help="export the stored profile #N")
     ex.add_argument("--allow-failed", action="store_true", help="export a profile that failed QA (said on stderr)")
     add_export_options(ex)
@@ -351,14 +351,14 @@ def _show(args, store) -> int:
 
 def _zoom_setting(args, lens, profiles) -> bool:
     """Whether the lens is a zoom lens (its profiles record focal lengths); a setting asked for it
-    needs both --focal and --focus, and --focal is refused for a fixed lens."""
+    needs both --zoom-mm and --focus, and --zoom-mm is refused for a fixed lens."""
     zoom = is_zoom(profiles)
     if getattr(args, "focal", None) is not None and not zoom:
-        raise _Fail(f"{lens_label_of(lens)} has no focal length settings (not a zoom lens): give no --focal")
+        raise _Fail(f"{lens_label_of(lens)} has no focal length settings (not a zoom lens): give no --zoom-mm")
     if zoom and args.focus is not None and args.focal is None:
-        raise _Fail(f"{lens_label_of(lens)} is a zoom lens: give --focal MM with --focus")
+        raise _Fail(f"{lens_label_of(lens)} is a zoom lens: give --zoom-mm MM with --focus")
     if zoom and args.focal is not None and args.focus is None:
-        raise _Fail("--focal needs --focus D (the setting is a focal length and a focus)")
+        raise _Fail("--zoom-mm needs --focus D (the setting is a focal length and a focus)")
     return zoom
 
 
@@ -466,7 +466,7 @@ def _export(args, store) -> int:
     edges = stamp = None
     if args.id is not None:
         if args.lens is not None or args.focus is not None or args.focal is not None:
-            raise _Fail("--id N names one profile: give no LENS, --focus or --focal with it")
+            raise _Fail("--id N names one profile: give no LENS, --focus or --zoom-mm with it")
         profile = store.profile(args.id)
         if profile is None:
             raise _Fail(f"no profile #{args.id} in {store.path}")

@@ -72,19 +72,19 @@ def test_profile_show_interpolates_in_both_and_never_extrapolates(zoom_run, caps
     d, _, _ = zoom_run
     store = ["--store", str(d / "profiles.sqlite")]
     capsys.readouterr()
-    assert main(["profile", "show", "ZOOM-0001", "--focal", "18", "--focus", "0.5", "--json", *store]) == 0
+    assert main(["profile", "show", "ZOOM-0001", "--zoom-mm", "18", "--focus", "0.5", "--json", *store]) == 0
     doc = json.loads(capsys.readouterr().out)
     model = model_from_dict(doc["interpolated"]["model"])
     c = compare_models(model, zoom_lens(18.0, 0.5, W, H), W, H, step=10.0)
     print(f"interpolated at 18 mm, focus 0.5 against the lens: RMS {c.rms:.4f} px, max {c.max:.4f} px")
     assert c.rms < 0.1
     assert {r["axis"] for r in doc["interpolated"]["leave_one_out"]} == {"focal"}
-    assert main(["profile", "show", "ZOOM-0001", "--focal", "40", "--focus", "0.5", *store]) == 2
+    assert main(["profile", "show", "ZOOM-0001", "--zoom-mm", "40", "--focus", "0.5", *store]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "focal 40 is outside the calibrated range [12, 36]: extrapolation refused" in err[0]
     assert main(["profile", "show", "ZOOM-0001", "--focus", "0.5", *store]) == 2
-    assert "is a zoom lens: give --focal MM with --focus" in capsys.readouterr().err
-    assert main(["profile", "show", "ZOOM-0001", "--focal", "24", "--focus", "1", *store]) == 0
+    assert "is a zoom lens: give --zoom-mm MM with --focus" in capsys.readouterr().err
+    assert main(["profile", "show", "ZOOM-0001", "--zoom-mm", "24", "--focus", "1", *store]) == 0
     assert capsys.readouterr().out.splitlines()[0].startswith("focal (mm)\tfocus\tid")
 
 

@@ -379,7 +379,7 @@ def _stamp_of(fmt, body):
     if fmt == "maps":
         with np.load(io.BytesIO(body)) as z:
             return str(z["notes"])
-    if fmt == "stmap":
+    if fmt in ("stmap", "stmap-redistort"):
         with OpenEXR.File(io.BytesIO(body)) as f:  # the EXR header, as Nuke shows it
             return str(f.header()["comments"])
     if fmt == "json":
