@@ -491,7 +491,7 @@ def _orientation_problem(edges: EdgeSet, min_spread_deg: float) -> str | None:
     return None
 
 
-def _fold_problem(model: DistortionModel, width: int, height: int) -> str | None:
+def fold_problem(model: DistortionModel, width: int, height: int) -> str | None:
     """None if the correction is locally invertible (orientation-preserving) over the image."""
     xs = np.linspace(-0.5, width - 0.5, 25)
     ys = np.linspace(-0.5, height - 0.5, 19)
@@ -694,7 +694,7 @@ def fit_distortion(
     if not np.all(np.isfinite(th)):
         return FitFailure("optimisation diverged (non-finite parameters)")
     fitted = param.model(th)
-    fold = _fold_problem(fitted, width, height)
+    fold = fold_problem(fitted, width, height)
     if fold:
         return FitFailure(fold)
     if sol.status <= 0:

@@ -61,6 +61,13 @@ DEFAULT_FIELD_PENALTY = 1e-3
 a thin-plate energy of ``E`` px² per half-diagonal² costs like a residual of ``penalty * sqrt(E)`` px on every
 point); the cross-validation (:func:`pipeline.select.field_candidates`) chooses among several."""
 
+STRINGS_SEPARATE = "separate"
+STRINGS_IGNORE = "ignore"
+STRINGS_CHOICES: tuple[str, ...] = (STRINGS_SEPARATE, STRINGS_IGNORE)
+"""What a session fits beside the lens when its turntable angles tell a string's own bend from the lens
+(:func:`pipeline.harp_shape.fit_harp_shape`): ``separate`` fits every string's bend with the lens and keeps
+the lens (the default), ``ignore`` fits the lens alone as for loose photographs."""
+
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
 

@@ -70,8 +70,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.edgeset import FitFailure, FitResult, collect, tls
-from pipeline.fit import fit_distortion, make_parametrisation, normal_equations, solve
+from pipeline.edgeset import FitFailure, FitResult, collect, summarise, tls
+from pipeline.fit import fit_distortion, fold_problem, make_parametrisation, normal_equations, solve
 from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
 
@@ -605,3 +605,44 @@ def fit_harp_shape(
         d_lens_only=float(np.sqrt(np.mean(r_lens**2))),
         n_params=param.n,
     )
+
+
+def lens_result(
+    fit: HarpShapeFit, lines_per_image: Sequence[Sequence[Floats]], width: int, height: int
+) -> FitResult | FitFailure:
+    """The jointly fitted lens ``fit.model`` as a :class:`~pipeline.edgeset.FitResult` on the shots' edges
+    (the points corrected by the lens *alone*, the strings' deviations left in them), with the plain fit's
+    rejected edges left out: what :func:`pipeline.fit.fit_distortion` reports of a lens it fitted, so that a
+    profile holds the lens with the strings separated exactly as it holds a plain fit. A failure when the lens
+    folds over the image."""
+    edges, _ = collect([[np.asarray(p, np.float64) for p in s] for s in lines_per_image], width, height)
+    if not edges:
+        return edges
+    fold = fold_problem(fit.model, width, height)
+    if fold:
+        return FitFailure(fold)
+    out = {(r.image, r.line) for r in fit.plain.rejected}
+    keep = np.array([(int(i), int(j)) not in out for i, j in zip(edges.image, edges.line, strict=True)])
+    return summarise(
+        fit.model,
+        edges,
+        edges.subset(keep),
+        fit.plain.rejected,
+        message="the lens fitted with every string's own deviation (pipeline.harp_shape)",
+        n_params=fit.n_params,
+        warnings=fit.plain.warnings,
+    )
+
+
+SeparatedJob = tuple[Sequence[Sequence[Floats]], Sequence[float], int, int, FitSpec]
+
+
+def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None]:
+    """One fit of the lens with the strings separated ``(lines_per_image, turntable_deg, width, height, spec)``
+    -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
+    leave-one-orientation-out folds of a session)."""
+    lines, angles, width, height, spec = job
+    fit = fit_harp_shape(lines, angles, width, height, spec)
+    if not fit:
+        return None, fit.reason
+    return fit.model, None

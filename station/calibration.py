@@ -32,8 +32,8 @@ import numpy as np
 
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
-from pipeline.fitspec import FitSpec
-from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape
+from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
+from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
 from pipeline.select import distinct_orientations, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
@@ -285,7 +285,13 @@ trade (each string is seen along two lines only), and the bends found are not th
 
 
 def harp_health(
-    shots: Sequence[Sequence[np.ndarray]], turntable_deg: Sequence[float], width: int, height: int, spec: FitSpec
+    shots: Sequence[Sequence[np.ndarray]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    spec: FitSpec,
+    *,
+    joint: HarpShapeFit | FitFailure | None = None,
 ) -> dict[str, Any]:
     """The harp's self-check (issue 19 item 4) as a profile keeps it (``details["harp_health"]``).
 
@@ -295,6 +301,7 @@ def harp_health(
     harp's or a lens term's, not one string's fault) and the standard error (px); the worst string and
     the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, as QA judges them;
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
+    ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens).
     """
 
     def num(v: float) -> float | None:
@@ -306,7 +313,11 @@ def harp_health(
             "failure": f"needs >= {MIN_HEALTH_ORIENTATIONS} turntable angles 10 deg apart to tell a string's bend "
             f"from the lens (the plan has {distinct_orientations(turntable_deg)})",
         }
-    hs = fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, spec)
+    hs = (
+        joint
+        if joint is not None
+        else fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, spec)
+    )
     if not hs:
         return {"limit_px": BEND_LIMIT_PX, "failure": str(getattr(hs, "reason", "the joint fit failed"))}
     own = {k: v for k, v in hs.own_bends().items() if np.isfinite(v)}
@@ -336,6 +347,86 @@ def harp_health(
     }
 
 
+def separate_strings(
+    cal: Calibration,
+    shots: Sequence[Sequence[np.ndarray]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    joint: HarpShapeFit,
+    *,
+    map_fn: MapFn = map,
+) -> Calibration:
+    """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
+    :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
+
+    A string is straight to a few micrometres, not exactly; a lens fitted alone takes the part of the
+    strings' bends that all orientations share into the correction (the realistic simulator's field error
+    was dominated by it). The joint fit gives that part back to the strings (issue 19 items 4 and 5:
+    ``benchmarks/strings_separated.py``). The figures are re-made for the stored lens: the fit's
+    (points corrected by the lens alone, :func:`pipeline.harp_shape.lens_result`) and the
+    leave-one-orientation-out hold-out, each fold fitted with the strings separated on the other
+    orientations (:func:`pipeline.harp_shape.separated_job`). The bootstrap field uncertainty, when asked
+    for, stays that of the lens fitted alone (said in ``details``). ``details["strings"]`` records what
+    was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
+    ``cal`` is returned with the reason there and its plain lens."""
+    spec = cal.spec
+    full = cal.fit
+    if spec is None or not full:
+        return cal
+    lines = [list(s) for s in shots]
+    plain_record: dict[str, Any] = {
+        "fit_d_lens_alone_px": _finite(full.d_after),
+        "holdout_d_lens_alone_px": None if cal.merit.holdout is None else cal.merit.holdout.d,
+    }
+
+    def kept_plain(reason: str) -> Calibration:
+        rec = {"separated": False, "reason": reason, **plain_record}
+        return dataclasses.replace(cal, details={**cal.details, "strings": rec})
+
+    res = lens_result(joint, lines, width, height)
+    if not res:
+        return kept_plain(f"the lens with the strings separated: {res.reason}")
+    hold = cal.merit.holdout
+    if hold is not None and hold.scheme == HOLDOUT_LEAVE_ONE_ORIENTATION_OUT:
+        outliers = {(r.image, r.line) for r in full.rejected}
+        n = len(lines)
+        jobs = [
+            (
+                [ls for j, ls in enumerate(lines) if j != k],
+                [float(a) for j, a in enumerate(turntable_deg) if j != k],
+                width,
+                height,
+                spec,
+            )
+            for k in range(n)
+        ]
+        held_lines: list[np.ndarray] = []
+        per_o: list[float | None] = []
+        for k, (model, reason) in enumerate(map_fn(separated_job, jobs)):
+            if model is None:
+                return kept_plain(f"without orientation {k} the strings cannot be separated: {reason}")
+            kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
+            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            held_lines.extend(model.undistort_points(p) for p in kept)
+        d, d_max = straightness_of(held_lines)
+        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+    merit = dataclasses.replace(cal.merit, fit=_figures(res.d_after, res.d_max_after), holdout=hold)
+    record = {
+        "separated": True,
+        "d_with_strings_px": _finite(joint.d_after),
+        **plain_record,
+    }
+    if cal.uncertainty is not None:
+        record["field_uncertainty_of"] = "the lens fitted alone"
+    details = {
+        **cal.details,
+        "n_params": res.n_params,
+        "strings": record,
+    }
+    return dataclasses.replace(cal, fit=res, merit=merit, details=details)
+
+
 def calibrate_focus(
     shots: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -353,7 +444,9 @@ def calibrate_focus(
     focus_idx``). ``spec``: what to fit (None: chosen by cross-validation). The executor and
     ``harp reprocess`` both call this, so re-processing fits what the session fitted.
     ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
-    (:func:`harp_health`, kept in ``details["harp_health"]``)."""
+    (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
+    ``"separate"`` (the default) and :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
+    lens is the one fitted with the strings' own bends separated (:func:`separate_strings`)."""
     cal = calibrate_shots(
         [list(s) for s in shots],
         width,
@@ -366,8 +459,18 @@ def calibrate_focus(
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
-    health = harp_health(shots, turntable_deg, width, height, cal.spec)
-    return dataclasses.replace(cal, details={**cal.details, "harp_health": health})
+    joint: HarpShapeFit | FitFailure | None = None
+    if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
+        joint = fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit)
+    health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
+    cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
+    if getattr(pipeline, "strings", STRINGS_SEPARATE) != STRINGS_SEPARATE:
+        return cal
+    if not isinstance(joint, HarpShapeFit):
+        reason = health.get("failure", "the strings cannot be separated")
+        rec = {"separated": False, "reason": reason}
+        return dataclasses.replace(cal, details={**cal.details, "strings": rec})
+    return separate_strings(cal, shots, turntable_deg, width, height, joint, map_fn=map_fn)
 
 
 def focus_profile(

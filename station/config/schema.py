@@ -32,7 +32,7 @@ from typing import Any
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS, driver_settings
 from drivers.settings import REQUIRED, SEED_MAX, Setting, fields_of, setting
 from drivers.sim.zaber_emulator import SETTINGS as EMULATOR_SETTINGS
-from pipeline.fitspec import DEGREE_BOUNDS, FitSpec, parse_choice
+from pipeline.fitspec import DEGREE_BOUNDS, STRINGS_CHOICES, STRINGS_SEPARATE, FitSpec, parse_choice
 from pipeline.resample import DEFAULT_T
 from station.config.errors import ConfigError
 from station.equipment import Identity, Optics, optics_keys
@@ -174,6 +174,9 @@ class PipelineConfig:
     bootstrap: int = setting(0, "replicates for the field uncertainty (0: not computed)", "", 0, 10000)
     seed: int = setting(0, "seed of the bootstrap resampling", "", 0, SEED_MAX)
     workers: int = setting(1, "processes for the cross-validation and bootstrap fits", "", 1, 256)
+    strings: str = setting(STRINGS_SEPARATE, "with 3 or more turntable angles: the profile's lens fitted with every "
+                           "string's own bend separated (separate) or the lens fitted alone (ignore)",
+                           choices=STRINGS_CHOICES)  # fmt: skip
 
     @property
     def spec(self) -> FitSpec | None:

@@ -78,3 +78,45 @@ def test_a_session_fit_checks_the_harp_and_qa_fails_a_bent_string():
     # no angles (photographs): no self-check, nothing judged
     shots, _ = turning_harp_point_sets(lens, w, h, turns[:3], np.zeros((11, 3)), seed=4)
     assert "harp_health" not in calibrate_focus(shots, w, h, PipelineConfig(), 0, spec).details
+
+
+def test_a_session_stores_the_lens_with_the_strings_separated():
+    """Issue 19 items 4-5 in the station: with turntable angles, the profile's lens is fitted with every
+    string's own bend separated, and it is closer to the exact lens than the lens fitted alone (which takes
+    the bends the strings share into the correction); its figures are its own (fit and the
+    leave-one-orientation-out hold-out re-made); ``pipeline.strings: ignore`` keeps the lens fitted alone.
+    Truth: the generator's exact lens (field error modulo homography over the whole image)."""
+    from pipeline.compare import compare_models
+    from pipeline.fitspec import FitSpec
+    from pipeline.models import RadialModel
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
+    turns = (0, 30, 60, 90, 120, 150)
+    spec = FitSpec("radial", 4, True, True)
+    bends = np.random.default_rng(19).normal(0.0, 0.02, (11, 3))  # every string bowed, as real strings are
+    bends[:, 0] += 0.03  # and a bow all of them share (what a lens fitted alone takes for distortion)
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), seed=7)
+    sep = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=turns)
+    alone = calibrate_focus(shots, w, h, PipelineConfig(strings="ignore"), 0, spec, turntable_deg=turns)
+    assert sep.failure is None and alone.failure is None
+    rec = sep.details["strings"]
+    assert rec["separated"] is True and "strings" not in alone.details
+    err_sep = compare_models(sep.fit.model, lens, w, h, step=20).rms
+    err_alone = compare_models(alone.fit.model, lens, w, h, step=20).rms
+    assert err_sep < 0.5 * err_alone, (err_sep, err_alone)
+    # the figures are the stored lens's: the fit's d is of the points corrected by it alone
+    assert sep.fit.model is not alone.fit.model
+    assert rec["fit_d_lens_alone_px"] == pytest.approx(alone.merit.fit.d)
+    assert rec["holdout_d_lens_alone_px"] == pytest.approx(alone.merit.holdout.d)
+    assert sep.merit.holdout.scheme == alone.merit.holdout.scheme and len(sep.merit.holdout.per_orientation_d) == 6
+    assert sep.merit.holdout.d != alone.merit.holdout.d
+    # too few orientations to separate: the lens fitted alone, and the reason
+    close = (0, 4, 60, 64)  # two orientations 10 deg apart or more
+    shots, _ = turning_harp_point_sets(lens, w, h, close, bends, axis=(497, 378), seed=7)
+    few = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=close)
+    assert few.failure is None, few.failure
+    assert few.details["strings"]["separated"] is False and "turntable angles" in few.details["strings"]["reason"]
