@@ -48,6 +48,12 @@ What can and cannot be separated
   another: string deviations cannot be separated from the lens at all, and a bent string shows
   only as residual straightness.
 
+What a session keeps
+--------------------
+The lens of the joint fit, with the strings' deviations left out (:func:`lens_result` gives its figures on
+the points corrected by the lens alone; :func:`separated_job` is one leave-one-orientation-out fold of it):
+a lens fitted alone takes the part of the bends that every orientation shares into the correction.
+
 The strings are identified across shots by their distance from the axis :math:`c`, which is
 found by making those distances agree between shots. For a harp with uniform spacing :math:`p`
 this is ambiguous by whole strings unless the axis is known to within about :math:`p/2`: the
