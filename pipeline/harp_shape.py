@@ -48,6 +48,12 @@ What can and cannot be separated
   another: string deviations cannot be separated from the lens at all, and a bent string shows
   only as residual straightness.
 
+What a session keeps
+--------------------
+The lens of the joint fit, with the strings' deviations left out (:func:`lens_result` gives its figures on
+the points corrected by the lens alone; :func:`separated_job` is one leave-one-orientation-out fold of it):
+a lens fitted alone takes the part of the bends that every orientation shares into the correction.
+
 The strings are identified across shots by their distance from the axis :math:`c`, which is
 found by making those distances agree between shots. For a harp with uniform spacing :math:`p`
 this is ambiguous by whole strings unless the axis is known to within about :math:`p/2`: the
@@ -642,7 +648,10 @@ def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
     lines, angles, width, height, spec = job
-    fit = fit_harp_shape(lines, angles, width, height, spec)
+    try:
+        fit = fit_harp_shape(lines, angles, width, height, spec)
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a fold's odd data
+        return None, f"the joint fit failed: {type(exc).__name__}: {exc}"
     if not fit:
         return None, fit.reason
     return fit.model, None

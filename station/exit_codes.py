@@ -19,6 +19,8 @@ from __future__ import annotations
 EXIT_OK = 0
 EXIT_FAIL = 1
 EXIT_ERROR = 2
+EXIT_ABORTED = EXIT_ERROR
+"""A session that stopped (its frames are kept): an error's code."""
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
 

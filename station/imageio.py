@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from station.bounded_read import BoundedReadError, read_regular_file
+from station.errors import HarpError
 
 MAX_PIXELS = 200_000_000
 """Default pixel-count limit of :func:`read_unchanged` (``HARP_MAX_IMAGE_PIXELS`` overrides it)."""
@@ -59,7 +60,7 @@ def max_file_bytes(max_pixels: int) -> int:
     return 16 * int(max_pixels) + (1 << 20)
 
 
-class ImageReadError(Exception):
+class ImageReadError(HarpError):
     """An image file could not be read; ``str(exc)`` is a one-line message."""
 
     def __init__(self, path, reason: str):

@@ -13,11 +13,12 @@ import numpy as np
 
 from pipeline.measure import MIN_SMOOTHED_POINTS, ImageMeasurement, measure_image
 from station import imageio
+from station.errors import HarpError
 
 NO_STRINGS = "no strings found (no pair of long straight edges a string width apart)"
 
 
-class InputError(Exception):
+class InputError(HarpError):
     """Bad input; ``str(exc)`` is a one-line message for the user, naming the file."""
 
 

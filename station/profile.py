@@ -376,6 +376,8 @@ class Profile:
             merit["qa"] = self.qa.to_record()
         if self.details.get("harp_health"):  # the harp's self-check: QA judges it from the file too
             merit["harp_health"] = _plain(dict(self.details["harp_health"]))
+        if self.details.get("strings"):  # whether the lens was fitted with the strings' bends separated
+            merit["strings"] = _plain(dict(self.details["strings"]))
         p = self.provenance
         prov: dict[str, Any] = {}
         if p.created_utc is not None:
@@ -414,6 +416,7 @@ class Profile:
         choice = merit_doc.pop("choice", None)
         qa_doc = merit_doc.pop("qa", None)
         health = merit_doc.pop("harp_health", None)
+        strings = merit_doc.pop("strings", None)
         spec, selection = _spec_of_choice(choice)
         prov = dict(mf.provenance or {})
         return cls(
@@ -431,7 +434,10 @@ class Profile:
             provenance=_provenance_of(prov),
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
-            details={"harp_health": dict(health)} if isinstance(health, Mapping) else {},
+            details={
+                **({"harp_health": dict(health)} if isinstance(health, Mapping) else {}),
+                **({"strings": dict(strings)} if isinstance(strings, Mapping) else {}),
+            },
             intrinsics=mf.intrinsics,
         )
 

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.models.base import DistortionModel
+from station.errors import HarpError
+from station.exit_codes import EXIT_FAIL
 from station.profile import Merit, Profile, Provenance
 
 LensRow = tuple[int | None, str, str, str]
@@ -42,12 +44,14 @@ FOCUS_TOL = 1e-9
 """Two focus settings closer than this are the same setting."""
 
 
-class ChoiceError(Exception):
+class ChoiceError(HarpError):
     """No profile to use (one line naming the lens and focus; exit 2)."""
 
 
-class FailedQA(Exception):
+class FailedQA(HarpError):
     """The profile asked for failed QA and failed ones were not allowed (one line; exit 1)."""
+
+    exit_code = EXIT_FAIL
 
 
 # ------------------------------------------------------------------ words

@@ -43,6 +43,7 @@ from pipeline.model_file import read_model_file
 from station import SOFTWARE, __version__
 from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
 from station.config import ConfigError, load_config
+from station.errors import HarpError
 from station.pool import WorkerPool
 from station.profile import Profile, Verdict
 from station.provenance import make_provenance
@@ -61,7 +62,7 @@ PRELOAD = ["station.reprocess", "station.calibration", "pipeline.fit", "pipeline
 """Modules the local pool's forkserver imports once, so that each worker starts warm."""
 
 
-class ReprocessError(RuntimeError):
+class ReprocessError(HarpError, RuntimeError):
     """Re-processing cannot start (no scheduler, no pool); ``str()`` is one line."""
 
 

@@ -33,14 +33,15 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from drivers.protocols import Camera, Turntable
-from station.exit_codes import EXIT_FAIL
+from station.errors import HarpError
+from station.exit_codes import EXIT_ABORTED, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
 from station.qa.judge import judge_session
 from station.qa.results import session_results, write_results
 from station.qa.verdicts import qa_verdict, session_measurements
 from station.session import layout
 from station.session.directory import SessionDir
-from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor, SessionResult
+from station.session.executor import Executor, SessionResult
 from station.session.progress import ConsoleProgress
 from station.session.records import Aborted, Finished, ReportFailed, ReportWritten
 from station.store.errors import StoreError
@@ -127,7 +128,7 @@ def judge_focus(session: SessionDir) -> Callable[[Profile, int], Verdict]:
     return judge
 
 
-class ReportError(Exception):
+class ReportError(HarpError):
     """The session report could not be written (not for a full disk: that is an ``OSError``)."""
 
 

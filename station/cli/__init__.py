@@ -13,10 +13,11 @@ Exit codes (:mod:`station.exit_codes`): 0 success (a verdict of PASS), 1 a verdi
 (``harp qa``, ``harp session run|resume``; ``harp profile export`` of a failed profile),
 2 bad input or an error, 130 interrupted, 141 standard output closed early.
 
-Whatever a command lets through ends here as one line on stderr and exit 2, never a
-traceback: an ``OSError`` names the file, the reason and what to do
-(:func:`station.files.describe_os_error`: a full disk, permissions), anything else is
-an internal error (``HARP_DEBUG=1`` shows its traceback).
+A command's error for the user is a :class:`station.errors.HarpError` it raises: printed here,
+once, as ``harp COMMAND: message`` on stderr, and its exit code returned. Whatever else a command
+lets through ends here as one line on stderr and exit 2, never a traceback: an ``OSError`` names the
+file, the reason and what to do (:func:`station.files.describe_os_error`: a full disk,
+permissions), anything else is an internal error (``HARP_DEBUG=1`` shows its traceback).
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ from typing import Any
 from station.cli.commands import COMMANDS, module_of, unknown_command
 from station.cli.help_text import HarpParser
 from station.ctrl_c import deliver_dropped_ctrl_c, forget_handled_ctrl_c
+from station.errors import HarpError, one_line
+from station.exit_codes import EXIT_BROKEN_PIPE, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 
 
 def first_word(argv: Sequence[str]) -> str | None:
@@ -108,22 +111,25 @@ def _main(argv: list[str] | None) -> int:
     word = first_word(argv)
     if word is not None and word not in COMMANDS:
         print(unknown_command(word), file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     try:  # Ctrl-C while the sub-command's module imports numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)
     except KeyboardInterrupt:
         print("harp: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
-        return 2
+        return EXIT_ERROR
     _keep_freed_memory()
     try:
-        return int(args.func(args) or 0)
+        return int(args.func(args) or EXIT_OK)
+    except HarpError as exc:  # a command's error for the user: printed here, once
+        print(f"{_prog(args)}: {one_line(exc)}", file=sys.stderr)
+        return exc.exit_code
     except KeyboardInterrupt:
         print("harp: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # stdout closed early (``harp measure --json ... | head``): not an error of
         # ours, and no traceback; point stdout at devnull so the interpreter's
@@ -131,25 +137,25 @@ def _main(argv: list[str] | None) -> int:
         with contextlib.suppress(OSError, ValueError):  # stdout may be a test double
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
-        return 141
+        return EXIT_BROKEN_PIPE
     except SystemExit as exc:
         # rich's Console turns a broken stdout pipe into SystemExit(1) after pointing
         # stdout at /dev/null; exit 1 means "QA FAIL" here, so report it as above
         if exc.code == 1 and _stdout_is_devnull():
-            return 141
+            return EXIT_BROKEN_PIPE
         raise
     except MemoryError:
         print(f"{_prog(args)}: out of memory; give smaller inputs or fewer at once", file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     except OSError as exc:  # a file a command did not expect to fail (a full disk, permissions)
         from station.files import describe_os_error  # defers tempfile
 
         print(f"{_prog(args)}: {describe_os_error(exc)}", file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     except Exception as exc:  # a bug: still one line and exit 2 (never 1, which means QA FAIL)
         if _caused_by_ctrl_c(exc):  # a Ctrl-C that Python wrapped (raised while a class was made)
             print("harp: interrupted", file=sys.stderr)
-            return 130
+            return EXIT_INTERRUPTED
         if os.environ.get(DEBUG_ENV):
             raise
         text = " ".join(str(exc).split()) or "(no message)"
@@ -158,7 +164,7 @@ def _main(argv: list[str] | None) -> int:
             f"(please report it; {DEBUG_ENV}=1 shows the traceback)",
             file=sys.stderr,
         )
-        return 2
+        return EXIT_ERROR
 
 
 DEBUG_ENV = "HARP_DEBUG"

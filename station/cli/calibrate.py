@@ -46,6 +46,7 @@ from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.exit_codes import EXIT_OK
 from station.files import sha256_file, write_profile
 from station.inputs import InputError, measure_file
 from station.pool import WorkerPool
@@ -370,13 +371,9 @@ def _print(report: dict) -> None:
 
 
 def run(args) -> int:
-    try:
-        report = calibrate(args)
-    except InputError as exc:
-        print(f"harp calibrate: {exc}", file=sys.stderr)
-        return 2
+    report = calibrate(args)
     if args.json:
         print(json.dumps(report))
     else:
         _print(report)
-    return 0
+    return EXIT_OK

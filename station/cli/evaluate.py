@@ -33,7 +33,7 @@ from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.evaluation import evaluate
-from station.inputs import InputError
+from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.tables import print_table
 
 
@@ -83,21 +83,17 @@ def _fmt(sd):
 
 
 def run(args) -> int:
-    try:
-        rep = evaluate(
-            args.correction,
-            args.images,
-            already_corrected=args.already_corrected,
-            focal=args.focal,
-            lens_name=args.lens,
-            t=args.t,
-        )
-    except InputError as exc:
-        print(f"harp evaluate: {exc}", file=sys.stderr)
-        return 2
-    for e in rep["errors"]:
+    rep = evaluate(
+        args.correction,
+        args.images,
+        already_corrected=args.already_corrected,
+        focal=args.focal,
+        lens_name=args.lens,
+        t=args.t,
+    )
+    for e in rep["errors"]:  # a bad image is named on stderr; the others are still evaluated
         print(f"harp evaluate: {e['error']}", file=sys.stderr)
-    status = 2 if rep["errors"] else 0
+    status = EXIT_ERROR if rep["errors"] else EXIT_OK
     if args.json:
         print(json.dumps(rep, indent=2))
         return status

@@ -56,6 +56,7 @@ from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
 from station.equipment import optic_problem
+from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes
 from station.inputs import InputError
 from station.lensfun_databases import installed_databases
@@ -379,8 +380,7 @@ def run(args) -> int:
         profile = Profile.from_model_file(mf)
         ex, fig = export_profile(args, profile, model_dir=Path(args.model).parent)
         write_output(args, ex)
-    except (ValueError, InputError) as exc:
-        print(f"harp export: {exc}", file=sys.stderr)
-        return 2
+    except ValueError as exc:  # a model file that cannot be read or exported (an InputError goes on)
+        raise ExportError(str(exc)) from None
     report(args, ex, fig, "harp export")
-    return 0
+    return EXIT_OK

@@ -21,9 +21,8 @@ from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.web_options import add_serve_options
+from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK
 from station.live.devices import apply_session_settings, check_once, live_station
-
-EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 
 
 def register(subparsers: Any) -> None:
@@ -87,7 +86,7 @@ def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -
             return _error(str(exc))
         except KeyboardInterrupt:
             print("harp live: stopped", file=sys.stderr)
-            return 130
+            return EXIT_INTERRUPTED
     return 0
 
 
@@ -97,7 +96,7 @@ def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:
         print(json.dumps(out, allow_nan=False))
     else:
         _print_once(out)
-    return EXIT_PASS if out["pass"] else EXIT_FAIL
+    return EXIT_OK if out["pass"] else EXIT_FAIL
 
 
 def _print_once(o: dict[str, Any]) -> None:

@@ -45,6 +45,7 @@ from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
 from station.inputs import InputError, measure_file
 from station.qa.overlay import write_overlay
@@ -155,15 +156,13 @@ def _print_tables(results: list[tuple[str, ImageMeasurement]], overall: dict) ->
 def run(args) -> int:
     t = int(args.t)
     overlay_dir = None
-    status = 0
+    status = EXIT_OK
     points_path = Path(args.points) if args.points else None
     if points_path is not None and points_path.suffix.lower() not in (".json", ".npz"):
-        print(
-            f"harp measure: {points_path}: unknown points format {points_path.suffix or '(none)'!r}: "
-            "give a file name ending in .json or .npz",
-            file=sys.stderr,
+        raise InputError(
+            f"{points_path}: unknown points format {points_path.suffix or '(none)'!r}: "
+            "give a file name ending in .json or .npz"
         )
-        return 2
     if args.overlay:
         overlay_dir = Path(args.overlay)
         try:
@@ -174,8 +173,7 @@ def run(args) -> int:
                 if overlay_dir.exists() and not overlay_dir.is_dir()
                 else exc.strerror or exc
             )
-            print(f"harp measure: {overlay_dir}: cannot create overlay directory: {reason}", file=sys.stderr)
-            return 2
+            raise InputError(f"{overlay_dir}: cannot create overlay directory: {reason}") from None
     names = _overlay_names(list(args.images))
     results: list[tuple[str, ImageMeasurement]] = []
     errors: list[dict] = []
@@ -185,7 +183,7 @@ def run(args) -> int:
         except InputError as exc:
             print(f"harp measure: {exc}", file=sys.stderr)
             errors.append({"path": path, "error": str(exc)})
-            status = 2
+            status = EXIT_ERROR
             continue
         results.append((path, m))
         if overlay_dir is not None:
@@ -193,7 +191,7 @@ def run(args) -> int:
                 write_overlay(overlay_dir / names[path], img, m, title=Path(path).name)
             except OSError as exc:
                 print(f"harp measure: {path}: cannot write overlay: {exc}", file=sys.stderr)
-                status = 2
+                status = EXIT_ERROR
 
     all_points = [ln.points for _, m in results for ln in m.lines]
     if all_points:
@@ -209,7 +207,7 @@ def run(args) -> int:
             atomic_write_bytes(points_path, edge_points_bytes(results, points_path.suffix.lower()))
         except OSError as exc:
             print(f"harp measure: {points_path}: cannot write the points file: {exc.strerror or exc}", file=sys.stderr)
-            status = 2
+            status = EXIT_ERROR
 
     if args.json:
         images = []

@@ -38,10 +38,9 @@ from typing import Any
 from pipeline.fitspec import parse_choice
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, location_from_args, open_store
+from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 from station.store import StoreError
 from station.tables import console, is_terminal, print_table
-
-EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 2, 130
 
 
 def register(subparsers: Any) -> None:

@@ -21,9 +21,9 @@ from typing import Any
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, open_store
 from station.cli.web_options import add_serve_options
+from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
 from station.store import StoreError
 
-EXIT_ERROR = 2
 DEFAULT_PORT = 8014
 
 
@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         return _error(str(exc))
     except KeyboardInterrupt:
         print("harp serve: stopped", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     finally:
         store.close()
-    return 0
+    return EXIT_OK

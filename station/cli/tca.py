@@ -17,7 +17,6 @@ different sizes, edges of one orientation only): one line on stderr, exit 2.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +26,8 @@ from pipeline.tca import shot_offsets
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.colour import fit_channels, measure_colour_file, tca_document
-from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.exit_codes import EXIT_OK
 from station.files import atomic_write_text
-from station.inputs import InputError
 from station.tables import is_terminal, print_table
 
 
@@ -59,16 +57,8 @@ def _offsets(m, colour: str) -> float:
 def run(args) -> int:
     shots = []
     for path in args.images:
-        try:
-            shots.append(measure_colour_file(path, t=args.t))
-        except InputError as exc:
-            print(f"harp tca: {exc}", file=sys.stderr)
-            return EXIT_ERROR
-    try:
-        fits, lensfun = fit_channels(shots, args.images, degree=args.degree)
-    except InputError as exc:
-        print(f"harp tca: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        shots.append(measure_colour_file(path, t=args.t))
+    fits, lensfun = fit_channels(shots, args.images, degree=args.degree)
     doc = tca_document(fits, lensfun, args.images)
     per_image = []
     for path, m in zip(args.images, shots):

@@ -36,6 +36,7 @@ from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
 from station.colour import read_tca_file
+from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
 
@@ -82,14 +83,6 @@ def undistort_image(img: np.ndarray, maps, interpolation=cv2.INTER_LANCZOS4) -> 
 
 def run(args) -> int:
     try:
-        return _run(args)
-    except InputError as exc:
-        print(f"harp undistort: {exc}", file=sys.stderr)
-        return 2
-
-
-def _run(args) -> int:
-    try:
         mf = read_model_file(args.model)
     except ValueError as exc:
         raise UndistortError(str(exc)) from None
@@ -129,13 +122,13 @@ def _run(args) -> int:
     except OSError as exc:
         raise UndistortError(f"{out_dir}: cannot create the output directory ({exc.strerror or exc})") from None
     cache: dict[tuple[int, int], object] = {}
-    status = 0
+    status = EXIT_OK
     for path in args.images:  # a bad image is named on stderr; the others are still corrected
         try:
             _correct_one(args, mf, Path(path), out_dir, cache, channels)
         except InputError as exc:
             print(f"harp undistort: {exc}", file=sys.stderr)
-            status = 2
+            status = EXIT_ERROR
     return status
 
 

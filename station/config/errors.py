@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 
+from station.errors import HarpError
 
-class ConfigError(ValueError):
+
+class ConfigError(HarpError, ValueError):
     """A configuration problem; ``str()`` is one line naming file and field."""
 
     def __init__(self, file: str | os.PathLike, field_path: str, expected: str):

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from station.bounded_read import BoundedReadError, read_regular_file
+from station.errors import HarpError
 
 MAX_CONFIG_BYTES = 1 << 20
 """A configuration file's largest size (1 MiB; the shipped ones are under 4 kB)."""
@@ -47,7 +48,7 @@ _CORE_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("str", "int", "float", "bool", 
 then refuses with "quote it"); ``!!python/...``, ``!!binary``, ``!!set`` and custom tags are refused."""
 
 
-class ConfigReadError(ValueError):
+class ConfigReadError(HarpError, ValueError):
     """A configuration file refused before its values are read: ``field`` (a dotted path or
     ``(file)``) and what was ``expected``."""
 

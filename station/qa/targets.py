@@ -31,6 +31,7 @@ from typing import Any
 
 from pipeline.model_file import read_model_file
 from station.config import ConfigError
+from station.errors import HarpError
 from station.profile import Profile, Verdict
 from station.qa.verdicts import (
     calibrated_thresholds,
@@ -51,7 +52,7 @@ StoreOpener = Callable[[], AbstractContextManager[Any]]
 """Opens the profile store for reading (``with open_store() as store``)."""
 
 
-class QAInputError(Exception):
+class QAInputError(HarpError):
     """A one-line error for the user (exit 2)."""
 
 

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from station.config import Config, ConfigError, load_config
+from station.errors import HarpError
 from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
 from station.session.frame_files import decode_frame, encode_frame
@@ -52,7 +53,7 @@ from station.session.records import (
 )
 
 
-class SessionError(RuntimeError):
+class SessionError(HarpError, RuntimeError):
     """A session directory that cannot be used; message is one line."""
 
 

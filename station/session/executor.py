@@ -50,6 +50,7 @@ from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, Device
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
+from station.exit_codes import EXIT_ABORTED, EXIT_OK
 from station.files import describe_os_error, sha256_file, write_profile
 from station.pool import WorkerPool
 from station.profile import Profile
@@ -105,9 +106,6 @@ POSITION_TOLERANCE_DEG = 0.05
 PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
 """Modules the fits' forkserver imports once, so that each worker starts warm (the fits' and the
 report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
-
-EXIT_OK = 0
-EXIT_ABORTED = 2
 
 T = TypeVar("T")
 

@@ -3,8 +3,10 @@ naming the store and, when there is one, what to do."""
 
 from __future__ import annotations
 
+from station.errors import HarpError
 
-class StoreError(RuntimeError):
+
+class StoreError(HarpError, RuntimeError):
     """A profile store problem; the message is one line naming the store.
 
     ``kind`` says what went wrong, for callers that act on it: ``"missing"`` (no store

@@ -26,11 +26,13 @@ from urllib.parse import parse_qsl, urlencode
 
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from station.errors import HarpError
+
 LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
 COOKIE = "harp_token"
 
 
-class ServeError(ValueError):
+class ServeError(HarpError, ValueError):
     """The app cannot be served as asked; ``str()`` is one line."""
 
 

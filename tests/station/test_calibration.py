@@ -114,6 +114,14 @@ def test_a_session_stores_the_lens_with_the_strings_separated():
     assert rec["holdout_d_lens_alone_px"] == pytest.approx(alone.merit.holdout.d)
     assert sep.merit.holdout.scheme == alone.merit.holdout.scheme and len(sep.merit.holdout.per_orientation_d) == 6
     assert sep.merit.holdout.d != alone.merit.holdout.d
+    # the model file says so, and reads back
+    from pipeline.model_file import parse_model_text
+    from station.profile import Profile, Provenance
+
+    mf = sep.profile(w, h, provenance=Provenance()).to_model_file()
+    back = Profile.from_model_file(parse_model_text(mf.text(), "p.yaml"))
+    assert back.details["strings"]["separated"] is True
+    assert back.details["strings"]["fit_d_lens_alone_px"] == pytest.approx(alone.merit.fit.d)
     # too few orientations to separate: the lens fitted alone, and the reason
     close = (0, 4, 60, 64)  # two orientations 10 deg apart or more
     shots, _ = turning_harp_point_sets(lens, w, h, close, bends, axis=(497, 378), seed=7)

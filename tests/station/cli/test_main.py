@@ -55,3 +55,27 @@ def test_a_ctrl_c_that_python_wrapped_in_another_error_is_still_exit_130(monkeyp
     monkeypatch.setattr(station.cli.export, "run", run)
     assert main(["export", "lens.yaml", "--format", "json"]) == 130
     assert capsys.readouterr().err == "harp: interrupted\n"
+
+
+def test_a_commands_error_is_printed_once_by_the_entry_point(tmp_path, capsys):
+    points = tmp_path / "edges.txt"  # harp measure raises its InputError; the entry point prints it
+    assert main(["measure", str(tmp_path / "missing.png"), "--points", str(points)]) == 2
+    assert capsys.readouterr().err == (
+        f"harp measure: {points}: unknown points format '.txt': give a file name ending in .json or .npz\n"
+    )
+
+
+def test_a_harp_error_carries_its_exit_code_and_is_one_line(monkeypatch, capsys):
+    from station.errors import HarpError
+    from station.profile_choice import FailedQA
+
+    monkeypatch.setattr(station.cli.export, "run", _raising(FailedQA("lens at focus 2:\nfailed QA")))
+    assert main(["export", "lens.yaml", "--format", "json"]) == 1
+    assert capsys.readouterr().err == "harp export: lens at focus 2: failed QA\n"
+
+    class Odd(HarpError):
+        exit_code = 3
+
+    monkeypatch.setattr(station.cli.export, "run", _raising(Odd("no")))
+    assert main(["export", "lens.yaml", "--format", "json"]) == 3
+    assert capsys.readouterr().err == "harp export: no\n"
