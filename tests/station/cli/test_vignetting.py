@@ -111,7 +111,19 @@ def test_json_and_16_bit_flat_field(shots, tmp_path, capsys):
     assert ff.dtype == np.uint16 and ff.shape == (H, W) and ff.max() == 65535
     v = cos4(_pixels())
     rel = (ff.astype(np.float64).ravel() / doc["flat_field"]["scale"]) / v - 1
+    print(f"\n16-bit flat field against cos^4: error RMS {np.sqrt(np.mean(rel**2)):.4f}, max {np.abs(rel).max():.4f}")
     assert np.abs(rel).max() <= 0.01
+
+
+def test_a_clipped_shot_is_refused(shots, tmp_path, capsys):
+    """A shot whose sheet is saturated (here: 16-bit values doubled and clipped) hides the fall-off."""
+    paths, _ = shots
+    img = cv2.imread(paths[0], cv2.IMREAD_UNCHANGED).astype(np.float64)
+    clipped = tmp_path / "clipped.png"
+    cv2.imwrite(str(clipped), np.clip(img * 2.0, 0, 65535).astype(np.uint16))
+    assert main(["vignetting", str(clipped), *paths[1:], "--angles", *ARGS_ANGLES]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "clipped.png" in err and "saturated" in err and "lower the exposure" in err
 
 
 @pytest.mark.parametrize(
