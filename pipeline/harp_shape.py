@@ -648,7 +648,10 @@ def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
     lines, angles, width, height, spec = job
-    fit = fit_harp_shape(lines, angles, width, height, spec)
+    try:
+        fit = fit_harp_shape(lines, angles, width, height, spec)
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a fold's odd data
+        return None, f"the joint fit failed: {type(exc).__name__}: {exc}"
     if not fit:
         return None, fit.reason
     return fit.model, None
