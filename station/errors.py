@@ -10,13 +10,19 @@ otherwise). No command prints an error and returns a code itself.
 
 from __future__ import annotations
 
-from station.exit_codes import EXIT_ERROR
+from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED
 
 
 class HarpError(Exception):
     """An error for the user: ``str()`` is one line, :attr:`exit_code` the command's exit code."""
 
     exit_code: int = EXIT_ERROR
+
+
+class Interrupted(HarpError):
+    """Ctrl-C stopped the command; the line says what was kept and how to go on (exit 130)."""
+
+    exit_code = EXIT_INTERRUPTED
 
 
 def one_line(message: object) -> str:

@@ -25,9 +25,9 @@ from pathlib import Path
 
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, open_store
-from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.errors import HarpError
+from station.exit_codes import EXIT_OK
 from station.files import describe_os_error, write_profile
-from station.store.errors import StoreError
 from station.tables import is_terminal, print_table
 
 
@@ -74,11 +74,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _fail(msg: str) -> int:
-    print(f"harp intrinsics: {' '.join(str(msg).split())}", file=sys.stderr)
-    return EXIT_ERROR
-
-
 def run(args) -> int:
     from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, parse_board  # defers numpy
     from pipeline.intrinsics import MIN_VIEWS  # defers cv2, numpy
@@ -87,19 +82,19 @@ def run(args) -> int:
     try:
         spec = parse_board(args.board)
     except ValueError as exc:
-        return _fail(f"--board: {exc}")
+        raise HarpError(f"--board: {exc}") from None
     if args.id is not None and args.out:
-        return _fail("give either -o FILE (a model file) or --id N (a stored profile), not both")
+        raise HarpError("give either -o FILE (a model file) or --id N (a stored profile), not both")
     min_corners = MIN_CORNERS if args.min_corners is None else args.min_corners
     max_width = MAX_EDGE_WIDTH_PX if args.max_edge_width is None else args.max_edge_width
     if min_corners < 4 or not max_width > 0:
-        return _fail("--min-corners must be >= 4 and --max-edge-width > 0")
+        raise HarpError("--min-corners must be >= 4 and --max-edge-width > 0")
     profile = None
     store = None
     if args.capture is not None and args.config is None:
-        return _fail("--capture needs --config CONFIG (the station that takes the board shots)")
+        raise HarpError("--capture needs --config CONFIG (the station that takes the board shots)")
     if args.id is None and not args.inputs:
-        return _fail("give the harp MODEL file (or --id N) and the board shots")
+        raise HarpError("give the harp MODEL file (or --id N) and the board shots")
     try:
         if args.id is None:
             from pipeline.model_file import read_model_file  # defers cv2, numpy, yaml
@@ -113,19 +108,17 @@ def run(args) -> int:
             store = open_store(args)
             profile = store.profile(args.id)
             if profile is None:
-                return _fail(f"{store.location}: no profile #{args.id}; harp profile list shows the stored ones")
+                raise HarpError(f"{store.location}: no profile #{args.id}; harp profile list shows the stored ones")
             where = f"profile #{args.id} of {store.location}"
-    except (ValueError, StoreError) as exc:
-        return _fail(str(exc))
+    except ValueError as exc:  # a model file that cannot be read (a StoreError goes on: one line)
+        raise HarpError(str(exc)) from None
     try:
         if args.capture is not None:
             if shots:
-                return _fail("--capture takes the board shots itself: give no BOARD_SHOT")
+                raise HarpError("--capture takes the board shots itself: give no BOARD_SHOT")
             shots = _capture(args, spec, profile)
-            if isinstance(shots, int):
-                return shots
         if not shots:
-            return _fail("no board shots given")
+            raise HarpError("no board shots given")
         run_ = measure_intrinsics(
             profile.model,
             profile.width,
@@ -147,15 +140,13 @@ def run(args) -> int:
                 if got < MIN_VIEWS
                 else result.reason
             )
-            return _fail(f"{reason}; nothing written")
+            raise HarpError(f"{reason}; nothing written")
         for w in result.warnings:
             print(f"harp intrinsics: warning: {w}", file=sys.stderr)
         if args.out:
             write_profile(args.out, profile.with_(intrinsics=result))
         elif store is not None:
             store.set_intrinsics(args.id, result)
-    except StoreError as exc:
-        return _fail(str(exc))
     finally:
         if store is not None:
             store.close()
@@ -164,9 +155,9 @@ def run(args) -> int:
 
 
 def _capture(args, spec, profile):
-    """The board shots taken by the station of ``--config``; an exit code after one line on failure."""
+    """The board shots taken by the station of ``--config``; a :class:`HarpError` (one line) on failure."""
     from drivers.errors import DriverError  # defers numpy (the drivers package)
-    from station.config import ConfigError, load_config  # defers yaml
+    from station.config import load_config  # defers yaml
     from station.intrinsics import DEFAULT_BOARD_ANGLES, capture_board_shots  # defers cv2, numpy
 
     try:
@@ -176,9 +167,9 @@ def _capture(args, spec, profile):
             else tuple(float(a) for a in args.angles.split(",") if a.strip())
         )
     except ValueError:
-        return _fail(f"--angles {args.angles!r}: expected degrees separated by commas, e.g. 0,45,90")
+        raise HarpError(f"--angles {args.angles!r}: expected degrees separated by commas, e.g. 0,45,90") from None
     if len(angles) < 3:
-        return _fail("--angles: at least 3 views")
+        raise HarpError("--angles: at least 3 views")
     try:
         config = load_config(args.config)
         focus = profile.focus
@@ -186,10 +177,10 @@ def _capture(args, spec, profile):
         if focus is None:
             note("harp intrinsics: the profile records no focus setting: the board shots at the camera's own focus")
         return capture_board_shots(config, spec, args.capture, angles=angles, focus=focus, note=note)
-    except (ConfigError, DriverError) as exc:
-        return _fail(str(exc))
+    except DriverError as exc:  # a ConfigError goes on: one line
+        raise HarpError(str(exc)) from None
     except OSError as exc:
-        return _fail(describe_os_error(exc))
+        raise HarpError(describe_os_error(exc)) from None
 
 
 def _report(args, run_, result) -> None:

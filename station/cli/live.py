@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.web_options import add_serve_options
-from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK
+from station.errors import HarpError, Interrupted
+from station.exit_codes import EXIT_FAIL, EXIT_OK
 from station.live.devices import apply_session_settings, check_once, live_station
 
 
@@ -39,27 +39,16 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _error(msg: str) -> int:
-    print(f"harp live: {msg}", file=sys.stderr)
-    return EXIT_ERROR
-
-
 def run(args: argparse.Namespace) -> int:
-    from station.config import ConfigError, load_config  # defers numpy, yaml
+    from station.config import load_config  # defers numpy, yaml
 
     if args.json and not args.once:
-        return _error("--json needs --once (the live page is served, not printed)")
-    try:
-        config = load_config(args.config)
-    except ConfigError as exc:
-        return _error(str(exc))
+        raise HarpError("--json needs --once (the live page is served, not printed)")
+    config = load_config(args.config)  # a ConfigError or ServeError: one line (station.cli.main)
     if not args.once:
-        from station.web.serve import ServeError, check_bind  # defers jinja2, starlette, markupsafe
+        from station.web.serve import check_bind  # defers jinja2, starlette, markupsafe
 
-        try:
-            check_bind(args.host, args.token)
-        except ServeError as exc:
-            return _error(str(exc))
+        check_bind(args.host, args.token)
     from drivers.errors import DriverError  # defers numpy
     from station.session.devices import open_station  # defers numpy, yaml
 
@@ -68,26 +57,21 @@ def run(args: argparse.Namespace) -> int:
             if args.once:
                 return _once(config, camera, turntable, args.json)
             return _serve(config, camera, turntable, args)
-    except ConfigError as exc:
-        return _error(str(exc))
     except DriverError as exc:
-        return _error(" ".join(str(exc).split()))
+        raise HarpError(str(exc)) from None
 
 
 def _serve(config: Any, camera: Any, turntable: Any, args: argparse.Namespace) -> int:
     from station.live.web import live_app  # defers scipy, cv2, jinja2, starlette
-    from station.web.serve import ServeError, serve  # defers jinja2, starlette, markupsafe
+    from station.web.serve import serve  # defers jinja2, starlette, markupsafe
 
     apply_session_settings(config, camera)
     with live_station(config, camera, turntable) as station:
         try:
             serve(live_app(station), host=args.host, port=args.port, token=args.token)
-        except ServeError as exc:
-            return _error(str(exc))
         except KeyboardInterrupt:
-            print("harp live: stopped", file=sys.stderr)
-            return EXIT_INTERRUPTED
-    return 0
+            raise Interrupted("stopped") from None
+    return EXIT_OK
 
 
 def _once(config: Any, camera: Any, turntable: Any, as_json: bool) -> int:

@@ -32,13 +32,11 @@ from typing import Any
 from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
 from station.cli.store_options import add_store_options, open_store
-from station.config import ConfigError
+from station.errors import HarpError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.inputs import InputError
 from station.plain_json import plain
 from station.profile_choice import (
-    ChoiceError,
-    FailedQA,
     at_focus,
     at_setting,
     current_and_left_out,
@@ -103,17 +101,19 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), EXIT_ERROR)[1])
 
 
-class _Fail(Exception):
-    """A one-line error for the user (printed by :func:`_error`, exit 2)."""
+class _Fail(HarpError):
+    """A one-line error for the user (printed by :func:`station.cli.main`, exit 2)."""
 
 
-class _Refused(Exception):
+class _Refused(HarpError):
     """A profile that failed QA was asked for without ``--allow-failed`` (one line, exit 1)."""
 
+    exit_code = EXIT_FAIL
 
-def _error(msg: str) -> int:
+
+def _error(msg: str) -> None:
+    """A damaged row of the store, on stderr; the others are still listed (exit 2 at the end)."""
     print(f"harp profile: {msg}", file=sys.stderr)
-    return EXIT_ERROR
 
 
 def _warn(msg: str) -> None:
@@ -129,15 +129,12 @@ def _num(v, nd=4) -> str:
 
 
 def _with_store(fn):
+    """``fn(args, store)`` with the store open; its errors (a StoreError, ConfigError, ChoiceError:
+    exit 2; FailedQA: exit 1) are one line each, printed by :func:`station.cli.main`."""
+
     def wrapped(args) -> int:
-        try:
-            with _open(args) as store:
-                return fn(args, store)
-        except (_Refused, FailedQA) as exc:
-            print(f"harp profile: {exc}", file=sys.stderr)
-            return EXIT_FAIL
-        except (StoreError, ConfigError, _Fail, ChoiceError) as exc:
-            return _error(str(exc))
+        with _open(args) as store:
+            return fn(args, store)
 
     return wrapped
 

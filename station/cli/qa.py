@@ -33,12 +33,13 @@ from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.store_options import open_store, store_location
-from station.config import OVERLAY_RETENTION, ConfigError, load_config
-from station.exit_codes import EXIT_ERROR, verdict_exit_code
+from station.config import OVERLAY_RETENTION, load_config
+from station.errors import HarpError
+from station.exit_codes import verdict_exit_code
 from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
 from station.session import layout
-from station.session.directory import SessionDir, SessionError
+from station.session.directory import SessionDir
 from station.store import DEFAULT_STORE, StoreError
 from station.tables import cell, is_terminal, print_table
 
@@ -165,9 +166,10 @@ def run(args) -> int:
                         f"{args.report}: cannot write the report "
                         f"({exc.strerror or exc}{': ' + exc.filename if exc.filename else ''})"
                     ) from None
-        except (ConfigError, SessionError, StoreError, QAInputError, ValueError, OSError) as exc:
-            print(f"harp qa: {exc}", file=sys.stderr)
-            return EXIT_ERROR
+        except HarpError:  # ConfigError, SessionError, StoreError, QAInputError: one line (station.cli.main)
+            raise
+        except (ValueError, OSError) as exc:
+            raise QAInputError(str(exc)) from None
     finally:
         if session is not None:
             session.close()

@@ -38,8 +38,8 @@ from typing import Any
 from pipeline.fitspec import parse_choice
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, location_from_args, open_store
-from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
-from station.store import StoreError
+from station.errors import HarpError, Interrupted
+from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.tables import console, is_terminal, print_table
 
 
@@ -63,16 +63,14 @@ def register(subparsers: Any) -> None:
 
 
 def _error(msg: str) -> None:
+    """One session's failure, on stderr as it happens; the others go on (exit 2 at the end)."""
     print(f"harp reprocess: {msg}", file=sys.stderr, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
-    from station.config import ConfigError  # defers numpy, yaml
-
     # defers cv2, numpy, yaml
     from station.reprocess import (
         ArchivedSession,
-        ReprocessError,
         SessionCollector,
         plan_jobs,
         probe_scheduler,
@@ -80,28 +78,20 @@ def run(args: argparse.Namespace) -> int:
     )
 
     if args.workers is not None and args.workers < 1:
-        _error("--workers must be at least 1")
-        return EXIT_ERROR
+        raise HarpError("--workers must be at least 1")
     if args.scheduler is not None and args.workers is not None:
-        _error("--workers is for the local pool; the cluster's workers are the scheduler's")
-        return EXIT_ERROR
+        raise HarpError("--workers is for the local pool; the cluster's workers are the scheduler's")
     if args.model is not None:
         try:
             parse_choice(args.model)
         except ValueError as exc:
-            _error(f"--model {args.model}: {exc}")
-            return EXIT_ERROR
+            raise HarpError(f"--model {args.model}: {exc}") from None
     missing = [str(s) for s in args.sessions if not s.is_dir()]
     if missing:
-        _error(f"{missing[0]}: no such session directory")
-        return EXIT_ERROR
+        raise HarpError(f"{missing[0]}: no such session directory")
 
     if args.scheduler is not None:  # before the store is opened: a typo creates no store
-        try:
-            probe_scheduler(args.scheduler)
-        except ReprocessError as exc:
-            _error(str(exc))
-            return EXIT_ERROR
+        probe_scheduler(args.scheduler)  # a ReprocessError: one line (station.cli.main)
 
     jobs, failed = plan_jobs(args.sessions, args.model)
     for msg in failed.values():
@@ -109,14 +99,10 @@ def run(args: argparse.Namespace) -> int:
     store = None
     outcomes: dict[str, Any] = {}
     try:  # Ctrl-C from the store's opening on: the line says what was stored before it
-        if not args.dry_run and jobs:
-            try:
-                first = ArchivedSession(jobs[0].session_dir).config
-                loc = location_from_args(args, first)
-                store = open_store(loc, write=True)
-            except (StoreError, ConfigError) as exc:
-                _error(" ".join(str(exc).split()))
-                return EXIT_ERROR
+        if not args.dry_run and jobs:  # a StoreError or ConfigError: one line (station.cli.main)
+            first = ArchivedSession(jobs[0].session_dir).config
+            loc = location_from_args(args, first)
+            store = open_store(loc, write=True)
 
         def say_failure(outcome: Any) -> None:
             if not outcome.ok:
@@ -127,16 +113,13 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
 
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-        try:
-            run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)
-        except ReprocessError as exc:
-            _error(str(exc))
-            return EXIT_ERROR
+        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)  # a ReprocessError: one line
     except KeyboardInterrupt:
         done = sum(1 for o in outcomes.values() if o.ok)
         kept = "re-processed and stored" if not args.dry_run else "re-processed"
-        _error(f"interrupted: {done} session(s) {kept} before Ctrl-C; the others are not (run it again for them)")
-        return EXIT_INTERRUPTED
+        raise Interrupted(
+            f"interrupted: {done} session(s) {kept} before Ctrl-C; the others are not (run it again for them)"
+        ) from None
     finally:
         if store is not None:
             store.close()

@@ -15,14 +15,13 @@ there or cannot be read, an address that cannot be used): one line on stderr.
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Any
 
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, open_store
 from station.cli.web_options import add_serve_options
-from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
-from station.store import StoreError
+from station.errors import Interrupted
+from station.exit_codes import EXIT_OK
 
 DEFAULT_PORT = 8014
 
@@ -39,34 +38,19 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _error(msg: str) -> int:
-    print(f"harp serve: {' '.join(str(msg).split())}", file=sys.stderr)
-    return EXIT_ERROR
-
-
 def run(args: argparse.Namespace) -> int:
-    from station.config import ConfigError  # defers numpy, yaml
-    from station.web.serve import ServeError, check_bind  # defers jinja2, starlette, markupsafe
+    from station.web.serve import check_bind  # defers jinja2, starlette, markupsafe
 
-    try:
-        check_bind(args.host, args.token)
-    except ServeError as exc:
-        return _error(str(exc))
-    try:
-        store = open_store(args)
-    except (StoreError, ConfigError) as exc:
-        return _error(str(exc))
+    check_bind(args.host, args.token)  # a ServeError, StoreError or ConfigError: one line (station.cli.main)
+    store = open_store(args)
     from station.web import serve  # defers jinja2, starlette, markupsafe
     from station.web.dashboard import dashboard_app  # defers cv2, jinja2, starlette, numpy
 
     try:
         store.lens_models()  # a store that cannot be read says so now, not on the first page
         serve(dashboard_app(store), host=args.host, port=args.port, token=args.token)
-    except (ServeError, StoreError) as exc:
-        return _error(str(exc))
     except KeyboardInterrupt:
-        print("harp serve: stopped", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        raise Interrupted("stopped") from None
     finally:
         store.close()
     return EXIT_OK

@@ -27,7 +27,8 @@ from pathlib import Path
 from station import __version__
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, store_location
-from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
+from station.errors import HarpError, Interrupted, one_line
+from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
 from station.qa.results import finished_results, read_results, state_exit_code
 from station.session.integrity import check_session, needs_capture, repair_files, repair_session, summary
@@ -110,9 +111,11 @@ def register(subparsers) -> None:
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), EXIT_ERROR)[1])
 
 
-def _error(msg: str) -> int:
-    print(f"harp session: {msg}", file=sys.stderr)
-    return EXIT_ERROR
+def _said(exc: HarpError) -> int:
+    """A part's or a live session's error said now, as :func:`station.cli.main` would, while the
+    command goes on (the next part is not run; the live page stays): its exit code."""
+    print(f"harp session: {one_line(exc)}", file=sys.stderr)
+    return exc.exit_code
 
 
 def _load(path: Path):
@@ -147,21 +150,18 @@ def _long_plan(config, yes: bool) -> str | None:
 
 
 def _run(args) -> int:
-    from station.config import ConfigError, check_port  # defers numpy, yaml
+    from station.config import check_port  # defers numpy, yaml
     from station.session.directory import SessionDir  # defers cv2, numpy, yaml
 
     if args.name is not None and (args.name in ("", ".", "..") or Path(args.name).name != args.name):
-        return _error(
+        raise HarpError(
             f"--name {args.name!r}: expected a plain directory name (no '/'); use --out for the parent directory"
         )
-    try:
-        config, _warnings = _load(args.config)
-        check_port(config)  # before creating anything
-    except ConfigError as exc:
-        return _error(str(exc))
+    config, _warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
+    check_port(config)  # before creating anything
     refused = _long_plan(config, args.yes)
     if refused is not None:
-        return _error(refused)
+        raise HarpError(refused)
     root = args.out if args.out is not None else config.sessions_dir
     if config.zoom_settings:
         return _run_zoom(config, root, args)
@@ -175,20 +175,16 @@ def _run(args) -> int:
 
 
 def _resume(args) -> int:
-    from station.config import ConfigError  # defers numpy, yaml
-    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+    from station.session.directory import SessionDir  # defers cv2, numpy, yaml
     from station.zoom_session import is_zoom_session  # defers numpy, yaml
 
     if is_zoom_session(args.session_dir):
         return _zoom_parts(Path(args.session_dir), args)
-    try:
-        session = SessionDir.open(args.session_dir)
-    except (ConfigError, SessionError) as exc:
-        return _error(str(exc))
+    session = SessionDir.open(args.session_dir)  # a ConfigError or SessionError: one line (station.cli.main)
     damage = check_session(session)
     if damage:  # found before anything is captured, fitted or judged again
         session.close()
-        return _error(summary(session.path, damage))
+        raise HarpError(summary(session.path, damage))
     if session.finished:
         with session:
             return _already_finished(session, args)
@@ -202,7 +198,7 @@ def _run_zoom(config, root, args) -> int:
     try:
         path = zoom_session.create(root, config, name=args.name)
     except OSError as exc:
-        return _error(f"cannot create the zoom session: {describe_os_error(exc)}")
+        raise HarpError(f"cannot create the zoom session: {describe_os_error(exc)}") from None
     print(f"zoom session directory: {path}", file=sys.stderr)
     return _zoom_parts(path, args)
 
@@ -212,12 +208,17 @@ def _zoom_parts(path: Path, args) -> int:
     import argparse
 
     from station import zoom_session  # defers numpy, yaml
-    from station.config import ConfigError  # defers numpy, yaml
-    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+    from station.session.directory import SessionDir  # defers cv2, numpy, yaml
 
     part_args = argparse.Namespace(**{**vars(args), "json": False})  # one JSON object: the zoom session's
 
     def run_part(part, config, session_path) -> int:
+        try:
+            return _run_part(part, config, session_path)
+        except HarpError as exc:  # said now (Ctrl-C too); the zoom session stops at this part
+            return _said(exc)
+
+    def _run_part(part, config, session_path) -> int:
         if not session_path.exists():
 
             def new_session():
@@ -226,10 +227,7 @@ def _zoom_parts(path: Path, args) -> int:
                 return s
 
             return _execute_session(config, new_session, part_args, report=not args.no_report)
-        try:
-            session = SessionDir.open(session_path)
-        except (ConfigError, SessionError) as exc:
-            return _error(str(exc))
+        session = SessionDir.open(session_path)
         if session.finished:
             with session:
                 return _already_finished(session, part_args, shown=session_path)
@@ -239,16 +237,18 @@ def _zoom_parts(path: Path, args) -> int:
     try:
         meta, _parts = zoom_session.read_parts(path)
         code, done = zoom_session.run_parts(path, run_part, note)
-    except (ValueError, ConfigError) as exc:
-        return _error(str(exc))
-    if code not in (0, 1):
-        return _error(f"zoom session stopped at {done[-1]['name']}; continue with: harp session resume {path}")
+    except HarpError:  # a ConfigError: one line (station.cli.main)
+        raise
+    except ValueError as exc:
+        raise HarpError(str(exc)) from None
+    if code not in (EXIT_OK, EXIT_FAIL):
+        raise HarpError(f"zoom session stopped at {done[-1]['name']}; continue with: harp session resume {path}")
     first = zoom_session.part_config(path, meta, zoom_session.read_parts(path)[1][0])
     try:
         with _open_store(first, args.store) as store:
             results = zoom_session.zoom_results(path, done, store, tuple(meta["lens"]))
     except (StoreError, OSError) as exc:  # one line: the parts are stored and reported already
-        return _error(f"zoom session results: {exc}")
+        raise HarpError(f"zoom session results: {exc}") from None
     _zoom_summary(results, args)
     return code
 
@@ -280,7 +280,7 @@ def _already_finished(session, args, shown=None) -> int:
     try:
         results = finished_results(session)
     except (OSError, ValueError) as exc:
-        return _error(f"{session.path}: finished, but its results cannot be gathered: {exc}")
+        raise HarpError(f"{session.path}: finished, but its results cannot be gathered: {exc}") from None
     code = state_exit_code("complete", results.get("verdict"))
     verdict = results.get("verdict") or "none"
     where = shown if shown is not None else args.session_dir
@@ -291,29 +291,24 @@ def _already_finished(session, args, shown=None) -> int:
 
 
 def _repair(args) -> int:
-    from station.session.directory import SessionDir, SessionError  # defers cv2, numpy, yaml
+    from station.session.directory import SessionDir  # defers cv2, numpy, yaml
 
-    try:
-        done = repair_files(args.session_dir, base_dir=args.base_dir)
-        session = SessionDir.open(args.session_dir)
-    except SessionError as exc:
-        return _error(str(exc))
+    done = repair_files(args.session_dir, base_dir=args.base_dir)  # a SessionError: one line (station.cli.main)
+    session = SessionDir.open(args.session_dir)
     for line in done:
         print(f"re-derived: {line}", file=sys.stderr)
     with session:
         try:
             report = repair_session(session, tuple(args.recapture))
         except ValueError as exc:
-            return _error(str(exc))
+            raise HarpError(str(exc)) from None
         for line in report.fixed:
             print(f"repaired: {line}", file=sys.stderr)
         for line in report.cannot:
             print(f"cannot re-derive: {line}", file=sys.stderr)
         pending = report.refit and needs_capture(session)  # shots still to capture: resume fits it with them
         if report.refit and not pending:
-            code = _refit(session, args.store)
-            if code:
-                return code
+            _refit(session, args.store)
         left = check_session(session)
     if pending:
         print("harp session: the reopened focus settings are fitted with the shots still to capture", file=sys.stderr)
@@ -321,23 +316,20 @@ def _repair(args) -> int:
         print(f"harp session: then: harp session resume {args.session_dir}", file=sys.stderr)
     elif not done and not report.fixed and not report.cannot:
         print(f"harp session: {args.session_dir}: every file matches the manifest, nothing to repair", file=sys.stderr)
-    return 2 if report.cannot else 0
+    return EXIT_ERROR if report.cannot else EXIT_OK
 
 
-def _refit(session, store_name=None) -> int:
-    """Measure, fit and store the reopened focus settings again, then QA and the report: no devices."""
+def _refit(session, store_name=None) -> None:
+    """Measure, fit and store the reopened focus settings again, then QA and the report: no devices.
+    A :class:`HarpError` (a StoreError, or the run's message: exit 2) when that does not succeed."""
     from station.session_run import run_session  # defers cv2, numpy, yaml
-    from station.store import ProfileStore, StoreError  # defers sqlalchemy
+    from station.store import ProfileStore  # defers sqlalchemy
 
-    try:
-        with ProfileStore(store_location(store_name, session.config)) as store:
-            result = run_session(session, None, None, store=store, console=None)
-    except StoreError as exc:
-        return _error(str(exc))
+    with ProfileStore(store_location(store_name, session.config)) as store:
+        result = run_session(session, None, None, store=store, console=None)
     if result.exit_code:
-        return _error(result.message)
+        raise HarpError(result.message)
     print(f"repaired: {result.message}", file=sys.stderr)
-    return 0
 
 
 def _live(args) -> int | None:
@@ -359,11 +351,14 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
     except ServeError as exc:
         if opened is not None:
             opened.close()
-        return _error(f"--live: {exc}")
+        raise HarpError(f"--live: {exc}") from None
     try:
-        code = _execute_session(config, get_session, args, opened, report, tap=tap)
-        if code == EXIT_INTERRUPTED:
-            return code
+        try:
+            code = _execute_session(config, get_session, args, opened, report, tap=tap)
+        except Interrupted:
+            raise
+        except HarpError as exc:  # said now; the live page shows how the session ended
+            code = _said(exc)
         print("harp session: the live page shows the result until Ctrl-C", file=sys.stderr, flush=True)
         try:
             import threading
@@ -377,9 +372,9 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
 
 
 def _execute_session(config, get_session, args, opened=None, report: bool = True, tap=None) -> int:
-    from station.config import ConfigError  # defers numpy, yaml
+    """Run the session: its exit code (0 PASS, 1 FAIL); a :class:`HarpError` when it stopped (a
+    ConfigError, StoreError, SessionError or the run's message; :class:`Interrupted` on Ctrl-C)."""
     from station.session.devices import open_station  # defers numpy, yaml
-    from station.session.directory import SessionError  # defers cv2, numpy, yaml
     from station.session_run import run_session  # defers cv2, numpy, yaml
 
     started = []  # the session directory, once there is one
@@ -396,19 +391,15 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
                     out = sys.stderr if args.json else sys.stdout
                     console = text_console(out)  # off a terminal: lines never wrapped (station.tables)
                 result = run_session(session, camera, turntable, store=store, console=console, report=report)
-    except (ConfigError, StoreError, SessionError) as exc:
-        return _error(str(exc))
     except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
         if not started:
-            _error("interrupted before the session started; nothing was captured")
-        else:
-            _error(
-                f"interrupted; every frame captured so far is kept in {started[0]}; "
-                f"continue with: harp session resume {started[0]}"
-            )
-            if args.json:
-                _print_results_of(started[0])
-        return EXIT_INTERRUPTED
+            raise Interrupted("interrupted before the session started; nothing was captured") from None
+        if args.json:
+            _print_results_of(started[0])
+        raise Interrupted(
+            f"interrupted; every frame captured so far is kept in {started[0]}; "
+            f"continue with: harp session resume {started[0]}"
+        ) from None
     finally:
         if opened is not None:
             opened.close()
@@ -416,7 +407,7 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         out = result.results or {"session": str(started[0]), "exit_code": result.exit_code, "message": result.message}
         print(json.dumps(out, indent=1))
     if result.exit_code == EXIT_ERROR:
-        return _error(result.message)
+        raise HarpError(result.message)
     print(result.message, file=sys.stderr)
     return result.exit_code
 
@@ -436,13 +427,9 @@ def _print_results_of(session_dir: Path) -> None:
 
 # ----------------------------------------------------------------- plan
 def _plan(args) -> int:
-    from station.config import ConfigError  # defers numpy, yaml
     from station.session.estimate import estimate_plan  # defers numpy, yaml
 
-    try:
-        config, warnings = _load(args.config)
-    except ConfigError as exc:
-        return _error(str(exc))
+    config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
     from station.session.estimate import long_plan  # defers numpy, yaml
 
     long = long_plan(config)
@@ -509,22 +496,19 @@ def _plan(args) -> int:
 
 # ----------------------------------------------------------------- list
 def _list(args) -> int:
-    from station.config import ConfigError, load_config  # defers numpy, yaml
+    from station.config import load_config  # defers numpy, yaml
 
     if args.directory is not None and args.config is not None:
-        return _error("give a directory or --config, not both")
+        raise HarpError("give a directory or --config, not both")
     config_path = args.config
     if config_path is None and args.directory is None and os.environ.get("HARP_CONFIG"):
         config_path = Path(os.environ["HARP_CONFIG"])  # the station's configuration, wherever the command runs
     if config_path is not None:
-        try:
-            root = load_config(config_path).sessions_dir
-        except ConfigError as exc:
-            return _error(str(exc))
+        root = load_config(config_path).sessions_dir  # a ConfigError: one line (station.cli.main)
     else:
         root = args.directory if args.directory is not None else Path("sessions")
     if not root.is_dir():
-        return _error(f"{root}: no such directory (name one, or --config CONFIG for its store.sessions_dir)")
+        raise HarpError(f"{root}: no such directory (name one, or --config CONFIG for its store.sessions_dir)")
     found, problems = sessions_in(root)
     for p in problems:
         print(f"harp session: warning: {p}", file=sys.stderr)

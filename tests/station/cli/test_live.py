@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 
@@ -12,12 +11,10 @@ from tests.station.live.support import live_config
 
 
 def _harp_live(argv):
-    from station.cli.live import register
+    """``harp live ARGV`` through the entry point, which prints the command's error (station.cli.main)."""
+    from station.cli import main
 
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers())
-    args = parser.parse_args(["live", *map(str, argv)])
-    return args.func(args)
+    return main(["live", *map(str, argv)])
 
 
 def test_once_json_passes_a_good_shot(tmp_path, capsys):

@@ -1,0 +1,165 @@
+"""One error path for the command line (issue 22): every error for the user is a
+:class:`station.errors.HarpError` carrying its exit code, printed once by the entry point.
+
+* the error classes of the station's modules are HarpErrors, with the exit codes the README's
+  table gives (:mod:`station.exit_codes`);
+* no command module prints a line on stderr and then returns an exit code itself (an AST check of
+  ``station/cli``: a ``print(..., file=sys.stderr)`` directly followed by ``return`` of a non-zero
+  number or ``EXIT_*`` name); a command raises instead. Per-file errors of a command that goes on with
+  the other files, and warnings, are still printed where they happen.
+
+The checker is tested on made-up source first, so that a broken checker cannot pass the real tree.
+"""
+
+from __future__ import annotations
+
+import ast
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from station.errors import HarpError, Interrupted, one_line
+from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_INTERRUPTED
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _is_stderr_print(node: ast.stmt) -> bool:
+    if not (isinstance(node, ast.Expr) and isinstance(node.value, ast.Call)):
+        return False
+    call = node.value
+    if not (isinstance(call.func, ast.Name) and call.func.id == "print"):
+        return False
+    return any(
+        k.arg == "file" and isinstance(k.value, ast.Attribute) and k.value.attr == "stderr" for k in call.keywords
+    )
+
+
+def _is_code_return(node: ast.stmt) -> bool:
+    """``return 2``, ``return EXIT_ERROR``: a literal number or an ``EXIT_*`` name, not success (a
+    note on stderr before ``return EXIT_OK``, "no profiles in STORE", is no error)."""
+    if not isinstance(node, ast.Return) or node.value is None:
+        return False
+    v = node.value
+    return (isinstance(v, ast.Constant) and isinstance(v.value, int) and v.value != 0) or (
+        isinstance(v, ast.Name) and v.id.startswith("EXIT_") and v.id != "EXIT_OK"
+    )
+
+
+def _printers(tree: ast.Module) -> set[str]:
+    """The module's functions that print on stderr (``_error(msg)``: a print by another name)."""
+    return {
+        f.name
+        for f in tree.body
+        if isinstance(f, ast.FunctionDef) and any(_is_stderr_print(n) for n in ast.walk(f) if isinstance(n, ast.stmt))
+    }
+
+
+def print_then_return(source: str, name: str = "<source>") -> list[str]:
+    """``name:line`` of every ``print(..., file=sys.stderr)`` (or call of a function of the module
+    that prints so) directly followed by a code return."""
+    tree = ast.parse(source)
+    printers = _printers(tree)
+
+    def prints(node: ast.stmt) -> bool:
+        if _is_stderr_print(node):
+            return True
+        call = node.value if isinstance(node, ast.Expr) else None
+        return isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in printers
+
+    found = []
+    for node in ast.walk(tree):
+        for field in ("body", "orelse", "finalbody"):
+            body = getattr(node, field, None)
+            if not isinstance(body, list):
+                continue
+            for a, b in zip(body, body[1:]):
+                if prints(a) and _is_code_return(b):
+                    found.append(a.lineno)
+    return [f"{name}:{line}" for line in sorted(found)]
+
+
+def test_the_checker_finds_a_print_then_return_and_nothing_else():
+    bad = textwrap.dedent(
+        """
+        import sys
+
+        def _error(msg) -> int:
+            print(f"harp x: {msg}", file=sys.stderr)
+            return EXIT_ERROR
+
+        def run(args):
+            try:
+                go()
+            except ValueError as exc:
+                print(f"harp x: {exc}", file=sys.stderr)
+                return 2
+            if args.n < 1:
+                _error("--n must be at least 1")
+                return EXIT_ERROR
+            return 0
+        """
+    )
+    assert print_then_return(bad) == ["<source>:5", "<source>:12", "<source>:15"]
+    fine = textwrap.dedent(
+        """
+        import sys
+
+        def run(args):
+            status = 0
+            for path in args.images:  # a bad file is said; the others go on
+                try:
+                    go(path)
+                except InputError as exc:
+                    print(f"harp x: {exc}", file=sys.stderr)
+                    status = EXIT_ERROR
+            print("wrote it", file=sys.stderr)
+            print("done")
+            if not args.images:
+                print("no images", file=sys.stderr)
+                return EXIT_OK
+            return status
+        """
+    )
+    assert print_then_return(fine) == []
+
+
+def test_no_command_prints_an_error_and_returns_a_code():
+    found = []
+    for path in sorted((REPO / "station" / "cli").glob("*.py")):
+        if path.name == "__init__.py":  # the entry point: where the one line is printed
+            continue
+        found += print_then_return(path.read_text(encoding="utf-8"), str(path.relative_to(REPO)))
+    assert found == [], "raise a station.errors.HarpError instead (printed once by station.cli.main)"
+
+
+def test_the_station_errors_are_harp_errors_with_their_exit_codes():
+    from station.config import ConfigError
+    from station.imageio import ImageReadError
+    from station.inputs import InputError
+    from station.profile_choice import ChoiceError, FailedQA
+    from station.qa.targets import QAInputError
+    from station.reprocess import ReprocessError
+    from station.session.directory import SessionError
+    from station.session_run import ReportError
+    from station.store import StoreError
+    from station.web.serve import ServeError
+
+    for cls in (ConfigError, ImageReadError, InputError, ChoiceError, QAInputError, ReprocessError, SessionError):
+        assert issubclass(cls, HarpError) and cls.exit_code == EXIT_ERROR, cls
+    for cls in (ReportError, StoreError, ServeError):
+        assert issubclass(cls, HarpError) and cls.exit_code == EXIT_ERROR, cls
+    assert issubclass(FailedQA, HarpError) and FailedQA.exit_code == EXIT_FAIL
+    assert Interrupted.exit_code == EXIT_INTERRUPTED
+    # the built-in bases they had are kept: callers that catch those still do
+    assert issubclass(ConfigError, ValueError) and issubclass(StoreError, RuntimeError)
+    assert issubclass(SessionError, RuntimeError) and issubclass(ServeError, ValueError)
+
+
+@pytest.mark.parametrize(
+    ("message", "line"),
+    [("a.png: no strings", "a.png: no strings"), ("a\n  b\tc ", "a b c"), ("", "")],
+)
+def test_one_line(message, line):
+    assert one_line(message) == line
