@@ -31,6 +31,7 @@ import numpy.typing as npt
 
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
+from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
 from pipeline.exports.fit import (
     ConversionError,
     conversion_error_in_frame,
@@ -60,6 +61,8 @@ from pipeline.models.base import DistortionModel
 from pipeline.models.homography import HomographyModel
 from pipeline.models.lensfun_model import LENSFUN_FISHEYE_TYPES, LensfunModel
 from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_focal
+from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
+from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
 
 Array = npt.NDArray[np.float64]
@@ -314,10 +317,22 @@ def _lens_notes(src: ExportSource) -> tuple[str, ...]:
 
 
 # ------------------------------------------------------------------ writers
-def _write_pinhole(
-    fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int, hint: bool = True
-) -> Export:
-    n = _coeffs(fmt, opt, allowed, default)
+@dataclass(frozen=True)
+class _Fitted:
+    """A pin-hole or fisheye fit with what its file states: camera choice, measured-camera lines, frame, warnings."""
+
+    model: OpenCVModel | OpenCVFisheyeModel
+    error: ConversionError
+    cam: CameraMatrixChoice
+    measured: tuple[str, ...]
+    frame: FrameStatement
+    warnings: tuple[str, ...]
+
+    def notes(self, src: ExportSource) -> tuple[str, ...]:
+        return (*_lens_notes(src), *self.measured)
+
+
+def _fit_pinhole(fmt: str, src: ExportSource, opt: ExportOptions, n: int, hint: bool = True) -> _Fitted:
     cam = _camera(src, opt)
     if cam.camera is not None:
         m, err = fit_opencv_camera(src.model, src.width, src.height, cam.camera, n_coeffs=n, edges=src.edges)
@@ -327,8 +342,31 @@ def _write_pinhole(
     if warnings and hint and cam.camera is None:
         warnings += _fisheye_hint(fmt, src, err, cam.focal_px if cam.kind != "placeholder" else None)
     measured = tuple(_measured_lines(src, cam, m))
-    notes = (*_lens_notes(src), *measured)
     fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
+    return _Fitted(m, err, cam, measured, fr, tuple(warnings))
+
+
+def _fit_fisheye_export(fmt: str, src: ExportSource, opt: ExportOptions) -> _Fitted:
+    cam = _camera(src, opt)
+    focal = None if cam.kind == "placeholder" else cam.focal_px
+    if cam.camera is not None:
+        m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
+    else:
+        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
+    if focal is None:
+        cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
+    measured = tuple(_measured_lines(src, cam, m))
+    warnings = _camera_warnings(src, opt) + conversion_warnings(fmt, src, err)
+    return _Fitted(m, err, cam, measured, fr, tuple(warnings))
+
+
+def _write_pinhole(
+    fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int, hint: bool = True
+) -> Export:
+    f = _fit_pinhole(fmt, src, opt, _coeffs(fmt, opt, allowed, default), hint)
+    m, err, cam, fr, notes = f.model, f.error, f.cam, f.frame, f.notes(src)
+    assert isinstance(m, OpenCVModel)
     sn = None
     if fmt == "opencv":
         sn = solver_need(src.model, m, src.width, src.height)
@@ -352,21 +390,13 @@ def _write_pinhole(
         )
     else:  # mrcal's unproject iterates to convergence: no solver statement
         text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp, frame=fr)
-    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
+    return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured), f.warnings, sn)
 
 
 def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
-    cam = _camera(src, opt)
-    focal = None if cam.kind == "placeholder" else cam.focal_px
-    if cam.camera is not None:
-        m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
-    else:
-        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
-    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
-    if focal is None:
-        cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
-    measured = tuple(_measured_lines(src, cam, m))
-    notes = (*_lens_notes(src), *measured)
+    f = _fit_fisheye_export(fmt, src, opt)
+    m, err, cam, fr, notes = f.model, f.error, f.cam, f.frame, f.notes(src)
+    assert isinstance(m, OpenCVFisheyeModel)
     sn = solver_need(src.model, m, src.width, src.height)
     if fmt == "opencv-fisheye":
         text = opencv_text(
@@ -386,12 +416,56 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
             solver=sn,
             frame=fr,
         )
-    warnings = (
-        _camera_warnings(src, opt)
-        + conversion_warnings(fmt, src, err)
-        + ([ROS_EQUIDISTANT_READERS] if fmt == "ros-equidistant" else [])
+    warnings = f.warnings + ((ROS_EQUIDISTANT_READERS,) if fmt == "ros-equidistant" else ())
+    return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured), warnings, sn)
+
+
+COLMAP_PINHOLE_COEFFS = 8
+"""COLMAP's FULL_OPENCV holds OpenCV's 8 rational coefficients (no thin prism)."""
+
+
+def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
+    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit).
+
+    The fisheye model is fitted too exactly when :data:`AUTO` would fit it (:func:`_fisheye_reason`:
+    a wide-angle calibration, or a pin-hole fit less exact than the calibration), and the file
+    holds the one with the smaller max conversion error modulo homography. COLMAP inverts either
+    model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's default point
+    solvers, the conversion error is what it sees.
+    """
+    fmt = "colmap"
+    pin = _fit_pinhole(fmt, src, opt, COLMAP_PINHOLE_COEFFS, hint=False)
+    e = pin.error
+    reason = _fisheye_reason(src, e, e.max_mod_h_px)
+    chosen = pin
+    if reason is None:
+        limit, what = _auto_limit(src)
+        choice = (
+            f"FULL_OPENCV: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
+            f"homography) is within {what} ({limit:.4f} px), OPENCV_FISHEYE not tried"
+        )
+    else:
+        fe = _fit_fisheye_export(fmt, src, opt)
+        if fe.error.max_mod_h_px < e.max_mod_h_px:
+            chosen = fe
+        choice = (
+            f"{'OPENCV_FISHEYE' if chosen is fe else 'FULL_OPENCV'}, the closer in max ({reason}): FULL_OPENCV RMS "
+            f"{e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px, OPENCV_FISHEYE RMS {fe.error.rms_mod_h_px:.4f} / "
+            f"max {fe.error.max_mod_h_px:.4f} px modulo homography"
+        )
+    text = colmap_text(
+        chosen.model,
+        src.width,
+        src.height,
+        chosen.error,
+        camera=chosen.cam,
+        choice=f"model {choice}",
+        notes=chosen.notes(src),
+        stamp=src.stamp,
+        frame=chosen.frame,
     )
-    return Export(fmt, text.encode(), err, m, (cam.statement, *measured), tuple(warnings), sn)
+    notes = (f"colmap: {choice}", chosen.cam.statement, *chosen.measured)
+    return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
 
 
 CROP_FACTOR_MISMATCH = 0.15
@@ -668,28 +742,50 @@ def consumer_max_px(ex: Export) -> float:
     return float(worst)
 
 
+def _auto_limit(src: ExportSource) -> tuple[float, str]:
+    """The limit a pin-hole export is held to before the fisheye model is tried, and what it is."""
+    if src.holdout_d is not None and math.isfinite(src.holdout_d):
+        return float(src.holdout_d), "the holdout d"
+    return AUTO_BAR_PX, f"the {AUTO_BAR_PX:g} px bar"
+
+
+def _fisheye_reason(src: ExportSource, err: ConversionError, pin_max: float) -> str | None:
+    """Why the fisheye model is fitted too (None: the pin-hole export suffices).
+
+    A wide-angle calibration, or a pin-hole export less exact than the calibration: RMS or
+    residual ``d`` above the limit (:func:`_auto_limit`), or ``pin_max`` (its max as its consumer
+    sees it) above :data:`AUTO_MAX_FACTOR` times the limit.
+    """
+    limit, _ = _auto_limit(src)
+    worst = max(err.rms_mod_h_px, err.d_px if math.isfinite(err.d_px) else 0.0)
+    if src.wide_angle:
+        return "the calibration chose a wide-angle model"
+    if worst <= limit and pin_max <= AUTO_MAX_FACTOR * limit:
+        return None
+    return f"the pin-hole is less exact than {limit:.4f} px RMS / {AUTO_MAX_FACTOR * limit:.4f} px max"
+
+
 def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
     """OpenCV pin-hole (12 coefficients, or ``opt.coeffs``) or OpenCV fisheye, whichever its consumer finds closer.
 
     Each candidate is judged as its consumer uses it, with OpenCV's own default solver
     (:func:`consumer_max_px`: the closed-form maps and ``cv2.undistortPoints`` /
     ``cv2.fisheye.undistortPoints`` with their default criteria, :mod:`pipeline.exports.solvers`).
-    The fisheye model is fitted too when the calibration chose a wide-angle model
-    (``src.wide_angle``) or when the pin-hole is less exact than the calibration: its RMS or
-    residual ``d`` exceeds the limit (the holdout ``d``, or :data:`AUTO_BAR_PX` without one) or
-    its max so judged exceeds :data:`AUTO_MAX_FACTOR` times the limit; the export is then the one
-    with the smaller max so judged. The file states what its points need (:class:`SolverNeed`).
+    The fisheye model is fitted too when :func:`_fisheye_reason` gives a reason: the calibration
+    chose a wide-angle model (``src.wide_angle``), or the pin-hole is less exact than the
+    calibration: its RMS or residual ``d`` exceeds the limit (the holdout ``d``, or
+    :data:`AUTO_BAR_PX` without one) or its max so judged exceeds :data:`AUTO_MAX_FACTOR` times the
+    limit; the export is then the one with the smaller max so judged. The file states what its
+    points need (:class:`SolverNeed`).
     """
     pin = _write_pinhole("opencv", src, opt, (5, 8, 12, 14), 12, hint=False)
     assert pin.error is not None and pin.solver is not None
     n = _coeffs("opencv", opt, (5, 8, 12, 14), 12)
-    held = src.holdout_d is not None and math.isfinite(src.holdout_d)
-    limit = float(src.holdout_d) if held and src.holdout_d is not None else AUTO_BAR_PX
     e = pin.error
-    worst = max(e.rms_mod_h_px, e.d_px if math.isfinite(e.d_px) else 0.0)
     pin_max = consumer_max_px(pin)
-    if not src.wide_angle and worst <= limit and pin_max <= AUTO_MAX_FACTOR * limit:
-        what = "the holdout d" if held else f"the {AUTO_BAR_PX:g} px bar"
+    reason = _fisheye_reason(src, e, pin_max)
+    if reason is None:
+        limit, what = _auto_limit(src)
         why = (
             f"auto: opencv (pin-hole, {n} coefficients): its conversion error (RMS {e.rms_mod_h_px:.4f} px, "
             f"max {pin_max:.4f} px modulo homography, maps and cv2.undistortPoints' default criteria) is within "
@@ -699,11 +795,6 @@ def _write_auto(src: ExportSource, opt: ExportOptions) -> Export:
     fe = _write_fisheye("opencv-fisheye", src, opt)
     assert fe.error is not None and fe.solver is not None
     fe_max = consumer_max_px(fe)
-    reason = (
-        "the calibration chose a wide-angle model"
-        if src.wide_angle
-        else f"the pin-hole is less exact than {limit:.4f} px RMS / {AUTO_MAX_FACTOR * limit:.4f} px max"
-    )
     figures = (
         f"as their consumers see them, with OpenCV's default point solvers: pin-hole ({n}) RMS "
         f"{pin.error.rms_mod_h_px:.4f} / max {pin_max:.4f} px (cv2.undistortPoints' default alone: "
@@ -739,6 +830,11 @@ def _read_lensfun(data: bytes, req: ReadRequest) -> Correction:
 def _read_mrcal(data: bytes, req: ReadRequest) -> Correction:
     m, size = read_mrcal_text(_text(data, req.name), req.name)
     return Correction(m, size, "mrcal")
+
+
+def _read_colmap(data: bytes, req: ReadRequest) -> Correction:
+    m, size, model = read_colmap_text(_text(data, req.name), req.name, (req.width, req.height))
+    return Correction(m, size, f"colmap:{model}")
 
 
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
@@ -838,6 +934,15 @@ FORMATS: dict[str, ExportFormat] = {
             12,
         ),
         ExportFormat(
+            "colmap",
+            "COLMAP cameras.txt, FULL_OPENCV (8 coefficients) or OPENCV_FISHEYE for a wide lens, whichever is closer",
+            ".txt",
+            False,
+            _write_colmap,
+            _read_colmap,
+            sniff_colmap,
+        ),
+        ExportFormat(
             "maps",
             "float32 map_x/map_y for cv2.remap (.npz), exactly harp undistort's",
             ".npz",
@@ -870,11 +975,12 @@ FORMATS: dict[str, ExportFormat] = {
     )
 }
 
-SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "opencv", "ros")
+SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "colmap", "opencv", "ros")
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
 RECOGNISED = (
-    "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, maps .npz or STMap .exr"
+    "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, "
+    "maps .npz or STMap .exr"
 )
 
 

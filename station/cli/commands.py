@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "devices": "cameras and serial ports found on this machine",
     "tca": "lateral chromatic aberration from colour or RAW harp shots",
     "intrinsics": "the camera matrix from board shots, with the harp's distortion held fixed",
+    "vignetting": "vignetting (relative illumination, lensfun pa, flat field) from harp shots turned on the turntable",
 }
 """Sub-command name -> its one-line help, in the order ``harp --help`` lists them."""
 

@@ -9,6 +9,8 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
     ros-equidistant  ROS camera_info YAML, equidistant (fisheye k1..k4)
     lensfun          lensfun database XML (ptlens); -o an existing database adds the lens to it
     mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
+    colmap           COLMAP cameras.txt: FULL_OPENCV (8 coefficients), or OPENCV_FISHEYE when the
+                     fisheye model is closer (tried as auto tries it)
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
     stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
     stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
@@ -71,6 +73,7 @@ FORMAT_CHOICES = (
     "ros-equidistant",
     "lensfun",
     "mrcal",
+    "colmap",
     "maps",
     "stmap",
     "stmap-redistort",
@@ -169,7 +172,7 @@ def register(subparsers) -> None:
         help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
-            "lensfun, mrcal, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
+            "lensfun, mrcal, COLMAP, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
         ),
     )
     p.add_argument("model", metavar="MODEL", help="harp model file (from harp calibrate or a session)")

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pycolmap
 import pytest
 import yaml
 
@@ -70,6 +71,7 @@ FILES = {
     "ros-equidistant": "camera-equidistant.yaml",
     "lensfun": "lensfun.xml",
     "mrcal": "lens.cameramodel",
+    "colmap": "cameras.txt",
     "maps": "maps.npz",
     "stmap": "stmap.exr",
     "json": "lens.json",
@@ -292,6 +294,28 @@ def test_mrcal_in_mrcal(both):
     _agrees(rms, mxe, fig["conversion"])
 
 
+def test_colmap_in_pycolmap(both, tmp_path):
+    src, runs = both
+    fig = _ok(runs["colmap"])
+    # COLMAP's own reader of a text model (cameras.txt, empty images.txt and points3D.txt)
+    d = tmp_path / "sparse"
+    d.mkdir()
+    (d / "cameras.txt").write_bytes(runs["colmap"].path.read_bytes())
+    (d / "images.txt").write_text("")
+    (d / "points3D.txt").write_text("")
+    rec = pycolmap.Reconstruction()
+    rec.read_text(str(d))
+    (cam,) = rec.cameras.values()
+    assert cam.model_name == "FULL_OPENCV" and (cam.width, cam.height) == (src.width, src.height)
+    assert cam.focal_length_x == pytest.approx(src.focal_px)  # nominal, from the optics
+    xs, ys = np.linspace(0, src.width - 1, 40), np.linspace(0, src.height - 1, 30)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    x = cam.cam_from_img(q + 0.5)  # COLMAP's pixel convention: the top-left pixel's centre at (0.5, 0.5)
+    rms, mxe = mod_h(x, src.model.undistort_points(q))
+    _agrees(rms, mxe, fig["conversion"])
+    assert "camera matrix: nominal" in runs["colmap"].path.read_text()
+
+
 def test_lensfun_finds_the_lens_by_its_names_at_the_crop_factor(both):
     src, runs = both
     fig = _ok(runs["lensfun"])
@@ -421,6 +445,7 @@ def test_harp_evaluate_reads_every_format(model_source, exported):
         "ros-equidistant": "ros-equidistant",
         "lensfun": "lensfun:ptlens",
         "mrcal": "mrcal",
+        "colmap": "colmap:FULL_OPENCV",
         "maps": "maps",
         "stmap": "stmap",
         "json": "harp:radial",
