@@ -200,6 +200,20 @@ class IndexedCapture(Protocol):
 
 
 @runtime_checkable
+class BoardScene(Protocol):
+    """A camera that can be shown a calibration board in place of the harp (the simulator: it renders
+    the board on its wedge on the turntable, :meth:`drivers.sim.camera.SimulatedCamera.board_pose`).
+
+    A session's camera-matrix stage (the ``intrinsics`` section) takes its board views with it; on a
+    real station the board is placed by hand (``harp intrinsics --capture``).
+    """
+
+    def show_board(self, label: str | None) -> None:
+        """Render the board ``label`` (:func:`pipeline.board.parse_board`) from the next capture on; None: the harp."""
+        ...
+
+
+@runtime_checkable
 class Zoomable(Protocol):
     """A camera with a zoom lens it can drive (the simulator's zoom lens, V4L2 ``zoom_absolute``,
     GenICam ``Zoom``). Positions are in the device's own units (the simulator's: millimetres of

@@ -483,9 +483,13 @@ def focus_profile(
     provenance: Provenance,
     given_by: str = GIVEN_BY_CONFIG,
     details: Mapping[str, Any] | None = None,
+    intrinsics: Any = None,
     judge: Callable[[Profile], Any] | None = None,
 ) -> Profile:
     """The judged profile of a focus setting's calibration ``cal`` (:func:`calibrate_focus`).
+
+    ``intrinsics``: its measured camera matrix (:class:`pipeline.intrinsics.Intrinsics`, the session's
+    ``intrinsics`` stage), kept before it is judged; None: none measured.
 
     The session's identities (lens, camera body, focus, a zoom session's focal length, optics), the selection record
     (:func:`selection_record`), the capture's details (orientations, frames per orientation,
@@ -513,6 +517,8 @@ def focus_profile(
             "t": config.pipeline.t,
         },
     )
+    if intrinsics is not None:
+        profile = profile.with_(intrinsics=intrinsics)
     if judge is None:
         return profile
     return profile.with_(qa=judge(profile))

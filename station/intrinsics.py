@@ -6,25 +6,20 @@ the profile's images, no board, too few corners, corners on a line, blurred) is 
 :class:`pipeline.board.BoardRejected` with its one-line reason, never an exception.
 :func:`measure_intrinsics` then fits the camera matrix with the profile's distortion held fixed
 (:func:`pipeline.intrinsics.fit_intrinsics`) and says where it comes from (``source``).
-:func:`capture_board_shots` takes the board shots with a station (``harp intrinsics --capture``): the
-board on a tilted wedge on the turntable, one view per turntable angle.
+The board shots are taken by a station with :func:`station.session.boards.capture_board_shots`
+(``harp intrinsics --capture``) or by a session's camera-matrix stage (the ``intrinsics`` section).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from types import MappingProxyType
-from typing import Any
 
 from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, BoardRejected, BoardSpec, BoardView, detect_board
 from pipeline.intrinsics import Intrinsics, IntrinsicsFailure, fit_intrinsics
 from pipeline.models.base import DistortionModel
-from station.files import atomic_write_bytes
 from station.inputs import InputError, read_image
-from station.session.frame_files import encode_frame
 
 
 @dataclass(frozen=True)
@@ -97,49 +92,3 @@ def measure_intrinsics(
     )
     result = fit_intrinsics(views, model, width, height, skew=skew, source=source)
     return IntrinsicsRun(result=result, views=tuple(views), rejected=tuple(rejected))
-
-
-DEFAULT_BOARD_ANGLES = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
-"""Turntable angles of the board views (a board on a tilted wedge on the turntable: each angle turns
-the tilt's direction, so the views are tilted every way with one axis)."""
-
-
-def capture_board_shots(
-    config: Any,
-    spec: BoardSpec,
-    out_dir: str | Path,
-    *,
-    angles: Sequence[float] = DEFAULT_BOARD_ANGLES,
-    focus: float | None = None,
-    note: Callable[[str], None] = lambda _text: None,
-) -> list[str]:
-    """Board shots taken by the configured station: the board on a tilted wedge on the turntable
-    (in place of the harp), one frame at each turntable angle, at ``focus`` (locked; None: as the
-    camera is), saved losslessly into ``out_dir`` (``board-<angle>.png``); their paths.
-
-    A simulated station (a ``simulation`` section, the ``sim`` camera) is told the board is in front
-    of it (the camera's ``board`` setting): it renders the board through its lens
-    (:meth:`drivers.sim.camera.SimulatedCamera.board_pose`). Raises ConfigError / OSError (one line)."""
-    import dataclasses
-
-    from station.session.devices import open_station  # defers drivers
-
-    cam = config.station.camera
-    if config.simulation is not None and cam.driver == "sim":
-        cam = dataclasses.replace(cam, settings=MappingProxyType({**dict(cam.settings), "board": spec.label}))
-        config = dataclasses.replace(config, station=dataclasses.replace(config.station, camera=cam))
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths: list[str] = []
-    with open_station(config, check=False) as (camera, turntable):
-        camera.set_exposure(config.capture.exposure_us)
-        if focus is not None:
-            camera.lock_focus(focus)
-        for a in angles:
-            got = turntable.move_to(float(a), timeout=config.capture.move_timeout_s)
-            frame = camera.capture(timeout=config.capture.timeout_s)
-            p = out / f"board-{a:g}.png"
-            atomic_write_bytes(p, encode_frame(frame.image))  # lossless PNG at the camera's depth
-            paths.append(str(p))
-            note(f"board view at turntable {got:.1f} deg: {p}")
-    return paths

@@ -608,6 +608,11 @@ class SimulatedCamera:
             raise ValueError(f"fault count must be a non-negative integer, got {n!r}")
         self._faults.extend([kind] * int(n))
 
+    def show_board(self, label: str | None) -> None:
+        """The board ``label`` in front of the camera from the next capture on (None: the harp again);
+        :class:`drivers.protocols.BoardScene`. ValueError (one line) for a label that is not a board."""
+        self.board = None if label is None else parse_board(str(label))
+
     # ------------------------------------------------------------ capture
     def set_capture_index(self, index: int) -> None:
         """Optional hook (not in the Camera protocol): the next frame returned is

@@ -158,7 +158,8 @@ def _capture(args, spec, profile):
     """The board shots taken by the station of ``--config``; a :class:`HarpError` (one line) on failure."""
     from drivers.errors import DriverError  # defers numpy (the drivers package)
     from station.config import load_config  # defers yaml
-    from station.intrinsics import DEFAULT_BOARD_ANGLES, capture_board_shots  # defers cv2, numpy
+    from station.config.schema import DEFAULT_BOARD_ANGLES  # defers yaml
+    from station.session.boards import capture_board_shots  # defers cv2, numpy
 
     try:
         angles = (

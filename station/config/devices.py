@@ -6,10 +6,13 @@
   a simulated camera's ``pixel_format`` against its ``bit_depth``, ``jpeg_quality`` without
   ``realism_seed``, strings as wide as their spacing; an Aravis ``autofocus_feature`` without a
   ``focus_feature``...), and a simulated station's Zaber emulator;
-* orientations within the turntable's configured ``limits`` (inclusive) or, without them,
+* orientations (and the board views' angles, ``intrinsics.angles_deg``) within the turntable's configured
+  ``limits`` (inclusive) or, without them,
   :data:`ROTARY_RANGE` for the rotary stages; focus settings within the simulated lens's range;
 * ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
-  every orientation (the image's extent across the strings over their spacing, two edges a string).
+  every orientation (the image's extent across the strings over their spacing, two edges a string);
+* a session with the camera-matrix stage (``intrinsics``) has a camera that can be shown the board
+  (:class:`drivers.protocols.BoardScene`: the simulator).
 
 The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
 """
@@ -22,6 +25,7 @@ from typing import Any
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
+from drivers.protocols import BoardScene
 from drivers.settings import shown
 from drivers.sim.zaber_emulator import ZaberEmulator
 from station.config.schema import EMULATOR_PORT, Config
@@ -65,6 +69,12 @@ def check_the_devices(config: Config) -> None:
             raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
     if config.station.camera.driver == "sim":
         _simulated_lens_and_harp(config, camera)
+    if config.intrinsics is not None and not isinstance(camera, BoardScene):
+        raise config.error(
+            "intrinsics", f"expected a camera the station can show the board (the simulated one), not the "
+            f"{config.station.camera.driver} camera: on this station place the board by hand and take its views "
+            "with harp intrinsics --id N --capture DIR",
+        )  # fmt: skip
 
 
 def _orientations(config: Config) -> None:
@@ -77,9 +87,13 @@ def _orientations(config: Config) -> None:
     else:
         lo, hi = ROTARY_RANGE
         inside, allowed = (lambda d: lo <= d < hi), f"[{lo:g}, {hi:g}) for a rotary stage"
-    for i, deg in enumerate(config.capture.orientations_deg):
-        if not inside(deg):
-            raise config.error(f"capture.orientations_deg[{i}]", f"expected an angle in {allowed}, got {deg:g}")
+    angles = [("capture.orientations_deg", config.capture.orientations_deg)]
+    if config.intrinsics is not None:
+        angles.append(("intrinsics.angles_deg", config.intrinsics.angles_deg))
+    for key, values in angles:
+        for i, deg in enumerate(values):
+            if not inside(deg):
+                raise config.error(f"{key}[{i}]", f"expected an angle in {allowed}, got {deg:g}")
 
 
 def harp_edges(width: int, height: int, spacing_px: float, angle_deg: float) -> int:

@@ -210,6 +210,31 @@ class ReportConfig:
     overlays: str = setting("all", "which overlays the session report keeps", choices=OVERLAY_RETENTION)
 
 
+DEFAULT_BOARD_ANGLES = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
+"""Turntable angles of the board views (a board on a tilted wedge on the turntable: each angle turns
+the tilt's direction, so the views are tilted every way with one axis)."""
+
+BOARD_MIN_VIEWS = 3
+"""The fewest board views a camera matrix is fitted from (:data:`pipeline.intrinsics.MIN_VIEWS`, which
+imports cv2: a test holds the two equal)."""
+
+
+@dataclass(frozen=True)
+class IntrinsicsConfig:
+    """The session's camera-matrix stage (issue 23): after each focus setting's distortion is fitted, the
+    station takes board views at that focus (the board on a tilted wedge on the turntable, one view per
+    angle) and fits the camera matrix with that distortion held fixed (:mod:`station.intrinsics`)."""
+
+    board: str = setting(doc="the board: charuco:NXxNY:SQUARE_MM:MARKER_MM[:DICT] or chessboard:NXxNY:SQUARE_MM "
+                         "(pipeline.board)")  # fmt: skip
+    angles_deg: tuple[float, ...] = setting(DEFAULT_BOARD_ANGLES, "turntable angles of the board views (within the "
+                                            "turntable's limits)", "deg", -3600.0, 3600.0,
+                                            length=(BOARD_MIN_VIEWS, None), unique=True)  # fmt: skip
+    min_views: int = setting(BOARD_MIN_VIEWS, "usable board views a camera matrix needs (fewer: the profile is "
+                             "stored without one)", "", BOARD_MIN_VIEWS, 1000)  # fmt: skip
+    skew: bool = setting(False, "fit the skew too (no export format holds it)")
+
+
 @dataclass(frozen=True)
 class SimulationConfig:
     """Present only for a simulated station (see :mod:`station.session.simulated`).
@@ -248,6 +273,9 @@ class Config:
                                     "store.path", yaml="store.url")  # fmt: skip
     sessions_dir: Path = setting(Path("sessions"), "where session directories are created", yaml="store.sessions_dir")
     simulation: SimulationConfig | None = section(None, "present only for a simulated station", yaml="simulation")
+    intrinsics: IntrinsicsConfig | None = section(None, "the camera-matrix stage: board views after each focus "
+                                                  "setting's fit (absent: no camera matrix measured)",
+                                                  yaml="intrinsics")  # fmt: skip
     optics: Optics = field(default_factory=Optics)  # from lens and camera_body
     # a zoom lens (issue 23): the focal lengths a zoom session calibrates, each an ordinary session at
     # every focus setting; () none
@@ -352,7 +380,7 @@ def document() -> Section:
         if "section" in f.metadata:
             extra = {n: s for n, s in fields_of(Optics).items() if n in optics_keys(head)}
             top[head] = _section_of(
-                _unoptional(hints[f.name]),
+                unoptional(hints[f.name]),
                 head,
                 f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
                 f.metadata["section"],
@@ -379,7 +407,7 @@ SECTION_DOCS = {
 """Meaning of the sections that gather :class:`Config` fields (``focus.settings``, ``store.*``)."""
 
 
-def _unoptional(annotation: Any) -> Any:
+def unoptional(annotation: Any) -> Any:
     if isinstance(annotation, types.UnionType):
         (annotation,) = [a for a in typing.get_args(annotation) if a is not type(None)]
     return annotation

@@ -43,6 +43,7 @@ from station.config.schema import (
     StationConfig,
     TurntableConfig,
     document,
+    unoptional,
 )
 from station.equipment import Identity, Optics, optics_keys
 from station.store.errors import StoreError
@@ -193,8 +194,8 @@ def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
                 optics[name] = _value(fields_of(Optics)[name], v)
     store = data.get("store") or {}
     store_path, store_url = _store_of(store, path, base)
-    sections = {k: build(typing.get_type_hints(Config)[k], data[k]) for k in ("capture", "pipeline", "qa", "report")
-                if data.get(k) is not None}  # fmt: skip
+    sections = {k: build(unoptional(typing.get_type_hints(Config)[k]), data[k])
+                for k in ("capture", "pipeline", "qa", "report", "intrinsics") if data.get(k) is not None}  # fmt: skip
     zoom = data.get("zoom") or {}
     zoom_values = {f: _value(fields_of(Config)[f], zoom.get(key)) for f, key in
                    (("zoom_settings", "settings"), ("zoom_positions", "positions"), ("focal", "focal"))
@@ -265,6 +266,7 @@ def check_across(config: Config) -> None:
     except ValueError as exc:
         raise config.error("pipeline.degree", f"expected a degree the model allows: {exc}") from None
     _zoom(config)
+    _intrinsics(config)
     cap = config.capture
     if not cap.timeout_s > cap.exposure_us / 1e6:
         raise config.error(
@@ -293,4 +295,22 @@ def _zoom(config: Config) -> None:
         raise config.error(
             "zoom.positions", f"expected one zoom position per focal length ({len(config.zoom_settings)}), got "
             f"{shown(list(config.zoom_positions))}",
+        )  # fmt: skip
+
+
+def _intrinsics(config: Config) -> None:
+    """``intrinsics``: a board label :func:`pipeline.board.parse_board` reads, no more ``min_views`` than angles."""
+    k = config.intrinsics
+    if k is None:
+        return
+    from pipeline.board import parse_board  # defers numpy: only a configuration with the stage needs it
+
+    try:
+        parse_board(k.board)
+    except ValueError as exc:
+        raise config.error("intrinsics.board", f"expected a board label: {exc}") from None
+    if k.min_views > len(k.angles_deg):
+        raise config.error(
+            "intrinsics.min_views", f"expected at most one view per angle of intrinsics.angles_deg "
+            f"({len(k.angles_deg)}), got {k.min_views}",
         )  # fmt: skip

@@ -39,8 +39,9 @@ from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
 from station.session.frame_files import decode_frame, encode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
-from station.session.plan import frame_key, stored_key
+from station.session.plan import board_key, frame_key, stored_key
 from station.session.records import (
+    BoardSaved,
     Finished,
     FrameSaved,
     ManifestReads,
@@ -136,7 +137,7 @@ class SessionDir(ManifestReads):
         self.lines = records
         self.typed = parse(records)
         # temporary files of writes a kill interrupted (never renamed into place)
-        for sub in layout.WRITTEN_DIRS:
+        for sub in layout.ATOMIC_DIRS:
             if (self.path / sub).is_dir():
                 for tmp in (self.path / sub).glob(".*.tmp*"):
                     tmp.unlink(missing_ok=True)
@@ -333,6 +334,9 @@ class SessionDir(ManifestReads):
         for r in self.of_type(FrameSaved):
             if r.attempt == attempts.get((r.focus_idx, r.orientation_idx), 0) and (self.path / r.file).is_file():
                 keys.add(frame_key(r.focus_idx, r.orientation_idx, r.frame_idx))
+        for b in self.of_type(BoardSaved):
+            if (self.path / b.file).is_file():
+                keys.add(board_key(b.focus_idx, b.view_idx))
         for rec in self.typed:  # a later ``reopened`` record takes a stored focus setting back
             if isinstance(rec, Stored):
                 keys.add(stored_key(rec.focus_idx))

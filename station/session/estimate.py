@@ -14,6 +14,8 @@ pass) and adds up, per step:
 * a fit: the full fit and one leave-one-orientation-out refit per orientation
   (:data:`FIT_S_PER_ORIENTATION` each), then the bootstrap replicates (as many refits) spread
   over ``pipeline.workers`` processes;
+* the camera-matrix stage (``intrinsics``): each board view a move and a frame, then
+  :data:`KFIT_S_PER_VIEW` per megapixel and view for the board and the adjustment;
 * once at the end: QA and the report (:data:`REPORT_S_PER_FOCUS` per focus setting).
 
 Every focus setting has the same steps when every shot passes, so the plan of the first is walked
@@ -37,7 +39,18 @@ import math
 from dataclasses import dataclass, field
 
 from station.config import Config
-from station.session.plan import Capture, Fit, LockFocus, Measure, Move, Settle, Store, plan_session
+from station.session.plan import (
+    BoardView,
+    Capture,
+    EstimateK,
+    Fit,
+    LockFocus,
+    Measure,
+    Move,
+    Settle,
+    Store,
+    plan_session,
+)
 
 TURNTABLE_SPEED_DEG_S = 20.0
 """Assumed speed of a real turntable (deg/s) when the configuration does not simulate one."""
@@ -50,6 +63,8 @@ RENDER_S_PER_MPX = 0.10
 MEASURE_S_PER_MPX = 0.35
 FIT_S_PER_ORIENTATION = 0.12
 REPORT_S_PER_FOCUS = 2.0
+KFIT_S_PER_VIEW = 0.3
+"""The camera-matrix stage: finding the board in a view and its share of the adjustment (s per megapixel)."""
 
 WARN_PLAN_HOURS = 1.0
 """A plan estimated longer than this is warned of (``harp config check``, ``harp session plan``)."""
@@ -164,6 +179,24 @@ def estimate_plan(config: Config) -> PlanEstimate:
                     f", {pc.bootstrap} bootstrap replicates)" if pc.bootstrap else ")"
                 )
                 first.append(PlanRow(f, config.focus_settings[f], what, seconds=fit_s))
+            case BoardView(focus_idx=f, degrees=deg):
+                moves += 1
+                frames += 1
+                s = current.pop("extra", 0.0) + MOVE_OVERHEAD_S + move_seconds(deg - stage, speed, accel)
+                stage = deg
+                s += cap.settle_s + frame_s
+                first.append(PlanRow(f, config.focus_settings[f], "board view", deg, 1, s))
+            case EstimateK(focus_idx=f):
+                assert config.intrinsics is not None
+                n_v = len(config.intrinsics.angles_deg)
+                first.append(
+                    PlanRow(
+                        f,
+                        config.focus_settings[f],
+                        f"camera matrix ({n_v} board views)",
+                        seconds=KFIT_S_PER_VIEW * mpx * n_v,
+                    )
+                )
             case Store(focus_idx=f):
                 pass
     o = cap.orientations_deg

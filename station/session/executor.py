@@ -6,8 +6,10 @@ atomically in the session directory, averages and checks each shot (exposure,
 strings found, string angle = commanded orientation + harp offset within a
 tolerance) and sends the check back to the plan, which decides whether to capture
 the shot again; fits each focus setting (:func:`station.calibration.calibrate_focus`,
-leave one orientation out) and stores its profile (model file and store row from
-the same :class:`station.profile.Profile`).
+leave one orientation out); with an ``intrinsics`` section, takes the board views at that
+focus (:mod:`station.session.boards`) and fits the camera matrix with the distortion held fixed
+(:func:`station.intrinsics.measure_intrinsics`); and stores its profile, with that camera matrix
+(model file and store row from the same :class:`station.profile.Profile`).
 
 Every fact is a typed manifest record (:mod:`station.session.records`) appended to
 the session directory and handed to the subscribers (:mod:`station.session.progress`:
@@ -42,24 +44,31 @@ import errno
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
+from pipeline.board import parse_board
+from pipeline.intrinsics import Intrinsics
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.exit_codes import EXIT_ABORTED, EXIT_OK
 from station.files import describe_os_error, sha256_file, write_profile
+from station.intrinsics import measure_intrinsics
 from station.pool import WorkerPool
 from station.profile import Profile
 from station.provenance import make_provenance
 from station.session import layout
+from station.session.boards import board_frame, save_board_frame
 from station.session.directory import SessionDir, SessionError, json_default
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.plan import (
+    BoardView,
     Capture,
+    EstimateK,
     Fit,
     LockFocus,
     Measure,
@@ -86,10 +95,12 @@ from station.session.processing import (
 from station.session.progress import Subscriber, Tally
 from station.session.records import (
     Aborted,
+    BoardSaved,
     Fault,
     FitFailed,
     Fitted,
     FocusLocked,
+    IntrinsicsMeasured,
     Record,
     Resumed,
     ShotMeasured,
@@ -183,6 +194,7 @@ class Executor:
         self._shots: dict[tuple[int, int], ShotMeasurement] = {}
         self._calibrations: dict[int, Calibration] = {}
         self._profiles: dict[int, Profile] = {}
+        self._intrinsics: dict[int, Intrinsics] = {}
         self._stage_deg: float | None = None
         self._focus: float | None = None
         self._size: tuple[int, int] | None = None
@@ -203,8 +215,8 @@ class Executor:
         self._emit(Resumed(__version__) if resumed else Started(__version__))
         done = s.done_keys()
         listed = list(plan_session(self.config, done))  # every shot taken to pass: the totals of the bars
-        n_capture = sum(isinstance(x, Capture) for x in listed)
-        n_process = sum(isinstance(x, (Measure, Fit, Store)) for x in listed)
+        n_capture = sum(isinstance(x, (Capture, BoardView)) for x in listed)
+        n_process = sum(isinstance(x, (Measure, Fit, EstimateK, Store)) for x in listed)
         for sub in self.subscribers:
             sub.start(self.config, past, n_capture, n_process)
         try:
@@ -309,7 +321,7 @@ class Executor:
     # ============================================================== steps
     def perform(self, step: Step) -> ShotCheck | None:
         """Perform one step of the plan; a ``Measure`` returns its check for the plan."""
-        if isinstance(step, (LockFocus, Move, Capture)):
+        if isinstance(step, (LockFocus, Move, Capture, BoardView)):
             self._prepare()
         match step:
             case LockFocus():
@@ -326,6 +338,10 @@ class Executor:
                 return self._measure(step)
             case Fit():
                 self._fit(step)
+            case BoardView():
+                self._board_view(step)
+            case EstimateK():
+                self._estimate_k(step)
             case Store():
                 self._store(step)
             case Stop():
@@ -346,21 +362,25 @@ class Executor:
             )
 
     def _move(self, step: Move) -> None:
+        self._move_to(step.degrees, "capture.orientations_deg")
+
+    def _move_to(self, degrees: float, field: str) -> None:
+        """Move the turntable to ``degrees`` (of configuration ``field``) and check where it went."""
         timeout = self.config.capture.move_timeout_s
 
         def move() -> float:
-            return float(self.turntable.move_to(step.degrees, timeout=timeout))
+            return float(self.turntable.move_to(degrees, timeout=timeout))
 
         self._stage_deg = None
-        got = self._retry(f"move turntable to {step.degrees:g} deg", move, self.turntable)
+        got = self._retry(f"move turntable to {degrees:g} deg", move, self.turntable)
         travel = self.turntable.travel_range() if isinstance(self.turntable, TurntableRanges) else None
         tol = max(POSITION_TOLERANCE_DEG, travel.tolerance() if travel is not None else 0.0)
-        if abs(got - step.degrees) > tol:
+        if abs(got - degrees) > tol:
             # the driver reported no fault, yet the stage is elsewhere: a device that clamps or
             # is configured differently; capturing here would store frames at the wrong angle
             raise SessionAborted(
-                f"turntable read back {got:.4f} deg after a move to {step.degrees:g} deg (tolerance {tol:g}): "
-                "check its limits and steps_per_degree against capture.orientations_deg"
+                f"turntable read back {got:.4f} deg after a move to {degrees:g} deg (tolerance {tol:g}): "
+                f"check its limits and steps_per_degree against {field}"
             )
         self._stage_deg = got
 
@@ -515,6 +535,73 @@ class Executor:
             )
         )
 
+    def _board_view(self, step: BoardView) -> None:
+        """The camera-matrix stage: one board view at the locked focus (:mod:`station.session.boards`),
+        saved and recorded; a resumed session keeps the views on disk (the plan skips them)."""
+        cfg = self.config
+        assert cfg.intrinsics is not None  # the plan yields board views only with the section
+        spec = parse_board(cfg.intrinsics.board)
+        self._move_to(step.degrees, "intrinsics.angles_deg")
+        if cfg.capture.settle_s > 0:
+            time.sleep(cfg.capture.settle_s)
+
+        def grab() -> Frame:
+            if isinstance(self.camera, IndexedCapture):
+                self.camera.set_capture_index(step.view_idx)  # the same noise on resume
+            return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+
+        frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
+        rel = layout.board_file(step.focus_idx, step.view_idx)
+        digest = save_board_frame(self.session.path / rel, frame)
+        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg))
+
+    def _estimate_k(self, step: EstimateK) -> None:
+        """The camera matrix of a focus setting from its board views, its distortion held fixed
+        (:func:`station.intrinsics.measure_intrinsics`); too few usable views (``intrinsics.min_views``)
+        or a failed adjustment: recorded and said, and the profile is stored without one."""
+        f = step.focus_idx
+        cfg = self.config
+        k = cfg.intrinsics
+        assert k is not None
+        cal = self._calibrations[f]
+        assert cal.fit is not None  # a failed fit stopped the session
+        views = {}
+        for r in self.session.of_type(BoardSaved):
+            if r.focus_idx == f:
+                views[r.view_idx] = r  # the last of a view wins
+        paths = []
+        for v in sorted(views):
+            r = views[v]
+            p = self.session.path / r.file
+            if sha256_file(p) != r.sha256:
+                raise SessionError(
+                    f"{p}: checksum does not match the manifest; run: harp session repair {self.session.path}"
+                )
+            paths.append(str(p))
+        w, h = self._image_size(f)
+        run = measure_intrinsics(
+            cal.fit.model,
+            w,
+            h,
+            paths,
+            parse_board(k.board),
+            distortion_from=f"the session's fit of focus setting {cfg.focus_settings[f]:g}",
+            skew=k.skew,
+            command="harp session",
+        )
+        rejected = [[str(Path(r.name).relative_to(self.session.path)), r.reason] for r in run.rejected]
+        result = run.result
+        failure = None
+        if not result:
+            failure = str(getattr(result, "reason", "no camera matrix"))
+        elif len(run.views) < k.min_views:
+            failure = f"only {len(run.views)} usable board views of {len(paths)} (intrinsics.min_views {k.min_views})"
+        if failure is None and isinstance(result, Intrinsics):
+            self._intrinsics[f] = result
+            self._emit(IntrinsicsMeasured(f, rejected, intrinsics=result.to_dict()))
+        else:
+            self._emit(IntrinsicsMeasured(f, rejected, failure=failure))
+
     def _image_size(self, f: int) -> tuple[int, int]:
         h, w = self.session.read_frame(self.session.frames(f, 0)[0], verify=False).shape
         return w, h
@@ -547,6 +634,7 @@ class Executor:
                 session_dir=str(self.session.path.resolve()),
             ),
             details={"model_file": str(path)},
+            intrinsics=self._intrinsics.get(f),
             judge=None if self.judge is None else (lambda p: self.judge(p, f)),
         )
         write_profile(path, profile)

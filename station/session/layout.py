@@ -8,6 +8,7 @@ Layout (paths relative to the session directory ``DIR``)::
     frames/f{f}_o{o}_a{a}_i{i}.png   frame i of attempt a of orientation o at focus setting f, lossless
                                      (station.session.frame_files; .pgm in older sessions)
     measurements/f{f}_o{o}_a{a}.npz  the measured edges of that shot (station.session.evidence)
+    boards/f{f}_v{v}.png             board view v at focus setting f (the ``intrinsics`` stage), lossless
     profiles/focus{f}.yaml           the profile (model file) of focus setting f
     profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
     report/                          the session report (station.qa.report)
@@ -32,6 +33,7 @@ CONFIG_COPY = "config.yaml"
 MANIFEST = "manifest.jsonl"
 FRAMES = "frames"
 MEASUREMENTS = "measurements"
+BOARDS = "boards"
 PROFILES = "profiles"
 REPORT = "report"
 RESULTS = "results.json"
@@ -41,13 +43,19 @@ RESERVE_BYTES = 256 * 1024
 """Size of ``.reserve``: released when a write finds the disk full, so the ``aborted`` record still fits."""
 
 WRITTEN_DIRS = (FRAMES, MEASUREMENTS, PROFILES)
-"""Subdirectories written atomically (a kill may leave a ``.*.tmp*`` temporary there)."""
+"""Subdirectories made with the session and written atomically (a kill may leave a ``.*.tmp*`` temporary there)."""
+ATOMIC_DIRS = (*WRITTEN_DIRS, BOARDS)
+"""Every subdirectory written atomically (``boards``: made by the first board view of the ``intrinsics`` stage)."""
 
 _PROFILE = re.compile(r"focus(\d+)\.yaml")
 
 
 def frame_file(focus_idx: int, orientation_idx: int, attempt: int, frame_idx: int) -> str:
     return f"{FRAMES}/f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.png"
+
+
+def board_file(focus_idx: int, view_idx: int) -> str:
+    return f"{BOARDS}/f{focus_idx}_v{view_idx}.png"
 
 
 def measurement_file(focus_idx: int, orientation_idx: int, attempt: int) -> str:

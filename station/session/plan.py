@@ -2,7 +2,8 @@
 
 :func:`plan_session` lists every step of a calibration session (per focus
 setting: lock focus; per orientation: move, settle, capture and save N frames,
-measure; then fit and store) without touching any hardware, so tests can list
+measure; then fit; with an ``intrinsics`` section, the board views at that focus and the
+camera matrix from them; then store) without touching any hardware, so tests can list
 it and :mod:`station.session.executor` can perform it. A resumed session passes the
 keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
 plan skips them.
@@ -74,13 +75,30 @@ class Store:
 
 
 @dataclass(frozen=True)
+class BoardView:
+    """The camera-matrix stage (``intrinsics``): move to ``degrees``, settle, capture the board and save
+    it (view ``view_idx`` of focus setting ``focus_idx``, at the locked focus)."""
+
+    focus_idx: int
+    view_idx: int
+    degrees: float
+
+
+@dataclass(frozen=True)
+class EstimateK:
+    """Find the board in the focus setting's views and fit its camera matrix, the distortion held fixed."""
+
+    focus_idx: int
+
+
+@dataclass(frozen=True)
 class Stop:
     """The session cannot go on (a shot keeps failing its checks); ``reason`` says why."""
 
     reason: str
 
 
-Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | Store | Stop
+Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | BoardView | EstimateK | Store | Stop
 
 
 @dataclass(frozen=True)
@@ -101,6 +119,11 @@ class ShotCheck:
 def frame_key(focus_idx: int, orientation_idx: int, frame_idx: int) -> tuple:
     """Key of a saved frame in ``already_done``."""
     return ("frame", int(focus_idx), int(orientation_idx), int(frame_idx))
+
+
+def board_key(focus_idx: int, view_idx: int) -> tuple:
+    """Key of a saved board view in ``already_done``."""
+    return ("board", int(focus_idx), int(view_idx))
 
 
 def stored_key(focus_idx: int) -> tuple:
@@ -129,13 +152,14 @@ def plan_session(
     Parameters
     ----------
     config : the validated station configuration.
-    already_done : keys of finished work (:func:`frame_key`, :func:`stored_key`).
+    already_done : keys of finished work (:func:`frame_key`, :func:`board_key`, :func:`stored_key`).
 
     Yields
     ------
     Step : in execution order. A focus setting whose profile is stored yields
         nothing; an orientation whose frames are all saved yields only its
-        ``Measure``; ``LockFocus`` is emitted only when something is captured.
+        ``Measure``; a board view saved yields nothing (its ``EstimateK`` reads it);
+        ``LockFocus`` is emitted only when something is captured.
         After a ``Measure``, the executor sends its :class:`ShotCheck`; a rejected
         shot is re-captured, or ``Stop`` is yielded (see the module docstring).
     """
@@ -169,4 +193,12 @@ def plan_session(
                     locked = f
                 yield from capture_steps(config, f, o)
         yield Fit(f)
+        if config.intrinsics is not None:
+            views = [v for v in range(len(config.intrinsics.angles_deg)) if board_key(f, v) not in done]
+            if views and locked != f:
+                yield LockFocus(f, focus)
+                locked = f
+            for v in views:
+                yield BoardView(f, v, config.intrinsics.angles_deg[v])
+            yield EstimateK(f)
         yield Store(f)

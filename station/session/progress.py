@@ -19,7 +19,17 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from station.config import Config
-from station.session.records import Fault, Fitted, FrameSaved, Record, ShotMeasured, ShotRejected, Stored
+from station.session.records import (
+    BoardSaved,
+    Fault,
+    Fitted,
+    FrameSaved,
+    IntrinsicsMeasured,
+    Record,
+    ShotMeasured,
+    ShotRejected,
+    Stored,
+)
 from station.tables import print_table
 
 
@@ -117,10 +127,13 @@ class ConsoleProgress:
 
     def record(self, record: Record) -> None:
         match record:
-            case FrameSaved():
+            case FrameSaved() | BoardSaved():
                 self._advance("capture")
             case ShotMeasured() | Fitted() | Stored():
                 self._advance("process")
+            case IntrinsicsMeasured(focus_idx=f, intrinsics=k, failure=why):
+                self._advance("process")
+                self.note(f"focus {f}: " + (_camera_matrix_line(k) if k else f"[yellow]no camera matrix: {why}"))
             case ShotRejected(focus_idx=f, orientation_idx=o, reasons=reasons):
                 self.note(f"[yellow]re-capturing focus {f} orientation {o}: {'; '.join(reasons)}")
 
@@ -180,6 +193,14 @@ class ConsoleProgress:
     def _advance(self, task: str) -> None:
         if self._progress is not None:
             self._progress.advance(self._tasks[task])
+
+
+def _camera_matrix_line(k: Any) -> str:
+    """``camera matrix fx 1200.12 ± 0.31, ... px from 6 board views`` of an
+    :meth:`pipeline.intrinsics.Intrinsics.to_dict`."""
+    sd = k.get("sd") or {}
+    vals = ", ".join(f"{n} {float(k[n]):.2f} ± {float(sd.get(n, math.nan)):.2f}" for n in ("fx", "fy", "cx", "cy"))
+    return f"camera matrix {vals} px from {k.get('n_views', '?')} board views"
 
 
 def _fmt(v: Any) -> str:

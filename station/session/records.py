@@ -152,6 +152,34 @@ class FitFailed(Record):
 
 
 @dataclass(frozen=True)
+class BoardSaved(Record):
+    """A board view of the camera-matrix stage (``intrinsics``): its file (lossless, from
+    :mod:`station.session.layout`), sha256, the commanded and read-back turntable angles."""
+
+    kind: ClassVar[str] = "board"
+    focus_idx: int
+    view_idx: int
+    file: str
+    sha256: str
+    commanded_deg: float
+    stage_deg: float | None
+
+
+@dataclass(frozen=True)
+class IntrinsicsMeasured(Record):
+    """The camera matrix of a focus setting from its board views (``intrinsics``: the
+    :meth:`pipeline.intrinsics.Intrinsics.to_dict`; None with ``failure``: the profile is stored
+    without one) and the views rejected, ``[file, reason]`` each."""
+
+    kind: ClassVar[str] = "intrinsics"
+    optional: ClassVar[tuple[str, ...]] = ("intrinsics", "failure")
+    focus_idx: int
+    rejected: list[list[str]]
+    intrinsics: Mapping[str, Any] | None = None
+    failure: str | None = None
+
+
+@dataclass(frozen=True)
 class Stored(Record):
     kind: ClassVar[str] = "stored"
     optional: ClassVar[tuple[str, ...]] = ("sha256",)
@@ -240,6 +268,8 @@ _TYPES: tuple[type[Record], ...] = (
     ShotMeasured,
     Fitted,
     FitFailed,
+    BoardSaved,
+    IntrinsicsMeasured,
     Stored,
     Fault,
     QARecorded,
