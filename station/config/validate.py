@@ -29,6 +29,7 @@ from typing import Any
 import yaml
 
 from drivers.settings import REQUIRED, Setting, describe, fields_of, plain, problem, shown, split_item
+from pipeline.board import parse_board
 from pipeline.fitspec import AUTO, parse_choice
 from station.config.devices import check_the_devices
 from station.config.errors import ConfigError
@@ -303,8 +304,6 @@ def _intrinsics(config: Config) -> None:
     k = config.intrinsics
     if k is None:
         return
-    from pipeline.board import parse_board  # defers numpy: only a configuration with the stage needs it
-
     try:
         parse_board(k.board)
     except ValueError as exc:

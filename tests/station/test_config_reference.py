@@ -64,6 +64,7 @@ def test_the_document_has_the_keys_the_station_reads():
         "qa.max_holdout_d_px", "qa.max_distortion_px", "qa.max_reference_deviation_px", "report.overlays",
         "store.path", "store.url", "store.sessions_dir", "simulation.harp_offset_deg",
         "simulation.lens_spread", "zoom.settings", "zoom.positions", "zoom.focal",  # issues 21 and 23
+        "intrinsics.board", "intrinsics.angles_deg", "intrinsics.min_views", "intrinsics.skew",  # issue 23
     }  # fmt: skip
     leaves = {p for p, _ in document().leaves() if not p.startswith("simulation.emulator.")}
     assert leaves == station
@@ -81,6 +82,7 @@ def test_required_keys_are_the_fields_without_a_default():
         "station.harp.string_spacing_mm", "lens.maker", "lens.model", "lens.serial", "camera_body.maker",
         "camera_body.model", "camera_body.serial", "focus.settings", "capture.orientations_deg",
         "capture.frames_per_orientation", "capture.exposure_us",
+        "intrinsics.board",  # when the optional intrinsics section is given
     }  # fmt: skip
 
 

@@ -31,6 +31,7 @@ def test_every_shipped_config_is_covered():
     assert {p.name for p in CONFIGS} == {
         "demo.yaml",
         "demo-zoom.yaml",
+        "demo-intrinsics.yaml",
         "live-demo.yaml",
         "aravis-zaber.yaml",
         "v4l2-grbl.yaml",
