@@ -427,7 +427,7 @@ def _print_results_of(session_dir: Path) -> None:
 
 # ----------------------------------------------------------------- plan
 def _plan(args) -> int:
-    from station.session.estimate import estimate_plan  # defers numpy, yaml
+    from station.session.estimate import board_views, estimate_plan  # defers numpy, yaml
 
     config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
     from station.session.estimate import long_plan  # defers numpy, yaml
@@ -485,7 +485,7 @@ def _plan(args) -> int:
     took = f"{minutes} min {seconds:02d} s" if minutes < 60 else f"{est.seconds / 3600:.1f} h"
     print(
         f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
-        f"{config.capture.frames_per_orientation} frames = {est.frames} frames, {est.moves} moves, "
+        f"{config.capture.frames_per_orientation} frames{board_views(config)} = {est.frames} frames, {est.moves} moves, "
         f"{est.fits} fits; estimated duration {took}",
         file=sys.stderr,
     )

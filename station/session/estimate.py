@@ -219,8 +219,16 @@ def plan_summary(config: Config, est: PlanEstimate) -> str:
     cap = config.capture
     return (
         f"{len(config.focus_settings)} focus settings x {len(cap.orientations_deg)} orientations x "
-        f"{cap.frames_per_orientation} frames = {est.frames} frames, an estimated {duration(est.seconds)}"
+        f"{cap.frames_per_orientation} frames{board_views(config)} = {est.frames} frames, an estimated "
+        f"{duration(est.seconds)}"
     )
+
+
+def board_views(config: Config) -> str:
+    """`` + 3 x 6 board views`` of the camera-matrix stage (``intrinsics``), or nothing without it."""
+    if config.intrinsics is None:
+        return ""
+    return f" + {len(config.focus_settings)} x {len(config.intrinsics.angles_deg)} board views"
 
 
 def duration(seconds: float) -> str:

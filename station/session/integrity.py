@@ -306,7 +306,7 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
 
 
 def needs_capture(session) -> bool:
-    """Whether what the session lacks includes frames (so the devices are needed)."""
-    from station.session.plan import Capture, plan_session  # defers numpy, yaml
+    """Whether what the session lacks includes frames or board views (so the devices are needed)."""
+    from station.session.plan import BoardView, Capture, plan_session  # defers numpy, yaml
 
-    return any(isinstance(step, Capture) for step in plan_session(session.config, session.done_keys()))
+    return any(isinstance(step, (Capture, BoardView)) for step in plan_session(session.config, session.done_keys()))

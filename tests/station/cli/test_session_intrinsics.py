@@ -70,7 +70,9 @@ def test_every_profile_has_the_true_camera_matrix_within_its_two_sigma(demo):
         k = profiles[focus].intrinsics
         assert k is not None and k.n_views == n
         z = [(got - t) / s for got, t, s in zip((k.fx, k.fy, k.cx, k.cy), truth, k.sd)]
-        print(f"focus {focus:g}: K - truth in sigmas {[f'{v:+.2f}' for v in z]}, sigma {[f'{s:.2f}' for s in k.sd[:4]]}")
+        print(
+            f"focus {focus:g}: K - truth in sigmas {[f'{v:+.2f}' for v in z]}, sigma {[f'{s:.2f}' for s in k.sd[:4]]}"
+        )
         assert all(abs(v) <= 2 for v in z) and max(k.sd[:4]) < 2.0
         assert k.source.startswith(f"harp session, {n} charuco views of charuco:9x7:24:17")
         assert f"distortion held fixed from the session's fit of focus setting {focus:g}" in k.source

@@ -110,3 +110,29 @@ def test_a_recapture_on_resume_locks_the_focus_first():
     while not isinstance(accepted, Measure):
         accepted = plan.send(None)
     assert plan.send(ShotCheck(0, 0, 1)) == Measure(0, 1)  # accepted: on to the next orientation
+
+
+def test_the_intrinsics_stage_takes_the_board_views_after_each_fit():
+    from station.session.plan import BoardView, EstimateK
+
+    cfg = load_config(DEMO.parent / "demo-intrinsics.yaml")
+    angles = cfg.intrinsics.angles_deg
+    steps = list(plan_session(cfg))
+    for f in range(len(cfg.focus_settings)):
+        i = steps.index(Fit(f))
+        n = len(angles)
+        assert steps[i + 1 : i + 1 + n] == [BoardView(f, v, a) for v, a in enumerate(angles)]
+        assert steps[i + 1 + n : i + 3 + n] == [EstimateK(f), Store(f)]
+    # the views on disk are not taken again; the focus is locked again before the missing ones
+    n_i, n_o = cfg.capture.frames_per_orientation, len(cfg.capture.orientations_deg)
+    from station.session.plan import board_key
+
+    done = {frame_key(0, o, i) for o in range(n_o) for i in range(n_i)} | {board_key(0, 0), board_key(0, 1)}
+    first = list(plan_session(cfg, done))
+    first = first[: first.index(Store(0)) + 1]
+    assert first[:n_o] == [Measure(0, o) for o in range(n_o)]
+    assert first[n_o :] == [Fit(0), LockFocus(0, 0.0)] + [
+        BoardView(0, v, angles[v]) for v in range(2, len(angles))
+    ] + [EstimateK(0), Store(0)]  # fmt: skip
+    every = {board_key(0, v) for v in range(len(angles))}
+    assert LockFocus(0, 0.0) not in list(plan_session(cfg, done | every))  # nothing to capture at focus 0
