@@ -200,7 +200,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
             case Store(focus_idx=f):
                 pass
     o = cap.orientations_deg
-    back = move_seconds(o[0] - o[-1], speed, accel) - move_seconds(o[0] - 0.0, speed, accel)
+    back = move_seconds(o[0] - stage, speed, accel) - move_seconds(o[0] - 0.0, speed, accel)  # from the last move
     rows: list[PlanRow] = []
     for f, focus in enumerate(config.focus_settings):
         for k, r in enumerate(first):

@@ -33,6 +33,9 @@ from station.config.schema import Section, document
 
 REPO = Path(__file__).resolve().parents[2]
 BASES = ("demo.yaml", "aravis-zaber.yaml", "v4l2-grbl.yaml")
+OPTIONAL_SECTIONS = {"intrinsics": "demo-intrinsics.yaml"}
+"""Optional sections with a required key, given to the demo as the shipped configuration that shows each
+of them has it, so that every key of theirs is broken beside valid others (issue 23)."""
 RAW = "RAW-YAML-PLACEHOLDER"
 SEED = 2025
 
@@ -162,6 +165,9 @@ def generate() -> list[Case]:
         text = (REPO / "configs" / base).read_text()
         original = yaml.safe_load(text)
         original["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"}
+        if base == "demo.yaml":
+            for name, shown_in in OPTIONAL_SECTIONS.items():
+                original.setdefault(name, yaml.safe_load((REPO / "configs" / shown_in).read_text())[name])
         tree = expanded(document(), original)
 
         def walk(sec: Section):
@@ -194,6 +200,10 @@ def generate() -> list[Case]:
                         field, got = f"{path}[{i}]", value[i]
                     case(f"of the wrong type ({value!r})", value, field, ("expected ", f"got {shown(got)}"))
                 for raw in rng.sample(ODDITIES[str(s.kind)], 2):
+                    items = raw.count(",") + 1
+                    if raw.startswith("[") and not raw.startswith("[[") and items < s.length[0]:
+                        # as many items as the key needs, so that the oddity is what is refused
+                        raw = raw[:-1] + "".join(f", {k + 2}" for k in range(s.length[0] - items)) + "]"
                     field, needles = oddity_expectation(raw, path)
                     case(f"as the YAML {raw[:20]!r}", None, field, needles, raw=raw)
                 if s.default is REQUIRED:
