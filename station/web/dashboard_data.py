@@ -44,10 +44,6 @@ def model_href(maker: str, model: str, api: bool = False) -> str:
     return f"{'/api' if api else ''}/model?{urlencode({'maker': maker, 'model': model})}"
 
 
-def _verdict_of(counts: Mapping[str, int]) -> str:
-    return "FAIL" if counts.get("failed") else "PASS" if counts.get("passed") else "unjudged"
-
-
 # ------------------------------------------------------------ lenses page
 class BadQuery(ValueError):
     """A query parameter that is not what it must be (HTTP 400); one line."""
