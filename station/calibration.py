@@ -350,6 +350,8 @@ def separate_strings(
     joint: HarpShapeFit,
     *,
     map_fn: MapFn = map,
+    bootstrap: int = 0,
+    seed: int = 0,
 ) -> Calibration:
     """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
     :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
@@ -360,8 +362,9 @@ def separate_strings(
     ``benchmarks/strings_separated.py``). The figures are re-made for the stored lens: the fit's
     (points corrected by the lens alone, :func:`pipeline.harp_shape.lens_result`) and the
     leave-one-orientation-out hold-out, each fold fitted with the strings separated on the other
-    orientations (:func:`pipeline.harp_shape.separated_job`). The bootstrap field uncertainty, when asked
-    for, stays that of the lens fitted alone (said in ``details``). ``details["strings"]`` records what
+    orientations (:func:`pipeline.harp_shape.separated_job`), and with ``bootstrap >= 2`` replicates the
+    field uncertainty of the separated lens (every replicate fitted with the strings separated, ``seed``
+    as for the lens alone). ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens."""
     spec = cal.spec
@@ -405,20 +408,33 @@ def separate_strings(
             held_lines.extend(model.undistort_points(p) for p in kept)
         d, d_max = straightness_of(held_lines)
         hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
-    merit = dataclasses.replace(cal.merit, fit=_figures(res.d_after, res.d_max_after), holdout=hold)
-    record = {
+    record: dict[str, Any] = {
         "separated": True,
         "d_with_strings_px": finite_or_none(joint.d_after),
         **plain_record,
     }
-    if cal.uncertainty is not None:
-        record["field_uncertainty_of"] = "the lens fitted alone"
-    details = {
-        **cal.details,
-        "n_params": res.n_params,
-        "strings": record,
-    }
-    return dataclasses.replace(cal, fit=res, merit=merit, details=details)
+    details: dict[str, Any] = {**cal.details, "n_params": res.n_params}
+    unc, unc_summary = cal.uncertainty, cal.merit.field_uncertainty
+    if bootstrap >= 2:
+        boot = bootstrap_field_uncertainty(
+            lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
+            turntable_deg=turntable_deg,
+        )  # fmt: skip
+        if cal.merit.field_uncertainty is not None:
+            record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
+        if not boot:
+            unc, unc_summary = None, None
+            details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=boot.reason)
+        else:
+            unc = boot
+            unc_summary = UncertaintySummary(float(boot.rms), float(boot.max), int(boot.n_boot))
+            details.pop("bootstrap_failure", None)
+            details.update(bootstrap_replicates=boot.n_boot, bootstrap_failed=boot.n_failed)
+    merit = dataclasses.replace(
+        cal.merit, fit=_figures(res.d_after, res.d_max_after), holdout=hold, field_uncertainty=unc_summary
+    )
+    details["strings"] = record
+    return dataclasses.replace(cal, fit=res, merit=merit, uncertainty=unc, details=details)
 
 
 def calibrate_focus(
@@ -464,7 +480,10 @@ def calibrate_focus(
         reason = health.get("failure", "the strings cannot be separated")
         rec = {"separated": False, "reason": reason}
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
-    return separate_strings(cal, shots, turntable_deg, width, height, joint, map_fn=map_fn)
+    return separate_strings(
+        cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
+        seed=pipeline.seed + 1000 * focus_idx,
+    )  # fmt: skip
 
 
 def focus_profile(
