@@ -34,6 +34,7 @@ from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, stra
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
+from pipeline.plain import finite_or_none
 from pipeline.select import distinct_orientations, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
@@ -112,11 +113,7 @@ class Calibration:
 
 
 def _figures(d: float, d_max: float) -> Figures:
-    return Figures(_finite(d), _finite(d_max))
-
-
-def _finite(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
+    return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
 def calibrate_shots(
@@ -189,10 +186,10 @@ def calibrate_shots(
                     failure=f"cross-validation without orientation {k}: {reason}",
                 )  # fmt: skip
             kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
             held_lines.extend(model.undistort_points(p) for p in kept)
         d, d_max = straightness_of(held_lines)
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
     elif holdout is not None:
         raise ValueError(f"unknown hold-out scheme {holdout!r}; known: 'orientations'")
     if held_out:
@@ -201,7 +198,7 @@ def calibrate_shots(
             a = corrected_straightness(full.model, list(s))
             per_shot.append(HeldOutShot(_figures(*b), _figures(*a)))
         d, d_max = corrected_straightness(full.model, [p for s in held_out for p in s])
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_SHOTS)
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_SHOTS)
 
     unc = None
     unc_summary = None
@@ -304,9 +301,6 @@ def harp_health(
     ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens).
     """
 
-    def num(v: float) -> float | None:
-        return float(v) if np.isfinite(v) else None
-
     if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
         return {
             "limit_px": BEND_LIMIT_PX,
@@ -328,22 +322,22 @@ def harp_health(
         "limit_px": BEND_LIMIT_PX,
         "worst_string": worst,
         "worst_bend_px": None if worst is None else own[worst],
-        "worst_bend_se_px": None if worst is None else num(by_index[worst].bend_se_px),
+        "worst_bend_se_px": None if worst is None else finite_or_none(by_index[worst].bend_se_px),
         "bent_strings": sorted(k for k, v in own.items() if v > BEND_LIMIT_PX and v > OUTLIER_FACTOR * typical),
         "typical_bend_px": typical,
         "strings": [
             {
                 "index": s.index,
-                "bend_px": num(s.bend_px),
+                "bend_px": finite_or_none(s.bend_px),
                 "own_bend_px": own.get(s.index),
-                "bend_se_px": num(s.bend_se_px),
+                "bend_se_px": finite_or_none(s.bend_se_px),
                 "shots": s.shots,
                 "span": [float(s.span[0]), float(s.span[1])],
             }
             for s in hs.strings
         ],
-        "d_with_strings_px": num(hs.d_after),
-        "d_lens_only_px": num(hs.d_lens_only),
+        "d_with_strings_px": finite_or_none(hs.d_after),
+        "d_lens_only_px": finite_or_none(hs.d_lens_only),
     }
 
 
@@ -379,7 +373,7 @@ def separate_strings(
         return cal
     lines = [list(s) for s in shots]
     plain_record: dict[str, Any] = {
-        "fit_d_lens_alone_px": _finite(full.d_after),
+        "fit_d_lens_alone_px": finite_or_none(full.d_after),
         "holdout_d_lens_alone_px": None if cal.merit.holdout is None else cal.merit.holdout.d,
     }
 
@@ -410,13 +404,13 @@ def separate_strings(
             if model is None:
                 return kept_plain(f"without orientation {k} the strings cannot be separated: {reason}")
             kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
             held_lines.extend(model.undistort_points(p) for p in kept)
         d, d_max = straightness_of(held_lines)
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
     record: dict[str, Any] = {
         "separated": True,
-        "d_with_strings_px": _finite(joint.d_after),
+        "d_with_strings_px": finite_or_none(joint.d_after),
         **plain_record,
     }
     details: dict[str, Any] = {**cal.details, "n_params": res.n_params}

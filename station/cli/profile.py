@@ -29,13 +29,13 @@ import math
 import sys
 from typing import Any
 
+from pipeline.plain import plain
 from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
 from station.cli.store_options import add_store_options, open_store
 from station.errors import HarpError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.inputs import InputError
-from station.plain_json import plain
 from station.profile_choice import (
     at_focus,
     at_setting,

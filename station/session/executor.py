@@ -53,6 +53,7 @@ from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, Device
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
 from pipeline.board import parse_board
 from pipeline.intrinsics import Intrinsics
+from pipeline.plain import json_default
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.exit_codes import EXIT_ABORTED, EXIT_OK
@@ -63,7 +64,7 @@ from station.profile import Profile
 from station.provenance import make_provenance
 from station.session import layout
 from station.session.boards import board_frame, save_board_frame
-from station.session.directory import SessionDir, SessionError, json_default
+from station.session.directory import SessionDir, SessionError
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.plan import (
     BoardView,
