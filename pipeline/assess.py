@@ -110,6 +110,7 @@ from scipy.special import ndtr
 
 from pipeline.edges import auto_thresholds, detect_edges
 from pipeline.grouping import MIN_PIECE_PX, REJECT_REASONS, Grouping, group_string_edges, points_bbox
+from pipeline.plain import finite_or_none
 
 Points = NDArray[np.float64]
 Floats = NDArray[np.float64]
@@ -420,20 +421,16 @@ class StringSharpness:
     def to_dict(self) -> dict[str, Any]:
         return {
             "string": self.string_id,
-            "sigma_px": _num(self.sigma_px),
-            "edge_width_px": _num(self.edge_width_px),
-            "contrast": _num(self.contrast),
-            "width_px": _num(self.width_px),
-            "angle_deg": _num(self.angle_deg),
+            "sigma_px": finite_or_none(self.sigma_px),
+            "edge_width_px": finite_or_none(self.edge_width_px),
+            "contrast": finite_or_none(self.contrast),
+            "width_px": finite_or_none(self.width_px),
+            "angle_deg": finite_or_none(self.angle_deg),
             "centre": [self.centre[0], self.centre[1]],
             "cross_sections": self.cross_sections,
-            "residual": _num(self.residual),
-            "offset_px": _num(self.offset_px),
+            "residual": finite_or_none(self.residual),
+            "offset_px": finite_or_none(self.offset_px),
         }
-
-
-def _num(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
 
 
 def _interp_along(xy: Points, u_of: Floats, u: Floats) -> Points:
@@ -977,10 +974,10 @@ class Assessment:
             "strings_found": self.n_strings,
             "tracked": self.tracked,
             "edges_found": self.n_edges,
-            "focus_score": _num(self.focus_score),
-            "edge_width_px": _num(self.edge_width_px),
-            "angle_deg": _num(self.angle_deg),
-            "string_width_px": _num(self.string_width_px),
+            "focus_score": finite_or_none(self.focus_score),
+            "edge_width_px": finite_or_none(self.edge_width_px),
+            "angle_deg": finite_or_none(self.angle_deg),
+            "string_width_px": finite_or_none(self.string_width_px),
             "dark_strings": self.dark_strings,
             "strings": [s.to_dict() for s in self.strings],
             "rejected": dict(self.rejected_reasons),

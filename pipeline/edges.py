@@ -516,12 +516,6 @@ def _threaded(fn: Callable[[_T], _R], parts: Sequence[_T]) -> list[_R]:
         return list(ex.map(fn, parts))
 
 
-def _bands(lo: int, hi: int, n: int) -> list[tuple[int, int]]:
-    """``[lo, hi)`` cut into ``n`` contiguous ranges."""
-    cuts = np.linspace(lo, hi, max(1, n) + 1).astype(int)
-    return [(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
-
-
 @dataclass(frozen=True, eq=False)
 class _NmsPoints:
     """Points kept by the non-maximum suppression, in raster order.

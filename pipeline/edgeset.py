@@ -285,12 +285,6 @@ def tls(
     return r, a, np.stack([-s, c], axis=1), np.stack([c, s], axis=1), phi
 
 
-def edge_residuals(points: np.ndarray) -> np.ndarray:
-    """Signed distances of ``points`` (N, 2) to their TLS regression line."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    return tls(pts, np.array([0]), np.array([len(pts)]))[0]
-
-
 def edge_figures(r: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per edge: RMS of the residuals ``r`` and their peak-to-peak (max - min), pixels."""
     ms = np.add.reduceat(r * r, starts) / counts

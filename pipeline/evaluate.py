@@ -32,7 +32,6 @@ from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.inverse import INVERSE_REASONS, OUTSIDE_DOMAIN
 from pipeline.normalise import corner_homography
-from pipeline.straightness import Straightness, straightness
 
 
 def corrected_points(
@@ -105,10 +104,3 @@ def corrected_edges(
         out.append(apply_homography(h, inv.points[keep]))
         kept.append(i)
     return CorrectedEdges(points=out, kept=kept, n_points=n, n_excluded=n_out)
-
-
-def residual_straightness(
-    point_sets: Sequence[np.ndarray], correction: DistortionModel, width: int, height: int
-) -> Straightness:
-    """Straightness of the edges after ``correction`` and the 4-corner normalisation."""
-    return straightness(corrected_points(point_sets, correction, width, height))

@@ -80,6 +80,7 @@ from pipeline.edgeset import FitFailure, FitResult, collect, summarise, tls
 from pipeline.fit import fit_distortion, fold_problem, make_parametrisation, normal_equations, solve
 from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
+from pipeline.plain import finite_or_none
 
 Floats = NDArray[np.float64]
 
@@ -182,9 +183,6 @@ class StringShape:
         return out.reshape(u.shape)
 
     def to_dict(self) -> dict[str, Any]:
-        def num(v: float) -> float | None:
-            return float(v) if np.isfinite(v) else None
-
         return {
             "index": self.index,
             "offset_px": self.offset_px,
@@ -195,8 +193,8 @@ class StringShape:
             "shots": self.shots,
             "edges": self.edges,
             "points": self.points,
-            "bend_px": num(self.bend_px),
-            "bend_se_px": num(self.bend_se_px),
+            "bend_px": finite_or_none(self.bend_px),
+            "bend_se_px": finite_or_none(self.bend_se_px),
         }
 
 

@@ -61,6 +61,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.models.base import DistortionModel
+from pipeline.plain import plain
 
 Array = npt.NDArray[np.float64]
 
@@ -78,20 +79,8 @@ _JACOBIAN_STEP_PX = 1e-3
 
 def distortion_digest(model: DistortionModel) -> str:
     """SHA-256 (hex, first 16) of the model's parameters: which distortion a camera matrix belongs to."""
-    text = json.dumps(_plain(model.to_dict()), sort_keys=True)
+    text = json.dumps(plain(model.to_dict(), nonfinite_as_none=False), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _plain(obj: Any) -> Any:
-    if isinstance(obj, Mapping):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
 
 
 @dataclass(frozen=True)
@@ -192,7 +181,7 @@ class Intrinsics:
             "warnings": list(self.warnings),
         }
         d.update(self.extra)
-        return _plain(d)  # type: ignore[no-any-return]
+        return plain(d, nonfinite_as_none=False)  # type: ignore[no-any-return]
 
     @classmethod
     def from_dict(cls, d: Any) -> Intrinsics:

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from pipeline.edges import detect_edges
 from pipeline.grouping import Grouping, group_string_edges
+from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T, MAX_EXTEND_PX, METHODS, SmoothingMethod, resample_polyline, smooth_subsample
 from pipeline.straightness import hf_rms, straightness
 
@@ -136,7 +137,7 @@ class LineMeasurement:
             "string": self.string_id,
             "polarity": self.polarity,
             "raw_points": self.raw,
-            "width_px": _num(self.width_px),
+            "width_px": finite_or_none(self.width_px),
             "start": list(self.start),
             "end": list(self.end),
             "pieces": max(1, int(len(self.point_pieces))),
@@ -191,20 +192,16 @@ class ImageMeasurement:
         return {
             "width": self.width,
             "height": self.height,
-            "d": _num(self.d),
-            "d_max": _num(self.d_max),
+            "d": finite_or_none(self.d),
+            "d_max": finite_or_none(self.d_max),
             "n_lines": self.n_lines,
             "n_strings": self.n_strings,
             "t": self.t,
             "smoothing": self.smoothing,
-            "string_width_px": _num(self.string_width_px),
+            "string_width_px": finite_or_none(self.string_width_px),
             "lines": [ln.to_dict() for ln in self.lines],
             "rejected": reasons,
         }
-
-
-def _num(v: float) -> float | None:
-    return None if not np.isfinite(v) else float(v)
 
 
 def contiguous_pieces(xy: Points, pieces: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:

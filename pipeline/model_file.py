@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from pipeline.intrinsics import Intrinsics
 from pipeline.models import MODEL_TYPES, model_from_dict
 from pipeline.models.base import DistortionModel
+from pipeline.plain import plain
 
 FORMAT_NAME = "harp-distortion-model"
 FORMAT_VERSION = 1
@@ -65,21 +65,6 @@ class ModelFile:
         )
 
 
-def _plain(obj: Any) -> Any:
-    """Convert numpy scalars/arrays and tuples into plain YAML-safe data."""
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float):
-        return float(obj)
-    return obj
-
-
 def model_file_text(
     model: DistortionModel,
     *,
@@ -102,13 +87,13 @@ def model_file_text(
     doc = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
-        "model": _plain(model.to_dict()),
+        "model": plain(model.to_dict(), nonfinite_as_none=False),
         "image": {"width": int(width), "height": int(height)},
-        "merit": _plain(merit or {}),
-        "provenance": _plain(provenance or {}),
+        "merit": plain(merit or {}, nonfinite_as_none=False),
+        "provenance": plain(provenance or {}, nonfinite_as_none=False),
     }
     if intrinsics is not None:
-        doc["intrinsics"] = _plain(intrinsics.to_dict())
+        doc["intrinsics"] = plain(intrinsics.to_dict(), nonfinite_as_none=False)
     header = (
         "# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
         "# pixel centres at integers). Load with pipeline.load_model(path).\n"

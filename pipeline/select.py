@@ -63,6 +63,7 @@ from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_residuals
 from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FULL_RADIAL, FitSpec
 from pipeline.models.base import DistortionModel
+from pipeline.plain import finite_or_none
 
 DEFAULT_CANDIDATES: tuple[FitSpec, ...] = tuple(
     [FitSpec("radial", d, t, p) for d in (2, 4, 6) for (t, p) in ((False, False), (True, False), (True, True))]
@@ -100,17 +101,14 @@ class CVRow:
     cv_d_bound: float = float("nan")  # a stopped candidate: its CV d is at least this (px)
 
     def to_dict(self) -> dict[str, Any]:
-        def num(v: float) -> float | None:
-            return None if not np.isfinite(v) else float(v)
-
         return {
             **self.candidate.to_dict(),
             "n_params": self.n_params,
-            "cv_d": num(self.cv_d),
-            "fold_d": [num(v) for v in self.fold_d],
-            "fit_d": [num(v) for v in self.fit_d],
+            "cv_d": finite_or_none(self.cv_d),
+            "fold_d": [finite_or_none(v) for v in self.fold_d],
+            "fit_d": [finite_or_none(v) for v in self.fit_d],
             "failure": self.failure,
-            "cv_d_bound": num(self.cv_d_bound),
+            "cv_d_bound": finite_or_none(self.cv_d_bound),
         }
 
 

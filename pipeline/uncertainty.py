@@ -53,6 +53,7 @@ from pipeline.compare import fit_homography
 from pipeline.edgeset import FitFailure, FitResult
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import separated_job
 from pipeline.models.base import DistortionModel
 
 RESAMPLE = ("edges", "images")
@@ -64,7 +65,7 @@ RefitJob: TypeAlias = tuple[Sequence[Sequence[np.ndarray]], int, int, dict[str, 
 """One replicate fit for :func:`refit_job`: ``(lines_per_image, width, height, fit_kwargs)``."""
 RefitOutcome: TypeAlias = tuple[DistortionModel | None, str | None]
 """``(model, None)`` or ``(None, reason)``."""
-MapFn: TypeAlias = Callable[[Callable[[RefitJob], RefitOutcome], Iterable[RefitJob]], Iterable[RefitOutcome]]
+MapFn: TypeAlias = Callable[[Callable[[Any], RefitOutcome], Iterable[Any]], Iterable[RefitOutcome]]
 """A ``map``-like runner of the replicate fits (``map`` itself, a process pool's ``map``)."""
 
 
@@ -150,6 +151,7 @@ def bootstrap_field_uncertainty(
     cells: int = GRID_CELLS,
     full_fit: FitResult | None = None,
     map_fn: MapFn = map,
+    turntable_deg: Sequence[float] | None = None,
 ) -> FieldUncertainty | FitFailure:
     """Bootstrap the correction fit and map the spread of the fitted field.
 
@@ -178,6 +180,11 @@ def bootstrap_field_uncertainty(
         ``map``-like runner of the replicate fits (e.g. a process pool's
         ``map``, with :func:`refit_job` as the picklable job); results do not
         depend on it.
+    turntable_deg : sequence of float, optional
+        Each image's turntable angle; given, every replicate is the lens fitted with the strings'
+        own bends separated (:func:`pipeline.harp_shape.separated_job`, the whole fit from the
+        resampled edges) and ``full_fit`` should be that lens's
+        (:func:`pipeline.harp_shape.lens_result`): the spread is then the separated lens's.
 
     Returns
     -------
@@ -198,6 +205,9 @@ def bootstrap_field_uncertainty(
         [np.asarray(p, np.float64) for j, p in enumerate(lines) if (i, j) not in dropped]
         for i, lines in enumerate(lines_per_image)
     ]
+    angles = (
+        None if turntable_deg is None else [float(a) for a, lines in zip(turntable_deg, data, strict=True) if lines]
+    )
     data = [lines for lines in data if lines]
     # resampling units of "edges": strings, i.e. lines 2k, 2k+1 (pipeline.measure lists a string's
     # two edges next to each other), grouped before dropping so a rejected edge keeps the pairing
@@ -212,20 +222,31 @@ def bootstrap_field_uncertainty(
         ]
         for i, lines in enumerate(lines_per_image)
     ]
+    string_angles = (
+        None
+        if turntable_deg is None
+        else [float(a) for a, groups in zip(turntable_deg, strings, strict=True) if groups]
+    )
     strings = [groups for groups in strings if groups]
     rkw = {**kw, "robust": False, "init": full.model}
     rng = np.random.default_rng(seed)
-    jobs = []
+    jobs: list[Any] = []
     for _ in range(int(n_boot)):  # all resampling first: the result does not depend on map_fn
         if resample == "edges":
             sample = [[p for k in rng.integers(0, len(groups), len(groups)) for p in groups[k]] for groups in strings]
+            sample_angles = string_angles
         else:
-            sample = [data[k] for k in rng.integers(0, len(data), len(data))]
-        jobs.append((sample, width, height, rkw))
+            picks = rng.integers(0, len(data), len(data))
+            sample = [data[k] for k in picks]
+            sample_angles = None if angles is None else [angles[k] for k in picks]
+        if sample_angles is None:
+            jobs.append((sample, width, height, rkw))
+        else:
+            jobs.append((sample, sample_angles, width, height, spec or FitSpec()))
     models: list[DistortionModel] = []
     failures: list[str] = []
     n_failed = 0
-    for model, reason in map_fn(refit_job, jobs):
+    for model, reason in map_fn(refit_job if turntable_deg is None else separated_job, jobs):
         if model is None:
             n_failed += 1
             if len(failures) < 3 and reason is not None:  # (a failed replicate always has a reason)

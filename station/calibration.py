@@ -34,6 +34,7 @@ from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, stra
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
+from pipeline.plain import finite_or_none
 from pipeline.select import distinct_orientations, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
@@ -112,11 +113,7 @@ class Calibration:
 
 
 def _figures(d: float, d_max: float) -> Figures:
-    return Figures(_finite(d), _finite(d_max))
-
-
-def _finite(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
+    return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
 def calibrate_shots(
@@ -189,10 +186,10 @@ def calibrate_shots(
                     failure=f"cross-validation without orientation {k}: {reason}",
                 )  # fmt: skip
             kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
             held_lines.extend(model.undistort_points(p) for p in kept)
         d, d_max = straightness_of(held_lines)
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
     elif holdout is not None:
         raise ValueError(f"unknown hold-out scheme {holdout!r}; known: 'orientations'")
     if held_out:
@@ -201,7 +198,7 @@ def calibrate_shots(
             a = corrected_straightness(full.model, list(s))
             per_shot.append(HeldOutShot(_figures(*b), _figures(*a)))
         d, d_max = corrected_straightness(full.model, [p for s in held_out for p in s])
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_SHOTS)
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_SHOTS)
 
     unc = None
     unc_summary = None
@@ -304,9 +301,6 @@ def harp_health(
     ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens).
     """
 
-    def num(v: float) -> float | None:
-        return float(v) if np.isfinite(v) else None
-
     if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
         return {
             "limit_px": BEND_LIMIT_PX,
@@ -328,22 +322,22 @@ def harp_health(
         "limit_px": BEND_LIMIT_PX,
         "worst_string": worst,
         "worst_bend_px": None if worst is None else own[worst],
-        "worst_bend_se_px": None if worst is None else num(by_index[worst].bend_se_px),
+        "worst_bend_se_px": None if worst is None else finite_or_none(by_index[worst].bend_se_px),
         "bent_strings": sorted(k for k, v in own.items() if v > BEND_LIMIT_PX and v > OUTLIER_FACTOR * typical),
         "typical_bend_px": typical,
         "strings": [
             {
                 "index": s.index,
-                "bend_px": num(s.bend_px),
+                "bend_px": finite_or_none(s.bend_px),
                 "own_bend_px": own.get(s.index),
-                "bend_se_px": num(s.bend_se_px),
+                "bend_se_px": finite_or_none(s.bend_se_px),
                 "shots": s.shots,
                 "span": [float(s.span[0]), float(s.span[1])],
             }
             for s in hs.strings
         ],
-        "d_with_strings_px": num(hs.d_after),
-        "d_lens_only_px": num(hs.d_lens_only),
+        "d_with_strings_px": finite_or_none(hs.d_after),
+        "d_lens_only_px": finite_or_none(hs.d_lens_only),
     }
 
 
@@ -356,6 +350,8 @@ def separate_strings(
     joint: HarpShapeFit,
     *,
     map_fn: MapFn = map,
+    bootstrap: int = 0,
+    seed: int = 0,
 ) -> Calibration:
     """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
     :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
@@ -366,8 +362,9 @@ def separate_strings(
     ``benchmarks/strings_separated.py``). The figures are re-made for the stored lens: the fit's
     (points corrected by the lens alone, :func:`pipeline.harp_shape.lens_result`) and the
     leave-one-orientation-out hold-out, each fold fitted with the strings separated on the other
-    orientations (:func:`pipeline.harp_shape.separated_job`). The bootstrap field uncertainty, when asked
-    for, stays that of the lens fitted alone (said in ``details``). ``details["strings"]`` records what
+    orientations (:func:`pipeline.harp_shape.separated_job`), and with ``bootstrap >= 2`` replicates the
+    field uncertainty of the separated lens (every replicate fitted with the strings separated, ``seed``
+    as for the lens alone). ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens."""
     spec = cal.spec
@@ -376,7 +373,7 @@ def separate_strings(
         return cal
     lines = [list(s) for s in shots]
     plain_record: dict[str, Any] = {
-        "fit_d_lens_alone_px": _finite(full.d_after),
+        "fit_d_lens_alone_px": finite_or_none(full.d_after),
         "holdout_d_lens_alone_px": None if cal.merit.holdout is None else cal.merit.holdout.d,
     }
 
@@ -407,24 +404,37 @@ def separate_strings(
             if model is None:
                 return kept_plain(f"without orientation {k} the strings cannot be separated: {reason}")
             kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(_finite(corrected_straightness(model, kept)[0]))
+            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
             held_lines.extend(model.undistort_points(p) for p in kept)
         d, d_max = straightness_of(held_lines)
-        hold = Holdout(_finite(d), _finite(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
-    merit = dataclasses.replace(cal.merit, fit=_figures(res.d_after, res.d_max_after), holdout=hold)
-    record = {
+        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+    record: dict[str, Any] = {
         "separated": True,
-        "d_with_strings_px": _finite(joint.d_after),
+        "d_with_strings_px": finite_or_none(joint.d_after),
         **plain_record,
     }
-    if cal.uncertainty is not None:
-        record["field_uncertainty_of"] = "the lens fitted alone"
-    details = {
-        **cal.details,
-        "n_params": res.n_params,
-        "strings": record,
-    }
-    return dataclasses.replace(cal, fit=res, merit=merit, details=details)
+    details: dict[str, Any] = {**cal.details, "n_params": res.n_params}
+    unc, unc_summary = cal.uncertainty, cal.merit.field_uncertainty
+    if bootstrap >= 2:
+        boot = bootstrap_field_uncertainty(
+            lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
+            turntable_deg=turntable_deg,
+        )  # fmt: skip
+        if cal.merit.field_uncertainty is not None:
+            record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
+        if not boot:
+            unc, unc_summary = None, None
+            details.update(bootstrap_replicates=0, bootstrap_failed=bootstrap, bootstrap_failure=boot.reason)
+        else:
+            unc = boot
+            unc_summary = UncertaintySummary(float(boot.rms), float(boot.max), int(boot.n_boot))
+            details.pop("bootstrap_failure", None)
+            details.update(bootstrap_replicates=boot.n_boot, bootstrap_failed=boot.n_failed)
+    merit = dataclasses.replace(
+        cal.merit, fit=_figures(res.d_after, res.d_max_after), holdout=hold, field_uncertainty=unc_summary
+    )
+    details["strings"] = record
+    return dataclasses.replace(cal, fit=res, merit=merit, uncertainty=unc, details=details)
 
 
 def calibrate_focus(
@@ -470,7 +480,10 @@ def calibrate_focus(
         reason = health.get("failure", "the strings cannot be separated")
         rec = {"separated": False, "reason": reason}
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
-    return separate_strings(cal, shots, turntable_deg, width, height, joint, map_fn=map_fn)
+    return separate_strings(
+        cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
+        seed=pipeline.seed + 1000 * focus_idx,
+    )  # fmt: skip
 
 
 def focus_profile(

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.measure import ImageMeasurement
+from pipeline.plain import json_default
 
 FORMAT = "harp-edge-points"
 VERSION = 1
@@ -92,13 +93,7 @@ def edge_points_bytes(results: list[tuple[str, ImageMeasurement]], suffix: str) 
     """The file's content for the format of ``suffix`` (``.json`` or ``.npz``)."""
     doc = edge_points_document(results)
     if suffix == ".json":
-
-        def plain(v: Any) -> Any:
-            return v.tolist() if isinstance(v, np.ndarray) else v
-
-        for im in doc["images"]:
-            im["edges"] = [{k: plain(v) for k, v in e.items()} for e in im["edges"]]
-        return (json.dumps(doc, allow_nan=False) + "\n").encode()
+        return (json.dumps(doc, allow_nan=False, default=json_default) + "\n").encode()
     if suffix == ".npz":
         arrays: dict[str, np.ndarray] = {}
         for i, im in enumerate(doc["images"]):

@@ -36,10 +36,8 @@ field; reading an older file or row fills what it holds and leaves the rest empt
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 from pipeline.exports.lens import LensInfo
@@ -48,6 +46,7 @@ from pipeline.intrinsics import Intrinsics
 from pipeline.model_file import ModelFile
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
+from pipeline.plain import finite_or_none, plain
 from station.equipment import Identity, Optics
 
 HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
@@ -55,13 +54,6 @@ HOLDOUT_LEAVE_ONE_ORIENTATION_OUT = "leave one orientation out"
 
 HOLDOUT_SHOTS = "held-out shots"
 """Hold-out scheme of ``harp calibrate --holdout``: shots never used in the fit."""
-
-
-def _num(v: Any) -> float | None:
-    """A finite float, or None (missing, null, NaN, not a number)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    return float(v) if math.isfinite(v) else None
 
 
 # ------------------------------------------------------------------ merit
@@ -80,7 +72,7 @@ class Figures:
     def from_dict(cls, d: Any) -> Figures | None:
         if not isinstance(d, Mapping):
             return None
-        return cls(_num(d.get("d")), _num(d.get("d_max")))
+        return cls(finite_or_none(d.get("d")), finite_or_none(d.get("d_max")))
 
 
 @dataclass(frozen=True)
@@ -109,10 +101,10 @@ class Holdout(Figures):
             return None
         per = d.get("per_orientation_d") or ()
         return cls(
-            _num(d.get("d")),
-            _num(d.get("d_max")),
+            finite_or_none(d.get("d")),
+            finite_or_none(d.get("d_max")),
             str(d["scheme"]) if d.get("scheme") is not None else None,
-            tuple(_num(v) for v in per) if isinstance(per, (list, tuple)) else (),
+            tuple(finite_or_none(v) for v in per) if isinstance(per, (list, tuple)) else (),
         )
 
 
@@ -133,7 +125,9 @@ class UncertaintySummary:
         if not isinstance(d, Mapping):
             return None
         n = d.get("replicates")
-        return cls(_num(d.get("rms")), _num(d.get("max")), int(n) if isinstance(n, (int, float)) else None)
+        return cls(
+            finite_or_none(d.get("rms")), finite_or_none(d.get("max")), int(n) if isinstance(n, (int, float)) else None
+        )
 
 
 @dataclass(frozen=True)
@@ -211,9 +205,9 @@ class Check:
         passed = d.get("passed")
         return cls(
             str(d.get("name", "")),
-            _num(d.get("value")),
+            finite_or_none(d.get("value")),
             str(d.get("comparison", "")),
-            _num(d.get("limit")),
+            finite_or_none(d.get("limit")),
             passed if isinstance(passed, bool) else None,
             str(d.get("text", "")),
         )
@@ -375,9 +369,9 @@ class Profile:
         if self.qa is not None:
             merit["qa"] = self.qa.to_record()
         if self.details.get("harp_health"):  # the harp's self-check: QA judges it from the file too
-            merit["harp_health"] = _plain(dict(self.details["harp_health"]))
+            merit["harp_health"] = plain(dict(self.details["harp_health"]))
         if self.details.get("strings"):  # whether the lens was fitted with the strings' bends separated
-            merit["strings"] = _plain(dict(self.details["strings"]))
+            merit["strings"] = plain(dict(self.details["strings"]))
         p = self.provenance
         prov: dict[str, Any] = {}
         if p.created_utc is not None:
@@ -429,8 +423,8 @@ class Profile:
             qa=Verdict.from_record(qa_doc) if isinstance(qa_doc, Mapping) else None,
             lens=_identity(prov.get("lens")),
             camera=_identity(prov.get("camera")),
-            focus=_num(prov.get("focus")),
-            focal=_num(prov.get("focal")),
+            focus=finite_or_none(prov.get("focus")),
+            focal=finite_or_none(prov.get("focal")),
             provenance=_provenance_of(prov),
             optics=Optics.from_dict(prov.get("optics")),
             id=int(prov["profile_id"]) if isinstance(prov.get("profile_id"), int) else None,
@@ -472,7 +466,7 @@ class Profile:
             "focus": float(self.focus),
             "focal": float(self.focal) if self.focal is not None else None,
             "model_name": self.model.name,
-            "model_json": json.dumps(_plain(self.model.to_dict())),
+            "model_json": json.dumps(plain(self.model.to_dict())),
             "width": int(self.width),
             "height": int(self.height),
             "fit_d": m.fit.d if m.fit else None,
@@ -484,12 +478,12 @@ class Profile:
             "session_dir": str(self.provenance.session_dir),
             "station_id": str(self.provenance.station),
             "software_version": self.provenance.software_version or "",
-            "details_json": json.dumps(_plain(dict(self.details))),
+            "details_json": json.dumps(plain(dict(self.details))),
             "spec_json": json.dumps(self.spec.to_dict()) if self.spec is not None else None,
-            "selection_json": json.dumps(_plain(dict(self.selection))),
-            "merit_json": json.dumps(_plain(self.merit.to_dict())),
-            "provenance_json": json.dumps(_plain(mf.provenance)),
-            "qa_json": json.dumps(_plain(self.qa.to_record())) if self.qa is not None else None,
+            "selection_json": json.dumps(plain(dict(self.selection))),
+            "merit_json": json.dumps(plain(self.merit.to_dict())),
+            "provenance_json": json.dumps(plain(mf.provenance)),
+            "qa_json": json.dumps(plain(self.qa.to_record())) if self.qa is not None else None,
             "verdict": self.qa.verdict if self.qa is not None else None,
             "intrinsics_json": json.dumps(self.intrinsics.to_dict()) if self.intrinsics is not None else None,
         }
@@ -506,22 +500,22 @@ class Profile:
         else:  # schema 2: the flat figures, the per-orientation holdout and bootstrap size in details
             per = details.get("holdout_per_orientation") or ()
             merit = Merit(
-                fit=Figures(_num(row.get("fit_d")), _num(row.get("fit_d_max"))),
+                fit=Figures(finite_or_none(row.get("fit_d")), finite_or_none(row.get("fit_d_max"))),
                 holdout=Holdout(
-                    _num(row.get("holdout_d")),
-                    _num(row.get("holdout_d_max")),
+                    finite_or_none(row.get("holdout_d")),
+                    finite_or_none(row.get("holdout_d_max")),
                     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT if per else None,
-                    tuple(_num(v) for v in per),
+                    tuple(finite_or_none(v) for v in per),
                 ),
                 before=(
-                    Figures(_num(details.get("d_before")), _num(details.get("d_max_before")))
+                    Figures(finite_or_none(details.get("d_before")), finite_or_none(details.get("d_max_before")))
                     if "d_before" in details
                     else None
                 ),
                 field_uncertainty=(
                     UncertaintySummary(
-                        _num(row.get("field_uncertainty_rms")),
-                        _num(row.get("field_uncertainty_max")),
+                        finite_or_none(row.get("field_uncertainty_rms")),
+                        finite_or_none(row.get("field_uncertainty_max")),
                         details.get("bootstrap_replicates"),
                     )
                     if row.get("field_uncertainty_rms") is not None or "bootstrap_replicates" in details
@@ -556,8 +550,8 @@ class Profile:
             qa=Verdict.from_record(json.loads(qa_json)) if qa_json else None,
             lens=Identity(*lens) if lens else None,
             camera=Identity(*camera) if camera else None,
-            focus=_num(row.get("focus")),
-            focal=_num(row.get("focal")),
+            focus=finite_or_none(row.get("focus")),
+            focal=finite_or_none(row.get("focal")),
             provenance=provenance,
             optics=Optics.from_dict(prov_doc.get("optics")),
             details=details,
@@ -628,22 +622,3 @@ def _spec_of_details(details: Mapping[str, Any]) -> tuple[FitSpec | None, dict[s
         except ValueError:
             pass
     return None, {}
-
-
-def _plain(obj: Any) -> Any:
-    """JSON-safe plain data (numpy scalars and arrays, tuples, non-finite floats as null)."""
-    import numpy as np
-
-    if isinstance(obj, Mapping):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _plain(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj

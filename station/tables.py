@@ -68,14 +68,12 @@ def print_table(
             stream.write("\t".join(clean(c) for c in r) + "\n")
         stream.flush()
         return
-    from rich.console import Console
     from rich.table import Table
     from rich.text import Text
 
-    con = Console(file=stream)
     t = Table(title=title)
     for c in columns:  # a cell too long for its column folds onto the next line, never cut with an ellipsis
         t.add_column(c, justify="right" if c in right else "left", overflow="fold")
     for r in texts:
         t.add_row(*(Text(c or "-") for c in r))
-    con.print(t)
+    console(stream).print(t)  # the one console factory (a terminal here)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.edgeset import FitFailure
-from pipeline.model_file import ModelFile
+from pipeline.model_file import ModelFile, read_model_file
 from pipeline.models.base import DistortionModel
 from pipeline.resample import DEFAULT_T
 from pipeline.tca import image_grid
@@ -78,8 +78,6 @@ def check_angles(paths: Sequence[str], angles: Sequence[float]) -> None:
 
 def read_model(path: str | Path) -> ModelFile:
     """A distortion model file; InputError naming the file."""
-    from pipeline.model_file import read_model_file
-
     try:
         return read_model_file(path)
     except ValueError as exc:

@@ -12,7 +12,7 @@ Faults are injected with :meth:`LineEmulator.inject`:
 ``"vanish"``   the device disappears (pty master closed) at fraction ``at``
               of the next move
 
-``count=None`` makes a counted fault permanent until :meth:`clear_faults`.
+``count=None`` makes a counted fault permanent.
 
 The shared :class:`~drivers.sim.world.SimWorld`, when given, is driven by
 this emulator's motion model (:meth:`SimWorld.drive_stage`): the camera
@@ -91,10 +91,6 @@ class LineEmulator(abc.ABC):
             raise ValueError(f"fault position 'at' must be in [0, 1], got {at}")
         with self._lock:
             self._faults[fault] = {"count": count, "at": float(at), **params}
-
-    def clear_faults(self) -> None:
-        with self._lock:
-            self._faults.clear()
 
     def _take_counted(self, fault: str) -> dict[str, Any] | None:
         spec = self._faults.get(fault)

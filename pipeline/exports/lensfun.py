@@ -406,11 +406,6 @@ def installed_lens(databases: Sequence[tuple[str, str]], maker: str, model: str)
     return None
 
 
-def lensfun_lens_names(text: str, name: str = "<text>") -> list[str]:
-    """``"maker model"`` of every lens in a database."""
-    return [" ".join(_key(ln)[:2]) for ln in parse_database(text, name).findall("lens")]
-
-
 def read_lensfun_text(
     text: str,
     width: int,

@@ -66,6 +66,7 @@ from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_foc
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
+from pipeline.plain import json_default
 
 Array = npt.NDArray[np.float64]
 
@@ -733,7 +734,7 @@ def harp_model_doc(src: ExportSource) -> dict[str, Any]:
 
 
 def _write_json(src: ExportSource, opt: ExportOptions) -> Export:
-    return Export("json", (json.dumps(harp_model_doc(src), indent=2, default=_plain) + "\n").encode())
+    return Export("json", (json.dumps(harp_model_doc(src), indent=2, default=json_default) + "\n").encode())
 
 
 def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
@@ -747,14 +748,6 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
     )
     head = "".join(f"# {line}\n" for line in src.stamp)
     return Export("harp", (head + text).encode())
-
-
-def _plain(obj: object) -> object:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
 AUTO = "auto"

@@ -40,9 +40,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec, parse
+from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
@@ -113,10 +112,6 @@ def register(subparsers) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
-
-
-def _num(v):
-    return None if v is None or not np.isfinite(v) else float(v)
 
 
 def _measure_one(job: tuple[str, int]):
@@ -260,16 +255,16 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
     report = {
         "model": str(args.out),
         "choice": choice,
-        "before": {"d": _num(res.d_before), "d_max": _num(res.d_max_before)},
-        "fit": {"d": _num(res.d_after), "d_max": _num(res.d_max_after)},
+        "before": {"d": finite_or_none(res.d_before), "d_max": finite_or_none(res.d_max_before)},
+        "fit": {"d": finite_or_none(res.d_after), "d_max": finite_or_none(res.d_max_after)},
         "images": [
             {
                 "path": str(fit_m[im.image][0]),
                 "n_edges": im.n_edges,
-                "d_before": _num(im.d_before),
-                "d_max_before": _num(im.d_max_before),
-                "d": _num(im.d_after),
-                "d_max": _num(im.d_max_after),
+                "d_before": finite_or_none(im.d_before),
+                "d_max_before": finite_or_none(im.d_max_before),
+                "d": finite_or_none(im.d_after),
+                "d_max": finite_or_none(im.d_max_after),
             }
             for im in res.images
         ],
@@ -280,15 +275,15 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
         per = [
             {
                 "path": str(p),
-                "d_before": _num(m.d),
-                "d_max_before": _num(m.d_max),
-                "d": _num(h.after.d),
-                "d_max": _num(h.after.d_max),
+                "d_before": finite_or_none(m.d),
+                "d_max_before": finite_or_none(m.d_max),
+                "d": finite_or_none(h.after.d),
+                "d_max": finite_or_none(h.after.d_max),
             }
             for (p, m), h in zip(hold_m, cal.held_out)
         ]
         hold = cal.merit.holdout
-        report["holdout"] = {"d": _num(hold.d), "d_max": _num(hold.d_max), "images": per}
+        report["holdout"] = {"d": finite_or_none(hold.d), "d_max": finite_or_none(hold.d_max), "images": per}
         warning = holdout_warning([ln.points for _, m in hold_m for ln in m.lines], hold.d)
         if warning:
             report["warnings"].append(warning)

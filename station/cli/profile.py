@@ -29,13 +29,13 @@ import math
 import sys
 from typing import Any
 
+from pipeline.plain import plain
 from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
 from station.cli.store_options import add_store_options, open_store
 from station.errors import HarpError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.inputs import InputError
-from station.plain_json import plain
 from station.profile_choice import (
     at_focus,
     at_setting,
@@ -99,10 +99,6 @@ def register(subparsers) -> None:
     add_export_options(ex)
     ex.set_defaults(func=_export)
     p.set_defaults(func=lambda args: (p.print_help(sys.stderr), EXIT_ERROR)[1])
-
-
-class _Fail(HarpError):
-    """A one-line error for the user (printed by :func:`station.cli.main`, exit 2)."""
 
 
 class _Refused(HarpError):
@@ -288,16 +284,16 @@ def _profile_row(p) -> tuple[str, ...]:
 def _show(args, store) -> int:
     if args.id is not None:
         if args.lens is not None or args.focus is not None:
-            raise _Fail("--id N names one profile: give no LENS or --focus with it")
+            raise HarpError("--id N names one profile: give no LENS or --focus with it")
         p = store.profile(args.id)
         if p is None:
-            raise _Fail(f"no profile #{args.id} in {store.path}")
+            raise HarpError(f"no profile #{args.id} in {store.path}")
         lens = lens_row(p)
         if is_failed(p):
             _warn(f"{failed_line(lens, p)}: it is not a current profile")
         return _print_profiles(args, lens, [p], [], detail=True)
     if args.lens is None:
-        raise _Fail("name a LENS (serial, maker/model/serial, #lens-id) or a profile with --id N")
+        raise HarpError("name a LENS (serial, maker/model/serial, #lens-id) or a profile with --id N")
     lens = store.find_lens(args.lens)
     used, left_out = current_and_left_out(store, lens[0], args.allow_failed)
     zoom = _zoom_setting(args, lens, used + left_out)
@@ -351,11 +347,11 @@ def _zoom_setting(args, lens, profiles) -> bool:
     needs both --zoom-mm and --focus, and --zoom-mm is refused for a fixed lens."""
     zoom = is_zoom(profiles)
     if getattr(args, "focal", None) is not None and not zoom:
-        raise _Fail(f"{lens_label_of(lens)} has no focal length settings (not a zoom lens): give no --zoom-mm")
+        raise HarpError(f"{lens_label_of(lens)} has no focal length settings (not a zoom lens): give no --zoom-mm")
     if zoom and args.focus is not None and args.focal is None:
-        raise _Fail(f"{lens_label_of(lens)} is a zoom lens: give --zoom-mm MM with --focus")
+        raise HarpError(f"{lens_label_of(lens)} is a zoom lens: give --zoom-mm MM with --focus")
     if zoom and args.focal is not None and args.focus is None:
-        raise _Fail("--zoom-mm needs --focus D (the setting is a focal length and a focus)")
+        raise HarpError("--zoom-mm needs --focus D (the setting is a focal length and a focus)")
     return zoom
 
 
@@ -463,15 +459,15 @@ def _export(args, store) -> int:
     edges = stamp = None
     if args.id is not None:
         if args.lens is not None or args.focus is not None or args.focal is not None:
-            raise _Fail("--id N names one profile: give no LENS, --focus or --zoom-mm with it")
+            raise HarpError("--id N names one profile: give no LENS, --focus or --zoom-mm with it")
         profile = store.profile(args.id)
         if profile is None:
-            raise _Fail(f"no profile #{args.id} in {store.path}")
+            raise HarpError(f"no profile #{args.id} in {store.path}")
         _allowed(args, lens_row(profile), profile)
         what = f"profile #{profile.id}"
     else:
         if args.lens is None or args.focus is None:
-            raise _Fail("name LENS and --focus F, or a stored profile with --id N")
+            raise HarpError("name LENS and --focus F, or a stored profile with --id N")
         lens = store.find_lens(args.lens)
         newest = store.latest_by_focus(lens[0], allow_failed=True)
         if is_zoom(newest) and args.focal is None and args.format == "lensfun":
@@ -496,7 +492,7 @@ def _export(args, store) -> int:
         ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
         write_output(args, ex)
     except InputError as exc:
-        raise _Fail(str(exc)) from None
+        raise HarpError(str(exc)) from None
     report(args, ex, fig, "harp profile")
     return EXIT_OK
 
@@ -524,7 +520,7 @@ def _export_zoom(args, store, lens, newest) -> int:
         ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
         write_output(args, ex)
     except InputError as exc:
-        raise _Fail(str(exc)) from None
+        raise HarpError(str(exc)) from None
     report(args, ex, fig, "harp profile")
     return EXIT_OK
 
@@ -543,7 +539,7 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     newest = store.latest_by_focus(lens[0], allow_failed=True)
     focals = sorted({p.focal for p in newest if p.focal is not None})
     if not args.output:
-        raise _Fail("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
+        raise HarpError("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
     out = Path(args.output)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".xml", dir=out.parent if str(out.parent) else ".")
     os.close(fd)
@@ -559,7 +555,7 @@ def _export_lensfun_zoom(args, store, lens) -> int:
                 ex, fig = export_profile(part, profile, what=what, edges=edges, stamp=stamp)
                 write_output(part, ex)
             except (InputError, ExportError) as exc:
-                raise _Fail(f"focal {z:g} mm: {str(exc).replace(tmp, str(out))}; {out} not written") from None
+                raise HarpError(f"focal {z:g} mm: {str(exc).replace(tmp, str(out))}; {out} not written") from None
             report(args, ex, fig, "harp profile")
             done.append(f"{z:g} mm")
         os.replace(tmp, out)

@@ -31,12 +31,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from pipeline.plain import plain
 from station.cli.commands import COMMANDS
 from station.cli.store_options import open_store, store_location
 from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
 from station.exit_codes import verdict_exit_code
-from station.plain_json import plain
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
 from station.session import layout
 from station.session.directory import SessionDir

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -36,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.fitspec import parse_choice
+from pipeline.plain import finite_or_none
 from station.cli.commands import COMMANDS
 from station.cli.store_options import add_store_options, location_from_args, open_store
 from station.errors import HarpError, Interrupted
@@ -134,8 +134,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------- output
-def _num(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
 
 def _figures(p: Any, verdict: str | None = None) -> dict[str, Any]:
@@ -146,11 +144,11 @@ def _figures(p: Any, verdict: str | None = None) -> dict[str, Any]:
     qa = p.qa
     return {
         "model": p.spec.label if p.spec is not None else p.model.name,
-        "fit_d_px": _num(m.fit.d) if m.fit else None,
-        "holdout_d_px": _num(m.holdout.d) if m.holdout else None,
-        "holdout_d_max_px": _num(m.holdout.d_max) if m.holdout else None,
-        "distortion_max_px": _num(qa.metrics.get("distortion_max_px")) if qa is not None else None,
-        "field_uncertainty_rms_px": _num(unc.rms) if unc else None,
+        "fit_d_px": finite_or_none(m.fit.d) if m.fit else None,
+        "holdout_d_px": finite_or_none(m.holdout.d) if m.holdout else None,
+        "holdout_d_max_px": finite_or_none(m.holdout.d_max) if m.holdout else None,
+        "distortion_max_px": finite_or_none(qa.metrics.get("distortion_max_px")) if qa is not None else None,
+        "field_uncertainty_rms_px": finite_or_none(unc.rms) if unc else None,
         "verdict": qa.verdict if qa is not None else verdict,
         "software": p.provenance.software,
     }

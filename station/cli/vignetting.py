@@ -29,6 +29,7 @@ from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes, atomic_write_text
 from station.inputs import InputError
 from station.tables import is_terminal, print_table
+from station.vignetting import flat_field_tiff, vignetting_document, vignetting_of
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -96,8 +97,6 @@ def _check_options(args) -> tuple[float, float, float] | None:
 
 
 def run(args) -> int:
-    from station.vignetting import flat_field_tiff, vignetting_document, vignetting_of
-
     setting = _check_options(args)
     shots, model, fit, pa = vignetting_of(
         args.images, args.angles, t=args.t, model_path=args.model, axis=tuple(args.axis) if args.axis else None

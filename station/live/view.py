@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.assess import Assessment
+from pipeline.plain import finite_or_none
 
 MAX_POINTS_PER_EDGE = 160
 """An edge drawn on the page is decimated to at most this many points."""
@@ -46,10 +47,6 @@ def _poly(xy: NDArray[np.float64], f: float) -> list[list[float]]:
     return np.round((pts + 0.5) * f - 0.5, 1).tolist()
 
 
-def _num(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
-
-
 def view_of(a: Assessment, warnings: list[str], display_width: int) -> dict[str, Any]:
     """The page's figures for one assessed frame; point coordinates in display pixels."""
     dw, dh, f = display_size(a.width, a.height, display_width)
@@ -73,5 +70,5 @@ def view_of(a: Assessment, warnings: list[str], display_width: int) -> dict[str,
             else {**s.to_dict(), "label_xy": None}
             for s in a.strings
         ],
-        "focus_score": _num(a.focus_score),
+        "focus_score": finite_or_none(a.focus_score),
     }

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import station.qa.verdicts
+from pipeline.plain import json_default
 from station.profile import Profile, Verdict
 from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_measurements
-from station.session.directory import json_default
 from station.session.records import InterpolationError, QARecorded, Reopened, SessionVerdict, Stored
 
 
@@ -52,11 +52,7 @@ def _append_once(session: Any, record: Any) -> None:
 
 def _normal(d: dict) -> Any:
     """``d`` as it reads back from the manifest (JSON types)."""
-    return json.loads(json.dumps(d, default=_plain))
-
-
-def _plain(o: Any) -> Any:
-    return json_default(o)
+    return json.loads(json.dumps(d, default=json_default))
 
 
 def _in_store(store: Any, session_dir: str, focus: float) -> bool:

@@ -165,7 +165,7 @@ def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, fl
                 pts.append(p)
     if not pts:
         return []
-    # every edge at once: one correction call, one TLS pass (per-edge lines, as edge_residuals does)
+    # every edge at once: one correction call, one TLS pass (per-edge lines)
     counts = np.array([len(p) for p in pts])
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     u = np.concatenate(pts)

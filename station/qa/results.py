@@ -32,9 +32,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from pipeline.plain import plain
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED, verdict_exit_code
 from station.files import atomic_write_text, sha256_file
-from station.plain_json import plain
 from station.session import layout
 from station.session.records import FrameSaved, InterpolationError, QARecorded, ReportWritten, SessionVerdict
 from station.session.states import session_state

@@ -57,6 +57,7 @@ from pipeline.edgeset import EdgeSet, collect, edge_figures, straightness_of, tl
 from pipeline.fit import fit_distortion
 from pipeline.model_file import read_model_file
 from pipeline.models.base import IdentityModel
+from pipeline.plain import finite_or_none
 from station.calibration import calibrate_shots
 from station.config import QAConfig
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
@@ -161,13 +162,13 @@ def judged(
         text = f"{label}: {'none' if value is None else 'not finite'}: {FAIL}"
     else:
         text = f"{label} {value:.{digits}f} {unit} {shown} {limit:g} {unit}: {PASS if ok else FAIL}"
-    return Check(name, _finite(value), comparison, float(limit), bool(ok), text)
+    return Check(name, finite_or_none(value), comparison, float(limit), bool(ok), text)
 
 
 def reported(name: str, label: str, value: float | None, comparison: str = "<=", *, digits: int = 4) -> Check:
     """A figure shown but not judged (no threshold)."""
     return Check(
-        name, _finite(value), comparison, None, None, f"{label} {_fmt(value, digits)} px: reported, no threshold"
+        name, finite_or_none(value), comparison, None, None, f"{label} {_fmt(value, digits)} px: reported, no threshold"
     )
 
 
@@ -178,10 +179,6 @@ def _holds(value: float, comparison: str, limit: float) -> bool:
         ">": value > limit,
         ">=": value >= limit,
     }[comparison]
-
-
-def _finite(v) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
 
 @dataclass(frozen=True)
@@ -268,13 +265,13 @@ def evaluate(
     if measurements is not None and measurements.shots:
         with np.errstate(all="ignore"):
             d_corr, n_kept, n_out = corrected_d(model, measurements.shots, width, height)
-        metrics.update(corrected_d_px=_finite(d_corr), corrected_d_outlier_edges=n_out)
+        metrics.update(corrected_d_px=finite_or_none(d_corr), corrected_d_outlier_edges=n_out)
         add(
             judged(
                 "corrected_d",
                 f"d of the {len(measurements.shots)} measured shots ({measurements.source}; {n_kept} edges, "
                 f"{n_out} outliers left out as the fit does) corrected by this model",
-                _finite(d_corr),
+                finite_or_none(d_corr),
                 "<=",
                 t,
             ),
@@ -282,7 +279,7 @@ def evaluate(
         )
 
     rt = round_trip_error(model, width, height)
-    metrics["round_trip_px"] = _finite(rt)
+    metrics["round_trip_px"] = finite_or_none(rt)
     add(
         judged(
             "defined", "correction's inverse round trip over the image, corners included,", rt, "<=", DEFINED_TOL_PX
@@ -295,7 +292,7 @@ def evaluate(
             rms, mx = distortion_magnitude(model, width, height)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         rms = mx = math.nan
-    metrics.update(distortion_rms_px=_finite(rms), distortion_max_px=_finite(mx))
+    metrics.update(distortion_rms_px=finite_or_none(rms), distortion_max_px=finite_or_none(mx))
     lim = thresholds.max_distortion_px
     label = "distortion max (modulo homography)"
     if not (math.isfinite(rms) and math.isfinite(mx)):
@@ -308,7 +305,7 @@ def evaluate(
     else:
         add(reported("distortion_max", label, mx, digits=3))
 
-    then = _finite((recorded or {}).get("distortion_max_px"))
+    then = finite_or_none((recorded or {}).get("distortion_max_px"))
     if then is not None and math.isfinite(mx):
         tol = RECORDED_AGREEMENT_PX + RECORDED_AGREEMENT_REL * then
         diff = abs(mx - then)
@@ -359,7 +356,7 @@ def evaluate(
             checks.append(
                 Check(
                     "string_bend_max",
-                    _finite(worst),
+                    finite_or_none(worst),
                     "<=",
                     limit,
                     None,
@@ -377,7 +374,7 @@ def evaluate(
                 f"{beyond}: {FAIL if bent else PASS}"
             )
             add(
-                Check("string_bend_max", _finite(worst), "<=", limit, not bent, text),
+                Check("string_bend_max", finite_or_none(worst), "<=", limit, not bent, text),
                 f"string {k} of the harp is bent by {worst:.4f} px (limit {limit:g} px): the correction "
                 "would carry its bend; straighten or replace the string, then capture again",
             )
@@ -427,10 +424,10 @@ def reported_figures(profile: Profile) -> dict[str, float | None]:
     m = profile.merit
     unc = m.field_uncertainty
     return {
-        "holdout_d_max_px": _finite(m.holdout.d_max) if m.holdout else None,
-        "fit_d_px": _finite(m.fit.d) if m.fit else None,
-        "field_uncertainty_rms_px": _finite(unc.rms) if unc else None,
-        "field_uncertainty_max_px": _finite(unc.max) if unc else None,
+        "holdout_d_max_px": finite_or_none(m.holdout.d_max) if m.holdout else None,
+        "fit_d_px": finite_or_none(m.fit.d) if m.fit else None,
+        "field_uncertainty_rms_px": finite_or_none(unc.rms) if unc else None,
+        "field_uncertainty_max_px": finite_or_none(unc.max) if unc else None,
     }
 
 
@@ -508,7 +505,7 @@ def qa_verdict(
         profile.model,
         profile.width,
         profile.height,
-        _finite(profile.merit.holdout_d),
+        finite_or_none(profile.merit.holdout_d),
         thresholds_from(thresholds),
         reference=reference,
         extra=extra,

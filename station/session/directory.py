@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.plain import json_default
 from station.config import Config, ConfigError, load_config
 from station.errors import HarpError
 from station.files import atomic_write_bytes, describe_os_error
@@ -343,14 +344,3 @@ class SessionDir(ManifestReads):
     @property
     def finished(self) -> bool:
         return any(isinstance(r, Finished) for r in self.typed)
-
-
-def json_default(o: Any) -> Any:
-    """``json.dumps`` default for numpy values and paths (manifest records, driver extras)."""
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

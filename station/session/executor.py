@@ -48,6 +48,7 @@ import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
+from pipeline.plain import json_default
 from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.exit_codes import EXIT_ABORTED, EXIT_OK
@@ -56,7 +57,7 @@ from station.pool import WorkerPool
 from station.profile import Profile
 from station.provenance import make_provenance
 from station.session import layout
-from station.session.directory import SessionDir, SessionError, json_default
+from station.session.directory import SessionDir, SessionError
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.plan import (
     Capture,

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
 
+from pipeline.plain import finite_or_none, plain
 from station.store import dashboard
 from station.store.engine import damaged_hint, make_engine, read, translate, write
 from station.store.errors import StoreError
@@ -105,10 +106,6 @@ def _iso_utc(text: str) -> str:
         raise StoreError(f"cannot store the profile: stored_at {text!r} is not an ISO 8601 time") from None
     t = t.replace(tzinfo=_dt.UTC) if t.tzinfo is None else t.astimezone(_dt.UTC)
     return t.isoformat(timespec="seconds")
-
-
-def _finite(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
 
 def _insert(backend: str):
@@ -202,8 +199,8 @@ class ProfileStore:
         dist = (qa.metrics if qa is not None else {}) or {}
         values_base = {
             **{k: row[k] for k in PROFILE_COLUMNS if k in row},
-            "distortion_max": _finite(dist.get("distortion_max_px")),
-            "distortion_rms": _finite(dist.get("distortion_rms_px")),
+            "distortion_max": finite_or_none(dist.get("distortion_max_px")),
+            "distortion_rms": finite_or_none(dist.get("distortion_rms_px")),
         }
 
         when = _now() if stored_at is None else _iso_utc(stored_at)
@@ -265,10 +262,10 @@ class ProfileStore:
                 sa.update(profiles)
                 .where(profiles.c.id == int(profile_id))
                 .values(
-                    qa_json=json.dumps(_json_safe(verdict.to_record())),
+                    qa_json=json.dumps(plain(verdict.to_record())),
                     verdict=verdict.verdict,
-                    distortion_max=_finite(verdict.metrics.get("distortion_max_px")),
-                    distortion_rms=_finite(verdict.metrics.get("distortion_rms_px")),
+                    distortion_max=finite_or_none(verdict.metrics.get("distortion_max_px")),
+                    distortion_rms=finite_or_none(verdict.metrics.get("distortion_rms_px")),
                 )
             )
             self._session_verdict(conn, int(profile_id), verdict, session_dir or got[0], float(got[1]))
@@ -283,7 +280,7 @@ class ProfileStore:
             done = conn.execute(
                 sa.update(profiles)
                 .where(profiles.c.id == int(profile_id))
-                .values(intrinsics_json=json.dumps(_json_safe(intrinsics.to_dict())))
+                .values(intrinsics_json=json.dumps(plain(intrinsics.to_dict())))
             )
             if done.rowcount != 1:
                 raise StoreError(f"{self.location}: no profile #{profile_id} to keep a camera matrix for", "missing")
@@ -312,7 +309,7 @@ class ProfileStore:
             else Verdict(str(verdict), tuple(reasons or ()), dict(metrics or {}))
         )
         if focus is None:
-            focus = _finite((metrics or v.metrics).get("focus"))
+            focus = finite_or_none((metrics or v.metrics).get("focus"))
         values = {
             "profile_id": profile_id,
             "session_dir": session_dir,
@@ -323,7 +320,7 @@ class ProfileStore:
         if reasons is not None:
             values["reasons_json"] = json.dumps(list(reasons))
         if metrics is not None:
-            values["metrics_json"] = json.dumps(_json_safe(dict(metrics)))
+            values["metrics_json"] = json.dumps(plain(dict(metrics)))
 
         def tx(conn: sa.Connection) -> int:
             return int(conn.execute(sa.insert(qa_results).values(values).returning(qa_results.c.id)).scalar_one())
@@ -516,28 +513,13 @@ class ProfileStore:
         return self._read("reading the model trend", lambda conn: dashboard.model_trend(conn, maker, model, focus))
 
 
-def _json_safe(obj: Any) -> Any:
-    """JSON-safe plain data (non-finite floats as null, numpy scalars as numbers)."""
-    if isinstance(obj, Mapping):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalar
-        return _json_safe(obj.item())
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
-
 def _qa_values(v: Verdict, focus: float | None) -> dict[str, Any]:
     rec = v.to_record()
     return {
         "verdict": v.verdict,
-        "reasons_json": json.dumps(_json_safe(rec["reasons"])),
-        "metrics_json": json.dumps(_json_safe(rec["metrics"])),
-        "checks_json": json.dumps(_json_safe(rec["checks"])),
-        "thresholds_json": json.dumps(_json_safe(rec["thresholds"])),
+        "reasons_json": json.dumps(plain(rec["reasons"])),
+        "metrics_json": json.dumps(plain(rec["metrics"])),
+        "checks_json": json.dumps(plain(rec["checks"])),
+        "thresholds_json": json.dumps(plain(rec["thresholds"])),
         "focus": focus,
     }

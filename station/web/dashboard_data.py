@@ -11,11 +11,11 @@ both with a one-line message.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 from urllib.parse import quote, urlencode
 
+from pipeline.plain import finite_or_none
 from station.profile import Profile
 from station.profile_choice import is_failed
 
@@ -31,10 +31,6 @@ class Ambiguous(LookupError):
     """A serial number shared by lenses of several models (HTTP 409)."""
 
 
-def _num(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
-
-
 def lens_href(serial: str, maker: str | None = None, model: str | None = None, api: bool = False) -> str:
     q = f"?{urlencode({'maker': maker, 'model': model})}" if maker is not None and model is not None else ""
     return f"{'/api' if api else ''}/lenses/{quote(serial, safe='')}{q}"
@@ -42,10 +38,6 @@ def lens_href(serial: str, maker: str | None = None, model: str | None = None, a
 
 def model_href(maker: str, model: str, api: bool = False) -> str:
     return f"{'/api' if api else ''}/model?{urlencode({'maker': maker, 'model': model})}"
-
-
-def _verdict_of(counts: Mapping[str, int]) -> str:
-    return "FAIL" if counts.get("failed") else "PASS" if counts.get("passed") else "unjudged"
 
 
 # ------------------------------------------------------------ lenses page
@@ -232,16 +224,16 @@ def profile_summary(p: Profile, *, current: bool = False) -> dict[str, Any]:
         "model": p.spec.label if p.spec is not None else p.model.name,
         "image_size": [p.width, p.height],
         "figures": {
-            "before_d_px": _num(m.before.d) if m.before else None,
-            "fit_d_px": _num(m.fit.d) if m.fit else None,
-            "fit_d_max_px": _num(m.fit.d_max) if m.fit else None,
-            "holdout_d_px": _num(m.holdout.d) if m.holdout else None,
-            "holdout_d_max_px": _num(m.holdout.d_max) if m.holdout else None,
+            "before_d_px": finite_or_none(m.before.d) if m.before else None,
+            "fit_d_px": finite_or_none(m.fit.d) if m.fit else None,
+            "fit_d_max_px": finite_or_none(m.fit.d_max) if m.fit else None,
+            "holdout_d_px": finite_or_none(m.holdout.d) if m.holdout else None,
+            "holdout_d_max_px": finite_or_none(m.holdout.d_max) if m.holdout else None,
             "holdout_scheme": m.holdout.scheme if m.holdout else None,
-            "field_uncertainty_rms_px": _num(unc.rms) if unc else None,
-            "field_uncertainty_max_px": _num(unc.max) if unc else None,
-            "distortion_max_px": _num(qa.metrics.get("distortion_max_px")) if qa else None,
-            "distortion_rms_px": _num(qa.metrics.get("distortion_rms_px")) if qa else None,
+            "field_uncertainty_rms_px": finite_or_none(unc.rms) if unc else None,
+            "field_uncertainty_max_px": finite_or_none(unc.max) if unc else None,
+            "distortion_max_px": finite_or_none(qa.metrics.get("distortion_max_px")) if qa else None,
+            "distortion_rms_px": finite_or_none(qa.metrics.get("distortion_rms_px")) if qa else None,
         },
         "verdict": qa.verdict if qa is not None else None,
         "reasons": list(qa.reasons) if qa is not None else [],
@@ -340,7 +332,9 @@ def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
                 "outside": [
                     t.serial
                     for t in pts
-                    if lim is not None and (v := _num(getattr(t, key))) is not None and not lim.lower <= v <= lim.upper
+                    if lim is not None
+                    and (v := finite_or_none(getattr(t, key))) is not None
+                    and not lim.lower <= v <= lim.upper
                 ],
             }
         out.append(
@@ -354,8 +348,8 @@ def model_doc(store: Any, maker: str, model: str) -> dict[str, Any]:
                         "created_at": t.created_at,
                         "station": t.station,
                         "verdict": t.verdict,
-                        "distortion_max": _num(t.distortion_max),
-                        "holdout_d": _num(t.holdout_d),
+                        "distortion_max": finite_or_none(t.distortion_max),
+                        "holdout_d": finite_or_none(t.holdout_d),
                         "href": lens_href(
                             t.serial, maker if t.serial in shared else None, model if t.serial in shared else None
                         ),

@@ -114,6 +114,11 @@ def test_a_session_stores_the_lens_with_the_strings_separated():
     assert rec["holdout_d_lens_alone_px"] == pytest.approx(alone.merit.holdout.d)
     assert sep.merit.holdout.scheme == alone.merit.holdout.scheme and len(sep.merit.holdout.per_orientation_d) == 6
     assert sep.merit.holdout.d != alone.merit.holdout.d
+    # the bootstrap, when asked for, is the separated lens's (every replicate fitted with the strings separated)
+    boot = calibrate_focus(shots, w, h, PipelineConfig(bootstrap=2), 0, spec, turntable_deg=turns)
+    assert boot.uncertainty is not None and boot.uncertainty.model is boot.fit.model and boot.uncertainty.n_boot == 2
+    assert boot.details["bootstrap_replicates"] == 2 and boot.details["strings"]["field_uncertainty_lens_alone_px"] > 0
+    assert boot.merit.field_uncertainty.rms == pytest.approx(boot.uncertainty.rms)
     # the model file says so, and reads back
     from pipeline.model_file import parse_model_text
     from station.profile import Profile, Provenance

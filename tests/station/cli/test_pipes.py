@@ -170,7 +170,7 @@ def test_reprocess_prints_a_tab_separated_table_into_a_pipe(factory_archive, tmp
 
 
 def test_profile_show_by_id_prints_the_profile_on_stdout(factory_archive):
-    from station.plain_json import plain as plain_json
+    from pipeline.plain import plain as plain_json
     from station.store import ProfileStore
 
     with ProfileStore(factory_archive.store, create=False) as st:
