@@ -45,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from drivers.sim.camera import SimulatedCamera  # noqa: E402
 from pipeline import assess as A  # noqa: E402
+from pipeline.assess import assessment as frame_job  # noqa: E402
 from pipeline.edges import detect_edges  # noqa: E402
 from pipeline.grouping import group_string_edges  # noqa: E402
 from pipeline.render import HarpScene  # noqa: E402
@@ -73,7 +74,7 @@ def stages(img, scale, th):
     t = [time.perf_counter()]
     A.exposure_figures(img)
     t.append(time.perf_counter())
-    small = A._downscale(img, scale)
+    small = frame_job._downscale(img, scale)
     t.append(time.perf_counter())
     chains = detect_edges(small, low=th[0], high=th[1], min_length=8, interpolation="parabola")
     t.append(time.perf_counter())
@@ -82,7 +83,7 @@ def stages(img, scale, th):
     sx = img.shape[1] / small.shape[1]
     by = {}
     for e in g.edges:
-        by.setdefault(e.string_id, []).append(A._to_frame(e.xy, sx, sx))
+        by.setdefault(e.string_id, []).append(frame_job._to_frame(e.xy, sx, sx))
     A.string_sharpness(img, [(i, *xs) for i, xs in by.items() if len(xs) == 2])
     t.append(time.perf_counter())
     A.edge_coverage([xs for v in by.values() for xs in v], img.shape[1], img.shape[0])

@@ -2,7 +2,7 @@
 
 :class:`WorkerPool` runs every job the station shares out among processes: a session's fits
 (:class:`station.session.executor.Executor`) and its report's figures
-(:func:`station.qa.report.draw_figures`), ``harp reprocess``'s focus settings
+(:func:`station.qa.plots.draw_figures`), ``harp reprocess``'s focus settings
 (:func:`station.reprocess.run_jobs`), ``harp calibrate``'s shots and candidates
 (:mod:`station.cli.calibrate`). Its policy:
 

@@ -30,8 +30,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
@@ -108,25 +106,11 @@ def colmap_text(
         *([choice] if choice else []),
         *([camera.statement] if camera is not None else []),
         "pixel convention: COLMAP's (the centre of the top-left pixel at 0.5, 0.5): cx, cy are OpenCV's + 0.5",
-        *(_frame_lines(frame) if frame is not None else []),
+        *(frame.ray_lines("COLMAP's cam_from_img") if frame is not None else []),
         *notes,
         "CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
     ]
     return "".join(f"# {s}\n" for s in lines) + colmap_line(model, width, height) + "\n"
-
-
-def _frame_lines(frame: FrameStatement) -> list[str]:
-    return [
-        f"corrected image = harp undistort's with {frame.choice.describe()}: {frame.frame.describe()}",
-        "a point (x, y) of COLMAP's cam_from_img is at newK @ R @ (x, y, 1) in it (harp pixels: the centre of "
-        "the top-left pixel at 0, 0), to within the conversion error",
-        f"R = {_rows(frame.rotation)}",
-        f"newK = {_rows(frame.new_k)}",
-    ]
-
-
-def _rows(m: np.ndarray) -> str:
-    return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in m) + "]"
 
 
 def parse_colmap_cameras(text: str, name: str = "<text>") -> list[ColmapCamera]:

@@ -69,6 +69,21 @@ M = TypeVar("M", bound=DistortionModel)
 OPENCV_STAGES = (5, 8, 12, 14)
 """Coefficient counts of OpenCV's pin-hole model, in the order they are fitted."""
 
+RADTAN_COEFFS = 4
+"""``k1 k2 p1 p2`` without ``k3``: the radial-tangential model of Kalibr (and OpenCV's 4), fitted alone."""
+
+
+def opencv_stages(n_coeffs: int) -> tuple[int, ...]:
+    """The stages fitted for ``n_coeffs`` coefficients (ValueError for a count OpenCV has not)."""
+    if n_coeffs == RADTAN_COEFFS:
+        return (RADTAN_COEFFS,)
+    if n_coeffs not in OPENCV_STAGES:
+        raise ValueError(
+            f"OpenCV export supports {', '.join(map(str, (RADTAN_COEFFS, *OPENCV_STAGES)))} coefficients, got {n_coeffs}"
+        )
+    return tuple(m for m in OPENCV_STAGES if m <= n_coeffs)
+
+
 FIT_GRID_LONG = 48
 """Fitting grid: points along the long side of the image (borders and corners included)."""
 
@@ -491,9 +506,9 @@ def fit_opencv(
 
     Parameters
     ----------
-    n_coeffs : 5, 8, 12 or 14
-        ``k1 k2 p1 p2 k3`` (plumb_bob), + ``k4 k5 k6`` (rational), + thin prism
-        ``s1..s4``, + sensor tilt ``taux tauy``. Fitted in stages from 5 up,
+    n_coeffs : 4, 5, 8, 12 or 14
+        ``k1 k2 p1 p2`` (radial-tangential, fitted alone), + ``k3`` (plumb_bob), + ``k4 k5 k6``
+        (rational), + thin prism ``s1..s4``, + sensor tilt ``taux tauy``. Fitted in stages from 5 up,
         each from the previous solution; the stage with the smallest
         conversion error (modulo homography) is returned, padded with zeros.
     focal : float, optional
@@ -510,8 +525,7 @@ def fit_opencv(
     -------
     (OpenCVModel, ConversionError)
     """
-    if n_coeffs not in OPENCV_STAGES:
-        raise ValueError(f"OpenCV export supports {', '.join(map(str, OPENCV_STAGES))} coefficients, got {n_coeffs}")
+    stages = opencv_stages(n_coeffs)
     f = placeholder_focal(width, height) if focal is None else float(focal)
     if not (np.isfinite(f) and f > 0):
         raise ValueError(f"focal length must be > 0 px, got {focal}")
@@ -534,14 +548,14 @@ def fit_opencv(
     pen = _pole_free_penalty
     # first the coefficients alone (centre at the image centre, H fixed at its linear start), then with
     # the centre, so that the centre does not wander off along the centre/perspective valley, then everything
-    n0 = OPENCV_STAGES[0]
+    n0 = stages[0]
     k0, _, _ = _least_squares(
         prob, lambda k: maker(n0)(np.concatenate([[0.0, 0.0], k])), np.zeros(n0), h8, fix_h=True, penalty=pen
     )
     theta, _, _ = _least_squares(prob, maker(n0), np.concatenate([[0.0, 0.0], k0]), h8, fix_h=True, penalty=pen)
     best: tuple[float, OpenCVModel] | None = None
     faults = []
-    for n in (m for m in OPENCV_STAGES if m <= n_coeffs):
+    for n in stages:
         theta = np.concatenate([theta, np.zeros(2 + n - len(theta))])
         theta, h8, _ = _least_squares(prob, maker(n), theta, h8, penalty=pen)
         cand = maker(n_coeffs)(np.concatenate([theta, np.zeros(2 + n_coeffs - len(theta))]))
@@ -739,8 +753,7 @@ def fit_opencv_camera(
     The conversion error is reported as by :func:`fit_opencv` (the figures ``harp evaluate``
     sees); :func:`frame_error` gives it in the camera's frame.
     """
-    if n_coeffs not in OPENCV_STAGES:
-        raise ValueError(f"OpenCV export supports {', '.join(map(str, OPENCV_STAGES))} coefficients, got {n_coeffs}")
+    stages = opencv_stages(n_coeffs)
     fx, fy, cx, cy = (float(v) for v in camera)
     prob, h_id = _in_frame_problem(model, width, height, n_long)
     scale = focal_rescaling(fx / placeholder_focal(width, height))
@@ -755,7 +768,7 @@ def fit_opencv_camera(
     theta = np.zeros(0)
     best: tuple[float, OpenCVModel] | None = None
     faults = []
-    for n in (m for m in OPENCV_STAGES if m <= n_coeffs):
+    for n in stages:
         theta = np.concatenate([theta, np.zeros(n - len(theta))])
         theta, _, _ = _least_squares(prob, maker(n), theta, h_id, fix_h=True, penalty=pen)
         cand = maker(n_coeffs)(np.concatenate([theta, np.zeros(n_coeffs - len(theta))]))

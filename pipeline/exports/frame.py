@@ -48,6 +48,21 @@ class FrameStatement:
             "newK = K gives another frame",
         ]
 
+    def ray_lines(self, unproject: str) -> list[str]:
+        """Comment lines for a format that holds no ``R``/``newK`` fields: both written out, and what
+        a point ``(x, y)`` of the consumer's ``unproject`` (normalised image plane) is in the corrected image."""
+        return [
+            f"corrected image = harp undistort's with {self.choice.describe()}: {self.frame.describe()}",
+            f"a point (x, y) of {unproject} is at newK @ R @ (x, y, 1) in it (harp pixels: the centre of "
+            "the top-left pixel at 0, 0), to within the conversion error",
+            f"R = {_rows(self.rotation)}",
+            f"newK = {_rows(self.new_k)}",
+        ]
+
+
+def _rows(m: Array) -> str:
+    return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in m) + "]"
+
 
 def frame_statement(
     ours: DistortionModel,

@@ -33,6 +33,7 @@ from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
 from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
 from pipeline.exports.fit import (
+    RADTAN_COEFFS,
     ConversionError,
     conversion_error_in_frame,
     fit_fisheye,
@@ -43,6 +44,7 @@ from pipeline.exports.fit import (
     frame_error,
 )
 from pipeline.exports.frame import FrameStatement, frame_statement
+from pipeline.exports.kalibr import kalibr_text, read_kalibr_text, sniff_kalibr
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
 from pipeline.exports.lensfun import (
     LensfunEntry,
@@ -421,39 +423,54 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured), warnings, sn)
 
 
+def _pinhole_or_fisheye(
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str]
+) -> tuple[_Fitted, str]:
+    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``.
+
+    For consumers that invert either model to convergence (or whose figures are the projection's):
+    the fisheye model is fitted too exactly when :data:`AUTO` would fit it (:func:`_fisheye_reason`:
+    a wide-angle calibration, or a pin-hole fit less exact than the calibration), and the one with
+    the smaller max conversion error modulo homography is kept. ``names``: the format's names of the
+    two models, for the statement. A lens the pin-hole family cannot hold (a pole or fold,
+    :mod:`pipeline.exports.pole_free`) is written with the fisheye model, saying why.
+    """
+    try:
+        pin = _fit_pinhole(fmt, src, opt, n, hint=False)
+    except ValueError as exc:
+        try:
+            fe = _fit_fisheye_export(fmt, src, opt)
+        except ValueError:
+            raise exc from None
+        return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})"
+    e = pin.error
+    reason = _fisheye_reason(src, e, e.max_mod_h_px)
+    if reason is None:
+        limit, what = _auto_limit(src)
+        return pin, (
+            f"{names[0]}: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
+            f"homography) is within {what} ({limit:.4f} px), {names[1]} not tried"
+        )
+    fe = _fit_fisheye_export(fmt, src, opt)
+    chosen = fe if fe.error.max_mod_h_px < e.max_mod_h_px else pin
+    return chosen, (
+        f"{names[1] if chosen is fe else names[0]}, the closer in max ({reason}): {names[0]} RMS "
+        f"{e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px, {names[1]} RMS {fe.error.rms_mod_h_px:.4f} / "
+        f"max {fe.error.max_mod_h_px:.4f} px modulo homography"
+    )
+
+
 COLMAP_PINHOLE_COEFFS = 8
 """COLMAP's FULL_OPENCV holds OpenCV's 8 rational coefficients (no thin prism)."""
 
 
 def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
-    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit).
-
-    The fisheye model is fitted too exactly when :data:`AUTO` would fit it (:func:`_fisheye_reason`:
-    a wide-angle calibration, or a pin-hole fit less exact than the calibration), and the file
-    holds the one with the smaller max conversion error modulo homography. COLMAP inverts either
-    model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's default point
-    solvers, the conversion error is what it sees.
-    """
+    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye
+    fit), as :func:`_pinhole_or_fisheye` chooses. COLMAP inverts either model iteratively to
+    convergence (``cam_from_img``), so, unlike OpenCV's default point solvers, the conversion error
+    is what it sees."""
     fmt = "colmap"
-    pin = _fit_pinhole(fmt, src, opt, COLMAP_PINHOLE_COEFFS, hint=False)
-    e = pin.error
-    reason = _fisheye_reason(src, e, e.max_mod_h_px)
-    chosen = pin
-    if reason is None:
-        limit, what = _auto_limit(src)
-        choice = (
-            f"FULL_OPENCV: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
-            f"homography) is within {what} ({limit:.4f} px), OPENCV_FISHEYE not tried"
-        )
-    else:
-        fe = _fit_fisheye_export(fmt, src, opt)
-        if fe.error.max_mod_h_px < e.max_mod_h_px:
-            chosen = fe
-        choice = (
-            f"{'OPENCV_FISHEYE' if chosen is fe else 'FULL_OPENCV'}, the closer in max ({reason}): FULL_OPENCV RMS "
-            f"{e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px, OPENCV_FISHEYE RMS {fe.error.rms_mod_h_px:.4f} / "
-            f"max {fe.error.max_mod_h_px:.4f} px modulo homography"
-        )
+    chosen, choice = _pinhole_or_fisheye(fmt, src, opt, COLMAP_PINHOLE_COEFFS, ("FULL_OPENCV", "OPENCV_FISHEYE"))
     text = colmap_text(
         chosen.model,
         src.width,
@@ -466,6 +483,26 @@ def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
         frame=chosen.frame,
     )
     notes = (f"colmap: {choice}", chosen.cam.statement, *chosen.measured)
+    return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
+
+
+def _write_kalibr(src: ExportSource, opt: ExportOptions) -> Export:
+    """Kalibr camchain YAML: pinhole-radtan (the OpenCV 4-coefficient fit, ``k1 k2 p1 p2``) or
+    pinhole-equi (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses."""
+    fmt = "kalibr"
+    chosen, choice = _pinhole_or_fisheye(fmt, src, opt, RADTAN_COEFFS, ("pinhole-radtan", "pinhole-equi"))
+    text = kalibr_text(
+        chosen.model,
+        src.width,
+        src.height,
+        chosen.error,
+        camera=chosen.cam,
+        choice=f"model {choice}",
+        notes=chosen.notes(src),
+        stamp=src.stamp,
+        frame=chosen.frame,
+    )
+    notes = (f"kalibr: {choice}", chosen.cam.statement, *chosen.measured)
     return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
 
 
@@ -830,6 +867,11 @@ def _read_colmap(data: bytes, req: ReadRequest) -> Correction:
     return Correction(m, size, f"colmap:{model}")
 
 
+def _read_kalibr(data: bytes, req: ReadRequest) -> Correction:
+    m, size, model = read_kalibr_text(_text(data, req.name), req.name, (req.width, req.height))
+    return Correction(m, size, f"kalibr:{model}")
+
+
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
     m = maps_fmt.read_maps_npz(data, req.name)
     return Correction(m, maps_fmt.maps_source_size(data) or (m.width, m.height), "maps")
@@ -936,6 +978,15 @@ FORMATS: dict[str, ExportFormat] = {
             sniff_colmap,
         ),
         ExportFormat(
+            "kalibr",
+            "Kalibr camchain YAML, pinhole-radtan (k1 k2 p1 p2) or pinhole-equi for a wide lens, whichever is closer",
+            ".yaml",
+            False,
+            _write_kalibr,
+            _read_kalibr,
+            sniff_kalibr,
+        ),
+        ExportFormat(
             "maps",
             "float32 map_x/map_y for cv2.remap (.npz), exactly harp undistort's",
             ".npz",
@@ -968,11 +1019,11 @@ FORMATS: dict[str, ExportFormat] = {
     )
 }
 
-SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "colmap", "opencv", "ros")
+SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "colmap", "kalibr", "opencv", "ros")
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
 RECOGNISED = (
-    "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, "
+    "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, Kalibr camchain, "
     "maps .npz or STMap .exr"
 )
 

@@ -11,6 +11,8 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
     mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
     colmap           COLMAP cameras.txt: FULL_OPENCV (8 coefficients), or OPENCV_FISHEYE when the
                      fisheye model is closer (tried as auto tries it)
+    kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
+                     fisheye model is closer (tried as auto tries it)
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
     stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
     stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
@@ -74,6 +76,7 @@ FORMAT_CHOICES = (
     "lensfun",
     "mrcal",
     "colmap",
+    "kalibr",
     "maps",
     "stmap",
     "stmap-redistort",
@@ -172,7 +175,7 @@ def register(subparsers) -> None:
         help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
-            "lensfun, mrcal, COLMAP, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
+            "lensfun, mrcal, COLMAP, Kalibr, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
         ),
     )
     p.add_argument("model", metavar="MODEL", help="harp model file (from harp calibrate or a session)")

@@ -5,6 +5,8 @@
   manifest and the store) and the focus-interpolation error, after the executor;
 * :mod:`station.qa.targets` — what ``harp qa`` judges (a session's profiles or a stored lens's
   newest ones), the measurements, thresholds and reference each is judged with, the report of it;
-* :mod:`station.qa.report` — the Markdown / HTML report with its plots;
+* :mod:`station.qa.report` — the Markdown report of a session or a judgement, with
+  :mod:`station.qa.plots` (its PNG plots, drawn here or in worker processes) and
+  :mod:`station.qa.report_html` (the same report as an HTML page);
 * :mod:`station.qa.overlay` — overlay PNGs of a measurement.
 """

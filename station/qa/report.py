@@ -1,4 +1,5 @@
-"""The QA report of a session: Markdown with PNG plots (matplotlib, Agg backend).
+"""The QA report of a session: Markdown with PNG plots (drawn by :mod:`station.qa.plots`; the HTML
+page of it by :mod:`station.qa.report_html`).
 
 Per focus setting:
 
@@ -32,34 +33,23 @@ without them (older or hand-made) is measured / bootstrapped again.
 
 from __future__ import annotations
 
-import html
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
-
-from pipeline.resample import DEFAULT_T
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 
 import pipeline.measure  # measure_image and the bootstrap called through their modules: tests replace them
 import pipeline.uncertainty
-from pipeline.compare import compare_models
-from pipeline.edgeset import edge_figures, tls
-from pipeline.models.base import IdentityModel
+from pipeline.resample import DEFAULT_T
 from station.config import OVERLAY_RETENTION
-from station.pool import WorkerPool
 from station.profile import Profile, Verdict
 from station.qa.evidence import stored_measurement, stored_uncertainty
-from station.qa.overlay import SCREEN_MAX_SIDE, write_overlay
+from station.qa.plots import Figure, Shot, draw_figures, edge_residual_table
+from station.qa.report_html import markdown_to_html
 from station.qa.results import config_record, device_identities, identity_warnings
-from station.qa.verdicts import grid_step
 from station.session import layout
 from station.session.processing import average_frames
 
@@ -67,15 +57,6 @@ REPORT_MD = "report.md"
 """The report's Markdown file, in its directory."""
 REPORT_HTML = "index.html"
 """The same report as a standalone HTML page."""
-
-
-@dataclass(frozen=True)
-class Shot:
-    """One averaged shot of a focus setting and its measurement."""
-
-    orientation_deg: float
-    image: np.ndarray
-    measurement: Any  # pipeline.measure.ImageMeasurement
 
 
 @dataclass
@@ -93,214 +74,11 @@ class FocusEvidence:
     uncertainty_note: str = ""
 
 
-# ------------------------------------------------------------------ figures
-def _fig(width: int, height: int, extra_w: float = 1.6):
-    aspect = height / width
-    fig, ax = plt.subplots(figsize=(7.0 + extra_w, 7.0 * aspect + 0.9), dpi=110)
-    return fig, ax
-
-
-def _save(fig, path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
-
-
-def _title(title: str, sub: str, width: int = 90) -> str:
-    """Plot title: ``title`` wrapped to ``width`` characters so it fits the figure, then ``sub``."""
-    import textwrap
-
-    return (textwrap.fill(title, width) + "\n" if title else "") + sub
-
-
-def _image_axes(ax, width, height):
-    ax.set_xlim(-0.5, width - 0.5)
-    ax.set_ylim(height - 0.5, -0.5)  # image rows grow downwards
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (column, px)")
-    ax.set_ylabel("y (row, px)")
-
-
-def plot_field(model, width: int, height: int, path, title: str = "", arrows: int = 24) -> Path:
-    """Quiver plot of the correction's displacement modulo homography; returns the path."""
-    from pipeline.interpolate import normalised_field  # defers scipy
-
-    # the same homography as the QA figure (station.qa.distortion_magnitude)
-    h = compare_models(model, IdentityModel(), width, height, step=grid_step(width, height)).homography
-    step = max(width, height) / arrows
-    xs = np.linspace(0, width - 1, max(2, int(round((width - 1) / step)) + 1))
-    ys = np.linspace(0, height - 1, max(2, int(round((height - 1) / step)) + 1))
-    ux, uy = normalised_field(model, xs, ys, h)
-    fxs = np.linspace(0, width - 1, 120)
-    fys = np.linspace(0, height - 1, max(2, int(120 * height / width)))
-    fx, fy = normalised_field(model, fxs, fys, h)
-    mag = np.hypot(fx, fy)
-    fig, ax = _fig(width, height)
-    im = ax.imshow(mag, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="viridis", interpolation="bilinear")
-    xx, yy = np.meshgrid(xs, ys)
-    vmax = float(np.hypot(ux, uy).max()) or 1.0
-    q = ax.quiver(xx, yy, ux, uy, color="white", angles="xy", scale_units="xy", scale=vmax / (0.9 * step), width=0.004)
-    key = float(f"{vmax:.1g}")
-    ax.quiverkey(q, 0.80, 1.03, key, f"{key:g} px", labelpos="E", coordinates="axes", color="black")
-    _image_axes(ax, width, height)
-    fig.colorbar(im, ax=ax, label="|displacement| (px)", fraction=0.046, pad=0.03)
-    ax.set_title(
-        _title(title, "")
-        + f"correction modulo homography: max {mag.max():.3f} px, RMS {np.sqrt(np.mean(mag**2)):.3f} px",
-        fontsize=10,
-        loc="left",
-    )
-    return _save(fig, path)
-
-
-def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, float, float]]:
-    """``(orientation index, edge index, rms before, rms after)`` per measured edge (px)."""
-    keys, pts = [], []
-    for o, s in enumerate(shots):
-        for i, ln in enumerate(s.measurement.lines):
-            p = np.asarray(ln.points, np.float64).reshape(-1, 2)
-            if len(p) >= 3:
-                keys.append((o, i))
-                pts.append(p)
-    if not pts:
-        return []
-    # every edge at once: one correction call, one TLS pass (per-edge lines)
-    counts = np.array([len(p) for p in pts])
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    u = np.concatenate(pts)
-    before = edge_figures(tls(u, starts, counts)[0], starts, counts)[0]
-    after = edge_figures(tls(model.undistort_points(u), starts, counts)[0], starts, counts)[0]
-    return [(o, i, float(b), float(a)) for (o, i), b, a in zip(keys, before, after)]
-
-
-def plot_edge_residuals(
-    rows: Sequence[tuple[int, int, float, float]], orientations_deg: Sequence[float], path, title: str = ""
-) -> Path:
-    """Per-edge RMS residual before / after correction, grouped by orientation (log scale).
-
-    ``rows``: :func:`edge_residual_table` of the shots; ``orientations_deg``: the stage angle of
-    each shot (the labels of the groups)."""
-    fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
-    if rows:
-        before = np.array([r[2] for r in rows])
-        after = np.array([r[3] for r in rows])
-        lo = max(min(after.min(), before.min()) / 2, 1e-5)
-        # one filled step artist per series (hundreds of bar patches are slow to draw)
-        edges = np.arange(len(rows) + 1) - 0.5
-        ax.stairs(before, edges, baseline=lo, fill=True, color="#f4a582", label="before correction")
-        ax.stairs(after, edges, baseline=lo, fill=True, color="#2166ac", label="after correction")
-        ori = np.array([r[0] for r in rows])
-        for o in np.unique(ori):
-            idx = np.flatnonzero(ori == o)
-            if o > 0:
-                ax.axvline(idx[0] - 0.5, color="grey", lw=0.6)
-            ax.text(
-                idx.mean(),
-                1.02,
-                f"{orientations_deg[o]:g}°",
-                transform=ax.get_xaxis_transform(),
-                ha="center",
-                fontsize=8,
-            )
-        ax.set_yscale("log")
-        ax.set_xlim(-0.5, len(rows) - 0.5)
-        ax.set_ylim(lo, before.max() * 2)
-        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
-        sub = f"mean RMS per edge: {before.mean():.4f} px before, {after.mean():.4f} px after ({len(rows)} edges)"
-    else:
-        ax.text(0.5, 0.5, "no measured edges", ha="center", va="center", transform=ax.transAxes)
-        sub = "no measured edges"
-    ax.set_xlabel("edge (grouped by stage orientation)")
-    ax.set_ylabel("RMS distance to the edge's line (px)")
-    ax.set_title(_title(title, sub), fontsize=10, loc="left", pad=16)
-    return _save(fig, path)
-
-
-def plot_uncertainty(unc, width: int, height: int, path, title: str = "") -> Path:
-    """Map of the bootstrap field uncertainty (px)."""
-    fig, ax = _fig(width, height)
-    dx = (unc.xs[1] - unc.xs[0]) / 2 if len(unc.xs) > 1 else 0.5
-    dy = (unc.ys[1] - unc.ys[0]) / 2 if len(unc.ys) > 1 else 0.5
-    im = ax.imshow(
-        unc.std,
-        extent=(unc.xs[0] - dx, unc.xs[-1] + dx, unc.ys[-1] + dy, unc.ys[0] - dy),
-        cmap="magma",
-        interpolation="bilinear",
-        vmin=0,
-    )
-    _image_axes(ax, width, height)
-    fig.colorbar(im, ax=ax, label="uncertainty of the correction (px, 1 sigma)", fraction=0.046, pad=0.03)
-    ax.set_title(
-        _title(title, "") + f"bootstrap ({unc.n_boot} replicates, {unc.resample} resampled): "
-        f"RMS {unc.rms:.4f} px, max {unc.max:.4f} px",
-        fontsize=10,
-        loc="left",
-    )
-    return _save(fig, path)
-
-
-@dataclass(frozen=True)
-class Figure:
-    """One PNG of the report: which drawing (a key of :data:`FIGURE_KINDS`), its arguments (the
-    PNG's path last)."""
-
-    kind: str
-    args: tuple
-    kwargs: dict
-
-    @property
-    def path(self) -> Path:
-        return Path(self.args[-1])
-
-
-def _write_overlay(image: np.ndarray, m: Any, path, title: str = "") -> Path:
-    return write_overlay(path, image, m, title=title, max_side=SCREEN_MAX_SIDE)
-
-
 def keeps_overlays(overlays: str, verdict: Verdict) -> bool:
     """Whether a focus setting of this verdict keeps its overlays under ``overlays`` (all, failed, none)."""
     if overlays not in OVERLAY_RETENTION:
         raise ValueError(f"overlays: expected one of {', '.join(OVERLAY_RETENTION)}, got {overlays!r}")
     return overlays == "all" or (overlays == "failed" and verdict.verdict != "PASS")
-
-
-FIGURE_KINDS = {
-    "field": plot_field,
-    "residuals": plot_edge_residuals,
-    "uncertainty": plot_uncertainty,
-    "overlay": _write_overlay,
-}
-"""The drawings of the report, by :attr:`Figure.kind`."""
-
-PARALLEL_MIN_FIGURES = 12
-"""Fewer figures than this are drawn in this process (handing them to workers would cost more than
-it saves; a session of 3 focus settings x 8 orientations has 33)."""
-
-
-def draw_figure(fig: Figure) -> Path:
-    """Draw one figure; returns its path."""
-    return FIGURE_KINDS[fig.kind](*fig.args, **fig.kwargs)
-
-
-def draw_figures(figures: Sequence[Figure], workers: int = 1) -> None:
-    """Draw ``figures``, in ``workers`` processes when there are enough of them.
-
-    The figures are independent PNGs (a session of 3 focus settings x 8 orientations has 33),
-    so on a machine with several cores they are drawn at once, in the processes of
-    a :class:`station.pool.WorkerPool` (forkserver: the session process may still run device
-    threads). An error in any figure (a full disk) is raised here, as in this process."""
-    if workers <= 1 or len(figures) < PARALLEL_MIN_FIGURES:
-        for fig in figures:
-            draw_figure(fig)
-        return
-    pool = WorkerPool(workers, ["station.qa.report"])
-    try:
-        # the slow plots first, then the overlays: the processes end at about the same time
-        order = sorted(figures, key=lambda f: f.kind == "overlay")
-        list(pool.map(draw_figure, order))
-    finally:
-        pool.close()
 
 
 # ------------------------------------------------------------------ report
@@ -456,100 +234,6 @@ def write_report(
     path.write_text(text)
     (out / REPORT_HTML).write_text(markdown_to_html(text, title=f"QA report: {title}"))
     return path
-
-
-# ------------------------------------------------------------------- HTML
-_INLINE = [
-    (re.compile(r"!\[([^\]]*)\]\(([^)]+)\)"), r'<img alt="\1" src="\2">'),
-    (re.compile(r"\*\*(.+?)\*\*"), r"<strong>\1</strong>"),
-    (re.compile(r"`([^`]+)`"), r"<code>\1</code>"),
-]
-
-
-def _inline(text: str) -> str:
-    out = html.escape(text, quote=False)
-    for rx, rep in _INLINE:
-        out = rx.sub(rep, out)
-    return out
-
-
-def markdown_to_html(md: str, title: str = "") -> str:
-    """HTML page of the Markdown subset :func:`write_report` writes (headings,
-    paragraphs, pipe tables, images, bullet lists, block quotes, bold, code)."""
-    body: list[str] = []
-    lines = md.splitlines()
-    i = 0
-    while i < len(lines):
-        ln = lines[i]
-        if not ln.strip():
-            i += 1
-        elif ln.startswith("#"):
-            level = len(ln) - len(ln.lstrip("#"))
-            body.append(f"<h{level}>{_inline(ln[level:].strip())}</h{level}>")
-            i += 1
-        elif ln.startswith("|"):
-            rows = []
-            while i < len(lines) and lines[i].startswith("|"):
-                rows.append([c.strip() for c in lines[i].strip().strip("|").split("|")])
-                i += 1
-            aligns = []
-            if len(rows) > 1 and all(re.fullmatch(r":?-+:?", c) for c in rows[1]):
-                aligns = [
-                    "right"
-                    if c.endswith(":") and not c.startswith(":")
-                    else "center"
-                    if c.startswith(":") and c.endswith(":")
-                    else "left"
-                    for c in rows[1]
-                ]
-                rows = [rows[0]] + rows[2:]
-            t = ["<table>"]
-            for r, cells in enumerate(rows):
-                tag = "th" if r == 0 and aligns else "td"
-                t.append(
-                    "<tr>"
-                    + "".join(
-                        f'<{tag} style="text-align:{aligns[k] if k < len(aligns) else "left"}">{_inline(c)}</{tag}>'
-                        for k, c in enumerate(cells)
-                    )
-                    + "</tr>"
-                )
-            body.append("\n".join(t + ["</table>"]))
-        elif ln.startswith("- "):
-            items = []
-            while i < len(lines) and lines[i].startswith("- "):
-                items.append(f"<li>{_inline(lines[i][2:])}</li>")
-                i += 1
-            body.append("<ul>" + "".join(items) + "</ul>")
-        elif ln.startswith("> "):
-            body.append(f"<blockquote>{_inline(ln[2:])}</blockquote>")
-            i += 1
-        else:
-            para = []
-            while i < len(lines) and lines[i].strip() and not lines[i].startswith(("#", "|", "- ", "> ")):
-                para.append(_inline(lines[i]))
-                i += 1
-            body.append("<p>" + "<br>\n".join(para) + "</p>")
-    style = (
-        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
-        ".verdict{padding:2px 8px;border-radius:3px;color:#fff}"
-        ".verdict.pass{background:#1a7f37}.verdict.fail{background:#cf222e}"
-        "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}"
-        "img{max-width:100%;display:block;margin:0.5em 0}"
-        "blockquote{color:#444;border-left:3px solid #bbb;margin-left:0;padding-left:1em}"
-    )
-    page = "\n".join(body)
-    # the verdicts in colour: green PASS, red FAIL (the Markdown says the same in words)
-    page = re.sub(
-        r"<strong>(Verdict(?: at focus [^:<]*)?: )(PASS|FAIL)</strong>",
-        lambda m: f'<strong class="verdict {m.group(2).lower()}">{m.group(1)}{m.group(2)}</strong>',
-        page,
-    )
-    page = page.replace("<strong>FAIL</strong>", '<strong class="verdict fail">FAIL</strong>')
-    return (
-        f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
-        f"<style>{style}</style></head>\n<body>\n" + page + "\n</body></html>\n"
-    )
 
 
 # ------------------------------------------------------- session evidence

@@ -117,7 +117,7 @@ POSITION_TOLERANCE_DEG = 0.05
 
 PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
 """Modules the fits' forkserver imports once, so that each worker starts warm (the fits' and the
-report's: :func:`station.qa.report.draw_figures` draws in these processes too)."""
+report's: :func:`station.qa.plots.draw_figures` draws in these processes too)."""
 
 T = TypeVar("T")
 

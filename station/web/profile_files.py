@@ -7,7 +7,7 @@ record itself:
 
 * **field plot** — the session report's ``report/field_f<i>.png`` when the session's profile file
   of that focus setting holds exactly the stored model (the report then shows this profile);
-  otherwise rendered from the stored model (:func:`station.qa.report.plot_field`);
+  otherwise rendered from the stored model (:func:`station.qa.plots.plot_field`);
 * **uncertainty plot** — the report's ``report/uncertainty_f<i>.png`` on the same condition, else
   rendered from the bootstrap map the session kept (``profiles/focus<i>_uncertainty.npz``, checked
   against the manifest's SHA-256); a profile whose map is not kept (re-processed, or a session
@@ -144,7 +144,7 @@ class ProfileFiles:
                 return Served("image/png", path=png, source="the session report")
 
         def make() -> Served:
-            from station.qa.report import plot_field  # defers matplotlib, PIL
+            from station.qa.plots import plot_field  # defers matplotlib, PIL
 
             data = _png(lambda out: plot_field(p.model, p.width, p.height, out, title=_label(p)))
             return Served("image/png", data=data, source="rendered from the stored model")
@@ -167,7 +167,7 @@ class ProfileFiles:
             return Served("image/png", path=png, source="the session report")
 
         def make() -> Served:
-            from station.qa.report import plot_uncertainty  # defers matplotlib, PIL
+            from station.qa.plots import plot_uncertainty  # defers matplotlib, PIL
 
             unc = _session_uncertainty(root, f, p.model)
             if unc is None:

@@ -58,6 +58,7 @@ from tests.pipeline.export_support import (
     ros_in_consumer,
     wide_radial,
 )
+from tests.pipeline.kalibr_equations import kalibr_camera, unproject
 
 W, H = 400, 300
 LENS = RadialModel.for_image(
@@ -72,6 +73,7 @@ FILES = {
     "lensfun": "lensfun.xml",
     "mrcal": "lens.cameramodel",
     "colmap": "cameras.txt",
+    "kalibr": "camchain.yaml",
     "maps": "maps.npz",
     "stmap": "stmap.exr",
     "json": "lens.json",
@@ -316,6 +318,29 @@ def test_colmap_in_pycolmap(both, tmp_path):
     assert "camera matrix: nominal" in runs["colmap"].path.read_text()
 
 
+def test_kalibr_by_its_documented_equations(both):
+    # no Kalibr installed: the file parsed by PyYAML, the camera evaluated with Kalibr's equations
+    src, runs = both
+    fig = _ok(runs["kalibr"])
+    p, dm, k, cam = kalibr_camera(runs["kalibr"].path.read_bytes())
+    assert dm in ("radtan", "equidistant") and cam["resolution"] == [src.width, src.height]
+    name = {"radtan": "radtan", "equidistant": "equi"}[dm]
+    assert any(n.startswith(f"kalibr: pinhole-{name}") for n in fig["notes"])  # the closer of the two
+    assert p[0] == pytest.approx(src.focal_px)  # nominal, from the optics
+    xs, ys = np.linspace(0, src.width - 1, 40), np.linspace(0, src.height - 1, 30)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    # the model the file holds (its inverse converged); Kalibr's own keypoint undistortion stops after 5
+    # Gauss-Newton / 20 fixed-point steps, which on this strong lens's equidistant file stops pixels short
+    # (printed; the file says so)
+    rms, mxe = mod_h(unproject(p, dm, k, q, converged=True), src.model.undistort_points(q))
+    _agrees(rms, mxe, fig["conversion"])
+    rms_k, mxe_k = mod_h(unproject(p, dm, k, q), src.model.undistort_points(q))
+    print(
+        f"\nkalibr pinhole-{name}: converged RMS {rms:.4f} / max {mxe:.4f} px; Kalibr's step count RMS {rms_k:.4f} / max {mxe_k:.4f} px"
+    )
+    assert "Kalibr's keypoint undistortion" in runs["kalibr"].path.read_text()
+
+
 def test_lensfun_finds_the_lens_by_its_names_at_the_crop_factor(both):
     src, runs = both
     fig = _ok(runs["lensfun"])
@@ -446,6 +471,7 @@ def test_harp_evaluate_reads_every_format(model_source, exported):
         "lensfun": "lensfun:ptlens",
         "mrcal": "mrcal",
         "colmap": "colmap:FULL_OPENCV",
+        "kalibr": "kalibr:pinhole-equi",  # 4 radial-tangential coefficients hold this lens less well
         "maps": "maps",
         "stmap": "stmap",
         "json": "harp:radial",

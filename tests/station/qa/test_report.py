@@ -9,7 +9,8 @@ import pytest
 from station.cli import main
 from station.config import Identity
 from station.profile import Holdout, Merit, Provenance, UncertaintySummary
-from station.qa.report import edge_residual_table, session_shots
+from station.qa.plots import edge_residual_table
+from station.qa.report import session_shots
 from station.qa.verdicts import session_profiles
 from station.session.directory import SessionDir
 from station.store import ProfileStore
@@ -118,7 +119,7 @@ def test_report_of_an_auto_session_bootstraps_exactly_the_stored_spec(session, t
 
 
 def test_figures_drawn_in_worker_processes_are_the_ones_drawn_here(session, tmp_path):
-    from station.qa.report import PARALLEL_MIN_FIGURES, Figure, draw_figures
+    from station.qa.plots import PARALLEL_MIN_FIGURES, Figure, draw_figures
 
     ((_, prof),) = session_profiles(session)
     with SessionDir.open(session) as s:
@@ -152,7 +153,7 @@ def test_report_overlays_are_sized_for_a_screen(session, tmp_path):
     # a 5 MP camera's overlay: shrunk to SCREEN_MAX_SIDE along its longer side, JPEG (the drawing is the
     # full-size overlay's, averaged down)
     from station.qa.overlay import SCREEN_MAX_SIDE, render_overlay
-    from station.qa.report import Figure, draw_figure
+    from station.qa.plots import Figure, draw_figure
 
     with SessionDir.open(session) as s:
         shot = session_shots(s, 0, t=30)[0]
