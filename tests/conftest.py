@@ -52,8 +52,16 @@ def page(browser):
 def pytest_configure(config):
     """The per-user directories the commands default to (the profile store, lensfun's user
     databases) are a temporary directory for the whole run, never the user's own; the variables a
-    station sets for its commands are unset."""
+    station sets for its commands are unset; Ctrl-C has its default disposition."""
+    import signal
     import tempfile
+
+    # Started with Ctrl-C ignored or blocked (under nohup, or as a background job of a script), this
+    # process would hand that on to every command a test starts, and the tests that press Ctrl-C (a real
+    # SIGINT to the command's process group) would see it ignored: give the run the default disposition.
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
     data_home = tempfile.mkdtemp(prefix="harp-tests-xdg-")
     config._harp_data_home = data_home
