@@ -178,6 +178,8 @@ def test_the_lens_list_filters_shows_failure_reasons_and_downloads_csv(page, das
     rows = list(csv.DictReader(io.StringIO(Path(dl.value.path()).read_text(encoding="utf-8"), newline="")))
     assert [[r["serial"], r["station"], r["verdict"], r["failure_reason"]] for r in rows] == sorted(shown)
     page.click("#filters a.clear")
+    page.wait_for_url(lambda url: "station=" not in url)  # the unfiltered page, loaded (not the old one unloading)
+    page.wait_for_load_state()
     assert page.locator("#lenses tr.lens").count() == len(stored)
 
 
