@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 
@@ -104,20 +105,38 @@ def _harp(*args, **kw):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        start_new_session=True,  # its own process group: killed whole by _finish, whatever happens
         **kw,
     )
 
 
+def _finish(p, timeout: float, interrupt: bool = False) -> tuple[str, str]:
+    """``(stdout, stderr)`` of ``p`` once it ends (after a Ctrl-C to it when ``interrupt``); its process
+    group is killed on every way out, a timeout or an assertion included."""
+    import signal
+    import subprocess
+
+    try:
+        if interrupt:
+            p.send_signal(signal.SIGINT)
+        return p.communicate(timeout=timeout)
+    finally:
+        if p.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.communicate(timeout=10)
+
+
 def test_harp_live_once_json_whole_process(tmp_path):
     p = _harp("live", live_config(tmp_path, width=320, height=240), "--once", "--json")
-    out, err = p.communicate(timeout=120)
+    out, err = _finish(p, 120)
     assert p.returncode == 0, err
     assert json.loads(out)["pass"] is True and err == ""
 
 
 def test_harp_live_serves_the_page_until_ctrl_c(tmp_path):
     import re
-    import signal
     import urllib.request
 
     p = _harp("live", live_config(tmp_path, width=320, height=240), "--port", "0")
@@ -136,8 +155,7 @@ def test_harp_live_serves_the_page_until_ctrl_c(tmp_path):
         page = urllib.request.urlopen(m.group(1), timeout=10).read().decode()
         assert "next orientation" in page
     finally:
-        p.send_signal(signal.SIGINT)
-        out, err = p.communicate(timeout=30)
+        out, err = _finish(p, 30, interrupt=True)
     assert p.returncode == 130, err
     assert err.strip().splitlines()[-1] == "harp live: stopped"
 
@@ -146,7 +164,6 @@ def test_session_run_live_shows_the_session_on_the_page(tmp_path):
     """``harp session run --live``: the page subscribes to the session's records and frames and
     shows progress, each shot's check, the fit figures and the verdict; it stays until Ctrl-C."""
     import re
-    import signal
     import urllib.error
     import urllib.request
 
@@ -192,8 +209,7 @@ def test_session_run_live_shows_the_session_on_the_page(tmp_path):
             said.append(p.stderr.readline())
             assert said[-1], "".join(said)
     finally:
-        p.send_signal(signal.SIGINT)
-        out, err = p.communicate(timeout=60)
+        out, err = _finish(p, 60, interrupt=True)
     err = "".join(said) + err
     assert p.returncode == (1 if "FAIL" in verdicts else 0), err  # the verdict binds (issue 9)
     assert "session finished" in err and (tmp_path / "sessions" / "s" / "manifest.jsonl").exists()
