@@ -464,14 +464,14 @@ COLMAP_PINHOLE_COEFFS = 8
 """COLMAP's FULL_OPENCV holds OpenCV's 8 rational coefficients (no thin prism)."""
 
 
-def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
-    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye
-    fit), as :func:`_pinhole_or_fisheye` chooses. COLMAP inverts either model iteratively to
-    convergence (``cam_from_img``), so, unlike OpenCV's default point solvers, the conversion error
-    is what it sees."""
-    fmt = "colmap"
-    chosen, choice = _pinhole_or_fisheye(fmt, src, opt, COLMAP_PINHOLE_COEFFS, ("FULL_OPENCV", "OPENCV_FISHEYE"))
-    text = colmap_text(
+def _write_chosen_family(
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str], text_of: Callable[..., str]
+) -> Export:
+    """The file of a format that holds a pin-hole fit with ``n`` coefficients or the fisheye fit, as
+    :func:`_pinhole_or_fisheye` chooses, written by ``text_of`` (:func:`~pipeline.exports.colmap.colmap_text`,
+    :func:`~pipeline.exports.kalibr.kalibr_text`)."""
+    chosen, choice = _pinhole_or_fisheye(fmt, src, opt, n, names)
+    text = text_of(
         chosen.model,
         src.width,
         src.height,
@@ -482,28 +482,23 @@ def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
         stamp=src.stamp,
         frame=chosen.frame,
     )
-    notes = (f"colmap: {choice}", chosen.cam.statement, *chosen.measured)
+    notes = (f"{fmt}: {choice}", chosen.cam.statement, *chosen.measured)
     return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
+
+
+def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
+    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye
+    fit). COLMAP inverts either model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
+    default point solvers, the conversion error is what it sees."""
+    names = ("FULL_OPENCV", "OPENCV_FISHEYE")
+    return _write_chosen_family("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names, colmap_text)
 
 
 def _write_kalibr(src: ExportSource, opt: ExportOptions) -> Export:
     """Kalibr camchain YAML: pinhole-radtan (the OpenCV 4-coefficient fit, ``k1 k2 p1 p2``) or
-    pinhole-equi (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses."""
-    fmt = "kalibr"
-    chosen, choice = _pinhole_or_fisheye(fmt, src, opt, RADTAN_COEFFS, ("pinhole-radtan", "pinhole-equi"))
-    text = kalibr_text(
-        chosen.model,
-        src.width,
-        src.height,
-        chosen.error,
-        camera=chosen.cam,
-        choice=f"model {choice}",
-        notes=chosen.notes(src),
-        stamp=src.stamp,
-        frame=chosen.frame,
-    )
-    notes = (f"kalibr: {choice}", chosen.cam.statement, *chosen.measured)
-    return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
+    pinhole-equi (the fisheye fit)."""
+    names = ("pinhole-radtan", "pinhole-equi")
+    return _write_chosen_family("kalibr", src, opt, RADTAN_COEFFS, names, kalibr_text)
 
 
 CROP_FACTOR_MISMATCH = 0.15
