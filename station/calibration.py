@@ -116,6 +116,30 @@ def _figures(d: float, d_max: float) -> Figures:
     return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
+def _orientation_holdout(
+    lines: Sequence[Sequence[np.ndarray]],
+    rejected: Sequence[Any],
+    job_fn: Callable[[Any], tuple[Any, str | None]],
+    jobs: Sequence[Any],
+    map_fn: MapFn,
+) -> Holdout | tuple[int, str]:
+    """The leave-one-orientation-out figure: ``job_fn(jobs[k])`` fits without orientation ``k``, and its
+    model corrects orientation ``k``'s edges (those the full fit did not reject, ``rejected``); the
+    straightness of all of them together, and per orientation. ``(k, reason)`` for the first fold whose
+    fit failed."""
+    outliers = {(r.image, r.line) for r in rejected}
+    held_lines: list[np.ndarray] = []
+    per_o: list[float | None] = []
+    for k, (model, reason) in enumerate(map_fn(job_fn, jobs)):
+        if model is None:
+            return k, str(reason)
+        kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
+        per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
+        held_lines.extend(model.undistort_points(p) for p in kept)
+    d, d_max = straightness_of(held_lines)
+    return Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+
+
 def calibrate_shots(
     shots: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -175,21 +199,14 @@ def calibrate_shots(
     hold: Holdout | None = None
     per_shot: list[HeldOutShot] = []
     if holdout == "orientations":
-        outliers = {(r.image, r.line) for r in full.rejected}
         jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
-        held_lines: list[np.ndarray] = []
-        per_o: list[float | None] = []
-        for k, (model, reason) in enumerate(map_fn(refit_job, jobs)):
-            if reason:
-                return Calibration(
-                    full, spec, selection, Merit(fit=fit_figures, before=before), details=details,
-                    failure=f"cross-validation without orientation {k}: {reason}",
-                )  # fmt: skip
-            kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
-            held_lines.extend(model.undistort_points(p) for p in kept)
-        d, d_max = straightness_of(held_lines)
-        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+        loo = _orientation_holdout(lines, full.rejected, refit_job, jobs, map_fn)
+        if not isinstance(loo, Holdout):
+            return Calibration(
+                full, spec, selection, Merit(fit=fit_figures, before=before), details=details,
+                failure=f"cross-validation without orientation {loo[0]}: {loo[1]}",
+            )  # fmt: skip
+        hold = loo
     elif holdout is not None:
         raise ValueError(f"unknown hold-out scheme {holdout!r}; known: 'orientations'")
     if held_out:
@@ -386,8 +403,6 @@ def separate_strings(
         return kept_plain(f"the lens with the strings separated: {res.reason}")
     hold = cal.merit.holdout
     if hold is not None and hold.scheme == HOLDOUT_LEAVE_ONE_ORIENTATION_OUT:
-        outliers = {(r.image, r.line) for r in full.rejected}
-        n = len(lines)
         jobs = [
             (
                 [ls for j, ls in enumerate(lines) if j != k],
@@ -396,18 +411,12 @@ def separate_strings(
                 height,
                 spec,
             )
-            for k in range(n)
+            for k in range(len(lines))
         ]
-        held_lines: list[np.ndarray] = []
-        per_o: list[float | None] = []
-        for k, (model, reason) in enumerate(map_fn(separated_job, jobs)):
-            if model is None:
-                return kept_plain(f"without orientation {k} the strings cannot be separated: {reason}")
-            kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
-            per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
-            held_lines.extend(model.undistort_points(p) for p in kept)
-        d, d_max = straightness_of(held_lines)
-        hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+        loo = _orientation_holdout(lines, full.rejected, separated_job, jobs, map_fn)
+        if not isinstance(loo, Holdout):
+            return kept_plain(f"without orientation {loo[0]} the strings cannot be separated: {loo[1]}")
+        hold = loo
     record: dict[str, Any] = {
         "separated": True,
         "d_with_strings_px": finite_or_none(joint.d_after),
