@@ -552,9 +552,10 @@ class Executor:
             return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
 
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
-        rel = layout.board_file(step.focus_idx, step.view_idx)
+        attempt = self.session.board_attempt(step.focus_idx, step.view_idx)
+        rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
         digest = save_board_frame(self.session.path / rel, frame)
-        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg))
+        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg, attempt))
 
     def _estimate_k(self, step: EstimateK) -> None:
         """The camera matrix of a focus setting from its board views, its distortion held fixed
@@ -566,10 +567,7 @@ class Executor:
         assert k is not None
         cal = self._calibrations[f]
         assert cal.fit is not None  # a failed fit stopped the session
-        views = {}
-        for r in self.session.of_type(BoardSaved):
-            if r.focus_idx == f:
-                views[r.view_idx] = r  # the last of a view wins
+        views = self.session.boards(f)  # the last capture of each view, unless superseded since
         paths = []
         for v in sorted(views):
             r = views[v]
