@@ -149,7 +149,7 @@ def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
 
 def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> None:
     """The session report into ``DIR/report``; a failure is recorded and said, the session kept."""
-    from station.qa.report import REPORT_HTML, write_session_report  # defers matplotlib, PIL
+    from station.qa.report import REPORT_HTML, write_session_report  # defers matplotlib, PIL, jinja2
 
     cfg = session.config
     title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {session.path.name}"
