@@ -190,13 +190,15 @@ class BoardWanted(Record):
 @dataclass(frozen=True)
 class BoardAccepted(Record):
     """An operator-placed board view passed its checks: the board's corners found (``corners``, image
-    pixels ``[x, y]``, rounded to 0.01 px: the board coverage of the live page)."""
+    pixels ``[x, y]``, rounded to 0.01 px, in an image of ``size`` [width, height]: the board coverage of
+    the live page)."""
 
     kind: ClassVar[str] = "board-ok"
     focus_idx: int
     view_idx: int
     attempt: int
     corners: list[list[float]]
+    size: list[int]
 
 
 @dataclass(frozen=True)

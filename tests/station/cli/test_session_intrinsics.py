@@ -255,6 +255,10 @@ def test_a_camera_that_cannot_be_shown_the_board_is_refused(tmp_path, capsys):
     assert main(["config", "check", str(p)]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{p}: intrinsics: expected a camera the station can show the board" in err and "\n" not in err
+    assert "the operator places the board (intrinsics.placement: operator)" in err
+    d["intrinsics"]["placement"] = "operator"  # the views asked of the operator: any camera will do
+    p.write_text(yaml.safe_dump(d))
+    assert main(["config", "check", str(p)]) == 0, capsys.readouterr().err
 
 
 def test_the_schema_minimum_is_the_fit_minimum():
