@@ -236,3 +236,29 @@ def test_opencv_channel_files_agree_with_harp_undistort(measured, tmp_path, caps
         )
         assert agree <= green_max + stated[ch] + 0.01, ch
         assert before > 0.4 and miss <= stated[ch] + 0.02, ch
+
+
+def test_profile_export_carries_the_colour_too(measured, tmp_path, capsys):
+    """``harp profile export`` takes the same options: a stored profile (640x480) exported as a complete
+    lensfun lens, liblensfun reads red where the measured field puts it (within the stated conversion)."""
+    from station.qa.verdicts import qa_verdict
+    from station.store import ProfileStore
+    from tests.station.cli.test_profile import PASSING
+    from tests.station.store.test_database import profile
+
+    d, _, _ = measured
+    p = profile(session="colour", focus=0.5, lens=("Harp", "Colour 35 test", "S1"))
+    with ProfileStore(tmp_path / "p.sqlite") as st:
+        pid = st.put_profile(p.with_(qa=qa_verdict(p, PASSING)))
+    out = tmp_path / "profile.xml"
+    capsys.readouterr()
+    argv = ["profile", "export", "--id", str(pid), "--store", str(tmp_path / "p.sqlite"), "--format", "lensfun"]
+    argv += ["-o", str(out), *NAMES, *BODY, "--no-shots", "--tca", str(d / "tca.yaml")]
+    assert main([*argv, "--vignetting", str(d / "vig.yaml")]) == 0, capsys.readouterr().err
+    xml = out.read_text()
+    assert xml.count("<tca ") == 1 and xml.count('<vignetting model="pa"') == 1, xml
+    stated = _stated(capsys.readouterr().out, r"TCA poly3 channel R: conversion error RMS \S+ px, max (\S+) px")
+    mod = _modifier(xml, lensfunpy.ModifyFlags.TCA)
+    sub = mod.apply_subpixel_distortion().reshape(-1, 3, 2).astype(np.float64)[::7]
+    field = TcaField.from_dict(yaml.safe_load((d / "tca.yaml").read_text())["channels"]["R"]["field"])
+    assert np.hypot(*(sub[:, 0] - field.from_reference(sub[:, 1])).T).max() <= stated + 0.003
