@@ -588,9 +588,13 @@ class Executor:
         def grab() -> Frame:
             if isinstance(self.camera, IndexedCapture):
                 self.camera.set_capture_index(step.view_idx)  # the same noise on resume
-            if step.degrees is None:  # where the operator placed it (PlaceBoard)
+            if step.degrees is not None:
+                return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            try:  # where the operator placed it (PlaceBoard)
                 return self.camera.capture(timeout=cfg.capture.timeout_s)
-            return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            finally:
+                if isinstance(self.camera, BoardScene):  # the stand-in takes the board away: the harp again
+                    self.camera.show_board(None)
 
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
         rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
