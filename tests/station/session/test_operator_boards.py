@@ -57,7 +57,7 @@ class StandIn:
         self.hide = hide or {}
         self.told: list[list[str]] = []
 
-    def ask(self, lines):
+    def ask(self, lines, idle=None):
         n = len(self.told)
         self.told.append(list(lines))
         if n in self.hide:
