@@ -31,6 +31,7 @@ import numpy.typing as npt
 
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
+from pipeline.exports.basalt import basalt_text, read_basalt_text, sniff_basalt
 from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
 from pipeline.exports.fit import (
     RADTAN_COEFFS,
@@ -53,10 +54,13 @@ from pipeline.exports.lensfun import (
     lensfun_database_text,
     read_lensfun_text,
 )
+from pipeline.exports.metashape import PINHOLE_COEFFS as METASHAPE_PINHOLE_COEFFS
+from pipeline.exports.metashape import metashape_text, read_metashape_text, sniff_metashape
 from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
+from pipeline.exports.statement import hash_comments
 from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.model_file import FORMAT_VERSION, model_file_text, parse_model_text
 from pipeline.models.base import DistortionModel
@@ -469,8 +473,14 @@ def _write_chosen_family(
 ) -> Export:
     """The file of a format that holds a pin-hole fit with ``n`` coefficients or the fisheye fit, as
     :func:`_pinhole_or_fisheye` chooses, written by ``text_of`` (:func:`~pipeline.exports.colmap.colmap_text`,
-    :func:`~pipeline.exports.kalibr.kalibr_text`)."""
+    :func:`~pipeline.exports.kalibr.kalibr_text`, :func:`~pipeline.exports.metashape.metashape_text`)."""
     chosen, choice = _pinhole_or_fisheye(fmt, src, opt, n, names)
+    return _write_fitted(fmt, src, chosen, choice, text_of)
+
+
+def _write_fitted(fmt: str, src: ExportSource, chosen: _Fitted, choice: str, text_of: Callable[..., str]) -> Export:
+    """The file of one fit, written by ``text_of`` with the statement every format makes (``choice``: the
+    model and why)."""
     text = text_of(
         chosen.model,
         src.width,
@@ -487,11 +497,45 @@ def _write_chosen_family(
 
 
 def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
-    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye
-    fit). COLMAP inverts either model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
+    """COLMAP ``cameras.txt``: OPENCV (the OpenCV 4-coefficient fit, ``k1 k2 p1 p2``) when it is as exact
+    as the calibration (:func:`_fisheye_reason` finds no reason to try more: not a wide-angle calibration,
+    RMS, residual ``d`` and max within the limit of :func:`_auto_limit`); otherwise FULL_OPENCV (the
+    8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses.
+    COLMAP inverts every model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
     default point solvers, the conversion error is what it sees."""
+    try:
+        simple = _fit_pinhole("colmap", src, opt, RADTAN_COEFFS, hint=False)
+    except ValueError:  # 4 coefficients cannot hold the lens without a fold: the richer models decide
+        simple = None
+    if simple is not None and _fisheye_reason(src, simple.error, simple.error.max_mod_h_px) is None:
+        limit, what = _auto_limit(src)
+        e = simple.error
+        choice = (
+            f"OPENCV (k1 k2 p1 p2): its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px "
+            f"modulo homography) is within {what} ({limit:.4f} px), FULL_OPENCV and OPENCV_FISHEYE not tried"
+        )
+        return _write_fitted("colmap", src, simple, choice, colmap_text)
     names = ("FULL_OPENCV", "OPENCV_FISHEYE")
     return _write_chosen_family("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names, colmap_text)
+
+
+def _write_basalt(src: ExportSource, opt: ExportOptions) -> Export:
+    """Basalt calibration JSON: ``kb4``, the fisheye fit (Basalt's Kannala-Brandt is OpenCV's fisheye)."""
+    fitted = _fit_fisheye_export("basalt", src, opt)
+    e = fitted.error
+    choice = (
+        f"kb4 (Basalt's Kannala-Brandt, OpenCV's fisheye fit): RMS {e.rms_mod_h_px:.4f} px, max "
+        f"{e.max_mod_h_px:.4f} px modulo homography"
+    )
+    return _write_fitted("basalt", src, fitted, choice, basalt_text)
+
+
+def _write_metashape(src: ExportSource, opt: ExportOptions) -> Export:
+    """Agisoft Metashape calibration XML: a frame camera (the OpenCV 5-coefficient fit, Metashape's p1/p2
+    swapped, ``K4 = 0``) or a fisheye camera (the fisheye fit, ``K1..K4``), as :func:`_pinhole_or_fisheye`
+    chooses."""
+    names = ("frame", "fisheye")
+    return _write_chosen_family("metashape", src, opt, METASHAPE_PINHOLE_COEFFS, names, metashape_text)
 
 
 def _write_kalibr(src: ExportSource, opt: ExportOptions) -> Export:
@@ -741,7 +785,7 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
         provenance=dict(src.provenance),
         intrinsics=src.intrinsics,
     )
-    head = "".join(f"# {line}\n" for line in src.stamp)
+    head = hash_comments(src.stamp)
     return Export("harp", (head + text).encode())
 
 
@@ -867,6 +911,16 @@ def _read_kalibr(data: bytes, req: ReadRequest) -> Correction:
     return Correction(m, size, f"kalibr:{model}")
 
 
+def _read_basalt(data: bytes, req: ReadRequest) -> Correction:
+    m, size, kind = read_basalt_text(_text(data, req.name), req.name, (req.width, req.height))
+    return Correction(m, size, f"basalt:{kind}")
+
+
+def _read_metashape(data: bytes, req: ReadRequest) -> Correction:
+    m, size, proj = read_metashape_text(_text(data, req.name), req.name)
+    return Correction(m, size, f"metashape:{proj}")
+
+
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
     m = maps_fmt.read_maps_npz(data, req.name)
     return Correction(m, maps_fmt.maps_source_size(data) or (m.width, m.height), "maps")
@@ -965,7 +1019,8 @@ FORMATS: dict[str, ExportFormat] = {
         ),
         ExportFormat(
             "colmap",
-            "COLMAP cameras.txt, FULL_OPENCV (8 coefficients) or OPENCV_FISHEYE for a wide lens, whichever is closer",
+            "COLMAP cameras.txt, OPENCV (k1 k2 p1 p2) when as exact as the calibration, else FULL_OPENCV (8 "
+            "coefficients) or OPENCV_FISHEYE for a wide lens, whichever is closer",
             ".txt",
             False,
             _write_colmap,
@@ -980,6 +1035,25 @@ FORMATS: dict[str, ExportFormat] = {
             _write_kalibr,
             _read_kalibr,
             sniff_kalibr,
+        ),
+        ExportFormat(
+            "basalt",
+            "Basalt calibration JSON, kb4 (Kannala-Brandt fx fy cx cy k1..k4; the IMU members placeholders)",
+            ".json",
+            False,
+            _write_basalt,
+            _read_basalt,
+            sniff_basalt,
+        ),
+        ExportFormat(
+            "metashape",
+            "Agisoft Metashape calibration XML, frame (k1 k2 k3 p1 p2, p1/p2 swapped from OpenCV's) or fisheye "
+            "(k1..k4) for a wide lens, whichever is closer",
+            ".xml",
+            False,
+            _write_metashape,
+            _read_metashape,
+            sniff_metashape,
         ),
         ExportFormat(
             "maps",
@@ -1014,12 +1088,12 @@ FORMATS: dict[str, ExportFormat] = {
     )
 }
 
-SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "mrcal", "colmap", "kalibr", "opencv", "ros")
+SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "metashape", "basalt", "mrcal", "colmap", "kalibr", "opencv", "ros")
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
 RECOGNISED = (
     "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, Kalibr camchain, "
-    "maps .npz or STMap .exr"
+    "Basalt calibration JSON, Metashape calibration XML, maps .npz or STMap .exr"
 )
 
 
