@@ -32,7 +32,7 @@ import numpy.typing as npt
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
 from pipeline.exports.basalt import basalt_text, read_basalt_text, sniff_basalt
-from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
+from pipeline.exports.colmap import colmap_model_name, colmap_text, read_colmap_text, sniff_colmap
 from pipeline.exports.fit import (
     RADTAN_COEFFS,
     ConversionError,
@@ -42,6 +42,7 @@ from pipeline.exports.fit import (
     fit_lensfun,
     fit_opencv,
     fit_opencv_camera,
+    fit_thin_prism_fisheye,
     frame_error,
 )
 from pipeline.exports.frame import FrameStatement, frame_statement
@@ -70,6 +71,7 @@ from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_foc
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
+from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
 from pipeline.plain import json_default
 
 Array = npt.NDArray[np.float64]
@@ -328,7 +330,7 @@ def _lens_notes(src: ExportSource) -> tuple[str, ...]:
 class _Fitted:
     """A pin-hole or fisheye fit with what its file states: camera choice, measured-camera lines, frame, warnings."""
 
-    model: OpenCVModel | OpenCVFisheyeModel
+    model: OpenCVModel | OpenCVFisheyeModel | ThinPrismFisheyeModel
     error: ConversionError
     cam: CameraMatrixChoice
     measured: tuple[str, ...]
@@ -430,7 +432,17 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
 def _pinhole_or_fisheye(
     fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str]
 ) -> tuple[_Fitted, str]:
-    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``.
+    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``
+    (:func:`_pinhole_or_fisheye_tried` without the fisheye fit)."""
+    chosen, why, _ = _pinhole_or_fisheye_tried(fmt, src, opt, n, names)
+    return chosen, why
+
+
+def _pinhole_or_fisheye_tried(
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str]
+) -> tuple[_Fitted, str, _Fitted | None]:
+    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer:
+    ``(fit, why, the fisheye fit if it was tried)``.
 
     For consumers that invert either model to convergence (or whose figures are the projection's):
     the fisheye model is fitted too exactly when :data:`AUTO` would fit it (:func:`_fisheye_reason`:
@@ -446,22 +458,27 @@ def _pinhole_or_fisheye(
             fe = _fit_fisheye_export(fmt, src, opt)
         except ValueError:
             raise exc from None
-        return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})"
+        return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})", fe
     e = pin.error
     reason = _fisheye_reason(src, e, e.max_mod_h_px)
     if reason is None:
         limit, what = _auto_limit(src)
-        return pin, (
-            f"{names[0]}: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
-            f"homography) is within {what} ({limit:.4f} px), {names[1]} not tried"
+        return (
+            pin,
+            (
+                f"{names[0]}: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
+                f"homography) is within {what} ({limit:.4f} px), {names[1]} not tried"
+            ),
+            None,
         )
     fe = _fit_fisheye_export(fmt, src, opt)
     chosen = fe if fe.error.max_mod_h_px < e.max_mod_h_px else pin
-    return chosen, (
+    why = (
         f"{names[1] if chosen is fe else names[0]}, the closer in max ({reason}): {names[0]} RMS "
         f"{e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px, {names[1]} RMS {fe.error.rms_mod_h_px:.4f} / "
         f"max {fe.error.max_mod_h_px:.4f} px modulo homography"
     )
+    return chosen, why, fe
 
 
 COLMAP_PINHOLE_COEFFS = 8
@@ -500,7 +517,10 @@ def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
     """COLMAP ``cameras.txt``: OPENCV (the OpenCV 4-coefficient fit, ``k1 k2 p1 p2``) when it is as exact
     as the calibration (:func:`_fisheye_reason` finds no reason to try more: not a wide-angle calibration,
     RMS, residual ``d`` and max within the limit of :func:`_auto_limit`); otherwise FULL_OPENCV (the
-    8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses.
+    8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses, or,
+    when the fisheye was tried (and no measured camera matrix is held), THIN_PRISM_FISHEYE fitted from
+    it (:func:`~pipeline.exports.fit.fit_thin_prism_fisheye`) if its max is below
+    :data:`COLMAP_THIN_PRISM_MARGIN` times the choice's.
     COLMAP inverts every model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
     default point solvers, the conversion error is what it sees."""
     try:
@@ -516,7 +536,35 @@ def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
         )
         return _write_fitted("colmap", src, simple, choice, colmap_text)
     names = ("FULL_OPENCV", "OPENCV_FISHEYE")
-    return _write_chosen_family("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names, colmap_text)
+    chosen, choice, fe = _pinhole_or_fisheye_tried("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names)
+    if fe is not None and fe.cam.camera is None and isinstance(fe.model, OpenCVFisheyeModel):
+        prism = _fit_thin_prism("colmap", src, opt, fe)
+        e = prism.error
+        if e.max_mod_h_px < COLMAP_THIN_PRISM_MARGIN * chosen.error.max_mod_h_px:
+            choice = (
+                f"THIN_PRISM_FISHEYE, closer in max than {colmap_model_name(chosen.model)} by more than "
+                f"{1 - COLMAP_THIN_PRISM_MARGIN:.0%} (RMS {e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px modulo "
+                f"homography); {choice}"
+            )
+            return _write_fitted("colmap", src, prism, choice, colmap_text)
+        choice += f"; THIN_PRISM_FISHEYE RMS {e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px is not closer enough"
+    return _write_fitted("colmap", src, chosen, choice, colmap_text)
+
+
+COLMAP_THIN_PRISM_MARGIN = 0.8
+"""COLMAP's THIN_PRISM_FISHEYE replaces the FULL_OPENCV or OPENCV_FISHEYE choice only when its max error is
+below this fraction of the choice's: the simpler models are read by more tools (COLMAP's undistorter,
+OpenCV-based readers of cameras.txt)."""
+
+
+def _fit_thin_prism(fmt: str, src: ExportSource, opt: ExportOptions, fe: _Fitted) -> _Fitted:
+    """COLMAP's THIN_PRISM_FISHEYE fitted from the fisheye fit ``fe`` (no measured camera matrix), with what
+    its file states."""
+    assert isinstance(fe.model, OpenCVFisheyeModel)
+    m, err = fit_thin_prism_fisheye(src.model, src.width, src.height, fe.model, edges=src.edges)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, fe.cam.focal_px)
+    warnings = _camera_warnings(src, opt) + conversion_warnings(fmt, src, err)
+    return _Fitted(m, err, fe.cam, fe.measured, fr, tuple(warnings))
 
 
 def _write_basalt(src: ExportSource, opt: ExportOptions) -> Export:
