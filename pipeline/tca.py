@@ -486,8 +486,16 @@ class LensfunTcaFit:
         ]
 
 
-def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float = GRID_STEP_PX) -> LensfunTcaFit:
+def lensfun_tca(
+    fields: Mapping[str, TcaField],
+    kind: str = "poly3",
+    step: float = GRID_STEP_PX,
+    center: tuple[float, float] = (0.0, 0.0),
+) -> LensfunTcaFit:
     """Lensfun's ``kind`` TCA closest to the fields of ``"R"`` and ``"B"`` over the whole image.
+
+    ``center``: the lens's ``<center>`` the file is written with (lensfun applies the TCA about
+    it, as it does the distortion); the image centre by default.
 
     Fitted in lensfun's direction (reference -> channel, :class:`LensfunTca`) by linear
     least squares on :func:`image_grid`: for each grid point of the channel
@@ -501,7 +509,8 @@ def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float
     if missing:
         raise ValueError(f"lensfun TCA needs the red and blue fields; missing {sorted(missing)}")
     w, h = fields["R"].width, fields["R"].height
-    probe = LensfunTca(kind, (1.0,) * len(LENSFUN_TCA_TERMS[kind]), (1.0,) * len(LENSFUN_TCA_TERMS[kind]), w, h)
+    ones = (1.0,) * len(LENSFUN_TCA_TERMS[kind])
+    probe = LensfunTca(kind, ones, ones, w, h, center=center)
     o, s = np.asarray(probe.origin), probe.unit
     terms: dict[str, tuple[float, ...]] = {}
     for ch in ("R", "B"):
@@ -514,7 +523,7 @@ def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float
         a = np.vstack([np.column_stack([q[:, 0] * c for c in cols]), np.column_stack([q[:, 1] * c for c in cols])])
         theta, *_ = np.linalg.lstsq(a, target, rcond=None)
         terms[ch] = tuple(float(v) for v in theta)
-    model = LensfunTca(kind, terms["R"], terms["B"], w, h)
+    model = LensfunTca(kind, terms["R"], terms["B"], w, h, center=center)
     err = {}
     for ch in ("R", "B"):
         fld = fields[ch]

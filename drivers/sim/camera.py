@@ -113,6 +113,7 @@ from drivers.sim.world import SimWorld
 from pipeline.board import parse_board
 from pipeline.board_render import BoardPose, render_board
 from pipeline.board_render import camera_matrix as board_camera_matrix
+from pipeline.board_requests import request_pose
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
@@ -305,6 +306,7 @@ class SimulatedCamera:
         self.board = None
         if board is not None:
             self.board = parse_board(str(board))  # ValueError (one line) naming the label
+        self.board_placed: Any = None  # a ViewRequest: the board where a person holds it (show_board)
         if not (0.0 <= float(board_tilt_deg) < 80.0):
             raise ValueError(f"sim camera: board_tilt_deg must be in [0, 80), got {board_tilt_deg!r}")
         self.board_tilt_deg = float(board_tilt_deg)
@@ -515,7 +517,10 @@ class SimulatedCamera:
         assert self.board is not None
         w, h = self._size
         lens = self.lens_at(focus)
-        pose = self.board_pose(stage)
+        if self.board_placed is not None:
+            pose = request_pose(self.board_placed, self.camera_matrix(), self.board.size_mm(), w, h)
+        else:
+            pose = self.board_pose(stage)
         img8 = render_board(
             self.board, self.camera_matrix(), pose, lens.undistort_points, w, h, supersample=3,
             noise_sigma=self.noise_sigma, seed=seed % (2**32),
@@ -608,10 +613,13 @@ class SimulatedCamera:
             raise ValueError(f"fault count must be a non-negative integer, got {n!r}")
         self._faults.extend([kind] * int(n))
 
-    def show_board(self, label: str | None) -> None:
+    def show_board(self, label: str | None, placed: Any = None) -> None:
         """The board ``label`` in front of the camera from the next capture on (None: the harp again);
-        :class:`drivers.protocols.BoardScene`. ValueError (one line) for a label that is not a board."""
+        :class:`drivers.protocols.BoardScene`. ``placed``: a :class:`pipeline.board_requests.ViewRequest`,
+        the board held where a person was asked to hold it (:func:`pipeline.board_requests.request_pose`)
+        instead of on the wedge. ValueError (one line) for a label that is not a board."""
         self.board = None if label is None else parse_board(str(label))
+        self.board_placed = None if label is None else placed
 
     # ------------------------------------------------------------ capture
     def set_capture_index(self, index: int) -> None:

@@ -540,6 +540,11 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     focals = sorted({p.focal for p in newest if p.focal is not None})
     if not args.output:
         raise HarpError("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
+    if args.tca or args.vignetting:
+        raise HarpError(
+            "lensfun export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
+            "alone (--focal MM) with them"
+        )
     out = Path(args.output)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".xml", dir=out.parent if str(out.parent) else ".")
     os.close(fd)

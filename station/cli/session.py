@@ -384,13 +384,16 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         with open_station(config) as (camera, turntable), _open_store(config, args.store) as store:
             with get_session() as session:
                 started.append(session.path)
-                if tap is not None:
-                    session = tap(session)  # the live page subscribes to the session's records and frames
                 console = None
                 if not args.quiet:
                     out = sys.stderr if args.json else sys.stdout
                     console = text_console(out)  # off a terminal: lines never wrapped (station.tables)
-                result = run_session(session, camera, turntable, store=store, console=console, report=report)
+                desk = _operator(config, console)
+                if tap is not None:  # the live page subscribes to the session's records and frames
+                    session = tap(session, desk)  # and answers the operator's questions too
+                result = run_session(
+                    session, camera, turntable, store=store, console=console, report=report, operator=desk
+                )
     except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
         if not started:
             raise Interrupted("interrupted before the session started; nothing was captured") from None
@@ -410,6 +413,16 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         raise HarpError(result.message)
     print(result.message, file=sys.stderr)
     return result.exit_code
+
+
+def _operator(config, console):
+    """The operator's desk when the board views are placed by hand (``intrinsics.placement: operator``):
+    asked on the console (standard error with ``--quiet``), answered on standard input or the live page."""
+    if config.intrinsics is None or config.intrinsics.placement != "operator":
+        return None
+    from station.session.operator import OperatorDesk  # defers numpy, yaml
+
+    return OperatorDesk(say=console.print if console is not None else None, stdin=sys.stdin)
 
 
 def _open_store(config, store_name=None):

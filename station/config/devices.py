@@ -11,7 +11,7 @@
   :data:`ROTARY_RANGE` for the rotary stages; focus settings within the simulated lens's range;
 * ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
   every orientation (the image's extent across the strings over their spacing, two edges a string);
-* a session with the camera-matrix stage (``intrinsics``) has a camera that can be shown the board
+* a session with the camera-matrix stage (``intrinsics``) on the turntable has a camera that can be shown the board
   (:class:`drivers.protocols.BoardScene`: the simulator).
 
 The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
@@ -69,11 +69,12 @@ def check_the_devices(config: Config) -> None:
             raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
     if config.station.camera.driver == "sim":
         _simulated_lens_and_harp(config, camera)
-    if config.intrinsics is not None and not isinstance(camera, BoardScene):
+    k = config.intrinsics
+    if k is not None and k.placement == "turntable" and not isinstance(camera, BoardScene):
         raise config.error(
             "intrinsics", f"expected a camera the station can show the board (the simulated one), not the "
-            f"{config.station.camera.driver} camera: on this station place the board by hand and take its views "
-            "with harp intrinsics --id N --capture DIR",
+            f"{config.station.camera.driver} camera: on this station the operator places the board "
+            "(intrinsics.placement: operator)",
         )  # fmt: skip
 
 
@@ -88,7 +89,7 @@ def _orientations(config: Config) -> None:
         lo, hi = ROTARY_RANGE
         inside, allowed = (lambda d: lo <= d < hi), f"[{lo:g}, {hi:g}) for a rotary stage"
     angles = [("capture.orientations_deg", config.capture.orientations_deg)]
-    if config.intrinsics is not None:
+    if config.intrinsics is not None and config.intrinsics.placement == "turntable":
         angles.append(("intrinsics.angles_deg", config.intrinsics.angles_deg))
     for key, values in angles:
         for i, deg in enumerate(values):

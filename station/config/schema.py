@@ -219,11 +219,16 @@ BOARD_MIN_VIEWS = 3
 imports cv2: a test holds the two equal)."""
 
 
+BOARD_PLACEMENTS = ("turntable", "operator")
+"""Who places the board for the camera-matrix stage (``intrinsics.placement``)."""
+
+
 @dataclass(frozen=True)
 class IntrinsicsConfig:
     """The session's camera-matrix stage (issue 23): after each focus setting's distortion is fitted, the
     station takes board views at that focus (the board on a tilted wedge on the turntable, one view per
-    angle) and fits the camera matrix with that distortion held fixed (:mod:`station.intrinsics`)."""
+    angle; or placed by the operator as each view asks, :mod:`pipeline.board_requests`) and fits the camera
+    matrix with that distortion held fixed (:mod:`station.intrinsics`)."""
 
     board: str = setting(doc="the board: charuco:NXxNY:SQUARE_MM:MARKER_MM[:DICT] or chessboard:NXxNY:SQUARE_MM "
                          "(pipeline.board)")  # fmt: skip
@@ -233,6 +238,16 @@ class IntrinsicsConfig:
     min_views: int = setting(BOARD_MIN_VIEWS, "usable board views a camera matrix needs (fewer: the profile is "
                              "stored without one)", "", BOARD_MIN_VIEWS, 1000)  # fmt: skip
     skew: bool = setting(False, "fit the skew too (no export format holds it)")
+    placement: str = setting("turntable", "who places the board: the turntable (on a wedge, one view per angle; "
+                             "a camera the station can show the board) or the operator (each view asked for on the "
+                             "terminal and the live page)", choices=BOARD_PLACEMENTS)  # fmt: skip
+    views: int = setting(6, "board views asked of the operator (placement: operator)", "", BOARD_MIN_VIEWS,
+                         100)  # fmt: skip
+
+    @property
+    def n_views(self) -> int:
+        """Board views per focus setting: one per angle on the turntable, ``views`` by the operator."""
+        return self.views if self.placement == "operator" else len(self.angles_deg)
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ import numpy as np
 from drivers import CameraRanges, TurntableRanges
 from drivers.errors import DeviceDisconnected, DriverError
 from pipeline.assess import Assessment, Coverage, analysis_scale, assess_frame, empty_coverage, focus_peak
+from pipeline.board import corner_coverage
 from station.config import CheckConfig
 from station.live.checks import live_warnings
 from station.live.view import encode_frame, view_of
@@ -138,6 +139,9 @@ class LiveStation:
         self._move_epoch = 0  # incremented at every move start and end
         self._orientation_idx: int | None = None
         self._session: dict[str, Any] | None = None
+        self.answer_board: Callable[[Any], dict[str, Any]] | None = None
+        """During a session whose board views the operator places: what the page's ``board`` command calls
+        (:meth:`station.session.operator.OperatorDesk.attach_page`)."""
         self._fps: deque[float] = deque(maxlen=10)
         self._assess_s: deque[float] = deque(maxlen=10)
         self.frames_assessed = 0
@@ -180,6 +184,8 @@ class LiveStation:
             v["coverage_total"] = self._coverage_total()
             v["focus_history"] = self._history_state()
             v["session"] = dict(self._session) if self._session is not None else None
+            if v["session"] is not None and v["session"].get("board"):  # the coverage, not every corner
+                v["session"]["board"] = {k: x for k, x in v["session"]["board"].items() if k != "corners"}
             v["checks"] = {
                 "min_lines": self.checks.min_lines,
                 "max_saturated_fraction": self.checks.max_saturated_fraction,
@@ -269,9 +275,20 @@ class LiveStation:
         """Queue an action; the Future resolves with its result or the one-line error.
 
         Actions: ``next``, ``previous`` (orientation of the plan), ``goto`` (degrees), ``home``,
-        ``focus``, ``exposure_us``, ``gain_db`` (a value), ``reset_coverage``, ``reset_focus``.
+        ``focus``, ``exposure_us``, ``gain_db`` (a value), ``reset_coverage``, ``reset_focus``; during a
+        session, ``board`` (``capture``, ``skip`` or ``stop``: the answer to the board view asked for).
         """
         fut: Future[Any] = Future()
+        if action == "board":
+            wanted = self._session is not None and (self._session.get("board") or {}).get("wanted")
+            if self.answer_board is None or not wanted:
+                fut.set_exception(ValueError("no board view is asked for"))
+                return fut
+            try:
+                fut.set_result(self.answer_board(value))
+            except ValueError as exc:
+                fut.set_exception(exc)
+            return fut
         if self._session is not None and action not in ("reset_focus",):
             fut.set_exception(ValueError("a session is running: it drives the camera and the turntable"))
             return fut
@@ -552,6 +569,8 @@ class LiveStation:
                 s["qa"] = s["qa"] + [record]
             elif kind in ("finished", "aborted"):
                 s["state"] = kind
+            if kind in ("board-ask", "board", "board-ok", "board-reject"):
+                s["board"] = _board_state(s.get("board"), record)
             if "progress" in record:
                 s["progress"] = record["progress"]
             self._session = s
@@ -581,3 +600,52 @@ class LiveStation:
             except queue.Empty:
                 continue
             self._process(frame, info.get("stage_deg"), info.get("session"))
+
+
+def _board_state(board: dict[str, Any] | None, record: dict[str, Any]) -> dict[str, Any]:
+    """The page's board panel after a session record (``intrinsics.placement: operator``): the view asked
+    for (``wanted``: instruction, why, the last rejection's problems; None while none is), the last
+    verdict, and the board coverage of the focus setting's accepted views
+    (:func:`pipeline.board.corner_coverage`: which cells of the image their corners reach)."""
+    b = dict(board) if board else {"wanted": None, "last": None, "coverage": None, "focus_idx": None}
+    f = record.get("focus_idx")
+    if b.get("focus_idx") != f:  # a new focus setting: its own views
+        b.update(focus_idx=f, corners=[], size=None, accepted=0, coverage=None)
+    kind = record.get("kind")
+    if kind == "board-ask":
+        req = record.get("request") or {}
+        b["wanted"] = {
+            "view_idx": record.get("view_idx"),
+            "attempt": record.get("attempt"),
+            "instruction": req.get("instruction"),
+            "why": req.get("why"),
+            "centre": req.get("centre"),
+            "problems": list(record.get("problems") or []),
+        }
+    elif kind == "board":
+        b["wanted"] = None  # captured: being checked
+    elif kind == "board-reject":
+        b["wanted"] = None
+        b["last"] = {
+            "view_idx": record.get("view_idx"),
+            "accepted": False,
+            "reasons": list(record.get("reasons") or []),
+        }
+    elif kind == "board-ok":
+        b["wanted"] = None
+        pts = record.get("corners") or []
+        b["corners"] = [*b.get("corners", []), pts]
+        b["size"] = record.get("size")
+        b["accepted"] = b.get("accepted", 0) + 1
+        b["last"] = {"view_idx": record.get("view_idx"), "accepted": True, "corners": len(pts)}
+    if b.get("size") and b.get("corners"):
+        w, h = b["size"]
+        cov = corner_coverage(b["corners"], int(w), int(h))
+        b["coverage"] = {
+            "nx": int(cov.covered.shape[1]),
+            "ny": int(cov.covered.shape[0]),
+            "covered": cov.covered.astype(int).tolist(),
+            "fraction": cov.fraction,
+            "missing": cov.missing(),
+        }
+    return b
