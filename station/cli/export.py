@@ -11,7 +11,8 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
     mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
     colmap           COLMAP cameras.txt: OPENCV (k1 k2 p1 p2) when as exact as the calibration, else
                      FULL_OPENCV (8 coefficients) or OPENCV_FISHEYE when the fisheye model is closer
-                     (tried as auto tries it)
+                     (tried as auto tries it), or THIN_PRISM_FISHEYE when the fisheye was tried and
+                     it is 20 % closer in max
     kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
                      fisheye model is closer (tried as auto tries it)
     basalt           Basalt calibration JSON: kb4 (Kannala-Brandt fx fy cx cy k1..k4), camera only
