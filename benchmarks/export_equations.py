@@ -1,6 +1,6 @@
 """The COLMAP, Kalibr, Basalt and Metashape exports in their consumers, stated against measured, per lens.
 
-Run:  .venv/bin/python benchmarks/export_equations.py [--real DIR] [--lenses real,wide93,wide115]
+Run:  .venv/bin/python benchmarks/export_equations.py [--real DIR] [--lenses real,wide93,wide115,prism100]
 Prints a Markdown table (committed in benchmarks/RESULTS-exports.md). For each lens and format: the model
 the export chose, the conversion error it states (RMS / max modulo homography, in the 4-corner
 normalised frame harp evaluate compares in), and what its consumer finds on a 64-point-wide grid of
@@ -12,7 +12,8 @@ the unprojection inverted to convergence and, beside it, with the consumer's own
 
 Lenses: ``real`` the real-photo model (radial4 + tangential + prism fitted on IMG_6931 and IMG_6950,
 holdout d on IMG_6964); ``wide93`` / ``wide115`` equisolid lenses of 93 and 115 degrees diagonal field
-as harp radial models (``wide_angle`` set, as a calibration that chose a wide-angle model).
+as harp radial models (``wide_angle`` set, as a calibration that chose a wide-angle model); ``prism100``
+a 100 degree lens with decentering and thin prism, 320 x 240 (the COLMAP test's THIN_PRISM_FISHEYE lens).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ sys.path.insert(0, str(REPO))
 
 from pipeline.compare import fit_homography  # noqa: E402
 from pipeline.exports.registry import ExportSource, write_export  # noqa: E402
+from pipeline.models import RadialModel  # noqa: E402
 from tests.pipeline import basalt_equations as be  # noqa: E402
 from tests.pipeline import kalibr_equations as ke  # noqa: E402
 from tests.pipeline import metashape_equations as me  # noqa: E402
@@ -47,6 +49,12 @@ def lenses(names: list[str], real_dir: Path) -> dict[str, ExportSource]:
         if n == "real":
             rm = real_model(1, str(real_dir))
             out[n] = ExportSource(rm.model, rm.width, rm.height, holdout_d=rm.holdout_d, edges=rm.edges)
+        elif n == "prism100":  # decentering and thin prism on a 100 degree lens (the COLMAP test's lens)
+            k = wide_radial(100, 320, 240).k
+            m = RadialModel.for_image(
+                320, 240, k=k, center=(161.0, 119.0), tangential=(1e-3, -5e-4), prism=(3e-3, 0, -2e-3, 0)
+            )
+            out[n] = ExportSource(m, 320, 240, wide_angle=True)
         elif n.startswith("wide"):
             fov = float(n[4:])
             out[n] = ExportSource(wide_radial(fov, 640, 480), 640, 480, wide_angle=True)
@@ -106,7 +114,7 @@ def consumer(fmt: str, data: bytes, q: np.ndarray, workdir: Path) -> tuple[str, 
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--real", type=Path, default=REAL)
-    ap.add_argument("--lenses", default="real,wide93,wide115")
+    ap.add_argument("--lenses", default="real,wide93,wide115,prism100")
     args = ap.parse_args()
     print(
         f"# COLMAP, Kalibr, Basalt, Metashape exports in their consumers — {os.cpu_count()} CPUs, "
