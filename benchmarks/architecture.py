@@ -214,7 +214,7 @@ def figures(root: Path) -> list[tuple[str, str]]:
     harp_errors = sum(c == "HarpError" or under(c, {"HarpError"}) for c in errors)
     roots = sorted(c for c in errors if c != "HarpError" and not under(c, {"HarpError"}) and bases[c] & BUILTIN_ERRORS)
     roots += ["HarpError"] if "HarpError" in bases else []
-    stderr = exits = literal_returns = pools = 0
+    stderr = harp_prints = sayings = exits = literal_returns = pools = 0
     builders, reasons = set(), 0
     for m, tree in trees.items():
         for node in ast.walk(tree):
@@ -222,10 +222,15 @@ def figures(root: Path) -> list[tuple[str, str]]:
                 f = node.func
                 fname = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
                 if m.startswith("station") and fname == "print":
-                    stderr += any(
+                    on_stderr = any(
                         k.arg == "file" and isinstance(k.value, ast.Attribute) and k.value.attr == "stderr"
                         for k in node.keywords
                     )
+                    stderr += on_stderr
+                    first = ast.unparse(node.args[0]) if node.args else ""
+                    harp_prints += on_stderr and first[first.find("'") + 1 :].startswith(("harp", "{prog}", "{_prog"))
+                if m.startswith("station.cli") and fname in ("say", "warn") and isinstance(f, ast.Name):
+                    sayings += m != "station.cli.say"
                 if m.startswith("station") and fname in ("ProcessPoolExecutor", "Pool", "get_context"):
                     pools += 1
                 if (
@@ -268,7 +273,8 @@ def figures(root: Path) -> list[tuple[str, str]]:
         ),
         ("station error classes", f"{len(errors)}, {harp_errors} of them HarpErrors"),
         ("station error bases (a class on a built-in base, not a HarpError)", f"{len(roots)} ({', '.join(roots)})"),
-        ("station print(..., file=sys.stderr)", str(stderr)),
+        ("station print(..., file=sys.stderr)", f"{stderr}, {harp_prints} of them 'harp X: ...' by hand"),
+        ("station/cli lines said by station.cli.say (say, warn)", str(sayings)),
         ("EXIT_* constants defined", str(exits)),
         ("literal non-zero returns in station/cli", str(literal_returns)),
         ("process pools made in station", str(pools)),

@@ -200,6 +200,16 @@ class IndexedCapture(Protocol):
 
 
 @runtime_checkable
+class Tilting(Protocol):
+    """A turntable with a second axis that tilts the calibration board (``tilt``: a
+    :class:`Turntable` of its own, ``move_to`` in degrees of tilt; None when the stage has none), so that
+    the session's camera-matrix stage takes its board views without a person (``intrinsics.placement:
+    stage``): :attr:`drivers.zaber.ZaberTurntable.tilt`."""
+
+    tilt: Any
+
+
+@runtime_checkable
 class BoardScene(Protocol):
     """A camera that can be shown a calibration board in place of the harp (the simulator: it renders
     the board on its wedge on the turntable, :meth:`drivers.sim.camera.SimulatedCamera.board_pose`).

@@ -64,6 +64,7 @@ from pathlib import Path
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
+from station.cli.say import warn
 from station.equipment import optic_problem
 from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes
@@ -443,7 +444,7 @@ def write_output(args, ex) -> None:
 def report(args, ex, fig: dict, prog: str) -> None:
     """Print what was written, the figures and the warnings (see the module docstring)."""
     for w in ex.warnings:
-        print(f"{prog}: warning: {w}", file=sys.stderr)
+        warn(prog, w)
     if args.json:
         print(json.dumps({"output": str(args.output), **fig}))
         return

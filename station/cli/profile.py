@@ -32,6 +32,7 @@ from typing import Any
 from pipeline.plain import plain
 from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
+from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, open_store
 from station.errors import HarpError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
@@ -109,11 +110,11 @@ class _Refused(HarpError):
 
 def _error(msg: str) -> None:
     """A damaged row of the store, on stderr; the others are still listed (exit 2 at the end)."""
-    print(f"harp profile: {msg}", file=sys.stderr)
+    say("harp profile", msg)
 
 
 def _warn(msg: str) -> None:
-    print(f"harp profile: warning: {msg}", file=sys.stderr)
+    warn("harp profile", msg)
 
 
 def _open(args):
@@ -175,7 +176,7 @@ def _say_used(lens, used, left_out) -> None:
         if is_failed(p):
             _warn(f"{failed_line(lens, p)}: used because of --allow-failed")
     for p in left_out:
-        print(f"harp profile: {failed_line(lens, p)}: not current, left out (--allow-failed uses it)", file=sys.stderr)
+        say("harp profile", f"{failed_line(lens, p)}: not current, left out (--allow-failed uses it)")
 
 
 # --------------------------------------------------------------------- list

@@ -18,6 +18,11 @@ the device (the drivers' messages already start with the device name). After
 :class:`~drivers.errors.DeviceDisconnected` the device is closed and reopened every
 ``reconnect_s`` until it answers; the line then stays, greyed, saying since when it works again.
 
+A Bayer camera's frame (a raw mosaic, its pattern in ``frame.extra["cfa"]``, e.g. ``"RGGB"``) is
+assessed on its luma (:func:`pipeline.cfa.mosaic_luma`), and every :data:`COLOUR_REFRESH_S` its
+planes are measured and each red and blue edge compared with green's (lateral chromatic
+aberration: :func:`pipeline.tca.channel_offsets`), for the page's colour panel.
+
 During a session (``harp session run --live``) the devices belong to the executor: a
 :class:`LiveStation` created with ``camera=None`` captures nothing; it assesses the frames the
 session passes to :meth:`LiveStation.show_frame` and shows the session's records
@@ -43,9 +48,11 @@ from drivers import CameraRanges, TurntableRanges
 from drivers.errors import DeviceDisconnected, DriverError
 from pipeline.assess import Assessment, Coverage, analysis_scale, assess_frame, empty_coverage, focus_peak
 from pipeline.board import corner_coverage
+from pipeline.cfa import measure_mosaic, mosaic_luma
+from pipeline.tca import channel_offsets
 from station.config import CheckConfig
 from station.live.checks import live_warnings
-from station.live.view import encode_frame, view_of
+from station.live.view import channels_view, encode_frame, view_of
 
 HISTORY = 400
 """Frames kept in the through-focus history."""
@@ -56,6 +63,9 @@ RESEARCH_S = 1.0
 (:func:`pipeline.assess.assess_frame` ``previous``): their figures measured afresh on every frame."""
 MAX_TRACK_OFFSET_PX = 0.5
 """A tracked string further than this from where it was found: search again."""
+COLOUR_REFRESH_S = 2.0
+"""The per-channel edge offsets of a Bayer camera's frames are measured again at most this often
+(every plane of the mosaic measured: several times a frame's assessment)."""
 
 
 @dataclass
@@ -145,6 +155,8 @@ class LiveStation:
         self._fps: deque[float] = deque(maxlen=10)
         self._assess_s: deque[float] = deque(maxlen=10)
         self.frames_assessed = 0
+        self._channels: dict[str, Any] | None = None
+        self._channels_at = -math.inf
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> LiveStation:
@@ -184,6 +196,7 @@ class LiveStation:
             v["coverage_total"] = self._coverage_total()
             v["focus_history"] = self._history_state()
             v["session"] = dict(self._session) if self._session is not None else None
+            v["channels"] = self._channels
             if v["session"] is not None and v["session"].get("board"):  # the coverage, not every corner
                 v["session"]["board"] = {k: x for k, x in v["session"]["board"].items() if k != "corners"}
             v["checks"] = {
@@ -397,10 +410,29 @@ class LiveStation:
             except (TypeError, ValueError, DriverError) as exc:
                 fut.set_exception(ValueError(_one_line(exc)))
 
+    def _colour(self, frame: Any, mosaic: np.ndarray, pattern: str) -> None:
+        """A Bayer frame's per-channel edge offsets from green (:func:`pipeline.tca.channel_offsets`), at most
+        every :data:`COLOUR_REFRESH_S`; a pattern that is not a Bayer one is a camera line on the page."""
+        if time.monotonic() - self._channels_at < COLOUR_REFRESH_S:
+            return
+        self._channels_at = time.monotonic()
+        try:
+            m = measure_mosaic(mosaic, pattern)
+        except ValueError as exc:
+            self._problem("camera", ValueError(f"frame {frame.counter}: {exc}"))
+            return
+        view = channels_view(channel_offsets(m), m.pattern, frame.counter)
+        with self._lock:
+            self._channels = view
+
     def _process(self, frame: Any, idle_stage: float | None, session: dict[str, Any] | None = None) -> None:
         img = np.asarray(frame.image)
         h, w = img.shape
         t0 = time.perf_counter()
+        pattern = (getattr(frame, "extra", None) or {}).get("cfa")
+        if pattern is not None:  # a Bayer camera's raw mosaic: per-channel offsets; the figures on its luma
+            self._colour(frame, img, str(pattern))
+            img = np.rint(mosaic_luma(img)).astype(img.dtype)
         scale = analysis_scale(w, h, self._string_width)
         key = (float(frame.exposure_us), float(frame.gain_db), scale)
         th = None

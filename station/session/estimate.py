@@ -147,6 +147,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
     first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
     stage = 0.0  # a session homes the turntable first
+    tilt = 0.0  # the tilt axis (intrinsics.placement: stage) starts at rest at 0
     frames = moves = locks = fits = 0
     current: dict[str, float] = {}
     for step in plan_session(dataclasses.replace(config, focus_settings=config.focus_settings[:1])):
@@ -188,13 +189,17 @@ def estimate_plan(config: Config) -> PlanEstimate:
                 frames += 1
                 s = current.pop("extra", 0.0) + PLACE_BOARD_S + frame_s
                 first.append(PlanRow(f, config.focus_settings[f], "board view placed by the operator", None, 1, s))
-            case BoardView(focus_idx=f, degrees=float(deg)):
+            case BoardView(focus_idx=f, degrees=float(deg), tilt_deg=t):
                 moves += 1
                 frames += 1
                 s = current.pop("extra", 0.0) + MOVE_OVERHEAD_S + move_seconds(deg - stage, speed, accel)
                 stage = deg
+                if t is not None:  # the tilt axis, at the turntable's speed
+                    s += MOVE_OVERHEAD_S + move_seconds(t - tilt, speed, accel)
+                    tilt = t
                 s += cap.settle_s + frame_s
-                first.append(PlanRow(f, config.focus_settings[f], "board view", deg, 1, s))
+                what = "board view" if t is None else f"board view tilted {t:g}°"
+                first.append(PlanRow(f, config.focus_settings[f], what, deg, 1, s))
             case EstimateK(focus_idx=f):
                 assert config.intrinsics is not None
                 n_v = config.intrinsics.n_views

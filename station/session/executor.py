@@ -571,6 +571,14 @@ class Executor:
         cfg = self.config
         assert cfg.intrinsics is not None  # the plan yields board views only with the section
         spec = parse_board(cfg.intrinsics.board)
+        tilt = None
+        if step.tilt_deg is not None:  # placement: stage (config check: the turntable has a tilt axis)
+            axis = getattr(self.turntable, "tilt", None)
+            if axis is None:
+                raise SessionAborted("intrinsics.placement: stage: the turntable has no tilt axis")
+            tilt = self._retry(f"tilt the board to {step.tilt_deg:g}°",
+                               lambda: axis.move_to(step.tilt_deg, timeout=cfg.capture.move_timeout_s),
+                               self.turntable)  # fmt: skip
         if step.degrees is not None:
             self._move_to(step.degrees, "intrinsics.angles_deg")
             if cfg.capture.settle_s > 0:
@@ -580,14 +588,18 @@ class Executor:
         def grab() -> Frame:
             if isinstance(self.camera, IndexedCapture):
                 self.camera.set_capture_index(step.view_idx)  # the same noise on resume
-            if step.degrees is None:  # where the operator placed it (PlaceBoard)
+            if step.degrees is not None:
+                return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            try:  # where the operator placed it (PlaceBoard)
                 return self.camera.capture(timeout=cfg.capture.timeout_s)
-            return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            finally:
+                if isinstance(self.camera, BoardScene):  # the stand-in takes the board away: the harp again
+                    self.camera.show_board(None)
 
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
         rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
         digest = save_board_frame(self.session.path / rel, frame)
-        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg, attempt))
+        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg, attempt, tilt))
 
     def _place_board(self, step: PlaceBoard) -> str:
         """Ask the operator for a board view (``intrinsics.placement: operator``): a ``board-ask`` record (the

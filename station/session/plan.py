@@ -91,13 +91,14 @@ class PlaceBoard:
 
 @dataclass(frozen=True)
 class BoardView:
-    """The camera-matrix stage (``intrinsics``): move to ``degrees`` and settle (None: the board where the
-    operator placed it, no move), capture the board and save it (view ``view_idx`` of focus setting
-    ``focus_idx``, at the locked focus)."""
+    """The camera-matrix stage (``intrinsics``): move to ``degrees`` (and the tilt axis to ``tilt_deg``,
+    ``placement: stage``) and settle (``degrees`` None: the board where the operator placed it, no move),
+    capture the board and save it (view ``view_idx`` of focus setting ``focus_idx``, at the locked focus)."""
 
     focus_idx: int
     view_idx: int
     degrees: float | None
+    tilt_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -275,7 +276,8 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
                             break
                         problems = check.problems
             else:
+                poses = k.stage_views()
                 for v in views:
-                    yield BoardView(f, v, k.angles_deg[v])
+                    yield BoardView(f, v, *poses[v])
             yield EstimateK(f)
         yield Store(f)

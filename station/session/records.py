@@ -160,9 +160,11 @@ class FitFailed(Record):
 class BoardSaved(Record):
     """A board view of the camera-matrix stage (``intrinsics``): its file (lossless, from
     :mod:`station.session.layout`), sha256, the commanded and read-back turntable angles (commanded None:
-    placed by the operator), the capture attempt (the times the view was superseded before)."""
+    placed by the operator), the capture attempt (the times the view was superseded before), the tilt axis's
+    read-back (``placement: stage``; None: no tilt axis)."""
 
     kind: ClassVar[str] = "board"
+    optional: ClassVar[tuple[str, ...]] = ("tilt_deg",)
     focus_idx: int
     view_idx: int
     file: str
@@ -170,6 +172,7 @@ class BoardSaved(Record):
     commanded_deg: float | None
     stage_deg: float | None
     attempt: int = 0
+    tilt_deg: float | None = None
 
 
 @dataclass(frozen=True)

@@ -142,6 +142,20 @@
       const rej = Object.entries(f.rejected || {});
       $("rejected").textContent = rej.length ? "rejected: " + rej.map(([k, n]) => `${n} × ${k}`).join(", ") : "nothing rejected";
     }
+    // colour (a Bayer camera): each channel's edges against green's
+    const col = s.channels;
+    $("colour-panel").hidden = !col;
+    if (col) {
+      $("colour-info").textContent = `${col.pattern} mosaic, frame #${col.frame}`;
+      const names = { R: "red", B: "blue" };
+      $("channels-table").tBodies[0].replaceChildren(...col.channels.map(c => {
+        const tr = document.createElement("tr");
+        tr.dataset.channel = c.channel;
+        const cells = [names[c.channel] || c.channel, c.points, ...c.zones.map(z => fmt(z.median_outward_px, 3)), fmt(c.rms_px, 3)];
+        for (const v of cells) { const td = document.createElement("td"); td.textContent = v; tr.appendChild(td); }
+        return tr;
+      }));
+    }
     // session
     const ses = s.session;
     updateBoard(ses && ses.board);
