@@ -299,13 +299,16 @@ def export_profile(
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
-    colour = colour_correction(args, source.width, source.height, stored=profile.details.get("colour"))
+    left_out: list[str] = []
+    colour = colour_correction(args, source.width, source.height, profile.details.get("colour"), left_out)
     if colour is not None:
         source = replace(source, colour=colour)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:
         raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
+    if left_out:
+        ex = replace(ex, warnings=(*ex.warnings, *left_out))
     return ex, figures(ex, source, edges)
 
 
@@ -315,20 +318,21 @@ VIGNETTING_FORMATS = ("lensfun",)
 """The formats that hold the vignetting (``--vignetting``)."""
 
 
-def colour_correction(args, width: int, height: int, stored=None):
+def colour_correction(args, width: int, height: int, stored=None, left_out: list[str] | None = None):
     """The :class:`~pipeline.exports.colour.ColourCorrection` of ``--tca`` and ``--vignetting`` (None without
     them); ExportError (one line) for a format that holds neither, a setting that is not positive, a file
     that cannot be read or is for another image size.
 
     ``stored``: the profile's own TCA and vignetting (``details["colour"]``, a colour camera's session:
     :mod:`station.session.colour`), exported where the format holds them and no file is given (a file
-    overrides); a stored vignetting without an f-number (``--aperture``) is left out with a warning."""
+    overrides); a stored vignetting without an f-number (``--aperture``) is left out, why appended to
+    ``left_out`` (the export's warnings)."""
     tca_path, vig_path = getattr(args, "tca", None), getattr(args, "vignetting", None)
     for flag, value in (("--aperture", args.aperture), ("--distance", args.distance)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ExportError(f"{flag}: expected a positive number, got {value:g}")
     if tca_path is None and vig_path is None:
-        return _stored_colour(args, width, height, stored)
+        return _stored_colour(args, width, height, stored, left_out)
     if tca_path is not None and args.format not in TCA_FORMATS:
         raise ExportError(
             f"--tca: the {args.format} format holds no TCA; export it with --format lensfun (<tca>) or opencv "
@@ -357,7 +361,7 @@ def colour_correction(args, width: int, height: int, stored=None):
     return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
 
 
-def _stored_colour(args, width: int, height: int, stored):
+def _stored_colour(args, width: int, height: int, stored, left_out: list[str] | None):
     """:func:`colour_correction` from the profile's stored documents alone (None: none the format holds)."""
     stored = stored if isinstance(stored, Mapping) else {}
     tca_doc, vig_doc = stored.get("tca"), stored.get("vignetting")
@@ -379,11 +383,11 @@ def _stored_colour(args, width: int, height: int, stored):
     aperture = args.aperture if args.aperture is not None else aperture
     distance = args.distance if args.distance is not None else distance
     if fit is not None and aperture is None:
-        warn(
-            "harp export",
-            "the profile's vignetting is left out: lensfun files a vignetting under the f-number it was "
-            "measured at; give --aperture F",
-        )
+        if left_out is not None:
+            left_out.append(
+                "the profile's vignetting is left out: lensfun files a vignetting under the f-number it was "
+                "measured at; give --aperture F"
+            )
         fit = None
     if tca is None and fit is None:
         return None
