@@ -172,4 +172,6 @@ def test_reprocess_makes_them_again(session):
         b = TcaField.from_dict(new.details["colour"]["tca"]["channels"][ch]["field"])
         assert field_difference(a.to_reference, b.to_reference, W, H).max < 1e-9
     fits = [VignettingFit.from_dict(p.details["colour"]["vignetting"]["fit"]) for p in (old, new)]
-    np.testing.assert_allclose(fits[1].relative_illumination(_grid()), fits[0].relative_illumination(_grid()), atol=1e-9)
+    np.testing.assert_allclose(
+        fits[1].relative_illumination(_grid()), fits[0].relative_illumination(_grid()), atol=1e-9
+    )
