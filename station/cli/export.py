@@ -13,6 +13,9 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
                      fisheye model is closer (tried as auto tries it)
     kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
                      fisheye model is closer (tried as auto tries it)
+    lcp              Adobe lens profile (Lightroom, Camera Raw, RawTherapee): PerspectiveModel (OpenCV's 5
+                     coefficients) or FisheyeModel (k1 k2), whichever is closer; filed under --focal-mm and
+                     --focus-distance-m; -o an existing profile of the lens adds this setting to it
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
     stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
     stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
@@ -77,6 +80,7 @@ FORMAT_CHOICES = (
     "mrcal",
     "colmap",
     "kalibr",
+    "lcp",
     "maps",
     "stmap",
     "stmap-redistort",
@@ -115,7 +119,7 @@ def add_export_options(p) -> None:
     p.add_argument("--xml", action="store_true", help="opencv: FileStorage XML instead of YAML (also -o *.xml)")
     p.add_argument(
         "--focal-px",
-        dest="focal",
+        dest="focal_px",
         type=float,
         default=None,
         help="opencv/ros/mrcal: focal length of the camera matrix in pixels",
@@ -147,6 +151,11 @@ def add_export_options(p) -> None:
     g.add_argument("--pixel-pitch-um", metavar="UM", help="pixel pitch of the images, micrometres")
     g.add_argument("--sensor-width-mm", metavar="MM", help="width of the sensor area the image covers (or a pitch)")
     g.add_argument("--camera-name", metavar="NAME", help="ros: camera_name (default: from the camera body)")
+    g.add_argument(
+        "--focus-distance-m",
+        metavar="M",
+        help="lcp: the focus distance of the calibration in metres (the profile files it under it)",
+    )
     s = p.add_mutually_exclusive_group()
     s.add_argument(
         "--shots",
@@ -214,15 +223,24 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
     from pipeline.exports.registry import ExportOptions  # defers scipy, yaml
 
-    if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
-        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
+    if args.focal_px is not None and not (math.isfinite(args.focal_px) and args.focal_px > 0):
+        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal_px:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
         installed = installed_databases(exclude=args.output)
+    focus_m = None
+    raw = getattr(args, "focus_distance_m", None)
+    if raw is not None:
+        try:
+            focus_m = float(raw)
+        except ValueError:
+            raise ExportError(f"--focus-distance-m: expected a distance in metres, got {raw!r}") from None
+        if not (math.isfinite(focus_m) and focus_m > 0):
+            raise ExportError(f"--focus-distance-m: expected a distance > 0 m, got {raw}")
     return ExportOptions(
         coeffs=args.coeffs,
-        focal_px=args.focal,
+        focal_px=args.focal_px,
         xml=xml,
         lensfun_model=args.lensfun_model,
         lensfun_center=not args.lensfun_no_center,
@@ -231,21 +249,22 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         existing=existing,
         existing_name=existing_name,
         installed_lensfun=installed,
+        focus_distance_m=focus_m,
         frame=frame_choice(args),
     )
 
 
 def _existing_lensfun(args) -> bytes | None:
-    """The database at ``-o`` when it is one (lensfun exports add to it)."""
+    """The database (lensfun) or lens profile (lcp) at ``-o`` when it is one (these exports add to it)."""
     from pipeline.exports.registry import FORMATS  # defers scipy, yaml
 
-    if args.format != "lensfun" or not args.output or not Path(args.output).is_file():
+    if args.format not in ("lensfun", "lcp") or not args.output or not Path(args.output).is_file():
         return None
     try:
         data = Path(args.output).read_bytes()
     except OSError as exc:
         raise ExportError(f"{args.output}: cannot read ({exc.strerror or exc})") from None
-    return data if FORMATS["lensfun"].sniff(data) else None
+    return data if FORMATS[args.format].sniff(data) else None
 
 
 # ------------------------------------------------------------------- export
