@@ -200,16 +200,29 @@ class IndexedCapture(Protocol):
 
 
 @runtime_checkable
+class Tilting(Protocol):
+    """A turntable with a second axis that tilts the calibration board (``tilt``: a
+    :class:`Turntable` of its own, ``move_to`` in degrees of tilt; None when the stage has none), so that
+    the session's camera-matrix stage takes its board views without a person (``intrinsics.placement:
+    stage``): :attr:`drivers.zaber.ZaberTurntable.tilt`."""
+
+    tilt: Any
+
+
+@runtime_checkable
 class BoardScene(Protocol):
     """A camera that can be shown a calibration board in place of the harp (the simulator: it renders
     the board on its wedge on the turntable, :meth:`drivers.sim.camera.SimulatedCamera.board_pose`).
 
     A session's camera-matrix stage (the ``intrinsics`` section) takes its board views with it; on a
-    real station the board is placed by hand (``harp intrinsics --capture``).
+    real station the board is placed by hand (``intrinsics.placement: operator``, or ``harp intrinsics
+    --capture``). With ``placed`` (a :class:`pipeline.board_requests.ViewRequest`) the simulator stands in
+    for the person too: it renders the board where the operator was asked to hold it.
     """
 
-    def show_board(self, label: str | None) -> None:
-        """Render the board ``label`` (:func:`pipeline.board.parse_board`) from the next capture on; None: the harp."""
+    def show_board(self, label: str | None, placed: Any = None) -> None:
+        """Render the board ``label`` (:func:`pipeline.board.parse_board`) from the next capture on, on the
+        wedge or, with ``placed``, as that request asks; None: the harp."""
         ...
 
 

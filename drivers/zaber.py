@@ -30,6 +30,10 @@ travel; a target outside raises :class:`~drivers.errors.OutOfRange` before
 anything is sent (the device would answer ``RJ ... BADDATA``). A device that
 rejects the settings (``RJ``) reports no travel: the configured limits apply.
 
+A second axis of the same device may tilt the calibration board (``tilt_axis``, e.g. 2 on a two-axis
+controller): :attr:`ZaberTurntable.tilt` is that axis, a :class:`ZaberTurntable` of its own on the same
+connection (``/1 2 move abs N``, ``/1 2 get pos``; its travel read at ``open()`` as the first axis's).
+
 Errors: ``RJ`` -> :class:`DeviceRejected` (with the reason, e.g. BADDATA);
 a fault flag (``F*``) or an unexpected-limit ``WL`` -> :class:`DeviceFault`
 naming the flag and its meaning (clear with :meth:`clear_warnings`, or
@@ -60,6 +64,8 @@ from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0
+TILT_LIMITS_DEG = (0.0, 60.0)
+"""The tilt axis's angles by default (a board tilted further hides its corners from the camera)."""
 
 # Warning flags of the Zaber ASCII protocol: F* faults, W* warnings, N* notices.
 WARNING_FLAGS = {
@@ -115,6 +121,12 @@ SETTINGS: dict[str, Setting] = {
     "tolerance_microsteps": Setting("how far from the target an idle axis may be", "integer", "microsteps", 0,
                                     1_000_000),
     "name": Setting("how messages name the stage", "text"),
+    "tilt_axis": Setting("a second axis of the same device that tilts the calibration board (the session's "
+                         "intrinsics.placement: stage); null: none", "integer", "", 1, 9, nullable=True),
+    "tilt_microsteps_per_degree": Setting("microsteps per degree of the tilt axis (default: the turntable's)",
+                                          "number", "microsteps/deg", 0.0, 1e8, low_open=True),
+    "tilt_limits": Setting("[min, max] of the tilt axis's angles (narrowed to its travel at open)", "numbers",
+                           "deg", -90.0, 90.0, length=(2, 2)),
 }  # fmt: skip
 """The keys of a Zaber turntable's configuration section, each with its type, unit and range."""
 _CONFIG_KEYS = {"driver", *SETTINGS}
@@ -198,6 +210,9 @@ class ZaberTurntable:
         home_timeout: float = 120.0,
         tolerance_microsteps: int = 1,
         name: str | None = None,
+        tilt_axis: int | None = None,
+        tilt_microsteps_per_degree: float | None = None,
+        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
     ):
         if microsteps_per_degree <= 0:
             raise ValueError(f"microsteps_per_degree must be positive, got {microsteps_per_degree}")
@@ -223,6 +238,23 @@ class ZaberTurntable:
         self.infos: list[str] = []
         self._lock = threading.RLock()
         self._target: int | None = None
+        self._shared = False  # an axis on another axis's connection (the tilt axis): opened and closed by it
+        self.tilt: ZaberTurntable | None = None
+        """The tilt axis (``tilt_axis``): another axis of this device, on this connection, which tilts the
+        calibration board (:class:`drivers.protocols.Tilting`); None without one."""
+        if tilt_axis is not None:
+            if int(tilt_axis) == self.axis_number:
+                raise ValueError(f"tilt_axis must be another axis than axis {self.axis_number}, got {tilt_axis}")
+            tilt = ZaberTurntable(
+                port, baudrate=baudrate, device=device, axis=int(tilt_axis),
+                microsteps_per_degree=self.microsteps_per_degree if tilt_microsteps_per_degree is None
+                else float(tilt_microsteps_per_degree),
+                limits=tuple(tilt_limits), reply_timeout=reply_timeout, poll_interval=poll_interval,  # type: ignore[arg-type]
+                move_timeout=move_timeout, home_timeout=home_timeout, tolerance_microsteps=tolerance_microsteps,
+                name=f"{self.name} tilt axis {tilt_axis}",
+            )  # fmt: skip
+            tilt.transport, tilt._lock, tilt._shared = self.transport, self._lock, True
+            self.tilt = tilt
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> ZaberTurntable:
@@ -236,27 +268,35 @@ class ZaberTurntable:
             if "microsteps_per_degree" in cfg:
                 raise ValueError("zaber turntable: give 'microsteps_per_degree' or 'steps_per_degree', not both")
             kw["microsteps_per_degree"] = cfg["steps_per_degree"]
-        if "limits" in kw:
-            kw["limits"] = tuple(kw["limits"])
+        for key in ("limits", "tilt_limits"):
+            if key in kw:
+                kw[key] = tuple(kw[key])
         port = kw.pop("port")
         return cls(port, **kw)
 
     # -- life cycle -----------------------------------------------------------
     def open(self) -> None:
-        self.transport.open()
+        if not self._shared:
+            self.transport.open()
         try:
             reply = self.command("", axis_scope=False)  # "/1": is the device there?
             if not reply.ok:  # warnings do not stop opening: recover() needs an open port
                 raise DeviceRejected(f"{self.name}: status request rejected: {reply.raw!r}")
             self._target = None
+            if self._shared:  # the tilt axis: is it there? (a one-axis device answers RJ ... BADAXIS)
+                self._check(self.command("get pos"), "get pos", fault=False)
             self._device_travel = self._read_device_travel()
             self._travel = effective_travel(self.name, self._configured, self._device_travel)
+            if self.tilt is not None:
+                self.tilt.open()
         except Exception:
-            self.transport.close()
+            if not self._shared:
+                self.transport.close()
             raise
 
     def close(self) -> None:
-        self.transport.close()
+        if not self._shared:
+            self.transport.close()
 
     def __enter__(self) -> ZaberTurntable:
         self.open()

@@ -34,6 +34,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -433,9 +434,17 @@ class BoardCoverage:
 
 def board_coverage(views: list[BoardView], width: int, height: int, nx: int = 8, ny: int = 6) -> BoardCoverage:
     """The image cells (``nx`` x ``ny``) that the corners of ``views`` reach."""
+    return corner_coverage([v.image_points for v in views], width, height, nx, ny)
+
+
+def corner_coverage(
+    points: Sequence[npt.ArrayLike], width: int, height: int, nx: int = 8, ny: int = 6
+) -> BoardCoverage:
+    """The image cells (``nx`` x ``ny``) that corners reach: ``points``, one (N, 2) array of pixels
+    ``[x, y]`` per view (the corners of a :class:`BoardView`, or as a session's manifest keeps them)."""
     covered = np.zeros((ny, nx), bool)
-    for v in views:
-        p = np.asarray(v.image_points, np.float64).reshape(-1, 2)
+    for pts in points:
+        p = np.asarray(pts, np.float64).reshape(-1, 2)
         i = np.clip((p[:, 0] / width * nx).astype(int), 0, nx - 1)
         j = np.clip((p[:, 1] / height * ny).astype(int), 0, ny - 1)
         covered[j, i] = True

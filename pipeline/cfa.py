@@ -241,3 +241,21 @@ def measure_channels(
         for c in "RGB"
     }
     return MosaicMeasurement(order.upper(), int(w), int(h), planes)
+
+
+def mosaic_luma(mosaic: NDArray[Any]) -> NDArray[np.float64]:
+    r"""A grey image of a Bayer mosaic at full resolution: the mosaic filtered by
+    :math:`\tfrac{1}{16}[1\ 2\ 1]^T[1\ 2\ 1]`.
+
+    Centred on any site of any Bayer pattern, the kernel weighs red, green and blue as
+    :math:`\tfrac14, \tfrac12, \tfrac14` (the four sites of each 2 x 2 cell add to the same
+    weights), so the pattern's checkerboard cancels and nothing is shifted: a grey picture
+    for the figures that do not need colour (the live view's assessment of a Bayer camera's
+    frames). Borders are mirrored.
+    """
+    m = np.asarray(mosaic, np.float64)
+    if m.ndim != 2:
+        raise ValueError(f"a CFA mosaic is a 2-D image, got shape {m.shape}")
+    p = np.pad(m, 1, mode="reflect")
+    rows = p[:-2] + 2.0 * p[1:-1] + p[2:]
+    return np.asarray((rows[:, :-2] + 2.0 * rows[:, 1:-1] + rows[:, 2:]) / 16.0, np.float64)

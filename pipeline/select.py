@@ -636,6 +636,8 @@ def select_model(
         alternate-string ``strings_table``. If every candidate fails in some fold, the choice is
         :data:`FALLBACK` and the reason says so.
     """
+    mode_wanted = folds if folds != "auto" else ("images" if len(lines_per_image) >= 3 else "edges")
+    candidates, set_aside = _supported_when_unchecked(candidates, lines_per_image, mode_wanted)
     table, mode = cross_validate(
         lines_per_image,
         width,
@@ -664,7 +666,7 @@ def select_model(
         reason = (
             f"{pick.candidate.label}: alternate-edge (shots too few to leave one out) CV d {pick.cv_d:.4f} px, "
             f"fewest parameters ({pick.n_params}) within {se_text} (paired over the held-out edges) of the best "
-            f"CV d {best_row.cv_d:.4f} px; the generalisation to an unseen orientation is not checked"
+            f"CV d {best_row.cv_d:.4f} px; the generalisation to an unseen orientation is not checked{set_aside}"
         )
         return _with_support(Selection(pick.candidate, reason, mode, table), lines_per_image)
     first = min(_within(ok, best_row, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
@@ -729,6 +731,35 @@ def select_model(
         f"{best_radial.cv_d:.4f} px); {tier2}{passed}"
     )
     return _with_support(Selection(choice, reason, mode, table, strings), lines_per_image)
+
+
+def _supported_when_unchecked(
+    candidates: Sequence[FitSpec], lines_per_image: Sequence[Sequence[np.ndarray]], mode: str
+) -> tuple[tuple[FitSpec, ...], str]:
+    """The candidates a choice without unseen orientations (``mode`` 'edges') may take, and the reason's note.
+
+    Alternate strings cannot judge a flexible candidate (:func:`is_flexible`: a free polynomial or a
+    residual field): fitted on every orientation, it bends to them and wins again, seen or not. So when
+    the shots have fewer distinct orientations than a flexible candidate needs
+    (:func:`required_orientations`) and a radial candidate remains, it is set aside before the
+    cross-validation, and the reason says so. On the real photographs fitted on two shots, a residual
+    field chosen by alternate strings left the third shot 0.108 px straight against the radial model's
+    0.073 (``harp calibrate IMG_6931 IMG_6950 --holdout IMG_6964 --field auto``). With leave-one-shot-out
+    folds (``mode`` 'images') nothing is set aside: unseen orientations judge every candidate.
+    """
+    if mode != "edges":
+        return tuple(candidates), ""
+    have = distinct_orientations(shot_orientation(s) for s in lines_per_image)
+    aside = [c for c in candidates if is_flexible(c) and required_orientations(c) > have]
+    kept = tuple(c for c in candidates if c not in aside)
+    if not aside or not any(not is_flexible(c) for c in kept):
+        return tuple(candidates), ""
+    need = min(required_orientations(c) for c in aside)
+    return kept, (
+        f"; {len(aside)} flexible candidate{'s' if len(aside) > 1 else ''} (free polynomial or residual field) "
+        f"set aside: alternate strings cannot judge them and they need >= {need} distinct string orientations, "
+        f"the shots have {have}"
+    )
 
 
 def _flexible_margin(row: CVRow, best_radial: CVRow | None) -> float:

@@ -294,6 +294,76 @@ def channel_pairs(
     return ch, ref
 
 
+OUTWARD_MIN_COS = 0.5
+"""A point counts for :meth:`ChannelOffsets.outward` when its edge normal is within 60 degrees of
+the radial direction (an edge along the radius sees nothing of a radial TCA)."""
+ZONES = ((0.0, 1.0 / 3.0), (1.0 / 3.0, 2.0 / 3.0), (2.0 / 3.0, 1.0))
+"""The rings of :meth:`ChannelOffsets.summary`, in fractions of the half-diagonal."""
+
+
+@dataclass(frozen=True)
+class ChannelOffsets:
+    r"""How far one channel's edges lie from green's in one shot, point by point (pixels).
+
+    ``offset[i]`` is :math:`n_i \cdot \Delta(p_i)`: the channel -> green shift at the channel's
+    edge point ``points[i]`` along green's normal ``normal[i]`` there (the observations of
+    :func:`edge_offsets`, not a fit). For a radial TCA the figure that reads at a glance is
+    :meth:`outward`: how far the channel's edge lies farther from the image centre than green's.
+    """
+
+    channel: str
+    width: int
+    height: int
+    points: Floats
+    normal: Floats
+    offset: Floats
+
+    def radius(self) -> Floats:
+        """Distance of each point from the image centre over the half-diagonal."""
+        c = np.array([(self.width - 1) / 2.0, (self.height - 1) / 2.0])
+        return np.asarray(np.hypot(*(self.points - c).T) / (0.5 * float(np.hypot(self.width, self.height))))
+
+    def outward(self) -> Floats:
+        r"""The channel's edge outward of green's (px; > 0: farther from the centre): :math:`-\Delta \cdot n\,
+        \mathrm{sign}(n \cdot \hat r)`, NaN where the normal is more than 60 degrees off the radius."""
+        c = np.array([(self.width - 1) / 2.0, (self.height - 1) / 2.0])
+        d = self.points - c
+        rr = np.hypot(d[:, 0], d[:, 1])
+        cos = np.einsum("ij,ij->i", self.normal, d) / np.where(rr > 0, rr, np.inf)
+        out = -self.offset * np.sign(cos)
+        return np.where(np.abs(cos) >= OUTWARD_MIN_COS, out, np.nan)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain figures: points, RMS offset, and per ring (:data:`ZONES`) the median outward offset."""
+        rho, out = self.radius(), self.outward()
+        zones = []
+        for lo, hi in ZONES:
+            sel = (rho >= lo) & ((rho < hi) | (hi >= 1.0)) & np.isfinite(out)
+            zones.append(
+                {
+                    "from": lo,
+                    "to": hi,
+                    "points": int(sel.sum()),
+                    "median_outward_px": float(np.median(out[sel])) if sel.any() else None,
+                }
+            )
+        rms = float(np.sqrt(np.mean(self.offset**2))) if len(self.offset) else None
+        return {"channel": self.channel, "points": int(len(self.offset)), "rms_px": rms, "zones": zones}
+
+
+def channel_offsets(m: MosaicMeasurement, reference: str = "G") -> dict[str, ChannelOffsets]:
+    """Red's and blue's edge offsets from green's in one measured shot (:class:`ChannelOffsets`).
+
+    Each reference plane (both green planes of a mosaic) is a reference of its own
+    (:func:`channel_pairs`), so every channel point appears once per green plane.
+    """
+    out = {}
+    for ch in ("R", "B"):
+        obs = shot_offsets(*channel_pairs([m], ch, reference))
+        out[ch] = ChannelOffsets(ch, m.width, m.height, obs.points, obs.coef, obs.offset)
+    return out
+
+
 @dataclass(frozen=True)
 class TcaFit:
     """A channel's fitted field and its figures (pixels).
@@ -486,8 +556,16 @@ class LensfunTcaFit:
         ]
 
 
-def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float = GRID_STEP_PX) -> LensfunTcaFit:
+def lensfun_tca(
+    fields: Mapping[str, TcaField],
+    kind: str = "poly3",
+    step: float = GRID_STEP_PX,
+    center: tuple[float, float] = (0.0, 0.0),
+) -> LensfunTcaFit:
     """Lensfun's ``kind`` TCA closest to the fields of ``"R"`` and ``"B"`` over the whole image.
+
+    ``center``: the lens's ``<center>`` the file is written with (lensfun applies the TCA about
+    it, as it does the distortion); the image centre by default.
 
     Fitted in lensfun's direction (reference -> channel, :class:`LensfunTca`) by linear
     least squares on :func:`image_grid`: for each grid point of the channel
@@ -501,7 +579,8 @@ def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float
     if missing:
         raise ValueError(f"lensfun TCA needs the red and blue fields; missing {sorted(missing)}")
     w, h = fields["R"].width, fields["R"].height
-    probe = LensfunTca(kind, (1.0,) * len(LENSFUN_TCA_TERMS[kind]), (1.0,) * len(LENSFUN_TCA_TERMS[kind]), w, h)
+    ones = (1.0,) * len(LENSFUN_TCA_TERMS[kind])
+    probe = LensfunTca(kind, ones, ones, w, h, center=center)
     o, s = np.asarray(probe.origin), probe.unit
     terms: dict[str, tuple[float, ...]] = {}
     for ch in ("R", "B"):
@@ -514,7 +593,7 @@ def lensfun_tca(fields: Mapping[str, TcaField], kind: str = "poly3", step: float
         a = np.vstack([np.column_stack([q[:, 0] * c for c in cols]), np.column_stack([q[:, 1] * c for c in cols])])
         theta, *_ = np.linalg.lstsq(a, target, rcond=None)
         terms[ch] = tuple(float(v) for v in theta)
-    model = LensfunTca(kind, terms["R"], terms["B"], w, h)
+    model = LensfunTca(kind, terms["R"], terms["B"], w, h, center=center)
     err = {}
     for ch in ("R", "B"):
         fld = fields[ch]

@@ -67,7 +67,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -91,11 +91,18 @@ class UndistortsPoints(Protocol):
     def undistort_points(self, xy: np.ndarray) -> np.ndarray: ...
 
 
-def lensfun_radius(xy: Floats, width: int, height: int) -> Floats:
-    """Distance to the image centre over the half-diagonal between pixel centres (lensfun's vignetting r)."""
+def lensfun_radius(xy: Floats, width: int, height: int, center: tuple[float, float] = (0.0, 0.0)) -> Floats:
+    """Lensfun's vignetting radius :math:`r`: the distance to the lens's centre over the half-diagonal.
+
+    The half-diagonal is between pixel centres; the lens's centre is the image centre plus the
+    lens's ``<center>`` (``center``, lensfun's normalised units: half the shorter side), about
+    which liblensfun applies the vignetting as it does the distortion and the TCA (checked
+    through lensfunpy, ``tests/pipeline/test_lensfun_colour.py``).
+    """
     p = np.asarray(xy, np.float64).reshape(-1, 2)
     c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
-    return np.asarray(np.hypot(*(p - c).T) / float(np.hypot(*c)), np.float64)
+    o = c + float(c.min()) * np.asarray(center, np.float64)
+    return np.asarray(np.hypot(*(p - o).T) / float(np.hypot(*c)), np.float64)
 
 
 def harmonics(degree: int) -> list[tuple[int, int]]:
@@ -270,6 +277,40 @@ class VignettingFit:
             "n_samples": self.n_samples,
         }
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> VignettingFit:
+        """The fit :meth:`to_dict` wrote (KeyError, TypeError or ValueError when it is not one)."""
+        if d.get("model") != "log_radial_vignetting":
+            raise ValueError(f"model {d.get('model')!r} is not log_radial_vignetting")
+        w, h = (int(v) for v in d["image_size"])
+        ax, ay = (float(v) for v in d["axis"])
+
+        def floats(key: str) -> tuple[float, ...]:
+            return tuple(float(v) for v in d.get(key) or ())
+
+        fit = cls(
+            width=w,
+            height=h,
+            log_v=floats("log_v"),
+            backlight_degree=int(d["backlight_degree"]),
+            backlight=floats("backlight"),
+            exposure=floats("exposure"),
+            axis=(ax, ay),
+            residual_rms=float(d["residual_rms"]),
+            n_samples=int(d["n_samples"]),
+            lens_degree=int(d.get("lens_degree", 0)),
+            lens_harmonics=floats("lens_harmonics"),
+        )
+        for key, degree, got in (
+            ("backlight", fit.backlight_degree, fit.backlight),
+            ("lens_harmonics", fit.lens_degree, fit.lens_harmonics),
+        ):
+            if len(got) != 2 * len(harmonics(degree)):
+                raise ValueError(f"{key}: {len(got)} values, degree {degree} has {2 * len(harmonics(degree))}")
+        if not fit.log_v or not all(np.isfinite(fit.log_v + fit.lens_harmonics)):
+            raise ValueError("log_v: no finite radial terms")
+        return fit
+
 
 def _design(
     shots: Sequence[BacklitSamples],
@@ -398,11 +439,15 @@ class LensfunVignetting:
         return attrs
 
 
-def lensfun_pa(fit: VignettingFit, step: float = 8.0) -> LensfunVignetting:
-    """Lensfun's ``pa`` model closest (relative, least squares) to ``fit``'s :math:`V` over the whole image."""
+def lensfun_pa(fit: VignettingFit, step: float = 8.0, center: tuple[float, float] = (0.0, 0.0)) -> LensfunVignetting:
+    """Lensfun's ``pa`` model closest (relative, least squares) to ``fit``'s :math:`V` over the whole image.
+
+    ``center``: the lens's ``<center>`` the file is written with (lensfun applies the
+    vignetting about it, :func:`lensfun_radius`); the image centre by default.
+    """
     g = image_grid(fit.width, fit.height, step)
     v = fit.relative_illumination(g)
-    r2 = lensfun_radius(g, fit.width, fit.height) ** 2
+    r2 = lensfun_radius(g, fit.width, fit.height, center) ** 2
     a = np.column_stack([r2, r2**2, r2**3]) / v[:, None]
     k, *_ = np.linalg.lstsq(a, 1.0 / v * (v - 1.0), rcond=None)
     pa = LensfunVignetting((float(k[0]), float(k[1]), float(k[2])), 0.0, 0.0)

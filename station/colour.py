@@ -91,11 +91,11 @@ def tca_document(fits: dict[str, TcaFit], lensfun: dict[str, LensfunTcaFit], pat
     }
 
 
-def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
-    """The red and blue :class:`~pipeline.models.tca_model.TcaField` of a ``harp tca --out`` file.
+def read_document(path, fmt: str, what: str, command: str) -> dict[str, Any]:
+    """A harp result file (YAML or JSON by the suffix) whose ``format`` is ``fmt``.
 
-    Returns ``{"R": field, "B": field}``; an :class:`~station.inputs.InputError` naming the file when
-    it is not a harp TCA file (YAML or JSON), lacks a channel, or is for another image size.
+    ``what`` names it (``"a harp TCA file"``), ``command`` writes it (``"harp tca --out"``);
+    an :class:`~station.inputs.InputError` naming the file when it cannot be read or is not one.
     """
     import json
 
@@ -103,14 +103,25 @@ def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
 
     p = Path(path)
     try:
-        text = read_regular_file(p, 1 << 20, what="a harp TCA file").decode("utf-8")
+        text = read_regular_file(p, 1 << 22, what=what).decode("utf-8")
         doc = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
     except BoundedReadError as exc:
         raise InputError(f"{p}: {exc.reason}") from None
     except (ValueError, yaml.YAMLError) as exc:
-        raise InputError(f"{p}: not a harp TCA file ({type(exc).__name__}); write one with harp tca --out") from None
-    if not isinstance(doc, dict) or doc.get("format") != "harp-tca":
-        raise InputError(f"{p}: not a harp TCA file (no 'format: harp-tca'); write one with harp tca --out")
+        raise InputError(f"{p}: not {what} ({type(exc).__name__}); write one with {command}") from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        raise InputError(f"{p}: not {what} (no 'format: {fmt}'); write one with {command}")
+    return doc
+
+
+def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
+    """The red and blue :class:`~pipeline.models.tca_model.TcaField` of a ``harp tca --out`` file.
+
+    Returns ``{"R": field, "B": field}``; an :class:`~station.inputs.InputError` naming the file when
+    it is not a harp TCA file (YAML or JSON), lacks a channel, or is for another image size.
+    """
+    p = Path(path)
+    doc = read_document(p, "harp-tca", "a harp TCA file", "harp tca --out")
     fields: dict[str, Any] = {}
     for ch in "RB":
         try:

@@ -59,13 +59,17 @@ def run_session(
     console: Any = None,
     sleep: Callable[[float], None] = time.sleep,
     report: bool = True,
+    operator: Any = None,
 ) -> SessionResult:
     """Run (or resume) ``session`` on open devices; see the module docstring.
 
     ``console``: a ``rich.console.Console`` for progress, summary, QA lines (None: silent);
-    ``report``: write ``DIR/report`` once the plan is done.
+    ``report``: write ``DIR/report`` once the plan is done; ``operator``: asked for the board views placed by
+    hand (:class:`station.session.operator.OperatorDesk`).
     """
-    executor = Executor(session, camera, turntable, store=store, judge=judge_focus(session), sleep=sleep)
+    executor = Executor(
+        session, camera, turntable, store=store, judge=judge_focus(session), sleep=sleep, operator=operator
+    )
     if console is not None:
         executor.subscribe(ConsoleProgress(console, executor.tally))
     try:
@@ -145,7 +149,7 @@ def _results(session: SessionDir, qa: Any) -> dict[str, Any] | None:
 
 def _write_report(session: SessionDir, qa: Any, note: Callable[[str], None]) -> None:
     """The session report into ``DIR/report``; a failure is recorded and said, the session kept."""
-    from station.qa.report import REPORT_HTML, write_session_report  # defers matplotlib, PIL
+    from station.qa.report import REPORT_HTML, write_session_report  # defers matplotlib, PIL, jinja2
 
     cfg = session.config
     title = f"{cfg.lens.label()} on {cfg.camera_body.label()}, session {session.path.name}"

@@ -1,7 +1,9 @@
 """Vignetting of harp shots read, measured and fitted with one-line errors (``harp vignetting``).
 
 Each shot is read as a grey image (:func:`station.inputs.measure_file`, as ``harp measure``:
-colour converted to luma) and its string edges measured; the lit sheet between the strings is
+colour converted to luma), or, a camera RAW file (:func:`station.raw.is_raw_path`), as its first
+green CFA plane at its own mosaic positions, black level subtracted (linear by construction, not
+demosaiced), and its string edges measured; the lit sheet between the strings is
 sampled away from every edge (:func:`pipeline.vignetting.backlit_samples`) and all shots are
 fitted together with their turntable angles (:func:`pipeline.vignetting.fit_vignetting`: the
 back-light turns with the harp, the lens's vignetting does not), the samples placed on the harp
@@ -22,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.cfa import cfa_planes, to_mosaic
 from pipeline.edgeset import FitFailure
+from pipeline.measure import measure_image
 from pipeline.model_file import ModelFile, read_model_file
 from pipeline.models.base import DistortionModel
 from pipeline.resample import DEFAULT_T
@@ -36,7 +40,10 @@ from pipeline.vignetting import (
     lensfun_pa,
     lensfun_radius,
 )
-from station.inputs import InputError, measure_file
+from station.colour import read_document
+from station.imageio import ImageReadError
+from station.inputs import NO_STRINGS, InputError, measure_file
+from station.raw import is_raw_path, read_raw
 
 MAX_SATURATED_FRACTION = 0.01
 """A shot with more than this fraction of its pixels at the format's largest value is refused
@@ -102,17 +109,50 @@ def _check_saturation(path: str, img: np.ndarray) -> None:
         )
 
 
+def _raw_samples(path: str, t: int) -> tuple[int, int, int, BacklitSamples]:
+    """A camera RAW shot's lit sheet on its first green plane: ``(width, height, edges, samples)``.
+
+    The plane's pixels, black level subtracted, at their own mosaic positions
+    (:func:`pipeline.cfa.plane_to_mosaic`: nothing interpolated, nothing demosaiced); its edges
+    measured on the plane (:func:`pipeline.cfa.measure_mosaic`'s scale) and brought to the mosaic.
+    """
+    try:
+        raw = read_raw(path)
+    except ImageReadError as exc:
+        raise InputError(str(exc)) from None
+    frac = float(np.mean(raw.mosaic >= raw.white_level))
+    if frac > MAX_SATURATED_FRACTION:
+        raise InputError(
+            f"{path}: {100 * frac:.1f} % of the pixels are at the white level {raw.white_level:g} (saturated): "
+            "the clipped sheet hides the vignetting; lower the exposure"
+        )
+    h, w = raw.mosaic.shape
+    plane = next(p for p in cfa_planes(raw.mosaic, raw.pattern) if p.name == "G1")
+    m = to_mosaic(measure_image(plane.image, t=max(2, int(t) // 2)), plane.offset, w, h)
+    if m.n_lines == 0:
+        raise InputError(f"{path}: {NO_STRINGS}")
+    yy, xx = np.mgrid[0 : plane.image.shape[0], 0 : plane.image.shape[1]].astype(np.float64)
+    positions = (2.0 * xx + plane.offset[0], 2.0 * yy + plane.offset[1])
+    img = plane.image.astype(np.float64) - raw.black_level
+    s = backlit_samples(img, [ln.raw_points for ln in m.lines], positions=positions)
+    return int(w), int(h), int(m.n_lines), s
+
+
 def sample_shots(paths: Sequence[str], angles: Sequence[float], t: int = DEFAULT_T) -> list[ShotSamples]:
     """Read and measure every shot and sample its lit sheet (module docstring); InputError naming the file."""
     check_angles(paths, angles)
     shots: list[ShotSamples] = []
     for path, ang in zip(paths, angles):
-        img, m = measure_file(path, t)
-        _check_saturation(path, img)
-        s = backlit_samples(img, [ln.raw_points for ln in m.lines])
+        if is_raw_path(path):
+            w, h, n, s = _raw_samples(path, t)
+        else:
+            img, m = measure_file(path, t)
+            _check_saturation(path, img)
+            s = backlit_samples(img, [ln.raw_points for ln in m.lines])
+            w, h, n = int(m.width), int(m.height), int(m.n_lines)
         if len(s.value) == 0:
             raise InputError(f"{path}: no lit sheet found between the strings: is the back-light on?")
-        shots.append(ShotSamples(str(path), float(ang), int(m.width), int(m.height), int(m.n_lines), s))
+        shots.append(ShotSamples(str(path), float(ang), w, h, n, s))
     sizes = {(s.width, s.height) for s in shots}
     if len(sizes) > 1:
         listed = ", ".join(f"{w}x{h}" for w, h in sorted(sizes))
@@ -258,3 +298,27 @@ def vignetting_of(
     model = None if mf is None else mf.model
     fit = fit_shots(shots, model, axis)
     return shots, model, fit, lensfun_pa(fit)
+
+
+def read_vignetting_file(path, width: int, height: int) -> tuple[VignettingFit, float | None, float | None]:
+    """The fit of a ``harp vignetting --out`` file and the aperture and distance it was filed under, if any.
+
+    An :class:`~station.inputs.InputError` naming the file when it is not a harp vignetting file,
+    its fit is malformed, or it is for another image size than ``width`` x ``height``.
+    """
+    doc = read_document(path, "harp-vignetting", "a harp vignetting file", "harp vignetting --out")
+    try:
+        fit = VignettingFit.from_dict(doc["fit"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: fit: missing or malformed ({exc})") from None
+    if (fit.width, fit.height) != (width, height):
+        raise InputError(
+            f"{path}: the vignetting is for {fit.width}x{fit.height} images, the model for {width}x{height}"
+        )
+    element = ((doc.get("lensfun") or {}).get("element")) or {}
+    try:
+        aperture = float(element["aperture"]) if "aperture" in element else None
+        distance = float(element["distance"]) if "distance" in element else None
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: lensfun.element: aperture and distance must be numbers") from None
+    return fit, aperture, distance

@@ -113,6 +113,7 @@ from drivers.sim.world import SimWorld
 from pipeline.board import parse_board
 from pipeline.board_render import BoardPose, render_board
 from pipeline.board_render import camera_matrix as board_camera_matrix
+from pipeline.board_requests import request_pose
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
@@ -305,6 +306,7 @@ class SimulatedCamera:
         self.board = None
         if board is not None:
             self.board = parse_board(str(board))  # ValueError (one line) naming the label
+        self.board_placed: Any = None  # a ViewRequest: the board where a person holds it (show_board)
         if not (0.0 <= float(board_tilt_deg) < 80.0):
             raise ValueError(f"sim camera: board_tilt_deg must be in [0, 80), got {board_tilt_deg!r}")
         self.board_tilt_deg = float(board_tilt_deg)
@@ -487,11 +489,11 @@ class SimulatedCamera:
         cy = (h - 1) / 2.0 + BOARD_PRINCIPAL_OFFSET[1] * w
         return board_camera_matrix(self.focal_px, self.focal_px, cx, cy)
 
-    def board_pose(self, stage_deg: float) -> Any:
+    def board_pose(self, stage_deg: float, tilt_deg: float | None = None) -> Any:
         """The board's pose at turntable angle ``stage_deg``: mounted on a wedge of ``board_tilt_deg``
-        on the turntable, whose axis is the optical axis (as the harp's), its centre
-        :data:`BOARD_SWEEP` image widths off the axis in the turntable's direction, at the distance
-        where it spans :data:`BOARD_FILL` of the width."""
+        (or tilted ``tilt_deg`` by the stage's tilt axis) on the turntable, whose axis is the optical axis
+        (as the harp's), its centre :data:`BOARD_SWEEP` image widths off the axis in the turntable's
+        direction, at the distance where it spans :data:`BOARD_FILL` of the width."""
         import cv2
 
         assert self.board is not None
@@ -500,7 +502,8 @@ class SimulatedCamera:
         z = self.focal_px * bw / (BOARD_FILL * w)
         th = math.radians(stage_deg)
         r_spin, _ = cv2.Rodrigues(np.array([0.0, 0.0, th]))
-        r_tilt, _ = cv2.Rodrigues(np.array([math.radians(self.board_tilt_deg), 0.0, 0.0]))
+        tilt = self.board_tilt_deg if tilt_deg is None else float(tilt_deg)
+        r_tilt, _ = cv2.Rodrigues(np.array([math.radians(tilt), 0.0, 0.0]))
         rot = r_spin @ r_tilt
         k = self.camera_matrix()
         u = np.array([k[0, 2] + BOARD_SWEEP * w * math.cos(th), k[1, 2] + BOARD_SWEEP * w * math.sin(th), 1.0])
@@ -509,13 +512,18 @@ class SimulatedCamera:
         rv = np.asarray(rvec, np.float64).ravel()
         return BoardPose((float(rv[0]), float(rv[1]), float(rv[2])), (float(t[0]), float(t[1]), float(t[2])))
 
-    def _board_frame(self, stage: float, focus: float, index: int, seed: int, stamp: float) -> Frame:
+    def _board_frame(
+        self, stage: float, focus: float, index: int, seed: int, stamp: float, tilt: float | None = None
+    ) -> Frame:
         """A frame of the board (``board`` configured) through the lens at ``focus``
         (:func:`pipeline.board_render.render_board`)."""
         assert self.board is not None
         w, h = self._size
         lens = self.lens_at(focus)
-        pose = self.board_pose(stage)
+        if self.board_placed is not None:
+            pose = request_pose(self.board_placed, self.camera_matrix(), self.board.size_mm(), w, h)
+        else:
+            pose = self.board_pose(stage, tilt)
         img8 = render_board(
             self.board, self.camera_matrix(), pose, lens.undistort_points, w, h, supersample=3,
             noise_sigma=self.noise_sigma, seed=seed % (2**32),
@@ -608,10 +616,13 @@ class SimulatedCamera:
             raise ValueError(f"fault count must be a non-negative integer, got {n!r}")
         self._faults.extend([kind] * int(n))
 
-    def show_board(self, label: str | None) -> None:
+    def show_board(self, label: str | None, placed: Any = None) -> None:
         """The board ``label`` in front of the camera from the next capture on (None: the harp again);
-        :class:`drivers.protocols.BoardScene`. ValueError (one line) for a label that is not a board."""
+        :class:`drivers.protocols.BoardScene`. ``placed``: a :class:`pipeline.board_requests.ViewRequest`,
+        the board held where a person was asked to hold it (:func:`pipeline.board_requests.request_pose`)
+        instead of on the wedge. ValueError (one line) for a label that is not a board."""
         self.board = None if label is None else parse_board(str(label))
+        self.board_placed = None if label is None else placed
 
     # ------------------------------------------------------------ capture
     def set_capture_index(self, index: int) -> None:
@@ -736,13 +747,14 @@ class SimulatedCamera:
             )
         stamp = time.time()
         # the world at the moment of this exposure (the stage: the emulator's motion at that time)
-        stage = self.world.stage_at(time.monotonic())
+        now = time.monotonic()
+        stage = self.world.stage_at(now)
         offset, focus = self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
         index = self._index_at(focus, angle)
         seed = noise_seed(self.seed, focus, angle, index)
         if self.board is not None:
-            return self._board_frame(stage, focus, index, seed, stamp)
+            return self._board_frame(stage, focus, index, seed, stamp, self.world.tilt_at(now))
         r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage)
         self.last_rendered = r
         image = r.image

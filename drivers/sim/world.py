@@ -58,6 +58,7 @@ class SimWorld:
         self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None
+        self._tilt: Callable[[float], float] | None = None
         self._lock = threading.Lock()
 
     # -- the stage ---------------------------------------------------------------
@@ -98,6 +99,21 @@ class SimWorld:
         if self._drive is not None:
             raise ValueError(f"the simulated stage is driven by the {self._driver_name}; move it through the turntable")
         self._stage_deg = float(deg)
+
+    # -- the board's tilt (a second axis of the stage) ---------------------------------
+    def drive_tilt(self, tilt_at: Callable[[float], float], name: str) -> None:
+        """Let ``tilt_at(t)`` (degrees at monotonic time ``t``) define the calibration board's tilt (an
+        emulator with a tilt axis, ``name`` for errors); a second one is refused with ``ValueError``."""
+        with self._lock:
+            if self._tilt is not None:
+                raise ValueError(f"the simulated board's tilt is already driven; one per world ({name})")
+            self._tilt = tilt_at
+
+    def tilt_at(self, t: float | None = None) -> float | None:
+        """The board's tilt in degrees at monotonic time ``t`` (default now); None: no axis tilts it (the
+        camera's ``board_tilt_deg`` wedge)."""
+        tilt = self._tilt
+        return None if tilt is None else float(tilt(time.monotonic() if t is None else t))
 
     # -- what the camera sees ----------------------------------------------------
     def string_angle_deg(self, t: float | None = None) -> float:

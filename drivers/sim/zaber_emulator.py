@@ -1,4 +1,4 @@
-"""A Zaber ASCII rotary stage (one device, one axis) that speaks the real bytes.
+"""A Zaber ASCII rotary stage (one device, one axis, or two: ``axes=2``) that speaks the real bytes.
 
 Commands (``/`` + device + axis + command, ended by ``\\n`` or ``\\r``)::
 
@@ -14,7 +14,9 @@ Commands (``/`` + device + axis + command, ended by ``\\n`` or ``\\r``)::
     /1 set comm.alert 1     (alerts ``!01 1 IDLE --`` when a move ends)
     /1 1 move abs 9e9       -> @01 1 RJ IDLE -- BADDATA
     /1 1 fly                -> @01 1 RJ IDLE -- BADCOMMAND
-    /1 2 get pos            -> @01 2 RJ IDLE -- BADAXIS
+    /1 2 get pos            -> @01 2 RJ IDLE -- BADAXIS   (one axis; with axes=2, axis 2 is the board's
+                                                          tilt: home, move abs/rel, stop, get pos,
+                                                          get limit.min/limit.max)
 
 Replies end with ``\\r\\n``; the warning field shows the most severe active
 flag (faults ``F*`` before warnings ``W*`` before notices ``N*``). An
@@ -43,6 +45,8 @@ if TYPE_CHECKING:
     from drivers.sim.pty_server import EmulatorHandle
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0  # 0.000234375 deg per microstep
+TILT_TRAVEL_DEG = 90.0
+"""Axis 2's travel (``axes=2``): limit.min 0, limit.max 90 degrees (in axis 1's microsteps per degree)."""
 
 _FLAG_ORDER = {"F": 0, "W": 1, "N": 2}
 
@@ -60,6 +64,8 @@ SETTINGS: dict[str, Setting] = {
     "alerts": Setting("send alert messages", "boolean"),
     "checksums": Setting("append checksums to replies", "boolean"),
     "seed": Setting("seed of the injected faults' timing", "integer", "", 0, SEED_MAX),
+    "axes": Setting("axes of the device: 1, or 2 with axis 2 tilting the calibration board (the station's "
+                    "turntable tilt_axis: 2)", "integer", "", 1, 2),
 }  # fmt: skip
 """The keyword arguments of :class:`ZaberEmulator` a configuration may set (``simulation.emulator``)."""
 
@@ -87,7 +93,10 @@ class ZaberEmulator(LineEmulator):
         alerts: bool = False,
         checksums: bool = False,
         seed: int = 0,
+        axes: int = 1,
     ):
+        if int(axes) not in (1, 2):
+            raise ValueError(f"axes must be 1 or 2, got {axes!r}")
         super().__init__(world, seed)
         self.address = int(address)
         self.mspd = float(microsteps_per_degree)
@@ -100,10 +109,22 @@ class ZaberEmulator(LineEmulator):
         self.flags: list[str] = [] if homed else ["WR"]
         self._homing = False
         self._was_busy = False
+        # axis 2 (axes=2): the tilt of the calibration board, 0..TILT_TRAVEL_DEG, at rest at 0
+        self.tilt: Axis | None = None
+        self.tilt_limits = (0, round(TILT_TRAVEL_DEG * self.mspd))
+        self._tilt_busy = False
+        if int(axes) == 2:
+            self.tilt = Axis(0.0, speed_deg_s * self.mspd, accel_deg_s2 * self.mspd)
+            if world is not None:
+                world.drive_tilt(self._tilt_for_world, self.NAME)
 
     # -- helpers --------------------------------------------------------------
     def stage_degrees(self, now: float) -> float:
         return self.axis.peek(now) / self.mspd
+
+    def _tilt_for_world(self, t: float) -> float:
+        with self._lock:  # not while a command is half-way through
+            return self.tilt.peek(t) / self.mspd if self.tilt is not None else 0.0
 
     def position_steps(self, now: float) -> int:
         return int(round(self.axis.position(now)))
@@ -120,7 +141,8 @@ class ZaberEmulator(LineEmulator):
         self.write(kind.encode() + raw + b"\r\n")
 
     def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float, flag: str | None = None) -> None:
-        status = "BUSY" if self.axis.busy(now) else "IDLE"
+        moving = self.tilt if axis == 2 else self.axis
+        status = "BUSY" if moving is not None and moving.busy(now) else "IDLE"
         ident = f" {msg_id}" if msg_id is not None else ""
         flag = self.flag() if flag is None else flag
         self._send("@", f"{self.address:02d} {axis}{ident} {'OK' if ok else 'RJ'} {status} {flag} {data}")
@@ -166,11 +188,11 @@ class ZaberEmulator(LineEmulator):
         device, axis, msg_id, words = parsed
         if device not in (0, self.address):
             return
-        if axis not in (0, 1):
+        if axis not in (0, 1) and not (axis == 2 and self.tilt is not None):
             self._reply(axis, msg_id, False, "BADAXIS", now)
             return
         flag_before = self.flag()
-        ok, data = self._execute(words, now)
+        ok, data = self._execute_tilt(words, now) if axis == 2 else self._execute(words, now)
         # "warnings clear" reports the flags as they were before clearing
         self._reply(axis, msg_id, ok, data, now, flag_before if words[:2] == ["warnings", "clear"] else None)
 
@@ -232,6 +254,36 @@ class ZaberEmulator(LineEmulator):
             return True, data
         return False, "BADCOMMAND"
 
+    def _execute_tilt(self, words: list[str], now: float) -> tuple[bool, str]:
+        """Axis 2, the board's tilt: home, move abs/rel, stop, get pos, get limit.min/limit.max."""
+        tilt = self.tilt
+        assert tilt is not None
+        lo, hi = self.tilt_limits
+        cmd = " ".join(words)
+        if cmd == "home":
+            tilt.start_move(0, now)
+            self._tilt_busy = True
+            return True, "0"
+        if words[:1] == ["move"] and len(words) == 3 and words[1] in ("abs", "rel"):
+            try:
+                value = int(words[2])
+            except ValueError:
+                return False, "BADDATA"
+            target = value if words[1] == "abs" else int(round(tilt.position(now))) + value
+            if not lo <= target <= hi:
+                return False, "BADDATA"
+            tilt.start_move(target, now)
+            self._tilt_busy = True
+            return True, "0"
+        if cmd == "stop":
+            tilt.halt(now)
+            return True, "0"
+        if cmd == "get pos":
+            return True, str(int(round(tilt.position(now))))
+        if cmd in ("get limit.min", "get limit.max"):
+            return True, str(lo if cmd.endswith("min") else hi)
+        return False, "BADCOMMAND"
+
     def _arm_motion(self, now: float) -> None:
         self._was_busy = True
 
@@ -263,6 +315,10 @@ class ZaberEmulator(LineEmulator):
                     self.flags.remove("WR")
             if self.alerts:
                 self._send("!", f"{self.address:02d} 1 IDLE {self.flag()}")
+        if self._tilt_busy and self.tilt is not None and not self.tilt.busy(now):
+            self._tilt_busy = False
+            if self.alerts:
+                self._send("!", f"{self.address:02d} 2 IDLE {self.flag()}")
 
 
 def start_zaber_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[ZaberEmulator]:

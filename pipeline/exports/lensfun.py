@@ -79,6 +79,8 @@ class LensfunEntry:
     distance: float = 1000.0
     crop_note: str | None = None
     stamp: tuple[str, ...] = ()
+    colour_lines: tuple[str, ...] = ()
+    """The TCA's and vignetting's conversion errors (:class:`~pipeline.exports.colour.LensfunColour`), stated too."""
 
     @property
     def maker(self) -> str:
@@ -126,6 +128,9 @@ class LensfunEntry:
             parts.append("crop factor 1 assumed (none configured)")
         if self.error is not None:
             parts.extend(self.error.lines())
+        if self.vignetting is not None:
+            parts.append(f"vignetting at f/{self.aperture:g}, focus distance {self.distance:g} m")
+        parts.extend(self.colour_lines)
         return "; ".join(parts)
 
 

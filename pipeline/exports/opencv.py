@@ -29,10 +29,12 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
 
+from pipeline.exports.colour import OpenCVChannel
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
@@ -57,8 +59,14 @@ def opencv_text(
     stamp: tuple[str, ...] = (),
     solver: SolverNeed | None = None,
     frame: FrameStatement | None = None,
+    channels: Sequence[OpenCVChannel] = (),
 ) -> str:
     """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye).
+
+    ``channels``: red's and blue's cameras and coefficients
+    (:func:`~pipeline.exports.colour.opencv_channels`), written as ``camera_matrix_red``,
+    ``distortion_coefficients_red`` (and ``_blue``) with their conversion errors
+    (``channel_conversion_rms_px_red``, ``channel_conversion_max_px_red``, ...).
 
     With ``frame`` the file holds ``rectification_matrix``, ``new_camera_matrix``, ``new_image_width``
     and ``new_image_height``: with them OpenCV writes harp undistort's corrected image
@@ -80,6 +88,7 @@ def opencv_text(
         *([camera.statement] if camera else []),
         *(frame.lines(fisheye) if frame is not None else []),
         *notes,
+        *(c.line() for c in channels),
     ]:
         fs.writeComment(line)
     fs.write("image_width", int(width))
@@ -87,6 +96,11 @@ def opencv_text(
     fs.write("camera_matrix", model.camera_matrix)
     fs.write("distortion_coefficients", model.dist_coeffs.reshape(1, -1))
     fs.write("distortion_model", "fisheye" if fisheye else "pinhole")
+    for c in channels:
+        fs.write(f"camera_matrix_{c.name}", c.model.camera_matrix)
+        fs.write(f"distortion_coefficients_{c.name}", c.model.dist_coeffs.reshape(1, -1))
+        fs.write(f"channel_conversion_rms_px_{c.name}", float(c.rms_px))
+        fs.write(f"channel_conversion_max_px_{c.name}", float(c.max_px))
     if frame is not None:
         fs.write("rectification_matrix", frame.rotation)
         fs.write("new_camera_matrix", frame.new_k)

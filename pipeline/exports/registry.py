@@ -32,6 +32,7 @@ import numpy.typing as npt
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
 from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
+from pipeline.exports.colour import ColourCorrection, OpenCVChannel, lensfun_colour, opencv_channels
 from pipeline.exports.fit import (
     RADTAN_COEFFS,
     ConversionError,
@@ -114,6 +115,10 @@ class ExportSource:
         The camera matrix measured with this correction held fixed (``harp intrinsics``):
         the OpenCV, ROS and mrcal exports use it (:func:`measured_camera`), the others say
         how they hold it.
+    colour : ColourCorrection, optional
+        The red and blue channels' TCA fields and the lens's vignetting (``harp tca``,
+        ``harp vignetting``): the lensfun export writes them as ``<tca>`` and ``<vignetting>``
+        (:func:`~pipeline.exports.colour.lensfun_colour`).
     """
 
     model: DistortionModel
@@ -127,6 +132,7 @@ class ExportSource:
     wide_angle: bool = False
     stamp: tuple[str, ...] = ()
     intrinsics: Intrinsics | None = None
+    colour: ColourCorrection | None = None
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,7 @@ class ExportOptions:
     lensfun_model: str = "ptlens"
     lensfun_center: bool = True
     lensfun_type: str = "auto"
+    lensfun_tca: str = "poly3"
     crop_factor: float | None = None
     mount: str | None = None
     camera_name: str | None = None
@@ -382,10 +389,23 @@ def _write_pinhole(
     m, err, cam, fr, notes = f.model, f.error, f.cam, f.frame, f.notes(src)
     assert isinstance(m, OpenCVModel)
     sn = None
+    channel_lines: tuple[str, ...] = ()
     if fmt == "opencv":
         sn = solver_need(src.model, m, src.width, src.height)
+        channels = _opencv_channels(src, m)
+        channel_lines = tuple(f"opencv: {c.line()}" for c in channels)
         text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
+            m,
+            src.width,
+            src.height,
+            err,
+            xml=opt.xml,
+            camera=cam,
+            notes=notes,
+            stamp=src.stamp,
+            solver=sn,
+            frame=fr,
+            channels=channels,
         )
     elif fmt == "ros":
         sn = solver_need(src.model, m, src.width, src.height)
@@ -404,7 +424,20 @@ def _write_pinhole(
         )
     else:  # mrcal's unproject iterates to convergence: no solver statement
         text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp, frame=fr)
-    return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured), f.warnings, sn)
+    return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured, *channel_lines), f.warnings, sn)
+
+
+def _opencv_channels(src: ExportSource, green: OpenCVModel) -> tuple[OpenCVChannel, ...]:
+    """Red's and blue's coefficients when the source has TCA fields (ValueError naming the format)."""
+    if src.colour is None or src.colour.tca is None:
+        return ()
+    problem = src.colour.size_problem(src.width, src.height)
+    if problem is not None:
+        raise ValueError(f"opencv: {problem}")
+    try:
+        return opencv_channels(green, src.colour.tca, src.width, src.height)
+    except ValueError as exc:
+        raise ValueError(f"opencv: a colour channel: {exc}") from None
 
 
 def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
@@ -557,7 +590,7 @@ def _write_lcp(src: ExportSource, opt: ExportOptions) -> Export:
     if lens.focal_mm is None:
         notes.append("lcp: no nominal focal length (--focal-mm): the profile states none, for any focal length")
     if opt.focus_distance_m is None:
-        notes.append("lcp: no focus distance (--focus-distance-m): the profile states none")
+        notes.append("lcp: no focus distance (--distance): the profile states none")
     if src.intrinsics is not None:
         notes.append("lcp: the measured camera matrix is not used (the profile's focal and centre are the fit's)")
     e = chosen.error
@@ -708,12 +741,28 @@ def _write_lensfun(src: ExportSource, opt: ExportOptions) -> Export:
     m, err, type_notes = _fit_lensfun_type(src, opt, lens)
     existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
     entry = LensfunEntry(model=m, lens=lens, error=err, crop_note=crop_how, stamp=src.stamp)
+    colour_lines: list[str] = []
+    if src.colour is not None:
+        problem = src.colour.size_problem(src.width, src.height)
+        if problem is not None:
+            raise ValueError(f"lensfun: {problem}")
+        lc = lensfun_colour(src.colour, m.center, opt.lensfun_tca)
+        colour_lines = [f"lensfun: {line}" for line in lc.lines()]
+        entry = replace(
+            entry,
+            tca=None if lc.tca is None else lc.tca.model,
+            vignetting=lc.vignetting,
+            aperture=src.colour.aperture if src.colour.aperture is not None else entry.aperture,
+            distance=src.colour.distance,
+            colour_lines=tuple(lc.lines()),
+        )
     text, done = lensfun_database_text([entry], existing, opt.existing_name)
     notes = [
         d for d in done if not d.startswith("replaced ")
     ]  # replacing a calibration in the user's file is warned of
     warnings += [f"lensfun: {d}" for d in done if d.startswith("replaced ")]
     notes += type_notes
+    notes += colour_lines
     if crop_how is not None:
         notes.append(f"lensfun: {crop_how}")
     if lens.focal_mm is None:

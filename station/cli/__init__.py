@@ -32,6 +32,7 @@ from typing import Any
 
 from station.cli.commands import COMMANDS, module_of, unknown_command
 from station.cli.help_text import HarpParser
+from station.cli.say import say
 from station.ctrl_c import deliver_dropped_ctrl_c, forget_handled_ctrl_c
 from station.errors import HarpError, one_line
 from station.exit_codes import EXIT_BROKEN_PIPE, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
@@ -115,7 +116,7 @@ def _main(argv: list[str] | None) -> int:
     try:  # Ctrl-C while the sub-command's module imports numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)
     except KeyboardInterrupt:
-        print("harp: interrupted", file=sys.stderr)
+        say("harp", "interrupted")
         return EXIT_INTERRUPTED
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -125,10 +126,10 @@ def _main(argv: list[str] | None) -> int:
     try:
         return int(args.func(args) or EXIT_OK)
     except HarpError as exc:  # a command's error for the user: printed here, once
-        print(f"{_prog(args)}: {one_line(exc)}", file=sys.stderr)
+        say(_prog(args), one_line(exc))
         return exc.exit_code
     except KeyboardInterrupt:
-        print("harp: interrupted", file=sys.stderr)
+        say("harp", "interrupted")
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # stdout closed early (``harp measure --json ... | head``): not an error of
@@ -145,24 +146,23 @@ def _main(argv: list[str] | None) -> int:
             return EXIT_BROKEN_PIPE
         raise
     except MemoryError:
-        print(f"{_prog(args)}: out of memory; give smaller inputs or fewer at once", file=sys.stderr)
+        say(_prog(args), "out of memory; give smaller inputs or fewer at once")
         return EXIT_ERROR
     except OSError as exc:  # a file a command did not expect to fail (a full disk, permissions)
         from station.files import describe_os_error  # defers tempfile
 
-        print(f"{_prog(args)}: {describe_os_error(exc)}", file=sys.stderr)
+        say(_prog(args), describe_os_error(exc))
         return EXIT_ERROR
     except Exception as exc:  # a bug: still one line and exit 2 (never 1, which means QA FAIL)
         if _caused_by_ctrl_c(exc):  # a Ctrl-C that Python wrapped (raised while a class was made)
-            print("harp: interrupted", file=sys.stderr)
+            say("harp", "interrupted")
             return EXIT_INTERRUPTED
         if os.environ.get(DEBUG_ENV):
             raise
         text = " ".join(str(exc).split()) or "(no message)"
-        print(
-            f"{_prog(args)}: internal error: {type(exc).__name__}: {text} "
-            f"(please report it; {DEBUG_ENV}=1 shows the traceback)",
-            file=sys.stderr,
+        say(
+            _prog(args),
+            f"internal error: {type(exc).__name__}: {text} (please report it; {DEBUG_ENV}=1 shows the traceback)",
         )
         return EXIT_ERROR
 

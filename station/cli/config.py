@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
+from station.cli.say import say, warn
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 
 
@@ -53,7 +54,7 @@ def _check_one(path: Path, as_json: bool) -> dict:
     long = long_plan(config)
     warnings = [*checked.warnings, *([long[1]] if long else [])]
     for w in warnings:
-        print(f"harp config: warning: {w}", file=sys.stderr)
+        warn("harp config", w)
     summary = (
         f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
         f"{config.capture.frames_per_orientation} frames; camera {config.station.camera.driver}, turntable "
@@ -65,5 +66,5 @@ def _check_one(path: Path, as_json: bool) -> dict:
 
 
 def _fail(path: Path, message: str, warnings: list[str]) -> dict:
-    print(f"harp config: {message}", file=sys.stderr)
+    say("harp config", message)
     return {"config": str(path), "ok": False, "error": message, "warnings": warnings}

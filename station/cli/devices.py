@@ -14,6 +14,7 @@ import json
 import sys
 
 from station.cli.commands import COMMANDS
+from station.cli.say import say
 from station.exit_codes import EXIT_OK
 from station.tables import is_terminal, print_table
 
@@ -50,7 +51,7 @@ def run(args) -> int:
             extra = []
         devices += [d for d in extra if d.device in args.port and d.device not in known]
     for p in problems:
-        print(f"harp devices: {p}", file=sys.stderr)
+        say("harp devices", p)
     if args.json:
         out = {
             "devices": [

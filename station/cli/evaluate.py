@@ -27,11 +27,11 @@ Exit 0 on success, 2 on bad input.
 from __future__ import annotations
 
 import json
-import sys
 
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.cli.say import say
 from station.evaluation import evaluate
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.tables import print_table
@@ -92,7 +92,7 @@ def run(args) -> int:
         t=args.t,
     )
     for e in rep["errors"]:  # a bad image is named on stderr; the others are still evaluated
-        print(f"harp evaluate: {e['error']}", file=sys.stderr)
+        say("harp evaluate", e["error"])
     status = EXIT_ERROR if rep["errors"] else EXIT_OK
     if args.json:
         print(json.dumps(rep, indent=2))

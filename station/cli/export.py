@@ -15,7 +15,7 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
                      fisheye model is closer (tried as auto tries it)
     lcp              Adobe lens profile (Lightroom, Camera Raw, RawTherapee): PerspectiveModel (OpenCV's 5
                      coefficients) or FisheyeModel (k1 k2), whichever is closer; filed under --focal-mm and
-                     --focus-distance-m; -o an existing profile of the lens adds this setting to it
+                     --distance (m); -o an existing profile of the lens adds this setting to it
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
     stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
     stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
@@ -55,11 +55,13 @@ from __future__ import annotations
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
+from station.cli.say import warn
 from station.equipment import optic_problem
 from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes
@@ -139,6 +141,30 @@ def add_export_options(p) -> None:
         action="store_true",
         help="lensfun: keep the distortion centre at the image centre (no <center> element)",
     )
+    c = p.add_argument_group("colour and light (lensfun: <tca> and <vignetting>; opencv: per-channel coefficients)")
+    c.add_argument(
+        "--tca",
+        metavar="FILE",
+        help="the red and blue channels' TCA (a harp tca --out file): lensfun <tca>, or opencv "
+        "distortion_coefficients_red / _blue with the same camera matrix",
+    )
+    c.add_argument("--vignetting", metavar="FILE", help="the lens's vignetting (a harp vignetting --out file)")
+    c.add_argument(
+        "--lensfun-tca", choices=("poly3", "linear"), default="poly3", help="lensfun TCA model (default poly3)"
+    )
+    c.add_argument(
+        "--aperture",
+        metavar="F",
+        type=float,
+        help="f-number the vignetting shots were taken at (default: the one the vignetting file was written with)",
+    )
+    c.add_argument(
+        "--distance",
+        metavar="M",
+        type=float,
+        help="focus distance (m) the vignetting is filed under (default: the vignetting file's, else 1000), "
+        "and the lcp profile (default: none stated)",
+    )
     g = p.add_argument_group("lens and camera (override what the profile records)")
     g.add_argument("--lens-maker", metavar="TEXT")
     g.add_argument("--lens-model", metavar="TEXT")
@@ -151,11 +177,6 @@ def add_export_options(p) -> None:
     g.add_argument("--pixel-pitch-um", metavar="UM", help="pixel pitch of the images, micrometres")
     g.add_argument("--sensor-width-mm", metavar="MM", help="width of the sensor area the image covers (or a pitch)")
     g.add_argument("--camera-name", metavar="NAME", help="ros: camera_name (default: from the camera body)")
-    g.add_argument(
-        "--focus-distance-m",
-        metavar="M",
-        help="lcp: the focus distance of the calibration in metres (the profile files it under it)",
-    )
     s = p.add_mutually_exclusive_group()
     s.add_argument(
         "--shots",
@@ -229,15 +250,9 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
         installed = installed_databases(exclude=args.output)
-    focus_m = None
-    raw = getattr(args, "focus_distance_m", None)
-    if raw is not None:
-        try:
-            focus_m = float(raw)
-        except ValueError:
-            raise ExportError(f"--focus-distance-m: expected a distance in metres, got {raw!r}") from None
-        if not (math.isfinite(focus_m) and focus_m > 0):
-            raise ExportError(f"--focus-distance-m: expected a distance > 0 m, got {raw}")
+    focus_m = getattr(args, "distance", None) if args.format == "lcp" else None
+    if focus_m is not None and not (math.isfinite(focus_m) and focus_m > 0):
+        raise ExportError(f"--distance: expected a focus distance > 0 m, got {focus_m:g}")
     return ExportOptions(
         coeffs=args.coeffs,
         focal_px=args.focal_px,
@@ -245,6 +260,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         lensfun_model=args.lensfun_model,
         lensfun_center=not args.lensfun_no_center,
         lensfun_type=args.lensfun_type,
+        lensfun_tca=args.lensfun_tca,
         camera_name=args.camera_name,
         existing=existing,
         existing_name=existing_name,
@@ -291,11 +307,58 @@ def export_profile(
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
+    colour = colour_correction(args, source.width, source.height)
+    if colour is not None:
+        source = replace(source, colour=colour)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:
         raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
     return ex, figures(ex, source, edges)
+
+
+TCA_FORMATS = ("lensfun", "opencv")
+"""The formats that hold the TCA (``--tca``): lensfun's ``<tca>``, OpenCV's per-channel coefficients."""
+VIGNETTING_FORMATS = ("lensfun",)
+"""The formats that hold the vignetting (``--vignetting``)."""
+
+
+def colour_correction(args, width: int, height: int):
+    """The :class:`~pipeline.exports.colour.ColourCorrection` of ``--tca`` and ``--vignetting`` (None without
+    them); ExportError (one line) for a format that holds neither, a setting that is not positive, a file
+    that cannot be read or is for another image size."""
+    tca_path, vig_path = getattr(args, "tca", None), getattr(args, "vignetting", None)
+    for flag, value in (("--aperture", args.aperture), ("--distance", args.distance)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ExportError(f"{flag}: expected a positive number, got {value:g}")
+    if tca_path is None and vig_path is None:
+        return None
+    if tca_path is not None and args.format not in TCA_FORMATS:
+        raise ExportError(
+            f"--tca: the {args.format} format holds no TCA; export it with --format lensfun (<tca>) or opencv "
+            "(per-channel coefficients)"
+        )
+    if vig_path is not None and args.format not in VIGNETTING_FORMATS:
+        raise ExportError(
+            f"--vignetting: the {args.format} format holds no vignetting; export it with --format lensfun, or "
+            "write the flat-field image with harp vignetting --flat-field"
+        )
+    from pipeline.exports.colour import DEFAULT_DISTANCE_M, ColourCorrection  # defers scipy
+    from station.colour import read_tca_file  # defers scipy
+    from station.vignetting import read_vignetting_file  # defers scipy
+
+    tca = None if tca_path is None else read_tca_file(tca_path, width, height)
+    fit, aperture, distance = None, None, None
+    if vig_path is not None:
+        fit, aperture, distance = read_vignetting_file(vig_path, width, height)
+    aperture = args.aperture if args.aperture is not None else aperture
+    distance = args.distance if args.distance is not None else distance
+    if fit is not None and aperture is None:
+        raise ExportError(
+            f"--vignetting {vig_path}: lensfun files a vignetting under the f-number it was measured at: give "
+            "--aperture F (or write the file with harp vignetting --focal-mm MM --aperture F)"
+        )
+    return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
 
 
 def _fitting_edges(args, profile, model_dir, known):
@@ -382,7 +445,7 @@ def write_output(args, ex) -> None:
 def report(args, ex, fig: dict, prog: str) -> None:
     """Print what was written, the figures and the warnings (see the module docstring)."""
     for w in ex.warnings:
-        print(f"{prog}: warning: {w}", file=sys.stderr)
+        warn(prog, w)
     if args.json:
         print(json.dumps({"output": str(args.output), **fig}))
         return

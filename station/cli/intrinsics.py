@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
+from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, open_store
 from station.errors import HarpError
 from station.exit_codes import EXIT_OK
@@ -131,7 +132,7 @@ def run(args) -> int:
             max_edge_width_px=max_width,
         )
         for r in run_.rejected:
-            print(f"harp intrinsics: {r.name}: rejected: {r.reason}", file=sys.stderr)
+            say("harp intrinsics", f"{r.name}: rejected: {r.reason}")
         result = run_.result
         if not result:
             got = len(run_.views)
@@ -142,7 +143,7 @@ def run(args) -> int:
             )
             raise HarpError(f"{reason}; nothing written")
         for w in result.warnings:
-            print(f"harp intrinsics: warning: {w}", file=sys.stderr)
+            warn("harp intrinsics", w)
         if args.out:
             write_profile(args.out, profile.with_(intrinsics=result))
         elif store is not None:

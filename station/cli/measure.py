@@ -45,6 +45,7 @@ from pipeline.resample import DEFAULT_T
 from pipeline.straightness import straightness
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.cli.say import say
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
 from station.inputs import InputError, measure_file
@@ -181,7 +182,7 @@ def run(args) -> int:
         try:
             img, m = measure_file(path, t, smoothing=args.smoothing)
         except InputError as exc:
-            print(f"harp measure: {exc}", file=sys.stderr)
+            say("harp measure", exc)
             errors.append({"path": path, "error": str(exc)})
             status = EXIT_ERROR
             continue
@@ -190,7 +191,7 @@ def run(args) -> int:
             try:
                 write_overlay(overlay_dir / names[path], img, m, title=Path(path).name)
             except OSError as exc:
-                print(f"harp measure: {path}: cannot write overlay: {exc}", file=sys.stderr)
+                say("harp measure", f"{path}: cannot write overlay: {exc}")
                 status = EXIT_ERROR
 
     all_points = [ln.points for _, m in results for ln in m.lines]
@@ -206,7 +207,7 @@ def run(args) -> int:
         try:
             atomic_write_bytes(points_path, edge_points_bytes(results, points_path.suffix.lower()))
         except OSError as exc:
-            print(f"harp measure: {points_path}: cannot write the points file: {exc.strerror or exc}", file=sys.stderr)
+            say("harp measure", f"{points_path}: cannot write the points file: {exc.strerror or exc}")
             status = EXIT_ERROR
 
     if args.json:

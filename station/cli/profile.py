@@ -32,6 +32,7 @@ from typing import Any
 from pipeline.plain import plain
 from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
+from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, open_store
 from station.errors import HarpError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
@@ -109,11 +110,11 @@ class _Refused(HarpError):
 
 def _error(msg: str) -> None:
     """A damaged row of the store, on stderr; the others are still listed (exit 2 at the end)."""
-    print(f"harp profile: {msg}", file=sys.stderr)
+    say("harp profile", msg)
 
 
 def _warn(msg: str) -> None:
-    print(f"harp profile: warning: {msg}", file=sys.stderr)
+    warn("harp profile", msg)
 
 
 def _open(args):
@@ -175,7 +176,7 @@ def _say_used(lens, used, left_out) -> None:
         if is_failed(p):
             _warn(f"{failed_line(lens, p)}: used because of --allow-failed")
     for p in left_out:
-        print(f"harp profile: {failed_line(lens, p)}: not current, left out (--allow-failed uses it)", file=sys.stderr)
+        say("harp profile", f"{failed_line(lens, p)}: not current, left out (--allow-failed uses it)")
 
 
 # --------------------------------------------------------------------- list
@@ -528,7 +529,7 @@ def _export_zoom(args, store, lens, newest) -> int:
 def _export_lensfun_zoom(args, store, lens) -> int:
     """lensfun (or lcp) of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
     (lensfun has no focus axis for distortion: a focus range cannot be written; an LCP profile adds the
-    other focus settings by exporting them into the same file, each with its --focus-distance-m), in one file;
+    other focus settings by exporting them into the same file, each with its --distance), in one file;
     each focal's profile at that focus is a current one or interpolated along focus. Written whole or
     not at all: into a copy of ``-o`` (when it is a database), moved over it once every focal is in."""
     import argparse
@@ -542,6 +543,11 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     suffix = ".lcp" if args.format == "lcp" else ".xml"
     if not args.output:
         raise HarpError(f"{args.format} export of a zoom lens: give -o FILE{suffix} (one calibration per focal length)")
+    if getattr(args, "tca", None) or getattr(args, "vignetting", None):
+        raise HarpError(
+            f"{args.format} export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
+            "alone (--focal MM) with them"
+        )
     out = Path(args.output)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=suffix, dir=out.parent if str(out.parent) else ".")
     os.close(fd)

@@ -33,6 +33,7 @@ from typing import Any
 
 from pipeline.plain import plain
 from station.cli.commands import COMMANDS
+from station.cli.say import warn
 from station.cli.store_options import open_store, store_location
 from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
@@ -220,7 +221,7 @@ def _record(args, config, session, items, results) -> None:
                     focus=it.focus,
                 )
     except StoreError as exc:
-        print(f"harp qa: warning: result not recorded: {exc}", file=sys.stderr)
+        warn("harp qa", f"result not recorded: {exc}")
 
 
 def _print_checks(items, judged, report) -> None:

@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -37,6 +36,7 @@ from typing import Any
 from pipeline.fitspec import parse_choice
 from pipeline.plain import finite_or_none
 from station.cli.commands import COMMANDS
+from station.cli.say import say
 from station.cli.store_options import add_store_options, location_from_args, open_store
 from station.errors import HarpError, Interrupted
 from station.exit_codes import EXIT_ERROR, EXIT_OK
@@ -64,7 +64,7 @@ def register(subparsers: Any) -> None:
 
 def _error(msg: str) -> None:
     """One session's failure, on stderr as it happens; the others go on (exit 2 at the end)."""
-    print(f"harp reprocess: {msg}", file=sys.stderr, flush=True)
+    say("harp reprocess", msg, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from station import __version__
 from station.cli.commands import COMMANDS
+from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, store_location
 from station.errors import HarpError, Interrupted, one_line
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
@@ -114,7 +115,7 @@ def register(subparsers) -> None:
 def _said(exc: HarpError) -> int:
     """A part's or a live session's error said now, as :func:`station.cli.main` would, while the
     command goes on (the next part is not run; the live page stays): its exit code."""
-    print(f"harp session: {one_line(exc)}", file=sys.stderr)
+    say("harp session", one_line(exc))
     return exc.exit_code
 
 
@@ -145,7 +146,7 @@ def _long_plan(config, yes: bool) -> str | None:
             f"{plan_summary(config, est)}, more than {CONFIRM_PLAN_HOURS:g} h: run again with --yes to start it, "
             "or plan fewer focus settings, orientations or frames (harp session plan shows the steps)"
         )
-    print(f"harp session: warning: {warning}", file=sys.stderr)
+    warn("harp session", warning)
     return None
 
 
@@ -284,7 +285,7 @@ def _already_finished(session, args, shown=None) -> int:
     code = state_exit_code("complete", results.get("verdict"))
     verdict = results.get("verdict") or "none"
     where = shown if shown is not None else args.session_dir
-    print(f"harp session: {where}: already finished (QA verdict {verdict}), nothing to do", file=sys.stderr)
+    say("harp session", f"{where}: already finished (QA verdict {verdict}), nothing to do")
     if args.json:
         print(json.dumps(results, indent=1))
     return EXIT_OK if code is None else code
@@ -311,11 +312,11 @@ def _repair(args) -> int:
             _refit(session, args.store)
         left = check_session(session)
     if pending:
-        print("harp session: the reopened focus settings are fitted with the shots still to capture", file=sys.stderr)
+        say("harp session", "the reopened focus settings are fitted with the shots still to capture")
     if report.resume or pending or (report.refit and left):
-        print(f"harp session: then: harp session resume {args.session_dir}", file=sys.stderr)
+        say("harp session", f"then: harp session resume {args.session_dir}")
     elif not done and not report.fixed and not report.cannot:
-        print(f"harp session: {args.session_dir}: every file matches the manifest, nothing to repair", file=sys.stderr)
+        say("harp session", f"{args.session_dir}: every file matches the manifest, nothing to repair")
     return EXIT_ERROR if report.cannot else EXIT_OK
 
 
@@ -359,7 +360,7 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
             raise
         except HarpError as exc:  # said now; the live page shows how the session ended
             code = _said(exc)
-        print("harp session: the live page shows the result until Ctrl-C", file=sys.stderr, flush=True)
+        say("harp session", "the live page shows the result until Ctrl-C", flush=True)
         try:
             import threading
 
@@ -384,13 +385,16 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         with open_station(config) as (camera, turntable), _open_store(config, args.store) as store:
             with get_session() as session:
                 started.append(session.path)
-                if tap is not None:
-                    session = tap(session)  # the live page subscribes to the session's records and frames
                 console = None
                 if not args.quiet:
                     out = sys.stderr if args.json else sys.stdout
                     console = text_console(out)  # off a terminal: lines never wrapped (station.tables)
-                result = run_session(session, camera, turntable, store=store, console=console, report=report)
+                desk = _operator(config, console)
+                if tap is not None:  # the live page subscribes to the session's records and frames
+                    session = tap(session, desk)  # and answers the operator's questions too
+                result = run_session(
+                    session, camera, turntable, store=store, console=console, report=report, operator=desk
+                )
     except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
         if not started:
             raise Interrupted("interrupted before the session started; nothing was captured") from None
@@ -410,6 +414,16 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         raise HarpError(result.message)
     print(result.message, file=sys.stderr)
     return result.exit_code
+
+
+def _operator(config, console):
+    """The operator's desk when the board views are placed by hand (``intrinsics.placement: operator``):
+    asked on the console (standard error with ``--quiet``), answered on standard input or the live page."""
+    if config.intrinsics is None or config.intrinsics.placement != "operator":
+        return None
+    from station.session.operator import OperatorDesk  # defers numpy, yaml
+
+    return OperatorDesk(say=console.print if console is not None else None, stdin=sys.stdin)
 
 
 def _open_store(config, store_name=None):
@@ -434,7 +448,7 @@ def _plan(args) -> int:
 
     long = long_plan(config)
     for w in [*warnings, *([long[1]] if long else [])]:
-        print(f"harp session: warning: {w}", file=sys.stderr)
+        warn("harp session", w)
     est = long[0] if long else estimate_plan(config)
     if args.json:
         print(
@@ -511,7 +525,7 @@ def _list(args) -> int:
         raise HarpError(f"{root}: no such directory (name one, or --config CONFIG for its store.sessions_dir)")
     found, problems = sessions_in(root)
     for p in problems:
-        print(f"harp session: warning: {p}", file=sys.stderr)
+        warn("harp session", p)
     if args.json:
         print(json.dumps({"directory": str(root.resolve()), "sessions": [s.to_dict() for s in found]}, indent=1))
         return EXIT_OK

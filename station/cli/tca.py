@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.resample import DEFAULT_T
-from pipeline.tca import shot_offsets
+from pipeline.tca import channel_offsets
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.colour import fit_channels, measure_colour_file, tca_document
@@ -47,13 +47,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _offsets(m, colour: str) -> float:
-    """Median signed offset (px) of a channel's edges from green's, along green's normals."""
-    ref = [[ln.points for ln in g.lines] for g in m.channel("G")]
-    obs = shot_offsets([m.lines(colour)] * len(ref), ref)
-    return float(np.median(np.abs(obs.offset))) if len(obs.offset) else float("nan")
-
-
 def run(args) -> int:
     shots = []
     for path in args.images:
@@ -63,8 +56,10 @@ def run(args) -> int:
     per_image = []
     for path, m in zip(args.images, shots):
         rows = []
+        offsets = channel_offsets(m)
         for name, pm in m.planes.items():
-            off = 0.0 if name[0] == "G" else _offsets(m, name[0])
+            obs = offsets.get(name[0])
+            off = 0.0 if obs is None else float(np.median(np.abs(obs.offset))) if len(obs.offset) else float("nan")
             rows.append({"plane": name, "edges": pm.n_lines, "d": pm.d, "d_max": pm.d_max, "median_offset_px": off})
         per_image.append({"path": str(path), "pattern": m.pattern, "planes": rows})
     doc["per_image"] = per_image

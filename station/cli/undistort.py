@@ -22,7 +22,6 @@ coincide. It needs colour images (BGR as OpenCV reads them); a grey one is refus
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from pipeline.models.tca_model import ChannelModel
 from pipeline.undistort_maps import DEFAULT_STEP_PX, fast_undistortion_maps
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
+from station.cli.say import say
 from station.colour import read_tca_file
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
@@ -127,7 +127,7 @@ def run(args) -> int:
         try:
             _correct_one(args, mf, Path(path), out_dir, cache, channels)
         except InputError as exc:
-            print(f"harp undistort: {exc}", file=sys.stderr)
+            say("harp undistort", exc)
             status = EXIT_ERROR
     return status
 

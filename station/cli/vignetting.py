@@ -1,7 +1,8 @@
 """``harp vignetting IMAGE... --angles A... [--model FILE] [--flat-field FILE] [--json] [-o FILE]``: vignetting.
 
 The lens's relative illumination from the back-lit sheet between the strings of harp shots
-taken at several turntable angles (:mod:`station.vignetting`): the back-light's own
+(linear images, or camera RAW files read by LibRaw: the green plane of the mosaic, black level
+subtracted, not demosaiced) taken at several turntable angles (:mod:`station.vignetting`): the back-light's own
 unevenness turns with the harp, the lens's vignetting does not, so the angles (one per image,
 degrees, counter-clockwise in the image) separate the two. A distortion model file
 (``--model``, from ``harp calibrate``) places the samples on the harp. Printed: the relative
@@ -13,7 +14,7 @@ suffix). ``--flat-field`` writes the flat-field image, the whole image size: a s
 it is corrected.
 
 Bad input (an angle count that is not one per image, fewer than two shots, angles that do not
-separate the back-light from the lens, an unreadable image, a model for another size): one line
+separate the back-light from the lens, an unreadable image or RAW file, a model for another size): one line
 on stderr, exit 2, nothing written.
 """
 
@@ -37,7 +38,10 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 def register(subparsers) -> None:
     p = subparsers.add_parser("vignetting", help=COMMANDS["vignetting"], description=__doc__.split("\n\n")[0])
     p.add_argument(
-        "images", metavar="IMAGE", nargs="+", help="linear harp shots (PGM/PNG/TIFF, 16-bit best), harp turned between"
+        "images",
+        metavar="IMAGE",
+        nargs="+",
+        help="linear harp shots (PGM/PNG/TIFF, 16-bit best, or camera RAW files: their green plane), harp turned between",
     )
     p.add_argument(
         "--angles",

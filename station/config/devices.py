@@ -11,7 +11,7 @@
   :data:`ROTARY_RANGE` for the rotary stages; focus settings within the simulated lens's range;
 * ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
   every orientation (the image's extent across the strings over their spacing, two edges a string);
-* a session with the camera-matrix stage (``intrinsics``) has a camera that can be shown the board
+* a session with the camera-matrix stage (``intrinsics``) on the turntable has a camera that can be shown the board
   (:class:`drivers.protocols.BoardScene`: the simulator).
 
 The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
@@ -58,22 +58,39 @@ def created_devices(config: Config) -> tuple[Any, Any]:
 def check_the_devices(config: Config) -> None:
     """The checks of the module docstring; :class:`ConfigError` naming the field."""
     _orientations(config)
-    camera, _turntable = created_devices(config)
+    camera, turntable = created_devices(config)
     if config.simulation is not None:
         opts = dict(config.simulation.emulator)
         if config.station.turntable.steps_per_degree is not None:
             opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
+        if config.station.turntable.settings.get("tilt_axis") is not None:
+            opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
         try:
             ZaberEmulator(None, **opts)
         except (ValueError, TypeError) as exc:
             raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
     if config.station.camera.driver == "sim":
         _simulated_lens_and_harp(config, camera)
-    if config.intrinsics is not None and not isinstance(camera, BoardScene):
+    k = config.intrinsics
+    if k is not None and k.placement == "stage":
+        tilt = getattr(turntable, "tilt", None)
+        if tilt is None:
+            raise config.error(
+                "intrinsics.placement", "stage: expected a turntable with a tilt axis (station.turntable.tilt_axis, "
+                f"zaber), the {config.station.turntable.driver} turntable has none",
+            )  # fmt: skip
+        r = tilt.travel_range()
+        for i, t in enumerate(k.tilts_deg):
+            if not r.minimum <= t <= r.maximum:
+                raise config.error(
+                    f"intrinsics.tilts_deg[{i}]", f"expected a tilt in [{r.minimum:g}, {r.maximum:g}] "
+                    f"(station.turntable.tilt_limits), got {t:g}",
+                )  # fmt: skip
+    if k is not None and k.placement == "turntable" and not isinstance(camera, BoardScene):
         raise config.error(
             "intrinsics", f"expected a camera the station can show the board (the simulated one), not the "
-            f"{config.station.camera.driver} camera: on this station place the board by hand and take its views "
-            "with harp intrinsics --id N --capture DIR",
+            f"{config.station.camera.driver} camera: on this station the operator places the board "
+            "(intrinsics.placement: operator)",
         )  # fmt: skip
 
 
@@ -88,7 +105,7 @@ def _orientations(config: Config) -> None:
         lo, hi = ROTARY_RANGE
         inside, allowed = (lambda d: lo <= d < hi), f"[{lo:g}, {hi:g}) for a rotary stage"
     angles = [("capture.orientations_deg", config.capture.orientations_deg)]
-    if config.intrinsics is not None:
+    if config.intrinsics is not None and config.intrinsics.placement != "operator":
         angles.append(("intrinsics.angles_deg", config.intrinsics.angles_deg))
     for key, values in angles:
         for i, deg in enumerate(values):

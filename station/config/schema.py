@@ -214,16 +214,24 @@ DEFAULT_BOARD_ANGLES = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
 """Turntable angles of the board views (a board on a tilted wedge on the turntable: each angle turns
 the tilt's direction, so the views are tilted every way with one axis)."""
 
+DEFAULT_BOARD_TILTS = (20.0, 40.0)
+"""Tilt-axis angles of the board views on a stage with a tilt axis (``intrinsics.placement: stage``)."""
+
 BOARD_MIN_VIEWS = 3
 """The fewest board views a camera matrix is fitted from (:data:`pipeline.intrinsics.MIN_VIEWS`, which
 imports cv2: a test holds the two equal)."""
+
+
+BOARD_PLACEMENTS = ("turntable", "operator", "stage")
+"""Who places the board for the camera-matrix stage (``intrinsics.placement``)."""
 
 
 @dataclass(frozen=True)
 class IntrinsicsConfig:
     """The session's camera-matrix stage (issue 23): after each focus setting's distortion is fitted, the
     station takes board views at that focus (the board on a tilted wedge on the turntable, one view per
-    angle) and fits the camera matrix with that distortion held fixed (:mod:`station.intrinsics`)."""
+    angle; or placed by the operator as each view asks, :mod:`pipeline.board_requests`) and fits the camera
+    matrix with that distortion held fixed (:mod:`station.intrinsics`)."""
 
     board: str = setting(doc="the board: charuco:NXxNY:SQUARE_MM:MARKER_MM[:DICT] or chessboard:NXxNY:SQUARE_MM "
                          "(pipeline.board)")  # fmt: skip
@@ -233,6 +241,32 @@ class IntrinsicsConfig:
     min_views: int = setting(BOARD_MIN_VIEWS, "usable board views a camera matrix needs (fewer: the profile is "
                              "stored without one)", "", BOARD_MIN_VIEWS, 1000)  # fmt: skip
     skew: bool = setting(False, "fit the skew too (no export format holds it)")
+    placement: str = setting("turntable", "who places the board: the turntable (on a wedge, one view per angle; "
+                             "a camera the station can show the board), the operator (each view asked for on the "
+                             "terminal and the live page) or the stage (the turntable and its tilt axis, "
+                             "station.turntable.tilt_axis: one view per angle and tilt)",
+                             choices=BOARD_PLACEMENTS)  # fmt: skip
+    views: int = setting(6, "board views asked of the operator (placement: operator)", "", BOARD_MIN_VIEWS,
+                         100)  # fmt: skip
+
+    tilts_deg: tuple[float, ...] = setting(DEFAULT_BOARD_TILTS, "tilt-axis angles of the board views, each at "
+                                           "every angle of angles_deg (placement: stage)", "deg", -90.0, 90.0,
+                                           length=(1, None), unique=True)  # fmt: skip
+
+    @property
+    def n_views(self) -> int:
+        """Board views per focus setting: one per angle on the turntable, ``views`` by the operator, one per
+        angle and tilt on the stage."""
+        if self.placement == "operator":
+            return self.views
+        return len(self.stage_views())
+
+    def stage_views(self) -> list[tuple[float, float | None]]:
+        """``(turntable angle, tilt)`` of each view on the turntable (tilt None: the wedge's) or the stage
+        (each tilt in turn, at every angle: the tilt axis moves least)."""
+        if self.placement == "stage":
+            return [(a, t) for t in self.tilts_deg for a in self.angles_deg]
+        return [(a, None) for a in self.angles_deg]
 
 
 @dataclass(frozen=True)

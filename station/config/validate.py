@@ -308,8 +308,14 @@ def _intrinsics(config: Config) -> None:
         parse_board(k.board)
     except ValueError as exc:
         raise config.error("intrinsics.board", f"expected a board label: {exc}") from None
-    if k.min_views > len(k.angles_deg):
+    if k.placement == "operator":
+        if k.min_views > k.views:
+            raise config.error(
+                "intrinsics.min_views", f"expected at most intrinsics.views ({k.views}), got {k.min_views}"
+            )
+    elif k.min_views > k.n_views:
+        per = "angle" if k.placement == "turntable" else "angle and tilt (intrinsics.tilts_deg)"
         raise config.error(
-            "intrinsics.min_views", f"expected at most one view per angle of intrinsics.angles_deg "
-            f"({len(k.angles_deg)}), got {k.min_views}",
+            "intrinsics.min_views", f"expected at most one view per {per} of intrinsics.angles_deg "
+            f"({k.n_views}), got {k.min_views}",
         )  # fmt: skip

@@ -18,6 +18,11 @@ the device (the drivers' messages already start with the device name). After
 :class:`~drivers.errors.DeviceDisconnected` the device is closed and reopened every
 ``reconnect_s`` until it answers; the line then stays, greyed, saying since when it works again.
 
+A Bayer camera's frame (a raw mosaic, its pattern in ``frame.extra["cfa"]``, e.g. ``"RGGB"``) is
+assessed on its luma (:func:`pipeline.cfa.mosaic_luma`), and every :data:`COLOUR_REFRESH_S` its
+planes are measured and each red and blue edge compared with green's (lateral chromatic
+aberration: :func:`pipeline.tca.channel_offsets`), for the page's colour panel.
+
 During a session (``harp session run --live``) the devices belong to the executor: a
 :class:`LiveStation` created with ``camera=None`` captures nothing; it assesses the frames the
 session passes to :meth:`LiveStation.show_frame` and shows the session's records
@@ -42,9 +47,12 @@ import numpy as np
 from drivers import CameraRanges, TurntableRanges
 from drivers.errors import DeviceDisconnected, DriverError
 from pipeline.assess import Assessment, Coverage, analysis_scale, assess_frame, empty_coverage, focus_peak
+from pipeline.board import corner_coverage
+from pipeline.cfa import measure_mosaic, mosaic_luma
+from pipeline.tca import channel_offsets
 from station.config import CheckConfig
 from station.live.checks import live_warnings
-from station.live.view import encode_frame, view_of
+from station.live.view import channels_view, encode_frame, view_of
 
 HISTORY = 400
 """Frames kept in the through-focus history."""
@@ -55,6 +63,9 @@ RESEARCH_S = 1.0
 (:func:`pipeline.assess.assess_frame` ``previous``): their figures measured afresh on every frame."""
 MAX_TRACK_OFFSET_PX = 0.5
 """A tracked string further than this from where it was found: search again."""
+COLOUR_REFRESH_S = 2.0
+"""The per-channel edge offsets of a Bayer camera's frames are measured again at most this often
+(every plane of the mosaic measured: several times a frame's assessment)."""
 
 
 @dataclass
@@ -138,9 +149,14 @@ class LiveStation:
         self._move_epoch = 0  # incremented at every move start and end
         self._orientation_idx: int | None = None
         self._session: dict[str, Any] | None = None
+        self.answer_board: Callable[[Any], dict[str, Any]] | None = None
+        """During a session whose board views the operator places: what the page's ``board`` command calls
+        (:meth:`station.session.operator.OperatorDesk.attach_page`)."""
         self._fps: deque[float] = deque(maxlen=10)
         self._assess_s: deque[float] = deque(maxlen=10)
         self.frames_assessed = 0
+        self._channels: dict[str, Any] | None = None
+        self._channels_at = -math.inf
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> LiveStation:
@@ -180,6 +196,9 @@ class LiveStation:
             v["coverage_total"] = self._coverage_total()
             v["focus_history"] = self._history_state()
             v["session"] = dict(self._session) if self._session is not None else None
+            v["channels"] = self._channels
+            if v["session"] is not None and v["session"].get("board"):  # the coverage, not every corner
+                v["session"]["board"] = {k: x for k, x in v["session"]["board"].items() if k != "corners"}
             v["checks"] = {
                 "min_lines": self.checks.min_lines,
                 "max_saturated_fraction": self.checks.max_saturated_fraction,
@@ -269,9 +288,20 @@ class LiveStation:
         """Queue an action; the Future resolves with its result or the one-line error.
 
         Actions: ``next``, ``previous`` (orientation of the plan), ``goto`` (degrees), ``home``,
-        ``focus``, ``exposure_us``, ``gain_db`` (a value), ``reset_coverage``, ``reset_focus``.
+        ``focus``, ``exposure_us``, ``gain_db`` (a value), ``reset_coverage``, ``reset_focus``; during a
+        session, ``board`` (``capture``, ``skip`` or ``stop``: the answer to the board view asked for).
         """
         fut: Future[Any] = Future()
+        if action == "board":
+            wanted = self._session is not None and (self._session.get("board") or {}).get("wanted")
+            if self.answer_board is None or not wanted:
+                fut.set_exception(ValueError("no board view is asked for"))
+                return fut
+            try:
+                fut.set_result(self.answer_board(value))
+            except ValueError as exc:
+                fut.set_exception(exc)
+            return fut
         if self._session is not None and action not in ("reset_focus",):
             fut.set_exception(ValueError("a session is running: it drives the camera and the turntable"))
             return fut
@@ -380,10 +410,29 @@ class LiveStation:
             except (TypeError, ValueError, DriverError) as exc:
                 fut.set_exception(ValueError(_one_line(exc)))
 
+    def _colour(self, frame: Any, mosaic: np.ndarray, pattern: str) -> None:
+        """A Bayer frame's per-channel edge offsets from green (:func:`pipeline.tca.channel_offsets`), at most
+        every :data:`COLOUR_REFRESH_S`; a pattern that is not a Bayer one is a camera line on the page."""
+        if time.monotonic() - self._channels_at < COLOUR_REFRESH_S:
+            return
+        self._channels_at = time.monotonic()
+        try:
+            m = measure_mosaic(mosaic, pattern)
+        except ValueError as exc:
+            self._problem("camera", ValueError(f"frame {frame.counter}: {exc}"))
+            return
+        view = channels_view(channel_offsets(m), m.pattern, frame.counter)
+        with self._lock:
+            self._channels = view
+
     def _process(self, frame: Any, idle_stage: float | None, session: dict[str, Any] | None = None) -> None:
         img = np.asarray(frame.image)
         h, w = img.shape
         t0 = time.perf_counter()
+        pattern = (getattr(frame, "extra", None) or {}).get("cfa")
+        if pattern is not None:  # a Bayer camera's raw mosaic: per-channel offsets; the figures on its luma
+            self._colour(frame, img, str(pattern))
+            img = np.rint(mosaic_luma(img)).astype(img.dtype)
         scale = analysis_scale(w, h, self._string_width)
         key = (float(frame.exposure_us), float(frame.gain_db), scale)
         th = None
@@ -552,6 +601,8 @@ class LiveStation:
                 s["qa"] = s["qa"] + [record]
             elif kind in ("finished", "aborted"):
                 s["state"] = kind
+            if kind in ("board-ask", "board", "board-ok", "board-reject"):
+                s["board"] = _board_state(s.get("board"), record)
             if "progress" in record:
                 s["progress"] = record["progress"]
             self._session = s
@@ -581,3 +632,52 @@ class LiveStation:
             except queue.Empty:
                 continue
             self._process(frame, info.get("stage_deg"), info.get("session"))
+
+
+def _board_state(board: dict[str, Any] | None, record: dict[str, Any]) -> dict[str, Any]:
+    """The page's board panel after a session record (``intrinsics.placement: operator``): the view asked
+    for (``wanted``: instruction, why, the last rejection's problems; None while none is), the last
+    verdict, and the board coverage of the focus setting's accepted views
+    (:func:`pipeline.board.corner_coverage`: which cells of the image their corners reach)."""
+    b = dict(board) if board else {"wanted": None, "last": None, "coverage": None, "focus_idx": None}
+    f = record.get("focus_idx")
+    if b.get("focus_idx") != f:  # a new focus setting: its own views
+        b.update(focus_idx=f, corners=[], size=None, accepted=0, coverage=None)
+    kind = record.get("kind")
+    if kind == "board-ask":
+        req = record.get("request") or {}
+        b["wanted"] = {
+            "view_idx": record.get("view_idx"),
+            "attempt": record.get("attempt"),
+            "instruction": req.get("instruction"),
+            "why": req.get("why"),
+            "centre": req.get("centre"),
+            "problems": list(record.get("problems") or []),
+        }
+    elif kind == "board":
+        b["wanted"] = None  # captured: being checked
+    elif kind == "board-reject":
+        b["wanted"] = None
+        b["last"] = {
+            "view_idx": record.get("view_idx"),
+            "accepted": False,
+            "reasons": list(record.get("reasons") or []),
+        }
+    elif kind == "board-ok":
+        b["wanted"] = None
+        pts = record.get("corners") or []
+        b["corners"] = [*b.get("corners", []), pts]
+        b["size"] = record.get("size")
+        b["accepted"] = b.get("accepted", 0) + 1
+        b["last"] = {"view_idx": record.get("view_idx"), "accepted": True, "corners": len(pts)}
+    if b.get("size") and b.get("corners"):
+        w, h = b["size"]
+        cov = corner_coverage(b["corners"], int(w), int(h))
+        b["coverage"] = {
+            "nx": int(cov.covered.shape[1]),
+            "ny": int(cov.covered.shape[0]),
+            "covered": cov.covered.astype(int).tolist(),
+            "fraction": cov.fraction,
+            "missing": cov.missing(),
+        }
+    return b

@@ -33,8 +33,10 @@ from station.session.records import ShotMeasured
 class SessionTap:
     """A session directory that also shows the session on a live page (module docstring)."""
 
-    def __init__(self, session: Any, live: Any, config: Any) -> None:
+    def __init__(self, session: Any, live: Any, config: Any, operator: Any = None) -> None:
         self._session, self._live, self._config = session, live, config
+        if operator is not None:  # the page's buttons answer the board views asked of the operator
+            live.answer_board = operator.attach_page()
         n_f, n_o = len(config.focus_settings), len(config.capture.orientations_deg)
         self._totals = (n_f, n_o, n_f * n_o)
         self._where = (0, 0)
@@ -115,7 +117,8 @@ class SessionTap:
 def live_session_page(
     config: Any, host: str = "127.0.0.1", port: int = 8013, token: str | None = None
 ) -> Iterator[Callable[[Any], SessionTap]]:
-    """Serve the live page for a session; yield ``tap(session) -> SessionTap``.
+    """Serve the live page for a session; yield ``tap(session, operator=None) -> SessionTap`` (``operator``:
+    the :class:`station.session.operator.OperatorDesk` the page's board buttons answer).
 
     The page's server runs on a background thread (the session runs in the foreground);
     raises :class:`station.web.ServeError` (one line) when the address cannot be used.
@@ -132,7 +135,7 @@ def live_session_page(
         raise
     print(f"live page: {server.url}", file=sys.stderr, flush=True)
     try:
-        yield lambda session: SessionTap(session, station, config)
+        yield lambda session, operator=None: SessionTap(session, station, config, operator)
     finally:
         server.stop()
         station.stop()

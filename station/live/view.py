@@ -72,3 +72,17 @@ def view_of(a: Assessment, warnings: list[str], display_width: int) -> dict[str,
         ],
         "focus_score": finite_or_none(a.focus_score),
     }
+
+
+def channels_view(offsets: dict[str, Any], pattern: str, counter: int) -> dict[str, Any]:
+    """The colour panel's figures: per channel (red, blue) the edge points compared with green's, their RMS
+    offset and the median outward offset per ring (:meth:`pipeline.tca.ChannelOffsets.summary`), of the
+    frame ``counter`` whose ``pattern`` (a Bayer mosaic's) they were measured on."""
+    return {
+        "pattern": pattern,
+        "frame": int(counter),
+        "channels": [
+            {k: finite_or_none(v) if isinstance(v, float) else v for k, v in o.summary().items()}
+            for o in offsets.values()
+        ],
+    }

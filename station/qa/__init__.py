@@ -7,6 +7,7 @@
   newest ones), the measurements, thresholds and reference each is judged with, the report of it;
 * :mod:`station.qa.report` — the Markdown report of a session or a judgement, with
   :mod:`station.qa.plots` (its PNG plots, drawn here or in worker processes) and
-  :mod:`station.qa.report_html` (the same report as an HTML page);
+  :mod:`station.qa.report_doc` (the report as one document, written as Markdown and as an HTML
+  page by its Jinja templates);
 * :mod:`station.qa.overlay` — overlay PNGs of a measurement.
 """

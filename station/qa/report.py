@@ -1,5 +1,6 @@
-"""The QA report of a session: Markdown with PNG plots (drawn by :mod:`station.qa.plots`; the HTML
-page of it by :mod:`station.qa.report_html`).
+"""The QA report of a session: Markdown with PNG plots (drawn by :mod:`station.qa.plots`), and the
+same report as an HTML page; both written from one document by Jinja templates
+(:mod:`station.qa.report_doc`).
 
 Per focus setting:
 
@@ -48,7 +49,7 @@ from station.config import OVERLAY_RETENTION
 from station.profile import Profile, Verdict
 from station.qa.evidence import stored_measurement, stored_uncertainty
 from station.qa.plots import Figure, Shot, draw_figures, edge_residual_table
-from station.qa.report_html import markdown_to_html
+from station.qa.report_doc import Block, Bullets, Heading, Image, Marked, Paragraph, Quote, Table, VerdictLine, render
 from station.qa.results import config_record, device_identities, identity_warnings
 from station.session import layout
 from station.session.processing import average_frames
@@ -97,17 +98,18 @@ DEFINITIONS = (
 """The one sentence every report defines d and d_max with."""
 
 
-def _check_rows(verdict: Verdict) -> list[str]:
-    """The checks of a verdict as a Markdown table: what was compared, and what happened."""
-    rows = [
-        "| check | value (px) | must be | limit (px) | result | what happened |",
-        "|:---|---:|:---:|---:|:---:|:---|",
-    ]
+def _check_table(verdict: Verdict) -> Table:
+    """The checks of a verdict as a table: what was compared, and what happened."""
+    rows = []
     for c in verdict.checks:
-        result = "reported" if c.passed is None else ("PASS" if c.passed else "**FAIL**")
+        result: str | Marked = "reported" if c.passed is None else ("PASS" if c.passed else Marked("FAIL"))
         limit = "-" if c.limit is None else f"{c.limit:g}"
-        rows.append(f"| {c.name} | {_fmt(c.value)} | {c.comparison} | {limit} | {result} | {c.text} |")
-    return rows
+        rows.append((c.name, _fmt(c.value), c.comparison, limit, result, c.text))
+    return Table(
+        ("check", "value (px)", "must be", "limit (px)", "result", "what happened"),
+        ("left", "right", "center", "right", "center", "left"),
+        tuple(rows),
+    )
 
 
 def write_report(
@@ -124,7 +126,9 @@ def write_report(
     workers: int = 1,
     overlays: str = "all",
 ) -> Path:
-    """Write ``report.md`` and its pictures into ``out_dir`` (created); returns the Markdown path.
+    """Write ``report.md``, its HTML page ``index.html`` and their pictures into ``out_dir``
+    (created); returns the Markdown path. Both are written from one document
+    (:mod:`station.qa.report_doc`).
 
     ``context``: (what, value) rows shown under the verdict (date, station, software,
     configuration and its SHA-256, devices); ``warnings``: lines shown as warnings (a device
@@ -136,26 +140,20 @@ def write_report(
     out = Path(out_dir)
     figures: list[Figure] = []
     out.mkdir(parents=True, exist_ok=True)
-    md = [f"# QA report: {title}", "", f"**Verdict: {overall}**", "", DEFINITIONS, ""]
+    doc: list[Block] = [Heading(1, f"QA report: {title}"), VerdictLine(overall), Paragraph(DEFINITIONS)]
     written = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-    md += ["| | |", "|:---|:---|", f"| report written | {written} |"]
-    md += [f"| {k} | {v} |" for k, v in context]
-    md.append("")
-    for w in warnings:
-        md += [f"> **warning**: {w}", ""]
+    doc.append(Table(("", ""), ("left", "left"), (("report written", written), *((k, v) for k, v in context))))
+    doc += [Quote(w, label="warning") for w in warnings]
     if thresholds is not None:
-        md += [
-            "Thresholds: "
-            + ", ".join(
-                f"{k} = {v:g} px" if v is not None else f"{k}: not judged" for k, v in thresholds.__dict__.items()
-            ),
-            "",
-        ]
-    md += [
-        "| focus | verdict | holdout d (px) | distortion max (px) | ref. deviation max (px) | "
-        "uncertainty RMS / max (px) | reasons |",
-        "|---:|:---:|---:|---:|---:|---:|:---|",
-    ]
+        doc.append(
+            Paragraph(
+                "Thresholds: "
+                + ", ".join(
+                    f"{k} = {v:g} px" if v is not None else f"{k}: not judged" for k, v in thresholds.__dict__.items()
+                )
+            )
+        )
+    summary = []
     for e in evidence:
         f = e.verdict.figures
         unc = e.uncertainty
@@ -164,75 +162,93 @@ def write_report(
             if unc is not None
             else f"{_fmt(f.get('field_uncertainty_rms_px'))} / {_fmt(f.get('field_uncertainty_max_px'))}"
         )
-        md.append(
-            f"| {e.focus:g} | {e.verdict.verdict} | {_fmt(f.get('holdout_d_px'))} | "
-            f"{_fmt(f.get('distortion_max_px'), 3)} | {_fmt(f.get('reference_max_px'))} | {u} | "
-            f"{'; '.join(e.verdict.reasons) or '-'} |"
+        summary.append(
+            (
+                f"{e.focus:g}",
+                e.verdict.verdict,
+                _fmt(f.get("holdout_d_px")),
+                _fmt(f.get("distortion_max_px"), 3),
+                _fmt(f.get("reference_max_px")),
+                u,
+                "; ".join(e.verdict.reasons) or "-",
+            )
         )
-    md.append("")
+    doc.append(
+        Table(
+            (
+                "focus",
+                "verdict",
+                "holdout d (px)",
+                "distortion max (px)",
+                "ref. deviation max (px)",
+                "uncertainty RMS / max (px)",
+                "reasons",
+            ),
+            ("right", "center", "right", "right", "right", "right", "left"),
+            tuple(summary),
+        )
+    )
     if interpolation:
-        md += [
-            "## Focus interpolation (leave one calibrated focus out)",
-            "",
-            "Each interior focus setting interpolated from the others and compared with its own fit, "
-            "modulo homography.",
-            "",
-            "| focus left out | RMS (px) | max (px) |",
-            "|---:|---:|---:|",
+        doc += [
+            Heading(2, "Focus interpolation (leave one calibrated focus out)"),
+            Paragraph(
+                "Each interior focus setting interpolated from the others and compared with its own fit, "
+                "modulo homography."
+            ),
+            Table(
+                ("focus left out", "RMS (px)", "max (px)"),
+                ("right", "right", "right"),
+                tuple((f"{r.focus:g}", f"{r.rms_px:.4f}", f"{r.max_px:.4f}") for r in interpolation),
+            ),
         ]
-        md += [f"| {r.focus:g} | {r.rms_px:.4f} | {r.max_px:.4f} |" for r in interpolation]
-        md.append("")
-    for n in notes:
-        md += [f"> {n}", ""]
+    doc += [Quote(n) for n in notes]
     for i, e in enumerate(evidence):
         label = f"focus {e.focus:g}"
-        md += [f"## {label}", ""]
+        doc.append(Heading(2, label))
         if e.source:
-            md += [f"Profile: `{e.source}`", ""]
-        md += [f"Verdict at focus {e.focus:g}: **{e.verdict.verdict}**", ""]
-        md += _check_rows(e.verdict) + [""]
+            doc.append(Paragraph(f"Profile: `{e.source}`"))
+        doc += [VerdictLine(e.verdict.verdict, focus=f"{e.focus:g}"), _check_table(e.verdict)]
         if e.verdict.reasons:
-            md += ["Reasons for FAIL:", ""] + [f"- {r}" for r in e.verdict.reasons] + [""]
+            doc += [Paragraph("Reasons for FAIL:"), Bullets(tuple(e.verdict.reasons))]
         name = f"field_f{i}.png"
         figures.append(Figure("field", (e.model, e.width, e.height, out / name), {"title": f"{title}, {label}"}))
-        md += ["### Distortion field", "", f"![distortion field]({name})", ""]
+        doc += [Heading(3, "Distortion field"), Image("distortion field", name)]
         if e.shots:
             name = f"residuals_f{i}.png"
             rows = edge_residual_table(e.shots, e.model)
             angles = [s.orientation_deg for s in e.shots]
             figures.append(Figure("residuals", (rows, angles, out / name), {"title": f"{title}, {label}"}))
-            md += ["### Residual per edge", "", f"![residual per edge]({name})", ""]
+            doc += [Heading(3, "Residual per edge"), Image("residual per edge", name)]
         if e.uncertainty is not None:
             name = f"uncertainty_f{i}.png"
             figures.append(
                 Figure("uncertainty", (e.uncertainty, e.width, e.height, out / name), {"title": f"{title}, {label}"})
             )
-            md += ["### Field uncertainty", "", f"![field uncertainty]({name})", ""]
+            doc += [Heading(3, "Field uncertainty"), Image("field uncertainty", name)]
         elif e.uncertainty_note:
-            md += ["### Field uncertainty", "", e.uncertainty_note, ""]
+            doc += [Heading(3, "Field uncertainty"), Paragraph(e.uncertainty_note)]
         if e.shots and not keeps_overlays(overlays, e.verdict):
-            md += [
-                "### Overlays",
-                "",
-                f"Not kept (overlays: {overlays}"
-                + ("; this focus setting passed QA)." if overlays == "failed" else ").")
-                + " `harp qa SESSION_DIR --report DIR --overlays all` draws them from the session's frames.",
-                "",
+            doc += [
+                Heading(3, "Overlays"),
+                Paragraph(
+                    f"Not kept (overlays: {overlays}"
+                    + ("; this focus setting passed QA)." if overlays == "failed" else ").")
+                    + " `harp qa SESSION_DIR --report DIR --overlays all` draws them from the session's frames."
+                ),
             ]
         elif e.shots:
-            md += ["### Overlays (edges coloured by their distance to their own line, before correction)", ""]
+            doc.append(Heading(3, "Overlays (edges coloured by their distance to their own line, before correction)"))
             for j, s in enumerate(e.shots):
                 name = f"overlay_f{i}_o{j}.jpg"
                 caption = f"{label}, stage {s.orientation_deg:g} deg"
                 # float32 holds an average of a few 8- or 16-bit frames for display (half the bytes to a worker)
                 image = np.asarray(s.image, np.float32)
                 figures.append(Figure("overlay", (image, s.measurement, out / name), {"title": caption}))
-                md += [f"![overlay {s.orientation_deg:g} deg]({name})", ""]
+                doc.append(Image(f"overlay {s.orientation_deg:g} deg", name))
     draw_figures(figures, workers)
     path = out / REPORT_MD
-    text = "\n".join(md) + "\n"
-    path.write_text(text)
-    (out / REPORT_HTML).write_text(markdown_to_html(text, title=f"QA report: {title}"))
+    path.write_text(render(doc, "md"))
+    (out / REPORT_HTML).write_text(render(doc, "html", title=f"QA report: {title}"))
     return path
 
 

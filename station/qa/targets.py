@@ -266,7 +266,7 @@ def write_qa_report(
     bootstrapped if it kept none); for a stored lens, the stored model and figures.
     ``overlays``: which focus settings keep their overlays (None: a session's ``report.overlays``,
     else all)."""
-    # defers matplotlib, PIL
+    # defers matplotlib, PIL, jinja2
     from station.qa.report import FocusEvidence, session_context, session_evidence, write_report
 
     evidence = []

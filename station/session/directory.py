@@ -42,7 +42,6 @@ from station.session.frame_files import decode_frame, encode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import board_key, frame_key, stored_key
 from station.session.records import (
-    BoardSaved,
     Finished,
     FrameSaved,
     ManifestReads,
@@ -335,9 +334,10 @@ class SessionDir(ManifestReads):
         for r in self.of_type(FrameSaved):
             if r.attempt == attempts.get((r.focus_idx, r.orientation_idx), 0) and (self.path / r.file).is_file():
                 keys.add(frame_key(r.focus_idx, r.orientation_idx, r.frame_idx))
-        for b in self.of_type(BoardSaved):
-            if (self.path / b.file).is_file():
-                keys.add(board_key(b.focus_idx, b.view_idx))
+        for f in range(len(self.config.focus_settings)):
+            for b in self.boards(f).values():  # a view superseded since (board-reject) is taken again
+                if (self.path / b.file).is_file():
+                    keys.add(board_key(b.focus_idx, b.view_idx))
         for rec in self.typed:  # a later ``reopened`` record takes a stored focus setting back
             if isinstance(rec, Stored):
                 keys.add(stored_key(rec.focus_idx))

@@ -14,8 +14,9 @@ pass) and adds up, per step:
 * a fit: the full fit and one leave-one-orientation-out refit per orientation
   (:data:`FIT_S_PER_ORIENTATION` each), then the bootstrap replicates (as many refits) spread
   over ``pipeline.workers`` processes;
-* the camera-matrix stage (``intrinsics``): each board view a move and a frame, then
-  :data:`KFIT_S_PER_VIEW` per megapixel and view for the board and the adjustment;
+* the camera-matrix stage (``intrinsics``): each board view a move and a frame (placed by the
+  operator: :data:`PLACE_BOARD_S` and a frame), then :data:`KFIT_S_PER_VIEW` per megapixel and view for
+  the board and the adjustment;
 * once at the end: QA and the report (:data:`REPORT_S_PER_FOCUS` per focus setting).
 
 Every focus setting has the same steps when every shot passes, so the plan of the first is walked
@@ -65,6 +66,8 @@ FIT_S_PER_ORIENTATION = 0.12
 REPORT_S_PER_FOCUS = 2.0
 KFIT_S_PER_VIEW = 0.3
 """The camera-matrix stage: finding the board in a view and its share of the adjustment (s per megapixel)."""
+PLACE_BOARD_S = 20.0
+"""Assumed time an operator takes to place the board as a view asks (``intrinsics.placement: operator``)."""
 
 WARN_PLAN_HOURS = 1.0
 """A plan estimated longer than this is warned of (``harp config check``, ``harp session plan``)."""
@@ -131,6 +134,8 @@ def estimate_plan(config: Config) -> PlanEstimate:
     else:
         speed, accel = TURNTABLE_SPEED_DEG_S, TURNTABLE_ACCEL_DEG_S2
         assumptions.append(f"turntable speed assumed {speed:g} deg/s, acceleration {accel:g} deg/s² (not configured)")
+    if config.intrinsics is not None and config.intrinsics.placement == "operator":
+        assumptions.append(f"the operator places each board view in {PLACE_BOARD_S:g} s (assumed)")
     mpx = _sensor_mpx(config)
     if mpx is None:
         mpx = 5.0
@@ -142,6 +147,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
     first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
     stage = 0.0  # a session homes the turntable first
+    tilt = 0.0  # the tilt axis (intrinsics.placement: stage) starts at rest at 0
     frames = moves = locks = fits = 0
     current: dict[str, float] = {}
     for step in plan_session(dataclasses.replace(config, focus_settings=config.focus_settings[:1])):
@@ -179,16 +185,24 @@ def estimate_plan(config: Config) -> PlanEstimate:
                     f", {pc.bootstrap} bootstrap replicates)" if pc.bootstrap else ")"
                 )
                 first.append(PlanRow(f, config.focus_settings[f], what, seconds=fit_s))
-            case BoardView(focus_idx=f, degrees=deg):
+            case BoardView(focus_idx=f, degrees=None):
+                frames += 1
+                s = current.pop("extra", 0.0) + PLACE_BOARD_S + frame_s
+                first.append(PlanRow(f, config.focus_settings[f], "board view placed by the operator", None, 1, s))
+            case BoardView(focus_idx=f, degrees=float(deg), tilt_deg=t):
                 moves += 1
                 frames += 1
                 s = current.pop("extra", 0.0) + MOVE_OVERHEAD_S + move_seconds(deg - stage, speed, accel)
                 stage = deg
+                if t is not None:  # the tilt axis, at the turntable's speed
+                    s += MOVE_OVERHEAD_S + move_seconds(t - tilt, speed, accel)
+                    tilt = t
                 s += cap.settle_s + frame_s
-                first.append(PlanRow(f, config.focus_settings[f], "board view", deg, 1, s))
+                what = "board view" if t is None else f"board view tilted {t:g}°"
+                first.append(PlanRow(f, config.focus_settings[f], what, deg, 1, s))
             case EstimateK(focus_idx=f):
                 assert config.intrinsics is not None
-                n_v = len(config.intrinsics.angles_deg)
+                n_v = config.intrinsics.n_views
                 first.append(
                     PlanRow(
                         f,
@@ -228,7 +242,8 @@ def board_views(config: Config) -> str:
     """`` + 3 x 6 board views`` of the camera-matrix stage (``intrinsics``), or nothing without it."""
     if config.intrinsics is None:
         return ""
-    return f" + {len(config.focus_settings)} x {len(config.intrinsics.angles_deg)} board views"
+    by = " placed by the operator" if config.intrinsics.placement == "operator" else ""
+    return f" + {len(config.focus_settings)} x {config.intrinsics.n_views} board views{by}"
 
 
 def duration(seconds: float) -> str:

@@ -50,7 +50,16 @@ from typing import Any, TypeVar
 import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
-from drivers.protocols import Camera, CameraRanges, Frame, IndexedCapture, Recoverable, Turntable, TurntableRanges
+from drivers.protocols import (
+    BoardScene,
+    Camera,
+    CameraRanges,
+    Frame,
+    IndexedCapture,
+    Recoverable,
+    Turntable,
+    TurntableRanges,
+)
 from pipeline.board import parse_board
 from pipeline.intrinsics import Intrinsics
 from pipeline.plain import json_default
@@ -58,7 +67,7 @@ from station import __version__
 from station.calibration import Calibration, calibrate_focus, focus_profile
 from station.exit_codes import EXIT_ABORTED, EXIT_OK
 from station.files import describe_os_error, sha256_file, write_profile
-from station.intrinsics import measure_intrinsics
+from station.intrinsics import board_views, measure_intrinsics
 from station.pool import WorkerPool
 from station.profile import Profile
 from station.provenance import make_provenance
@@ -66,17 +75,23 @@ from station.session import layout
 from station.session.boards import board_frame, save_board_frame
 from station.session.directory import SessionDir, SessionError
 from station.session.evidence import measurement_arrays, uncertainty_arrays
+from station.session.operator import NoOperator, OperatorDesk
 from station.session.plan import (
+    BoardCheck,
     BoardView,
     Capture,
+    CheckBoard,
     EstimateK,
     Fit,
     LockFocus,
     Measure,
     Move,
+    PlaceBoard,
     Save,
+    Sent,
     Settle,
     ShotCheck,
+    SkipBoard,
     Step,
     Stop,
     Store,
@@ -96,7 +111,10 @@ from station.session.processing import (
 from station.session.progress import Subscriber, Tally
 from station.session.records import (
     Aborted,
+    BoardAccepted,
+    BoardRejected,
     BoardSaved,
+    BoardWanted,
     Fault,
     FitFailed,
     Fitted,
@@ -168,6 +186,8 @@ class Executor:
         (``None``: stored unjudged; :func:`station.session_run.run_session` passes the QA's).
     subscribers : receive the records and notes (:class:`station.session.progress.Subscriber`).
     sleep : the back-off sleep (tests pass a recorder).
+    operator : asked for each board view placed by hand (``intrinsics.placement: operator``;
+        :class:`station.session.operator.OperatorDesk`; None: such a session stops at its first view).
     """
 
     def __init__(
@@ -180,8 +200,10 @@ class Executor:
         judge: Callable[[Profile, int], Any] | None = None,
         subscribers: Sequence[Subscriber] = (),
         sleep: Callable[[float], None] = time.sleep,
+        operator: OperatorDesk | None = None,
     ):
         self.session = session
+        self.operator = operator
         self.judge = judge
         self.config = session.config
         self.camera = camera
@@ -320,9 +342,10 @@ class Executor:
         self._size = (int(w), int(h))
 
     # ============================================================== steps
-    def perform(self, step: Step) -> ShotCheck | None:
-        """Perform one step of the plan; a ``Measure`` returns its check for the plan."""
-        if isinstance(step, (LockFocus, Move, Capture, BoardView)):
+    def perform(self, step: Step) -> Sent:
+        """Perform one step of the plan; a ``Measure`` or ``CheckBoard`` returns its check for the plan, a
+        ``PlaceBoard`` the operator's answer."""
+        if isinstance(step, (LockFocus, Move, Capture, PlaceBoard, BoardView)):
             self._prepare()
         match step:
             case LockFocus():
@@ -339,8 +362,14 @@ class Executor:
                 return self._measure(step)
             case Fit():
                 self._fit(step)
+            case PlaceBoard():
+                return self._place_board(step)
             case BoardView():
                 self._board_view(step)
+            case CheckBoard():
+                return self._check_board(step)
+            case SkipBoard():
+                self._emit(BoardRejected(step.focus_idx, step.view_idx, ["skipped by the operator"], skipped=True))
             case EstimateK():
                 self._estimate_k(step)
             case Store():
@@ -542,19 +571,75 @@ class Executor:
         cfg = self.config
         assert cfg.intrinsics is not None  # the plan yields board views only with the section
         spec = parse_board(cfg.intrinsics.board)
-        self._move_to(step.degrees, "intrinsics.angles_deg")
-        if cfg.capture.settle_s > 0:
-            time.sleep(cfg.capture.settle_s)
+        tilt = None
+        if step.tilt_deg is not None:  # placement: stage (config check: the turntable has a tilt axis)
+            axis = getattr(self.turntable, "tilt", None)
+            if axis is None:
+                raise SessionAborted("intrinsics.placement: stage: the turntable has no tilt axis")
+            tilt = self._retry(f"tilt the board to {step.tilt_deg:g}°",
+                               lambda: axis.move_to(step.tilt_deg, timeout=cfg.capture.move_timeout_s),
+                               self.turntable)  # fmt: skip
+        if step.degrees is not None:
+            self._move_to(step.degrees, "intrinsics.angles_deg")
+            if cfg.capture.settle_s > 0:
+                time.sleep(cfg.capture.settle_s)
+        attempt = self.session.board_attempt(step.focus_idx, step.view_idx)
 
         def grab() -> Frame:
             if isinstance(self.camera, IndexedCapture):
                 self.camera.set_capture_index(step.view_idx)  # the same noise on resume
+            if step.degrees is None:  # where the operator placed it (PlaceBoard)
+                return self.camera.capture(timeout=cfg.capture.timeout_s)
             return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
 
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
-        rel = layout.board_file(step.focus_idx, step.view_idx)
+        rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
         digest = save_board_frame(self.session.path / rel, frame)
-        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg))
+        self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg, attempt, tilt))
+
+    def _place_board(self, step: PlaceBoard) -> str:
+        """Ask the operator for a board view (``intrinsics.placement: operator``): a ``board-ask`` record (the
+        live page shows it), the request said on the terminal, the answer awaited. A camera that can be shown
+        the board (the simulator) stands in for the person too: it holds the board as asked."""
+        cfg = self.config
+        assert cfg.intrinsics is not None  # the plan asks for board views only with the section
+        f, v, req = step.focus_idx, step.view_idx, step.request
+        attempt = self.session.board_attempt(f, v)
+        self._emit(BoardWanted(f, v, attempt, req.to_dict(), list(step.problems)))
+        if isinstance(self.camera, BoardScene):
+            self.camera.show_board(parse_board(cfg.intrinsics.board).label, req)
+        lines = [f"focus {cfg.focus_settings[f]:g}, {req.instruction()}", f"  why: {req.why()}"]
+        if step.problems:
+            lines.insert(0, f"[yellow]board view {v + 1} rejected: {'; '.join(step.problems)}; once more:")
+        if self.operator is None:
+            raise SessionAborted(
+                "the board views are placed by the operator (intrinsics.placement: operator) and this run has "
+                f"none; continue on a terminal with: harp session resume {self.session.path}"
+            )
+        try:
+            return self.operator.ask(lines)
+        except NoOperator as exc:
+            raise SessionAborted(f"{exc}; then: harp session resume {self.session.path}") from None
+
+    def _check_board(self, step: CheckBoard) -> BoardCheck:
+        """Find the board in the view just saved: accepted (``board-ok`` with its corners, which the live
+        page's board coverage pools) or rejected with why (``board-reject``: no board, too few corners,
+        blurred, another size than the harp's frames)."""
+        cfg = self.config
+        assert cfg.intrinsics is not None
+        f, v = step.focus_idx, step.view_idx
+        rec = self.session.boards(f)[v]
+        path = self.session.path / rec.file
+        w, h = self._image_size(f)
+        views, rejected = board_views([str(path)], parse_board(cfg.intrinsics.board), w, h)
+        if not views:
+            problems = [rejected[0].reason]
+            self._emit(BoardRejected(f, v, problems))
+            return BoardCheck(f, v, tuple(problems))
+        view = views[0]
+        corners = np.round(np.asarray(view.image_points, np.float64).reshape(-1, 2), 2).tolist()
+        self._emit(BoardAccepted(f, v, rec.attempt, corners, [w, h]))
+        return BoardCheck(f, v, (), view.n)
 
     def _estimate_k(self, step: EstimateK) -> None:
         """The camera matrix of a focus setting from its board views, its distortion held fixed
@@ -566,10 +651,7 @@ class Executor:
         assert k is not None
         cal = self._calibrations[f]
         assert cal.fit is not None  # a failed fit stopped the session
-        views = {}
-        for r in self.session.of_type(BoardSaved):
-            if r.focus_idx == f:
-                views[r.view_idx] = r  # the last of a view wins
+        views = self.session.boards(f)  # the last capture of each view, unless superseded since
         paths = []
         for v in sorted(views):
             r = views[v]

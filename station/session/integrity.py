@@ -3,7 +3,8 @@
 :func:`check_session` holds every file the manifest names against it: the frames of each
 shot's current attempt (present, checksum), the measurements of the accepted shots, the
 uncertainty maps and the profile files of the stored focus settings (checksum where the
-manifest records one, and readable as a model file). ``harp session resume`` runs it first
+manifest records one, and readable as a model file), and the board views that count (``intrinsics``:
+present, checksum). ``harp session resume`` runs it first
 and stops with one line naming the damage and what to do, instead of failing at QA every
 time or saying "finished" over a missing frame.
 
@@ -22,7 +23,9 @@ manifest allow, and says what they do not:
   the same fit as before (it is seeded), without the devices;
 * a damaged frame of a focus setting not stored yet — its shot is superseded (a ``reject``
   record): ``harp session resume`` captures it again;
-* a missing or damaged frame of a stored focus setting — cannot be re-derived; the profile made
+* a damaged board view of a focus setting not stored yet — superseded (a ``board-reject`` record):
+  ``harp session resume`` takes it again;
+* a missing or damaged frame or board view of a stored focus setting — cannot be re-derived; the profile made
   from it stays valid (its provenance keeps the frame's checksum). ``--recapture F`` supersedes
   every shot of focus setting ``F`` and reopens it, so that ``resume`` captures it again.
 """
@@ -38,6 +41,7 @@ from pathlib import Path
 from station.files import atomic_write_bytes
 from station.session import layout
 from station.session.records import (
+    BoardRejected,
     FitFailed,
     Fitted,
     Reopened,
@@ -51,14 +55,15 @@ from station.session.records import (
 
 @dataclass(frozen=True)
 class Damage:
-    """One damaged file: where (relative path), what is wrong, which focus setting, and whether
-    :func:`repair_session` can re-derive it (``how``: ``"refit"``, ``"recapture"`` or ``""``)."""
+    """One damaged file: where (relative path), what is wrong, which focus setting (and shot or board
+    view), and whether :func:`repair_session` can re-derive it (``how``: ``"refit"``, ``"recapture"`` or ``""``)."""
 
     file: str
     problem: str
     focus_idx: int | None = None
     orientation_idx: int | None = None
     how: str = ""
+    view_idx: int | None = None  # a board view's (the ``intrinsics`` stage), else None
 
     def line(self) -> str:
         return f"{self.file}: {self.problem}"
@@ -104,6 +109,11 @@ def check_session(session) -> list[Damage]:
                     continue  # a frame missing from a setting not stored yet is simply captured again
                 how = "" if f in stored else "recapture"
                 out.append(Damage(frame.file, problem, f, o, how))
+        for v, b in sorted(session.boards(f).items()):  # the board views that count (``intrinsics``)
+            problem = _file_problem(session.path / b.file, b.sha256)
+            if problem is None or (problem == "missing" and f not in stored):
+                continue  # a board view missing from a setting not stored yet is simply taken again
+            out.append(Damage(b.file, problem, f, None, "" if f in stored else "recapture", view_idx=v))
         if f not in stored:
             continue
         attempts = {o: session.attempt(f, o) for o in range(n_o)}
@@ -269,7 +279,11 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
     reopen: dict[int, str] = {}
     superseded: set[tuple[int, int]] = set()
     for d in damage:
-        if d.how == "recapture" and (d.focus_idx, d.orientation_idx) not in superseded:
+        if d.how == "recapture" and d.view_idx is not None:
+            session.append(BoardRejected(d.focus_idx, d.view_idx, [f"{d.file}: {d.problem} (harp session repair)"]))
+            report.fixed.append(f"{d.line()}: the board view will be taken again by harp session resume")
+            report.resume = True
+        elif d.how == "recapture" and (d.focus_idx, d.orientation_idx) not in superseded:
             superseded.add((d.focus_idx, d.orientation_idx))
             session.append(
                 ShotRejected(
@@ -283,9 +297,15 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
             reopen.setdefault(d.focus_idx, d.line())
             report.fixed.append(f"{d.line()}: re-derived from the frames (focus setting {d.focus_idx} fitted again)")
         elif d.focus_idx not in recapture:
+            made = (
+                f"the profile of focus setting {d.focus_idx} was made from it and stays valid (its provenance "
+                "keeps the checksum)"
+                if d.view_idx is None
+                else f"the camera matrix of focus setting {d.focus_idx} was measured from it and stays valid (the "
+                "manifest keeps the checksum)"
+            )
             report.cannot.append(
-                f"{d.line()}: cannot be re-derived; the profile of focus setting {d.focus_idx} was made from it "
-                f"and stays valid (its provenance keeps the checksum); to capture that setting again: "
+                f"{d.line()}: cannot be re-derived; {made}; to capture that setting again: "
                 f"harp session repair {session.path} --recapture {d.focus_idx}"
             )
     for f in recapture:
@@ -294,6 +314,8 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
         for o in range(n_o):
             if (f, o) not in superseded:
                 session.append(ShotRejected(f, o, session.attempt(f, o), ["captured again (harp session repair)"]))
+        for v in sorted(session.boards(f)):
+            session.append(BoardRejected(f, v, ["taken again (harp session repair --recapture)"]))
         reopen[f] = "captured again (harp session repair --recapture)"
         report.fixed.append(f"focus setting {f}: every shot will be captured again by harp session resume")
         report.resume = True

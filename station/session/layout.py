@@ -8,7 +8,8 @@ Layout (paths relative to the session directory ``DIR``)::
     frames/f{f}_o{o}_a{a}_i{i}.png   frame i of attempt a of orientation o at focus setting f, lossless
                                      (station.session.frame_files; .pgm in older sessions)
     measurements/f{f}_o{o}_a{a}.npz  the measured edges of that shot (station.session.evidence)
-    boards/f{f}_v{v}.png             board view v at focus setting f (the ``intrinsics`` stage), lossless
+    boards/f{f}_v{v}[_a{a}].png      board view v at focus setting f (the ``intrinsics`` stage), lossless;
+                                     _a{a}: its capture attempt a > 0 (after a rejection)
     profiles/focus{f}.yaml           the profile (model file) of focus setting f
     profiles/focus{f}_uncertainty.npz  its bootstrap field-uncertainty map
     report/                          the session report (station.qa.report)
@@ -54,8 +55,9 @@ def frame_file(focus_idx: int, orientation_idx: int, attempt: int, frame_idx: in
     return f"{FRAMES}/f{focus_idx}_o{orientation_idx}_a{attempt}_i{frame_idx}.png"
 
 
-def board_file(focus_idx: int, view_idx: int) -> str:
-    return f"{BOARDS}/f{focus_idx}_v{view_idx}.png"
+def board_file(focus_idx: int, view_idx: int, attempt: int = 0) -> str:
+    again = f"_a{attempt}" if attempt else ""
+    return f"{BOARDS}/f{focus_idx}_v{view_idx}{again}.png"
 
 
 def measurement_file(focus_idx: int, orientation_idx: int, attempt: int) -> str:

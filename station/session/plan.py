@@ -2,8 +2,9 @@
 
 :func:`plan_session` lists every step of a calibration session (per focus
 setting: lock focus; per orientation: move, settle, capture and save N frames,
-measure; then fit; with an ``intrinsics`` section, the board views at that focus and the
-camera matrix from them; then store) without touching any hardware, so tests can list
+measure; then fit; with an ``intrinsics`` section, the board views at that focus — on the
+turntable's wedge, or asked of the operator one by one (:class:`PlaceBoard`) — and the camera
+matrix from them; then store) without touching any hardware, so tests can list
 it and :mod:`station.session.executor` can perform it. A resumed session passes the
 keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
 plan skips them.
@@ -21,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 
+from pipeline.board_requests import ViewRequest, wanted_views
 from station.config import Config
 
 
@@ -75,13 +77,45 @@ class Store:
 
 
 @dataclass(frozen=True)
-class BoardView:
-    """The camera-matrix stage (``intrinsics``): move to ``degrees``, settle, capture the board and save
-    it (view ``view_idx`` of focus setting ``focus_idx``, at the locked focus)."""
+class PlaceBoard:
+    """Ask the operator to place the board as ``request`` says (``intrinsics.placement: operator``; a
+    :class:`pipeline.board_requests.ViewRequest`), saying why the last capture was rejected
+    (``problems``), and wait for the answer: the executor sends back :data:`CAPTURE`, :data:`SKIP` or
+    :data:`STOP`."""
 
     focus_idx: int
     view_idx: int
-    degrees: float
+    request: ViewRequest
+    problems: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class BoardView:
+    """The camera-matrix stage (``intrinsics``): move to ``degrees`` (and the tilt axis to ``tilt_deg``,
+    ``placement: stage``) and settle (``degrees`` None: the board where the operator placed it, no move),
+    capture the board and save it (view ``view_idx`` of focus setting ``focus_idx``, at the locked focus)."""
+
+    focus_idx: int
+    view_idx: int
+    degrees: float | None
+    tilt_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class CheckBoard:
+    """Find the board in the view just saved (found, enough corners, not blurred); the executor sends
+    back its :class:`BoardCheck` (an operator-placed view that fails is asked for again)."""
+
+    focus_idx: int
+    view_idx: int
+
+
+@dataclass(frozen=True)
+class SkipBoard:
+    """The operator skipped this view: recorded, and the camera matrix is fitted without it."""
+
+    focus_idx: int
+    view_idx: int
 
 
 @dataclass(frozen=True)
@@ -98,7 +132,13 @@ class Stop:
     reason: str
 
 
-Step = LockFocus | Move | Settle | Capture | Save | Measure | Fit | BoardView | EstimateK | Store | Stop
+Step = (
+    LockFocus | Move | Settle | Capture | Save | Measure | Fit | PlaceBoard | BoardView | CheckBoard | SkipBoard
+    | EstimateK | Store | Stop
+)  # fmt: skip
+
+CAPTURE, SKIP, STOP = "capture", "skip", "stop"
+"""The operator's answers to a :class:`PlaceBoard`: the board is in place, leave this view out, stop the session."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +154,24 @@ class ShotCheck:
     @property
     def accepted(self) -> bool:
         return not self.problems
+
+
+@dataclass(frozen=True)
+class BoardCheck:
+    """What finding the board in a view gave: ``problems`` (empty: accepted), the corners found."""
+
+    focus_idx: int
+    view_idx: int
+    problems: tuple[str, ...] = ()
+    corners: int = 0
+
+    @property
+    def accepted(self) -> bool:
+        return not self.problems
+
+
+Sent = ShotCheck | BoardCheck | str | None
+"""What the executor sends back into the plan: a shot's or a board view's check, the operator's answer."""
 
 
 def frame_key(focus_idx: int, orientation_idx: int, frame_idx: int) -> tuple:
@@ -144,9 +202,7 @@ def capture_steps(
         yield Save(focus_idx, orientation_idx, i)
 
 
-def plan_session(
-    config: Config, already_done: Iterable[tuple] = frozenset()
-) -> Generator[Step, ShotCheck | None, None]:
+def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) -> Generator[Step, Sent, None]:
     """Every step of the session described by ``config``, minus ``already_done``.
 
     Parameters
@@ -162,6 +218,9 @@ def plan_session(
         ``LockFocus`` is emitted only when something is captured.
         After a ``Measure``, the executor sends its :class:`ShotCheck`; a rejected
         shot is re-captured, or ``Stop`` is yielded (see the module docstring).
+        With board views placed by the operator, each is a ``PlaceBoard`` (the executor sends the
+        operator's answer), ``BoardView`` and ``CheckBoard`` (it sends the :class:`BoardCheck`); a
+        rejected view is asked for again with its problems, as long as the operator wants.
     """
     done = set(already_done)
     n = config.capture.frames_per_orientation
@@ -193,12 +252,32 @@ def plan_session(
                     locked = f
                 yield from capture_steps(config, f, o)
         yield Fit(f)
-        if config.intrinsics is not None:
-            views = [v for v in range(len(config.intrinsics.angles_deg)) if board_key(f, v) not in done]
+        k = config.intrinsics
+        if k is not None:
+            views = [v for v in range(k.n_views) if board_key(f, v) not in done]
             if views and locked != f:
                 yield LockFocus(f, focus)
                 locked = f
-            for v in views:
-                yield BoardView(f, v, config.intrinsics.angles_deg[v])
+            if k.placement == "operator":
+                requests = wanted_views(k.n_views)
+                for v in views:
+                    problems: tuple[str, ...] = ()
+                    while True:
+                        answer = yield PlaceBoard(f, v, requests[v], problems)
+                        if answer == STOP:
+                            yield Stop(f"the operator stopped the session at board view {v + 1} of focus {f}")
+                            return
+                        if answer == SKIP:
+                            yield SkipBoard(f, v)
+                            break
+                        yield BoardView(f, v, None)
+                        check = yield CheckBoard(f, v)
+                        if not isinstance(check, BoardCheck) or check.accepted:
+                            break
+                        problems = check.problems
+            else:
+                poses = k.stage_views()
+                for v in views:
+                    yield BoardView(f, v, *poses[v])
             yield EstimateK(f)
         yield Store(f)

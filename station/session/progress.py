@@ -5,7 +5,7 @@ The executor (:mod:`station.session.executor`) tells its subscribers when it sta
 session already had), hands them every manifest record it writes
 (:mod:`station.session.records`) and every transient note (a retry, a recovery), and
 tells them when it is done. :class:`Tally` counts, per focus setting, the shots,
-re-captures, edges, fit figures and stored profile, and the frames and faults of
+re-captures, edges, fit figures, camera matrix and stored profile, and the frames and faults of
 this run — every figure derived from the records, so it says what the manifest
 says; the executor's result is built from it. :class:`ConsoleProgress` shows a
 tally as rich progress bars, the notes and the summary table.
@@ -52,6 +52,7 @@ class FocusRow:
     recaptures: int = 0
     lines: int = 0
     fit: Fitted | None = None
+    intrinsics: IntrinsicsMeasured | None = None
     profile_id: int | None = None
 
 
@@ -82,6 +83,8 @@ class Tally:
                 self.rows[f].lines += n
             case Fitted(focus_idx=f):
                 self.rows[f].fit = record
+            case IntrinsicsMeasured(focus_idx=f):
+                self.rows[f].intrinsics = record
             case Stored(focus_idx=f, profile_id=pid):
                 self.rows[f].profile_id = pid
             case Fault():
@@ -163,6 +166,7 @@ class ConsoleProgress:
             "unc. rms (px)",
             "unc. max (px)",
             "model",
+            *(K_COLUMNS if cfg.intrinsics is not None else ()),
             "profile",
         )
         figures = ("fit_d", "fit_d_max", "holdout_d", "holdout_d_max", "uncertainty_rms", "uncertainty_max")
@@ -177,6 +181,7 @@ class ConsoleProgress:
                     str(row.lines),
                     *(_fmt(getattr(fit, name) if fit else None) for name in figures),
                     str(fit.model.get("model", "?")) if fit else "",
+                    *(_k_cells(row.intrinsics) if cfg.intrinsics is not None else ()),
                     f"#{row.profile_id}" if row.profile_id is not None else "",
                 )
             )
@@ -185,7 +190,7 @@ class ConsoleProgress:
             columns,
             rows,
             title=f"{cfg.lens.label()} on {cfg.camera_body.label()}\n{session_path}",
-            right=columns[:-2],
+            right=tuple(c for c in columns if c not in ("model", "board views", "profile")),
             stream=stream,
         )
         self.console.print(f"frames saved this run: {self.tally.frames_saved}, device faults: {self.tally.faults}")
@@ -201,6 +206,29 @@ def _camera_matrix_line(k: Any) -> str:
     sd = k.get("sd") or {}
     vals = ", ".join(f"{n} {float(k[n]):.2f} ± {float(sd.get(n, math.nan)):.2f}" for n in ("fx", "fy", "cx", "cy"))
     return f"camera matrix {vals} px from {k.get('n_views', '?')} board views"
+
+
+K_COLUMNS = ("fx (px)", "fy (px)", "cx (px)", "cy (px)", "K sd max (px)", "board views")
+"""The summary's camera-matrix columns (a session with an ``intrinsics`` section)."""
+
+
+def _k_cells(rec: IntrinsicsMeasured | None) -> tuple[str, ...]:
+    """The :data:`K_COLUMNS` cells of a focus setting: its camera matrix, the largest standard deviation of
+    fx, fy, cx, cy, the board views used; without one, ``none: <why>`` in the views' cell (empty: not
+    measured in this run)."""
+    if rec is None:
+        return ("",) * len(K_COLUMNS)
+    k = rec.intrinsics
+    if not k:
+        return ("",) * (len(K_COLUMNS) - 1) + (f"none: {rec.failure}",)
+    sd = k.get("sd") or {}
+    sds = [float(sd.get(n, math.nan)) for n in ("fx", "fy", "cx", "cy")]
+    sd_max = max(sds) if all(math.isfinite(v) for v in sds) else math.nan
+    return (
+        *(f"{float(k[n]):.2f}" for n in ("fx", "fy", "cx", "cy")),
+        _fmt(sd_max),
+        str(k.get("n_views", "?")),
+    )
 
 
 def _fmt(v: Any) -> str:

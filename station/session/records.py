@@ -24,6 +24,11 @@ kind               record
 ``reject``         :class:`ShotRejected` — a shot failed its checks (its frames superseded)
 ``measure``        :class:`ShotMeasured` — an accepted shot's figures and measurement file
 ``fit``            :class:`Fitted` or :class:`FitFailed` — a focus setting's fit
+``board-ask``      :class:`BoardWanted` — the operator is asked to place the board (which pose, why)
+``board``          :class:`BoardSaved` — a board view's file, sha256, turntable angles
+``board-ok``       :class:`BoardAccepted` — an operator-placed board view passed its checks (its corners)
+``board-reject``   :class:`BoardRejected` — a board view superseded (failed its checks, skipped, damaged)
+``intrinsics``     :class:`IntrinsicsMeasured` — a focus setting's camera matrix from its board views
 ``stored``         :class:`Stored` — the profile file and store id of a focus setting
 ``fault``          :class:`Fault` — a device error and the attempt it hit
 ``qa``             :class:`QARecorded` — one profile's verdict
@@ -154,15 +159,62 @@ class FitFailed(Record):
 @dataclass(frozen=True)
 class BoardSaved(Record):
     """A board view of the camera-matrix stage (``intrinsics``): its file (lossless, from
-    :mod:`station.session.layout`), sha256, the commanded and read-back turntable angles."""
+    :mod:`station.session.layout`), sha256, the commanded and read-back turntable angles (commanded None:
+    placed by the operator), the capture attempt (the times the view was superseded before), the tilt axis's
+    read-back (``placement: stage``; None: no tilt axis)."""
 
     kind: ClassVar[str] = "board"
+    optional: ClassVar[tuple[str, ...]] = ("tilt_deg",)
     focus_idx: int
     view_idx: int
     file: str
     sha256: str
-    commanded_deg: float
+    commanded_deg: float | None
     stage_deg: float | None
+    attempt: int = 0
+    tilt_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class BoardWanted(Record):
+    """The operator is asked to place the board (``intrinsics.placement: operator``): view ``view_idx`` of
+    focus setting ``focus_idx``, capture ``attempt`` (the times it was rejected before), ``request`` (a
+    :meth:`station.session.board_requests.BoardRequest.to_dict`: pose, where in the image, why) and why
+    the last attempt was rejected (``problems``)."""
+
+    kind: ClassVar[str] = "board-ask"
+    focus_idx: int
+    view_idx: int
+    attempt: int
+    request: Mapping[str, Any]
+    problems: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class BoardAccepted(Record):
+    """An operator-placed board view passed its checks: the board's corners found (``corners``, image
+    pixels ``[x, y]``, rounded to 0.01 px, in an image of ``size`` [width, height]: the board coverage of
+    the live page)."""
+
+    kind: ClassVar[str] = "board-ok"
+    focus_idx: int
+    view_idx: int
+    attempt: int
+    corners: list[list[float]]
+    size: list[int]
+
+
+@dataclass(frozen=True)
+class BoardRejected(Record):
+    """A board view superseded: it failed its checks (no board, too few corners, blurred), the operator
+    skipped it, or ``harp session repair`` found its file damaged (``reasons``). Its next capture is
+    attempt + 1 (:meth:`ManifestReads.board_attempt`)."""
+
+    kind: ClassVar[str] = "board-reject"
+    focus_idx: int
+    view_idx: int
+    reasons: list[str]
+    skipped: bool = False
 
 
 @dataclass(frozen=True)
@@ -268,7 +320,10 @@ _TYPES: tuple[type[Record], ...] = (
     ShotMeasured,
     Fitted,
     FitFailed,
+    BoardWanted,
     BoardSaved,
+    BoardAccepted,
+    BoardRejected,
     IntrinsicsMeasured,
     Stored,
     Fault,
@@ -362,6 +417,23 @@ class ManifestReads:
             if (r.focus_idx, r.orientation_idx, r.attempt) == (focus_idx, orientation_idx, a)
         }
         return [by_idx[i] for i in sorted(by_idx)]
+
+    def board_attempt(self, focus_idx: int, view_idx: int) -> int:
+        """Current capture attempt of a board view: the number of times it was superseded."""
+        return sum(1 for r in self.of_type(BoardRejected) if (r.focus_idx, r.view_idx) == (focus_idx, view_idx))
+
+    def boards(self, focus_idx: int) -> dict[int, BoardSaved]:
+        """``{view_idx: record}`` of the board views of ``focus_idx`` that count: saved at the view's current
+        attempt (the last capture wins; a view superseded since, :class:`BoardRejected`, is left out)."""
+        out: dict[int, BoardSaved] = {}
+        for r in self.typed:
+            if getattr(r, "focus_idx", None) != focus_idx:
+                continue
+            if isinstance(r, BoardSaved):
+                out[r.view_idx] = r
+            elif isinstance(r, BoardRejected):
+                out.pop(r.view_idx, None)
+        return out
 
     def stored_ids(self) -> dict[int, int | None]:
         """``{focus_idx: store id}`` of every ``stored`` record (the last one of a focus setting wins)."""

@@ -57,6 +57,8 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     opts = dict(config.simulation.emulator)
     if tt.steps_per_degree is not None:
         opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
+    if tt.settings.get("tilt_axis") is not None:
+        opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
     opts.update(emulator_overrides)
     try:
         handle = start_zaber_emulator(world=world, **opts)

@@ -289,3 +289,53 @@ def test_reply_parsing_with_message_id_and_garbage():
     assert tt.parse_line(b"@01 0 RJ IDLE -- BADCOMMAND").ok is False
     with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'@01 1 OK'"):
         tt.parse_line(b"@01 1 OK")
+
+
+# -- the tilt axis (issue 23: the board tilted by a second axis of the stage) ----------------------------
+
+
+def test_tilt_axis_bytes():
+    """``tilt_axis=2``: the second axis of the same device on the same connection, checked at open (its
+    position, its travel) and moved like the first; its configured limits (default 0..60°) refuse a
+    move before anything is sent."""
+    script = [
+        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        *LIMITS,
+        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 2 get pos\n", b"@01 2 OK IDLE -- 0\r\n"),
+        (b"/1 2 get limit.min\n", b"@01 2 OK IDLE -- 0\r\n"),
+        (b"/1 2 get limit.max\n", b"@01 2 OK IDLE -- 384000\r\n"),
+        (b"/1 2 move abs 128000\n", b"@01 2 OK BUSY -- 0\r\n"),
+        (b"/1 2 get pos\n", b"@01 2 OK BUSY -- 64000\r\n"),
+        (b"/1 2 get pos\n", b"@01 2 OK IDLE -- 128000\r\n"),
+        (b"/1 1 move abs 192000\n", b"@01 1 OK BUSY -- 0\r\n"),
+        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port, tilt_axis=2) as tt:
+            assert tt.tilt is not None and tt.tilt.travel_range().maximum == 60.0
+            assert tt.tilt.move_to(30.0) == pytest.approx(30.0, abs=1e-12)
+            with pytest.raises(OutOfRange):
+                tt.tilt.move_to(70.0)
+            assert tt.move_to(45.0) == pytest.approx(45.0, abs=1e-12)
+
+
+def test_tilt_axis_on_the_emulator_tilts_the_simulated_board():
+    world = SimWorld()
+    assert world.tilt_at() is None  # no axis tilts the board: the camera's wedge
+    with start_zaber_emulator(world=world, axes=2, **FAST) as h, driver(h.port_path, tilt_axis=2) as tt:
+        assert world.tilt_at() == 0.0
+        tt.home()
+        got = tt.tilt.move_to(25.0)
+        assert got == pytest.approx(25.0, abs=0.5 / MSPD) and world.tilt_at() == pytest.approx(got, abs=1e-9)
+        assert tt.move_to(90.0) == pytest.approx(90.0, abs=0.5 / MSPD) and world.tilt_at() == pytest.approx(got)
+        assert tt.tilt.position() == got
+        with pytest.raises(DeviceRejected, match="BADDATA"):  # beyond the device's travel (0..90°)
+            tt.tilt._check(tt.tilt.command("move abs 999999999"), "move abs")  # the driver's limits bypassed
+
+
+def test_a_tilt_axis_the_device_does_not_have_fails_at_open(emu):
+    with pytest.raises(DeviceRejected, match="tilt axis 2: 'get pos' rejected: BADAXIS"):
+        driver(emu.port_path, tilt_axis=2).open()
+    with pytest.raises(ValueError, match="tilt_axis must be another axis than axis 1"):
+        driver(emu.port_path, tilt_axis=1)

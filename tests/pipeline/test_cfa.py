@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.cfa import CFA_PATTERNS, cfa_planes, measure_mosaic, plane_offsets, plane_to_mosaic
+from pipeline.cfa import CFA_PATTERNS, cfa_planes, measure_mosaic, mosaic_luma, plane_offsets, plane_to_mosaic
 from pipeline.models.base import IdentityModel
 from pipeline.render import HarpScene, string_edges
 from pipeline.render_colour import render_mosaic
@@ -106,3 +106,19 @@ def test_plane_edges_lie_on_the_exact_edges(pattern):
         assert np.abs(errs).max() < 0.01, (name, errs)  # a wrong site offset would be 0.3-0.8 px
         outward[name] = float(np.mean(half))
     assert max(outward.values()) - min(outward.values()) < 0.003, outward
+
+
+@pytest.mark.parametrize("pattern", CFA_PATTERNS)
+def test_mosaic_luma_weighs_the_colours_alike_on_every_site(pattern):
+    """A mosaic of a flat colour (R, G, B) and of a linear ramp of it: the luma is R/4 + G/2 + B/4 on every
+    pixel (borders mirrored), and a ramp stays where it was (no shift)."""
+    h, w = 12, 16
+    colour = {"R": 40.0, "G": 100.0, "B": 20.0}
+    ramp = np.add.outer(np.zeros(h), np.arange(w, dtype=float))  # x
+    flat, sloped = np.zeros((h, w)), np.zeros((h, w))
+    for name, (ox, oy) in plane_offsets(pattern).items():
+        flat[oy::2, ox::2] = colour[name[0]]
+        sloped[oy::2, ox::2] = colour[name[0]] * (1 + 0.01 * ramp[oy::2, ox::2])
+    np.testing.assert_allclose(mosaic_luma(flat), 0.25 * 40 + 0.5 * 100 + 0.25 * 20)
+    want = (0.25 * 40 + 0.5 * 100 + 0.25 * 20) * (1 + 0.01 * ramp)
+    np.testing.assert_allclose(mosaic_luma(sloped)[1:-1, 1:-1], want[1:-1, 1:-1], rtol=1e-12)

@@ -80,3 +80,39 @@ def test_adding_again_replaces_the_colour_elements_at_that_focal():
     corner = sub[0, 0, 0]
     want = _entry(2.0).tca.from_reference("R", np.array([[0.0, 0.0]]))[0]  # type: ignore[union-attr]
     np.testing.assert_allclose(corner, want, atol=2e-3)
+
+
+def test_tca_and_vignetting_are_applied_about_the_lens_centre():
+    """liblensfun applies the TCA and the vignetting about the lens's <center>, as the distortion:
+    what ``LensfunTca(center=...)`` and ``lensfun_radius(..., center)`` say (the exports fit them so)."""
+    centre = (0.05, -0.03)
+    base = _entry()
+    assert base.tca is not None
+    tca = LensfunTca("poly3", base.tca.red, base.tca.blue, W, H, center=centre)
+    entry = LensfunEntry(
+        model=LensfunModel("poly5", (-0.04, 0.006), W, H, center=centre),
+        lens=INFO,
+        tca=tca,
+        vignetting=base.vignetting,
+        aperture=4.0,
+        distance=2.0,
+    )
+    xml, _ = lensfun_database_text([entry])
+    assert "<center " in xml
+    mod = _modifier(xml, lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.TCA)
+    sub = mod.apply_subpixel_geometry_distortion().reshape(-1, 3, 2).astype(np.float64)
+    green = sub[:, 1]
+    about_image_centre = LensfunTca("poly3", tca.red, tca.blue, W, H)
+    for c, ch in ((0, "R"), (2, "B")):
+        np.testing.assert_allclose(sub[:, c], tca.from_reference(ch, green), atol=2e-3, err_msg=ch)
+        assert np.abs(sub[:, c] - about_image_centre.from_reference(ch, green)).max() > 4e-3  # the centre matters
+    mod = _modifier(xml, lensfunpy.ModifyFlags.VIGNETTING)
+    img = np.full((H, W, 3), 0.25, np.float32)
+    assert mod.apply_color_modification(img)
+    yy, xx = np.mgrid[0:H, 0:W].astype(float)
+    xy = np.column_stack([xx.ravel(), yy.ravel()])
+    assert entry.vignetting is not None
+    v = entry.vignetting.factor(lensfun_radius(xy, W, H, centre)).reshape(H, W)
+    np.testing.assert_allclose(0.25 / img[..., 0], v, rtol=2e-4)
+    off = entry.vignetting.factor(lensfun_radius(xy, W, H)).reshape(H, W)
+    assert np.abs(0.25 / img[..., 0] / off - 1).max() > 0.01

@@ -152,6 +152,37 @@ def test_a_lens_without_a_field_keeps_the_radial_model(seed):
     assert compare_models(row.full_fit.model, lens.model, W, H).rms < 0.0015
 
 
+def test_with_two_orientations_a_field_is_set_aside_and_the_unseen_orientation_shows_why():
+    """Two orientations (10 and 100 deg), so only alternate strings can judge: there the field wins
+    (CV d 0.006 against 0.010 px), because it bends to both orientations. An unseen orientation of the
+    exact lens (55 and 145 deg) is left twice as bent by the field as by the radial model, so the
+    choice sets the field aside and says so."""
+    from pipeline.straightness import straightness
+
+    lens = lens_population(3, 1, W, H, field=True, field_rms_px=(0.05, 0.05))[0]
+    shots = harp_point_sets(lens.model, W, H, (10, 100), noise=0.005, seed=3)
+    unseen = [p for s in harp_point_sets(lens.model, W, H, (55, 145), noise=0.005, seed=53) for p in s]
+    sel = select_model(shots, W, H, candidates=field_candidates(BASE, grids=((8, 6),), penalties=(1e-4,)))
+    assert sel.choice == BASE and sel.folds == "edges", sel.reason
+    assert "1 flexible candidate (free polynomial or residual field) set aside" in sel.reason
+    assert "the shots have 2" in sel.reason
+    assert [r.candidate for r in sel.table] == [BASE]
+    field = fit_distortion(shots, W, H, **FIELD.fit_arguments())
+    base = next(r.full_fit for r in sel.table if r.candidate == BASE)
+    assert field and base is not None
+    d_field = straightness([field.model.undistort_points(p) for p in unseen]).d
+    d_base = straightness([base.model.undistort_points(p) for p in unseen]).d
+    assert d_field > 1.5 * d_base, (d_field, d_base)
+    # with leave-one-shot-out folds nothing is set aside: unseen orientations judge every candidate
+    sel4 = select_model(
+        harp_point_sets(lens.model, W, H, (10, 55, 100, 145), noise=0.005, seed=3),
+        W,
+        H,
+        candidates=(BASE, FIELD),
+    )
+    assert {r.candidate for r in sel4.table} == {BASE, FIELD} and "set aside" not in sel4.reason
+
+
 @pytest.mark.parametrize("field", [True, False])
 def test_on_the_realistic_simulator_the_field_helps_where_the_lens_has_one_and_nowhere_else(field):
     """Rendered and measured shots of the realistic simulator (bent strings, field-dependent blur, Bayer,

@@ -115,3 +115,27 @@ def test_lensfun_applies_the_tca_as_the_model_says():
             got = sub[:, :, c, :].reshape(-1, 2)
             np.testing.assert_allclose(got, model.from_reference(ch, g), atol=2e-3, err_msg=f"{kind} {ch}")
         np.testing.assert_allclose(sub[:, :, 1, :].reshape(-1, 2), g, atol=2e-3)  # green is the reference (float32)
+
+
+def test_channel_offsets_of_one_shot_are_the_exact_shift_across_the_edges():
+    """The live page's figure (issue 24 item 4): each red and blue edge point's offset from green's
+    edge, along green's normal, against the exact shift there; outward in the outer ring: red's edges
+    lie outside green's, blue's inside, by the exact amount."""
+    from pipeline.tca import ChannelOffsets, channel_offsets
+
+    shot = measured_colour_shots()[0]
+    truth = colour_lens(W, H)["tca"]
+    for ch, got in channel_offsets(shot).items():
+        want = np.einsum("ij,ij->i", got.normal, truth[ch].displacement(got.points))
+        err = got.offset - want
+        print(
+            f"{ch}: {len(err)} points, offset error median {np.median(np.abs(err)):.4f} px, RMS {np.sqrt(np.mean(err**2)):.4f}"
+        )
+        assert len(err) > 500 and np.median(np.abs(err)) < 0.01 and np.sqrt(np.mean(err**2)) < 0.03
+        exact = ChannelOffsets(ch, W, H, got.points, got.normal, want).summary()
+        summary = got.summary()
+        for z, zt in zip(summary["zones"], exact["zones"]):
+            assert z["points"] == zt["points"] > 50
+            assert abs(z["median_outward_px"] - zt["median_outward_px"]) < 0.02, (ch, z, zt)
+        outer = summary["zones"][-1]["median_outward_px"]
+        assert (outer > 0.2) if ch == "R" else (outer < -0.15), (ch, outer)

@@ -32,6 +32,7 @@ def test_every_shipped_config_is_covered():
         "demo.yaml",
         "demo-zoom.yaml",
         "demo-intrinsics.yaml",
+        "demo-operator-board.yaml",
         "live-demo.yaml",
         "aravis-zaber.yaml",
         "v4l2-grbl.yaml",

@@ -25,10 +25,16 @@ from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_INTERRUPTED
 REPO = Path(__file__).resolve().parents[2]
 
 
+SAYERS = {"say", "warn"}
+"""station.cli.say's functions: a line on stderr by another name."""
+
+
 def _is_stderr_print(node: ast.stmt) -> bool:
     if not (isinstance(node, ast.Expr) and isinstance(node.value, ast.Call)):
         return False
     call = node.value
+    if isinstance(call.func, ast.Name) and call.func.id in SAYERS:
+        return True
     if not (isinstance(call.func, ast.Name) and call.func.id == "print"):
         return False
     return any(
@@ -123,6 +129,28 @@ def test_the_checker_finds_a_print_then_return_and_nothing_else():
         """
     )
     assert print_then_return(fine) == []
+
+
+def test_the_checker_sees_the_commands_say_and_warn_as_prints():
+    bad = textwrap.dedent(
+        """
+        from station.cli.say import say, warn
+
+        def _error(msg):
+            say("harp x", msg)
+
+        def run(args):
+            if args.n < 1:
+                say("harp x", "--n must be at least 1")
+                return EXIT_ERROR
+            if args.m < 1:
+                _error("--m must be at least 1")
+                return 2
+            warn("harp x", "no images")
+            return EXIT_OK
+        """
+    )
+    assert print_then_return(bad) == ["<source>:9", "<source>:12"]
 
 
 def test_no_command_prints_an_error_and_returns_a_code():

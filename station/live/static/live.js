@@ -142,8 +142,23 @@
       const rej = Object.entries(f.rejected || {});
       $("rejected").textContent = rej.length ? "rejected: " + rej.map(([k, n]) => `${n} × ${k}`).join(", ") : "nothing rejected";
     }
+    // colour (a Bayer camera): each channel's edges against green's
+    const col = s.channels;
+    $("colour-panel").hidden = !col;
+    if (col) {
+      $("colour-info").textContent = `${col.pattern} mosaic, frame #${col.frame}`;
+      const names = { R: "red", B: "blue" };
+      $("channels-table").tBodies[0].replaceChildren(...col.channels.map(c => {
+        const tr = document.createElement("tr");
+        tr.dataset.channel = c.channel;
+        const cells = [names[c.channel] || c.channel, c.points, ...c.zones.map(z => fmt(z.median_outward_px, 3)), fmt(c.rms_px, 3)];
+        for (const v of cells) { const td = document.createElement("td"); td.textContent = v; tr.appendChild(td); }
+        return tr;
+      }));
+    }
     // session
     const ses = s.session;
+    updateBoard(ses && ses.board);
     $("session-panel").hidden = !ses;
     if (ses) {
       $("session-state").textContent = ses.state || "running";
@@ -165,6 +180,40 @@
     }
   }
 
+  /* The board views asked of the operator (intrinsics.placement: operator): the view wanted, its buttons,
+     the last verdict and the cells of the image the accepted views' corners reach. */
+  function updateBoard(b) {
+    $("board-panel").hidden = !b;
+    if (!b) return;
+    const w = b.wanted;
+    $("board-wanted").hidden = !w;
+    if (w) {
+      $("board-instruction").textContent = w.instruction || "";
+      $("board-why").textContent = w.why ? "why: " + w.why : "";
+      $("board-problems").textContent = w.problems && w.problems.length ? "the last capture was rejected: " + w.problems.join("; ") : "";
+    }
+    for (const id of ["board-capture", "board-skip", "board-stop"]) $(id).disabled = !w;
+    const l = b.last;
+    $("board-last").textContent = l ? `view ${l.view_idx + 1}: ` + (l.accepted ? `accepted, ${l.corners} corners` : "rejected: " + l.reasons.join("; ")) : "";
+    $("board-last").className = l ? (l.accepted ? "ok" : "bad") : "";
+    $("board-count").textContent = `${b.accepted || 0} accepted`;
+    const cov = b.coverage;
+    $("board-coverage").textContent = cov ? pct(cov.fraction, 0) : "–";
+    $("board-coverage").dataset.fraction = cov ? cov.fraction : "";
+    $("board-missing").textContent = cov ? (cov.missing.length ? "not reached yet: " + cov.missing.join(", ") : "every region reached") : "";
+    const cv = $("board-grid"), ctx = cv.getContext("2d");
+    ctx.clearRect(0, 0, cv.width, cv.height);
+    const nx = cov ? cov.nx : 8, ny = cov ? cov.ny : 6, cw = cv.width / nx, ch = cv.height / ny;
+    for (let j = 0; j < ny; j++) for (let i = 0; i < nx; i++) {
+      ctx.fillStyle = cov && cov.covered[j][i] ? "rgba(46, 125, 50, 0.6)" : "rgba(179, 38, 30, 0.25)";
+      ctx.fillRect(i * cw + 1, j * ch + 1, cw - 2, ch - 2);
+    }
+    if (w && w.centre) {
+      ctx.fillStyle = "#1565c0";
+      ctx.beginPath(); ctx.arc(w.centre[0] * cv.width, w.centre[1] * cv.height, 7, 0, 2 * Math.PI); ctx.fill();
+    }
+  }
+
   async function send(action, value) {
     $("command-error").textContent = "";
     try { await window.harp.post("/api/command", { action, value }); }
@@ -173,6 +222,9 @@
   $("next-orientation").addEventListener("click", () => send("next"));
   $("prev-orientation").addEventListener("click", () => send("previous"));
   $("reset-coverage").addEventListener("click", () => send("reset_coverage"));
+  $("board-capture").addEventListener("click", () => send("board", "capture"));
+  $("board-skip").addEventListener("click", () => send("board", "skip"));
+  $("board-stop").addEventListener("click", () => send("board", "stop"));
   $("reset-focus").addEventListener("click", () => send("reset_focus"));
   $("focus-slider").addEventListener("change", (ev) => send("focus", Number(ev.target.value)));
   for (const b of document.querySelectorAll("[data-exposure]")) {

@@ -40,7 +40,7 @@ def test_two_focus_distances_in_one_profile_each_within_its_stated_error(model, 
     stated = []
     for dist in ("0.5", "3"):
         code, stdout, stderr = run_main(
-            "export", model, "--format", "lcp", *OPTICS, "--focus-distance-m", dist, "-o", out, "--json"
+            "export", model, "--format", "lcp", *OPTICS, "--distance", dist, "-o", out, "--json"
         )
         assert code == 0, stderr
         fig = json.loads(stdout)
@@ -64,8 +64,7 @@ def test_two_focus_distances_in_one_profile_each_within_its_stated_error(model, 
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--focus-distance-m", "-1"], "--focus-distance-m: expected a distance > 0 m, got -1"),
-        (["--focus-distance-m", "far"], "--focus-distance-m: expected a distance in metres, got 'far'"),
+        (["--distance", "-1"], "--distance: expected a focus distance > 0 m, got -1"),
         (["--coeffs", "5"], "--coeffs 5: the lcp export has no choice of coefficients"),
     ],
 )

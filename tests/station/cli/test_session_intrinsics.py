@@ -4,8 +4,11 @@ the stored camera matrix is held against; a killed session resumes with the boar
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -51,11 +54,19 @@ def records(session: Path, kind: str) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory):
+def demo_run(tmp_path_factory):
+    """The demo session, run once; its standard output (the summary table) kept."""
     base = tmp_path_factory.mktemp("k")
     cfg = config_file(base)
-    code = main(["session", "run", str(cfg), "--name", "s", "--quiet", "--no-report"])
-    return code, load_config(cfg), base, base / "sessions" / "s"
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["session", "run", str(cfg), "--name", "s", "--no-report"])
+    return code, load_config(cfg), base, base / "sessions" / "s", out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def demo(demo_run):
+    return demo_run[:4]
 
 
 def test_every_profile_has_the_true_camera_matrix_within_its_two_sigma(demo):
@@ -88,6 +99,51 @@ def test_every_profile_has_the_true_camera_matrix_within_its_two_sigma(demo):
         assert hashlib.sha256((session / r["file"]).read_bytes()).hexdigest() == r["sha256"]
         assert abs(r["stage_deg"] - r["commanded_deg"]) < 0.05
     assert [r["focus_idx"] for r in records(session, "intrinsics")] == [0, 1]
+
+
+def test_the_summary_has_the_stored_camera_matrix(demo_run):
+    """The session's summary table (tab-separated off a terminal) shows each focus setting's camera
+    matrix as the store holds it."""
+    code, cfg, base, _session, out = demo_run
+    assert code == 0
+    lines = out.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("focus\t"))
+    header = lines[start].split("\t")
+    assert header[-7:] == ["fx (px)", "fy (px)", "cx (px)", "cy (px)", "K sd max (px)", "board views", "profile"]
+    rows = [dict(zip(header, line.split("\t"))) for line in lines[start + 1 : start + 1 + len(cfg.focus_settings)]]
+    with ProfileStore(base / "profiles.sqlite", create=False) as st:
+        profiles = {f"#{p.id}": p for p in st.profiles()}
+    for row in rows:
+        k = profiles[row["profile"]].intrinsics
+        assert k is not None and float(row["focus"]) == profiles[row["profile"]].focus
+        assert [float(row[f"{n} (px)"]) for n in ("fx", "fy", "cx", "cy")] == pytest.approx(
+            [k.fx, k.fy, k.cx, k.cy], abs=0.006
+        )
+        assert float(row["K sd max (px)"]) == pytest.approx(max(k.sd[:4]), abs=6e-5)
+        assert row["board views"] == str(len(cfg.intrinsics.angles_deg))
+
+
+def test_a_damaged_board_view_of_a_stored_setting_is_found_and_said(demo, tmp_path, capsys):
+    """``harp session resume`` checks the board views against the manifest too; a stored setting's view
+    cannot be taken again by itself: repair says so and names --recapture."""
+    _code, _cfg, _base, session = demo
+    s = tmp_path / "s"
+    shutil.copytree(session, s)
+    board = next(r for r in records(s, "board") if (r["focus_idx"], r["view_idx"]) == (1, 2))
+    (s / board["file"]).write_bytes((s / board["file"]).read_bytes()[:-1] + b"\0")
+    assert main(["session", "resume", str(s)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        f"harp session: {s}: damaged: boards/f1_v2.png: checksum does not match the manifest; "
+        f"run: harp session repair {s} (it says what cannot be re-derived)"
+    )
+    assert main(["session", "repair", str(s)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "cannot re-derive: boards/f1_v2.png: checksum does not match the manifest: cannot be re-derived; the camera "
+        f"matrix of focus setting 1 was measured from it and stays valid (the manifest keeps the checksum); to "
+        f"capture that setting again: harp session repair {s} --recapture 1"
+    ) in err, err
 
 
 def test_the_plan_lists_the_board_views_after_each_fit(demo, capsys):
@@ -126,9 +182,10 @@ class _KillAfter:
         return None
 
 
-def test_interrupted_among_the_board_views_then_resumed(demo, tmp_path):
-    """Stopped after 3 of the 6 board views of the first focus setting: the resume keeps those 3 (not taken
-    again), takes the others and gives the camera matrix of the uninterrupted session."""
+def test_interrupted_among_the_board_views_then_resumed(demo, tmp_path, capsys):
+    """Stopped after 3 of the 6 board views of the first focus setting, then one of them damaged on disk: the
+    resume says so, the repair has that one taken again, the resume keeps the other 2 (not taken again), takes
+    the rest and gives the camera matrix of the uninterrupted session."""
     _code, _cfg, base, reference = demo
     cfg = load_config(config_file(tmp_path, focus={"settings": [0.0]}))
     with simulated_devices(cfg) as sim, SessionDir.create(cfg.sessions_dir, cfg, name="r") as s:
@@ -139,9 +196,26 @@ def test_interrupted_among_the_board_views_then_resumed(demo, tmp_path):
     session = cfg.sessions_dir / "r"
     before = {r["view_idx"]: r["sha256"] for r in records(session, "board")}
     assert sorted(before) == [0, 1, 2] and not records(session, "stored")
+    # a board view damaged on disk: found before anything is taken again, and repair has it taken again
+    damaged = session / "boards" / "f0_v1.png"
+    damaged.write_bytes(damaged.read_bytes()[:-1] + b"\0")
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"harp session: {session}: damaged: boards/f0_v1.png: checksum does not match the manifest; "
+        f"run: harp session repair {session}"
+    )
+    assert main(["session", "repair", str(session)]) == 0
+    assert (
+        "repaired: boards/f0_v1.png: checksum does not match the manifest: the board view will be taken again by "
+        "harp session resume"
+    ) in capsys.readouterr().err
     assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
     after = records(session, "board")
-    assert sorted(r["view_idx"] for r in after) == list(range(6))  # each view taken once
+    # each view taken once, the damaged one again (attempt 1, its own file)
+    assert [(r["view_idx"], r.get("attempt", 0)) for r in after] == [(0, 0), (1, 0), (2, 0), (1, 1), (3, 0), (4, 0),
+                                                                      (5, 0)]  # fmt: skip
+    assert after[3]["file"] == "boards/f0_v1_a1.png"
+    after = [r for r in after if (r["view_idx"], r.get("attempt", 0)) != (1, 0)]
     assert {r["view_idx"]: r["sha256"] for r in after if r["view_idx"] in before} == before
     ref = {r["view_idx"]: r["sha256"] for r in records(reference, "board") if r["focus_idx"] == 0}
     assert {r["view_idx"]: r["sha256"] for r in after} == ref  # the same frames as the uninterrupted session
@@ -181,6 +255,10 @@ def test_a_camera_that_cannot_be_shown_the_board_is_refused(tmp_path, capsys):
     assert main(["config", "check", str(p)]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{p}: intrinsics: expected a camera the station can show the board" in err and "\n" not in err
+    assert "the operator places the board (intrinsics.placement: operator)" in err
+    d["intrinsics"]["placement"] = "operator"  # the views asked of the operator: any camera will do
+    p.write_text(yaml.safe_dump(d))
+    assert main(["config", "check", str(p)]) == 0, capsys.readouterr().err
 
 
 def test_the_schema_minimum_is_the_fit_minimum():

@@ -125,7 +125,7 @@ def test_lcp_export_one_profile_per_focal_and_focus_applied_by_rawtherapees_equa
     stated = {}
     for focus, metres in (("0", 0.5),):
         args = ["profile", "export", "ZOOM-0001", "--focus", focus, "--format", "lcp", "-o", str(out), "--json"]
-        assert main([*args, "--focus-distance-m", str(metres), *store]) == 0
+        assert main([*args, "--distance", str(metres), *store]) == 0
         lines = capsys.readouterr().out.strip().splitlines()
         assert lines[-1] == f"lcp: 3 calibrations (focal 12 mm, 24 mm, 36 mm) at focus {focus} in {out}"
         stated.update({(z, metres): json.loads(ln)["conversion"] for z, ln in zip(FOCALS, lines[:-1], strict=True)})
