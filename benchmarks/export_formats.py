@@ -49,10 +49,20 @@ EXPORTS = [  # (label, format, extra options, file name)
     ("mrcal (default: LENSMODEL_OPENCV12)", "mrcal", [], "lens.cameramodel"),
     ("mrcal --coeffs 8", "mrcal", ["--coeffs", "8"], "lens8.cameramodel"),
     ("lensfun (ptlens, crop factor 1.611)", "lensfun", [], "lensfun.xml"),
+    ("colmap (OPENCV, FULL_OPENCV, OPENCV_FISHEYE or THIN_PRISM_FISHEYE)", "colmap", [], "cameras.txt"),
+    ("kalibr (pinhole-radtan or pinhole-equi)", "kalibr", [], "camchain.yaml"),
+    ("basalt (kb4)", "basalt", [], "calib.json"),
+    ("metashape (frame or fisheye)", "metashape", [], "calibration.xml"),
     ("maps (.npz, cv2.remap)", "maps", [], "maps.npz"),
     ("stmap (.exr)", "stmap", [], "stmap.exr"),
     ("auto", "auto", [], "auto.yml"),
 ]
+
+
+def chosen_model(fmt: str, fig: dict) -> str:
+    """`` → MODEL`` of a format that chooses among models (its first note: ``"colmap: FULL_OPENCV, ..."``)."""
+    note = next((n for n in fig.get("notes", []) if n.startswith(f"{fmt}: ")), None)
+    return "" if note is None else " → " + note[len(fmt) + 2 :].split()[0].rstrip(",:")
 
 
 def harp(*args: str) -> tuple[subprocess.CompletedProcess, float]:
@@ -101,7 +111,7 @@ def main() -> int:
         model_holdout = fig["holdout_d"]
         ev, _ = harp("evaluate", str(path), shots[2], "--json")
         held = json.loads(ev.stdout)["after"]["d"] if ev.returncode == 0 else None
-        chosen = f" → {fig['format']}" if fmt == "auto" else ""
+        chosen = f" → {fig['format']}" if fmt == "auto" else chosen_model(fmt, fig)
         print(
             f"| {label}{chosen} | {c['rms_mod_h_px']:.4f} / {c['max_mod_h_px']:.4f} | {c['d_px']:.4f} | "
             f"{c['shots_d_px']:.4f} ({c['model_shots_d_px']:.4f}) | "

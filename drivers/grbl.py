@@ -27,6 +27,10 @@ off: no device travel, the configured limits apply. (A firmware built with
 ``HOMING_FORCE_SET_ORIGIN`` counts up from the home switch instead; it is
 not detected.)
 
+A second axis may tilt the calibration board (``tilt_axis``, e.g. ``Y``): :attr:`GrblTurntable.tilt` is
+that axis, a :class:`GrblTurntable` of its own on the same connection (``G90 G0 Y30.000``, its position
+from the same status reports; the controller's settings and soft limits read once at ``open()``).
+
 Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
 ``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
 meaning (recover with :meth:`recover`: soft reset if needed, then ``$X``;
@@ -103,6 +107,8 @@ _ERROR = re.compile(r"^error:(\d+)$")
 _ALARM = re.compile(r"^ALARM:(\d+)$")
 _SETTING = re.compile(r"^\$(\d+)=([-+]?[0-9.]+)$")
 _AXES = "XYZABC"
+TILT_LIMITS_DEG = (0.0, 60.0)
+"""The tilt axis's angles by default (a board tilted further hides its corners from the camera)."""
 
 SETTINGS: dict[str, Setting] = {
     "port": Setting("serial device, socket://host:port or rfc2217://host:port ('emulator': the simulated "
@@ -126,6 +132,11 @@ SETTINGS: dict[str, Setting] = {
     "startup_timeout": Setting("wait for the banner after a reset", "number", "s", 0.0, 60.0, low_open=True),
     "tolerance_deg": Setting("how far from the target an idle axis may be", "number", "deg", 0.0, 10.0),
     "name": Setting("how messages name the stage", "text"),
+    "tilt_axis": Setting("a second GRBL axis that tilts the calibration board (the session's intrinsics.placement: "
+                         "stage); null: none", "text", choices=tuple(_AXES + _AXES.lower()), nullable=True),
+    "tilt_units_per_degree": Setting("GRBL units per degree of tilt (not 0)", "number", "units/deg", -1e6, 1e6),
+    "tilt_limits": Setting("[min, max] of the tilt axis's angles (narrowed to its soft limits at open)", "numbers",
+                           "deg", -90.0, 90.0, length=(2, 2)),
 }  # fmt: skip
 """The keys of a GRBL turntable's configuration section, each with its type, unit and range."""
 _CONFIG_KEYS = {"driver", *SETTINGS}
@@ -194,6 +205,9 @@ class GrblTurntable:
         startup_timeout: float = 3.0,
         tolerance_deg: float = 0.002,
         name: str | None = None,
+        tilt_axis: str | None = None,
+        tilt_units_per_degree: float = 1.0,
+        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
     ):
         axis = str(axis).upper()
         if axis not in _AXES:
@@ -225,6 +239,21 @@ class GrblTurntable:
         self.last_alarm: int | None = None
         self._lock = threading.RLock()
         self._target: float | None = None
+        self._shared = False  # an axis on another axis's connection (the tilt axis): opened and closed by it
+        self.tilt: GrblTurntable | None = None
+        """The tilt axis (``tilt_axis``): another axis of this controller, on this connection, which tilts the
+        calibration board (:class:`drivers.protocols.Tilting`); None without one."""
+        if tilt_axis is not None:
+            if str(tilt_axis).upper() == axis:
+                raise ValueError(f"grbl turntable: tilt_axis must be another axis than {axis}, got {tilt_axis!r}")
+            tilt = GrblTurntable(
+                port, baudrate=baudrate, axis=str(tilt_axis), units_per_degree=tilt_units_per_degree, feed=feed,
+                limits=tuple(tilt_limits), reply_timeout=reply_timeout, poll_interval=poll_interval,  # type: ignore[arg-type]
+                move_timeout=move_timeout, home_timeout=home_timeout, startup_timeout=startup_timeout,
+                tolerance_deg=tolerance_deg, name=f"{self.name} tilt axis {str(tilt_axis).upper()}",
+            )  # fmt: skip
+            tilt.transport, tilt._lock, tilt._shared = self.transport, self._lock, True
+            self.tilt = tilt
 
     @classmethod
     def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> GrblTurntable:
@@ -242,13 +271,20 @@ class GrblTurntable:
             if spd <= 0 or spu <= 0:
                 raise ValueError("grbl turntable: 'steps_per_degree' and 'steps_per_unit' must be positive")
             kw["units_per_degree"] = spd / spu
-        if "limits" in kw:
-            kw["limits"] = tuple(kw["limits"])
+        for key in ("limits", "tilt_limits"):
+            if key in kw:
+                kw[key] = tuple(kw[key])
         return cls(kw.pop("port"), **kw)
 
     # -- life cycle --------------------------------------------------------------
     def open(self) -> None:
-        """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner."""
+        """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner (the tilt axis: the same
+        controller's settings and a status report, on the connection its turntable opened)."""
+        if self._shared:
+            self._device_travel = self._soft_limit_travel()
+            self._travel = effective_travel(self.name, self._configured, self._device_travel)
+            self.query_status()
+            return
         self.transport.open()
         try:
             with self._lock:
@@ -260,6 +296,9 @@ class GrblTurntable:
                 self.settings = self.read_settings()
                 self._device_travel = self._soft_limit_travel()
                 self._travel = effective_travel(self.name, self._configured, self._device_travel)
+                if self.tilt is not None:
+                    self.tilt.settings = self.settings
+                    self.tilt.open()
         except Exception:
             self.transport.close()
             raise
@@ -279,7 +318,8 @@ class GrblTurntable:
                 self.last_alarm = int(text[6:]) if text[6:].isdigit() else None
 
     def close(self) -> None:
-        self.transport.close()
+        if not self._shared:
+            self.transport.close()
 
     def __enter__(self) -> GrblTurntable:
         self.open()

@@ -117,7 +117,8 @@ class SerialTransport:
             raise DeviceDisconnected(f"{self.name}: read from {self.port} failed, device gone ({exc})") from exc
 
     def readline(self, timeout: float, what: str = "a reply", eol: bytes = b"\n", total: float | None = None) -> bytes:
-        """Return the next line, without its terminator (``\\r\\n`` or ``\\n``).
+        """Return the next line, without its terminator (``\\r\\n`` or ``\\n``; another ``eol``, e.g. a
+        binary protocol's end byte, is cut alone).
 
         Raises :class:`DeviceTimeout` naming ``what`` if no complete line
         arrives within ``timeout`` seconds (the message quotes ``total``
@@ -130,7 +131,7 @@ class SerialTransport:
                 if idx >= 0:
                     line = bytes(self._buf[:idx])
                     del self._buf[: idx + len(eol)]
-                    return line.rstrip(b"\r")
+                    return line.rstrip(b"\r") if eol == b"\n" else line  # a binary packet keeps its 0x0D
                 if time.monotonic() >= deadline:
                     partial = f" (got only {bytes(self._buf)!r})" if self._buf else ""
                     raise DeviceTimeout(

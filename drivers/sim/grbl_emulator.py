@@ -27,6 +27,11 @@ acceleration and ``$13x`` = ``max_travel``. Soft limits (``$20=1``), as in
 GRBL's ``system_check_travel_limits``: a target outside machine
 ``[-$13x, 0]`` raises ``ALARM:2`` (critical: reset to continue).
 
+With ``tilt_axis`` (e.g. ``"Y"``) a second axis tilts the calibration board, in degrees (``G90 G0 Y30.000``;
+its position in the status report's ``MPos``; homed with the turntable by ``$H``; blocks of both axes run
+one after another, as GRBL's planner runs them; not soft-limited here), and drives the simulated world's
+board tilt.
+
 Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 ``"no_reply"``, ``"garbage"``, ``"alarm"`` (hard limit ``ALARM:1`` at
 fraction ``at`` of the next move: motion stops, ``[MSG:Reset to continue]``,
@@ -47,6 +52,8 @@ if TYPE_CHECKING:
     from drivers.sim.pty_server import EmulatorHandle
 
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
+TILT_TRAVEL_DEG = 90.0
+"""The tilt axis's ``$13x`` (``tilt_axis``)."""
 UNLOCK_MSG = b"[MSG:'$H'|'$X' to unlock]\r\n"
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
@@ -95,13 +102,17 @@ class GrblEmulator(LineEmulator):
         position_deg: float = 0.0,
         axis: str = "X",
         seed: int = 0,
+        tilt_axis: str | None = None,
     ):
         super().__init__(world, seed)
         axis = str(axis).upper()
         if axis not in "XYZA" or len(axis) != 1:
             raise ValueError(f"GRBL emulator axis must be X, Y, Z or A, got {axis!r}")
+        tilt_letter = None if tilt_axis is None else str(tilt_axis).upper()
+        if tilt_letter is not None and (tilt_letter not in "XYZA" or len(tilt_letter) != 1 or tilt_letter == axis):
+            raise ValueError(f"GRBL emulator tilt_axis must be another of X, Y, Z or A, got {tilt_axis!r}")
         self.axis_letter = axis
-        self.n_axes = 4 if axis == "A" else 3
+        self.n_axes = 4 if "A" in (axis, tilt_letter) else 3
         self.upd = float(units_per_degree)
         if self.upd == 0:
             raise ValueError("GRBL emulator units_per_degree must not be 0")
@@ -122,9 +133,19 @@ class GrblEmulator(LineEmulator):
         self.critical = False  # waiting for Ctrl-X after a hard/soft limit alarm
         self.absolute = True
         self.feed: float | None = None
-        self.queue: list[float] = []
+        self.queue: list[tuple[str, float]] = []  # (axis letter, target): blocks run one after another
         self._homing = False
-        self._held_target: float | None = None
+        self._held: tuple[str, float] | None = None
+        # the tilt axis (tilt_axis): the calibration board's tilt, in degrees (1 unit = 1 degree), at 0
+        self.tilt_letter = tilt_letter
+        self.tilt: Axis | None = None
+        self._axes = {axis: self.axis}
+        if tilt_letter is not None:
+            self.tilt = Axis(0.0, speed_deg_s, accel_deg_s2)
+            self._axes[tilt_letter] = self.tilt
+            self.settings[130 + "XYZA".index(tilt_letter)] = TILT_TRAVEL_DEG
+            if world is not None:
+                world.drive_tilt(self._tilt_for_world, self.NAME)
 
     @property
     def homing_enabled(self) -> bool:
@@ -139,6 +160,13 @@ class GrblEmulator(LineEmulator):
 
     def stage_degrees(self, now: float) -> float:
         return self.axis.peek(now) / self.upd
+
+    def _tilt_for_world(self, t: float) -> float:
+        with self._lock:  # not while a command is half-way through
+            return self.tilt.peek(t) if self.tilt is not None else 0.0
+
+    def _busy(self, now: float) -> bool:
+        return any(a.busy(now) for a in self._axes.values())
 
     def _line(self, text: str) -> None:
         self.write(text.encode("ascii") + b"\r\n")
@@ -155,15 +183,18 @@ class GrblEmulator(LineEmulator):
             return True
         if byte == b"!":
             if self.state in ("Run", "Home"):
-                move = self.axis.move
-                self._held_target = move.target if move is not None else None
-                self.axis.halt(now)
+                self._held = None
+                for letter, a in self._axes.items():
+                    if a.move is not None and a.busy(now):
+                        self._held = (letter, a.move.target)
+                    a.halt(now)
                 self.state = "Hold:0"
             return True
         if byte == b"~":
-            if self.state.startswith("Hold") and self._held_target is not None:
-                self.axis.start_move(self._held_target, now)
-                self._held_target = None
+            if self.state.startswith("Hold") and self._held is not None:
+                letter, target = self._held
+                self._axes[letter].start_move(target, now)
+                self._held = None
                 self.state = "Run"
             return True
         if byte == b"\x18":
@@ -174,7 +205,8 @@ class GrblEmulator(LineEmulator):
     def _status(self, now: float) -> None:
         self.update(now)
         coords = [0.0] * self.n_axes
-        coords["XYZA".index(self.axis_letter)] = self.axis.position(now)
+        for letter, a in self._axes.items():
+            coords["XYZA".index(letter)] = a.position(now)
         speed = 0.0
         move = self.axis.move
         if move is not None:
@@ -184,11 +216,12 @@ class GrblEmulator(LineEmulator):
         self._line(f"<{self.state}|MPos:{mpos}|FS:{speed:.0f},0>")
 
     def _reset(self, now: float) -> None:
-        moving = self.axis.busy(now) and self.state in ("Run", "Home")
-        self.axis.halt(now)
+        moving = self._busy(now) and self.state in ("Run", "Home")
+        for a in self._axes.values():
+            a.halt(now)
         self.queue.clear()
         self._homing = False
-        self._held_target = None
+        self._held = None
         self._inbuf.clear()
         if moving:
             self._line("ALARM:3")  # reset while in motion: position lost
@@ -230,7 +263,8 @@ class GrblEmulator(LineEmulator):
                 return
             self.state = "Home"
             self._homing = True
-            self.axis.start_move(0.0, now)  # ok is sent when the cycle ends
+            for a in self._axes.values():  # every axis to its home switch (machine 0)
+                a.start_move(0.0, now)  # ok is sent when the cycle ends
             return
         if text == "$X":
             if self.state == "Alarm":
@@ -288,6 +322,7 @@ class GrblEmulator(LineEmulator):
         motion = None
         absolute = self.absolute
         x = None
+        tilt = None
         feed = self.feed
         for letter, value in words:
             v = float(value)
@@ -303,6 +338,8 @@ class GrblEmulator(LineEmulator):
                     return
             elif letter == self.axis_letter:
                 x = v
+            elif letter == self.tilt_letter:
+                tilt = v
             elif letter == "F":
                 if v <= 0:
                     self._line("error:4")
@@ -317,12 +354,13 @@ class GrblEmulator(LineEmulator):
             self._line("error:22")
             return
         self.absolute, self.feed = absolute, feed
+        if tilt is not None and self.tilt_letter is not None and self.tilt is not None:  # not soft-limited here
+            queued = [t for letter, t in self.queue if letter == self.tilt_letter]
+            base = queued[-1] if queued else self._rest(self.tilt, now)
+            self.queue.append((self.tilt_letter, tilt if absolute else base + tilt))
         if x is not None:
-            base = (
-                self.queue[-1]
-                if self.queue
-                else (self.axis.move.target if self.axis.move is not None else self.axis.position(now))
-            )
+            queued = [t for letter, t in self.queue if letter == self.axis_letter]
+            base = queued[-1] if queued else self._rest(self.axis, now)
             target = x if absolute else base + x
             if self.soft_limits is not None and not self.soft_limits[0] <= target <= self.soft_limits[1]:
                 self.axis.halt(now)
@@ -332,9 +370,14 @@ class GrblEmulator(LineEmulator):
                 self._line("ALARM:2")
                 self._line("[MSG:Reset to continue]")
                 return
-            self.queue.append(target)
-            self.update(now)
+            self.queue.append((self.axis_letter, target))
+        self.update(now)
         self._line("ok")
+
+    @staticmethod
+    def _rest(axis: Axis, now: float) -> float:
+        """Where ``axis`` will be once its current move is done."""
+        return axis.move.target if axis.move is not None else axis.position(now)
 
     # -- motion -------------------------------------------------------------------
     def update(self, now: float) -> None:
@@ -357,14 +400,16 @@ class GrblEmulator(LineEmulator):
                 return
         if self.state.startswith("Hold") or self.state == "Alarm":
             return
-        if not self.axis.busy(now):
+        if not self._busy(now):
             if self._homing:
                 self._homing = False
-                self.axis.set_position(0.0)
+                for a in self._axes.values():
+                    a.set_position(0.0)
                 self.state = "Idle"
                 self._line("ok")
             elif self.queue:
-                self.axis.start_move(self.queue.pop(0), now)
+                letter, target = self.queue.pop(0)
+                self._axes[letter].start_move(target, now)
                 self.state = "Run"
             elif self.state in ("Run", "Home"):
                 self.state = "Idle"

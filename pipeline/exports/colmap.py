@@ -1,21 +1,25 @@
-"""COLMAP ``cameras.txt`` (one camera: ``FULL_OPENCV`` or ``OPENCV_FISHEYE``).
+"""COLMAP ``cameras.txt`` (one camera: ``OPENCV``, ``FULL_OPENCV``, ``OPENCV_FISHEYE`` or ``THIN_PRISM_FISHEYE``).
 
 COLMAP's text model holds one camera a line, ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]``, and
-skips lines starting with ``#``. ``FULL_OPENCV`` takes ``fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6``:
+skips lines starting with ``#``. ``OPENCV`` takes ``fx fy cx cy k1 k2 p1 p2`` (OpenCV's model with
+those 4 coefficients); ``FULL_OPENCV`` takes ``fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6``:
 OpenCV's pin-hole projection with its 8 rational coefficients
 (:class:`~pipeline.models.opencv_model.OpenCVModel`); ``OPENCV_FISHEYE`` takes ``fx fy cx cy
 k1 k2 k3 k4``: OpenCV's ``cv::fisheye`` (Kannala-Brandt,
-:class:`~pipeline.models.opencv_fisheye_model.OpenCVFisheyeModel`). So the export is the OpenCV
-8-coefficient or fisheye fit (:mod:`pipeline.exports.fit`); the conversion figures, what the
-camera matrix means and the corrected image are in leading comments.
+:class:`~pipeline.models.opencv_fisheye_model.OpenCVFisheyeModel`); ``THIN_PRISM_FISHEYE`` takes ``fx fy
+cx cy k1 k2 p1 p2 k3 k4 sx1 sy1``: the equidistant fisheye with radial, tangential and thin-prism terms
+(:class:`~pipeline.models.thin_prism_fisheye_model.ThinPrismFisheyeModel`). So the export is the OpenCV
+4- or 8-coefficient, fisheye or thin-prism fisheye fit (:mod:`pipeline.exports.fit`; the registry
+chooses: ``OPENCV`` when it is as exact as the calibration, else the closer of ``FULL_OPENCV`` and
+``OPENCV_FISHEYE``, or ``THIN_PRISM_FISHEYE`` when the fisheye was tried and it is clearly closer); the
+conversion figures, the choice, what the camera matrix means and the corrected image are in leading comments.
 
 COLMAP's pixel convention differs from OpenCV's (and harp's): the centre of the top-left pixel is
 at (0.5, 0.5), not (0, 0), so the file's ``cx``, ``cy`` are the OpenCV model's plus 0.5, and the
 reader takes 0.5 off. COLMAP inverts the projection (``cam_from_img``) iteratively to
 convergence, so the export needs no statement about a point solver.
 
-The reader also takes COLMAP's other OpenCV-family models: ``OPENCV`` (``fx fy cx cy k1 k2 p1
-p2``), ``RADIAL`` (``f cx cy k1 k2``), ``SIMPLE_RADIAL`` (``f cx cy k``), ``PINHOLE`` and
+The reader also takes COLMAP's other OpenCV-family models: ``RADIAL`` (``f cx cy k1 k2``), ``SIMPLE_RADIAL`` (``f cx cy k``), ``PINHOLE`` and
 ``SIMPLE_PINHOLE``.
 
 References
@@ -33,8 +37,10 @@ from dataclasses import dataclass
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.exports.statement import hash_comments, statement_lines
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
+from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
 
 PIXEL_CENTRE = 0.5
 """COLMAP's coordinate of the centre of the top-left pixel (OpenCV's and harp's: 0)."""
@@ -49,8 +55,12 @@ COLMAP_MODELS = {
     "OPENCV": 8,
     "FULL_OPENCV": 12,
     "OPENCV_FISHEYE": 8,
+    "THIN_PRISM_FISHEYE": 12,
 }
 """The COLMAP camera models this module reads, with their number of parameters."""
+
+PINHOLE_MODELS = {4: "OPENCV", 8: "FULL_OPENCV"}
+"""The COLMAP pin-hole model of an OpenCV model with 4 (``k1 k2 p1 p2``) or 8 (rational) coefficients."""
 
 
 @dataclass(frozen=True)
@@ -64,16 +74,22 @@ class ColmapCamera:
     params: tuple[float, ...]
 
 
-def colmap_model_name(model: OpenCVModel | OpenCVFisheyeModel) -> str:
-    """``OPENCV_FISHEYE`` for the fisheye model, ``FULL_OPENCV`` for the 8-coefficient pin-hole one."""
+ColmapModel = OpenCVModel | OpenCVFisheyeModel | ThinPrismFisheyeModel
+
+
+def colmap_model_name(model: ColmapModel) -> str:
+    """``OPENCV_FISHEYE`` for the fisheye model, ``OPENCV`` / ``FULL_OPENCV`` for the 4- / 8-coefficient
+    pin-hole one."""
     if isinstance(model, OpenCVFisheyeModel):
         return "OPENCV_FISHEYE"
-    if len(model.dist) != 8:
-        raise ValueError(f"COLMAP's FULL_OPENCV holds 8 OpenCV coefficients, not {len(model.dist)}")
-    return "FULL_OPENCV"
+    if isinstance(model, ThinPrismFisheyeModel):
+        return "THIN_PRISM_FISHEYE"
+    if len(model.dist) not in PINHOLE_MODELS:
+        raise ValueError(f"COLMAP's OPENCV and FULL_OPENCV hold 4 or 8 OpenCV coefficients, not {len(model.dist)}")
+    return PINHOLE_MODELS[len(model.dist)]
 
 
-def colmap_line(model: OpenCVModel | OpenCVFisheyeModel, width: int, height: int, camera_id: int = CAMERA_ID) -> str:
+def colmap_line(model: ColmapModel, width: int, height: int, camera_id: int = CAMERA_ID) -> str:
     """``CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]`` of an OpenCV model (principal point in COLMAP's convention)."""
     name = colmap_model_name(model)
     params = [model.fx, model.fy, model.cx + PIXEL_CENTRE, model.cy + PIXEL_CENTRE, *model.dist]
@@ -81,7 +97,7 @@ def colmap_line(model: OpenCVModel | OpenCVFisheyeModel, width: int, height: int
 
 
 def colmap_text(
-    model: OpenCVModel | OpenCVFisheyeModel,
+    model: ColmapModel,
     width: int,
     height: int,
     error: ConversionError | None = None,
@@ -98,19 +114,24 @@ def colmap_text(
     ``cam_from_img`` is at ``newK @ R @ (x, y, 1)`` in harp undistort's corrected image (harp pixels).
     """
     name = colmap_model_name(model)
-    kind = "OpenCV fisheye, Kannala-Brandt k1..k4" if name == "OPENCV_FISHEYE" else "OpenCV pin-hole, 8 coefficients"
+    kind = {
+        "OPENCV_FISHEYE": "OpenCV fisheye, Kannala-Brandt k1..k4",
+        "THIN_PRISM_FISHEYE": "equidistant fisheye with k1..k4, tangential p1 p2 and thin prism sx1 sy1",
+    }.get(name, f"OpenCV pin-hole, {len(model.dist)} coefficients")
     lines = [f"COLMAP camera list exported by harp station: 1 camera, {name} ({kind})"]
-    lines += [
-        *stamp,
-        *(error.lines() if error is not None else []),
-        *([choice] if choice else []),
-        *([camera.statement] if camera is not None else []),
-        "pixel convention: COLMAP's (the centre of the top-left pixel at 0.5, 0.5): cx, cy are OpenCV's + 0.5",
-        *(frame.ray_lines("COLMAP's cam_from_img") if frame is not None else []),
-        *notes,
-        "CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
-    ]
-    return "".join(f"# {s}\n" for s in lines) + colmap_line(model, width, height) + "\n"
+    lines += statement_lines(
+        stamp,
+        error,
+        choice=choice,
+        camera=camera,
+        conventions=[
+            "pixel convention: COLMAP's (the centre of the top-left pixel at 0.5, 0.5): cx, cy are OpenCV's + 0.5"
+        ],
+        frame=frame.ray_lines("COLMAP's cam_from_img") if frame is not None else (),
+        notes=notes,
+    )
+    lines.append("CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]")
+    return hash_comments(lines) + colmap_line(model, width, height) + "\n"
 
 
 def parse_colmap_cameras(text: str, name: str = "<text>") -> list[ColmapCamera]:
@@ -143,7 +164,7 @@ def parse_colmap_cameras(text: str, name: str = "<text>") -> list[ColmapCamera]:
     return cams
 
 
-def camera_model(cam: ColmapCamera) -> OpenCVModel | OpenCVFisheyeModel:
+def camera_model(cam: ColmapCamera) -> ColmapModel:
     """The OpenCV model of a COLMAP camera (principal point back to OpenCV's pixel convention)."""
     p = cam.params
     if cam.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"):
@@ -156,12 +177,15 @@ def camera_model(cam: ColmapCamera) -> OpenCVModel | OpenCVFisheyeModel:
     cx, cy = cx - PIXEL_CENTRE, cy - PIXEL_CENTRE
     if cam.model == "OPENCV_FISHEYE":
         return OpenCVFisheyeModel(fx=f, fy=fy, cx=cx, cy=cy, dist=(dist[0], dist[1], dist[2], dist[3]))
+    if cam.model == "THIN_PRISM_FISHEYE":
+        d = dist
+        return ThinPrismFisheyeModel(fx=f, fy=fy, cx=cx, cy=cy, dist=(d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]))
     return OpenCVModel(fx=f, fy=fy, cx=cx, cy=cy, dist=dist)
 
 
 def read_colmap_text(
     text: str, name: str = "<text>", size: tuple[int, int] | None = None
-) -> tuple[OpenCVModel | OpenCVFisheyeModel, tuple[int, int], str]:
+) -> tuple[ColmapModel, tuple[int, int], str]:
     """The camera of a ``cameras.txt``: ``(model, (width, height), COLMAP model name)``.
 
     A file with several cameras: the one of ``size`` if exactly one has it, else ValueError.

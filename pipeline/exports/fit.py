@@ -60,6 +60,7 @@ from pipeline.models.homography import apply_homography
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LensfunModel
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
+from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
 from pipeline.normalise import corner_homography, fit_homography, normalise_by_corners
 from pipeline.straightness import Straightness, straightness
 
@@ -823,3 +824,42 @@ def fit_fisheye_camera(
     out = make(th)
     family = "the OpenCV fisheye model with the measured camera matrix"
     return out, conversion_error(model, out, width, height, edges=edges, export=family)
+
+
+def fit_thin_prism_fisheye(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    start: OpenCVFisheyeModel,
+    *,
+    edges: Sequence[Array] | None = None,
+    n_long: int = FIT_GRID_LONG,
+) -> tuple[ThinPrismFisheyeModel, ConversionError]:
+    """Closest COLMAP ``THIN_PRISM_FISHEYE`` projection to ``model``, from the fisheye fit ``start``.
+
+    ``start`` (:func:`fit_fisheye`) is the member of the family with ``p = s = 0``; the fit starts at
+    it and its homography (:func:`ideal_homography`), the focal length held at its value, and moves
+    the principal point, ``k1..k4``, ``p1 p2``, ``sx1 sy1`` and the homography together. LM is
+    monotone from that start, so the result is never farther from ``model`` (on the fitting grid)
+    than ``start``.
+    """
+    prob = _Problem.make(model, width, height, n_long)
+    s = 0.5 * float(np.hypot(width, height))
+
+    def make(theta: Array) -> ThinPrismFisheyeModel:
+        k1, k2, p1, p2, k3, k4, sx, sy = (float(v) for v in theta[2:10])
+        return ThinPrismFisheyeModel(
+            fx=start.fx,
+            fy=start.fy,
+            cx=start.cx + s * theta[0],
+            cy=start.cy + s * theta[1],
+            dist=(k1, k2, p1, p2, k3, k4, sx, sy),
+        )
+
+    k = start.dist
+    theta0 = np.array([0.0, 0.0, k[0], k[1], 0.0, 0.0, k[2], k[3], 0.0, 0.0])
+    h = prob.t @ np.linalg.inv(ideal_homography(model, start, width, height)) @ prob.tinv
+    h8 = np.asarray((h / h[2, 2]).ravel()[:8], dtype=np.float64)
+    th, _, _ = _least_squares(prob, make, theta0, h8)
+    out = make(th)
+    return out, conversion_error(model, out, width, height, edges=edges, export="COLMAP's THIN_PRISM_FISHEYE model")

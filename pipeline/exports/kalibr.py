@@ -39,6 +39,7 @@ import yaml
 from pipeline.exports.fit import RADTAN_COEFFS, ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.exports.statement import OPENCV_PIXELS, hash_comments, statement_lines
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -73,19 +74,21 @@ def kalibr_text(
     comments state ``R`` and ``newK`` (:meth:`~pipeline.exports.frame.FrameStatement.ray_lines`)."""
     cam_model, dist_model = kalibr_models(model)
     lines = [f"Kalibr camera chain exported by harp station: {CAMERA}, {cam_model}-{dist_model}"]
-    lines += [
-        *stamp,
-        *(error.lines() if error is not None else []),
-        *([choice] if choice else []),
-        *([camera.statement] if camera is not None else []),
-        "pixel convention: OpenCV's (the centre of the top-left pixel at 0, 0)",
-        "Kalibr's projection (distort, then fu x + pu) is closed form and holds this conversion error; Kalibr's "
-        "keypoint undistortion stops after a fixed number of steps (radtan: 5 Gauss-Newton, equidistant: 20 "
-        "fixed-point) and can stop short on a strong lens: invert to convergence (e.g. cv2.fisheye.undistortPoints "
-        "with criteria, cv2.undistortPointsIter)",
-        *(frame.ray_lines("Kalibr's keypointToEuclidean (normalised)") if frame is not None else []),
-        *notes,
-    ]
+    lines += statement_lines(
+        stamp,
+        error,
+        choice=choice,
+        camera=camera,
+        conventions=[
+            OPENCV_PIXELS,
+            "Kalibr's projection (distort, then fu x + pu) is closed form and holds this conversion error; Kalibr's "
+            "keypoint undistortion stops after a fixed number of steps (radtan: 5 Gauss-Newton, equidistant: 20 "
+            "fixed-point) and can stop short on a strong lens: invert to convergence (e.g. cv2.fisheye.undistortPoints "
+            "with criteria, cv2.undistortPointsIter)",
+        ],
+        frame=frame.ray_lines("Kalibr's keypointToEuclidean (normalised)") if frame is not None else (),
+        notes=notes,
+    )
     nums = ", ".join
 
     def fl(vals: Any) -> str:
@@ -101,7 +104,7 @@ def kalibr_text(
         f"  rostopic: {rostopic}",
         "  cam_overlaps: []",
     ]
-    return "".join(f"# {s}\n" for s in lines) + "\n".join(body) + "\n"
+    return hash_comments(lines) + "\n".join(body) + "\n"
 
 
 def sniff_kalibr(data: bytes) -> bool:

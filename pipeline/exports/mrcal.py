@@ -24,6 +24,7 @@ from typing import Any
 from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
+from pipeline.exports.statement import statement_lines
 from pipeline.models.opencv_model import OpenCVModel
 
 MRCAL_LENSMODELS = {4: "LENSMODEL_OPENCV4", 5: "LENSMODEL_OPENCV5", 8: "LENSMODEL_OPENCV8", 12: "LENSMODEL_OPENCV12"}
@@ -48,24 +49,16 @@ def mrcal_text(
     if n not in MRCAL_LENSMODELS:
         raise ValueError(f"mrcal has LENSMODEL_OPENCV4/5/8/12, not {n} coefficients")
     intr = [model.fx, model.fy, model.cx, model.cy, *model.dist]
-    lines = [f"# mrcal camera model exported by harp station ({MRCAL_LENSMODELS[n]})"]
-    lines += [
-        f"# {s}"
-        for s in [
-            *stamp,
-            *(error.lines() if error else []),
-            *([camera.statement] if camera else []),
-            *(
-                [
-                    f"corrected image = harp undistort's with {frame.choice.describe()}: {frame.frame.describe()}",
-                    "a ray v of mrcal.unproject is at harp_new_camera_matrix @ harp_rectification_matrix @ v in it",
-                ]
-                if frame is not None
-                else []
-            ),
-            *notes,
+    frame_lines = (
+        [
+            f"corrected image = harp undistort's with {frame.choice.describe()}: {frame.frame.describe()}",
+            "a ray v of mrcal.unproject is at harp_new_camera_matrix @ harp_rectification_matrix @ v in it",
         ]
-    ]
+        if frame is not None
+        else []
+    )
+    lines = [f"# mrcal camera model exported by harp station ({MRCAL_LENSMODELS[n]})"]
+    lines += [f"# {s}" for s in statement_lines(stamp, error, camera=camera, frame=frame_lines, notes=notes)]
     lines += [
         "{",
         f"    'lensmodel':  '{MRCAL_LENSMODELS[n]}',",

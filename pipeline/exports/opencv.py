@@ -39,6 +39,7 @@ from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed
+from pipeline.exports.statement import statement_lines
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -80,16 +81,14 @@ def opencv_text(
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     kind = "fisheye (cv::fisheye, Kannala-Brandt k1..k4)" if fisheye else f"pinhole, {len(model.dist)} coefficients"
     fs.writeComment(comment or f"OpenCV {kind} distortion exported by harp station")
-    solver_lines = solver.lines() if solver is not None else []
-    for line in [
-        *stamp,
-        *(error.lines() if error is not None else []),
-        *solver_lines,
-        *([camera.statement] if camera else []),
-        *(frame.lines(fisheye) if frame is not None else []),
-        *notes,
-        *(c.line() for c in channels),
-    ]:
+    for line in statement_lines(
+        stamp,
+        error,
+        solver=solver.lines() if solver is not None else (),
+        camera=camera,
+        frame=frame.lines(fisheye) if frame is not None else (),
+        notes=(*notes, *(c.line() for c in channels)),
+    ):
         fs.writeComment(line)
     fs.write("image_width", int(width))
     fs.write("image_height", int(height))

@@ -31,7 +31,8 @@ import numpy.typing as npt
 
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports import maps as maps_fmt
-from pipeline.exports.colmap import colmap_text, read_colmap_text, sniff_colmap
+from pipeline.exports.basalt import basalt_text, read_basalt_text, sniff_basalt
+from pipeline.exports.colmap import colmap_model_name, colmap_text, read_colmap_text, sniff_colmap
 from pipeline.exports.colour import ColourCorrection, OpenCVChannel, lensfun_colour, opencv_channels
 from pipeline.exports.fit import (
     RADTAN_COEFFS,
@@ -42,6 +43,7 @@ from pipeline.exports.fit import (
     fit_lensfun,
     fit_opencv,
     fit_opencv_camera,
+    fit_thin_prism_fisheye,
     frame_error,
 )
 from pipeline.exports.frame import FrameStatement, frame_statement
@@ -63,10 +65,13 @@ from pipeline.exports.lensfun import (
     lensfun_database_text,
     read_lensfun_text,
 )
+from pipeline.exports.metashape import PINHOLE_COEFFS as METASHAPE_PINHOLE_COEFFS
+from pipeline.exports.metashape import metashape_text, read_metashape_text, sniff_metashape
 from pipeline.exports.mrcal import mrcal_text, read_mrcal_text, sniff_mrcal
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_EQUIDISTANT_READERS, read_ros_text, ros_text
 from pipeline.exports.solvers import SolverNeed, solver_need
+from pipeline.exports.statement import hash_comments
 from pipeline.intrinsics import Intrinsics, distortion_digest
 from pipeline.model_file import FORMAT_VERSION, model_file_text, parse_model_text
 from pipeline.models.base import DistortionModel
@@ -76,6 +81,7 @@ from pipeline.models.lensfun_model import geometry_focal as lensfun_geometry_foc
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.remap_model import CorrectionMapModel, RemapModel
+from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
 from pipeline.plain import json_default
 
 Array = npt.NDArray[np.float64]
@@ -342,7 +348,7 @@ def _lens_notes(src: ExportSource) -> tuple[str, ...]:
 class _Fitted:
     """A pin-hole or fisheye fit with what its file states: camera choice, measured-camera lines, frame, warnings."""
 
-    model: OpenCVModel | OpenCVFisheyeModel
+    model: OpenCVModel | OpenCVFisheyeModel | ThinPrismFisheyeModel
     error: ConversionError
     cam: CameraMatrixChoice
     measured: tuple[str, ...]
@@ -470,7 +476,17 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
 def _pinhole_or_fisheye(
     fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str], fisheye_coeffs: int = 4
 ) -> tuple[_Fitted, str]:
-    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``.
+    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``
+    (:func:`_pinhole_or_fisheye_tried` without the fisheye fit)."""
+    chosen, why, _ = _pinhole_or_fisheye_tried(fmt, src, opt, n, names, fisheye_coeffs)
+    return chosen, why
+
+
+def _pinhole_or_fisheye_tried(
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str], fisheye_coeffs: int = 4
+) -> tuple[_Fitted, str, _Fitted | None]:
+    """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer:
+    ``(fit, why, the fisheye fit if it was tried)``.
 
     For consumers that invert either model to convergence (or whose figures are the projection's):
     the fisheye model is fitted too exactly when :data:`AUTO` would fit it (:func:`_fisheye_reason`:
@@ -487,22 +503,27 @@ def _pinhole_or_fisheye(
             fe = _fit_fisheye_export(fmt, src, opt, fisheye_coeffs)
         except ValueError:
             raise exc from None
-        return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})"
+        return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})", fe
     e = pin.error
     reason = _fisheye_reason(src, e, e.max_mod_h_px)
     if reason is None:
         limit, what = _auto_limit(src)
-        return pin, (
-            f"{names[0]}: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
-            f"homography) is within {what} ({limit:.4f} px), {names[1]} not tried"
+        return (
+            pin,
+            (
+                f"{names[0]}: its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px modulo "
+                f"homography) is within {what} ({limit:.4f} px), {names[1]} not tried"
+            ),
+            None,
         )
     fe = _fit_fisheye_export(fmt, src, opt, fisheye_coeffs)
     chosen = fe if fe.error.max_mod_h_px < e.max_mod_h_px else pin
-    return chosen, (
+    why = (
         f"{names[1] if chosen is fe else names[0]}, the closer in max ({reason}): {names[0]} RMS "
         f"{e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px, {names[1]} RMS {fe.error.rms_mod_h_px:.4f} / "
         f"max {fe.error.max_mod_h_px:.4f} px modulo homography"
     )
+    return chosen, why, fe
 
 
 COLMAP_PINHOLE_COEFFS = 8
@@ -514,8 +535,14 @@ def _write_chosen_family(
 ) -> Export:
     """The file of a format that holds a pin-hole fit with ``n`` coefficients or the fisheye fit, as
     :func:`_pinhole_or_fisheye` chooses, written by ``text_of`` (:func:`~pipeline.exports.colmap.colmap_text`,
-    :func:`~pipeline.exports.kalibr.kalibr_text`)."""
+    :func:`~pipeline.exports.kalibr.kalibr_text`, :func:`~pipeline.exports.metashape.metashape_text`)."""
     chosen, choice = _pinhole_or_fisheye(fmt, src, opt, n, names)
+    return _write_fitted(fmt, src, chosen, choice, text_of)
+
+
+def _write_fitted(fmt: str, src: ExportSource, chosen: _Fitted, choice: str, text_of: Callable[..., str]) -> Export:
+    """The file of one fit, written by ``text_of`` with the statement every format makes (``choice``: the
+    model and why)."""
     text = text_of(
         chosen.model,
         src.width,
@@ -532,11 +559,76 @@ def _write_chosen_family(
 
 
 def _write_colmap(src: ExportSource, opt: ExportOptions) -> Export:
-    """COLMAP ``cameras.txt``: FULL_OPENCV (the OpenCV 8-coefficient fit) or OPENCV_FISHEYE (the fisheye
-    fit). COLMAP inverts either model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
+    """COLMAP ``cameras.txt``: OPENCV (the OpenCV 4-coefficient fit, ``k1 k2 p1 p2``) when it is as exact
+    as the calibration (:func:`_fisheye_reason` finds no reason to try more: not a wide-angle calibration,
+    RMS, residual ``d`` and max within the limit of :func:`_auto_limit`); otherwise FULL_OPENCV (the
+    8-coefficient fit) or OPENCV_FISHEYE (the fisheye fit), as :func:`_pinhole_or_fisheye` chooses, or,
+    when the fisheye was tried (and no measured camera matrix is held), THIN_PRISM_FISHEYE fitted from
+    it (:func:`~pipeline.exports.fit.fit_thin_prism_fisheye`) if its max is below
+    :data:`COLMAP_THIN_PRISM_MARGIN` times the choice's.
+    COLMAP inverts every model iteratively to convergence (``cam_from_img``), so, unlike OpenCV's
     default point solvers, the conversion error is what it sees."""
+    try:
+        simple = _fit_pinhole("colmap", src, opt, RADTAN_COEFFS, hint=False)
+    except ValueError:  # 4 coefficients cannot hold the lens without a fold: the richer models decide
+        simple = None
+    if simple is not None and _fisheye_reason(src, simple.error, simple.error.max_mod_h_px) is None:
+        limit, what = _auto_limit(src)
+        e = simple.error
+        choice = (
+            f"OPENCV (k1 k2 p1 p2): its conversion error (RMS {e.rms_mod_h_px:.4f} px, max {e.max_mod_h_px:.4f} px "
+            f"modulo homography) is within {what} ({limit:.4f} px), FULL_OPENCV and OPENCV_FISHEYE not tried"
+        )
+        return _write_fitted("colmap", src, simple, choice, colmap_text)
     names = ("FULL_OPENCV", "OPENCV_FISHEYE")
-    return _write_chosen_family("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names, colmap_text)
+    chosen, choice, fe = _pinhole_or_fisheye_tried("colmap", src, opt, COLMAP_PINHOLE_COEFFS, names)
+    if fe is not None and fe.cam.camera is None and isinstance(fe.model, OpenCVFisheyeModel):
+        prism = _fit_thin_prism("colmap", src, opt, fe)
+        e = prism.error
+        if e.max_mod_h_px < COLMAP_THIN_PRISM_MARGIN * chosen.error.max_mod_h_px:
+            choice = (
+                f"THIN_PRISM_FISHEYE, closer in max than {colmap_model_name(chosen.model)} by more than "
+                f"{1 - COLMAP_THIN_PRISM_MARGIN:.0%} (RMS {e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px modulo "
+                f"homography); {choice}"
+            )
+            return _write_fitted("colmap", src, prism, choice, colmap_text)
+        choice += f"; THIN_PRISM_FISHEYE RMS {e.rms_mod_h_px:.4f} / max {e.max_mod_h_px:.4f} px is not closer enough"
+    return _write_fitted("colmap", src, chosen, choice, colmap_text)
+
+
+COLMAP_THIN_PRISM_MARGIN = 0.8
+"""COLMAP's THIN_PRISM_FISHEYE replaces the FULL_OPENCV or OPENCV_FISHEYE choice only when its max error is
+below this fraction of the choice's: the simpler models are read by more tools (COLMAP's undistorter,
+OpenCV-based readers of cameras.txt)."""
+
+
+def _fit_thin_prism(fmt: str, src: ExportSource, opt: ExportOptions, fe: _Fitted) -> _Fitted:
+    """COLMAP's THIN_PRISM_FISHEYE fitted from the fisheye fit ``fe`` (no measured camera matrix), with what
+    its file states."""
+    assert isinstance(fe.model, OpenCVFisheyeModel)
+    m, err = fit_thin_prism_fisheye(src.model, src.width, src.height, fe.model, edges=src.edges)
+    fr = _frame_of(fmt, src, opt, m, m.camera_matrix, fe.cam.focal_px)
+    warnings = _camera_warnings(src, opt) + conversion_warnings(fmt, src, err)
+    return _Fitted(m, err, fe.cam, fe.measured, fr, tuple(warnings))
+
+
+def _write_basalt(src: ExportSource, opt: ExportOptions) -> Export:
+    """Basalt calibration JSON: ``kb4``, the fisheye fit (Basalt's Kannala-Brandt is OpenCV's fisheye)."""
+    fitted = _fit_fisheye_export("basalt", src, opt)
+    e = fitted.error
+    choice = (
+        f"kb4 (Basalt's Kannala-Brandt, OpenCV's fisheye fit): RMS {e.rms_mod_h_px:.4f} px, max "
+        f"{e.max_mod_h_px:.4f} px modulo homography"
+    )
+    return _write_fitted("basalt", src, fitted, choice, basalt_text)
+
+
+def _write_metashape(src: ExportSource, opt: ExportOptions) -> Export:
+    """Agisoft Metashape calibration XML: a frame camera (the OpenCV 5-coefficient fit, Metashape's p1/p2
+    swapped, ``K4 = 0``) or a fisheye camera (the fisheye fit, ``K1..K4``), as :func:`_pinhole_or_fisheye`
+    chooses."""
+    names = ("frame", "fisheye")
+    return _write_chosen_family("metashape", src, opt, METASHAPE_PINHOLE_COEFFS, names, metashape_text)
 
 
 def _write_kalibr(src: ExportSource, opt: ExportOptions) -> Export:
@@ -606,6 +698,7 @@ def _write_lcp(src: ExportSource, opt: ExportOptions) -> Export:
         f"{AUTHOR_LINE}: Adobe lens profile; centre = ImageXCenter * width, ImageYCenter * height, pixel (i, j) at "
         "(i, j); focal = FocalLengthX * max(width, height) (RawTherapee's reading, rtengine/lcp.cc)",
     )
+    assert isinstance(chosen.model, (OpenCVModel, OpenCVFisheyeModel))  # the 5- or 2-coefficient fits
     profile = LcpProfile(chosen.model, src.width, src.height, lens.focal_mm, opt.focus_distance_m, tuple(comments))
     text, done = lcp_text(profile, lens, header=header, existing=existing, existing_name=opt.existing_name)
     warnings = [*chosen.warnings, *(f"lcp: {d}" for d in done if d.startswith("replaced "))]
@@ -872,7 +965,7 @@ def _write_harp(src: ExportSource, opt: ExportOptions) -> Export:
         provenance=dict(src.provenance),
         intrinsics=src.intrinsics,
     )
-    head = "".join(f"# {line}\n" for line in src.stamp)
+    head = hash_comments(src.stamp)
     return Export("harp", (head + text).encode())
 
 
@@ -1003,6 +1096,16 @@ def _read_lcp(data: bytes, req: ReadRequest) -> Correction:
     return Correction(m, None, "lcp:" + ("FisheyeModel" if entry.fisheye else "PerspectiveModel"))
 
 
+def _read_basalt(data: bytes, req: ReadRequest) -> Correction:
+    m, size, kind = read_basalt_text(_text(data, req.name), req.name, (req.width, req.height))
+    return Correction(m, size, f"basalt:{kind}")
+
+
+def _read_metashape(data: bytes, req: ReadRequest) -> Correction:
+    m, size, proj = read_metashape_text(_text(data, req.name), req.name)
+    return Correction(m, size, f"metashape:{proj}")
+
+
 def _read_maps(data: bytes, req: ReadRequest) -> Correction:
     m = maps_fmt.read_maps_npz(data, req.name)
     return Correction(m, maps_fmt.maps_source_size(data) or (m.width, m.height), "maps")
@@ -1101,7 +1204,8 @@ FORMATS: dict[str, ExportFormat] = {
         ),
         ExportFormat(
             "colmap",
-            "COLMAP cameras.txt, FULL_OPENCV (8 coefficients) or OPENCV_FISHEYE for a wide lens, whichever is closer",
+            "COLMAP cameras.txt, OPENCV (k1 k2 p1 p2) when as exact as the calibration, else FULL_OPENCV (8 "
+            "coefficients) or OPENCV_FISHEYE for a wide lens, whichever is closer",
             ".txt",
             False,
             _write_colmap,
@@ -1126,6 +1230,25 @@ FORMATS: dict[str, ExportFormat] = {
             _write_lcp,
             _read_lcp,
             sniff_lcp,
+        ),
+        ExportFormat(
+            "basalt",
+            "Basalt calibration JSON, kb4 (Kannala-Brandt fx fy cx cy k1..k4; the IMU members placeholders)",
+            ".json",
+            False,
+            _write_basalt,
+            _read_basalt,
+            sniff_basalt,
+        ),
+        ExportFormat(
+            "metashape",
+            "Agisoft Metashape calibration XML, frame (k1 k2 k3 p1 p2, p1/p2 swapped from OpenCV's) or fisheye "
+            "(k1..k4) for a wide lens, whichever is closer",
+            ".xml",
+            False,
+            _write_metashape,
+            _read_metashape,
+            sniff_metashape,
         ),
         ExportFormat(
             "maps",
@@ -1160,12 +1283,25 @@ FORMATS: dict[str, ExportFormat] = {
     )
 }
 
-SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "lcp", "mrcal", "colmap", "kalibr", "opencv", "ros")
+SNIFF_ORDER = (
+    "stmap",
+    "maps",
+    "harp",
+    "lensfun",
+    "lcp",
+    "metashape",
+    "basalt",
+    "mrcal",
+    "colmap",
+    "kalibr",
+    "opencv",
+    "ros",
+)
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
 RECOGNISED = (
     "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, Kalibr camchain, "
-    "Adobe LCP, maps .npz or STMap .exr"
+    "Adobe LCP, Basalt calibration JSON, Metashape calibration XML, maps .npz or STMap .exr"
 )
 
 

@@ -33,6 +33,7 @@ from pipeline.exports.fit import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed
+from pipeline.exports.statement import hash_comments, statement_lines
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -109,18 +110,16 @@ def ros_text(
         "projection_matrix": _mat(np.hstack([proj, np.zeros((3, 1))])),
     }
     head = "# ROS camera_info calibration exported by harp station\n"
-    readers = [ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else []
-    solver_lines = solver.lines(ros=True) if solver is not None else []
-    lines = [
-        *stamp,
-        *readers,
-        *(error.lines() if error is not None else []),
-        *solver_lines,
-        *([camera.statement] if camera else []),
-        *(frame.lines(isinstance(model, OpenCVFisheyeModel)) if frame is not None else []),
-        *notes,
-    ]
-    head += "".join(f"# {line}\n" for line in lines)
+    lines = statement_lines(
+        stamp,
+        error,
+        caveats=[ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else [],
+        solver=solver.lines(ros=True) if solver is not None else (),
+        camera=camera,
+        frame=frame.lines(isinstance(model, OpenCVFisheyeModel)) if frame is not None else (),
+        notes=notes,
+    )
+    head += hash_comments(lines)
     return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))
 
 

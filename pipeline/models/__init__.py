@@ -17,10 +17,11 @@ from pipeline.models.polynomial import PolynomialModel
 from pipeline.models.radial import RadialModel
 from pipeline.models.radial_field import RadialFieldModel
 from pipeline.models.remap_model import RemapModel
+from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
 
 MODEL_TYPES: dict[str, type[DistortionModel]] = model_types()
 """Every model class by the ``name`` its files carry: identity, radial, poly, homography,
-opencv, opencv_fisheye, lensfun, grid_field, remap, radial_field."""
+opencv, opencv_fisheye, thin_prism_fisheye, lensfun, grid_field, remap, radial_field."""
 
 __all__ = [
     "MODEL_TYPES",
@@ -35,6 +36,7 @@ __all__ = [
     "RadialFieldModel",
     "RadialModel",
     "RemapModel",
+    "ThinPrismFisheyeModel",
     "model_from_dict",
     "model_types",
 ]

@@ -9,13 +9,19 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
     ros-equidistant  ROS camera_info YAML, equidistant (fisheye k1..k4)
     lensfun          lensfun database XML (ptlens); -o an existing database adds the lens to it
     mrcal            mrcal .cameramodel, LENSMODEL_OPENCV12 (--coeffs 8: OPENCV8)
-    colmap           COLMAP cameras.txt: FULL_OPENCV (8 coefficients), or OPENCV_FISHEYE when the
-                     fisheye model is closer (tried as auto tries it)
+    colmap           COLMAP cameras.txt: OPENCV (k1 k2 p1 p2) when as exact as the calibration, else
+                     FULL_OPENCV (8 coefficients) or OPENCV_FISHEYE when the fisheye model is closer
+                     (tried as auto tries it), or THIN_PRISM_FISHEYE when the fisheye was tried and
+                     it is 20 % closer in max
     kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
                      fisheye model is closer (tried as auto tries it)
     lcp              Adobe lens profile (Lightroom, Camera Raw, RawTherapee): PerspectiveModel (OpenCV's 5
                      coefficients) or FisheyeModel (k1 k2), whichever is closer; filed under --focal-mm and
                      --distance (m); -o an existing profile of the lens adds this setting to it
+    basalt           Basalt calibration JSON: kb4 (Kannala-Brandt fx fy cx cy k1..k4), camera only
+                     (the IMU members are placeholders)
+    metashape        Agisoft Metashape calibration XML: frame (k1 k2 k3 p1 p2, Metashape's p1/p2
+                     swapped from OpenCV's, cx/cy from the image centre), or fisheye (k1..k4) when closer
     maps             .npz with float32 map_x, map_y for cv2.remap: exactly harp undistort's
     stmap            STMap, 32-bit float OpenEXR (Nuke/Natron): exactly harp undistort's, alpha = has a source
     stmap-redistort  the other STMap of a pair: a render of the corrected image (--overscan) back into the
@@ -83,6 +89,8 @@ FORMAT_CHOICES = (
     "colmap",
     "kalibr",
     "lcp",
+    "basalt",
+    "metashape",
     "maps",
     "stmap",
     "stmap-redistort",
@@ -205,7 +213,7 @@ def register(subparsers) -> None:
         help=COMMANDS["export"],
         description=(
             "Export a harp model file for other software (OpenCV pin-hole or fisheye, ROS camera_info, "
-            "lensfun, mrcal, COLMAP, Kalibr, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
+            "lensfun, mrcal, COLMAP, Kalibr, Basalt, Metashape, per-pixel maps, STMap, JSON), stating the conversion error in pixels."
         ),
     )
     p.add_argument("model", metavar="MODEL", help="harp model file (from harp calibrate or a session)")

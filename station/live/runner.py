@@ -52,7 +52,7 @@ from pipeline.cfa import measure_mosaic, mosaic_luma
 from pipeline.tca import channel_offsets
 from station.config import CheckConfig
 from station.live.checks import live_warnings
-from station.live.view import channels_view, encode_frame, view_of
+from station.live.view import channels_view, display_size, encode_frame, view_of
 
 HISTORY = 400
 """Frames kept in the through-focus history."""
@@ -610,6 +610,27 @@ class LiveStation:
     def begin_session(self, info: dict[str, Any]) -> None:
         with self._lock:
             self._session = {"records": [], "shots": [], "fits": [], "qa": [], "state": "running", **info}
+
+    def show_board_preview(self, image: Any, corners: Any, reason: str | None) -> None:
+        """A frame taken while the operator places the board (a session's camera-matrix stage), shown as
+        the page's picture with the board's corners found in it (``corners`` (N, 2) pixels, or None and
+        why not: ``reason``); no harp assessment."""
+        img = np.asarray(image)
+        h, w = img.shape[:2]
+        full = 65535.0 if img.dtype == np.uint16 else 255.0
+        dw, dh, f = display_size(w, h, self.display_width)
+        jpeg = encode_frame(img, self.display_width, full)
+        pts = [] if corners is None else np.round((np.asarray(corners) + 0.5) * f - 0.5, 1).tolist()
+        with self._lock:
+            self._frame_id += 1
+            self._view = {
+                "frame_id": self._frame_id,
+                "display": {"width": dw, "height": dh, "factor": f},
+                "board_preview": {"corners": pts, "found": corners is not None, "reason": reason},
+                "warnings": [],
+                "ok": corners is not None,
+            }
+            self._jpeg = jpeg
 
     def show_frame(self, frame: Any, stage_deg: float | None = None, **info: Any) -> None:
         """A frame the session captured, to assess on this station's thread.

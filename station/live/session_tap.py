@@ -85,6 +85,12 @@ class SessionTap:
         self._show(self._session.lines[-1])  # the frame's line as written
         return out
 
+    def show_board_preview(self, image: np.ndarray, found: Any) -> None:
+        """A frame taken while the operator places the board, and the board found in it (a
+        :class:`pipeline.board.BoardView`, or a falsy :class:`pipeline.board.BoardRejected` saying why not)."""
+        corners = np.asarray(found.image_points, np.float64).reshape(-1, 2) if found else None
+        self._live.show_board_preview(image, corners, None if found else found.reason)
+
     # -- what the page shows ---------------------------------------------------------------
     def _show(self, record: dict[str, Any]) -> None:
         kind = record.get("kind")

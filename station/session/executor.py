@@ -60,7 +60,7 @@ from drivers.protocols import (
     Turntable,
     TurntableRanges,
 )
-from pipeline.board import parse_board
+from pipeline.board import detect_board, parse_board
 from pipeline.intrinsics import Intrinsics
 from pipeline.plain import json_default
 from station import __version__
@@ -588,9 +588,13 @@ class Executor:
         def grab() -> Frame:
             if isinstance(self.camera, IndexedCapture):
                 self.camera.set_capture_index(step.view_idx)  # the same noise on resume
-            if step.degrees is None:  # where the operator placed it (PlaceBoard)
+            if step.degrees is not None:
+                return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            try:  # where the operator placed it (PlaceBoard)
                 return self.camera.capture(timeout=cfg.capture.timeout_s)
-            return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
+            finally:
+                if isinstance(self.camera, BoardScene):  # the stand-in takes the board away: the harp again
+                    self.camera.show_board(None)
 
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
         rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
@@ -617,9 +621,30 @@ class Executor:
                 f"none; continue on a terminal with: harp session resume {self.session.path}"
             )
         try:
-            return self.operator.ask(lines)
+            return self.operator.ask(lines, self._board_preview())
         except NoOperator as exc:
             raise SessionAborted(f"{exc}; then: harp session resume {self.session.path}") from None
+
+    def _board_preview(self) -> Callable[[], None] | None:
+        """While the operator places the board, and a live page shows the session (its session directory
+        has ``show_board_preview``: :class:`station.live.session_tap.SessionTap`): a frame now and then,
+        and where the board is found in it, for the page. Best effort: a frame that fails is left out (the
+        view's own capture retries)."""
+        show = getattr(self.session, "show_board_preview", None)
+        if show is None or self.config.intrinsics is None:
+            return None
+        spec = parse_board(self.config.intrinsics.board)
+        timeout = self.config.capture.timeout_s
+
+        def preview() -> None:
+            try:
+                frame = self.camera.capture(timeout=timeout)
+            except (DriverError, OSError):
+                return
+            image = np.asarray(frame.image)
+            show(image, detect_board(image, spec, name="the camera's picture"))
+
+        return preview
 
     def _check_board(self, step: CheckBoard) -> BoardCheck:
         """Find the board in the view just saved: accepted (``board-ok`` with its corners, which the live

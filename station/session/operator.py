@@ -93,8 +93,9 @@ class OperatorDesk:
             return self._stdin_open or self._pages > 0
 
     # -- the question ----------------------------------------------------------------------
-    def ask(self, lines: Sequence[str]) -> str:
+    def ask(self, lines: Sequence[str], idle: Callable[[], None] | None = None) -> str:
         """Say ``lines`` (the wanted view, why, what was wrong) and the prompt; the operator's answer.
+        ``idle`` is called while no answer has come (the live page's preview of the camera).
 
         Raises :class:`NoOperator` when nobody can answer; Ctrl-C (KeyboardInterrupt) goes through.
         """
@@ -115,6 +116,8 @@ class OperatorDesk:
                 got = self._answers.get(timeout=0.2)  # short waits: Ctrl-C is seen at once
             except queue.Empty:
                 got = ""
+                if idle is not None:
+                    idle()
             if got:
                 return got  # answers given ahead (lines typed or piped in advance) are taken in turn
             if self._answers.empty() and not self._listening():

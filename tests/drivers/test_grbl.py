@@ -295,3 +295,43 @@ def test_bad_config_names_the_problem(cfg, message):
 def test_emulator_fault_names_are_checked():
     with pytest.raises(ValueError, match="unknown fault 'stall'.*alarm"):
         GrblEmulator().inject("stall")
+
+
+# -- the tilt axis (issue 23: the board tilted by a second axis of the stage) ----------------------------
+
+
+def test_tilt_axis_bytes():
+    """``tilt_axis="Y"``: the second axis of the same controller on the same connection (no second reset:
+    the settings read once, a status report at open), moved with its own letter and read from MPos; its
+    configured limits (default 0..60°) refuse a move before anything is sent."""
+    script = [
+        (b"\x18", BANNER),
+        (b"$$\n", SETTINGS),
+        (b"?", b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 Y30.000\n", b"ok\r\n"),
+        (b"?", b"<Run|MPos:0.000,12.250,0.000|FS:1800,0>\r\n"),
+        (b"?", b"<Idle|MPos:0.000,30.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 X45.000\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:45.000,30.000,0.000|FS:0,0>\r\n"),
+    ]
+    with ScriptedDevice(script, name="grbl") as dev:
+        with driver(dev.port, tilt_axis="Y") as tt:
+            assert tt.tilt is not None and tt.tilt.travel_range().maximum == 60.0 and tt.tilt.settings is tt.settings
+            assert tt.tilt.move_to(30.0) == 30.0
+            with pytest.raises(OutOfRange):
+                tt.tilt.move_to(61.0)
+            assert tt.move_to(45.0) == 45.0
+
+
+def test_tilt_axis_on_the_emulator_tilts_the_simulated_board():
+    world = SimWorld()
+    with start_grbl_emulator(world=world, tilt_axis="Y", **FAST) as h, driver(h.port_path, tilt_axis="Y") as tt:
+        assert world.tilt_at() == 0.0
+        tt.home()
+        assert tt.tilt.move_to(25.0) == 25.0 and world.tilt_at() == pytest.approx(25.0, abs=1e-9)
+        assert tt.move_to(90.0) == 90.0 and world.tilt_at() == pytest.approx(25.0, abs=1e-9)
+        assert world.stage_deg == pytest.approx(90.0, abs=1e-9) and tt.tilt.position() == 25.0
+        tt.home()  # $H homes both axes
+        assert world.tilt_at() == pytest.approx(0.0, abs=1e-9) and tt.position() == 0.0
+    with pytest.raises(ValueError, match="tilt_axis must be another axis than X"):
+        driver("/dev/null", tilt_axis="x")

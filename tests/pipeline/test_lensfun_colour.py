@@ -7,16 +7,14 @@ must do (:class:`~pipeline.models.lensfun_model.LensfunModel`,
 
 from __future__ import annotations
 
+import lensfunpy  # in the test extras: a missing lensfunpy fails, it is not skipped
 import numpy as np
-import pytest
 
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.lensfun import LensfunEntry, lensfun_database_text
 from pipeline.models.lensfun_model import LensfunModel
 from pipeline.models.tca_model import LensfunTca
 from pipeline.vignetting import LensfunVignetting, lensfun_radius
-
-lensfunpy = pytest.importorskip("lensfunpy")
 
 W, H = 600, 400
 INFO = LensInfo(

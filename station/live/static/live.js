@@ -37,6 +37,11 @@
       ctx.strokeStyle = "rgba(255,255,255,0.25)";
       cov.covered.forEach((row, j) => row.forEach((c, i) => ctx.strokeRect(i * cell, j * cell, cell, cell)));
     }
+    const bp = s.board_preview;  // the camera's picture while the operator places the board: its corners found
+    if (bp) {
+      ctx.fillStyle = "#2e7d32";
+      for (const p of bp.corners) { ctx.beginPath(); ctx.arc(p[0], p[1], 3 / k, 0, 2 * Math.PI); ctx.fill(); }
+    }
     const path = (xy) => { ctx.beginPath(); xy.forEach((p, i) => i ? ctx.lineTo(p[0], p[1]) : ctx.moveTo(p[0], p[1])); ctx.stroke(); };
     ctx.strokeStyle = styles.getPropertyValue("--edge").trim();
     for (const e of s.edges || []) path(e.xy);
@@ -71,7 +76,10 @@
       img.src = "/api/frame.jpg?id=" + s.frame_id;
     }
     const f = s.figures || null, fr = s.frame || {};
-    $("frame-info").textContent = f ? `#${fr.counter} · ${f.width}×${f.height} · ${fmt(s.rate_hz, 1)} frames/s` : "waiting for the first frame";
+    const bp = s.board_preview;
+    $("frame-info").textContent = f ? `#${fr.counter} · ${f.width}×${f.height} · ${fmt(s.rate_hz, 1)} frames/s`
+      : bp ? (bp.found ? `the camera now: the board found, ${bp.corners.length} corners` : `the camera now: ${bp.reason}`)
+      : "waiting for the first frame";
     $("frame-info").dataset.frameId = s.frame_id;
     const v = $("verdict");
     if (f) { v.textContent = s.ok ? "would pass the session's checks" : "would be re-captured"; v.className = "badge " + (s.ok ? "ok" : "bad"); }

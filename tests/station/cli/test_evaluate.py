@@ -120,6 +120,8 @@ def test_table_output_lensfun_and_already_corrected(tmp_path, shots, capsys):
         ("format: harp-distortion-model\nformat_version: 1\nmodel: [\n", "not a valid YAML"),
         ("hello: world\n", "not a recognised correction"),
         ("<lensdatabase><lens><model>x</model></lens></lensdatabase>", "no <calibration><distortion>"),
+        ('{"value0": {"intrinsics": [{"camera_type": "eucm"}]}}', "Basalt camera_type 'eucm' not read"),
+        ("<calibration><projection>frame</projection><width>8</width></calibration>", "without <height>"),
     ],
 )
 def test_bad_correction_files_exit_2_with_one_line(tmp_path, shots, capsys, content, message):

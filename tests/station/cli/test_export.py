@@ -47,6 +47,9 @@ from station.config import Identity, Optics
 from station.files import write_model_file, write_profile
 from station.profile import HOLDOUT_SHOTS, Holdout, Merit, Profile
 from station.provenance import make_provenance
+from tests.pipeline.basalt_equations import basalt_camera
+from tests.pipeline.basalt_equations import normalised as basalt_normalised
+from tests.pipeline.basalt_equations import unproject as basalt_unproject
 from tests.pipeline.export_support import (
     compare_map,
     compare_points,
@@ -59,6 +62,8 @@ from tests.pipeline.export_support import (
     wide_radial,
 )
 from tests.pipeline.kalibr_equations import kalibr_camera, unproject
+from tests.pipeline.metashape_equations import metashape_camera
+from tests.pipeline.metashape_equations import unproject as metashape_unproject
 
 W, H = 400, 300
 LENS = RadialModel.for_image(
@@ -74,6 +79,8 @@ FILES = {
     "mrcal": "lens.cameramodel",
     "colmap": "cameras.txt",
     "kalibr": "camchain.yaml",
+    "basalt": "calib.json",
+    "metashape": "calibration.xml",
     "maps": "maps.npz",
     "stmap": "stmap.exr",
     "json": "lens.json",
@@ -341,6 +348,31 @@ def test_kalibr_by_its_documented_equations(both):
     assert "Kalibr's keypoint undistortion" in runs["kalibr"].path.read_text()
 
 
+def test_basalt_by_its_documented_equations(both):
+    # no Basalt installed: the file parsed by the json module, the camera evaluated with Basalt's kb4 equations
+    src, runs = both
+    fig = _ok(runs["basalt"])
+    p, res, value0 = basalt_camera(runs["basalt"].path.read_bytes())
+    assert res == [src.width, src.height] and value0["harp_station"]["statement"][0].startswith("conversion error")
+    xs, ys = np.linspace(0, src.width - 1, 40), np.linspace(0, src.height - 1, 30)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    rms, mxe = mod_h(basalt_normalised(basalt_unproject(p, q, steps=50)), src.model.undistort_points(q))
+    _agrees(rms, mxe, fig["conversion"])
+
+
+def test_metashape_by_its_documented_equations(both):
+    # no Metashape installed: the XML parsed by ElementTree, the camera evaluated with the manual's equations
+    src, runs = both
+    fig = _ok(runs["metashape"])
+    proj, w, h, p = metashape_camera(runs["metashape"].path.read_bytes())
+    assert (w, h) == (src.width, src.height) and any(n.startswith(f"metashape: {proj}") for n in fig["notes"])
+    xs, ys = np.linspace(0, src.width - 1, 40), np.linspace(0, src.height - 1, 30)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    rms, mxe = mod_h(metashape_unproject(proj, w, h, p, q + 0.5), src.model.undistort_points(q))
+    _agrees(rms, mxe, fig["conversion"])
+    assert "camera matrix: nominal" in runs["metashape"].path.read_text()
+
+
 def test_lensfun_finds_the_lens_by_its_names_at_the_crop_factor(both):
     src, runs = both
     fig = _ok(runs["lensfun"])
@@ -472,6 +504,8 @@ def test_harp_evaluate_reads_every_format(model_source, exported):
         "mrcal": "mrcal",
         "colmap": "colmap:FULL_OPENCV",
         "kalibr": "kalibr:pinhole-equi",  # 4 radial-tangential coefficients hold this lens less well
+        "basalt": "basalt:kb4",
+        "metashape": "metashape:frame",
         "maps": "maps",
         "stmap": "stmap",
         "json": "harp:radial",

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 
+import lensfunpy  # in the test extras: a missing lensfunpy fails, it is not skipped
 import numpy as np
 import pytest
 import yaml
@@ -27,8 +28,6 @@ from tests.pipeline.colour_lenses import GAINS, colour_lens
 from tests.pipeline.test_vignetting import ANGLES as ALL_ANGLES
 from tests.pipeline.test_vignetting import LENS, H, W, cos4, uneven
 from tests.station.dng import write_dng
-
-lensfunpy = pytest.importorskip("lensfunpy")
 
 PATTERN = "GRBG"
 ANGLES = ALL_ANGLES[:3]  # three turns: the TCA sees three orientations, the back-light three angles

@@ -55,6 +55,14 @@ def test_views_announced_on_terminal_and_page_answered_by_either(tmp_path):
         b = wait_for(wanted(0), 120, "the first board view asked for on the page")
         assert b["wanted"]["instruction"].startswith("board view 1 of 4: tilt the board 30° with its right edge ")
         assert b["wanted"]["why"].startswith("a tilt towards the right") and b["coverage"] is None
+        # while the operator places the board, the page shows the camera's picture and the corners found in it
+
+        def preview():
+            s = json.load(urllib.request.urlopen(url + "api/state", timeout=10))
+            return s if (s.get("board_preview") or {}).get("found") else None
+
+        assert len(wait_for(preview, 60, "the camera's picture with the board")["board_preview"]["corners"]) >= 30
+        assert urllib.request.urlopen(url + "api/frame.jpg", timeout=10).read()[:2] == b"\xff\xd8"
         # the terminal says the same, and how to answer there
         while not said or not said[-1].startswith("press Enter when the board is in place"):
             said.append(p.stderr.readline())

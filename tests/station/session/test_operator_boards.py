@@ -57,7 +57,7 @@ class StandIn:
         self.hide = hide or {}
         self.told: list[list[str]] = []
 
-    def ask(self, lines):
+    def ask(self, lines, idle=None):
         n = len(self.told)
         self.told.append(list(lines))
         if n in self.hide:
@@ -103,6 +103,7 @@ def test_a_session_whose_operator_places_the_board(tmp_path):
             result = Executor(s, sim.camera, sim.turntable, store=store, sleep=lambda _s: None, operator=person).run()
             (profile,) = store.profiles()
         truth = sim.camera.camera_matrix()
+        assert sim.camera.board is None  # the board taken away after its views: the next harp shots see the harp
     assert result.exit_code == 0, result.message
     session = cfg.sessions_dir / "s"
     recs = records(session)
