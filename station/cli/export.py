@@ -15,6 +15,9 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
                      it is 20 % closer in max
     kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
                      fisheye model is closer (tried as auto tries it)
+    lcp              Adobe lens profile (Lightroom, Camera Raw, RawTherapee): PerspectiveModel (OpenCV's 5
+                     coefficients) or FisheyeModel (k1 k2), whichever is closer; filed under --focal-mm and
+                     --distance (m); -o an existing profile of the lens adds this setting to it
     basalt           Basalt calibration JSON: kb4 (Kannala-Brandt fx fy cx cy k1..k4), camera only
                      (the IMU members are placeholders)
     metashape        Agisoft Metashape calibration XML: frame (k1 k2 k3 p1 p2, Metashape's p1/p2
@@ -86,6 +89,7 @@ FORMAT_CHOICES = (
     "mrcal",
     "colmap",
     "kalibr",
+    "lcp",
     "basalt",
     "metashape",
     "maps",
@@ -126,7 +130,7 @@ def add_export_options(p) -> None:
     p.add_argument("--xml", action="store_true", help="opencv: FileStorage XML instead of YAML (also -o *.xml)")
     p.add_argument(
         "--focal-px",
-        dest="focal",
+        dest="focal_px",
         type=float,
         default=None,
         help="opencv/ros/mrcal: focal length of the camera matrix in pixels",
@@ -167,7 +171,8 @@ def add_export_options(p) -> None:
         "--distance",
         metavar="M",
         type=float,
-        help="focus distance (m) the vignetting is filed under (default: the vignetting file's, else 1000)",
+        help="focus distance (m) the vignetting is filed under (default: the vignetting file's, else 1000), "
+        "and the lcp profile (default: none stated)",
     )
     g = p.add_argument_group("lens and camera (override what the profile records)")
     g.add_argument("--lens-maker", metavar="TEXT")
@@ -248,15 +253,18 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
     from pipeline.exports.registry import ExportOptions  # defers scipy, yaml
 
-    if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
-        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
+    if args.focal_px is not None and not (math.isfinite(args.focal_px) and args.focal_px > 0):
+        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal_px:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
         installed = installed_databases(exclude=args.output)
+    focus_m = getattr(args, "distance", None) if args.format == "lcp" else None
+    if focus_m is not None and not (math.isfinite(focus_m) and focus_m > 0):
+        raise ExportError(f"--distance: expected a focus distance > 0 m, got {focus_m:g}")
     return ExportOptions(
         coeffs=args.coeffs,
-        focal_px=args.focal,
+        focal_px=args.focal_px,
         xml=xml,
         lensfun_model=args.lensfun_model,
         lensfun_center=not args.lensfun_no_center,
@@ -266,21 +274,22 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         existing=existing,
         existing_name=existing_name,
         installed_lensfun=installed,
+        focus_distance_m=focus_m,
         frame=frame_choice(args),
     )
 
 
 def _existing_lensfun(args) -> bytes | None:
-    """The database at ``-o`` when it is one (lensfun exports add to it)."""
+    """The database (lensfun) or lens profile (lcp) at ``-o`` when it is one (these exports add to it)."""
     from pipeline.exports.registry import FORMATS  # defers scipy, yaml
 
-    if args.format != "lensfun" or not args.output or not Path(args.output).is_file():
+    if args.format not in ("lensfun", "lcp") or not args.output or not Path(args.output).is_file():
         return None
     try:
         data = Path(args.output).read_bytes()
     except OSError as exc:
         raise ExportError(f"{args.output}: cannot read ({exc.strerror or exc})") from None
-    return data if FORMATS["lensfun"].sniff(data) else None
+    return data if FORMATS[args.format].sniff(data) else None
 
 
 # ------------------------------------------------------------------- export

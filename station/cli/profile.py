@@ -471,7 +471,7 @@ def _export(args, store) -> int:
             raise HarpError("name LENS and --focus F, or a stored profile with --id N")
         lens = store.find_lens(args.lens)
         newest = store.latest_by_focus(lens[0], allow_failed=True)
-        if is_zoom(newest) and args.focal is None and args.format == "lensfun":
+        if is_zoom(newest) and args.focal is None and args.format in ("lensfun", "lcp"):
             return _export_lensfun_zoom(args, store, lens)
         if _zoom_setting(args, lens, newest):
             return _export_zoom(args, store, lens, newest)
@@ -527,8 +527,9 @@ def _export_zoom(args, store, lens, newest) -> int:
 
 
 def _export_lensfun_zoom(args, store, lens) -> int:
-    """lensfun of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
-    (lensfun has no focus axis for distortion: a focus range cannot be written), in one database file;
+    """lensfun (or lcp) of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
+    (lensfun has no focus axis for distortion: a focus range cannot be written; an LCP profile adds the
+    other focus settings by exporting them into the same file, each with its --distance), in one file;
     each focal's profile at that focus is a current one or interpolated along focus. Written whole or
     not at all: into a copy of ``-o`` (when it is a database), moved over it once every focal is in."""
     import argparse
@@ -539,15 +540,16 @@ def _export_lensfun_zoom(args, store, lens) -> int:
 
     newest = store.latest_by_focus(lens[0], allow_failed=True)
     focals = sorted({p.focal for p in newest if p.focal is not None})
+    suffix = ".lcp" if args.format == "lcp" else ".xml"
     if not args.output:
-        raise HarpError("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
-    if args.tca or args.vignetting:
+        raise HarpError(f"{args.format} export of a zoom lens: give -o FILE{suffix} (one calibration per focal length)")
+    if getattr(args, "tca", None) or getattr(args, "vignetting", None):
         raise HarpError(
-            "lensfun export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
+            f"{args.format} export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
             "alone (--focal MM) with them"
         )
     out = Path(args.output)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".xml", dir=out.parent if str(out.parent) else ".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=suffix, dir=out.parent if str(out.parent) else ".")
     os.close(fd)
     os.unlink(tmp)
     try:
@@ -568,5 +570,5 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    print(f"lensfun: {len(done)} calibrations (focal {', '.join(done)}) at focus {args.focus:g} in {out}")
+    print(f"{args.format}: {len(done)} calibrations (focal {', '.join(done)}) at focus {args.focus:g} in {out}")
     return EXIT_OK
