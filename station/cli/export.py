@@ -317,7 +317,8 @@ def export_profile(
     edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
     left_out: list[str] = []
-    colour = colour_correction(args, source.width, source.height, profile.details.get("colour"), left_out)
+    stored = {**dict(profile.details.get("colour") or {}), "aperture": profile.optics.aperture}
+    colour = colour_correction(args, source.width, source.height, stored, left_out)
     if colour is not None:
         source = replace(source, colour=colour)
     try:
@@ -341,9 +342,10 @@ def colour_correction(args, width: int, height: int, stored=None, left_out: list
     that cannot be read or is for another image size.
 
     ``stored``: the profile's own TCA and vignetting (``details["colour"]``, a colour camera's session:
-    :mod:`station.session.colour`), exported where the format holds them and no file is given (a file
-    overrides); a stored vignetting without an f-number (``--aperture``) is left out, why appended to
-    ``left_out`` (the export's warnings)."""
+    :mod:`station.session.colour`) and its f-number (``"aperture"``: the configuration's ``lens.aperture``),
+    exported where the format holds them and no file is given (a file overrides); a stored vignetting without
+    an f-number (neither ``--aperture`` nor the profile's) is left out, why appended to ``left_out`` (the
+    export's warnings)."""
     tca_path, vig_path = getattr(args, "tca", None), getattr(args, "vignetting", None)
     for flag, value in (("--aperture", args.aperture), ("--distance", args.distance)):
         if value is not None and not (math.isfinite(value) and value > 0):
@@ -397,13 +399,13 @@ def _stored_colour(args, width: int, height: int, stored, left_out: list[str] | 
     fit, aperture, distance = None, None, None
     if vig_doc is not None:
         fit, aperture, distance = vignetting_fit_of(vig_doc, f"{where} (vignetting)", width, height)
-    aperture = args.aperture if args.aperture is not None else aperture
+    aperture = next((a for a in (args.aperture, aperture, stored.get("aperture")) if a is not None), None)
     distance = args.distance if args.distance is not None else distance
     if fit is not None and aperture is None:
         if left_out is not None:
             left_out.append(
                 "the profile's vignetting is left out: lensfun files a vignetting under the f-number it was "
-                "measured at; give --aperture F"
+                "measured at; give --aperture F (or lens.aperture in the station configuration)"
             )
         fit = None
     if tca is None and fit is None:

@@ -78,6 +78,7 @@ def session(tmp_path_factory):
     d["station"]["camera"].update(CAMERA)
     d["focus"]["settings"] = [0.5]
     d["capture"].update(orientations_deg=[0, 60, 120], frames_per_orientation=1)
+    d["lens"]["aperture"] = 4.0  # the f-number lensfun files the vignetting under
     d["pipeline"].update(bootstrap=0, workers=1)
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     d["report"] = {"overlays": "none"}
@@ -124,15 +125,16 @@ def test_stored_tca_and_vignetting_are_the_truth(session):
 
 
 def test_profile_export_writes_them_for_lensfun(session, tmp_path, capsys):
-    """``harp profile export --format lensfun`` of the stored profile, no --tca/--vignetting: liblensfun
-    brings red and blue onto green and corrects the vignetting, each within the conversion the export states."""
+    """``harp profile export --format lensfun`` of the stored profile, no --tca/--vignetting (the f-number from
+    the configuration's lens.aperture): liblensfun brings red and blue onto green and corrects the vignetting,
+    each within the conversion the export states."""
     path, store, _ = session
     out = tmp_path / "lens.xml"
     argv = ["profile", "export", "--id", "1", "--store", store, "--format", "lensfun", "-o", out, *NAMES, *BODY]
-    code, printed, err = _main([*argv, "--no-shots", "--aperture", "4", "--lensfun-model", "poly5"])
+    code, printed, err = _main([*argv, "--no-shots", "--lensfun-model", "poly5"])
     assert code == 0, err
     xml = out.read_text()
-    assert xml.count("<tca ") == 1 and xml.count('<vignetting model="pa"') == 1, xml
+    assert xml.count("<tca ") == 1 and xml.count('<vignetting model="pa" focal="35.0" aperture="4.0"') == 1, xml
     with ProfileStore(store, create=False) as st:
         (profile,) = st.profiles()
     (tmp_path / "tca.yaml").write_text(yaml.safe_dump(profile.details["colour"]["tca"]))  # what _tca_figures reads
@@ -151,12 +153,23 @@ def test_profile_export_writes_them_for_lensfun(session, tmp_path, capsys):
     # vignetting about the image centre: the conversion states what that costs, liblensfun applies no more
     assert np.abs(rel - 1).max() <= stated + 0.003
 
-    # without an f-number the vignetting cannot be filed: left out, said in one line; the TCA still written
-    argv[argv.index(out)] = tmp_path / "no_aperture.xml"
-    code, _, err = _main([*argv, "--no-shots"])
+    # a file overrides the stored TCA: red and blue swapped in it, swapped in the export
+    swapped = yaml.safe_load((tmp_path / "tca.yaml").read_text())
+    swapped["channels"] = {"R": swapped["channels"]["B"], "B": swapped["channels"]["R"]}
+    (tmp_path / "swapped.yaml").write_text(yaml.safe_dump(swapped))
+    argv[argv.index(out)] = tmp_path / "swapped.xml"
+    assert _main([*argv, "--no-shots", "--lensfun-model", "poly5", "--tca", tmp_path / "swapped.yaml"])[0] == 0
+    terms = [dict(re.findall(r'(v[rb])="([^"]+)"', x.read_text())) for x in (out, tmp_path / "swapped.xml")]
+    assert float(terms[1]["vr"]) < 1 < float(terms[0]["vr"]) and terms[1]["vb"] != terms[0]["vb"], terms
+
+    # a model file whose optics name no f-number: the vignetting cannot be filed, left out in one line; TCA kept
+    doc = yaml.safe_load((path / "profiles" / "focus0.yaml").read_text())
+    del doc["provenance"]["optics"]["aperture"]
+    (tmp_path / "lens.yaml").write_text(yaml.safe_dump(doc))
+    code, _, err = _main(["export", tmp_path / "lens.yaml", "--format", "lensfun", "-o", tmp_path / "n.xml", *NAMES])
     said = [ln for ln in err.splitlines() if "vignetting" in ln]
-    assert code == 0 and len(said) == 1 and said[0].startswith("harp profile: warning:") and "--aperture F" in said[0]
-    xml = (tmp_path / "no_aperture.xml").read_text()
+    assert code == 0 and len(said) == 1 and said[0].startswith("harp export: warning:") and "--aperture F" in said[0]
+    xml = (tmp_path / "n.xml").read_text()
     assert xml.count("<tca ") == 1 and "<vignetting" not in xml
 
 
