@@ -28,7 +28,17 @@ from pipeline.vignetting import VignettingFit
 from station.cli import main
 from station.store import ProfileStore
 from tests.pipeline.colour_lenses import ExactTca
-from tests.station.cli.test_export_colour import BODY, NAMES, H, W, _modifier, _stated, _tca_figures, lensfunpy
+from tests.station.cli.test_export_colour import (
+    BODY,
+    NAMES,
+    H,
+    W,
+    _modifier,
+    _stated,
+    _tca_figures,
+    lensfunpy,
+    opencv_channel_figures,
+)
 
 REPO = Path(__file__).resolve().parents[3]
 VIGNETTING = 0.3  # the scene's fall-off at the corners
@@ -171,6 +181,24 @@ def test_profile_export_writes_them_for_lensfun(session, tmp_path, capsys):
     assert code == 0 and len(said) == 1 and said[0].startswith("harp export: warning:") and "--aperture F" in said[0]
     xml = (tmp_path / "n.xml").read_text()
     assert xml.count("<tca ") == 1 and "<vignetting" not in xml
+
+
+def test_profile_export_writes_them_for_opencv(session, tmp_path):
+    """``harp profile export --format opencv``, no --tca: red's and blue's own coefficients, OpenCV's maps
+    agreeing with harp undistort's of the stored TCA, the channels brought together in truth."""
+    path, store, _ = session
+    out = tmp_path / "lens_opencv.yaml"
+    argv = ["profile", "export", "--id", "1", "--store", store, "--format", "opencv", "-o", out, "--no-shots"]
+    code, printed, err = _main(argv)
+    assert code == 0, err
+    with ProfileStore(store, create=False) as st:
+        (profile,) = st.profiles()
+    (tmp_path / "tca.yaml").write_text(yaml.safe_dump(profile.details["colour"]["tca"]))
+    model = path / "profiles" / "focus0.yaml"
+    figures = opencv_channel_figures(model, tmp_path / "tca.yaml", true_tca(), out, printed)
+    for ch, (agree, green_max, stated, miss, before) in figures.items():
+        assert agree <= green_max + stated + 0.01, ch
+        assert before > 0.4 and miss <= stated + 0.02, ch
 
 
 def test_reprocess_makes_them_again(session):
