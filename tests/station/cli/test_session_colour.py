@@ -132,6 +132,8 @@ def test_stored_tca_and_vignetting_are_the_truth(session):
     assert "Colour and light" in report and "| top-left corner | 0.69" in report, report
     kinds = [json.loads(line)["kind"] for line in (path / "manifest.jsonl").read_text().splitlines()]
     assert kinds.index("colour") < kinds.index("stored")
+    code, shown, err = _main(["profile", "show", "--id", "1", "--store", store])
+    assert code == 0 and f"TCA: {cells['TCA']}\n" in shown and f"vignetting: {cells['vignetting']}\n" in shown, err
 
 
 def test_profile_export_writes_them_for_lensfun(session, tmp_path, capsys):
