@@ -598,8 +598,12 @@ def fit_fisheye(
     focal: float | None = None,
     edges: Sequence[Array] | None = None,
     n_long: int = FIT_GRID_LONG,
+    n_coeffs: int = 4,
 ) -> tuple[OpenCVFisheyeModel, ConversionError]:
     """Closest OpenCV fisheye (Kannala–Brandt ``k1..k4``) projection to ``model`` over the whole image.
+
+    ``n_coeffs`` 2: ``k1 k2`` alone (``k3 = k4 = 0``), the fisheye model of Adobe's lens profiles
+    (:mod:`pipeline.exports.lcp`).
 
     Unlike the pin-hole polynomial, the fisheye family depends on the focal
     length (the angle of a ray is ``atan(r / f)``): with ``focal`` (px, the
@@ -616,15 +620,20 @@ def fit_fisheye(
         raise ValueError(f"focal length must be > 0 px, got {focal}")
     prob = _Problem.make(model, width, height, n_long)
 
+    if n_coeffs not in (2, 4):
+        raise ValueError(f"the fisheye fit takes 2 or 4 coefficients, got {n_coeffs}")
+    nt = 2 + n_coeffs
+
     def fixed(f: float) -> Callable[[Array], OpenCVFisheyeModel]:
         def make(theta: Array) -> OpenCVFisheyeModel:
-            d = (float(theta[2]), float(theta[3]), float(theta[4]), float(theta[5]))
+            k = [float(v) for v in theta[2:nt]] + [0.0] * (4 - n_coeffs)
+            d = (k[0], k[1], k[2], k[3])
             return OpenCVFisheyeModel(fx=f, fy=f, cx=cx0 + s * theta[0], cy=cy0 + s * theta[1], dist=d)
 
         return make
 
     def free(theta: Array) -> OpenCVFisheyeModel:
-        return fixed(diag * float(np.exp(theta[6])))(theta)
+        return fixed(diag * float(np.exp(theta[nt])))(theta)
 
     def start(p: _Problem, f0: float, th0: Array) -> tuple[Array, Array, float]:
         th, _, _ = _least_squares(p, fixed(f0), th0, p.h0(), fix_h=True)
@@ -632,13 +641,13 @@ def fit_fisheye(
 
     if focal is not None:
         f0 = float(focal)
-        th, h8, _ = start(prob, f0, np.zeros(6))
+        th, h8, _ = start(prob, f0, np.zeros(nt))
     else:
         # the starting focal is chosen on a coarse grid (the scan is most of the work), then refined
         coarse = _Problem.make(model, width, height, FISHEYE_SCAN_GRID_LONG)
         best: tuple[float, Array, float] | None = None
         for v in FISHEYE_FOCAL_STARTS:
-            th, _, cost = start(coarse, diag * v, np.zeros(6))
+            th, _, cost = start(coarse, diag * v, np.zeros(nt))
             if best is None or cost < best[0]:
                 best = (cost, th, diag * v)
         assert best is not None
@@ -649,7 +658,8 @@ def fit_fisheye(
         out = free(th)
     else:
         out = fixed(float(focal))(th)
-    return out, conversion_error(model, out, width, height, edges=edges, export="the OpenCV fisheye model")
+    family = "the OpenCV fisheye model" if n_coeffs == 4 else f"the fisheye model with {n_coeffs} coefficients"
+    return out, conversion_error(model, out, width, height, edges=edges, export=family)
 
 
 def fit_lensfun(

@@ -48,6 +48,15 @@ from pipeline.exports.fit import (
 )
 from pipeline.exports.frame import FrameStatement, frame_statement
 from pipeline.exports.kalibr import kalibr_text, read_kalibr_text, sniff_kalibr
+from pipeline.exports.lcp import (
+    LCP_FISHEYE_COEFFS,
+    LCP_PINHOLE_COEFFS,
+    LcpProfile,
+    check_existing,
+    lcp_text,
+    read_lcp_text,
+    sniff_lcp,
+)
 from pipeline.exports.lens import CameraMatrixChoice, LensInfo, camera_matrix_choice
 from pipeline.exports.lensfun import (
     LensfunEntry,
@@ -152,6 +161,8 @@ class ExportOptions:
     """The corrected image (``--size``, ``--scale``, ``--alpha``, ``--overscan``; :mod:`pipeline.corrected_frame`):
     the maps and STMaps hold it, the pin-hole and fisheye files state the ``R`` and ``newK`` that write it."""
     installed_lensfun: tuple[tuple[str, str], ...] = ()
+    focus_distance_m: float | None = None
+    """The focus distance (metres) an LCP profile files the calibration under (None: not stated)."""
     """The lensfun databases lensfun loads on this machine, ``(path, XML text)``: a lensfun export
     under the name of a lens in one of them is refused (see :func:`~pipeline.exports.lensfun.installed_lens`)."""
 
@@ -362,13 +373,13 @@ def _fit_pinhole(fmt: str, src: ExportSource, opt: ExportOptions, n: int, hint: 
     return _Fitted(m, err, cam, measured, fr, tuple(warnings))
 
 
-def _fit_fisheye_export(fmt: str, src: ExportSource, opt: ExportOptions) -> _Fitted:
+def _fit_fisheye_export(fmt: str, src: ExportSource, opt: ExportOptions, n_coeffs: int = 4) -> _Fitted:
     cam = _camera(src, opt)
     focal = None if cam.kind == "placeholder" else cam.focal_px
-    if cam.camera is not None:
+    if cam.camera is not None and n_coeffs == 4:
         m, err = fit_fisheye_camera(src.model, src.width, src.height, cam.camera, edges=src.edges)
     else:
-        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges)
+        m, err = fit_fisheye(src.model, src.width, src.height, focal=focal, edges=src.edges, n_coeffs=n_coeffs)
     fr = _frame_of(fmt, src, opt, m, m.camera_matrix, cam.focal_px)
     if focal is None:
         cam = CameraMatrixChoice(m.fx, "placeholder", "fitted with the fisheye coefficients, not measured")
@@ -463,16 +474,16 @@ def _write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
 
 
 def _pinhole_or_fisheye(
-    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str]
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str], fisheye_coeffs: int = 4
 ) -> tuple[_Fitted, str]:
     """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer: ``(fit, why)``
     (:func:`_pinhole_or_fisheye_tried` without the fisheye fit)."""
-    chosen, why, _ = _pinhole_or_fisheye_tried(fmt, src, opt, n, names)
+    chosen, why, _ = _pinhole_or_fisheye_tried(fmt, src, opt, n, names, fisheye_coeffs)
     return chosen, why
 
 
 def _pinhole_or_fisheye_tried(
-    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str]
+    fmt: str, src: ExportSource, opt: ExportOptions, n: int, names: tuple[str, str], fisheye_coeffs: int = 4
 ) -> tuple[_Fitted, str, _Fitted | None]:
     """The pin-hole fit with ``n`` coefficients, or the fisheye fit when it is tried and closer:
     ``(fit, why, the fisheye fit if it was tried)``.
@@ -483,12 +494,13 @@ def _pinhole_or_fisheye_tried(
     the smaller max conversion error modulo homography is kept. ``names``: the format's names of the
     two models, for the statement. A lens the pin-hole family cannot hold (a pole or fold,
     :mod:`pipeline.exports.pole_free`) is written with the fisheye model, saying why.
+    ``fisheye_coeffs``: 4 (``k1..k4``) or 2 (``k1 k2``, the LCP's).
     """
     try:
         pin = _fit_pinhole(fmt, src, opt, n, hint=False)
     except ValueError as exc:
         try:
-            fe = _fit_fisheye_export(fmt, src, opt)
+            fe = _fit_fisheye_export(fmt, src, opt, fisheye_coeffs)
         except ValueError:
             raise exc from None
         return fe, f"{names[1]}: {names[0]} cannot hold this lens ({str(exc).split('; ')[0]})", fe
@@ -504,7 +516,7 @@ def _pinhole_or_fisheye_tried(
             ),
             None,
         )
-    fe = _fit_fisheye_export(fmt, src, opt)
+    fe = _fit_fisheye_export(fmt, src, opt, fisheye_coeffs)
     chosen = fe if fe.error.max_mod_h_px < e.max_mod_h_px else pin
     why = (
         f"{names[1] if chosen is fe else names[0]}, the closer in max ({reason}): {names[0]} RMS "
@@ -624,6 +636,77 @@ def _write_kalibr(src: ExportSource, opt: ExportOptions) -> Export:
     pinhole-equi (the fisheye fit)."""
     names = ("pinhole-radtan", "pinhole-equi")
     return _write_chosen_family("kalibr", src, opt, RADTAN_COEFFS, names, kalibr_text)
+
+
+def _write_lcp(src: ExportSource, opt: ExportOptions) -> Export:
+    """Adobe lens profile (:mod:`pipeline.exports.lcp`): the PerspectiveModel (the OpenCV 5-coefficient
+    fit) or the FisheyeModel (the fisheye fit with ``k1 k2``), whichever is closer, filed under the
+    nominal focal length and ``opt.focus_distance_m``; added to ``opt.existing`` when it is a profile of
+    the same lens. The camera matrix is the nominal one (a measured one is not used: the profile's
+    ``FocalLengthX`` is a scale of its coefficients, the centre the fitted distortion centre)."""
+    names = ("PerspectiveModel (k1 k2 k3, tangential k4 k5)", "FisheyeModel (k1 k2)")
+    existing = _text(opt.existing, opt.existing_name) if opt.existing is not None else None
+    # before the fit: a file of another lens is refused at once; a profile holds one model kind
+    kind = None if existing is None else check_existing(existing, src.lens, opt.existing_name)
+    plain = replace(src, intrinsics=None)
+    if kind is None:
+        chosen, choice = _pinhole_or_fisheye("lcp", plain, opt, LCP_PINHOLE_COEFFS, names, LCP_FISHEYE_COEFFS)
+    else:
+        fisheye = kind == "FisheyeModel"
+        try:
+            chosen = (
+                _fit_fisheye_export("lcp", plain, opt, LCP_FISHEYE_COEFFS)
+                if fisheye
+                else _fit_pinhole("lcp", plain, opt, LCP_PINHOLE_COEFFS, hint=False)
+            )
+        except ValueError as exc:
+            raise ValueError(
+                f"{opt.existing_name} holds {kind} entries and a profile holds one kind: {exc}; write another file"
+            ) from None
+        e = chosen.error
+        choice = (
+            f"{names[1] if fisheye else names[0]}, the kind of the profile's other entries (RMS {e.rms_mod_h_px:.4f} / "
+            f"max {e.max_mod_h_px:.4f} px modulo homography)"
+        )
+    lens = src.lens.with_overrides(crop_factor=opt.crop_factor, mount=opt.mount)
+    notes = [f"lcp: {choice}", chosen.cam.statement]
+    if lens.crop_factor is None:
+        derived = lens.derived_crop_factor(src.width, src.height)
+        if derived is not None:
+            lens = replace(lens, crop_factor=round(derived, 4))
+            notes.append(
+                f"lcp: SensorFormatFactor {lens.crop_factor:g} derived from the optics (43.27 mm over the image diagonal)"
+            )
+        else:
+            notes.append("lcp: no crop factor known: no SensorFormatFactor written (give --crop)")
+    if lens.focal_mm is None:
+        notes.append("lcp: no nominal focal length (--focal-mm): the profile states none, for any focal length")
+    if opt.focus_distance_m is None:
+        notes.append("lcp: no focus distance (--distance): the profile states none")
+    if src.intrinsics is not None:
+        notes.append("lcp: the measured camera matrix is not used (the profile's focal and centre are the fit's)")
+    e = chosen.error
+    comments = (
+        *src.stamp,
+        *_lens_notes(src),
+        f"{AUTHOR_LINE}: {choice}",
+        *e.lines(),
+        chosen.cam.statement,
+    )
+    header = (
+        *src.stamp,
+        f"{AUTHOR_LINE}: Adobe lens profile; centre = ImageXCenter * width, ImageYCenter * height, pixel (i, j) at "
+        "(i, j); focal = FocalLengthX * max(width, height) (RawTherapee's reading, rtengine/lcp.cc)",
+    )
+    assert isinstance(chosen.model, (OpenCVModel, OpenCVFisheyeModel))  # the 5- or 2-coefficient fits
+    profile = LcpProfile(chosen.model, src.width, src.height, lens.focal_mm, opt.focus_distance_m, tuple(comments))
+    text, done = lcp_text(profile, lens, header=header, existing=existing, existing_name=opt.existing_name)
+    warnings = [*chosen.warnings, *(f"lcp: {d}" for d in done if d.startswith("replaced "))]
+    notes += [f"lcp: {d}" for d in done if not d.startswith("replaced ")]
+    return Export("lcp", text.encode(), e, chosen.model, tuple(notes), tuple(warnings))
+
+
+AUTHOR_LINE = "harp station"
 
 
 CROP_FACTOR_MISMATCH = 0.15
@@ -1008,6 +1091,11 @@ def _read_kalibr(data: bytes, req: ReadRequest) -> Correction:
     return Correction(m, size, f"kalibr:{model}")
 
 
+def _read_lcp(data: bytes, req: ReadRequest) -> Correction:
+    m, entry = read_lcp_text(_text(data, req.name), req.name, req.width, req.height, req.focal)
+    return Correction(m, None, "lcp:" + ("FisheyeModel" if entry.fisheye else "PerspectiveModel"))
+
+
 def _read_basalt(data: bytes, req: ReadRequest) -> Correction:
     m, size, kind = read_basalt_text(_text(data, req.name), req.name, (req.width, req.height))
     return Correction(m, size, f"basalt:{kind}")
@@ -1134,6 +1222,16 @@ FORMATS: dict[str, ExportFormat] = {
             sniff_kalibr,
         ),
         ExportFormat(
+            "lcp",
+            "Adobe lens profile (.lcp, XMP): PerspectiveModel (OpenCV's 5 coefficients) or FisheyeModel for a wide "
+            "lens, whichever is closer; adds its (focal, focus distance) to an existing profile of the lens",
+            ".lcp",
+            False,
+            _write_lcp,
+            _read_lcp,
+            sniff_lcp,
+        ),
+        ExportFormat(
             "basalt",
             "Basalt calibration JSON, kb4 (Kannala-Brandt fx fy cx cy k1..k4; the IMU members placeholders)",
             ".json",
@@ -1185,12 +1283,25 @@ FORMATS: dict[str, ExportFormat] = {
     )
 }
 
-SNIFF_ORDER = ("stmap", "maps", "harp", "lensfun", "metashape", "basalt", "mrcal", "colmap", "kalibr", "opencv", "ros")
+SNIFF_ORDER = (
+    "stmap",
+    "maps",
+    "harp",
+    "lensfun",
+    "lcp",
+    "metashape",
+    "basalt",
+    "mrcal",
+    "colmap",
+    "kalibr",
+    "opencv",
+    "ros",
+)
 """The order in which :func:`sniff_format` tries the formats (binary magic first)."""
 
 RECOGNISED = (
     "harp model, OpenCV YAML/XML, ROS camera_info YAML, lensfun XML, mrcal .cameramodel, COLMAP cameras.txt, Kalibr camchain, "
-    "Basalt calibration JSON, Metashape calibration XML, maps .npz or STMap .exr"
+    "Adobe LCP, Basalt calibration JSON, Metashape calibration XML, maps .npz or STMap .exr"
 )
 
 

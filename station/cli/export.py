@@ -15,6 +15,9 @@ Formats (:data:`pipeline.exports.registry.FORMATS`)::
                      it is 20 % closer in max
     kalibr           Kalibr camchain YAML: pinhole-radtan (k1 k2 p1 p2), or pinhole-equi when the
                      fisheye model is closer (tried as auto tries it)
+    lcp              Adobe lens profile (Lightroom, Camera Raw, RawTherapee): PerspectiveModel (OpenCV's 5
+                     coefficients) or FisheyeModel (k1 k2), whichever is closer; filed under --focal-mm and
+                     --distance (m); -o an existing profile of the lens adds this setting to it
     basalt           Basalt calibration JSON: kb4 (Kannala-Brandt fx fy cx cy k1..k4), camera only
                      (the IMU members are placeholders)
     metashape        Agisoft Metashape calibration XML: frame (k1 k2 k3 p1 p2, Metashape's p1/p2
@@ -58,6 +61,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -85,6 +89,7 @@ FORMAT_CHOICES = (
     "mrcal",
     "colmap",
     "kalibr",
+    "lcp",
     "basalt",
     "metashape",
     "maps",
@@ -125,7 +130,7 @@ def add_export_options(p) -> None:
     p.add_argument("--xml", action="store_true", help="opencv: FileStorage XML instead of YAML (also -o *.xml)")
     p.add_argument(
         "--focal-px",
-        dest="focal",
+        dest="focal_px",
         type=float,
         default=None,
         help="opencv/ros/mrcal: focal length of the camera matrix in pixels",
@@ -166,7 +171,8 @@ def add_export_options(p) -> None:
         "--distance",
         metavar="M",
         type=float,
-        help="focus distance (m) the vignetting is filed under (default: the vignetting file's, else 1000)",
+        help="focus distance (m) the vignetting is filed under (default: the vignetting file's, else 1000), "
+        "and the lcp profile (default: none stated)",
     )
     g = p.add_argument_group("lens and camera (override what the profile records)")
     g.add_argument("--lens-maker", metavar="TEXT")
@@ -247,15 +253,18 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
     from pipeline.exports.registry import ExportOptions  # defers scipy, yaml
 
-    if args.focal is not None and not (math.isfinite(args.focal) and args.focal > 0):
-        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal:g}")
+    if args.focal_px is not None and not (math.isfinite(args.focal_px) and args.focal_px > 0):
+        raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal_px:g}")
     xml = bool(args.xml or (args.output and Path(args.output).suffix.lower() == ".xml"))
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
         installed = installed_databases(exclude=args.output)
+    focus_m = getattr(args, "distance", None) if args.format == "lcp" else None
+    if focus_m is not None and not (math.isfinite(focus_m) and focus_m > 0):
+        raise ExportError(f"--distance: expected a focus distance > 0 m, got {focus_m:g}")
     return ExportOptions(
         coeffs=args.coeffs,
-        focal_px=args.focal,
+        focal_px=args.focal_px,
         xml=xml,
         lensfun_model=args.lensfun_model,
         lensfun_center=not args.lensfun_no_center,
@@ -265,21 +274,22 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
         existing=existing,
         existing_name=existing_name,
         installed_lensfun=installed,
+        focus_distance_m=focus_m,
         frame=frame_choice(args),
     )
 
 
 def _existing_lensfun(args) -> bytes | None:
-    """The database at ``-o`` when it is one (lensfun exports add to it)."""
+    """The database (lensfun) or lens profile (lcp) at ``-o`` when it is one (these exports add to it)."""
     from pipeline.exports.registry import FORMATS  # defers scipy, yaml
 
-    if args.format != "lensfun" or not args.output or not Path(args.output).is_file():
+    if args.format not in ("lensfun", "lcp") or not args.output or not Path(args.output).is_file():
         return None
     try:
         data = Path(args.output).read_bytes()
     except OSError as exc:
         raise ExportError(f"{args.output}: cannot read ({exc.strerror or exc})") from None
-    return data if FORMATS["lensfun"].sniff(data) else None
+    return data if FORMATS[args.format].sniff(data) else None
 
 
 # ------------------------------------------------------------------- export
@@ -306,13 +316,17 @@ def export_profile(
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
-    colour = colour_correction(args, source.width, source.height)
+    left_out: list[str] = []
+    stored = {**dict(profile.details.get("colour") or {}), "aperture": profile.optics.aperture}
+    colour = colour_correction(args, source.width, source.height, stored, left_out)
     if colour is not None:
         source = replace(source, colour=colour)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:
         raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
+    if left_out:
+        ex = replace(ex, warnings=(*ex.warnings, *left_out))
     return ex, figures(ex, source, edges)
 
 
@@ -322,16 +336,22 @@ VIGNETTING_FORMATS = ("lensfun",)
 """The formats that hold the vignetting (``--vignetting``)."""
 
 
-def colour_correction(args, width: int, height: int):
+def colour_correction(args, width: int, height: int, stored=None, left_out: list[str] | None = None):
     """The :class:`~pipeline.exports.colour.ColourCorrection` of ``--tca`` and ``--vignetting`` (None without
     them); ExportError (one line) for a format that holds neither, a setting that is not positive, a file
-    that cannot be read or is for another image size."""
+    that cannot be read or is for another image size.
+
+    ``stored``: the profile's own TCA and vignetting (``details["colour"]``, a colour camera's session:
+    :mod:`station.session.colour`) and its f-number (``"aperture"``: the configuration's ``lens.aperture``),
+    exported where the format holds them and no file is given (a file overrides); a stored vignetting without
+    an f-number (neither ``--aperture`` nor the profile's) is left out, why appended to ``left_out`` (the
+    export's warnings)."""
     tca_path, vig_path = getattr(args, "tca", None), getattr(args, "vignetting", None)
     for flag, value in (("--aperture", args.aperture), ("--distance", args.distance)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ExportError(f"{flag}: expected a positive number, got {value:g}")
     if tca_path is None and vig_path is None:
-        return None
+        return _stored_colour(args, width, height, stored, left_out)
     if tca_path is not None and args.format not in TCA_FORMATS:
         raise ExportError(
             f"--tca: the {args.format} format holds no TCA; export it with --format lensfun (<tca>) or opencv "
@@ -357,6 +377,39 @@ def colour_correction(args, width: int, height: int):
             f"--vignetting {vig_path}: lensfun files a vignetting under the f-number it was measured at: give "
             "--aperture F (or write the file with harp vignetting --focal-mm MM --aperture F)"
         )
+    return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
+
+
+def _stored_colour(args, width: int, height: int, stored, left_out: list[str] | None):
+    """:func:`colour_correction` from the profile's stored documents alone (None: none the format holds)."""
+    stored = stored if isinstance(stored, Mapping) else {}
+    tca_doc, vig_doc = stored.get("tca"), stored.get("vignetting")
+    tca_doc = tca_doc if isinstance(tca_doc, dict) and "channels" in tca_doc else None
+    vig_doc = vig_doc if isinstance(vig_doc, dict) and "fit" in vig_doc else None
+    tca_doc = tca_doc if args.format in TCA_FORMATS else None
+    vig_doc = vig_doc if args.format in VIGNETTING_FORMATS else None
+    if tca_doc is None and vig_doc is None:
+        return None
+    from pipeline.exports.colour import DEFAULT_DISTANCE_M, ColourCorrection  # defers scipy
+    from station.colour import tca_fields  # defers scipy
+    from station.vignetting import vignetting_fit_of  # defers scipy
+
+    where = "the profile's stored colour"
+    tca = None if tca_doc is None else tca_fields(tca_doc, f"{where} (tca)", width, height)
+    fit, aperture, distance = None, None, None
+    if vig_doc is not None:
+        fit, aperture, distance = vignetting_fit_of(vig_doc, f"{where} (vignetting)", width, height)
+    aperture = next((a for a in (args.aperture, aperture, stored.get("aperture")) if a is not None), None)
+    distance = args.distance if args.distance is not None else distance
+    if fit is not None and aperture is None:
+        if left_out is not None:
+            left_out.append(
+                "the profile's vignetting is left out: lensfun files a vignetting under the f-number it was "
+                "measured at; give --aperture F (or lens.aperture in the station configuration)"
+            )
+        fit = None
+    if tca is None and fit is None:
+        return None
     return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
 
 

@@ -414,6 +414,8 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         }
         if detail:
             out["profiles"][0]["model_parameters"] = plain(profiles[0].model.to_dict())
+            if profiles[0].details.get("colour"):  # a colour camera's TCA and vignetting, as stored
+                out["profiles"][0]["colour"] = plain(dict(profiles[0].details["colour"]))
         print(json.dumps(out, indent=1))
         return EXIT_OK
     who = f"lens #{lens[0]}: " if lens[0] is not None else "lens "
@@ -438,6 +440,11 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
             print(f"check: {c.text}")
         if p.intrinsics is not None:
             print(p.intrinsics.statement())
+        if p.details.get("colour"):
+            from station.session.colour import colour_summary  # defers numpy
+
+            for what, cell in colour_summary(p.details["colour"]).items():
+                print(f"{what}: {cell}")
         print(json.dumps(plain(p.model.to_dict())))
     return EXIT_OK
 
@@ -471,7 +478,7 @@ def _export(args, store) -> int:
             raise HarpError("name LENS and --focus F, or a stored profile with --id N")
         lens = store.find_lens(args.lens)
         newest = store.latest_by_focus(lens[0], allow_failed=True)
-        if is_zoom(newest) and args.focal is None and args.format == "lensfun":
+        if is_zoom(newest) and args.focal is None and args.format in ("lensfun", "lcp"):
             return _export_lensfun_zoom(args, store, lens)
         if _zoom_setting(args, lens, newest):
             return _export_zoom(args, store, lens, newest)
@@ -527,8 +534,9 @@ def _export_zoom(args, store, lens, newest) -> int:
 
 
 def _export_lensfun_zoom(args, store, lens) -> int:
-    """lensfun of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
-    (lensfun has no focus axis for distortion: a focus range cannot be written), in one database file;
+    """lensfun (or lcp) of a zoom lens: one calibration per calibrated focal length, at the one focus asked for
+    (lensfun has no focus axis for distortion: a focus range cannot be written; an LCP profile adds the
+    other focus settings by exporting them into the same file, each with its --distance), in one file;
     each focal's profile at that focus is a current one or interpolated along focus. Written whole or
     not at all: into a copy of ``-o`` (when it is a database), moved over it once every focal is in."""
     import argparse
@@ -539,15 +547,16 @@ def _export_lensfun_zoom(args, store, lens) -> int:
 
     newest = store.latest_by_focus(lens[0], allow_failed=True)
     focals = sorted({p.focal for p in newest if p.focal is not None})
+    suffix = ".lcp" if args.format == "lcp" else ".xml"
     if not args.output:
-        raise HarpError("lensfun export of a zoom lens: give -o FILE.xml (one calibration per focal length)")
-    if args.tca or args.vignetting:
+        raise HarpError(f"{args.format} export of a zoom lens: give -o FILE{suffix} (one calibration per focal length)")
+    if getattr(args, "tca", None) or getattr(args, "vignetting", None):
         raise HarpError(
-            "lensfun export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
+            f"{args.format} export of a zoom lens: --tca and --vignetting hold one focal length's; export that focal "
             "alone (--focal MM) with them"
         )
     out = Path(args.output)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".xml", dir=out.parent if str(out.parent) else ".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=suffix, dir=out.parent if str(out.parent) else ".")
     os.close(fd)
     os.unlink(tmp)
     try:
@@ -568,5 +577,5 @@ def _export_lensfun_zoom(args, store, lens) -> int:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-    print(f"lensfun: {len(done)} calibrations (focal {', '.join(done)}) at focus {args.focus:g} in {out}")
+    print(f"{args.format}: {len(done)} calibrations (focal {', '.join(done)}) at focus {args.focus:g} in {out}")
     return EXIT_OK

@@ -1,6 +1,6 @@
 """A zoom session: the simulated zoom lens calibrated over 3 focal lengths x 2 focus settings; the store
 holds it per (focal, focus); profile show interpolates in both, never extrapolates; the lensfun export
-has one calibration per focal length, read by lensfun itself.
+has one calibration per focal length, read by lensfun itself; the Adobe LCP export one per (focal, focus).
 
 Truth: the simulated zoom lens's closed form (:func:`drivers.sim.lens.zoom_lens`), compared modulo
 homography (what a harp measures)."""
@@ -108,6 +108,41 @@ def test_lensfun_export_one_calibration_per_focal_read_by_lensfun(zoom_run, tmp_
         rms, mx = compare_points(zoom_lens(z, 0.0, W, H), p, q, W, H)
         print(f"lensfun at {z:g} mm against the lens: RMS {rms:.4f} px, max {mx:.4f} px")
         assert rms < 0.15
+
+
+def test_lcp_export_one_profile_per_focal_and_focus_applied_by_rawtherapees_equations(zoom_run, tmp_path, capsys):
+    """``--format lcp`` at one focus writes a profile per calibrated focal length, filed under the focus
+    distance given (another focus setting exported into the same file adds its own: one entry per (focal,
+    focus distance); ``tests/station/cli/test_export_lcp.py``)."""
+    import numpy as np
+
+    from tests.pipeline.export_support import compare_points
+    from tests.pipeline.lcp_equations import correct_distortion, mapper, read_profiles
+
+    d, _, _ = zoom_run
+    out = tmp_path / "zoom.lcp"
+    store = ["--store", str(d / "profiles.sqlite")]
+    stated = {}
+    for focus, metres in (("0", 0.5),):
+        args = ["profile", "export", "ZOOM-0001", "--focus", focus, "--format", "lcp", "-o", str(out), "--json"]
+        assert main([*args, "--distance", str(metres), *store]) == 0
+        lines = capsys.readouterr().out.strip().splitlines()
+        assert lines[-1] == f"lcp: 3 calibrations (focal 12 mm, 24 mm, 36 mm) at focus {focus} in {out}"
+        stated.update({(z, metres): json.loads(ln)["conversion"] for z, ln in zip(FOCALS, lines[:-1], strict=True)})
+    prof = read_profiles(out.read_bytes())
+    assert [(m["focal"], m["focus"]) for m in prof["models"]] == [(z, 0.5) for z in FOCALS]
+    assert not prof["fisheye"]
+    p = np.stack(np.meshgrid(np.linspace(0, W - 1, 32), np.linspace(0, H - 1, 24)), axis=-1).reshape(-1, 2)
+    for m in prof["models"]:
+        q = correct_distortion(mapper(m, W, H, m["focal"]), p, prof["fisheye"])
+        rms, mx = compare_points(zoom_lens(m["focal"], 0.0, W, H), p, q, W, H)
+        c = stated[(m["focal"], m["focus"])]
+        print(
+            f"lcp at {m['focal']:g} mm, {m['focus']:g} m against the lens: RMS {rms:.4f} px, max {mx:.4f} px "
+            f"(stated against the profile: RMS {c['rms_mod_h_px']:.4f}, max {c['max_mod_h_px']:.4f} px)"
+        )
+        # the profile is within 0.03 px RMS of the lens (first test); the file within its stated error of it
+        assert rms <= 1.3 * c["rms_mod_h_px"] + 0.03
 
 
 def test_resume_of_a_finished_zoom_session_does_nothing_again(zoom_run, capsys):
