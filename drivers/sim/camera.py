@@ -126,6 +126,7 @@ from pipeline.board_render import camera_matrix as board_camera_matrix
 from pipeline.board_requests import request_pose
 from pipeline.cfa import CFA_PATTERNS, check_pattern
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
+from pipeline.render_colour import backlit_shading, render_mosaic
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
     from pipeline.realism import Session, Shot
@@ -739,8 +740,6 @@ class SimulatedCamera:
         (:class:`drivers.sim.lens.ChannelLens`), shaded by the scene's vignetting and the back-light, which
         turns with the harp (at ``harp_deg``, the strings' angle not folded to 180 degrees); a
         :class:`pipeline.render_colour.RenderedColour`."""
-        from pipeline.render_colour import backlit_shading, render_mosaic  # defers: a grey camera never needs it
-
         assert self.cfa is not None
         w, h = self._size
         lenses = {"G": lens, **{c: ChannelLens(lens, a, b, w, h) for c, (a, b) in self.tca.items()}}

@@ -52,6 +52,7 @@ from station.profile_choice import (
     setting_text,
     verdict_text,
 )
+from station.session.colour import colour_summary
 from station.store import StoreError
 from station.tables import console as text_console
 from station.tables import is_terminal, print_table
@@ -441,8 +442,6 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         if p.intrinsics is not None:
             print(p.intrinsics.statement())
         if p.details.get("colour"):
-            from station.session.colour import colour_summary  # defers numpy
-
             for what, cell in colour_summary(p.details["colour"]).items():
                 print(f"{what}: {cell}")
         print(json.dumps(plain(p.model.to_dict())))

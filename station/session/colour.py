@@ -32,8 +32,20 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.cfa import measure_mosaic
 from pipeline.models.base import DistortionModel
+from pipeline.vignetting import lensfun_pa
+from station.colour import fit_channels, tca_document
 from station.inputs import InputError
+from station.session.processing import average_frames, full_scale
+from station.vignetting import (
+    MAX_SATURATED_FRACTION,
+    ShotSamples,
+    check_angles,
+    fit_shots,
+    mosaic_samples,
+    vignetting_document,
+)
 
 KEY = "colour"
 """The profile's ``details`` key (and the model file's) of :func:`focus_colour`'s document."""
@@ -75,17 +87,6 @@ def focus_colour(
     ``{"tca": ..., "vignetting": ...}``: each the document ``harp tca --out`` / ``harp vignetting
     --out`` writes, or ``{"failure": reason}`` when it cannot be measured from these shots.
     """
-    from pipeline.cfa import measure_mosaic  # defers cv2
-    from station.colour import fit_channels, tca_document
-    from station.vignetting import (
-        MAX_SATURATED_FRACTION,
-        ShotSamples,
-        check_angles,
-        fit_shots,
-        mosaic_samples,
-        vignetting_document,
-    )
-
     out: dict[str, Any] = {}
     shots = [measure_mosaic(m, pattern, t=t) for m in mosaics]
     try:
@@ -104,8 +105,6 @@ def focus_colour(
             if len(s.value) == 0:
                 raise InputError(f"{name}: no lit sheet found between the strings")
             samples.append(ShotSamples(name, float(a), w, h, n, s))
-        from pipeline.vignetting import lensfun_pa
-
         fit = fit_shots(samples, model)
         out["vignetting"] = vignetting_document(fit, lensfun_pa(fit), samples, model=model)
     except (InputError, ValueError) as exc:
@@ -121,14 +120,10 @@ def session_colour(session: Any, focus_idx: int, model: DistortionModel, config:
     frames averaged, its angle the stage's read-back (else the commanded one); ``model`` the focus setting's
     fitted distortion; ``config`` the session's.
     """
-    from station.session.processing import average_frames
-
     records = [session.frames(focus_idx, o) for o in range(len(config.capture.orientations_deg))]
     pattern = frames_cfa([r for rs in records for r in rs])
     if pattern is None:
         return None
-    from station.session.processing import full_scale
-
     mosaics, angles, names = [], [], []
     for rs, commanded in zip(records, config.capture.orientations_deg):
         mosaics.append(average_frames([session.read_frame(r) for r in rs]))

@@ -223,7 +223,7 @@ def measure_shot(image: np.ndarray, pipeline: PipelineConfig, cfa: str | None = 
     from pipeline.measure import measure_image  # defers cv2
 
     if cfa is not None:
-        from pipeline.cfa import mosaic_luma
+        from pipeline.cfa import mosaic_luma  # defers cv2
 
         image = mosaic_luma(image)
     m = measure_image(image, t=pipeline.t)
