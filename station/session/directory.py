@@ -59,6 +59,10 @@ class SessionError(HarpError, RuntimeError):
     """A session directory that cannot be used; message is one line."""
 
 
+class SessionAborted(Exception):
+    """The session cannot go on; ``str()`` is the one-line reason (the executor records it as ``aborted``)."""
+
+
 def read_session_file(path: Path) -> dict:
     """The mapping in ``DIR/session.json``; a damaged one is a :class:`SessionError` saying what to do."""
     f = Path(path) / SESSION_FILE
