@@ -9,7 +9,7 @@ Two parts (issue 19 items 2 and 5):
 
 * **The real photographs** (``../shared/data/real-harp`` or ``$HARP_REAL_DATA``): every split of the
   three shots into two fitted and one held out. For each candidate of ``harp calibrate``
-  (:data:`pipeline.select.DEFAULT_CANDIDATES`) fitted on the two, the held-out shot's d, measured
+  (:data:`pipeline.cross_validation.DEFAULT_CANDIDATES`) fitted on the two, the held-out shot's d, measured
   on whole strings (the measurement of ``harp measure``, ends kept) and on the paper's interior-only
   points (``smoothing="gaussian"``: 3 sigma = 72 px dropped at both ends of every piece); the choice
   made on the two shots (:func:`pipeline.select.select_model`) and its ratio to the best candidate on
@@ -38,12 +38,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from pipeline.cross_validation import DEFAULT_CANDIDATES, CVRow, paired_difference
 from pipeline.edgeset import held_out_residuals
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.models import RadialModel
 from pipeline.resample import smooth_subsample
-from pipeline.select import DEFAULT_CANDIDATES, CVRow, paired_difference, select_model
+from pipeline.select import select_model
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
 

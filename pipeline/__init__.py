@@ -17,7 +17,8 @@ Where things are
 * fitting: :mod:`pipeline.fitspec` (what to fit), :mod:`pipeline.edgeset` (the edges
   of a fit, TLS lines, figures, result types), :mod:`pipeline.fit` (the
   Levenberg–Marquardt fit), :mod:`pipeline.alvarez` (closed-form start),
-  :mod:`pipeline.select` (cross-validated model choice),
+  :mod:`pipeline.cross_validation` (the candidates' CV table), :mod:`pipeline.orientations` (whether
+  the shots' string orientations support a model), :mod:`pipeline.select` (the model choice of them),
   :mod:`pipeline.uncertainty` (bootstrap field uncertainty);
 * using corrections: :mod:`pipeline.compare` and :mod:`pipeline.normalise` (modulo
   homography), :mod:`pipeline.evaluate`, :mod:`pipeline.interpolate` (over focus),

@@ -296,7 +296,7 @@ class FitSpec:
 FULL_RADIAL = FitSpec("radial", tangential=True, prism=True)
 """The radial model with its decentering and thin-prism terms, degree 4 (12 parameters): what
 ``harp calibrate --model radial`` fits unless told ``--no-tangential`` / ``--no-prism``, and the
-model selection's fallback (:data:`pipeline.select.FALLBACK`)."""
+model selection's fallback (:data:`pipeline.cross_validation.FALLBACK`)."""
 
 
 _TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_prior", "center-prior": "center_prior"}

@@ -34,8 +34,9 @@ from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, stra
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
+from pipeline.orientations import distinct_orientations
 from pipeline.plain import finite_or_none
-from pipeline.select import distinct_orientations, select_model
+from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
 from station.profile import (
@@ -180,7 +181,7 @@ def calibrate_shots(
     seed : of the bootstrap resampling.
     map_fn : ``map`` over independent fits (a process pool's); results do not depend on it.
     candidates : what the cross-validation chooses among when ``spec`` is None (default
-        :data:`pipeline.select.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
+        :data:`pipeline.cross_validation.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     """
     lines = [list(s) for s in shots]
     selection = None

@@ -346,7 +346,7 @@ CORNER_CANDIDATES = tuple(
         "radial2+division1",
     )
 )
-"""The contenders of pipeline.select.DEFAULT_CANDIDATES on these lenses (benchmarks/field_error.py runs
+"""The contenders of pipeline.cross_validation.DEFAULT_CANDIDATES on these lenses (benchmarks/field_error.py runs
 the whole default list and chooses the same)."""
 
 

@@ -13,6 +13,7 @@ import pytest
 import threadpoolctl
 
 from pipeline.compare import compare_models
+from pipeline.cross_validation import n_params
 from pipeline.edgeset import collect
 from pipeline.exports.maps import map_accuracy
 from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, read_correction, write_export
@@ -22,7 +23,8 @@ from pipeline.lens_population import lens_population
 from pipeline.model_file import model_file_text, parse_model_text
 from pipeline.models import RadialFieldModel, RadialModel, model_from_dict
 from pipeline.models.radial_field import bspline_weights, field_bounds
-from pipeline.select import field_candidates, is_flexible, n_params, required_orientations, select_model
+from pipeline.orientations import required_orientations
+from pipeline.select import field_candidates, is_flexible, select_model
 from tests.pipeline.harp_points import harp_point_sets
 
 W, H = 1000, 750

@@ -1,9 +1,10 @@
 import numpy as np
 import pytest
 
+from pipeline.cross_validation import FALLBACK
 from pipeline.fitspec import FitSpec
 from pipeline.models import RadialModel
-from pipeline.select import FALLBACK, select_model
+from pipeline.select import select_model
 from tests.pipeline.harp_points import harp_point_sets
 from tests.pipeline.rendered_shots import real_shots
 
@@ -59,7 +60,7 @@ def test_real_photos_radial_generalises_polynomial_does_not(real_harp_dir):
 def test_edge_folds_hold_out_whole_strings_not_one_side_of_each():
     # measure() lists a string's two edges next to each other (lines 2k, 2k+1: one string).
     # Holding out one edge while fitting its twin 3 px away leaks the held-out string into the fit.
-    from pipeline.select import cv_folds
+    from pipeline.cross_validation import cv_folds
 
     lines = [[np.full((6, 2), 10.0 * i + j) for j in range(8)] for i in range(2)]
     for train, held in cv_folds(lines, "edges"):
@@ -119,7 +120,8 @@ def test_the_choice_is_made_with_every_orientation_in_the_fit():
     """Issue 19 item 2: tier 1 (leave one shot out) only sets aside what fails on an unseen
     orientation; the choice among the rest is cross-validated on alternate strings, every shot in
     every fit."""
-    from pipeline.select import ORIENTATION_TOLERANCE, cv_folds
+    from pipeline.cross_validation import cv_folds
+    from pipeline.select import ORIENTATION_TOLERANCE
 
     shots = harp_point_sets(DECENTRED, W, H, (0, 60, 120), noise=0.005, seed=3)
     sel = select_model(shots, W, H, candidates=CANDS, stop_factor=None)
@@ -153,7 +155,7 @@ def test_a_centre_prior_that_bends_the_fit_loses_with_every_orientation():
 
 
 def test_too_few_orientations_for_the_choice_are_said():
-    from pipeline.select import distinct_orientations, required_orientations, shot_orientation, support_problem
+    from pipeline.orientations import distinct_orientations, required_orientations, shot_orientation, support_problem
 
     shots = harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005, seed=5)
     assert [round(shot_orientation(s)) % 180 for s in shots] == [0, 90]

@@ -1,0 +1,82 @@
+"""Whether shots support a distortion model: the distinct string orientations they cover and what a model needs.
+
+A free centre with decentering, thin-prism or division terms, and a free polynomial or residual field,
+are determined only by strings seen in enough directions (:func:`required_orientations`); a shot's
+direction is its strings' (:func:`shot_orientation`), and directions closer than
+:data:`ORIENTATION_SEPARATION_DEG` count once (:func:`distinct_orientations`). :func:`support_problem`
+says what is missing; the model choice (:mod:`pipeline.select`) and the calibration read it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from pipeline.fitspec import FitSpec
+
+REQUIRED_ORIENTATIONS_FREE = 3
+"""Distinct orientations a spec with a free centre and decentering / thin-prism / division terms needs
+to be well supported: with two, a shift of the centre and the decentering terms trade against each
+other along a direction the two orientations hardly see (on the real photographs, fitted on two
+orientations, the third is left 2-3x less straight than when it is in the fit)."""
+
+REQUIRED_ORIENTATIONS_POLY = 4
+"""Distinct orientations a free bivariate polynomial (or a residual field) needs: with fewer, it keeps the lines of
+the shots straight with terms an unseen orientation sees bent."""
+
+ORIENTATION_SEPARATION_DEG = 10.0
+"""Two shots whose strings differ in direction by less than this are one orientation."""
+
+
+def shot_orientation(lines: Sequence[np.ndarray]) -> float:
+    """Direction of a shot's strings, degrees in [0, 180): the length-weighted mean (on doubled angles)
+    of its edges' directions; NaN when it has no edge of 3 points or more."""
+    c = s = 0.0
+    for p in lines:
+        q = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+        q = q[np.all(np.isfinite(q), axis=1)]
+        if len(q) < 3:
+            continue
+        d = q - q.mean(axis=0)
+        sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
+        two = np.arctan2(2.0 * sxy, sxx - syy)
+        length = float(np.hypot(*(q[-1] - q[0])))
+        c += length * np.cos(two)
+        s += length * np.sin(two)
+    if c == 0.0 and s == 0.0:
+        return float("nan")
+    return float(np.degrees(0.5 * np.arctan2(s, c)) % 180.0)
+
+
+def distinct_orientations(angles_deg: Iterable[float], separation_deg: float = ORIENTATION_SEPARATION_DEG) -> int:
+    """Number of distinct orientations among line directions (degrees, modulo 180): directions closer
+    than ``separation_deg`` (single linkage, around the circle) count once."""
+    a = np.sort(np.array([v % 180.0 for v in angles_deg if np.isfinite(v)]))
+    if not len(a):
+        return 0
+    gaps = np.diff(np.append(a, a[0] + 180.0))
+    n = int(np.sum(gaps >= separation_deg))
+    return max(n, 1)
+
+
+def required_orientations(spec: FitSpec) -> int:
+    """Distinct orientations ``spec`` needs to be well supported (:data:`REQUIRED_ORIENTATIONS_FREE`,
+    :data:`REQUIRED_ORIENTATIONS_POLY`, also for a residual field); 2 for a radial factor alone (or one with a centre prior)."""
+    if spec.kind == "poly" or spec.field is not None:
+        return REQUIRED_ORIENTATIONS_POLY
+    if (spec.tangential or spec.prism or spec.division) and not spec.center_prior:
+        return REQUIRED_ORIENTATIONS_FREE
+    return 2
+
+
+def support_problem(spec: FitSpec, lines_per_image: Sequence[Sequence[np.ndarray]]) -> str | None:
+    """Why the shots do not support ``spec`` well (too few distinct orientations), or None."""
+    have = distinct_orientations(shot_orientation(s) for s in lines_per_image)
+    need = required_orientations(spec)
+    if have >= need:
+        return None
+    return (
+        f"not well supported: {spec.label} needs >= {need} distinct string orientations "
+        f"(>= {ORIENTATION_SEPARATION_DEG:g} deg apart), the shots have {have}; add shots at other angles"
+    )
