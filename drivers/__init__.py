@@ -33,6 +33,8 @@ from drivers.protocols import (  # noqa: F401  (re-exported)
     TurntableRanges,
 )
 from drivers.settings import Setting
+from drivers.zoom_controller import SETTING as ZOOM_CONTROLLER
+from drivers.zoom_controller import ControlledZoom
 
 CAMERA_DRIVERS = {
     "v4l2": "drivers.v4l2_camera:V4L2Camera",
@@ -59,12 +61,26 @@ def driver_settings(table: Mapping[str, str], name: str) -> Mapping[str, Setting
     opening anything."""
     module, cls = table[name].split(":")
     settings: Mapping[str, Setting] = getattr(importlib.import_module(module), cls).SETTINGS
+    if table is CAMERA_DRIVERS:  # every camera's zoom may be a lens controller's (drivers.zoom_controller)
+        settings = {**settings, "zoom_controller": ZOOM_CONTROLLER}
     return settings
 
 
 def open_camera(cfg: Mapping[str, Any], **context: Any) -> Camera:
-    """Create (not open) the camera driver named by ``cfg["driver"]``."""
-    return cast(Camera, _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(dict(cfg), **context))
+    """Create (not open) the camera driver named by ``cfg["driver"]``; with ``zoom_controller``, the
+    camera whose zoom a lens controller drives (:class:`drivers.zoom_controller.ControlledZoom`)."""
+    cfg = dict(cfg)
+    controller = cfg.pop("zoom_controller", None)
+    if controller is None:
+        return cast(Camera, _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(cfg, **context))
+    from drivers.visca import ViscaLens  # defers serial
+
+    if not isinstance(controller, Mapping):
+        raise ValueError(f"zoom_controller: expected a mapping (port, address, ...), got {controller!r}")
+    controller = dict(controller)
+    zoom = controller.pop("zoom", None)  # the controller's position, set before the camera opens
+    camera = _driver_class(CAMERA_DRIVERS, "camera", cfg).from_config(cfg, **context)
+    return cast(Camera, ControlledZoom(camera, ViscaLens.from_config(controller), zoom))
 
 
 def open_turntable(cfg: Mapping[str, Any], **context: Any) -> Turntable:

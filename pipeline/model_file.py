@@ -17,6 +17,9 @@ their SHA-256), passed in here as plain data. Layout (format version 1)::
                  command: .., images: [{path: .., sha256: ..}, ..]}
     intrinsics: {fx: .., fy: .., cx: .., cy: .., sd: {..}, source: .., ...}   # optional:
                  # the camera matrix measured with this distortion (pipeline.intrinsics)
+    colour: {tca: {..}, vignetting: {..}}   # optional: a colour camera's lateral chromatic aberration
+                 # and vignetting from the same shots (station.session.colour: the documents
+                 # harp tca --out and harp vignetting --out write), plain data
 
 Any defect (not YAML, not our format, unknown version, unknown model, bad
 parameters) raises :class:`ValueError` with a one-line message naming the file and
@@ -52,6 +55,7 @@ class ModelFile:
     provenance: dict[str, Any] = field(default_factory=dict)
     path: str | None = None
     intrinsics: Intrinsics | None = None
+    colour: dict[str, Any] | None = None
 
     def text(self) -> str:
         """The file's text (:func:`model_file_text`)."""
@@ -62,6 +66,7 @@ class ModelFile:
             merit=self.merit,
             provenance=self.provenance,
             intrinsics=self.intrinsics,
+            colour=self.colour,
         )
 
 
@@ -73,6 +78,7 @@ def model_file_text(
     merit: dict[str, Any] | None = None,
     provenance: dict[str, Any] | None = None,
     intrinsics: Intrinsics | None = None,
+    colour: dict[str, Any] | None = None,
 ) -> str:
     """The text of a model file holding ``model`` for ``width x height`` images, with its
     figures of merit and provenance (plain data: numpy values and tuples are converted)
@@ -94,6 +100,8 @@ def model_file_text(
     }
     if intrinsics is not None:
         doc["intrinsics"] = plain(intrinsics.to_dict(), nonfinite_as_none=False)
+    if colour:
+        doc["colour"] = plain(colour, nonfinite_as_none=False)
     header = (
         "# harp station distortion model (maps distorted -> ideal pixels; x = column, y = row,\n"
         "# pixel centres at integers). Load with pipeline.load_model(path).\n"
@@ -149,8 +157,18 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
             intrinsics = Intrinsics.from_dict(doc["intrinsics"])
         except ValueError as exc:
             raise ValueError(f"{name}: {exc}") from None
+    colour = doc.get("colour")
+    if colour is not None and not isinstance(colour, dict):
+        raise ValueError(f"{name}: 'colour' must be a mapping (tca, vignetting)")
     return ModelFile(
-        model=model, width=width, height=height, merit=merit, provenance=prov, path=name, intrinsics=intrinsics
+        model=model,
+        width=width,
+        height=height,
+        merit=merit,
+        provenance=prov,
+        path=name,
+        intrinsics=intrinsics,
+        colour=colour,
     )
 
 

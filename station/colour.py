@@ -121,7 +121,11 @@ def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
     it is not a harp TCA file (YAML or JSON), lacks a channel, or is for another image size.
     """
     p = Path(path)
-    doc = read_document(p, "harp-tca", "a harp TCA file", "harp tca --out")
+    return tca_fields(read_document(p, "harp-tca", "a harp TCA file", "harp tca --out"), str(p), width, height)
+
+
+def tca_fields(doc: dict[str, Any], p: str, width: int, height: int) -> dict[str, Any]:
+    """:func:`read_tca_file` of a document already read (a profile's stored one); ``p`` names it."""
     fields: dict[str, Any] = {}
     for ch in "RB":
         try:

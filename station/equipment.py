@@ -36,7 +36,7 @@ class Optics:
     export's camera matrix nominal instead of a placeholder
     (:func:`pipeline.exports.lens.camera_matrix_choice`) and let lensfun
     applications find the lens (:mod:`pipeline.exports.lensfun`). In the YAML
-    file ``focal_mm`` and ``mount`` belong to ``lens``, the others to
+    file ``focal_mm``, ``mount`` and ``aperture`` belong to ``lens``, the others to
     ``camera_body`` (each field's ``optics`` metadata); ``pixel_pitch_um`` and
     ``sensor_width_mm`` are alternatives (give one). The ranges are plausible
     values for their unit, which catches a value written in the wrong unit (a
@@ -46,6 +46,8 @@ class Optics:
     focal_mm: float | None = setting(None, "the nominal focal length (at this zoom setting)", "mm", 0.1, 10000.0,
                                      optics="lens")  # fmt: skip
     mount: str | None = setting(None, "the lens mount, as lensfun names it (e.g. 'Canon EF')", optics="lens")
+    aperture: float | None = setting(None, "the f-number the harp shots are taken at (lensfun files a vignetting "
+                                     "under it)", "", 0.5, 100.0, optics="lens")  # fmt: skip
     pixel_pitch_um: float | None = setting(None, "the pixel pitch of the images (after any binning)", "µm", 0.2,
                                            100.0, optics="camera_body")  # fmt: skip
     sensor_width_mm: float | None = setting(None, "the width of the sensor area the image covers", "mm", 0.5, 200.0,

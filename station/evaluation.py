@@ -8,7 +8,11 @@ the 4 corrected image corners and reports their straightness before and after; e
 maps file or STMap does not cover (their ideal position is outside the corrected image it holds,
 as at a wide lens's borders) are left out, never extrapolated, and counted (``n_excluded`` of
 ``n_points``, per image and in all; the after figures are on the points kept); with
-``already_corrected`` the shots were corrected by other software and are only measured. A shot
+``already_corrected`` the shots were corrected by other software and are only measured. Each shot's
+residual after the correction is also split into the profile every string edge shares and each edge's
+own part (``after_shared``, :func:`pipeline.shared_bend.shared_bend`): a large shared part is a term
+the correction lacks or its shots left undetermined (shots at other orientations help), a large own
+part the strings or the measurement. A shot
 that cannot be read, has another size than the first, or holds no string is reported in
 ``errors`` and left out. Every other problem is an :class:`EvaluateError` (one line naming the file).
 """
@@ -23,6 +27,7 @@ from pipeline.models.homography import apply_homography
 from pipeline.models.remap_model import RemapModel
 from pipeline.normalise import corner_homography
 from pipeline.resample import DEFAULT_T
+from pipeline.shared_bend import shared_bend
 from pipeline.straightness import straightness
 from station.inputs import NO_STRINGS, InputError, measure_grey, read_image
 
@@ -135,6 +140,8 @@ def evaluate(
             raise EvaluateError(f"{correction_path}: {exc}") from None
         entry["before"] = _sd(straightness(before)) if before is not None else None
         entry["after"] = _sd(straightness(after)) if after else None
+        shared = shared_bend(after) if after else None
+        entry["after_shared"] = shared.to_dict() if shared is not None else None
         per_image.append(entry)
         after_all += after
         if before is not None:

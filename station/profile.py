@@ -26,6 +26,9 @@ same record), ``harp calibrate`` writes it, QA judges it, the report shows it an
 * the camera matrix measured with this correction held fixed, once measured
   (``intrinsics``: :class:`pipeline.intrinsics.Intrinsics`, values, standard deviations,
   source; ``harp intrinsics``), which every export uses.
+* a colour camera's TCA and vignetting from the same shots (``details["colour"]``:
+  :mod:`station.session.colour`; the model file's ``colour`` key, the store's details), which
+  ``harp profile export`` writes to lensfun and OpenCV.
 
 Conversions: :meth:`Profile.to_model_file` / :meth:`Profile.from_model_file` (the
 YAML model file, :mod:`pipeline.model_file`) and :meth:`Profile.to_row` /
@@ -401,7 +404,16 @@ class Profile:
         if self.id is not None:
             prov["profile_id"] = self.id
         prov.update(p.extra)
-        return ModelFile(self.model, int(self.width), int(self.height), merit, prov, intrinsics=self.intrinsics)
+        colour = self.details.get("colour")  # a colour camera's TCA and vignetting (station.session.colour)
+        return ModelFile(
+            self.model,
+            int(self.width),
+            int(self.height),
+            merit,
+            prov,
+            intrinsics=self.intrinsics,
+            colour=dict(colour) if isinstance(colour, Mapping) else None,
+        )
 
     @classmethod
     def from_model_file(cls, mf: ModelFile) -> Profile:
@@ -431,6 +443,7 @@ class Profile:
             details={
                 **({"harp_health": dict(health)} if isinstance(health, Mapping) else {}),
                 **({"strings": dict(strings)} if isinstance(strings, Mapping) else {}),
+                **({"colour": dict(mf.colour)} if mf.colour else {}),
             },
             intrinsics=mf.intrinsics,
         )

@@ -49,6 +49,8 @@ from station.profile import Profile, Verdict
 from station.provenance import make_provenance
 from station.qa.verdicts import Measurements, qa_verdict
 from station.session import layout
+from station.session.colour import KEY as COLOUR
+from station.session.colour import frames_cfa, session_colour
 from station.session.directory import SessionError, read_manifest
 from station.session.frame_files import decode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
@@ -268,7 +270,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
             size = (w, h)
         elif size != (w, h):
             raise ValueError(f"{where}: orientation {o} frames are {w}x{h}, the others {size[0]}x{size[1]}")
-        m = measure_shot(average_frames(images), cfg.pipeline)
+        m = measure_shot(average_frames(images), cfg.pipeline, frames_cfa(records))
         stage = (records[-1].meta or {}).get("stage_deg")
         expected = cfg.station.harp.expected_angle(commanded if stage is None else stage)
         problems = shot_problems(m, expected, cfg.capture.checks)
@@ -282,6 +284,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
     if cal.failure or not cal.fit:
         raise ValueError(f"{where}: the fit failed: {cal.failure}")
     old = s.old_profile(f)
+    colour = session_colour(s, f, cal.fit.model, cfg)  # a colour camera's TCA and vignetting, made again
     profile = focus_profile(
         cal,
         w,
@@ -290,7 +293,10 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         f,
         provenance=make_provenance(frame_files, t=cfg.pipeline.t, command="harp reprocess", station=cfg.station.id),
         given_by=GIVEN_ON_COMMAND_LINE if job.spec else GIVEN_BY_CONFIG,
-        details={"session_model_file": str(s.path / layout.profile_file(f))},
+        details={
+            "session_model_file": str(s.path / layout.profile_file(f)),
+            **({COLOUR: colour} if colour is not None else {}),
+        },
         judge=lambda p: qa_verdict(
             p, cfg.qa, measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}")
         ),

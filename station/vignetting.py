@@ -110,12 +110,7 @@ def _check_saturation(path: str, img: np.ndarray) -> None:
 
 
 def _raw_samples(path: str, t: int) -> tuple[int, int, int, BacklitSamples]:
-    """A camera RAW shot's lit sheet on its first green plane: ``(width, height, edges, samples)``.
-
-    The plane's pixels, black level subtracted, at their own mosaic positions
-    (:func:`pipeline.cfa.plane_to_mosaic`: nothing interpolated, nothing demosaiced); its edges
-    measured on the plane (:func:`pipeline.cfa.measure_mosaic`'s scale) and brought to the mosaic.
-    """
+    """A camera RAW shot's lit sheet (:func:`mosaic_samples`), its saturation checked."""
     try:
         raw = read_raw(path)
     except ImageReadError as exc:
@@ -126,14 +121,30 @@ def _raw_samples(path: str, t: int) -> tuple[int, int, int, BacklitSamples]:
             f"{path}: {100 * frac:.1f} % of the pixels are at the white level {raw.white_level:g} (saturated): "
             "the clipped sheet hides the vignetting; lower the exposure"
         )
-    h, w = raw.mosaic.shape
-    plane = next(p for p in cfa_planes(raw.mosaic, raw.pattern) if p.name == "G1")
-    m = to_mosaic(measure_image(plane.image, t=max(2, int(t) // 2)), plane.offset, w, h)
+    return mosaic_samples(raw.mosaic, raw.pattern, raw.black_level, t, path)
+
+
+def mosaic_samples(
+    mosaic: np.ndarray, pattern: str, black_level: float, t: int, path: str, measured: Any = None
+) -> tuple[int, int, int, BacklitSamples]:
+    """A raw mosaic's lit sheet on its first green plane: ``(width, height, edges, samples)``.
+
+    The plane's pixels, ``black_level`` subtracted, at their own mosaic positions
+    (:func:`pipeline.cfa.plane_to_mosaic`: nothing interpolated, nothing demosaiced); its edges
+    measured on the plane (:func:`pipeline.cfa.measure_mosaic`'s scale) and brought to the mosaic.
+    ``path`` names the shot in the InputError when no string is found; ``measured``: the plane's
+    measurement when already made (:attr:`pipeline.cfa.MosaicMeasurement.planes` ``["G1"]``).
+    """
+    h, w = mosaic.shape
+    plane = next(p for p in cfa_planes(mosaic, pattern) if p.name == "G1")
+    m = measured
+    if m is None:
+        m = to_mosaic(measure_image(plane.image, t=max(2, int(t) // 2)), plane.offset, w, h)
     if m.n_lines == 0:
         raise InputError(f"{path}: {NO_STRINGS}")
     yy, xx = np.mgrid[0 : plane.image.shape[0], 0 : plane.image.shape[1]].astype(np.float64)
     positions = (2.0 * xx + plane.offset[0], 2.0 * yy + plane.offset[1])
-    img = plane.image.astype(np.float64) - raw.black_level
+    img = plane.image.astype(np.float64) - black_level
     s = backlit_samples(img, [ln.raw_points for ln in m.lines], positions=positions)
     return int(w), int(h), int(m.n_lines), s
 
@@ -307,6 +318,13 @@ def read_vignetting_file(path, width: int, height: int) -> tuple[VignettingFit, 
     its fit is malformed, or it is for another image size than ``width`` x ``height``.
     """
     doc = read_document(path, "harp-vignetting", "a harp vignetting file", "harp vignetting --out")
+    return vignetting_fit_of(doc, str(path), width, height)
+
+
+def vignetting_fit_of(
+    doc: dict[str, Any], path: str, width: int, height: int
+) -> tuple[VignettingFit, float | None, float | None]:
+    """:func:`read_vignetting_file` of a document already read (a profile's stored one); ``path`` names it."""
     try:
         fit = VignettingFit.from_dict(doc["fit"])
     except (KeyError, TypeError, ValueError) as exc:

@@ -67,7 +67,11 @@ def part_config_text(config: Config, part: Part) -> str:
     """The configuration of one part: the zoom configuration's with ``zoom.focal`` and the camera's ``zoom``."""
     doc = load_yaml(read_config_text(config.path))
     doc["zoom"] = {"focal": part.focal}
-    doc["station"]["camera"]["zoom"] = part.position
+    camera = doc["station"]["camera"]
+    if isinstance(camera.get("zoom_controller"), dict):  # the lens controller's position (drivers.zoom_controller)
+        camera["zoom_controller"] = {**camera["zoom_controller"], "zoom": part.position}
+    else:
+        camera["zoom"] = part.position
     head = (
         f"# part {part.name} of a zoom session (harp station): {config.path} at focal length {part.focal:g} mm\n"
         f"# (zoom position {part.position:g}); relative paths resolve against {config.base_dir}\n"

@@ -89,6 +89,16 @@ lowers the electrons per grey level) and the defocus model on the drawn PSF.
 ``extra["sim"]["realism_seed"]``. A realistic frame costs several times a clean one
 (a half-size conversion renders four samples per pixel).
 
+Colour (off by default). With ``cfa`` (a Bayer pattern, e.g. ``RGGB``) the sensor is a colour one and
+each frame a raw mosaic (:func:`pipeline.render_colour.render_mosaic`, its pattern in
+``extra["cfa"]``): green through the demo lens, red and blue through their own exact maps
+(:class:`drivers.sim.lens.ChannelLens`: ``tca_red``, ``tca_blue`` their magnification against green,
+``tca_red_radial``, ``tca_blue_radial`` its growth to the corners), with the channel sensitivities
+:data:`CFA_GAINS`; the light is the scene's ``vignetting`` (:func:`drivers.sim.lens.vignetting_factor`,
+on the sensor) times a back-light ``1 + backlight_gradient * h_x / R0`` in the harp's own coordinates
+(:math:`R_0` the half diagonal), which turns with the harp
+(:func:`pipeline.render_colour.backlit_shading`), times the exposure scale.
+
 Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
 """
 
@@ -100,7 +110,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -108,13 +118,15 @@ from drivers.config_keys import check_config_keys
 from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import SEED_MAX, Setting
-from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, lens_for_focus, zoom_lens
+from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, ChannelLens, lens_for_focus, vignetting_factor, zoom_lens
 from drivers.sim.world import SimWorld
 from pipeline.board import parse_board
 from pipeline.board_render import BoardPose, render_board
 from pipeline.board_render import camera_matrix as board_camera_matrix
 from pipeline.board_requests import request_pose
+from pipeline.cfa import CFA_PATTERNS, check_pattern
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
+from pipeline.render_colour import backlit_shading, render_mosaic
 
 if TYPE_CHECKING:  # the realistic simulator is imported only by a camera that uses it
     from pipeline.realism import Session, Shot
@@ -132,6 +144,9 @@ BOARD_FILL = 0.5
 BOARD_SWEEP = 0.2
 """A board view's centre is this many image widths from the image centre, in the direction of the
 turntable angle, so that the views sweep the field."""
+
+CFA_GAINS = {"R": 0.6, "G": 1.0, "B": 0.5}
+"""A colour sensor's channel sensitivities (``cfa``): red and blue below green, as a white balance undoes."""
 
 IDEAL_CACHE_PIXELS = 6_000_000
 """Largest sensor (pixels) whose lens map the camera keeps between frames (16 bytes per pixel: 96 MB)."""
@@ -203,6 +218,16 @@ SETTINGS: dict[str, Setting] = {
     "board_tilt_deg": Setting("the board's tilt on its wedge", "number", "deg", 0.0, 80.0, high_open=True),
     "focal_px": Setting("the camera matrix's focal length of board frames (default: in proportion to width)",
                         "number", "px", 0.0, 1e6, low_open=True),
+    "cfa": Setting("a Bayer colour sensor with this pattern: raw mosaics (null: a grey sensor)", "text",
+                   choices=CFA_PATTERNS, nullable=True),
+    "tca_red": Setting("red's magnification against green (lateral chromatic aberration; needs cfa)", "number", "",
+                       -0.01, 0.01),
+    "tca_red_radial": Setting("red's magnification growth to the corners (rho^2 term; needs cfa)", "number", "",
+                              -0.01, 0.01),
+    "tca_blue": Setting("blue's magnification against green (needs cfa)", "number", "", -0.01, 0.01),
+    "tca_blue_radial": Setting("blue's magnification growth to the corners (needs cfa)", "number", "", -0.01, 0.01),
+    "backlight_gradient": Setting("the back-light's brightness slope across the harp, turning with it (needs cfa)",
+                                  "number", "", -0.5, 0.5),
     **SCENE_SETTINGS,
 }  # fmt: skip
 """The keys of the simulated camera's configuration section, each with its type, unit and range."""
@@ -281,6 +306,12 @@ class SimulatedCamera:
         board: str | None = None,
         board_tilt_deg: float = 30.0,
         focal_px: float | None = None,
+        cfa: str | None = None,
+        tca_red: float = 0.0,
+        tca_red_radial: float = 0.0,
+        tca_blue: float = 0.0,
+        tca_blue_radial: float = 0.0,
+        backlight_gradient: float = 0.0,
     ):
         if int(width) != width or int(height) != height or width < 16 or height < 16:
             raise ValueError(f"sim camera: width and height must be integers >= 16, got {width}x{height}")
@@ -303,6 +334,13 @@ class SimulatedCamera:
                 raise ValueError(f"sim camera: jpeg_quality must be an integer in 1..100, got {jpeg_quality!r}")
             if bit_depth != 8:
                 raise ValueError("sim camera: jpeg_quality needs bit_depth 8 (Mono8)")
+        self.cfa = None if cfa is None else check_pattern(str(cfa))
+        self.tca = {"R": (float(tca_red), float(tca_red_radial)), "B": (float(tca_blue), float(tca_blue_radial))}
+        self.backlight_gradient = float(backlight_gradient)
+        if self.cfa is None and (any(any(t) for t in self.tca.values()) or self.backlight_gradient):
+            raise ValueError("sim camera: tca_red, tca_blue and backlight_gradient need cfa (a colour sensor)")
+        if self.cfa is not None and (int(width) % 2 or int(height) % 2 or realism_seed is not None):
+            raise ValueError("sim camera: cfa needs an even width and height and no realism_seed")
         self.board = None
         if board is not None:
             self.board = parse_board(str(board))  # ValueError (one line) naming the label
@@ -373,7 +411,7 @@ class SimulatedCamera:
         scene_kw: dict[str, Any] = {}
         try:
             for key, value in cfg.items():
-                if key in ("realism_seed", "jpeg_quality") and value is None:
+                if key in ("realism_seed", "jpeg_quality", "cfa") and value is None:
                     pass
                 elif key in (
                     "width",
@@ -392,7 +430,7 @@ class SimulatedCamera:
                 elif key in ("shot_noise", "frame"):
                     if not isinstance(value, bool):
                         raise ValueError(f"must be true or false, got {value!r}")
-                elif key in ("serial", "pixel_format", "driver", "board"):
+                elif key in ("serial", "pixel_format", "driver", "board", "cfa"):
                     value = str(value)
                 elif key == "best_focus" and value is None:
                     pass
@@ -460,6 +498,8 @@ class SimulatedCamera:
 
     @property
     def pixel_format(self) -> str:
+        if self.cfa is not None:  # GenICam's name of a raw Bayer mosaic: BayerRG16 for RGGB
+            return f"Bayer{self.cfa[:2]}{self._bit_depth}"
         return "Mono8" if self._bit_depth == 8 else "Mono16"
 
     @property
@@ -676,6 +716,11 @@ class SimulatedCamera:
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
         lens = self.lens_at(focus)
+        if self.cfa is not None:
+            stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
+            seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom)
+            colour: Rendered = self._render_colour(scene, lens, stage + self.world.harp_offset_deg, seed, gain_lin)
+            return colour  # a RenderedColour: image and scene as a Rendered's
         return render_harp(
             w,
             h,
@@ -689,6 +734,30 @@ class SimulatedCamera:
             exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
+
+    def _render_colour(self, scene: HarpScene, lens: Any, harp_deg: float, seed: int, gain_lin: float) -> Any:
+        """A raw Bayer mosaic (``cfa``; module docstring, *Colour*): each channel through its own lens map
+        (:class:`drivers.sim.lens.ChannelLens`), shaded by the scene's vignetting and the back-light, which
+        turns with the harp (at ``harp_deg``, the strings' angle not folded to 180 degrees); a
+        :class:`pipeline.render_colour.RenderedColour`."""
+        assert self.cfa is not None
+        w, h = self._size
+        lenses = {"G": lens, **{c: ChannelLens(lens, a, b, w, h) for c, (a, b) in self.tca.items()}}
+        r0 = 0.5 * math.hypot(w, h)
+        g = self.backlight_gradient
+
+        def vignetting(xy: np.ndarray) -> np.ndarray:
+            return vignetting_factor(self.scene.vignetting, w, h, xy)
+
+        def backlight(hxy: np.ndarray) -> np.ndarray:
+            return np.asarray(1.0 + g * np.asarray(hxy)[:, 0] / r0, np.float64)
+
+        shading = backlit_shading(w, h, vignetting, backlight if g else None, harp_deg, lens)
+        return render_mosaic(
+            w, h, scene, cast(Any, lenses), self.cfa, gains=CFA_GAINS, shading=shading * self.exposure_scale(),
+            noise_sigma=self.noise_sigma, shot_noise=self.shot_noise,
+            electrons_per_level=self.electrons_per_level / gain_lin, bit_depth=self._bit_depth, seed=seed,
+        )  # fmt: skip
 
     def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
         """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
@@ -758,19 +827,22 @@ class SimulatedCamera:
         r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage)
         self.last_rendered = r
         image = r.image
+        lens_doc = cast(Any, r).lenses["G"].to_dict() if self.cfa is not None else r.lens.to_dict()
         sim: dict[str, Any] = {
             "string_angle_deg": angle,
             "stage_deg": float(stage),
             "harp_offset_deg": float(offset),
-            "lens": r.lens.to_dict(),
+            "lens": lens_doc,
             "seed": seed,
             "pose_index": index,
-            "blur_px": r.scene.blur_px if isinstance(r, Rendered) else r.effects.blur.sigma_px,
+            "blur_px": cast(Any, r).effects.blur.sigma_px if self.realism is not None else cast(Any, r).scene.blur_px,
             "exposure_scale": self.exposure_scale(),
         }
         if self.realism_seed is not None:
             sim["realism_seed"] = self.realism_seed
         extra: dict[str, Any] = {"sim": sim}
+        if self.cfa is not None:
+            extra["cfa"] = self.cfa  # a raw mosaic: its pattern (the live page, the session's colour)
         if fault == "corrupt":
             h = image.shape[0]
             rng = np.random.default_rng([seed, 1_000_003])

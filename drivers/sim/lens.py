@@ -156,3 +156,43 @@ def zoom_lens(focal_mm: float, focus: float, width: int, height: int, unit: Unit
     k4 = ZOOM_K4[0] * (1 - z) + ZOOM_K4[1] * z
     tang = (TANGENTIAL[0] * (1 - 0.5 * z), TANGENTIAL[1] * (1 - 0.5 * z))
     return _unit_of(int(width), int(height), k2, k4, tang, unit)
+
+
+class ChannelLens:
+    r"""A colour channel's lens map: the green lens after the channel's lateral chromatic aberration.
+
+    With :math:`c` the image centre, :math:`R_0` the half diagonal and :math:`\rho = |x - c| / R_0`,
+    the channel's pixel :math:`x` sees what green sees at
+
+    .. math::
+        x + \Delta(x), \qquad \Delta(x) = (x - c)\,(\alpha + \beta \rho^2),
+
+    so :math:`U_c(x) = U_g(x + \Delta(x))` (distorted -> ideal): :math:`\alpha` the channel's
+    relative magnification against green (lensfun's linear TCA, :math:`-\alpha` to first order),
+    :math:`\beta` its growth to the corners. :math:`\Delta` is the exact TCA field.
+    """
+
+    def __init__(self, green: RadialModel, alpha: float, beta: float, width: int, height: int):
+        self.green = green
+        self.alpha, self.beta = float(alpha), float(beta)
+        self.centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+        self.r0 = 0.5 * math.hypot(width, height)
+
+    def displacement(self, xy: np.ndarray) -> np.ndarray:
+        """:math:`\\Delta(x)` of ``(N, 2)`` pixels (channel -> green, pixels)."""
+        v = np.asarray(xy, np.float64).reshape(-1, 2) - self.centre
+        rho2 = (v[:, 0] ** 2 + v[:, 1] ** 2) / self.r0**2
+        return np.asarray(v * (self.alpha + self.beta * rho2)[:, None], np.float64)
+
+    def undistort_points(self, xy: np.ndarray) -> np.ndarray:
+        p = np.asarray(xy, np.float64).reshape(-1, 2)
+        return np.asarray(self.green.undistort_points(p + self.displacement(p)), np.float64)
+
+
+def vignetting_factor(vignetting: float, width: int, height: int, xy: np.ndarray) -> np.ndarray:
+    r""":math:`V(x) = (1 + a r^2)^{-2}` of the simulated scene (:func:`pipeline.render.render_harp`'s
+    vignetting, :math:`1 - v` at the corners), on ``(N, 2)`` pixels."""
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    a = ((1.0 - float(vignetting)) ** -0.5 - 1.0) / float(c @ c)
+    v = np.asarray(xy, np.float64).reshape(-1, 2) - c
+    return np.asarray((1.0 + a * (v[:, 0] ** 2 + v[:, 1] ** 2)) ** -2.0, np.float64)

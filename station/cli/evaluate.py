@@ -10,7 +10,10 @@ mrcal ``.cameramodel``, maps ``.npz`` or an STMap ``.exr``. The string edges of 
 shots (taken through the lens, uncorrected) are measured, corrected by
 CORRECTION, normalised by the homography of the 4 corrected image corners and
 their straightness reported before and after (:mod:`pipeline.evaluate`), one row per
-shot and ``all`` (off a terminal tab-separated with a header line, :mod:`station.tables`). Edge
+shot and ``all``; each shot's residual after the correction is split into the part every string edge
+shares and each edge's own (``shared after``, ``own after``; JSON ``after_shared``,
+:mod:`pipeline.shared_bend`): a large shared part is a term the correction lacks or its shots left
+undetermined (add shots at other orientations), a large own part the strings or the measurement (off a terminal tab-separated with a header line, :mod:`station.tables`). Edge
 points a maps file or STMap does not cover (outside the corrected image it holds: a wide lens's
 borders) are left out, never extrapolated, and their number printed (JSON: ``n_excluded``
 of ``n_points``).
@@ -82,6 +85,11 @@ def _fmt(sd):
     return ("", "") if sd is None else (f"{sd['d']:.4f}", f"{sd['d_max']:.4f}")
 
 
+def _shared(sb) -> tuple[str, str]:
+    """A shot's residual shared by every string edge and each edge's own (:mod:`pipeline.shared_bend`)."""
+    return ("-", "-") if sb is None else (f"{sb['shared_px']:.4f}", f"{sb['own_px']:.4f}")
+
+
 def run(args) -> int:
     rep = evaluate(
         args.correction,
@@ -101,9 +109,21 @@ def run(args) -> int:
         f"correction: {rep['correction']} ({rep['kind']}), {rep['width']}x{rep['height']}, t={rep['t']}"
         + (", images already corrected" if rep["already_corrected"] else "")
     )
-    columns = ("image", "lines", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)")
-    rows = [(str(e["path"]), str(e["n_lines"]), *_fmt(e["before"]), *_fmt(e["after"])) for e in rep["images"]]
-    rows.append(("all", str(rep["n_lines"]), *_fmt(rep["before"]), *_fmt(rep["after"])))
+    columns = (
+        "image",
+        "lines",
+        "d before (px)",
+        "d_max before (px)",
+        "d after (px)",
+        "d_max after (px)",
+        "shared after (px)",
+        "own after (px)",
+    )
+    rows = [
+        (str(e["path"]), str(e["n_lines"]), *_fmt(e["before"]), *_fmt(e["after"]), *_shared(e.get("after_shared")))
+        for e in rep["images"]
+    ]
+    rows.append(("all", str(rep["n_lines"]), *_fmt(rep["before"]), *_fmt(rep["after"]), "", ""))
     print_table(columns, rows, title="straightness before and after the correction", right=columns[1:])
     if rep.get("n_excluded"):
         print(

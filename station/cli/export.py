@@ -61,6 +61,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -315,13 +316,17 @@ def export_profile(
     options = export_options(args, existing, str(args.output))
     edges = _fitting_edges(args, profile, model_dir, edges)
     source = export_source(profile, lens=lens, edges=edges, stamp=stamp)
-    colour = colour_correction(args, source.width, source.height)
+    left_out: list[str] = []
+    stored = {**dict(profile.details.get("colour") or {}), "aperture": profile.optics.aperture}
+    colour = colour_correction(args, source.width, source.height, stored, left_out)
     if colour is not None:
         source = replace(source, colour=colour)
     try:
         ex = write_export(args.format, source, options)
     except ValueError as exc:
         raise ExportError(f"{what}: {exc}" if what else str(exc)) from None
+    if left_out:
+        ex = replace(ex, warnings=(*ex.warnings, *left_out))
     return ex, figures(ex, source, edges)
 
 
@@ -331,16 +336,22 @@ VIGNETTING_FORMATS = ("lensfun",)
 """The formats that hold the vignetting (``--vignetting``)."""
 
 
-def colour_correction(args, width: int, height: int):
+def colour_correction(args, width: int, height: int, stored=None, left_out: list[str] | None = None):
     """The :class:`~pipeline.exports.colour.ColourCorrection` of ``--tca`` and ``--vignetting`` (None without
     them); ExportError (one line) for a format that holds neither, a setting that is not positive, a file
-    that cannot be read or is for another image size."""
+    that cannot be read or is for another image size.
+
+    ``stored``: the profile's own TCA and vignetting (``details["colour"]``, a colour camera's session:
+    :mod:`station.session.colour`) and its f-number (``"aperture"``: the configuration's ``lens.aperture``),
+    exported where the format holds them and no file is given (a file overrides); a stored vignetting without
+    an f-number (neither ``--aperture`` nor the profile's) is left out, why appended to ``left_out`` (the
+    export's warnings)."""
     tca_path, vig_path = getattr(args, "tca", None), getattr(args, "vignetting", None)
     for flag, value in (("--aperture", args.aperture), ("--distance", args.distance)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ExportError(f"{flag}: expected a positive number, got {value:g}")
     if tca_path is None and vig_path is None:
-        return None
+        return _stored_colour(args, width, height, stored, left_out)
     if tca_path is not None and args.format not in TCA_FORMATS:
         raise ExportError(
             f"--tca: the {args.format} format holds no TCA; export it with --format lensfun (<tca>) or opencv "
@@ -366,6 +377,39 @@ def colour_correction(args, width: int, height: int):
             f"--vignetting {vig_path}: lensfun files a vignetting under the f-number it was measured at: give "
             "--aperture F (or write the file with harp vignetting --focal-mm MM --aperture F)"
         )
+    return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
+
+
+def _stored_colour(args, width: int, height: int, stored, left_out: list[str] | None):
+    """:func:`colour_correction` from the profile's stored documents alone (None: none the format holds)."""
+    stored = stored if isinstance(stored, Mapping) else {}
+    tca_doc, vig_doc = stored.get("tca"), stored.get("vignetting")
+    tca_doc = tca_doc if isinstance(tca_doc, dict) and "channels" in tca_doc else None
+    vig_doc = vig_doc if isinstance(vig_doc, dict) and "fit" in vig_doc else None
+    tca_doc = tca_doc if args.format in TCA_FORMATS else None
+    vig_doc = vig_doc if args.format in VIGNETTING_FORMATS else None
+    if tca_doc is None and vig_doc is None:
+        return None
+    from pipeline.exports.colour import DEFAULT_DISTANCE_M, ColourCorrection  # defers scipy
+    from station.colour import tca_fields  # defers scipy
+    from station.vignetting import vignetting_fit_of  # defers scipy
+
+    where = "the profile's stored colour"
+    tca = None if tca_doc is None else tca_fields(tca_doc, f"{where} (tca)", width, height)
+    fit, aperture, distance = None, None, None
+    if vig_doc is not None:
+        fit, aperture, distance = vignetting_fit_of(vig_doc, f"{where} (vignetting)", width, height)
+    aperture = next((a for a in (args.aperture, aperture, stored.get("aperture")) if a is not None), None)
+    distance = args.distance if args.distance is not None else distance
+    if fit is not None and aperture is None:
+        if left_out is not None:
+            left_out.append(
+                "the profile's vignetting is left out: lensfun files a vignetting under the f-number it was "
+                "measured at; give --aperture F (or lens.aperture in the station configuration)"
+            )
+        fit = None
+    if tca is None and fit is None:
+        return None
     return ColourCorrection(tca, fit, aperture, DEFAULT_DISTANCE_M if distance is None else distance)
 
 

@@ -52,6 +52,7 @@ from station.profile_choice import (
     setting_text,
     verdict_text,
 )
+from station.session.colour import colour_summary
 from station.store import StoreError
 from station.tables import console as text_console
 from station.tables import is_terminal, print_table
@@ -414,6 +415,8 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         }
         if detail:
             out["profiles"][0]["model_parameters"] = plain(profiles[0].model.to_dict())
+            if profiles[0].details.get("colour"):  # a colour camera's TCA and vignetting, as stored
+                out["profiles"][0]["colour"] = plain(dict(profiles[0].details["colour"]))
         print(json.dumps(out, indent=1))
         return EXIT_OK
     who = f"lens #{lens[0]}: " if lens[0] is not None else "lens "
@@ -438,6 +441,9 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
             print(f"check: {c.text}")
         if p.intrinsics is not None:
             print(p.intrinsics.statement())
+        if p.details.get("colour"):
+            for what, cell in colour_summary(p.details["colour"]).items():
+                print(f"{what}: {cell}")
         print(json.dumps(plain(p.model.to_dict())))
     return EXIT_OK
 

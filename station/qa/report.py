@@ -73,6 +73,48 @@ class FocusEvidence:
     shots: list[Shot] = field(default_factory=list)
     uncertainty: Any = None  # pipeline.uncertainty.FieldUncertainty, or None
     uncertainty_note: str = ""
+    colour: Any = None  # a colour camera's TCA and vignetting (station.session.colour), or None
+
+
+def _colour_blocks(colour: Any) -> list[Block]:
+    """The report's *Colour and light* of a focus setting: per channel the TCA against green (largest shift
+    over the image, RMS residual, lensfun poly3), the relative illumination at the centre, edges and corners,
+    the back-light's unevenness and lensfun's pa terms; a measurement that failed, its reason."""
+    blocks: list[Block] = [Heading(3, "Colour and light (from the same shots)")]
+    tca = colour.get("tca") or {}
+    if "failure" in tca:
+        blocks.append(Paragraph(f"TCA: not measured: {tca['failure']}"))
+    elif tca:
+        poly3 = (tca.get("lensfun") or {}).get("poly3") or {}
+        rows = []
+        for ch, name in (("R", "red"), ("B", "blue")):
+            c = (tca.get("channels") or {}).get(ch) or {}
+            terms = ", ".join(f"{v:.6g}" for v in poly3.get(name) or ())
+            rows.append(
+                (ch, _fmt(c.get("field_max_px")), _fmt(c.get("residual_rms_px")), str(c.get("n_edges", "-")), terms)
+            )
+        blocks.append(
+            Table(
+                ("channel", "TCA max (px)", "residual RMS (px)", "edges", "lensfun poly3"),
+                ("center", "right", "right", "right", "left"),
+                tuple(rows),
+            )
+        )
+    vig = colour.get("vignetting") or {}
+    if "failure" in vig:
+        blocks.append(Paragraph(f"Vignetting: not measured: {vig['failure']}"))
+    elif vig:
+        points = (vig.get("relative_illumination") or {}).get("points") or ()
+        rows = tuple((str(p["where"]), _fmt(p.get("fit")), _fmt(p.get("lensfun_pa"))) for p in points)
+        blocks.append(Table(("where", "relative illumination", "lensfun pa"), ("left", "right", "right"), rows))
+        lf = vig.get("lensfun") or {}
+        blocks.append(
+            Paragraph(
+                f"Back-light unevenness (separated by the turntable) {_fmt(vig.get('backlight_unevenness'))}; "
+                f"lensfun pa k1 {_fmt(lf.get('k1'))}, k2 {_fmt(lf.get('k2'))}, k3 {_fmt(lf.get('k3'))}."
+            )
+        )
+    return blocks
 
 
 def keeps_overlays(overlays: str, verdict: Verdict) -> bool:
@@ -213,6 +255,8 @@ def write_report(
         name = f"field_f{i}.png"
         figures.append(Figure("field", (e.model, e.width, e.height, out / name), {"title": f"{title}, {label}"}))
         doc += [Heading(3, "Distortion field"), Image("distortion field", name)]
+        if e.colour:
+            doc += _colour_blocks(e.colour)
         if e.shots:
             name = f"residuals_f{i}.png"
             rows = edge_residual_table(e.shots, e.model)
@@ -291,6 +335,7 @@ def session_evidence(
     e = FocusEvidence(
         focus=focus, model=profile.model, width=profile.width, height=profile.height, verdict=verdict, source=source
     )
+    e.colour = profile.details.get("colour")
     e.shots = session_shots(session, focus_idx, t=cfg.pipeline.t)
     e.uncertainty = stored_uncertainty(session, focus_idx, profile.model)
     if e.uncertainty is None:

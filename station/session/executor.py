@@ -73,6 +73,8 @@ from station.profile import Profile
 from station.provenance import make_provenance
 from station.session import layout
 from station.session.boards import board_frame, save_board_frame
+from station.session.colour import KEY as COLOUR
+from station.session.colour import colour_summary, frames_cfa, session_colour
 from station.session.directory import SessionDir, SessionError
 from station.session.evidence import measurement_arrays, uncertainty_arrays
 from station.session.operator import NoOperator, OperatorDesk
@@ -115,6 +117,7 @@ from station.session.records import (
     BoardRejected,
     BoardSaved,
     BoardWanted,
+    ColourMeasured,
     Fault,
     FitFailed,
     Fitted,
@@ -517,7 +520,7 @@ class Executor:
         problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), self.config.capture.checks)
         if problems:
             return problems, None
-        m = measure_shot(image, self.config.pipeline)
+        m = measure_shot(image, self.config.pipeline, frames_cfa(records))
         stage = (records[-1].meta or {}).get("stage_deg")
         if stage is None:
             stage = self.config.capture.orientations_deg[o]
@@ -726,6 +729,12 @@ class Executor:
         ]
         rel = layout.profile_file(f)
         path = self.session.path / rel
+        assert cal.fit is not None  # a failed fit stopped the session
+        colour = session_colour(
+            self.session, f, cal.fit.model, cfg
+        )  # a colour camera's TCA and vignetting (None: grey)
+        if colour is not None:
+            self._emit(ColourMeasured(f, colour_summary(colour)))
         # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
         # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
         profile = focus_profile(
@@ -741,7 +750,7 @@ class Executor:
                 station=cfg.station.id,
                 session_dir=str(self.session.path.resolve()),
             ),
-            details={"model_file": str(path)},
+            details={"model_file": str(path), **({COLOUR: colour} if colour is not None else {})},
             intrinsics=self._intrinsics.get(f),
             judge=None if self.judge is None else (lambda p: self.judge(p, f)),
         )

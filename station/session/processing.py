@@ -216,10 +216,16 @@ class ShotMeasurement:
         return len(self.lines)
 
 
-def measure_shot(image: np.ndarray, pipeline: PipelineConfig) -> ShotMeasurement:
-    """Run :func:`pipeline.measure.measure_image` on an averaged shot."""
+def measure_shot(image: np.ndarray, pipeline: PipelineConfig, cfa: str | None = None) -> ShotMeasurement:
+    """Run :func:`pipeline.measure.measure_image` on an averaged shot; a colour camera's raw mosaic
+    (``cfa``: its Bayer pattern, :func:`station.session.colour.frames_cfa`) on its luma
+    (:func:`pipeline.cfa.mosaic_luma`: no checkerboard, no shift)."""
     from pipeline.measure import measure_image  # defers cv2
 
+    if cfa is not None:
+        from pipeline.cfa import mosaic_luma  # defers cv2
+
+        image = mosaic_luma(image)
     m = measure_image(image, t=pipeline.t)
     return shot_from_measurement(m)
 

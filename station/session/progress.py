@@ -14,13 +14,14 @@ tally as rich progress bars, the notes and the summary table.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 from station.config import Config
 from station.session.records import (
     BoardSaved,
+    ColourMeasured,
     Fault,
     Fitted,
     FrameSaved,
@@ -54,6 +55,7 @@ class FocusRow:
     fit: Fitted | None = None
     intrinsics: IntrinsicsMeasured | None = None
     profile_id: int | None = None
+    colour: Mapping[str, str] | None = None  # a colour camera's TCA and vignetting, in short
 
 
 class Tally:
@@ -85,6 +87,8 @@ class Tally:
                 self.rows[f].fit = record
             case IntrinsicsMeasured(focus_idx=f):
                 self.rows[f].intrinsics = record
+            case ColourMeasured(focus_idx=f, summary=cells):
+                self.rows[f].colour = cells
             case Stored(focus_idx=f, profile_id=pid):
                 self.rows[f].profile_id = pid
             case Fault():
@@ -154,6 +158,7 @@ class ConsoleProgress:
         if interrupted or self.config is None:
             return
         cfg = self.config
+        colour = any(row.colour for row in self.tally.rows.values())
         columns = (
             "focus",
             "shots",
@@ -167,6 +172,7 @@ class ConsoleProgress:
             "unc. max (px)",
             "model",
             *(K_COLUMNS if cfg.intrinsics is not None else ()),
+            *(COLOUR_COLUMNS if colour else ()),
             "profile",
         )
         figures = ("fit_d", "fit_d_max", "holdout_d", "holdout_d_max", "uncertainty_rms", "uncertainty_max")
@@ -182,6 +188,7 @@ class ConsoleProgress:
                     *(_fmt(getattr(fit, name) if fit else None) for name in figures),
                     str(fit.model.get("model", "?")) if fit else "",
                     *(_k_cells(row.intrinsics) if cfg.intrinsics is not None else ()),
+                    *((row.colour or {}).get(c, "") for c in (COLOUR_COLUMNS if colour else ())),
                     f"#{row.profile_id}" if row.profile_id is not None else "",
                 )
             )
@@ -190,7 +197,7 @@ class ConsoleProgress:
             columns,
             rows,
             title=f"{cfg.lens.label()} on {cfg.camera_body.label()}\n{session_path}",
-            right=tuple(c for c in columns if c not in ("model", "board views", "profile")),
+            right=tuple(c for c in columns if c not in ("model", "board views", "profile", *COLOUR_COLUMNS)),
             stream=stream,
         )
         self.console.print(f"frames saved this run: {self.tally.frames_saved}, device faults: {self.tally.faults}")
@@ -207,6 +214,9 @@ def _camera_matrix_line(k: Any) -> str:
     vals = ", ".join(f"{n} {float(k[n]):.2f} ± {float(sd.get(n, math.nan)):.2f}" for n in ("fx", "fy", "cx", "cy"))
     return f"camera matrix {vals} px from {k.get('n_views', '?')} board views"
 
+
+COLOUR_COLUMNS = ("TCA", "vignetting")
+"""The summary's colour columns (a colour camera: :func:`station.session.colour.colour_summary`'s cells)."""
 
 K_COLUMNS = ("fx (px)", "fy (px)", "cx (px)", "cy (px)", "K sd max (px)", "board views")
 """The summary's camera-matrix columns (a session with an ``intrinsics`` section)."""

@@ -29,6 +29,7 @@ kind               record
 ``board-ok``       :class:`BoardAccepted` — an operator-placed board view passed its checks (its corners)
 ``board-reject``   :class:`BoardRejected` — a board view superseded (failed its checks, skipped, damaged)
 ``intrinsics``     :class:`IntrinsicsMeasured` — a focus setting's camera matrix from its board views
+``colour``         :class:`ColourMeasured` — a colour camera's TCA and vignetting of a focus setting, in short
 ``stored``         :class:`Stored` — the profile file and store id of a focus setting
 ``fault``          :class:`Fault` — a device error and the attempt it hit
 ``qa``             :class:`QARecorded` — one profile's verdict
@@ -232,6 +233,17 @@ class IntrinsicsMeasured(Record):
 
 
 @dataclass(frozen=True)
+class ColourMeasured(Record):
+    """A colour camera's TCA and vignetting of focus setting ``focus_idx`` (:mod:`station.session.colour`),
+    in short (``summary``: :func:`station.session.colour.colour_summary`'s cells); the documents are the
+    profile's (its model file's ``colour`` key)."""
+
+    kind: ClassVar[str] = "colour"
+    focus_idx: int
+    summary: Mapping[str, str]
+
+
+@dataclass(frozen=True)
 class Stored(Record):
     kind: ClassVar[str] = "stored"
     optional: ClassVar[tuple[str, ...]] = ("sha256",)
@@ -325,6 +337,7 @@ _TYPES: tuple[type[Record], ...] = (
     BoardAccepted,
     BoardRejected,
     IntrinsicsMeasured,
+    ColourMeasured,
     Stored,
     Fault,
     QARecorded,

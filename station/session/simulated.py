@@ -43,7 +43,8 @@ def _one_line(exc: BaseException) -> str:
 def simulated_devices(config: Config, **emulator_overrides) -> Iterator[SimulatedStation]:
     """Start the simulated world and devices; yield a :class:`SimulatedStation`.
 
-    The devices are created but not opened. The emulator is stopped on exit.
+    The devices are created but not opened. The emulator is stopped on exit (and the VISCA emulator a
+    camera's ``zoom_controller`` with ``port: emulator`` is given, driving the simulated zoom lens).
     ``emulator_overrides`` reach ``start_zaber_emulator``.
     """
     if config.simulation is None:
@@ -64,11 +65,20 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
         handle = start_zaber_emulator(world=world, **opts)
     except (ValueError, TypeError, OSError) as exc:
         raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
+    stack = contextlib.ExitStack()  # the lens controller's emulator, if any
     try:
         port = handle.port_path if tt.port == EMULATOR_PORT else tt.port
         # a setting the simulator refuses is a configuration error naming the section, not a traceback
+        cam_cfg = config.station.camera.as_driver_config()
+        controller = cam_cfg.get("zoom_controller")
+        if isinstance(controller, dict) and controller.get("port") == EMULATOR_PORT:
+            from drivers.sim.visca_emulator import start_visca_emulator  # defers cv2
+
+            visca = start_visca_emulator(world=world)
+            stack.callback(visca.stop)
+            cam_cfg["zoom_controller"] = {**controller, "port": visca.port_path}
         try:
-            camera = open_camera(config.station.camera.as_driver_config(), world=world)
+            camera = open_camera(cam_cfg, world=world)
         except (ValueError, TypeError, DriverError, OSError) as exc:
             raise config.error("station.camera", f"cannot use this camera: {_one_line(exc)}") from None
         try:
@@ -77,4 +87,5 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
             raise config.error("station.turntable", f"cannot use this turntable: {_one_line(exc)}") from None
         yield SimulatedStation(camera, turntable, world, handle)
     finally:
+        stack.close()
         handle.stop()

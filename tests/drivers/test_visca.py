@@ -77,3 +77,51 @@ def test_the_emulator_zooms_the_simulated_lens():
         with pytest.raises(DeviceRejected, match="syntax error"):
             z._check(z._read_packet(0.5, "x"), "x")
         cam.close()
+
+
+def test_a_camera_whose_zoom_the_controller_drives():
+    """``zoom_controller`` in a camera's configuration: the zoom (set at open, before the camera opens and
+    locks its focus) and the Zoomable calls go to the controller; the rest is the camera's."""
+    from drivers import open_camera
+
+    world = SimWorld()
+    with start_visca_emulator(world=world, zoom_speed=65536.0) as h:
+        cam = open_camera(
+            {"driver": "sim", "width": 160, "height": 120, "focus": 0.5,
+             "zoom_controller": {"port": h.port_path, "reply_timeout": 0.5, "zoom": position_of(30.0)}},
+            world=world,
+        )  # fmt: skip
+        with cam:
+            assert world.zoom == pytest.approx(30.0, abs=1e-3) and world.focus == 0.5
+            assert cam.get_zoom() == position_of(30.0) and cam.zoom_range().maximum == 0x4000
+            assert cam.capture(5.0).image.shape == (120, 160)  # the camera's own
+            assert cam.set_zoom(0) == 0 and world.zoom == ZOOM_FOCAL_RANGE_MM[0]
+    with pytest.raises(ValueError, match="unknown config key 'speed'"):
+        open_camera({"driver": "sim", "zoom_controller": {"port": "/dev/null", "speed": 1}})
+
+
+def test_a_zoom_sessions_part_sets_the_controllers_position(tmp_path):
+    """A zoom session's part (:func:`station.zoom_session.part_config_text`) puts its zoom position in the lens
+    controller's section when the camera has one (the camera's own zoom otherwise), and the simulated
+    station opens with the controller's emulator at that position (the zoom lens at that focal length)."""
+    from pathlib import Path
+
+    import yaml
+
+    from station.config import load_config
+    from station.session.simulated import simulated_devices
+    from station.zoom_session import part_config_text, parts_of
+
+    d = yaml.safe_load((Path(__file__).resolve().parents[2] / "configs" / "demo-zoom.yaml").read_text())
+    d["station"]["camera"]["zoom_controller"] = {"port": "emulator"}
+    d["zoom"] = {"settings": [12, 24, 36], "positions": [position_of(f) for f in (12, 24, 36)]}
+    (tmp_path / "z.yaml").write_text(yaml.safe_dump(d))
+    cfg = load_config(tmp_path / "z.yaml")
+    part = parts_of(cfg)[1]
+    text = part_config_text(cfg, part)
+    cam = yaml.safe_load(text)["station"]["camera"]
+    assert cam["zoom_controller"] == {"port": "emulator", "zoom": 8192.0} and "zoom" not in cam
+    (tmp_path / "p.yaml").write_text(text)
+    with simulated_devices(load_config(tmp_path / "p.yaml")) as sim:
+        with sim.camera:
+            assert sim.world.zoom == pytest.approx(24.0, abs=1e-3) and sim.camera.get_zoom() == 8192

@@ -114,6 +114,7 @@ WRONG = {
     "numbers": ["0, 1", 5, {"a": 1}, [1, "x"]],
     "integers": ["0, 0, 8, 8", 5, [0, 0, 8, 8.5]],
     "value": [[1], {"a": 1}],
+    "mapping": [5, "text", [1], True],
 }
 """Values of the wrong type per kind (the seeded generator picks two of each key's)."""
 
@@ -125,6 +126,7 @@ ODDITIES = {
     "numbers": ["[yes, 1]", "[1e4, 2]", "[.nan, 1]", "[" * 20 + "]" * 20],
     "integers": ["[yes, 1, 2, 3]", "[" * 20 + "]" * 20],
     "value": ["!!binary aGk=", "[" * 20 + "]" * 20],
+    "mapping": ["!!binary aGk=", "[" * 20 + "]" * 20],
 }
 """YAML text that PyYAML reads as something else than what a user meant (the generator picks two)."""
 

@@ -238,3 +238,18 @@ def test_maps_and_stmap_of_a_wide_lens_are_not_extrapolated(tmp_path, fov):
         assert rep["after"]["d"] == pytest.approx(truth.d, rel=0.01), (fmt, rep["after"], truth)
         assert rep["after"]["d_max"] == pytest.approx(truth.d_max, rel=0.02), (fmt, rep["after"], truth)
         assert rep["before"] == whole["before"]
+
+
+def test_the_residual_is_split_into_what_every_string_shares_and_each_edges_own(tmp_path, shots, capsys):
+    """Corrected by the true lens, what is left is the measurement's noise: each edge's own, not shared;
+    the two parts add up to the shot's d, and the table shows them."""
+    true_file = tmp_path / "true.yaml"
+    write_model_file(true_file, LENS, width=W, height=H)
+    rep = run_json(capsys, true_file, shots[0])
+    sb = rep["images"][0]["after_shared"]
+    assert sb["n_edges"] >= 4 and sb["shared_px"] < 0.5 * sb["own_px"]
+    assert np.hypot(sb["shared_px"], sb["own_px"]) == pytest.approx(rep["images"][0]["after"]["d"], rel=0.25)
+    assert main(["evaluate", str(true_file), shots[0]]) == 0
+    header, row = capsys.readouterr().out.splitlines()[1:3]
+    cols = dict(zip(header.split("\t"), row.split("\t")))
+    assert cols["shared after (px)"] == f"{sb['shared_px']:.4f}" and cols["own after (px)"] == f"{sb['own_px']:.4f}"
