@@ -53,6 +53,11 @@ MapFn = Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]]
 
 BOOTSTRAP_SCHEME = "edges resampled with replacement within each shot"
 
+GIVEN_BY_CONFIG = "pipeline.model of the configuration"
+"""The selection reason of a spec the session's configuration names (``pipeline.model``)."""
+GIVEN_ON_COMMAND_LINE = "given on the command line"
+"""The selection reason of a spec a command's option names (``harp calibrate --model``, ``harp reprocess --spec``)."""
+
 
 @dataclass(frozen=True)
 class HeldOutShot:
@@ -88,27 +93,34 @@ class Calibration:
         height: int,
         *,
         provenance: Provenance,
+        given_by: str = GIVEN_BY_CONFIG,
+        details: Mapping[str, Any] | None = None,
+        merit_extra: Mapping[str, Any] | None = None,
         lens: Identity | None = None,
         camera: Identity | None = None,
         focus: float | None = None,
-        selection: Mapping[str, Any] | None = None,
     ) -> Profile:
-        """The profile of this calibration (raises ValueError for a failed one); ``selection``:
-        its record (None: :func:`selection_record` of this calibration's selection)."""
+        """The profile of this calibration (raises ValueError for a failed one): the one builder under a
+        session's and a reprocess's :func:`focus_profile` and ``harp calibrate``.
+
+        ``given_by``: the selection reason of a given spec (:func:`selection_record`); ``details``: kept
+        after this calibration's own; ``merit_extra``: written into the merit beside its figures
+        (:attr:`station.profile.Merit.extra`, e.g. ``harp calibrate``'s rejected edges)."""
         if self.failure is not None or not self.fit:
             raise ValueError(f"no profile of a failed calibration: {self.failure}")
+        merit = self.merit if merit_extra is None else dataclasses.replace(self.merit, extra=dict(merit_extra))
         return Profile(
             model=self.fit.model,
             width=int(width),
             height=int(height),
             spec=self.spec,
-            selection=dict(selection_record(self.selection) if selection is None else selection),
-            merit=self.merit,
+            selection=selection_record(self.selection, given_by),
+            merit=merit,
             lens=lens,
             camera=camera,
             focus=focus,
             provenance=provenance,
-            details=dict(self.details),
+            details={**self.details, **dict(details or {})},
         )
 
 
@@ -268,10 +280,6 @@ def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -
 
 
 # ------------------------------------------------------- a focus setting
-GIVEN_BY_CONFIG = "pipeline.model of the configuration"
-"""The selection reason of a spec the session's configuration names (``pipeline.model``)."""
-GIVEN_ON_COMMAND_LINE = "given on the command line"
-"""The selection reason of a spec a command's option names (``harp calibrate --model``, ``harp reprocess --spec``)."""
 
 
 def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG) -> dict[str, Any]:
@@ -526,18 +534,17 @@ def focus_profile(
         lens=config.lens,
         camera=config.camera_body,
         focus=config.focus_settings[focus_idx],
-        selection=selection_record(cal.selection, given_by),
-    )
-    profile = profile.with_(
-        focal=getattr(config, "focal", None),  # a zoom session's part: its focal length (mm)
-        optics=config.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
+        given_by=given_by,
         details={
-            **profile.details,
             **dict(details or {}),
             "orientations_deg": list(config.capture.orientations_deg),
             "frames_per_orientation": config.capture.frames_per_orientation,
             "t": config.pipeline.t,
         },
+    )
+    profile = profile.with_(
+        focal=getattr(config, "focal", None),  # a zoom session's part: its focal length (mm)
+        optics=config.optics,  # for exports: nominal focal, pixel pitch, crop factor, mount
     )
     if intrinsics is not None:
         profile = profile.with_(intrinsics=intrinsics)

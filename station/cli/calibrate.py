@@ -218,7 +218,6 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
         GIVEN_ON_COMMAND_LINE,
         calibrate_shots,
         holdout_warning,
-        selection_record,
         shot_count_problem,
         size_problem,
     )
@@ -243,20 +242,32 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
         map_fn=map_fn,
         candidates=cands,
     )
-    selection = selection_record(cal.selection, GIVEN_ON_COMMAND_LINE)
-    if cal.selection is not None:
-        choice = cal.selection.to_dict()
-    else:
-        choice = {**cal.spec.to_dict(), **selection, "table": []}
     res = cal.fit
     if not res:
         raise CalibrateError(f"cannot fit {cal.spec.label}: {res.reason}")
-
+    rejected = [{"path": str(fit_m[e.image][0]), "line": e.line, "reason": e.reason} for e in res.rejected]
+    profile = cal.profile(
+        width,
+        height,
+        provenance=make_provenance(
+            args.images,
+            t=args.t,
+            command=["harp", "calibrate", *sys.argv[2:]],
+            holdout=[{"path": str(p), "sha256": sha256_file(p)} for p, _ in hold_m],
+        ),
+        given_by=GIVEN_ON_COMMAND_LINE,
+        merit_extra={"rejected_edges": rejected},
+    )
+    merit = profile.merit
+    assert merit.before is not None and merit.fit is not None  # a calibration that fitted has both
     report = {
         "model": str(args.out),
-        "choice": choice,
-        "before": {"d": finite_or_none(res.d_before), "d_max": finite_or_none(res.d_max_before)},
-        "fit": {"d": finite_or_none(res.d_after), "d_max": finite_or_none(res.d_max_after)},
+        # how the spec was chosen: the cross-validation's table, or the profile's record of a given spec
+        "choice": cal.selection.to_dict()
+        if cal.selection is not None
+        else {**cal.spec.to_dict(), **profile.selection, "table": []},
+        "before": merit.before.to_dict(),
+        "fit": merit.fit.to_dict(),
         "images": [
             {
                 "path": str(fit_m[im.image][0]),
@@ -268,7 +279,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
             }
             for im in res.images
         ],
-        "rejected": [{"path": str(fit_m[e.image][0]), "line": e.line, "reason": e.reason} for e in res.rejected],
+        "rejected": rejected,
         "warnings": list(res.warnings),
     }
     if hold_m:
@@ -277,28 +288,17 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
                 "path": str(p),
                 "d_before": finite_or_none(m.d),
                 "d_max_before": finite_or_none(m.d_max),
-                "d": finite_or_none(h.after.d),
-                "d_max": finite_or_none(h.after.d_max),
+                "d": h.after.d,
+                "d_max": h.after.d_max,
             }
             for (p, m), h in zip(hold_m, cal.held_out)
         ]
-        hold = cal.merit.holdout
-        report["holdout"] = {"d": finite_or_none(hold.d), "d_max": finite_or_none(hold.d_max), "images": per}
+        hold = merit.holdout
+        assert hold is not None  # held-out shots given: the holdout figures of the profile
+        report["holdout"] = {"d": hold.d, "d_max": hold.d_max, "images": per}
         warning = holdout_warning([ln.points for _, m in hold_m for ln in m.lines], hold.d)
         if warning:
             report["warnings"].append(warning)
-    profile = cal.profile(
-        width,
-        height,
-        provenance=make_provenance(
-            args.images,
-            t=args.t,
-            command=["harp", "calibrate", *sys.argv[2:]],
-            holdout=[{"path": str(p), "sha256": sha256_file(p)} for p, _ in hold_m],
-        ),
-        selection=selection,
-    )
-    profile = profile.with_(merit=replace(profile.merit, extra={"rejected_edges": report["rejected"]}))
     try:
         write_profile(args.out, profile)
     except OSError as exc:

@@ -3,7 +3,10 @@
 * :mod:`station.session.plan` — the capture plan as data (steps; re-captures decided
   from each shot's check result);
 * :mod:`station.session.executor` — the one executor performing the plan on a camera
-  and a turntable (retries, device recovery), emitting typed manifest records;
+  and a turntable (retries, device recovery), emitting typed manifest records; the work of its
+  steps in :mod:`station.session.shot_checks` (frames and shots checked),
+  :mod:`station.session.profile_steps` (a focus setting fitted and stored) and
+  :mod:`station.session.camera_matrix` (the board views checked, the camera matrix fitted);
 * :mod:`station.session.records` — those records (one dataclass per manifest kind), and
   how every reader reads them back typed (``parse``, ``ManifestReads``);
 * :mod:`station.session.progress` — progress bars and the summary table, a subscriber

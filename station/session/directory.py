@@ -40,8 +40,9 @@ from station.files import atomic_write_bytes, describe_os_error
 from station.session import layout
 from station.session.frame_files import decode_frame, encode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
-from station.session.plan import board_key, frame_key, stored_key
+from station.session.plan import board_key, board_unchecked_key, frame_key, stored_key
 from station.session.records import (
+    BoardAccepted,
     Finished,
     FrameSaved,
     ManifestReads,
@@ -56,6 +57,10 @@ from station.session.records import (
 
 class SessionError(HarpError, RuntimeError):
     """A session directory that cannot be used; message is one line."""
+
+
+class SessionAborted(Exception):
+    """The session cannot go on; ``str()`` is the one-line reason (the executor records it as ``aborted``)."""
 
 
 def read_session_file(path: Path) -> dict:
@@ -334,9 +339,16 @@ class SessionDir(ManifestReads):
         for r in self.of_type(FrameSaved):
             if r.attempt == attempts.get((r.focus_idx, r.orientation_idx), 0) and (self.path / r.file).is_file():
                 keys.add(frame_key(r.focus_idx, r.orientation_idx, r.frame_idx))
+        k = self.config.intrinsics
+        checked = k is not None and k.placement == "operator"  # each view checked as it is saved
+        accepted = {(r.focus_idx, r.view_idx, r.attempt) for r in self.of_type(BoardAccepted)}
         for f in range(len(self.config.focus_settings)):
             for b in self.boards(f).values():  # a view superseded since (board-reject) is taken again
-                if (self.path / b.file).is_file():
+                if not (self.path / b.file).is_file():
+                    continue
+                if checked and (b.focus_idx, b.view_idx, b.attempt) not in accepted:
+                    keys.add(board_unchecked_key(b.focus_idx, b.view_idx))  # the run stopped before its check
+                else:
                     keys.add(board_key(b.focus_idx, b.view_idx))
         for rec in self.typed:  # a later ``reopened`` record takes a stored focus setting back
             if isinstance(rec, Stored):

@@ -5,11 +5,14 @@ moves the turntable (``move_to`` returns when idle), captures and saves each fra
 atomically in the session directory, averages and checks each shot (exposure,
 strings found, string angle = commanded orientation + harp offset within a
 tolerance) and sends the check back to the plan, which decides whether to capture
-the shot again; fits each focus setting (:func:`station.calibration.calibrate_focus`,
-leave one orientation out); with an ``intrinsics`` section, takes the board views at that
-focus (:mod:`station.session.boards`) and fits the camera matrix with the distortion held fixed
-(:func:`station.intrinsics.measure_intrinsics`); and stores its profile, with that camera matrix
-(model file and store row from the same :class:`station.profile.Profile`).
+the shot again (:mod:`station.session.shot_checks`); fits each focus setting
+(:mod:`station.session.profile_steps`: :func:`station.calibration.calibrate_focus`, leave one
+orientation out); with an ``intrinsics`` section, takes the board views at that focus
+(:mod:`station.session.boards`) and fits the camera matrix with the distortion held fixed
+(:mod:`station.session.camera_matrix`); and stores its profile, with that camera matrix
+(:mod:`station.session.profile_steps`: model file and store row from the same
+:class:`station.profile.Profile`). This module keeps the order of the steps, the devices and their
+faults; the steps' work is in those modules.
 
 Every fact is a typed manifest record (:mod:`station.session.records`) appended to
 the session directory and handed to the subscribers (:mod:`station.session.progress`:
@@ -44,14 +47,12 @@ import errno
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
 from drivers.errors import CaptureError, DeviceDisconnected, DeviceFault, DeviceRejected, DriverError
 from drivers.protocols import (
-    BoardScene,
     Camera,
     CameraRanges,
     Frame,
@@ -60,24 +61,20 @@ from drivers.protocols import (
     Turntable,
     TurntableRanges,
 )
-from pipeline.board import detect_board, parse_board
 from pipeline.intrinsics import Intrinsics
 from pipeline.plain import json_default
 from station import __version__
-from station.calibration import Calibration, calibrate_focus, focus_profile
+from station.calibration import Calibration
 from station.exit_codes import EXIT_ABORTED, EXIT_OK
-from station.files import describe_os_error, sha256_file, write_profile
-from station.intrinsics import board_views, measure_intrinsics
+from station.files import describe_os_error
 from station.pool import WorkerPool
 from station.profile import Profile
-from station.provenance import make_provenance
 from station.session import layout
-from station.session.boards import board_frame, save_board_frame
-from station.session.colour import KEY as COLOUR
-from station.session.colour import colour_summary, frames_cfa, session_colour
-from station.session.directory import SessionDir, SessionError
-from station.session.evidence import measurement_arrays, uncertainty_arrays
-from station.session.operator import NoOperator, OperatorDesk
+from station.session.boards import save_board_frame
+from station.session.camera_matrix import ask_for_board, board_spec, check_board, estimate_k, grab_board_view
+from station.session.directory import SessionAborted, SessionDir, SessionError
+from station.session.evidence import measurement_arrays
+from station.session.operator import OperatorDesk
 from station.session.plan import (
     BoardCheck,
     BoardView,
@@ -99,38 +96,23 @@ from station.session.plan import (
     Store,
     plan_session,
 )
-from station.session.processing import (
-    FrameStats,
-    ShotMeasurement,
-    average_frames,
-    exposure_problems,
-    frame_damage,
-    frame_stats,
-    full_scale,
-    measure_shot,
-    shot_problems,
-)
+from station.session.processing import ShotMeasurement, full_scale
+from station.session.profile_steps import fit_focus, fitted_record, store_focus
 from station.session.progress import Subscriber, Tally
 from station.session.records import (
     Aborted,
-    BoardAccepted,
     BoardRejected,
     BoardSaved,
-    BoardWanted,
-    ColourMeasured,
     Fault,
     FitFailed,
-    Fitted,
     FocusLocked,
-    IntrinsicsMeasured,
     Record,
     Resumed,
     ShotMeasured,
     ShotRejected,
     Started,
-    Stored,
 )
-from station.store import StoreError
+from station.session.shot_checks import FrameReference, check_shot
 
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
@@ -141,10 +123,6 @@ PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "stati
 report's: :func:`station.qa.plots.draw_figures` draws in these processes too)."""
 
 T = TypeVar("T")
-
-
-class SessionAborted(Exception):
-    """The session cannot go on; ``str()`` is the one-line reason."""
 
 
 @dataclass
@@ -224,13 +202,8 @@ class Executor:
         self._stage_deg: float | None = None
         self._focus: float | None = None
         self._size: tuple[int, int] | None = None
-        # frame checks: the statistics of a trusted frame (of an accepted shot, or one that passed
-        # against such a frame), with its shot (focus, orientation, attempt); frames of a shot not
-        # yet judged against one (the first shot of a session) wait in _candidates
-        self._reference: tuple[tuple[int, int, int], FrameStats] | None = None
-        self._reference_loaded = False
+        self._frames = FrameReference(session)  # the frame checks' reference
         self._prepared = False
-        self._candidates: dict[tuple[int, int], FrameStats] = {}
 
     # ================================================================ run
     def run(self) -> SessionResult:
@@ -366,7 +339,7 @@ class Executor:
             case Fit():
                 self._fit(step)
             case PlaceBoard():
-                return self._place_board(step)
+                return ask_for_board(step, self.session, self.config, self.camera, self.operator, self._emit)
             case BoardView():
                 self._board_view(step)
             case CheckBoard():
@@ -435,45 +408,12 @@ class Executor:
                 raise CaptureError(f"corrupt frame: {img.dtype} array of shape {img.shape}")
             if self._size and img.shape != (self._size[1], self._size[0]):
                 raise CaptureError(f"corrupt frame: shape {img.shape}, sensor is {self._size[0]}x{self._size[1]}")
-            self._check_frame(step, img, full_scale(img.dtype, _bit_depth(frame)))
+            shot = (step.focus_idx, step.orientation_idx, self.session.attempt(step.focus_idx, step.orientation_idx))
+            self._frames.check(shot, img, full_scale(img.dtype, _bit_depth(frame)))
             return frame
 
         where = f"capture focus {step.focus_idx} orientation {step.orientation_idx} frame {step.frame_idx}"
         self._pending[(step.focus_idx, step.orientation_idx, step.frame_idx)] = self._retry(where, grab, self.camera)
-
-    def _check_frame(self, step: Capture, img: np.ndarray, full: float) -> None:
-        """A frame damaged in transfer raises CaptureError (a device fault: captured again).
-
-        Judged on its own and against the reference frame (:func:`~station.session.processing.frame_damage`);
-        a frame that passes against a reference becomes the reference."""
-        stats = frame_stats(img, full)
-        ref = self._frame_reference()
-        shot = (step.focus_idx, step.orientation_idx, self.session.attempt(step.focus_idx, step.orientation_idx))
-        same = ref is not None and ref[0] == shot
-        damage = frame_damage(stats, ref[1] if ref is not None else None, same_pose=same)
-        if damage:
-            raise CaptureError(f"corrupt frame: {damage}")
-        if ref is not None:
-            self._reference = (shot, stats)
-        else:
-            self._candidates[shot[:2]] = stats
-
-    def _frame_reference(self) -> tuple[tuple[int, int, int], FrameStats] | None:
-        """The reference frame; on resume, the last frame of the last accepted shot on disk."""
-        if self._reference is None and not self._reference_loaded:
-            self._reference_loaded = True
-            for r in reversed(list(self.session.of_type(ShotMeasured))):
-                frames = self.session.frames(r.focus_idx, r.orientation_idx)
-                if not frames or frames[-1].attempt != r.attempt:
-                    continue
-                try:
-                    img = self.session.read_frame(frames[-1])
-                except (OSError, ValueError, SessionError):
-                    continue  # damaged or missing: another shot will do, or the next accepted one
-                full = full_scale(img.dtype, (frames[-1].meta or {}).get("bit_depth"))
-                self._reference = ((r.focus_idx, r.orientation_idx, r.attempt), frame_stats(img, full))
-                break
-        return self._reference
 
     def _save(self, step: Save) -> None:
         frame = self._pending.pop((step.focus_idx, step.orientation_idx, step.frame_idx))
@@ -497,83 +437,32 @@ class Executor:
     def _measure(self, step: Measure) -> ShotCheck:
         f, o = step.focus_idx, step.orientation_idx
         attempt = self.session.attempt(f, o)
-        problems, m = self._check_shot(f, o)
+        problems, m = check_shot(self.session, self.config, f, o)
         if problems or m is None:
             self._emit(ShotRejected(f, o, attempt, list(problems)))
             return ShotCheck(f, o, attempt, tuple(problems))
         self._shots[(f, o)] = m
-        candidate = self._candidates.pop((f, o), None)
-        if self._reference is None and candidate is not None:  # the first accepted shot: its frames are the reference
-            self._reference = ((f, o, attempt), candidate)
+        self._frames.accept((f, o, attempt))
         saved = self.session.write_arrays(layout.measurement_file(f, o, attempt), measurement_arrays(m.measurement))
         self._emit(ShotMeasured(f, o, attempt, m.n_lines, m.d, m.d_max, m.angle_deg, saved["file"], saved["sha256"]))
         return ShotCheck(f, o, attempt)
 
-    def _check_shot(self, f: int, o: int) -> tuple[list[str], ShotMeasurement | None]:
-        records = self.session.frames(f, o)
-        n = self.config.capture.frames_per_orientation
-        if len(records) != n:  # cannot happen unless the directory was tampered with
-            raise SessionAborted(f"focus {f} orientation {o}: {len(records)} of {n} frames on disk")
-        images = [self.session.read_frame(r) for r in records]
-        bit_depth = (records[0].meta or {}).get("bit_depth")
-        image = average_frames(images)
-        problems = exposure_problems(image, full_scale(images[0].dtype, bit_depth), self.config.capture.checks)
-        if problems:
-            return problems, None
-        m = measure_shot(image, self.config.pipeline, frames_cfa(records))
-        stage = (records[-1].meta or {}).get("stage_deg")
-        if stage is None:
-            stage = self.config.capture.orientations_deg[o]
-        expected = self.config.station.harp.expected_angle(stage)
-        return shot_problems(m, expected, self.config.capture.checks), m
-
     def _fit(self, step: Fit) -> None:
         f = step.focus_idx
         n_o = len(self.config.capture.orientations_deg)
-        w, h = self._image_size(f)
-        cal = calibrate_focus(
-            [list(self._shots[(f, o)].lines) for o in range(n_o)],
-            w,
-            h,
-            self.config.pipeline,
-            f,
-            self.config.pipeline.spec,
-            map_fn=self.workers.map,
-            turntable_deg=self.config.capture.orientations_deg,
-        )
+        shots = [self._shots[(f, o)].lines for o in range(n_o)]
+        cal = fit_focus(f, self.config, shots, self._image_size(f), self.workers.map)
         self._calibrations[f] = cal
         if cal.failure or not cal.fit:
             self._emit(FitFailed(f, str(cal.failure)))
             raise SessionAborted(f"fit of focus setting {self.config.focus_settings[f]:g} failed: {cal.failure}")
-        saved = {"file": None, "sha256": None}
-        if cal.uncertainty is not None:
-            saved = self.session.write_arrays(layout.uncertainty_file(f), uncertainty_arrays(cal.uncertainty))
-        m = cal.merit
-        unc = m.field_uncertainty
-        self._emit(
-            Fitted(
-                focus_idx=f,
-                model=cal.fit.model.to_dict(),
-                spec=cal.spec.to_dict() if cal.spec is not None else None,
-                fit_d=m.fit.d if m.fit else None,
-                fit_d_max=m.fit.d_max if m.fit else None,
-                holdout_d=m.holdout.d if m.holdout else None,
-                holdout_d_max=m.holdout.d_max if m.holdout else None,
-                holdout_per_orientation=list(m.holdout.per_orientation_d) if m.holdout else [],
-                uncertainty_rms=unc.rms if unc else None,
-                uncertainty_max=unc.max if unc else None,
-                details=dict(cal.details),
-                uncertainty_file=saved["file"],
-                uncertainty_sha256=saved["sha256"],
-            )
-        )
+        self._emit(fitted_record(f, cal, self.session))
 
     def _board_view(self, step: BoardView) -> None:
         """The camera-matrix stage: one board view at the locked focus (:mod:`station.session.boards`),
         saved and recorded; a resumed session keeps the views on disk (the plan skips them)."""
         cfg = self.config
-        assert cfg.intrinsics is not None  # the plan yields board views only with the section
-        spec = parse_board(cfg.intrinsics.board)
+        spec = board_spec(cfg)
         tilt = None
         if step.tilt_deg is not None:  # placement: stage (config check: the turntable has a tilt axis)
             axis = getattr(self.turntable, "tilt", None)
@@ -587,131 +476,27 @@ class Executor:
             if cfg.capture.settle_s > 0:
                 time.sleep(cfg.capture.settle_s)
         attempt = self.session.board_attempt(step.focus_idx, step.view_idx)
-
-        def grab() -> Frame:
-            if isinstance(self.camera, IndexedCapture):
-                self.camera.set_capture_index(step.view_idx)  # the same noise on resume
-            if step.degrees is not None:
-                return board_frame(self.camera, spec, timeout=cfg.capture.timeout_s)
-            try:  # where the operator placed it (PlaceBoard)
-                return self.camera.capture(timeout=cfg.capture.timeout_s)
-            finally:
-                if isinstance(self.camera, BoardScene):  # the stand-in takes the board away: the harp again
-                    self.camera.show_board(None)
-
+        grab = grab_board_view(self.camera, spec, step, cfg.capture.timeout_s)
         frame = self._retry(f"capture board view {step.view_idx} at focus {step.focus_idx}", grab, self.camera)
         rel = layout.board_file(step.focus_idx, step.view_idx, attempt)
         digest = save_board_frame(self.session.path / rel, frame)
         self._emit(BoardSaved(step.focus_idx, step.view_idx, rel, digest, step.degrees, self._stage_deg, attempt, tilt))
 
-    def _place_board(self, step: PlaceBoard) -> str:
-        """Ask the operator for a board view (``intrinsics.placement: operator``): a ``board-ask`` record (the
-        live page shows it), the request said on the terminal, the answer awaited. A camera that can be shown
-        the board (the simulator) stands in for the person too: it holds the board as asked."""
-        cfg = self.config
-        assert cfg.intrinsics is not None  # the plan asks for board views only with the section
-        f, v, req = step.focus_idx, step.view_idx, step.request
-        attempt = self.session.board_attempt(f, v)
-        self._emit(BoardWanted(f, v, attempt, req.to_dict(), list(step.problems)))
-        if isinstance(self.camera, BoardScene):
-            self.camera.show_board(parse_board(cfg.intrinsics.board).label, req)
-        lines = [f"focus {cfg.focus_settings[f]:g}, {req.instruction()}", f"  why: {req.why()}"]
-        if step.problems:
-            lines.insert(0, f"[yellow]board view {v + 1} rejected: {'; '.join(step.problems)}; once more:")
-        if self.operator is None:
-            raise SessionAborted(
-                "the board views are placed by the operator (intrinsics.placement: operator) and this run has "
-                f"none; continue on a terminal with: harp session resume {self.session.path}"
-            )
-        try:
-            return self.operator.ask(lines, self._board_preview())
-        except NoOperator as exc:
-            raise SessionAborted(f"{exc}; then: harp session resume {self.session.path}") from None
-
-    def _board_preview(self) -> Callable[[], None] | None:
-        """While the operator places the board, and a live page shows the session (its session directory
-        has ``show_board_preview``: :class:`station.live.session_tap.SessionTap`): a frame now and then,
-        and where the board is found in it, for the page. Best effort: a frame that fails is left out (the
-        view's own capture retries)."""
-        show = getattr(self.session, "show_board_preview", None)
-        if show is None or self.config.intrinsics is None:
-            return None
-        spec = parse_board(self.config.intrinsics.board)
-        timeout = self.config.capture.timeout_s
-
-        def preview() -> None:
-            try:
-                frame = self.camera.capture(timeout=timeout)
-            except (DriverError, OSError):
-                return
-            image = np.asarray(frame.image)
-            show(image, detect_board(image, spec, name="the camera's picture"))
-
-        return preview
-
     def _check_board(self, step: CheckBoard) -> BoardCheck:
-        """Find the board in the view just saved: accepted (``board-ok`` with its corners, which the live
-        page's board coverage pools) or rejected with why (``board-reject``: no board, too few corners,
-        blurred, another size than the harp's frames)."""
-        cfg = self.config
-        assert cfg.intrinsics is not None
-        f, v = step.focus_idx, step.view_idx
-        rec = self.session.boards(f)[v]
-        path = self.session.path / rec.file
-        w, h = self._image_size(f)
-        views, rejected = board_views([str(path)], parse_board(cfg.intrinsics.board), w, h)
-        if not views:
-            problems = [rejected[0].reason]
-            self._emit(BoardRejected(f, v, problems))
-            return BoardCheck(f, v, tuple(problems))
-        view = views[0]
-        corners = np.round(np.asarray(view.image_points, np.float64).reshape(-1, 2), 2).tolist()
-        self._emit(BoardAccepted(f, v, rec.attempt, corners, [w, h]))
-        return BoardCheck(f, v, (), view.n)
+        record, check = check_board(step, self.session, self.config, self._image_size(step.focus_idx))
+        self._emit(record)
+        return check
 
     def _estimate_k(self, step: EstimateK) -> None:
-        """The camera matrix of a focus setting from its board views, its distortion held fixed
-        (:func:`station.intrinsics.measure_intrinsics`); too few usable views (``intrinsics.min_views``)
-        or a failed adjustment: recorded and said, and the profile is stored without one."""
+        """The camera matrix of a focus setting (:func:`station.session.camera_matrix.estimate_k`); without
+        one, the profile is stored without it."""
         f = step.focus_idx
-        cfg = self.config
-        k = cfg.intrinsics
-        assert k is not None
         cal = self._calibrations[f]
         assert cal.fit is not None  # a failed fit stopped the session
-        views = self.session.boards(f)  # the last capture of each view, unless superseded since
-        paths = []
-        for v in sorted(views):
-            r = views[v]
-            p = self.session.path / r.file
-            if sha256_file(p) != r.sha256:
-                raise SessionError(
-                    f"{p}: checksum does not match the manifest; run: harp session repair {self.session.path}"
-                )
-            paths.append(str(p))
-        w, h = self._image_size(f)
-        run = measure_intrinsics(
-            cal.fit.model,
-            w,
-            h,
-            paths,
-            parse_board(k.board),
-            distortion_from=f"the session's fit of focus setting {cfg.focus_settings[f]:g}",
-            skew=k.skew,
-            command="harp session",
-        )
-        rejected = [[str(Path(r.name).relative_to(self.session.path)), r.reason] for r in run.rejected]
-        result = run.result
-        failure = None
-        if not result:
-            failure = str(getattr(result, "reason", "no camera matrix"))
-        elif len(run.views) < k.min_views:
-            failure = f"only {len(run.views)} usable board views of {len(paths)} (intrinsics.min_views {k.min_views})"
-        if failure is None and isinstance(result, Intrinsics):
-            self._intrinsics[f] = result
-            self._emit(IntrinsicsMeasured(f, rejected, intrinsics=result.to_dict()))
-        else:
-            self._emit(IntrinsicsMeasured(f, rejected, failure=failure))
+        record, k = estimate_k(f, self.session, self.config, cal.fit.model, self._image_size(f))
+        if k is not None:
+            self._intrinsics[f] = k
+        self._emit(record)
 
     def _image_size(self, f: int) -> tuple[int, int]:
         h, w = self.session.read_frame(self.session.frames(f, 0)[0], verify=False).shape
@@ -719,52 +504,19 @@ class Executor:
 
     def _store(self, step: Store) -> None:
         f = step.focus_idx
-        cfg = self.config
-        cal = self._calibrations[f]
-        w, h = self._image_size(f)
-        frames = [
-            self.session.path / r.file
-            for o in range(len(cfg.capture.orientations_deg))
-            for r in self.session.frames(f, o)
-        ]
-        rel = layout.profile_file(f)
-        path = self.session.path / rel
-        assert cal.fit is not None  # a failed fit stopped the session
-        colour = session_colour(
-            self.session, f, cal.fit.model, cfg
-        )  # a colour camera's TCA and vignetting (None: grey)
-        if colour is not None:
-            self._emit(ColourMeasured(f, colour_summary(colour)))
-        # judged here so that the store keeps the profile, its verdict (thresholds, every check) and
-        # its lens row in one transaction (issues 9, 12); the QA after the executor says it again
-        profile = focus_profile(
-            cal,
-            w,
-            h,
-            cfg,
+        profile, stored = store_focus(
             f,
-            provenance=make_provenance(
-                frames,
-                t=cfg.pipeline.t,
-                command="harp session",
-                station=cfg.station.id,
-                session_dir=str(self.session.path.resolve()),
-            ),
-            details={"model_file": str(path), **({COLOUR: colour} if colour is not None else {})},
+            self.session,
+            self.config,
+            self._calibrations[f],
+            self._image_size(f),
             intrinsics=self._intrinsics.get(f),
             judge=None if self.judge is None else (lambda p: self.judge(p, f)),
+            store=self.store,
+            emit=self._emit,
         )
-        write_profile(path, profile)
-        digest = sha256_file(path)
-        profile_id = None
-        if self.store is not None:
-            try:
-                profile_id = self.store.put_profile(profile)
-            except StoreError as exc:  # full disk, damaged store: stop here, frames and fits kept
-                raise SessionAborted(f"{exc}; then continue with: harp session resume {self.session.path}") from None
-            profile = profile.with_(id=profile_id)
         self._profiles[f] = profile
-        self._emit(Stored(f, profile_id, rel, digest))
+        self._emit(stored)
 
     # ============================================================ faults
     def _retry(self, what: str, fn: Callable[[], T], device: Any = None) -> T:

@@ -184,6 +184,12 @@ def board_key(focus_idx: int, view_idx: int) -> tuple:
     return ("board", int(focus_idx), int(view_idx))
 
 
+def board_unchecked_key(focus_idx: int, view_idx: int) -> tuple:
+    """Key of an operator-placed board view saved but not yet checked (the run stopped in between): the
+    plan checks it before anything else of that view, and asks for it again with why if it is rejected."""
+    return ("board-unchecked", int(focus_idx), int(view_idx))
+
+
 def stored_key(focus_idx: int) -> tuple:
     """Key meaning the profile of this focus setting is in the store."""
     return ("stored", int(focus_idx))
@@ -208,7 +214,8 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
     Parameters
     ----------
     config : the validated station configuration.
-    already_done : keys of finished work (:func:`frame_key`, :func:`board_key`, :func:`stored_key`).
+    already_done : keys of finished work (:func:`frame_key`, :func:`board_key`, :func:`stored_key`) and
+        of operator-placed board views saved but not yet checked (:func:`board_unchecked_key`).
 
     Yields
     ------
@@ -220,7 +227,9 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
         shot is re-captured, or ``Stop`` is yielded (see the module docstring).
         With board views placed by the operator, each is a ``PlaceBoard`` (the executor sends the
         operator's answer), ``BoardView`` and ``CheckBoard`` (it sends the :class:`BoardCheck`); a
-        rejected view is asked for again with its problems, as long as the operator wants.
+        rejected view is asked for again with its problems, as long as the operator wants. A view saved
+        but not yet checked when the run stopped is checked first (a ``CheckBoard``), and asked for
+        again with its problems only if it is rejected.
     """
     done = set(already_done)
     n = config.capture.frames_per_orientation
@@ -262,6 +271,11 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
                 requests = wanted_views(k.n_views)
                 for v in views:
                     problems: tuple[str, ...] = ()
+                    if board_unchecked_key(f, v) in done:  # saved when the last run stopped, never checked
+                        check = yield CheckBoard(f, v)
+                        if not isinstance(check, BoardCheck) or check.accepted:
+                            continue
+                        problems = check.problems
                     while True:
                         answer = yield PlaceBoard(f, v, requests[v], problems)
                         if answer == STOP:

@@ -5,6 +5,7 @@ camera stands in for the camera and the person (it renders the board where the p
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import subprocess
@@ -107,3 +108,57 @@ def test_views_announced_on_terminal_and_page_answered_by_either(tmp_path):
     assert k.fx == pytest.approx(1200.0, abs=2 * k.sd[0])  # the simulator's focal length: 2.5 image widths
     manifest = [json.loads(x) for x in (tmp_path / "sessions" / "s" / "manifest.jsonl").read_text().splitlines()]
     assert [r["view_idx"] for r in manifest if r["kind"] == "board-ok"] == [0, 1, 3]
+
+
+def _records(session) -> list[dict]:
+    return [json.loads(x) for x in (session / "manifest.jsonl").read_text().splitlines()]
+
+
+def test_killed_between_a_views_save_and_its_check_then_resumed(tmp_path):
+    """``harp session run`` killed (SIGKILL, its whole process group) while the operator places the second
+    view; the manifest is then cut back to right after the first view's ``board`` record, where a kill a
+    moment earlier leaves it (between the save and the check: a SIGKILL stops between two appends).
+    ``harp session resume`` checks that view first, without asking for it again, then asks for the rest."""
+    import os
+    import signal
+
+    cfg = operator_config(tmp_path, views=3)
+    session = tmp_path / "sessions" / "s"
+    p = _harp("session", "run", cfg, "--quiet", "--no-report", "--name", "s", stdin=subprocess.PIPE)
+    try:
+        p.stdin.write("\n")  # the first view: the board is in place
+        p.stdin.flush()
+
+        def asked_second():
+            recs = _records(session) if (session / "manifest.jsonl").is_file() else []
+            return any(r["kind"] == "board-ask" and r["view_idx"] == 1 for r in recs) or None
+
+        wait_for(asked_second, 120, "the second view asked for")
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+        p.communicate(timeout=30)
+    assert p.returncode == -signal.SIGKILL
+    lines = (session / "manifest.jsonl").read_text().splitlines(keepends=True)
+    kinds = [json.loads(line)["kind"] for line in lines]
+    cut = kinds.index("board") + 1
+    assert kinds[cut:] == ["board-ok", "board-ask"]  # the check and the next question, as if never written
+    (session / "manifest.jsonl").write_text("".join(lines[:cut]))
+
+    r = _harp("session", "resume", session, "--quiet", "--no-report", stdin=subprocess.PIPE)
+    try:
+        out, err = r.communicate("\n\n", timeout=180)  # the second and third views
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(r.pid, signal.SIGKILL)
+        if r.poll() is None:
+            r.communicate(timeout=30)
+    assert r.returncode in (0, 1), err
+    resumed = _records(session)[cut:]
+    board = [(x["kind"], x["view_idx"]) for x in resumed if x["kind"].startswith("board")]
+    assert board[0] == ("board-ok", 0)  # checked first, not asked for again
+    assert board[1:] == [("board-ask", 1), ("board", 1), ("board-ok", 1), ("board-ask", 2), ("board", 2),
+                         ("board-ok", 2)]  # fmt: skip
+    with ProfileStore(tmp_path / "profiles.sqlite", create=False) as st:
+        (profile,) = st.profiles()
+    assert profile.intrinsics is not None and profile.intrinsics.n_views == 3

@@ -22,7 +22,7 @@ from station.live.runner import LiveStation
 from station.session.directory import SessionDir
 from station.session.executor import Executor
 from station.session.operator import PROMPT, NoOperator, OperatorDesk, parse_answer
-from station.session.plan import CAPTURE, SKIP, BoardCheck, CheckBoard, PlaceBoard, SkipBoard, plan_session
+from station.session.plan import CAPTURE, SKIP, STOP, BoardCheck, CheckBoard, PlaceBoard, SkipBoard, plan_session
 from station.session.simulated import simulated_devices
 from station.store import ProfileStore
 
@@ -202,3 +202,42 @@ def test_the_live_page_shows_the_wanted_view_and_the_board_coverage():
     assert cov["fraction"] == pytest.approx(5 / 48) and "bottom-right corner" in cov["missing"]
     live.session_record({"kind": "board-reject", "focus_idx": 0, "view_idx": 1, "reasons": ["blurred"]})
     assert live.state()["session"]["board"]["last"] == {"view_idx": 1, "accepted": False, "reasons": ["blurred"]}
+
+
+def test_a_view_saved_but_not_checked_when_the_run_stopped_is_checked_on_resume(tmp_path):
+    """A run stopped between an operator-placed view's save and its check (a SIGKILL stops between two of
+    the manifest's appends: the manifest is cut right after the view's ``board`` record, as the kill left
+    it; ``tests/station/cli/test_session_operator.py`` kills a real process there). Resumed, the view is
+    checked before anything else of it: here the board was not in the picture, so it is rejected and the
+    operator is asked for it again, told why; the camera matrix comes from three good views."""
+    cfg = load_config(operator_config(tmp_path, views=3))
+    with simulated_devices(cfg) as sim, SessionDir.create(cfg.sessions_dir, cfg, name="s") as s:
+        sim.camera.open()
+        sim.turntable.open()
+        person = StandIn([CAPTURE, STOP], hide={0: sim.camera})  # the board away before the first capture
+        with ProfileStore(tmp_path / "profiles.sqlite") as store:
+            Executor(s, sim.camera, sim.turntable, store=store, sleep=lambda _s: None, operator=person).run()
+    session = cfg.sessions_dir / "s"
+    lines = (session / "manifest.jsonl").read_text().splitlines(keepends=True)
+    kinds = [json.loads(line)["kind"] for line in lines]
+    cut = kinds.index("board") + 1
+    assert kinds[cut] == "board-reject"  # what the check said then, cut away with everything after it
+    (session / "manifest.jsonl").write_text("".join(lines[:cut]))
+
+    with SessionDir.open(session) as s, simulated_devices(s.config) as sim:
+        sim.camera.open()
+        sim.turntable.open()
+        person = StandIn([CAPTURE, CAPTURE, CAPTURE])
+        with ProfileStore(tmp_path / "profiles.sqlite") as store:
+            result = Executor(s, sim.camera, sim.turntable, store=store, sleep=lambda _s: None, operator=person).run()
+            (profile,) = store.profiles()
+    assert result.exit_code == 0, result.message
+    resumed = records(session)[cut:]
+    reject = next(r for r in resumed if r["kind"] == "board-reject")
+    assert (reject["view_idx"], reject["skipped"]) == (0, False) and "board" in reject["reasons"][0]
+    assert resumed.index(reject) < next(i for i, r in enumerate(resumed) if r["kind"] == "board-ask")
+    asks = [(r["view_idx"], r["attempt"], r["problems"]) for r in resumed if r["kind"] == "board-ask"]
+    assert asks == [(0, 1, reject["reasons"]), (1, 0, []), (2, 0, [])]
+    assert person.told[0][0] == f"[yellow]board view 1 rejected: {reject['reasons'][0]}; once more:"
+    assert [(r["view_idx"], r["attempt"]) for r in resumed if r["kind"] == "board-ok"] == [(0, 1), (1, 0), (2, 0)]
+    assert profile.intrinsics is not None and profile.intrinsics.n_views == 3
