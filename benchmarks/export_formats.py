@@ -16,7 +16,9 @@ Prints a table (commit it as benchmarks/RESULTS-exports.md). Steps, each a ``har
    states it; the first row is ``harp evaluate lens.yaml IMG_6964`` (harp evaluate normalises by
    the 4 corrected corners, ``harp calibrate`` does not, hence the small difference).
 
-The real consumers' reading of these files is in ``pytest tests/pipeline/test_export_consumers.py -s``.
+The real consumers' reading of these files is in ``pytest tests/pipeline/test_export_consumers.py -s``;
+the second table (:func:`benchmarks.export_consumers.table`) is every format x lens (this model, the demo
+lens, a 93 and a 115 degree lens) in its consumer, over the image and out to 1.3x the corner radius.
 """
 
 from __future__ import annotations
@@ -120,6 +122,15 @@ def main() -> int:
         )
     print()
     print(f"files in {work}")
+    print()
+    print("## Every export x lens in its consumer, over the image and out to 1.3x the corner radius")
+    print()
+    print("(`benchmarks/export_consumers.py`: the consumers, their inverse and the figures are described there.)")
+    print()
+    sys.path.insert(0, str(REPO))
+    from benchmarks.export_consumers import table  # defers cv2, pycolmap, lensfunpy
+
+    table(model)
     return 0
 
 

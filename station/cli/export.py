@@ -259,9 +259,7 @@ def export_options(args, existing: bytes | None = None, existing_name: str = "<e
     installed: tuple[tuple[str, str], ...] = ()
     if args.format == "lensfun":
         installed = installed_databases(exclude=args.output)
-    focus_m = getattr(args, "distance", None) if args.format == "lcp" else None
-    if focus_m is not None and not (math.isfinite(focus_m) and focus_m > 0):
-        raise ExportError(f"--distance: expected a focus distance > 0 m, got {focus_m:g}")
+    focus_m = getattr(args, "distance", None) if args.format == "lcp" else None  # checked with --aperture
     return ExportOptions(
         coeffs=args.coeffs,
         focal_px=args.focal_px,

@@ -63,16 +63,22 @@ def ask_for_board(
     emit: Callable[[Record], None],
 ) -> str:
     """Ask the operator for a board view (``intrinsics.placement: operator``): a ``board-ask`` record (the
-    live page shows it), the request said on the terminal, the answer awaited. A camera that can be shown
-    the board (the simulator) stands in for the person too: it holds the board as asked."""
+    live page shows it), the request said on the terminal with why the view's last capture was rejected
+    (the plan's problems, or on resume the last ``board-reject`` record's), the answer awaited. A camera
+    that can be shown the board (the simulator) stands in for the person too: it holds the board as asked."""
     f, v, req = step.focus_idx, step.view_idx, step.request
     attempt = session.board_attempt(f, v)
-    emit(BoardWanted(f, v, attempt, req.to_dict(), list(step.problems)))
+    problems = list(step.problems)
+    if not problems and attempt > 0:  # rejected before the last run stopped (or by a repair): why, said again
+        last = session.last(BoardRejected, focus_idx=f, view_idx=v)
+        if last is not None and not last.skipped:
+            problems = list(last.reasons)
+    emit(BoardWanted(f, v, attempt, req.to_dict(), problems))
     if isinstance(camera, BoardScene):
         camera.show_board(board_spec(config).label, req)
     lines = [f"focus {config.focus_settings[f]:g}, {req.instruction()}", f"  why: {req.why()}"]
-    if step.problems:
-        lines.insert(0, f"[yellow]board view {v + 1} rejected: {'; '.join(step.problems)}; once more:")
+    if problems:
+        lines.insert(0, f"[yellow]board view {v + 1} rejected: {'; '.join(problems)}; once more:")
     if operator is None:
         raise SessionAborted(
             "the board views are placed by the operator (intrinsics.placement: operator) and this run has "

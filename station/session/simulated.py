@@ -1,5 +1,5 @@
-"""The demo's simulated station: one SimWorld, a Zaber emulator on a real pty
-and the simulated camera, built from a configuration with a ``simulation``
+"""The demo's simulated station: one SimWorld, a Zaber emulator (or, for a ``grbl`` turntable, a GRBL
+emulator) on a real pty and the simulated camera, built from a configuration with a ``simulation``
 section.
 
 Only the *devices* are simulated: the station talks to them through the real
@@ -21,6 +21,8 @@ from typing import Any
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
+from drivers.grbl import GrblTurntable
+from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import start_zaber_emulator
 from station.config import EMULATOR_PORT, Config
@@ -29,14 +31,57 @@ from station.config import EMULATOR_PORT, Config
 @dataclass
 class SimulatedStation:
     camera: Any  # drivers.sim.camera.SimulatedCamera (not yet opened)
-    turntable: Any  # drivers.zaber.ZaberTurntable on the emulator's pty (not yet opened)
+    turntable: Any  # drivers.zaber.ZaberTurntable (drivers.grbl.GrblTurntable) on the emulator's pty, not opened
     world: SimWorld
-    emulator: Any  # EmulatorHandle: .port_path, .emulator (.inject faults), .stop()
+    emulator: Any  # EmulatorHandle of the Zaber (GRBL) emulator: .port_path, .emulator (.inject faults), .stop()
 
 
 def _one_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+GRBL_EMULATOR_KEYS = ("speed_deg_s", "accel_deg_s2", "position_deg", "seed")
+"""The ``simulation.emulator`` options a GRBL turntable's emulator takes too (the others are the Zaber's)."""
+
+
+def _start_stage_emulator(config: Config, world: SimWorld, overrides: dict[str, Any]) -> Any:
+    """The emulator of the configured turntable's controller on a new pty: the GRBL emulator for a ``grbl``
+    turntable (its axis, units per degree and tilt axis the turntable's), the Zaber emulator otherwise."""
+    assert config.simulation is not None
+    tt = config.station.turntable
+    opts = {**config.simulation.emulator, **overrides}
+    if tt.driver == "grbl":
+        other = sorted(set(opts) - set(GRBL_EMULATOR_KEYS))
+        if other:
+            raise config.error(
+                "simulation.emulator",
+                f"{other[0]!r} is a Zaber emulator option; a GRBL turntable's emulator takes "
+                + ", ".join(GRBL_EMULATOR_KEYS),
+            )
+        try:  # the driver's own reading of its section (axis, units per degree, tilt axis), not opened
+            probe = GrblTurntable.from_config(tt.as_driver_config(port=EMULATOR_PORT))
+        except (ValueError, TypeError) as exc:
+            raise config.error("station.turntable", f"cannot use this turntable: {_one_line(exc)}") from None
+        opts.update(units_per_degree=probe.units_per_degree, axis=probe.axis)
+        if probe.tilt is not None:  # the simulated stage has the tilt axis the turntable names
+            if probe.tilt.units_per_degree != 1.0:
+                raise config.error(
+                    "station.turntable.tilt_units_per_degree",
+                    "the GRBL emulator's tilt axis counts degrees: leave it out (1) for a simulated station",
+                )
+            opts["tilt_axis"] = probe.tilt.axis
+        start, name = start_grbl_emulator, "GRBL"
+    else:
+        if tt.steps_per_degree is not None:
+            opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
+        if tt.settings.get("tilt_axis") is not None:
+            opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
+        start, name = start_zaber_emulator, "Zaber"
+    try:
+        return start(world=world, **opts)
+    except (ValueError, TypeError, OSError) as exc:
+        raise config.error("simulation.emulator", f"cannot start the {name} emulator: {_one_line(exc)}") from None
 
 
 @contextlib.contextmanager
@@ -54,17 +99,8 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     # the lens on the camera: the unit of the demo lens that carries this serial (simulation.lens_spread)
     unit = lens_unit(config.lens.serial, config.simulation.lens_spread)
     world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg, lens_unit=unit)
+    handle = _start_stage_emulator(config, world, emulator_overrides)
     tt = config.station.turntable
-    opts = dict(config.simulation.emulator)
-    if tt.steps_per_degree is not None:
-        opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
-    if tt.settings.get("tilt_axis") is not None:
-        opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
-    opts.update(emulator_overrides)
-    try:
-        handle = start_zaber_emulator(world=world, **opts)
-    except (ValueError, TypeError, OSError) as exc:
-        raise config.error("simulation.emulator", f"cannot start the Zaber emulator: {_one_line(exc)}") from None
     stack = contextlib.ExitStack()  # the lens controller's emulator, if any
     try:
         port = handle.port_path if tt.port == EMULATOR_PORT else tt.port

@@ -93,7 +93,8 @@ def test_fisheye_export_holds_a_wide_angle_lens_the_pinhole_cannot(wide_fits):
         f"(fitted f {fm.fx:.2f}); pinhole-12 {pe.rms_mod_h_px:.4f}/{pe.max_mod_h_px:.4f} px"
     )
     assert fe.rms_mod_h_px < 1e-4 and fe.max_mod_h_px < 1e-3
-    assert pe.max_mod_h_px > 0.05 and pe.rms_mod_h_px > 100 * fe.rms_mod_h_px
+    # the pin-hole 12 comes within 0.013 px max (Lawson's reweighting); the fisheye is exact
+    assert pe.max_mod_h_px > 100 * fe.max_mod_h_px and pe.rms_mod_h_px > 100 * fe.rms_mod_h_px
     assert abs(fm.cx - WIDE.cx) < 0.01 and abs(fm.cy - WIDE.cy) < 0.01
 
 

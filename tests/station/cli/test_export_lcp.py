@@ -64,7 +64,7 @@ def test_two_focus_distances_in_one_profile_each_within_its_stated_error(model, 
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--distance", "-1"], "--distance: expected a focus distance > 0 m, got -1"),
+        (["--distance", "-1"], "--distance: expected a positive number, got -1"),
         (["--coeffs", "5"], "--coeffs 5: the lcp export has no choice of coefficients"),
     ],
 )

@@ -108,6 +108,22 @@ def test_lensfun_export_one_calibration_per_focal_read_by_lensfun(zoom_run, tmp_
         rms, mx = compare_points(zoom_lens(z, 0.0, W, H), p, q, W, H)
         print(f"lensfun at {z:g} mm against the lens: RMS {rms:.4f} px, max {mx:.4f} px")
         assert rms < 0.15
+    # lensfun has no focus axis for distortion: no focus given is refused in one line, nothing written ...
+    capsys.readouterr()
+    none = tmp_path / "none.xml"
+    assert main(["profile", "export", "ZOOM-0001", "--format", "lensfun", "-o", str(none), *store]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "name LENS and --focus F" in err and "\n" not in err and not none.exists()
+    # ... and the other focus setting exported into the same file replaces each focal's, said so
+    assert main([*args[:4], "1", *args[5:], "--lensfun-no-center", *store]) == 0
+    err = capsys.readouterr().err
+    assert err.count("no focus axis") == 3 and err.count("focus 1 calibration replaced the focus 0 one") == 3
+    text = xml.read_text()
+    assert text.count("<distortion ") == 3 and "focus setting 0 (" not in text
+    _, _, p, q = lensfun_in_consumer(
+        text, ("harp station", "SimulatedCamera"), ("Simulated Optics", "SIM-ZOOM-12-36mm"), 36.0, W, H
+    )
+    assert compare_points(zoom_lens(36.0, 1.0, W, H), p, q, W, H)[0] < 0.15  # the long end at focus 1
 
 
 def test_lcp_export_one_profile_per_focal_and_focus_applied_by_rawtherapees_equations(zoom_run, tmp_path, capsys):

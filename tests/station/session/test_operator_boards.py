@@ -204,12 +204,14 @@ def test_the_live_page_shows_the_wanted_view_and_the_board_coverage():
     assert live.state()["session"]["board"]["last"] == {"view_idx": 1, "accepted": False, "reasons": ["blurred"]}
 
 
-def test_a_view_saved_but_not_checked_when_the_run_stopped_is_checked_on_resume(tmp_path):
-    """A run stopped between an operator-placed view's save and its check (a SIGKILL stops between two of
-    the manifest's appends: the manifest is cut right after the view's ``board`` record, as the kill left
-    it; ``tests/station/cli/test_session_operator.py`` kills a real process there). Resumed, the view is
-    checked before anything else of it: here the board was not in the picture, so it is rejected and the
-    operator is asked for it again, told why; the camera matrix comes from three good views."""
+@pytest.mark.parametrize("stopped_after", ["board", "board-reject"])
+def test_a_view_saved_but_not_checked_when_the_run_stopped_is_checked_on_resume(tmp_path, stopped_after):
+    """A run stopped between an operator-placed view's save and its check, or between its rejection and the
+    next question (a SIGKILL stops between two of the manifest's appends: the manifest is cut right after
+    that record, as the kill left it; ``tests/station/cli/test_session_operator.py`` kills a real process
+    there). Resumed, the view is checked before anything else of it: here the board was not in the picture,
+    so it is rejected and the operator is asked for it again, told why; the camera matrix comes from three
+    good views."""
     cfg = load_config(operator_config(tmp_path, views=3))
     with simulated_devices(cfg) as sim, SessionDir.create(cfg.sessions_dir, cfg, name="s") as s:
         sim.camera.open()
@@ -220,9 +222,9 @@ def test_a_view_saved_but_not_checked_when_the_run_stopped_is_checked_on_resume(
     session = cfg.sessions_dir / "s"
     lines = (session / "manifest.jsonl").read_text().splitlines(keepends=True)
     kinds = [json.loads(line)["kind"] for line in lines]
-    cut = kinds.index("board") + 1
-    assert kinds[cut] == "board-reject"  # what the check said then, cut away with everything after it
-    (session / "manifest.jsonl").write_text("".join(lines[:cut]))
+    assert kinds[kinds.index("board") + 1] == "board-reject"  # what the check said then
+    cut = kinds.index(stopped_after) + 1
+    (session / "manifest.jsonl").write_text("".join(lines[:cut]))  # everything after it cut away
 
     with SessionDir.open(session) as s, simulated_devices(s.config) as sim:
         sim.camera.open()
@@ -233,9 +235,13 @@ def test_a_view_saved_but_not_checked_when_the_run_stopped_is_checked_on_resume(
             (profile,) = store.profiles()
     assert result.exit_code == 0, result.message
     resumed = records(session)[cut:]
-    reject = next(r for r in resumed if r["kind"] == "board-reject")
+    if stopped_after == "board":  # checked on resume, before the question
+        reject = next(r for r in resumed if r["kind"] == "board-reject")
+        assert resumed.index(reject) < next(i for i, r in enumerate(resumed) if r["kind"] == "board-ask")
+    else:  # checked before the kill: not again
+        assert [r for r in resumed if r["kind"] == "board-reject"] == []
+        reject = records(session)[cut - 1]
     assert (reject["view_idx"], reject["skipped"]) == (0, False) and "board" in reject["reasons"][0]
-    assert resumed.index(reject) < next(i for i, r in enumerate(resumed) if r["kind"] == "board-ask")
     asks = [(r["view_idx"], r["attempt"], r["problems"]) for r in resumed if r["kind"] == "board-ask"]
     assert asks == [(0, 1, reject["reasons"]), (1, 0, []), (2, 0, [])]
     assert person.told[0][0] == f"[yellow]board view 1 rejected: {reject['reasons'][0]}; once more:"
