@@ -139,8 +139,18 @@ def test_evaluate_prints_a_tab_separated_table_into_a_pipe(calibrated, shots):
     first, table = out.split("\n", 1)
     assert first.startswith("correction: ")
     cols, rows = tsv(table)
-    assert cols == ["image", "lines", "d before (px)", "d_max before (px)", "d after (px)", "d_max after (px)"]
+    assert cols == [
+        "image",
+        "lines",
+        "d before (px)",
+        "d_max before (px)",
+        "d after (px)",
+        "d_max after (px)",
+        "shared after (px)",
+        "own after (px)",
+    ]
     assert [r["image"] for r in rows] == [*map(str, shots), "all"]  # the whole paths, not 40 characters
+    assert rows[0]["shared after (px)"] == f"{rep['images'][0]['after_shared']['shared_px']:.4f}"
     assert rows[-1]["d after (px)"] == f"{rep['after']['d']:.4f}" and rows[-1]["lines"] == str(rep["n_lines"])
 
 
