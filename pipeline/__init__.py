@@ -6,7 +6,9 @@ model file, :func:`pipeline.model_file.read_model_file`, is the one file access)
 
 Where things are
 ----------------
-* measuring strings: :mod:`pipeline.edges` (sub-pixel Canny/Devernay),
+* measuring strings: :mod:`pipeline.edges` (sub-pixel Canny/Devernay; its gradient
+  :mod:`pipeline.edge_gradient`, thresholds :mod:`pipeline.edge_thresholds` and chaining
+  :mod:`pipeline.edge_chains`),
   :mod:`pipeline.grouping` (edges into strings), :mod:`pipeline.resample`
   (along-edge smoothing), :mod:`pipeline.straightness` (d, d_max),
   :mod:`pipeline.measure` (all of it on one image), :mod:`pipeline.render`
