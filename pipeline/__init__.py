@@ -18,7 +18,8 @@ Where things are
   format);
 * fitting: :mod:`pipeline.fitspec` (what to fit), :mod:`pipeline.edgeset` (the edges
   of a fit, TLS lines, figures, result types), :mod:`pipeline.fit` (the
-  Levenberg–Marquardt fit), :mod:`pipeline.alvarez` (closed-form start),
+  fit; its least-squares problem :mod:`pipeline.fit_problem`, its Levenberg–Marquardt
+  :mod:`pipeline.fit_solver`), :mod:`pipeline.alvarez` (closed-form start),
   :mod:`pipeline.cross_validation` (the candidates' CV table), :mod:`pipeline.orientations` (whether
   the shots' string orientations support a model), :mod:`pipeline.select` (the model choice of them),
   :mod:`pipeline.uncertainty` (bootstrap field uncertainty);

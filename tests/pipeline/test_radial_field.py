@@ -17,7 +17,8 @@ from pipeline.cross_validation import n_params
 from pipeline.edgeset import collect
 from pipeline.exports.maps import map_accuracy
 from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, read_correction, write_export
-from pipeline.fit import fit_distortion, make_parametrisation, residuals_and_jacobian
+from pipeline.fit import fit_distortion
+from pipeline.fit_problem import make_parametrisation, residuals_and_jacobian
 from pipeline.fitspec import DEFAULT_FIELD_PENALTY, FitSpec, parse
 from pipeline.lens_population import lens_population
 from pipeline.model_file import model_file_text, parse_model_text
