@@ -6,7 +6,9 @@ model file, :func:`pipeline.model_file.read_model_file`, is the one file access)
 
 Where things are
 ----------------
-* measuring strings: :mod:`pipeline.edges` (sub-pixel Canny/Devernay),
+* measuring strings: :mod:`pipeline.edges` (sub-pixel Canny/Devernay; its gradient
+  :mod:`pipeline.edge_gradient`, thresholds :mod:`pipeline.edge_thresholds` and chaining
+  :mod:`pipeline.edge_chains`),
   :mod:`pipeline.grouping` (edges into strings), :mod:`pipeline.resample`
   (along-edge smoothing), :mod:`pipeline.straightness` (d, d_max),
   :mod:`pipeline.measure` (all of it on one image), :mod:`pipeline.render`
@@ -16,7 +18,8 @@ Where things are
   format);
 * fitting: :mod:`pipeline.fitspec` (what to fit), :mod:`pipeline.edgeset` (the edges
   of a fit, TLS lines, figures, result types), :mod:`pipeline.fit` (the
-  Levenberg–Marquardt fit), :mod:`pipeline.alvarez` (closed-form start),
+  fit; its least-squares problem :mod:`pipeline.fit_problem`, its Levenberg–Marquardt
+  :mod:`pipeline.fit_solver`), :mod:`pipeline.alvarez` (closed-form start),
   :mod:`pipeline.cross_validation` (the candidates' CV table), :mod:`pipeline.orientations` (whether
   the shots' string orientations support a model), :mod:`pipeline.select` (the model choice of them),
   :mod:`pipeline.uncertainty` (bootstrap field uncertainty);

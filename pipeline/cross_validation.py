@@ -46,7 +46,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_residuals
-from pipeline.fit import MIN_EDGES, fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
+from pipeline.fit import MIN_EDGES, fit_distortion
+from pipeline.fit_problem import make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FULL_RADIAL, FitSpec
 from pipeline.models.base import DistortionModel
 from pipeline.plain import finite_or_none
@@ -301,7 +302,7 @@ class _FoldStart:
 
     Every fold starts from the fit on all shots, ``theta0``, and its training edges are all kept
     edges but one shot's; the edges' terms of the normal equations are independent, so they are
-    computed once per shot at ``theta0`` (:func:`pipeline.fit.normal_equations`) and each fold's
+    computed once per shot at ``theta0`` (:func:`pipeline.fit_problem.normal_equations`) and each fold's
     first step sums the other shots' (``folds='images'`` only; otherwise :meth:`fold` is None)."""
 
     def __init__(
@@ -365,7 +366,7 @@ def _gauss_newton_fold(
     :func:`pipeline.fit.fit_distortion`'s final pass: ``(model, its d)``, or None when a step does
     not lower the cost or it has not converged (the caller then runs that pass itself).
 
-    Each step solves the normal equations (:func:`pipeline.fit.normal_equations`); a trial point
+    Each step solves the normal equations (:func:`pipeline.fit_problem.normal_equations`); a trial point
     is first evaluated without its Jacobian (the last one, converged, needs none); ``first``: the
     normal equations at the start, already summed, and ``fold_edges`` the edge set of ``kept``
     (:class:`_FoldStart`)."""

@@ -67,23 +67,9 @@ The gradient modulus is ``sqrt(gx**2 + gy**2)`` in float32, each operation round
 
 Automatic thresholds
 --------------------
-When ``low``/``high`` are ``None`` they are derived from the noise of the
-gradient itself, never from the image content:
-
-* ``sigma_g`` = robust standard deviation of one gradient component from
-  the trimmed median of the gradient modulus (:func:`gradient_noise`).
-  Measuring it on the gradient includes the spatial correlation of real
-  camera noise (demosaicing, compression): on the real harp photos it is
-  1.4x what a white-noise model of the pixels predicts, and with that model
-  ~2 % of the background pixels exceeded ``low`` instead of 0.03 %;
-* floored at the gradient noise that white noise of std ``1/sqrt(12)``
-  (quantisation, integer images) or ``1e-3`` times the 0.5-99.5 percentile
-  range of the grey levels (any image) would give through the same filters;
-* ``low = 4 sigma_g`` and ``high = 8 sigma_g``. On pure noise the modulus is
-  Rayleigh distributed with scale ``sigma_g``, so a pixel exceeds ``low``
-  with probability ``exp(-8) = 3.4e-4`` and ``high`` with
-  ``exp(-32) = 1.3e-14``: chains made by noise alone are rejected by the
-  hysteresis.
+When ``low``/``high`` are ``None`` they are ``4 sigma_g`` and ``8 sigma_g``, ``sigma_g`` the
+noise of one gradient component measured on the gradient itself, floored at that of the
+quantisation: :mod:`pipeline.edge_thresholds` (:func:`~pipeline.edge_thresholds.auto_thresholds`).
 
 References
 ----------
@@ -108,20 +94,19 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 from numpy.typing import NDArray
 
+from pipeline.edge_chains import link_points, order_chains
+from pipeline.edge_gradient import as_float_image, check_image, gaussian_kernels, gradient_modulus
+from pipeline.edge_thresholds import noise_from_samples, noise_stride, thresholds_from_noise
+
 _T = TypeVar("_T")
 _R = TypeVar("_R")
 
-__all__ = ["EdgeChain", "detect_edges", "edge_points", "auto_thresholds", "gradient_noise"]
+__all__ = ["EdgeChain", "detect_edges", "edge_points"]
 
 MIN_SIGMA_CONTINUOUS = 0.5
-LOW_FACTOR = 4.0
-HIGH_FACTOR = 8.0
 
 Floats = NDArray[np.float64]
 Ints = NDArray[np.int64]
-
-# 5x5 neighbourhood used for chaining (centre excluded), as in the IPOL code.
-_NEIGH = [(dx, dy) for dy in range(-2, 3) for dx in range(-2, 3) if (dx, dy) != (0, 0)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,83 +135,8 @@ class EdgeChain:
 
 
 # --------------------------------------------------------------------------- #
-# smoothing, gradient, thresholds
+# the gradient at continuous positions (sub-pixel step)
 # --------------------------------------------------------------------------- #
-def _as_float_image(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
-    _check_image(img)
-    return np.ascontiguousarray(img, dtype=np.float32)
-
-
-def _check_image(img: np.ndarray) -> None:
-    if img.ndim != 2:
-        raise ValueError(f"expected a 2-D grey image, got shape {img.shape}")
-    if img.shape[0] < 5 or img.shape[1] < 5:
-        raise ValueError(f"image too small for edge detection: {img.shape}")
-    if img.dtype == np.bool_ or not (np.issubdtype(img.dtype, np.integer) or np.issubdtype(img.dtype, np.floating)):
-        raise ValueError(f"unsupported image dtype {img.dtype}")
-    if np.issubdtype(img.dtype, np.floating) and not np.isfinite(img).all():
-        raise ValueError("image contains NaN or infinite values")
-
-
-def _gauss_ksize(sigma: float) -> int:
-    return 2 * int(np.ceil(4.0 * sigma)) + 1
-
-
-def _gradient(smoothed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centred differences ``(L(x+1) - L(x-1)) / 2`` (and in y) and the modulus,
-    for ``sigma = 0`` (no smoothing).
-
-    ``cv2.Sobel`` with ``ksize=1`` is the plain ``[-1, 0, 1]`` kernel (no
-    cross smoothing). Values on the outermost pixel ring depend on the border
-    rule and are never used (points are only detected 2 pixels or more inside
-    the image).
-    """
-    gx = cv2.Sobel(smoothed, cv2.CV_32F, 1, 0, ksize=1, scale=0.5, borderType=cv2.BORDER_REPLICATE)
-    gy = cv2.Sobel(smoothed, cv2.CV_32F, 0, 1, ksize=1, scale=0.5, borderType=cv2.BORDER_REPLICATE)
-    return gx, gy, _modulus(gx, gy, np.empty_like(gx))
-
-
-def _modulus(gx: np.ndarray, gy: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """``out = sqrt(gx**2 + gy**2)`` in float32, each operation rounded on its own (no fused
-    multiply-add), so that a pixel's modulus does not depend on where it lies in the array
-    (``cv2.magnitude`` fuses some lanes and not others, depending on the array's length)."""
-    np.multiply(gx, gx, out=out)
-    out += gy * gy
-    np.sqrt(out, out=out)
-    return out
-
-
-def _kernels(sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sampled Gaussian (OpenCV's, normalised) and its centred difference, as
-    correlation kernels: ``d[m] = (g[m-1] - g[m+1]) / 2``."""
-    g = cv2.getGaussianKernel(_gauss_ksize(sigma), sigma, cv2.CV_32F).ravel()
-    gp = np.concatenate([[0.0, 0.0], g, [0.0, 0.0]])
-    d = 0.5 * (gp[:-2] - gp[2:])
-    return g.astype(np.float32), d.astype(np.float32)
-
-
-def _separable_gradient(
-    img: np.ndarray, sigma: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Gradient of the Gaussian-smoothed image by centred differences.
-
-    Returns ``gx, gy, mod, sv, sh`` where ``sv`` (``sh``) is the image
-    smoothed in y (x) only: ``gx`` = centred x-difference of ``sv`` smoothed
-    in x, i.e. exactly the centred difference of ``GaussianBlur(img)``.
-    ``sv``/``sh`` let the sub-pixel step evaluate the gradient at continuous
-    positions along x/y (:func:`_refine_continuous`).
-    """
-    g, d = _kernels(sigma)
-    b = cv2.BORDER_REFLECT
-    # 1-D passes with filter2D (faster than sepFilter2D with a unit kernel)
-    sv = cv2.filter2D(img, cv2.CV_32F, g[:, None], borderType=b)
-    sh = cv2.filter2D(img, cv2.CV_32F, g[None, :], borderType=b)
-    gx = cv2.filter2D(sv, cv2.CV_32F, d[None, :], borderType=b)
-    gy = cv2.filter2D(sh, cv2.CV_32F, d[:, None], borderType=b)
-    return gx, gy, _modulus(gx, gy, np.empty_like(gx)), sv, sh
-
-
 def _refine_radius(sigma: float) -> int:
     """Taps ``-r..r`` of the continuous evaluation, ``r = ceil(4 sigma) + 2``: for
     ``|u| <= 1`` the terms left out are weighted by ``G(t)`` with ``|t| >= 4 sigma``
@@ -328,135 +238,6 @@ def _refine_continuous(
     return np.where(ok, u, np.nan)
 
 
-def _gradient_noise_gain(sigma: float) -> float:
-    """Std of one gradient component per unit of white-noise std (exact)."""
-    k = _gauss_ksize(max(sigma, 0.0)) if sigma > 0 else 1
-    n = 2 * k + 7
-    delta = np.zeros((n, n), np.float32)
-    delta[n // 2, n // 2] = 1.0
-    gx = (_separable_gradient(delta, sigma)[0] if sigma > 0 else _gradient(delta)[0])[1:-1, 1:-1]
-    return float(np.sqrt(np.sum(gx.astype(np.float64) ** 2)))
-
-
-def _noise_floor(img: np.ndarray) -> float:
-    """Smallest credible image noise std: 8-bit-style quantisation for integer images
-    and 1e-3 of the 0.5-99.5 percentile range of the grey levels for any image."""
-    sub = img[:: max(1, img.shape[0] // 256), :: max(1, img.shape[1] // 256)]
-    lo_p, hi_p = np.percentile(sub.astype(np.float64), [0.5, 99.5])
-    floor = 1e-3 * float(hi_p - lo_p)
-    if np.issubdtype(img.dtype, np.integer):
-        floor = max(floor, 1.0 / np.sqrt(12.0))
-    return max(floor, float(np.finfo(np.float32).tiny))
-
-
-def gradient_noise(gx: np.ndarray, gy: np.ndarray) -> float:
-    """Robust std ``sigma_g`` of one gradient component due to noise.
-
-    On noise alone the modulus ``|(gx, gy)|`` is Rayleigh distributed with
-    scale ``sigma_g`` (median ``1.1774 sigma_g``). Start from the median of
-    the modulus over ~5e5 pixels (a regular sub-grid, 2-pixel border
-    excluded), then 4 times: keep the moduli below ``3 sigma_g`` and take
-    their median divided by the median of a Rayleigh law truncated at
-    ``3 sigma`` (``1.1680 sigma``). The trimming removes edges even when they
-    cover a third of the image (harp strings 30 px apart: bias < 4 %, against
-    +80 % for a plain median). Measured on the gradient itself, the estimate
-    includes the spatial correlation of real camera noise (demosaicing,
-    compression) that a white-noise model of the pixels misses.
-
-    Parameters
-    ----------
-    gx, gy : np.ndarray
-        Gradient components of the smoothed image (same shape).
-
-    Returns
-    -------
-    float
-        Standard deviation, grey levels per pixel (0 for a noise-free flat image).
-
-    References
-    ----------
-    .. [1] P. J. Rousseeuw, C. Croux, "Alternatives to the median absolute
-       deviation", JASA 88(424), 1993 (robust scale estimation).
-    """
-    k = _noise_stride(gx.shape)
-    return _noise_from_samples(gx[2:-2:k, 2:-2:k], gy[2:-2:k, 2:-2:k])
-
-
-def _noise_stride(shape: tuple[int, ...]) -> int:
-    """Stride ``k`` of the grid ``[2:-2:k, 2:-2:k]`` on which :func:`gradient_noise` samples the
-    gradient (about 5e5 samples)."""
-    h, w = shape[0], shape[1]
-    return max(1, int(np.sqrt(max(h - 4, 1) * max(w - 4, 1) / 5e5)))
-
-
-def _noise_from_samples(gx: np.ndarray, gy: np.ndarray) -> float:
-    """:func:`gradient_noise` of the gradient samples ``gx``, ``gy`` (any shape, same shape)."""
-    m = np.hypot(np.asarray(gx, np.float64), np.asarray(gy, np.float64)).ravel()
-    if m.size == 0:
-        return 0.0
-    # sorted once: the moduli below a bound are a prefix, whose median is read off directly
-    # (the same values as np.median of the selection, without five selections and partitions)
-    m.sort()
-    s: float = _sorted_median(m, m.size) / np.sqrt(2.0 * np.log(2.0))
-    c = 3.0
-    trunc_median = np.sqrt(-2.0 * np.log(1.0 - 0.5 * (1.0 - np.exp(-0.5 * c * c))))
-    for _ in range(4):
-        n = int(np.searchsorted(m, c * s, side="left"))  # the moduli < c s
-        if n == 0:
-            break
-        s = _sorted_median(m, n) / trunc_median
-    return s
-
-
-def _sorted_median(m: Floats, n: int) -> float:
-    """Median of the first ``n`` values of the sorted ``m``, as :func:`numpy.median` computes it
-    (the middle value, or the mean of the two middle values)."""
-    h = n // 2
-    return float(m[h]) if n % 2 else float(np.mean(m[h - 1 : h + 1]))
-
-
-def _thresholds_from_gradient(img: np.ndarray, gx: np.ndarray, gy: np.ndarray, sigma: float) -> tuple[float, float]:
-    return _thresholds_from_noise(img, gradient_noise(gx, gy), sigma)
-
-
-def _thresholds_from_noise(img: np.ndarray, noise: float, sigma: float) -> tuple[float, float]:
-    """``(low, high)`` from the measured gradient noise, floored (module docstring)."""
-    sig_g = max(noise, _noise_floor(img) * _gradient_noise_gain(sigma))
-    return LOW_FACTOR * sig_g, HIGH_FACTOR * sig_g
-
-
-def auto_thresholds(image: np.ndarray, sigma: float = 1.0) -> tuple[float, float]:
-    """Automatic ``(low, high)`` gradient-modulus thresholds for an image.
-
-    ``low = 4 sigma_g``, ``high = 8 sigma_g`` where ``sigma_g`` is the noise
-    standard deviation of one gradient component (:func:`gradient_noise`),
-    floored at the gradient noise of the quantisation (see the module
-    docstring). This is the rule :func:`detect_edges` applies when its
-    thresholds are ``None``.
-
-    Parameters
-    ----------
-    image : np.ndarray
-        2-D grey image, any numeric dtype.
-    sigma : float
-        Gaussian smoothing used by the detector.
-
-    Returns
-    -------
-    (float, float)
-        ``(low, high)`` in grey levels per pixel.
-
-    References
-    ----------
-    .. [1] R. Grompone von Gioi, G. Randall, IPOL 7 (2017).
-    """
-    img = np.asarray(image)
-    _check_image(img)
-    f = _as_float_image(img)
-    gx, gy, _ = _separable_gradient(f, sigma)[:3] if sigma > 0 else _gradient(f)
-    return _thresholds_from_gradient(img, gx, gy, sigma)
-
-
 # --------------------------------------------------------------------------- #
 # NMS + sub-pixel points
 # --------------------------------------------------------------------------- #
@@ -500,8 +281,6 @@ NOISE_BOUND_ROWS = 24
 """Rows of the noise sample used for the provisional lower threshold (see :func:`_nms_points`)."""
 NOISE_BOUND_FACTOR = 0.8
 """Provisional lower threshold = this fraction of the noise measured on those rows."""
-LINK_BAND_PX = 4_000_000
-"""Pixels of one band of the chaining's label map (int32)."""
 
 
 def _threaded(fn: Callable[[_T], _R], parts: Sequence[_T]) -> list[_R]:
@@ -565,11 +344,11 @@ class _Dense:
         self.interpolation = interpolation
         self.continuous = interpolation == "continuous" and sigma >= MIN_SIGMA_CONTINUOUS
         if sigma > 0:
-            self.g, self.d = _kernels(sigma)
+            self.g, self.d = gaussian_kernels(sigma)
             self.margin = int(np.ceil(4.0 * sigma)) + 2
         else:
             self.margin = 2
-        k = _noise_stride(img.shape)
+        k = noise_stride(img.shape)
         self.noise_rows = np.arange(2, self.h - 2, k)
         self.noise_cols = np.arange(2, self.w - 2, k)
         self.local = threading.local()
@@ -600,7 +379,7 @@ class _Dense:
             b = cv2.BORDER_REPLICATE
             cv2.Sobel(block, cv2.CV_32F, 1, 0, dst=gx, ksize=1, scale=0.5, borderType=b)
             cv2.Sobel(block, cv2.CV_32F, 0, 1, dst=gy, ksize=1, scale=0.5, borderType=b)
-        _modulus(gx[lo:hi], gy[lo:hi], mod[lo:hi])
+        gradient_modulus(gx[lo:hi], gy[lo:hi], mod[lo:hi])
         return gx, gy, mod, sv, sh
 
     def rows_block(self, r0: int, r1: int) -> tuple[int, NDArray[Any]]:
@@ -735,10 +514,10 @@ def _nms_points(
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"sigma must be >= 0, got {sigma}")
     img = np.asarray(image)
-    _check_image(img)
+    check_image(img)
     raw = img
     if sigma <= 0 or img.dtype.type not in _CV_INPUT or not img.flags.c_contiguous:
-        img = _as_float_image(img)  # else OpenCV converts on the fly (saves a full pass)
+        img = as_float_image(img)  # else OpenCV converts on the fly (saves a full pass)
     if interpolation not in ("continuous", "gaussian", "parabola"):
         raise ValueError(f"unknown interpolation {interpolation!r} (use 'continuous', 'gaussian' or 'parabola')")
     dense = _Dense(img, sigma, interpolation)
@@ -748,14 +527,14 @@ def _nms_points(
         return dense.run(low, sample=False)[0], img.shape, high
     bgx, bgy = dense.noise_bound_sample()
     if dense.noise_rows.size <= NOISE_BOUND_ROWS:  # that was the whole sample: the exact threshold
-        exact = _noise_from_samples(bgx, bgy)
-        low, high = _resolve_thresholds(low, high, lambda: _thresholds_from_noise(raw, exact, sigma))
+        exact = noise_from_samples(bgx, bgy)
+        low, high = _resolve_thresholds(low, high, lambda: thresholds_from_noise(raw, exact, sigma))
         return dense.run(low, sample=False)[0], img.shape, high
-    noise = NOISE_BOUND_FACTOR * _noise_from_samples(bgx, bgy)
-    bound, _ = _resolve_thresholds(low, high, lambda: _thresholds_from_noise(raw, noise, sigma))
+    noise = NOISE_BOUND_FACTOR * noise_from_samples(bgx, bgy)
+    bound, _ = _resolve_thresholds(low, high, lambda: thresholds_from_noise(raw, noise, sigma))
     pts, sgx, sgy = dense.run(bound, sample=True)
-    exact = _noise_from_samples(sgx, sgy)
-    low, high = _resolve_thresholds(low, high, lambda: _thresholds_from_noise(raw, exact, sigma))
+    exact = noise_from_samples(sgx, sgy)
+    low, high = _resolve_thresholds(low, high, lambda: thresholds_from_noise(raw, exact, sigma))
     if low < bound:
         pts = dense.run(low, sample=False)[0]
     else:
@@ -812,198 +591,6 @@ def edge_points(
     """
     pts, shape, _ = _nms_points(image, sigma, low, high, interpolation)
     return _subpixel_xy(pts, shape[1], refined=True), pts.grad
-
-
-# --------------------------------------------------------------------------- #
-# chaining
-# --------------------------------------------------------------------------- #
-def _link(xy: Floats, grad: Floats, idx: NDArray[np.intp], shape: tuple[int, int]) -> tuple[Ints, Ints]:
-    """Vectorised IPOL chaining; returns next/prev arrays (-1 = none).
-
-    Every point looks for the nearest compatible neighbour forward and
-    backward, first among its 8 neighbours and, only where none is found
-    there, in the outer ring of its 5x5 neighbourhood (the IPOL code scans
-    the whole 5x5 window; a closer point in the outer ring is rare and both
-    are valid links). Mutual choices (``fwd[e] = f`` and ``bck[f] = e``) are
-    linked first, the remaining candidates greedily by decreasing
-    ``1/distance`` so that every point keeps at most one successor and one
-    predecessor.
-    """
-    h, w = shape
-    n = xy.shape[0]
-    ex, ey = xy[:, 0], xy[:, 1]
-    gx, gy = grad[:, 0], grad[:, 1]
-    fwd = np.full(n, -1, np.int64)
-    bck = np.full(n, -1, np.int64)
-    fwd_d = np.full(n, np.inf)
-    bck_d = np.full(n, np.inf)
-    ring1 = [(ox, oy) for ox, oy in _NEIGH if max(abs(ox), abs(oy)) == 1]
-    ring2 = [(ox, oy) for ox, oy in _NEIGH if max(abs(ox), abs(oy)) == 2]
-    # label map of the points by bands of rows (with the 2 rows around each band), not of the whole image
-    rows = max(8, LINK_BAND_PX // max(w, 1))
-    lab_buf = np.empty(min(h, rows + 4) * w, np.int32)
-    for b0 in range(0, h, rows):
-        b1 = min(h, b0 + rows)
-        p0, p1 = (int(v) for v in np.searchsorted(idx, [b0 * w, b1 * w]))
-        if p0 == p1:
-            continue
-        l0, l1 = max(0, b0 - 2) * w, min(h, b1 + 2) * w
-        q0, q1 = (int(v) for v in np.searchsorted(idx, [l0, l1]))
-        lab = lab_buf[: l1 - l0]
-        lab.fill(-1)
-        lab[idx[q0:q1] - l0] = np.arange(q0, q1, dtype=np.int32)
-        pts = np.arange(p0, p1)
-        for ring in (ring1, ring2):
-            if ring is ring2:
-                pts = pts[(fwd[pts] < 0) | (bck[pts] < 0)]
-            base = idx[pts] - l0
-            for ox, oy in ring:  # IPOL scan order; ties keep the first
-                nb = lab[base + (oy * w + ox)]
-                has = nb >= 0
-                e = pts[has]
-                t = nb[has].astype(np.int64)
-                dx = ex[t] - ex[e]
-                dy = ey[t] - ey[e]
-                cf = gy[e] * dx - gx[e] * dy  # side of the gradient of e w.r.t. e -> t
-                ct = gy[t] * dx - gx[t] * dy  # same for the gradient of t
-                d2 = dx * dx + dy * dy
-                comp = cf * ct > 0
-                f = comp & (cf > 0) & (d2 < fwd_d[e])
-                fwd_d[e[f]] = d2[f]
-                fwd[e[f]] = t[f]
-                b = comp & (cf < 0) & (d2 < bck_d[e])
-                bck_d[e[b]] = d2[b]
-                bck[e[b]] = t[b]
-    del lab_buf
-    nxt = np.full(n, -1, np.int64)
-    prv = np.full(n, -1, np.int64)
-    # 1. mutual choices: consistent by construction (one out-link, one in-link each)
-    e = np.nonzero(fwd >= 0)[0]
-    mutual = bck[fwd[e]] == e
-    e = e[mutual]
-    nxt[e] = fwd[e]
-    prv[fwd[e]] = e
-    # 2. the other candidate links src -> dst, greedily by decreasing score
-    hf = np.nonzero((fwd >= 0) & (nxt < 0))[0]
-    hf = hf[prv[fwd[hf]] < 0]
-    hb = np.nonzero((bck >= 0) & (prv < 0))[0]
-    hb = hb[nxt[bck[hb]] < 0]
-    src = np.concatenate([hf, bck[hb]])
-    dst = np.concatenate([fwd[hf], hb])
-    sc = 1.0 / np.sqrt(np.concatenate([fwd_d[hf], bck_d[hb]]))
-    key, first = np.unique(src * n + dst, return_index=True)  # dedupe
-    src, dst, sc = src[first], dst[first], sc[first]
-    while src.size:  # rounds: accept each source's best if also best for its destination
-        order = np.lexsort((dst, src, -sc))
-        _, fs = np.unique(src[order], return_index=True)
-        cand = np.sort(order[fs])
-        o2 = cand[np.lexsort((src[cand], -sc[cand]))]
-        _, fd = np.unique(dst[o2], return_index=True)
-        acc = o2[fd]
-        nxt[src[acc]] = dst[acc]
-        prv[dst[acc]] = src[acc]
-        keep = (nxt[src] < 0) & (prv[dst] < 0)
-        src, dst, sc = src[keep], dst[keep], sc[keep]
-    return nxt, prv
-
-
-def _path_components(cn: np.ndarray, cp: np.ndarray) -> tuple[int, np.ndarray]:
-    """Components of a graph where every node has at most one successor ``cn`` and one
-    predecessor ``cp`` (-1: none), i.e. disjoint paths and cycles: ``(count, labels 0..count-1)``.
-
-    Each node's label is the smallest index of its component, found by pointer doubling
-    (after round ``k`` a node holds the minimum over the ``2**k`` nodes following it),
-    first along the successors, then along the predecessors; on a cycle the first pass
-    already covers the whole cycle within ``ceil(log2(m))`` rounds.
-    """
-    m = cn.size
-    rounds = max(1, int(np.ceil(np.log2(max(m, 2))))) + 1
-    lab = np.arange(m, dtype=np.int64)
-    for ptr0 in (cn, cp):
-        ptr = ptr0.copy()
-        active = np.nonzero(ptr >= 0)[0]
-        for _ in range(rounds):
-            if not active.size:
-                break
-            p = ptr[active]
-            lab[active] = np.minimum(lab[active], lab[p])
-            ptr[active] = ptr[p]
-            active = active[ptr[active] >= 0]
-    uniq, clab = np.unique(lab, return_inverse=True)
-    return int(uniq.size), clab.astype(np.int64)
-
-
-def _rank_to_tail(cn: Ints) -> tuple[Ints, Ints]:
-    """List ranking of disjoint paths (``cn``: successor, -1 at a path's last node) by pointer
-    jumping with saturating pointers (Wyllie): each node's distance to its path's last node
-    and that node. Nodes on a cycle (no last node) end with a pointer to a node that has a
-    successor; their distances are then meaningless."""
-    m = cn.size
-    has = cn >= 0
-    ptr = np.where(has, cn, np.arange(m, dtype=np.int64))
-    dist = has.astype(np.int64)
-    active = np.flatnonzero(has)
-    for _ in range(max(1, int(np.ceil(np.log2(max(m, 2))))) + 1):
-        if not active.size:
-            break
-        p = ptr[active]
-        dist[active] += dist[p]
-        pp = ptr[p]
-        ptr[active] = pp
-        active = active[ptr[pp] != pp]
-    return dist, ptr
-
-
-def _order_chains(nxt: Ints, prv: Ints) -> tuple[Ints, NDArray[np.intp]]:
-    """Label linked components and order their points along the links.
-
-    Returns ``(labels, order)`` where ``order`` sorts points by (label,
-    position along the chain). Linked components are labelled ``0, 1, ...`` in the
-    order of their smallest point index, unlinked points (singleton components) after
-    them. Cycles are opened at their smallest index.
-    """
-    n = nxt.size
-    linked = np.flatnonzero((nxt >= 0) | (prv >= 0))
-    m = linked.size
-    lab = np.empty(n, np.int64)
-    single = np.ones(n, bool)
-    single[linked] = False
-    pos = np.zeros(n, np.int64)
-    ncomp = 0
-    if m:
-        # compact numbering of the linked points
-        comp_of = np.full(n, -1, np.int64)
-        comp_of[linked] = np.arange(m)
-        cn = comp_of[nxt[linked]]
-        cn[nxt[linked] < 0] = -1  # (index -1 picked the last entry)
-        cp = comp_of[prv[linked]]
-        cp[prv[linked] < 0] = -1
-        # paths: distance to the last point, which names the component
-        dist, tail = _rank_to_tail(cn)
-        cyc = np.flatnonzero(cn[tail] >= 0)
-        if cyc.size:  # cycles: opened at their smallest index, ranked again
-            loc = np.full(m, -1, np.int64)
-            loc[cyc] = np.arange(cyc.size)
-            ncyc, clab = _path_components(loc[cn[cyc]], loc[cp[cyc]])
-            first = np.full(ncyc, cyc.size, np.int64)
-            np.minimum.at(first, clab, np.arange(cyc.size))
-            hd = cyc[first]
-            cn[cp[hd]] = -1
-            cp[hd] = -1
-            sub = cn[cyc]
-            d2, t2 = _rank_to_tail(np.where(sub >= 0, loc[np.maximum(sub, 0)], -1))
-            dist[cyc] = d2
-            tail[cyc] = cyc[t2]
-        # label = rank of the component's smallest index
-        key = np.full(m, m, np.int64)
-        np.minimum.at(key, tail, np.arange(m))
-        uniq, clab = np.unique(key[tail], return_inverse=True)
-        ncomp = int(uniq.size)
-        lab[linked] = clab.ravel()
-        pos[linked] = -dist
-    lab[single] = ncomp + np.arange(int(single.sum()))
-    order = np.lexsort((pos, lab))
-    return lab, order
 
 
 def detect_edges(
@@ -1067,8 +654,8 @@ def detect_edges(
     if pts.idx.shape[0] == 0:
         return []
     xy, grad, mod = _subpixel_xy(pts, shape[1], refined=False), pts.grad, pts.m0
-    nxt, prv = _link(xy, grad, pts.idx, shape)
-    lab, order = _order_chains(nxt, prv)
+    nxt, prv = link_points(xy, grad, pts.idx, shape)
+    lab, order = order_chains(nxt, prv)
     ncomp = int(lab.max()) + 1
     strong = np.zeros(ncomp, bool)
     strong[lab[mod > high]] = True

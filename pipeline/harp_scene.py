@@ -16,7 +16,8 @@ in the ideal image, and the harp point :math:`(a, b)` is the ideal image point
 :math:`u = c + a\,d + b\,n`, :math:`d = (\cos\theta, \sin\theta)`,
 :math:`n = (-\sin\theta, \cos\theta)`, :math:`c` the turntable axis in the ideal image.
 A string therefore keeps its shape, and the sheet its pattern, as the harp rotates
-between shots; only the sag, which follows gravity, changes with the angle.
+between shots; only the sag, which follows gravity, changes with the angle. The back-lit sheet
+behind the strings, which turns with the harp too, is :class:`pipeline.backlight.Backlight`.
 
 A string and its edges
 ----------------------
@@ -65,18 +66,8 @@ between the frame's anchors, :math:`a_c` its middle):
   with its own phase on each side.
 
 :func:`draw_harp` draws all of it per string from a seed, from the physical ranges of
-:data:`MATERIALS` (its docstring gives the values and their sources); the magnitudes
+:data:`pipeline.string_materials.MATERIALS` (its docstring gives the values and their sources); the magnitudes
 in pixels follow from the string's diameter and width in pixels (the image scale).
-
-The back-lit sheet
-------------------
-:class:`Backlight` is the sheet's brightness in harp coordinates (it turns with the
-harp): a lamp at distance :math:`D` behind a Lambertian diffuser lights it as
-:math:`(1 + |p - p_L|^2/D^2)^{-3/2}` (the :math:`\cos^3` law of a point source on a
-plane), times :math:`1 + m(p)`, the sheet's mottle, a stationary Gaussian random texture
-of RMS :math:`m` and autocorrelation :math:`\exp(-r^2/\ell^2)`, :math:`\ell` = ``mottle_scale_px``
-(paper and opal diffusers:
-fibre flocs of 0.5–3 mm, 0.5–2 % RMS).
 
 References
 ----------
@@ -93,69 +84,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 
 from pipeline.render import EdgeTruth
-
-GRAVITY_M_S2 = 9.80665
-"""Standard gravity."""
-
-
-# ---------------------------------------------------------------- materials
-@dataclass(frozen=True)
-class Material:
-    """A string material: what its sag, stiffness and cross-section follow from.
-
-    ``density_kg_m3`` is the mass per volume of the round envelope (a braid's fibre
-    density times its packing fraction), ``modulus_gpa`` the bending modulus on that
-    envelope, ``strength_mpa`` the breaking load over the envelope's area. The ranges
-    (``(low, high)``, drawn uniformly) are of ``diameter_mm``, ``ovality`` (major minus
-    minor axis over the mean), ``offcentre`` (centroid off the silhouette's centre, in
-    diameters), ``pick_ripple`` (braid edge ripple amplitude, in diameters),
-    ``pick_period`` (in diameters) and ``coil_radius_mm`` (the spool the string was
-    stored on).
-    """
-
-    name: str
-    density_kg_m3: float
-    modulus_gpa: float
-    strength_mpa: float
-    diameter_mm: tuple[float, float]
-    ovality: tuple[float, float]
-    offcentre: tuple[float, float] = (0.0, 0.0)
-    pick_ripple: tuple[float, float] = (0.0, 0.0)
-    pick_period: tuple[float, float] = (4.0, 4.0)
-    coil_radius_mm: tuple[float, float] = (20.0, 40.0)
-
-
-MATERIALS: dict[str, Material] = {
-    # nylon 6.6 monofilament (fishing line): density 1140 kg/m3, drawn-filament modulus
-    # 2-3 GPa; a 0.30 mm line is rated 6-7 kg (~800-900 MPa); round to ~1-2 %; spools of
-    # 20-50 mm radius
-    "nylon": Material("nylon", 1140.0, 2.5, 800.0, (0.2, 0.5), (0.0, 0.02), coil_radius_mm=(15.0, 40.0)),
-    # UHMWPE 8-carrier braid: fibre density 970 kg/m3 x packing ~0.7; its ~300 15-um fibres
-    # bend one by one, EI ~ 7e-8 N m2 for 0.3 mm (0.18 GPa on the envelope); rated
-    # ~15-20 kg at 0.3 mm (~2 GPa); braids flatten (ovality 2-8 %), carriers cross the
-    # edge every 3-6 diameters with a 1-3 % ripple
-    "braid": Material(
-        "braid",
-        680.0,
-        0.18,
-        2000.0,
-        (0.2, 0.4),
-        (0.02, 0.08),
-        offcentre=(0.0, 0.01),
-        pick_ripple=(0.01, 0.03),
-        pick_period=(3.0, 6.0),
-        coil_radius_mm=(20.0, 40.0),
-    ),
-    # music wire (ASTM A228): 7850 kg/m3, 207 GPa, ~2.7 GPa tensile at 0.3 mm; drawn round
-    # (< 0.5 %); coils of 50-150 mm radius
-    "steel": Material("steel", 7850.0, 207.0, 2700.0, (0.2, 0.4), (0.0, 0.005), coil_radius_mm=(50.0, 150.0)),
-}
-"""The string materials :func:`draw_harp` chooses from, with their physical constants."""
+from pipeline.string_materials import MATERIALS, breaking_load_n, string_physics
 
 TENSION_FRACTION = (0.15, 0.45)
 """Range of a harp's string tension as a fraction of the breaking load (hand-tensioned,
@@ -337,82 +270,6 @@ def edge_offsets(
         minus = half + col("pick_px") * np.cos(pick + col("pick_phase_minus"))
         plus = half + col("pick_px") * np.cos(pick + col("pick_phase_plus"))
     return centre, minus, plus
-
-
-# ---------------------------------------------------------------- the sheet
-@lru_cache(maxsize=8)
-def _mottle_tile(seed: int, n: int) -> np.ndarray:
-    """A periodic ``n x n`` Gaussian random texture of unit RMS, autocorrelation ``exp(-r^2 / 16)`` (r in cells):
-    white noise filtered by a Gaussian of 2 cells, correlation length (1/e) 4 cells."""
-    rng = np.random.default_rng([seed, 0x5EE7])
-    f = np.fft.fftfreq(n)
-    k2 = f[:, None] ** 2 + f[None, :] ** 2
-    spectrum = np.fft.fft2(rng.standard_normal((n, n))) * np.exp(-2.0 * math.pi**2 * 4.0 * k2)
-    tex = np.real(np.fft.ifft2(spectrum))
-    tex -= tex.mean()
-    out: np.ndarray = tex / tex.std()
-    out.setflags(write=False)
-    return out
-
-
-MOTTLE_TILE = 512
-"""Cells of the periodic mottle texture per side (4 cells per correlation length: it repeats
-every 128 correlation lengths)."""
-
-
-@dataclass(frozen=True)
-class Backlight:
-    """The back-lit sheet's relative brightness in harp coordinates (module docstring).
-
-    Parameters
-    ----------
-    lamp_px : the foot of the lamp on the sheet, harp coordinates ``(a, b)``.
-    lamp_distance_px : the lamp's distance behind the sheet (harp px); ``inf``: uniform.
-    mottle, mottle_scale_px : the sheet texture's RMS (relative) and correlation length.
-    seed : the texture's seed (the texture is fixed to the sheet).
-    """
-
-    lamp_px: tuple[float, float] = (0.0, 0.0)
-    lamp_distance_px: float = math.inf
-    mottle: float = 0.0
-    mottle_scale_px: float = 12.0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if not self.lamp_distance_px > 0:
-            raise ValueError(f"lamp_distance_px must be > 0, got {self.lamp_distance_px}")
-        if not (0 <= self.mottle < 0.5 and self.mottle_scale_px > 0):
-            raise ValueError(
-                f"mottle must be in [0, 0.5) and mottle_scale_px > 0, got {self.mottle}, {self.mottle_scale_px}"
-            )
-
-    def at(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Relative brightness at harp points ``(a, b)`` (1 at the lamp's foot, before the mottle)."""
-        a = np.asarray(a, np.float64)
-        b = np.asarray(b, np.float64)
-        out = np.ones(np.broadcast(a, b).shape)
-        if math.isfinite(self.lamp_distance_px):
-            r2 = ((a - self.lamp_px[0]) ** 2 + (b - self.lamp_px[1]) ** 2) / self.lamp_distance_px**2
-            out = (1.0 + r2) ** -1.5
-        if self.mottle > 0:
-            out = out * (1.0 + self.mottle * self._texture(a, b))
-        return out
-
-    def _texture(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """The unit-RMS mottle at ``(a, b)``: the periodic tile, bilinear, 4 cells per correlation length."""
-        import cv2
-
-        tile = _mottle_tile(int(self.seed), MOTTLE_TILE).astype(np.float32)
-        n = float(MOTTLE_TILE)
-        # cell coordinates reduced modulo the tile (float32 keeps 1e-4 cell there); tile rows are a, columns b
-        ga = np.mod(a * (4.0 / self.mottle_scale_px), n).astype(np.float32)
-        gb = np.mod(b * (4.0 / self.mottle_scale_px), n).astype(np.float32)
-        shape = ga.shape
-        rows = ga.reshape(-1, shape[-1]) if ga.ndim >= 2 else ga.reshape(-1, 1)
-        cols = gb.reshape(rows.shape)
-        flat = cv2.remap(tile, cols, rows, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-        out: np.ndarray = flat.reshape(shape).astype(np.float64)
-        return out
 
 
 # ---------------------------------------------------------------- the harp
@@ -601,31 +458,6 @@ class HarpMount:
 
 
 # ---------------------------------------------------------------- drawing a harp
-def string_physics(material: Material, diameter_mm: float, tension_n: float, span_mm: float) -> dict[str, float]:
-    """Sag, stiffness length and the like of one string (SI in, millimetres out).
-
-    Returns ``linear_density_kg_m`` (:math:`\\mu = \\rho\\pi D^2/4`), ``bending_stiffness_nm2``
-    (:math:`EI`, :math:`I = \\pi D^4/64`), ``stiffness_length_mm``
-    (:math:`\\lambda = \\sqrt{EI/T}`) and ``sag_mm`` (:math:`\\mu g L^2/8T`).
-    """
-    d = diameter_mm * 1e-3
-    mu = material.density_kg_m3 * math.pi * d * d / 4.0
-    ei = material.modulus_gpa * 1e9 * math.pi * d**4 / 64.0
-    span = span_mm * 1e-3
-    return {
-        "linear_density_kg_m": mu,
-        "bending_stiffness_nm2": ei,
-        "stiffness_length_mm": 1e3 * math.sqrt(ei / tension_n),
-        "sag_mm": 1e3 * mu * GRAVITY_M_S2 * span * span / (8.0 * tension_n),
-    }
-
-
-def breaking_load_n(material: Material, diameter_mm: float) -> float:
-    """The breaking load (N) of a string of ``material`` and ``diameter_mm``."""
-    d = diameter_mm * 1e-3
-    return material.strength_mpa * 1e6 * math.pi * d * d / 4.0
-
-
 def draw_harp(
     seed: int,
     n_strings: int,

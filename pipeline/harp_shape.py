@@ -23,7 +23,7 @@ the constant and linear parts are the string's own line, free in every shot anyw
 minimises the straightness objective of :mod:`pipeline.fit` of the points corrected by the lens
 *and* moved back by their string's deviation, :math:`U_\theta(x) - \delta_k(u)\,n_i`, over the
 lens parameters :math:`\theta` and every :math:`a_{kj}` at once (Levenberg-Marquardt on the
-normal equations, :func:`pipeline.fit.solve`), with a weak ridge on the :math:`a_{kj}`
+normal equations, :func:`pipeline.fit_solver.solve`), with a weak ridge on the :math:`a_{kj}`
 (:data:`STRING_RIDGE`).
 
 What can and cannot be separated
@@ -77,7 +77,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.edgeset import FitFailure, FitResult, collect, summarise, tls
-from pipeline.fit import fit_distortion, fold_problem, make_parametrisation, normal_equations, solve
+from pipeline.fit import fit_distortion, fold_problem
+from pipeline.fit_problem import make_parametrisation, normal_equations
+from pipeline.fit_solver import solve
 from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
 from pipeline.plain import finite_or_none
@@ -360,7 +362,7 @@ def harp_frame(
 
 # ------------------------------------------------------------------ the joint fit
 class _WithStrings:
-    """Lens parameters and string deviation coefficients, for :func:`pipeline.fit.solve` on one edge set.
+    """Lens parameters and string deviation coefficients, for :func:`pipeline.fit_solver.solve` on one edge set.
 
     ``theta = [lens theta, a_kj for every string with terms]``; the corrected points are
     ``U(x) - delta_k(u) n`` (module docstring), ``u`` and ``n`` per point fixed from the start."""

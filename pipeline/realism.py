@@ -69,7 +69,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from pipeline.harp_scene import COIL_SET_VARIATION, Backlight, Harp, HarpMount, HarpPose, draw_harp, edge_offsets
+from pipeline.backlight import Backlight
+from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount, HarpPose, draw_harp, edge_offsets
 from pipeline.models.base import DistortionModel, IdentityModel
 from pipeline.optics import PIXEL_BOX_VARIANCE, FieldBlur, Vignetting
 from pipeline.render import EdgeTruth, ideal_border

@@ -17,7 +17,8 @@ from numpy.typing import NDArray
 from pipeline.assess.coverage import Coverage, edge_coverage
 from pipeline.assess.exposure import ExposureFigures, exposure_figures
 from pipeline.assess.sharpness import CROSS_SECTIONS, StringSharpness, string_sharpness
-from pipeline.edges import auto_thresholds, detect_edges
+from pipeline.edge_thresholds import auto_thresholds
+from pipeline.edges import detect_edges
 from pipeline.grouping import MIN_PIECE_PX, Grouping, group_string_edges, points_bbox
 from pipeline.plain import finite_or_none
 
@@ -212,7 +213,7 @@ def assess_frame(
         :func:`analysis_scale` of the frame size alone).
     thresholds : (low, high) or None
         Edge-detector thresholds on the downscaled image (None: estimated,
-        :func:`pipeline.edges.auto_thresholds`; they depend on the noise
+        :func:`pipeline.edge_thresholds.auto_thresholds`; they depend on the noise
         only, so a live view passes back the previous frame's).
     full_scale : float or None
         Top code value (None: from the dtype).

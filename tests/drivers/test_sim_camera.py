@@ -11,7 +11,8 @@ from scipy import ndimage
 import drivers
 from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
 from drivers.protocols import Camera, CameraIdentity, Frame
-from drivers.sim.camera import EXPOSURE_RANGE_US, GAIN_RANGE_DB, SimulatedCamera
+from drivers.sim.camera import SimulatedCamera
+from drivers.sim.camera_settings import EXPOSURE_RANGE_US, GAIN_RANGE_DB
 from drivers.sim.lens import lens_for_focus
 from drivers.sim.world import SimWorld
 from pipeline.render import true_edge_curves

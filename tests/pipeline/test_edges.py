@@ -4,7 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.edges import EdgeChain, auto_thresholds, detect_edges, edge_points, gradient_noise
+from pipeline.edge_thresholds import auto_thresholds, gradient_noise
+from pipeline.edges import EdgeChain, detect_edges, edge_points
 from tests.pipeline.synthetic_edges import line_normal, quantise, render_disk, render_step, render_string
 
 ANGLES = [0, 15, 30, 45, 60, 75, 90]
@@ -375,7 +376,7 @@ def test_chains_are_ordered_along_their_links_paths_and_cycles():
     """The chaining's ordering (list ranking by pointer jumping, issue 8 item 6) against a plain walk
     along the links: each component contiguous, in the order of its links, components in the order
     of their smallest point, a cycle opened at its smallest point, unlinked points last."""
-    from pipeline.edges import _order_chains
+    from pipeline.edge_chains import order_chains as _order_chains
 
     rng = np.random.default_rng(3)
     for _ in range(20):

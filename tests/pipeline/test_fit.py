@@ -3,7 +3,8 @@ import pytest
 
 from pipeline.compare import compare_models
 from pipeline.edgeset import FitFailure, FitResult, collect, corrected_straightness, tls
-from pipeline.fit import fit_distortion, make_parametrisation, normal_equations, residuals_and_jacobian
+from pipeline.fit import fit_distortion
+from pipeline.fit_problem import make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FitSpec, parse
 from pipeline.models import PolynomialModel, RadialModel
 from pipeline.select import select_model
@@ -130,7 +131,7 @@ def test_normal_equation_levenberg_marquardt_reaches_minpacks_minimum(kind, kw, 
     """The fit's Levenberg-Marquardt on the normal equations ends where MINPACK's (scipy's
     least_squares, an independent implementation) ends, from the same start, with or without
     per-edge weights, in about as many evaluations."""
-    from pipeline import fit as fit_module
+    from pipeline import fit_solver as fit_module
 
     shots = harp_point_sets(DECENTRED, W, H, (0, 60, 120), noise=0.05, seed=7)
     edges, _ = collect(shots, W, H)

@@ -11,18 +11,17 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.backlight import Backlight
 from pipeline.harp_scene import (
-    MATERIALS,
-    Backlight,
     Harp,
     HarpMount,
     StringShape,
     draw_harp,
-    string_physics,
 )
 from pipeline.optics import Vignetting
 from pipeline.realism import Effects, render_shot
 from pipeline.sensor import Development
+from pipeline.string_materials import MATERIALS, string_physics
 
 
 def test_sag_and_stiffness_length_follow_the_textbook_formulas():

@@ -1,0 +1,179 @@
+r"""The least-squares problem of the fit (:mod:`pipeline.fit`): a model family's free parameters,
+the residuals of the corrected points to their edges' TLS lines and their Jacobian, and the normal
+equations of the residuals.
+
+A residual is the signed distance of a corrected point :math:`U_\theta(p_i)` to the total-least-squares
+line of its own corrected edge; the lines are recomputed from the corrected points at every
+evaluation (variable projection), and the Jacobian includes the derivative of the line (centroid and
+angle) with respect to :math:`\theta` [2]_. :func:`normal_equations` gives :math:`J^T W J`,
+:math:`J^T W r` and :math:`r^T W r` from per-edge moments without forming the Jacobian.
+
+References
+----------
+.. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision
+   camera distortion measurements with a calibration harp", JOSA A 29(10), 2012.
+.. [2] G. H. Golub, V. Pereyra, "The differentiation of pseudo-inverses and
+   nonlinear least squares problems whose variables separate", SIAM J. Numer.
+   Anal. 10(2), 1973.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+
+from pipeline.edgeset import EdgeSet, tls
+from pipeline.fitspec import FitSpec
+from pipeline.models.base import DistortionModel
+from pipeline.models.polynomial import PolynomialParametrisation
+from pipeline.models.radial import RadialParametrisation
+from pipeline.models.radial_field import RadialFieldParametrisation
+
+
+class Parametrisation(Protocol):
+    """The free parameters ``theta`` of a model family (beside each model in :mod:`pipeline.models`)."""
+
+    n: int
+
+    def theta0(self, init: DistortionModel | None) -> np.ndarray: ...
+    def model(self, th: np.ndarray) -> DistortionModel: ...
+    def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]: ...
+    def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]: ...
+    def project(
+        self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def make_parametrisation(
+    width: int,
+    height: int,
+    spec: FitSpec,
+    *,
+    w_center: float | None = None,
+    w_gauge: float = 1e-3,
+    ridge: float | None = None,
+) -> RadialParametrisation | RadialFieldParametrisation | PolynomialParametrisation:
+    """The free parameters of ``spec`` for a ``width x height`` image (see module doc).
+
+    ``w_center`` defaults to the spec's (:attr:`FitSpec.w_center`); ``ridge`` to 0 for
+    radial, 1e-4 for poly. A spec with a field: the radial parameters followed by the field's
+    (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`).
+    """
+    if spec.kind == "radial":
+        radial = RadialParametrisation(
+            width,
+            height,
+            int(spec.degree or 0),
+            spec.tangential,
+            spec.prism,
+            spec.w_center if w_center is None else w_center,
+            w_gauge,
+            0.0 if ridge is None else ridge,
+            spec.division,
+        )
+        if spec.field is None:
+            return radial
+        return RadialFieldParametrisation(
+            radial, width, height, (spec.field[1], spec.field[0]), float(spec.field_penalty or 0)
+        )
+    return PolynomialParametrisation(width, height, int(spec.degree or 0), 1e-4 if ridge is None else ridge)
+
+
+# ------------------------------------------------------------- objective
+def _projected(
+    param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """``(r, a, P, T)``: the residuals, the positions along the lines and (``jac``) the Jacobian of
+    the corrected points projected on each point's line normal (``P``) and direction (``T``), one row
+    per parameter (``(n, N)``)."""
+    u, _ = param.evaluate(edges.xy, th, jac=False)
+    r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts)
+    if not jac:
+        return r, a, None, None
+    p_mat, t_mat = param.project(edges.xy, th, nrm, tan)
+    return r, a, p_mat, t_mat
+
+
+def _line_turn(
+    p_mat: np.ndarray, t_mat: np.ndarray, r: np.ndarray, a: np.ndarray, st: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per edge (columns, ``(n, E)``): the sums of ``P`` and of ``a P``, and ``d phi / d theta``, the
+    rotation of its TLS line (Golub-Pereyra):
+    ``d phi = sum_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i (a_i^2 - r_i^2)``; the means
+    drop out because ``sum a = sum r = 0`` on each edge (distances from its centroid)."""
+    sum_p = np.add.reduceat(p_mat, st, axis=1)
+    sum_ap = np.add.reduceat(p_mat * a, st, axis=1)
+    sum_rt = np.add.reduceat(t_mat * r, st, axis=1)
+    den = np.add.reduceat(a * a - r * r, st)
+    return sum_p, sum_ap, (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)
+
+
+def residuals_and_jacobian(
+    param: Parametrisation, edges: EdgeSet, th: np.ndarray, jac: bool = True
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Signed distances of the corrected points to their own edge's TLS line, and (``jac``)
+    their analytic Jacobian ``(N, n)`` in ``theta``, the line's motion included (variable
+    projection): ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`)."""
+    r, a, p_mat, t_mat = _projected(param, edges, th, jac)
+    if p_mat is None or t_mat is None:
+        return r, None
+    st, ct = edges.starts, edges.counts
+    sum_p, _, dphi = _line_turn(p_mat, t_mat, r, a, st)
+    j = p_mat - np.repeat(sum_p / ct, ct, axis=1)
+    j -= np.repeat(dphi, ct, axis=1) * a
+    return r, j.T
+
+
+def normal_equations(
+    param: Parametrisation,
+    edges: EdgeSet,
+    th: np.ndarray,
+    groups: Sequence[int] | None = None,
+    edge_weights: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``J^T W J``, ``J^T W r`` and ``r^T W r`` of :func:`residuals_and_jacobian` at ``th`` without
+    forming ``J`` (``W``: the per-edge ``edge_weights``, default 1), per group of edges: ``groups``
+    are the edge indices where each group starts (the edges of a group contiguous; default one
+    group), the results stacked ``(G, n, n)``, ``(G, n)``, ``(G,)``.
+
+    With ``Pc`` the per-edge centred ``P``, ``J = Pc - a dphi``, so per edge
+    ``J^T J = P^T P - n mean P mean P^T - S dphi^T - dphi S^T + (sum a^2) dphi dphi^T`` with
+    ``S = sum a Pc`` and ``J^T r = P^T r - mean P sum r - dphi sum a r`` (the last two terms zero to
+    rounding). A Gauss-Newton or Levenberg-Marquardt step needs only these (``n x n``), not the
+    ``N x n`` Jacobian."""
+    r, a, p_mat, t_mat = _projected(param, edges, th, True)
+    assert p_mat is not None and t_mat is not None
+    st, ct = edges.starts, edges.counts
+    sum_p, sum_ap, dphi = _line_turn(p_mat, t_mat, r, a, st)
+    mean_p = sum_p / ct
+    sum_a = np.add.reduceat(a, st)
+    sum_r = np.add.reduceat(r, st)
+    sum_aa = np.add.reduceat(a * a, st)
+    sum_ar = np.add.reduceat(a * r, st)
+    s_ap = sum_ap - mean_p * sum_a  # sum a Pc
+    w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    w_pt = None if edge_weights is None else np.repeat(w, ct)
+    bounds = [0] if groups is None else [int(g) for g in groups]
+    bounds.append(edges.n_edges)
+    n = p_mat.shape[0]
+    ata = np.empty((len(bounds) - 1, n, n))
+    atb = np.empty((len(bounds) - 1, n))
+    ss = np.empty(len(bounds) - 1)
+    for g, (e0, e1) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        p0 = int(st[e0]) if e0 < edges.n_edges else len(r)
+        p1 = int(st[e1]) if e1 < edges.n_edges else len(r)
+        pg, rg = p_mat[:, p0:p1], r[p0:p1]
+        if w_pt is not None:
+            rw = rg * w_pt[p0:p1]
+            pw = pg * w_pt[p0:p1]
+        else:
+            rw, pw = rg, pg
+        we = w[e0:e1]
+        mp, dp, sp = mean_p[:, e0:e1], dphi[:, e0:e1], s_ap[:, e0:e1]
+        cross = (sp * we) @ dp.T
+        ata[g] = pw @ pg.T - (mp * (ct[e0:e1] * we)) @ mp.T - cross - cross.T + (dp * (sum_aa[e0:e1] * we)) @ dp.T
+        atb[g] = pw @ rg - mp @ (sum_r[e0:e1] * we) - dp @ (sum_ar[e0:e1] * we)
+        ss[g] = rw @ rg
+    return ata, atb, ss
