@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.models.base import DistortionModel
+from pipeline.models.inverse import newton_inverse
 
 Array = npt.NDArray[np.float64]
 
@@ -98,26 +99,25 @@ class ThinPrismFisheyeModel(DistortionModel):
         return np.stack([self.fx * ud + self.cx, self.fy * vd + self.cy], axis=1)
 
     def undistort_points(self, xy: Array, max_iter: int = 30) -> Array:
-        """Distorted -> ideal pixels: Newton on the distortion of the equidistant point, then ``tan``."""
+        """Distorted -> ideal pixels: the distortion of the equidistant point inverted by the project's one
+        safeguarded Newton (:func:`pipeline.models.inverse.newton_inverse`, with this model's Jacobian), then ``tan``."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        tx, ty = (xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy
-        u, v = tx.copy(), ty.copy()
-        tol = THIN_PRISM_INVERSE_TOL_PX / max(self.fx, self.fy)
-        done = np.zeros(len(u), bool)
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            for _ in range(max_iter):
-                ud, vd = self._distorted(u, v)
-                eu, ev = tx - ud, ty - vd
-                done = np.hypot(eu, ev) < tol
-                if done.all():
-                    break
-                juu, juv, jvu, jvv = self._jacobian(u, v)
-                det = juu * jvv - juv * jvu
-                u = np.where(done, u, u + (jvv * eu - juv * ev) / det)
-                v = np.where(done, v, v + (juu * ev - jvu * eu) / det)
+        t = np.stack([(xy[:, 0] - self.cx) / self.fx, (xy[:, 1] - self.cy) / self.fy], axis=1)
+
+        def forward(p: Array) -> Array:
+            return np.stack(self._distorted(p[:, 0], p[:, 1]), axis=1)
+
+        def jacobian(p: Array) -> tuple[Array, Array, Array, Array]:
+            return self._jacobian(p[:, 0], p[:, 1])
+
+        # both components below tol / sqrt(2): the residual's length below tol
+        tol = THIN_PRISM_INVERSE_TOL_PX / max(self.fx, self.fy) / np.sqrt(2.0)
+        inv = newton_inverse(forward, t, t, tol=tol, h=0.0, max_iter=max_iter, jacobian=jacobian)
+        u, v = inv.points[:, 0], inv.points[:, 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
             juu, juv, jvu, jvv = self._jacobian(u, v)
             theta = np.hypot(u, v)
-            ok = done & (juu * jvv - juv * jvu > 0) & (theta < np.pi / 2 - 1e-9)
+            ok = inv.ok & (juu * jvv - juv * jvu > 0) & (theta < np.pi / 2 - 1e-9)
             s = np.where(theta > 1e-15, np.tan(theta) / theta, 1.0)
         s[~ok] = np.nan
         return np.stack([self.cx + self.fx * u * s, self.cy + self.fy * v * s], axis=1)
