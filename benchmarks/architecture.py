@@ -30,20 +30,11 @@ from collections import defaultdict
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("pipeline", "drivers", "station")
+sys.path.insert(0, str(REPO))
+
+from tests.test_architecture import cycles, module_names  # noqa: E402  (this checkout's, for any checkout)
+
 BUILTIN_ERRORS = {"Exception", "RuntimeError", "ValueError", "OSError", "KeyError", "TypeError", "LookupError"}
-
-
-def modules(root: Path) -> dict[str, Path]:
-    """``{dotted name: file}`` of the project's modules."""
-    out = {}
-    for pkg in PACKAGES:
-        for path in sorted((root / pkg).rglob("*.py")):
-            parts = list(path.relative_to(root).with_suffix("").parts)
-            if parts[-1] == "__init__":
-                parts = parts[:-1]
-            out[".".join(parts)] = path
-    return out
 
 
 def imports(name: str, path: Path, tree: ast.AST) -> list[tuple[str, bool, ast.stmt]]:
@@ -74,38 +65,6 @@ def part_of(module: str) -> str | None:
     """The part of ``station`` a module is in (its top-level file or folder), or None."""
     bits = module.split(".")
     return bits[1] if bits[0] == "station" and len(bits) > 1 else None
-
-
-def circles(graph: dict[str, set[str]]) -> list[set[str]]:
-    """Strongly connected parts of more than one node (Tarjan)."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    out: list[set[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        for w in graph[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = set()
-            while True:
-                w = stack.pop()
-                comp.add(w)
-                if w == v:
-                    break
-            if len(comp) > 1:
-                out.append(comp)
-
-    for v in sorted(graph):
-        if v not in index:
-            visit(v)
-    return out
 
 
 def layers(graph: dict[str, set[str]], groups: list[set[str]]) -> int:
@@ -159,7 +118,7 @@ def t30_places(tree: ast.AST) -> int:
 
 
 def figures(root: Path) -> list[tuple[str, str]]:
-    mods = modules(root)
+    mods = module_names(root)
     trees = {m: ast.parse(p.read_text(encoding="utf-8"), str(p)) for m, p in mods.items()}
     texts = {m: p.read_text(encoding="utf-8").splitlines() for m, p in mods.items()}
     rel = {m: str(p.relative_to(root)) for m, p in mods.items()}
@@ -192,10 +151,10 @@ def figures(root: Path) -> list[tuple[str, str]]:
         for m, node in late_nodes.values()
     )
     arrows = sum(len(v) for v in graph.values())
-    groups = circles(graph)
+    groups = [set(c) for c in cycles(graph)]
     inside = sum(1 for a, bs in graph.items() for b in bs for g in groups if a in g and b in g)
     late_arrows = sum(len(graph[a] - top_only[a]) for a in graph)
-    hidden = circles(graph) != circles(top_only)
+    hidden = cycles(graph) != cycles(top_only)
 
     t30 = {rel[m]: k for m, t in trees.items() if (k := t30_places(t))}
     bases: dict[str, set[str]] = {}  # station's classes and the names of their bases
