@@ -65,6 +65,12 @@ class StandIn:
         return self.script[n]
 
 
+def k_sigmas(k, truth) -> list[float]:
+    """fx, fy, cx, cy of a stored camera matrix ``k`` minus the simulator's ``truth``, in ``k``'s stated sigmas."""
+    exact = (truth[0, 0], truth[1, 1], truth[0, 2], truth[1, 2])
+    return [(got - t) / sd for got, t, sd in zip((k.fx, k.fy, k.cx, k.cy), exact, k.sd)]
+
+
 def records(session: Path) -> list[dict]:
     return [json.loads(line) for line in (session / "manifest.jsonl").read_text().splitlines()]
 
@@ -138,8 +144,7 @@ def test_a_session_whose_operator_places_the_board(tmp_path):
         assert len(got) >= 30 and np.max(d) < 0.2, np.max(d)
     k = profile.intrinsics
     assert k is not None and k.n_views == 4
-    z = [(got - t) / sd for got, t, sd in zip((k.fx, k.fy, k.cx, k.cy), (truth[0, 0], truth[1, 1], truth[0, 2],
-                                                                           truth[1, 2]), k.sd)]  # fmt: skip
+    z = k_sigmas(k, truth)
     print(f"K - truth in sigmas {[f'{v:+.2f}' for v in z]}, sigma {[f'{v:.2f}' for v in k.sd[:4]]}")
     assert all(abs(v) <= 2 for v in z)
 

@@ -17,7 +17,7 @@ from station.session.directory import SessionDir
 from station.session.executor import Executor
 from station.session.simulated import simulated_devices
 from station.store import ProfileStore
-from tests.station.session.test_operator_boards import operator_config
+from tests.station.session.test_operator_boards import k_sigmas, operator_config
 
 
 def stage_config(dirpath, **intrinsics):
@@ -50,8 +50,7 @@ def test_the_stage_tilts_and_turns_the_board_for_each_view(tmp_path):
     assert k_rec["rejected"] == []
     k = profile.intrinsics
     assert k is not None and k.n_views == 6
-    z = [(got - t) / sd for got, t, sd in zip((k.fx, k.fy, k.cx, k.cy), (truth[0, 0], truth[1, 1], truth[0, 2],
-                                                                           truth[1, 2]), k.sd)]  # fmt: skip
+    z = k_sigmas(k, truth)
     print(f"K - truth in sigmas {[f'{v:+.2f}' for v in z]}, sigma {[f'{v:.2f}' for v in k.sd[:4]]}")
     assert all(abs(v) <= 2 for v in z)
 
@@ -104,8 +103,7 @@ def test_a_grbl_stage_turns_and_tilts_the_board(tmp_path):
     assert tilt_now == tilt_axis_now == 40.0
     k = profile.intrinsics
     assert k is not None and k.n_views == 6
-    z = [(got - t) / sd for got, t, sd in zip((k.fx, k.fy, k.cx, k.cy), (truth[0, 0], truth[1, 1], truth[0, 2],
-                                                                           truth[1, 2]), k.sd)]  # fmt: skip
+    z = k_sigmas(k, truth)
     print(f"GRBL stage: K - truth in sigmas {[f'{v:+.2f}' for v in z]}, sigma {[f'{v:.2f}' for v in k.sd[:4]]}")
     assert all(abs(v) <= 2 for v in z)
 
