@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.orientations import shot_orientation
 from pipeline.straightness import fit_line
 
 MIN_EDGES = 4
@@ -101,10 +102,8 @@ def shared_bend(point_sets: Sequence[NDArray[np.float64]], n_bins: int = N_BINS)
             edges.append((q, fit_line(q)))
     if len(edges) < MIN_EDGES:
         return None
-    # the shot's direction: the length-weighted mean of the edges' directions on doubled angles
-    two = np.array([2.0 * np.arctan2(f.direction[1], f.direction[0]) for _, f in edges])
-    length = np.array([float(np.hypot(*(q[-1] - q[0]))) for q, _ in edges])
-    mean = 0.5 * np.arctan2(float(length @ np.sin(two)), float(length @ np.cos(two)))
+    direction_deg = shot_orientation([q for q, _ in edges])  # the length-weighted mean on doubled angles
+    mean = np.radians(direction_deg)
     along = np.array([np.cos(mean), np.sin(mean)])
     normal = np.array([-along[1], along[0]])
     pos = [q @ along for q, _ in edges]
@@ -129,6 +128,6 @@ def shared_bend(point_sets: Sequence[NDArray[np.float64]], n_bins: int = N_BINS)
         shared_px=float(np.sqrt(np.mean(shared**2))),
         own_px=float(np.sqrt(np.mean(own**2))),
         profile_px=tuple(float(v) for v in profile),
-        direction_deg=float(np.degrees(mean) % 180.0),
+        direction_deg=direction_deg,
         n_edges=len(edges),
     )
