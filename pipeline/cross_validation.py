@@ -126,6 +126,14 @@ STOP_FACTOR = 4.0
 the whole CV mean square of the best candidate completed (its CV d would be at least twice as large)."""
 
 
+def fold_mode(folds: str, n_shots: int) -> str:
+    """The folds ``folds`` means for ``n_shots`` shots: 'auto' is 'images' (leave one shot out) with 3
+    shots or more, else 'edges' (alternate strings); 'images' and 'edges' are themselves."""
+    if folds == "auto":
+        return "images" if n_shots >= 3 else "edges"
+    return folds
+
+
 def cross_validate(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -160,8 +168,7 @@ def cross_validate(
     shots, then the others' folds. ``full_fits``: fits on all shots already made (with the same
     ``fit_kw``; e.g. the leave-one-shot-out table's, for the alternate-string one), not made again.
     """
-    if folds == "auto":
-        folds = "images" if len(lines_per_image) >= 3 else "edges"
+    folds = fold_mode(folds, len(lines_per_image))
     lines = [list(s) for s in lines_per_image]
     first = FALLBACK if FALLBACK in candidates else candidates[0]
     settings = (width, height, folds, warm_start, stop_factor, fit_kw)

@@ -46,6 +46,7 @@ from pipeline.cross_validation import (
     STOP_FACTOR,
     CVRow,
     cross_validate,
+    fold_mode,
     paired_difference,
 )
 from pipeline.fitspec import FitSpec
@@ -168,8 +169,9 @@ def select_model(
         alternate-string ``strings_table``. If every candidate fails in some fold, the choice is
         :data:`FALLBACK` and the reason says so.
     """
-    mode_wanted = folds if folds != "auto" else ("images" if len(lines_per_image) >= 3 else "edges")
-    candidates, set_aside = _supported_when_unchecked(candidates, lines_per_image, mode_wanted)
+    candidates, set_aside = _supported_when_unchecked(
+        candidates, lines_per_image, fold_mode(folds, len(lines_per_image))
+    )
     table, mode = cross_validate(
         lines_per_image,
         width,
