@@ -1,0 +1,223 @@
+"""Per-point weights from the along-edge smoother's variance: do they help on held-out data? (issue 19 item 2)
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/point_weights.py [--real DIR] [--skip-real]
+        [--seeds 20] [--first-seed 0] [--workers 2] [--size 1000x750]
+
+Three fits of the same data, only the least-squares weights differing (the figures, d, are the
+paper's unweighted ones in every case):
+
+* ``unweighted``: every smoothed point weighs the same (the fit as it is);
+* ``smoother x edge noise``: residual ``i`` weighted by ``1 / sigma_i``, ``sigma_i`` the smoother's
+  variance factor at the point (the squared norm of its hat-matrix row, large at the ends of a piece)
+  times the edge's noise, estimated robustly from the raw points' scatter about the smooth
+  (``pipeline.measure.point_sigmas``);
+* ``smoother x local noise``: the same with the noise measured along the edge (its growth towards
+  the ends and corners, ``local=True``).
+
+Two parts:
+
+* **The real photographs** (``../shared/data/real-harp`` or ``$HARP_REAL_DATA``), every 2+1 split:
+  fitted on two shots, held-out d of the third, whole strings (``harp measure``'s points) and
+  interior only (``smoothing="gaussian"``: 72 px dropped at both ends of every piece), for the
+  radial candidates that win or nearly win on these photographs.
+* **The realistic simulated population** (the set-up of ``benchmarks/strings_separated.py``): per seed
+  a lens of ``pipeline.lens_population``, a harp, mount and camera effects of
+  ``pipeline.realism.realistic_session``, shots at turntable angles 0..150 degrees and three unseen
+  ones at 17, 77 and 137 degrees, measured as ``harp measure`` does; radial4+tangential+prism fitted
+  on the six shots, and on three of them (0, 60, 120); field RMS against the exact lens (modulo a
+  homography, ``compare_models``) and the unseen shots' d (whole strings).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pipeline.compare import compare_models
+from pipeline.edgeset import corrected_straightness
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec, parse
+from pipeline.measure import measure_image, point_sigmas
+
+REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
+VARIANTS = ("unweighted", "smoother x edge noise", "smoother x local noise")
+REAL_CANDIDATES = (
+    "radial4+tangential",
+    "radial4+tangential+prism",
+    "radial6+tangential+prism",
+    "radial4+tangential+prism+centre-prior",
+)
+FITTED = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
+FEW = (0, 2, 4)  # three of the six: 0, 60, 120 degrees
+UNSEEN = (17.0, 77.0, 137.0)
+SPEC = FitSpec("radial", 4, True, True)
+
+
+def sigmas_of(m, variant: str):  # type: ignore[no-untyped-def]
+    if variant == "unweighted":
+        return None
+    return point_sigmas(m, local=variant == "smoother x local noise")
+
+
+# ------------------------------------------------------------------------ real photographs
+def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
+    import cv2
+
+    names = sorted(p.name for p in directory.glob("*.pgm"))
+    if len(names) < 3:
+        print(f"(no real photographs in {directory}: part skipped)")
+        return {}
+    whole, interior = {}, {}
+    size = (0, 0)
+    for n in names:
+        img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
+        size = (img.shape[1], img.shape[0])
+        whole[n] = measure_image(img)
+        interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
+    w, h = size
+    print(f"## Real photographs ({directory.name}: {', '.join(names)}), {w}x{h}, every 2+1 split")
+    print()
+    print("| held out | candidate | weights | fit d px | held-out d, whole px | held-out d, interior px |")
+    print("|---|---|---|---:|---:|---:|")
+    out: dict[str, list[tuple[float, float]]] = {v: [] for v in VARIANTS}
+    for held in names:
+        fit_on = [n for n in names if n != held]
+        lines = [[ln.points for ln in whole[n].lines] for n in fit_on]
+        for label in REAL_CANDIDATES:
+            spec = parse(label)
+            for v in VARIANTS:
+                sig = None if v == "unweighted" else [sigmas_of(whole[n], v) for n in fit_on]
+                f = fit_distortion(lines, w, h, **spec.fit_arguments(), point_sigma=sig)
+                if not f:
+                    print(f"| {held} | {label} | {v} | failed: {f.reason} | | |")
+                    out[v].append((float("nan"), float("nan")))
+                    continue
+                hw = corrected_straightness(f.model, [ln.points for ln in whole[held].lines])[0]
+                hi = corrected_straightness(f.model, interior[held])[0]
+                out[v].append((hw, hi))
+                print(f"| {held} | {label} | {v} | {f.d_after:.4f} | {hw:.4f} | {hi:.4f} |")
+    print()
+    base = np.array(out["unweighted"])
+    print("| weights | held-out d whole, mean px | interior, mean px | whole / unweighted (mean, worst, better in) |")
+    print("|---|---:|---:|---|")
+    for v in VARIANTS:
+        a = np.array(out[v])
+        rw = a[:, 0] / base[:, 0]
+        print(
+            f"| {v} | {np.nanmean(a[:, 0]):.4f} | {np.nanmean(a[:, 1]):.4f} | {np.nanmean(rw):.3f}, "
+            f"{np.nanmax(rw):.3f}, {int(np.sum(rw < 1))} / {len(rw)} |"
+        )
+    print()
+    return out
+
+
+# ------------------------------------------------------------------------ realistic population
+def one(seed: int, w: int, h: int) -> dict[str, object]:
+    from pipeline.lens_population import lens_population
+    from pipeline.realism import realistic_session, render_shots
+
+    member = lens_population(seed, 1, w, h)[0]
+    lens = member.model
+    ses = realistic_session(seed, w, h)
+    shots = render_shots(lens, ses.harp, ses.mount, FITTED + UNSEEN, w, h, ses.effects, seed=seed)
+    ms = [measure_image(s.image) for s in shots]
+    fitted, unseen = ms[: len(FITTED)], [ln.points for m in ms[len(FITTED) :] for ln in m.lines]
+    row: dict[str, object] = {"seed": seed, "kind": member.design}
+    for n_label, idx in (("6", tuple(range(len(FITTED)))), ("3", FEW)):
+        for v in VARIANTS:
+            sub = [fitted[i] for i in idx]
+            sig = None if v == "unweighted" else [sigmas_of(m, v) for m in sub]
+            f = fit_distortion(
+                [[ln.points for ln in m.lines] for m in sub], w, h, **SPEC.fit_arguments(), point_sigma=sig
+            )
+            if not f:
+                row[(n_label, v)] = (float("nan"), float("nan"))
+                continue
+            row[(n_label, v)] = (
+                compare_models(f.model, lens, w, h, step=20).rms,
+                corrected_straightness(f.model, unseen)[0],
+            )
+    return row
+
+
+def population_part(seeds: range, w: int, h: int, workers: int) -> None:
+    print(
+        f"## Realistic population, {w}x{h}, seeds {seeds.start}..{seeds.stop - 1}: radial4+tangential+prism, "
+        "field RMS vs the exact lens / d of 3 unseen shots (px)"
+    )
+    print()
+    print(
+        "| seed | lens | shots | "
+        + " | ".join(f"field, {v}" for v in VARIANTS)
+        + " | "
+        + " | ".join(f"unseen d, {v}" for v in VARIANTS)
+        + " |"
+    )
+    print("|---:|---|---:|" + "---:|" * (2 * len(VARIANTS)))
+    with ProcessPoolExecutor(max_workers=workers) as ex:
+        rows = list(ex.map(one, seeds, [w] * len(seeds), [h] * len(seeds)))
+    for n_label in ("6", "3"):
+        for r in rows:
+            vals = [r[(n_label, v)] for v in VARIANTS]
+            print(
+                f"| {r['seed']} | {r['kind']} | {n_label} | "
+                + " | ".join(f"{x[0]:.4f}" for x in vals)
+                + " | "
+                + " | ".join(f"{x[1]:.4f}" for x in vals)
+                + " |"
+            )
+    print()
+    print(
+        "| shots | weights | field RMS median px | RMS over lenses px | ratio to unweighted: median, worst, lower in | unseen d median px | unseen ratio median, worst |"
+    )
+    print("|---:|---|---:|---:|---|---:|---|")
+    for n_label in ("6", "3"):
+        base = np.array([r[(n_label, "unweighted")] for r in rows])
+        for v in VARIANTS:
+            a = np.array([r[(n_label, v)] for r in rows])
+            rf = a[:, 0] / base[:, 0]
+            ru = a[:, 1] / base[:, 1]
+            print(
+                f"| {n_label} | {v} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
+                f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
+                f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
+            )
+    print()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--real", type=Path, default=REAL)
+    ap.add_argument("--skip-real", action="store_true")
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--size", default="1000x750")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    print(
+        f"# Per-point weights from the smoother's variance ({os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; "
+        f"`benchmarks/point_weights.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    t0 = time.perf_counter()
+    if not args.skip_real:
+        real_part(args.real)
+    if args.seeds > 0:
+        population_part(range(args.first_seed, args.first_seed + args.seeds), w, h, args.workers)
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
