@@ -3,7 +3,7 @@
 Usage::
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/point_weights.py [--real DIR] [--skip-real]
-        [--seeds 20] [--first-seed 0] [--workers 2] [--size 1000x750]
+        [--seeds 20] [--first-seed 0] [--workers 2] [--size 1000x750] [--points]
 
 Three fits of the same data, only the least-squares weights differing (the figures, d, are the
 paper's unweighted ones in every case):
@@ -16,7 +16,7 @@ paper's unweighted ones in every case):
 * ``smoother x local noise``: the same with the noise measured along the edge (its growth towards
   the ends and corners, ``local=True``).
 
-Two parts:
+Three parts:
 
 * **The real photographs** (``../shared/data/real-harp`` or ``$HARP_REAL_DATA``), every 2+1 split:
   fitted on two shots, held-out d of the third, whole strings (``harp measure``'s points) and
@@ -28,6 +28,9 @@ Two parts:
   ones at 17, 77 and 137 degrees, measured as ``harp measure`` does; radial4+tangential+prism fitted
   on the six shots, and on three of them (0, 60, 120); field RMS against the exact lens (modulo a
   homography, ``compare_models``) and the unseen shots' d (whole strings).
+* ``--points`` (instead of the rendered population): ``benchmarks/model_choice.py``'s point-set
+  population (raw points every pixel with 0.06 px noise, strings bent, every shot moved by a smooth
+  field of its own), three shots fitted, three unseen; unweighted against smoother x edge noise.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # model_choice's point-set population
 
 from pipeline.compare import compare_models
 from pipeline.edgeset import corrected_straightness
@@ -195,6 +199,61 @@ def population_part(seeds: range, w: int, h: int, workers: int) -> None:
     print()
 
 
+# ------------------------------------------------------------------------ point-set population
+def one_points(seed: int) -> dict[str, object]:
+    from model_choice import H_PT, W_PT, point_lens, point_shot
+
+    lens = point_lens(seed)
+    rng = np.random.default_rng(seed + 7)
+    harp = rng.normal(0, 0.015, (15, 3))
+    base = rng.uniform(0, 180)
+    fa = [(base + 180 * i / 3 + rng.normal(0, 5)) % 180 for i in range(3)]
+    ta = [(base + 90 / 3 + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
+    fs, sg = [], []
+    for i, a in enumerate(fa):
+        out: list[np.ndarray] = []
+        fs.append(point_shot(lens, harp, a, seed * 100 + i, out))
+        sg.append(out)
+    unseen = [p for i, a in enumerate(ta) for p in point_shot(lens, harp, a, seed * 100 + 50 + i)]
+    row: dict[str, object] = {"seed": seed}
+    for v in VARIANTS[:2]:
+        f = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments(), point_sigma=None if v == "unweighted" else sg)
+        row[v] = (
+            (compare_models(f.model, lens, W_PT, H_PT, step=20).rms, corrected_straightness(f.model, unseen)[0])
+            if f
+            else (float("nan"), float("nan"))
+        )
+    return row
+
+
+def points_part(seeds: range, workers: int) -> None:
+    print(
+        f"## Point-set population (benchmarks/model_choice.py's), seeds {seeds.start}..{seeds.stop - 1}: 3 shots "
+        "fitted, radial4+tangential+prism; field RMS vs the exact lens / d of 3 unseen shots (px)"
+    )
+    print()
+    print(
+        "| seed | field, unweighted | field, smoother x edge noise | unseen d, unweighted | unseen d, smoother x edge noise |"
+    )
+    print("|---:|---:|---:|---:|---:|")
+    with ProcessPoolExecutor(max_workers=workers) as ex:
+        rows = list(ex.map(one_points, seeds))
+    for r in rows:
+        a, b = r[VARIANTS[0]], r[VARIANTS[1]]
+        print(f"| {r['seed']} | {a[0]:.4f} | {b[0]:.4f} | {a[1]:.4f} | {b[1]:.4f} |")
+    a = np.array([r[VARIANTS[0]] for r in rows])
+    b = np.array([r[VARIANTS[1]] for r in rows])
+    rf, ru = b[:, 0] / a[:, 0], b[:, 1] / a[:, 1]
+    print()
+    print(
+        f"field RMS median {np.nanmedian(a[:, 0]):.4f} -> {np.nanmedian(b[:, 0]):.4f} px (ratio median "
+        f"{np.nanmedian(rf):.3f}, worst {np.nanmax(rf):.3f}, lower for {int(np.sum(rf < 1))} / {len(rf)}); unseen d "
+        f"median {np.nanmedian(a[:, 1]):.4f} -> {np.nanmedian(b[:, 1]):.4f} px (ratio median {np.nanmedian(ru):.3f}, "
+        f"worst {np.nanmax(ru):.3f})"
+    )
+    print()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--real", type=Path, default=REAL)
@@ -203,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--size", default="1000x750")
+    ap.add_argument("--points", action="store_true", help="the point-set population instead of the rendered one")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     print(
@@ -213,7 +273,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     if not args.skip_real:
         real_part(args.real)
-    if args.seeds > 0:
+    if args.seeds > 0 and args.points:
+        points_part(range(args.first_seed, args.first_seed + args.seeds), args.workers)
+    elif args.seeds > 0:
         population_part(range(args.first_seed, args.first_seed + args.seeds), w, h, args.workers)
     print(f"({time.perf_counter() - t0:.0f} s)")
     return 0
