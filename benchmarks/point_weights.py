@@ -15,6 +15,10 @@ paper's unweighted ones in every case):
   (``pipeline.measure.point_sigmas``);
 * ``smoother x local noise``: the same with the noise measured along the edge (its growth towards
   the ends and corners, ``local=True``).
+* ``smoother + misfit floor``: the edge-noise sigma with, in quadrature, what the unweighted fit's
+  residual RMS of the edge leaves unexplained by it (the string's shape, the shot's own systematic
+  error: the real residuals are ten times the smoother's noise), so that the end points are
+  down-weighted only as much as their extra noise matters against the misfit.
 
 Three parts:
 
@@ -48,13 +52,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # model_choice's point-set population
 
 from pipeline.compare import compare_models
-from pipeline.edgeset import corrected_straightness
+from pipeline.edgeset import FitResult, corrected_straightness
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec, parse
 from pipeline.measure import measure_image, point_sigmas
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
-VARIANTS = ("unweighted", "smoother x edge noise", "smoother x local noise")
+VARIANTS = ("unweighted", "smoother x edge noise", "smoother x local noise", "smoother + misfit floor")
+POINT_VARIANTS = ("unweighted", "smoother x edge noise", "smoother + misfit floor")
 REAL_CANDIDATES = (
     "radial4+tangential",
     "radial4+tangential+prism",
@@ -71,6 +76,34 @@ def sigmas_of(m, variant: str):  # type: ignore[no-untyped-def]
     if variant == "unweighted":
         return None
     return point_sigmas(m, local=variant == "smoother x local noise")
+
+
+def misfit_floor(sig: list[list[np.ndarray]], plain: FitResult) -> list[list[np.ndarray]]:
+    """Each point's sigma with its edge's misfit added in quadrature: ``sqrt(sigma^2 + s_e^2)``,
+    ``s_e^2 = max(0, rms_e^2 - mean sigma^2)`` from the unweighted fit's residual RMS of the edge (what
+    the smoother's noise does not explain: the string's shape, the shot's own systematic error)."""
+    rms = {(e.image, e.line): e.rms_after for e in plain.edges}
+    out = []
+    for i, shot in enumerate(sig):
+        row = []
+        for j, s in enumerate(shot):
+            floor2 = max(0.0, rms.get((i, j), 0.0) ** 2 - float(np.mean(s**2)))
+            row.append(np.sqrt(s**2 + floor2))
+        out.append(row)
+    return out
+
+
+def fit_variant(lines, ms, v, w, h, spec, plain=None):  # type: ignore[no-untyped-def]
+    """The fit of ``lines`` (the measurements ``ms``) with the weights of variant ``v``."""
+    if v == "unweighted":
+        return fit_distortion(lines, w, h, **spec.fit_arguments())
+    if v == "smoother + misfit floor":
+        if not plain:
+            return plain
+        sig = misfit_floor([point_sigmas(m) for m in ms], plain)
+    else:
+        sig = [sigmas_of(m, v) for m in ms]
+    return fit_distortion(lines, w, h, **spec.fit_arguments(), point_sigma=sig)
 
 
 # ------------------------------------------------------------------------ real photographs
@@ -99,9 +132,10 @@ def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
         lines = [[ln.points for ln in whole[n].lines] for n in fit_on]
         for label in REAL_CANDIDATES:
             spec = parse(label)
+            plain = None
             for v in VARIANTS:
-                sig = None if v == "unweighted" else [sigmas_of(whole[n], v) for n in fit_on]
-                f = fit_distortion(lines, w, h, **spec.fit_arguments(), point_sigma=sig)
+                f = fit_variant(lines, [whole[n] for n in fit_on], v, w, h, spec, plain)
+                plain = f if v == "unweighted" else plain
                 if not f:
                     print(f"| {held} | {label} | {v} | failed: {f.reason} | | |")
                     out[v].append((float("nan"), float("nan")))
@@ -138,12 +172,11 @@ def one(seed: int, w: int, h: int) -> dict[str, object]:
     fitted, unseen = ms[: len(FITTED)], [ln.points for m in ms[len(FITTED) :] for ln in m.lines]
     row: dict[str, object] = {"seed": seed, "kind": member.design}
     for n_label, idx in (("6", tuple(range(len(FITTED)))), ("3", FEW)):
+        plain = None
         for v in VARIANTS:
             sub = [fitted[i] for i in idx]
-            sig = None if v == "unweighted" else [sigmas_of(m, v) for m in sub]
-            f = fit_distortion(
-                [[ln.points for ln in m.lines] for m in sub], w, h, **SPEC.fit_arguments(), point_sigma=sig
-            )
+            f = fit_variant([[ln.points for ln in m.lines] for m in sub], sub, v, w, h, SPEC, plain)
+            plain = f if v == "unweighted" else plain
             if not f:
                 row[(n_label, v)] = (float("nan"), float("nan"))
                 continue
@@ -181,22 +214,7 @@ def population_part(seeds: range, w: int, h: int, workers: int) -> None:
                 + " |"
             )
     print()
-    print(
-        "| shots | weights | field RMS median px | RMS over lenses px | ratio to unweighted: median, worst, lower in | unseen d median px | unseen ratio median, worst |"
-    )
-    print("|---:|---|---:|---:|---|---:|---|")
-    for n_label in ("6", "3"):
-        base = np.array([r[(n_label, "unweighted")] for r in rows])
-        for v in VARIANTS:
-            a = np.array([r[(n_label, v)] for r in rows])
-            rf = a[:, 0] / base[:, 0]
-            ru = a[:, 1] / base[:, 1]
-            print(
-                f"| {n_label} | {v} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
-                f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
-                f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
-            )
-    print()
+    summary({n: [{v: r[(n, v)] for v in VARIANTS} for r in rows] for n in ("6", "3")}, VARIANTS, lambda r, v: r[v])
 
 
 # ------------------------------------------------------------------------ point-set population
@@ -216,8 +234,13 @@ def one_points(seed: int) -> dict[str, object]:
         sg.append(out)
     unseen = [p for i, a in enumerate(ta) for p in point_shot(lens, harp, a, seed * 100 + 50 + i)]
     row: dict[str, object] = {"seed": seed}
-    for v in VARIANTS[:2]:
-        f = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments(), point_sigma=None if v == "unweighted" else sg)
+    plain = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments())
+    for v in POINT_VARIANTS:
+        if v == "unweighted":
+            f = plain
+        else:
+            sig = misfit_floor(sg, plain) if v == "smoother + misfit floor" and plain else sg
+            f = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments(), point_sigma=sig)
         row[v] = (
             (compare_models(f.model, lens, W_PT, H_PT, step=20).rms, corrected_straightness(f.model, unseen)[0])
             if f
@@ -233,24 +256,47 @@ def points_part(seeds: range, workers: int) -> None:
     )
     print()
     print(
-        "| seed | field, unweighted | field, smoother x edge noise | unseen d, unweighted | unseen d, smoother x edge noise |"
+        "| seed | "
+        + " | ".join(f"field, {v}" for v in POINT_VARIANTS)
+        + " | "
+        + " | ".join(f"unseen d, {v}" for v in POINT_VARIANTS)
+        + " |"
     )
-    print("|---:|---:|---:|---:|---:|")
+    print("|---:|" + "---:|" * (2 * len(POINT_VARIANTS)))
     with ProcessPoolExecutor(max_workers=workers) as ex:
         rows = list(ex.map(one_points, seeds))
     for r in rows:
-        a, b = r[VARIANTS[0]], r[VARIANTS[1]]
-        print(f"| {r['seed']} | {a[0]:.4f} | {b[0]:.4f} | {a[1]:.4f} | {b[1]:.4f} |")
-    a = np.array([r[VARIANTS[0]] for r in rows])
-    b = np.array([r[VARIANTS[1]] for r in rows])
-    rf, ru = b[:, 0] / a[:, 0], b[:, 1] / a[:, 1]
+        vals = [r[v] for v in POINT_VARIANTS]
+        print(
+            f"| {r['seed']} | "
+            + " | ".join(f"{x[0]:.4f}" for x in vals)
+            + " | "
+            + " | ".join(f"{x[1]:.4f}" for x in vals)
+            + " |"
+        )
     print()
+    summary({"3": rows}, POINT_VARIANTS, lambda r, v: r[v])
+
+
+def summary(groups, variants, get):  # type: ignore[no-untyped-def]
+    """Per group of rows (label: the shots fitted) and variant: the field RMS (median, RMS over the
+    lenses, ratio to unweighted) and the unseen shots' d."""
     print(
-        f"field RMS median {np.nanmedian(a[:, 0]):.4f} -> {np.nanmedian(b[:, 0]):.4f} px (ratio median "
-        f"{np.nanmedian(rf):.3f}, worst {np.nanmax(rf):.3f}, lower for {int(np.sum(rf < 1))} / {len(rf)}); unseen d "
-        f"median {np.nanmedian(a[:, 1]):.4f} -> {np.nanmedian(b[:, 1]):.4f} px (ratio median {np.nanmedian(ru):.3f}, "
-        f"worst {np.nanmax(ru):.3f})"
+        "| shots | weights | field RMS median px | RMS over lenses px | ratio to unweighted: median, worst, "
+        "lower in | unseen d median px | unseen ratio median, worst |"
     )
+    print("|---:|---|---:|---:|---|---:|---|")
+    for label, rows in groups.items():
+        base = np.array([get(r, "unweighted") for r in rows])
+        for v in variants:
+            a = np.array([get(r, v) for r in rows])
+            rf = a[:, 0] / base[:, 0]
+            ru = a[:, 1] / base[:, 1]
+            print(
+                f"| {label} | {v} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
+                f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
+                f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
+            )
     print()
 
 
