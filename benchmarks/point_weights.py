@@ -19,6 +19,10 @@ paper's unweighted ones in every case):
   residual RMS of the edge leaves unexplained by it (the string's shape, the shot's own systematic
   error: the real residuals are ten times the smoother's noise), so that the end points are
   down-weighted only as much as their extra noise matters against the misfit.
+* ``smoother, within edges``: the local-noise sigma scaled per edge so that its points' weights
+  average 1: only the shape along each edge (its noisy ends down-weighted), no edge weighing more
+  or less than in the plain fit (the other weightings also rank whole edges by their noise: the
+  blurred corners' edges lose weight).
 
 Three parts:
 
@@ -58,8 +62,14 @@ from pipeline.fitspec import FitSpec, parse
 from pipeline.measure import measure_image, point_sigmas
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
-VARIANTS = ("unweighted", "smoother x edge noise", "smoother x local noise", "smoother + misfit floor")
-POINT_VARIANTS = ("unweighted", "smoother x edge noise", "smoother + misfit floor")
+VARIANTS = (
+    "unweighted",
+    "smoother x edge noise",
+    "smoother x local noise",
+    "smoother + misfit floor",
+    "smoother, within edges",
+)
+POINT_VARIANTS = ("unweighted", "smoother x edge noise", "smoother + misfit floor", "smoother, within edges")
 REAL_CANDIDATES = (
     "radial4+tangential",
     "radial4+tangential+prism",
@@ -76,6 +86,12 @@ def sigmas_of(m, variant: str):  # type: ignore[no-untyped-def]
     if variant == "unweighted":
         return None
     return point_sigmas(m, local=variant == "smoother x local noise")
+
+
+def within_edges(sig: list[list[np.ndarray]]) -> list[list[np.ndarray]]:
+    """Each edge's sigmas scaled so that its points' weights average 1: the smoother's end effect
+    (and the noise's growth along the edge) alone, every edge weighing as much as in the plain fit."""
+    return [[s * np.sqrt(np.mean(1.0 / s**2)) for s in shot] for shot in sig]
 
 
 def misfit_floor(sig: list[list[np.ndarray]], plain: FitResult) -> list[list[np.ndarray]]:
@@ -101,6 +117,8 @@ def fit_variant(lines, ms, v, w, h, spec, plain=None):  # type: ignore[no-untype
         if not plain:
             return plain
         sig = misfit_floor([point_sigmas(m) for m in ms], plain)
+    elif v == "smoother, within edges":
+        sig = within_edges([point_sigmas(m, local=True) for m in ms])
     else:
         sig = [sigmas_of(m, v) for m in ms]
     return fit_distortion(lines, w, h, **spec.fit_arguments(), point_sigma=sig)
@@ -240,6 +258,7 @@ def one_points(seed: int) -> dict[str, object]:
             f = plain
         else:
             sig = misfit_floor(sg, plain) if v == "smoother + misfit floor" and plain else sg
+            sig = within_edges(sg) if v == "smoother, within edges" else sig
             f = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments(), point_sigma=sig)
         row[v] = (
             (compare_models(f.model, lens, W_PT, H_PT, step=20).rms, corrected_straightness(f.model, unseen)[0])
