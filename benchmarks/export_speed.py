@@ -36,7 +36,7 @@ EXPORTS = {  # label: (format, coeffs)
     "auto": ("auto", None),
 }
 DEFAULT = [f"{lens}:{e}" for lens in ("eq93", "eq115", "wr93", "wr115") for e in EXPORTS] + [
-    f"field:{e}" for e in ("opencv", "ros", "mrcal", "colmap")
+    f"field:{e}" for e in ("opencv", "ros", "colmap")
 ]
 
 
