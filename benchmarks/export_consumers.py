@@ -50,7 +50,8 @@ sys.path.insert(0, str(REPO))
 from drivers.sim.lens import lens_for_focus  # noqa: E402
 from pipeline.compare import fit_homography  # noqa: E402
 from pipeline.exports.lens import LensInfo  # noqa: E402
-from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, write_export  # noqa: E402
+from pipeline.exports.registry import FORMATS, write_export  # noqa: E402
+from pipeline.exports.source import ExportOptions, ExportSource  # noqa: E402
 from pipeline.models.homography import apply_homography  # noqa: E402
 from tests.pipeline.export_support import EquisolidLens  # noqa: E402
 

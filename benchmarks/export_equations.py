@@ -32,7 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from pipeline.compare import fit_homography  # noqa: E402
-from pipeline.exports.registry import ExportSource, write_export  # noqa: E402
+from pipeline.exports.registry import write_export  # noqa: E402
+from pipeline.exports.source import ExportSource  # noqa: E402
 from pipeline.models import RadialModel  # noqa: E402
 from tests.pipeline import basalt_equations as be  # noqa: E402
 from tests.pipeline import kalibr_equations as ke  # noqa: E402

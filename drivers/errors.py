@@ -6,6 +6,13 @@ class DriverError(Exception):
 
     The message is always one line: line breaks in a device's or library's
     own text (a GLib error, a garbled reply) are folded into spaces.
+
+    Not a HarpError: ``drivers`` stands below ``station`` and imports nothing of it
+    (``tests/test_architecture.py``). Where a driver error can reach a command, ``station`` turns it
+    into one: a :class:`station.config.ConfigError` naming the device's field when the devices are
+    opened or their ranges read (:mod:`station.session.devices`, :mod:`station.config.devices`), a
+    :class:`station.errors.HarpError` in ``harp live`` and ``harp intrinsics``, a row's problem in
+    ``harp devices``; during a session the executor recovers from it or records it as the abort.
     """
 
     def __init__(self, *args: object) -> None:

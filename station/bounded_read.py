@@ -13,7 +13,11 @@ from pathlib import Path
 
 
 class BoundedReadError(OSError):
-    """A file that :func:`read_regular_file` refuses: ``reason`` is one line without the path."""
+    """A file that :func:`read_regular_file` refuses: ``reason`` is one line without the path.
+
+    Not a HarpError: each reader says what the file was meant to be, so each turns it into its own
+    HarpError with the ``reason`` (:class:`station.imageio.ImageReadError`,
+    :class:`station.config.ConfigError`, the TCA file's :class:`station.inputs.InputError`)."""
 
     def __init__(self, path: str | os.PathLike, reason: str):
         self.path = str(path)

@@ -1,7 +1,7 @@
 """What an export of a profile is made from: the station's side of :mod:`pipeline.exports`.
 
 :func:`export_source` turns a :class:`~station.profile.Profile` (from a model file or
-the profile store) into the :class:`pipeline.exports.registry.ExportSource` every
+the profile store) into the :class:`pipeline.exports.source.ExportSource` every
 format writes from: the correction and its image size, the lens and camera
 (:meth:`~station.profile.Profile.lens_info`, with the user's overrides), the model's
 own holdout ``d``, whether the calibration chose a wide-angle model, the edges
@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.exports.registry import ExportSource
+from pipeline.exports.source import ExportSource
 from pipeline.measure import measure_image
 from pipeline.resample import DEFAULT_T
 from station.imageio import ImageReadError, read_grey

@@ -103,7 +103,7 @@ def export_refusal(lens: LensRow, p: Profile, override: str) -> str | None:
 
 def failed_stamp(p: Profile) -> tuple[str, ...]:
     """The lines an export of ``p`` states first when it failed QA
-    (:attr:`pipeline.exports.registry.ExportSource.stamp`); none otherwise."""
+    (:attr:`pipeline.exports.source.ExportSource.stamp`); none otherwise."""
     if not is_failed(p):
         return ()
     what = f"profile #{p.id}" if p.id is not None else "this profile"

@@ -37,7 +37,7 @@ def statement_lines(
 
     Parameters
     ----------
-    stamp : lines stated first (:attr:`~pipeline.exports.registry.ExportSource.stamp`).
+    stamp : lines stated first (:attr:`~pipeline.exports.source.ExportSource.stamp`).
     error : the conversion error, stated by its :meth:`~pipeline.exports.fit.ConversionError.lines`.
     caveats : what the consumer must know before the figures (e.g. which readers read the file).
     solver : what the consumer's point solver needs (:meth:`~pipeline.exports.solvers.SolverNeed.lines`).

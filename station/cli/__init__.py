@@ -111,7 +111,7 @@ def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     word = first_word(argv)
     if word is not None and word not in COMMANDS:
-        print(unknown_command(word), file=sys.stderr)
+        say("harp", unknown_command(word))
         return EXIT_ERROR
     try:  # Ctrl-C while the sub-command's module imports numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)

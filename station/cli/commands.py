@@ -34,9 +34,10 @@ def module_of(name: str) -> str:
 
 
 def unknown_command(word: str) -> str:
-    """The one line for a first word that is no command: the closest command named, when one is close."""
+    """The one line for a first word that is no command (said as ``harp: ...``): the closest command named,
+    when one is close."""
     import difflib
 
     close = difflib.get_close_matches(word, COMMANDS, n=1, cutoff=0.6)
     hint = f"did you mean '{close[0]}'?" if close else "'harp --help' lists the commands"
-    return f"harp: unknown command '{word}'; {hint}"
+    return f"unknown command '{word}'; {hint}"

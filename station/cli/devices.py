@@ -11,7 +11,6 @@ still shown. Exit 0 (also when nothing is found), 2 on bad input.
 from __future__ import annotations
 
 import json
-import sys
 
 from station.cli.commands import COMMANDS
 from station.cli.say import say
@@ -72,7 +71,7 @@ def run(args) -> int:
         print(json.dumps(out, indent=1))
         return EXIT_OK
     if not devices:
-        print("no cameras or serial ports found", file=sys.stderr)
+        say("harp devices", "no cameras or serial ports found")
         return EXIT_OK
     print_table(
         ("kind", "driver", "device", "description", "problem", "config snippet"),

@@ -250,8 +250,8 @@ def lens_overrides(args) -> dict:
 
 
 def export_options(args, existing: bytes | None = None, existing_name: str = "<existing>"):
-    """The :class:`~pipeline.exports.registry.ExportOptions` of the parsed options."""
-    from pipeline.exports.registry import ExportOptions  # defers scipy, yaml
+    """The :class:`~pipeline.exports.source.ExportOptions` of the parsed options."""
+    from pipeline.exports.source import ExportOptions  # defers scipy, yaml
 
     if args.focal_px is not None and not (math.isfinite(args.focal_px) and args.focal_px > 0):
         raise ExportError(f"--focal-px: expected a focal length > 0 px, got {args.focal_px:g}")

@@ -20,7 +20,6 @@ model, board label or store, or fewer than 3 usable views.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from station.cli.commands import COMMANDS
@@ -175,9 +174,9 @@ def _capture(args, spec, profile):
     try:
         config = load_config(args.config)
         focus = profile.focus
-        note = (lambda text: None) if args.json else (lambda text: print(text, file=sys.stderr))
+        note = (lambda text: None) if args.json else (lambda text: say("harp intrinsics", text))
         if focus is None:
-            note("harp intrinsics: the profile records no focus setting: the board shots at the camera's own focus")
+            note("the profile records no focus setting: the board shots at the camera's own focus")
         return capture_board_shots(config, spec, args.capture, angles=angles, focus=focus, note=note)
     except DriverError as exc:  # a ConfigError goes on: one line
         raise HarpError(str(exc)) from None

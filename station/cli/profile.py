@@ -199,7 +199,7 @@ def _list(args, store) -> int:
         }
         print(json.dumps(out, indent=1))
     elif not profiles and not errors:
-        print(f"no profiles in {store.path}", file=sys.stderr)
+        say("harp profile", f"no profiles in {store.path}")
         return EXIT_OK
     else:
         rows = []

@@ -169,7 +169,7 @@ def _run(args) -> int:
 
     def new_session():  # created only once the devices are open
         s = SessionDir.create(root, config, name=args.name, software_version=__version__)
-        print(f"session directory: {s.path}", file=sys.stderr)
+        say("harp session", f"session directory: {s.path}")
         return s
 
     return _execute(config, new_session, args, report=not args.no_report)
@@ -200,7 +200,7 @@ def _run_zoom(config, root, args) -> int:
         path = zoom_session.create(root, config, name=args.name)
     except OSError as exc:
         raise HarpError(f"cannot create the zoom session: {describe_os_error(exc)}") from None
-    print(f"zoom session directory: {path}", file=sys.stderr)
+    say("harp session", f"zoom session directory: {path}")
     return _zoom_parts(path, args)
 
 
@@ -224,7 +224,7 @@ def _zoom_parts(path: Path, args) -> int:
 
             def new_session():
                 s = SessionDir.create(path, config, name=part.name, software_version=__version__)
-                print(f"session directory: {s.path}", file=sys.stderr)
+                say("harp session", f"session directory: {s.path}")
                 return s
 
             return _execute_session(config, new_session, part_args, report=not args.no_report)
@@ -234,7 +234,7 @@ def _zoom_parts(path: Path, args) -> int:
                 return _already_finished(session, part_args, shown=session_path)
         return _execute_session(session.config, lambda: session, part_args, opened=session, report=not args.no_report)
 
-    note = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr))
+    note = (lambda text: None) if args.quiet else (lambda text: say("harp session", text))
     try:
         meta, _parts = zoom_session.read_parts(path)
         code, done = zoom_session.run_parts(path, run_part, note)
@@ -297,16 +297,16 @@ def _repair(args) -> int:
     done = repair_files(args.session_dir, base_dir=args.base_dir)  # a SessionError: one line (station.cli.main)
     session = SessionDir.open(args.session_dir)
     for line in done:
-        print(f"re-derived: {line}", file=sys.stderr)
+        say("harp session", f"re-derived: {line}")
     with session:
         try:
             report = repair_session(session, tuple(args.recapture))
         except ValueError as exc:
             raise HarpError(str(exc)) from None
         for line in report.fixed:
-            print(f"repaired: {line}", file=sys.stderr)
+            say("harp session", f"repaired: {line}")
         for line in report.cannot:
-            print(f"cannot re-derive: {line}", file=sys.stderr)
+            say("harp session", f"cannot re-derive: {line}")
         pending = report.refit and needs_capture(session)  # shots still to capture: resume fits it with them
         if report.refit and not pending:
             _refit(session, args.store)
@@ -330,7 +330,7 @@ def _refit(session, store_name=None) -> None:
         result = run_session(session, None, None, store=store, console=None)
     if result.exit_code:
         raise HarpError(result.message)
-    print(f"repaired: {result.message}", file=sys.stderr)
+    say("harp session", f"repaired: {result.message}")
 
 
 def _live(args) -> int | None:
@@ -412,7 +412,7 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
         print(json.dumps(out, indent=1))
     if result.exit_code == EXIT_ERROR:
         raise HarpError(result.message)
-    print(result.message, file=sys.stderr)
+    say("harp session", result.message)
     return result.exit_code
 
 
@@ -497,14 +497,14 @@ def _plan(args) -> int:
     )
     minutes, seconds = divmod(int(round(est.seconds)), 60)
     took = f"{minutes} min {seconds:02d} s" if minutes < 60 else f"{est.seconds / 3600:.1f} h"
-    print(
+    say(
+        "harp session",
         f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
         f"{config.capture.frames_per_orientation} frames{board_views(config)} = {est.frames} frames, {est.moves} moves, "
         f"{est.fits} fits; estimated duration {took}",
-        file=sys.stderr,
     )
     for a in est.assumptions:
-        print(f"assumed: {a}", file=sys.stderr)
+        say("harp session", f"assumed: {a}")
     return EXIT_OK
 
 
@@ -530,7 +530,7 @@ def _list(args) -> int:
         print(json.dumps({"directory": str(root.resolve()), "sessions": [s.to_dict() for s in found]}, indent=1))
         return EXIT_OK
     if not found:
-        print(f"no sessions in {root}", file=sys.stderr)
+        say("harp session", f"no sessions in {root}")
         return EXIT_OK
     print_table(
         ("session", "state", "verdict", "lens", "profiles", "frames", "created", "last activity", "path"),

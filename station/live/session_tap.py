@@ -139,6 +139,7 @@ def live_session_page(
     except BaseException:
         station.stop()
         raise
+    # not through say: the address line, read by scripts (and the tests) from the line's start
     print(f"live page: {server.url}", file=sys.stderr, flush=True)
     try:
         yield lambda session, operator=None: SessionTap(session, station, config, operator)

@@ -60,7 +60,12 @@ class SessionError(HarpError, RuntimeError):
 
 
 class SessionAborted(Exception):
-    """The session cannot go on; ``str()`` is the one-line reason (the executor records it as ``aborted``)."""
+    """The session cannot go on; ``str()`` is the one-line reason (the executor records it as ``aborted``).
+
+    Not a HarpError: it never leaves the session's executor, which catches it, records the abort in the
+    manifest and ends the run with a :class:`~station.session.executor.SessionResult` of exit code
+    :data:`station.exit_codes.EXIT_ABORTED`, which ``harp session`` raises as a HarpError with the
+    result's message (said once by the entry point)."""
 
 
 def read_session_file(path: Path) -> dict:

@@ -26,7 +26,10 @@ PROMPT = "press Enter when the board is in place (s: skip this view, q: stop the
 
 
 class NoOperator(Exception):
-    """Nobody can answer (standard input closed, no live page); ``str()`` is the one-line reason."""
+    """Nobody can answer (standard input closed, no live page); ``str()`` is the one-line reason.
+
+    Not a HarpError: :func:`station.session.camera_matrix.ask_for_board` turns it into a
+    :class:`~station.session.directory.SessionAborted` naming how to resume, recorded by the executor."""
 
 
 def parse_answer(text: str) -> str:
@@ -48,6 +51,7 @@ class OperatorDesk:
     """
 
     def __init__(self, say: Callable[[str], None] | None = None, stdin: TextIO | None = None) -> None:
+        # not through say: the prompt to the person placing the board (like input()'s), not a note of a command
         self.say = say if say is not None else (lambda text: print(text, file=sys.stderr, flush=True))
         self._stdin = stdin
         self._answers: queue.Queue[str] = queue.Queue()

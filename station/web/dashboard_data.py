@@ -24,11 +24,16 @@ ALLOW_FAILED = "allow-failed"
 
 
 class NotFound(LookupError):
-    """Nothing of that name in the store (HTTP 404)."""
+    """Nothing of that name in the store (HTTP 404).
+
+    Not a HarpError: the dashboard's lookups are answered as HTTP errors by :mod:`station.web.dashboard`
+    (this one 404); no command raises it."""
 
 
 class Ambiguous(LookupError):
-    """A serial number shared by lenses of several models (HTTP 409)."""
+    """A serial number shared by lenses of several models (HTTP 409).
+
+    Not a HarpError: answered as HTTP 409 by :mod:`station.web.dashboard`; no command raises it."""
 
 
 def lens_href(serial: str, maker: str | None = None, model: str | None = None, api: bool = False) -> str:
@@ -42,7 +47,9 @@ def model_href(maker: str, model: str, api: bool = False) -> str:
 
 # ------------------------------------------------------------ lenses page
 class BadQuery(ValueError):
-    """A query parameter that is not what it must be (HTTP 400); one line."""
+    """A query parameter that is not what it must be (HTTP 400); one line.
+
+    Not a HarpError: answered as HTTP 400 by :mod:`station.web.dashboard`; no command raises it."""
 
 
 FILTERS = (("from", "since"), ("to", "until"), ("station", "station"))

@@ -47,7 +47,9 @@ CACHE_ENTRIES = 64
 
 
 class Unavailable(LookupError):
-    """The file cannot be served for this profile; ``str()`` says why in one line."""
+    """The file cannot be served for this profile; ``str()`` says why in one line.
+
+    Not a HarpError: answered as HTTP 404 by :mod:`station.web.dashboard`; no command raises it."""
 
 
 @dataclass(frozen=True)
@@ -185,7 +187,7 @@ class ProfileFiles:
             raise Unavailable(f"unknown export format {fmt!r}; known: {', '.join(FORMATS)}")
 
         def make() -> Served:
-            from pipeline.exports.registry import ExportOptions  # defers scipy
+            from pipeline.exports.source import ExportOptions  # defers scipy
             from station.export_source import export_source  # defers scipy
 
             options = ExportOptions()

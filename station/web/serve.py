@@ -199,6 +199,7 @@ def serve(app: ASGIApp, host: str = "127.0.0.1", port: int = 8000, token: str | 
     """
     check_bind(host, token)
     sock = _bind(host, port)
+    # not through say: the address line of harp serve and harp live, read by scripts from the line's start
     print(f"serving on {_url(host, int(sock.getsockname()[1]), token)} (Ctrl-C to stop)", file=sys.stderr, flush=True)
     server = _server(app, token)
     try:  # uvicorn re-raises the Ctrl-C it captured (KeyboardInterrupt) once it has shut down

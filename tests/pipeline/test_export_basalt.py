@@ -18,7 +18,8 @@ import pytest
 
 from pipeline.compare import fit_homography
 from pipeline.exports.basalt import read_basalt_text
-from pipeline.exports.registry import ExportSource, read_correction, write_export
+from pipeline.exports.registry import read_correction, write_export
+from pipeline.exports.source import ExportSource
 from pipeline.models import RadialModel
 from pipeline.models.homography import apply_homography
 from tests.pipeline.basalt_equations import CALIBRATION_MEMBERS, basalt_camera, normalised, project, unproject

@@ -25,7 +25,8 @@ import pytest
 from pipeline.compare import fit_homography
 from pipeline.exports.colmap import colmap_text, read_colmap_text
 from pipeline.exports.fit import fit_fisheye, fit_thin_prism_fisheye
-from pipeline.exports.registry import ExportSource, read_correction, write_export
+from pipeline.exports.registry import read_correction, write_export
+from pipeline.exports.source import ExportSource
 from pipeline.models import RadialModel
 from pipeline.models.homography import apply_homography
 from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, mod_h, real_model, wide_radial

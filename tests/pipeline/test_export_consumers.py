@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from pipeline.exports.lens import LensInfo
-from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, read_correction, write_export
+from pipeline.exports.registry import FORMATS, read_correction, write_export
+from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.undistort_maps import fast_undistortion_maps
 from tests.pipeline.export_support import (
     WIDE,

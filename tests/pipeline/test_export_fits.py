@@ -52,7 +52,8 @@ def test_the_forced_5_coefficient_export_of_a_wide_lens_states_what_cv2_finds(fo
     """The file read by cv2.FileStorage, inverted by cv2.undistortPoints into its camera's pixels (P = K),
     against the harp correction modulo homography, measured in cv2's pixels and in the harp model's: within
     the stated error (+15 %) in both (it was stated in the 4-corner frame alone, 1.6x smaller on this lens)."""
-    from pipeline.exports.registry import ExportOptions, ExportSource, write_export
+    from pipeline.exports.registry import write_export
+    from pipeline.exports.source import ExportOptions, ExportSource
 
     w, h = 320, 240
     lens = wide_radial(fov, w, h)

@@ -17,7 +17,8 @@ import pytest
 from pipeline.corrected_frame import FrameChoice, corrected_frame
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.maps import maps_from_stmap
-from pipeline.exports.registry import ExportOptions, ExportSource, write_export
+from pipeline.exports.registry import write_export
+from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.undistort_maps import fast_undistortion_maps
 from tests.pipeline.export_support import (

@@ -15,7 +15,8 @@ import yaml
 
 from pipeline.compare import fit_homography
 from pipeline.exports.kalibr import read_kalibr_text
-from pipeline.exports.registry import ExportSource, read_correction, write_export
+from pipeline.exports.registry import read_correction, write_export
+from pipeline.exports.source import ExportSource
 from pipeline.models.homography import apply_homography
 from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, mod_h, real_model
 from tests.pipeline.kalibr_equations import kalibr_camera, project, unproject

@@ -14,7 +14,8 @@ import pytest
 
 from pipeline.exports.lcp import LcpProfile, lcp_text, read_lcp_entries
 from pipeline.exports.lens import LensInfo
-from pipeline.exports.registry import ExportOptions, ExportSource, read_correction, write_export
+from pipeline.exports.registry import read_correction, write_export
+from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.models.opencv_model import OpenCVModel
 from tests.pipeline.export_support import compare_points, real_model, wide_radial
 from tests.pipeline.lcp_equations import correct_distortion, mapper, read_profiles

@@ -13,7 +13,8 @@ import pytest
 
 from pipeline.compare import fit_homography
 from pipeline.exports.metashape import metashape_text, read_metashape_text
-from pipeline.exports.registry import ExportSource, read_correction, write_export
+from pipeline.exports.registry import read_correction, write_export
+from pipeline.exports.source import ExportSource
 from pipeline.models import RadialModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel

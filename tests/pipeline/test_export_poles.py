@@ -21,7 +21,8 @@ from drivers.sim.lens import lens_for_focus
 from pipeline.exports.fit import fit_opencv
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.mrcal import mrcal_text
-from pipeline.exports.registry import Export, ExportSource, write_export
+from pipeline.exports.registry import write_export
+from pipeline.exports.source import Export, ExportSource
 from pipeline.models.opencv_model import OpenCVModel
 from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, real_model, system_python, wide_radial
 

@@ -11,8 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.exports.registry import ExportSource, write_export
+from pipeline.exports.registry import write_export
 from pipeline.exports.solvers import ITERATION_STEPS, SOLVER_TOL_PX
+from pipeline.exports.source import ExportSource
 from tests.pipeline.export_support import mod_h, wide_radial
 
 W, H = 1200, 900

@@ -218,7 +218,9 @@ def test_lensfun_itself_loads_the_xml_and_applies_our_model(model):
 def test_auto_tries_the_fisheye_for_a_wide_angle_calibration_and_keeps_the_closer():
     import re
 
-    from pipeline.exports.registry import ExportOptions, ExportSource, consumer_max_px, write_export
+    from pipeline.exports.auto_rule import consumer_max_px
+    from pipeline.exports.registry import write_export
+    from pipeline.exports.source import ExportOptions, ExportSource
 
     # a calibration that chose a wide-angle model: both are fitted (the pin-hole with 5 coefficients,
     # quicker), and the export is the one closer in max as its consumer sees it (maps and OpenCV's

@@ -10,7 +10,8 @@ import pytest
 
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.lensfun import installed_lens, read_lensfun_text
-from pipeline.exports.registry import ExportOptions, ExportSource, write_export
+from pipeline.exports.registry import write_export
+from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.models import RadialModel
 from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, compare_points, lensfun_in_consumer
 

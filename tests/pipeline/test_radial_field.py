@@ -16,7 +16,8 @@ from pipeline.compare import compare_models
 from pipeline.cross_validation import n_params
 from pipeline.edgeset import collect
 from pipeline.exports.maps import map_accuracy
-from pipeline.exports.registry import FORMATS, ExportOptions, ExportSource, read_correction, write_export
+from pipeline.exports.registry import FORMATS, read_correction, write_export
+from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.fit import fit_distortion
 from pipeline.fit_problem import make_parametrisation, residuals_and_jacobian
 from pipeline.fitspec import DEFAULT_FIELD_PENALTY, FitSpec, parse

@@ -8,12 +8,19 @@
   number or ``EXIT_*`` name); a command raises instead. Per-file errors of a command that goes on with
   the other files, and warnings, are still printed where they happen.
 
-The checker is tested on made-up source first, so that a broken checker cannot pass the real tree.
+* an error class of ``station``, ``drivers`` or ``pipeline`` is a HarpError, or it (or the project's
+  class it derives from) says in its docstring why not (``Not a HarpError: ...``: where it is turned
+  into one, or why it never reaches a command);
+* a line on stderr in ``station`` goes through :mod:`station.cli.say` (``harp COMMAND: ...``), or
+  the print says why not in a comment on the line above (``# not through say: ...``).
+
+The checkers are tested on made-up source first, so that a broken checker cannot pass the real tree.
 """
 
 from __future__ import annotations
 
 import ast
+import builtins
 import textwrap
 from pathlib import Path
 
@@ -191,3 +198,153 @@ def test_the_station_errors_are_harp_errors_with_their_exit_codes():
 )
 def test_one_line(message, line):
     assert one_line(message) == line
+
+
+NOT_HARP = "Not a HarpError:"
+"""How an error class outside :class:`station.errors.HarpError` says why, in its docstring."""
+
+BUILTIN_ERRORS = {n for n, v in vars(builtins).items() if isinstance(v, type) and issubclass(v, BaseException)}
+
+
+def errors_outside_harp_error(sources: dict[str, str]) -> tuple[list[str], list[str]]:
+    """``(unexplained, explained)``: ``path:line: Name`` of every error class of ``sources`` (path ->
+    text) that is no HarpError, without and with a :data:`NOT_HARP` reason (its own or a base's)."""
+    classes: dict[str, tuple[str, int, set[str], str]] = {}
+    for path, text in sources.items():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ClassDef):
+                bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases}
+                classes[node.name] = (path, node.lineno, bases, ast.get_docstring(node) or "")
+
+    def chain(name: str, seen: frozenset[str] = frozenset()) -> set[str]:
+        """``name`` and the names of every class it derives from."""
+        if name not in classes or name in seen:
+            return {name}
+        return {name}.union(*(chain(b, seen | {name}) for b in classes[name][2]))
+
+    unexplained, explained = [], []
+    for name, (path, line, _, _) in classes.items():
+        names = chain(name)
+        if name == "HarpError" or "HarpError" in names or not names & BUILTIN_ERRORS:
+            continue
+        says = any(NOT_HARP in classes[n][3] for n in names if n in classes)
+        (explained if says else unexplained).append(f"{path}:{line}: {name}")
+    return sorted(unexplained), sorted(explained)
+
+
+def test_the_error_checker_sees_what_it_must():
+    source = textwrap.dedent(
+        '''
+        class HarpError(Exception):
+            pass
+
+        class InputError(HarpError, ValueError):
+            pass
+
+        class BadInput(InputError):
+            pass
+
+        class Lost(LookupError):
+            """Gone."""
+
+        class DriverError(Exception):
+            """A device's error.
+
+            Not a HarpError: drivers import nothing of station.
+            """
+
+        class DeviceTimeout(DriverError):
+            pass
+
+        class Settings:
+            pass
+        '''
+    )
+    unexplained, explained = errors_outside_harp_error({"m.py": source})
+    assert unexplained == ["m.py:11: Lost"]
+    assert explained == ["m.py:14: DriverError", "m.py:20: DeviceTimeout"]
+
+
+def test_every_error_class_is_a_harp_error_or_says_why_not():
+    sources = {
+        str(p.relative_to(REPO)): p.read_text(encoding="utf-8")
+        for pkg in ("station", "drivers", "pipeline")
+        for p in sorted((REPO / pkg).rglob("*.py"))
+    }
+    unexplained, explained = errors_outside_harp_error(sources)
+    assert unexplained == [], f"derive from station.errors.HarpError or say in the docstring: {NOT_HARP} ..."
+    # the classes that say why (issue 22): the drivers' family, the session's control flow, the web's HTTP
+    # answers and the bounded reader's, which each reader turns into its own HarpError
+    names = sorted(e.rsplit(": ", 1)[1] for e in explained)
+    assert names == sorted(
+        [
+            "BadQuery",
+            "Ambiguous",
+            "NotFound",
+            "Unavailable",
+            "BoundedReadError",
+            "SessionAborted",
+            "NoOperator",
+            "DriverError",
+            "DeviceTimeout",
+            "DeviceRejected",
+            "DeviceFault",
+            "ProtocolError",
+            "DeviceDisconnected",
+            "CaptureError",
+            "OutOfRange",
+        ]
+    )
+
+
+AS_IS = "# not through say:"
+"""The comment above a ``print(..., file=sys.stderr)`` that is no ``harp COMMAND:`` line, saying why."""
+
+
+def stderr_prints(source: str, name: str = "<source>") -> tuple[list[str], list[str]]:
+    """``(unexplained, explained)``: ``name:line`` of every ``print(..., file=sys.stderr)`` of
+    ``source``, without and with an :data:`AS_IS` comment on the line above it."""
+    lines = source.splitlines()
+    unexplained, explained = [], []
+    for node in ast.walk(ast.parse(source)):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print"):
+            continue
+        if not any(
+            k.arg == "file" and isinstance(k.value, ast.Attribute) and k.value.attr == "stderr" for k in node.keywords
+        ):
+            continue
+        above = lines[node.lineno - 2].strip() if node.lineno >= 2 else ""
+        (explained if above.startswith(AS_IS) else unexplained).append(f"{name}:{node.lineno}")
+    return sorted(unexplained), sorted(explained)
+
+
+def test_the_stderr_checker_sees_what_it_must():
+    source = textwrap.dedent(
+        """
+        import sys
+        print("note", file=sys.stderr)
+        # not through say: the address line, read by scripts
+        print("serving on ...", file=sys.stderr, flush=True)
+        print("to stdout")
+        say = lambda text: print(text, file=sys.stderr)
+        print("a file", file=out)
+        """
+    )
+    assert stderr_prints(source) == (["<source>:3", "<source>:7"], ["<source>:5"])
+
+
+def test_every_line_on_stderr_is_said_by_the_command_or_says_why_not():
+    unexplained, explained = [], []
+    for path in sorted((REPO / "station").rglob("*.py")):
+        if path == REPO / "station" / "cli" / "say.py":  # the one print of say()
+            continue
+        u, e = stderr_prints(path.read_text(encoding="utf-8"), str(path.relative_to(REPO)))
+        unexplained += u
+        explained += e
+    assert unexplained == [], "say it with station.cli.say (say, warn), or say why not: " + AS_IS
+    # the two address lines scripts read and the operator's prompt (issue 22)
+    assert sorted(e.split(":")[0] for e in explained) == [
+        "station/live/session_tap.py",
+        "station/session/operator.py",
+        "station/web/serve.py",
+    ]
