@@ -13,7 +13,11 @@ For each checkout (default: this one) a Markdown table of what issue 22 counts, 
   through late imports;
 * the default t = 30 spelled in code (a default, a keyword, an option's default, a field);
 * function-level imports of the project's own modules and how many say what they defer;
-* error classes of ``station``, how many are HarpErrors, the unrelated error bases; prints on stderr, ``EXIT_*`` constants defined, literal non-zero returns of the command modules;
+* error classes of ``station``, how many are HarpErrors, the unrelated error bases; the error classes
+  of ``station``, ``drivers`` and ``pipeline`` outside HarpError and how many say why
+  (``tests/station/test_errors.py``'s checker); prints on stderr, and those not said through
+  ``station.cli.say`` and how many say why; ``EXIT_*`` constants defined, literal non-zero returns of the
+  command modules;
 * process pools made, modules that assemble a focus setting's profile (``Calibration.profile``),
   places that write a selection reason;
 * modules over 700 lines and the lines of code of ``pipeline``, ``drivers`` and ``station``.
@@ -32,6 +36,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from tests.station.test_errors import errors_outside_harp_error, stderr_prints  # noqa: E402  (the same)
 from tests.test_architecture import cycles, module_names  # noqa: E402  (this checkout's, for any checkout)
 
 BUILTIN_ERRORS = {"Exception", "RuntimeError", "ValueError", "OSError", "KeyError", "TypeError", "LookupError"}
@@ -213,6 +218,10 @@ def figures(root: Path) -> list[tuple[str, str]]:
                     v = node.values[keys.index("reason")] if None not in node.keys else None
                     said = ast.unparse(v) if v is not None else ""
                     reasons += "folds" in keys or "given" in said or "configuration" in said
+    sources = {rel[m]: "\n".join(texts[m]) for m in mods}
+    unexplained, explained = errors_outside_harp_error(sources)
+    as_is = [stderr_prints(s, r) for r, s in sources.items() if r.startswith("station/") and r != "station/cli/say.py"]
+    prints_bare, prints_said = sum(len(u) for u, _ in as_is), sum(len(e) for _, e in as_is)
     sizes = {rel[m]: len(texts[m]) for m in mods}
     big = sorted((f"{p} {n}" for p, n in sizes.items() if n > 700), key=lambda s: -int(s.rsplit(" ", 1)[1]))
     return [
@@ -232,7 +241,15 @@ def figures(root: Path) -> list[tuple[str, str]]:
         ),
         ("station error classes", f"{len(errors)}, {harp_errors} of them HarpErrors"),
         ("station error bases (a class on a built-in base, not a HarpError)", f"{len(roots)} ({', '.join(roots)})"),
+        (
+            "error classes of station, drivers, pipeline outside HarpError",
+            f"{len(unexplained) + len(explained)}, {len(explained)} say why",
+        ),
         ("station print(..., file=sys.stderr)", f"{stderr}, {harp_prints} of them 'harp X: ...' by hand"),
+        (
+            "station prints on stderr outside station.cli.say",
+            f"{prints_bare + prints_said}, {prints_said} say why",
+        ),
         ("station/cli lines said by station.cli.say (say, warn)", str(sayings)),
         ("EXIT_* constants defined", str(exits)),
         ("literal non-zero returns in station/cli", str(literal_returns)),

@@ -43,7 +43,7 @@ from pipeline.edgeset import held_out_residuals
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.models import RadialModel
-from pipeline.resample import smooth_subsample
+from pipeline.resample import point_sigma, sample_noise, smooth_subsample
 from pipeline.select import select_model
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
@@ -148,7 +148,11 @@ def point_lens(seed: int) -> RadialModel:
     )
 
 
-def point_shot(lens: RadialModel, harp_bends: np.ndarray, angle: float, seed: int) -> list[np.ndarray]:
+def point_shot(
+    lens: RadialModel, harp_bends: np.ndarray, angle: float, seed: int, sigma_out: list[np.ndarray] | None = None
+) -> list[np.ndarray]:
+    """One shot's smoothed edges; with ``sigma_out``, each edge's point sigmas appended to it
+    (``pipeline.resample.point_sigma``, the edge's noise from ``sample_noise``; benchmarks/point_weights.py)."""
     rng = np.random.default_rng(seed)
     field = rng.normal(0, 0.04, (2, 6))
     t = np.radians(angle)
@@ -172,7 +176,10 @@ def point_shot(lens: RadialModel, harp_bends: np.ndarray, angle: float, seed: in
                 continue
             runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
             idx = max(runs, key=len)
-            lines.append(smooth_subsample(p[idx] + rng.normal(0, 0.06, (len(idx), 2)), 30))
+            raw = p[idx] + rng.normal(0, 0.06, (len(idx), 2))
+            lines.append(smooth_subsample(raw, 30))
+            if sigma_out is not None:
+                sigma_out.append(point_sigma(raw, sample_noise(raw), 30))
     return lines
 
 

@@ -124,7 +124,9 @@ class EdgeSet:
 
     ``xy`` (N, 2) the points; per edge (E,): ``starts`` (index of its first point),
     ``counts`` (its number of points), ``image`` (index of its shot) and ``line``
-    (its index within the shot, as given).
+    (its index within the shot, as given). ``weights`` (N,), optional: each point's
+    weight in the fit's least squares (inverse variance, :func:`point_weights`); None,
+    every point weighs 1 (the paper's fit).
     """
 
     xy: np.ndarray
@@ -132,13 +134,21 @@ class EdgeSet:
     counts: np.ndarray
     image: np.ndarray
     line: np.ndarray
+    weights: np.ndarray | None = None
 
     def __bool__(self) -> Literal[True]:  # an edge set is true, a FitFailure false (:func:`collect`)
         return True
 
     @classmethod
-    def of(cls, pieces: Sequence[np.ndarray], image: Sequence[int], line: Sequence[int]) -> EdgeSet:
-        """The edge set of the point sets ``pieces`` (each (M, 2)) with their image and line indices."""
+    def of(
+        cls,
+        pieces: Sequence[np.ndarray],
+        image: Sequence[int],
+        line: Sequence[int],
+        weights: Sequence[np.ndarray] | None = None,
+    ) -> EdgeSet:
+        """The edge set of the point sets ``pieces`` (each (M, 2)) with their image and line indices
+        (and, optionally, each point's weight, one (M,) array per piece)."""
         counts = np.array([len(p) for p in pieces], dtype=int)
         return cls(
             np.concatenate(pieces),
@@ -146,6 +156,7 @@ class EdgeSet:
             counts,
             np.asarray(image, dtype=int),
             np.asarray(line, dtype=int),
+            None if weights is None else np.concatenate([np.asarray(w, dtype=np.float64) for w in weights]),
         )
 
     @property
@@ -160,11 +171,27 @@ class EdgeSet:
         """The edges where ``keep`` (E,) is true."""
         keep = np.asarray(keep, bool)
         pieces = [self.xy[s : s + c] for s, c, k in zip(self.starts, self.counts, keep, strict=True) if k]
-        return EdgeSet.of(pieces, self.image[keep], self.line[keep])
+        w = self.weights
+        kept_w = (
+            None if w is None else [w[s : s + c] for s, c, k in zip(self.starts, self.counts, keep, strict=True) if k]
+        )
+        return EdgeSet.of(pieces, self.image[keep], self.line[keep], kept_w)
+
+    def point_weights(self, edge_weights: np.ndarray | None = None) -> np.ndarray | None:
+        """Each point's weight in the least squares: its own (``weights``) times its edge's
+        (``edge_weights`` (E,), e.g. the fit's Huber weights); None when both are absent."""
+        if edge_weights is None:
+            return self.weights
+        per_point = np.repeat(np.asarray(edge_weights, dtype=np.float64), self.counts)
+        return per_point if self.weights is None else per_point * self.weights
 
 
 def collect(
-    lines_per_image: Sequence[Sequence[np.ndarray]], width: int, height: int, margin: float = 2.0
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    margin: float = 2.0,
+    point_sigma: Sequence[Sequence[np.ndarray]] | None = None,
 ) -> tuple[EdgeSet | FitFailure, list[RejectedEdge]]:
     """Check and flatten the edges of every shot into one :class:`EdgeSet`.
 
@@ -172,7 +199,10 @@ def collect(
     or no direction (points not elongated along a line) are set aside as
     :class:`RejectedEdge`. Points that are not an (M, 2) array of numbers, or lie
     outside the ``width x height`` image (by more than ``margin`` px), make the whole
-    input a :class:`FitFailure` (wrong data, not a bad edge).
+    input a :class:`FitFailure` (wrong data, not a bad edge). ``point_sigma``, optional,
+    shaped like ``lines_per_image`` (one (M,) array per edge): each point's standard
+    deviation, turned into the kept points' weights (:func:`point_weights`); a shape that
+    does not match, or a value that is not finite and > 0, is a :class:`FitFailure`.
 
     Returns
     -------
@@ -190,6 +220,23 @@ def collect(
                 return FitFailure(f"image {i} line {j}: points must be an (M, 2) array, got shape {p.shape}"), []
             arrays.append(p)
             where.append((i, j))
+    sigmas: list[np.ndarray] | None = None
+    if point_sigma is not None:
+        sigmas = []
+        if len(point_sigma) != len(lines_per_image):
+            return FitFailure(
+                f"point_sigma has {len(point_sigma)} images, the lines {len(lines_per_image)}: one per image"
+            ), []
+        for i, (lines, sig_i) in enumerate(zip(lines_per_image, point_sigma, strict=True)):
+            if len(sig_i) != len(lines):
+                return FitFailure(f"image {i}: point_sigma has {len(sig_i)} edges, the lines {len(lines)}"), []
+            for j, (raw, sg) in enumerate(zip(lines, sig_i, strict=True)):
+                q = np.asarray(sg, dtype=np.float64).reshape(-1)
+                if len(q) != len(raw) or not np.all(np.isfinite(q) & (q > 0)):
+                    return FitFailure(
+                        f"image {i} line {j}: point_sigma must be one finite value > 0 per point ({len(raw)})"
+                    ), []
+                sigmas.append(q)
     rejected: list[RejectedEdge] = []
     if not arrays:
         return FitFailure("no usable edges (every edge has too few points, non-finite coordinates or no direction)"), []
@@ -237,6 +284,7 @@ def collect(
     else:
         line_like = np.zeros(len(arrays), bool)
     pieces: list[np.ndarray] = []
+    kept_sigma: list[np.ndarray] = []
     img: list[int] = []
     lin: list[int] = []
     for k, (i, j) in enumerate(where):
@@ -248,6 +296,8 @@ def collect(
             rejected.append(RejectedEdge(i, j, "degenerate: its points have no direction (not a line)"))
         else:
             pieces.append(arrays[k])
+            if sigmas is not None:
+                kept_sigma.append(sigmas[k])
             img.append(i)
             lin.append(j)
     if not pieces:
@@ -255,14 +305,31 @@ def collect(
             FitFailure("no usable edges (every edge has too few points, non-finite coordinates or no direction)"),
             rejected,
         )
-    return EdgeSet.of(pieces, img, lin), rejected
+    weights = None
+    if sigmas is not None:
+        w_all = point_weights(np.concatenate(kept_sigma))
+        weights = np.split(w_all, np.cumsum([len(p) for p in pieces])[:-1])
+    return EdgeSet.of(pieces, img, lin, weights), rejected
+
+
+def point_weights(sigma: np.ndarray) -> np.ndarray:
+    """Least-squares weights ``1 / sigma^2`` of points of standard deviations ``sigma``, scaled to a
+    mean of 1: only their ratios matter to the data, and at mean 1 the fit's penalties (centre prior,
+    gauge, ridge, field roughness: each "a residual of so many px on every point") keep the
+    strength they have in the unweighted fit."""
+    w = 1.0 / np.asarray(sigma, dtype=np.float64) ** 2
+    out: np.ndarray = w / np.mean(w)
+    return out
 
 
 # ------------------------------------------------------------ TLS lines
 def tls(
-    u: np.ndarray, starts: np.ndarray, counts: np.ndarray
+    u: np.ndarray, starts: np.ndarray, counts: np.ndarray, weights: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per-edge TLS lines of the points ``u`` (N, 2), edges contiguous (``starts``, ``counts``).
+
+    ``weights`` (N,), optional: the weighted TLS line (weighted centroid and scatter matrix), the
+    line minimising ``sum w r^2``; None, the plain one (the paper's, and every figure's: d, d_max).
 
     Returns
     -------
@@ -272,11 +339,19 @@ def tls(
     phi : (E,) direction angle of each line (radians)
     """
     ux, uy = u[:, 0], u[:, 1]
-    dx = ux - np.repeat(np.add.reduceat(ux, starts) / counts, counts)
-    dy = uy - np.repeat(np.add.reduceat(uy, starts) / counts, counts)
-    sxx = np.add.reduceat(dx * dx, starts)
-    syy = np.add.reduceat(dy * dy, starts)
-    sxy = np.add.reduceat(dx * dy, starts)
+    if weights is None:
+        dx = ux - np.repeat(np.add.reduceat(ux, starts) / counts, counts)
+        dy = uy - np.repeat(np.add.reduceat(uy, starts) / counts, counts)
+        sxx = np.add.reduceat(dx * dx, starts)
+        syy = np.add.reduceat(dy * dy, starts)
+        sxy = np.add.reduceat(dx * dy, starts)
+    else:
+        sw = np.add.reduceat(weights, starts)
+        dx = ux - np.repeat(np.add.reduceat(weights * ux, starts) / sw, counts)
+        dy = uy - np.repeat(np.add.reduceat(weights * uy, starts) / sw, counts)
+        sxx = np.add.reduceat(weights * dx * dx, starts)
+        syy = np.add.reduceat(weights * dy * dy, starts)
+        sxy = np.add.reduceat(weights * dx * dy, starts)
     phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # direction of the line
     c = np.repeat(np.cos(phi), counts)
     s = np.repeat(np.sin(phi), counts)

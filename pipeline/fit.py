@@ -169,6 +169,7 @@ def fit_distortion(
     ridge: float | None = None,
     w_center: float = FREE_CENTER_WEIGHT,
     max_nfev: int = 200,
+    point_sigma: Sequence[Sequence[np.ndarray]] | None = None,
 ) -> FitResult | FitFailure:
     """Fit a distortion correction straightening all edges of all images at once.
 
@@ -215,6 +216,14 @@ def fit_distortion(
         ``w_center * delta`` px on every point); 1e-5 leaves it free.
     max_nfev : int
         Evaluation budget of each Levenberg–Marquardt run.
+    point_sigma : sequence over images of sequences of (M,) arrays, optional
+        Each point's standard deviation (px), shaped like ``lines_per_image``
+        (:func:`pipeline.measure.point_sigmas`: the along-edge smoother's variance factor
+        times the edge's noise). Given, every residual is weighted by ``1 / sigma`` in the
+        least squares (weights ``1 / sigma^2`` scaled to mean 1,
+        :func:`pipeline.edgeset.point_weights`) and each edge's line is its weighted TLS
+        line; the reported figures (d, d_max, per edge) stay the paper's unweighted ones.
+        None (default): every point weighs the same, as in Tang et al.
 
     Returns
     -------
@@ -235,7 +244,7 @@ def fit_distortion(
             )
     if len(lines_per_image) == 0:
         return FitFailure("no images given")
-    edges, rejected = collect(lines_per_image, width, height)
+    edges, rejected = collect(lines_per_image, width, height, point_sigma=point_sigma)
     if not edges:
         return edges
     param = make_parametrisation(width, height, spec, w_center=w_center, ridge=ridge)

@@ -90,7 +90,7 @@ def _projected(
     the corrected points projected on each point's line normal (``P``) and direction (``T``), one row
     per parameter (``(n, N)``)."""
     u, _ = param.evaluate(edges.xy, th, jac=False)
-    r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts)
+    r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts, edges.weights)
     if not jac:
         return r, a, None, None
     p_mat, t_mat = param.project(edges.xy, th, nrm, tan)
@@ -98,17 +98,28 @@ def _projected(
 
 
 def _line_turn(
-    p_mat: np.ndarray, t_mat: np.ndarray, r: np.ndarray, a: np.ndarray, st: np.ndarray
+    p_mat: np.ndarray, t_mat: np.ndarray, r: np.ndarray, a: np.ndarray, st: np.ndarray, q: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per edge (columns, ``(n, E)``): the sums of ``P`` and of ``a P``, and ``d phi / d theta``, the
-    rotation of its TLS line (Golub-Pereyra):
-    ``d phi = sum_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i (a_i^2 - r_i^2)``; the means
-    drop out because ``sum a = sum r = 0`` on each edge (distances from its centroid)."""
-    sum_p = np.add.reduceat(p_mat, st, axis=1)
-    sum_ap = np.add.reduceat(p_mat * a, st, axis=1)
-    sum_rt = np.add.reduceat(t_mat * r, st, axis=1)
-    den = np.add.reduceat(a * a - r * r, st)
+    """Per edge (columns, ``(n, E)``): the (``q``-weighted) sums of ``P`` and of ``a P``, and
+    ``d phi / d theta``, the rotation of its TLS line (Golub-Pereyra):
+    ``d phi = sum_i q_i (a_i (P_i - mean P) + r_i (T_i - mean T)) / sum_i q_i (a_i^2 - r_i^2)``; the
+    means drop out because ``sum q a = sum q r = 0`` on each edge (distances from its weighted
+    centroid). ``q`` (N,): the points' weights (:attr:`EdgeSet.weights`), None for 1."""
+    pq = p_mat if q is None else p_mat * q
+    aq, rq = (a, r) if q is None else (a * q, r * q)
+    sum_p = np.add.reduceat(pq, st, axis=1)
+    sum_ap = np.add.reduceat(pq * a, st, axis=1)
+    sum_rt = np.add.reduceat(t_mat * rq, st, axis=1)
+    den = np.add.reduceat(aq * a - rq * r, st)
     return sum_p, sum_ap, (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)
+
+
+def _weight_sums(edges: EdgeSet) -> np.ndarray:
+    """Per edge: the sum of its points' weights (its number of points when unweighted)."""
+    if edges.weights is None:
+        return edges.counts.astype(np.float64)
+    out: np.ndarray = np.add.reduceat(edges.weights, edges.starts)
+    return out
 
 
 def residuals_and_jacobian(
@@ -116,13 +127,15 @@ def residuals_and_jacobian(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Signed distances of the corrected points to their own edge's TLS line, and (``jac``)
     their analytic Jacobian ``(N, n)`` in ``theta``, the line's motion included (variable
-    projection): ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`)."""
+    projection): ``J_i = P_i - mean_e P - a_i d phi_e`` (``P_i = n_e . du_i``, :func:`_line_turn`).
+    With point weights (:attr:`EdgeSet.weights`) the lines are the weighted TLS lines and the means
+    weighted; the residuals are not multiplied by the weights (the caller weighs their squares)."""
     r, a, p_mat, t_mat = _projected(param, edges, th, jac)
     if p_mat is None or t_mat is None:
         return r, None
     st, ct = edges.starts, edges.counts
-    sum_p, _, dphi = _line_turn(p_mat, t_mat, r, a, st)
-    j = p_mat - np.repeat(sum_p / ct, ct, axis=1)
+    sum_p, _, dphi = _line_turn(p_mat, t_mat, r, a, st, edges.weights)
+    j = p_mat - np.repeat(sum_p / _weight_sums(edges), ct, axis=1)
     j -= np.repeat(dphi, ct, axis=1) * a
     return r, j.T
 
@@ -135,7 +148,8 @@ def normal_equations(
     edge_weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``J^T W J``, ``J^T W r`` and ``r^T W r`` of :func:`residuals_and_jacobian` at ``th`` without
-    forming ``J`` (``W``: the per-edge ``edge_weights``, default 1), per group of edges: ``groups``
+    forming ``J`` (``W``: the per-edge ``edge_weights``, default 1, times the points' own weights
+    :attr:`EdgeSet.weights`, default 1), per group of edges: ``groups``
     are the edge indices where each group starts (the edges of a group contiguous; default one
     group), the results stacked ``(G, n, n)``, ``(G, n)``, ``(G,)``.
 
@@ -146,16 +160,19 @@ def normal_equations(
     ``N x n`` Jacobian."""
     r, a, p_mat, t_mat = _projected(param, edges, th, True)
     assert p_mat is not None and t_mat is not None
-    st, ct = edges.starts, edges.counts
-    sum_p, sum_ap, dphi = _line_turn(p_mat, t_mat, r, a, st)
-    mean_p = sum_p / ct
-    sum_a = np.add.reduceat(a, st)
-    sum_r = np.add.reduceat(r, st)
-    sum_aa = np.add.reduceat(a * a, st)
-    sum_ar = np.add.reduceat(a * r, st)
-    s_ap = sum_ap - mean_p * sum_a  # sum a Pc
+    st = edges.starts
+    q = edges.weights
+    sum_p, sum_ap, dphi = _line_turn(p_mat, t_mat, r, a, st, q)
+    sum_q = _weight_sums(edges)
+    mean_p = sum_p / sum_q
+    aq, rq = (a, r) if q is None else (a * q, r * q)
+    sum_a = np.add.reduceat(aq, st)
+    sum_r = np.add.reduceat(rq, st)
+    sum_aa = np.add.reduceat(aq * a, st)
+    sum_ar = np.add.reduceat(aq * r, st)
+    s_ap = sum_ap - mean_p * sum_a  # sum q a Pc
     w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
-    w_pt = None if edge_weights is None else np.repeat(w, ct)
+    w_pt = edges.point_weights(edge_weights)
     bounds = [0] if groups is None else [int(g) for g in groups]
     bounds.append(edges.n_edges)
     n = p_mat.shape[0]
@@ -174,7 +191,7 @@ def normal_equations(
         we = w[e0:e1]
         mp, dp, sp = mean_p[:, e0:e1], dphi[:, e0:e1], s_ap[:, e0:e1]
         cross = (sp * we) @ dp.T
-        ata[g] = pw @ pg.T - (mp * (ct[e0:e1] * we)) @ mp.T - cross - cross.T + (dp * (sum_aa[e0:e1] * we)) @ dp.T
+        ata[g] = pw @ pg.T - (mp * (sum_q[e0:e1] * we)) @ mp.T - cross - cross.T + (dp * (sum_aa[e0:e1] * we)) @ dp.T
         atb[g] = pw @ rg - mp @ (sum_r[e0:e1] * we) - dp @ (sum_ar[e0:e1] * we)
         ss[g] = rw @ rg
     return ata, atb, ss

@@ -94,7 +94,7 @@ def _levenberg_marquardt(
     .. [2] J. J. Moré, B. S. Garbow, K. E. Hillstrom, *User guide for MINPACK-1*, ANL-80-74, 1980.
     """
     n_pts = len(edges.xy)
-    sw = None if edge_weights is None else np.repeat(edge_weights, edges.counts)
+    sw = edges.point_weights(edge_weights)
 
     def cost(t: np.ndarray) -> float:
         r, _ = residuals_and_jacobian(param, edges, t, jac=False)
@@ -184,7 +184,8 @@ def solve(
     edge_weights: np.ndarray | None = None,
     max_nfev: int = 200,
 ) -> Solution:
-    """Levenberg–Marquardt on the residuals, optionally weighted per edge: on the normal equations
+    """Levenberg–Marquardt on the residuals, optionally weighted per edge (and per point,
+    :attr:`EdgeSet.weights`): on the normal equations
     (:func:`_levenberg_marquardt`), or MINPACK's on the Jacobian when that one cannot finish."""
     sol = _levenberg_marquardt(param, edges, th0, edge_weights, max_nfev)
     if sol is not None:
@@ -204,7 +205,8 @@ def _solve_minpack(
     from scipy.optimize import least_squares  # only when the normal-equations solver cannot finish
 
     n_pts = len(edges.xy)
-    sw = None if edge_weights is None else np.repeat(np.sqrt(edge_weights), edges.counts)
+    pw = edges.point_weights(edge_weights)
+    sw = None if pw is None else np.sqrt(pw)
 
     last: dict[str, tuple[bytes, np.ndarray]] = {}  # the optimiser asks twice for some points: once is enough
 

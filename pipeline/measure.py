@@ -45,7 +45,16 @@ from numpy.typing import NDArray
 from pipeline.edges import detect_edges
 from pipeline.grouping import Grouping, group_string_edges
 from pipeline.plain import finite_or_none
-from pipeline.resample import DEFAULT_T, MAX_EXTEND_PX, METHODS, SmoothingMethod, resample_polyline, smooth_subsample
+from pipeline.resample import (
+    DEFAULT_T,
+    MAX_EXTEND_PX,
+    METHODS,
+    SmoothingMethod,
+    point_sigma,
+    resample_polyline,
+    sample_noise,
+    smooth_subsample,
+)
 from pipeline.straightness import hf_rms, straightness
 
 BRIDGE_GAP_PX = 6.0
@@ -408,3 +417,55 @@ def measure_image(
 def border_px(sigma: float = 1.0) -> float:
     """Width of the image border where no edge point is kept: ``max(4, ceil(3 sigma) + 1)`` px."""
     return max(4.0, float(np.ceil(3.0 * sigma)) + 1.0)
+
+
+def point_sigmas(m: ImageMeasurement, border: float | None = None, local: bool = False) -> list[Points]:
+    r"""Each measured point's standard deviation, one ``(M,)`` array per line of ``m`` (its ``points``).
+
+    Per edge, the raw points' scatter about the along-edge smooth gives the noise of the uniform
+    samples (:func:`pipeline.resample.sample_noise`: one robust figure pooled over the edge's pieces,
+    or with ``local`` its growth along the edge); each smoothed point's standard deviation is that
+    noise through the smoother's row, :math:`\sqrt{\sum_i l_i^2 \sigma_i^2}`
+    (:func:`pipeline.resample.point_sigma`): about 2.6 times the middle's at the ends of a piece for
+    t = 30, where the local fit's window is one-sided. The input of the fit's per-point weights
+    (``fit_distortion(..., point_sigma=...)``).
+
+    ``border``: the border (px) the measurement trimmed (``border_px(sigma)`` of
+    :func:`measure_image`, default ``border_px()``), to extend the pieces it cut as the measurement
+    did; the noise is that of the interpolated samples, a little below the raw points' (only the
+    ratios between points and edges weigh in the fit).
+
+    References
+    ----------
+    .. [1] J. Fan, I. Gijbels, *Local Polynomial Modelling and Its Applications*, Chapman & Hall, 1996.
+    """
+    b = border_px() if border is None else border
+    frame = (b, b, m.width - 1.0 - b, m.height - 1.0 - b)
+    method: SmoothingMethod = "gaussian" if m.smoothing == "gaussian" else "local-quadratic"
+    out: list[Points] = []
+    for ln in m.lines:
+        rng = ln.raw_pieces if len(ln.raw_pieces) else np.array([[0, len(ln.raw_points)]])
+        pieces = [ln.raw_points[a:c] for a, c in rng]
+        noise = [sample_noise(p, m.t, local=local) for p in pieces]
+        if local:
+            e = np.concatenate([np.asarray(v) for v in noise]) if noise else np.zeros(0)
+            edge = float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")
+        else:
+            lens = np.array([len(p) for p in pieces], dtype=np.float64)
+            v = np.array(noise, dtype=np.float64)
+            ok = np.isfinite(v)
+            edge = float(np.sqrt(np.sum(lens[ok] * v[ok] ** 2) / np.sum(lens[ok]))) if ok.any() else float("nan")
+        if not (np.isfinite(edge) and edge > 0):
+            edge = 1.0  # no noise figure: the smoother's variance factor alone
+        parts = []
+        for p, nz in zip(pieces, noise, strict=True):
+            ext = (0.0, 0.0)
+            if method == "local-quadratic":
+                ext = (_border_extension(p, False, frame), _border_extension(p, True, frame))
+            use = nz if local and len(np.atleast_1d(nz)) and np.all(np.asarray(nz) > 0) else edge
+            parts.append(point_sigma(p, use, m.t, method=method, extend=ext))
+        sig = np.concatenate(parts) if parts else np.zeros(0)
+        if len(sig) != len(ln.points):
+            raise ValueError(f"line {ln.string_id}: {len(sig)} sigmas for {len(ln.points)} points (border?)")
+        out.append(np.maximum(sig, 1e-6 * edge))
+    return out

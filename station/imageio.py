@@ -16,8 +16,11 @@ Reading is bounded. Only regular files are read: a device (``/dev/zero``), a
 FIFO or a socket is refused before it is opened (it could be endless or block
 forever). An image whose header claims more than ``max_pixels`` pixels is
 refused before anything is decoded (:func:`header_size` reads the width and
-height of PNG, TIFF, JPEG, PNM, BMP and WebP headers); other formats are checked
-after decoding, which OpenCV itself bounds at 2^30 pixels. The default limit is
+height of PNG, TIFF, JPEG, PNM, BMP and WebP headers, by hand: OpenCV reads no header alone,
+``cv2.haveImageReader`` only matches a file's signature and its own check before decoding,
+``OPENCV_IO_MAX_IMAGE_PIXELS``, is read once per process and fails without the size; Pillow does read
+them, at 90-180 ms of imports a process); other formats are checked after decoding, which OpenCV
+itself bounds at 2^30 pixels. The default limit is
 :data:`MAX_PIXELS` (200 megapixels), or the environment variable
 ``HARP_MAX_IMAGE_PIXELS``; a file larger than any image of that many pixels
 could be (:func:`max_file_bytes`) is refused without reading it all.

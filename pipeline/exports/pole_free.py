@@ -61,9 +61,26 @@ def radial_polynomials(dist: Sequence[float]) -> tuple[Array, Array]:
 
 
 def slope_numerator(num: Array, den: Array) -> Array:
-    """Coefficients in :math:`u` of :math:`N D + 2u (N' D - N D')`, the numerator of :math:`dr_d/dr`."""
-    cross = P.polysub(P.polymul(P.polyder(num), den), P.polymul(num, P.polyder(den)))
-    return np.asarray(P.polyadd(P.polymul(num, den), P.polymulx(2.0 * cross)), dtype=np.float64)
+    """Coefficients in :math:`u` of :math:`N D + 2u (N' D - N D')`, the numerator of :math:`dr_d/dr`.
+
+    Written with :func:`numpy.convolve` (what :mod:`numpy.polynomial` multiplies with, the same
+    figures) rather than through :mod:`numpy.polynomial`'s series checks: the pole-free fits evaluate
+    it at every residual evaluation.
+    """
+    num = np.asarray(num, dtype=np.float64)
+    den = np.asarray(den, dtype=np.float64)
+    cross = np.convolve(num[1:] * np.arange(1, len(num)), den) - np.convolve(num, den[1:] * np.arange(1, len(den)))
+    out = np.convolve(num, den)
+    out[1 : 1 + len(cross)] += 2.0 * cross
+    return out
+
+
+def _horner(coeffs: Array, x: Array) -> Array:
+    """The polynomial with ``coeffs`` (increasing powers) at ``x``, by Horner's rule (as :func:`numpy.polynomial.polynomial.polyval`)."""
+    out = np.full_like(x, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        out = c + out * x
+    return out
 
 
 def radial_penalty(dist: Sequence[float], r_max: float, n: int = PENALTY_SAMPLES) -> Array:
@@ -76,11 +93,62 @@ def radial_penalty(dist: Sequence[float], r_max: float, n: int = PENALTY_SAMPLES
     """
     num, den = radial_polynomials(dist)
     u = np.linspace(0.0, float(r_max), int(n)) ** 2
-    dv = P.polyval(u, den)
-    slope = P.polyval(u, slope_numerator(num, den)) / np.maximum(dv, DENOMINATOR_MIN) ** 2
+    dv = _horner(den, u)
+    slope = _horner(slope_numerator(num, den), u) / np.maximum(dv, DENOMINATOR_MIN) ** 2
     short_d = np.maximum(0.0, DENOMINATOR_MIN - dv)
     short_s = np.maximum(0.0, SLOPE_MIN - slope)
     return np.concatenate([short_d**2 / DENOMINATOR_MIN, short_s**2 / SLOPE_MIN])
+
+
+RADIAL_INDEX_NUM = (0, 1, 4)
+"""Positions of :math:`k_1, k_2, k_3` (the numerator's coefficients of :math:`u, u^2, u^3`) in OpenCV's order."""
+
+RADIAL_INDEX_DEN = (5, 6, 7)
+"""Positions of :math:`k_4, k_5, k_6` (the denominator's) in OpenCV's order."""
+
+
+def radial_penalty_jacobian(dist: Sequence[float], r_max: float, n: int = PENALTY_SAMPLES) -> tuple[Array, Array]:
+    r"""Derivatives of :func:`radial_penalty`: ``(J_dist (2n, len(dist)), J_r (2n,))``, the second with
+    respect to ``r_max``.
+
+    With :math:`S` the slope numerator (:func:`slope_numerator`) and :math:`u^i` a coefficient's power,
+    :math:`\partial S/\partial a_i = (1 + 2i) u^i D - 2 u^{i+1} D'` for the numerator's and
+    :math:`\partial S/\partial b_i = (1 - 2i) u^i N + 2 u^{i+1} N'` for the denominator's; the samples
+    :math:`u_j = (r_{max} j / (n - 1))^2` move with :math:`r_{max}` as :math:`2 u_j / r_{max}`.
+    """
+    nd = len(dist)
+    num, den = radial_polynomials(dist)
+    u = np.linspace(0.0, float(r_max), int(n)) ** 2
+    dv = _horner(den, u)
+    nv = _horner(num, u)
+    d_den = _horner(den[1:] * np.arange(1, 4), u)
+    d_num = _horner(num[1:] * np.arange(1, 4), u)
+    sn = slope_numerator(num, den)
+    sv = _horner(sn, u)
+    dm = np.maximum(dv, DENOMINATOR_MIN)
+    free = dv > DENOMINATOR_MIN  # where the slope's denominator follows D
+    short_d = np.maximum(0.0, DENOMINATOR_MIN - dv)
+    short_s = np.maximum(0.0, SLOPE_MIN - sv / dm**2)
+    # d(penalty)/d(D) and d(penalty)/d(slope)
+    gd = -2.0 * short_d / DENOMINATOR_MIN
+    gs = -2.0 * short_s / SLOPE_MIN
+
+    def slope_by(d_s: Array, d_d: Array) -> Array:
+        out: Array = d_s / dm**2 - np.where(free, 2.0 * sv * d_d / dm**3, 0.0)
+        return out
+
+    jd = np.zeros((2 * len(u), nd))
+    for i, (ia, ib) in enumerate(zip(RADIAL_INDEX_NUM, RADIAL_INDEX_DEN, strict=True), start=1):
+        ui = u**i
+        if ia < nd:
+            jd[len(u) :, ia] = gs * slope_by((1 + 2 * i) * ui * dv - 2 * ui * u * d_den, np.zeros_like(u))
+        if ib < nd:
+            jd[: len(u), ib] = gd * ui
+            jd[len(u) :, ib] = gs * slope_by((1 - 2 * i) * ui * nv + 2 * ui * u * d_num, ui)
+    du = 2.0 * u / float(r_max) if r_max > 0 else np.zeros_like(u)
+    d_sn = _horner(sn[1:] * np.arange(1, len(sn)), u)
+    jr = np.concatenate([gd * d_den * du, gs * slope_by(d_sn, d_den) * du])
+    return jd, jr
 
 
 def _first_root(coeffs: Array, u_max: float) -> float | None:

@@ -65,6 +65,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
+from pipeline.plain import finite_or_none, plain
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
@@ -436,18 +437,12 @@ def figures(ex, source, edges) -> dict:
     err = ex.error
     return {
         "format": ex.format,
-        "conversion": None if err is None else {k: _finite(v) for k, v in err.to_dict().items()},
-        "holdout_d": _finite(source.holdout_d),
+        "conversion": None if err is None else plain(err.to_dict()),
+        "holdout_d": finite_or_none(source.holdout_d),
         "fitting_shots": {"source": edges.source, "n_shots": edges.n_shots, "used": edges.edges is not None},
         "notes": list(ex.notes),
         "warnings": list(ex.warnings),
     }
-
-
-def _finite(v):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        return None
-    return v if isinstance(v, int) else float(v)
 
 
 def _px(v) -> str:

@@ -391,3 +391,93 @@ def test_a_far_decentred_lens_is_not_left_in_a_local_minimum():
     r = fit_distortion(shots, w, h, **FitSpec("radial", 4, True, True).fit_arguments())
     assert r and r.d_after < 0.0105
     assert compare_models(r.model, lens, w, h, step=25).rms < 0.005
+
+
+# ----------------------------------------------------------- per-point weights
+def _noisy_end_shots(seed, end_px=60.0, end_noise=0.3, base=0.02, spacing=100.0):
+    """Raw points every pixel along ideal strings at 0, 60 and 120 degrees through DECENTRED (the exact
+    lens), noise ``base`` px across each edge and ``base + end_noise`` px on its last ``end_px`` px at
+    both ends (known), smoothed as the measurement does; with each point's sigma as the measurement's
+    :func:`pipeline.measure.point_sigmas` computes it (noise measured along the edge)."""
+    from pipeline.resample import point_sigma, sample_noise, smooth_subsample
+
+    rng = np.random.default_rng(seed)
+    c = np.array([(W - 1) / 2, (H - 1) / 2])
+    half = 0.5 * np.hypot(W, H)
+    lines, sigmas = [], []
+    for ang in (0.0, 60.0, 120.0):
+        t = np.radians(ang)
+        d, n = np.array([np.cos(t), np.sin(t)]), np.array([-np.sin(t), np.cos(t)])
+        shot, sig = [], []
+        for off in np.arange(-half + spacing / 2, half, spacing):
+            s = np.arange(-half, half, 1.0)
+            p = DECENTRED.distort_points(c + off * n + s[:, None] * d)
+            idx = np.flatnonzero(np.all(np.isfinite(p), 1) & np.all((p > 5) & (p < [W - 6, H - 6]), 1))
+            if len(idx) < 200:
+                continue
+            q = p[idx]
+            to_end = np.minimum(np.arange(len(q)), np.arange(len(q))[::-1])
+            q = q + (rng.normal(0, 1, len(q)) * (base + end_noise * (to_end < end_px)))[:, None] * n
+            shot.append(smooth_subsample(q, 30))
+            sig.append(point_sigma(q, sample_noise(q, local=True)))
+        lines.append(shot)
+        sigmas.append(sig)
+    return lines, sigmas
+
+
+def test_points_weighted_by_their_sigma_keep_noisy_ends_from_pulling_the_fit():
+    """Edges whose ends carry extra known noise: weighted by each point's sigma (the smoother's
+    variance factor times the noise measured along the edge) the fit is closer to the exact lens
+    than the unweighted fit; the reported d stays the paper's unweighted figure."""
+    lines, sigmas = _noisy_end_shots(21)
+    kw = dict(model="radial", degree=4, tangential=True)
+    plain = fit_distortion(lines, W, H, **kw)
+    weighted = fit_distortion(lines, W, H, **kw, point_sigma=sigmas)
+    assert plain and weighted
+    e_plain = compare_models(plain.model, DECENTRED, W, H, step=25).rms
+    e_weighted = compare_models(weighted.model, DECENTRED, W, H, step=25).rms
+    assert e_weighted < 0.6 * e_plain, (e_weighted, e_plain)
+    assert weighted.d_after == pytest.approx(corrected_straightness(weighted.model, [p for s in lines for p in s])[0])
+    assert weighted.d_after >= plain.d_after * 0.999  # the unweighted figure is what the plain fit minimises
+
+
+def test_point_weights_jacobian_and_normal_equations():
+    """With point weights: the Jacobian of the residuals to the weighted TLS lines against finite
+    differences, the normal equations against the explicit ``J^T W J``, ``J^T W r``, and the
+    weighted residuals of every edge summing to zero (its weighted centroid)."""
+    shots = harp_point_sets(DECENTRED, W, H, (10, 70, 130), noise=0.01, seed=2)
+    rng = np.random.default_rng(6)
+    sig = [[rng.uniform(0.5, 3.0, len(p)) for p in s] for s in shots]
+    edges, _ = collect(shots, W, H, point_sigma=sig)
+    assert edges.weights is not None and edges.weights.mean() == pytest.approx(1.0)
+    param = make_parametrisation(W, H, FitSpec("radial", 4, True, True))
+    th = rng.normal(0, 1e-3, param.n)
+    r, j = residuals_and_jacobian(param, edges, th)
+    assert np.abs(np.add.reduceat(edges.weights * r, edges.starts)).max() < 1e-9
+    num = np.empty_like(j)
+    for k in range(param.n):
+        e = np.zeros(param.n)
+        e[k] = 1e-7
+        num[:, k] = (
+            residuals_and_jacobian(param, edges, th + e, jac=False)[0]
+            - residuals_and_jacobian(param, edges, th - e, jac=False)[0]
+        ) / 2e-7
+    assert np.abs(j - num).max() < 1e-4 * np.abs(num).max()
+    ew = rng.uniform(0.3, 1.0, edges.n_edges)
+    ata, atb, ss = normal_equations(param, edges, th, edge_weights=ew)
+    wp = edges.weights * np.repeat(ew, edges.counts)
+    assert np.allclose(ata[0], (j * wp[:, None]).T @ j, rtol=1e-9, atol=1e-9 * np.abs(ata[0]).max())
+    assert np.allclose(atb[0], (j * wp[:, None]).T @ r, rtol=1e-7, atol=1e-9 * np.abs(ata[0]).max() ** 0.5)
+    assert ss[0] == pytest.approx(float((r * wp) @ r), rel=1e-12)
+
+
+def test_point_sigma_of_the_wrong_shape_fails_clearly():
+    shots = harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.01, seed=3)
+    ones = [[np.ones(len(p)) for p in s] for s in shots]
+    assert fit_distortion(shots, W, H, point_sigma=ones)  # all equal: the plain fit
+    bad = [[np.ones(len(p) - 1) for p in s] for s in shots]
+    f = fit_distortion(shots, W, H, point_sigma=bad)
+    assert not f and "point_sigma" in f.reason and "image 0 line 0" in f.reason
+    zero = [[np.zeros(len(p)) for p in s] for s in shots]
+    assert "> 0" in fit_distortion(shots, W, H, point_sigma=zero).reason
+    assert "one per image" in fit_distortion(shots, W, H, point_sigma=ones[:1]).reason

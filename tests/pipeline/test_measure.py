@@ -8,7 +8,8 @@ visible in the image, sampled on the measurement's grid, never clipped to what w
 import numpy as np
 import pytest
 
-from pipeline.measure import measure_image
+from pipeline.edgeset import tls
+from pipeline.measure import measure_image, point_sigmas
 from pipeline.models.radial import RadialModel
 from pipeline.render import HarpScene, render_harp
 from pipeline.straightness import straightness
@@ -216,6 +217,26 @@ def test_result_is_consistent_with_straightness_of_its_points():
         assert ln.raw_pieces[0, 0] >= 0 and ln.raw_pieces[-1, 1] <= len(ln.raw_points)
         assert ln.point_pieces[0, 0] == 0 and ln.point_pieces[-1, 1] == len(ln.points)
         assert np.all(ln.point_pieces[1:, 0] == ln.point_pieces[:-1, 1])
+
+
+def test_point_sigmas_are_the_scatter_of_a_straight_harp():
+    """On an undistorted (straight) harp every residual of the measured points is noise: the
+    predicted sigmas (one per point) match its RMS in the middle of the edges and at their ends,
+    where the smoother's one-sided window makes it 2-3 times larger."""
+    r = render_harp(
+        640, 480, HarpScene(angle_deg=30.0, spacing_px=60.0, string_width_px=3.0), noise_sigma=1.5, bit_depth=8, seed=3
+    )
+    m = measure_image(r.image)
+    sig = point_sigmas(m)
+    assert [len(s) for s in sig] == [len(ln.points) for ln in m.lines]
+    pts = [ln.points for ln in m.lines]
+    counts = np.array([len(p) for p in pts])
+    res = tls(np.concatenate(pts), np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)[0]
+    end = np.concatenate([np.r_[True, np.zeros(len(p) - 2, bool), True] for p in pts])
+    s = np.concatenate(sig)
+    for sel in (~end, end):
+        assert np.sqrt(np.mean(s[sel] ** 2)) == pytest.approx(np.sqrt(np.mean(res[sel] ** 2)), rel=0.25)
+    assert np.median(s[end]) > 2 * np.median(s[~end])
 
 
 # -- 4. the real photographs -----------------------------------------------------------------

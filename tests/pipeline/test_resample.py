@@ -4,7 +4,16 @@ import numpy as np
 import pytest
 
 from pipeline.edges import detect_edges
-from pipeline.resample import TRUNCATE, noise_gain, resample_polyline, smooth_subsample, smoothing_sigma, subsample_grid
+from pipeline.resample import (
+    TRUNCATE,
+    noise_gain,
+    point_sigma,
+    resample_polyline,
+    sample_noise,
+    smooth_subsample,
+    smoothing_sigma,
+    subsample_grid,
+)
 from tests.pipeline.synthetic_edges import line_normal, quantise, render_step
 
 
@@ -202,3 +211,44 @@ def test_after_t30_smoothing_rms_to_true_line_is_below_5_thousandths_px():
     print(f"local quadratic: inside RMS {np.sqrt(np.mean(mid**2)):.4f} px, ends RMS {np.sqrt(np.mean(ends**2)):.4f} px")
     assert np.sqrt(np.mean(mid**2)) <= 0.005
     assert np.sqrt(np.mean(ends**2)) <= 0.01
+
+
+def test_point_sigma_is_the_spread_of_the_smoothed_points():
+    """Each smoothed point's standard deviation, the smoother's row through white noise, against the
+    spread of the smoothed points of many noisy copies of one gently curved edge (both smoothers)."""
+    rng = np.random.default_rng(11)
+    x = np.arange(0.0, 701.0)
+    base = np.column_stack([x, 2e-5 * (x - 350.0) ** 2])
+    noise = 0.03 * (1.0 + 2.0 * (x > 600))  # the last 100 px three times as noisy (known)
+    for method in ("local-quadratic", "gaussian"):
+        runs = np.array(
+            [
+                smooth_subsample(base + np.column_stack([0 * x, rng.normal(0, 1, x.size) * noise]), 30, method=method)[
+                    :, 1
+                ]
+                for _ in range(300)
+            ]
+        )
+        predicted = point_sigma(base, noise, 30, method=method)
+        assert predicted.shape == (runs.shape[1],)
+        assert np.allclose(runs.std(axis=0), predicted, rtol=0.15)
+    lq = point_sigma(base, noise, 30)
+    assert lq[-1] > 5 * lq[len(lq) // 2] and lq[0] > 2 * lq[len(lq) // 2]  # the noisy, one-sided end
+
+
+def test_sample_noise_recovers_the_noise_and_its_growth():
+    rng = np.random.default_rng(12)
+    x = np.arange(0.0, 1501.0)
+    curve = 1e-5 * (x - 700.0) ** 2
+    assert sample_noise(np.column_stack([x, curve + rng.normal(0, 0.01, x.size)])) == pytest.approx(0.01, rel=0.1)
+    sd = np.where(x > 1300, 0.03, 0.01)
+    xy = np.column_stack([x, curve + rng.normal(0, 1, x.size) * sd])
+    local = sample_noise(xy, local=True)
+    assert local.shape == (1501,)
+    assert local[600] == pytest.approx(0.01, rel=0.15) and local[-1] == pytest.approx(0.03, rel=0.2)
+    # correlated noise (a 3-sample moving average of white noise 0.01: long-run standard deviation 0.01,
+    # plain scatter 0.01 / sqrt(3)): the effective level, not the scatter
+    w = rng.normal(0, 0.01, x.size + 2)
+    ma = (w[:-2] + w[1:-1] + w[2:]) / 3.0
+    assert sample_noise(np.column_stack([x, ma])) == pytest.approx(0.01 / np.sqrt(3) * np.sqrt(3), rel=0.15)
+    assert np.isnan(sample_noise(xy[:4])) and sample_noise(xy[:4], local=True).shape == (0,)

@@ -1,0 +1,328 @@
+"""What limits the realistic simulator's field error (issue 19 item 5): one effect switched off at a time.
+
+Usage::
+
+    .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2] [--exact-only | --kink-trim]
+
+Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
+0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
+``pipeline.harp_shape.fit_harp_shape``: what a session stores), rendered again with one thing changed:
+
+* **render ablations** (measured as ``harp measure`` does): the strings made straight (sag, bows, kink,
+  twist all zero), the kinks alone removed, the blur made uniform (the drawn isotropic PSF, no defocus
+  growing to the corners), no colour filter array (a monochrome sensor: no demosaicing), no shot or read
+  noise, no vignetting and a uniform back-light, a linear tone curve;
+* **exact points**: the true edges traced through the exact lens every 2 px (``pipeline.render.visible_edges``),
+  no image at all, with the strings as drawn ("bent") or straight; the straight ones fitted by
+  ``radial4+tangential+prism`` and by ``radial6+tangential+prism`` are the model family's own limit;
+* **chosen**: the candidate ``pipeline.select.select_model`` chooses on the realistic shots (what a session
+  with no ``pipeline.model`` fits), fitted with the strings separated.
+
+A second table (exact points only, no image; ``--exact-only`` prints it alone) asks whether the strings'
+shapes could be told from the lens by the set-up or the fit: the turntable axis moved 150 and 300 px (and half
+that down) from where it was drawn (the harp widened by copies of its strings so that it still fills the
+image), each fitted with the lens alone and with the strings separated; and the kinks alone (every other
+shape zero), fitted with ``fit_distortion``'s outlier rejection (edges above 5 x the median edge RMS) and
+without it.
+
+A third table (``--kink-trim``) tries, on the full realistic shots, what would keep a kink out of the lens
+without a per-point weight in the fit (a prototype in this script, not the pipeline's behaviour): after the
+fit, each edge's residual about the fitted lens minus its own smooth trend (Legendre degree 4 along the edge:
+what the lens's misfit and a string's bow leave) is a kink's signature; the points where it exceeds
+``c`` times its robust standard deviation over all edges (1.4826 x median absolute value) are dropped and the
+lens fitted again.
+
+Every figure is the field error against the exact lens, RMS modulo homography over the whole image
+(``pipeline.compare.compare_models``, 20 px grid), px. JPEG is off and the lens has no non-parametric field
+in this population (``realistic_session(jpeg=False)``, ``lens_population(field=False)``), as in
+``benchmarks/strings_separated.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.harp_scene import Harp
+from pipeline.harp_shape import fit_harp_shape
+from pipeline.lens_population import lens_population
+from pipeline.measure import measure_image
+from pipeline.models.base import DistortionModel
+from pipeline.optics import FieldBlur
+from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
+from pipeline.render import visible_edges
+from pipeline.select import select_model
+
+FITTED = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
+SPEC = FitSpec("radial", 4, True, True)
+SPEC6 = FitSpec("radial", 6, True, True)
+STRAIGHT = {"sag_px": 0.0, "bow_px": (0.0, 0.0, 0.0), "kink_px": 0.0, "ovality_px": 0.0, "offcentre_px": 0.0}
+STRAIGHT |= {"pick_px": 0.0}
+RENDERS = ("full", "straight", "no kinks", "uniform blur", "no Bayer", "no noise", "flat light", "linear tone")
+
+
+def reshaped(harp: Harp, zero: dict[str, object]) -> Harp:
+    """``harp`` with the string-shape fields in ``zero`` set to those values (positions and widths kept)."""
+    strings = tuple(dataclasses.replace(s, **zero) for s in harp.strings)  # type: ignore[arg-type]
+    return Harp(strings, harp.spacing_px, harp.material, harp.mm_per_px, harp.tension_n, harp.transmission)
+
+
+def variant(ses: Session, name: str) -> tuple[Harp, Effects]:
+    """The harp and effects of render ablation ``name`` (module docstring)."""
+    e, rep = ses.effects, dataclasses.replace
+    return {
+        "full": (ses.harp, e),
+        "straight": (reshaped(ses.harp, STRAIGHT), e),
+        "no kinks": (reshaped(ses.harp, {"kink_px": 0.0}), e),
+        "uniform blur": (ses.harp, rep(e, blur=FieldBlur(sigma_px=e.blur.sigma_px))),
+        "no Bayer": (ses.harp, rep(e, sensor=rep(e.sensor, cfa=None))),
+        "no noise": (ses.harp, rep(e, sensor=rep(e.sensor, shot_noise=False, read_noise_e=0.0))),
+        "flat light": (ses.harp, rep(e, vignetting=None, backlight=None)),
+        "linear tone": (ses.harp, rep(e, development=rep(e.development, tone="linear"))),
+    }[name]
+
+
+def field(lines: list[list], lens: DistortionModel, w: int, h: int, spec: FitSpec, joint: bool = True) -> float:
+    """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``)."""
+    plain = fit_distortion(lines, w, h, **spec.fit_arguments())
+    if not plain:
+        return float("nan")
+    model = plain.model
+    if joint:
+        sep = fit_harp_shape(lines, FITTED, w, h, spec, plain=plain)
+        if not sep:
+            return float("nan")
+        model = sep.model
+    return float(compare_models(model, lens, w, h, step=20).rms)
+
+
+def exact_lines(lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int) -> list[list]:
+    """The true edges of every shot, traced through the exact lens every 2 px."""
+    out = []
+    for ang in FITTED:
+        edges = shot_edges(lens, harp, ses.mount.pose(ang), w, h)
+        out.append([c for _, c in visible_edges(edges, lens, w, h, step=2.0)])
+    return out
+
+
+def one(args: tuple[int, int, int]) -> dict[str, object]:
+    seed, w, h = args
+    member = lens_population(seed, 1, w, h)[0]
+    lens = member.model
+    ses = realistic_session(seed, w, h)
+    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    t0 = time.perf_counter()
+    full_lines: list[list] = []
+    for name in RENDERS:
+        harp, eff = variant(ses, name)
+        shots = render_shots(lens, harp, ses.mount, FITTED, w, h, eff, seed=seed)
+        lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+        if name == "full":
+            full_lines = lines
+            row["full alone"] = field(lines, lens, w, h, SPEC, joint=False)
+        row[name] = field(lines, lens, w, h, SPEC)
+    row["exact bent"] = field(exact_lines(lens, ses.harp, ses, w, h), lens, w, h, SPEC)
+    straight = exact_lines(lens, reshaped(ses.harp, STRAIGHT), ses, w, h)
+    row["exact straight r4"] = field(straight, lens, w, h, SPEC, joint=False)
+    row["exact straight r6"] = field(straight, lens, w, h, SPEC6, joint=False)
+    choice = select_model(full_lines, w, h).choice
+    row["chosen"] = choice.label
+    row["chosen field"] = field(full_lines, lens, w, h, choice)
+    row["t"] = time.perf_counter() - t0
+    return row
+
+
+def widened(harp: Harp, extra: int) -> Harp:
+    """``harp`` with ``extra`` copies of its strings (shapes and all) added on each side at its pitch."""
+    n, p = len(harp.strings), harp.spacing_px
+    strings = tuple(
+        dataclasses.replace(
+            harp.strings[j % n], index=j + extra, position_px=harp.strings[j % n].position_px + (j - j % n) * p
+        )
+        for j in range(-extra, n + extra)
+    )
+    return Harp(strings, harp.spacing_px, harp.material, harp.mm_per_px, harp.tension_n, harp.transmission)
+
+
+AXIS_SHIFTS = (0.0, 150.0, 300.0)
+
+
+def exact_only(args: tuple[int, int, int]) -> dict[str, object]:
+    seed, w, h = args
+    member = lens_population(seed, 1, w, h)[0]
+    lens = member.model
+    ses = realistic_session(seed, w, h)
+    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    for off in AXIS_SHIFTS:
+        harp = widened(ses.harp, int(off // ses.harp.spacing_px) + 1)
+        c = ses.mount.centre
+        moved = dataclasses.replace(ses, mount=dataclasses.replace(ses.mount, centre=(c[0] + off, c[1] + off / 2)))
+        lines = exact_lines(lens, harp, moved, w, h)
+        row[f"axis {off:.0f}"] = (field(lines, lens, w, h, SPEC, joint=False), field(lines, lens, w, h, SPEC))
+    kinks = reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"})
+    lines = exact_lines(lens, kinks, ses, w, h)
+    for robust in (True, False):
+        fit = fit_distortion(lines, w, h, robust=robust, **SPEC.fit_arguments())
+        row[f"kinks {robust}"] = (
+            (compare_models(fit.model, lens, w, h, step=20).rms, len(fit.rejected)) if fit else None
+        )
+    return row
+
+
+def print_exact(rows: list[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | "
+        + " | ".join(f"axis moved {off:.0f} px: lens alone / separated" for off in AXIS_SHIFTS)
+        + " | kinks only, outlier edges rejected (edges) | kinks only, none rejected |"
+    )
+    print("|---:|---|---|" + "---:|" * (len(AXIS_SHIFTS) + 2))
+    for r in rows:
+        axis = " | ".join("{:.4f} / {:.4f}".format(*r[f"axis {off:.0f}"]) for off in AXIS_SHIFTS)  # type: ignore[str-format]
+        k1, k0 = r["kinks True"], r["kinks False"]
+        kink = f"{k1[0]:.4f} ({k1[1]}) | {k0[0]:.4f}" if k1 and k0 else "failed | failed"  # type: ignore[index]
+        print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {axis} | {kink} |", flush=True)
+
+
+def kink_points(lines: list[list], model: DistortionModel, c: float, degree: int = 4) -> tuple[list[list], int]:
+    """``lines`` without the points whose residual about ``model``, less its smooth trend along the edge,
+    exceeds ``c`` robust standard deviations (module docstring); also how many were dropped."""
+    detrended = []
+    for shot in lines:
+        per_shot = []
+        for p in shot:
+            u = model.undistort_points(p)
+            m = u.mean(0)
+            r = (u - m) @ np.linalg.svd(u - m, full_matrices=False)[2][1]
+            s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+            s = 2.0 * s / max(float(s[-1]), 1e-9) - 1.0
+            if len(p) >= 3 * (degree + 1):
+                v = np.polynomial.legendre.legvander(s, degree)
+                r = r - v @ np.linalg.lstsq(v, r, rcond=None)[0]
+            else:
+                r = np.zeros_like(r)
+            per_shot.append(r)
+        detrended.append(per_shot)
+    sigma = 1.4826 * float(np.median(np.abs(np.concatenate([r for shot in detrended for r in shot]))))
+    out, dropped = [], 0
+    for shot, rs in zip(lines, detrended, strict=True):
+        keep = [np.abs(r) <= c * sigma for r in rs]
+        dropped += sum(int(np.sum(~k)) for k in keep)
+        out.append([p[k] for p, k in zip(shot, keep, strict=True) if np.sum(k) >= 5])
+    return out, dropped
+
+
+KINK_C = (5.0, 8.0)
+
+
+def kink_trim(args: tuple[int, int, int]) -> dict[str, object]:
+    seed, w, h = args
+    member = lens_population(seed, 1, w, h)[0]
+    lens = member.model
+    ses = realistic_session(seed, w, h)
+    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
+    lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+    row["n"] = sum(len(p) for shot in lines for p in shot)
+    row["base"] = (field(lines, lens, w, h, SPEC, joint=False), field(lines, lens, w, h, SPEC))
+    plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
+    for c in KINK_C:
+        if not plain:
+            row[c] = None
+            continue
+        kept, dropped = kink_points(lines, plain.model, c)
+        row[c] = (field(kept, lens, w, h, SPEC, joint=False), field(kept, lens, w, h, SPEC), dropped)
+    return row
+
+
+def print_kink_trim(rows: list[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | points | lens alone / separated | "
+        + " | ".join(f"points > {c:g} sigma dropped: lens alone / separated (dropped)" for c in KINK_C)
+        + " |"
+    )
+    print("|---:|---|---|---:|---:|" + "---:|" * len(KINK_C))
+    for r in rows:
+        cells = " | ".join("{:.4f} / {:.4f} ({})".format(*r[c]) if r[c] else "failed" for c in KINK_C)  # type: ignore[str-format]
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['n']} | {{:.4f}} / {{:.4f}}".format(*r["base"])
+            + f" | {cells} |",  # type: ignore[str-format]
+            flush=True,
+        )
+
+
+COLUMNS = (
+    ("full alone", "full, lens alone"),
+    ("full", "full"),
+    ("straight", "straight strings"),
+    ("no kinks", "no kinks"),
+    ("uniform blur", "uniform blur"),
+    ("no Bayer", "no Bayer"),
+    ("no noise", "no noise"),
+    ("flat light", "flat light"),
+    ("linear tone", "linear tone"),
+    ("exact bent", "exact points, bent"),
+    ("exact straight r4", "exact points, straight"),
+    ("exact straight r6", "exact straight, radial6+t+p (lens alone)"),
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="38,37,39,6,16")
+    ap.add_argument("--size", default="1000x750")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--exact-only", action="store_true", help="print only the exact-point table (no rendering)")
+    ap.add_argument("--kink-trim", action="store_true", help="print only the kinked-points prototype's table")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    seeds = [int(s) for s in args.seeds.split(",")]
+    cmd = " ".join(argv if argv is not None else sys.argv[1:])
+    print(
+        f"# What limits the field error: strings separated, radial4+tangential+prism unless said, {w}x{h}, six "
+        f"shots ({os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; `benchmarks/lens_limits.py {cmd}`)"
+    )
+    pool = ProcessPoolExecutor(max(1, args.workers))
+    jobs = [(s, w, h) for s in seeds]
+    if args.kink_trim:
+        print()
+        with pool:
+            print_kink_trim(list(pool.map(kink_trim, jobs)))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    if args.exact_only:
+        print()
+        with pool:
+            print_exact(list(pool.map(exact_only, jobs)))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    print()
+    print("| seed | lens | strings | " + " | ".join(c for _, c in COLUMNS) + " | chosen model | chosen, px | s |")
+    print("|---:|---|---|" + "---:|" * len(COLUMNS) + "---|---:|---:|")
+    with pool:
+        for r in pool.map(one, jobs):
+            cells = " | ".join(f"{r[k]:.4f}" for k, _ in COLUMNS)
+            print(
+                f"| {r['seed']} | {r['lens']} | {r['strings']} | {cells} | {r['chosen']} | "
+                f"{r['chosen field']:.4f} | {r['t']:.0f} |",
+                flush=True,
+            )
+        print()
+        print_exact(list(pool.map(exact_only, jobs)))
+    print(f"# load average at end {os.getloadavg()[0]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
