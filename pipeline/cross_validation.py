@@ -61,7 +61,10 @@ DEFAULT_CANDIDATES: tuple[FitSpec, ...] = tuple(
 )
 """Radial k up to rho^2, rho^4, rho^6, each plain / +tangential / +tangential+prism (degrees 4, 6 also with
 a centre prior); the division (rational) radial factor with one denominator term over k up to rho^2 (plain,
-+tangential, +tangential+prism) and rho^4 (+tangential+prism), for wide-angle lenses; poly 3, 5, 7."""
++tangential, +tangential+prism) and rho^4 (+tangential+prism), for wide-angle lenses; poly 3, 5, 7. Not the
+three-fold term (:class:`~pipeline.models.radial.RadialModel`'s ``trefoil``): with 6 shots of 20 seeded lenses
+whose harp has its own bends it was chosen for lenses without one and made unseen shots worse
+(``benchmarks/RESULTS-model-choice.md``); a spec or a candidate list can name it."""
 
 FALLBACK = FULL_RADIAL
 """Choice when no cross-validation is possible: physically motivated, generalises across orientations."""

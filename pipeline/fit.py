@@ -157,6 +157,7 @@ def fit_distortion(
     prism: bool = False,
     *,
     division: int = 0,
+    trefoil: bool = False,
     field: tuple[int, int] | None = None,
     field_penalty: float | None = None,
     image_sizes: Sequence[tuple[int, int]] | None = None,
@@ -189,6 +190,9 @@ def fit_distortion(
     division : int
         Radial only: division (rational) denominator coefficients ``d1 .. dM`` (0..3,
         :class:`~pipeline.models.radial.RadialModel`), started at 0.
+    trefoil : bool
+        Radial only: the three-fold terms ``t1, t2`` (:class:`~pipeline.models.radial.RadialModel`),
+        started at 0 (or at ``init``'s); four string orientations determine them.
     field, field_penalty
         Radial only: a residual field of ``(nx, ny)`` B-spline control points and its roughness
         weight (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`; default
@@ -226,10 +230,12 @@ def fit_distortion(
     FitResult or FitFailure
         Never raises for a data problem: a :class:`FitFailure` says why.
     """
-    problem = spec_problem(model, degree, tangential, prism, division, field, field_penalty)
+    problem = spec_problem(model, degree, tangential, prism, division, field, field_penalty, trefoil)
     if problem:
         return FitFailure(problem)
-    spec = FitSpec(model, degree, tangential, prism, division=division, field=field, field_penalty=field_penalty)
+    spec = FitSpec(
+        model, degree, tangential, prism, division=division, field=field, field_penalty=field_penalty, trefoil=trefoil
+    )
     if image_sizes is not None:
         sizes = {(int(w), int(h)) for w, h in image_sizes}
         if sizes != {(int(width), int(height))}:

@@ -72,6 +72,7 @@ def make_parametrisation(
             w_gauge,
             0.0 if ridge is None else ridge,
             spec.division,
+            spec.trefoil,
         )
         if spec.field is None:
             return radial

@@ -5,7 +5,8 @@ can fit:
 
 * ``radial`` — :class:`~pipeline.models.radial.RadialModel` with a free centre,
   ``k0 = 1`` and ``k1 .. k_degree`` (degree 1..10, default 4), optionally with the
-  decentering (``tangential``: p1, p2) and thin-prism (``prism``: s1..s4) terms,
+  decentering (``tangential``: p1, p2) and thin-prism (``prism``: s1..s4) terms, optionally
+  with the three-fold (``trefoil``: t1, t2) term,
   optionally with a division (rational) denominator ``1 + d1 rho^2 + .. + dM rho^2M``
   (``division = M``, 1..3: wide-angle lenses), optionally with a prior pulling the
   distortion centre towards the image centre (``center_prior``);
@@ -89,8 +90,9 @@ def spec_problem(
     division: Any = 0,
     field: Any = None,
     field_penalty: Any = None,
+    trefoil: Any = False,
 ) -> str | None:
-    """Why ``(kind, degree, tangential, prism, division, field, field_penalty)`` is not a valid
+    """Why ``(kind, degree, tangential, prism, division, field, field_penalty, trefoil)`` is not a valid
     spec, or ``None``.
 
     The one check of the allowed kinds and degrees (:data:`DEGREE_BOUNDS`,
@@ -108,8 +110,8 @@ def spec_problem(
         if not whole or not lo <= degree <= hi:
             name = "polynomial" if kind == "poly" else "radial"
             return f"{name} degree must be within {lo}..{hi}, got {degree}"
-    if kind == "poly" and (tangential or prism):
-        return "tangential/prism terms apply to the radial model only (poly contains them)"
+    if kind == "poly" and (tangential or prism or trefoil):
+        return "tangential/prism/trefoil terms apply to the radial model only (poly contains them)"
     try:
         whole_div = not isinstance(division, bool) and operator.index(division) == division
     except TypeError:
@@ -169,6 +171,10 @@ class FitSpec:
     field_penalty : float, optional
         The field's roughness weight; ``None``: :data:`DEFAULT_FIELD_PENALTY` (the spec then
         holds the number).
+    trefoil : bool
+        Radial only: the three-fold term (t1, t2) of :class:`~pipeline.models.radial.RadialModel`,
+        the quadratic distortion that thin-prism terms and homographies cannot express; it needs
+        four string orientations (:func:`pipeline.orientations.required_orientations`).
 
     Raises
     ------
@@ -185,10 +191,18 @@ class FitSpec:
     division: int = 0
     field: tuple[int, int] | None = None
     field_penalty: float | None = None
+    trefoil: bool = False
 
     def __post_init__(self) -> None:
         problem = spec_problem(
-            self.kind, self.degree, self.tangential, self.prism, self.division, self.field, self.field_penalty
+            self.kind,
+            self.degree,
+            self.tangential,
+            self.prism,
+            self.division,
+            self.field,
+            self.field_penalty,
+            self.trefoil,
         )
         if problem is None and self.kind == "poly" and self.center_prior:
             problem = "a centre prior applies to the radial model only"
@@ -197,6 +211,7 @@ class FitSpec:
         object.__setattr__(self, "degree", DEFAULT_DEGREE[self.kind] if self.degree is None else int(self.degree))
         object.__setattr__(self, "tangential", bool(self.tangential))
         object.__setattr__(self, "prism", bool(self.prism))
+        object.__setattr__(self, "trefoil", bool(self.trefoil))
         object.__setattr__(self, "center_prior", bool(self.center_prior))
         object.__setattr__(self, "division", int(self.division))
         if self.field is not None:
@@ -207,6 +222,7 @@ class FitSpec:
     @property
     def label(self) -> str:
         """Short name, e.g. ``radial4+tangential+prism+centre-prior``, ``radial2+division1``,
+        ``radial4+tangential+prism+trefoil``,
         ``radial4+tangential+field8x6@0.001`` or ``poly5`` (:func:`parse` reads it)."""
         if self.kind == "poly":
             return f"poly{self.degree}"
@@ -214,6 +230,7 @@ class FitSpec:
             f"radial{self.degree}"
             + ("+tangential" if self.tangential else "")
             + ("+prism" if self.prism else "")
+            + ("+trefoil" if self.trefoil else "")
             + (f"+division{self.division}" if self.division else "")
             + ("+centre-prior" if self.center_prior else "")
             + (f"+field{self.field[0]}x{self.field[1]}@{self.field_penalty:g}" if self.field else "")
@@ -229,6 +246,8 @@ class FitSpec:
         kw: dict[str, Any] = {"model": self.kind, "degree": self.degree}
         if self.kind == "radial":
             kw.update(tangential=self.tangential, prism=self.prism)
+            if self.trefoil:
+                kw["trefoil"] = True
             if self.division:
                 kw["division"] = self.division
             if self.center_prior:
@@ -254,12 +273,13 @@ class FitSpec:
             kw.get("division", 0),
             None if field is None else tuple(field),
             kw.get("field_penalty"),
+            bool(kw.get("trefoil", False)),
         )
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (model files, JSON, the store): ``model`` (the kind), ``degree``,
         ``tangential``, ``prism``, ``center_prior``, ``label`` and, when not 0, ``division``; with a
-        field, ``field`` ``[nx, ny]`` and ``field_penalty``."""
+        field, ``field`` ``[nx, ny]`` and ``field_penalty``; with the three-fold term, ``trefoil``."""
         d: dict[str, Any] = {
             "model": self.kind,
             "degree": self.degree,
@@ -268,6 +288,8 @@ class FitSpec:
             "center_prior": self.center_prior,
             "label": self.label,
         }
+        if self.trefoil:
+            d["trefoil"] = True
         if self.division:
             d["division"] = self.division
         if self.field is not None:
@@ -290,6 +312,7 @@ class FitSpec:
             d.get("division", 0),
             None if d.get("field") is None else tuple(d["field"]),
             d.get("field_penalty"),
+            bool(d.get("trefoil", False)),
         )
 
 
@@ -299,11 +322,18 @@ FULL_RADIAL = FitSpec("radial", tangential=True, prism=True)
 model selection's fallback (:data:`pipeline.cross_validation.FALLBACK`)."""
 
 
-_TERMS = {"tangential": "tangential", "prism": "prism", "centre-prior": "center_prior", "center-prior": "center_prior"}
+_TERMS = {
+    "tangential": "tangential",
+    "prism": "prism",
+    "trefoil": "trefoil",
+    "centre-prior": "center_prior",
+    "center-prior": "center_prior",
+}
 
 
 def parse(label: str) -> FitSpec:
     """The spec of a label: ``radial``, ``radial4``, ``radial4+tangential+prism``,
+    ``radial4+tangential+prism+trefoil``,
     ``radial6+tangential+centre-prior``, ``radial2+division1``, ``radial4+field8x6``,
     ``radial4+tangential+field8x6@0.03`` (a field of 8 x 6 control points, its penalty), ``poly``,
     ``poly7`` (no degree: the default).
@@ -318,7 +348,7 @@ def parse(label: str) -> FitSpec:
     kind = next((k for k in KINDS if head.startswith(k)), None)
     if kind is None:
         raise ValueError(
-            f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+division<M>][+centre-prior] "
+            f"{label!r}: unknown model; expected radial<degree>[+tangential][+prism][+trefoil][+division<M>][+centre-prior] "
             "[+field<nx>x<ny>[@<penalty>]] or poly<degree>"
         )
     digits = head[len(kind) :]
@@ -337,7 +367,7 @@ def parse(label: str) -> FitSpec:
             continue
         if term not in _TERMS:
             raise ValueError(
-                f"{label!r}: unknown term {term!r}; known: tangential, prism, division<M>, centre-prior, "
+                f"{label!r}: unknown term {term!r}; known: tangential, prism, trefoil, division<M>, centre-prior, "
                 "field<nx>x<ny>[@<penalty>]"
             )
         flags[_TERMS[term]] = True

@@ -17,9 +17,18 @@ from pipeline.fitspec import FitSpec
 
 REQUIRED_ORIENTATIONS_FREE = 3
 """Distinct orientations a spec with a free centre and decentering / thin-prism / division terms needs
-to be well supported: with two, a shift of the centre and the decentering terms trade against each
-other along a direction the two orientations hardly see (on the real photographs, fitted on two
-orientations, the third is left 2-3x less straight than when it is in the fit)."""
+to be well supported. Two orientations determine those terms when the lens has nothing else (an exact
+decentred lens fitted on two orientations leaves unseen ones straight to 0.001 px,
+``tests/pipeline/test_trefoil.py``), but a quadratic term the spec lacks (the three-fold one,
+:class:`~pipeline.models.radial.RadialModel`) is then taken up by the thin-prism and decentering terms
+without a trace and bends the third orientation; with three, it shows as a bow the fitted shots keep.
+On the real photographs, fitted on two orientations, the third is left 2-3x less straight than when it
+is in the fit (``benchmarks/quadratic_sector.py``)."""
+
+REQUIRED_ORIENTATIONS_TREFOIL = 4
+"""Distinct orientations the three-fold (trefoil) term needs: a quadratic distortion field shows on the
+strings of one orientation only as the bow they all share, one number per orientation, and modulo a
+homography the quadratic fields are four-dimensional (thin-prism two, trefoil two)."""
 
 REQUIRED_ORIENTATIONS_POLY = 4
 """Distinct orientations a free bivariate polynomial (or a residual field) needs: with fewer, it keeps the lines of
@@ -62,9 +71,12 @@ def distinct_orientations(angles_deg: Iterable[float], separation_deg: float = O
 
 def required_orientations(spec: FitSpec) -> int:
     """Distinct orientations ``spec`` needs to be well supported (:data:`REQUIRED_ORIENTATIONS_FREE`,
-    :data:`REQUIRED_ORIENTATIONS_POLY`, also for a residual field); 2 for a radial factor alone (or one with a centre prior)."""
+    :data:`REQUIRED_ORIENTATIONS_POLY`, also for a residual field, :data:`REQUIRED_ORIENTATIONS_TREFOIL`);
+    2 for a radial factor alone (or one with a centre prior)."""
     if spec.kind == "poly" or spec.field is not None:
         return REQUIRED_ORIENTATIONS_POLY
+    if spec.trefoil:
+        return REQUIRED_ORIENTATIONS_TREFOIL
     if (spec.tangential or spec.prism or spec.division) and not spec.center_prior:
         return REQUIRED_ORIENTATIONS_FREE
     return 2

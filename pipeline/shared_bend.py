@@ -4,7 +4,8 @@ After a correction, each edge of a shot still departs from its regression line b
 ``S`` (:func:`pipeline.straightness.fit_line`). Two causes leave different marks:
 
 * a term of the lens the correction lacks, or one the fitted shots left undetermined (with two
-  orientations a thin-prism or decentering term along the third is free), bends **every** edge
+  orientations a three-fold term, :class:`~pipeline.models.radial.RadialModel`'s ``trefoil``, is taken
+  up by the thin-prism and decentering terms and bends a third orientation), bends **every** edge
   of a shot the same way where they pass through the same part of the field — as does a bend the
   whole harp shares;
 * a string's own bend, its twist and the measurement's noise differ from edge to edge, and so
@@ -19,7 +20,9 @@ shared cause; the rest is each edge's own. On the real photographs fitted on two
 RMS shared by every string, 0.033 px each edge's own; the same shot in a fit of all three keeps
 0.010 px shared and 0.023 px own (``harp calibrate IMG_6931.pgm IMG_6950.pgm --out two.yaml``, then
 ``harp evaluate two.yaml IMG_6964.pgm``). The shared part was a
-term the two orientations did not determine, not the strings.
+quadratic term the two orientations could not tell from the thin-prism terms, not the strings: with the
+three-fold term, all three shots fitted keep 0.005-0.009 px shared instead of 0.010-0.013
+(``benchmarks/quadratic_sector.py``).
 
 References
 ----------

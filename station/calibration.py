@@ -34,7 +34,7 @@ from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, stra
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
-from pipeline.orientations import distinct_orientations
+from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
@@ -76,7 +76,8 @@ class Calibration:
     :class:`pipeline.select.Selection` of an automatic choice, else None);
     ``merit``: the figures of merit; ``held_out``: per held-out shot (``held_out``
     mode); ``uncertainty``: the bootstrap map (``FieldUncertainty``) or None;
-    ``details``: fit diagnostics kept with the profile.
+    ``details``: fit diagnostics kept with the profile; ``support``: why the shots do not support a given
+    ``spec`` well (:func:`pipeline.orientations.support_problem`; an automatic choice says it in its reason).
     """
 
     fit: FitResult | FitFailure
@@ -87,6 +88,7 @@ class Calibration:
     uncertainty: Any = None
     details: Mapping[str, Any] = field(default_factory=dict)
     failure: str | None = None
+    support: str | None = None
 
     def profile(
         self,
@@ -115,7 +117,7 @@ class Calibration:
             width=int(width),
             height=int(height),
             spec=self.spec,
-            selection=selection_record(self.selection, given_by),
+            selection=selection_record(self.selection, given_by, self.support),
             merit=merit,
             lens=lens,
             camera=camera,
@@ -185,6 +187,7 @@ def calibrate_shots(
     """
     lines = [list(s) for s in shots]
     selection = None
+    support = None if spec is None else support_problem(spec, lines)
     if spec is None:
         if candidates is None:
             selection = select_model(lines, width, height, map_fn=map_fn)
@@ -197,7 +200,7 @@ def calibrate_shots(
     cv_fit = next((r.full_fit for r in selection.table if r.candidate == spec), None) if selection else None
     full = cv_fit if cv_fit and same_size else fit_distortion(lines, width, height, **kw, image_sizes=image_sizes)
     if not full:
-        return Calibration(full, spec, selection, failure=full.reason)
+        return Calibration(full, spec, selection, failure=full.reason, support=support)
     fit_figures = _figures(full.d_after, full.d_max_after)
     before = _figures(full.d_before, full.d_max_before)
     details: dict[str, Any] = {
@@ -246,7 +249,7 @@ def calibrate_shots(
             details.update(bootstrap_replicates=res.n_boot, bootstrap_failed=res.n_failed)
         details["bootstrap_scheme"] = BOOTSTRAP_SCHEME
     merit = Merit(fit=fit_figures, holdout=hold, before=before, field_uncertainty=unc_summary)
-    return Calibration(full, spec, selection, merit, tuple(per_shot), unc, details)
+    return Calibration(full, spec, selection, merit, tuple(per_shot), unc, details, support=support)
 
 
 def size_problem(shots: Sequence[tuple[str, int, int]]) -> str | None:
@@ -283,15 +286,16 @@ def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -
 # ------------------------------------------------------- a focus setting
 
 
-def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG) -> dict[str, Any]:
+def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG, support: str | None = None) -> dict[str, Any]:
     """How the spec was chosen, as a profile keeps it: ``{"reason", "folds"}``.
 
     ``selection``: the :class:`pipeline.select.Selection` of an automatic choice (its reason and
     folds), or None for a given spec (``given_by``: :data:`GIVEN_BY_CONFIG` or
-    :data:`GIVEN_ON_COMMAND_LINE`; folds ``"none"``). The one place a selection reason is written.
+    :data:`GIVEN_ON_COMMAND_LINE`, followed by ``support``, why the shots do not support that spec well,
+    when they do not; folds ``"none"``). The one place a selection reason is written.
     """
     if selection is None:
-        return {"reason": given_by, "folds": "none"}
+        return {"reason": given_by if support is None else f"{given_by}; {support}", "folds": "none"}
     return {"reason": selection.reason, "folds": selection.folds}
 
 

@@ -2,7 +2,7 @@
 and its parametrisation for the fit.
 
 Without a denominator the correction is linear in its coefficients ``k0 … kN, p1, p2,
-s1 … s4``: :func:`radial_basis` writes the formula once, as the basis function of each
+s1 … s4, t1, t2``: :func:`radial_basis` writes the formula once, as the basis function of each
 coefficient, and both the model (:class:`RadialModel`, a sum over the terms) and the
 fit (:class:`RadialParametrisation`, the terms as Jacobian columns) use it. The
 optional division (rational) denominator ``1 + d1 rho^2 + … + dM rho^2M`` divides the
@@ -27,7 +27,7 @@ RADIAL_REACH_LIMIT = 8.0
 
 
 def radial_basis(
-    xi: np.ndarray, eta: np.ndarray, degree: int, tangential: bool, prism: bool
+    xi: np.ndarray, eta: np.ndarray, degree: int, tangential: bool, prism: bool, trefoil: bool = False
 ) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
     r"""The basis functions of :class:`RadialModel`, in parameter order.
 
@@ -37,7 +37,8 @@ def radial_basis(
     eta_u part)`` of the other terms — with ``tangential``, :math:`p_1`:
     :math:`(2\xi\eta,\ \rho^2 + 2\eta^2)` and :math:`p_2`: :math:`(\rho^2 + 2\xi^2,\ 2\xi\eta)`;
     then, with ``prism``, :math:`s_1`: :math:`(\rho^2, 0)`, :math:`s_2`: :math:`(\rho^4, 0)`,
-    :math:`s_3`: :math:`(0, \rho^2)`, :math:`s_4`: :math:`(0, \rho^4)`. The corrected
+    :math:`s_3`: :math:`(0, \rho^2)`, :math:`s_4`: :math:`(0, \rho^4)`; then, with ``trefoil``,
+    :math:`t_1`: :math:`(\xi^2 - \eta^2,\ -2\xi\eta)`, :math:`t_2`: :math:`(2\xi\eta,\ \xi^2 - \eta^2)`. The corrected
     offsets are the coefficient-weighted sum of the terms (:meth:`RadialModel.undistort_points`),
     the radial part divided by the denominator of :func:`division_basis` when there is one.
     """
@@ -52,7 +53,18 @@ def radial_basis(
     if prism:
         z = np.zeros_like(rho)
         extra += [(rho2, z), (rho2 * rho2, z), (z, rho2), (z, rho2 * rho2)]
+    if trefoil:
+        extra += trefoil_terms(xi, eta)
     return powers, extra
+
+
+def trefoil_terms(xi: np.ndarray, eta: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    r"""The two three-fold (trefoil) terms of :class:`RadialModel`, ``(xi_u part, eta_u part)`` each:
+    :math:`t_1`: :math:`(\xi^2 - \eta^2,\ -2\xi\eta)` and :math:`t_2`: :math:`(2\xi\eta,\ \xi^2 - \eta^2)`,
+    in complex form :math:`\bar z^2` and :math:`i\bar z^2` (:math:`z = \xi + i\eta`)."""
+    xe2 = 2.0 * xi * eta
+    d2 = xi * xi - eta * eta
+    return [(d2, -xe2), (xe2, d2)]
 
 
 def division_basis(rho2: np.ndarray, terms: int) -> list[np.ndarray]:
@@ -70,12 +82,14 @@ class RadialTerms(TypedDict, total=False):
     tangential: tuple[float, float] | None
     prism: tuple[float, float, float, float] | None
     division: tuple[float, ...] | None
+    trefoil: tuple[float, float] | None
 
 
 @dataclass(frozen=True)
 class RadialModel(DistortionModel):
     r"""Radial polynomial correction with a free centre (Tang et al. 2012, eq. 1),
-    optionally with decentering (tangential) and thin-prism terms (Brown–Conrady).
+    optionally with decentering (tangential) and thin-prism terms (Brown–Conrady) and a
+    three-fold (trefoil) term.
 
     Maps distorted pixels :math:`(x_d, y_d)` to ideal pixels :math:`(x_u, y_u)`.
     With the normalised offsets :math:`\xi = (x_d - c_x)/s`,
@@ -84,8 +98,10 @@ class RadialModel(DistortionModel):
     .. math::
         f(\rho) &= \frac{k_0 + k_1 \rho + k_2 \rho^2 + \dots + k_N \rho^N}
                          {1 + d_1 \rho^2 + \dots + d_M \rho^{2M}} \\
-        \xi_u &= f(\rho)\,\xi + 2 p_1 \xi\eta + p_2(\rho^2 + 2\xi^2) + s_1\rho^2 + s_2\rho^4 \\
-        \eta_u &= f(\rho)\,\eta + p_1(\rho^2 + 2\eta^2) + 2 p_2 \xi\eta + s_3\rho^2 + s_4\rho^4 \\
+        \xi_u &= f(\rho)\,\xi + 2 p_1 \xi\eta + p_2(\rho^2 + 2\xi^2) + s_1\rho^2 + s_2\rho^4
+                 + t_1(\xi^2 - \eta^2) + 2 t_2\xi\eta \\
+        \eta_u &= f(\rho)\,\eta + p_1(\rho^2 + 2\eta^2) + 2 p_2 \xi\eta + s_3\rho^2 + s_4\rho^4
+                 - 2 t_1\xi\eta + t_2(\xi^2 - \eta^2) \\
         x_u &= c_x + s\,\xi_u, \quad y_u = c_y + s\,\eta_u
 
     ``s`` (``scale``) is a fixed normalisation, by convention half the image
@@ -98,8 +114,22 @@ class RadialModel(DistortionModel):
     :math:`\tan(a\rho)/(a\rho)`, has its pole inside the image's reach, which a
     denominator can place and a polynomial cannot).
 
-    Parameter order (as in :meth:`params`): ``cx, cy, k0 … kN, p1, p2, s1 … s4,
-    d1 … dM`` (``p``, ``s`` and ``d`` present only when enabled).
+    The trefoil term (``t1, t2``; :func:`trefoil_terms`, :math:`\bar z^2` in complex form) is the
+    part of a quadratic distortion field that neither the decentering and thin-prism terms nor a
+    homography can express: modulo a homography, the quadratic fields are four-dimensional, the
+    thin-prism's :math:`\rho^2` terms two of them, the trefoil the other two. A straight line of
+    direction :math:`\theta` sees a quadratic field only as a bow shared by every line of that
+    direction, :math:`-s_1\sin\theta + s_3\cos\theta - t_1\sin 3\theta + t_2\cos 3\theta` (times
+    the line's half-length squared), so strings of two orientations determine the thin-prism terms
+    but not the trefoil as well, and four orientations determine both. The real photographs of
+    ``../shared/data/real-harp`` show a bow of this kind (``benchmarks/quadratic_sector.py``): a
+    three-fold term, or a bow the whole harp shares, which three photographs cannot tell apart (shots
+    180 degrees apart can: the harp's bow turns over with it, the lens's does not). A tilted or decentred
+    element gives thin-prism and decentering terms; a three-fold term needs a three-fold cause, such
+    as an element or sensor deformed where it is held at three points.
+
+    Parameter order (as in :meth:`params`): ``cx, cy, k0 … kN, p1, p2, s1 … s4, t1, t2,
+    d1 … dM`` (``p``, ``s``, ``t`` and ``d`` present only when enabled).
 
     References
     ----------
@@ -119,6 +149,7 @@ class RadialModel(DistortionModel):
     tangential: tuple[float, float] | None = None
     prism: tuple[float, float, float, float] | None = None
     division: tuple[float, ...] | None = None
+    trefoil: tuple[float, float] | None = None
     name: str = field(default="radial", init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -128,6 +159,10 @@ class RadialModel(DistortionModel):
             object.__setattr__(self, "tangential", tuple(float(v) for v in self.tangential))
         if self.prism is not None:
             object.__setattr__(self, "prism", tuple(float(v) for v in self.prism))
+        if self.trefoil is not None:
+            object.__setattr__(self, "trefoil", tuple(float(v) for v in self.trefoil))
+            if len(self.trefoil) != 2:
+                raise ValueError(f"RadialModel trefoil needs (t1, t2), got {len(self.trefoil)} values")
         if self.division is not None:
             object.__setattr__(self, "division", tuple(float(v) for v in self.division))
             if not self.division:
@@ -158,6 +193,8 @@ class RadialModel(DistortionModel):
             p += list(self.tangential)
         if self.prism is not None:
             p += list(self.prism)
+        if self.trefoil is not None:
+            p += list(self.trefoil)
         if self.division is not None:
             p += list(self.division)
         return np.asarray(p, dtype=np.float64)
@@ -167,7 +204,9 @@ class RadialModel(DistortionModel):
         s = self.scale
         xi = (xy[:, 0] - self.center[0]) / s
         eta = (xy[:, 1] - self.center[1]) / s
-        powers, extra = radial_basis(xi, eta, len(self.k) - 1, self.tangential is not None, self.prism is not None)
+        powers, extra = radial_basis(
+            xi, eta, len(self.k) - 1, self.tangential is not None, self.prism is not None, self.trefoil is not None
+        )
         f = self.k[0] * powers[0]
         for km, pw in zip(self.k[1:], powers[1:], strict=True):
             f = f + km * pw
@@ -177,7 +216,8 @@ class RadialModel(DistortionModel):
                 den = den + dj * ev
             f = f / den
         xu, yu = f * xi, f * eta
-        for c, (tx, ty) in zip((*(self.tangential or ()), *(self.prism or ())), extra, strict=True):
+        coefficients = (*(self.tangential or ()), *(self.prism or ()), *(self.trefoil or ()))
+        for c, (tx, ty) in zip(coefficients, extra, strict=True):
             xu = xu + c * tx
             yu = yu + c * ty
         return np.stack([self.center[0] + s * xu, self.center[1] + s * yu], axis=1)
@@ -222,7 +262,7 @@ class RadialModel(DistortionModel):
         rho, ok = radial_start(self.radial_map, rt, reach, tol=0.1 * INVERSE_TOL_PX / s)
         with np.errstate(divide="ignore", invalid="ignore"):
             unit = np.where(rt[:, None] > 0, off / rt[:, None], 0.0)
-        pure = self.tangential is None and self.prism is None
+        pure = self.tangential is None and self.prism is None and self.trefoil is None
         rho = np.minimum(rho, reach * (1 - 1e-9))
         start = c + s * rho[:, None] * unit
         if pure:  # beyond the radial part's range: no inverse in the domain
@@ -246,6 +286,8 @@ class RadialModel(DistortionModel):
             d["tangential"] = list(self.tangential)
         if self.prism is not None:
             d["prism"] = list(self.prism)
+        if self.trefoil is not None:
+            d["trefoil"] = list(self.trefoil)
         if self.division is not None:
             d["division"] = list(self.division)
         return d
@@ -259,13 +301,14 @@ class RadialModel(DistortionModel):
             tangential=tuple(d["tangential"]) if d.get("tangential") is not None else None,
             prism=tuple(d["prism"]) if d.get("prism") is not None else None,
             division=tuple(d["division"]) if d.get("division") is not None else None,
+            trefoil=tuple(d["trefoil"]) if d.get("trefoil") is not None else None,
         )
 
 
 class RadialParametrisation:
     """The free parameters of a :class:`RadialModel` fit, for :func:`pipeline.fit.fit_distortion`.
 
-    ``theta = [dcx, dcy, k1 … kN, (p1, p2), (s1 … s4), (d1 … dM)]``: centre ``c0 + s * dc``
+    ``theta = [dcx, dcy, k1 … kN, (p1, p2), (s1 … s4), (t1, t2), (d1 … dM)]``: centre ``c0 + s * dc``
     (``c0`` the image centre, ``s`` half the image diagonal), ``k0 = 1`` fixed (the
     model can express scale, so the gauge fixes it). Without a denominator the corrected
     points are linear in ``theta[2:]`` (their Jacobian columns are the terms of
@@ -287,12 +330,13 @@ class RadialParametrisation:
         w_gauge: float,
         ridge: float,
         division: int = 0,
+        trefoil: bool = False,
     ) -> None:
         self.s = 0.5 * float(np.hypot(width, height))
         self.c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
         self.degree, self.tangential, self.prism = int(degree), bool(tangential), bool(prism)
-        self.division = int(division)
-        self.n = 2 + self.degree + 2 * self.tangential + 4 * self.prism + self.division
+        self.division, self.trefoil = int(division), bool(trefoil)
+        self.n = 2 + self.degree + 2 * self.tangential + 4 * self.prism + 2 * self.trefoil + self.division
         self.w_center, self.w_gauge, self.ridge = w_center, w_gauge, ridge
 
     def theta0(self, init: DistortionModel | None) -> np.ndarray:
@@ -312,6 +356,9 @@ class RadialParametrisation:
             if self.prism and init.prism is not None:
                 s1, s2, s3, s4 = init.prism
                 th[i : i + 4] = np.array([s1 * scale, s2 * scale**3, s3 * scale, s4 * scale**3]) / k0
+            i += 4 * self.prism
+            if self.trefoil and init.trefoil is not None:
+                th[i : i + 2] = np.asarray(init.trefoil) / k0 * scale
             if init.division is not None and self.division:
                 i = self.n - self.division
                 for j, dj in enumerate(init.division[: self.division], start=1):
@@ -323,6 +370,8 @@ class RadialParametrisation:
         tang = (float(th[i]), float(th[i + 1])) if self.tangential else None
         i += 2 * self.tangential
         prism = (float(th[i]), float(th[i + 1]), float(th[i + 2]), float(th[i + 3])) if self.prism else None
+        i += 4 * self.prism
+        trefoil = (float(th[i]), float(th[i + 1])) if self.trefoil else None
         div = tuple(float(v) for v in th[self.n - self.division :]) if self.division else None
         c = self.c0 + self.s * th[:2]
         return RadialModel(
@@ -332,6 +381,7 @@ class RadialParametrisation:
             tangential=tang,
             prism=prism,
             division=div,
+            trefoil=trefoil,
         )
 
     def _offsets(self, xy: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -360,6 +410,8 @@ class RadialParametrisation:
             z = np.zeros_like(rho)
             rho4 = rho2 * rho2
             extra += [(rho2, z), (rho4, z), (z, rho2), (z, rho4)]
+        if self.trefoil:
+            extra += trefoil_terms(xi, eta)
         den = None
         even: list[np.ndarray] = []
         if self.division:
@@ -509,6 +561,13 @@ class RadialParametrisation:
             gxy += 2 * s1 * eta + 4 * s2 * rho2 * eta
             gyx += 2 * s3 * xi + 4 * s4 * rho2 * xi
             gyy += 2 * s3 * eta + 4 * s4 * rho2 * eta
+            i += 4
+        if self.trefoil:  # t1 (xi^2 - eta^2, -2 xi eta) + t2 (2 xi eta, xi^2 - eta^2)
+            t1, t2 = th[i : i + 2]
+            gxx += 2 * t1 * xi + 2 * t2 * eta
+            gxy += -2 * t1 * eta + 2 * t2 * xi
+            gyx += -2 * t1 * eta + 2 * t2 * xi
+            gyy += -2 * t1 * xi - 2 * t2 * eta
         return gxx, gxy, gyx, gyy
 
     def regularisation(self, th: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:

@@ -78,6 +78,11 @@ def register(subparsers) -> None:
     p.add_argument("--no-tangential", action="store_true", help="radial: no decentering terms")
     p.add_argument("--no-prism", action="store_true", help="radial: no thin-prism terms")
     p.add_argument(
+        "--trefoil",
+        action="store_true",
+        help="radial: add the three-fold term t1, t2 (needs >= 4 string orientations; pipeline.models.radial)",
+    )
+    p.add_argument(
         "--division",
         type=int,
         default=0,
@@ -146,17 +151,19 @@ def _spec(args) -> FitSpec | None:
             or args.no_prism
             or args.center_prior
             or args.division
+            or args.trefoil
             or field is not None
         ):
             raise CalibrateError(
-                "--degree/--no-tangential/--no-prism/--center-prior/--division/--field need --model radial or poly"
+                "--degree/--no-tangential/--no-prism/--trefoil/--center-prior/--division/--field need "
+                "--model radial or poly"
             )
         return None
     if args.model == "poly" and (
-        args.no_tangential or args.no_prism or args.center_prior or args.division or field is not None
+        args.no_tangential or args.no_prism or args.trefoil or args.center_prior or args.division or field is not None
     ):
         raise CalibrateError(
-            "--no-tangential/--no-prism/--center-prior/--division/--field apply to --model radial only"
+            "--no-tangential/--no-prism/--trefoil/--center-prior/--division/--field apply to --model radial only"
         )
     grid, penalty = None, None
     if field is not None and field != "auto":
@@ -173,6 +180,7 @@ def _spec(args) -> FitSpec | None:
             degree=args.degree,
             tangential=not args.no_tangential,
             prism=not args.no_prism,
+            trefoil=args.trefoil,
             center_prior=args.center_prior,
             division=args.division,
             field=grid,

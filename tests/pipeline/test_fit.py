@@ -60,6 +60,7 @@ def test_fit_without_the_needed_terms_leaves_residual():
     "kind,kw",
     [
         ("radial", dict(degree=4, tangential=True, prism=True)),
+        ("radial", dict(degree=4, tangential=True, prism=True, trefoil=True)),
         ("radial", dict(degree=3)),
         ("radial", dict(degree=2, tangential=True, prism=True, division=2)),
         ("poly", dict(degree=6)),
@@ -88,6 +89,7 @@ def test_analytic_jacobian_matches_finite_differences(kind, kw):
     [
         ("radial", dict(degree=4, tangential=True, prism=True)),
         ("radial", dict(degree=2, tangential=True, prism=True, division=2)),
+        ("radial", dict(degree=3, trefoil=True, division=1)),
         ("poly", dict(degree=5)),
     ],
 )

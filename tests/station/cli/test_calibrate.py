@@ -207,6 +207,29 @@ def test_division_option(shots, tmp_path, capsys):
     assert code == 2 and "need --model radial" in err
 
 
+def test_trefoil_option_and_a_given_spec_the_shots_do_not_support_says_so(shots, tmp_path, capsys):
+    """``--trefoil`` adds the three-fold term (the model file holds it, the label names it); a given spec
+    the shots' orientations cannot support (the term needs 4, here 3) is fitted, and the reason in the
+    output and in the model file says why it is not well supported. With 4 orientations it is not."""
+    out_path = tmp_path / "tref.yaml"
+    three = (shots[3.0], shots[63.0], shots[123.0])
+    code, out, err = _run(capsys, *three, "--model", "radial", "--trefoil", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["choice"]["label"] == "radial4+tangential+prism+trefoil"
+    assert (
+        "not well supported" in rep["choice"]["reason"]
+        and ">= 4 distinct string orientations" in rep["choice"]["reason"]
+    )
+    assert load_model(out_path).trefoil is not None
+    assert "not well supported" in out_path.read_text()
+    code, out, err = _run(capsys, *three, shots[93.0], "--model", "radial", "--trefoil", "--out", out_path, "--json")
+    assert code == 0, err
+    assert json.loads(out)["choice"]["reason"] == "given on the command line"
+    code, out, err = _run(capsys, *three, "--model", "poly", "--trefoil", "--out", out_path)
+    assert code == 2 and err.count("\n") == 1 and "--trefoil" in err and "radial only" in err
+
+
 def test_field_option(shots, tmp_path, capsys):
     """``--field`` adds a residual field to the radial model: the model file holds it, the label names it;
     on this radial lens it stays near the radial fit. A bad grid is one line, exit 2."""
