@@ -4,7 +4,7 @@ Run:  .venv/bin/python benchmarks/export_equations.py [--real DIR] [--lenses rea
 Prints a Markdown table (committed in benchmarks/RESULTS-exports.md). For each lens and format: the model
 the export chose, the conversion error it states (RMS / max modulo homography, each point's largest over
 the export's own pixels, the harp model's ideal pixels and the 4-corner normalised frame:
-``pipeline.exports.fit.worst_frame_mod_h``), and what its consumer finds on a 64-point-wide grid of the
+``pipeline.exports.conversion_error.worst_frame_mod_h``), and what its consumer finds on a 64-point-wide grid of the
 image, in the 4-corner normalised frame harp evaluate compares in (one of the three, so at most the
 stated figure up to the grids' difference): pycolmap's ``cam_from_img`` for COLMAP (a text model read by
 ``Reconstruction.read_text``), and for the formats whose software is not installable here the

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.source import Export, ExportSource
 
 AUTO = "auto"

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.exports.fit import ConversionError, image_grid
+from pipeline.exports.conversion_error import ConversionError, image_grid
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.statement import OPENCV_PIXELS, statement_lines

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.exports.fit import image_grid as fit_grid
+from pipeline.exports.conversion_error import image_grid as fit_grid
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.tca_model import ChannelModel, TcaField
 from pipeline.tca import LensfunTcaFit, lensfun_tca

@@ -13,14 +13,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.exports.auto_rule import auto_limit, fisheye_reason
-from pipeline.exports.fit import (
-    ConversionError,
-    fit_fisheye,
-    fit_fisheye_camera,
-    fit_opencv,
-    fit_opencv_camera,
-    fit_thin_prism_fisheye,
-)
+from pipeline.exports.conversion_error import ConversionError
+from pipeline.exports.fit import fit_fisheye, fit_fisheye_camera, fit_opencv, fit_opencv_camera, fit_thin_prism_fisheye
 from pipeline.exports.frame import FrameStatement, frame_statement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.measured_camera import camera_warnings, export_camera, measured_lines

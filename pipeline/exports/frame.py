@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from pipeline.corrected_frame import CorrectedFrame, corrected_frame, rectification
 from pipeline.corrected_frame import FrameChoice as FrameChoice
-from pipeline.exports.fit import ideal_homography
+from pipeline.exports.conversion_error import ideal_homography
 from pipeline.models.base import DistortionModel
 
 Array = npt.NDArray[np.float64]

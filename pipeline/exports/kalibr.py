@@ -36,7 +36,8 @@ from typing import Any
 
 import yaml
 
-from pipeline.exports.fit import RADTAN_COEFFS, ConversionError
+from pipeline.exports.conversion_error import ConversionError
+from pipeline.exports.fit import RADTAN_COEFFS
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.statement import OPENCV_PIXELS, hash_comments, statement_lines

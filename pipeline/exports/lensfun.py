@@ -49,7 +49,7 @@ from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.lens import LensInfo
 from pipeline.models.lensfun_model import LENSFUN_TERMS, LENSFUN_TYPES, LensfunModel, geometry_focal
 from pipeline.models.tca_model import LensfunTca

@@ -11,7 +11,8 @@ from dataclasses import replace
 
 from pipeline.exports.auto_rule import AUTO
 from pipeline.exports.colour import lensfun_colour
-from pipeline.exports.fit import ConversionError, fit_lensfun
+from pipeline.exports.conversion_error import ConversionError
+from pipeline.exports.fit import fit_lensfun
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.lensfun import LensfunEntry, installed_lens, lens_names, lensfun_database_text
 from pipeline.exports.measured_camera import measured_camera

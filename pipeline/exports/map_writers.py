@@ -13,7 +13,7 @@ import numpy as np
 
 from pipeline.corrected_frame import corrected_frame
 from pipeline.exports import maps as maps_fmt
-from pipeline.exports.fit import conversion_error_in_frame
+from pipeline.exports.conversion_error import conversion_error_in_frame
 from pipeline.exports.measured_camera import measured_camera
 from pipeline.exports.source import Export, ExportOptions, ExportSource, conversion_warnings, lens_notes
 from pipeline.models.base import DistortionModel

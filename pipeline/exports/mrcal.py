@@ -21,7 +21,7 @@ from __future__ import annotations
 import ast
 from typing import Any
 
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.statement import statement_lines

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from pipeline.exports.colour import OpenCVChannel
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed

@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.frame import FrameStatement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.solvers import SolverNeed

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.exports.fit import image_grid
+from pipeline.exports.conversion_error import image_grid
 from pipeline.models.base import DistortionModel
 from pipeline.models.homography import apply_homography
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from pipeline.corrected_frame import FrameChoice
 from pipeline.exports.colour import ColourCorrection
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.lens import LensInfo
 from pipeline.exports.solvers import SolverNeed
 from pipeline.intrinsics import Intrinsics

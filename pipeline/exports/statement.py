@@ -4,7 +4,7 @@ The OpenCV, ROS, mrcal, COLMAP, Kalibr, Basalt and Metashape files each say, in 
 mechanism (``#`` lines, FileStorage comments, XML comments, a JSON list), the same things: the
 stamp first (what a reader must know before using the file, e.g. that the profile failed QA), what
 the consumer must know before the figures (e.g. which ROS versions read the file), the conversion
-error (:meth:`~pipeline.exports.fit.ConversionError.lines`), what its point solver needs, the model
+error (:meth:`~pipeline.exports.conversion_error.ConversionError.lines`), what its point solver needs, the model
 chosen and why, what the camera matrix means, the format's own conventions (pixel origin, a
 consumer's fixed step counts), the corrected image (``R``, ``newK``) and notes (lens, holdout ``d``).
 :func:`statement_lines` is that list; each writer only puts it into its file.
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from pipeline.exports.fit import ConversionError
+from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.lens import CameraMatrixChoice
 
 OPENCV_PIXELS = "pixel convention: OpenCV's (the centre of the top-left pixel at 0, 0)"
@@ -38,7 +38,7 @@ def statement_lines(
     Parameters
     ----------
     stamp : lines stated first (:attr:`~pipeline.exports.source.ExportSource.stamp`).
-    error : the conversion error, stated by its :meth:`~pipeline.exports.fit.ConversionError.lines`.
+    error : the conversion error, stated by its :meth:`~pipeline.exports.conversion_error.ConversionError.lines`.
     caveats : what the consumer must know before the figures (e.g. which readers read the file).
     solver : what the consumer's point solver needs (:meth:`~pipeline.exports.solvers.SolverNeed.lines`).
     choice : the model chosen and why.

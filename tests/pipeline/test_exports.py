@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline.exports.fit import conversion_error, fit_lensfun, fit_opencv
+from pipeline.exports.conversion_error import conversion_error
+from pipeline.exports.fit import fit_lensfun, fit_opencv
 from pipeline.exports.lensfun import lensfun_text, read_lensfun_text
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_FIELDS, read_ros_text, ros_text
