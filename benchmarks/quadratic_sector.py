@@ -39,6 +39,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "pipeline"))
 
+from complex_lens import ComplexLens, worst_d
 from harp_points import harp_point_sets
 
 from pipeline.fit import fit_distortion
@@ -46,24 +47,7 @@ from pipeline.shared_bend import shared_bend
 from pipeline.straightness import straightness
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
-W, H, F = 1200, 800, 1000.0
-
-
-class ComplexLens:
-    """Ideal -> distorted: ``z_d = z + k1 |z|^2 z + s |z|^2 + t conj(z)^2`` about ``centre``."""
-
-    def __init__(self, k1: float, s: complex, t: complex, centre: tuple[float, float]) -> None:
-        self.k1, self.s, self.t, self.c = k1, complex(s), complex(t), complex(*centre)
-
-    def distort_points(self, xy: np.ndarray) -> np.ndarray:
-        z = ((xy[:, 0] + 1j * xy[:, 1]) - self.c) / F
-        zd = z + self.k1 * abs(z) ** 2 * z + self.s * abs(z) ** 2 + self.t * np.conj(z) ** 2
-        out = self.c + F * zd
-        return np.c_[out.real, out.imag]
-
-
-def worst_d(model, shots) -> float:
-    return max(straightness([model.undistort_points(p) for p in lines]).d for lines in shots)
+W, H = 1200, 800
 
 
 def exact_part() -> None:
