@@ -183,6 +183,28 @@ def point_shot(
     return lines
 
 
+def point_session(
+    seed: int, nfit: int, sigmas: list[list[np.ndarray]] | None = None
+) -> tuple[RadialModel, list[list[np.ndarray]], list[list[np.ndarray]]]:
+    """Lens ``seed`` of the point-set population, its ``nfit`` shots to fit (spread over 180 degrees) and 3
+    unseen shots between them, one harp (15 strings with their own bends) in all; with ``sigmas``, each
+    fitted shot's point sigmas appended to it (:func:`point_shot`)."""
+    lens = point_lens(seed)
+    rng = np.random.default_rng(seed + 7)
+    harp = rng.normal(0, 0.015, (15, 3))
+    base = rng.uniform(0, 180)
+    fa = [(base + 180 * i / nfit + rng.normal(0, 5)) % 180 for i in range(nfit)]
+    ta = [(base + 90 / nfit + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
+    fs = []
+    for i, a in enumerate(fa):
+        out: list[np.ndarray] | None = None if sigmas is None else []
+        fs.append(point_shot(lens, harp, a, seed * 100 + i, out))
+        if sigmas is not None and out is not None:
+            sigmas.append(out)
+    ts = [point_shot(lens, harp, a, seed * 100 + 50 + i) for i, a in enumerate(ta)]
+    return lens, fs, ts
+
+
 def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 0) -> None:
     print(
         "## Population (point sets): chosen model's held-out d on 3 unseen shots over the best candidate's "
@@ -195,14 +217,7 @@ def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 
         ratios: dict[str, list[float]] = {"two tiers (now)": [], "leave-one-shot-out alone (before)": []}
         bests = []
         for seed in range(first_seed, first_seed + n_lenses):
-            lens = point_lens(seed)
-            rng = np.random.default_rng(seed + 7)
-            harp = rng.normal(0, 0.015, (15, 3))
-            base = rng.uniform(0, 180)
-            fa = [(base + 180 * i / nfit + rng.normal(0, 5)) % 180 for i in range(nfit)]
-            ta = [(base + 90 / nfit + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
-            fs = [point_shot(lens, harp, a, seed * 100 + i) for i, a in enumerate(fa)]
-            ts = [point_shot(lens, harp, a, seed * 100 + 50 + i) for i, a in enumerate(ta)]
+            lens, fs, ts = point_session(seed, nfit)
             sel = select_model(fs, W_PT, H_PT)
             unseen = {}
             for r in sel.table:

@@ -237,20 +237,11 @@ def population_part(seeds: range, w: int, h: int, workers: int) -> None:
 
 # ------------------------------------------------------------------------ point-set population
 def one_points(seed: int) -> dict[str, object]:
-    from model_choice import H_PT, W_PT, point_lens, point_shot
+    from model_choice import H_PT, W_PT, point_session
 
-    lens = point_lens(seed)
-    rng = np.random.default_rng(seed + 7)
-    harp = rng.normal(0, 0.015, (15, 3))
-    base = rng.uniform(0, 180)
-    fa = [(base + 180 * i / 3 + rng.normal(0, 5)) % 180 for i in range(3)]
-    ta = [(base + 90 / 3 + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
-    fs, sg = [], []
-    for i, a in enumerate(fa):
-        out: list[np.ndarray] = []
-        fs.append(point_shot(lens, harp, a, seed * 100 + i, out))
-        sg.append(out)
-    unseen = [p for i, a in enumerate(ta) for p in point_shot(lens, harp, a, seed * 100 + 50 + i)]
+    sg: list[list[np.ndarray]] = []
+    lens, fs, ts = point_session(seed, 3, sg)
+    unseen = [p for shot in ts for p in shot]
     row: dict[str, object] = {"seed": seed}
     plain = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments())
     for v in POINT_VARIANTS:
