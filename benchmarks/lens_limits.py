@@ -117,12 +117,16 @@ def exact_lines(lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int)
     return out
 
 
+def seed_lens(seed: int, w: int, h: int) -> tuple[DistortionModel, Session, dict[str, object]]:
+    """The population's lens ``seed``, its realistic session and the start of its table row."""
+    member = lens_population(seed, 1, w, h)[0]
+    ses = realistic_session(seed, w, h)
+    return member.model, ses, {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+
+
 def one(args: tuple[int, int, int]) -> dict[str, object]:
     seed, w, h = args
-    member = lens_population(seed, 1, w, h)[0]
-    lens = member.model
-    ses = realistic_session(seed, w, h)
-    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    lens, ses, row = seed_lens(seed, w, h)
     t0 = time.perf_counter()
     full_lines: list[list] = []
     for name in RENDERS:
@@ -161,10 +165,7 @@ AXIS_SHIFTS = (0.0, 150.0, 300.0)
 
 def exact_only(args: tuple[int, int, int]) -> dict[str, object]:
     seed, w, h = args
-    member = lens_population(seed, 1, w, h)[0]
-    lens = member.model
-    ses = realistic_session(seed, w, h)
-    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    lens, ses, row = seed_lens(seed, w, h)
     for off in AXIS_SHIFTS:
         harp = widened(ses.harp, int(off // ses.harp.spacing_px) + 1)
         c = ses.mount.centre
@@ -228,10 +229,7 @@ KINK_C = (5.0, 8.0)
 
 def kink_trim(args: tuple[int, int, int]) -> dict[str, object]:
     seed, w, h = args
-    member = lens_population(seed, 1, w, h)[0]
-    lens = member.model
-    ses = realistic_session(seed, w, h)
-    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    lens, ses, row = seed_lens(seed, w, h)
     shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
     lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
     row["n"] = sum(len(p) for shot in lines for p in shot)
