@@ -29,6 +29,25 @@ def image_corners(width: int, height: int) -> np.ndarray:
     return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
 
 
+def set_pinhole_fields(model: Any, counts: tuple[int, ...], count_text: str, name: str) -> None:
+    """Normalise a camera-matrix model's fields in its ``__post_init__`` (a frozen dataclass): ``fx, fy, cx,
+    cy`` to floats, ``dist`` to a flat tuple of floats whose length is one of ``counts``.
+
+    Raises
+    ------
+    ValueError
+        ``"{count_text}, got N"`` for another number of coefficients; ``"{name} camera matrix needs fx, fy > 0"``.
+    """
+    for a in ("fx", "fy", "cx", "cy"):
+        object.__setattr__(model, a, float(getattr(model, a)))
+    dist = tuple(float(v) for v in np.asarray(model.dist, dtype=np.float64).ravel())
+    if len(dist) not in counts:
+        raise ValueError(f"{count_text}, got {len(dist)}")
+    object.__setattr__(model, "dist", dist)
+    if not (model.fx > 0 and model.fy > 0):
+        raise ValueError(f"{name} camera matrix needs fx, fy > 0, got {model.fx}, {model.fy}")
+
+
 class DistortionModel(ABC):
     """Base class: a named, serialisable map distorted -> ideal pixels."""
 

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, set_pinhole_fields
 
 Array = npt.NDArray[np.float64]
 
@@ -62,14 +62,7 @@ class OpenCVFisheyeModel(DistortionModel):
     name: str = field(default="opencv_fisheye", init=False, repr=False)
 
     def __post_init__(self) -> None:
-        for a in ("fx", "fy", "cx", "cy"):
-            object.__setattr__(self, a, float(getattr(self, a)))
-        dist = tuple(float(v) for v in np.asarray(self.dist, dtype=np.float64).ravel())
-        if len(dist) != 4:
-            raise ValueError(f"OpenCV fisheye distortion needs 4 coefficients k1..k4, got {len(dist)}")
-        object.__setattr__(self, "dist", dist)
-        if not (self.fx > 0 and self.fy > 0):
-            raise ValueError(f"OpenCV fisheye camera matrix needs fx, fy > 0, got {self.fx}, {self.fy}")
+        set_pinhole_fields(self, (4,), "OpenCV fisheye distortion needs 4 coefficients k1..k4", "OpenCV fisheye")
 
     @property
     def camera_matrix(self) -> Array:

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, set_pinhole_fields
 from pipeline.models.inverse import OUTSIDE_DOMAIN, Inverse, monotonic_reach, newton_inverse, radial_start
 
 #: accuracy (px) to which :meth:`OpenCVModel.undistort_points` inverts the projection
@@ -70,14 +70,7 @@ class OpenCVModel(DistortionModel):
     name: str = field(default="opencv", init=False, repr=False)
 
     def __post_init__(self) -> None:
-        for a in ("fx", "fy", "cx", "cy"):
-            object.__setattr__(self, a, float(getattr(self, a)))
-        dist = tuple(float(v) for v in np.asarray(self.dist, dtype=np.float64).ravel())
-        if len(dist) not in _VALID_NCOEFFS:
-            raise ValueError(f"OpenCV distortion needs 4, 5, 8, 12 or 14 coefficients, got {len(dist)}")
-        object.__setattr__(self, "dist", dist)
-        if not (self.fx > 0 and self.fy > 0):
-            raise ValueError(f"OpenCV camera matrix needs fx, fy > 0, got {self.fx}, {self.fy}")
+        set_pinhole_fields(self, _VALID_NCOEFFS, "OpenCV distortion needs 4, 5, 8, 12 or 14 coefficients", "OpenCV")
 
     # ------------------------------------------------------------- matrices
     @classmethod

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel
+from pipeline.models.base import DistortionModel, set_pinhole_fields
 from pipeline.models.inverse import newton_inverse
 
 Array = npt.NDArray[np.float64]
@@ -56,14 +56,9 @@ class ThinPrismFisheyeModel(DistortionModel):
     name: str = field(default="thin_prism_fisheye", init=False, repr=False)
 
     def __post_init__(self) -> None:
-        for a in ("fx", "fy", "cx", "cy"):
-            object.__setattr__(self, a, float(getattr(self, a)))
-        dist = tuple(float(v) for v in np.asarray(self.dist, dtype=np.float64).ravel())
-        if len(dist) != 8:
-            raise ValueError(f"THIN_PRISM_FISHEYE needs 8 coefficients k1 k2 p1 p2 k3 k4 sx1 sy1, got {len(dist)}")
-        object.__setattr__(self, "dist", dist)
-        if not (self.fx > 0 and self.fy > 0):
-            raise ValueError(f"THIN_PRISM_FISHEYE camera matrix needs fx, fy > 0, got {self.fx}, {self.fy}")
+        set_pinhole_fields(
+            self, (8,), "THIN_PRISM_FISHEYE needs 8 coefficients k1 k2 p1 p2 k3 k4 sx1 sy1", "THIN_PRISM_FISHEYE"
+        )
 
     @property
     def camera_matrix(self) -> Array:
