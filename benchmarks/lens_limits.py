@@ -53,6 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np
 
 from pipeline.compare import compare_models
+from pipeline.edgeset import FitFailure, FitResult
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import Harp
@@ -94,9 +95,19 @@ def variant(ses: Session, name: str) -> tuple[Harp, Effects]:
     }[name]
 
 
-def field(lines: list[list], lens: DistortionModel, w: int, h: int, spec: FitSpec, joint: bool = True) -> float:
-    """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``)."""
-    plain = fit_distortion(lines, w, h, **spec.fit_arguments())
+def field(
+    lines: list[list],
+    lens: DistortionModel,
+    w: int,
+    h: int,
+    spec: FitSpec,
+    joint: bool = True,
+    plain: FitResult | FitFailure | None = None,
+) -> float:
+    """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``); ``plain``: the
+    fit of ``spec`` on ``lines`` alone when already made."""
+    if plain is None:
+        plain = fit_distortion(lines, w, h, **spec.fit_arguments())
     if not plain:
         return float("nan")
     model = plain.model
@@ -106,6 +117,12 @@ def field(lines: list[list], lens: DistortionModel, w: int, h: int, spec: FitSpe
             return float("nan")
         model = sep.model
     return float(compare_models(model, lens, w, h, step=20).rms)
+
+
+def both(lines: list[list], lens: DistortionModel, w: int, h: int, spec: FitSpec) -> tuple[float, float]:
+    """Field errors of ``spec`` fitted on ``lines`` alone and with the strings separated (one plain fit)."""
+    plain = fit_distortion(lines, w, h, **spec.fit_arguments())
+    return field(lines, lens, w, h, spec, joint=False, plain=plain), field(lines, lens, w, h, spec, plain=plain)
 
 
 def exact_lines(lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int) -> list[list]:
@@ -135,8 +152,9 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
         lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
         if name == "full":
             full_lines = lines
-            row["full alone"] = field(lines, lens, w, h, SPEC, joint=False)
-        row[name] = field(lines, lens, w, h, SPEC)
+            row["full alone"], row[name] = both(lines, lens, w, h, SPEC)
+        else:
+            row[name] = field(lines, lens, w, h, SPEC)
     row["exact bent"] = field(exact_lines(lens, ses.harp, ses, w, h), lens, w, h, SPEC)
     straight = exact_lines(lens, reshaped(ses.harp, STRAIGHT), ses, w, h)
     row["exact straight r4"] = field(straight, lens, w, h, SPEC, joint=False)
@@ -171,7 +189,7 @@ def exact_only(args: tuple[int, int, int]) -> dict[str, object]:
         c = ses.mount.centre
         moved = dataclasses.replace(ses, mount=dataclasses.replace(ses.mount, centre=(c[0] + off, c[1] + off / 2)))
         lines = exact_lines(lens, harp, moved, w, h)
-        row[f"axis {off:.0f}"] = (field(lines, lens, w, h, SPEC, joint=False), field(lines, lens, w, h, SPEC))
+        row[f"axis {off:.0f}"] = both(lines, lens, w, h, SPEC)
     kinks = reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"})
     lines = exact_lines(lens, kinks, ses, w, h)
     for robust in (True, False):
@@ -233,14 +251,17 @@ def kink_trim(args: tuple[int, int, int]) -> dict[str, object]:
     shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
     lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
     row["n"] = sum(len(p) for shot in lines for p in shot)
-    row["base"] = (field(lines, lens, w, h, SPEC, joint=False), field(lines, lens, w, h, SPEC))
     plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
+    row["base"] = (
+        field(lines, lens, w, h, SPEC, joint=False, plain=plain),
+        field(lines, lens, w, h, SPEC, plain=plain),
+    )
     for c in KINK_C:
         if not plain:
             row[c] = None
             continue
         kept, dropped = kink_points(lines, plain.model, c)
-        row[c] = (field(kept, lens, w, h, SPEC, joint=False), field(kept, lens, w, h, SPEC), dropped)
+        row[c] = (*both(kept, lens, w, h, SPEC), dropped)
     return row
 
 
