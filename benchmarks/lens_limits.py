@@ -60,7 +60,7 @@ from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import Harp
 from pipeline.harp_shape import fit_harp_shape
 from pipeline.lens_population import lens_population
-from pipeline.measure import measure_image
+from pipeline.measure import measure_image, point_sigmas
 from pipeline.models.base import DistortionModel
 from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
@@ -286,36 +286,46 @@ POINT_LOSS_ROWS: tuple[tuple[str, dict[str, object]], ...] = (
     ("none", {}),
     ("tukey", {"point_loss": "tukey"}),
     ("huber", {"point_loss": "huber"}),
+    ("tukey, own sigma", {"point_loss": "tukey"}),
+    ("huber, own sigma", {"point_loss": "huber"}),
 )
 
 
-def measured(seed: int, w: int, h: int, cache: str | None) -> list[list]:
-    """The full realistic shots of ``seed`` measured as ``harp measure`` does (read from / written to
-    ``cache``/lines_SEED_WxH.npz when given: the rendering is seeded, the file only saves time)."""
+def measured(seed: int, w: int, h: int, cache: str | None) -> tuple[list[list], list[list]]:
+    """The full realistic shots of ``seed`` measured as ``harp measure`` does, and each point's standard
+    deviation (``pipeline.measure.point_sigmas``); read from / written to ``cache``/pts_SEED_WxH.npz when
+    given (the rendering is seeded, the file only saves time)."""
     lens, ses, _ = seed_lens(seed, w, h)
-    path = Path(cache) / f"lines_{seed}_{w}x{h}.npz" if cache else None
+    path = Path(cache) / f"pts_{seed}_{w}x{h}.npz" if cache else None
     if path is not None and path.exists():
         with np.load(path) as z:
-            n_shots = int(z["n_shots"])
-            return [[z[f"s{i}_{j}"] for j in range(int(z[f"n{i}"]))] for i in range(n_shots)]
+            n = [int(z[f"n{i}"]) for i in range(int(z["n_shots"]))]
+            return (
+                [[z[f"s{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
+                [[z[f"g{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
+            )
     shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
-    lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+    ms = [measure_image(s.image) for s in shots]
+    lines = [[ln.points for ln in m.lines] for m in ms]
+    sigmas = [point_sigmas(m) for m in ms]
     if path is not None:
         arrays = {f"s{i}_{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
+        arrays |= {f"g{i}_{j}": g for i, shot in enumerate(sigmas) for j, g in enumerate(shot)}
         arrays |= {f"n{i}": np.array(len(shot)) for i, shot in enumerate(lines)}
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, n_shots=np.array(len(lines)), **arrays)  # type: ignore[arg-type]
         os.replace(tmp, path)
-    return lines
+    return lines, sigmas
 
 
 def point_robust(args: tuple[int, int, int, str | None]) -> dict[str, object]:
     seed, w, h, cache = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
-    lines = measured(seed, w, h, cache)
+    lines, sigmas = measured(seed, w, h, cache)
     for name, kw in POINT_LOSS_ROWS:
-        plain = fit_distortion(lines, w, h, **kw, **SPEC.fit_arguments())  # type: ignore[arg-type]
+        own = {"point_scale": sigmas} if name.endswith("own sigma") else {}
+        plain = fit_distortion(lines, w, h, **kw, **own, **SPEC.fit_arguments())  # type: ignore[arg-type]
         row[name] = (
             field(lines, lens, w, h, SPEC, joint=False, plain=plain),
             field(lines, lens, w, h, SPEC, plain=plain),

@@ -39,14 +39,19 @@ from pipeline.compare import compare_models
 from pipeline.edgeset import corrected_straightness
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec, parse
-from pipeline.measure import measure_image
+from pipeline.measure import measure_image, point_sigmas
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
 LOSSES: tuple[tuple[str, dict[str, object]], ...] = (
     ("none", {}),
     ("tukey", {"point_loss": "tukey"}),
     ("huber", {"point_loss": "huber"}),
+    ("tukey, own sigma", {"point_loss": "tukey"}),
+    ("huber, own sigma", {"point_loss": "huber"}),
 )
+"""The fits compared: none, and each loss with each point's scale from its edge's residuals or from its own
+standard deviation (``point_scale``: ``pipeline.measure.point_sigmas`` of the measurement, or the point
+sets' own smoother sigmas)."""
 REAL_CANDIDATES = ("radial4+tangential", "radial4+tangential+prism", "radial4+tangential+prism+centre-prior")
 SPEC = FitSpec("radial", 4, True, True)
 
@@ -58,12 +63,14 @@ def real_part(directory: Path) -> None:
     if len(names) < 3:
         print(f"(no real photographs in {directory}: part skipped)")
         return
-    whole, interior = {}, {}
+    whole, interior, sigma = {}, {}, {}
     size = (0, 0)
     for n in names:
         img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
         size = (img.shape[1], img.shape[0])
-        whole[n] = [ln.points for ln in measure_image(img).lines]
+        m = measure_image(img)
+        whole[n] = [ln.points for ln in m.lines]
+        sigma[n] = point_sigmas(m)
         interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
     w, h = size
     print(f"## Real photographs ({directory.name}: {', '.join(names)}), {w}x{h}, every 2+1 split")
@@ -73,10 +80,12 @@ def real_part(directory: Path) -> None:
     out: dict[str, list[tuple[float, float]]] = {name: [] for name, _ in LOSSES}
     for held in names:
         lines = [whole[n] for n in names if n != held]
+        own = [sigma[n] for n in names if n != held]
         for label in REAL_CANDIDATES:
             spec = parse(label)
             for name, kw in LOSSES:
-                f = fit_distortion(lines, w, h, **kw, **spec.fit_arguments())  # type: ignore[arg-type]
+                scale = {"point_scale": own} if name.endswith("own sigma") else {}
+                f = fit_distortion(lines, w, h, **kw, **scale, **spec.fit_arguments())  # type: ignore[arg-type]
                 if not f:
                     print(f"| {held} | {label} | {name} | failed: {f.reason} | | |")
                     out[name].append((float("nan"), float("nan")))
@@ -102,11 +111,13 @@ def real_part(directory: Path) -> None:
 def one_points(seed: int) -> dict[str, object]:
     from model_choice import H_PT, W_PT, point_session
 
-    lens, fs, ts = point_session(seed, 3, [])
+    sg: list[list[np.ndarray]] = []
+    lens, fs, ts = point_session(seed, 3, sg)
     unseen = [p for shot in ts for p in shot]
     row: dict[str, object] = {"seed": seed}
     for name, kw in LOSSES:
-        f = fit_distortion(fs, W_PT, H_PT, **kw, **SPEC.fit_arguments())  # type: ignore[arg-type]
+        scale = {"point_scale": sg} if name.endswith("own sigma") else {}
+        f = fit_distortion(fs, W_PT, H_PT, **kw, **scale, **SPEC.fit_arguments())  # type: ignore[arg-type]
         row[name] = (
             (compare_models(f.model, lens, W_PT, H_PT, step=20).rms, corrected_straightness(f.model, unseen)[0])
             if f

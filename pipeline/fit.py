@@ -119,6 +119,14 @@ MIN_POINT_WEIGHT = 1e-6
 """A point's robust weight is kept above this (an edge whose points all lose their weight keeps a line)."""
 
 
+def _kept_points(every: EdgeSet, kept: EdgeSet) -> np.ndarray:
+    """Mask over ``every``'s points of those of the edges in ``kept`` (matched by image and line)."""
+    keys = set(zip(kept.image.tolist(), kept.line.tolist(), strict=True))
+    on = np.array([k in keys for k in zip(every.image.tolist(), every.line.tolist(), strict=True)])
+    out: np.ndarray = np.repeat(on, every.counts)
+    return out
+
+
 def _times(base: np.ndarray | None, robust_w: np.ndarray) -> np.ndarray:
     """The points' weights in the least squares: their own (``base``, None for 1) times their robust ones."""
     return robust_w if base is None else base * robust_w
@@ -193,6 +201,7 @@ def fit_distortion(
     point_sigma: Sequence[Sequence[np.ndarray]] | None = None,
     point_loss: PointLoss | None = None,
     point_iterations: int = POINT_ITERATIONS,
+    point_scale: Sequence[Sequence[np.ndarray]] | None = None,
 ) -> FitResult | FitFailure:
     """Fit a distortion correction straightening all edges of all images at once.
 
@@ -253,6 +262,11 @@ def fit_distortion(
         weight against each point's own scale), so that a string's kink stops pulling the lens while
         ordinary points keep full weight; ``point_iterations`` reweightings at most. None (default):
         no per-point robust weights.
+    point_scale : sequence over images of sequences of (M,) arrays, optional
+        Shaped like ``lines_per_image``: each point's standard deviation (relative values suffice,
+        :func:`pipeline.measure.point_sigmas`) used only as the robust stage's scale of each point
+        (not as least-squares weights); default: ``point_sigma`` when given, else each edge's robust
+        size of its detrended residuals.
 
     Returns
     -------
@@ -278,6 +292,12 @@ def fit_distortion(
     edges, rejected = collect(lines_per_image, width, height, point_sigma=point_sigma)
     if not edges:
         return edges
+    scales: EdgeSet | None = None
+    if point_scale is not None:
+        got, _ = collect(lines_per_image, width, height, point_sigma=point_scale)
+        if isinstance(got, FitFailure):
+            return FitFailure(f"point_scale: {got.reason}")
+        scales = got
     param = make_parametrisation(width, height, spec, w_center=w_center, ridge=ridge)
     n_e = edges.n_edges
     n_constraints = int(np.sum(edges.counts - 2))
@@ -374,7 +394,11 @@ def fit_distortion(
                     th = sol.x
             if point_loss is not None:
                 base = edges.weights
-                sigma = None if base is None else 1.0 / np.sqrt(base)
+                if scales is not None and scales.weights is not None:
+                    keep_pts = _kept_points(scales, edges)
+                    sigma = 1.0 / np.sqrt(scales.weights[keep_pts])
+                else:
+                    sigma = None if base is None else 1.0 / np.sqrt(base)
                 robust_w = None
                 for _ in range(max(int(point_iterations), 0)):
                     current = base if robust_w is None else _times(base, robust_w)

@@ -6,8 +6,11 @@ import pytest
 
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import fit_harp_shape
 from pipeline.models import RadialModel
 from pipeline.robust_points import robust_point_weights
+from tests.pipeline.harp_points import turning_harp_point_sets
 
 W, H = 1000, 750
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(520, 365), tangential=(0.0008, -0.0005))
@@ -85,6 +88,8 @@ def test_unknown_point_loss_is_a_failure():
     line = np.stack([np.arange(10.0, 200.0, 10.0), np.full(19, 100.0)], axis=1)
     f = fit_distortion([[line]], W, H, **SPEC, point_loss="cauchy")  # type: ignore[arg-type]
     assert not f and "point_loss" in f.reason and "tukey" in f.reason
+    f = fit_distortion([[line]], W, H, **SPEC, point_loss="tukey", point_scale=[[np.ones(3)]])
+    assert not f and "point_scale" in f.reason and "one finite value > 0 per point (19)" in f.reason
 
 
 @pytest.mark.parametrize("loss", ["tukey", "huber"])
@@ -94,3 +99,34 @@ def test_robust_point_weights_on_clean_noise_are_near_one(loss):
     r = rng.normal(0.0, 0.02, len(a))
     w = robust_point_weights(r, a, np.array([0]), np.array([len(a)]), loss)
     assert np.mean(w) > 0.85 and np.mean(w > 0.5) > 0.97
+
+
+def test_the_joint_fit_with_the_strings_keeps_the_robust_weights():
+    # a turning harp of straight strings; a kink pressed into every third edge (in the image: a cusp across
+    # the edge, 15 px long); the lens fitted with every string's bend separated (fit_harp_shape), started
+    # from the plain fit with and without the per-point stage
+    turns = (0.0, 60.0, 120.0)
+    shots, _ = turning_harp_point_sets(LENS, W, H, turns, [(0.0, 0.0, 0.0)] * 12, spacing=70.0, step=5.0, noise=0.02)
+    rng = np.random.default_rng(7)
+    kinked = []
+    for shot in shots:
+        out = []
+        for j, p in enumerate(shot):
+            if j % 3 == 0:
+                s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+                t = (p[-1] - p[0]) / np.hypot(*(p[-1] - p[0]))
+                at = rng.uniform(0.2, 0.8) * s[-1]
+                p = p + 0.5 * np.exp(-np.abs(s - at) / 15.0)[:, None] * np.array([-t[1], t[0]])
+            out.append(p)
+        kinked.append(out)
+
+    def separated(lines: list[list[np.ndarray]], **kw: object) -> float:
+        plain = fit_distortion(lines, W, H, **SPEC, **kw)  # type: ignore[arg-type]
+        assert plain, getattr(plain, "reason", "")
+        joint = fit_harp_shape(lines, turns, W, H, FitSpec("radial", 4, True, True), plain=plain)
+        assert joint, getattr(joint, "reason", "")
+        return float(compare_models(joint.model, LENS, W, H).rms)
+
+    reference, plain, robust = separated(shots), separated(kinked), separated(kinked, point_loss="tukey")
+    assert plain > 3.0 * reference, (plain, reference)
+    assert robust < 2.0 * reference and robust < 0.4 * plain, (robust, reference, plain)
