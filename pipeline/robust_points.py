@@ -71,9 +71,7 @@ def detrended(r: np.ndarray, a: np.ndarray, starts: np.ndarray, counts: np.ndarr
     return out
 
 
-def point_scales(
-    d: np.ndarray, starts: np.ndarray, counts: np.ndarray, sigma: np.ndarray | None = None
-) -> np.ndarray:
+def point_scales(d: np.ndarray, starts: np.ndarray, counts: np.ndarray, sigma: np.ndarray | None = None) -> np.ndarray:
     """Each point's scale (px, module docstring step 2) for the detrended residuals ``d`` (N,):
     ``k sigma`` with each point's ``sigma`` given, else its edge's robust size of ``d``."""
     if sigma is not None:
