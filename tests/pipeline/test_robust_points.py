@@ -106,7 +106,7 @@ def test_the_joint_fit_with_the_strings_keeps_the_robust_weights():
     # the edge, 15 px long); the lens fitted with every string's bend separated (fit_harp_shape), started
     # from the plain fit with and without the per-point stage
     turns = (0.0, 60.0, 120.0)
-    shots, _ = turning_harp_point_sets(LENS, W, H, turns, [(0.0, 0.0, 0.0)] * 12, spacing=70.0, step=5.0, noise=0.02)
+    shots, _ = turning_harp_point_sets(LENS, W, H, turns, [(0.0, 0.0, 0.0)] * 10, spacing=80.0, step=8.0, noise=0.02)
     rng = np.random.default_rng(7)
     kinked = []
     for shot in shots:
