@@ -2,7 +2,8 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2] [--exact-only | --kink-trim]
+    .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2]
+        [--exact-only | --kink-trim | --point-robust [--cache DIR] | --point-robust-exact]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
 0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
@@ -31,6 +32,16 @@ fit, each edge's residual about the fitted lens minus its own smooth trend (Lege
 what the lens's misfit and a string's bow leave) is a kink's signature; the points where it exceeds
 ``c`` times its robust standard deviation over all edges (1.4826 x median absolute value) are dropped and the
 lens fitted again.
+
+``--point-robust`` prints the per-point robust fit of the pipeline (``fit_distortion(point_loss=...)``,
+``pipeline.robust_points``) on the full realistic shots: none (the fit as it is), Tukey's biweight and Huber's
+weight with each point's scale from its edge's detrended residuals, and the same two with each point's own
+standard deviation as its scale (``point_scale``: ``pipeline.measure.point_sigmas``), each fitted with the lens
+alone and with the strings separated (``fit_harp_shape`` weighs the plain fit's robust point weights); the
+measured lines and sigmas are kept in ``--cache`` (npz) when given. ``--point-robust-exact``: the exact points
+of the kinks alone (every other string shape zero) fitted as they are and with Tukey's biweight, without and
+with 0.02 px of independent noise per point (enough that a kinked edge no longer stands out as a whole), and
+the straight strings with the same noise (the kink-free reference).
 
 Every figure is the field error against the exact lens, RMS modulo homography over the whole image
 (``pipeline.compare.compare_models``, 20 px grid), px. JPEG is off and the lens has no non-parametric field

@@ -66,7 +66,8 @@ Optionally (``point_loss``, default off) the final fit is followed by iterativel
 reweighted least squares on each point (:mod:`pipeline.robust_points`): a point's
 residual about its edge's smooth trend, judged against its own scale by Tukey's
 biweight or Huber's weight, so that a string's kink (a few points far off their
-edge's course) stops pulling the lens when the whole edge does not stand out.
+edge's course) stops pulling the lens when the whole edge does not stand out
+(off by default: it does not help the realistic population, benchmarks/RESULTS-robust-points.md).
 
 References
 ----------
