@@ -45,6 +45,7 @@ import dataclasses
 import os
 import sys
 import time
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -65,6 +66,7 @@ from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
 from pipeline.render import visible_edges
 from pipeline.select import select_model
+from pipeline.separated_cv import held_out_without_strings
 
 FITTED = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 SPEC = FitSpec("radial", 4, True, True)
@@ -141,6 +143,31 @@ def seed_lens(seed: int, w: int, h: int) -> tuple[DistortionModel, Session, dict
     return member.model, ses, {"seed": seed, "lens": member.design, "strings": ses.harp.material}
 
 
+UNSEEN = (17.0, 77.0, 137.0)
+
+
+def realistic_lines(seed: int, w: int, h: int, cache: Path | None = None) -> tuple[list[list], list[list]]:
+    """The measured edges of seed ``seed``'s full realistic render: the six fitted shots (``FITTED``, the same
+    as :func:`one`'s "full" row: shot ``i`` is seeded by its index) and three unseen ones (``UNSEEN``, as in
+    ``benchmarks/strings_separated.py``); kept in ``cache`` (a directory, one ``.npz`` per seed and size) when
+    given, read from there when present (a render takes minutes)."""
+    path = None if cache is None else cache / f"seed{seed}_{w}x{h}.npz"
+    if path is not None and path.exists():
+        with np.load(path) as z:
+            n_shots = int(z["n_shots"])
+            counts = z["counts"]
+            lines = [[z[f"s{i}_e{j}"] for j in range(int(counts[i]))] for i in range(n_shots)]
+    else:
+        lens, ses, _ = seed_lens(seed, w, h)
+        shots = render_shots(lens, ses.harp, ses.mount, FITTED + UNSEEN, w, h, ses.effects, seed=seed)
+        lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            arrays = {f"s{i}_e{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
+            np.savez(path, n_shots=len(lines), counts=np.array([len(s) for s in lines]), **arrays)
+    return lines[: len(FITTED)], lines[len(FITTED) :]
+
+
 def one(args: tuple[int, int, int]) -> dict[str, object]:
     seed, w, h = args
     lens, ses, row = seed_lens(seed, w, h)
@@ -164,6 +191,66 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
     row["chosen field"] = field(full_lines, lens, w, h, choice)
     row["t"] = time.perf_counter() - t0
     return row
+
+
+def choice(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
+    """Seed ``seed``'s choice without and with the turntable angles (``--choice``, module docstring)."""
+    seed, w, h, cache = args
+    lens, ses, row = seed_lens(seed, w, h)
+    fitted, unseen = realistic_lines(seed, w, h, cache)
+    t0 = time.perf_counter()
+    plain_sel = select_model(fitted, w, h)
+    row["t plain"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sep_sel = select_model(fitted, w, h, turntable_deg=FITTED)
+    row["t separated"] = time.perf_counter() - t0
+    fields, unseen_d = {}, {}
+    for r in sep_sel.table:  # every candidate as a session stores it: fitted with the strings separated
+        plain = r.full_fit or fit_distortion(fitted, w, h, **r.candidate.fit_arguments())
+        joint = fit_harp_shape(fitted, FITTED, w, h, r.candidate, plain=plain) if plain else plain
+        if not joint:
+            continue
+        fields[r.candidate] = float(compare_models(joint.model, lens, w, h, step=20).rms)
+        held = [held_out_without_strings(joint, shot, a) for shot, a in zip(unseen, UNSEEN, strict=True)]
+        unseen_d[r.candidate] = float(np.sqrt(np.mean(np.concatenate([x.residuals for x in held]) ** 2)))
+    best = min(fields, key=lambda c: fields[c])
+    best_u = min(unseen_d, key=lambda c: unseen_d[c])
+    row.update(best=best.label, best_field=fields[best], best_unseen=best_u.label, best_unseen_d=unseen_d[best_u])
+    for key, sel in (("plain", plain_sel), ("separated", sep_sel)):
+        row[key] = sel.choice.label
+        row[f"{key} field"] = fields.get(sel.choice, float("nan"))
+        row[f"{key} unseen"] = unseen_d.get(sel.choice, float("nan"))
+    return row
+
+
+def print_choice(results: Iterable[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | chosen (plain folds) | field px | chosen, strings separated (angles known) | "
+        "field px | best candidate | field px | field ratio plain / separated | unseen d ratio plain / separated "
+        "| choice s plain / separated |"
+    )
+    print("|---:|---|---|---|---:|---|---:|---|---:|---:|---:|---:|")
+    rows = []
+    for r in results:  # each row as it comes
+        rows.append(r)
+        bf, bu = float(r["best_field"]), float(r["best_unseen_d"])  # type: ignore[arg-type]
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['plain']} | {r['plain field']:.4f} | {r['separated']} | "
+            f"{r['separated field']:.4f} | {r['best']} | {bf:.4f} | {float(r['plain field']) / bf:.3f} / "  # type: ignore[arg-type]
+            f"{float(r['separated field']) / bf:.3f} | {float(r['plain unseen']) / bu:.3f} / "  # type: ignore[arg-type]
+            f"{float(r['separated unseen']) / bu:.3f} | {r['t plain']:.0f} / {r['t separated']:.0f} |",  # type: ignore[arg-type]
+            flush=True,
+        )
+    for key, name in (("plain", "plain folds"), ("separated", "strings separated")):
+        fr = np.array([float(r[f"{key} field"]) / float(r["best_field"]) for r in rows])  # type: ignore[arg-type]
+        ur = np.array([float(r[f"{key} unseen"]) / float(r["best_unseen_d"]) for r in rows])  # type: ignore[arg-type]
+        print(
+            f"\n{name}: field error over the best candidate's worst {fr.max():.3f}, median {np.median(fr):.3f}, "
+            f"> 1.05 for {int(np.sum(fr > 1.05))} / {len(fr)}; unseen d (strings removed) worst {ur.max():.3f}, "
+            f"median {np.median(ur):.3f}, > 1.05 for {int(np.sum(ur > 1.05))} / {len(ur)}",
+            end="",
+        )
+    print()
 
 
 def widened(harp: Harp, extra: int) -> Harp:
@@ -304,6 +391,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--exact-only", action="store_true", help="print only the exact-point table (no rendering)")
     ap.add_argument("--kink-trim", action="store_true", help="print only the kinked-points prototype's table")
+    ap.add_argument("--choice", action="store_true", help="print only the model choice's table (no ablations)")
+    ap.add_argument("--cache", type=Path, default=None, help="directory keeping the measured edges (--choice)")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -318,6 +407,12 @@ def main(argv: list[str] | None = None) -> int:
         print()
         with pool:
             print_kink_trim(list(pool.map(kink_trim, jobs)))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    if args.choice:
+        print()
+        with pool:
+            print_choice(pool.map(choice, [(s, w, h, args.cache) for s in seeds]))
         print(f"# load average at end {os.getloadavg()[0]:.1f}")
         return 0
     if args.exact_only:
