@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
-from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
+from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
@@ -483,10 +483,11 @@ def calibrate_focus(
     (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
     ``"separate"`` (the default) and :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
-    choice (``spec`` None) cross-validates every candidate so too: each fold fitted with the strings separated,
-    each held-out shot judged with its strings' fitted bends removed (:mod:`pipeline.separated_cv`; the folds
-    then compare the lenses, not the strings: ``benchmarks/RESULTS-strings.md``)."""
+    choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
+    so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
+    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`)."""
     separate = getattr(pipeline, "strings", STRINGS_SEPARATE) == STRINGS_SEPARATE
+    by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
     known = turntable_deg is not None and len(turntable_deg) == len(shots)
     cal = calibrate_shots(
         [list(s) for s in shots],
@@ -497,7 +498,7 @@ def calibrate_focus(
         bootstrap=pipeline.bootstrap,
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
-        turntable_deg=turntable_deg if separate and known else None,
+        turntable_deg=turntable_deg if separate and by_strings and known else None,
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
