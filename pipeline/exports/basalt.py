@@ -39,10 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.exports.conversion_error import ConversionError, image_grid
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.statement import OPENCV_PIXELS, statement_lines
+from pipeline.exports.conversion_error import image_grid
+from pipeline.exports.statement import OPENCV_PIXELS, Statement
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 
 CAMERA_TYPE = "kb4"
@@ -96,23 +94,14 @@ def basalt_text(
     model: OpenCVFisheyeModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
-    *,
-    camera: CameraMatrixChoice | None = None,
-    choice: str | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    frame: FrameStatement | None = None,
+    statement: Statement = Statement(),
 ) -> str:
     """The calibration JSON of one ``kb4`` camera; the statement (stamp first) is ``value0.harp_station``."""
     if not isinstance(model, OpenCVFisheyeModel):
         raise ValueError("Basalt's kb4 holds the fisheye (Kannala-Brandt k1..k4) model")
     short = unproject_shortfall_px(model, width, height)
-    lines = statement_lines(
-        stamp,
-        error,
-        choice=choice,
-        camera=camera,
+    frame = statement.frame
+    lines = statement.lines(
         conventions=[
             OPENCV_PIXELS,
             f"Basalt's kb4 project is closed form and holds this conversion error; its unproject takes "
@@ -121,7 +110,6 @@ def basalt_text(
             "200 Hz), not measured: calibrate the IMU with Basalt before visual-inertial use",
         ],
         frame=frame.ray_lines("Basalt's unproject (x/z, y/z)") if frame is not None else (),
-        notes=notes,
     )
     value0: dict[str, Any] = {
         STATEMENT_KEY: {"exported_by": "harp station", "statement": lines},

@@ -34,10 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from pipeline.exports.conversion_error import ConversionError
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.statement import hash_comments, statement_lines
+from pipeline.exports.statement import Statement, hash_comments
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 from pipeline.models.thin_prism_fisheye_model import ThinPrismFisheyeModel
@@ -100,17 +97,11 @@ def colmap_text(
     model: ColmapModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
-    *,
-    camera: CameraMatrixChoice | None = None,
-    choice: str | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    frame: FrameStatement | None = None,
+    statement: Statement = Statement(),
 ) -> str:
-    """The ``cameras.txt`` text of one camera; ``stamp``: comment lines right after the title.
+    """The ``cameras.txt`` text of one camera; the statement's ``stamp``: comment lines right after the title.
 
-    With ``frame``, comments state ``R`` and ``newK``: a point ``(x, y)`` of COLMAP's
+    With its ``frame``, comments state ``R`` and ``newK``: a point ``(x, y)`` of COLMAP's
     ``cam_from_img`` is at ``newK @ R @ (x, y, 1)`` in harp undistort's corrected image (harp pixels).
     """
     name = colmap_model_name(model)
@@ -119,16 +110,12 @@ def colmap_text(
         "THIN_PRISM_FISHEYE": "equidistant fisheye with k1..k4, tangential p1 p2 and thin prism sx1 sy1",
     }.get(name, f"OpenCV pin-hole, {len(model.dist)} coefficients")
     lines = [f"COLMAP camera list exported by harp station: 1 camera, {name} ({kind})"]
-    lines += statement_lines(
-        stamp,
-        error,
-        choice=choice,
-        camera=camera,
+    frame = statement.frame
+    lines += statement.lines(
         conventions=[
             "pixel convention: COLMAP's (the centre of the top-left pixel at 0.5, 0.5): cx, cy are OpenCV's + 0.5"
         ],
         frame=frame.ray_lines("COLMAP's cam_from_img") if frame is not None else (),
-        notes=notes,
     )
     lines.append("CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]")
     return hash_comments(lines) + colmap_line(model, width, height) + "\n"

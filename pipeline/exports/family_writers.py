@@ -49,17 +49,7 @@ def _write_chosen_family(
 def _write_fitted(fmt: str, src: ExportSource, chosen: Fitted, choice: str, text_of: Callable[..., str]) -> Export:
     """The file of one fit, written by ``text_of`` with the statement every format makes (``choice``: the
     model and why)."""
-    text = text_of(
-        chosen.model,
-        src.width,
-        src.height,
-        chosen.error,
-        camera=chosen.cam,
-        choice=f"model {choice}",
-        notes=chosen.notes(src),
-        stamp=src.stamp,
-        frame=chosen.frame,
-    )
+    text = text_of(chosen.model, src.width, src.height, chosen.statement(src, choice=f"model {choice}"))
     notes = (f"{fmt}: {choice}", chosen.cam.statement, *chosen.measured)
     return Export(fmt, text.encode(), chosen.error, chosen.model, notes, chosen.warnings)
 

@@ -18,7 +18,9 @@ from pipeline.exports.fit import fit_fisheye, fit_fisheye_camera, fit_opencv, fi
 from pipeline.exports.frame import FrameStatement, frame_statement
 from pipeline.exports.lens import CameraMatrixChoice
 from pipeline.exports.measured_camera import camera_warnings, export_camera, measured_lines
+from pipeline.exports.solvers import SolverNeed
 from pipeline.exports.source import ExportOptions, ExportSource, conversion_warnings, lens_notes
+from pipeline.exports.statement import Statement
 from pipeline.models.base import DistortionModel
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
@@ -63,6 +65,12 @@ class Fitted:
 
     def notes(self, src: ExportSource) -> tuple[str, ...]:
         return (*lens_notes(src), *self.measured)
+
+    def statement(self, src: ExportSource, choice: str | None = None, solver: SolverNeed | None = None) -> Statement:
+        """What the file of this fit states (:class:`~pipeline.exports.statement.Statement`): its conversion
+        error, ``src``'s stamp, its camera choice and frame, the lens and measured-camera notes, and ``choice``
+        (the model and why) and ``solver`` where the format states them."""
+        return Statement(self.error, src.stamp, self.cam, choice, solver, self.frame, self.notes(src))
 
 
 def fit_pinhole(fmt: str, src: ExportSource, opt: ExportOptions, n: int, hint: bool = True) -> Fitted:

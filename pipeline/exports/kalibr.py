@@ -36,11 +36,8 @@ from typing import Any
 
 import yaml
 
-from pipeline.exports.conversion_error import ConversionError
 from pipeline.exports.fit import RADTAN_COEFFS
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.statement import OPENCV_PIXELS, hash_comments, statement_lines
+from pipeline.exports.statement import OPENCV_PIXELS, Statement, hash_comments
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -62,24 +59,16 @@ def kalibr_text(
     model: OpenCVModel | OpenCVFisheyeModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
+    statement: Statement = Statement(),
     *,
-    camera: CameraMatrixChoice | None = None,
-    choice: str | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    frame: FrameStatement | None = None,
     rostopic: str = "/cam0/image_raw",
 ) -> str:
-    """The camchain YAML of one camera; ``stamp``: comment lines right after the title. With ``frame``,
+    """The camchain YAML of one camera; the statement's ``stamp``: comment lines right after the title. With its ``frame``,
     comments state ``R`` and ``newK`` (:meth:`~pipeline.exports.frame.FrameStatement.ray_lines`)."""
     cam_model, dist_model = kalibr_models(model)
     lines = [f"Kalibr camera chain exported by harp station: {CAMERA}, {cam_model}-{dist_model}"]
-    lines += statement_lines(
-        stamp,
-        error,
-        choice=choice,
-        camera=camera,
+    frame = statement.frame
+    lines += statement.lines(
         conventions=[
             OPENCV_PIXELS,
             "Kalibr's projection (distort, then fu x + pu) is closed form and holds this conversion error; Kalibr's "
@@ -88,7 +77,6 @@ def kalibr_text(
             "with criteria, cv2.undistortPointsIter)",
         ],
         frame=frame.ray_lines("Kalibr's keypointToEuclidean (normalised)") if frame is not None else (),
-        notes=notes,
     )
     nums = ", ".join
 

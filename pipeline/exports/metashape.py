@@ -41,10 +41,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
-from pipeline.exports.conversion_error import ConversionError
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.statement import statement_lines
+from pipeline.exports.statement import Statement
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -85,28 +82,18 @@ def metashape_text(
     model: OpenCVModel | OpenCVFisheyeModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
-    *,
-    camera: CameraMatrixChoice | None = None,
-    choice: str | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    frame: FrameStatement | None = None,
+    statement: Statement = Statement(),
 ) -> str:
     """The calibration XML of an OpenCV 5-coefficient or fisheye model; the statement in comments."""
     p = metashape_params(model, width, height)
-    lines = statement_lines(
-        stamp,
-        error,
-        choice=choice,
-        camera=camera,
+    frame = statement.frame
+    lines = statement.lines(
         conventions=[
             "Metashape's conventions: u = w/2 + cx + x'(f + b1) + y' b2, v = h/2 + cy + y' f, from the image's "
             "top-left corner (the centre of the top-left pixel at 0.5, 0.5); p1 and p2 are OpenCV's p2 and p1 "
             "(swapped)",
         ],
         frame=frame.ray_lines("Metashape's unprojection (x = X/Z, y = Y/Z)") if frame is not None else (),
-        notes=notes,
     )
     body = [
         '<?xml version="1.0" encoding="UTF-8"?>',

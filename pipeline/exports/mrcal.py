@@ -21,10 +21,7 @@ from __future__ import annotations
 import ast
 from typing import Any
 
-from pipeline.exports.conversion_error import ConversionError
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.statement import statement_lines
+from pipeline.exports.statement import Statement
 from pipeline.models.opencv_model import OpenCVModel
 
 MRCAL_LENSMODELS = {4: "LENSMODEL_OPENCV4", 5: "LENSMODEL_OPENCV5", 8: "LENSMODEL_OPENCV8", 12: "LENSMODEL_OPENCV12"}
@@ -34,21 +31,17 @@ def mrcal_text(
     model: OpenCVModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
-    *,
-    camera: CameraMatrixChoice | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    frame: FrameStatement | None = None,
+    statement: Statement = Statement(),
 ) -> str:
-    """The ``.cameramodel`` text of an OpenCV model with 4, 5, 8 or 12 coefficients; ``stamp``:
-    comment lines right after the title. With ``frame``, the keys ``harp_rectification_matrix``,
+    """The ``.cameramodel`` text of an OpenCV model with 4, 5, 8 or 12 coefficients; the statement's ``stamp``:
+    comment lines right after the title. With its ``frame``, the keys ``harp_rectification_matrix``,
     ``harp_new_camera_matrix`` and ``harp_new_imagersize`` (mrcal ignores keys it does not know): a ray
     ``v`` that ``mrcal.unproject`` gives is at ``newK R v`` in harp undistort's corrected image."""
     n = len(model.dist)
     if n not in MRCAL_LENSMODELS:
         raise ValueError(f"mrcal has LENSMODEL_OPENCV4/5/8/12, not {n} coefficients")
     intr = [model.fx, model.fy, model.cx, model.cy, *model.dist]
+    frame = statement.frame
     frame_lines = (
         [
             f"corrected image = harp undistort's with {frame.choice.describe()}: {frame.frame.describe()}",
@@ -58,7 +51,7 @@ def mrcal_text(
         else []
     )
     lines = [f"# mrcal camera model exported by harp station ({MRCAL_LENSMODELS[n]})"]
-    lines += [f"# {s}" for s in statement_lines(stamp, error, camera=camera, frame=frame_lines, notes=notes)]
+    lines += [f"# {s}" for s in statement.lines(frame=frame_lines)]
     lines += [
         "{",
         f"    'lensmodel':  '{MRCAL_LENSMODELS[n]}',",

@@ -35,11 +35,7 @@ import cv2
 import numpy as np
 
 from pipeline.exports.colour import OpenCVChannel
-from pipeline.exports.conversion_error import ConversionError
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.solvers import SolverNeed
-from pipeline.exports.statement import statement_lines
+from pipeline.exports.statement import Statement
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -51,15 +47,10 @@ def opencv_text(
     model: OpenCVModel | OpenCVFisheyeModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
+    statement: Statement = Statement(),
     *,
     xml: bool = False,
     comment: str | None = None,
-    camera: CameraMatrixChoice | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    solver: SolverNeed | None = None,
-    frame: FrameStatement | None = None,
     channels: Sequence[OpenCVChannel] = (),
 ) -> str:
     """FileStorage YAML (or XML) text of an OpenCV calibration (pin-hole or fisheye).
@@ -69,25 +60,23 @@ def opencv_text(
     ``distortion_coefficients_red`` (and ``_blue``) with their conversion errors
     (``channel_conversion_rms_px_red``, ``channel_conversion_max_px_red``, ...).
 
-    With ``frame`` the file holds ``rectification_matrix``, ``new_camera_matrix``, ``new_image_width``
+    With the statement's ``frame`` the file holds ``rectification_matrix``, ``new_camera_matrix``, ``new_image_width``
     and ``new_image_height``: with them OpenCV writes harp undistort's corrected image
     (:mod:`pipeline.exports.frame`).
 
-    ``stamp``: comment lines right after the title, before the figures. With ``solver`` the file
+    Its ``stamp``: comment lines right after the title, before the figures. With its ``solver`` the file
     states what its point solver needs (comments, and the fields ``undistort_points_default_max_px``
     / ``undistort_points_iterations``, 0 when none suffices).
     """
     fisheye = isinstance(model, OpenCVFisheyeModel)
+    error, camera, solver, frame = statement.error, statement.camera, statement.solver, statement.frame
     fs = cv2.FileStorage("calib.xml" if xml else "calib.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     kind = "fisheye (cv::fisheye, Kannala-Brandt k1..k4)" if fisheye else f"pinhole, {len(model.dist)} coefficients"
     fs.writeComment(comment or f"OpenCV {kind} distortion exported by harp station")
-    for line in statement_lines(
-        stamp,
-        error,
+    for line in statement.lines(
         solver=solver.lines() if solver is not None else (),
-        camera=camera,
         frame=frame.lines(fisheye) if frame is not None else (),
-        notes=(*notes, *(c.line() for c in channels)),
+        notes=[c.line() for c in channels],
     ):
         fs.writeComment(line)
     fs.write("image_width", int(width))

@@ -32,7 +32,7 @@ def write_pinhole(
     fmt: str, src: ExportSource, opt: ExportOptions, allowed: tuple[int, ...], default: int, hint: bool = True
 ) -> Export:
     f = fit_pinhole(fmt, src, opt, _coeffs(fmt, opt, allowed, default), hint)
-    m, err, cam, fr, notes = f.model, f.error, f.cam, f.frame, f.notes(src)
+    m, err, cam = f.model, f.error, f.cam
     assert isinstance(m, OpenCVModel)
     sn = None
     channel_lines: tuple[str, ...] = ()
@@ -40,36 +40,13 @@ def write_pinhole(
         sn = solver_need(src.model, m, src.width, src.height)
         channels = _opencv_channels(src, m)
         channel_lines = tuple(f"opencv: {c.line()}" for c in channels)
-        text = opencv_text(
-            m,
-            src.width,
-            src.height,
-            err,
-            xml=opt.xml,
-            camera=cam,
-            notes=notes,
-            stamp=src.stamp,
-            solver=sn,
-            frame=fr,
-            channels=channels,
-        )
+        text = opencv_text(m, src.width, src.height, f.statement(src, solver=sn), xml=opt.xml, channels=channels)
     elif fmt == "ros":
         sn = solver_need(src.model, m, src.width, src.height)
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(
-            m,
-            src.width,
-            src.height,
-            err,
-            camera_name=name,
-            camera=cam,
-            notes=notes,
-            stamp=src.stamp,
-            solver=sn,
-            frame=fr,
-        )
+        text = ros_text(m, src.width, src.height, f.statement(src, solver=sn), camera_name=name)
     else:  # mrcal's unproject iterates to convergence: no solver statement
-        text = mrcal_text(m, src.width, src.height, err, camera=cam, notes=notes, stamp=src.stamp, frame=fr)
+        text = mrcal_text(m, src.width, src.height, f.statement(src))
     return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured, *channel_lines), f.warnings, sn)
 
 
@@ -88,27 +65,15 @@ def _opencv_channels(src: ExportSource, green: OpenCVModel) -> tuple[OpenCVChann
 
 def write_fisheye(fmt: str, src: ExportSource, opt: ExportOptions) -> Export:
     f = fit_fisheye_export(fmt, src, opt)
-    m, err, cam, fr, notes = f.model, f.error, f.cam, f.frame, f.notes(src)
+    m, err, cam = f.model, f.error, f.cam
     assert isinstance(m, OpenCVFisheyeModel)
     sn = solver_need(src.model, m, src.width, src.height)
+    statement = f.statement(src, solver=sn)
     if fmt == "opencv-fisheye":
-        text = opencv_text(
-            m, src.width, src.height, err, xml=opt.xml, camera=cam, notes=notes, stamp=src.stamp, solver=sn, frame=fr
-        )
+        text = opencv_text(m, src.width, src.height, statement, xml=opt.xml)
     else:
         name = opt.camera_name or src.lens.ros_camera_name()
-        text = ros_text(
-            m,
-            src.width,
-            src.height,
-            err,
-            camera_name=name,
-            camera=cam,
-            notes=notes,
-            stamp=src.stamp,
-            solver=sn,
-            frame=fr,
-        )
+        text = ros_text(m, src.width, src.height, statement, camera_name=name)
     warnings = f.warnings + ((ROS_EQUIDISTANT_READERS,) if fmt == "ros-equidistant" else ())
     return Export(fmt, text.encode(), err, m, (cam.statement, *f.measured), warnings, sn)
 

@@ -29,11 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from pipeline.exports.conversion_error import ConversionError
-from pipeline.exports.frame import FrameStatement
-from pipeline.exports.lens import CameraMatrixChoice
-from pipeline.exports.solvers import SolverNeed
-from pipeline.exports.statement import hash_comments, statement_lines
+from pipeline.exports.statement import Statement, hash_comments
 from pipeline.models.opencv_fisheye_model import OpenCVFisheyeModel
 from pipeline.models.opencv_model import OpenCVModel
 
@@ -68,19 +64,14 @@ def ros_text(
     model: OpenCVModel | OpenCVFisheyeModel,
     width: int,
     height: int,
-    error: ConversionError | None = None,
+    statement: Statement = Statement(),
     *,
     camera_name: str = "camera",
-    camera: CameraMatrixChoice | None = None,
-    notes: tuple[str, ...] = (),
-    stamp: tuple[str, ...] = (),
-    solver: SolverNeed | None = None,
-    frame: FrameStatement | None = None,
 ) -> str:
     """camera_info YAML text for a 5- or 8-coefficient OpenCV model, or a fisheye one (``equidistant``).
 
-    ``stamp``: comment lines right after the title. With ``solver`` the comments state what
-    rectifyPoint's solver needs on this lens. With ``frame`` the rectification and projection matrices
+    The statement's ``stamp``: comment lines right after the title. With its ``solver`` the comments state what
+    rectifyPoint's solver needs on this lens. With its ``frame`` the rectification and projection matrices
     are its ``R`` and ``[newK | 0]`` (image_geometry then writes harp undistort's corrected image); ROS
     rectifies to the raw image's size, so a frame of another size is refused (ValueError)."""
     if isinstance(model, OpenCVFisheyeModel):
@@ -92,6 +83,7 @@ def ros_text(
         dm = ROS_DISTORTION_MODELS[n]
     k = model.camera_matrix
     rect, proj = np.eye(3), k
+    frame, solver = statement.frame, statement.solver
     if frame is not None:
         if frame.size != (int(width), int(height)):
             raise ValueError(
@@ -110,14 +102,10 @@ def ros_text(
         "projection_matrix": _mat(np.hstack([proj, np.zeros((3, 1))])),
     }
     head = "# ROS camera_info calibration exported by harp station\n"
-    lines = statement_lines(
-        stamp,
-        error,
+    lines = statement.lines(
         caveats=[ROS_EQUIDISTANT_READERS] if dm == ROS_FISHEYE_MODEL else [],
         solver=solver.lines(ros=True) if solver is not None else (),
-        camera=camera,
         frame=frame.lines(isinstance(model, OpenCVFisheyeModel)) if frame is not None else (),
-        notes=notes,
     )
     head += hash_comments(lines)
     return head + str(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200))

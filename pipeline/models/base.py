@@ -127,6 +127,23 @@ class DistortionModel(ABC):
         """Inverse of :meth:`to_dict`."""
 
 
+class CameraMatrixModel(DistortionModel):
+    """A model whose ideal pixels are those of a pin-hole camera matrix without skew (``fx, fy, cx, cy``
+    fields, normalised by :func:`set_pinhole_fields`): OpenCV's, OpenCV's fisheye and COLMAP's
+    ``THIN_PRISM_FISHEYE``."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, ...]
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        """:math:`K = [[f_x, 0, c_x], [0, f_y, c_y], [0, 0, 1]]` (3x3 float64)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
 class IdentityModel(DistortionModel):
     """The identity map ``x_u = x_d`` (a perfect lens)."""
 

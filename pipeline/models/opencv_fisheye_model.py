@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel, set_pinhole_fields
+from pipeline.models.base import CameraMatrixModel, set_pinhole_fields
 
 Array = npt.NDArray[np.float64]
 
@@ -18,7 +18,7 @@ FISHEYE_INVERSE_TOL_PX = 1e-8
 
 
 @dataclass(frozen=True)
-class OpenCVFisheyeModel(DistortionModel):
+class OpenCVFisheyeModel(CameraMatrixModel):
     r"""OpenCV's ``cv::fisheye`` projection (Kannala–Brandt, equidistant base), ROS ``equidistant``.
 
     The coefficients describe the *projection* ideal -> distorted. An ideal
@@ -63,10 +63,6 @@ class OpenCVFisheyeModel(DistortionModel):
 
     def __post_init__(self) -> None:
         set_pinhole_fields(self, (4,), "OpenCV fisheye distortion needs 4 coefficients k1..k4", "OpenCV fisheye")
-
-    @property
-    def camera_matrix(self) -> Array:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @property
     def dist_coeffs(self) -> Array:

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pipeline.models.base import DistortionModel, set_pinhole_fields
+from pipeline.models.base import CameraMatrixModel, set_pinhole_fields
 from pipeline.models.inverse import OUTSIDE_DOMAIN, Inverse, monotonic_reach, newton_inverse, radial_start
 
 #: accuracy (px) to which :meth:`OpenCVModel.undistort_points` inverts the projection
@@ -25,7 +25,7 @@ OPENCV_REACH_LIMIT = 11.5
 
 
 @dataclass(frozen=True)
-class OpenCVModel(DistortionModel):
+class OpenCVModel(CameraMatrixModel):
     r"""OpenCV's pinhole camera distortion (``cv::projectPoints`` convention).
 
     OpenCV's coefficients describe the *projection* ideal -> distorted. With
@@ -88,10 +88,6 @@ class OpenCVModel(DistortionModel):
             cy=k[1, 2],
             dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()),
         )
-
-    @property
-    def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @property
     def dist_coeffs(self) -> np.ndarray:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import DistortionModel, set_pinhole_fields
+from pipeline.models.base import CameraMatrixModel, set_pinhole_fields
 from pipeline.models.inverse import newton_inverse
 
 Array = npt.NDArray[np.float64]
@@ -18,7 +18,7 @@ THIN_PRISM_INVERSE_TOL_PX = 1e-8
 
 
 @dataclass(frozen=True)
-class ThinPrismFisheyeModel(DistortionModel):
+class ThinPrismFisheyeModel(CameraMatrixModel):
     r"""The fisheye projection with radial, tangential and thin-prism terms of COLMAP's ``THIN_PRISM_FISHEYE``.
 
     An ideal (pin-hole) pixel :math:`(x_u, y_u)` has normalised coordinates :math:`a = (x_u - c_x)/f_x`,
@@ -59,10 +59,6 @@ class ThinPrismFisheyeModel(DistortionModel):
         set_pinhole_fields(
             self, (8,), "THIN_PRISM_FISHEYE needs 8 coefficients k1 k2 p1 p2 k3 k4 sx1 sy1", "THIN_PRISM_FISHEYE"
         )
-
-    @property
-    def camera_matrix(self) -> Array:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     def _distorted(self, u: Array, v: Array) -> tuple[Array, Array]:
         k1, k2, p1, p2, k3, k4, sx, sy = self.dist

@@ -27,6 +27,7 @@ from pipeline.exports.colmap import colmap_text, read_colmap_text
 from pipeline.exports.fit import fit_fisheye, fit_thin_prism_fisheye
 from pipeline.exports.registry import read_correction, write_export
 from pipeline.exports.source import ExportSource
+from pipeline.exports.statement import Statement
 from pipeline.models import RadialModel
 from pipeline.models.homography import apply_homography
 from tests.pipeline.export_support import WIDE, WIDE_H, WIDE_W, mod_h, real_model, wide_radial
@@ -172,7 +173,7 @@ def test_thin_prism_fisheye_in_pycolmap_is_the_fitted_model_and_within_the_state
     fe, fe_err = fit_fisheye(lens, w, h)
     m, err = fit_thin_prism_fisheye(lens, w, h, fe)
     assert err.max_mod_h_px < 0.5 * fe_err.max_mod_h_px  # the prism terms hold what the fisheye cannot
-    cam = colmap_camera(tmp_path / "sparse", colmap_text(m, w, h, err).encode())
+    cam = colmap_camera(tmp_path / "sparse", colmap_text(m, w, h, Statement(err)).encode())
     assert cam.model_name == "THIN_PRISM_FISHEYE"
     q = grid(w, h)
     x = np.asarray(cam.cam_from_img(q + 0.5), dtype=np.float64)

@@ -13,6 +13,7 @@ from pipeline.exports.fit import fit_lensfun, fit_opencv
 from pipeline.exports.lensfun import lensfun_text, read_lensfun_text
 from pipeline.exports.opencv import opencv_text, read_opencv_text
 from pipeline.exports.ros import ROS_FIELDS, read_ros_text, ros_text
+from pipeline.exports.statement import Statement
 from pipeline.models import LensfunModel, OpenCVModel, RadialModel
 from pipeline.normalise import corner_homography, homography_from_4, image_corners, normalise_by_corners
 
@@ -130,7 +131,7 @@ def test_conversion_error_states_the_real_disagreement():
 def test_opencv_file_loads_unchanged_with_cv2_filestorage(tmp_path):
     m, err = fit_opencv(BARREL, W, H, n_coeffs=5)
     path = tmp_path / "calib.yaml"
-    path.write_text(opencv_text(m, W, H, err))
+    path.write_text(opencv_text(m, W, H, Statement(err)))
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     assert fs.isOpened()
     np.testing.assert_array_equal(fs.getNode("camera_matrix").mat(), m.camera_matrix)

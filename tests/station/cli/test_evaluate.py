@@ -15,6 +15,7 @@ from pipeline.exports.fit import fit_opencv
 from pipeline.exports.lensfun import lensfun_text
 from pipeline.exports.opencv import opencv_text
 from pipeline.exports.ros import ros_text
+from pipeline.exports.statement import Statement
 from pipeline.models import LensfunModel, RadialModel
 from pipeline.render import HarpScene, render_harp
 from pipeline.resample import DEFAULT_T
@@ -60,7 +61,7 @@ def test_opencv_round_trip_residual_matches_stated_conversion_error(tmp_path, sh
     write_model_file(true_file, LENS, width=W, height=H)
     cv_model, err = fit_opencv(LENS, W, H, n_coeffs=5)
     cv_file = tmp_path / "opencv.yaml"
-    cv_file.write_text(opencv_text(cv_model, W, H, err))
+    cv_file.write_text(opencv_text(cv_model, W, H, Statement(err)))
     assert err.d_px > 0.015  # the export really cannot represent this lens: the test can tell
 
     floor = run_json(capsys, true_file, *shots)
@@ -91,7 +92,7 @@ def test_opencv_round_trip_residual_matches_stated_conversion_error(tmp_path, sh
     cv8, err8 = fit_opencv(LENS, W, H, n_coeffs=8)
     assert err8.d_px < 0.002
     ros_file = tmp_path / "camera_info.yaml"
-    ros_file.write_text(ros_text(cv8, W, H, err8))
+    ros_file.write_text(ros_text(cv8, W, H, Statement(err8)))
     rep8 = run_json(capsys, ros_file, *shots)
     assert rep8["kind"] == "ros"
     assert abs(rep8["after"]["d"] - d_floor) < 0.002
