@@ -3,6 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2] [--exact-only | --kink-trim]
+    .venv/bin/python benchmarks/lens_limits.py --choice [--seeds ...] [--cache /tmp/lines]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
 0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
@@ -31,6 +32,14 @@ fit, each edge's residual about the fitted lens minus its own smooth trend (Lege
 what the lens's misfit and a string's bow leave) is a kink's signature; the points where it exceeds
 ``c`` times its robust standard deviation over all edges (1.4826 x median absolute value) are dropped and the
 lens fitted again.
+
+A fourth table (``--choice``, issue 19 item 2) compares the automatic choice without and with the turntable
+angles (``select_model(..., turntable_deg=...)``: folds fitted with the strings separated, the held-out shot
+judged with its strings' fitted bends removed, :mod:`pipeline.separated_cv`) on the full realistic render of
+the six shots; every candidate is fitted with the strings separated (what a session stores) and judged by its
+field error and by the d of three unseen shots (17, 77, 137 degrees) with their strings' bends, as that fit
+found them, removed; ratios over the best candidate by the same measure. ``--cache DIR`` keeps the measured
+edges of each seed (a render takes minutes).
 
 Every figure is the field error against the exact lens, RMS modulo homography over the whole image
 (``pipeline.compare.compare_models``, 20 px grid), px. JPEG is off and the lens has no non-parametric field

@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/model_choice.py [--real DIR] [--lenses 20] [--fit-shots 3,4,6]
-        [--population points] [--skip-real]
+        [--population points] [--skip-real] [--separated]
 
 Two parts (issue 19 items 2 and 5):
 
@@ -22,7 +22,10 @@ Two parts (issue 19 items 2 and 5):
   30 px off), each string bent by its own Legendre P2..P4 terms (harp-fixed, 0.015 px each) plus a
   bend of its own in every shot (0.015 px), every shot moved by a smooth field of its own (quadratic
   and cubic terms, 0.04 px each: an orientation's own measurement bias), raw points every pixel with
-  0.06 px noise smoothed as the measurement does (``smooth_subsample``, t = 30).
+  0.06 px noise smoothed as the measurement does (``smooth_subsample``, t = 30). With ``--separated`` also the
+  choice with the turntable angles known (``select_model(..., turntable_deg=...)``, :mod:`pipeline.separated_cv`)
+  against the two tiers, every candidate fitted with the strings separated: its d on the unseen shots with their
+  strings' fitted bends removed and its field error against the exact lens, over the best candidate's.
 """
 
 from __future__ import annotations
