@@ -69,7 +69,7 @@ from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import Harp
 from pipeline.harp_shape import fit_harp_shape
 from pipeline.lens_population import lens_population
-from pipeline.measure import measure_image
+from pipeline.measure import measure_image, point_sigmas
 from pipeline.models.base import DistortionModel
 from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
@@ -397,6 +397,105 @@ def print_kink_trim(rows: list[dict[str, object]]) -> None:
         )
 
 
+POINT_LOSS_ROWS: tuple[tuple[str, dict[str, object]], ...] = (
+    ("none", {}),
+    ("tukey", {"point_loss": "tukey"}),
+    ("huber", {"point_loss": "huber"}),
+    ("tukey, own sigma", {"point_loss": "tukey"}),
+    ("huber, own sigma", {"point_loss": "huber"}),
+)
+
+
+def measured(seed: int, w: int, h: int, cache: str | None) -> tuple[list[list], list[list]]:
+    """The full realistic shots of ``seed`` measured as ``harp measure`` does, and each point's standard
+    deviation (``pipeline.measure.point_sigmas``); read from / written to ``cache``/pts_SEED_WxH.npz when
+    given (the rendering is seeded, the file only saves time)."""
+    lens, ses, _ = seed_lens(seed, w, h)
+    path = Path(cache) / f"pts_{seed}_{w}x{h}.npz" if cache else None
+    if path is not None and path.exists():
+        with np.load(path) as z:
+            n = [int(z[f"n{i}"]) for i in range(int(z["n_shots"]))]
+            return (
+                [[z[f"s{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
+                [[z[f"g{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
+            )
+    shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
+    ms = [measure_image(s.image) for s in shots]
+    lines = [[ln.points for ln in m.lines] for m in ms]
+    sigmas = [point_sigmas(m) for m in ms]
+    if path is not None:
+        arrays = {f"s{i}_{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
+        arrays |= {f"g{i}_{j}": g for i, shot in enumerate(sigmas) for j, g in enumerate(shot)}
+        arrays |= {f"n{i}": np.array(len(shot)) for i, shot in enumerate(lines)}
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, n_shots=np.array(len(lines)), **arrays)  # type: ignore[arg-type]
+        os.replace(tmp, path)
+    return lines, sigmas
+
+
+def point_robust(args: tuple[int, int, int, str | None]) -> dict[str, object]:
+    seed, w, h, cache = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    lines, sigmas = measured(seed, w, h, cache)
+    for name, kw in POINT_LOSS_ROWS:
+        own = {"point_scale": sigmas} if name.endswith("own sigma") else {}
+        plain = fit_distortion(lines, w, h, **kw, **own, **SPEC.fit_arguments())  # type: ignore[arg-type]
+        row[name] = (
+            field(lines, lens, w, h, SPEC, joint=False, plain=plain),
+            field(lines, lens, w, h, SPEC, plain=plain),
+        )
+    return row
+
+
+def print_point_robust(rows: Iterable[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | kinked strings | "
+        + " | ".join(f"point loss {n}: lens alone / separated" for n, _ in POINT_LOSS_ROWS)
+        + " |"
+    )
+    print("|---:|---|---|---:|" + "---:|" * len(POINT_LOSS_ROWS))
+    for r in rows:
+        cells = " | ".join("{:.4f} / {:.4f}".format(*r[n]) for n, _ in POINT_LOSS_ROWS)  # type: ignore[str-format]
+        print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {cells} |", flush=True)
+
+
+EXACT_NOISE_PX = 0.02
+"""Noise added to the exact points in ``--point-robust-exact`` (px, per point, independent): enough to lift
+the median edge RMS as a real measurement's noise and bows do, so that whole kinked edges no longer stand out."""
+
+
+def point_robust_exact(args: tuple[int, int, int]) -> dict[str, object]:
+    seed, w, h = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    kinks = exact_lines(lens, reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"}), ses, w, h)
+    straight = exact_lines(lens, reshaped(ses.harp, STRAIGHT), ses, w, h)
+    rng = np.random.default_rng(seed)
+    noisy = [[p + rng.normal(0.0, EXACT_NOISE_PX, p.shape) for p in shot] for shot in kinks]
+    noisy_straight = [[p + rng.normal(0.0, EXACT_NOISE_PX, p.shape) for p in shot] for shot in straight]
+    for tag, pts in (("exact", kinks), ("noisy", noisy)):
+        for name, kw in POINT_LOSS_ROWS[:2]:
+            fit = fit_distortion(pts, w, h, **kw, **SPEC.fit_arguments())  # type: ignore[arg-type]
+            row[f"{tag} {name}"] = field(pts, lens, w, h, SPEC, joint=False, plain=fit)
+    row["noisy straight"] = field(noisy_straight, lens, w, h, SPEC, joint=False)
+    return row
+
+
+def print_point_robust_exact(rows: Iterable[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | kinked strings | exact kinks: point loss edges / tukey | "
+        f"kinks + {EXACT_NOISE_PX:g} px noise: edges / tukey | straight + {EXACT_NOISE_PX:g} px noise: edges |"
+    )
+    print("|---:|---|---|---:|---:|---:|---:|")
+    for r in rows:
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {r['exact none']:.4f} / "
+            f"{r['exact tukey']:.4f} | {r['noisy none']:.4f} / {r['noisy tukey']:.4f} | {r['noisy straight']:.4f} |",
+            flush=True,
+        )
+
+
 COLUMNS = (
     ("full alone", "full, lens alone"),
     ("full", "full"),
@@ -421,7 +520,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--exact-only", action="store_true", help="print only the exact-point table (no rendering)")
     ap.add_argument("--kink-trim", action="store_true", help="print only the kinked-points prototype's table")
     ap.add_argument("--choice", action="store_true", help="print only the model choice's table (no ablations)")
-    ap.add_argument("--cache", type=Path, default=None, help="directory keeping the measured edges (--choice)")
+    ap.add_argument(
+        "--point-robust",
+        action="store_true",
+        help="print only the per-point robust fit's table (fit_distortion point_loss)",
+    )
+    ap.add_argument(
+        "--point-robust-exact", action="store_true", help="print only the per-point robust fit on exact kinked points"
+    )
+    ap.add_argument(
+        "--cache", type=Path, default=None, help="--choice, --point-robust: directory keeping the measured edges (npz)"
+    )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -442,6 +551,18 @@ def main(argv: list[str] | None = None) -> int:
         print()
         with pool:
             print_choice(pool.map(choice, [(s, w, h, args.cache) for s in seeds]))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    if args.point_robust:
+        print()
+        with pool:
+            print_point_robust(pool.map(point_robust, [(s, w, h, args.cache) for s in seeds]))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    if args.point_robust_exact:
+        print()
+        with pool:
+            print_point_robust_exact(pool.map(point_robust_exact, jobs))
         print(f"# load average at end {os.getloadavg()[0]:.1f}")
         return 0
     if args.exact_only:

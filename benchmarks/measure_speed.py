@@ -45,6 +45,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.startup import bytecode_environment  # noqa: E402
 from pipeline.edges import detect_edges  # noqa: E402
 from pipeline.grouping import group_string_edges  # noqa: E402
 from pipeline.measure import border_px, measure_grouping, measure_image  # noqa: E402
@@ -68,13 +69,7 @@ def _median_time(fn, repeat):
 def whole_process(path: Path, repeat: int, pycache: Path | None) -> tuple[float, float, float]:
     """Median wall, user and system seconds of ``harp measure --json path`` as a process; with
     ``pycache`` the bytecode cache lives there, else none is written (``PYTHONDONTWRITEBYTECODE``)."""
-    env = dict(os.environ)
-    if pycache is None:
-        env["PYTHONDONTWRITEBYTECODE"] = "1"
-        env.pop("PYTHONPYCACHEPREFIX", None)
-    else:
-        env.pop("PYTHONDONTWRITEBYTECODE", None)
-        env["PYTHONPYCACHEPREFIX"] = str(pycache)
+    env = bytecode_environment(pycache)
     walls, users, syss = [], [], []
     for _ in range(repeat + 1):  # the first run warms the file (and bytecode) cache, not counted
         t0 = time.perf_counter()

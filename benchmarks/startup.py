@@ -55,11 +55,10 @@ def run_once(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, flo
     return wall, usage.ru_utime + usage.ru_stime
 
 
-def environment(tree: Path, pycache: Path | None) -> dict[str, str]:
-    """``tree`` first on the path; the bytecode cache in ``pycache``, or (None) none written, as
-    in a sandbox with ``PYTHONDONTWRITEBYTECODE=1``: the installed packages' and the standard
-    library's bytecode read as installed, every module of the tree compiled at each start."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
+def bytecode_environment(pycache: Path | None, **extra: str) -> dict[str, str]:
+    """This process's environment with ``extra``; the bytecode cache in ``pycache``, or (None) none
+    written, as in a sandbox with ``PYTHONDONTWRITEBYTECODE=1``."""
+    env = dict(os.environ, **extra)
     if pycache is None:
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         env.pop("PYTHONPYCACHEPREFIX", None)
@@ -67,6 +66,13 @@ def environment(tree: Path, pycache: Path | None) -> dict[str, str]:
         env.pop("PYTHONDONTWRITEBYTECODE", None)
         env["PYTHONPYCACHEPREFIX"] = str(pycache)
     return env
+
+
+def environment(tree: Path, pycache: Path | None) -> dict[str, str]:
+    """``tree`` first on the path; the bytecode cache in ``pycache``, or (None) none written, as
+    in a sandbox with ``PYTHONDONTWRITEBYTECODE=1``: the installed packages' and the standard
+    library's bytecode read as installed, every module of the tree compiled at each start."""
+    return bytecode_environment(pycache, PYTHONPATH=str(tree))
 
 
 def paired(args: tuple[str, ...], trees: dict[str, Path], repeat: int, cache: Path | None) -> dict[str, list]:

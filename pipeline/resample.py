@@ -204,16 +204,25 @@ def _window(
     return np.clip(idx, 0, max(n - 1, 0)), d / sig, w
 
 
-def _local_quadratic(r: Points, s0: NDArray[np.float64], sig: float) -> Points:
-    """Local quadratic regression of the samples ``r`` (uniform, unit spacing) at ``s0``."""
-    idx, u, w = _window(r.shape[0], s0, sig)
+def _normal_matrices(
+    u: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    r"""``w u``, ``w u^2`` and each window's local-quadratic normal matrix :math:`X^\top W X`, ``(windows, 3, 3)``
+    with entries :math:`\sum_i w_i u_i^{j+k}` (``u``, ``w``: :func:`_window`'s offsets and weights)."""
     wu = w * u
     wu2 = wu * u
     m = np.stack([w.sum(1), wu.sum(1), wu2.sum(1), (wu2 * u).sum(1), (wu2 * u * u).sum(1)], axis=1)
-    a = np.empty((len(s0), 3, 3))
+    a = np.empty((len(u), 3, 3))
     for i in range(3):
         for j in range(3):
             a[:, i, j] = m[:, i + j]
+    return wu, wu2, a
+
+
+def _local_quadratic(r: Points, s0: NDArray[np.float64], sig: float) -> Points:
+    """Local quadratic regression of the samples ``r`` (uniform, unit spacing) at ``s0``."""
+    idx, u, w = _window(r.shape[0], s0, sig)
+    wu, wu2, a = _normal_matrices(u, w)
     out = np.empty((len(s0), 2))
     for c in range(2):
         v = r[idx, c]
@@ -230,13 +239,7 @@ def _hat_rows(n: int, s0: NDArray[np.float64], sig: float) -> tuple[NDArray[np.i
     :math:`\hat x(s_0) = \sum_i l_i x_i` (the rows of the smoother's hat matrix,
     :math:`l = e_1^\top (X^\top W X)^{-1} X^\top W`)."""
     idx, u, w = _window(n, s0, sig)
-    wu = w * u
-    wu2 = wu * u
-    m = np.stack([w.sum(1), wu.sum(1), wu2.sum(1), (wu2 * u).sum(1), (wu2 * u * u).sum(1)], axis=1)
-    a = np.empty((len(s0), 3, 3))
-    for i in range(3):
-        for j in range(3):
-            a[:, i, j] = m[:, i + j]
+    wu, wu2, a = _normal_matrices(u, w)
     e1 = np.zeros((len(s0), 3, 1))
     e1[:, 0, 0] = 1.0
     c = np.linalg.solve(a, e1)[:, :, 0]

@@ -173,6 +173,12 @@ def conversion_error(
         sh = straightness(corrected_points(list(edges), theirs, width, height))
         so = straightness(corrected_points(list(edges), ours, width, height))
         shots = (sh.d, sh.d_max, so.d, so.d_max)
+    return _figures(e, e_h, st, shots)
+
+
+def _figures(e: Array, e_h: Array, st: Straightness, shots: tuple[float, float, float, float]) -> ConversionError:
+    """The :class:`ConversionError` of the per-point distances ``e`` (4-corner normalised) and ``e_h`` (modulo
+    homography), the lines' straightness ``st`` and the shots' ``(d, d_max)`` after the export and after ours."""
     return ConversionError(
         rms_px=float(np.sqrt(np.mean(e**2))),
         max_px=float(e.max()),
@@ -274,20 +280,7 @@ def conversion_error_in_frame(
             sh = straightness([theirs.undistort_points(p) for p in kept])
             so = straightness([ours_q(p) for p in kept])
             shots = (sh.d, sh.d_max, so.d, so.d_max)
-    rms, mx = float(np.sqrt(np.mean(e**2))), float(e.max())
-    return ConversionError(
-        rms_px=rms,
-        max_px=mx,
-        rms_mod_h_px=rms,
-        max_mod_h_px=mx,
-        n_points=int(len(e)),
-        d_px=st.d,
-        d_max_px=st.d_max,
-        shots_d_px=shots[0],
-        shots_d_max_px=shots[1],
-        model_shots_d_px=shots[2],
-        model_shots_d_max_px=shots[3],
-    )
+    return _figures(e, e, st, shots)
 
 
 def ideal_homography(

@@ -385,6 +385,21 @@ def fit_opencv(
     if more:
         alts = more[0] if len(more) == 1 else f"{', '.join(more[:-1])} or {more[-1]}"
         remedy = f"export with more coefficients (--coeffs {alts}) or as a fisheye (--format auto picks the closest)"
+    return _pole_free_choice(model, best, faults, width, height, edges, family, remedy)
+
+
+def _pole_free_choice(
+    model: DistortionModel,
+    best: tuple[float, OpenCVModel] | None,
+    faults: Sequence[str],
+    width: int,
+    height: int,
+    edges: Sequence[Array] | None,
+    family: str,
+    remedy: str,
+) -> tuple[OpenCVModel, ConversionError]:
+    """The closest pole-free stage ``best`` (score, model) with its conversion error stated as ``family`` with
+    ``remedy``; ValueError naming every stage's fault and the remedy when no stage was pole-free."""
     if best is None:
         raise ValueError(
             f"{family} cannot represent this lens without a pole or fold within {EXTRAPOLATION_RADIUS:g}x the "
@@ -639,13 +654,7 @@ def fit_opencv_camera(
             best = (score, cand)
     family = f"the OpenCV {n_coeffs}-coefficient pin-hole model with the measured camera matrix"
     remedy = "export with more coefficients (--coeffs) or as a fisheye"
-    if best is None:
-        raise ValueError(
-            f"{family} cannot represent this lens without a pole or fold within {EXTRAPOLATION_RADIUS:g}x the "
-            f"corner radius ({'; '.join(faults)}); {remedy}"
-        )
-    out = best[1]
-    return out, conversion_error(model, out, width, height, edges=edges, export=family, remedy=remedy)
+    return _pole_free_choice(model, best, faults, width, height, edges, family, remedy)
 
 
 def fit_fisheye_camera(

@@ -127,6 +127,22 @@ class DistortionModel(ABC):
         """Inverse of :meth:`to_dict`."""
 
 
+def pinhole_from_matrix(camera_matrix: Any) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` of a 3x3 camera matrix without skew.
+
+    Raises
+    ------
+    ValueError
+        For another shape, a skew or a last row other than ``[0 0 1]``.
+    """
+    k = np.asarray(camera_matrix, dtype=np.float64)
+    if k.shape != (3, 3):
+        raise ValueError(f"camera matrix must be 3x3, got shape {k.shape}")
+    if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]) or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-12):
+        raise ValueError("camera matrix with skew or a non-[0 0 1] last row is not supported")
+    return k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+
+
 class CameraMatrixModel(DistortionModel):
     """A model whose ideal pixels are those of a pin-hole camera matrix without skew (``fx, fy, cx, cy``
     fields, normalised by :func:`set_pinhole_fields`): OpenCV's, OpenCV's fisheye and COLMAP's
@@ -142,6 +158,18 @@ class CameraMatrixModel(DistortionModel):
     def camera_matrix(self) -> np.ndarray:
         """:math:`K = [[f_x, 0, c_x], [0, f_y, c_y], [0, 0, 1]]` (3x3 float64)."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        """The coefficients ``dist`` as a float64 array (OpenCV's ``distCoeffs``)."""
+        return np.asarray(self.dist, dtype=np.float64)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.name,
+            "camera_matrix": self.camera_matrix.tolist(),
+            "distortion_coefficients": list(self.dist),
+        }
 
 
 class IdentityModel(DistortionModel):

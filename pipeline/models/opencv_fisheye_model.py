@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.models.base import CameraMatrixModel, set_pinhole_fields
+from pipeline.models.base import CameraMatrixModel, pinhole_from_matrix, set_pinhole_fields
 
 Array = npt.NDArray[np.float64]
 
@@ -63,10 +63,6 @@ class OpenCVFisheyeModel(CameraMatrixModel):
 
     def __post_init__(self) -> None:
         set_pinhole_fields(self, (4,), "OpenCV fisheye distortion needs 4 coefficients k1..k4", "OpenCV fisheye")
-
-    @property
-    def dist_coeffs(self) -> Array:
-        return np.asarray(self.dist, dtype=np.float64)
 
     def theta_d(self, theta: Array) -> Array:
         """The distorted angle :math:`\\theta_d(\\theta)`."""
@@ -128,13 +124,6 @@ class OpenCVFisheyeModel(CameraMatrixModel):
         )
         return np.asarray(mx), np.asarray(my)
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "model": self.name,
-            "camera_matrix": self.camera_matrix.tolist(),
-            "distortion_coefficients": list(self.dist),
-        }
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> OpenCVFisheyeModel:
         return cls.from_matrices(d["camera_matrix"], d["distortion_coefficients"])
@@ -142,12 +131,8 @@ class OpenCVFisheyeModel(CameraMatrixModel):
     @classmethod
     def from_matrices(cls, camera_matrix: npt.ArrayLike, dist_coeffs: npt.ArrayLike) -> OpenCVFisheyeModel:
         """From a 3x3 camera matrix (no skew) and ``k1..k4``."""
-        k = np.asarray(camera_matrix, dtype=np.float64)
-        if k.shape != (3, 3):
-            raise ValueError(f"camera matrix must be 3x3, got shape {k.shape}")
-        if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]) or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-12):
-            raise ValueError("camera matrix with skew or a non-[0 0 1] last row is not supported")
+        fx, fy, cx, cy = pinhole_from_matrix(camera_matrix)
         d = np.asarray(dist_coeffs, dtype=np.float64).ravel()
         if len(d) != 4:
             raise ValueError(f"OpenCV fisheye distortion needs 4 coefficients k1..k4, got {len(d)}")
-        return cls(fx=k[0, 0], fy=k[1, 1], cx=k[0, 2], cy=k[1, 2], dist=(d[0], d[1], d[2], d[3]))
+        return cls(fx=fx, fy=fy, cx=cx, cy=cy, dist=(d[0], d[1], d[2], d[3]))

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pipeline.models.base import CameraMatrixModel, set_pinhole_fields
+from pipeline.models.base import CameraMatrixModel, pinhole_from_matrix, set_pinhole_fields
 from pipeline.models.inverse import OUTSIDE_DOMAIN, Inverse, monotonic_reach, newton_inverse, radial_start
 
 #: accuracy (px) to which :meth:`OpenCVModel.undistort_points` inverts the projection
@@ -76,22 +76,8 @@ class OpenCVModel(CameraMatrixModel):
     @classmethod
     def from_matrices(cls, camera_matrix: ArrayLike, dist_coeffs: ArrayLike) -> OpenCVModel:
         """From a 3x3 camera matrix and a coefficient vector (skew must be 0)."""
-        k = np.asarray(camera_matrix, dtype=np.float64)
-        if k.shape != (3, 3):
-            raise ValueError(f"camera matrix must be 3x3, got shape {k.shape}")
-        if abs(k[0, 1]) > 1e-12 * abs(k[0, 0]) or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-12):
-            raise ValueError("camera matrix with skew or a non-[0 0 1] last row is not supported")
-        return cls(
-            fx=k[0, 0],
-            fy=k[1, 1],
-            cx=k[0, 2],
-            cy=k[1, 2],
-            dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()),
-        )
-
-    @property
-    def dist_coeffs(self) -> np.ndarray:
-        return np.asarray(self.dist, dtype=np.float64)
+        fx, fy, cx, cy = pinhole_from_matrix(camera_matrix)
+        return cls(fx=fx, fy=fy, cx=cx, cy=cy, dist=tuple(np.asarray(dist_coeffs, dtype=np.float64).ravel()))
 
     # ----------------------------------------------------------------- maps
     def distort_points(self, xy: np.ndarray, max_iter: int = 50) -> np.ndarray:
@@ -174,13 +160,6 @@ class OpenCVModel(CameraMatrixModel):
         return cv2.initUndistortRectifyMap(k, self.dist_coeffs, None, k, (int(width), int(height)), cv2.CV_32FC1)
 
     # ------------------------------------------------------------ file form
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "model": self.name,
-            "camera_matrix": self.camera_matrix.tolist(),
-            "distortion_coefficients": list(self.dist),
-        }
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> OpenCVModel:
         return cls.from_matrices(d["camera_matrix"], d["distortion_coefficients"])

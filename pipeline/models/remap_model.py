@@ -20,6 +20,27 @@ REMAP_INVERSE_TOL_PX = 1e-7
 REMAP_DOMAIN_MARGIN_PX = 0.01
 
 
+def _set_maps(model: Any, what: str) -> None:
+    """Normalise a maps model's ``map_x`` and ``map_y`` in its ``__post_init__`` (a frozen dataclass): read-only
+    float64 arrays of one ``(H, W)`` shape, at least 2 x 2, finite.
+
+    Raises
+    ------
+    ValueError
+        ``"{what} maps must be two equal (H, W) arrays, ..."``; ``"{what} maps hold non-finite values"``.
+    """
+    mx = np.asarray(model.map_x, dtype=np.float64)
+    my = np.asarray(model.map_y, dtype=np.float64)
+    if mx.ndim != 2 or mx.shape != my.shape or min(mx.shape) < 2:
+        raise ValueError(f"{what} maps must be two equal (H, W) arrays, got {mx.shape} and {my.shape}")
+    if not (np.all(np.isfinite(mx)) and np.all(np.isfinite(my))):
+        raise ValueError(f"{what} maps hold non-finite values")
+    mx.setflags(write=False)
+    my.setflags(write=False)
+    object.__setattr__(model, "map_x", mx)
+    object.__setattr__(model, "map_y", my)
+
+
 @dataclass(frozen=True, eq=False)
 class RemapModel(DistortionModel):
     r"""Correction defined by maps :math:`m_x, m_y` such that ``cv2.remap(img, m_x, m_y)`` corrects ``img``.
@@ -58,16 +79,7 @@ class RemapModel(DistortionModel):
     name: str = field(default="remap", init=False, repr=False)
 
     def __post_init__(self) -> None:
-        mx = np.asarray(self.map_x, dtype=np.float64)
-        my = np.asarray(self.map_y, dtype=np.float64)
-        if mx.ndim != 2 or mx.shape != my.shape or min(mx.shape) < 2:
-            raise ValueError(f"remap maps must be two equal (H, W) arrays, got {mx.shape} and {my.shape}")
-        if not (np.all(np.isfinite(mx)) and np.all(np.isfinite(my))):
-            raise ValueError("remap maps hold non-finite values")
-        mx.setflags(write=False)
-        my.setflags(write=False)
-        object.__setattr__(self, "map_x", mx)
-        object.__setattr__(self, "map_y", my)
+        _set_maps(self, "remap")
         if self.corners_ideal is not None:
             c = np.asarray(self.corners_ideal, dtype=np.float64)
             if c.shape != (4, 2) or not np.all(np.isfinite(c)):
@@ -173,16 +185,7 @@ class CorrectionMapModel(DistortionModel):
     name: str = field(default="correction_map", init=False, repr=False)
 
     def __post_init__(self) -> None:
-        mx = np.asarray(self.map_x, dtype=np.float64)
-        my = np.asarray(self.map_y, dtype=np.float64)
-        if mx.ndim != 2 or mx.shape != my.shape or min(mx.shape) < 2:
-            raise ValueError(f"correction maps must be two equal (H, W) arrays, got {mx.shape} and {my.shape}")
-        if not (np.all(np.isfinite(mx)) and np.all(np.isfinite(my))):
-            raise ValueError("correction maps hold non-finite values")
-        mx.setflags(write=False)
-        my.setflags(write=False)
-        object.__setattr__(self, "map_x", mx)
-        object.__setattr__(self, "map_y", my)
+        _set_maps(self, "correction")
 
     def undistort_points(self, xy: Array) -> Array:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)

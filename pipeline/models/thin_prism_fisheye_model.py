@@ -113,13 +113,6 @@ class ThinPrismFisheyeModel(CameraMatrixModel):
         s[~ok] = np.nan
         return np.stack([self.cx + self.fx * u * s, self.cy + self.fy * v * s], axis=1)
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "model": self.name,
-            "camera_matrix": self.camera_matrix.tolist(),
-            "distortion_coefficients": list(self.dist),
-        }
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ThinPrismFisheyeModel:
         k = np.asarray(d["camera_matrix"], dtype=np.float64)

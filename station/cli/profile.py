@@ -495,6 +495,12 @@ def _export(args, store) -> int:
             edges = FittingEdges(
                 None, f"none: the correction is interpolated between the focus settings {interp.known()}"
             )
+    return _write_profile(args, profile, what, edges, stamp)
+
+
+def _write_profile(args, profile, what: str, edges, stamp) -> int:
+    """Export ``profile`` (``what``: how it was found; ``edges``, ``stamp``: see :func:`export_profile`), write it
+    where ``args`` asks and report it (HarpError for bad input)."""
     try:
         ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
         write_output(args, ex)
@@ -523,13 +529,7 @@ def _zoom_profile(args, store, lens, newest, focal: float):
 
 def _export_zoom(args, store, lens, newest) -> int:
     profile, what, edges, stamp = _zoom_profile(args, store, lens, newest, args.focal)
-    try:
-        ex, fig = export_profile(args, profile, what=what, edges=edges, stamp=stamp)
-        write_output(args, ex)
-    except InputError as exc:
-        raise HarpError(str(exc)) from None
-    report(args, ex, fig, "harp profile")
-    return EXIT_OK
+    return _write_profile(args, profile, what, edges, stamp)
 
 
 def _export_lensfun_zoom(args, store, lens) -> int:
