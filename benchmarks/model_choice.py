@@ -42,7 +42,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline.compare import compare_models
-from pipeline.cross_validation import DEFAULT_CANDIDATES, CVRow, paired_difference
+from pipeline.cross_validation import DEFAULT_CANDIDATES, FALLBACK, CVRow, paired_difference
 from pipeline.edgeset import held_out_residuals
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
@@ -258,6 +258,12 @@ def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 
         print_separated(sep_rows, n_lenses, first_seed)
 
 
+COMPARED = (
+    "for comparison: lowest CV d of the separated folds",
+    f"for comparison: no choice ({FALLBACK.label})",
+)
+"""Two rules that are not the pipeline's, printed beside the choice with the strings separated (``--separated``)."""
+
 SEPARATED_MEASURES = (
     ("unseen", "unseen d, strings removed"),
     ("field", "field error"),
@@ -285,10 +291,12 @@ def separated_ratios(
         unseen[r.candidate] = float(np.sqrt(np.mean(held**2)))
         field[r.candidate] = float(compare_models(joint.model, lens, W_PT, H_PT, step=20).rms)
     out = {"t": elapsed, "separated folds": float(sel.folds == SEPARATED_FOLDS)}
+    lowest = min((r for r in sel.table if np.isfinite(r.cv_d)), key=lambda r: r.cv_d).candidate
+    others = ((COMPARED[0], lowest), (COMPARED[1], FALLBACK))
     for name, table in (("unseen", unseen), ("field", field)):
         best = min(table.values())
         out[f"{name} best"] = best
-        for rule, spec in (("two tiers (now)", plain), ("strings separated (angles known)", sel.choice)):
+        for rule, spec in (("two tiers (now)", plain), ("strings separated (angles known)", sel.choice), *others):
             out[f"{name} {rule}"] = table.get(spec, float("nan")) / best
     return out
 
@@ -308,7 +316,7 @@ def print_separated(rows: list[tuple[int, dict[str, list[float]]]], n_lenses: in
         if not sep:
             continue
         for key, name in SEPARATED_MEASURES:
-            for rule in ("two tiers (now)", "strings separated (angles known)"):
+            for rule in ("two tiers (now)", "strings separated (angles known)", *COMPARED):
                 a = np.array(sep[f"{key} {rule}"])
                 t = f"{np.median(sep['t']):.0f}" if rule.startswith("strings") else ""
                 folds = "" if min(sep["separated folds"]) else " (some folds too few orientations: plain folds)"
