@@ -30,7 +30,7 @@ References
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -85,7 +85,10 @@ class FitResult:
     ``d``/``d_max`` follow Tang et al. 2012: ``d`` is the RMS signed distance
     of all points to their edge's regression line; ``d_max`` is
     ``sqrt(mean over edges of (max - min signed distance)^2)``; both over the
-    kept (non-rejected) edges. ``before`` is the uncorrected input.
+    kept (non-rejected) edges. ``before`` is the uncorrected input. ``point_weights`` (N,), when the fit
+    weighed its points robustly (``fit_distortion(point_loss=...)``): each kept point's weight in the
+    final fit, the kept edges' points in order (the joint fit with the strings,
+    :func:`pipeline.harp_shape.fit_harp_shape`, weighs them the same); None otherwise.
     """
 
     model: DistortionModel
@@ -102,6 +105,7 @@ class FitResult:
     n_points: int
     n_params: int
     warnings: tuple[str, ...] = ()
+    point_weights: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __bool__(self) -> Literal[True]:  # a result is true, a FitFailure false: ``if not fit:``
         return True

@@ -62,6 +62,12 @@ the remaining edges. (When no edge is down-weighted the weighted fit is the
 first one, and when moreover none is rejected the final fit is too: they are
 not run again.)
 
+Optionally (``point_loss``, default off) the final fit is followed by iteratively
+reweighted least squares on each point (:mod:`pipeline.robust_points`): a point's
+residual about its edge's smooth trend, judged against its own scale by Tukey's
+biweight or Huber's weight, so that a string's kink (a few points far off their
+edge's course) stops pulling the lens when the whole edge does not stand out.
+
 References
 ----------
 .. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision
@@ -75,6 +81,7 @@ References
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -87,6 +94,7 @@ from pipeline.edgeset import (
     collect,
     edge_figures,
     summarise,
+    tls,
 )
 from pipeline.fit_problem import make_parametrisation, residuals_and_jacobian
 from pipeline.fit_solver import solve
@@ -94,6 +102,7 @@ from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, s
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialParametrisation
 from pipeline.models.radial_field import RadialFieldParametrisation
+from pipeline.robust_points import POINT_LOSSES, PointLoss, robust_point_weights
 
 MIN_EDGES = 4
 """A fit needs at least this many usable edges."""
@@ -101,6 +110,26 @@ MIN_EDGES = 4
 FAR_CENTRE = 0.05
 """A free distortion centre farther than this from the image centre (in half image diagonals) is
 checked against the fit started from the centre-prior solution (:func:`fit_distortion`)."""
+
+POINT_ITERATIONS = 5
+"""Most reweightings of the per-point robust stage (``fit_distortion(point_loss=...)``)."""
+POINT_WEIGHT_TOL = 1e-3
+"""The per-point robust stage stops when no point's weight changes by more than this."""
+MIN_POINT_WEIGHT = 1e-6
+"""A point's robust weight is kept above this (an edge whose points all lose their weight keeps a line)."""
+
+
+def _kept_points(every: EdgeSet, kept: EdgeSet) -> np.ndarray:
+    """Mask over ``every``'s points of those of the edges in ``kept`` (matched by image and line)."""
+    keys = set(zip(kept.image.tolist(), kept.line.tolist(), strict=True))
+    on = np.array([k in keys for k in zip(every.image.tolist(), every.line.tolist(), strict=True)])
+    out: np.ndarray = np.repeat(on, every.counts)
+    return out
+
+
+def _times(base: np.ndarray | None, robust_w: np.ndarray) -> np.ndarray:
+    """The points' weights in the least squares: their own (``base``, None for 1) times their robust ones."""
+    return robust_w if base is None else base * robust_w
 
 
 # ------------------------------------------------------------ input checks
@@ -170,6 +199,9 @@ def fit_distortion(
     w_center: float = FREE_CENTER_WEIGHT,
     max_nfev: int = 200,
     point_sigma: Sequence[Sequence[np.ndarray]] | None = None,
+    point_loss: PointLoss | None = None,
+    point_iterations: int = POINT_ITERATIONS,
+    point_scale: Sequence[Sequence[np.ndarray]] | None = None,
 ) -> FitResult | FitFailure:
     """Fit a distortion correction straightening all edges of all images at once.
 
@@ -224,6 +256,17 @@ def fit_distortion(
         :func:`pipeline.edgeset.point_weights`) and each edge's line is its weighted TLS
         line; the reported figures (d, d_max, per edge) stay the paper's unweighted ones.
         None (default): every point weighs the same, as in Tang et al.
+    point_loss : {'tukey', 'huber'}, optional
+        After the edge-level stage, iteratively reweighted least squares on each point's residual
+        about its edge's smooth trend (:mod:`pipeline.robust_points`: Tukey's biweight or Huber's
+        weight against each point's own scale), so that a string's kink stops pulling the lens while
+        ordinary points keep full weight; ``point_iterations`` reweightings at most. None (default):
+        no per-point robust weights.
+    point_scale : sequence over images of sequences of (M,) arrays, optional
+        Shaped like ``lines_per_image``: each point's standard deviation (relative values suffice,
+        :func:`pipeline.measure.point_sigmas`) used only as the robust stage's scale of each point
+        (not as least-squares weights); default: ``point_sigma`` when given, else each edge's robust
+        size of its detrended residuals.
 
     Returns
     -------
@@ -233,6 +276,8 @@ def fit_distortion(
     problem = spec_problem(model, degree, tangential, prism, division, field, field_penalty, trefoil)
     if problem:
         return FitFailure(problem)
+    if point_loss is not None and point_loss not in POINT_LOSSES:
+        return FitFailure(f"point_loss must be one of {', '.join(POINT_LOSSES)} or None, got {point_loss!r}")
     spec = FitSpec(
         model, degree, tangential, prism, division=division, field=field, field_penalty=field_penalty, trefoil=trefoil
     )
@@ -247,6 +292,12 @@ def fit_distortion(
     edges, rejected = collect(lines_per_image, width, height, point_sigma=point_sigma)
     if not edges:
         return edges
+    scales: EdgeSet | None = None
+    if point_scale is not None:
+        got, _ = collect(lines_per_image, width, height, point_sigma=point_scale)
+        if isinstance(got, FitFailure):
+            return FitFailure(f"point_scale: {got.reason}")
+        scales = got
     param = make_parametrisation(width, height, spec, w_center=w_center, ridge=ridge)
     n_e = edges.n_edges
     n_constraints = int(np.sum(edges.counts - 2))
@@ -274,6 +325,7 @@ def fit_distortion(
         th = param.theta0(init)
 
     all_edges = edges
+    robust_w: np.ndarray | None = None
     warnings: list[str] = []
     n_iter = 0
     rejected = list(rejected)
@@ -340,6 +392,26 @@ def fit_distortion(
                     sol = solve(param, edges, th, max_nfev=max_nfev)
                     n_iter += sol.nfev
                     th = sol.x
+            if point_loss is not None:
+                base = edges.weights
+                if scales is not None and scales.weights is not None:
+                    keep_pts = _kept_points(scales, edges)
+                    sigma = 1.0 / np.sqrt(scales.weights[keep_pts])
+                else:
+                    sigma = None if base is None else 1.0 / np.sqrt(base)
+                robust_w = None
+                for _ in range(max(int(point_iterations), 0)):
+                    current = base if robust_w is None else _times(base, robust_w)
+                    u, _ = param.evaluate(edges.xy, th, jac=False)
+                    r, a, *_ = tls(u, edges.starts, edges.counts, current)
+                    new = robust_point_weights(r, a, edges.starts, edges.counts, point_loss, sigma, robust_w)
+                    new = np.maximum(new, MIN_POINT_WEIGHT)
+                    if robust_w is not None and float(np.max(np.abs(new - robust_w))) <= POINT_WEIGHT_TOL:
+                        break
+                    robust_w = new
+                    sol = solve(param, replace(edges, weights=_times(base, robust_w)), th, max_nfev=max_nfev)
+                    n_iter += sol.nfev
+                    th = sol.x
     except (ValueError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"optimisation failed: {exc}")
     if not np.all(np.isfinite(th)):
@@ -361,6 +433,8 @@ def fit_distortion(
         n_params=param.n,
         warnings=tuple(warnings),
     )
+    if robust_w is not None:
+        result = replace(result, point_weights=_times(edges.weights, robust_w))
     if result.d_after > result.d_before * 1.01 + 1e-9:
         return FitFailure(f"the fit made the edges less straight (d {result.d_before:.4g} -> {result.d_after:.4g} px)")
     return result

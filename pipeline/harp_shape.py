@@ -70,7 +70,7 @@ References
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -522,6 +522,9 @@ def fit_harp_shape(
     edges, _ = collect(kept, width, height)
     if not edges:
         return edges
+    w_plain = plain.point_weights  # the plain fit's robust point weights (its kept points, in order)
+    if w_plain is not None and len(w_plain) == len(edges.xy):
+        edges = replace(edges, weights=w_plain)
     model0 = plain.model
     by_shot: list[list[Floats]] = [[] for _ in kept]
     for e, pts in enumerate(edges.lines()):
