@@ -78,8 +78,8 @@ two tiers); ``strings-separated`` fits every fold with the strings' own bends se
 shot with its strings' fitted bends removed (:mod:`pipeline.separated_cv`; with ``pipeline.strings: separate``
 and folds of 3 turntable angles or more). Not the default: on the realistic simulator it brought the chosen
 model's field error closer to the best candidate's on some lenses and farther on others
-(``benchmarks/RESULTS-strings.md``: as often worse as better, and worse on the point population of
-``benchmarks/RESULTS-model-choice.md``), at about 7 times the choice's time."""
+(``benchmarks/RESULTS-strings.md``: 15 better and 12 worse of 51; on the point populations of
+``benchmarks/RESULTS-model-choice.md`` not better), at about 7 times the choice's time."""
 
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
