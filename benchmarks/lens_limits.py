@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2]
         [--exact-only | --kink-trim | --point-robust [--cache DIR] | --point-robust-exact]
+    .venv/bin/python benchmarks/lens_limits.py --choice [--seeds ...] [--cache /tmp/lines]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
 0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
@@ -43,6 +44,14 @@ of the kinks alone (every other string shape zero) fitted as they are and with T
 with 0.02 px of independent noise per point (enough that a kinked edge no longer stands out as a whole), and
 the straight strings with the same noise (the kink-free reference).
 
+A fourth table (``--choice``, issue 19 item 2) compares the automatic choice without and with the turntable
+angles (``select_model(..., turntable_deg=...)``: folds fitted with the strings separated, the held-out shot
+judged with its strings' fitted bends removed, :mod:`pipeline.separated_cv`) on the full realistic render of
+the six shots; every candidate is fitted with the strings separated (what a session stores) and judged by its
+field error and by the d of three unseen shots (17, 77, 137 degrees) with their strings' bends, as that fit
+found them, removed; ratios over the best candidate by the same measure. ``--cache DIR`` keeps the measured
+edges of each seed (a render takes minutes).
+
 Every figure is the field error against the exact lens, RMS modulo homography over the whole image
 (``pipeline.compare.compare_models``, 20 px grid), px. JPEG is off and the lens has no non-parametric field
 in this population (``realistic_session(jpeg=False)``, ``lens_population(field=False)``), as in
@@ -77,6 +86,7 @@ from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
 from pipeline.render import visible_edges
 from pipeline.select import select_model
+from pipeline.separated_cv import held_out_without_strings
 
 FITTED = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 SPEC = FitSpec("radial", 4, True, True)
@@ -153,6 +163,31 @@ def seed_lens(seed: int, w: int, h: int) -> tuple[DistortionModel, Session, dict
     return member.model, ses, {"seed": seed, "lens": member.design, "strings": ses.harp.material}
 
 
+UNSEEN = (17.0, 77.0, 137.0)
+
+
+def realistic_lines(seed: int, w: int, h: int, cache: Path | None = None) -> tuple[list[list], list[list]]:
+    """The measured edges of seed ``seed``'s full realistic render: the six fitted shots (``FITTED``, the same
+    as :func:`one`'s "full" row: shot ``i`` is seeded by its index) and three unseen ones (``UNSEEN``, as in
+    ``benchmarks/strings_separated.py``); kept in ``cache`` (a directory, one ``.npz`` per seed and size) when
+    given, read from there when present (a render takes minutes)."""
+    path = None if cache is None else cache / f"seed{seed}_{w}x{h}.npz"
+    if path is not None and path.exists():
+        with np.load(path) as z:
+            n_shots = int(z["n_shots"])
+            counts = z["counts"]
+            lines = [[z[f"s{i}_e{j}"] for j in range(int(counts[i]))] for i in range(n_shots)]
+    else:
+        lens, ses, _ = seed_lens(seed, w, h)
+        shots = render_shots(lens, ses.harp, ses.mount, FITTED + UNSEEN, w, h, ses.effects, seed=seed)
+        lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            arrays = {f"s{i}_e{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
+            np.savez(path, n_shots=len(lines), counts=np.array([len(s) for s in lines]), **arrays)
+    return lines[: len(FITTED)], lines[len(FITTED) :]
+
+
 def one(args: tuple[int, int, int]) -> dict[str, object]:
     seed, w, h = args
     lens, ses, row = seed_lens(seed, w, h)
@@ -176,6 +211,86 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
     row["chosen field"] = field(full_lines, lens, w, h, choice)
     row["t"] = time.perf_counter() - t0
     return row
+
+
+def choice(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
+    """Seed ``seed``'s choice without and with the turntable angles (``--choice``, module docstring)."""
+    seed, w, h, cache = args
+    lens, ses, row = seed_lens(seed, w, h)
+    fitted, unseen = realistic_lines(seed, w, h, cache)
+    t0 = time.perf_counter()
+    plain_sel = select_model(fitted, w, h)
+    row["t plain"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sep_sel = select_model(fitted, w, h, turntable_deg=FITTED)
+    row["t separated"] = time.perf_counter() - t0
+    fields, unseen_d = {}, {}
+    for r in sep_sel.table:  # every candidate as a session stores it: fitted with the strings separated
+        plain = r.full_fit or fit_distortion(fitted, w, h, **r.candidate.fit_arguments())
+        joint = fit_harp_shape(fitted, FITTED, w, h, r.candidate, plain=plain) if plain else plain
+        if not joint:
+            continue
+        fields[r.candidate] = float(compare_models(joint.model, lens, w, h, step=20).rms)
+        held = [held_out_without_strings(joint, shot, a) for shot, a in zip(unseen, UNSEEN, strict=True)]
+        unseen_d[r.candidate] = float(np.sqrt(np.mean(np.concatenate([x.residuals for x in held]) ** 2)))
+    best = min(fields, key=lambda c: fields[c])
+    best_u = min(unseen_d, key=lambda c: unseen_d[c])
+    # two rules for comparison, not the pipeline's: the lowest CV d of the separated folds, and no choice at all
+    # (the fallback radial4+tangential+prism, what the rest of this benchmark fits)
+    lowest = min((r for r in sep_sel.table if np.isfinite(r.cv_d)), key=lambda r: r.cv_d).candidate
+    row["lowest cv field"] = fields.get(lowest, float("nan"))
+    row["fixed field"] = fields.get(SPEC, float("nan"))
+    row.update(best=best.label, best_field=fields[best], best_unseen=best_u.label, best_unseen_d=unseen_d[best_u])
+    for key, sel in (("plain", plain_sel), ("separated", sep_sel)):
+        row[key] = sel.choice.label
+        row[f"{key} field"] = fields.get(sel.choice, float("nan"))
+        row[f"{key} unseen"] = unseen_d.get(sel.choice, float("nan"))
+    return row
+
+
+def print_choice(results: Iterable[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | chosen (plain folds) | field px | chosen, strings separated (angles known) | "
+        "field px | best candidate | field px | field ratio plain / separated | unseen d ratio plain / separated "
+        "| choice s plain / separated |"
+    )
+    print("|---:|---|---|---|---:|---|---:|---|---:|---:|---:|---:|")
+    rows = []
+    for r in results:  # each row as it comes
+        rows.append(r)
+        bf, bu = float(r["best_field"]), float(r["best_unseen_d"])  # type: ignore[arg-type]
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['plain']} | {r['plain field']:.4f} | {r['separated']} | "
+            f"{r['separated field']:.4f} | {r['best']} | {bf:.4f} | {float(r['plain field']) / bf:.3f} / "  # type: ignore[arg-type]
+            f"{float(r['separated field']) / bf:.3f} | {float(r['plain unseen']) / bu:.3f} / "  # type: ignore[arg-type]
+            f"{float(r['separated unseen']) / bu:.3f} | {r['t plain']:.0f} / {r['t separated']:.0f} |",  # type: ignore[arg-type]
+            flush=True,
+        )
+    print()
+    for key, name in (("plain", "plain folds"), ("separated", "strings separated")):
+        fr = np.array([float(r[f"{key} field"]) / float(r["best_field"]) for r in rows])  # type: ignore[arg-type]
+        ur = np.array([float(r[f"{key} unseen"]) / float(r["best_unseen_d"]) for r in rows])  # type: ignore[arg-type]
+        print(
+            f"{name}: field error over the best candidate's worst {fr.max():.3f}, median {np.median(fr):.3f}, "
+            f"> 1.05 for {int(np.sum(fr > 1.05))} / {len(fr)}; unseen d (strings removed) worst {ur.max():.3f}, "
+            f"median {np.median(ur):.3f}, > 1.05 for {int(np.sum(ur > 1.05))} / {len(ur)}"
+        )
+    for key, name in (
+        ("lowest cv field", "for comparison, the lowest CV d of the separated folds (no one-SE rule)"),
+        ("fixed field", f"for comparison, no choice ({SPEC.label})"),
+    ):
+        fr = np.array([float(r[key]) / float(r["best_field"]) for r in rows])  # type: ignore[arg-type]
+        print(
+            f"{name}: field error over the best candidate's worst {fr.max():.3f}, median {np.median(fr):.3f}, "
+            f"> 1.05 for {int(np.sum(fr > 1.05))} / {len(fr)}"
+        )
+    sp = np.array([float(r["separated field"]) / float(r["plain field"]) for r in rows])  # type: ignore[arg-type]
+    print(
+        f"separated over plain choice, field error: lower by > 5 % for {int(np.sum(sp < 0.95))}, within 5 % for "
+        f"{int(np.sum(np.abs(sp - 1) <= 0.05))}, higher by > 5 % for {int(np.sum(sp > 1.05))} of {len(sp)}; "
+        f"median choice time plain {np.median([float(r['t plain']) for r in rows]):.0f} s, separated "  # type: ignore[arg-type]
+        f"{np.median([float(r['t separated']) for r in rows]):.0f} s"  # type: ignore[arg-type]
+    )
 
 
 def widened(harp: Harp, extra: int) -> Harp:
@@ -302,7 +417,7 @@ POINT_LOSS_ROWS: tuple[tuple[str, dict[str, object]], ...] = (
 )
 
 
-def measured(seed: int, w: int, h: int, cache: str | None) -> tuple[list[list], list[list]]:
+def measured(seed: int, w: int, h: int, cache: Path | None) -> tuple[list[list], list[list]]:
     """The full realistic shots of ``seed`` measured as ``harp measure`` does, and each point's standard
     deviation (``pipeline.measure.point_sigmas``); read from / written to ``cache``/pts_SEED_WxH.npz when
     given (the rendering is seeded, the file only saves time)."""
@@ -329,7 +444,7 @@ def measured(seed: int, w: int, h: int, cache: str | None) -> tuple[list[list], 
     return lines, sigmas
 
 
-def point_robust(args: tuple[int, int, int, str | None]) -> dict[str, object]:
+def point_robust(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
     seed, w, h, cache = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
@@ -415,6 +530,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--exact-only", action="store_true", help="print only the exact-point table (no rendering)")
     ap.add_argument("--kink-trim", action="store_true", help="print only the kinked-points prototype's table")
+    ap.add_argument("--choice", action="store_true", help="print only the model choice's table (no ablations)")
     ap.add_argument(
         "--point-robust",
         action="store_true",
@@ -423,7 +539,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--point-robust-exact", action="store_true", help="print only the per-point robust fit on exact kinked points"
     )
-    ap.add_argument("--cache", default=None, help="--point-robust: directory to keep the measured lines in (npz)")
+    ap.add_argument(
+        "--cache", type=Path, default=None, help="--choice, --point-robust: directory keeping the measured edges (npz)"
+    )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -438,6 +556,12 @@ def main(argv: list[str] | None = None) -> int:
         print()
         with pool:
             print_kink_trim(list(pool.map(kink_trim, jobs)))
+        print(f"# load average at end {os.getloadavg()[0]:.1f}")
+        return 0
+    if args.choice:
+        print()
+        with pool:
+            print_choice(pool.map(choice, [(s, w, h, args.cache) for s in seeds]))
         print(f"# load average at end {os.getloadavg()[0]:.1f}")
         return 0
     if args.point_robust:

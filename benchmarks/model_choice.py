@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/model_choice.py [--real DIR] [--lenses 20] [--fit-shots 3,4,6]
-        [--population points] [--skip-real]
+        [--population points] [--skip-real] [--separated]
 
 Two parts (issue 19 items 2 and 5):
 
@@ -22,7 +22,10 @@ Two parts (issue 19 items 2 and 5):
   30 px off), each string bent by its own Legendre P2..P4 terms (harp-fixed, 0.015 px each) plus a
   bend of its own in every shot (0.015 px), every shot moved by a smooth field of its own (quadratic
   and cubic terms, 0.04 px each: an orientation's own measurement bias), raw points every pixel with
-  0.06 px noise smoothed as the measurement does (``smooth_subsample``, t = 30).
+  0.06 px noise smoothed as the measurement does (``smooth_subsample``, t = 30). With ``--separated`` also the
+  choice with the turntable angles known (``select_model(..., turntable_deg=...)``, :mod:`pipeline.separated_cv`)
+  against the two tiers, every candidate fitted with the strings separated: its d on the unseen shots with their
+  strings' fitted bends removed and its field error against the exact lens, over the best candidate's.
 """
 
 from __future__ import annotations
@@ -38,13 +41,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.cross_validation import DEFAULT_CANDIDATES, CVRow, paired_difference
+from pipeline.compare import compare_models
+from pipeline.cross_validation import DEFAULT_CANDIDATES, FALLBACK, CVRow, paired_difference
 from pipeline.edgeset import held_out_residuals
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import fit_harp_shape
 from pipeline.models import RadialModel
 from pipeline.resample import point_sigma, sample_noise, smooth_subsample
-from pipeline.select import select_model
+from pipeline.select import SEPARATED_FOLDS, select_model
+from pipeline.separated_cv import held_out_without_strings
 
 REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
 
@@ -183,6 +189,17 @@ def point_shot(
     return lines
 
 
+def point_angles(seed: int, nfit: int) -> tuple[np.ndarray, list[float], list[float]]:
+    """Lens ``seed``'s harp (each string's P2..P4 bend, px), the turntable angles of its ``nfit`` fitted shots and
+    of its 3 unseen ones (degrees: the strings' direction in the image, :func:`point_shot`)."""
+    rng = np.random.default_rng(seed + 7)
+    harp = rng.normal(0, 0.015, (15, 3))
+    base = rng.uniform(0, 180)
+    fa = [(base + 180 * i / nfit + rng.normal(0, 5)) % 180 for i in range(nfit)]
+    ta = [(base + 90 / nfit + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
+    return harp, fa, ta
+
+
 def point_session(
     seed: int, nfit: int, sigmas: list[list[np.ndarray]] | None = None
 ) -> tuple[RadialModel, list[list[np.ndarray]], list[list[np.ndarray]]]:
@@ -190,11 +207,7 @@ def point_session(
     unseen shots between them, one harp (15 strings with their own bends) in all; with ``sigmas``, each
     fitted shot's point sigmas appended to it (:func:`point_shot`)."""
     lens = point_lens(seed)
-    rng = np.random.default_rng(seed + 7)
-    harp = rng.normal(0, 0.015, (15, 3))
-    base = rng.uniform(0, 180)
-    fa = [(base + 180 * i / nfit + rng.normal(0, 5)) % 180 for i in range(nfit)]
-    ta = [(base + 90 / nfit + 60 * i + rng.normal(0, 5)) % 180 for i in range(3)]
+    harp, fa, ta = point_angles(seed, nfit)
     fs = []
     for i, a in enumerate(fa):
         out: list[np.ndarray] | None = None if sigmas is None else []
@@ -205,7 +218,7 @@ def point_session(
     return lens, fs, ts
 
 
-def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 0) -> None:
+def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 0, separated: bool = False) -> None:
     print(
         "## Population (point sets): chosen model's held-out d on 3 unseen shots over the best candidate's "
         f"({n_lenses} seeded lenses per row, seeds {first_seed}..{first_seed + n_lenses - 1})"
@@ -213,7 +226,10 @@ def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 
     print()
     print("| shots fitted | rule | worst ratio | mean ratio | lenses > 1.05 | median best held-out d px |")
     print("|---:|---|---:|---:|---:|---:|")
+    sep_rows: list[tuple[int, dict[str, list[float]]]] = []
     for nfit in fit_counts:
+        sep: dict[str, list[float]] = {}
+        sep_rows.append((nfit, sep))
         ratios: dict[str, list[float]] = {"two tiers (now)": [], "leave-one-shot-out alone (before)": []}
         bests = []
         for seed in range(first_seed, first_seed + n_lenses):
@@ -228,12 +244,86 @@ def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 
             bests.append(best)
             ratios["two tiers (now)"].append(unseen[sel.choice] / best)
             ratios["leave-one-shot-out alone (before)"].append(unseen[old_rule(sel.table)] / best)
+            if separated:
+                for k, v in separated_ratios(seed, nfit, lens, fs, ts, sel.choice).items():
+                    sep.setdefault(k, []).append(v)
         for rule, v in ratios.items():
             a = np.array(v)
             print(
                 f"| {nfit} | {rule} | {a.max():.3f} | {a.mean():.3f} | {int(np.sum(a > 1.05))} / {len(a)} | "
                 f"{np.median(bests):.4f} |"
             )
+    print()
+    if separated:
+        print_separated(sep_rows, n_lenses, first_seed)
+
+
+COMPARED = (
+    "for comparison: lowest CV d of the separated folds",
+    f"for comparison: no choice ({FALLBACK.label})",
+)
+"""Two rules that are not the pipeline's, printed beside the choice with the strings separated (``--separated``)."""
+
+SEPARATED_MEASURES = (
+    ("unseen", "unseen d, strings removed"),
+    ("field", "field error"),
+)
+
+
+def separated_ratios(
+    seed: int, nfit: int, lens: RadialModel, fs: list[list[np.ndarray]], ts: list[list[np.ndarray]], plain: FitSpec
+) -> dict[str, float]:
+    """The choice with the turntable angles known (``select_model(..., turntable_deg=...)``) against the plain
+    choice ``plain``, every candidate fitted with the strings separated (what a session stores): each one's
+    d on the unseen shots with their strings' fitted bends removed (the unseen shots' angles known) and its
+    field error against the exact lens, both over the best candidate's (``--separated``)."""
+    _, fa, ta = point_angles(seed, nfit)
+    t0 = time.perf_counter()
+    sel = select_model(fs, W_PT, H_PT, turntable_deg=fa)
+    elapsed = time.perf_counter() - t0
+    unseen, field = {}, {}
+    for r in sel.table:
+        plain_fit = r.full_fit or fit_distortion(fs, W_PT, H_PT, **r.candidate.fit_arguments())
+        joint = fit_harp_shape(fs, fa, W_PT, H_PT, r.candidate, plain=plain_fit) if plain_fit else plain_fit
+        if not joint:
+            continue
+        held = np.concatenate([held_out_without_strings(joint, s, a).residuals for s, a in zip(ts, ta, strict=True)])
+        unseen[r.candidate] = float(np.sqrt(np.mean(held**2)))
+        field[r.candidate] = float(compare_models(joint.model, lens, W_PT, H_PT, step=20).rms)
+    out = {"t": elapsed, "separated folds": float(sel.folds == SEPARATED_FOLDS)}
+    lowest = min((r for r in sel.table if np.isfinite(r.cv_d)), key=lambda r: r.cv_d).candidate
+    others = ((COMPARED[0], lowest), (COMPARED[1], FALLBACK))
+    for name, table in (("unseen", unseen), ("field", field)):
+        best = min(table.values())
+        out[f"{name} best"] = best
+        for rule, spec in (("two tiers (now)", plain), ("strings separated (angles known)", sel.choice), *others):
+            out[f"{name} {rule}"] = table.get(spec, float("nan")) / best
+    return out
+
+
+def print_separated(rows: list[tuple[int, dict[str, list[float]]]], n_lenses: int, first_seed: int) -> None:
+    print(
+        "## Population (point sets), every candidate fitted with the strings separated (what a session stores): "
+        f"the choice with and without the turntable angles over the best candidate ({n_lenses} seeded lenses "
+        f"per row, seeds {first_seed}..{first_seed + n_lenses - 1})"
+    )
+    print()
+    print(
+        "| shots fitted | measure | rule | worst ratio | mean ratio | lenses > 1.05 | median best px | median choice s |"
+    )
+    print("|---:|---|---|---:|---:|---:|---:|---:|")
+    for nfit, sep in rows:
+        if not sep:
+            continue
+        for key, name in SEPARATED_MEASURES:
+            for rule in ("two tiers (now)", "strings separated (angles known)", *COMPARED):
+                a = np.array(sep[f"{key} {rule}"])
+                t = f"{np.median(sep['t']):.0f}" if rule.startswith("strings") else ""
+                folds = "" if min(sep["separated folds"]) else " (some folds too few orientations: plain folds)"
+                print(
+                    f"| {nfit} | {name} | {rule}{folds if rule.startswith('strings') else ''} | {a.max():.3f} | "
+                    f"{a.mean():.3f} | {int(np.sum(a > 1.05))} / {len(a)} | {np.median(sep[f'{key} best']):.4f} | {t} |"
+                )
     print()
 
 
@@ -245,6 +335,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lenses", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=0, help="seeds first..first+lenses-1 (a fresh population)")
     ap.add_argument("--fit-shots", default="3,4,6")
+    ap.add_argument(
+        "--separated", action="store_true", help="also the choice with the turntable angles known (strings separated)"
+    )
     args = ap.parse_args(argv)
     print(
         f"# Model choice on unseen shots ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
@@ -255,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.skip_real:
         real_part(args.real)
     if args.population == "points":
-        population_part(args.lenses, [int(v) for v in args.fit_shots.split(",")], args.first_seed)
+        population_part(args.lenses, [int(v) for v in args.fit_shots.split(",")], args.first_seed, args.separated)
     print(f"({time.perf_counter() - t0:.0f} s)")
     return 0
 

@@ -89,6 +89,9 @@ class CVRow:
     edge_n: tuple[int, ...] = field(default=(), repr=False)  # per held-out edge: number of points
     full_fit: FitResult | None = field(default=None, repr=False, compare=False)  # fit on all shots (warm start)
     cv_d_bound: float = float("nan")  # a stopped candidate: its CV d is at least this (px)
+    # folds with the strings separated (pipeline.separated_cv): held-out edges whose string's bend was
+    # removed, and edges left as they were (their string not fitted in the fold); None for other folds
+    strings_removed: tuple[int, int] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -99,6 +102,7 @@ class CVRow:
             "fit_d": [finite_or_none(v) for v in self.fit_d],
             "failure": self.failure,
             "cv_d_bound": finite_or_none(self.cv_d_bound),
+            **({} if self.strings_removed is None else {"strings_removed": list(self.strings_removed)}),
         }
 
 

@@ -69,6 +69,18 @@ STRINGS_CHOICES: tuple[str, ...] = (STRINGS_SEPARATE, STRINGS_IGNORE)
 (:func:`pipeline.harp_shape.fit_harp_shape`): ``separate`` fits every string's bend with the lens and keeps
 the lens (the default), ``ignore`` fits the lens alone as for loose photographs."""
 
+CHOICE_FOLDS_PLAIN = "plain"
+CHOICE_FOLDS_STRINGS = "strings-separated"
+CHOICE_FOLDS: tuple[str, ...] = (CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS)
+"""How a session's automatic choice (``pipeline.model: auto``) cross-validates the candidates when it knows the
+turntable angles: ``plain`` (the default) judges each held-out shot as it is (:func:`pipeline.select.select_model`'s
+two tiers); ``strings-separated`` fits every fold with the strings' own bends separated and judges the held-out
+shot with its strings' fitted bends removed (:mod:`pipeline.separated_cv`; with ``pipeline.strings: separate``
+and folds of 3 turntable angles or more). Not the default: on the realistic simulator it brought the chosen
+model's field error closer to the best candidate's on some lenses and farther on others
+(``benchmarks/RESULTS-strings.md``: 15 better and 12 worse of 51; on the point populations of
+``benchmarks/RESULTS-model-choice.md`` not better), at about 7 times the choice's time."""
+
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
 

@@ -51,6 +51,7 @@ from pipeline.cross_validation import (
 )
 from pipeline.fitspec import FitSpec
 from pipeline.orientations import distinct_orientations, required_orientations, shot_orientation, support_problem
+from pipeline.separated_cv import MIN_FOLD_ORIENTATIONS, cross_validate_separated
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,7 @@ def select_model(
     warm_start: bool = True,
     stop_factor: float | None = STOP_FACTOR,
     map_fn: Callable[..., Iterable[CVRow]] = map,
+    turntable_deg: Sequence[float] | None = None,
     **fit_kw: Any,
 ) -> Selection:
     r"""Choose model and degree by cross-validation over the shots.
@@ -152,6 +154,18 @@ def select_model(
     so, as it says when the shots have fewer distinct orientations than the choice needs
     (:func:`support_problem`, also in :attr:`Selection.support`).
 
+    **With the turntable angles** (``turntable_deg``, three shots or more, ``folds`` 'auto' or 'images')
+    the folds are leave-one-shot-out with the strings separated instead
+    (:func:`pipeline.separated_cv.cross_validate_separated`): each candidate fitted jointly with every
+    string's own bend on the other shots, and judged on the held-out shot with those bends removed, so
+    that the folds compare the lenses and not the strings. The choice is then one tier: the candidate
+    with fewest parameters within ``n_se`` paired standard errors of the best (ties: the lower CV d); a
+    flexible one only when it is ahead of the best radial candidate by more than ``flexible_margin_se``
+    (otherwise the same rule among the radial candidates). ``folds`` of the selection is
+    :data:`SEPARATED_FOLDS`. Each fold must keep :data:`pipeline.separated_cv.MIN_FOLD_ORIENTATIONS`
+    distinct turntable orientations (with two, a string's bend and the lens's terms trade); with fewer
+    the folds are the plain ones and the reason says that the strings were not separated.
+
     Parameters
     ----------
     lines_per_image : edge point sets of each shot (as for :func:`pipeline.fit.fit_distortion`).
@@ -161,6 +175,7 @@ def select_model(
     orientation_tolerance : tier 1's relative tolerance on the leave-one-shot-out CV d.
     flexible_margin_se : tier 1's bar for a flexible candidate, in paired standard errors.
     warm_start, stop_factor, map_fn : see :func:`cross_validate`.
+    turntable_deg : each shot's turntable angle (degrees), when known: the folds with the strings separated.
 
     Returns
     -------
@@ -170,9 +185,28 @@ def select_model(
         :data:`FALLBACK` and the reason says so.
     """
     mode_now = fold_mode(folds, len(lines_per_image))
+    if turntable_deg is not None and len(turntable_deg) != len(lines_per_image):
+        raise ValueError(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
+    unseparated = ""
+    if turntable_deg is not None and mode_now == "images":
+        fewest = min(
+            distinct_orientations(a for j, a in enumerate(turntable_deg) if j != h) for h in range(len(turntable_deg))
+        )
+        if fewest < MIN_FOLD_ORIENTATIONS:
+            unseparated = (
+                f"; turntable angles known, but a fold would have {fewest} turntable orientation"
+                f"{'s' if fewest != 1 else ''} (separating the strings needs >= {MIN_FOLD_ORIENTATIONS}): "
+                "strings not separated in the folds"
+            )
+    if turntable_deg is not None and mode_now == "images" and not unseparated:
+        return _select_separated(
+            lines_per_image, turntable_deg, width, height, candidates, n_se, flexible_margin_se,
+            stop_factor=stop_factor, map_fn=map_fn, **fit_kw,
+        )  # fmt: skip
     candidates, set_aside = _supported_when_unchecked(candidates, lines_per_image, mode_now)
     candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, mode_now)
     set_aside += trefoil_aside
+    notes = trefoil_aside + unseparated  # what the reasons of leave-one-shot-out choices end with
     table, mode = cross_validate(
         lines_per_image,
         width,
@@ -217,14 +251,14 @@ def select_model(
             f"({first.n_params}) within {se_text} (paired over the held-out edges) of the best CV d "
             f"{best_row.cv_d:.4f} px,{ahead} ahead of every radial model on unseen orientations"
         )
-        return _with_support(Selection(first.candidate, reason + trefoil_aside, mode, table), lines_per_image)
+        return _with_support(Selection(first.candidate, reason + notes, mode, table), lines_per_image)
     if best_radial is None:  # only flexible candidates, none clearly ahead: the folds decide alone
         reason = (
             f"{first.candidate.label}: leave-one-shot-out CV d {first.cv_d:.4f} px, fewest parameters "
             f"({first.n_params}) within {se_text} (paired over the held-out edges) of the best CV d "
             f"{best_row.cv_d:.4f} px (no radial candidate)"
         )
-        return _with_support(Selection(first.candidate, reason + trefoil_aside, mode, table), lines_per_image)
+        return _with_support(Selection(first.candidate, reason + notes, mode, table), lines_per_image)
     general = _within(radial, best_radial, n_se, orientation_tolerance)
     fits = {r.candidate: r.full_fit for r in general if r.full_fit is not None}
     strings, _ = cross_validate(
@@ -265,7 +299,63 @@ def select_model(
         f"{loso[choice].cv_d:.4f} px, within {se_text} or {tol} of the best radial model's "
         f"{best_radial.cv_d:.4f} px); {tier2}{passed}"
     )
-    return _with_support(Selection(choice, reason + trefoil_aside, mode, table, strings), lines_per_image)
+    return _with_support(Selection(choice, reason + notes, mode, table, strings), lines_per_image)
+
+
+SEPARATED_FOLDS = "images, strings separated"
+""":attr:`Selection.folds` of a choice made by leave-one-shot-out folds with the strings separated."""
+
+
+def _select_separated(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    candidates: Sequence[FitSpec],
+    n_se: float,
+    flexible_margin_se: float,
+    *,
+    stop_factor: float | None,
+    map_fn: Callable[..., Iterable[Any]],
+    **fit_kw: Any,
+) -> Selection:
+    """The choice of :func:`select_model` when the turntable angles are known (its docstring)."""
+    candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, "images")
+    table = cross_validate_separated(
+        lines_per_image, turntable_deg, width, height, candidates, stop_factor=stop_factor, map_fn=map_fn, **fit_kw
+    )
+    ok = [r for r in table if np.isfinite(r.cv_d)]
+    if not ok:
+        reasons = sorted({r.failure for r in table if r.failure})
+        return Selection(
+            FALLBACK,
+            f"no candidate could be cross-validated with the strings separated ({'; '.join(reasons)[:200]}); "
+            f"using the default {FALLBACK.label}",
+            "none",
+            table,
+        )
+    se_text = "one standard error" if n_se == 1.0 else f"{n_se:g} standard errors"
+    best = min(ok, key=lambda r: r.cv_d)
+    pick = min(_within(ok, best, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+    radial = [r for r in ok if not is_flexible(r.candidate)]
+    best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
+    margin = _flexible_margin(pick, best_radial)
+    passed = ""
+    if is_flexible(pick.candidate) and best_radial is not None and margin <= flexible_margin_se:
+        passed = (
+            f"; {pick.candidate.label} won the folds by only {margin:.1f} paired standard errors "
+            f"(a flexible model needs more than {flexible_margin_se:g})"
+        )
+        best = best_radial
+        pick = min(_within(radial, best_radial, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+    removed, left = pick.strings_removed or (0, 0)
+    reason = (
+        f"{pick.candidate.label}: strings separated, turntable angles known: leave-one-shot-out CV d "
+        f"{pick.cv_d:.4f} px with each held-out shot's strings' fitted bends removed ({removed} held-out edges; "
+        f"{left} left as they were, their string not fitted in the fold), fewest parameters ({pick.n_params}) "
+        f"within {se_text} (paired over the held-out edges) of the best CV d {best.cv_d:.4f} px{passed}"
+    )
+    return _with_support(Selection(pick.candidate, reason + trefoil_aside, SEPARATED_FOLDS, table), lines_per_image)
 
 
 def _supported_when_unchecked(

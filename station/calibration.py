@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
-from pipeline.fitspec import STRINGS_SEPARATE, FitSpec
+from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
@@ -168,6 +168,7 @@ def calibrate_shots(
     seed: int = 0,
     map_fn: MapFn = map,
     candidates: Sequence[FitSpec] | None = None,
+    turntable_deg: Sequence[float] | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -184,15 +185,18 @@ def calibrate_shots(
     map_fn : ``map`` over independent fits (a process pool's); results do not depend on it.
     candidates : what the cross-validation chooses among when ``spec`` is None (default
         :data:`pipeline.cross_validation.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
+    turntable_deg : each shot's turntable angle, when known: the automatic choice cross-validates every
+        candidate with the strings separated (:func:`pipeline.select.select_model`'s ``turntable_deg``).
     """
     lines = [list(s) for s in shots]
     selection = None
     support = None if spec is None else support_problem(spec, lines)
     if spec is None:
+        angles = None if turntable_deg is None else [float(a) for a in turntable_deg]
         if candidates is None:
-            selection = select_model(lines, width, height, map_fn=map_fn)
+            selection = select_model(lines, width, height, map_fn=map_fn, turntable_deg=angles)
         else:
-            selection = select_model(lines, width, height, candidates, map_fn=map_fn)
+            selection = select_model(lines, width, height, candidates, map_fn=map_fn, turntable_deg=angles)
         spec = selection.choice
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
@@ -478,7 +482,13 @@ def calibrate_focus(
     ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
     (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
     ``"separate"`` (the default) and :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
-    lens is the one fitted with the strings' own bends separated (:func:`separate_strings`)."""
+    lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
+    choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
+    so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
+    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`)."""
+    separate = getattr(pipeline, "strings", STRINGS_SEPARATE) == STRINGS_SEPARATE
+    by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
+    known = turntable_deg is not None and len(turntable_deg) == len(shots)
     cal = calibrate_shots(
         [list(s) for s in shots],
         width,
@@ -488,6 +498,7 @@ def calibrate_focus(
         bootstrap=pipeline.bootstrap,
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
+        turntable_deg=turntable_deg if separate and by_strings and known else None,
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
@@ -496,7 +507,7 @@ def calibrate_focus(
         joint = fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit)
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
-    if getattr(pipeline, "strings", STRINGS_SEPARATE) != STRINGS_SEPARATE:
+    if not separate:
         return cal
     if not isinstance(joint, HarpShapeFit):
         reason = health.get("failure", "the strings cannot be separated")

@@ -32,7 +32,15 @@ from typing import Any
 from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS, driver_settings
 from drivers.settings import REQUIRED, SEED_MAX, Setting, fields_of, setting
 from drivers.sim.zaber_emulator import SETTINGS as EMULATOR_SETTINGS
-from pipeline.fitspec import DEGREE_BOUNDS, STRINGS_CHOICES, STRINGS_SEPARATE, FitSpec, parse_choice
+from pipeline.fitspec import (
+    CHOICE_FOLDS,
+    CHOICE_FOLDS_PLAIN,
+    DEGREE_BOUNDS,
+    STRINGS_CHOICES,
+    STRINGS_SEPARATE,
+    FitSpec,
+    parse_choice,
+)
 from pipeline.resample import DEFAULT_T
 from station.config.errors import ConfigError
 from station.equipment import Identity, Optics, optics_keys
@@ -177,6 +185,9 @@ class PipelineConfig:
     strings: str = setting(STRINGS_SEPARATE, "with 3 or more turntable angles: the profile's lens fitted with every "
                            "string's own bend separated (separate) or the lens fitted alone (ignore)",
                            choices=STRINGS_CHOICES)  # fmt: skip
+    choice_folds: str = setting(CHOICE_FOLDS_PLAIN, "model auto with turntable angles: the held-out shots judged as "
+                                "they are (plain) or each fold fitted with the strings' bends separated and its "
+                                "held-out shot judged without them (strings-separated)", choices=CHOICE_FOLDS)  # fmt: skip
 
     @property
     def spec(self) -> FitSpec | None:

@@ -133,3 +133,28 @@ def test_a_session_stores_the_lens_with_the_strings_separated():
     few = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=close)
     assert few.failure is None, few.failure
     assert few.details["strings"]["separated"] is False and "turntable angles" in few.details["strings"]["reason"]
+
+
+def test_an_automatic_choice_with_turntable_angles_can_separate_the_strings():
+    """``calibrate_shots(turntable_deg=...)`` (a session's ``pipeline.choice_folds: strings-separated``) chooses
+    by folds fitted with the strings separated, and says so in the record a profile keeps; bent strings (0.04 px
+    terms) had the plain folds choose radial2 for a lens with a rho^4 term (tests/pipeline/test_separated_cv.py)."""
+    from pipeline.fitspec import CHOICE_FOLDS, CHOICE_FOLDS_PLAIN, FitSpec
+    from pipeline.models import RadialModel
+    from pipeline.select import SEPARATED_FOLDS
+    from station.calibration import calibrate_shots, selection_record
+    from station.config import PipelineConfig
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.002), center=(512, 366))
+    turns = (0, 36, 72, 108, 144)
+    bends = np.random.default_rng(1).normal(0.0, 0.04, (9, 3))
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), seed=4, step=60.0)
+    cands = [FitSpec("radial", 2), FitSpec("radial", 4)]
+    cal = calibrate_shots(shots, w, h, candidates=cands, turntable_deg=turns)
+    assert cal.failure is None and cal.spec == cands[1]
+    rec = selection_record(cal.selection)
+    assert rec["folds"] == SEPARATED_FOLDS and "strings separated, turntable angles known" in rec["reason"]
+    assert cal.fit.model is cal.selection.table[1].full_fit.model  # the fold's start: no second fit
+    assert PipelineConfig().choice_folds == CHOICE_FOLDS_PLAIN and set(CHOICE_FOLDS) == {"plain", "strings-separated"}

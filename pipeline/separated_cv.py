@@ -1,0 +1,289 @@
+r"""Cross-validation with the strings separated: a held-out shot judged without its strings' own bends.
+
+Leave-one-shot-out folds (:mod:`pipeline.cross_validation`) judge a candidate by the straightness of a
+shot it was not fitted on. On a harp whose strings are not perfectly straight, that straightness is
+mostly the strings' own: the same strings are in every shot, bent the same way on the harp, and no
+lens correction removes a bend that turns with the harp. The folds then compare the strings, not the
+lenses, and a too-simple model passes within one standard error (``benchmarks/RESULTS-strings.md``: on
+the realistic simulator every candidate's held-out d was 0.0126-0.0147 px, and radial2 was chosen with
+five times the field error of radial4+tangential+prism).
+
+When the turntable angles are known, each fold is fitted with every string's deviation separated
+(:func:`pipeline.harp_shape.fit_harp_shape` on the other shots), and the held-out shot is judged with
+the deviations that fold fitted removed (:func:`held_out_without_strings`): each held-out edge is given
+to the string at its distance from the turntable axis in the fold's ideal image (the rule of
+:func:`pipeline.harp_shape.harp_frame`), and its corrected points are moved back by that string's
+deviation :math:`\delta_k(u)\,n` before its straightness is measured. What is left is the lens's misfit,
+the measurement's noise and what the fold could not learn of the strings (a string seen in fewer than two
+of the fold's shots gets no deviation: its edges are left as they are and counted).
+
+The CV table (:func:`cross_validate_separated`) is the same :class:`~pipeline.cross_validation.CVRow` per
+candidate as the plain one, held-out residuals pooled over the folds, so the choice reads it by the same
+paired differences (:func:`pipeline.cross_validation.paired_difference`); :func:`pipeline.select.select_model`
+uses it when given the turntable angles.
+
+References
+----------
+.. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision camera distortion
+   measurements with a calibration harp", JOSA A 29(10), 2012 (held-out straightness, Sect. 5).
+.. [2] T. Hastie, R. Tibshirani, J. Friedman, *The Elements of Statistical Learning*, 2nd ed.,
+   Sect. 7.10 (cross-validation).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.cross_validation import FALLBACK, STOP_FACTOR, CVRow, n_params
+from pipeline.edgeset import FitResult, tls
+from pipeline.fit import fit_distortion
+from pipeline.fitspec import FitSpec
+from pipeline.harp_shape import HarpShapeFit, fit_harp_shape
+
+Floats = NDArray[np.float64]
+
+MIN_FOLD_ORIENTATIONS = 3
+"""Distinct turntable orientations (:func:`pipeline.orientations.distinct_orientations`) every fold must keep
+for :func:`pipeline.select.select_model` to separate the strings in it: with two, each string is seen along
+two lines only, and its bend and the lens's terms trade."""
+
+MATCH_PITCHES = 1.0 / 3.0
+"""A held-out edge belongs to the fold's string nearest to it across the strings when within this many
+string pitches (the gap that separates two strings in :func:`pipeline.harp_shape.harp_frame`)."""
+
+
+@dataclass(frozen=True)
+class HeldOutStrings:
+    """A held-out shot's residuals with its strings' fitted deviations removed (:func:`held_out_without_strings`).
+
+    ``residuals``: per point, the edges concatenated in order (the edges with 3 points or more and finite
+    coordinates, as :func:`pipeline.edgeset.held_out_residuals` keeps them); ``counts``: the points of each
+    of those edges; ``removed``: edges whose string's deviation was removed; ``without_terms``: edges of a
+    string the fold fitted no deviation for (seen in fewer than two of its shots, or over too short a
+    stretch); ``unmatched``: edges at no string of the fold (a string the fold never saw); the last two are
+    left as they are."""
+
+    residuals: Floats
+    counts: NDArray[np.int64]
+    removed: int
+    without_terms: int
+    unmatched: int
+
+    @property
+    def d(self) -> float:
+        """RMS of the residuals (px); NaN without any."""
+        return float(np.sqrt(np.mean(self.residuals**2))) if len(self.residuals) else float("nan")
+
+    @property
+    def edge_ss(self) -> Floats:
+        """Sum of squared residuals of each edge."""
+        if not len(self.counts):
+            return np.zeros(0)
+        starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]]).astype(int)
+        out: Floats = np.add.reduceat(self.residuals**2, starts)
+        return out
+
+
+def held_out_without_strings(
+    fit: HarpShapeFit, lines: Sequence[NDArray[np.float64]], turntable_deg: float
+) -> HeldOutStrings:
+    r"""The residuals of a held-out shot's edges (distorted pixels) corrected by ``fit.model``, each moved
+    back by its string's deviation as ``fit`` fitted it (module docstring).
+
+    The harp coordinates of a point are those of the fit (:class:`pipeline.harp_shape.HarpFrame` at the
+    shot's ``turntable_deg``, from the points corrected by the fit's start ``fit.plain.model``, as
+    :func:`pipeline.harp_shape.fit_harp_shape` takes them); an edge's string is the one whose offset
+    :math:`q_k` is nearest to the edge's median :math:`q`, within :data:`MATCH_PITCHES` pitches. The
+    deviation is evaluated over the stretch of ``u`` where the fold saw the string and held at its end
+    value beyond it (a polynomial is not extrapolated). Every edge's residual is its distance from its own
+    total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure.
+    """
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines if len(p) >= 3]
+    pts = [p for p in pts if np.all(np.isfinite(p))]
+    if not pts:
+        return HeldOutStrings(np.zeros(0), np.zeros(0, dtype=np.int64), 0, 0, 0)
+    frame = fit.frame
+    d, n = frame.direction(float(turntable_deg)), frame.normal(float(turntable_deg))
+    c = np.asarray(frame.centre)
+    offsets = np.array([s.offset_px for s in fit.strings])
+    moved = []
+    removed = without = unmatched = 0
+    for p in pts:
+        rel = fit.plain.model.undistort_points(p) - c
+        q = rel @ n
+        corrected = fit.model.undistort_points(p)
+        qe = float(np.nanmedian(q)) if np.any(np.isfinite(q)) else float("nan")
+        k = int(np.argmin(np.abs(offsets - qe))) if len(offsets) and np.isfinite(qe) else -1
+        if k < 0 or abs(offsets[k] - qe) > MATCH_PITCHES * frame.pitch_px:
+            unmatched += 1
+        elif not fit.strings[k].coefficients:
+            without += 1
+        else:
+            st = fit.strings[k]
+            u = np.clip((rel @ d) / frame.scale_px, st.span[0], st.span[1])
+            corrected = corrected - st.deviation(u)[:, None] * n
+            removed += 1
+        moved.append(corrected)
+    counts = np.array([len(p) for p in moved], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+    r = tls(np.concatenate(moved), starts, counts)[0]
+    return HeldOutStrings(r, counts, removed, without, unmatched)
+
+
+# ------------------------------------------------------------------ the CV table
+Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any]]
+
+
+def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> tuple[Any, Any]:
+    """A candidate's fit on all shots, alone and with the strings separated (either may be a failure)."""
+    width, height, angles, _, fit_kw = settings
+    plain = fit_distortion(lines, width, height, **cand.fit_arguments(), **fit_kw)
+    if not plain:
+        return plain, plain
+    return plain, _joint(lines, angles, width, height, cand, plain)
+
+
+def _joint(lines: Any, angles: Sequence[float], width: int, height: int, cand: FitSpec, plain: FitResult) -> Any:
+    try:
+        return fit_harp_shape(lines, list(angles), width, height, cand, plain=plain)
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a fold's odd data
+        return _Failed(f"the joint fit failed: {type(exc).__name__}: {exc}")
+
+
+@dataclass(frozen=True)
+class _Failed:
+    reason: str
+
+    def __bool__(self) -> bool:
+        return False
+
+
+def _first_pass(job: tuple[FitSpec, list[list[Floats]], Settings, bool]) -> Any:
+    """The reference's whole :class:`CVRow`, or another candidate's fits on all shots (:func:`_full_fits`)."""
+    cand, lines, settings, is_reference = job
+    if is_reference:
+        return _row((cand, lines, float("inf"), settings, _full_fits(cand, lines, settings)))
+    return _full_fits(cand, lines, settings)
+
+
+def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any]]) -> CVRow:
+    """One candidate's :class:`CVRow` from its leave-one-shot-out folds fitted with the strings separated;
+    stopped as :func:`pipeline.cross_validation.cross_validate` stops one (its joint fit on all shots, or its
+    held-out residuals so far, already beyond ``stop_factor`` times the reference's CV mean square)."""
+    cand, lines, ref_mse, settings, (plain, joint) = job
+    width, height, angles, stop_factor, fit_kw = settings
+    size = n_params(cand, width, height)
+    full = plain if plain else None
+    if not plain or not joint:
+        return CVRow(cand, size, float("nan"), (), (), f"its fit on all shots: {plain.reason if not plain else joint.reason}", full_fit=full)  # fmt: skip
+    held_total = float(sum(sum(len(p) for p in shot if len(p) >= 3) for shot in lines))
+    factor = float("inf") if stop_factor is None else float(stop_factor)
+    stopping = np.isfinite(factor) and np.isfinite(ref_mse)
+    if stopping and joint.d_after**2 > factor * ref_mse:
+        return CVRow(
+            cand, size, float("nan"), (), (),
+            f"stopped before the folds: its fit on all shots with the strings separated already leaves d "
+            f"{joint.d_after:.4g} px, >= {np.sqrt(factor):g}x the CV d {np.sqrt(ref_mse):.4g} px of the reference",
+            full_fit=full, cv_d_bound=float(joint.d_after),
+        )  # fmt: skip
+    fold_d: list[float] = []
+    fit_d: list[float] = []
+    res: list[Floats] = []
+    ss: list[Floats] = []
+    nn: list[NDArray[np.int64]] = []
+    removed = left = 0
+    so_far = 0.0
+    for h in range(len(lines)):
+        train = [s for i, s in enumerate(lines) if i != h]
+        train_angles = [a for i, a in enumerate(angles) if i != h]
+        fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
+        fold = _joint(train, train_angles, width, height, cand, fold_plain) if fold_plain else fold_plain
+        if not fold:
+            return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
+        held = held_out_without_strings(fold, lines[h], angles[h])
+        removed += held.removed
+        left += held.without_terms + held.unmatched
+        res.append(held.residuals)
+        ss.append(held.edge_ss)
+        nn.append(held.counts)
+        fold_d.append(held.d)
+        fit_d.append(fold.d_after)
+        so_far += float(np.sum(held.residuals**2))
+        if stopping and h + 1 < len(lines) and so_far / held_total > factor * ref_mse:
+            bound = float(np.sqrt(so_far / held_total))
+            return CVRow(
+                cand, size, float("nan"), tuple(fold_d), tuple(fit_d),
+                f"stopped after {h + 1} of {len(lines)} folds: held-out d already >= {bound:.4g} px, "
+                f"{np.sqrt(factor):g}x the CV d {np.sqrt(ref_mse):.4g} px of the reference",
+                full_fit=full, cv_d_bound=bound,
+            )  # fmt: skip
+    allr = np.concatenate(res)
+    return CVRow(
+        cand,
+        size,
+        float(np.sqrt(np.mean(allr**2))) if len(allr) else float("nan"),
+        tuple(fold_d),
+        tuple(fit_d),
+        None,
+        tuple(float(v) for v in np.concatenate(ss)),
+        tuple(int(v) for v in np.concatenate(nn)),
+        full,
+        strings_removed=(removed, left),
+    )
+
+
+def cross_validate_separated(
+    lines_per_image: Sequence[Sequence[Floats]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    candidates: Sequence[FitSpec],
+    *,
+    stop_factor: float | None = STOP_FACTOR,
+    map_fn: Callable[..., Iterable[Any]] = map,
+    **fit_kw: Any,
+) -> tuple[CVRow, ...]:
+    """The CV table of ``candidates``, each fold fitted with the strings separated on all shots but one and
+    judged on that shot with its strings' fitted deviations removed (module docstring).
+
+    Parameters
+    ----------
+    lines_per_image : per shot, its edges (distorted pixels); three shots or more.
+    turntable_deg : each shot's turntable angle (degrees).
+    width, height : the image size.
+    candidates : the configurations compared.
+    stop_factor : as for :func:`pipeline.cross_validation.cross_validate`: :data:`FALLBACK` (or else the first
+        candidate) is the reference, any other candidate is stopped once its joint fit on all shots, or its
+        held-out residuals so far, exceed this many times the reference's CV mean square; None: never.
+    map_fn : a ``map`` over the candidates (a process pool's; the table does not depend on it), called twice:
+        the reference's row with the others' fits on all shots, then the others' folds.
+    fit_kw : passed to :func:`pipeline.fit.fit_distortion`.
+
+    Returns
+    -------
+    tuple of CVRow
+        In the order of ``candidates``; :attr:`CVRow.full_fit` is each candidate's fit on all shots without
+        the strings (the start of its joint fit), :attr:`CVRow.fit_d` each fold's d with the strings
+        separated, :attr:`CVRow.strings_removed` how many held-out edges had their string's bend removed
+        and how many were left as they are.
+    """
+    if len(turntable_deg) != len(lines_per_image):
+        raise ValueError(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
+    if len(lines_per_image) < 3:
+        raise ValueError(f"leave-one-shot-out folds with the strings separated need 3 shots or more, got {len(lines_per_image)}")  # fmt: skip
+    lines = [[np.asarray(p, dtype=np.float64) for p in s] for s in lines_per_image]
+    settings: Settings = (width, height, tuple(float(a) for a in turntable_deg), stop_factor, dict(fit_kw))
+    first = FALLBACK if FALLBACK in candidates else candidates[0]
+    order = sorted((c for c in candidates if c != first), key=lambda c: -n_params(c, width, height))
+    made = list(map_fn(_first_pass, [(c, lines, settings, c == first) for c in [first, *order]]))
+    ref: CVRow = made[0]
+    ref_mse = ref.cv_d**2 if np.isfinite(ref.cv_d) else float("inf")
+    jobs = [(c, lines, ref_mse, settings, fits) for c, fits in zip(order, made[1:], strict=True)]
+    done = dict(zip(order, map_fn(_row, jobs)))
+    done[first] = ref
+    return tuple(done[c] for c in candidates)
