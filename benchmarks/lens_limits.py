@@ -166,26 +166,35 @@ def seed_lens(seed: int, w: int, h: int) -> tuple[DistortionModel, Session, dict
 UNSEEN = (17.0, 77.0, 137.0)
 
 
-def realistic_lines(seed: int, w: int, h: int, cache: Path | None = None) -> tuple[list[list], list[list]]:
-    """The measured edges of seed ``seed``'s full realistic render: the six fitted shots (``FITTED``, the same
-    as :func:`one`'s "full" row: shot ``i`` is seeded by its index) and three unseen ones (``UNSEEN``, as in
-    ``benchmarks/strings_separated.py``); kept in ``cache`` (a directory, one ``.npz`` per seed and size) when
-    given, read from there when present (a render takes minutes)."""
-    path = None if cache is None else cache / f"seed{seed}_{w}x{h}.npz"
+def realistic_measured(
+    seed: int, w: int, h: int, cache: Path | None = None
+) -> tuple[list[list], list[list], list[list]]:
+    """Seed ``seed``'s full realistic render measured as ``harp measure`` does: the six fitted shots' edges
+    (``FITTED``, the same as :func:`one`'s "full" row: shot ``i`` is seeded by its index), the three unseen
+    shots' edges (``UNSEEN``, as in ``benchmarks/strings_separated.py``) and each fitted point's standard
+    deviation (``pipeline.measure.point_sigmas``). Kept in ``cache`` (a directory, one ``.npz`` per seed and
+    size) when given, read from there when present (a render takes minutes; the file only saves time)."""
+    path = None if cache is None else cache / f"measured_{seed}_{w}x{h}.npz"
     if path is not None and path.exists():
         with np.load(path) as z:
-            n_shots = int(z["n_shots"])
-            counts = z["counts"]
-            lines = [[z[f"s{i}_e{j}"] for j in range(int(counts[i]))] for i in range(n_shots)]
+            counts = [int(v) for v in z["counts"]]
+            lines = [[z[f"s{i}_{j}"] for j in range(k)] for i, k in enumerate(counts)]
+            sigmas = [[z[f"g{i}_{j}"] for j in range(k)] for i, k in enumerate(counts)]
     else:
         lens, ses, _ = seed_lens(seed, w, h)
         shots = render_shots(lens, ses.harp, ses.mount, FITTED + UNSEEN, w, h, ses.effects, seed=seed)
-        lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+        ms = [measure_image(s.image) for s in shots]
+        lines = [[ln.points for ln in m.lines] for m in ms]
+        sigmas = [point_sigmas(m) for m in ms]
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            arrays = {f"s{i}_e{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
-            np.savez(path, n_shots=len(lines), counts=np.array([len(s) for s in lines]), **arrays)
-    return lines[: len(FITTED)], lines[len(FITTED) :]
+            arrays = {f"s{i}_{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
+            arrays |= {f"g{i}_{j}": g for i, shot in enumerate(sigmas) for j, g in enumerate(shot)}
+            tmp = path.with_suffix(".tmp.npz")
+            np.savez(tmp, counts=np.array([len(shot) for shot in lines]), **arrays)
+            os.replace(tmp, path)
+    n = len(FITTED)
+    return lines[:n], lines[n:], sigmas[:n]
 
 
 def one(args: tuple[int, int, int]) -> dict[str, object]:
@@ -217,7 +226,7 @@ def choice(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
     """Seed ``seed``'s choice without and with the turntable angles (``--choice``, module docstring)."""
     seed, w, h, cache = args
     lens, ses, row = seed_lens(seed, w, h)
-    fitted, unseen = realistic_lines(seed, w, h, cache)
+    fitted, unseen, _ = realistic_measured(seed, w, h, cache)
     t0 = time.perf_counter()
     plain_sel = select_model(fitted, w, h)
     row["t plain"] = time.perf_counter() - t0
@@ -417,38 +426,11 @@ POINT_LOSS_ROWS: tuple[tuple[str, dict[str, object]], ...] = (
 )
 
 
-def measured(seed: int, w: int, h: int, cache: Path | None) -> tuple[list[list], list[list]]:
-    """The full realistic shots of ``seed`` measured as ``harp measure`` does, and each point's standard
-    deviation (``pipeline.measure.point_sigmas``); read from / written to ``cache``/pts_SEED_WxH.npz when
-    given (the rendering is seeded, the file only saves time)."""
-    lens, ses, _ = seed_lens(seed, w, h)
-    path = Path(cache) / f"pts_{seed}_{w}x{h}.npz" if cache else None
-    if path is not None and path.exists():
-        with np.load(path) as z:
-            n = [int(z[f"n{i}"]) for i in range(int(z["n_shots"]))]
-            return (
-                [[z[f"s{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
-                [[z[f"g{i}_{j}"] for j in range(k)] for i, k in enumerate(n)],
-            )
-    shots = render_shots(lens, ses.harp, ses.mount, FITTED, w, h, ses.effects, seed=seed)
-    ms = [measure_image(s.image) for s in shots]
-    lines = [[ln.points for ln in m.lines] for m in ms]
-    sigmas = [point_sigmas(m) for m in ms]
-    if path is not None:
-        arrays = {f"s{i}_{j}": p for i, shot in enumerate(lines) for j, p in enumerate(shot)}
-        arrays |= {f"g{i}_{j}": g for i, shot in enumerate(sigmas) for j, g in enumerate(shot)}
-        arrays |= {f"n{i}": np.array(len(shot)) for i, shot in enumerate(lines)}
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, n_shots=np.array(len(lines)), **arrays)  # type: ignore[arg-type]
-        os.replace(tmp, path)
-    return lines, sigmas
-
-
 def point_robust(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
     seed, w, h, cache = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
-    lines, sigmas = measured(seed, w, h, cache)
+    lines, _, sigmas = realistic_measured(seed, w, h, cache)
     for name, kw in POINT_LOSS_ROWS:
         own = {"point_scale": sigmas} if name.endswith("own sigma") else {}
         plain = fit_distortion(lines, w, h, **kw, **own, **SPEC.fit_arguments())  # type: ignore[arg-type]
