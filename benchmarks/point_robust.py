@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # point_weights' harness, model_choice's population
 
-from point_weights import point_rows, real_measurements, real_splits
+from point_weights import point_rows, ratio_cells, real_measurements, real_splits
 
 from pipeline.fit import fit_distortion
 from pipeline.measure import point_sigmas
@@ -80,13 +80,7 @@ def points_part(seeds: range, workers: int) -> None:
     print("|---|---:|---:|---|---:|---|")
     base = np.array([r["none"] for r in rows])
     for name, _ in LOSSES:
-        a = np.array([r[name] for r in rows])
-        rf, ru = a[:, 0] / base[:, 0], a[:, 1] / base[:, 1]
-        print(
-            f"| {name} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
-            f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
-            f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
-        )
+        print(f"| {name} | {ratio_cells(np.array([r[name] for r in rows]), base)} |")
     print()
 
 

@@ -348,15 +348,20 @@ def summary(groups, variants, get):  # type: ignore[no-untyped-def]
     for label, rows in groups.items():
         base = np.array([get(r, "unweighted") for r in rows])
         for v in variants:
-            a = np.array([get(r, v) for r in rows])
-            rf = a[:, 0] / base[:, 0]
-            ru = a[:, 1] / base[:, 1]
-            print(
-                f"| {label} | {v} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
-                f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
-                f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
-            )
+            print(f"| {label} | {v} | {ratio_cells(np.array([get(r, v) for r in rows]), base)} |")
     print()
+
+
+def ratio_cells(a: np.ndarray, base: np.ndarray) -> str:
+    """A variant's summary cells over the lenses from its (field RMS, unseen d) rows ``a`` and the base
+    variant's ``base``: field median, RMS over the lenses, ratio to the base (median, worst, lower in),
+    unseen d median, its ratio (median, worst)."""
+    rf, ru = a[:, 0] / base[:, 0], a[:, 1] / base[:, 1]
+    return (
+        f"{np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
+        f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
+        f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f}"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
