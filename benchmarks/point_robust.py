@@ -25,7 +25,6 @@ The kinked lenses themselves are ``benchmarks/lens_limits.py --point-robust``.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -36,12 +35,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # point_weights' harness, model_choice's population
 
-from point_weights import point_rows, ratio_cells, real_measurements, real_splits
+from point_weights import harness_arguments, point_rows, ratio_cells, real_measurements, real_splits
 
 from pipeline.fit import fit_distortion
 from pipeline.measure import point_sigmas
 
-REAL = Path(os.environ.get("HARP_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real-harp"))
 LOSSES: tuple[tuple[str, dict[str, object]], ...] = (
     ("none", {}),
     ("tukey", {"point_loss": "tukey"}),
@@ -85,13 +83,7 @@ def points_part(seeds: range, workers: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--real", type=Path, default=REAL)
-    ap.add_argument("--skip-real", action="store_true")
-    ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--first-seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args(argv)
+    args = harness_arguments(__doc__.splitlines()[0]).parse_args(argv)
     cmd = " ".join(argv if argv is not None else sys.argv[1:])
     print(
         f"# The per-point robust fit where there are no kinks ({os.cpu_count()} CPUs, load "

@@ -364,13 +364,20 @@ def ratio_cells(a: np.ndarray, base: np.ndarray) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def harness_arguments(description: str) -> argparse.ArgumentParser:
+    """The harness's command line: the photographs (``--real``, ``--skip-real``) and the population's seeds
+    and workers."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--real", type=Path, default=REAL)
     ap.add_argument("--skip-real", action="store_true")
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = harness_arguments(__doc__.splitlines()[0])
     ap.add_argument("--size", default="1000x750")
     ap.add_argument("--points", action="store_true", help="the point-set population instead of the rendered one")
     args = ap.parse_args(argv)
