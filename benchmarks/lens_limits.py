@@ -65,13 +65,17 @@ import dataclasses
 import os
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # point_robust's losses
 
 import numpy as np
+from point_robust import LOSSES as POINT_LOSS_ROWS
+from point_robust import fit_loss
 
 from pipeline.compare import compare_models
 from pipeline.edgeset import FitFailure, FitResult
@@ -336,7 +340,7 @@ def exact_only(args: tuple[int, int, int]) -> dict[str, object]:
     return row
 
 
-def print_exact(rows: list[dict[str, object]]) -> None:
+def print_exact(rows: Iterable[dict[str, object]]) -> None:
     print(
         "| seed | lens | strings | "
         + " | ".join(f"axis moved {off:.0f} px: lens alone / separated" for off in AXIS_SHIFTS)
@@ -401,7 +405,7 @@ def kink_trim(args: tuple[int, int, int]) -> dict[str, object]:
     return row
 
 
-def print_kink_trim(rows: list[dict[str, object]]) -> None:
+def print_kink_trim(rows: Iterable[dict[str, object]]) -> None:
     print(
         "| seed | lens | strings | points | lens alone / separated | "
         + " | ".join(f"points > {c:g} sigma dropped: lens alone / separated (dropped)" for c in KINK_C)
@@ -417,23 +421,13 @@ def print_kink_trim(rows: list[dict[str, object]]) -> None:
         )
 
 
-POINT_LOSS_ROWS: tuple[tuple[str, dict[str, object]], ...] = (
-    ("none", {}),
-    ("tukey", {"point_loss": "tukey"}),
-    ("huber", {"point_loss": "huber"}),
-    ("tukey, own sigma", {"point_loss": "tukey"}),
-    ("huber, own sigma", {"point_loss": "huber"}),
-)
-
-
 def point_robust(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
     seed, w, h, cache = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
     lines, _, sigmas = realistic_measured(seed, w, h, cache)
-    for name, kw in POINT_LOSS_ROWS:
-        own = {"point_scale": sigmas} if name.endswith("own sigma") else {}
-        plain = fit_distortion(lines, w, h, **kw, **own, **SPEC.fit_arguments())  # type: ignore[arg-type]
+    for name, _ in POINT_LOSS_ROWS:
+        plain = fit_loss(lines, sigmas, name, w, h, SPEC)
         row[name] = (
             field(lines, lens, w, h, SPEC, joint=False, plain=plain),
             field(lines, lens, w, h, SPEC, plain=plain),
@@ -534,36 +528,23 @@ def main(argv: list[str] | None = None) -> int:
     )
     pool = ProcessPoolExecutor(max(1, args.workers))
     jobs = [(s, w, h) for s in seeds]
-    if args.kink_trim:
-        print()
-        with pool:
-            print_kink_trim(list(pool.map(kink_trim, jobs)))
-        print(f"# load average at end {os.getloadavg()[0]:.1f}")
-        return 0
-    if args.choice:
-        print()
-        with pool:
-            print_choice(pool.map(choice, [(s, w, h, args.cache) for s in seeds]))
-        print(f"# load average at end {os.getloadavg()[0]:.1f}")
-        return 0
-    if args.point_robust:
-        print()
-        with pool:
-            print_point_robust(pool.map(point_robust, [(s, w, h, args.cache) for s in seeds]))
-        print(f"# load average at end {os.getloadavg()[0]:.1f}")
-        return 0
-    if args.point_robust_exact:
-        print()
-        with pool:
-            print_point_robust_exact(pool.map(point_robust_exact, jobs))
-        print(f"# load average at end {os.getloadavg()[0]:.1f}")
-        return 0
-    if args.exact_only:
-        print()
-        with pool:
-            print_exact(list(pool.map(exact_only, jobs)))
-        print(f"# load average at end {os.getloadavg()[0]:.1f}")
-        return 0
+    cached = [(s, w, h, args.cache) for s in seeds]
+    only: tuple[
+        tuple[bool, Callable[[Any], dict[str, object]], list[Any], Callable[[Iterable[dict[str, object]]], None]], ...
+    ] = (
+        (args.kink_trim, kink_trim, jobs, print_kink_trim),
+        (args.choice, choice, cached, print_choice),
+        (args.point_robust, point_robust, cached, print_point_robust),
+        (args.point_robust_exact, point_robust_exact, jobs, print_point_robust_exact),
+        (args.exact_only, exact_only, jobs, print_exact),
+    )
+    for wanted, job, job_args, printer in only:
+        if wanted:
+            print()
+            with pool:
+                printer(pool.map(job, job_args))
+            print(f"# load average at end {os.getloadavg()[0]:.1f}")
+            return 0
     print()
     print("| seed | lens | strings | " + " | ".join(c for _, c in COLUMNS) + " | chosen model | chosen, px | s |")
     print("|---:|---|---|" + "---:|" * len(COLUMNS) + "---|---:|---:|")

@@ -47,8 +47,11 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -125,13 +128,23 @@ def fit_variant(lines, ms, v, w, h, spec, plain=None):  # type: ignore[no-untype
 
 
 # ------------------------------------------------------------------------ real photographs
-def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
+Measured = tuple[str, list[str], dict[str, Any], dict[str, list[np.ndarray]], tuple[int, int]]
+FitVariant = Callable[..., Any]
+"""``fit(lines, measurements, variant, width, height, spec, plain)``: the fit of ``lines`` (the ``measurements``
+they come from, ``pipeline.measure``'s) by ``variant``; ``plain`` the base variant's fit of the same lines."""
+
+
+def real_measurements(directory: Path) -> Measured | None:
+    """The photographs in ``directory`` measured as ``harp measure`` does (the measurements: whole strings,
+    point sigmas) and interior only (``smoothing="gaussian"``, points), the folder's and their names and the
+    size; None, and a line
+    saying so, when there are fewer than three."""
     import cv2
 
     names = sorted(p.name for p in directory.glob("*.pgm"))
     if len(names) < 3:
         print(f"(no real photographs in {directory}: part skipped)")
-        return {}
+        return None
     whole, interior = {}, {}
     size = (0, 0)
     for n in names:
@@ -139,21 +152,35 @@ def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
         size = (img.shape[1], img.shape[0])
         whole[n] = measure_image(img)
         interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
-    w, h = size
-    print(f"## Real photographs ({directory.name}: {', '.join(names)}), {w}x{h}, every 2+1 split")
+    return directory.name, names, whole, interior, size
+
+
+def real_splits(
+    measured: Measured,
+    variants: Sequence[str],
+    fit: FitVariant,
+    candidates: Sequence[str],
+    word: str,
+    base: str,
+) -> dict[str, list[tuple[float, float]]]:
+    """Every 2+1 split of the photographs: each candidate fitted on two by each variant (``fit``), the
+    held-out d of the third (whole strings and interior only), a row each and a summary against ``base``;
+    ``word`` names the variants' column."""
+    folder, names, whole, interior, (w, h) = measured
+    print(f"## Real photographs ({folder}: {', '.join(names)}), {w}x{h}, every 2+1 split")
     print()
-    print("| held out | candidate | weights | fit d px | held-out d, whole px | held-out d, interior px |")
+    print(f"| held out | candidate | {word} | fit d px | held-out d, whole px | held-out d, interior px |")
     print("|---|---|---|---:|---:|---:|")
-    out: dict[str, list[tuple[float, float]]] = {v: [] for v in VARIANTS}
+    out: dict[str, list[tuple[float, float]]] = {v: [] for v in variants}
     for held in names:
         fit_on = [n for n in names if n != held]
         lines = [[ln.points for ln in whole[n].lines] for n in fit_on]
-        for label in REAL_CANDIDATES:
+        for label in candidates:
             spec = parse(label)
             plain = None
-            for v in VARIANTS:
-                f = fit_variant(lines, [whole[n] for n in fit_on], v, w, h, spec, plain)
-                plain = f if v == "unweighted" else plain
+            for v in variants:
+                f = fit(lines, [whole[n] for n in fit_on], v, w, h, spec, plain)
+                plain = f if v == base else plain
                 if not f:
                     print(f"| {held} | {label} | {v} | failed: {f.reason} | | |")
                     out[v].append((float("nan"), float("nan")))
@@ -161,20 +188,27 @@ def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
                 hw = corrected_straightness(f.model, [ln.points for ln in whole[held].lines])[0]
                 hi = corrected_straightness(f.model, interior[held])[0]
                 out[v].append((hw, hi))
-                print(f"| {held} | {label} | {v} | {f.d_after:.4f} | {hw:.4f} | {hi:.4f} |")
+                print(f"| {held} | {label} | {v} | {f.d_after:.4f} | {hw:.4f} | {hi:.4f} |", flush=True)
     print()
-    base = np.array(out["unweighted"])
-    print("| weights | held-out d whole, mean px | interior, mean px | whole / unweighted (mean, worst, better in) |")
+    ref = np.array(out[base])
+    print(f"| {word} | held-out d whole, mean px | interior, mean px | whole / {base} (mean, worst, better in) |")
     print("|---|---:|---:|---|")
-    for v in VARIANTS:
+    for v in variants:
         a = np.array(out[v])
-        rw = a[:, 0] / base[:, 0]
+        rw = a[:, 0] / ref[:, 0]
         print(
             f"| {v} | {np.nanmean(a[:, 0]):.4f} | {np.nanmean(a[:, 1]):.4f} | {np.nanmean(rw):.3f}, "
             f"{np.nanmax(rw):.3f}, {int(np.sum(rw < 1))} / {len(rw)} |"
         )
     print()
     return out
+
+
+def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
+    measured = real_measurements(directory)
+    if measured is None:
+        return {}
+    return real_splits(measured, VARIANTS, fit_variant, REAL_CANDIDATES, "weights", "unweighted")
 
 
 # ------------------------------------------------------------------------ realistic population
@@ -236,21 +270,19 @@ def population_part(seeds: range, w: int, h: int, workers: int) -> None:
 
 
 # ------------------------------------------------------------------------ point-set population
-def one_points(seed: int) -> dict[str, object]:
+def one_points(seed: int, variants: Sequence[str], fit: FitVariant, base: str) -> dict[str, object]:
+    """Lens ``seed`` of the point-set population, three shots fitted by each variant (``fit``, given the point
+    sets' own smoother sigmas as the measurements), its field RMS and the d of three unseen shots."""
     from model_choice import H_PT, W_PT, point_session
 
     sg: list[list[np.ndarray]] = []
     lens, fs, ts = point_session(seed, 3, sg)
     unseen = [p for shot in ts for p in shot]
     row: dict[str, object] = {"seed": seed}
-    plain = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments())
-    for v in POINT_VARIANTS:
-        if v == "unweighted":
-            f = plain
-        else:
-            sig = misfit_floor(sg, plain) if v == "smoother + misfit floor" and plain else sg
-            sig = within_edges(sg) if v == "smoother, within edges" else sig
-            f = fit_distortion(fs, W_PT, H_PT, **SPEC.fit_arguments(), point_sigma=sig)
+    plain = None
+    for v in variants:
+        f = fit(fs, sg, v, W_PT, H_PT, SPEC, plain)
+        plain = f if v == base else plain
         row[v] = (
             (compare_models(f.model, lens, W_PT, H_PT, step=20).rms, corrected_straightness(f.model, unseen)[0])
             if f
@@ -259,7 +291,10 @@ def one_points(seed: int) -> dict[str, object]:
     return row
 
 
-def points_part(seeds: range, workers: int) -> None:
+def point_rows(
+    seeds: range, workers: int, variants: Sequence[str], fit: FitVariant, base: str
+) -> list[dict[str, object]]:
+    """:func:`one_points` of every seed (``workers`` processes), a row each."""
     print(
         f"## Point-set population (benchmarks/model_choice.py's), seeds {seeds.start}..{seeds.stop - 1}: 3 shots "
         "fitted, radial4+tangential+prism; field RMS vs the exact lens / d of 3 unseen shots (px)"
@@ -267,16 +302,16 @@ def points_part(seeds: range, workers: int) -> None:
     print()
     print(
         "| seed | "
-        + " | ".join(f"field, {v}" for v in POINT_VARIANTS)
+        + " | ".join(f"field, {v}" for v in variants)
         + " | "
-        + " | ".join(f"unseen d, {v}" for v in POINT_VARIANTS)
+        + " | ".join(f"unseen d, {v}" for v in variants)
         + " |"
     )
-    print("|---:|" + "---:|" * (2 * len(POINT_VARIANTS)))
+    print("|---:|" + "---:|" * (2 * len(variants)))
     with ProcessPoolExecutor(max_workers=workers) as ex:
-        rows = list(ex.map(one_points, seeds))
+        rows = list(ex.map(partial(one_points, variants=variants, fit=fit, base=base), seeds))
     for r in rows:
-        vals = [r[v] for v in POINT_VARIANTS]
+        vals: list[tuple[float, float]] = [r[v] for v in variants]  # type: ignore[misc]
         print(
             f"| {r['seed']} | "
             + " | ".join(f"{x[0]:.4f}" for x in vals)
@@ -285,6 +320,20 @@ def points_part(seeds: range, workers: int) -> None:
             + " |"
         )
     print()
+    return rows
+
+
+def fit_points(fs, sg, v, w, h, spec, plain):  # type: ignore[no-untyped-def]
+    """The point sets ``fs`` fitted with the weights of variant ``v`` (``sg``: their smoother sigmas)."""
+    if v == "unweighted":
+        return fit_distortion(fs, w, h, **spec.fit_arguments())
+    sig = misfit_floor(sg, plain) if v == "smoother + misfit floor" and plain else sg
+    sig = within_edges(sg) if v == "smoother, within edges" else sig
+    return fit_distortion(fs, w, h, **spec.fit_arguments(), point_sigma=sig)
+
+
+def points_part(seeds: range, workers: int) -> None:
+    rows = point_rows(seeds, workers, POINT_VARIANTS, fit_points, "unweighted")
     summary({"3": rows}, POINT_VARIANTS, lambda r, v: r[v])
 
 
@@ -299,24 +348,36 @@ def summary(groups, variants, get):  # type: ignore[no-untyped-def]
     for label, rows in groups.items():
         base = np.array([get(r, "unweighted") for r in rows])
         for v in variants:
-            a = np.array([get(r, v) for r in rows])
-            rf = a[:, 0] / base[:, 0]
-            ru = a[:, 1] / base[:, 1]
-            print(
-                f"| {label} | {v} | {np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
-                f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
-                f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f} |"
-            )
+            print(f"| {label} | {v} | {ratio_cells(np.array([get(r, v) for r in rows]), base)} |")
     print()
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def ratio_cells(a: np.ndarray, base: np.ndarray) -> str:
+    """A variant's summary cells over the lenses from its (field RMS, unseen d) rows ``a`` and the base
+    variant's ``base``: field median, RMS over the lenses, ratio to the base (median, worst, lower in),
+    unseen d median, its ratio (median, worst)."""
+    rf, ru = a[:, 0] / base[:, 0], a[:, 1] / base[:, 1]
+    return (
+        f"{np.nanmedian(a[:, 0]):.4f} | {np.sqrt(np.nanmean(a[:, 0] ** 2)):.4f} | "
+        f"{np.nanmedian(rf):.3f}, {np.nanmax(rf):.3f}, {int(np.sum(rf < 1))} / {len(rf)} | "
+        f"{np.nanmedian(a[:, 1]):.4f} | {np.nanmedian(ru):.3f}, {np.nanmax(ru):.3f}"
+    )
+
+
+def harness_arguments(description: str) -> argparse.ArgumentParser:
+    """The harness's command line: the photographs (``--real``, ``--skip-real``) and the population's seeds
+    and workers."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--real", type=Path, default=REAL)
     ap.add_argument("--skip-real", action="store_true")
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = harness_arguments(__doc__.splitlines()[0])
     ap.add_argument("--size", default="1000x750")
     ap.add_argument("--points", action="store_true", help="the point-set population instead of the rendered one")
     args = ap.parse_args(argv)

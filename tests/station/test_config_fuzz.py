@@ -197,6 +197,9 @@ def generate() -> list[Case]:
                     case(what, value, path + index, needles)
                 for value in rng.sample(WRONG[str(s.kind)], 2):
                     field, got = path, value
+                    if isinstance(value, list) and len(value) < s.length[0]:
+                        # as many items as the key needs, so that the wrong type is what is refused
+                        value = value + [k + 2 for k in range(s.length[0] - len(value))]
                     if isinstance(value, list) and s.kind in ("numbers", "integers"):  # the first bad item named
                         i = next(i for i, v in enumerate(value) if isinstance(v, str) or (v != int(v)))
                         field, got = f"{path}[{i}]", value[i]
