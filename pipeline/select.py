@@ -113,6 +113,30 @@ def _within(rows: Sequence[CVRow], best: CVRow, n_se: float, tolerance: float) -
     return out
 
 
+def _fewest_within(rows: Sequence[CVRow], best: CVRow, n_se: float) -> CVRow:
+    """The one-standard-error rule: of the rows within ``n_se`` paired standard errors of ``best``
+    (:func:`_within`), the one with fewest parameters (ties in size: the lower CV d)."""
+    return min(_within(rows, best, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+
+
+def _fewest_fold_orientations(angles: Sequence[float]) -> int:
+    """The fewest distinct orientations (:func:`distinct_orientations`) any leave-one-shot-out fold of shots at
+    ``angles`` keeps."""
+    return min(distinct_orientations(a for j, a in enumerate(angles) if j != h) for h in range(len(angles)))
+
+
+def _nothing_cross_validated(table: Sequence[CVRow], how: str = "") -> Selection:
+    """The :data:`FALLBACK` choice when no candidate of ``table`` could be cross-validated (``how``: the
+    folds' kind, for the reason)."""
+    reasons = sorted({r.failure for r in table if r.failure})
+    return Selection(
+        FALLBACK,
+        f"no candidate could be cross-validated{how} ({'; '.join(reasons)[:200]}); using the default {FALLBACK.label}",
+        "none",
+        tuple(table),
+    )
+
+
 def select_model(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -189,9 +213,7 @@ def select_model(
         raise ValueError(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
     unseparated = ""
     if turntable_deg is not None and mode_now == "images":
-        fewest = min(
-            distinct_orientations(a for j, a in enumerate(turntable_deg) if j != h) for h in range(len(turntable_deg))
-        )
+        fewest = _fewest_fold_orientations(turntable_deg)
         if fewest < MIN_FOLD_ORIENTATIONS:
             unseparated = (
                 f"; turntable angles known, but a fold would have {fewest} turntable orientation"
@@ -220,25 +242,18 @@ def select_model(
     )
     ok = [r for r in table if np.isfinite(r.cv_d)]
     if not ok:
-        reasons = sorted({r.failure for r in table if r.failure})
-        return Selection(
-            FALLBACK,
-            f"no candidate could be cross-validated ({'; '.join(reasons)[:200]}); using the default {FALLBACK.label}",
-            "none",
-            table,
-        )
+        return _nothing_cross_validated(table)
     se_text = "one standard error" if n_se == 1.0 else f"{n_se:g} standard errors"
     best_row = min(ok, key=lambda r: r.cv_d)
     if mode != "images":
-        good = _within(ok, best_row, n_se, 0.0)
-        pick = min(good, key=lambda r: (r.n_params, r.cv_d))  # ties in size: the lower CV d
+        pick = _fewest_within(ok, best_row, n_se)
         reason = (
             f"{pick.candidate.label}: alternate-edge (shots too few to leave one out) CV d {pick.cv_d:.4f} px, "
             f"fewest parameters ({pick.n_params}) within {se_text} (paired over the held-out edges) of the best "
             f"CV d {best_row.cv_d:.4f} px; the generalisation to an unseen orientation is not checked{set_aside}"
         )
         return _with_support(Selection(pick.candidate, reason, mode, table), lines_per_image)
-    first = min(_within(ok, best_row, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+    first = _fewest_within(ok, best_row, n_se)
     radial = [r for r in ok if not is_flexible(r.candidate)]
     best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
     margin = _flexible_margin(first, best_radial)
@@ -277,7 +292,7 @@ def select_model(
     loso = {r.candidate: r for r in general}
     if ok2:
         best2 = min(ok2, key=lambda r: r.cv_d)
-        pick2 = min(_within(ok2, best2, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+        pick2 = _fewest_within(ok2, best2, n_se)
         choice = pick2.candidate
         tier2 = (
             f"of those, fewest parameters ({pick2.n_params}) within {se_text} of the best with every "
@@ -326,17 +341,10 @@ def _select_separated(
     )
     ok = [r for r in table if np.isfinite(r.cv_d)]
     if not ok:
-        reasons = sorted({r.failure for r in table if r.failure})
-        return Selection(
-            FALLBACK,
-            f"no candidate could be cross-validated with the strings separated ({'; '.join(reasons)[:200]}); "
-            f"using the default {FALLBACK.label}",
-            "none",
-            table,
-        )
+        return _nothing_cross_validated(table, " with the strings separated")
     se_text = "one standard error" if n_se == 1.0 else f"{n_se:g} standard errors"
     best = min(ok, key=lambda r: r.cv_d)
-    pick = min(_within(ok, best, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+    pick = _fewest_within(ok, best, n_se)
     radial = [r for r in ok if not is_flexible(r.candidate)]
     best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
     margin = _flexible_margin(pick, best_radial)
@@ -347,7 +355,7 @@ def _select_separated(
             f"(a flexible model needs more than {flexible_margin_se:g})"
         )
         best = best_radial
-        pick = min(_within(radial, best_radial, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
+        pick = _fewest_within(radial, best_radial, n_se)
     removed, left = pick.strings_removed or (0, 0)
     reason = (
         f"{pick.candidate.label}: strings separated, turntable angles known: leave-one-shot-out CV d "
@@ -410,7 +418,7 @@ def _trefoil_when_determined(
         return tuple(candidates), ""
     angles = [shot_orientation(s) for s in lines_per_image]
     if mode == "images":
-        seen = min(distinct_orientations(a for j, a in enumerate(angles) if j != h) for h in range(len(angles)))
+        seen = _fewest_fold_orientations(angles)
     else:
         seen = distinct_orientations(angles)
     aside = [c for c in tref if required_orientations(c) > seen]
