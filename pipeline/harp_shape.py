@@ -646,15 +646,25 @@ def lens_result(
 SeparatedJob = tuple[Sequence[Sequence[Floats]], Sequence[float], int, int, FitSpec]
 
 
+def try_fit_harp_shape(
+    lines_per_image: Sequence[Sequence[Floats]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    spec: FitSpec,
+    plain: FitResult | None = None,
+) -> HarpShapeFit | FitFailure:
+    """:func:`fit_harp_shape` of a fold, whose odd data (too few strings seen twice, a singular system) may
+    raise: the error becomes a :class:`~pipeline.edgeset.FitFailure` naming it."""
+    try:
+        return fit_harp_shape(lines_per_image, list(turntable_deg), width, height, spec, plain=plain)
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
+
+
 def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None]:
     """One fit of the lens with the strings separated ``(lines_per_image, turntable_deg, width, height, spec)``
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
-    lines, angles, width, height, spec = job
-    try:
-        fit = fit_harp_shape(lines, angles, width, height, spec)
-    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a fold's odd data
-        return None, f"the joint fit failed: {type(exc).__name__}: {exc}"
-    if not fit:
-        return None, fit.reason
-    return fit.model, None
+    fit = try_fit_harp_shape(*job)
+    return (fit.model, None) if fit else (None, fit.reason)

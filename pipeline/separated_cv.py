@@ -40,10 +40,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.cross_validation import FALLBACK, STOP_FACTOR, CVRow, n_params
-from pipeline.edgeset import FitResult, tls
+from pipeline.edgeset import tls
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_shape import HarpShapeFit, fit_harp_shape
+from pipeline.harp_shape import HarpShapeFit, try_fit_harp_shape
 
 Floats = NDArray[np.float64]
 
@@ -145,22 +145,7 @@ def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> 
     plain = fit_distortion(lines, width, height, **cand.fit_arguments(), **fit_kw)
     if not plain:
         return plain, plain
-    return plain, _joint(lines, angles, width, height, cand, plain)
-
-
-def _joint(lines: Any, angles: Sequence[float], width: int, height: int, cand: FitSpec, plain: FitResult) -> Any:
-    try:
-        return fit_harp_shape(lines, list(angles), width, height, cand, plain=plain)
-    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a fold's odd data
-        return _Failed(f"the joint fit failed: {type(exc).__name__}: {exc}")
-
-
-@dataclass(frozen=True)
-class _Failed:
-    reason: str
-
-    def __bool__(self) -> bool:
-        return False
+    return plain, try_fit_harp_shape(lines, angles, width, height, cand, plain)
 
 
 def _first_pass(job: tuple[FitSpec, list[list[Floats]], Settings, bool]) -> Any:
@@ -202,7 +187,7 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
         train = [s for i, s in enumerate(lines) if i != h]
         train_angles = [a for i, a in enumerate(angles) if i != h]
         fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
-        fold = _joint(train, train_angles, width, height, cand, fold_plain) if fold_plain else fold_plain
+        fold = try_fit_harp_shape(train, train_angles, width, height, cand, fold_plain) if fold_plain else fold_plain
         if not fold:
             return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
         held = held_out_without_strings(fold, lines[h], angles[h])
