@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_residuals
+from pipeline.edgeset import EdgeSet, FitResult, collect, held_out_edges, held_out_residuals
 from pipeline.fit import MIN_EDGES, fit_distortion
 from pipeline.fit_problem import make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FULL_RADIAL, FitSpec
@@ -432,13 +432,9 @@ def _gauss_newton_fold(
 
 
 def _held_out_counts(held: Sequence[np.ndarray]) -> np.ndarray:
-    """Points of each held-out edge that :func:`pipeline.edgeset.held_out_residuals` keeps (same rule)."""
-    kept = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in held if len(p) >= 3]
-    if not kept:
-        return np.zeros(0, dtype=np.int64)
-    counts = np.array([len(p) for p in kept], dtype=np.int64)
-    finite = np.logical_and.reduceat(np.isfinite(np.concatenate(kept)).all(axis=1), np.cumsum(counts) - counts)
-    return counts[finite]
+    """Points of each held-out edge that :func:`pipeline.edgeset.held_out_residuals` keeps
+    (:func:`pipeline.edgeset.held_out_edges`)."""
+    return np.array([len(p) for p in held_out_edges(held)], dtype=np.int64)
 
 
 def paired_difference(row: CVRow, best: CVRow) -> tuple[float, float]:

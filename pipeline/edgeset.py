@@ -371,22 +371,23 @@ def edge_figures(r: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> tuple
     return np.sqrt(ms), p2p
 
 
+def held_out_edges(lines: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """The edges of ``lines`` a held-out figure measures, as (M, 2) float arrays in order: those with 3
+    points or more, all finite, as the fit keeps them."""
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines if len(p) >= 3]
+    return [p for p in pts if np.isfinite(p).all()]
+
+
 def held_out_residuals(model: DistortionModel, lines: Sequence[np.ndarray]) -> np.ndarray:
     """Residuals ``r`` of the edges ``lines`` after correction by ``model``, all edges
-    concatenated; edges with fewer than 3 points or non-finite points are skipped, as
-    the fit skips them (NaN from the correction itself stays)."""
-    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines if len(p) >= 3]
+    concatenated; the edges of :func:`held_out_edges` only, as the fit skips the others
+    (NaN from the correction itself stays)."""
+    pts = held_out_edges(lines)
     if not pts:
         return np.zeros(0)
     counts = np.array([len(p) for p in pts])
-    allp = np.concatenate(pts)
-    finite = np.logical_and.reduceat(np.isfinite(allp).all(axis=1), np.cumsum(counts) - counts)
-    if not finite.all():
-        if not finite.any():
-            return np.zeros(0)
-        allp, counts = allp[np.repeat(finite, counts)], counts[finite]
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-    return tls(model.undistort_points(allp), starts, counts)[0]
+    return tls(model.undistort_points(np.concatenate(pts)), starts, counts)[0]
 
 
 def straightness_of(points_list: Sequence[np.ndarray]) -> tuple[float, float]:

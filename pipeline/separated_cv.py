@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.cross_validation import FALLBACK, STOP_FACTOR, CVRow, n_params
-from pipeline.edgeset import tls
+from pipeline.edgeset import held_out_edges, tls
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_shape import HarpShapeFit, try_fit_harp_shape
@@ -61,8 +61,8 @@ string pitches (the gap that separates two strings in :func:`pipeline.harp_shape
 class HeldOutStrings:
     """A held-out shot's residuals with its strings' fitted deviations removed (:func:`held_out_without_strings`).
 
-    ``residuals``: per point, the edges concatenated in order (the edges with 3 points or more and finite
-    coordinates, as :func:`pipeline.edgeset.held_out_residuals` keeps them); ``counts``: the points of each
+    ``residuals``: per point, the edges concatenated in order (:func:`pipeline.edgeset.held_out_edges`, as
+    :func:`pipeline.edgeset.held_out_residuals` keeps them); ``counts``: the points of each
     of those edges; ``removed``: edges whose string's deviation was removed; ``without_terms``: edges of a
     string the fold fitted no deviation for (seen in fewer than two of its shots, or over too short a
     stretch); ``unmatched``: edges at no string of the fold (a string the fold never saw); the last two are
@@ -103,8 +103,7 @@ def held_out_without_strings(
     value beyond it (a polynomial is not extrapolated). Every edge's residual is its distance from its own
     total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure.
     """
-    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in lines if len(p) >= 3]
-    pts = [p for p in pts if np.all(np.isfinite(p))]
+    pts = held_out_edges(lines)
     if not pts:
         return HeldOutStrings(np.zeros(0), np.zeros(0, dtype=np.int64), 0, 0, 0)
     frame = fit.frame
