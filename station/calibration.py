@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.cross_validation import DEFAULT_CANDIDATES
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_SEPARATE, FitSpec
@@ -193,10 +194,8 @@ def calibrate_shots(
     support = None if spec is None else support_problem(spec, lines)
     if spec is None:
         angles = None if turntable_deg is None else [float(a) for a in turntable_deg]
-        if candidates is None:
-            selection = select_model(lines, width, height, map_fn=map_fn, turntable_deg=angles)
-        else:
-            selection = select_model(lines, width, height, candidates, map_fn=map_fn, turntable_deg=angles)
+        offered = DEFAULT_CANDIDATES if candidates is None else candidates
+        selection = select_model(lines, width, height, offered, map_fn=map_fn, turntable_deg=angles)
         spec = selection.choice
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
