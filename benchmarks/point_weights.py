@@ -211,6 +211,16 @@ def real_part(directory: Path) -> dict[str, list[tuple[float, float]]]:
     return real_splits(measured, VARIANTS, fit_variant, REAL_CANDIDATES, "weights", "unweighted")
 
 
+def variant_columns(variants: Sequence[str]) -> str:
+    """The header cells of a population table: each variant's field RMS, then each one's unseen d."""
+    return " | ".join([*(f"field, {v}" for v in variants), *(f"unseen d, {v}" for v in variants)])
+
+
+def variant_cells(vals: Sequence[Any]) -> str:
+    """A population row's cells from each variant's (field RMS, unseen d), as :func:`variant_columns` orders them."""
+    return " | ".join([*(f"{x[0]:.4f}" for x in vals), *(f"{x[1]:.4f}" for x in vals)])
+
+
 # ------------------------------------------------------------------------ realistic population
 def one(seed: int, w: int, h: int) -> dict[str, object]:
     from pipeline.lens_population import lens_population
@@ -245,26 +255,13 @@ def population_part(seeds: range, w: int, h: int, workers: int) -> None:
         "field RMS vs the exact lens / d of 3 unseen shots (px)"
     )
     print()
-    print(
-        "| seed | lens | shots | "
-        + " | ".join(f"field, {v}" for v in VARIANTS)
-        + " | "
-        + " | ".join(f"unseen d, {v}" for v in VARIANTS)
-        + " |"
-    )
+    print(f"| seed | lens | shots | {variant_columns(VARIANTS)} |")
     print("|---:|---|---:|" + "---:|" * (2 * len(VARIANTS)))
     with ProcessPoolExecutor(max_workers=workers) as ex:
         rows = list(ex.map(one, seeds, [w] * len(seeds), [h] * len(seeds)))
     for n_label in ("6", "3"):
         for r in rows:
-            vals = [r[(n_label, v)] for v in VARIANTS]
-            print(
-                f"| {r['seed']} | {r['kind']} | {n_label} | "
-                + " | ".join(f"{x[0]:.4f}" for x in vals)
-                + " | "
-                + " | ".join(f"{x[1]:.4f}" for x in vals)
-                + " |"
-            )
+            print(f"| {r['seed']} | {r['kind']} | {n_label} | {variant_cells([r[(n_label, v)] for v in VARIANTS])} |")
     print()
     summary({n: [{v: r[(n, v)] for v in VARIANTS} for r in rows] for n in ("6", "3")}, VARIANTS, lambda r, v: r[v])
 
@@ -300,25 +297,12 @@ def point_rows(
         "fitted, radial4+tangential+prism; field RMS vs the exact lens / d of 3 unseen shots (px)"
     )
     print()
-    print(
-        "| seed | "
-        + " | ".join(f"field, {v}" for v in variants)
-        + " | "
-        + " | ".join(f"unseen d, {v}" for v in variants)
-        + " |"
-    )
+    print(f"| seed | {variant_columns(variants)} |")
     print("|---:|" + "---:|" * (2 * len(variants)))
     with ProcessPoolExecutor(max_workers=workers) as ex:
         rows = list(ex.map(partial(one_points, variants=variants, fit=fit, base=base), seeds))
     for r in rows:
-        vals: list[tuple[float, float]] = [r[v] for v in variants]  # type: ignore[misc]
-        print(
-            f"| {r['seed']} | "
-            + " | ".join(f"{x[0]:.4f}" for x in vals)
-            + " | "
-            + " | ".join(f"{x[1]:.4f}" for x in vals)
-            + " |"
-        )
+        print(f"| {r['seed']} | {variant_cells([r[v] for v in variants])} |")
     print()
     return rows
 
