@@ -191,7 +191,14 @@ class WorkerPool:
                 proc.terminate()
             for proc in procs:
                 proc.join(5)
+            manager = getattr(pool, "_executor_manager_thread", None)  # shutdown forgets it
             pool.shutdown(wait=False, cancel_futures=True)
+            if manager is not None:
+                # the manager thread closes its wake-up pipe as it ends, and Python 3.11's exit hook
+                # (concurrent.futures.process._python_exit) writes to that pipe without a lock: a Ctrl-C exit
+                # racing the close printed "OSError: [Errno 9] Bad file descriptor" after our one line
+                # (CPython gh-125451, fixed in later versions). The workers are dead, so it ends at once.
+                manager.join(5)
         self._thaw()
 
     def _thaw(self) -> None:
