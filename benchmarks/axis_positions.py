@@ -1,0 +1,182 @@
+"""Does moving the harp (with its turntable) between shots separate the strings' bends from the lens?
+
+Usage::
+
+    .venv/bin/python benchmarks/axis_positions.py [--seeds 38,26,0,16,27,39] [--first-seed 0 --count 20]
+        [--shift 150] [--workers 2]
+
+Turning the harp about one axis cannot tell a radial correction about that axis from string bends
+depending on the strings' distances from it (``pipeline.harp_shape``'s docstring): when the axis is near
+the distortion centre that part goes to the lens by a gauge, right or wrong. Seen about two axes, a
+string keeps its distance from the turntable axis while its distance from the distortion centre changes,
+so the shots tell them apart. For each seeded lens of ``benchmarks/lens_limits.py`` (its realistic
+session's lens, harp with drawn string shapes and mount), the exact edges (no rendering: the strings'
+shapes are the only error) are traced for plans of equal shot counts:
+
+* six shots at 0..150 by 30 about the drawn axis, against six in two groups of three (0, 60, 120 with
+  the axis moved by ``-shift`` px in x and half that in y; 30, 90, 150 moved by ``+shift``);
+* twelve shots at 0..165 by 15 about the drawn axis, against 0..150 by 30 about each moved axis.
+
+The two-axis plans are fitted twice: with each group's shift given 5 % off (``axis_shifts``, what a linear
+stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
+shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
+``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis was found more than a third of a
+pitch from where it was drawn (its strings misnumbered).
+
+Every plan uses the harp widened by copies of its strings (``lens_limits.widened``) so that it fills the
+image wherever the axis is. ``radial4+tangential+prism`` is fitted alone (``pipeline.fit.fit_distortion``)
+and with the strings separated (``pipeline.harp_shape.fit_harp_shape``; for the moved plans with
+``axis_groups``, each group's axis found by the search, the shift not given); the table gives the field
+error against the exact lens (``pipeline.compare.compare_models``, 20 px grid), "alone / separated", px.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from lens_limits import SPEC, seed_lens, widened
+
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.harp_shape import fit_harp_shape
+from pipeline.realism import shot_edges
+from pipeline.render import visible_edges
+
+W, H = 1000, 750
+SIX = tuple((float(a), -1 if a % 60 == 0 else 1) for a in range(0, 180, 30))
+TWELVE = tuple((float(a), g) for g in (-1, 1) for a in range(0, 180, 30))
+# plan name -> ((turntable angle, axis group: -1 moved by -shift, 0 not moved, +1 moved by +shift) per shot,
+# how the fit is told the groups' shifts: None (one axis), "given" or "searched")
+PLANS: dict[str, tuple[tuple[tuple[float, int], ...], str | None]] = {
+    "6 shots, one axis": (tuple((float(a), 0) for a in range(0, 180, 30)), None),
+    "6 shots, two axes, shift given": (SIX, "given"),
+    "6 shots, two axes, searched": (SIX, "searched"),
+    "12 shots, one axis": (tuple((float(a), 0) for a in range(0, 180, 15)), None),
+    "12 shots, two axes, shift given": (TWELVE, "given"),
+    "12 shots, two axes, searched": (TWELVE, "searched"),
+}
+SHIFT_ERROR = 1.05
+"""A given shift is the true one times this (known roughly: a stage's travel times an image scale)."""
+
+
+def plan_lines(seed: int, plan: tuple[tuple[float, int], ...], shift: float) -> tuple[list[list], object]:
+    """The exact edges of seed ``seed``'s shots in ``plan`` (the axis moved by ``group * (shift, shift / 2)``)."""
+    lens, ses, _ = seed_lens(seed, W, H)
+    harp = widened(ses.harp, int(np.hypot(shift, shift / 2) // ses.harp.spacing_px) + 1)
+    out = []
+    for a, g in plan:
+        c = ses.mount.centre
+        mount = dataclasses.replace(ses.mount, centre=(c[0] + g * shift, c[1] + g * shift / 2))
+        edges = shot_edges(lens, harp, mount.pose(a), W, H)
+        out.append([p for _, p in visible_edges(edges, lens, W, H, step=2.0)])
+    return out, lens
+
+
+def row(args: tuple[int, float]) -> str:
+    seed, shift = args
+    lens, ses, start = seed_lens(seed, W, H)
+    cells = [str(seed), str(start["lens"]), str(start["strings"])]
+    for plan, mode in PLANS.values():
+        lines, _ = plan_lines(seed, plan, shift)
+        angles = [a for a, _ in plan]
+        groups = [g for _, g in plan] if mode else None
+        given = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)}
+        plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
+        sep = (
+            fit_harp_shape(
+                lines,
+                angles,
+                W,
+                H,
+                SPEC,
+                plain=plain,
+                axis_groups=groups,
+                axis_shifts=given if mode == "given" else None,
+            )
+            if plain
+            else None
+        )
+        alone = compare_models(plain.model, lens, W, H, step=20).rms if plain else np.nan
+        both = compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan
+        # a group's axis found more than a third of a pitch from where it was drawn: the strings misnumbered
+        c = ses.mount.centre
+        wrong = sep and any(
+            np.hypot(f.centre[0] - c[0] - g * shift, f.centre[1] - c[1] - g * shift / 2) > f.pitch_px / 3
+            for g, f in (sep.axis_groups or ((0, sep.frame),))
+        )
+        cells.append(f"{alone:.4f} / {both:.4f}" + (" (axis wrong)" if wrong else ""))
+    return "| " + " | ".join(cells) + " |"
+
+
+def summary(rows: list[str]) -> list[str]:
+    """Per two-axis plan against the one-axis plan of its shot count: how often the separated field error
+    drops, rises, stays."""
+    cells = [[c.split(" (")[0] for c in r.strip("| ").split(" | ")[3:]] for r in rows]
+    sep = np.array([[float(c.split("/")[1]) for c in r] for r in cells])
+    alone = np.array([[float(c.split("/")[0]) for c in r] for r in cells])
+    out = []
+    names = list(PLANS)
+    for i, j in ((0, 1), (0, 2), (3, 4), (3, 5)):
+        one, two = sep[:, i], sep[:, j]
+        ratio = two / one
+        out.append(
+            f"{names[j]} against {names[i]}, separated: lower (< 0.95x) for {int(np.sum(ratio < 0.95))}, "
+            f"within 5 % for {int(np.sum(np.abs(ratio - 1) <= 0.05))}, higher for {int(np.sum(ratio > 1.05))} of "
+            f"{len(ratio)}; median ratio {np.median(ratio):.2f}, worst {ratio.max():.2f}; median field "
+            f"{np.median(one):.4f} -> {np.median(two):.4f} px; at or below 0.005 px {int(np.sum(one <= 0.005))} -> "
+            f"{int(np.sum(two <= 0.005))}; lens alone median {np.median(alone[:, i]):.4f} -> "
+            f"{np.median(alone[:, j]):.4f} px"
+        )
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="38,26,0,16,27,39", help="comma-separated seeds")
+    ap.add_argument("--first-seed", type=int, default=None, help="a population instead: seeds first..first+count-1")
+    ap.add_argument("--count", type=int, default=20)
+    ap.add_argument("--shift", type=float, default=150.0, help="axis shift in x, px (half that in y)")
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args(argv)
+    seeds = (
+        list(range(args.first_seed, args.first_seed + args.count))
+        if args.first_seed is not None
+        else [int(s) for s in args.seeds.split(",")]
+    )
+    print(
+        f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, exact "
+        f"edges, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f} at start; "
+        f"`benchmarks/axis_positions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    print("| seed | lens | strings | " + " | ".join(PLANS) + " |")
+    print("|---:|---|---|" + "---:|" * len(PLANS))
+    t0 = time.perf_counter()
+    rows = []
+    jobs = [(s, args.shift) for s in seeds]
+    with ProcessPoolExecutor(max(1, args.workers)) as pool:
+        for r in pool.map(row, jobs):
+            rows.append(r)
+            print(r, flush=True)
+    print()
+    for line in summary(rows):
+        print(line)
+    print()
+    print(f"({time.perf_counter() - t0:.0f} s, load average at end {os.getloadavg()[0]:.1f})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
