@@ -20,14 +20,17 @@ shapes are the only error) are traced for plans of equal shot counts:
 The two-axis plans are fitted twice: with each group's shift given 5 % off (``axis_shifts``, what a linear
 stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
 shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
-``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis was found more than a third of a
-pitch from where it was drawn (its strings misnumbered).
+``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis (or the one axis) was found more
+than a third of a pitch from where it was drawn (its strings misnumbered). A two-axis cell has a third
+figure: the strings separated with the one-axis ridge (``STRING_RIDGE`` 0.02) instead of the two-axis
+default (``GROUP_STRING_RIDGE`` 0.002).
 
 Every plan uses the harp widened by copies of its strings (``lens_limits.widened``) so that it fills the
 image wherever the axis is. ``radial4+tangential+prism`` is fitted alone (``pipeline.fit.fit_distortion``)
 and with the strings separated (``pipeline.harp_shape.fit_harp_shape``; for the moved plans with
 ``axis_groups``, each group's axis found by the search, the shift not given); the table gives the field
 error against the exact lens (``pipeline.compare.compare_models``, 20 px grid), "alone / separated", px.
+The summary compares the separated figures (the two-axis default) with the one-axis plan's.
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from lens_limits import SPEC, seed_lens, widened
 
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
-from pipeline.harp_shape import fit_harp_shape
+from pipeline.harp_shape import STRING_RIDGE, fit_harp_shape
 from pipeline.realism import shot_edges
 from pipeline.render import visible_edges
 
@@ -93,29 +96,23 @@ def row(args: tuple[int, float]) -> str:
         groups = [g for _, g in plan] if mode else None
         given = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)}
         plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
-        sep = (
-            fit_harp_shape(
-                lines,
-                angles,
-                W,
-                H,
-                SPEC,
-                plain=plain,
-                axis_groups=groups,
-                axis_shifts=given if mode == "given" else None,
-            )
+        shifts = given if mode == "given" else None
+        fits = [
+            fit_harp_shape(lines, angles, W, H, SPEC, plain=plain, axis_groups=groups, axis_shifts=shifts, ridge=r)
             if plain
             else None
-        )
+            for r in ((None, STRING_RIDGE) if mode else (None,))
+        ]
+        sep = fits[0]
         alone = compare_models(plain.model, lens, W, H, step=20).rms if plain else np.nan
-        both = compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan
+        both = " / ".join(f"{compare_models(f.model, lens, W, H, step=20).rms:.4f}" if f else "nan" for f in fits)
         # a group's axis found more than a third of a pitch from where it was drawn: the strings misnumbered
         c = ses.mount.centre
         wrong = sep and any(
             np.hypot(f.centre[0] - c[0] - g * shift, f.centre[1] - c[1] - g * shift / 2) > f.pitch_px / 3
             for g, f in (sep.axis_groups or ((0, sep.frame),))
         )
-        cells.append(f"{alone:.4f} / {both:.4f}" + (" (axis wrong)" if wrong else ""))
+        cells.append(f"{alone:.4f} / {both}" + (" (axis wrong)" if wrong else ""))
     return "| " + " | ".join(cells) + " |"
 
 

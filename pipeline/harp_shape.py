@@ -94,6 +94,13 @@ STRING_RIDGE = 0.02
 of ``STRING_RIDGE * a`` px on every point (a bend of 0.02 px like 4e-4 px: it fixes what turning the
 harp cannot see and shrinks what it sees by far less than its standard error)."""
 
+GROUP_STRING_RIDGE = 0.002
+"""The ridge's weight when the shots come from two turntable axes or more (:func:`fit_harp_shape`'s
+``axis_groups``): there the shots see what one axis cannot (a part of the strings' bends that a radial
+correction about one axis imitates exactly), but only weakly, and :data:`STRING_RIDGE` would give most of
+it back to the lens (exact bent strings about two axes, ``tests/pipeline/test_harp_shape.py``: bends
+recovered to about half with 0.02, within a few per cent with 0.002)."""
+
 MAX_ANGLE_SPREAD_DEG = 3.0
 """Largest spread of the shots' string angles about ``phi_0 + sigma * theta`` that is accepted."""
 
@@ -598,7 +605,7 @@ def fit_harp_shape(
     spec: FitSpec,
     *,
     degrees: Sequence[int] = DEVIATION_TERMS,
-    ridge: float = STRING_RIDGE,
+    ridge: float | None = None,
     plain: FitResult | None = None,
     max_nfev: int = 200,
     axis_groups: Sequence[Hashable] | None = None,
@@ -613,7 +620,8 @@ def fit_harp_shape(
     width, height : the image size.
     spec : the lens model.
     degrees : Legendre degrees of each deviation (>= 2).
-    ridge : weight of the ridge on the deviation coefficients (:data:`STRING_RIDGE`).
+    ridge : weight of the ridge on the deviation coefficients (None: :data:`STRING_RIDGE`, or
+        :data:`GROUP_STRING_RIDGE` with two axis groups or more).
     plain : the fit of ``spec`` without string terms, when already made (its outliers are left out).
     axis_groups : a label per shot when the harp was moved (with its turntable) between groups of shots:
         each group's axis is found on its own (:func:`group_frames`), a string is the same in every group.
@@ -701,6 +709,8 @@ def fit_harp_shape(
     basis = legendre(u, degrees)
     lens = make_parametrisation(width, height, spec)
     gauge = None
+    if ridge is None:
+        ridge = STRING_RIDGE if len(groups) < 2 else GROUP_STRING_RIDGE
     if len(groups) < 2:
         gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
     param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge)
