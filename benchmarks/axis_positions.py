@@ -17,7 +17,7 @@ shapes are the only error) are traced for plans of equal shot counts:
   the axis moved by ``-shift`` px in x and half that in y; 30, 90, 150 moved by ``+shift``);
 * twelve shots at 0..165 by 15 about the drawn axis, against 0..150 by 30 about each moved axis.
 
-The two-axis plans are fitted twice: with each group's shift given 5 % off (``axis_shifts``, what a linear
+The two-axis plans are fitted twice: with each group's shift given 2 % off (``axis_shifts``, what a linear
 stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
 shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
 ``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis (or the one axis) was found more
@@ -69,8 +69,9 @@ PLANS: dict[str, tuple[tuple[tuple[float, int], ...], str | None]] = {
     "12 shots, two axes, shift given": (TWELVE, "given"),
     "12 shots, two axes, searched": (TWELVE, "searched"),
 }
-SHIFT_ERROR = 1.05
-"""A given shift is the true one times this (known roughly: a stage's travel times an image scale)."""
+SHIFT_ERROR = 1.02
+"""A given shift is the true one times this (known roughly: a stage's travel times an image scale, from the harp's
+pitch in mm and in px)."""
 
 
 def plan_lines(seed: int, plan: tuple[tuple[float, int], ...], shift: float) -> tuple[list[list], object]:

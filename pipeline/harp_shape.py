@@ -339,6 +339,7 @@ def harp_frame(
     *,
     centre: Sequence[float] | Floats | None = None,
     reach: float | None = None,
+    refine: bool = True,
 ) -> tuple[HarpFrame, list[list[int]]] | FitFailure:
     """The harp's frame in the shots (:class:`HarpFrame`) and each edge's string number.
 
@@ -350,7 +351,8 @@ def harp_frame(
     within their clusters; with ``reach`` (pitches) instead within ``reach`` of ``centre`` by how well the
     distances fall on one comb, for a harp of uniform pitch (:func:`_coarse_axis`: the spread misleads
     where a wrong axis splits the strings into clusters of one or two edges, as it may with few shots).
-    Either is then refined with its clusters held.
+    Either is then refined with its clusters held (unless not ``refine``: where the shots do not share
+    one axis exactly, the refinement may wander off).
     """
     if len(corrected) != len(turntable_deg):
         return FitFailure(f"{len(corrected)} shots but {len(turntable_deg)} turntable angles")
@@ -404,7 +406,7 @@ def harp_frame(
     else:
         c_best = c0
     # refine: given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
-    for _ in range(3):
+    for _ in range(3 if refine else 0):
         lab = score(c_best)[1]
         k = int(lab.max()) + 1
         a = np.zeros((len(oo), 2 + k))
@@ -431,11 +433,12 @@ def group_frames(
 
     Each group's frame is :func:`harp_frame` on its own shots. Where its axis is searched:
 
-    * ``shifts`` given (per group, the image shift of the axis from a reference place near the image
-      centre, known roughly: a stage's travel times the image scale): every shot moved back by its group's
-      shift, all shots together find the reference axis (:func:`harp_frame`'s search), and each group's own
-      axis is searched within :data:`SHIFT_SEARCH` pitches of the reference plus its shift (a shift known
-      to a quarter of a pitch suffices, with as few as three shots in a group);
+    * ``shifts`` given (per group, the image shift of the axis from a reference place within
+      :data:`AXIS_SEARCH` pitches of the image centre, known roughly: a stage's travel times the image
+      scale): every shot moved back by its group's shift, all shots together place the reference axis
+      (:func:`harp_frame` with ``reach``, not refined), and each group's own axis is searched within
+      :data:`SHIFT_SEARCH` pitches of the reference plus its shift (the shifts' errors a sixth of a pitch
+      or less, with as few as three shots in a group);
     * no ``shifts``: within :data:`GROUP_AXIS_SEARCH` pitches of the image centre (``harp_frame(reach=)``).
       For a harp of uniform pitch this needs four turntable angles or more per group, spread over the
       half turn: the distances from any point agree between three shots modulo the pitch on a lattice of
@@ -455,7 +458,7 @@ def group_frames(
             return FitFailure(f"no axis shift for axis group {missing[0]!r}")
         s = {g: np.asarray(shifts[g], np.float64) for g in names}
         back = [[e - s[g] for e in shot] for shot, g in zip(corrected, axis_groups, strict=True)]
-        framed = harp_frame(back, turntable_deg, width, height)
+        framed = harp_frame(back, turntable_deg, width, height, reach=AXIS_SEARCH, refine=False)
         if not framed:
             return framed
         guess = {g: np.asarray(framed[0].centre) + s[g] for g in names}
