@@ -31,6 +31,10 @@ and with the strings separated (``pipeline.harp_shape.fit_harp_shape``; for the 
 ``axis_groups``, each group's axis found by the search, the shift not given); the table gives the field
 error against the exact lens (``pipeline.compare.compare_models``, 20 px grid), "alone / separated", px.
 The summary compares the separated figures (the two-axis default) with the one-axis plan's.
+
+``--realistic``: the same plans on shots rendered with every effect of the seed's realistic session (blur,
+noise, Bayer, vignetting, the strings' kinks; ``pipeline.realism.render_shots``, JPEG off as in
+``benchmarks/lens_limits.py``) and measured as ``harp measure`` does, instead of the exact edges.
 """
 
 from __future__ import annotations
@@ -40,8 +44,10 @@ import dataclasses
 import os
 import sys
 import time
+from collections.abc import Hashable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -52,8 +58,10 @@ from lens_limits import SPEC, seed_lens, widened
 
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
+from pipeline.harp_scene import Harp, HarpMount
 from pipeline.harp_shape import STRING_RIDGE, fit_harp_shape
-from pipeline.realism import shot_edges
+from pipeline.measure import measure_image
+from pipeline.realism import Session, render_shots, shot_edges
 from pipeline.render import visible_edges
 
 W, H = 1000, 750
@@ -74,28 +82,51 @@ SHIFT_ERROR = 1.02
 pitch in mm and in px)."""
 
 
-def plan_lines(seed: int, plan: tuple[tuple[float, int], ...], shift: float) -> tuple[list[list], object]:
-    """The exact edges of seed ``seed``'s shots in ``plan`` (the axis moved by ``group * (shift, shift / 2)``)."""
-    lens, ses, _ = seed_lens(seed, W, H)
+def moved(ses: Session, shift: float, group: int) -> tuple[Harp, HarpMount]:
+    """The widened harp and the mount with its axis moved by ``group * (shift, shift / 2)``."""
     harp = widened(ses.harp, int(np.hypot(shift, shift / 2) // ses.harp.spacing_px) + 1)
-    out = []
-    for a, g in plan:
-        c = ses.mount.centre
-        mount = dataclasses.replace(ses.mount, centre=(c[0] + g * shift, c[1] + g * shift / 2))
+    c = ses.mount.centre
+    return harp, dataclasses.replace(ses.mount, centre=(c[0] + group * shift, c[1] + group * shift / 2))
+
+
+def exact_shots(seed: int, shift: float) -> dict[tuple[float, int], list[Any]]:
+    """The exact edges of every (angle, group) shot the plans take, traced through the exact lens every 2 px."""
+    lens, ses, _ = seed_lens(seed, W, H)
+    out = {}
+    for a, g in dict.fromkeys(shot for plan, _ in PLANS.values() for shot in plan):
+        harp, mount = moved(ses, shift, g)
         edges = shot_edges(lens, harp, mount.pose(a), W, H)
-        out.append([p for _, p in visible_edges(edges, lens, W, H, step=2.0)])
-    return out, lens
+        out[(a, g)] = [p for _, p in visible_edges(edges, lens, W, H, step=2.0)]
+    return out
 
 
-def row(args: tuple[int, float]) -> str:
-    seed, shift = args
+def rendered_shots(seed: int, shift: float) -> dict[tuple[float, int], list[Any]]:
+    """Every (angle, group) shot the plans take rendered with all of the seed's realistic effects
+    (``pipeline.realism.render_shots``, group ``g``'s shots seeded ``3 seed + g + 1``) and measured as
+    ``harp measure`` does."""
+    lens, ses, _ = seed_lens(seed, W, H)
+    shots = list(dict.fromkeys(shot for plan, _ in PLANS.values() for shot in plan))
+    out = {}
+    for g in sorted({g for _, g in shots}):
+        harp, mount = moved(ses, shift, g)
+        angles = [a for a, h in shots if h == g]
+        for a, im in zip(angles, render_shots(lens, harp, mount, angles, W, H, ses.effects, seed=3 * seed + g + 1)):
+            out[(a, g)] = [ln.points for ln in measure_image(im.image).lines]
+    return out
+
+
+def row(args: tuple[int, float, bool]) -> str:
+    seed, shift, realistic = args
     lens, ses, start = seed_lens(seed, W, H)
     cells = [str(seed), str(start["lens"]), str(start["strings"])]
+    store = rendered_shots(seed, shift) if realistic else exact_shots(seed, shift)
     for plan, mode in PLANS.values():
-        lines, _ = plan_lines(seed, plan, shift)
+        lines = [store[shot] for shot in plan]
         angles = [a for a, _ in plan]
         groups = [g for _, g in plan] if mode else None
-        given = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)}
+        given: dict[Hashable, tuple[float, float]] = {
+            g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)
+        }
         plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
         shifts = given if mode == "given" else None
         fits = [
@@ -109,8 +140,9 @@ def row(args: tuple[int, float]) -> str:
         both = " / ".join(f"{compare_models(f.model, lens, W, H, step=20).rms:.4f}" if f else "nan" for f in fits)
         # a group's axis found more than a third of a pitch from where it was drawn: the strings misnumbered
         c = ses.mount.centre
+        drawn: dict[Hashable, tuple[float, float]] = {g: (c[0] + g * shift, c[1] + g * shift / 2) for g in (-1, 0, 1)}
         wrong = sep and any(
-            np.hypot(f.centre[0] - c[0] - g * shift, f.centre[1] - c[1] - g * shift / 2) > f.pitch_px / 3
+            np.hypot(f.centre[0] - drawn[g][0], f.centre[1] - drawn[g][1]) > f.pitch_px / 3
             for g, f in (sep.axis_groups or ((0, sep.frame),))
         )
         cells.append(f"{alone:.4f} / {both}" + (" (axis wrong)" if wrong else ""))
@@ -146,6 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--count", type=int, default=20)
     ap.add_argument("--shift", type=float, default=150.0, help="axis shift in x, px (half that in y)")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--realistic", action="store_true", help="rendered and measured shots instead of exact edges")
     args = ap.parse_args(argv)
     seeds = (
         list(range(args.first_seed, args.first_seed + args.count))
@@ -153,8 +186,8 @@ def main(argv: list[str] | None = None) -> int:
         else [int(s) for s in args.seeds.split(",")]
     )
     print(
-        f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, exact "
-        f"edges, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
+        f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, "
+        f"{'realistic renders' if args.realistic else 'exact edges'}, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
         f"load average {os.getloadavg()[0]:.1f} at start; "
         f"`benchmarks/axis_positions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
     )
@@ -163,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---:|---|---|" + "---:|" * len(PLANS))
     t0 = time.perf_counter()
     rows = []
-    jobs = [(s, args.shift) for s in seeds]
+    jobs = [(s, args.shift, args.realistic) for s in seeds]
     with ProcessPoolExecutor(max(1, args.workers)) as pool:
         for r in pool.map(row, jobs):
             rows.append(r)

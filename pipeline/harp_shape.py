@@ -42,6 +42,12 @@ What can and cannot be separated
   lens (no penalty there), which is the physical reading (a harp whose strings bow in proportion
   to a radial law of their distance from the axis is not plausible). The farther the axis from the
   distortion centre, the better the separation.
+* Shots about two turntable axes or more (the harp moved *with* its turntable between groups of shots,
+  ``fit_harp_shape(axis_groups=...)``) separate that part too: a string keeps its distance from the
+  turntable axis while its distance from the distortion centre changes, and a radial term about the
+  distortion centre plus a thin prism imitates string bends about one axis but not about two on opposite
+  sides of it. Each group's axis is found on its own shots (or about a rough shift given per group,
+  :func:`group_frames`); no radial gauge is held, and the ridge is :data:`GROUP_STRING_RIDGE`.
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
 * Without turntable angles (loose photographs) nothing ties a string of one shot to a string of
