@@ -47,7 +47,10 @@ What can and cannot be separated
   turntable axis while its distance from the distortion centre changes, and a radial term about the
   distortion centre plus a thin prism imitates string bends about one axis but not about two on opposite
   sides of it. Each group's axis is found on its own shots (or about a rough shift given per group,
-  :func:`group_frames`); no radial gauge is held, and the ridge is :data:`GROUP_STRING_RIDGE`.
+  :func:`group_frames`); no radial gauge is held. The ridge stays :data:`STRING_RIDGE`: it still takes a
+  part of what two axes see (about half of it for the bends of ``tests/pipeline/test_harp_shape.py``'s
+  two-axis case with axes 170 px from the centre), but a ten times weaker one was worse on realistic
+  renders (``benchmarks/axis_positions.py --realistic``, ``benchmarks/RESULTS-strings.md``).
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
 * Without turntable angles (loose photographs) nothing ties a string of one shot to a string of
@@ -99,13 +102,6 @@ STRING_RIDGE = 0.02
 """Weight of the ridge on the deviation coefficients: a coefficient of ``a`` px costs like a residual
 of ``STRING_RIDGE * a`` px on every point (a bend of 0.02 px like 4e-4 px: it fixes what turning the
 harp cannot see and shrinks what it sees by far less than its standard error)."""
-
-GROUP_STRING_RIDGE = 0.002
-"""The ridge's weight when the shots come from two turntable axes or more (:func:`fit_harp_shape`'s
-``axis_groups``): there the shots see what one axis cannot (a part of the strings' bends that a radial
-correction about one axis imitates exactly), but only weakly, and :data:`STRING_RIDGE` would give most of
-it back to the lens (exact bent strings about two axes, ``tests/pipeline/test_harp_shape.py``: bends
-recovered to about half with 0.02, within a few per cent with 0.002)."""
 
 MAX_ANGLE_SPREAD_DEG = 3.0
 """Largest spread of the shots' string angles about ``phi_0 + sigma * theta`` that is accepted."""
@@ -614,7 +610,7 @@ def fit_harp_shape(
     spec: FitSpec,
     *,
     degrees: Sequence[int] = DEVIATION_TERMS,
-    ridge: float | None = None,
+    ridge: float = STRING_RIDGE,
     plain: FitResult | None = None,
     max_nfev: int = 200,
     axis_groups: Sequence[Hashable] | None = None,
@@ -629,8 +625,7 @@ def fit_harp_shape(
     width, height : the image size.
     spec : the lens model.
     degrees : Legendre degrees of each deviation (>= 2).
-    ridge : weight of the ridge on the deviation coefficients (None: :data:`STRING_RIDGE`, or
-        :data:`GROUP_STRING_RIDGE` with two axis groups or more).
+    ridge : weight of the ridge on the deviation coefficients (:data:`STRING_RIDGE`).
     plain : the fit of ``spec`` without string terms, when already made (its outliers are left out).
     axis_groups : a label per shot when the harp was moved (with its turntable) between groups of shots:
         each group's axis is found on its own (:func:`group_frames`), a string is the same in every group.
@@ -718,8 +713,6 @@ def fit_harp_shape(
     basis = legendre(u, degrees)
     lens = make_parametrisation(width, height, spec)
     gauge = None
-    if ridge is None:
-        ridge = STRING_RIDGE if len(groups) < 2 else GROUP_STRING_RIDGE
     if len(groups) < 2:
         gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
     param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge)

@@ -88,7 +88,7 @@ def test_a_harp_moved_between_two_turntable_axes_frees_the_lens_of_what_one_axis
     bends = np.zeros((n, 3))
     bends[:, 0] = 0.05 * q / 600.0
     bends[8, 1] = 0.04  # and one string with an S of its own
-    centre, shift = np.array(LENS.center), np.array([150.0, 75.0])
+    centre, shift = np.array(LENS.center), np.array([250.0, 125.0])
     one_turn = tuple(range(0, 180, 15))
     one, _ = turning_harp_point_sets(LENS, W, H, one_turn, bends, axis=centre, step=40, seed=4)
     left, _ = turning_harp_point_sets(LENS, W, H, TURNS, bends, axis=centre - shift, step=40, seed=5)
