@@ -8,7 +8,7 @@ import pytest
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape, legendre
+from pipeline.harp_shape import BEND_LIMIT_PX, STRING_RIDGE, fit_harp_shape, legendre
 from pipeline.models import RadialModel
 from tests.pipeline.harp_points import turning_harp_point_sets
 
@@ -88,21 +88,23 @@ def test_a_harp_moved_between_two_turntable_axes_frees_the_lens_of_what_one_axis
     bends = np.zeros((n, 3))
     bends[:, 0] = 0.05 * q / 600.0
     bends[8, 1] = 0.04  # and one string with an S of its own
-    centre, shift = np.array(LENS.center), np.array([250.0, 125.0])
+    centre, shift = np.array(LENS.center), np.array([150.0, 75.0])
     one_turn = tuple(range(0, 180, 15))
     one, _ = turning_harp_point_sets(LENS, W, H, one_turn, bends, axis=centre, step=40, seed=4)
     left, _ = turning_harp_point_sets(LENS, W, H, TURNS, bends, axis=centre - shift, step=40, seed=5)
     right, _ = turning_harp_point_sets(LENS, W, H, TURNS, bends, axis=centre + shift, step=40, seed=6)
-    err = {}
-    for name, shots, turns, groups in (
-        ("one", one, one_turn, None),
-        ("two", left + right, TURNS + TURNS, ["left"] * 6 + ["right"] * 6),
-    ):
-        plain = fit_distortion(shots, W, H, **SPEC.fit_arguments())
-        fit = fit_harp_shape(shots, turns, W, H, SPEC, plain=plain, axis_groups=groups)
-        assert fit, fit
-        err[name] = compare_models(fit.model, LENS, W, H, step=25).rms
-    assert err["one"] > 2.0 * err["two"] and err["one"] > 0.005
+    plain = fit_distortion(one, W, H, **SPEC.fit_arguments())
+    fit = fit_harp_shape(one, one_turn, W, H, SPEC, plain=plain)
+    err_one = compare_models(fit.model, LENS, W, H, step=25).rms
+    shots, groups = left + right, ["left"] * 6 + ["right"] * 6
+    plain = fit_distortion(shots, W, H, **SPEC.fit_arguments())
+    # the default ridge keeps about half of what only two axes see (pipeline.harp_shape: chosen on realistic
+    # renders); a ridge ten times weaker lets the shots decide
+    default = fit_harp_shape(shots, TURNS + TURNS, W, H, SPEC, plain=plain, axis_groups=groups)
+    fit = fit_harp_shape(shots, TURNS + TURNS, W, H, SPEC, plain=plain, axis_groups=groups, ridge=0.1 * STRING_RIDGE)
+    assert default and fit, (default, fit)
+    assert err_one > 0.005 and err_one > 1.5 * compare_models(default.model, LENS, W, H, step=25).rms
+    assert err_one > 2.0 * compare_models(fit.model, LENS, W, H, step=25).rms
     axes = dict(fit.axis_groups)
     assert np.hypot(*(np.array(axes["left"].centre) - (centre - shift))) < 2.0
     assert np.hypot(*(np.array(axes["right"].centre) - (centre + shift))) < 2.0
