@@ -164,7 +164,7 @@ def summary(rows: list[str]) -> list[str]:
         ratio = two / one
         out.append(
             f"{names[j]} against {names[i]}, separated: lower (< 0.95x) for {int(np.sum(ratio < 0.95))}, "
-            f"within 5 % for {int(np.sum(np.abs(ratio - 1) <= 0.05))}, higher for {int(np.sum(ratio > 1.05))} of "
+            f"within 5 % for {int(np.sum((ratio >= 0.95) & (ratio <= 1.05)))}, higher for {int(np.sum(ratio > 1.05))} of "
             f"{len(ratio)}; median ratio {np.median(ratio):.2f}, worst {ratio.max():.2f}; median field "
             f"{np.median(one):.4f} -> {np.median(two):.4f} px; at or below 0.005 px {int(np.sum(one <= 0.005))} -> "
             f"{int(np.sum(two <= 0.005))}; lens alone median {np.median(alone[:, i]):.4f} -> "
