@@ -89,6 +89,7 @@ from pipeline.models.base import DistortionModel
 from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
 from pipeline.render import visible_edges
+from pipeline.resample import DEFAULT_T, smooth_subsample
 from pipeline.select import select_model
 from pipeline.separated_cv import held_out_without_strings
 
@@ -447,6 +448,150 @@ def print_point_robust(rows: Iterable[dict[str, object]]) -> None:
         print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {cells} |", flush=True)
 
 
+def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int]:
+    """How many kinks ``fit`` modelled on a string that has one within 24 px (one smoothing sigma) of its place
+    (harp coordinates of the drawing: strings matched by their distance from the axis, the sense of ``a`` and
+    ``b`` from the frame's direction), how many elsewhere, how many drawn kinks lie on strings the fit saw in
+    two shots or more, inside the stretch they show, and how many of those were found."""
+    sense = 1 if np.dot(fit.frame.direction(0.0), ses.mount.pose(0.0).direction) > 0 else -1
+    pos = np.array([st.position_px for st in harp.strings])
+    by_index = {x.index: x for x in fit.strings}
+    true = false = 0
+    hit: set[int] = set()
+    for k in fit.kinks:
+        j = int(np.argmin(np.abs(pos - sense * by_index[k.string].offset_px)))
+        st = harp.strings[j]
+        if st.kink_px != 0.0 and abs(sense * k.at_px - st.kink_at_px) < 24.0:
+            true += 1
+            hit.add(j)
+        else:
+            false += 1
+    seen = 0
+    for x in fit.strings:
+        j = int(np.argmin(np.abs(pos - sense * x.offset_px)))
+        st = harp.strings[j]
+        a = sense * st.kink_at_px / fit.frame.scale_px
+        if st.kink_px != 0.0 and x.shots >= 2 and x.span[0] + 0.05 <= a <= x.span[1] - 0.05:
+            seen += 1
+    return true, false, seen, len(hit)
+
+
+def kink_fields(lines: list[list], lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int) -> dict[str, Any]:
+    """Field errors of the separated fit without and with the kinks modelled, and :func:`kink_truth`."""
+    plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
+    if not plain:
+        return {"failed": plain.reason}
+    t0 = time.perf_counter()
+    sep = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain)
+    t1 = time.perf_counter()
+    kinked = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain, kinks=True)
+    t2 = time.perf_counter()
+    if not sep:
+        return {"failed": sep.reason}
+    if not kinked:
+        return {"failed": kinked.reason}
+    return {
+        "without": float(compare_models(sep.model, lens, w, h, step=20).rms),
+        "with": float(compare_models(kinked.model, lens, w, h, step=20).rms),
+        "truth": kink_truth(kinked, harp, ses),
+        "t": (t1 - t0, t2 - t1),
+    }
+
+
+def kinks_realistic(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
+    """``--kinks``: the full realistic render, strings separated, without and with the kinks modelled."""
+    seed, w, h, cache = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    lines, _, _ = realistic_measured(seed, w, h, cache)
+    row |= kink_fields(lines, lens, ses.harp, ses, w, h)
+    return row
+
+
+def smoothed(lines: list[list]) -> list[list]:
+    """Exact edges smoothed along themselves as ``harp measure`` does (``pipeline.resample.smooth_subsample``,
+    t = 30, 1 px samples): what a noise-free measurement gives."""
+    return [[smooth_subsample(p, t=DEFAULT_T) for p in shot] for shot in lines]
+
+
+KINK_NOISE_PX = 0.003
+"""Noise per point added to the smoothed exact points in ``--kinks-exact`` (what the smoothing leaves of a
+measurement's noise, as ``tests/pipeline/harp_points.py``)."""
+
+
+def kinks_exact(args: tuple[int, int, int]) -> dict[str, object]:
+    """``--kinks-exact``: exact points of the strings with their kinks alone (every other shape zero), smoothed
+    as measured, fitted without and with the kinks modelled; the same with :data:`KINK_NOISE_PX` of noise."""
+    seed, w, h = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    harp = reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"})
+    lines = smoothed(exact_lines(lens, harp, ses, w, h))
+    row["exact"] = kink_fields(lines, lens, harp, ses, w, h)
+    rng = np.random.default_rng(seed)
+    noisy = [[p + rng.normal(0.0, KINK_NOISE_PX, p.shape) for p in shot] for shot in lines]
+    row["noisy"] = kink_fields(noisy, lens, harp, ses, w, h)
+    return row
+
+
+def kink_cells(r: dict[str, Any]) -> str:
+    """A row's cells: field without / with, kinks modelled true / false, drawn ones seen / found."""
+    if "failed" in r:
+        return "failed | | "
+    true, false, seen, hit = r["truth"]
+    return f"{r['without']:.4f} / {r['with']:.4f} | {true} / {false} | {seen} / {hit}"
+
+
+def kink_summary(results: list[dict[str, Any]], name: str) -> None:
+    """Counts at or below 0.005 px, better / worse by more than 5 %, worst ratio, kinks true / false."""
+    ok = [r for r in results if "failed" not in r]
+    a = np.array([(r["without"], r["with"]) for r in ok])
+    ratio = a[:, 1] / a[:, 0]
+    tf = np.array([r["truth"] for r in ok])
+    print(
+        f"{name}: at or below 0.005 px {int(np.sum(a[:, 0] <= 0.005))} -> {int(np.sum(a[:, 1] <= 0.005))} of "
+        f"{len(a)} ({len(results) - len(ok)} failed); median {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f} "
+        f"px; lower by > 5 % for {int(np.sum(ratio < 0.95))}, higher by > 5 % for {int(np.sum(ratio > 1.05))} "
+        f"(worst ratio {ratio.max():.3f}, largest rise {np.max(a[:, 1] - a[:, 0]):+.4f} px); kinks modelled "
+        f"{tf[:, 0].sum()} true, {tf[:, 1].sum()} false; drawn kinks seen twice {tf[:, 2].sum()}, found "
+        f"{tf[:, 3].sum()}"
+    )
+
+
+KINK_HEAD = "field without / with kinks px | kinks modelled: true / false | drawn kinks seen twice / found"
+
+
+def print_kinks(rows: Iterable[dict[str, Any]]) -> None:
+    print(f"| seed | lens | strings | kinked strings | {KINK_HEAD} | s without / with |")
+    print("|---:|---|---|---:|---:|---:|---:|---:|")
+    done = []
+    for r in rows:
+        done.append(r)
+        t = "{:.1f} / {:.1f}".format(*r["t"]) if "t" in r else ""
+        print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {kink_cells(r)} | {t} |", flush=True)
+    print()
+    kink_summary(done, "strings separated, kinks modelled")
+
+
+def print_kinks_exact(rows: Iterable[dict[str, Any]]) -> None:
+    print(
+        f"| seed | lens | strings | kinked strings | exact kinks, smoothed: {KINK_HEAD} | "
+        f"+ {KINK_NOISE_PX:g} px noise: {KINK_HEAD} |"
+    )
+    print("|---:|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    done = []
+    for r in rows:
+        done.append(r)
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {kink_cells(r['exact'])} | "
+            f"{kink_cells(r['noisy'])} |",
+            flush=True,
+        )
+    print()
+    for key in ("exact", "noisy"):
+        kink_summary([r[key] for r in done], key)
+
+
 EXACT_NOISE_PX = 0.02
 """Noise added to the exact points in ``--point-robust-exact`` (px, per point, independent): enough to lift
 the median edge RMS as a real measurement's noise and bows do, so that whole kinked edges no longer stand out."""
@@ -515,8 +660,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--point-robust-exact", action="store_true", help="print only the per-point robust fit on exact kinked points"
     )
+    ap.add_argument("--kinks", action="store_true", help="print only the kinks-modelled table (realistic shots)")
+    ap.add_argument("--kinks-exact", action="store_true", help="print only the kinks-modelled table on exact points")
     ap.add_argument(
-        "--cache", type=Path, default=None, help="--choice, --point-robust: directory keeping the measured edges (npz)"
+        "--cache",
+        type=Path,
+        default=None,
+        help="--choice, --point-robust, --kinks: directory keeping the measured edges (npz)",
     )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
@@ -537,6 +687,8 @@ def main(argv: list[str] | None = None) -> int:
         (args.point_robust, point_robust, cached, print_point_robust),
         (args.point_robust_exact, point_robust_exact, jobs, print_point_robust_exact),
         (args.exact_only, exact_only, jobs, print_exact),
+        (args.kinks, kinks_realistic, cached, print_kinks),
+        (args.kinks_exact, kinks_exact, jobs, print_kinks_exact),
     )
     for wanted, job, job_args, printer in only:
         if wanted:
