@@ -738,11 +738,12 @@ def try_fit_harp_shape(
     height: int,
     spec: FitSpec,
     plain: FitResult | None = None,
+    kinks: bool = False,
 ) -> HarpShapeFit | FitFailure:
     """:func:`fit_harp_shape` of a fold, whose odd data (too few strings seen twice, a singular system) may
     raise: the error becomes a :class:`~pipeline.edgeset.FitFailure` naming it."""
     try:
-        return fit_harp_shape(lines_per_image, list(turntable_deg), width, height, spec, plain=plain)
+        return fit_harp_shape(lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks)
     except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
 
@@ -752,4 +753,10 @@ def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
     fit = try_fit_harp_shape(*job)
+    return (fit.model, None) if fit else (None, fit.reason)
+
+
+def separated_kinks_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None]:
+    """:func:`separated_job` with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``)."""
+    fit = try_fit_harp_shape(*job, kinks=True)
     return (fit.model, None) if fit else (None, fit.reason)

@@ -107,7 +107,7 @@ def kinked_harp_point_sets(
         n = np.array([-d[1], d[0]])
         lines = []
         for k, q in enumerate(offsets):
-            s = np.arange(-1.6 * half, 1.6 * half, 1.0)
+            s = np.arange(-half - 8.0, half + 8.0, 1.0)  # the image lies within half a diagonal of the axis
             dev = np.zeros_like(s)
             if k in kinks:
                 at, h, lam = kinks[k]
