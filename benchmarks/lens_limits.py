@@ -81,6 +81,7 @@ from pipeline.compare import compare_models
 from pipeline.edgeset import FitFailure, FitResult
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_kinks import KINK_Z
 from pipeline.harp_scene import Harp
 from pipeline.harp_shape import fit_harp_shape
 from pipeline.lens_population import lens_population
@@ -448,15 +449,18 @@ def print_point_robust(rows: Iterable[dict[str, object]]) -> None:
         print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {cells} |", flush=True)
 
 
-def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int]:
+def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, float]:
     """How many kinks ``fit`` modelled on a string that has one within 24 px (one smoothing sigma) of its place
     (harp coordinates of the drawing: strings matched by their distance from the axis, the sense of ``a`` and
     ``b`` from the frame's direction), how many elsewhere, how many drawn kinks lie on strings the fit saw in
-    two shots or more, inside the stretch they show, and how many of those were found."""
+    two shots or more, inside the stretch they show, how many of those were found, and the largest detection
+    significance ``|z|`` of a kink modelled elsewhere (0 when none: with ``--kink-z 3``, how high the scan goes
+    on strings without a kink, what ``pipeline.harp_kinks.KINK_Z`` was set from)."""
     sense = 1 if np.dot(fit.frame.direction(0.0), ses.mount.pose(0.0).direction) > 0 else -1
     pos = np.array([st.position_px for st in harp.strings])
     by_index = {x.index: x for x in fit.strings}
     true = false = 0
+    false_z = 0.0
     hit: set[int] = set()
     for k in fit.kinks:
         j = int(np.argmin(np.abs(pos - sense * by_index[k.string].offset_px)))
@@ -466,6 +470,7 @@ def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int]:
             hit.add(j)
         else:
             false += 1
+            false_z = max(false_z, abs(k.z))
     seen = 0
     for x in fit.strings:
         j = int(np.argmin(np.abs(pos - sense * x.offset_px)))
@@ -473,18 +478,21 @@ def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int]:
         a = sense * st.kink_at_px / fit.frame.scale_px
         if st.kink_px != 0.0 and x.shots >= 2 and x.span[0] + 0.05 <= a <= x.span[1] - 0.05:
             seen += 1
-    return true, false, seen, len(hit)
+    return true, false, seen, len(hit), false_z
 
 
-def kink_fields(lines: list[list], lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int) -> dict[str, Any]:
-    """Field errors of the separated fit without and with the kinks modelled, and :func:`kink_truth`."""
+def kink_fields(
+    lines: list[list], lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int, z: float
+) -> dict[str, Any]:
+    """Field errors of the separated fit without and with the kinks of significance ``z`` or more modelled, and
+    :func:`kink_truth`."""
     plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
     if not plain:
         return {"failed": plain.reason}
     t0 = time.perf_counter()
     sep = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain)
     t1 = time.perf_counter()
-    kinked = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain, kinks=True)
+    kinked = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain, kinks=True, kink_z=z)
     t2 = time.perf_counter()
     if not sep:
         return {"failed": sep.reason}
@@ -498,13 +506,13 @@ def kink_fields(lines: list[list], lens: DistortionModel, harp: Harp, ses: Sessi
     }
 
 
-def kinks_realistic(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
+def kinks_realistic(args: tuple[int, int, int, Path | None, float]) -> dict[str, object]:
     """``--kinks``: the full realistic render, strings separated, without and with the kinks modelled."""
-    seed, w, h, cache = args
+    seed, w, h, cache, z = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
     lines, _, _ = realistic_measured(seed, w, h, cache)
-    row |= kink_fields(lines, lens, ses.harp, ses, w, h)
+    row |= kink_fields(lines, lens, ses.harp, ses, w, h, z)
     return row
 
 
@@ -519,27 +527,27 @@ KINK_NOISE_PX = 0.003
 measurement's noise, as ``tests/pipeline/harp_points.py``)."""
 
 
-def kinks_exact(args: tuple[int, int, int]) -> dict[str, object]:
+def kinks_exact(args: tuple[int, int, int, Path | None, float]) -> dict[str, object]:
     """``--kinks-exact``: exact points of the strings with their kinks alone (every other shape zero), smoothed
     as measured, fitted without and with the kinks modelled; the same with :data:`KINK_NOISE_PX` of noise."""
-    seed, w, h = args
+    seed, w, h, _, z = args
     lens, ses, row = seed_lens(seed, w, h)
     row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
     harp = reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"})
     lines = smoothed(exact_lines(lens, harp, ses, w, h))
-    row["exact"] = kink_fields(lines, lens, harp, ses, w, h)
+    row["exact"] = kink_fields(lines, lens, harp, ses, w, h, z)
     rng = np.random.default_rng(seed)
     noisy = [[p + rng.normal(0.0, KINK_NOISE_PX, p.shape) for p in shot] for shot in lines]
-    row["noisy"] = kink_fields(noisy, lens, harp, ses, w, h)
+    row["noisy"] = kink_fields(noisy, lens, harp, ses, w, h, z)
     return row
 
 
 def kink_cells(r: dict[str, Any]) -> str:
     """A row's cells: field without / with, kinks modelled true / false, drawn ones seen / found."""
     if "failed" in r:
-        return "failed | | "
-    true, false, seen, hit = r["truth"]
-    return f"{r['without']:.4f} / {r['with']:.4f} | {true} / {false} | {seen} / {hit}"
+        return "failed | | | "
+    true, false, seen, hit, false_z = r["truth"]
+    return f"{r['without']:.4f} / {r['with']:.4f} | {true} / {false} | {false_z:.1f} | {seen} / {hit}"
 
 
 def kink_summary(results: list[dict[str, Any]], name: str) -> None:
@@ -553,17 +561,20 @@ def kink_summary(results: list[dict[str, Any]], name: str) -> None:
         f"{len(a)} ({len(results) - len(ok)} failed); median {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f} "
         f"px; lower by > 5 % for {int(np.sum(ratio < 0.95))}, higher by > 5 % for {int(np.sum(ratio > 1.05))} "
         f"(worst ratio {ratio.max():.3f}, largest rise {np.max(a[:, 1] - a[:, 0]):+.4f} px); kinks modelled "
-        f"{tf[:, 0].sum()} true, {tf[:, 1].sum()} false; drawn kinks seen twice {tf[:, 2].sum()}, found "
-        f"{tf[:, 3].sum()}"
+        f"{tf[:, 0].sum():.0f} true, {tf[:, 1].sum():.0f} false (largest |z| of a false one {tf[:, 4].max():.1f}); "
+        f"drawn kinks seen twice {tf[:, 2].sum():.0f}, found {tf[:, 3].sum():.0f}"
     )
 
 
-KINK_HEAD = "field without / with kinks px | kinks modelled: true / false | drawn kinks seen twice / found"
+KINK_HEAD = (
+    "field without / with kinks px | kinks modelled: true / false | largest z of a false one | "
+    "drawn kinks seen twice / found"
+)
 
 
 def print_kinks(rows: Iterable[dict[str, Any]]) -> None:
     print(f"| seed | lens | strings | kinked strings | {KINK_HEAD} | s without / with |")
-    print("|---:|---|---|---:|---:|---:|---:|---:|")
+    print("|---:|---|---|---:|---:|---:|---:|---:|---:|")
     done = []
     for r in rows:
         done.append(r)
@@ -578,7 +589,7 @@ def print_kinks_exact(rows: Iterable[dict[str, Any]]) -> None:
         f"| seed | lens | strings | kinked strings | exact kinks, smoothed: {KINK_HEAD} | "
         f"+ {KINK_NOISE_PX:g} px noise: {KINK_HEAD} |"
     )
-    print("|---:|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---:|---|---|---:|" + "---:|" * 8)
     done = []
     for r in rows:
         done.append(r)
@@ -662,6 +673,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--kinks", action="store_true", help="print only the kinks-modelled table (realistic shots)")
     ap.add_argument("--kinks-exact", action="store_true", help="print only the kinks-modelled table on exact points")
+    ap.add_argument("--kink-z", type=float, default=KINK_Z, help="--kinks, --kinks-exact: the kinks' threshold")
     ap.add_argument(
         "--cache",
         type=Path,
@@ -679,6 +691,7 @@ def main(argv: list[str] | None = None) -> int:
     pool = ProcessPoolExecutor(max(1, args.workers))
     jobs = [(s, w, h) for s in seeds]
     cached = [(s, w, h, args.cache) for s in seeds]
+    kink_jobs = [(s, w, h, args.cache, args.kink_z) for s in seeds]
     only: tuple[
         tuple[bool, Callable[[Any], dict[str, object]], list[Any], Callable[[Iterable[dict[str, object]]], None]], ...
     ] = (
@@ -687,8 +700,8 @@ def main(argv: list[str] | None = None) -> int:
         (args.point_robust, point_robust, cached, print_point_robust),
         (args.point_robust_exact, point_robust_exact, jobs, print_point_robust_exact),
         (args.exact_only, exact_only, jobs, print_exact),
-        (args.kinks, kinks_realistic, cached, print_kinks),
-        (args.kinks_exact, kinks_exact, jobs, print_kinks_exact),
+        (args.kinks, kinks_realistic, kink_jobs, print_kinks),
+        (args.kinks_exact, kinks_exact, kink_jobs, print_kinks_exact),
     )
     for wanted, job, job_args, printer in only:
         if wanted:
