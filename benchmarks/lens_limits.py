@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2]
         [--exact-only | --kink-trim | --point-robust [--cache DIR] | --point-robust-exact]
     .venv/bin/python benchmarks/lens_limits.py --choice [--seeds ...] [--cache /tmp/lines]
+    .venv/bin/python benchmarks/lens_limits.py --kinks [--kink-z Z] [--cache DIR] | --kinks-exact [--seeds ...]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
 0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
@@ -43,6 +44,15 @@ measured lines and sigmas are kept in ``--cache`` (npz) when given. ``--point-ro
 of the kinks alone (every other string shape zero) fitted as they are and with Tukey's biweight, without and
 with 0.02 px of independent noise per point (enough that a kinked edge no longer stands out as a whole), and
 the straight strings with the same noise (the kink-free reference).
+
+``--kinks`` (issue 19 items 4-5): the full realistic shots fitted with the strings separated as a session
+does, without and with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``,
+``pipeline.harp_kinks``), against the drawn truth: kinks modelled within 24 px of a drawn one on the same string
+("true") or elsewhere ("false", with the largest detection significance of those: ``--kink-z 3`` shows how high
+the scan goes on kink-free strings), and the drawn kinks on strings seen in two shots or more (inside the
+stretch shown) with how many of them were found. ``--kinks-exact``: the same on the exact points of the strings
+with their kinks alone, smoothed along the edge as ``harp measure`` does (``pipeline.resample.smooth_subsample``),
+as they are and with 0.003 px of noise per point.
 
 A fourth table (``--choice``, issue 19 item 2) compares the automatic choice without and with the turntable
 angles (``select_model(..., turntable_deg=...)``: folds fitted with the strings separated, the held-out shot
@@ -449,18 +459,20 @@ def print_point_robust(rows: Iterable[dict[str, object]]) -> None:
         print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {cells} |", flush=True)
 
 
-def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, float]:
+def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, float, list[float]]:
     """How many kinks ``fit`` modelled on a string that has one within 24 px (one smoothing sigma) of its place
     (harp coordinates of the drawing: strings matched by their distance from the axis, the sense of ``a`` and
     ``b`` from the frame's direction), how many elsewhere, how many drawn kinks lie on strings the fit saw in
     two shots or more, inside the stretch they show, how many of those were found, and the largest detection
     significance ``|z|`` of a kink modelled elsewhere (0 when none: with ``--kink-z 3``, how high the scan goes
-    on strings without a kink, what ``pipeline.harp_kinks.KINK_Z`` was set from)."""
+    on strings without a kink, what ``pipeline.harp_kinks.KINK_Z`` was set from), and for each true one its fitted
+    area over the drawn cusp's, :math:`2h\\lambda` (sign included)."""
     sense = 1 if np.dot(fit.frame.direction(0.0), ses.mount.pose(0.0).direction) > 0 else -1
     pos = np.array([st.position_px for st in harp.strings])
     by_index = {x.index: x for x in fit.strings}
     true = false = 0
     false_z = 0.0
+    areas: list[float] = []
     hit: set[int] = set()
     for k in fit.kinks:
         j = int(np.argmin(np.abs(pos - sense * by_index[k.string].offset_px)))
@@ -468,6 +480,7 @@ def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, 
         if st.kink_px != 0.0 and abs(sense * k.at_px - st.kink_at_px) < 24.0:
             true += 1
             hit.add(j)
+            areas.append(sense * k.area_px2 / (2.0 * st.kink_px * st.kink_length_px))
         else:
             false += 1
             false_z = max(false_z, abs(k.z))
@@ -478,7 +491,7 @@ def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, 
         a = sense * st.kink_at_px / fit.frame.scale_px
         if st.kink_px != 0.0 and x.shots >= 2 and x.span[0] + 0.05 <= a <= x.span[1] - 0.05:
             seen += 1
-    return true, false, seen, len(hit), false_z
+    return true, false, seen, len(hit), false_z, areas
 
 
 def kink_fields(
@@ -546,7 +559,7 @@ def kink_cells(r: dict[str, Any]) -> str:
     """A row's cells: field without / with, kinks modelled true / false, drawn ones seen / found."""
     if "failed" in r:
         return "failed | | | "
-    true, false, seen, hit, false_z = r["truth"]
+    true, false, seen, hit, false_z, _ = r["truth"]
     return f"{r['without']:.4f} / {r['with']:.4f} | {true} / {false} | {false_z:.1f} | {seen} / {hit}"
 
 
@@ -555,7 +568,8 @@ def kink_summary(results: list[dict[str, Any]], name: str) -> None:
     ok = [r for r in results if "failed" not in r]
     a = np.array([(r["without"], r["with"]) for r in ok])
     ratio = a[:, 1] / a[:, 0]
-    tf = np.array([r["truth"] for r in ok])
+    tf = np.array([r["truth"][:5] for r in ok])
+    areas = np.array([v for r in ok for v in r["truth"][5]])
     print(
         f"{name}: at or below 0.005 px {int(np.sum(a[:, 0] <= 0.005))} -> {int(np.sum(a[:, 1] <= 0.005))} of "
         f"{len(a)} ({len(results) - len(ok)} failed); median {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f} "
@@ -564,6 +578,12 @@ def kink_summary(results: list[dict[str, Any]], name: str) -> None:
         f"{tf[:, 0].sum():.0f} true, {tf[:, 1].sum():.0f} false (largest |z| of a false one {tf[:, 4].max():.1f}); "
         f"drawn kinks seen twice {tf[:, 2].sum():.0f}, found {tf[:, 3].sum():.0f}"
     )
+    if len(areas):
+        q = np.percentile(areas, [0, 10, 50, 90, 100])
+        print(
+            f"  true kinks' fitted area over the drawn 2 h lambda: median {q[2]:.2f}, 10-90 % {q[1]:.2f}-{q[3]:.2f}, "
+            f"range {q[0]:.2f}-{q[4]:.2f}, within 30 % for {int(np.sum(np.abs(areas - 1) <= 0.3))} of {len(areas)}"
+        )
 
 
 KINK_HEAD = (

@@ -33,8 +33,10 @@ What can and cannot be separated
   at different angles (strings seen in one shot, or over less than :data:`MIN_SPAN`, get no
   deviation terms).
 * Only bends on scales longer than the along-edge smoothing are seen (:math:`\sigma = 0.8\sqrt{t^2-1}`,
-  24 px at t = 30): a kink a few pixels long is smoothed away before any fit, and P2..P4 hold the
-  smooth part of a string's shape over the stretch of it the image shows.
+  24 px at t = 30): a kink a few pixels long is smoothed into a bump of the smoother's own shape before
+  any fit, and P2..P4 hold the smooth part of a string's shape over the stretch of it the image shows.
+  With ``kinks=True`` the bumps that sit at the same harp coordinate in two shots or more are found
+  and modelled as terms of their string's deviation (:mod:`pipeline.harp_kinks`).
 * A rotationally symmetric (radial) lens correction about the turntable axis bends a line at
   distance :math:`q` from the axis the same way whatever its direction: for a harp turning about
   the distortion centre it is *exactly* a set of string deviations :math:`\delta_k` depending on
