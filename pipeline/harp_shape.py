@@ -741,11 +741,14 @@ def try_fit_harp_shape(
     spec: FitSpec,
     plain: FitResult | None = None,
     kinks: bool = False,
+    kink_t: int = DEFAULT_T,
 ) -> HarpShapeFit | FitFailure:
     """:func:`fit_harp_shape` of a fold, whose odd data (too few strings seen twice, a singular system) may
     raise: the error becomes a :class:`~pipeline.edgeset.FitFailure` naming it."""
     try:
-        return fit_harp_shape(lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks)
+        return fit_harp_shape(
+            lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks, kink_t=kink_t
+        )
     except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
 
@@ -758,7 +761,8 @@ def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None
     return (fit.model, None) if fit else (None, fit.reason)
 
 
-def separated_kinks_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None]:
-    """:func:`separated_job` with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``)."""
-    fit = try_fit_harp_shape(*job, kinks=True)
+def separated_kinks_job(job: SeparatedJob, t: int = DEFAULT_T) -> tuple[DistortionModel | None, str | None]:
+    """:func:`separated_job` with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``, the
+    points measured with subsampling factor ``t``; ``functools.partial`` of it is what a process pool runs)."""
+    fit = try_fit_harp_shape(*job, kinks=True, kink_t=t)
     return (fit.model, None) if fit else (None, fit.reason)

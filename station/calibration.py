@@ -24,6 +24,7 @@ per-shot figures); :meth:`Calibration.profile` makes the
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +45,7 @@ from pipeline.harp_shape import (
 )
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
+from pipeline.resample import DEFAULT_T
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
@@ -393,6 +395,7 @@ def separate_strings(
     bootstrap: int = 0,
     seed: int = 0,
     kinks: bool = False,
+    kink_t: int = DEFAULT_T,
 ) -> Calibration:
     """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
     :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
@@ -407,7 +410,8 @@ def separate_strings(
     field uncertainty of the separated lens (every replicate fitted with the strings separated, ``seed``
     as for the lens alone). With ``kinks`` (``joint`` fitted with them) the hold-out's folds find and model
     each string's kinks too (:mod:`pipeline.harp_kinks`; the bootstrap's replicates do not), and
-    ``details["strings"]["kinks"]`` lists those of ``joint``. ``details["strings"]`` records what
+    ``details["strings"]["kinks"]`` lists those of ``joint`` (``kink_t``: the subsampling factor the edges were
+    measured with, which sets the kinks' template). ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens."""
     spec = cal.spec
@@ -439,7 +443,8 @@ def separate_strings(
             )
             for k in range(len(lines))
         ]
-        loo = _orientation_holdout(lines, full.rejected, separated_kinks_job if kinks else separated_job, jobs, map_fn)
+        job_fn = functools.partial(separated_kinks_job, t=kink_t) if kinks else separated_job
+        loo = _orientation_holdout(lines, full.rejected, job_fn, jobs, map_fn)
         if not isinstance(loo, Holdout):
             return kept_plain(f"without orientation {loo[0]} the strings cannot be separated: {loo[1]}")
         hold = loo
@@ -519,8 +524,9 @@ def calibrate_focus(
     joint: HarpShapeFit | FitFailure | None = None
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
-            [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks
-        )
+            [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
+            kink_t=getattr(pipeline, "t", DEFAULT_T),
+        )  # fmt: skip
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
     if not separate:
@@ -531,7 +537,7 @@ def calibrate_focus(
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
     return separate_strings(
         cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
-        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks,
+        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=getattr(pipeline, "t", DEFAULT_T),
     )  # fmt: skip
 
 
