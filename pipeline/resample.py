@@ -83,6 +83,7 @@ __all__ = [
     "TRUNCATE",
     "SmoothingMethod",
     "DEFAULT_T",
+    "equivalent_kernel",
     "noise_gain",
     "point_sigma",
     "resample_polyline",
@@ -362,6 +363,27 @@ def noise_gain(position: float, length: float, t: int = DEFAULT_T) -> float:
     g = np.exp(-0.5 * (k / sig) ** 2)
     var_g = float(np.sum(g**2) / np.sum(g) ** 2)
     return float(np.sqrt(var / var_g))
+
+
+def equivalent_kernel(offset: ArrayLike, t: int = DEFAULT_T) -> NDArray[np.float64]:
+    r"""The local-quadratic smoother's weight :math:`l(s)` per sample at offset ``s`` (samples) from an
+    interior point: :math:`\hat x(s_0) = \sum_i l(s_i - s_0)\,x_i` where the whole window lies on the
+    piece (its equivalent kernel, [2]_ Sect. 3.2.2; about :math:`\phi(u)(3 - u^2)/(2\sigma)`,
+    :math:`u = s/\sigma`, for the untruncated Gaussian). A feature much narrower than
+    :math:`\sigma` of area :math:`A` (px x px) leaves the smoothed edge displaced by
+    :math:`A\,l(s)` at distance ``s`` from it. Linear between the integer offsets, 0 beyond
+    ``TRUNCATE`` sigma; for ``t = 1`` (no smoothing) 1 at offset 0 and 0 elsewhere."""
+    t_int = _check_t(t)
+    s = np.abs(np.asarray(offset, dtype=np.float64))
+    sig = smoothing_sigma(t_int)
+    if sig == 0:
+        out0: NDArray[np.float64] = np.where(s < 0.5, 1.0, 0.0)
+        return out0
+    half = int(np.ceil(TRUNCATE * sig))
+    idx, w = _hat_rows(2 * half + 1, np.array([float(half)]), sig)
+    k = idx[0] - half
+    out: NDArray[np.float64] = np.interp(s, k[k >= 0].astype(np.float64), w[0][k >= 0], right=0.0)
+    return out
 
 
 def sample_noise(
