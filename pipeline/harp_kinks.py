@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.resample import DEFAULT_T, TRUNCATE, equivalent_kernel, noise_gain, smoothing_sigma
+from pipeline.resample import DEFAULT_T, TRUNCATE, equivalent_kernel, noise_gains, smoothing_sigma
 from pipeline.robust_points import MAD_TO_SIGMA, SCALE_FLOOR_PX
 
 Floats = NDArray[np.float64]
@@ -164,9 +164,9 @@ def end_weights(xy: Floats, starts: NDArray[np.intp], counts: NDArray[np.intp], 
         length = float(s[-1])
         if length <= 0:
             continue
-        mid = noise_gain(0.5 * length, length, t)
-        for i in np.flatnonzero((s < reach) | (s > length - reach)):
-            out[s0 + i] = (mid / noise_gain(float(s[i]), length, t)) ** 2
+        ends = np.flatnonzero((s < reach) | (s > length - reach))
+        gains = noise_gains(np.concatenate([[0.5 * length], s[ends]]), length, t)
+        out[s0 + ends] = (gains[0] / gains[1:]) ** 2
     return out
 
 
@@ -185,17 +185,21 @@ def stretches(xy: Floats, ideal: Floats, starts: NDArray[np.intp], counts: NDArr
 
 def _without_lines(g: Floats, a: Floats, w: Floats, edge: NDArray[np.intp]) -> Floats:
     """``g`` (P, C) less, per edge, its ``w``-weighted least-squares line in ``a`` (rows of edges with fewer
-    than three points set to 0: such an edge cannot tell a bump from its line)."""
-    out = g.copy()
-    for e in np.unique(edge):
-        idx = np.flatnonzero(edge == e)
-        if len(idx) < 3:
-            out[idx] = 0.0
-            continue
-        x = np.column_stack([np.ones(len(idx)), a[idx] - a[idx].mean()])
-        sw = np.sqrt(w[idx])[:, None]
-        coef, *_ = np.linalg.lstsq(x * sw, g[idx] * sw, rcond=None)
-        out[idx] = g[idx] - x @ coef
+    than three points set to 0: such an edge cannot tell a bump from its line). All edges at once, from the
+    weighted sums of the 2 x 2 normal equations :math:`[W, S_a; S_a, S_{aa}]`."""
+    _, e, n = np.unique(edge, return_inverse=True, return_counts=True)
+    ne = len(n)
+    sw = np.bincount(e, w, ne)
+    x = a - (np.bincount(e, w * a, ne) / np.where(sw > 0, sw, 1.0))[e]  # centred per edge: S_a = 0
+    sxx = np.bincount(e, w * x * x, ne)
+    member = (e[None, :] == np.arange(ne)[:, None]).astype(np.float64)  # (edges, P)
+    wg = w[:, None] * g
+    sg = member @ wg
+    sxg = member @ (x[:, None] * wg)
+    c0 = sg / np.where(sw > 0, sw, 1.0)[:, None]
+    c1 = sxg / np.where(sxx > 0, sxx, 1.0)[:, None]
+    out: Floats = g - c0[e] - x[:, None] * c1[e]
+    out[(n < 3)[e]] = 0.0
     return out
 
 
