@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2]
         [--exact-only | --kink-trim | --point-robust [--cache DIR] | --point-robust-exact]
     .venv/bin/python benchmarks/lens_limits.py --choice [--seeds ...] [--cache /tmp/lines]
+    .venv/bin/python benchmarks/lens_limits.py --kinks [--kink-z Z] [--cache DIR] | --kinks-exact [--seeds ...]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
 0..150 degrees, ``radial4+tangential+prism`` fitted with every string's own bend separated,
@@ -44,6 +45,15 @@ of the kinks alone (every other string shape zero) fitted as they are and with T
 with 0.02 px of independent noise per point (enough that a kinked edge no longer stands out as a whole), and
 the straight strings with the same noise (the kink-free reference).
 
+``--kinks`` (issue 19 items 4-5): the full realistic shots fitted with the strings separated as a session
+does, without and with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``,
+``pipeline.harp_kinks``), against the drawn truth: kinks modelled within 24 px of a drawn one on the same string
+("true") or elsewhere ("false", with the largest detection significance of those: ``--kink-z 3`` shows how high
+the scan goes on kink-free strings), and the drawn kinks on strings seen in two shots or more (inside the
+stretch shown) with how many of them were found. ``--kinks-exact``: the same on the exact points of the strings
+with their kinks alone, smoothed along the edge as ``harp measure`` does (``pipeline.resample.smooth_subsample``),
+as they are and with 0.003 px of noise per point.
+
 A fourth table (``--choice``, issue 19 item 2) compares the automatic choice without and with the turntable
 angles (``select_model(..., turntable_deg=...)``: folds fitted with the strings separated, the held-out shot
 judged with its strings' fitted bends removed, :mod:`pipeline.separated_cv`) on the full realistic render of
@@ -81,6 +91,7 @@ from pipeline.compare import compare_models
 from pipeline.edgeset import FitFailure, FitResult
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_kinks import KINK_Z
 from pipeline.harp_scene import Harp
 from pipeline.harp_shape import fit_harp_shape
 from pipeline.lens_population import lens_population
@@ -89,6 +100,7 @@ from pipeline.models.base import DistortionModel
 from pipeline.optics import FieldBlur
 from pipeline.realism import Effects, Session, realistic_session, render_shots, shot_edges
 from pipeline.render import visible_edges
+from pipeline.resample import DEFAULT_T, smooth_subsample
 from pipeline.select import select_model
 from pipeline.separated_cv import held_out_without_strings
 
@@ -447,6 +459,170 @@ def print_point_robust(rows: Iterable[dict[str, object]]) -> None:
         print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {cells} |", flush=True)
 
 
+def kink_truth(fit: Any, harp: Harp, ses: Session) -> tuple[int, int, int, int, float, list[float]]:
+    """How many kinks ``fit`` modelled on a string that has one within 24 px (one smoothing sigma) of its place
+    (harp coordinates of the drawing: strings matched by their distance from the axis, the sense of ``a`` and
+    ``b`` from the frame's direction), how many elsewhere, how many drawn kinks lie on strings the fit saw in
+    two shots or more, inside the stretch they show, how many of those were found, and the largest detection
+    significance ``|z|`` of a kink modelled elsewhere (0 when none: with ``--kink-z 3``, how high the scan goes
+    on strings without a kink, what ``pipeline.harp_kinks.KINK_Z`` was set from), and for each true one its fitted
+    area over the drawn cusp's, :math:`2h\\lambda` (sign included)."""
+    sense = 1 if np.dot(fit.frame.direction(0.0), ses.mount.pose(0.0).direction) > 0 else -1
+    pos = np.array([st.position_px for st in harp.strings])
+    by_index = {x.index: x for x in fit.strings}
+    true = false = 0
+    false_z = 0.0
+    areas: list[float] = []
+    hit: set[int] = set()
+    for k in fit.kinks:
+        j = int(np.argmin(np.abs(pos - sense * by_index[k.string].offset_px)))
+        st = harp.strings[j]
+        if st.kink_px != 0.0 and abs(sense * k.at_px - st.kink_at_px) < 24.0:
+            true += 1
+            hit.add(j)
+            areas.append(sense * k.area_px2 / (2.0 * st.kink_px * st.kink_length_px))
+        else:
+            false += 1
+            false_z = max(false_z, abs(k.z))
+    seen = 0
+    for x in fit.strings:
+        j = int(np.argmin(np.abs(pos - sense * x.offset_px)))
+        st = harp.strings[j]
+        a = sense * st.kink_at_px / fit.frame.scale_px
+        if st.kink_px != 0.0 and x.shots >= 2 and x.span[0] + 0.05 <= a <= x.span[1] - 0.05:
+            seen += 1
+    return true, false, seen, len(hit), false_z, areas
+
+
+def kink_fields(
+    lines: list[list], lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int, z: float
+) -> dict[str, Any]:
+    """Field errors of the separated fit without and with the kinks of significance ``z`` or more modelled, and
+    :func:`kink_truth`."""
+    plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
+    if not plain:
+        return {"failed": plain.reason}
+    t0 = time.perf_counter()
+    sep = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain)
+    t1 = time.perf_counter()
+    kinked = fit_harp_shape(lines, FITTED, w, h, SPEC, plain=plain, kinks=True, kink_z=z)
+    t2 = time.perf_counter()
+    if not sep:
+        return {"failed": sep.reason}
+    if not kinked:
+        return {"failed": kinked.reason}
+    return {
+        "without": float(compare_models(sep.model, lens, w, h, step=20).rms),
+        "with": float(compare_models(kinked.model, lens, w, h, step=20).rms),
+        "truth": kink_truth(kinked, harp, ses),
+        "t": (t1 - t0, t2 - t1),
+    }
+
+
+def kinks_realistic(args: tuple[int, int, int, Path | None, float]) -> dict[str, object]:
+    """``--kinks``: the full realistic render, strings separated, without and with the kinks modelled."""
+    seed, w, h, cache, z = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    lines, _, _ = realistic_measured(seed, w, h, cache)
+    row |= kink_fields(lines, lens, ses.harp, ses, w, h, z)
+    return row
+
+
+def smoothed(lines: list[list]) -> list[list]:
+    """Exact edges smoothed along themselves as ``harp measure`` does (``pipeline.resample.smooth_subsample``,
+    t = 30, 1 px samples): what a noise-free measurement gives."""
+    return [[smooth_subsample(p, t=DEFAULT_T) for p in shot] for shot in lines]
+
+
+KINK_NOISE_PX = 0.003
+"""Noise per point added to the smoothed exact points in ``--kinks-exact`` (what the smoothing leaves of a
+measurement's noise, as ``tests/pipeline/harp_points.py``)."""
+
+
+def kinks_exact(args: tuple[int, int, int, Path | None, float]) -> dict[str, object]:
+    """``--kinks-exact``: exact points of the strings with their kinks alone (every other shape zero), smoothed
+    as measured, fitted without and with the kinks modelled; the same with :data:`KINK_NOISE_PX` of noise."""
+    seed, w, h, _, z = args
+    lens, ses, row = seed_lens(seed, w, h)
+    row["kinks"] = sum(1 for s in ses.harp.strings if s.kink_px != 0.0)
+    harp = reshaped(ses.harp, {k: v for k, v in STRAIGHT.items() if k != "kink_px"})
+    lines = smoothed(exact_lines(lens, harp, ses, w, h))
+    row["exact"] = kink_fields(lines, lens, harp, ses, w, h, z)
+    rng = np.random.default_rng(seed)
+    noisy = [[p + rng.normal(0.0, KINK_NOISE_PX, p.shape) for p in shot] for shot in lines]
+    row["noisy"] = kink_fields(noisy, lens, harp, ses, w, h, z)
+    return row
+
+
+def kink_cells(r: dict[str, Any]) -> str:
+    """A row's cells: field without / with, kinks modelled true / false, drawn ones seen / found."""
+    if "failed" in r:
+        return "failed | | | "
+    true, false, seen, hit, false_z, _ = r["truth"]
+    return f"{r['without']:.4f} / {r['with']:.4f} | {true} / {false} | {false_z:.1f} | {seen} / {hit}"
+
+
+def kink_summary(results: list[dict[str, Any]], name: str) -> None:
+    """Counts at or below 0.005 px, better / worse by more than 5 %, worst ratio, kinks true / false."""
+    ok = [r for r in results if "failed" not in r]
+    a = np.array([(r["without"], r["with"]) for r in ok])
+    ratio = a[:, 1] / a[:, 0]
+    tf = np.array([r["truth"][:5] for r in ok])
+    areas = np.array([v for r in ok for v in r["truth"][5]])
+    print(
+        f"{name}: at or below 0.005 px {int(np.sum(a[:, 0] <= 0.005))} -> {int(np.sum(a[:, 1] <= 0.005))} of "
+        f"{len(a)} ({len(results) - len(ok)} failed); median {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f} "
+        f"px; lower by > 5 % for {int(np.sum(ratio < 0.95))}, higher by > 5 % for {int(np.sum(ratio > 1.05))} "
+        f"(worst ratio {ratio.max():.3f}, largest rise {np.max(a[:, 1] - a[:, 0]):+.4f} px); kinks modelled "
+        f"{tf[:, 0].sum():.0f} true, {tf[:, 1].sum():.0f} false (largest |z| of a false one {tf[:, 4].max():.1f}); "
+        f"drawn kinks seen twice {tf[:, 2].sum():.0f}, found {tf[:, 3].sum():.0f}"
+    )
+    if len(areas):
+        q = np.percentile(areas, [0, 10, 50, 90, 100])
+        print(
+            f"  true kinks' fitted area over the drawn 2 h lambda: median {q[2]:.2f}, 10-90 % {q[1]:.2f}-{q[3]:.2f}, "
+            f"range {q[0]:.2f}-{q[4]:.2f}, within 30 % for {int(np.sum(np.abs(areas - 1) <= 0.3))} of {len(areas)}"
+        )
+
+
+KINK_HEAD = (
+    "field without / with kinks px | kinks modelled: true / false | largest z of a false one | "
+    "drawn kinks seen twice / found"
+)
+
+
+def print_kinks(rows: Iterable[dict[str, Any]]) -> None:
+    print(f"| seed | lens | strings | kinked strings | {KINK_HEAD} | s without / with |")
+    print("|---:|---|---|---:|---:|---:|---:|---:|---:|")
+    done = []
+    for r in rows:
+        done.append(r)
+        t = "{:.1f} / {:.1f}".format(*r["t"]) if "t" in r else ""
+        print(f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {kink_cells(r)} | {t} |", flush=True)
+    print()
+    kink_summary(done, "strings separated, kinks modelled")
+
+
+def print_kinks_exact(rows: Iterable[dict[str, Any]]) -> None:
+    print(
+        f"| seed | lens | strings | kinked strings | exact kinks, smoothed: {KINK_HEAD} | "
+        f"+ {KINK_NOISE_PX:g} px noise: {KINK_HEAD} |"
+    )
+    print("|---:|---|---|---:|" + "---:|" * 8)
+    done = []
+    for r in rows:
+        done.append(r)
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['kinks']} | {kink_cells(r['exact'])} | "
+            f"{kink_cells(r['noisy'])} |",
+            flush=True,
+        )
+    print()
+    for key in ("exact", "noisy"):
+        kink_summary([r[key] for r in done], key)
+
+
 EXACT_NOISE_PX = 0.02
 """Noise added to the exact points in ``--point-robust-exact`` (px, per point, independent): enough to lift
 the median edge RMS as a real measurement's noise and bows do, so that whole kinked edges no longer stand out."""
@@ -515,8 +691,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--point-robust-exact", action="store_true", help="print only the per-point robust fit on exact kinked points"
     )
+    ap.add_argument("--kinks", action="store_true", help="print only the kinks-modelled table (realistic shots)")
+    ap.add_argument("--kinks-exact", action="store_true", help="print only the kinks-modelled table on exact points")
+    ap.add_argument("--kink-z", type=float, default=KINK_Z, help="--kinks, --kinks-exact: the kinks' threshold")
     ap.add_argument(
-        "--cache", type=Path, default=None, help="--choice, --point-robust: directory keeping the measured edges (npz)"
+        "--cache",
+        type=Path,
+        default=None,
+        help="--choice, --point-robust, --kinks: directory keeping the measured edges (npz)",
     )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
@@ -529,6 +711,7 @@ def main(argv: list[str] | None = None) -> int:
     pool = ProcessPoolExecutor(max(1, args.workers))
     jobs = [(s, w, h) for s in seeds]
     cached = [(s, w, h, args.cache) for s in seeds]
+    kink_jobs = [(s, w, h, args.cache, args.kink_z) for s in seeds]
     only: tuple[
         tuple[bool, Callable[[Any], dict[str, object]], list[Any], Callable[[Iterable[dict[str, object]]], None]], ...
     ] = (
@@ -537,6 +720,8 @@ def main(argv: list[str] | None = None) -> int:
         (args.point_robust, point_robust, cached, print_point_robust),
         (args.point_robust_exact, point_robust_exact, jobs, print_point_robust_exact),
         (args.exact_only, exact_only, jobs, print_exact),
+        (args.kinks, kinks_realistic, kink_jobs, print_kinks),
+        (args.kinks_exact, kinks_exact, kink_jobs, print_kinks_exact),
     )
     for wanted, job, job_args, printer in only:
         if wanted:

@@ -33,8 +33,10 @@ What can and cannot be separated
   at different angles (strings seen in one shot, or over less than :data:`MIN_SPAN`, get no
   deviation terms).
 * Only bends on scales longer than the along-edge smoothing are seen (:math:`\sigma = 0.8\sqrt{t^2-1}`,
-  24 px at t = 30): a kink a few pixels long is smoothed away before any fit, and P2..P4 hold the
-  smooth part of a string's shape over the stretch of it the image shows.
+  24 px at t = 30): a kink a few pixels long is smoothed into a bump of the smoother's own shape before
+  any fit, and P2..P4 hold the smooth part of a string's shape over the stretch of it the image shows.
+  With ``kinks=True`` the bumps that sit at the same harp coordinate in two shots or more are found
+  and modelled as terms of their string's deviation (:mod:`pipeline.harp_kinks`).
 * A rotationally symmetric (radial) lens correction about the turntable axis bends a line at
   distance :math:`q` from the axis the same way whatever its direction: for a harp turning about
   the distortion centre it is *exactly* a set of string deviations :math:`\delta_k` depending on
@@ -90,8 +92,10 @@ from pipeline.fit import fit_distortion, fold_problem
 from pipeline.fit_problem import make_parametrisation, normal_equations
 from pipeline.fit_solver import solve
 from pipeline.fitspec import FitSpec
+from pipeline.harp_kinks import KINK_Z, Candidate, Kink, end_weights, peak_per_area, scan_string, stretches, template
 from pipeline.models.base import DistortionModel
 from pipeline.plain import finite_or_none
+from pipeline.resample import DEFAULT_T
 
 Floats = NDArray[np.float64]
 
@@ -235,6 +239,7 @@ class HarpShapeFit:
     d_lens_only: float
     n_params: int
     axis_groups: tuple[tuple[Hashable, HarpFrame], ...] = ()
+    kinks: tuple[Kink, ...] = ()
 
     @property
     def worst(self) -> StringShape | None:
@@ -282,6 +287,7 @@ class HarpShapeFit:
             "d_after": self.d_after,
             "d_lens_only": self.d_lens_only,
             "n_params": self.n_params,
+            "kinks": [k.to_dict() for k in self.kinks],
             "model": self.model.to_dict(),
         } | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
 
@@ -503,6 +509,7 @@ class _WithStrings:
         n_strings: int,
         ridge: float,
         gauge: Floats | None = None,
+        kinks: Floats | None = None,
     ) -> None:
         self.lens = lens
         self.string_of = string_of  # per point: index among the strings with terms, or -1
@@ -510,14 +517,15 @@ class _WithStrings:
         self.normal = normal  # (N, 2) harp normal per point
         self.m = basis.shape[0]
         self.k = n_strings
-        self.n = int(lens.n) + self.k * self.m
+        self.kinks = np.zeros((0, len(string_of))) if kinks is None else kinks  # (kinks, N) templates g
+        self.n = int(lens.n) + self.k * self.m + len(self.kinks)
         self.ridge = ridge
         self.gauge = np.zeros((0, self.k * self.m)) if gauge is None else gauge  # rows: directions held at 0
         has = string_of >= 0
         self._cols = [(np.flatnonzero(has & (string_of == s))) for s in range(n_strings)]
 
     def theta0(self, init: DistortionModel | None) -> Floats:
-        out: Floats = np.concatenate([self.lens.theta0(init), np.zeros(self.k * self.m)])
+        out: Floats = np.concatenate([self.lens.theta0(init), np.zeros(self.k * self.m + len(self.kinks))])
         return out
 
     def model(self, th: Floats) -> DistortionModel:
@@ -525,11 +533,14 @@ class _WithStrings:
         return m
 
     def deviation(self, th: Floats) -> Floats:
-        """``delta_k(u)`` per point (0 for points of strings without terms)."""
-        a = th[self.lens.n :].reshape(self.k, self.m)
+        """``delta_k(u)`` per point (0 for points of strings without terms), kinks included."""
+        ks = self.k * self.m
+        a = th[self.lens.n : self.lens.n + ks].reshape(self.k, self.m)
         out = np.zeros(len(self.string_of))
         for s, idx in enumerate(self._cols):
             out[idx] = a[s] @ self.basis[:, idx]
+        if len(self.kinks):
+            out += th[self.lens.n + ks :] @ self.kinks
         return out
 
     def evaluate(self, xy: Floats, th: Floats, jac: bool = True) -> tuple[Floats, Any]:
@@ -540,14 +551,14 @@ class _WithStrings:
         g, jg = self.lens.regularisation(th[: self.lens.n], n_points)
         w = np.sqrt(max(n_points, 1)) * self.ridge
         ks = self.k * self.m
-        jr = np.zeros((ks, self.n))
-        jr[:, self.lens.n :] = w * np.eye(ks)
+        jr = np.zeros((ks, self.n))  # the kinks' peaks: no ridge
+        jr[:, self.lens.n : self.lens.n + ks] = w * np.eye(ks)
         wg = np.sqrt(max(n_points, 1)) * GAUGE_WEIGHT
         jq = np.zeros((len(self.gauge), self.n))
-        jq[:, self.lens.n :] = wg * self.gauge
+        jq[:, self.lens.n : self.lens.n + ks] = wg * self.gauge
         jl = np.zeros((len(g), self.n))
         jl[:, : self.lens.n] = jg
-        a = th[self.lens.n :]
+        a = th[self.lens.n : self.lens.n + ks]
         rows: Floats = np.concatenate([g, w * a, wg * (self.gauge @ a)])
         return rows, np.vstack([jl, jr, jq])
 
@@ -562,6 +573,9 @@ class _WithStrings:
             r0 = self.lens.n + s * self.m
             p_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dn[idx]
             t_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dt[idx]
+        r0 = self.lens.n + self.k * self.m
+        p_mat[r0:] = self.kinks * dn
+        t_mat[r0:] = self.kinks * dt
         return p_mat, t_mat
 
 
@@ -615,6 +629,9 @@ def fit_harp_shape(
     max_nfev: int = 200,
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
+    kinks: bool = False,
+    kink_t: int = DEFAULT_T,
+    kink_z: float = KINK_Z,
 ) -> HarpShapeFit | FitFailure:
     """Fit the lens ``spec`` and every string's deviation together (module docstring).
 
@@ -634,6 +651,11 @@ def fit_harp_shape(
         None (the default): one axis for all shots, searched near the image centre.
     axis_shifts : with ``axis_groups``, each group's rough image shift of the axis, px (:func:`group_frames`);
         None: each group's axis searched on its own shots.
+    kinks : after the fit, find each string's kinks in its residuals pooled over the shots and fit again
+        with a term for each (:mod:`pipeline.harp_kinks`; off by default).
+    kink_t : the along-edge subsampling factor the points were measured with (sets the kinks' template:
+        the points must have been smoothed as ``harp measure`` does).
+    kink_z : least significance of a kink that is modelled (:data:`pipeline.harp_kinks.KINK_Z`).
 
     Returns
     -------
@@ -725,6 +747,23 @@ def fit_harp_shape(
     th = sol.x
     if not np.all(np.isfinite(th)):
         return FitFailure("the joint fit of lens and strings diverged (non-finite parameters)")
+    placed: list[tuple[int, Candidate]] = []  # (string, detection) of each kink modelled
+    if kinks:
+        ideal_xy = model0.undistort_points(edges.xy)
+        columns, placed, peaks = _kink_columns(
+            param, edges, th, u * frame.scale_px, normals[point_shot], edge_string[point_edge], point_edge,
+            point_shot, stretches(edges.xy, ideal_xy, edges.starts, edges.counts), kink_t, kink_z,
+        )  # fmt: skip
+        if placed:
+            param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)
+            with np.errstate(all="ignore"):
+                try:
+                    sol = solve(param, edges, np.concatenate([th, peaks]), max_nfev=max_nfev)
+                except (ValueError, np.linalg.LinAlgError) as exc:
+                    return FitFailure(f"the joint fit of lens, strings and kinks failed: {exc}")
+            th = sol.x
+            if not np.all(np.isfinite(th)):
+                return FitFailure("the joint fit of lens, strings and kinks diverged (non-finite parameters)")
     joint = param.model(th)
     corrected, _ = param.evaluate(edges.xy, th, jac=False)
     r_joint = tls(corrected, edges.starts, edges.counts)[0]
@@ -734,7 +773,18 @@ def fit_harp_shape(
     _, jg = param.regularisation(th, len(edges.xy))
     dof = max(len(edges.xy) - param.n, 1)
     cov = np.linalg.pinv(ata[0] + jg.T @ jg) * float(ss[0]) / dof
-    coefs = th[lens.n :].reshape(len(with_terms), len(degrees))
+    n_dev = len(with_terms) * len(degrees)
+    coefs = th[lens.n : lens.n + n_dev].reshape(len(with_terms), len(degrees))
+    found = []
+    for j, (k, cand) in enumerate(placed):
+        c = lens.n + n_dev + j
+        peak, peak_se = float(th[c]), float(np.sqrt(max(cov[c, c], 0.0)))
+        area = peak / peak_per_area(kink_t, cand.length_px)
+        found.append(
+            Kink(
+                int(k), cand.at_px / frame.scale_px, cand.at_px, peak, peak_se, area, cand.z, cand.shots, cand.length_px
+            )
+        )
     strings = []
     for k in sorted(shots_of):
         sel = np.flatnonzero(edge_string == k)
@@ -771,7 +821,44 @@ def fit_harp_shape(
         d_lens_only=float(np.sqrt(np.mean(r_lens**2))),
         n_params=param.n,
         axis_groups=tuple(groups.items()),
+        kinks=tuple(found),
     )
+
+
+def _kink_columns(
+    param: _WithStrings,
+    edges: Any,
+    th: Floats,
+    a_px: Floats,
+    normal: Floats,
+    point_string: NDArray[np.intp],
+    point_edge: NDArray[np.intp],
+    point_shot: NDArray[np.intp],
+    stretch: Floats,
+    t: int,
+    z_min: float,
+) -> tuple[Floats, list[tuple[int, Candidate]], Floats]:
+    """The kinks of every string in the residuals of the fit ``th`` (:func:`pipeline.harp_kinks.scan_string`):
+    their templates over all points ``(kinks, N)``, ``(string, detection)`` of each and their matched-filter
+    peaks (the refit's start)."""
+    corrected, _ = param.evaluate(edges.xy, th, jac=False)
+    r, _, nrm, _, _ = tls(corrected, edges.starts, edges.counts, edges.weights)
+    r_harp = r * np.einsum("ij,ij->i", nrm, normal)  # along the harp normal (+q)
+    w = end_weights(edges.xy, edges.starts, edges.counts, t)
+    if edges.weights is not None:
+        w = w * edges.weights
+    columns, placed, peaks = [], [], []
+    for k in np.unique(point_string):
+        idx = np.flatnonzero(point_string == k)
+        for c in scan_string(
+            a_px[idx], r_harp[idx], w[idx], point_edge[idx], point_shot[idx], stretch[idx], t=t, z_min=z_min
+        ):
+            g = np.zeros(len(edges.xy))
+            g[idx] = template(a_px[idx] - c.at_px, stretch[idx], t, c.length_px)
+            columns.append(g)
+            placed.append((int(k), c))
+            peaks.append(c.peak_px)
+    return np.array(columns).reshape(len(columns), len(edges.xy)), placed, np.array(peaks)
 
 
 def lens_result(
@@ -811,11 +898,15 @@ def try_fit_harp_shape(
     height: int,
     spec: FitSpec,
     plain: FitResult | None = None,
+    kinks: bool = False,
+    kink_t: int = DEFAULT_T,
 ) -> HarpShapeFit | FitFailure:
     """:func:`fit_harp_shape` of a fold, whose odd data (too few strings seen twice, a singular system) may
     raise: the error becomes a :class:`~pipeline.edgeset.FitFailure` naming it."""
     try:
-        return fit_harp_shape(lines_per_image, list(turntable_deg), width, height, spec, plain=plain)
+        return fit_harp_shape(
+            lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks, kink_t=kink_t
+        )
     except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
 
@@ -825,4 +916,11 @@ def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
     fit = try_fit_harp_shape(*job)
+    return (fit.model, None) if fit else (None, fit.reason)
+
+
+def separated_kinks_job(job: SeparatedJob, t: int = DEFAULT_T) -> tuple[DistortionModel | None, str | None]:
+    """:func:`separated_job` with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``, the
+    points measured with subsampling factor ``t``; ``functools.partial`` of it is what a process pool runs)."""
+    fit = try_fit_harp_shape(*job, kinks=True, kink_t=t)
     return (fit.model, None) if fit else (None, fit.reason)

@@ -83,7 +83,9 @@ __all__ = [
     "TRUNCATE",
     "SmoothingMethod",
     "DEFAULT_T",
+    "equivalent_kernel",
     "noise_gain",
+    "noise_gains",
     "point_sigma",
     "resample_polyline",
     "sample_noise",
@@ -348,20 +350,48 @@ def noise_gain(position: float, length: float, t: int = DEFAULT_T) -> float:
     on a piece ``length`` samples long, relative to the plain Gaussian in the middle
     of a long edge (module docstring, "Noise at the ends"; independent sample noise).
     """
+    return float(noise_gains(np.array([float(position)]), length, t)[0])
+
+
+def noise_gains(positions: ArrayLike, length: float, t: int = DEFAULT_T) -> NDArray[np.float64]:
+    r""":func:`noise_gain` at each of ``positions`` (samples) on one piece ``length`` samples long, at once:
+    :math:`\sqrt{(A^{-1} B A^{-1})_{00} / \sum g^2 (\sum g)^{-2}}` with :math:`A = X^\top W X`,
+    :math:`B = X^\top W^2 X` of each point's window."""
     t_int = _check_t(t)
+    s0 = np.asarray(positions, dtype=np.float64).reshape(-1)
     sig = smoothing_sigma(t_int)
     if sig == 0:
-        return 1.0
+        return np.ones(len(s0))
     n = int(np.floor(length + 1e-9)) + 1
-    s0 = np.array([float(position)])
     _, u, w = _window(n, s0, sig)
-    x = np.stack([np.ones_like(u[0]), u[0], u[0] ** 2], axis=1)
-    ai = np.linalg.inv(x.T @ (w[0][:, None] * x))
-    var = (ai @ (x.T @ ((w[0] ** 2)[:, None] * x)) @ ai)[0, 0]
+    ai = np.linalg.inv(_normal_matrices(u, w)[2])
+    var = np.einsum("pi,pij,pj->p", ai[:, 0, :], _normal_matrices(u, w**2)[2], ai[:, 0, :])
     k = np.arange(-int(np.ceil(TRUNCATE * sig)), int(np.ceil(TRUNCATE * sig)) + 1)
     g = np.exp(-0.5 * (k / sig) ** 2)
     var_g = float(np.sum(g**2) / np.sum(g) ** 2)
-    return float(np.sqrt(var / var_g))
+    out: NDArray[np.float64] = np.sqrt(var / var_g)
+    return out
+
+
+def equivalent_kernel(offset: ArrayLike, t: int = DEFAULT_T) -> NDArray[np.float64]:
+    r"""The local-quadratic smoother's weight :math:`l(s)` per sample at offset ``s`` (samples) from an
+    interior point: :math:`\hat x(s_0) = \sum_i l(s_i - s_0)\,x_i` where the whole window lies on the
+    piece (its equivalent kernel, [2]_ Sect. 3.2.2; about :math:`\phi(u)(3 - u^2)/(2\sigma)`,
+    :math:`u = s/\sigma`, for the untruncated Gaussian). A feature much narrower than
+    :math:`\sigma` of area :math:`A` (px x px) leaves the smoothed edge displaced by
+    :math:`A\,l(s)` at distance ``s`` from it. Linear between the integer offsets, 0 beyond
+    ``TRUNCATE`` sigma; for ``t = 1`` (no smoothing) 1 at offset 0 and 0 elsewhere."""
+    t_int = _check_t(t)
+    s = np.abs(np.asarray(offset, dtype=np.float64))
+    sig = smoothing_sigma(t_int)
+    if sig == 0:
+        out0: NDArray[np.float64] = np.where(s < 0.5, 1.0, 0.0)
+        return out0
+    half = int(np.ceil(TRUNCATE * sig))
+    idx, w = _hat_rows(2 * half + 1, np.array([float(half)]), sig)
+    k = idx[0] - half
+    out: NDArray[np.float64] = np.interp(s, k[k >= 0].astype(np.float64), w[0][k >= 0], right=0.0)
+    return out
 
 
 def sample_noise(

@@ -165,7 +165,7 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     full = plain if plain else None
     if not plain or not joint:
         return CVRow(cand, size, float("nan"), (), (), f"its fit on all shots: {plain.reason if not plain else joint.reason}", full_fit=full)  # fmt: skip
-    held_total = float(sum(sum(len(p) for p in shot if len(p) >= 3) for shot in lines))
+    held_total = float(sum(len(p) for shot in lines for p in held_out_edges(shot)))
     factor = float("inf") if stop_factor is None else float(stop_factor)
     stopping = np.isfinite(factor) and np.isfinite(ref_mse)
     if stopping and joint.d_after**2 > factor * ref_mse:

@@ -24,6 +24,7 @@ per-shot figures); :meth:`Calibration.profile` makes the
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,10 +34,18 @@ import numpy as np
 from pipeline.cross_validation import DEFAULT_CANDIDATES
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
-from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_SEPARATE, FitSpec
-from pipeline.harp_shape import BEND_LIMIT_PX, HarpShapeFit, fit_harp_shape, lens_result, separated_job
+from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_KINKS, STRINGS_SEPARATE, FitSpec
+from pipeline.harp_shape import (
+    BEND_LIMIT_PX,
+    HarpShapeFit,
+    fit_harp_shape,
+    lens_result,
+    separated_job,
+    separated_kinks_job,
+)
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
+from pipeline.resample import DEFAULT_T
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
@@ -385,6 +394,8 @@ def separate_strings(
     map_fn: MapFn = map,
     bootstrap: int = 0,
     seed: int = 0,
+    kinks: bool = False,
+    kink_t: int = DEFAULT_T,
 ) -> Calibration:
     """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
     :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
@@ -397,7 +408,10 @@ def separate_strings(
     leave-one-orientation-out hold-out, each fold fitted with the strings separated on the other
     orientations (:func:`pipeline.harp_shape.separated_job`), and with ``bootstrap >= 2`` replicates the
     field uncertainty of the separated lens (every replicate fitted with the strings separated, ``seed``
-    as for the lens alone). ``details["strings"]`` records what
+    as for the lens alone). With ``kinks`` (``joint`` fitted with them) the hold-out's folds find and model
+    each string's kinks too (:mod:`pipeline.harp_kinks`; the bootstrap's replicates do not), and
+    ``details["strings"]["kinks"]`` lists those of ``joint`` (``kink_t``: the subsampling factor the edges were
+    measured with, which sets the kinks' template). ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens."""
     spec = cal.spec
@@ -429,7 +443,8 @@ def separate_strings(
             )
             for k in range(len(lines))
         ]
-        loo = _orientation_holdout(lines, full.rejected, separated_job, jobs, map_fn)
+        job_fn = functools.partial(separated_kinks_job, t=kink_t) if kinks else separated_job
+        loo = _orientation_holdout(lines, full.rejected, job_fn, jobs, map_fn)
         if not isinstance(loo, Holdout):
             return kept_plain(f"without orientation {loo[0]} the strings cannot be separated: {loo[1]}")
         hold = loo
@@ -438,6 +453,8 @@ def separate_strings(
         "d_with_strings_px": finite_or_none(joint.d_after),
         **plain_record,
     }
+    if kinks:
+        record["kinks"] = [k.to_dict() for k in joint.kinks]
     details: dict[str, Any] = {**cal.details, "n_params": res.n_params}
     unc, unc_summary = cal.uncertainty, cal.merit.field_uncertainty
     if bootstrap >= 2:
@@ -480,12 +497,15 @@ def calibrate_focus(
     ``harp reprocess`` both call this, so re-processing fits what the session fitted.
     ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
     (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
-    ``"separate"`` (the default) and :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
+    ``"separate"`` (the default) or ``"separate-kinks"`` (each string's kinks modelled as well) and
+    :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
     choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
     so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
     removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`)."""
-    separate = getattr(pipeline, "strings", STRINGS_SEPARATE) == STRINGS_SEPARATE
+    strings = getattr(pipeline, "strings", STRINGS_SEPARATE)
+    separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
+    kinks = separate and strings == STRINGS_KINKS
     by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
     known = turntable_deg is not None and len(turntable_deg) == len(shots)
     cal = calibrate_shots(
@@ -503,7 +523,10 @@ def calibrate_focus(
         return cal
     joint: HarpShapeFit | FitFailure | None = None
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
-        joint = fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit)
+        joint = fit_harp_shape(
+            [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
+            kink_t=getattr(pipeline, "t", DEFAULT_T),
+        )  # fmt: skip
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
     if not separate:
@@ -514,7 +537,7 @@ def calibrate_focus(
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
     return separate_strings(
         cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
-        seed=pipeline.seed + 1000 * focus_idx,
+        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=getattr(pipeline, "t", DEFAULT_T),
     )  # fmt: skip
 
 

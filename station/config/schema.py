@@ -183,7 +183,8 @@ class PipelineConfig:
     seed: int = setting(0, "seed of the bootstrap resampling", "", 0, SEED_MAX)
     workers: int = setting(1, "processes for the cross-validation and bootstrap fits", "", 1, 256)
     strings: str = setting(STRINGS_SEPARATE, "with 3 or more turntable angles: the profile's lens fitted with every "
-                           "string's own bend separated (separate) or the lens fitted alone (ignore)",
+                           "string's own bend separated (separate), with each string's kinks found and modelled as well "
+                           "(separate-kinks) or the lens fitted alone (ignore)",
                            choices=STRINGS_CHOICES)  # fmt: skip
     choice_folds: str = setting(CHOICE_FOLDS_PLAIN, "model auto with turntable angles: the held-out shots judged as "
                                 "they are (plain) or each fold fitted with the strings' bends separated and its "

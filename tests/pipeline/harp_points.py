@@ -80,3 +80,49 @@ def turning_harp_point_sets(
                     lines.append(p + rng.normal(0.0, noise, p.shape))
         shots.append(lines)
     return shots, offsets
+
+
+def kinked_harp_point_sets(
+    lens, width, height, turntable_deg, n_strings, kinks, *, angle0=20.0, axis=None, spacing=60.0,
+    string_width=3.0, t=30, noise=0.01, seed=0, margin=5.0,
+):  # fmt: skip
+    """Measured-like edge point sets of a turning harp whose strings carry kinks (test helper, exact truth).
+
+    As :func:`turning_harp_point_sets` with straight strings, but string ``k`` in ``kinks`` (a dict
+    ``k -> (a_k, h, lam)``) carries the cusp of :mod:`pipeline.harp_scene`, ``h exp(-|a - a_k| / lam)`` across
+    it at harp position ``a`` (ideal px along the string from the axis), on both edges. Each edge is traced
+    densely (every ideal pixel) through ``lens.distort_points``, smoothed along itself as ``harp measure``
+    does (``pipeline.resample.smooth_subsample`` with ``t``) and given Gaussian noise of ``noise`` px per
+    smoothed point. Returns the shots and the offsets ``q_k``."""
+    from pipeline.resample import smooth_subsample
+
+    rng = np.random.default_rng(seed)
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if axis is None else np.asarray(axis, float)
+    half = 0.5 * np.hypot(width, height)
+    offsets = (np.arange(n_strings) - (n_strings - 1) / 2.0) * spacing
+    shots = []
+    for theta in turntable_deg:
+        a = np.radians(angle0 + theta)
+        d = np.array([np.cos(a), np.sin(a)])
+        n = np.array([-d[1], d[0]])
+        lines = []
+        for k, q in enumerate(offsets):
+            s = np.arange(-half - 8.0, half + 8.0, 1.0)  # the image lies within half a diagonal of the axis
+            dev = np.zeros_like(s)
+            if k in kinks:
+                at, h, lam = kinks[k]
+                dev = h * np.exp(-np.abs(s - at) / lam)
+            for side in (-0.5, 0.5):
+                ideal = c + s[:, None] * d + (q + side * string_width + dev)[:, None] * n
+                dist = lens.distort_points(ideal)
+                ok = np.all(np.isfinite(dist), axis=1) & np.all(
+                    (dist > margin) & (dist < [width - 1 - margin, height - 1 - margin]), axis=1
+                )
+                idx = np.flatnonzero(ok)
+                if len(idx) < 8 * t:
+                    continue
+                run = idx[: np.argmax(np.diff(np.concatenate([idx, [idx[-1] + 2]])) > 1) + 1]  # first inside run
+                p = smooth_subsample(dist[run], t=t)
+                lines.append(p + rng.normal(0.0, noise, p.shape))
+        shots.append(lines)
+    return shots, offsets

@@ -158,3 +158,32 @@ def test_an_automatic_choice_with_turntable_angles_can_separate_the_strings():
     assert rec["folds"] == SEPARATED_FOLDS and "strings separated, turntable angles known" in rec["reason"]
     assert cal.fit.model is cal.selection.table[1].full_fit.model  # the fold's start: no second fit
     assert PipelineConfig().choice_folds == CHOICE_FOLDS_PLAIN and set(CHOICE_FOLDS) == {"plain", "strings-separated"}
+
+
+def test_a_session_can_model_the_strings_kinks():
+    """``pipeline.strings: separate-kinks``: the stored lens is fitted with each string's kinks found and modelled
+    (``pipeline.harp_kinks``), the record lists them where they were drawn, and the lens is closer to the exact
+    lens than with the bends alone separated. Truth: the drawn cusps and the exact lens map."""
+    from pipeline.compare import compare_models
+    from pipeline.fitspec import FitSpec
+    from pipeline.harp_shape import fit_harp_shape
+    from pipeline.models import RadialModel
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig
+    from tests.pipeline.harp_points import kinked_harp_point_sets
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
+    turns = (0, 30, 60, 90, 120, 150)
+    spec = FitSpec("radial", 4, True, True)
+    drawn = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0)}
+    shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, drawn, axis=(497, 378), seed=4, noise=0.008)
+    kinked = calibrate_focus(shots, w, h, PipelineConfig(strings="separate-kinks"), 0, spec, turntable_deg=turns)
+    assert kinked.failure is None and kinked.details["strings"]["separated"] is True
+    found = kinked.details["strings"]["kinks"]
+    assert sorted(k["string"] for k in found) == sorted(drawn)
+    for k in found:
+        assert abs(k["at_px"] - drawn[k["string"]][0]) < 4.0
+    bends = fit_harp_shape(shots, turns, w, h, spec)  # what pipeline.strings: separate stores
+    err = [compare_models(m, lens, w, h, step=20).rms for m in (kinked.fit.model, bends.model)]
+    assert err[0] < 0.5 * err[1], err
