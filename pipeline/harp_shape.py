@@ -44,6 +44,15 @@ What can and cannot be separated
   lens (no penalty there), which is the physical reading (a harp whose strings bow in proportion
   to a radial law of their distance from the axis is not plausible). The farther the axis from the
   distortion centre, the better the separation.
+* Shots about two turntable axes or more (the harp moved *with* its turntable between groups of shots,
+  ``fit_harp_shape(axis_groups=...)``) separate that part too: a string keeps its distance from the
+  turntable axis while its distance from the distortion centre changes, and a radial term about the
+  distortion centre plus a thin prism imitates string bends about one axis but not about two on opposite
+  sides of it. Each group's axis is found on its own shots (or about a rough shift given per group,
+  :func:`group_frames`); no radial gauge is held. The ridge stays :data:`STRING_RIDGE`: it still takes a
+  part of what two axes see (about half of it for the bends of ``tests/pipeline/test_harp_shape.py``'s
+  two-axis case with axes 170 px from the centre), but a ten times weaker one was worse on realistic
+  renders (``benchmarks/axis_positions.py --realistic``, ``benchmarks/RESULTS-strings.md``).
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
 * Without turntable angles (loose photographs) nothing ties a string of one shot to a string of
@@ -71,7 +80,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
@@ -107,6 +116,15 @@ GAUGE_WEIGHT = 1.0
 
 AXIS_SEARCH = 0.6
 """Half-width, in string pitches, of the search for the turntable axis around the image centre."""
+
+GROUP_AXIS_SEARCH = 4.0
+"""Half-width, in string pitches, of the search for the turntable axis of each axis group of
+:func:`fit_harp_shape` around the image centre (:func:`_coarse_axis`)."""
+
+SHIFT_SEARCH = 0.3
+"""Half-width, in string pitches, of the search for an axis group's turntable axis about where its given shift
+puts it (:func:`group_frames`): below half the distance to the nearest point about which three shots 60
+degrees apart agree as well (about a pitch)."""
 
 MIN_SPAN = 0.8
 """Shortest stretch of ``u`` (half image diagonals) over which a string must be seen, in all its shots
@@ -210,7 +228,8 @@ class HarpShapeFit:
 
     ``model`` the lens correction fitted jointly, ``plain`` the fit without string terms (its start);
     ``d_after`` the straightness of the points corrected by both, ``d_lens_only`` of the same points
-    corrected by ``model`` alone (pixels)."""
+    corrected by ``model`` alone (pixels); ``axis_groups`` each axis group's frame when the harp was moved
+    between groups of shots (``frame`` is then the first group's), empty otherwise."""
 
     model: DistortionModel
     plain: FitResult
@@ -219,6 +238,7 @@ class HarpShapeFit:
     d_after: float
     d_lens_only: float
     n_params: int
+    axis_groups: tuple[tuple[Hashable, HarpFrame], ...] = ()
     kinks: tuple[Kink, ...] = ()
 
     @property
@@ -269,7 +289,7 @@ class HarpShapeFit:
             "n_params": self.n_params,
             "kinks": [k.to_dict() for k in self.kinks],
             "model": self.model.to_dict(),
-        }
+        } | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
 
 
 # ------------------------------------------------------------------ the harp frame
@@ -295,15 +315,52 @@ def _clusters(q: Floats, gap: float) -> NDArray[np.intp]:
     return labels
 
 
+def _phase_coherence(q: Floats, pitch: Floats | float) -> Floats:
+    """How well distances ``q`` (last axis) fall on one comb of period ``pitch``: the squared mean
+    resultants of ``q`` modulo ``pitch`` and ``pitch / 2`` summed (2 when every ``q`` is on the comb; the
+    second harmonic keeps a string's two edges from cancelling when its width is near half the pitch)."""
+    return sum(np.abs(np.mean(np.exp(2j * np.pi * h * q / pitch), axis=-1)) ** 2 for h in (1, 2))  # type: ignore[no-any-return]
+
+
+def _coarse_axis(offsets: list[Floats], normals: list[Floats], pitch: float, c0: Floats, reach: float) -> Floats:
+    """The turntable axis to ``pitch / 8`` within ``reach`` pitches of ``c0``, for a harp of (nearly) uniform
+    pitch: the point about which every shot's string distances fall on one comb (:func:`_phase_coherence`);
+    the pitch is refined first, each shot on its own (within 10 %: the median gap :func:`harp_frame` takes
+    is biased by the strings' widths), since a comb of the wrong period dephases over many strings. Six
+    shots 30 degrees apart make a comb again about a point some 8 pitches away: ``reach`` stays well
+    below that."""
+    trial = pitch * np.linspace(0.9, 1.1, 401)
+    p = float(trial[np.argmax(sum(_phase_coherence(o[None, :], trial[:, None]) for o in offsets))])
+    oo = np.concatenate(offsets)
+    nn = np.concatenate([np.repeat(n[None, :], len(o), axis=0) for n, o in zip(normals, offsets, strict=True)])
+    steps = np.linspace(-reach, reach, 2 * int(np.ceil(reach / 0.125)) + 1) * p
+    grid = c0 + np.array([(dx, dy) for dx in steps for dy in steps])
+    out: Floats = grid[int(np.argmax(_phase_coherence(oo[None, :] - grid @ nn.T, p)))]
+    return out
+
+
 def harp_frame(
-    corrected: Sequence[Sequence[Floats]], turntable_deg: Sequence[float], width: int, height: int
+    corrected: Sequence[Sequence[Floats]],
+    turntable_deg: Sequence[float],
+    width: int,
+    height: int,
+    *,
+    centre: Sequence[float] | Floats | None = None,
+    reach: float | None = None,
+    refine: bool = True,
 ) -> tuple[HarpFrame, list[list[int]]] | FitFailure:
     """The harp's frame in the shots (:class:`HarpFrame`) and each edge's string number.
 
     ``corrected``: per shot, its edges corrected by a lens fit (ideal pixels). The strings' angle at
     turntable 0 and the sense of rotation come from the shots' line directions; the axis from making
     the strings' distances from it agree between shots (module docstring); the strings are the
-    clusters of those distances, numbered from the lowest ``q``.
+    clusters of those distances, numbered from the lowest ``q``. The axis is searched within
+    :data:`AXIS_SEARCH` pitches of ``centre`` (default the image centre) by the spread of the distances
+    within their clusters; with ``reach`` (pitches) instead within ``reach`` of ``centre`` by how well the
+    distances fall on one comb, for a harp of uniform pitch (:func:`_coarse_axis`: the spread misleads
+    where a wrong axis splits the strings into clusters of one or two edges, as it may with few shots).
+    Either is then refined with its clusters held (unless not ``refine``: where the shots do not share
+    one axis exactly, the refinement may wander off).
     """
     if len(corrected) != len(turntable_deg):
         return FitFailure(f"{len(corrected)} shots but {len(turntable_deg)} turntable angles")
@@ -338,7 +395,9 @@ def harp_frame(
     nn = np.concatenate([np.repeat(nrm[None, :], len(o), axis=0) for nrm, o in zip(normals, offsets)])
     oo = np.concatenate(offsets)
     shot_of = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)])
-    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if centre is None else np.asarray(centre, np.float64)
+    if reach is not None:
+        c0 = _coarse_axis(offsets, normals, pitch, c0, reach)
 
     def score(c: Floats) -> tuple[float, NDArray[np.intp]]:
         q = oo - nn @ c
@@ -348,11 +407,14 @@ def harp_frame(
         ss = float(np.sum((q - means[lab]) ** 2))
         return ss, lab
 
-    steps = np.linspace(-AXIS_SEARCH, AXIS_SEARCH, 13) * pitch
-    grid = [c0 + np.array([dx, dy]) for dx in steps for dy in steps]
-    c_best = min(grid, key=lambda c: score(c)[0])
+    if reach is None:
+        steps = np.linspace(-AXIS_SEARCH, AXIS_SEARCH, 13) * pitch
+        grid = [c0 + np.array([dx, dy]) for dx in steps for dy in steps]
+        c_best = min(grid, key=lambda c: score(c)[0])
+    else:
+        c_best = c0
     # refine: given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
-    for _ in range(3):
+    for _ in range(3 if refine else 0):
         lab = score(c_best)[1]
         k = int(lab.max()) + 1
         a = np.zeros((len(oo), 2 + k))
@@ -364,6 +426,71 @@ def harp_frame(
     per_shot: list[list[int]] = [[int(v) for v in lab[shot_of == i]] for i in range(len(corrected))]
     frame = HarpFrame(float(angle0), int(sign), (float(c_best[0]), float(c_best[1])), scale, pitch)
     return frame, per_shot
+
+
+def group_frames(
+    corrected: Sequence[Sequence[Floats]],
+    turntable_deg: Sequence[float],
+    axis_groups: Sequence[Hashable],
+    width: int,
+    height: int,
+    shifts: Mapping[Hashable, Sequence[float]] | None = None,
+) -> tuple[dict[Hashable, HarpFrame], list[list[int]]] | FitFailure:
+    """The harp's frame in each axis group of shots (the harp moved with its turntable between groups, by a
+    linear stage or by hand) and each edge's string number, one number per string in every group.
+
+    Each group's frame is :func:`harp_frame` on its own shots. Where its axis is searched:
+
+    * ``shifts`` given (per group, the image shift of the axis from a reference place within
+      :data:`AXIS_SEARCH` pitches of the image centre, known roughly: a stage's travel times the image
+      scale): every shot moved back by its group's shift, all shots together place the reference axis
+      (:func:`harp_frame` with ``reach``, not refined), and each group's own axis is searched within
+      :data:`SHIFT_SEARCH` pitches of the reference plus its shift (the shifts' errors a sixth of a pitch
+      or less, with as few as three shots in a group);
+    * no ``shifts``: within :data:`GROUP_AXIS_SEARCH` pitches of the image centre (``harp_frame(reach=)``).
+      For a harp of uniform pitch this needs four turntable angles or more per group, spread over the
+      half turn: the distances from any point agree between three shots modulo the pitch on a lattice of
+      points (about a pitch apart for angles 60 degrees apart, 2.7 pitches for 30), so three shots alone
+      cannot place their axis.
+
+    A string's distance ``q`` from the turntable axis is the same in every group, so the strings are the
+    clusters of every group's distances together, numbered from the lowest ``q``.
+    """
+    if len(axis_groups) != len(corrected):
+        return FitFailure(f"{len(corrected)} shots but {len(axis_groups)} axis groups")
+    names = list(dict.fromkeys(axis_groups))
+    guess: dict[Hashable, Floats | None] = dict.fromkeys(names)
+    if shifts is not None:
+        missing = [g for g in names if g not in shifts]
+        if missing:
+            return FitFailure(f"no axis shift for axis group {missing[0]!r}")
+        s = {g: np.asarray(shifts[g], np.float64) for g in names}
+        back = [[e - s[g] for e in shot] for shot, g in zip(corrected, axis_groups, strict=True)]
+        framed = harp_frame(back, turntable_deg, width, height, reach=AXIS_SEARCH, refine=False)
+        if not framed:
+            return framed
+        guess = {g: np.asarray(framed[0].centre) + s[g] for g in names}
+    frames: dict[Hashable, HarpFrame] = {}
+    q: list[Floats] = [np.zeros(0)] * len(corrected)
+    for g in names:
+        idx = [i for i, h in enumerate(axis_groups) if h == g]
+        framed = harp_frame(
+            [corrected[i] for i in idx],
+            [turntable_deg[i] for i in idx],
+            width,
+            height,
+            centre=guess[g],
+            reach=GROUP_AXIS_SEARCH if shifts is None else SHIFT_SEARCH,
+        )
+        if not framed:
+            return FitFailure(f"axis group {g!r}: {framed.reason}")
+        frames[g] = frame = framed[0]
+        for i in idx:
+            nrm, c = frame.normal(float(turntable_deg[i])), np.asarray(frame.centre)
+            q[i] = np.array([float(nrm @ (e.mean(axis=0) - c)) for e in corrected[i]])
+    lab = _clusters(np.concatenate(q), min(f.pitch_px for f in frames.values()) / 3.0)
+    ends = np.cumsum([len(v) for v in q])
+    return frames, [[int(v) for v in part] for part in np.split(lab, ends[:-1])]
 
 
 # ------------------------------------------------------------------ the joint fit
@@ -500,6 +627,8 @@ def fit_harp_shape(
     ridge: float = STRING_RIDGE,
     plain: FitResult | None = None,
     max_nfev: int = 200,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
     kinks: bool = False,
     kink_t: int = DEFAULT_T,
     kink_z: float = KINK_Z,
@@ -515,6 +644,13 @@ def fit_harp_shape(
     degrees : Legendre degrees of each deviation (>= 2).
     ridge : weight of the ridge on the deviation coefficients (:data:`STRING_RIDGE`).
     plain : the fit of ``spec`` without string terms, when already made (its outliers are left out).
+    axis_groups : a label per shot when the harp was moved (with its turntable) between groups of shots:
+        each group's axis is found on its own (:func:`group_frames`), a string is the same in every group.
+        With two groups or more no radial gauge is held (:func:`_radial_gauge`): a radial correction
+        cannot imitate string deviations about two axes at once, so the shots themselves separate it.
+        None (the default): one axis for all shots, searched near the image centre.
+    axis_shifts : with ``axis_groups``, each group's rough image shift of the axis, px (:func:`group_frames`);
+        None: each group's axis searched on its own shots.
     kinks : after the fit, find each string's kinks in its residuals pooled over the shots and fit again
         with a term for each (:mod:`pipeline.harp_kinks`; off by default).
     kink_t : the along-edge subsampling factor the points were measured with (sets the kinks' template:
@@ -532,6 +668,8 @@ def fit_harp_shape(
         return FitFailure(f"deviation degrees must be >= 2 (0 and 1 are the line itself), got {degrees}")
     if len(turntable_deg) != len(lines_per_image):
         return FitFailure(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
+    if axis_groups is not None and len(axis_groups) != len(lines_per_image):
+        return FitFailure(f"{len(lines_per_image)} shots but {len(axis_groups)} axis groups")
     if plain is None:
         fitted = fit_distortion(lines_per_image, width, height, **spec.fit_arguments())
         if not fitted:
@@ -552,10 +690,27 @@ def fit_harp_shape(
     for e, pts in enumerate(edges.lines()):
         by_shot[int(edges.image[e])].append(model0.undistort_points(pts))
     present = [i for i, s in enumerate(by_shot) if s]
-    framed = harp_frame([by_shot[i] for i in present], [turntable_deg[i] for i in present], width, height)
-    if not framed:
-        return framed
-    frame, labels = framed
+    groups: dict[Hashable, HarpFrame] = {}
+    if axis_groups is None:
+        framed = harp_frame([by_shot[i] for i in present], [turntable_deg[i] for i in present], width, height)
+        if not framed:
+            return framed
+        frame, labels = framed
+        shot_frame = [frame] * len(lines_per_image)
+    else:
+        grouped = group_frames(
+            [by_shot[i] for i in present],
+            [turntable_deg[i] for i in present],
+            [axis_groups[i] for i in present],
+            width,
+            height,
+            axis_shifts,
+        )
+        if not grouped:
+            return grouped
+        groups, labels = grouped
+        frame = next(iter(groups.values()))
+        shot_frame = [groups.get(g, frame) for g in axis_groups]  # a shot with no edges: no points to place
     edge_string = np.empty(edges.n_edges, dtype=np.intp)
     cursor = {i: 0 for i in present}
     for e in range(edges.n_edges):
@@ -565,9 +720,9 @@ def fit_harp_shape(
     ideal = model0.undistort_points(edges.xy)
     point_edge = np.repeat(np.arange(edges.n_edges), edges.counts)
     point_shot = edges.image[point_edge]
-    normals = np.array([frame.normal(float(turntable_deg[i])) for i in range(len(lines_per_image))])
-    directions = np.array([frame.direction(float(turntable_deg[i])) for i in range(len(lines_per_image))])
-    rel = ideal - np.asarray(frame.centre)
+    normals = np.array([f.normal(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
+    directions = np.array([f.direction(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
+    rel = ideal - np.array([f.centre for f in shot_frame])[point_shot]
     u = np.einsum("ij,ij->i", rel, directions[point_shot]) / frame.scale_px
     q = np.einsum("ij,ij->i", rel, normals[point_shot])
     # strings seen in two shots or more, over MIN_SPAN of u or more, get deviation terms
@@ -579,7 +734,9 @@ def fit_harp_shape(
     string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
     basis = legendre(u, degrees)
     lens = make_parametrisation(width, height, spec)
-    gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
+    gauge = None
+    if len(groups) < 2:
+        gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
     param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge)
     th0 = param.theta0(model0)
     with np.errstate(all="ignore"):
@@ -663,6 +820,7 @@ def fit_harp_shape(
         d_after=float(np.sqrt(np.mean(r_joint**2))),
         d_lens_only=float(np.sqrt(np.mean(r_lens**2))),
         n_params=param.n,
+        axis_groups=tuple(groups.items()),
         kinks=tuple(found),
     )
 

@@ -1,0 +1,215 @@
+"""Does moving the harp (with its turntable) between shots separate the strings' bends from the lens?
+
+Usage::
+
+    .venv/bin/python benchmarks/axis_positions.py [--seeds 38,26,0,16,27,39] [--first-seed 0 --count 20]
+        [--shift 150] [--workers 2]
+
+Turning the harp about one axis cannot tell a radial correction about that axis from string bends
+depending on the strings' distances from it (``pipeline.harp_shape``'s docstring): when the axis is near
+the distortion centre that part goes to the lens by a gauge, right or wrong. Seen about two axes, a
+string keeps its distance from the turntable axis while its distance from the distortion centre changes,
+so the shots tell them apart. For each seeded lens of ``benchmarks/lens_limits.py`` (its realistic
+session's lens, harp with drawn string shapes and mount), the exact edges (no rendering: the strings'
+shapes are the only error) are traced for plans of equal shot counts:
+
+* six shots at 0..150 by 30 about the drawn axis, against six in two groups of three (0, 60, 120 with
+  the axis moved by ``-shift`` px in x and half that in y; 30, 90, 150 moved by ``+shift``);
+* twelve shots at 0..165 by 15 about the drawn axis, against 0..150 by 30 about each moved axis.
+
+The two-axis plans are fitted twice: with each group's shift given 2 % off (``axis_shifts``, what a linear
+stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
+shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
+``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis (or the one axis) was found more
+than a third of a pitch from where it was drawn (its strings misnumbered). A two-axis cell has a third
+figure: the strings separated with a ridge ten times weaker (``LOW_RIDGE``) than the default
+(``pipeline.harp_shape.STRING_RIDGE``, 0.02).
+
+Every plan uses the harp widened by copies of its strings (``lens_limits.widened``) so that it fills the
+image wherever the axis is. ``radial4+tangential+prism`` is fitted alone (``pipeline.fit.fit_distortion``)
+and with the strings separated (``pipeline.harp_shape.fit_harp_shape``; for the moved plans with
+``axis_groups``, each group's axis found by the search, the shift not given); the table gives the field
+error against the exact lens (``pipeline.compare.compare_models``, 20 px grid), "alone / separated", px.
+The summary compares the separated figures (the default ridge) with the one-axis plan's.
+
+``--realistic``: the same plans on shots rendered with every effect of the seed's realistic session (blur,
+noise, Bayer, vignetting, the strings' kinks; ``pipeline.realism.render_shots``, JPEG off as in
+``benchmarks/lens_limits.py``) and measured as ``harp measure`` does, instead of the exact edges.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from collections.abc import Hashable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from lens_limits import SPEC, seed_lens, widened
+
+from pipeline.compare import compare_models
+from pipeline.fit import fit_distortion
+from pipeline.harp_scene import Harp, HarpMount
+from pipeline.harp_shape import STRING_RIDGE, fit_harp_shape
+from pipeline.measure import measure_image
+from pipeline.realism import Session, render_shots, shot_edges
+from pipeline.render import visible_edges
+
+W, H = 1000, 750
+SIX = tuple((float(a), -1 if a % 60 == 0 else 1) for a in range(0, 180, 30))
+TWELVE = tuple((float(a), g) for g in (-1, 1) for a in range(0, 180, 30))
+# plan name -> ((turntable angle, axis group: -1 moved by -shift, 0 not moved, +1 moved by +shift) per shot,
+# how the fit is told the groups' shifts: None (one axis), "given" or "searched")
+PLANS: dict[str, tuple[tuple[tuple[float, int], ...], str | None]] = {
+    "6 shots, one axis": (tuple((float(a), 0) for a in range(0, 180, 30)), None),
+    "6 shots, two axes, shift given": (SIX, "given"),
+    "6 shots, two axes, searched": (SIX, "searched"),
+    "12 shots, one axis": (tuple((float(a), 0) for a in range(0, 180, 15)), None),
+    "12 shots, two axes, shift given": (TWELVE, "given"),
+    "12 shots, two axes, searched": (TWELVE, "searched"),
+}
+LOW_RIDGE = 0.1 * STRING_RIDGE
+"""The weaker ridge tried on the two-axis plans (module docstring)."""
+SHIFT_ERROR = 1.02
+"""A given shift is the true one times this (known roughly: a stage's travel times an image scale, from the harp's
+pitch in mm and in px)."""
+
+
+def moved(ses: Session, shift: float, group: int) -> tuple[Harp, HarpMount]:
+    """The widened harp and the mount with its axis moved by ``group * (shift, shift / 2)``."""
+    harp = widened(ses.harp, int(np.hypot(shift, shift / 2) // ses.harp.spacing_px) + 1)
+    c = ses.mount.centre
+    return harp, dataclasses.replace(ses.mount, centre=(c[0] + group * shift, c[1] + group * shift / 2))
+
+
+def exact_shots(seed: int, shift: float) -> dict[tuple[float, int], list[Any]]:
+    """The exact edges of every (angle, group) shot the plans take, traced through the exact lens every 2 px."""
+    lens, ses, _ = seed_lens(seed, W, H)
+    out = {}
+    for a, g in dict.fromkeys(shot for plan, _ in PLANS.values() for shot in plan):
+        harp, mount = moved(ses, shift, g)
+        edges = shot_edges(lens, harp, mount.pose(a), W, H)
+        out[(a, g)] = [p for _, p in visible_edges(edges, lens, W, H, step=2.0)]
+    return out
+
+
+def rendered_shots(seed: int, shift: float) -> dict[tuple[float, int], list[Any]]:
+    """Every (angle, group) shot the plans take rendered with all of the seed's realistic effects
+    (``pipeline.realism.render_shots``, group ``g``'s shots seeded ``3 seed + g + 1``) and measured as
+    ``harp measure`` does."""
+    lens, ses, _ = seed_lens(seed, W, H)
+    shots = list(dict.fromkeys(shot for plan, _ in PLANS.values() for shot in plan))
+    out = {}
+    for g in sorted({g for _, g in shots}):
+        harp, mount = moved(ses, shift, g)
+        angles = [a for a, h in shots if h == g]
+        for a, im in zip(angles, render_shots(lens, harp, mount, angles, W, H, ses.effects, seed=3 * seed + g + 1)):
+            out[(a, g)] = [ln.points for ln in measure_image(im.image).lines]
+    return out
+
+
+def row(args: tuple[int, float, bool]) -> str:
+    seed, shift, realistic = args
+    lens, ses, start = seed_lens(seed, W, H)
+    cells = [str(seed), str(start["lens"]), str(start["strings"])]
+    store = rendered_shots(seed, shift) if realistic else exact_shots(seed, shift)
+    for plan, mode in PLANS.values():
+        lines = [store[shot] for shot in plan]
+        angles = [a for a, _ in plan]
+        groups = [g for _, g in plan] if mode else None
+        given: dict[Hashable, tuple[float, float]] = {
+            g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)
+        }
+        plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
+        shifts = given if mode == "given" else None
+        fits = [
+            fit_harp_shape(lines, angles, W, H, SPEC, plain=plain, axis_groups=groups, axis_shifts=shifts, ridge=r)
+            if plain
+            else None
+            for r in ((STRING_RIDGE, LOW_RIDGE) if mode else (STRING_RIDGE,))
+        ]
+        sep = fits[0]
+        alone = compare_models(plain.model, lens, W, H, step=20).rms if plain else np.nan
+        both = " / ".join(f"{compare_models(f.model, lens, W, H, step=20).rms:.4f}" if f else "nan" for f in fits)
+        # a group's axis found more than a third of a pitch from where it was drawn: the strings misnumbered
+        c = ses.mount.centre
+        drawn: dict[Hashable, tuple[float, float]] = {g: (c[0] + g * shift, c[1] + g * shift / 2) for g in (-1, 0, 1)}
+        wrong = sep and any(
+            np.hypot(f.centre[0] - drawn[g][0], f.centre[1] - drawn[g][1]) > f.pitch_px / 3
+            for g, f in (sep.axis_groups or ((0, sep.frame),))
+        )
+        cells.append(f"{alone:.4f} / {both}" + (" (axis wrong)" if wrong else ""))
+    return "| " + " | ".join(cells) + " |"
+
+
+def summary(rows: list[str]) -> list[str]:
+    """Per two-axis plan against the one-axis plan of its shot count: how often the separated field error
+    drops, rises, stays."""
+    cells = [[c.split(" (")[0] for c in r.strip("| ").split(" | ")[3:]] for r in rows]
+    sep = np.array([[float(c.split("/")[1]) for c in r] for r in cells])
+    alone = np.array([[float(c.split("/")[0]) for c in r] for r in cells])
+    out = []
+    names = list(PLANS)
+    for i, j in ((0, 1), (0, 2), (3, 4), (3, 5)):
+        one, two = sep[:, i], sep[:, j]
+        ratio = two / one
+        out.append(
+            f"{names[j]} against {names[i]}, separated: lower (< 0.95x) for {int(np.sum(ratio < 0.95))}, "
+            f"within 5 % for {int(np.sum((ratio >= 0.95) & (ratio <= 1.05)))}, higher for {int(np.sum(ratio > 1.05))} of "
+            f"{len(ratio)}; median ratio {np.median(ratio):.2f}, worst {ratio.max():.2f}; median field "
+            f"{np.median(one):.4f} -> {np.median(two):.4f} px; at or below 0.005 px {int(np.sum(one <= 0.005))} -> "
+            f"{int(np.sum(two <= 0.005))}; lens alone median {np.median(alone[:, i]):.4f} -> "
+            f"{np.median(alone[:, j]):.4f} px"
+        )
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="38,26,0,16,27,39", help="comma-separated seeds")
+    ap.add_argument("--first-seed", type=int, default=None, help="a population instead: seeds first..first+count-1")
+    ap.add_argument("--count", type=int, default=20)
+    ap.add_argument("--shift", type=float, default=150.0, help="axis shift in x, px (half that in y)")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--realistic", action="store_true", help="rendered and measured shots instead of exact edges")
+    args = ap.parse_args(argv)
+    seeds = (
+        list(range(args.first_seed, args.first_seed + args.count))
+        if args.first_seed is not None
+        else [int(s) for s in args.seeds.split(",")]
+    )
+    print(
+        f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, "
+        f"{'realistic renders' if args.realistic else 'exact edges'}, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f} at start; "
+        f"`benchmarks/axis_positions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    print("| seed | lens | strings | " + " | ".join(PLANS) + " |")
+    print("|---:|---|---|" + "---:|" * len(PLANS))
+    t0 = time.perf_counter()
+    rows = []
+    jobs = [(s, args.shift, args.realistic) for s in seeds]
+    with ProcessPoolExecutor(max(1, args.workers)) as pool:
+        for r in pool.map(row, jobs):
+            rows.append(r)
+            print(r, flush=True)
+    print()
+    for line in summary(rows):
+        print(line)
+    print()
+    print(f"({time.perf_counter() - t0:.0f} s, load average at end {os.getloadavg()[0]:.1f})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
