@@ -67,11 +67,11 @@ STRINGS_IGNORE = "ignore"
 STRINGS_KINKS = "separate-kinks"
 STRINGS_CHOICES: tuple[str, ...] = (STRINGS_SEPARATE, STRINGS_IGNORE, STRINGS_KINKS)
 """What a session fits beside the lens when its turntable angles tell a string's own bend from the lens
-(:func:`pipeline.harp_shape.fit_harp_shape`): ``separate`` fits every string's bend with the lens and keeps
-the lens (the default), ``separate-kinks`` also finds each string's kinks and models them
-(:mod:`pipeline.harp_kinks`: on the realistic simulator's 60 lenses at or below 0.005 px for 47 against 43,
-higher by more than 5 % for one, +0.0002 px; ``benchmarks/RESULTS-strings.md``), ``ignore`` fits the lens
-alone as for loose photographs."""
+(:func:`pipeline.harp_shape.fit_harp_shape`): ``separate-kinks`` (the default) fits every string's bend with
+the lens, finds each string's kinks and models them (:mod:`pipeline.harp_kinks`: on the realistic
+simulator's 60 lenses at or below 0.005 px for 47 against 43 with the bends only, higher by more than 5 % for
+one, +0.0002 px; ``benchmarks/RESULTS-strings.md``) and keeps the lens; ``separate`` fits the bends only;
+``ignore`` fits the lens alone as for loose photographs."""
 
 CHOICE_FOLDS_PLAIN = "plain"
 CHOICE_FOLDS_STRINGS = "strings-separated"

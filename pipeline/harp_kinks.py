@@ -150,14 +150,23 @@ def peak_per_area(t: int = DEFAULT_T, length_px: float = 0.0) -> float:
 
 
 def end_weights(xy: Floats, starts: NDArray[np.intp], counts: NDArray[np.intp], t: int = DEFAULT_T) -> Floats:
-    """Per point ``1 / gain^2``, ``gain`` the smoother's noise at the point's place on its edge over the
+    r"""Per point ``1 / gain^2``, ``gain`` the smoother's noise at the point's place on its edge over the
     middle's (:func:`pipeline.resample.noise_gain`: 2.6 at the end points for t = 30, 1 from about
-    :math:`2\\sigma` in), arclengths along the (distorted) points as given."""
+    :math:`2\sigma` in), arclengths along the (distorted) points as given.
+
+    A point's gain depends on the piece's samples within its window only: on an edge long enough that no
+    window reaches both ends, a point near the start has the gain it has on any such edge, one near the end
+    the gain of the place as far from the last sample on any such edge, and the middle the interior gain at
+    its offset from the sample grid; all of those are taken from one reference edge in one call."""
     out = np.ones(len(xy))
     sig = smoothing_sigma(t)
     if sig == 0:
         return out
     reach = TRUNCATE * sig
+    m = int(np.ceil(reach)) + int(np.ceil(TRUNCATE * sig)) + 2  # no window of a point within reach of one
+    pos: list[Floats] = []  # end of a piece 2m samples long reaches the other end (nor the middle's)
+    where: list[NDArray[np.intp]] = []
+    mids: list[float] = []
     for s0, c in zip(starts, counts, strict=True):
         p = xy[s0 : s0 + c]
         s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
@@ -165,8 +174,20 @@ def end_weights(xy: Floats, starts: NDArray[np.intp], counts: NDArray[np.intp], 
         if length <= 0:
             continue
         ends = np.flatnonzero((s < reach) | (s > length - reach))
-        gains = noise_gains(np.concatenate([[0.5 * length], s[ends]]), length, t)
-        out[s0 + ends] = (gains[0] / gains[1:]) ** 2
+        last = float(np.floor(length + 1e-9))
+        if last < 2 * m:  # a short edge: its own piece
+            gains = noise_gains(np.concatenate([[0.5 * length], s[ends]]), length, t)
+            out[s0 + ends] = (gains[0] / gains[1:]) ** 2
+            continue
+        half = 0.5 * length
+        mids.append(half - np.floor(half) + m)
+        pos.append(np.where(s[ends] < reach, s[ends], s[ends] - last + 2 * m))
+        where.append(s0 + ends)
+    if mids:
+        n = np.array([len(w) for w in where])
+        gains = noise_gains(np.concatenate([np.array(mids), *pos]), float(2 * m), t)
+        mid = np.repeat(gains[: len(mids)], n)
+        out[np.concatenate(where)] = (mid / gains[len(mids) :]) ** 2
     return out
 
 

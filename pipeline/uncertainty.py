@@ -152,6 +152,7 @@ def bootstrap_field_uncertainty(
     full_fit: FitResult | None = None,
     map_fn: MapFn = map,
     turntable_deg: Sequence[float] | None = None,
+    separated_fn: Callable[[Any], RefitOutcome] | None = None,
 ) -> FieldUncertainty | FitFailure:
     """Bootstrap the correction fit and map the spread of the fitted field.
 
@@ -185,6 +186,9 @@ def bootstrap_field_uncertainty(
         own bends separated (:func:`pipeline.harp_shape.separated_job`, the whole fit from the
         resampled edges) and ``full_fit`` should be that lens's
         (:func:`pipeline.harp_shape.lens_result`): the spread is then the separated lens's.
+    separated_fn : callable, optional
+        The job that fits such a replicate (default :func:`pipeline.harp_shape.separated_job`; e.g.
+        :func:`pipeline.harp_shape.separated_kinks_job` to model each string's kinks as well).
 
     Returns
     -------
@@ -246,7 +250,8 @@ def bootstrap_field_uncertainty(
     models: list[DistortionModel] = []
     failures: list[str] = []
     n_failed = 0
-    for model, reason in map_fn(refit_job if turntable_deg is None else separated_job, jobs):
+    job_fn = refit_job if turntable_deg is None else (separated_fn or separated_job)
+    for model, reason in map_fn(job_fn, jobs):
         if model is None:
             n_failed += 1
             if len(failures) < 3 and reason is not None:  # (a failed replicate always has a reason)

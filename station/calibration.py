@@ -408,10 +408,13 @@ def separate_strings(
     leave-one-orientation-out hold-out, each fold fitted with the strings separated on the other
     orientations (:func:`pipeline.harp_shape.separated_job`), and with ``bootstrap >= 2`` replicates the
     field uncertainty of the separated lens (every replicate fitted with the strings separated, ``seed``
-    as for the lens alone). With ``kinks`` (``joint`` fitted with them) the hold-out's folds find and model
-    each string's kinks too (:mod:`pipeline.harp_kinks`; the bootstrap's replicates do not), and
-    ``details["strings"]["kinks"]`` lists those of ``joint`` (``kink_t``: the subsampling factor the edges were
-    measured with, which sets the kinks' template). ``details["strings"]`` records what
+    as for the lens alone). With ``kinks`` (``joint`` fitted with them) ``details["strings"]["kinks"]`` lists
+    those of ``joint`` (``kink_t``: the subsampling factor the edges were measured with, which sets the kinks'
+    template), and when ``joint`` found any, the hold-out's folds and the bootstrap's replicates find and model
+    each string's kinks too (:mod:`pipeline.harp_kinks`). When it found none they do not look: a fold or a
+    replicate sees a subset of the same strings' points, and a kink's significance grows with the shots that see
+    it, so one the fit on all shots does not find is not significant in a fold either; this keeps a session
+    whose strings have no kink at the cost of one scan per focus. ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens."""
     spec = cal.spec
@@ -431,6 +434,8 @@ def separate_strings(
     res = lens_result(joint, lines, width, height)
     if not res:
         return kept_plain(f"the lens with the strings separated: {res.reason}")
+    # a fold or a replicate looks for kinks only where the fit on all shots found some (docstring)
+    kink_job = functools.partial(separated_kinks_job, t=kink_t) if kinks and joint.kinks else None
     hold = cal.merit.holdout
     if hold is not None and hold.scheme == HOLDOUT_LEAVE_ONE_ORIENTATION_OUT:
         jobs = [
@@ -443,7 +448,7 @@ def separate_strings(
             )
             for k in range(len(lines))
         ]
-        job_fn = functools.partial(separated_kinks_job, t=kink_t) if kinks else separated_job
+        job_fn = kink_job if kink_job is not None else separated_job
         loo = _orientation_holdout(lines, full.rejected, job_fn, jobs, map_fn)
         if not isinstance(loo, Holdout):
             return kept_plain(f"without orientation {loo[0]} the strings cannot be separated: {loo[1]}")
@@ -460,7 +465,7 @@ def separate_strings(
     if bootstrap >= 2:
         boot = bootstrap_field_uncertainty(
             lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
-            turntable_deg=turntable_deg,
+            turntable_deg=turntable_deg, separated_fn=kink_job,
         )  # fmt: skip
         if cal.merit.field_uncertainty is not None:
             record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
@@ -497,13 +502,13 @@ def calibrate_focus(
     ``harp reprocess`` both call this, so re-processing fits what the session fitted.
     ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
     (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
-    ``"separate"`` (the default) or ``"separate-kinks"`` (each string's kinks modelled as well) and
+    ``"separate-kinks"`` (the default: each string's kinks found and modelled as well) or ``"separate"`` and
     :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
     choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
     so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
     removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`)."""
-    strings = getattr(pipeline, "strings", STRINGS_SEPARATE)
+    strings = getattr(pipeline, "strings", STRINGS_KINKS)
     separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
     kinks = separate and strings == STRINGS_KINKS
     by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS

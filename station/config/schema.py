@@ -37,7 +37,7 @@ from pipeline.fitspec import (
     CHOICE_FOLDS_PLAIN,
     DEGREE_BOUNDS,
     STRINGS_CHOICES,
-    STRINGS_SEPARATE,
+    STRINGS_KINKS,
     FitSpec,
     parse_choice,
 )
@@ -182,9 +182,9 @@ class PipelineConfig:
     bootstrap: int = setting(0, "replicates for the field uncertainty (0: not computed)", "", 0, 10000)
     seed: int = setting(0, "seed of the bootstrap resampling", "", 0, SEED_MAX)
     workers: int = setting(1, "processes for the cross-validation and bootstrap fits", "", 1, 256)
-    strings: str = setting(STRINGS_SEPARATE, "with 3 or more turntable angles: the profile's lens fitted with every "
-                           "string's own bend separated (separate), with each string's kinks found and modelled as well "
-                           "(separate-kinks) or the lens fitted alone (ignore)",
+    strings: str = setting(STRINGS_KINKS, "with 3 or more turntable angles: the profile's lens fitted with every "
+                           "string's own bend separated and each string's kinks found and modelled (separate-kinks), "
+                           "with the bends only (separate) or the lens fitted alone (ignore)",
                            choices=STRINGS_CHOICES)  # fmt: skip
     choice_folds: str = setting(CHOICE_FOLDS_PLAIN, "model auto with turntable angles: the held-out shots judged as "
                                 "they are (plain) or each fold fitted with the strings' bends separated and its "

@@ -187,3 +187,34 @@ def test_a_session_can_model_the_strings_kinks():
     bends = fit_harp_shape(shots, turns, w, h, spec)  # what pipeline.strings: separate stores
     err = [compare_models(m, lens, w, h, step=20).rms for m in (kinked.fit.model, bends.model)]
     assert err[0] < 0.5 * err[1], err
+
+
+def test_kinks_are_the_default_and_a_kink_free_harp_stores_what_separate_stores():
+    """``pipeline.strings`` defaults to ``separate-kinks``; on strings with no kink it finds none and stores exactly
+    what ``separate`` stores: lens, hold-out and field uncertainty (no false kink moves them). Truth: a harp drawn
+    with no kink (``kinked_harp_point_sets`` with none). (The hold-out's folds and the bootstrap's replicates then
+    do not scan at all, a matter of time: ``benchmarks/RESULTS-strings.md``.)"""
+    from pipeline.fitspec import STRINGS_KINKS, FitSpec
+    from pipeline.models import RadialModel
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig
+    from tests.pipeline.harp_points import kinked_harp_point_sets
+
+    assert PipelineConfig().strings == STRINGS_KINKS
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
+    turns = (0, 30, 60, 90, 120, 150)
+    spec = FitSpec("radial", 4, True, True)
+    shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, {}, axis=(497, 378), seed=4, noise=0.008)
+    cals = [
+        calibrate_focus(shots, w, h, PipelineConfig(strings=s, bootstrap=4), 0, spec, turntable_deg=turns)
+        for s in ("separate-kinks", "separate")
+    ]
+    kinked, bends = cals
+    assert kinked.failure is None and kinked.details["strings"]["separated"] is True
+    assert kinked.details["strings"]["kinks"] == [] and "kinks" not in bends.details["strings"]
+    assert kinked.merit.holdout == bends.merit.holdout and kinked.merit.holdout is not None
+    assert kinked.merit.field_uncertainty == bends.merit.field_uncertainty
+    assert kinked.merit.field_uncertainty is not None and kinked.details["bootstrap_replicates"] == 4
+    grid = np.mgrid[0:w:50, 0:h:50].reshape(2, -1).T.astype(float)
+    assert np.array_equal(kinked.fit.model.undistort_points(grid), bends.fit.model.undistort_points(grid))
