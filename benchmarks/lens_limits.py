@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python benchmarks/lens_limits.py [--seeds 38,37,39,6,16] [--size 1000x750] [--workers 2]
         [--exact-only | --kink-trim | --point-robust [--cache DIR] | --point-robust-exact]
     .venv/bin/python benchmarks/lens_limits.py --choice [--seeds ...] [--cache /tmp/lines]
+    .venv/bin/python benchmarks/lens_limits.py --stored [--seeds ...] [--cache /tmp/lines]
     .venv/bin/python benchmarks/lens_limits.py --kinks [--kink-z Z] [--cache DIR] | --kinks-exact [--seeds ...]
 
 Per seed: the lens, harp, mount and camera effects of ``benchmarks/strings_separated.py`` (six shots at
@@ -61,6 +62,11 @@ the six shots; every candidate is fitted with the strings separated (what a sess
 field error and by the d of three unseen shots (17, 77, 137 degrees) with their strings' bends, as that fit
 found them, removed; ratios over the best candidate by the same measure. ``--cache DIR`` keeps the measured
 edges of each seed (a render takes minutes).
+
+``--stored`` (issue 19 item 5) gives each lens as a session with its default settings stores it: the model
+``select_model`` chooses on the six shots (plain folds, ``pipeline.choice_folds: plain``), fitted with the
+strings' bends separated (``pipeline.strings: separate``) and with each string's kinks found and modelled as
+well (``separate-kinks``, the default since 2026-12-06), beside radial4+tangential+prism fitted both ways.
 
 Every figure is the field error against the exact lens, RMS modulo homography over the whole image
 (``pipeline.compare.compare_models``, 20 px grid), px. JPEG is off and the lens has no non-parametric field
@@ -271,6 +277,50 @@ def choice(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
         row[f"{key} field"] = fields.get(sel.choice, float("nan"))
         row[f"{key} unseen"] = unseen_d.get(sel.choice, float("nan"))
     return row
+
+
+def stored(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
+    """Seed ``seed``'s lens as a session stores it (``--stored``, module docstring)."""
+    seed, w, h, cache = args
+    lens, _, row = seed_lens(seed, w, h)
+    fitted, _, _ = realistic_measured(seed, w, h, cache)
+    t0 = time.perf_counter()
+    sel = select_model(fitted, w, h)
+    row["chosen"] = sel.choice.label
+    for name, spec in (("chosen", sel.choice), ("fixed", SPEC)):
+        full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
+        full = full or fit_distortion(fitted, w, h, **spec.fit_arguments())
+        for kinks in (False, True):
+            joint = fit_harp_shape(fitted, FITTED, w, h, spec, plain=full, kinks=kinks) if full else full
+            row[f"{name} {kinks}"] = float(compare_models(joint.model, lens, w, h, step=20).rms) if joint else np.nan
+    row["t"] = time.perf_counter() - t0
+    return row
+
+
+def print_stored(results: Iterable[dict[str, object]]) -> None:
+    print(
+        "| seed | lens | strings | chosen (plain folds) | chosen: bends / bends + kinks px | "
+        "radial4+tangential+prism: bends / bends + kinks px | s |"
+    )
+    print("|---:|---|---|---|---:|---:|---:|")
+    rows = []
+    for r in results:
+        rows.append(r)
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['chosen']} | {r['chosen False']:.4f} / "
+            f"{r['chosen True']:.4f} | {r['fixed False']:.4f} / {r['fixed True']:.4f} | {r['t']:.0f} |",
+            flush=True,
+        )
+    print()
+    for key, name in (("chosen", "the chosen model"), ("fixed", "radial4+tangential+prism")):
+        a = np.array([float(r[f"{key} False"]) for r in rows])  # type: ignore[arg-type]
+        b = np.array([float(r[f"{key} True"]) for r in rows])  # type: ignore[arg-type]
+        print(
+            f"{name}: at or below 0.005 px {int(np.sum(a <= 0.005))} (bends) -> {int(np.sum(b <= 0.005))} (bends + "
+            f"kinks) of {len(rows)}; with the kinks lower by > 5 % for {int(np.sum(b < 0.95 * a))}, higher by > 5 % "
+            f"for {int(np.sum(b > 1.05 * a))} (largest rise {np.max(b - a):+.4f} px); median {np.median(a):.4f} -> "
+            f"{np.median(b):.4f} px"
+        )
 
 
 def print_choice(results: Iterable[dict[str, object]]) -> None:
@@ -683,6 +733,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--exact-only", action="store_true", help="print only the exact-point table (no rendering)")
     ap.add_argument("--kink-trim", action="store_true", help="print only the kinked-points prototype's table")
     ap.add_argument("--choice", action="store_true", help="print only the model choice's table (no ablations)")
+    ap.add_argument("--stored", action="store_true", help="print only the table of the lens a session stores")
     ap.add_argument(
         "--point-robust",
         action="store_true",
@@ -698,7 +749,7 @@ def main(argv: list[str] | None = None) -> int:
         "--cache",
         type=Path,
         default=None,
-        help="--choice, --point-robust, --kinks: directory keeping the measured edges (npz)",
+        help="--choice, --stored, --point-robust, --kinks: directory keeping the measured edges (npz)",
     )
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
@@ -717,6 +768,7 @@ def main(argv: list[str] | None = None) -> int:
     ] = (
         (args.kink_trim, kink_trim, jobs, print_kink_trim),
         (args.choice, choice, cached, print_choice),
+        (args.stored, stored, cached, print_stored),
         (args.point_robust, point_robust, cached, print_point_robust),
         (args.point_robust_exact, point_robust_exact, jobs, print_point_robust_exact),
         (args.exact_only, exact_only, jobs, print_exact),
