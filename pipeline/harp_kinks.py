@@ -50,7 +50,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 from typing import Any
 
@@ -102,17 +102,7 @@ class Kink:
     length_px: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "string": self.string,
-            "u": self.u,
-            "at_px": self.at_px,
-            "peak_px": self.peak_px,
-            "peak_se_px": self.peak_se_px,
-            "area_px2": self.area_px2,
-            "z": self.z,
-            "shots": self.shots,
-            "length_px": self.length_px,
-        }
+        return asdict(self)
 
 
 _TABLE_STEP = 0.25  # px: the tabulated smoothed cusps

@@ -749,10 +749,9 @@ def fit_harp_shape(
         return FitFailure("the joint fit of lens and strings diverged (non-finite parameters)")
     placed: list[tuple[int, Candidate]] = []  # (string, detection) of each kink modelled
     if kinks:
-        ideal_xy = model0.undistort_points(edges.xy)
         columns, placed, peaks = _kink_columns(
             param, edges, th, u * frame.scale_px, normals[point_shot], edge_string[point_edge], point_edge,
-            point_shot, stretches(edges.xy, ideal_xy, edges.starts, edges.counts), kink_t, kink_z,
+            point_shot, stretches(edges.xy, ideal, edges.starts, edges.counts), kink_t, kink_z,
         )  # fmt: skip
         if placed:
             param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)

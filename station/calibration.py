@@ -511,6 +511,7 @@ def calibrate_focus(
     strings = getattr(pipeline, "strings", STRINGS_KINKS)
     separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
     kinks = separate and strings == STRINGS_KINKS
+    kink_t = getattr(pipeline, "t", DEFAULT_T)  # the kinks' template follows the edges' subsampling
     by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
     known = turntable_deg is not None and len(turntable_deg) == len(shots)
     cal = calibrate_shots(
@@ -530,7 +531,7 @@ def calibrate_focus(
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
             [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
-            kink_t=getattr(pipeline, "t", DEFAULT_T),
+            kink_t=kink_t,
         )  # fmt: skip
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
@@ -542,7 +543,7 @@ def calibrate_focus(
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
     return separate_strings(
         cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
-        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=getattr(pipeline, "t", DEFAULT_T),
+        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=kink_t,
     )  # fmt: skip
 
 
