@@ -70,22 +70,12 @@ def old_rule(table: Sequence[CVRow]) -> FitSpec:
 
 # ------------------------------------------------------------------------ real photographs
 def real_part(directory: Path) -> None:
-    import cv2
+    from point_weights import real_points
 
-    from pipeline.measure import measure_image
-
-    names = sorted(p.name for p in directory.glob("*.pgm"))
-    if len(names) < 3:
-        print(f"(no real photographs in {directory}: part skipped)")
+    measured = real_points(directory)
+    if measured is None:
         return
-    whole, interior = {}, {}
-    size = (0, 0)
-    for n in names:
-        img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
-        size = (img.shape[1], img.shape[0])
-        whole[n] = [ln.points for ln in measure_image(img).lines]
-        interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
-    w, h = size
+    names, whole, interior, (w, h) = measured
     print(f"## Real photographs ({directory.name}: {', '.join(names)}), {w}x{h}")
     print()
     for held in names:

@@ -155,6 +155,18 @@ def real_measurements(directory: Path) -> Measured | None:
     return directory.name, names, whole, interior, size
 
 
+def real_points(
+    directory: Path,
+) -> tuple[list[str], dict[str, list[np.ndarray]], dict[str, list[np.ndarray]], tuple[int, int]] | None:
+    """:func:`real_measurements` as edge points only: the names, each photograph's edges (whole strings)
+    and interior-only edges by name, and the size; None (and the line saying so) as there."""
+    measured = real_measurements(directory)
+    if measured is None:
+        return None
+    _, names, whole, interior, size = measured
+    return names, {n: [ln.points for ln in m.lines] for n, m in whole.items()}, interior, size
+
+
 def real_splits(
     measured: Measured,
     variants: Sequence[str],

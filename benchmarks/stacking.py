@@ -69,7 +69,7 @@ from model_choice import H_PT, REAL, W_PT, held_d, point_session
 
 from pipeline.compare import compare_models, fit_homography, image_grid
 from pipeline.cross_validation import FALLBACK, _gauss_newton_fold, cv_folds
-from pipeline.edgeset import FitResult, held_out_edges, tls
+from pipeline.edgeset import FitResult, held_out_edges, held_out_residuals, tls
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.models.homography import apply_homography
@@ -172,20 +172,11 @@ def exact_fold_ms(folds: list, weights: np.ndarray) -> float:
     """The blend's exact held-out mean square over ``folds`` (TLS lines refitted)."""
     ss, n = 0.0, 0
     for models, homs, held in folds:
-        r = held_residuals(Blend(models, homs, weights), held)
+        r = held_out_residuals(Blend(models, homs, weights), held)
         r = r[np.isfinite(r)]
         ss += float(np.sum(r**2))
         n += len(r)
     return ss / max(n, 1)
-
-
-def held_residuals(model: Any, lines: Sequence[np.ndarray]) -> np.ndarray:
-    pts = held_out_edges(lines)
-    if not pts:
-        return np.zeros(0)
-    counts = np.array([len(p) for p in pts])
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-    return tls(model.undistort_points(np.concatenate(pts)), starts, counts)[0]
 
 
 def stack(
@@ -266,7 +257,7 @@ def one_lens(job: tuple[int, int, Path | None]) -> dict[str, Any]:
     blend_unseen, blend_field = {}, {}
     for name, wv in weights.items():
         b = Blend(models, homs, wv)
-        r = held_residuals(b, held)
+        r = held_out_residuals(b, held)
         blend_unseen[name] = float(np.sqrt(np.mean(r**2)))
         blend_field[name] = float(compare_models(b, lens, W_PT, H_PT, step=40).rms)
     out = {
@@ -347,22 +338,12 @@ def population_part(seeds: range, fit_counts: Sequence[int], workers: int, cache
 
 # ------------------------------------------------------------------------ real photographs
 def real_part(directory: Path) -> None:
-    import cv2
+    from point_weights import real_points
 
-    from pipeline.measure import measure_image
-
-    names = sorted(p.name for p in directory.glob("*.pgm"))
-    if len(names) < 3:
-        print(f"(no real photographs in {directory}: part skipped)")
+    measured = real_points(directory)
+    if measured is None:
         return
-    whole, interior = {}, {}
-    size = (0, 0)
-    for n in names:
-        img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
-        size = (img.shape[1], img.shape[0])
-        whole[n] = [ln.points for ln in measure_image(img).lines]
-        interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
-    w, h = size
+    names, whole, interior, (w, h) = measured
     print(f"## Real photographs ({directory.name}), {w}x{h}: every 2+1 split, held-out d of the third shot (px)")
     print()
     print(
