@@ -147,16 +147,17 @@ def field(
     spec: FitSpec,
     joint: bool = True,
     plain: FitResult | FitFailure | None = None,
+    kinks: bool = False,
 ) -> float:
-    """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``); ``plain``: the
-    fit of ``spec`` on ``lines`` alone when already made."""
+    """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``, and their kinks
+    modelled as well with ``kinks``); ``plain``: the fit of ``spec`` on ``lines`` alone when already made."""
     if plain is None:
         plain = fit_distortion(lines, w, h, **spec.fit_arguments())
     if not plain:
         return float("nan")
     model = plain.model
     if joint:
-        sep = fit_harp_shape(lines, FITTED, w, h, spec, plain=plain)
+        sep = fit_harp_shape(lines, FITTED, w, h, spec, plain=plain, kinks=kinks)
         if not sep:
             return float("nan")
         model = sep.model
@@ -291,8 +292,7 @@ def stored(args: tuple[int, int, int, Path | None]) -> dict[str, object]:
         full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
         full = full or fit_distortion(fitted, w, h, **spec.fit_arguments())
         for kinks in (False, True):
-            joint = fit_harp_shape(fitted, FITTED, w, h, spec, plain=full, kinks=kinks) if full else full
-            row[f"{name} {kinks}"] = float(compare_models(joint.model, lens, w, h, step=20).rms) if joint else np.nan
+            row[f"{name} {kinks}"] = field(fitted, lens, w, h, spec, plain=full, kinks=kinks)
     row["t"] = time.perf_counter() - t0
     return row
 
