@@ -184,6 +184,8 @@ def main() -> None:
                 desc = " ".join(f"{k}={r[k]:.2f}" if isinstance(r[k], float) else f"{k}={r[k]}" for k in keys)
                 extra = r.get("reason") or (
                     f"axis err {float(r['axis_err_pitches']):.2f} p, {r['wrong_strings']}/{r['seen_strings']} strings wrong"
+                    if r["result"] == "framed"
+                    else ""
                 )
                 print(f"  {desc}: {extra}")
 

@@ -126,8 +126,10 @@ AXIS_SEARCH = 0.6
 (about the image centre, all shots moved back by their group's shift)."""
 
 AXIS_REACH = 2.5
-"""Half-width, in string pitches, of the search for the turntable axis around the image centre (or the
-``centre`` given) of :func:`harp_frame` (:func:`_place_axis`)."""
+r"""Radius, in string pitches, of the search for the turntable axis around the image centre (or the ``centre``
+given) of :func:`harp_frame` (:func:`_place_axis`). Four angles evenly spread by :math:`\Delta` make the shots
+agree about points :math:`p / (\cos(\Delta/2) - \cos(3\Delta/2))` off the axis (1.85 pitches for 45 degrees,
+2.75 for 36, 3.9 for 30: a fold of five or seven angles leaving one out): beyond this radius for all but 45."""
 
 AXIS_STEP = 1.0 / 6.0
 """Spacing, in string pitches, of the grid of trial axes of :func:`_place_axis`."""
@@ -415,11 +417,11 @@ def _place_axis(
     c0: Floats,
     refined: Any,
 ) -> Floats | FitFailure:
-    """The turntable axis within :data:`AXIS_REACH` pitches of ``c0`` about which the edges (offsets ``oo``
+    """The turntable axis within :data:`AXIS_REACH` pitches of ``c0`` (a disc) about which the edges (offsets ``oo``
     along their shots' normals ``nn``) make one harp (:func:`_consistency`), refined by ``refined``.
 
-    Every point of a grid :data:`AXIS_STEP` pitches apart is scored (with a tolerance of twice the grid's
-    spacing); its best local minima (up to :data:`AXIS_SEEDS`, those scoring within what the grid's placement
+    Every point of a grid :data:`AXIS_STEP` pitches apart is scored on each shot's strings (the mean of the edges
+    of each, with a tolerance of twice the grid's spacing); its best local minima (up to :data:`AXIS_SEEDS`, those scoring within what the grid's placement
     may cost a place) are refined and scored again (a tolerance of
     :data:`AXIS_TOLERANCE` pitches). Where two places a quarter pitch apart or more score alike (within
     :data:`AXIS_TIE`), the one with fewer strings is the harp (about a wrong axis the shots' strings shift by
@@ -427,21 +429,33 @@ def _place_axis(
     turntable angles cannot place the axis (three angles never can, for a harp wider than the image:
     :func:`group_frames`) and the frame is refused rather than guessed.
     """
-    n = int(round(AXIS_REACH / AXIS_STEP))
+    n = int(np.ceil(AXIS_REACH / AXIS_STEP))
     steps = np.arange(-n, n + 1) * AXIS_STEP * pitch
     gx, gy = np.meshgrid(steps, steps, indexing="ij")
     grid = c0 + np.column_stack([gx.ravel(), gy.ravel()])
-    coarse = _consistency(oo[None, :] - grid @ nn.T, shot_of, n_shots, pitch, 2.0 * AXIS_STEP * pitch)[0]
+    # the grid is scored on each shot's strings (its edges a third of a pitch apart or less, paired), half as many
+    oc, nc, sc = [], [], []
+    for i in range(n_shots):
+        o = oo[shot_of == i]
+        if len(o):
+            lab = _clusters(o, pitch / 3.0)
+            oc.append(np.bincount(lab, weights=o) / np.bincount(lab))
+            nc.append(np.repeat(nn[shot_of == i][:1], len(oc[-1]), axis=0))
+            sc.append(np.full(len(oc[-1]), i))
+    o_s, n_s, s_s = np.concatenate(oc), np.concatenate(nc), np.concatenate(sc)
+    disc = np.hypot(gx, gy).ravel() <= AXIS_REACH * pitch + 1e-9
+    coarse = np.full(len(grid), np.inf)
+    coarse[disc] = _consistency(o_s[None, :] - grid[disc] @ n_s.T, s_s, n_shots, pitch, 2 * AXIS_STEP * pitch)[0]
     sq = coarse.reshape(2 * n + 1, 2 * n + 1)
     padded = np.pad(sq, 1, constant_values=np.inf)
     neighbours = np.min(
         [padded[1 + dx : 2 * n + 2 + dx, 1 + dy : 2 * n + 2 + dy] for dx in (-1, 0, 1) for dy in (-1, 0, 1)
          if dx or dy], axis=0,
     )  # fmt: skip
-    minima = np.flatnonzero((sq <= neighbours).ravel())
+    minima = np.flatnonzero((sq <= neighbours).ravel() & disc)
     minima = minima[np.argsort(coarse[minima], kind="stable")][:AXIS_SEEDS]
     # the coarse score of a place varies with where the grid falls about it (up to ~0.15 per edge)
-    minima = minima[coarse[minima] <= coarse[minima[0]] + AXIS_TIE + 0.2 * len(oo)]
+    minima = minima[coarse[minima] <= coarse[minima[0]] + AXIS_TIE + 0.2 * len(o_s)]
     places: list[tuple[float, int, Floats]] = []
     for c in (refined(grid[j]) for j in minima):
         if all(np.hypot(*(c - p)) > 0.25 * pitch for _, _, p in places):
