@@ -204,6 +204,7 @@ class Executor:
         self._intrinsics: dict[int, Intrinsics] = {}
         self._stage_deg: float | None = None
         self._shift_mm: float | None = None  # the linear stage's read-back (two-axis capture)
+        self._shift_target: float | None = None  # where it was sent and went (None: not known, after a fault)
         self._focus: float | None = None
         self._size: tuple[int, int] | None = None
         self._frames = FrameReference(session)  # the frame checks' reference
@@ -372,8 +373,8 @@ class Executor:
             )
 
     def _move(self, step: Move) -> None:
-        if step.shift_mm is not None:  # two-axis capture: the linear stage under the turntable first
-            self._shift_to(step.shift_mm)
+        if step.shift_mm is not None and step.shift_mm != self._shift_target:  # two-axis capture: the linear stage
+            self._shift_to(step.shift_mm)  # under the turntable first, when it is not there already
         self._move_to(step.degrees, "capture.orientations_deg")
 
     def _shift_to(self, mm: float) -> None:
@@ -385,7 +386,7 @@ class Executor:
                 "capture.shift_positions_mm: the turntable has no linear stage (station.turntable.shift_axis)"
             )
         timeout = self.config.capture.move_timeout_s
-        self._shift_mm = None
+        self._shift_mm = self._shift_target = None
         got = float(
             self._retry(
                 f"move the linear stage to {mm:g} mm", lambda: axis.move_to(mm, timeout=timeout), self.turntable
@@ -398,7 +399,7 @@ class Executor:
                 f"linear stage read back {got:.4f} mm after a move to {mm:g} mm (tolerance {tol:g}): check its "
                 "limits (station.turntable.shift_limits) against capture.shift_positions_mm"
             )
-        self._shift_mm = got
+        self._shift_mm, self._shift_target = got, mm
 
     def _move_to(self, degrees: float, field: str) -> None:
         """Move the turntable to ``degrees`` (of configuration ``field``) and check where it went."""
@@ -579,7 +580,9 @@ class Executor:
 
     def _recover_turntable(self) -> None:
         """After a stall / limit / alarm: clear it (:class:`~drivers.protocols.Recoverable`) and
-        re-home, since a stepper that stalled no longer knows where it is."""
+        re-home, since a stepper that stalled no longer knows where it is (nor is the linear stage taken to be
+        where it was sent)."""
+        self._shift_target = None
         try:
             if isinstance(self.turntable, Recoverable):
                 cleared = self.turntable.recover()
@@ -589,6 +592,8 @@ class Executor:
             self._note(f"[yellow]turntable recovery failed: {type(exc).__name__}: {exc}")
 
     def _reopen(self, device: Any) -> None:
+        if device is self.turntable:
+            self._shift_target = None
         with contextlib.suppress(Exception):
             device.close()
         try:
