@@ -899,13 +899,16 @@ def try_fit_harp_shape(
     plain: FitResult | None = None,
     kinks: bool = False,
     kink_t: int = DEFAULT_T,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
 ) -> HarpShapeFit | FitFailure:
     """:func:`fit_harp_shape` of a fold, whose odd data (too few strings seen twice, a singular system) may
     raise: the error becomes a :class:`~pipeline.edgeset.FitFailure` naming it."""
     try:
         return fit_harp_shape(
-            lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks, kink_t=kink_t
-        )
+            lines_per_image, list(turntable_deg), width, height, spec, plain=plain, kinks=kinks, kink_t=kink_t,
+            axis_groups=axis_groups, axis_shifts=axis_shifts,
+        )  # fmt: skip
     except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
 
