@@ -14,7 +14,7 @@ The calibration board's tilt (:meth:`SimWorld.drive_tilt`) and the linear stage 
 turntable sideways (:meth:`SimWorld.drive_shift`, millimetres) are functions of time the same way, each
 handed over by the emulator that has the axis. A shift of ``s`` mm moves the turntable axis in the image
 by ``s * shift_px_per_mm`` pixels in the direction ``shift_direction_deg``
-(:meth:`SimWorld.shift_offset_px`).
+(:meth:`SimWorld.axis_offset_px`).
 """
 
 from __future__ import annotations
@@ -153,19 +153,22 @@ class SimWorld:
 
     def shift_offset_px(self, t: float | None = None) -> tuple[float, float]:
         """How far the linear stage has moved the turntable axis in the image at time ``t`` (default now):
-        ``shift_at(t) * shift_px_per_mm * (cos d, sin d)`` with ``d = shift_direction_deg``, ``(0.0, 0.0)``
-        when no axis carries it or it is at 0. ``ValueError`` for a moved axis in a world without
-        ``shift_px_per_mm``."""
-        mm = self.shift_at(t)
-        if not mm:
+        :meth:`axis_offset_px` of :meth:`shift_at`, ``(0.0, 0.0)`` when no axis carries the turntable."""
+        return self.axis_offset_px(self.shift_at(t) or 0.0)
+
+    def axis_offset_px(self, shift_mm: float) -> tuple[float, float]:
+        """The turntable axis's move in the image for the linear stage at ``shift_mm``:
+        ``shift_mm * shift_px_per_mm * (cos d, sin d)`` with ``d = shift_direction_deg``; ``(0.0, 0.0)`` at 0.
+        ``ValueError`` for a moved axis in a world without ``shift_px_per_mm``."""
+        if not shift_mm:
             return (0.0, 0.0)
         if self.shift_px_per_mm is None:
             raise ValueError(
-                f"the simulated turntable is shifted {mm:g} mm but the world has no shift_px_per_mm (image "
+                f"the simulated turntable is shifted {shift_mm:g} mm but the world has no shift_px_per_mm (image "
                 "pixels per mm of travel): give it to SimWorld"
             )
         d = math.radians(self.shift_direction_deg)
-        r = mm * self.shift_px_per_mm
+        r = float(shift_mm) * self.shift_px_per_mm
         return (r * math.cos(d), r * math.sin(d))
 
     # -- what the camera sees ----------------------------------------------------

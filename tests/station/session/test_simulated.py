@@ -43,11 +43,15 @@ def test_the_shift_axis_moves_the_turntable_in_the_simulated_world(tmp_path, tur
             dx, dy = world.shift_offset_px()
             assert (dx, dy) == pytest.approx((got * 6.0 * math.cos(math.pi / 6), got * 6.0 * math.sin(math.pi / 6)))
             assert tt.move_to(45.0) == pytest.approx(45.0, abs=1e-3) and world.shift_at() == pytest.approx(got)
+            with sim.camera as cam:  # the frame is taken with the turntable where the shift axis put it
+                sim_extra = cam.capture().extra["sim"]
+            assert sim_extra["shift_mm"] == pytest.approx(got, abs=1e-9) and sim_extra["axis_offset_px"] == [dx, dy]
 
 
 def shift_config_file(tmp_path: Path, turntable: dict, emulator: dict | None = None, direction: float = 30.0):
     d = yaml.safe_load(DEMO.read_text())
     d["station"]["turntable"].update(turntable)
+    d["station"]["camera"].update(width=480, height=360)  # small frames: fast
     d["simulation"]["shift_direction_deg"] = direction
     d["simulation"]["emulator"] = {"speed_deg_s": 3600.0, "accel_deg_s2": 72000.0, **(emulator or {})}
     p = tmp_path / "station.yaml"
