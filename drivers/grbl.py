@@ -68,7 +68,7 @@ from drivers.errors import (
     with_unit,
 )
 from drivers.protocols import Range
-from drivers.ranges import effective_travel
+from drivers.ranges import SHIFT_LIMITS_MM, UNIT_WORDS, effective_travel
 from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
@@ -121,10 +121,6 @@ _SETTING = re.compile(r"^\$(\d+)=([-+]?[0-9.]+)$")
 _AXES = "XYZABC"
 TILT_LIMITS_DEG = (0.0, 60.0)
 """The tilt axis's angles by default (a board tilted further hides its corners from the camera)."""
-SHIFT_LIMITS_MM = (0.0, 100.0)
-"""The shift axis's positions by default, in mm (narrowed to its soft limits at open)."""
-UNIT_WORDS = {"°": "degree", "mm": "mm"}
-"""An axis's unit -> the word its configuration keys use (``units_per_degree``, ``shift_units_per_mm``)."""
 
 SETTINGS: dict[str, Setting] = {
     "port": Setting("serial device, socket://host:port or rfc2217://host:port ('emulator': the simulated "

@@ -71,7 +71,7 @@ from drivers.errors import (
     with_unit,
 )
 from drivers.protocols import Range
-from drivers.ranges import effective_travel
+from drivers.ranges import SHIFT_LIMITS_MM, UNIT_WORDS, effective_travel
 from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
@@ -81,10 +81,6 @@ TILT_LIMITS_DEG = (0.0, 60.0)
 X_LSM_MICROSTEPS_PER_MM = 1.0 / 0.047625e-3
 """The shift axis's microsteps per mm by default: 20997.4, a Zaber X-LSM linear stage (0.047625 µm per
 microstep: a 0.6096 mm lead screw, 200 full steps of 64 microsteps per turn)."""
-SHIFT_LIMITS_MM = (0.0, 100.0)
-"""The shift axis's positions by default, in mm (an X-LSM100A's travel; narrowed to the device's at open)."""
-UNIT_WORDS = {"°": "degree", "mm": "mm"}
-"""An axis's unit -> the word its configuration keys use (``microsteps_per_degree``, ``shift_microsteps_per_mm``)."""
 
 # Warning flags of the Zaber ASCII protocol: F* faults, W* warnings, N* notices.
 WARNING_FLAGS = {
@@ -279,8 +275,7 @@ class ZaberAxis:
     ) -> ZaberAxis:
         """Axis ``number`` of this device on this connection (the ``role`` axis: ``"tilt"``, ``"shift"``),
         opened, closed and locked with this one; ValueError when it is an axis already in use."""
-        taken = [self, *self._others]
-        for other in taken:
+        for other in (self, *self._others):
             if int(number) == other.axis_number:
                 raise ConfigKeyError(
                     f"{role}_axis", f"{role}_axis must be another axis than axis {other.axis_number}, got {number}"

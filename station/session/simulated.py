@@ -22,6 +22,7 @@ from typing import Any
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.grbl import GrblTurntable
+from drivers.ranges import UNIT_WORDS
 from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import start_zaber_emulator
@@ -74,9 +75,8 @@ def _start_stage_emulator(config: Config, world: SimWorld, overrides: dict[str, 
             if axis is None:
                 continue
             if axis.units_per_unit != 1.0:
-                key = f"{role}_units_per_{'degree' if role == 'tilt' else 'mm'}"
                 raise config.error(
-                    f"station.turntable.{key}",
+                    f"station.turntable.{axis.config_prefix}units_per_{UNIT_WORDS[axis.unit]}",
                     f"the GRBL emulator's {role} axis counts {unit}: leave it out (1) for a simulated station",
                 )
             opts[f"{role}_axis"] = axis.axis
