@@ -926,7 +926,6 @@ def try_fit_harp_shape(
     plain: FitResult | None = None,
     kinks: bool = False,
     kink_t: int = DEFAULT_T,
-    *,
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
 ) -> HarpShapeFit | FitFailure:

@@ -29,7 +29,7 @@ from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.protocols import BoardScene
 from drivers.settings import shown
-from drivers.sim.zaber_emulator import ZaberEmulator
+from drivers.sim.zaber_emulator import ZaberEmulator, axes_options
 from station.config.schema import EMULATOR_PORT, Config
 
 ROTARY_RANGE = (0.0, 360.0)
@@ -39,6 +39,14 @@ ROTARY_RANGE = (0.0, 360.0)
 def _one_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+def device_field(section: str, exc: BaseException, default: str | None = None) -> str:
+    """The configuration field a driver's error is about: ``section.KEY`` when the driver names the key
+    (``config_key`` of :class:`drivers.errors.ConfigKeyError`, :class:`drivers.errors.DriverError`: a
+    shift axis on the turntable's own axis, one the device lacks), else ``default`` (the section)."""
+    key = getattr(exc, "config_key", None)
+    return f"{section}.{key}" if key else (default or section)
 
 
 def created_devices(config: Config) -> tuple[Any, Any]:
@@ -52,9 +60,28 @@ def created_devices(config: Config) -> tuple[Any, Any]:
         try:
             devices.append(make(section.as_driver_config()))
         except (ValueError, TypeError, DriverError, OSError) as exc:
-            raise config.error(f"station.{key}", f"expected settings the {section.driver} {key} accepts: "
-                               f"{_one_line(exc)}") from None  # fmt: skip
+            raise config.error(device_field(f"station.{key}", exc), f"expected settings the {section.driver} {key} "
+                               f"accepts: {_one_line(exc)}") from None  # fmt: skip
     return devices[0], devices[1]
+
+
+def zaber_emulator_options(config: Config, turntable: Any) -> dict[str, Any]:
+    """The Zaber emulator's options for a simulated station: ``simulation.emulator``, and what it leaves out
+    from the turntable (``turntable``, its driver created from its section, not opened): its microsteps per
+    degree, and for a Zaber turntable the axes it names (the tilt, the shift axis:
+    :func:`drivers.sim.zaber_emulator.axes_options`) with the shift axis's microsteps per mm."""
+    assert config.simulation is not None
+    opts = dict(config.simulation.emulator)
+    if config.station.turntable.steps_per_degree is not None:
+        opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
+    if config.station.turntable.driver == "zaber":  # the simulated stage has the axes the turntable names
+        tilt, shift = getattr(turntable, "tilt", None), getattr(turntable, "shift", None)
+        numbers = (None if a is None else a.axis_number for a in (tilt, shift))
+        for k, v in axes_options(*numbers, opts.get("axes")).items():
+            opts.setdefault(k, v)
+        if shift is not None:
+            opts.setdefault("shift_microsteps_per_mm", shift.microsteps_per_unit)
+    return opts
 
 
 def check_the_devices(config: Config) -> None:
@@ -63,11 +90,7 @@ def check_the_devices(config: Config) -> None:
     camera, turntable = created_devices(config)
     _shift_positions(config, turntable)
     if config.simulation is not None:
-        opts = dict(config.simulation.emulator)
-        if config.station.turntable.steps_per_degree is not None:
-            opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
-        if config.station.turntable.settings.get("tilt_axis") is not None:
-            opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
+        opts = zaber_emulator_options(config, turntable)
         try:
             ZaberEmulator(None, **opts)
         except (ValueError, TypeError) as exc:

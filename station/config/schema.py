@@ -329,6 +329,9 @@ class SimulationConfig:
     )
     lens_spread: float = setting(0.0, "the simulated lens's manufacturing spread, drawn from lens.serial (0: the "
                                  "nominal demo lens for every serial)", "× the population's spread", 0.0, 5.0)  # fmt: skip
+    shift_direction_deg: float = setting(0.0, "the image direction (from +x, the columns, towards +y, the rows) in "
+                                         "which a positive move of the turntable's shift axis carries the turntable "
+                                         "axis in the simulated world", "deg", -360.0, 360.0)  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)

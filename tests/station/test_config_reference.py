@@ -67,6 +67,7 @@ def test_the_document_has_the_keys_the_station_reads():
         "simulation.lens_spread", "zoom.settings", "zoom.positions", "zoom.focal",  # issues 21 and 23
         "intrinsics.board", "intrinsics.angles_deg", "intrinsics.min_views", "intrinsics.skew",  # issue 23
         "intrinsics.placement", "intrinsics.views", "intrinsics.tilts_deg", "lens.aperture",  # issue 24
+        "simulation.shift_direction_deg",  # issue 19: the shift axis
     }  # fmt: skip
     leaves = {p for p, _ in document().leaves() if not p.startswith("simulation.emulator.")}
     assert leaves == station
