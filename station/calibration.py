@@ -37,8 +37,10 @@ from pipeline.fit import fit_distortion
 from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_KINKS, STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
+    GROUP_AXIS_SEARCH,
     HarpShapeFit,
     fit_harp_shape,
+    harp_frame,
     lens_result,
     separated_job,
     separated_kinks_job,
@@ -49,6 +51,7 @@ from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
+from station.config.devices import MIN_SEARCHED_ANGLES
 from station.equipment import Identity
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
@@ -180,6 +183,8 @@ def calibrate_shots(
     map_fn: MapFn = map,
     candidates: Sequence[FitSpec] | None = None,
     turntable_deg: Sequence[float] | None = None,
+    axis_groups: Sequence[Any] | None = None,
+    axis_shifts: Mapping[Any, Sequence[float]] | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -198,6 +203,8 @@ def calibrate_shots(
         :data:`pipeline.cross_validation.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     turntable_deg : each shot's turntable angle, when known: the automatic choice cross-validates every
         candidate with the strings separated (:func:`pipeline.select.select_model`'s ``turntable_deg``).
+    axis_groups, axis_shifts : with ``turntable_deg``, a two-axis capture's groups and shifts (:func:`axes_of`) for
+        those folds.
     """
     lines = [list(s) for s in shots]
     selection = None
@@ -205,7 +212,10 @@ def calibrate_shots(
     if spec is None:
         angles = None if turntable_deg is None else [float(a) for a in turntable_deg]
         offered = DEFAULT_CANDIDATES if candidates is None else candidates
-        selection = select_model(lines, width, height, offered, map_fn=map_fn, turntable_deg=angles)
+        selection = select_model(
+            lines, width, height, offered, map_fn=map_fn, turntable_deg=angles,
+            axis_groups=None if angles is None else axis_groups, axis_shifts=None if angles is None else axis_shifts,
+        )  # fmt: skip
         spec = selection.choice
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
@@ -351,28 +361,49 @@ def place_label(mm: float) -> str:
     return f"{mm:g} mm"
 
 
-def axes_of(places: AxisPlaces | None, model: Any, shots: Sequence[Sequence[np.ndarray]]) -> Axes | None:
+def axes_of(
+    places: AxisPlaces | None,
+    shots: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    turntable_deg: Sequence[float],
+) -> Axes | None:
     """The axis groups and rough shifts of a two-axis capture for :func:`pipeline.harp_shape.fit_harp_shape`
-    (None when every shot was taken at one place: nothing changes). The image scale is the strings' pitch in the
-    shots corrected by ``model`` (:func:`pipeline.harp_shape.string_pitch`) over the harp's pitch in mm; a group's
-    shift is its shots' mean read-back position less the middle of the commanded positions, times the scale, along
-    ``direction_deg``. The axis is then searched within a third of a pitch of where that shift puts it
-    (:func:`pipeline.harp_shape.group_frames`), the shift known to about a sixth of a pitch: the setup places the
-    turntable axis at the image centre (within half a pitch) with the stage halfway between its outermost
-    positions, as a one-place session places it there."""
+    (None when every shot was taken at one place: nothing changes), from the shots' edges as measured.
+
+    The image scale is the strings' pitch in the shots (:func:`pipeline.harp_shape.string_pitch`; the lens's
+    distortion changes it by its local scale only) over the harp's pitch in mm. Each group's shift is its shots'
+    mean read-back position less the middle of the commanded positions, times the scale, along ``direction_deg``;
+    the axis at that middle is then found, to an eighth of a pitch, on every shot moved back by its group's shift
+    (:func:`pipeline.harp_shape.harp_frame` within :data:`pipeline.harp_shape.GROUP_AXIS_SEARCH` pitches of the
+    image centre; it needs four turntable angles or more, else it is taken at the image centre) and the shifts are
+    given from the image centre to there: :func:`pipeline.harp_shape.group_frames` searches each group's axis
+    within a third of a pitch of where its shift puts it. Without ``direction_deg`` no shift is given (each group's
+    axis searched on its own shots)."""
     if places is None or len(set(places.commanded_mm)) < 2:
         return None
-    pitch = string_pitch([[model.undistort_points(np.asarray(p, np.float64)) for p in s] for s in shots])
+    raw = [[np.asarray(p, np.float64) for p in s] for s in shots]
+    pitch = string_pitch(raw)
     ppm = pitch / places.spacing_mm
     groups = tuple(place_label(m) for m in places.commanded_mm)
     shifts = None
     if places.direction_deg is not None and np.isfinite(ppm):
         mid = 0.5 * (min(places.commanded_mm) + max(places.commanded_mm))
         a = np.radians(places.direction_deg)
-        shifts = {}
+        rel = {}
         for label in dict.fromkeys(groups):
             d = (float(np.mean([r for g, r in zip(groups, places.read_mm, strict=True) if g == label])) - mid) * ppm
-            shifts[label] = (float(d * np.cos(a)), float(d * np.sin(a)))
+            rel[label] = np.array([d * np.cos(a), d * np.sin(a)])
+        ref = np.zeros(2)  # where the axis is with the stage at the middle, from the image centre
+        if distinct_orientations(turntable_deg) >= MIN_SEARCHED_ANGLES:
+            back = [[p - rel[g] for p in s] for s, g in zip(raw, groups, strict=True) if s]
+            framed = harp_frame(
+                back, [float(t) for t, s in zip(turntable_deg, raw, strict=True) if s], width, height,
+                reach=GROUP_AXIS_SEARCH, refine=False,
+            )  # fmt: skip
+            if framed:
+                ref = np.asarray(framed[0].centre) - np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+        shifts = {g: (float(v[0] + ref[0]), float(v[1] + ref[1])) for g, v in rel.items()}
     return Axes(places, groups, shifts, float(pitch), float(ppm))
 
 
@@ -640,16 +671,15 @@ def calibrate_focus(
     removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`).
     ``axis_places``: each shot's linear-stage position of a two-axis capture (``capture.shift_positions_mm``);
     when the shots span two places or more, the joint fit, its folds and its bootstrap replicates find each
-    place's turntable axis (:func:`axes_of`) and the harp's self-check reports them (:func:`axis_record`); an
-    automatic choice's strings-separated folds do not take the places yet (the choice is then made with plain
-    folds, and its record says so). One place, or None: nothing changes."""
+    place's turntable axis (:func:`axes_of`), as do an automatic choice's strings-separated folds, and the harp's
+    self-check reports them (:func:`axis_record`). One place, or None: nothing changes."""
     strings = getattr(pipeline, "strings", STRINGS_KINKS)
     separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
     kinks = separate and strings == STRINGS_KINKS
     kink_t = getattr(pipeline, "t", DEFAULT_T)  # the kinks' template follows the edges' subsampling
     by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
     known = turntable_deg is not None and len(turntable_deg) == len(shots)
-    several = axis_places is not None and len(set(axis_places.commanded_mm)) > 1
+    axes = axes_of(axis_places, shots, width, height, turntable_deg) if known and turntable_deg is not None else None
     cal = calibrate_shots(
         [list(s) for s in shots],
         width,
@@ -659,15 +689,13 @@ def calibrate_focus(
         bootstrap=pipeline.bootstrap,
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
-        turntable_deg=turntable_deg if separate and by_strings and known and not several else None,
+        turntable_deg=turntable_deg if separate and by_strings and known else None,
+        axis_groups=None if axes is None else axes.groups,
+        axis_shifts=None if axes is None else axes.shifts,
     )
-    if several and separate and by_strings and known and cal.selection is not None:
-        why = "strings-separated choice folds do not take two turntable-axis places yet: plain folds"
-        cal = dataclasses.replace(cal, details={**cal.details, "choice_folds": why})
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
     joint: HarpShapeFit | FitFailure | None = None
-    axes = axes_of(axis_places, cal.fit.model, shots) if cal.fit else None
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
             [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,

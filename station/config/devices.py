@@ -156,8 +156,10 @@ def _shift_positions(config: Config, turntable: Any) -> None:
 
 
 MIN_SEARCHED_ANGLES = 4
-"""Turntable angles a place of a two-axis capture needs when its axis is searched (no image direction of a stage
-move given): three shots agree about a lattice of points (:func:`pipeline.harp_shape.group_frames`)."""
+"""Turntable angles about which the shots of a place of a two-axis capture place its axis without a lattice of
+equally good points about a pitch apart (three 60 degrees apart have one, :func:`pipeline.harp_shape.group_frames`):
+what a place's axis searched on its own shots needs (no image direction of a stage move given), and the search of
+where the axis is with the stage halfway (:func:`station.calibration.axes_of`)."""
 
 
 def _orientations(config: Config) -> None:

@@ -263,11 +263,12 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
     err_one = compare_models(one.model, lens, w, h, step=20).rms
     assert err_two < 0.6 * err_one, (err_two, err_one)
     axes = two.details["harp_health"]["axes"]
-    assert axes["shift_given"] is True and axes["px_per_mm"] == pytest.approx(40.0 / 6.0, rel=0.01)
+    # the scale from the pitch of the edges as measured (the lens's local scale in it: 1.2 % here)
+    assert axes["shift_given"] is True and axes["px_per_mm"] == pytest.approx(40.0 / 6.0, rel=0.03)
     assert [p["position_mm"] for p in axes["places"]] == [-travel, travel]
     for p, drawn in zip(axes["places"], (centre - shift, centre + shift), strict=True):  # each place's axis found
         assert np.hypot(*(np.array(p["centre_px"]) - drawn)) < 2.0 and p["shots"] == 4
-    assert axes["worst_off_px"] < 2.0 and axes["misplaced"] == [] and axes["limit_px"] == pytest.approx(20, rel=0.01)
+    assert axes["worst_off_px"] < 2.0 and axes["misplaced"] == [] and axes["limit_px"] == pytest.approx(20, rel=0.03)
     # one place: nothing changes (the profile's model file byte for byte; the harp's self-check made, the lens
     # fitted alone to keep the test short)
     same, cfg = AxisPlaces((5.0,) * 4, (5.0,) * 4, 26.5, 6.0), PipelineConfig(strings="ignore")
