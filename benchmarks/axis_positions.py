@@ -35,6 +35,12 @@ The summary compares the separated figures (the default ridge) with the one-axis
 ``--realistic``: the same plans on shots rendered with every effect of the seed's realistic session (blur,
 noise, Bayer, vignetting, the strings' kinks; ``pipeline.realism.render_shots``, JPEG off as in
 ``benchmarks/lens_limits.py``) and measured as ``harp measure`` does, instead of the exact edges.
+
+``--stored``: what a session would store from each plan of shots (realistic renders only; kept in ``--cache
+DIR``, one file per seed and shift, when given): the model ``pipeline.select.select_model`` chooses on the
+plan's shots (plain folds, the session default ``pipeline.choice_folds``), fitted with the strings' bends and
+kinks separated (the default ``pipeline.strings: separate-kinks``; the two-axis plans with ``axis_groups`` and
+the shift given), beside radial4+tangential+prism fitted the same way; field error against the exact lens.
 """
 
 from __future__ import annotations
@@ -42,6 +48,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import pickle
 import sys
 import time
 from collections.abc import Hashable
@@ -63,6 +70,7 @@ from pipeline.harp_shape import STRING_RIDGE, fit_harp_shape
 from pipeline.measure import measure_image
 from pipeline.realism import Session, render_shots, shot_edges
 from pipeline.render import visible_edges
+from pipeline.select import select_model
 
 W, H = 1000, 750
 SIX = tuple((float(a), -1 if a % 60 == 0 else 1) for a in range(0, 180, 30))
@@ -114,6 +122,88 @@ def rendered_shots(seed: int, shift: float) -> dict[tuple[float, int], list[Any]
         angles = [a for a, h in shots if h == g]
         for a, im in zip(angles, render_shots(lens, harp, mount, angles, W, H, ses.effects, seed=3 * seed + g + 1)):
             out[(a, g)] = [ln.points for ln in measure_image(im.image).lines]
+    return out
+
+
+def cached_rendered(seed: int, shift: float, cache: Path | None) -> dict[tuple[float, int], list[Any]]:
+    """:func:`rendered_shots`, kept in ``cache`` (a directory; one pickle per seed and shift) when given."""
+    path = None if cache is None else cache / f"axis_rendered_{seed}_{shift:g}_{W}x{H}.pkl"
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            out: dict[tuple[float, int], list[Any]] = pickle.load(f)
+        return out
+    out = rendered_shots(seed, shift)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump(out, f)
+        os.replace(tmp, path)
+    return out
+
+
+STORED_PLANS = (
+    "6 shots, one axis",
+    "6 shots, two axes, shift given",
+    "12 shots, one axis",
+    "12 shots, two axes, shift given",
+)
+"""The plans ``--stored`` compares (a session's two-axis capture gives the fit the stage's shift)."""
+
+
+def stored_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
+    """Per plan of :data:`STORED_PLANS`: the chosen candidate and the field errors of the chosen and of
+    radial4+tangential+prism, each fitted with the strings' bends and kinks separated (``--stored``)."""
+    seed, shift, cache = args
+    lens, _, start = seed_lens(seed, W, H)
+    store = cached_rendered(seed, shift, cache)
+    out: dict[str, Any] = {"seed": seed, "lens": start["lens"], "strings": start["strings"]}
+    t0 = time.perf_counter()
+    for name in STORED_PLANS:
+        plan, mode = PLANS[name]
+        lines = [store[shot] for shot in plan]
+        angles = [a for a, _ in plan]
+        groups = [g for _, g in plan] if mode else None
+        shifts = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)} if mode else None
+        sel = select_model(lines, W, H)
+        cells = []
+        for spec in (sel.choice, SPEC):
+            full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
+            full = full or fit_distortion(lines, W, H, **spec.fit_arguments())
+            sep = (
+                fit_harp_shape(
+                    lines, angles, W, H, spec, plain=full, axis_groups=groups, axis_shifts=shifts, kinks=True
+                )
+                if full
+                else full
+            )
+            cells.append(compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan)
+        out[name] = (sel.choice.label, *cells)
+    out["t"] = time.perf_counter() - t0
+    return out
+
+
+def print_stored(results: list[dict[str, Any]]) -> None:
+    print("| seed | lens | strings | " + " | ".join(f"{p}: chosen, px (fixed px)" for p in STORED_PLANS) + " | s |")
+    print("|---:|---|---|" + "---|" * len(STORED_PLANS) + "---:|")
+    for r in results:
+        cells = [f"{r[p][0]} {r[p][1]:.4f} ({r[p][2]:.4f})" for p in STORED_PLANS]
+        print(f"| {r['seed']} | {r['lens']} | {r['strings']} | " + " | ".join(cells) + f" | {r['t']:.0f} |", flush=True)
+
+
+def stored_summary(results: list[dict[str, Any]]) -> list[str]:
+    out = []
+    for one, two in ((STORED_PLANS[0], STORED_PLANS[1]), (STORED_PLANS[2], STORED_PLANS[3])):
+        for i, who in ((1, "the chosen model"), (2, "radial4+tangential+prism")):
+            a = np.array([r[one][i] for r in results])
+            b = np.array([r[two][i] for r in results])
+            ratio = b / a
+            out.append(
+                f"{two} against {one}, {who}: at or below 0.005 px {int(np.sum(a <= 0.005))} -> "
+                f"{int(np.sum(b <= 0.005))} of {len(a)}; median {np.median(a):.4f} -> {np.median(b):.4f} px; "
+                f"lower (< 0.95x) for {int(np.sum(ratio < 0.95))}, higher (> 1.05x) for {int(np.sum(ratio > 1.05))}, "
+                f"worst {np.nanmax(ratio):.2f}x"
+            )
     return out
 
 
@@ -181,12 +271,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shift", type=float, default=150.0, help="axis shift in x, px (half that in y)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--realistic", action="store_true", help="rendered and measured shots instead of exact edges")
+    ap.add_argument("--stored", action="store_true", help="what a session stores from each plan (realistic renders)")
+    ap.add_argument("--cache", type=Path, default=None, help="--stored: keep the rendered, measured shots here")
     args = ap.parse_args(argv)
     seeds = (
         list(range(args.first_seed, args.first_seed + args.count))
         if args.first_seed is not None
         else [int(s) for s in args.seeds.split(",")]
     )
+    if args.stored:
+        return main_stored(seeds, args.shift, args.workers, args.cache, argv)
     print(
         f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, "
         f"{'realistic renders' if args.realistic else 'exact edges'}, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
@@ -205,6 +299,27 @@ def main(argv: list[str] | None = None) -> int:
             print(r, flush=True)
     print()
     for line in summary(rows):
+        print(line)
+    print()
+    print(f"({time.perf_counter() - t0:.0f} s, load average at end {os.getloadavg()[0]:.1f})")
+    return 0
+
+
+def main_stored(seeds: list[int], shift: float, workers: int, cache: Path | None, argv: list[str] | None) -> int:
+    print(
+        f"# One turntable axis or two, what a session stores: the chosen model (plain folds) and "
+        f"radial4+tangential+prism, strings' bends and kinks separated, field error against the exact lens, "
+        f"realistic renders, {W}x{H}, axis moved by +-({shift:.0f}, {shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f} at start; "
+        f"`benchmarks/axis_positions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max(1, workers)) as pool:
+        results = list(pool.map(stored_row, [(s, shift, cache) for s in seeds]))
+    print_stored(results)
+    print()
+    for line in stored_summary(results):
         print(line)
     print()
     print(f"({time.perf_counter() - t0:.0f} s, load average at end {os.getloadavg()[0]:.1f})")

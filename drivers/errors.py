@@ -15,10 +15,28 @@ class DriverError(Exception):
     ``harp devices``; during a session the executor recovers from it or records it as the abort.
     """
 
+    config_key: str | None = None
+    """The key of the device's configuration section the error is about (a tilt or shift axis the device
+    lacks: ``"shift_axis"``), so that a station names that field; None: the device as a whole."""
+
     def __init__(self, *args: object) -> None:
         if len(args) == 1 and isinstance(args[0], str) and ("\n" in args[0] or "\r" in args[0]):
             args = (" ".join(args[0].split()),)
         super().__init__(*args)
+
+
+class ConfigKeyError(ValueError):
+    """A driver's configuration value it cannot use, whatever the device: ``config_key`` names the key
+    (``"shift_axis"``) so that a station names that field.
+
+    Not a HarpError: drivers import nothing of station; the station turns it into a
+    :class:`station.config.ConfigError` naming ``station.turntable.KEY``
+    (:func:`station.config.devices.device_field`).
+    """
+
+    def __init__(self, config_key: str, message: str) -> None:
+        super().__init__(message)
+        self.config_key = config_key
 
 
 class DeviceTimeout(DriverError):
@@ -49,6 +67,12 @@ def _number(value: float) -> str:
     return f"{value:.10g}"
 
 
+def with_unit(unit: str) -> str:
+    """What follows a number in ``unit`` in a message: ``"°"`` directly (``45°``), any other unit after a
+    space (``12.5 mm``), nothing for ``""`` (a device's own units)."""
+    return unit if unit in ("", "°") else f" {unit}"
+
+
 class OutOfRange(DeviceRejected, ValueError):
     """A commanded value outside the range the device accepts; nothing was sent.
 
@@ -67,8 +91,7 @@ class OutOfRange(DeviceRejected, ValueError):
     ):
         self.device, self.what, self.value = device, what, float(value)
         self.minimum, self.maximum, self.unit, self.source = float(minimum), float(maximum), unit, source
-        sep = "" if unit in ("", "°") else " "
-        u = f"{sep}{unit}"
+        u = with_unit(unit)
         where = f" ({source})" if source else ""
         super().__init__(
             f"{device}: {what} {_number(value)}{u} is outside the range"

@@ -28,8 +28,12 @@ off: no device travel, the configured limits apply. (A firmware built with
 not detected.)
 
 A second axis may tilt the calibration board (``tilt_axis``, e.g. ``Y``): :attr:`GrblTurntable.tilt` is
-that axis, a :class:`GrblTurntable` of its own on the same connection (``G90 G0 Y30.000``, its position
+that axis, a :class:`GrblAxis` of its own on the same connection (``G90 G0 Y30.000``, its position
 from the same status reports; the controller's settings and soft limits read once at ``open()``).
+Another may be a linear stage that carries the turntable sideways (``shift_axis``, e.g. ``Z``), so that a
+session takes its shots about two places of the turntable axis in the image: :attr:`GrblTurntable.shift`,
+the same kind of axis with its positions in millimetres (``shift_units_per_mm``, default 1: GRBL counts
+mm; ``G90 G0 Z12.500``).
 
 Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
 ``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
@@ -51,12 +55,20 @@ import re
 import threading
 import time
 from collections.abc import Mapping
-from typing import Any, TypedDict
+from typing import Any, Self, TypedDict
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.errors import (
+    ConfigKeyError,
+    DeviceFault,
+    DeviceRejected,
+    DeviceTimeout,
+    DriverError,
+    ProtocolError,
+    with_unit,
+)
 from drivers.protocols import Range
-from drivers.ranges import effective_travel
+from drivers.ranges import SHIFT_LIMITS_MM, UNIT_WORDS, effective_travel
 from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
@@ -137,6 +149,12 @@ SETTINGS: dict[str, Setting] = {
     "tilt_units_per_degree": Setting("GRBL units per degree of tilt (not 0)", "number", "units/deg", -1e6, 1e6),
     "tilt_limits": Setting("[min, max] of the tilt axis's angles (narrowed to its soft limits at open)", "numbers",
                            "deg", -90.0, 90.0, length=(2, 2)),
+    "shift_axis": Setting("another GRBL axis: a linear stage that carries the turntable sideways between groups of "
+                          "shots; null: none", "text", choices=tuple(_AXES + _AXES.lower()), nullable=True),
+    "shift_units_per_mm": Setting("GRBL units per mm of the shift axis (1: GRBL counts mm; not 0)", "number",
+                                  "units/mm", -1e6, 1e6),
+    "shift_limits": Setting("[min, max] of the shift axis's positions (narrowed to its soft limits at open)", "numbers",
+                            "mm", -10000.0, 10000.0, length=(2, 2)),
 }  # fmt: skip
 """The keys of a GRBL turntable's configuration section, each with its type, unit and range."""
 _CONFIG_KEYS = {"driver", *SETTINGS}
@@ -147,7 +165,7 @@ class GrblStatus(TypedDict):
 
     state: str  # Idle, Run, Hold, Jog, Alarm, Door, Check, Home, Sleep
     substate: int | None  # e.g. 0 of Hold:0
-    position: float  # the turntable axis, in degrees
+    position: float  # the axis queried, in its unit (degrees, mm)
     fields: dict[str, str]  # every field of the report by name (MPos, FS, Pn, ...)
     raw: str
 
@@ -160,8 +178,10 @@ def alarm_text(code: int) -> str:
     return f"ALARM:{code} ({ALARM_CODES.get(code, 'unknown alarm')})"
 
 
-class GrblTurntable:
-    """A turntable on one GRBL axis; satisfies :class:`drivers.protocols.Turntable`.
+class GrblAxis:
+    """One axis of a GRBL controller, its positions in ``unit``: degrees (``"°"``) of a turntable or of
+    the calibration board's tilt, millimetres (``"mm"``) of the linear stage that carries the turntable
+    sideways. :class:`GrblTurntable` is one; its tilt and shift axes are others on its connection.
 
     Parameters
     ----------
@@ -170,24 +190,24 @@ class GrblTurntable:
     baudrate : int
         115200 (GRBL 1.1 default).
     axis : str
-        GRBL axis letter carrying the turntable (``"X"``).
-    units_per_degree : float
-        GRBL units (mm as GRBL sees them) per degree of the table.
+        GRBL axis letter (``"X"``).
+    units_per_unit : float
+        GRBL units (mm as GRBL sees them) per ``unit`` of this axis (not 0; negative: reversed).
+    unit : str
+        ``"°"`` or ``"mm"``: how positions, ranges and messages are stated.
+    config_prefix : str
+        The prefix of this axis's configuration keys (``""``, ``"tilt_"``, ``"shift_"``), which the
+        messages about a bad scale or bad limits name.
     feed : float or None
         None: rapid moves ``G0``; else ``G1`` at this feed (units/min).
     limits : (float, float)
-        Allowed ``move_to`` range in degrees, narrowed at ``open()`` to the
+        Allowed ``move_to`` range in ``unit``, narrowed at ``open()`` to the
         soft-limit travel (:class:`~drivers.errors.OutOfRange` outside).
     reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
         Seconds.
-    tolerance_deg : float
-        How far from the target an idle axis may be (status has 3 decimals).
+    tolerance : float
+        How far from the target an idle axis may be, in ``unit`` (status has 3 decimals).
     """
-
-    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
-    """Keys of this driver's configuration section (``driver`` included or implied)."""
-    SETTINGS: Mapping[str, Setting] = SETTINGS
-    """Each key's type, unit and range (:mod:`drivers.settings`)."""
 
     def __init__(
         self,
@@ -195,7 +215,9 @@ class GrblTurntable:
         *,
         baudrate: int = 115200,
         axis: str = "X",
-        units_per_degree: float = 1.0,
+        units_per_unit: float = 1.0,
+        unit: str = "°",
+        config_prefix: str = "",
         feed: float | None = None,
         limits: tuple[float, float] = (0.0, 360.0),
         reply_timeout: float = 1.0,
@@ -203,26 +225,30 @@ class GrblTurntable:
         move_timeout: float = 60.0,
         home_timeout: float = 120.0,
         startup_timeout: float = 3.0,
-        tolerance_deg: float = 0.002,
+        tolerance: float = 0.002,
         name: str | None = None,
-        tilt_axis: str | None = None,
-        tilt_units_per_degree: float = 1.0,
-        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
     ):
         axis = str(axis).upper()
         if axis not in _AXES:
-            raise ValueError(f"grbl turntable: axis must be one of {', '.join(_AXES)}, got {axis!r}")
-        if units_per_degree == 0:
-            raise ValueError("grbl turntable: units_per_degree must not be 0")
+            key = f"{config_prefix}axis"
+            raise ConfigKeyError(key, f"grbl turntable: {key} must be one of {', '.join(_AXES)}, got {axis!r}")
+        if unit not in UNIT_WORDS:
+            raise ValueError(f"grbl turntable: unit must be one of {', '.join(UNIT_WORDS)}, got {unit!r}")
+        if units_per_unit == 0:
+            key = f"{config_prefix}units_per_{UNIT_WORDS[unit]}"
+            raise ConfigKeyError(key, f"grbl turntable: {key} must not be 0")
         if feed is not None and feed <= 0:
             raise ValueError(f"grbl turntable: feed must be positive, got {feed}")
         lo, hi = (float(v) for v in limits)
         if not lo < hi:
-            raise ValueError(f"grbl turntable: limits must be (min, max) with min < max, got {limits}")
+            key = f"{config_prefix}limits"
+            raise ConfigKeyError(key, f"grbl turntable: {key} must be (min, max) with min < max, got {limits}")
         self.axis = axis
-        self.units_per_degree = float(units_per_degree)
+        self.unit = unit
+        self.config_prefix = config_prefix
+        self.units_per_unit = float(units_per_unit)
         self.feed = feed
-        self._configured = Range(lo, hi, "°", "configured limits")
+        self._configured = Range(lo, hi, unit, "configured limits")
         self._device_travel: Range | None = None
         self._travel = self._configured
         self.settings: dict[int, float] = {}  # as read by ``$$`` at open()
@@ -231,7 +257,7 @@ class GrblTurntable:
         self.move_timeout = float(move_timeout)
         self.home_timeout = float(home_timeout)
         self.startup_timeout = float(startup_timeout)
-        self.tolerance_deg = float(tolerance_deg)
+        self.tolerance = float(tolerance)
         self.name = name or f"grbl {port} axis {axis}"
         self.transport = SerialTransport(port, baudrate, name=self.name)
         self.messages: list[str] = []  # [MSG:...] and other feedback lines seen
@@ -239,46 +265,34 @@ class GrblTurntable:
         self.last_alarm: int | None = None
         self._lock = threading.RLock()
         self._target: float | None = None
-        self._shared = False  # an axis on another axis's connection (the tilt axis): opened and closed by it
-        self.tilt: GrblTurntable | None = None
-        """The tilt axis (``tilt_axis``): another axis of this controller, on this connection, which tilts the
-        calibration board (:class:`drivers.protocols.Tilting`); None without one."""
-        if tilt_axis is not None:
-            if str(tilt_axis).upper() == axis:
-                raise ValueError(f"grbl turntable: tilt_axis must be another axis than {axis}, got {tilt_axis!r}")
-            tilt = GrblTurntable(
-                port, baudrate=baudrate, axis=str(tilt_axis), units_per_degree=tilt_units_per_degree, feed=feed,
-                limits=tuple(tilt_limits), reply_timeout=reply_timeout, poll_interval=poll_interval,  # type: ignore[arg-type]
-                move_timeout=move_timeout, home_timeout=home_timeout, startup_timeout=startup_timeout,
-                tolerance_deg=tolerance_deg, name=f"{self.name} tilt axis {str(tilt_axis).upper()}",
-            )  # fmt: skip
-            tilt.transport, tilt._lock, tilt._shared = self.transport, self._lock, True
-            self.tilt = tilt
+        self._shared = False  # an axis on another axis's connection (the tilt, the shift axis): opened and closed by it
+        self._others: list[GrblAxis] = []  # the axes on this one's connection, opened with it
 
-    @classmethod
-    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> GrblTurntable:
-        check_config_keys("grbl turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
-        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
-        if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
-            raise ValueError("grbl turntable: 'steps_per_unit' needs 'steps_per_degree'")
-        if "steps_per_degree" in cfg:
-            # motor steps per table degree, and GRBL's own $10x steps per unit
-            # (default: GRBL is set up in degrees, one unit = one degree)
-            if "units_per_degree" in cfg:
-                raise ValueError("grbl turntable: give 'units_per_degree' or 'steps_per_degree', not both")
-            spd = float(cfg["steps_per_degree"])
-            spu = float(cfg.get("steps_per_unit", spd))
-            if spd <= 0 or spu <= 0:
-                raise ValueError("grbl turntable: 'steps_per_degree' and 'steps_per_unit' must be positive")
-            kw["units_per_degree"] = spd / spu
-        for key in ("limits", "tilt_limits"):
-            if key in kw:
-                kw[key] = tuple(kw[key])
-        return cls(kw.pop("port"), **kw)
+    def _another_axis(
+        self, role: str, letter: str, units_per_unit: float, limits: tuple[float, float], unit: str
+    ) -> GrblAxis:
+        """Axis ``letter`` of this controller on this connection (the ``role`` axis: ``"tilt"``, ``"shift"``),
+        opened, closed and locked with this one; ValueError when it is an axis already in use."""
+        for other in (self, *self._others):
+            if str(letter).upper() == other.axis:
+                raise ConfigKeyError(
+                    f"{role}_axis",
+                    f"grbl turntable: {role}_axis must be another axis than {other.axis}, got {letter!r}",
+                )
+        axis = GrblAxis(
+            self.transport.port, baudrate=self.transport.baudrate, axis=str(letter), units_per_unit=units_per_unit,
+            unit=unit, config_prefix=f"{role}_", feed=self.feed, limits=tuple(limits),  # type: ignore[arg-type]
+            reply_timeout=self.reply_timeout, poll_interval=self.poll_interval, move_timeout=self.move_timeout,
+            home_timeout=self.home_timeout, startup_timeout=self.startup_timeout, tolerance=self.tolerance,
+            name=f"{self.name} {role} axis {str(letter).upper()}",
+        )  # fmt: skip
+        axis.transport, axis._lock, axis._shared = self.transport, self._lock, True
+        self._others.append(axis)
+        return axis
 
     # -- life cycle --------------------------------------------------------------
     def open(self) -> None:
-        """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner (the tilt axis: the same
+        """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner (the tilt, the shift axis: the same
         controller's settings and a status report, on the connection its turntable opened)."""
         if self._shared:
             self._device_travel = self._soft_limit_travel()
@@ -296,9 +310,13 @@ class GrblTurntable:
                 self.settings = self.read_settings()
                 self._device_travel = self._soft_limit_travel()
                 self._travel = effective_travel(self.name, self._configured, self._device_travel)
-                if self.tilt is not None:
-                    self.tilt.settings = self.settings
-                    self.tilt.open()
+                for other in self._others:
+                    other.settings = self.settings
+                    try:
+                        other.open()
+                    except DriverError as exc:  # the tilt or shift axis: name its key
+                        exc.config_key = f"{other.config_prefix}axis"
+                        raise
         except Exception:
             self.transport.close()
             raise
@@ -321,7 +339,7 @@ class GrblTurntable:
         if not self._shared:
             self.transport.close()
 
-    def __enter__(self) -> GrblTurntable:
+    def __enter__(self) -> Self:
         self.open()
         return self
 
@@ -385,7 +403,7 @@ class GrblTurntable:
                 feedback.extend(self.messages[n_messages:])
 
     def query_status(self) -> GrblStatus:
-        """Realtime ``?``: ``{"state", "substate", "position" (deg), "fields"}``."""
+        """Realtime ``?``: ``{"state", "substate", "position" (in :attr:`unit`), "fields"}``."""
         with self._lock:
             self._drain()
             self.transport.write(b"?")
@@ -422,7 +440,7 @@ class GrblTurntable:
         return {
             "state": m["state"],
             "substate": int(m["sub"]) if m["sub"] else None,
-            "position": units / self.units_per_degree,
+            "position": units / self.units_per_unit,
             "fields": fields,
             "raw": text,
         }
@@ -456,8 +474,8 @@ class GrblTurntable:
         travel = self.settings.get(130 + idx)
         if not self.settings.get(20) or travel is None:
             return None
-        ends = sorted((-travel / self.units_per_degree, 0.0))
-        return Range(ends[0], ends[1], "°", f"GRBL soft limits $20=1, ${130 + idx}={travel:.3f}")
+        ends = sorted((-travel / self.units_per_unit, 0.0))
+        return Range(ends[0], ends[1], self.unit, f"GRBL soft limits $20=1, ${130 + idx}={travel:.3f}")
 
     # -- Turntable protocol ----------------------------------------------------------
     @property
@@ -470,11 +488,15 @@ class GrblTurntable:
         return self._travel
 
     def device_travel_range(self) -> Range | None:
-        """The soft-limit travel read at ``open()`` in degrees; None when ``$20=0`` (no limits)."""
+        """The soft-limit travel read at ``open()`` in :attr:`unit`; None when ``$20=0`` (no limits)."""
         return self._device_travel
 
     def position(self) -> float:
         return self.query_status()["position"]
+
+    def _show(self, position: float) -> str:
+        """A position in messages: ``45.000°``, ``12.500 mm`` (the status reports 3 decimals)."""
+        return f"{position:.3f}{with_unit(self.unit)}"
 
     def status(self) -> dict[str, Any]:
         st = self.query_status()
@@ -499,25 +521,26 @@ class GrblTurntable:
             self.last_alarm = None
             self._wait_idle(timeout, "home", None)
 
-    def start_move(self, degrees: float) -> float:
+    def start_move(self, position: float) -> float:
         """Queue the move (``ok`` = buffered) and return without waiting."""
-        self._travel.check(self.name, "move to", degrees)
+        self._travel.check(self.name, "move to", position)
         if self.last_alarm is not None:
             raise DeviceFault(
                 f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)}; call recover() (then home())"
             )
-        units = degrees * self.units_per_degree
+        units = position * self.units_per_unit
         cmd = f"G90 G0 {self.axis}{units:.3f}" if self.feed is None else f"G90 G1 {self.axis}{units:.3f} F{self.feed:g}"
         with self._lock:
             self.send(cmd)
-            self._target = round(units, 3) / self.units_per_degree
+            self._target = round(units, 3) / self.units_per_unit
         return self._target
 
-    def move_to(self, degrees: float, timeout: float | None = None) -> float:
+    def move_to(self, position: float, timeout: float | None = None) -> float:
+        """Move to ``position`` (in :attr:`unit`) and wait until idle there; returns the position read back."""
         timeout = self.move_timeout if timeout is None else timeout
         with self._lock:
-            target = self.start_move(degrees)
-            return self._wait_idle(timeout, f"move to {degrees}°", target)
+            target = self.start_move(position)
+            return self._wait_idle(timeout, f"move to {position}{with_unit(self.unit)}", target)
 
     def wait_idle(self, timeout: float | None = None) -> float:
         timeout = self.move_timeout if timeout is None else timeout
@@ -530,10 +553,12 @@ class GrblTurntable:
             state, pos = st["state"], st["position"]
             if state == "Alarm":
                 cause = alarm_text(self.last_alarm) if self.last_alarm else "alarm state"
-                raise DeviceFault(f"{self.name}: {what} failed at {pos:.3f}°: {cause}; use recover()")
+                raise DeviceFault(f"{self.name}: {what} failed at {self._show(pos)}: {cause}; use recover()")
             if state == "Idle":
-                if target is not None and abs(pos - target) > self.tolerance_deg:
-                    raise DeviceFault(f"{self.name}: {what} ended idle at {pos:.3f}°, not at {target:.3f}°")
+                if target is not None and abs(pos - target) > self.tolerance:
+                    raise DeviceFault(
+                        f"{self.name}: {what} ended idle at {self._show(pos)}, not at {self._show(target)}"
+                    )
                 return pos
             if time.monotonic() >= deadline:
                 try:
@@ -541,7 +566,7 @@ class GrblTurntable:
                 finally:
                     raise DeviceTimeout(
                         f"{self.name}: {what} not finished within {timeout:.2f} s"
-                        f" (state {state} at {pos:.3f}°); feed hold + reset sent"
+                        f" (state {state} at {self._show(pos)}); feed hold + reset sent"
                     )
             time.sleep(self.poll_interval)
 
@@ -581,4 +606,100 @@ class GrblTurntable:
             return cleared
 
     def __repr__(self) -> str:
-        return f"GrblTurntable({self.transport.port!r}, axis={self.axis!r})"
+        return f"{type(self).__name__}({self.transport.port!r}, axis={self.axis!r})"
+
+
+class GrblTurntable(GrblAxis):
+    """A turntable on one GRBL axis; satisfies :class:`drivers.protocols.Turntable`.
+
+    Parameters
+    ----------
+    port : str
+        Serial device or pyserial URL.
+    baudrate : int
+        115200 (GRBL 1.1 default).
+    axis : str
+        GRBL axis letter carrying the turntable (``"X"``).
+    units_per_degree : float
+        GRBL units (mm as GRBL sees them) per degree of the table.
+    feed : float or None
+        None: rapid moves ``G0``; else ``G1`` at this feed (units/min).
+    limits : (float, float)
+        Allowed ``move_to`` range in degrees, narrowed at ``open()`` to the
+        soft-limit travel (:class:`~drivers.errors.OutOfRange` outside).
+    reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
+        Seconds.
+    tolerance_deg : float
+        How far from the target an idle axis may be (status has 3 decimals).
+    """
+
+    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
+    """Keys of this driver's configuration section (``driver`` included or implied)."""
+    SETTINGS: Mapping[str, Setting] = SETTINGS
+    """Each key's type, unit and range (:mod:`drivers.settings`)."""
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 115200,
+        axis: str = "X",
+        units_per_degree: float = 1.0,
+        feed: float | None = None,
+        limits: tuple[float, float] = (0.0, 360.0),
+        reply_timeout: float = 1.0,
+        poll_interval: float = 0.05,
+        move_timeout: float = 60.0,
+        home_timeout: float = 120.0,
+        startup_timeout: float = 3.0,
+        tolerance_deg: float = 0.002,
+        name: str | None = None,
+        tilt_axis: str | None = None,
+        tilt_units_per_degree: float = 1.0,
+        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
+        shift_axis: str | None = None,
+        shift_units_per_mm: float = 1.0,
+        shift_limits: tuple[float, float] = SHIFT_LIMITS_MM,
+    ):
+        super().__init__(
+            port, baudrate=baudrate, axis=axis, units_per_unit=units_per_degree, unit="°", feed=feed, limits=limits,
+            reply_timeout=reply_timeout, poll_interval=poll_interval, move_timeout=move_timeout,
+            home_timeout=home_timeout, startup_timeout=startup_timeout, tolerance=tolerance_deg, name=name,
+        )  # fmt: skip
+        self.tilt: GrblAxis | None = None
+        """The tilt axis (``tilt_axis``): another axis of this controller, on this connection, which tilts the
+        calibration board (:class:`drivers.protocols.Tilting`), in degrees; None without one."""
+        if tilt_axis is not None:
+            self.tilt = self._another_axis("tilt", tilt_axis, tilt_units_per_degree, tilt_limits, "°")
+        self.shift: GrblAxis | None = None
+        """The shift axis (``shift_axis``): another axis of this controller, on this connection, a linear stage
+        that carries the turntable sideways (:class:`drivers.protocols.ShiftingTurntable`), in millimetres;
+        None without one."""
+        if shift_axis is not None:
+            self.shift = self._another_axis("shift", shift_axis, shift_units_per_mm, shift_limits, "mm")
+
+    @property
+    def units_per_degree(self) -> float:
+        """GRBL units per degree of the turntable."""
+        return self.units_per_unit
+
+    @classmethod
+    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> GrblTurntable:
+        check_config_keys("grbl turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
+        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "steps_per_unit")}
+        if "steps_per_unit" in cfg and "steps_per_degree" not in cfg:
+            raise ValueError("grbl turntable: 'steps_per_unit' needs 'steps_per_degree'")
+        if "steps_per_degree" in cfg:
+            # motor steps per table degree, and GRBL's own $10x steps per unit
+            # (default: GRBL is set up in degrees, one unit = one degree)
+            if "units_per_degree" in cfg:
+                raise ValueError("grbl turntable: give 'units_per_degree' or 'steps_per_degree', not both")
+            spd = float(cfg["steps_per_degree"])
+            spu = float(cfg.get("steps_per_unit", spd))
+            if spd <= 0 or spu <= 0:
+                raise ValueError("grbl turntable: 'steps_per_degree' and 'steps_per_unit' must be positive")
+            kw["units_per_degree"] = spd / spu
+        for key in ("limits", "tilt_limits", "shift_limits"):
+            if key in kw:
+                kw[key] = tuple(kw[key])
+        return cls(kw.pop("port"), **kw)

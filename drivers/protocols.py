@@ -12,7 +12,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from drivers.errors import OutOfRange
+from drivers.errors import OutOfRange, with_unit
 
 
 @dataclass(frozen=True)
@@ -137,8 +137,7 @@ class Range:
         return 0.0 if self.step is None else 0.5 * self.step
 
     def __str__(self) -> str:
-        sep = "" if self.unit in ("", "°") else " "
-        return f"[{self.minimum:.10g}, {self.maximum:.10g}]{sep}{self.unit}"
+        return f"[{self.minimum:.10g}, {self.maximum:.10g}]{with_unit(self.unit)}"
 
 
 @runtime_checkable
@@ -207,6 +206,17 @@ class Tilting(Protocol):
     stage``): :attr:`drivers.zaber.ZaberTurntable.tilt`."""
 
     tilt: Any
+
+
+@runtime_checkable
+class ShiftingTurntable(Protocol):
+    """A turntable carried sideways by a linear stage (``shift``: an axis of the same controller with the
+    :class:`Turntable`'s methods, ``move_to`` in millimetres of travel; None when the stage has none), so that
+    a session takes its shots about two places of the turntable axis in the image and the harp's own shape
+    separates from the lens (:func:`pipeline.harp_shape.fit_harp_shape`, ``axis_groups``):
+    :attr:`drivers.zaber.ZaberTurntable.shift`, :attr:`drivers.grbl.GrblTurntable.shift`."""
+
+    shift: Any
 
 
 @runtime_checkable

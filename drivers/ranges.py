@@ -1,9 +1,17 @@
-"""The one rule that combines a turntable's configured limits with the travel its device reports."""
+"""The one rule that combines a turntable's configured limits with the travel its device reports, and the
+units of its axes."""
 
 from __future__ import annotations
 
 from drivers.errors import DeviceRejected
 from drivers.protocols import Range
+
+SHIFT_LIMITS_MM = (0.0, 100.0)
+"""A shift axis's positions by default, in mm (a 100 mm linear stage; narrowed to the device's travel at open)."""
+
+UNIT_WORDS = {"°": "degree", "mm": "mm"}
+"""A turntable axis's unit -> the word its configuration keys use (``microsteps_per_degree``,
+``shift_microsteps_per_mm``, ``shift_units_per_mm``)."""
 
 
 def effective_travel(name: str, configured: Range, device: Range | None) -> Range:

@@ -31,8 +31,12 @@ anything is sent (the device would answer ``RJ ... BADDATA``). A device that
 rejects the settings (``RJ``) reports no travel: the configured limits apply.
 
 A second axis of the same device may tilt the calibration board (``tilt_axis``, e.g. 2 on a two-axis
-controller): :attr:`ZaberTurntable.tilt` is that axis, a :class:`ZaberTurntable` of its own on the same
+controller): :attr:`ZaberTurntable.tilt` is that axis, a :class:`ZaberAxis` of its own on the same
 connection (``/1 2 move abs N``, ``/1 2 get pos``; its travel read at ``open()`` as the first axis's).
+Another may be a linear stage that carries the turntable sideways (``shift_axis``, e.g. 3), so that a
+session takes its shots about two places of the turntable axis in the image: :attr:`ZaberTurntable.shift`,
+the same kind of axis with its positions in millimetres (``shift_microsteps_per_mm``; default
+:data:`X_LSM_MICROSTEPS_PER_MM`, ``/1 3 move abs 209974`` for 10 mm).
 
 Errors: ``RJ`` -> :class:`DeviceRejected` (with the reason, e.g. BADDATA);
 a fault flag (``F*``) or an unexpected-limit ``WL`` -> :class:`DeviceFault`
@@ -54,18 +58,29 @@ import threading
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Self
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DeviceFault, DeviceRejected, DeviceTimeout, ProtocolError
+from drivers.errors import (
+    ConfigKeyError,
+    DeviceFault,
+    DeviceRejected,
+    DeviceTimeout,
+    DriverError,
+    ProtocolError,
+    with_unit,
+)
 from drivers.protocols import Range
-from drivers.ranges import effective_travel
+from drivers.ranges import SHIFT_LIMITS_MM, UNIT_WORDS, effective_travel
 from drivers.settings import REQUIRED, Setting
 from drivers.transport import SerialTransport
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0
 TILT_LIMITS_DEG = (0.0, 60.0)
 """The tilt axis's angles by default (a board tilted further hides its corners from the camera)."""
+X_LSM_MICROSTEPS_PER_MM = 1.0 / 0.047625e-3
+"""The shift axis's microsteps per mm by default: 20997.4, a Zaber X-LSM linear stage (0.047625 µm per
+microstep: a 0.6096 mm lead screw, 200 full steps of 64 microsteps per turn)."""
 
 # Warning flags of the Zaber ASCII protocol: F* faults, W* warnings, N* notices.
 WARNING_FLAGS = {
@@ -127,6 +142,13 @@ SETTINGS: dict[str, Setting] = {
                                           "number", "microsteps/deg", 0.0, 1e8, low_open=True),
     "tilt_limits": Setting("[min, max] of the tilt axis's angles (narrowed to its travel at open)", "numbers",
                            "deg", -90.0, 90.0, length=(2, 2)),
+    "shift_axis": Setting("another axis of the same device: a linear stage that carries the turntable sideways "
+                          "between groups of shots; null: none", "integer", "", 1, 9, nullable=True),
+    "shift_microsteps_per_mm": Setting("microsteps per mm of the shift axis (by default a Zaber X-LSM's: "
+                                       "0.047625 µm per microstep)", "number", "microsteps/mm", 0.0, 1e9,
+                                       low_open=True),
+    "shift_limits": Setting("[min, max] of the shift axis's positions (narrowed to its travel at open)", "numbers",
+                            "mm", -10000.0, 10000.0, length=(2, 2)),
 }  # fmt: skip
 """The keys of a Zaber turntable's configuration section, each with its type, unit and range."""
 _CONFIG_KEYS = {"driver", *SETTINGS}
@@ -165,8 +187,10 @@ class ZaberReply:
     raw: str
 
 
-class ZaberTurntable:
-    """Zaber ASCII rotary stage; satisfies :class:`drivers.protocols.Turntable`.
+class ZaberAxis:
+    """One axis of a Zaber ASCII device, its positions in ``unit``: degrees (``"°"``) of a rotary stage or
+    of the calibration board's tilt, millimetres (``"mm"``) of the linear stage that carries the turntable
+    sideways. :class:`ZaberTurntable` is one; its tilt and shift axes are others on its connection.
 
     Parameters
     ----------
@@ -176,12 +200,17 @@ class ZaberTurntable:
         115200 (Zaber default for ASCII).
     device, axis : int
         Device address on the chain and axis number (1, 1).
-    microsteps_per_degree : float
-        Conversion of angles (default: X-RSW60, 1536000/360).
+    microsteps_per_unit : float
+        Microsteps per ``unit`` (per degree, per mm).
     limits : (float, float)
-        Allowed range of ``move_to`` in degrees, narrowed at ``open()`` to
+        Allowed range of ``move_to`` in ``unit``, narrowed at ``open()`` to
         the device's ``limit.min``/``limit.max``; outside it,
         :class:`~drivers.errors.OutOfRange` before anything is sent.
+    unit : str
+        ``"°"`` or ``"mm"``: how positions, ranges and messages are stated.
+    config_prefix : str
+        The prefix of this axis's configuration keys (``""``, ``"tilt_"``, ``"shift_"``), which the
+        messages about a bad scale or bad limits name.
     reply_timeout : float
         Seconds to wait for each reply.
     poll_interval : float
@@ -190,11 +219,6 @@ class ZaberTurntable:
         How far from the target an idle axis may be and count as arrived.
     """
 
-    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
-    """Keys of this driver's configuration section (``driver`` included or implied)."""
-    SETTINGS: Mapping[str, Setting] = SETTINGS
-    """Each key's type, unit and range (:mod:`drivers.settings`)."""
-
     def __init__(
         self,
         port: str,
@@ -202,29 +226,34 @@ class ZaberTurntable:
         baudrate: int = 115200,
         device: int = 1,
         axis: int = 1,
-        microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+        microsteps_per_unit: float = X_RSW60_MICROSTEPS_PER_DEGREE,
         limits: tuple[float, float] = (0.0, 360.0),
+        unit: str = "°",
+        config_prefix: str = "",
         reply_timeout: float = 1.0,
         poll_interval: float = 0.05,
         move_timeout: float = 60.0,
         home_timeout: float = 120.0,
         tolerance_microsteps: int = 1,
         name: str | None = None,
-        tilt_axis: int | None = None,
-        tilt_microsteps_per_degree: float | None = None,
-        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
     ):
-        if microsteps_per_degree <= 0:
-            raise ValueError(f"microsteps_per_degree must be positive, got {microsteps_per_degree}")
+        if unit not in UNIT_WORDS:
+            raise ValueError(f"unit must be one of {', '.join(UNIT_WORDS)}, got {unit!r}")
+        if microsteps_per_unit <= 0:
+            key = f"{config_prefix}microsteps_per_{UNIT_WORDS[unit]}"
+            raise ConfigKeyError(key, f"{key} must be positive, got {microsteps_per_unit}")
         lo, hi = (float(v) for v in limits)
         if not lo < hi:
-            raise ValueError(f"limits must be (min, max) with min < max, got {limits}")
+            key = f"{config_prefix}limits"
+            raise ConfigKeyError(key, f"{key} must be (min, max) with min < max, got {limits}")
         if device < 0 or axis < 0:
             raise ValueError(f"device and axis must be >= 0, got {device}, {axis}")
         self.device = int(device)
         self.axis_number = int(axis)
-        self.microsteps_per_degree = float(microsteps_per_degree)
-        self._configured = Range(lo, hi, "°", "configured limits")
+        self.unit = unit
+        self.config_prefix = config_prefix
+        self.microsteps_per_unit = float(microsteps_per_unit)
+        self._configured = Range(lo, hi, unit, "configured limits")
         self._device_travel: Range | None = None
         self._travel = self._configured
         self.reply_timeout = float(reply_timeout)
@@ -238,41 +267,29 @@ class ZaberTurntable:
         self.infos: list[str] = []
         self._lock = threading.RLock()
         self._target: int | None = None
-        self._shared = False  # an axis on another axis's connection (the tilt axis): opened and closed by it
-        self.tilt: ZaberTurntable | None = None
-        """The tilt axis (``tilt_axis``): another axis of this device, on this connection, which tilts the
-        calibration board (:class:`drivers.protocols.Tilting`); None without one."""
-        if tilt_axis is not None:
-            if int(tilt_axis) == self.axis_number:
-                raise ValueError(f"tilt_axis must be another axis than axis {self.axis_number}, got {tilt_axis}")
-            tilt = ZaberTurntable(
-                port, baudrate=baudrate, device=device, axis=int(tilt_axis),
-                microsteps_per_degree=self.microsteps_per_degree if tilt_microsteps_per_degree is None
-                else float(tilt_microsteps_per_degree),
-                limits=tuple(tilt_limits), reply_timeout=reply_timeout, poll_interval=poll_interval,  # type: ignore[arg-type]
-                move_timeout=move_timeout, home_timeout=home_timeout, tolerance_microsteps=tolerance_microsteps,
-                name=f"{self.name} tilt axis {tilt_axis}",
-            )  # fmt: skip
-            tilt.transport, tilt._lock, tilt._shared = self.transport, self._lock, True
-            self.tilt = tilt
+        self._shared = False  # an axis on another axis's connection (the tilt, the shift axis): opened and closed by it
+        self._others: list[ZaberAxis] = []  # the axes on this one's connection, opened with it
 
-    @classmethod
-    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> ZaberTurntable:
-        check_config_keys("zaber turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
-        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
-        if "device_address" in cfg:
-            if "device" in cfg:
-                raise ValueError("zaber turntable: give 'device' or 'device_address', not both")
-            kw["device"] = int(cfg["device_address"])
-        if "steps_per_degree" in cfg:
-            if "microsteps_per_degree" in cfg:
-                raise ValueError("zaber turntable: give 'microsteps_per_degree' or 'steps_per_degree', not both")
-            kw["microsteps_per_degree"] = cfg["steps_per_degree"]
-        for key in ("limits", "tilt_limits"):
-            if key in kw:
-                kw[key] = tuple(kw[key])
-        port = kw.pop("port")
-        return cls(port, **kw)
+    def _another_axis(
+        self, role: str, number: int, microsteps_per_unit: float, limits: tuple[float, float], unit: str
+    ) -> ZaberAxis:
+        """Axis ``number`` of this device on this connection (the ``role`` axis: ``"tilt"``, ``"shift"``),
+        opened, closed and locked with this one; ValueError when it is an axis already in use."""
+        for other in (self, *self._others):
+            if int(number) == other.axis_number:
+                raise ConfigKeyError(
+                    f"{role}_axis", f"{role}_axis must be another axis than axis {other.axis_number}, got {number}"
+                )
+        axis = ZaberAxis(
+            self.transport.port, baudrate=self.transport.baudrate, device=self.device, axis=int(number),
+            microsteps_per_unit=microsteps_per_unit, limits=tuple(limits), unit=unit,  # type: ignore[arg-type]
+            config_prefix=f"{role}_", reply_timeout=self.reply_timeout, poll_interval=self.poll_interval,
+            move_timeout=self.move_timeout, home_timeout=self.home_timeout, tolerance_microsteps=self.tolerance,
+            name=f"{self.name} {role} axis {number}",
+        )  # fmt: skip
+        axis.transport, axis._lock, axis._shared = self.transport, self._lock, True
+        self._others.append(axis)
+        return axis
 
     # -- life cycle -----------------------------------------------------------
     def open(self) -> None:
@@ -283,12 +300,16 @@ class ZaberTurntable:
             if not reply.ok:  # warnings do not stop opening: recover() needs an open port
                 raise DeviceRejected(f"{self.name}: status request rejected: {reply.raw!r}")
             self._target = None
-            if self._shared:  # the tilt axis: is it there? (a one-axis device answers RJ ... BADAXIS)
+            if self._shared:  # the tilt or shift axis: is it there? (a one-axis device answers RJ ... BADAXIS)
                 self._check(self.command("get pos"), "get pos", fault=False)
             self._device_travel = self._read_device_travel()
             self._travel = effective_travel(self.name, self._configured, self._device_travel)
-            if self.tilt is not None:
-                self.tilt.open()
+            for other in self._others:
+                try:
+                    other.open()
+                except DriverError as exc:  # the tilt or shift axis: name its key
+                    exc.config_key = f"{other.config_prefix}axis"
+                    raise
         except Exception:
             if not self._shared:
                 self.transport.close()
@@ -298,7 +319,7 @@ class ZaberTurntable:
         if not self._shared:
             self.transport.close()
 
-    def __enter__(self) -> ZaberTurntable:
+    def __enter__(self) -> Self:
         self.open()
         return self
 
@@ -387,11 +408,17 @@ class ZaberTurntable:
         return reply
 
     # -- conversions -------------------------------------------------------------
-    def to_microsteps(self, degrees: float) -> int:
-        return int(round(degrees * self.microsteps_per_degree))
+    def to_microsteps(self, position: float) -> int:
+        """A position in :attr:`unit` (degrees, mm) as the nearest microstep."""
+        return int(round(position * self.microsteps_per_unit))
 
-    def to_degrees(self, microsteps: int) -> float:
-        return microsteps / self.microsteps_per_degree
+    def to_units(self, microsteps: int) -> float:
+        """A position in microsteps in :attr:`unit` (degrees, mm)."""
+        return microsteps / self.microsteps_per_unit
+
+    def _show(self, position: float) -> str:
+        """A position in messages: ``45.0000°``, ``12.5000 mm``."""
+        return f"{position:.4f}{with_unit(self.unit)}"
 
     # -- Turntable protocol ----------------------------------------------------
     @property
@@ -400,11 +427,11 @@ class ZaberTurntable:
         return (self._travel.minimum, self._travel.maximum)
 
     def travel_range(self) -> Range:
-        """The angles ``move_to`` accepts: the configured limits within the device's travel."""
+        """The positions ``move_to`` accepts (in :attr:`unit`): the configured limits within the device's travel."""
         return self._travel
 
     def device_travel_range(self) -> Range | None:
-        """``limit.min`` .. ``limit.max`` as read at ``open()``, in degrees (None if not reported)."""
+        """``limit.min`` .. ``limit.max`` as read at ``open()``, in :attr:`unit` (None if not reported)."""
         return self._device_travel
 
     def _read_device_travel(self) -> Range | None:
@@ -414,13 +441,14 @@ class ZaberTurntable:
             if not reply.ok:
                 return None  # no such setting on this device: only the configured limits apply
             try:
-                values.append(self.to_degrees(int(reply.data)))
+                values.append(self.to_units(int(reply.data)))
             except ValueError:
                 raise ProtocolError(f"{self.name}: {setting} is not an integer: {reply.raw!r}") from None
         lo, hi = values
         if not lo < hi:
-            raise ProtocolError(f"{self.name}: device reports limit.min {lo:g}° >= limit.max {hi:g}°")
-        return Range(lo, hi, "°", "device limit.min/limit.max")
+            u = with_unit(self.unit)
+            raise ProtocolError(f"{self.name}: device reports limit.min {lo:g}{u} >= limit.max {hi:g}{u}")
+        return Range(lo, hi, self.unit, "device limit.min/limit.max")
 
     def _get_pos(self, fault: bool = True) -> ZaberReply:
         reply = self._check(self.command("get pos"), "get pos", fault)
@@ -431,7 +459,7 @@ class ZaberTurntable:
         return reply
 
     def position(self) -> float:
-        return self.to_degrees(int(self._get_pos(fault=False).data))
+        return self.to_units(int(self._get_pos(fault=False).data))
 
     def home(self, timeout: float | None = None) -> None:
         timeout = self.home_timeout if timeout is None else timeout
@@ -440,23 +468,24 @@ class ZaberTurntable:
             self._target = None
             self._wait_idle(timeout, "home", target=None)
 
-    def start_move(self, degrees: float) -> int:
-        """Send ``move abs`` and return the target in microsteps, without waiting."""
-        self._travel.check(self.name, "move to", degrees)
-        steps = self.to_microsteps(degrees)
+    def start_move(self, position: float) -> int:
+        """Send ``move abs`` and return the target in microsteps, without waiting (``position`` in :attr:`unit`)."""
+        self._travel.check(self.name, "move to", position)
+        steps = self.to_microsteps(position)
         with self._lock:
             self._check(self.command(f"move abs {steps}"), f"move abs {steps}")
             self._target = steps
         return steps
 
-    def move_to(self, degrees: float, timeout: float | None = None) -> float:
+    def move_to(self, position: float, timeout: float | None = None) -> float:
+        """Move to ``position`` (in :attr:`unit`) and wait until idle there; returns the position read back."""
         timeout = self.move_timeout if timeout is None else timeout
         with self._lock:
-            steps = self.start_move(degrees)
-            return self._wait_idle(timeout, f"move to {degrees}°", target=steps)
+            steps = self.start_move(position)
+            return self._wait_idle(timeout, f"move to {position}{with_unit(self.unit)}", target=steps)
 
     def wait_idle(self, timeout: float | None = None) -> float:
-        """Wait until the axis stops (at the last target, if any); returns degrees."""
+        """Wait until the axis stops (at the last target, if any); returns the position in :attr:`unit`."""
         timeout = self.move_timeout if timeout is None else timeout
         return self._wait_idle(timeout, "wait", target=self._target)
 
@@ -467,24 +496,24 @@ class ZaberTurntable:
             pos = int(reply.data)
             if reply.warning != "--" and is_fatal(reply.warning):
                 raise DeviceFault(
-                    f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}°:"
+                    f"{self.name}: {what} stopped at {self._show(self.to_units(pos))}:"
                     f" warning {describe_flag(reply.warning)};"
                     f" clear it with clear_warnings() / recover()"
                 )
             if not reply.busy:
                 if target is not None and abs(pos - target) > self.tolerance:
                     raise DeviceFault(
-                        f"{self.name}: {what} stopped at {self.to_degrees(pos):.4f}° short of the target"
-                        f" {self.to_degrees(target):.4f}° (warning {reply.warning})"
+                        f"{self.name}: {what} stopped at {self._show(self.to_units(pos))} short of the target"
+                        f" {self._show(self.to_units(target))} (warning {reply.warning})"
                     )
-                return self.to_degrees(pos)
+                return self.to_units(pos)
             if time.monotonic() >= deadline:
                 try:
                     self.stop()
                 finally:
                     raise DeviceTimeout(
                         f"{self.name}: {what} not finished within {timeout:.2f} s"
-                        f" (at {self.to_degrees(pos):.4f}°); stage stopped"
+                        f" (at {self._show(self.to_units(pos))}); stage stopped"
                     )
             time.sleep(self.poll_interval)
 
@@ -527,9 +556,114 @@ class ZaberTurntable:
             "busy": reply.busy,
             "warnings": flags,
             "descriptions": [describe_flag(f) for f in flags],
-            "position": self.to_degrees(int(reply.data)),
+            "position": self.to_units(int(reply.data)),
             "fault": any(is_fatal(f) for f in flags),
         }
 
     def __repr__(self) -> str:
-        return f"ZaberTurntable({self.transport.port!r}, device={self.device}, axis={self.axis_number})"
+        return f"{type(self).__name__}({self.transport.port!r}, device={self.device}, axis={self.axis_number})"
+
+
+class ZaberTurntable(ZaberAxis):
+    """Zaber ASCII rotary stage; satisfies :class:`drivers.protocols.Turntable`, with the optional tilt
+    (:class:`drivers.protocols.Tilting`) and shift (:class:`drivers.protocols.ShiftingTurntable`) axes.
+
+    Parameters
+    ----------
+    port : str
+        Serial device or pyserial URL.
+    baudrate : int
+        115200 (Zaber default for ASCII).
+    device, axis : int
+        Device address on the chain and axis number (1, 1).
+    microsteps_per_degree : float
+        Conversion of angles (default: X-RSW60, 1536000/360).
+    limits : (float, float)
+        Allowed range of ``move_to`` in degrees, narrowed at ``open()`` to
+        the device's ``limit.min``/``limit.max``; outside it,
+        :class:`~drivers.errors.OutOfRange` before anything is sent.
+    reply_timeout : float
+        Seconds to wait for each reply.
+    poll_interval : float
+        Seconds between ``get pos`` polls while waiting for a move.
+    tolerance_microsteps : int
+        How far from the target an idle axis may be and count as arrived.
+    tilt_axis, tilt_microsteps_per_degree, tilt_limits
+        The axis that tilts the calibration board (:attr:`tilt`), its microsteps per degree (default:
+        the turntable's) and its angles (default :data:`TILT_LIMITS_DEG`).
+    shift_axis, shift_microsteps_per_mm, shift_limits
+        The linear axis that carries the turntable sideways (:attr:`shift`), its microsteps per mm
+        (default :data:`X_LSM_MICROSTEPS_PER_MM`) and its positions in mm (default
+        :data:`SHIFT_LIMITS_MM`).
+    """
+
+    CONFIG_KEYS: frozenset[str] = frozenset(_CONFIG_KEYS)
+    """Keys of this driver's configuration section (``driver`` included or implied)."""
+    SETTINGS: Mapping[str, Setting] = SETTINGS
+    """Each key's type, unit and range (:mod:`drivers.settings`)."""
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = 115200,
+        device: int = 1,
+        axis: int = 1,
+        microsteps_per_degree: float = X_RSW60_MICROSTEPS_PER_DEGREE,
+        limits: tuple[float, float] = (0.0, 360.0),
+        reply_timeout: float = 1.0,
+        poll_interval: float = 0.05,
+        move_timeout: float = 60.0,
+        home_timeout: float = 120.0,
+        tolerance_microsteps: int = 1,
+        name: str | None = None,
+        tilt_axis: int | None = None,
+        tilt_microsteps_per_degree: float | None = None,
+        tilt_limits: tuple[float, float] = TILT_LIMITS_DEG,
+        shift_axis: int | None = None,
+        shift_microsteps_per_mm: float = X_LSM_MICROSTEPS_PER_MM,
+        shift_limits: tuple[float, float] = SHIFT_LIMITS_MM,
+    ):
+        super().__init__(
+            port, baudrate=baudrate, device=device, axis=axis, microsteps_per_unit=microsteps_per_degree,
+            limits=limits, unit="°", reply_timeout=reply_timeout, poll_interval=poll_interval,
+            move_timeout=move_timeout, home_timeout=home_timeout, tolerance_microsteps=tolerance_microsteps,
+            name=name,
+        )  # fmt: skip
+        self.tilt: ZaberAxis | None = None
+        """The tilt axis (``tilt_axis``): another axis of this device, on this connection, which tilts the
+        calibration board (:class:`drivers.protocols.Tilting`), in degrees; None without one."""
+        if tilt_axis is not None:
+            scale = (
+                self.microsteps_per_unit if tilt_microsteps_per_degree is None else float(tilt_microsteps_per_degree)
+            )
+            self.tilt = self._another_axis("tilt", tilt_axis, scale, tilt_limits, "°")
+        self.shift: ZaberAxis | None = None
+        """The shift axis (``shift_axis``): another axis of this device, on this connection, a linear stage
+        that carries the turntable sideways (:class:`drivers.protocols.ShiftingTurntable`), in millimetres;
+        None without one."""
+        if shift_axis is not None:
+            self.shift = self._another_axis("shift", shift_axis, shift_microsteps_per_mm, shift_limits, "mm")
+
+    @property
+    def microsteps_per_degree(self) -> float:
+        """Microsteps per degree of the turntable."""
+        return self.microsteps_per_unit
+
+    @classmethod
+    def from_config(cls, cfg: dict[str, Any], **ctx: Any) -> ZaberTurntable:
+        check_config_keys("zaber turntable", cfg, SETTINGS, {"port": "device name or pyserial URL"})
+        kw = {k: v for k, v in cfg.items() if k not in ("driver", "steps_per_degree", "device_address")}
+        if "device_address" in cfg:
+            if "device" in cfg:
+                raise ValueError("zaber turntable: give 'device' or 'device_address', not both")
+            kw["device"] = int(cfg["device_address"])
+        if "steps_per_degree" in cfg:
+            if "microsteps_per_degree" in cfg:
+                raise ValueError("zaber turntable: give 'microsteps_per_degree' or 'steps_per_degree', not both")
+            kw["microsteps_per_degree"] = cfg["steps_per_degree"]
+        for key in ("limits", "tilt_limits", "shift_limits"):
+            if key in kw:
+                kw[key] = tuple(kw[key])
+        port = kw.pop("port")
+        return cls(port, **kw)

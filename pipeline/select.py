@@ -34,7 +34,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -151,6 +151,8 @@ def select_model(
     stop_factor: float | None = STOP_FACTOR,
     map_fn: Callable[..., Iterable[CVRow]] = map,
     turntable_deg: Sequence[float] | None = None,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
     **fit_kw: Any,
 ) -> Selection:
     r"""Choose model and degree by cross-validation over the shots.
@@ -200,6 +202,9 @@ def select_model(
     flexible_margin_se : tier 1's bar for a flexible candidate, in paired standard errors.
     warm_start, stop_factor, map_fn : see :func:`cross_validate`.
     turntable_deg : each shot's turntable angle (degrees), when known: the folds with the strings separated.
+    axis_groups, axis_shifts : with ``turntable_deg``, each shot's turntable-axis group and the groups' rough
+        image shifts (px) when the harp was moved with its turntable between groups of shots
+        (:func:`pipeline.harp_shape.fit_harp_shape`); only the folds with the strings separated use them.
 
     Returns
     -------
@@ -223,7 +228,7 @@ def select_model(
     if turntable_deg is not None and mode_now == "images" and not unseparated:
         return _select_separated(
             lines_per_image, turntable_deg, width, height, candidates, n_se, flexible_margin_se,
-            stop_factor=stop_factor, map_fn=map_fn, **fit_kw,
+            stop_factor=stop_factor, map_fn=map_fn, axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
         )  # fmt: skip
     candidates, set_aside = _supported_when_unchecked(candidates, lines_per_image, mode_now)
     candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, mode_now)
@@ -332,13 +337,16 @@ def _select_separated(
     *,
     stop_factor: float | None,
     map_fn: Callable[..., Iterable[Any]],
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
     **fit_kw: Any,
 ) -> Selection:
     """The choice of :func:`select_model` when the turntable angles are known (its docstring)."""
     candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, "images")
     table = cross_validate_separated(
-        lines_per_image, turntable_deg, width, height, candidates, stop_factor=stop_factor, map_fn=map_fn, **fit_kw
-    )
+        lines_per_image, turntable_deg, width, height, candidates, stop_factor=stop_factor, map_fn=map_fn,
+        axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
+    )  # fmt: skip
     ok = [r for r in table if np.isfinite(r.cv_d)]
     if not ok:
         return _nothing_cross_validated(table, " with the strings separated")

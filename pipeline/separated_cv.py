@@ -32,7 +32,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -90,7 +90,7 @@ class HeldOutStrings:
 
 
 def held_out_without_strings(
-    fit: HarpShapeFit, lines: Sequence[NDArray[np.float64]], turntable_deg: float
+    fit: HarpShapeFit, lines: Sequence[NDArray[np.float64]], turntable_deg: float, group: Hashable | None = None
 ) -> HeldOutStrings:
     r"""The residuals of a held-out shot's edges (distorted pixels) corrected by ``fit.model``, each moved
     back by its string's deviation as ``fit`` fitted it (module docstring).
@@ -101,12 +101,16 @@ def held_out_without_strings(
     :math:`q_k` is nearest to the edge's median :math:`q`, within :data:`MATCH_PITCHES` pitches. The
     deviation is evaluated over the stretch of ``u`` where the fold saw the string and held at its end
     value beyond it (a polynomial is not extrapolated). Every edge's residual is its distance from its own
-    total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure.
+    total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure. A shot of axis
+    group ``group`` (the harp moved with its turntable between groups, ``fit_harp_shape(axis_groups=...)``)
+    is placed in that group's frame; a group the fit did not see leaves every edge unmatched.
     """
     pts = held_out_edges(lines)
     if not pts:
         return HeldOutStrings(np.zeros(0), np.zeros(0, dtype=np.int64), 0, 0, 0)
-    frame = fit.frame
+    frame = fit.frame if group is None else dict(fit.axis_groups).get(group)
+    if frame is None:
+        return _unmatched([fit.model.undistort_points(p) for p in pts])
     d, n = frame.direction(float(turntable_deg)), frame.normal(float(turntable_deg))
     c = np.asarray(frame.centre)
     offsets = np.array([s.offset_px for s in fit.strings])
@@ -134,17 +138,29 @@ def held_out_without_strings(
     return HeldOutStrings(r, counts, removed, without, unmatched)
 
 
+def _unmatched(pts: list[Floats]) -> HeldOutStrings:
+    """Every edge of a held-out shot (corrected points) left as it is, none matched to a string."""
+    counts = np.array([len(p) for p in pts], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+    r = tls(np.concatenate(pts), starts, counts)[0]
+    return HeldOutStrings(r, counts, 0, 0, len(pts))
+
+
 # ------------------------------------------------------------------ the CV table
-Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any]]
+Groups = tuple[tuple[Hashable, ...], dict[Hashable, tuple[float, ...]] | None] | None
+"""Each shot's axis group and the groups' rough shifts (``fit_harp_shape(axis_groups=, axis_shifts=)``), or
+None: one turntable axis."""
+Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any], Groups]
 
 
 def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> tuple[Any, Any]:
     """A candidate's fit on all shots, alone and with the strings separated (either may be a failure)."""
-    width, height, angles, _, fit_kw = settings
+    width, height, angles, _, fit_kw, groups = settings
     plain = fit_distortion(lines, width, height, **cand.fit_arguments(), **fit_kw)
     if not plain:
         return plain, plain
-    return plain, try_fit_harp_shape(lines, angles, width, height, cand, plain)
+    labels, shifts = groups or (None, None)
+    return plain, try_fit_harp_shape(lines, angles, width, height, cand, plain, axis_groups=labels, axis_shifts=shifts)
 
 
 def _first_pass(job: tuple[FitSpec, list[list[Floats]], Settings, bool]) -> Any:
@@ -160,7 +176,8 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     stopped as :func:`pipeline.cross_validation.cross_validate` stops one (its joint fit on all shots, or its
     held-out residuals so far, already beyond ``stop_factor`` times the reference's CV mean square)."""
     cand, lines, ref_mse, settings, (plain, joint) = job
-    width, height, angles, stop_factor, fit_kw = settings
+    width, height, angles, stop_factor, fit_kw, groups = settings
+    labels, shifts = groups or (None, None)
     size = n_params(cand, width, height)
     full = plain if plain else None
     if not plain or not joint:
@@ -185,11 +202,18 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     for h in range(len(lines)):
         train = [s for i, s in enumerate(lines) if i != h]
         train_angles = [a for i, a in enumerate(angles) if i != h]
+        train_groups = None if labels is None else [g for i, g in enumerate(labels) if i != h]
         fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
-        fold = try_fit_harp_shape(train, train_angles, width, height, cand, fold_plain) if fold_plain else fold_plain
+        fold = (
+            try_fit_harp_shape(
+                train, train_angles, width, height, cand, fold_plain, axis_groups=train_groups, axis_shifts=shifts
+            )
+            if fold_plain
+            else fold_plain
+        )
         if not fold:
             return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
-        held = held_out_without_strings(fold, lines[h], angles[h])
+        held = held_out_without_strings(fold, lines[h], angles[h], None if labels is None else labels[h])
         removed += held.removed
         left += held.without_terms + held.unmatched
         res.append(held.residuals)
@@ -230,6 +254,8 @@ def cross_validate_separated(
     *,
     stop_factor: float | None = STOP_FACTOR,
     map_fn: Callable[..., Iterable[Any]] = map,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
     **fit_kw: Any,
 ) -> tuple[CVRow, ...]:
     """The CV table of ``candidates``, each fold fitted with the strings separated on all shots but one and
@@ -246,6 +272,9 @@ def cross_validate_separated(
         held-out residuals so far, exceed this many times the reference's CV mean square; None: never.
     map_fn : a ``map`` over the candidates (a process pool's; the table does not depend on it), called twice:
         the reference's row with the others' fits on all shots, then the others' folds.
+    axis_groups, axis_shifts : each shot's axis group and the groups' rough shifts, px, when the harp was moved
+        with its turntable between groups (:func:`pipeline.harp_shape.fit_harp_shape`); each fold and the
+        held-out shot are placed in their group's frame.
     fit_kw : passed to :func:`pipeline.fit.fit_distortion`.
 
     Returns
@@ -261,7 +290,14 @@ def cross_validate_separated(
     if len(lines_per_image) < 3:
         raise ValueError(f"leave-one-shot-out folds with the strings separated need 3 shots or more, got {len(lines_per_image)}")  # fmt: skip
     lines = [[np.asarray(p, dtype=np.float64) for p in s] for s in lines_per_image]
-    settings: Settings = (width, height, tuple(float(a) for a in turntable_deg), stop_factor, dict(fit_kw))
+    if axis_groups is not None and len(axis_groups) != len(lines_per_image):
+        raise ValueError(f"{len(lines_per_image)} shots but {len(axis_groups)} axis groups")
+    groups: Groups = (
+        None
+        if axis_groups is None
+        else (tuple(axis_groups), None if axis_shifts is None else {g: tuple(v) for g, v in axis_shifts.items()})
+    )
+    settings: Settings = (width, height, tuple(float(a) for a in turntable_deg), stop_factor, dict(fit_kw), groups)
     first = FALLBACK if FALLBACK in candidates else candidates[0]
     order = sorted((c for c in candidates if c != first), key=lambda c: -n_params(c, width, height))
     made = list(map_fn(_first_pass, [(c, lines, settings, c == first) for c in [first, *order]]))

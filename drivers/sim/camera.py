@@ -99,6 +99,16 @@ on the sensor) times a back-light ``1 + backlight_gradient * h_x / R0`` in the h
 (:math:`R_0` the half diagonal), which turns with the harp
 (:func:`pipeline.render_colour.backlit_shading`), times the exposure scale.
 
+The turntable carried sideways (issue 19: a linear stage under the turntable, the world's
+:meth:`~drivers.sim.world.SimWorld.shift_at`). At a shift of ``s`` mm at the exposure time the harp turns
+about the turntable axis moved by :meth:`~drivers.sim.world.SimWorld.shift_offset_px`, ``s`` times the
+world's ``shift_px_per_mm`` in its ``shift_direction_deg``: the clean renderer's strings move by that
+offset along their normal (``phase_px``), the realistic harp's mount centre by the offset (its strings keep
+their shapes about the moved axis). Vignetting, dust and the sensor stay where they are; the colour
+renderer's back-light and the board views are not moved. The frame records ``shift_mm`` and
+``axis_offset_px`` in ``extra["sim"]`` (when a linear axis drives the world), and its noise seed includes
+the shift when it is not 0; without a linear axis, or at 0, every frame is the one it was without it.
+
 Faults for station tests: :meth:`~SimulatedCamera.fail_next`.
 """
 
@@ -162,7 +172,9 @@ _TIMEOUT_WAIT_S = 0.05  # an injected timeout waits min(timeout, this) before ra
 _SCENE_KEYS = tuple(SCENE_SETTINGS)
 
 
-def noise_seed(seed: int, focus: float, angle_deg: float, index: int, zoom: float | None = None) -> int:
+def noise_seed(
+    seed: int, focus: float, angle_deg: float, index: int, zoom: float | None = None, shift_mm: float | None = None
+) -> int:
     """Noise seed of the ``index``-th capture at a pose (focus, string angle).
 
     A 64-bit hash of ``seed``, ``focus`` (to 1e-6), the string angle (to
@@ -174,11 +186,14 @@ def noise_seed(seed: int, focus: float, angle_deg: float, index: int, zoom: floa
     key = f"{int(seed)}|{round(float(focus), 6):.6f}|{angle:.3f}|{int(index)}".encode()
     if zoom is not None:  # a zoom lens's frames differ by focal length too (the fixed lens's are unchanged)
         key += f"|z{round(float(zoom), 6):.6f}".encode()
+    if shift_mm:  # so do frames with the turntable carried sideways (at 0 mm: unchanged)
+        key += f"|s{round(float(shift_mm), 6):.6f}".encode()
     return int.from_bytes(hashlib.sha256(key).digest()[:8], "little")
 
 
-def _pose(focus: float, angle_deg: float) -> tuple[float, float]:
-    return round(float(focus), 6), round(float(angle_deg) % 180.0, 3) % 180.0
+def _pose(focus: float, angle_deg: float, shift_mm: float | None = None) -> tuple[float, ...]:
+    pose = (round(float(focus), 6), round(float(angle_deg) % 180.0, 3) % 180.0)
+    return pose + (round(float(shift_mm), 6),) if shift_mm else pose
 
 
 class SimulatedCamera:
@@ -311,7 +326,7 @@ class SimulatedCamera:
         self._gain = _GAIN.check(self.name, "gain", gain_db)
         self._open = False
         self._counter = 0
-        self._pose_counts: dict[tuple[float, float], int] = {}
+        self._pose_counts: dict[tuple[float, ...], int] = {}
         self._next_index: int | None = None
         self._faults: deque[str] = deque()
         #: the :class:`pipeline.render.Rendered` (clean) or :class:`pipeline.realism.Shot` (realistic)
@@ -606,10 +621,10 @@ class SimulatedCamera:
             raise ValueError(f"capture index must be a non-negative integer, got {index!r}")
         self._next_index = int(index)
 
-    def _index_at(self, focus: float, angle_deg: float) -> int:
+    def _index_at(self, focus: float, angle_deg: float, shift_mm: float | None = None) -> int:
         if self._next_index is not None:
             return self._next_index
-        return self._pose_counts.get(_pose(focus, angle_deg), 0)
+        return self._pose_counts.get(_pose(focus, angle_deg, shift_mm), 0)
 
     def render(
         self,
@@ -617,6 +632,7 @@ class SimulatedCamera:
         angle_deg: float | None = None,
         focus: float | None = None,
         stage_deg: float | None = None,
+        shift_mm: float | None = None,
     ) -> Rendered | Shot:
         """Render what the camera sees (no fault, no counter change).
 
@@ -625,27 +641,34 @@ class SimulatedCamera:
         is the capture index at the pose, which selects the noise. A realistic
         camera (``realism_seed``) renders the harp at stage angle ``stage_deg``
         (default: ``angle_deg`` minus the harp offset, or the world's stage now).
+        ``shift_mm``: the linear stage's position (module doc; default: the world's now, None without one).
         """
         w, h = self._size
+        now = time.monotonic()
         if stage_deg is None and angle_deg is None:
-            stage_deg = self.world.stage_at()
+            stage_deg = self.world.stage_at(now)
+        if shift_mm is None:
+            shift_mm = self.world.shift_at(now)
+        axis_px = self._axis_offset(shift_mm)
         if angle_deg is None:
             assert stage_deg is not None
             angle_deg = (stage_deg + self.world.harp_offset_deg) % 180.0
         focus = self.world.focus if focus is None else focus
-        index = self._index_at(focus, angle_deg) if index is None else int(index)
+        index = self._index_at(focus, angle_deg, shift_mm) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
+        seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom, shift_mm)
         if self.realism is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
-            seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom)
-            return self._render_realistic(stage, focus, seed, gain_lin)
+            return self._render_realistic(stage, focus, seed, gain_lin, axis_px)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
+        if axis_px is not None:  # the strings turn about the moved axis: each moves by the offset along its normal
+            nx, ny = scene.normal
+            scene = dataclasses.replace(scene, phase_px=scene.phase_px + axis_px[0] * nx + axis_px[1] * ny)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
         lens = self.lens_at(focus)
         if self.cfa is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
-            seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom)
             colour: Rendered = self._render_colour(scene, lens, stage + self.world.harp_offset_deg, seed, gain_lin)
             return colour  # a RenderedColour: image and scene as a Rendered's
         return render_harp(
@@ -657,7 +680,7 @@ class SimulatedCamera:
             noise_sigma=self.noise_sigma,
             shot_noise=self.shot_noise,
             bit_depth=self._bit_depth,
-            seed=noise_seed(self.seed, focus, angle_deg, index, self.world.zoom),
+            seed=seed,
             exposure=self.exposure_scale(),
             electrons_per_level=self.electrons_per_level / gain_lin,
         )
@@ -686,7 +709,20 @@ class SimulatedCamera:
             electrons_per_level=self.electrons_per_level / gain_lin, bit_depth=self._bit_depth, seed=seed,
         )  # fmt: skip
 
-    def _render_realistic(self, stage_deg: float, focus: float, seed: int, gain_lin: float) -> Shot:
+    def _axis_offset(self, shift_mm: float | None) -> tuple[float, float] | None:
+        """Where the linear stage at ``shift_mm`` has moved the turntable axis in the image (px,
+        :meth:`SimWorld.axis_offset_px`), None when it has not (no linear axis, or at 0: the frame is the one
+        without it); DriverError when the world cannot say (no ``shift_px_per_mm``)."""
+        if not shift_mm:
+            return None
+        try:
+            return self.world.axis_offset_px(shift_mm)
+        except ValueError as exc:
+            raise DriverError(f"{self.name}: {exc}") from None
+
+    def _render_realistic(
+        self, stage_deg: float, focus: float, seed: int, gain_lin: float, axis_px: tuple[float, float] | None = None
+    ) -> Shot:
         """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
         from pipeline.harp_scene import HarpMount  # defers pipeline.harp_scene
         from pipeline.realism import raw_ideal_grid, render_shot  # defers pipeline.realism
@@ -708,7 +744,8 @@ class SimulatedCamera:
             )
         effects = dataclasses.replace(eff, sensor=sensor, development=development, blur=blur)
         m = self.realism.mount
-        mount = HarpMount(m.centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
+        centre = m.centre if axis_px is None else (m.centre[0] + axis_px[0], m.centre[1] + axis_px[1])
+        mount = HarpMount(centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
         lens = self.lens_at(focus)
         ideal = None
         if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
@@ -744,14 +781,14 @@ class SimulatedCamera:
         stamp = time.time()
         # the world at the moment of this exposure (the stage: the emulator's motion at that time)
         now = time.monotonic()
-        stage = self.world.stage_at(now)
+        stage, shift = self.world.stage_at(now), self.world.shift_at(now)
         offset, focus = self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
-        index = self._index_at(focus, angle)
-        seed = noise_seed(self.seed, focus, angle, index)
+        index = self._index_at(focus, angle, shift)
+        seed = noise_seed(self.seed, focus, angle, index, shift_mm=shift)
         if self.board is not None:
             return self._board_frame(stage, focus, index, seed, stamp, self.world.tilt_at(now))
-        r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage)
+        r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage, shift_mm=shift)
         self.last_rendered = r
         image = r.image
         lens_doc = cast(Any, r).lenses["G"].to_dict() if self.cfa is not None else r.lens.to_dict()
@@ -767,6 +804,9 @@ class SimulatedCamera:
         }
         if self.realism_seed is not None:
             sim["realism_seed"] = self.realism_seed
+        if shift is not None:  # a linear axis carries the turntable: where it was, and where it put the axis
+            sim["shift_mm"] = shift
+            sim["axis_offset_px"] = list(self._axis_offset(shift) or (0.0, 0.0))
         extra: dict[str, Any] = {"sim": sim}
         if self.cfa is not None:
             extra["cfa"] = self.cfa  # a raw mosaic: its pattern (the live page, the session's colour)
@@ -789,7 +829,7 @@ class SimulatedCamera:
             extra=extra,
         )
         self._counter += 1
-        pose = _pose(focus, angle)
+        pose = _pose(focus, angle, shift)
         self._pose_counts[pose] = max(self._pose_counts.get(pose, 0), index + 1)
         self._next_index = None
         return frame

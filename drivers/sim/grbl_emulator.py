@@ -30,7 +30,9 @@ GRBL's ``system_check_travel_limits``: a target outside machine
 With ``tilt_axis`` (e.g. ``"Y"``) a second axis tilts the calibration board, in degrees (``G90 G0 Y30.000``;
 its position in the status report's ``MPos``; homed with the turntable by ``$H``; blocks of both axes run
 one after another, as GRBL's planner runs them; not soft-limited here), and drives the simulated world's
-board tilt.
+board tilt. With ``shift_axis`` (e.g. ``"Z"``) another axis is the linear stage that carries the turntable
+sideways, in mm (1 unit = 1 mm: ``G90 G0 Z12.500``; ``$13x`` = :data:`SHIFT_TRAVEL_MM`; at
+``shift_speed_mm_s``), the same way, and drives the world's shift (:meth:`SimWorld.drive_shift`).
 
 Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 ``"no_reply"``, ``"garbage"``, ``"alarm"`` (hard limit ``ALARM:1`` at
@@ -54,6 +56,8 @@ if TYPE_CHECKING:
 BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
 TILT_TRAVEL_DEG = 90.0
 """The tilt axis's ``$13x`` (``tilt_axis``)."""
+SHIFT_TRAVEL_MM = 100.0
+"""The shift axis's ``$13x`` (``shift_axis``), mm."""
 UNLOCK_MSG = b"[MSG:'$H'|'$X' to unlock]\r\n"
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
@@ -103,16 +107,25 @@ class GrblEmulator(LineEmulator):
         axis: str = "X",
         seed: int = 0,
         tilt_axis: str | None = None,
+        shift_axis: str | None = None,
+        shift_speed_mm_s: float = 100.0,
+        shift_accel_mm_s2: float = 1000.0,
     ):
         super().__init__(world, seed)
         axis = str(axis).upper()
         if axis not in "XYZA" or len(axis) != 1:
             raise ValueError(f"GRBL emulator axis must be X, Y, Z or A, got {axis!r}")
-        tilt_letter = None if tilt_axis is None else str(tilt_axis).upper()
-        if tilt_letter is not None and (tilt_letter not in "XYZA" or len(tilt_letter) != 1 or tilt_letter == axis):
-            raise ValueError(f"GRBL emulator tilt_axis must be another of X, Y, Z or A, got {tilt_axis!r}")
+        taken = [axis]
+        letters: list[str | None] = []
+        for key, given in (("tilt_axis", tilt_axis), ("shift_axis", shift_axis)):
+            letter = None if given is None else str(given).upper()
+            if letter is not None and (letter not in "XYZA" or len(letter) != 1 or letter in taken):
+                raise ValueError(f"GRBL emulator {key} must be another of X, Y, Z or A, got {given!r}")
+            taken.append(letter or "")
+            letters.append(letter)
+        tilt_letter, shift_letter = letters
         self.axis_letter = axis
-        self.n_axes = 4 if "A" in (axis, tilt_letter) else 3
+        self.n_axes = 4 if "A" in taken else 3
         self.upd = float(units_per_degree)
         if self.upd == 0:
             raise ValueError("GRBL emulator units_per_degree must not be 0")
@@ -136,9 +149,11 @@ class GrblEmulator(LineEmulator):
         self.queue: list[tuple[str, float]] = []  # (axis letter, target): blocks run one after another
         self._homing = False
         self._held: tuple[str, float] | None = None
-        # the tilt axis (tilt_axis): the calibration board's tilt, in degrees (1 unit = 1 degree), at 0
-        self.tilt_letter = tilt_letter
+        # the tilt axis (tilt_axis): the calibration board's tilt, in degrees (1 unit = 1 degree), at 0;
+        # the shift axis (shift_axis): the linear stage under the turntable, in mm (1 unit = 1 mm), at 0
+        self.tilt_letter, self.shift_letter = tilt_letter, shift_letter
         self.tilt: Axis | None = None
+        self.shift: Axis | None = None
         self._axes = {axis: self.axis}
         if tilt_letter is not None:
             self.tilt = Axis(0.0, speed_deg_s, accel_deg_s2)
@@ -146,6 +161,12 @@ class GrblEmulator(LineEmulator):
             self.settings[130 + "XYZA".index(tilt_letter)] = TILT_TRAVEL_DEG
             if world is not None:
                 world.drive_tilt(self._tilt_for_world, self.NAME)
+        if shift_letter is not None:
+            self.shift = Axis(0.0, shift_speed_mm_s, shift_accel_mm_s2)
+            self._axes[shift_letter] = self.shift
+            self.settings[130 + "XYZA".index(shift_letter)] = SHIFT_TRAVEL_MM
+            if world is not None:
+                world.drive_shift(self._shift_for_world, self.NAME)
 
     @property
     def homing_enabled(self) -> bool:
@@ -164,6 +185,10 @@ class GrblEmulator(LineEmulator):
     def _tilt_for_world(self, t: float) -> float:
         with self._lock:  # not while a command is half-way through
             return self.tilt.peek(t) if self.tilt is not None else 0.0
+
+    def _shift_for_world(self, t: float) -> float:
+        with self._lock:  # not while a command is half-way through
+            return self.shift.peek(t) if self.shift is not None else 0.0
 
     def _busy(self, now: float) -> bool:
         return any(a.busy(now) for a in self._axes.values())
@@ -322,7 +347,7 @@ class GrblEmulator(LineEmulator):
         motion = None
         absolute = self.absolute
         x = None
-        tilt = None
+        others: dict[str, float] = {}  # the tilt's, the shift's targets
         feed = self.feed
         for letter, value in words:
             v = float(value)
@@ -338,8 +363,8 @@ class GrblEmulator(LineEmulator):
                     return
             elif letter == self.axis_letter:
                 x = v
-            elif letter == self.tilt_letter:
-                tilt = v
+            elif letter in self._axes:
+                others[letter] = v
             elif letter == "F":
                 if v <= 0:
                     self._line("error:4")
@@ -354,10 +379,11 @@ class GrblEmulator(LineEmulator):
             self._line("error:22")
             return
         self.absolute, self.feed = absolute, feed
-        if tilt is not None and self.tilt_letter is not None and self.tilt is not None:  # not soft-limited here
-            queued = [t for letter, t in self.queue if letter == self.tilt_letter]
-            base = queued[-1] if queued else self._rest(self.tilt, now)
-            self.queue.append((self.tilt_letter, tilt if absolute else base + tilt))
+        for other in (self.tilt_letter, self.shift_letter):  # not soft-limited here
+            if other is not None and other in others:
+                queued = [t for letter, t in self.queue if letter == other]
+                base = queued[-1] if queued else self._rest(self._axes[other], now)
+                self.queue.append((other, others[other] if absolute else base + others[other]))
         if x is not None:
             queued = [t for letter, t in self.queue if letter == self.axis_letter]
             base = queued[-1] if queued else self._rest(self.axis, now)

@@ -1,4 +1,4 @@
-"""A Zaber ASCII rotary stage (one device, one axis, or two: ``axes=2``) that speaks the real bytes.
+"""A Zaber ASCII rotary stage (one device, one axis, or more: ``axes=2``, ``axes=3``) that speaks the real bytes.
 
 Commands (``/`` + device + axis + command, ended by ``\\n`` or ``\\r``)::
 
@@ -17,6 +17,15 @@ Commands (``/`` + device + axis + command, ended by ``\\n`` or ``\\r``)::
     /1 2 get pos            -> @01 2 RJ IDLE -- BADAXIS   (one axis; with axes=2, axis 2 is the board's
                                                           tilt: home, move abs/rel, stop, get pos,
                                                           get limit.min/limit.max)
+    /1 3 move abs 209974    -> @01 3 OK BUSY -- 0     (axes=3: axis 3 is the linear stage that carries
+                                                          the turntable sideways, 10 mm; the same commands)
+
+Axes beyond the first (``axes``): ``tilt_axis`` (default 2) tilts the calibration board (degrees, in the
+turntable's microsteps per degree, travel 0..:data:`TILT_TRAVEL_DEG`), ``shift_axis`` (default 3) is a
+linear stage that carries the turntable sideways (``shift_microsteps_per_mm``, travel
+0..:data:`SHIFT_TRAVEL_MM`); a role on an axis beyond ``axes`` or None is absent. An axis with neither
+role answers as the tilt axis does and moves nothing of the world. Each role drives the world as the stage does: its motion
+model, evaluated at the time asked (:meth:`SimWorld.drive_tilt`, :meth:`SimWorld.drive_shift`).
 
 Replies end with ``\\r\\n``; the warning field shows the most severe active
 flag (faults ``F*`` before warnings ``W*`` before notices ``N*``). An
@@ -33,6 +42,7 @@ Faults (:meth:`inject`): ``"reject"`` (``RJ ... BADDATA``), ``"no_reply"``,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from drivers.settings import SEED_MAX, Setting
@@ -40,13 +50,17 @@ from drivers.sim.line_emulator import LineEmulator
 from drivers.sim.motion import Axis
 from drivers.sim.pty_server import serve
 from drivers.sim.world import SimWorld
+from drivers.zaber import X_LSM_MICROSTEPS_PER_MM
 
 if TYPE_CHECKING:
     from drivers.sim.pty_server import EmulatorHandle
 
 X_RSW60_MICROSTEPS_PER_DEGREE = 1536000 / 360.0  # 0.000234375 deg per microstep
 TILT_TRAVEL_DEG = 90.0
-"""Axis 2's travel (``axes=2``): limit.min 0, limit.max 90 degrees (in axis 1's microsteps per degree)."""
+"""The tilt axis's travel (``axes=2``): limit.min 0, limit.max 90 degrees (in axis 1's microsteps per degree)."""
+SHIFT_TRAVEL_MM = 100.0
+"""The shift axis's travel (``axes=3``): limit.min 0, limit.max 100 mm (an X-LSM100A), in its microsteps per mm."""
+MAX_AXES = 9
 
 _FLAG_ORDER = {"F": 0, "W": 1, "N": 2}
 
@@ -64,10 +78,53 @@ SETTINGS: dict[str, Setting] = {
     "alerts": Setting("send alert messages", "boolean"),
     "checksums": Setting("append checksums to replies", "boolean"),
     "seed": Setting("seed of the injected faults' timing", "integer", "", 0, SEED_MAX),
-    "axes": Setting("axes of the device: 1, or 2 with axis 2 tilting the calibration board (the station's "
-                    "turntable tilt_axis: 2)", "integer", "", 1, 2),
+    "axes": Setting("axes of the device: 1, 2 with axis 2 tilting the calibration board (the station's "
+                    "turntable tilt_axis: 2), 3 with axis 3 carrying the turntable sideways (shift_axis: 3)",
+                    "integer", "", 1, MAX_AXES),
+    "shift_microsteps_per_mm": Setting("microsteps per mm of the shift axis (default: the turntable's "
+                                       "shift_microsteps_per_mm)", "number", "microsteps/mm", 0.0, 1e9,
+                                       low_open=True),
+    "shift_speed_mm_s": Setting("top speed of the emulated shift axis", "number", "mm/s", 0.0, 100000.0,
+                                low_open=True),
+    "shift_accel_mm_s2": Setting("acceleration of the emulated shift axis", "number", "mm/s²", 0.0, 1e7,
+                                 low_open=True),
 }  # fmt: skip
 """The keyword arguments of :class:`ZaberEmulator` a configuration may set (``simulation.emulator``)."""
+
+
+@dataclass
+class OtherAxis:
+    """An axis of the device beyond the first: its motion (microsteps), its travel ``(limit.min, limit.max)``
+    (microsteps) and whether it was moving at the last update (for the alert when it stops)."""
+
+    motion: Axis
+    limits: tuple[int, int]
+    was_busy: bool = False
+
+
+def axis_roles(axes: int, tilt_axis: int | None, shift_axis: int | None) -> tuple[int | None, int | None]:
+    """``(tilt axis, shift axis)`` of a device with ``axes`` axes: each role given, if the device has that
+    axis (None: no such axis); ValueError for a role on axis 1 (the turntable's) or both on one axis."""
+    for key, n in (("tilt_axis", tilt_axis), ("shift_axis", shift_axis)):
+        if n is not None and (isinstance(n, bool) or int(n) != n or n < 2):
+            raise ValueError(f"{key} must be an axis from 2 on (axis 1 turns the stage), got {n!r}")
+    if tilt_axis is not None and tilt_axis == shift_axis:
+        raise ValueError(f"tilt_axis and shift_axis must be different axes, both are {tilt_axis}")
+    return tuple(n if n is not None and n <= axes else None for n in (tilt_axis, shift_axis))  # type: ignore[return-value]
+
+
+def axes_options(tilt_axis: int | None, shift_axis: int | None, axes: int | None = None) -> dict[str, Any]:
+    """The emulator options (``axes``, ``tilt_axis``, ``shift_axis``) of a device with the axes a turntable's
+    configuration names (its ``tilt_axis``, ``shift_axis``): ``{}`` for neither; ``axes`` defaults to the
+    highest axis named. A role on axis 1 (the turntable's) is left out; one beyond ``axes`` is on an axis
+    the device does not have, which answers ``BADAXIS`` as a real device would."""
+    if tilt_axis is None and shift_axis is None:
+        return {} if axes is None else {"axes": axes}
+    n_axes = max(n for n in (1, tilt_axis, shift_axis) if n is not None) if axes is None else int(axes)
+    roles = {
+        k: (n if n is not None and n >= 2 else None) for k, n in (("tilt_axis", tilt_axis), ("shift_axis", shift_axis))
+    }
+    return {"axes": n_axes, **roles}
 
 
 def zaber_checksum(body: bytes) -> int:
@@ -94,9 +151,15 @@ class ZaberEmulator(LineEmulator):
         checksums: bool = False,
         seed: int = 0,
         axes: int = 1,
+        tilt_axis: int | None = 2,
+        shift_axis: int | None = 3,
+        shift_microsteps_per_mm: float = X_LSM_MICROSTEPS_PER_MM,
+        shift_speed_mm_s: float = 100.0,
+        shift_accel_mm_s2: float = 1000.0,
     ):
-        if int(axes) not in (1, 2):
-            raise ValueError(f"axes must be 1 or 2, got {axes!r}")
+        if isinstance(axes, bool) or int(axes) != axes or not 1 <= axes <= MAX_AXES:
+            raise ValueError(f"axes must be 1..{MAX_AXES}, got {axes!r}")
+        tilt_n, shift_n = axis_roles(int(axes), tilt_axis, shift_axis)
         super().__init__(world, seed)
         self.address = int(address)
         self.mspd = float(microsteps_per_degree)
@@ -109,14 +172,23 @@ class ZaberEmulator(LineEmulator):
         self.flags: list[str] = [] if homed else ["WR"]
         self._homing = False
         self._was_busy = False
-        # axis 2 (axes=2): the tilt of the calibration board, 0..TILT_TRAVEL_DEG, at rest at 0
-        self.tilt: Axis | None = None
-        self.tilt_limits = (0, round(TILT_TRAVEL_DEG * self.mspd))
-        self._tilt_busy = False
-        if int(axes) == 2:
-            self.tilt = Axis(0.0, speed_deg_s * self.mspd, accel_deg_s2 * self.mspd)
-            if world is not None:
-                world.drive_tilt(self._tilt_for_world, self.NAME)
+        # the axes beyond the first, each at rest at 0: the tilt (degrees), the shift (mm), others
+        self.shift_mspmm = float(shift_microsteps_per_mm)
+        self.others: dict[int, OtherAxis] = {}
+        for n in range(2, int(axes) + 1):
+            if n == shift_n:
+                scale, speed, accel, travel = self.shift_mspmm, shift_speed_mm_s, shift_accel_mm_s2, SHIFT_TRAVEL_MM
+            else:
+                scale, speed, accel, travel = self.mspd, speed_deg_s, accel_deg_s2, TILT_TRAVEL_DEG
+            self.others[n] = OtherAxis(Axis(0.0, speed * scale, accel * scale), (0, round(travel * scale)))
+        self.tilt: Axis | None = None if tilt_n is None else self.others[tilt_n].motion
+        """The tilt axis's motion (microsteps), or None."""
+        self.shift: Axis | None = None if shift_n is None else self.others[shift_n].motion
+        """The shift axis's motion (microsteps), or None."""
+        if world is not None and self.tilt is not None:
+            world.drive_tilt(self._tilt_for_world, self.NAME)
+        if world is not None and self.shift is not None:
+            world.drive_shift(self._shift_for_world, self.NAME)
 
     # -- helpers --------------------------------------------------------------
     def stage_degrees(self, now: float) -> float:
@@ -125,6 +197,10 @@ class ZaberEmulator(LineEmulator):
     def _tilt_for_world(self, t: float) -> float:
         with self._lock:  # not while a command is half-way through
             return self.tilt.peek(t) / self.mspd if self.tilt is not None else 0.0
+
+    def _shift_for_world(self, t: float) -> float:
+        with self._lock:  # not while a command is half-way through
+            return self.shift.peek(t) / self.shift_mspmm if self.shift is not None else 0.0
 
     def position_steps(self, now: float) -> int:
         return int(round(self.axis.position(now)))
@@ -141,8 +217,9 @@ class ZaberEmulator(LineEmulator):
         self.write(kind.encode() + raw + b"\r\n")
 
     def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float, flag: str | None = None) -> None:
-        moving = self.tilt if axis == 2 else self.axis
-        status = "BUSY" if moving is not None and moving.busy(now) else "IDLE"
+        other = self.others.get(axis)
+        moving = self.axis if other is None else other.motion
+        status = "BUSY" if moving.busy(now) else "IDLE"
         ident = f" {msg_id}" if msg_id is not None else ""
         flag = self.flag() if flag is None else flag
         self._send("@", f"{self.address:02d} {axis}{ident} {'OK' if ok else 'RJ'} {status} {flag} {data}")
@@ -188,11 +265,11 @@ class ZaberEmulator(LineEmulator):
         device, axis, msg_id, words = parsed
         if device not in (0, self.address):
             return
-        if axis not in (0, 1) and not (axis == 2 and self.tilt is not None):
+        if axis not in (0, 1) and axis not in self.others:
             self._reply(axis, msg_id, False, "BADAXIS", now)
             return
         flag_before = self.flag()
-        ok, data = self._execute_tilt(words, now) if axis == 2 else self._execute(words, now)
+        ok, data = self._execute_other(self.others[axis], words, now) if axis > 1 else self._execute(words, now)
         # "warnings clear" reports the flags as they were before clearing
         self._reply(axis, msg_id, ok, data, now, flag_before if words[:2] == ["warnings", "clear"] else None)
 
@@ -254,32 +331,32 @@ class ZaberEmulator(LineEmulator):
             return True, data
         return False, "BADCOMMAND"
 
-    def _execute_tilt(self, words: list[str], now: float) -> tuple[bool, str]:
-        """Axis 2, the board's tilt: home, move abs/rel, stop, get pos, get limit.min/limit.max."""
-        tilt = self.tilt
-        assert tilt is not None
-        lo, hi = self.tilt_limits
+    def _execute_other(self, other: OtherAxis, words: list[str], now: float) -> tuple[bool, str]:
+        """An axis beyond the first (the tilt, the shift): home, move abs/rel, stop, get pos, get
+        limit.min/limit.max."""
+        motion = other.motion
+        lo, hi = other.limits
         cmd = " ".join(words)
         if cmd == "home":
-            tilt.start_move(0, now)
-            self._tilt_busy = True
+            motion.start_move(0, now)
+            other.was_busy = True
             return True, "0"
         if words[:1] == ["move"] and len(words) == 3 and words[1] in ("abs", "rel"):
             try:
                 value = int(words[2])
             except ValueError:
                 return False, "BADDATA"
-            target = value if words[1] == "abs" else int(round(tilt.position(now))) + value
+            target = value if words[1] == "abs" else int(round(motion.position(now))) + value
             if not lo <= target <= hi:
                 return False, "BADDATA"
-            tilt.start_move(target, now)
-            self._tilt_busy = True
+            motion.start_move(target, now)
+            other.was_busy = True
             return True, "0"
         if cmd == "stop":
-            tilt.halt(now)
+            motion.halt(now)
             return True, "0"
         if cmd == "get pos":
-            return True, str(int(round(tilt.position(now))))
+            return True, str(int(round(motion.position(now))))
         if cmd in ("get limit.min", "get limit.max"):
             return True, str(lo if cmd.endswith("min") else hi)
         return False, "BADCOMMAND"
@@ -315,10 +392,11 @@ class ZaberEmulator(LineEmulator):
                     self.flags.remove("WR")
             if self.alerts:
                 self._send("!", f"{self.address:02d} 1 IDLE {self.flag()}")
-        if self._tilt_busy and self.tilt is not None and not self.tilt.busy(now):
-            self._tilt_busy = False
-            if self.alerts:
-                self._send("!", f"{self.address:02d} 2 IDLE {self.flag()}")
+        for n, other in self.others.items():
+            if other.was_busy and not other.motion.busy(now):
+                other.was_busy = False
+                if self.alerts:
+                    self._send("!", f"{self.address:02d} {n} IDLE {self.flag()}")
 
 
 def start_zaber_emulator(world: SimWorld | None = None, **opts: Any) -> EmulatorHandle[ZaberEmulator]:

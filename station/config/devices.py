@@ -12,7 +12,9 @@
 * ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
   every orientation (the image's extent across the strings over their spacing, two edges a string);
 * a session with the camera-matrix stage (``intrinsics``) on the turntable has a camera that can be shown the board
-  (:class:`drivers.protocols.BoardScene`: the simulator).
+  (:class:`drivers.protocols.BoardScene`: the simulator);
+* a two-axis capture (``capture.shift_positions_mm``) has a turntable with a linear stage, its positions within
+  the stage's configured travel, and the image direction of a stage move when it has fewer than four angles.
 
 The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
 """
@@ -27,7 +29,7 @@ from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.protocols import BoardScene
 from drivers.settings import shown
-from drivers.sim.zaber_emulator import ZaberEmulator
+from drivers.sim.zaber_emulator import ZaberEmulator, axes_options
 from station.config.schema import EMULATOR_PORT, Config
 
 ROTARY_RANGE = (0.0, 360.0)
@@ -37,6 +39,14 @@ ROTARY_RANGE = (0.0, 360.0)
 def _one_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+def device_field(section: str, exc: BaseException, default: str | None = None) -> str:
+    """The configuration field a driver's error is about: ``section.KEY`` when the driver names the key
+    (``config_key`` of :class:`drivers.errors.ConfigKeyError`, :class:`drivers.errors.DriverError`: a
+    shift axis on the turntable's own axis, one the device lacks), else ``default`` (the section)."""
+    key = getattr(exc, "config_key", None)
+    return f"{section}.{key}" if key else (default or section)
 
 
 def created_devices(config: Config) -> tuple[Any, Any]:
@@ -50,21 +60,37 @@ def created_devices(config: Config) -> tuple[Any, Any]:
         try:
             devices.append(make(section.as_driver_config()))
         except (ValueError, TypeError, DriverError, OSError) as exc:
-            raise config.error(f"station.{key}", f"expected settings the {section.driver} {key} accepts: "
-                               f"{_one_line(exc)}") from None  # fmt: skip
+            raise config.error(device_field(f"station.{key}", exc), f"expected settings the {section.driver} {key} "
+                               f"accepts: {_one_line(exc)}") from None  # fmt: skip
     return devices[0], devices[1]
+
+
+def zaber_emulator_options(config: Config, turntable: Any) -> dict[str, Any]:
+    """The Zaber emulator's options for a simulated station: ``simulation.emulator``, and what it leaves out
+    from the turntable (``turntable``, its driver created from its section, not opened): its microsteps per
+    degree, and for a Zaber turntable the axes it names (the tilt, the shift axis:
+    :func:`drivers.sim.zaber_emulator.axes_options`) with the shift axis's microsteps per mm."""
+    assert config.simulation is not None
+    opts = dict(config.simulation.emulator)
+    if config.station.turntable.steps_per_degree is not None:
+        opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
+    if config.station.turntable.driver == "zaber":  # the simulated stage has the axes the turntable names
+        tilt, shift = getattr(turntable, "tilt", None), getattr(turntable, "shift", None)
+        numbers = (None if a is None else a.axis_number for a in (tilt, shift))
+        for k, v in axes_options(*numbers, opts.get("axes")).items():
+            opts.setdefault(k, v)
+        if shift is not None:
+            opts.setdefault("shift_microsteps_per_mm", shift.microsteps_per_unit)
+    return opts
 
 
 def check_the_devices(config: Config) -> None:
     """The checks of the module docstring; :class:`ConfigError` naming the field."""
     _orientations(config)
     camera, turntable = created_devices(config)
+    _shift_positions(config, turntable)
     if config.simulation is not None:
-        opts = dict(config.simulation.emulator)
-        if config.station.turntable.steps_per_degree is not None:
-            opts.setdefault("microsteps_per_degree", config.station.turntable.steps_per_degree)
-        if config.station.turntable.settings.get("tilt_axis") is not None:
-            opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
+        opts = zaber_emulator_options(config, turntable)
         try:
             ZaberEmulator(None, **opts)
         except (ValueError, TypeError) as exc:
@@ -92,6 +118,48 @@ def check_the_devices(config: Config) -> None:
             f"{config.station.camera.driver} camera: on this station the operator places the board "
             "(intrinsics.placement: operator)",
         )  # fmt: skip
+
+
+def _shift_positions(config: Config, turntable: Any) -> None:
+    """Two-axis capture (``capture.shift_positions_mm``): the turntable has a linear stage (``turntable.shift``,
+    its driver's ``shift_axis``) and every position is within its configured travel; without the image direction
+    of a stage move (``station.harp.shift_direction_deg``) each place's axis is searched on its own shots, which
+    takes four turntable angles or more (:func:`pipeline.harp_shape.group_frames`)."""
+    cap = config.capture
+    if not cap.shift_positions_mm:
+        return
+    shift = getattr(turntable, "shift", None)
+    if shift is None:
+        raise config.error(
+            "capture.shift_positions_mm", "expected a turntable with a linear stage under it "
+            f"(station.turntable.shift_axis), the {config.station.turntable.driver} turntable has none",
+        )  # fmt: skip
+    travel = getattr(shift, "travel_range", None)
+    r = None
+    if travel is not None:
+        try:
+            r = travel()
+        except (DriverError, OSError, ValueError):  # a range known only once open: checked then
+            r = None
+    for i, mm in enumerate(cap.shift_positions_mm):
+        if r is not None and not r.minimum <= mm <= r.maximum:
+            raise config.error(
+                f"capture.shift_positions_mm[{i}]", f"expected a position in [{r.minimum:g}, {r.maximum:g}] mm "
+                f"(station.turntable.shift_limits), got {mm:g}",
+            )  # fmt: skip
+    if config.station.harp.shift_direction_deg is None and len(cap.orientations_deg) < MIN_SEARCHED_ANGLES:
+        raise config.error(
+            "station.harp.shift_direction_deg", "expected the image direction of a positive linear-stage move: "
+            f"with fewer than {MIN_SEARCHED_ANGLES} turntable angles (capture.orientations_deg) a place's turntable "
+            "axis cannot be found without it",
+        )  # fmt: skip
+
+
+MIN_SEARCHED_ANGLES = 4
+"""Turntable angles about which the shots of a place of a two-axis capture place its axis without a lattice of
+equally good points about a pitch apart (three 60 degrees apart have one, :func:`pipeline.harp_shape.group_frames`):
+what a place's axis searched on its own shots needs (no image direction of a stage move given), and the search of
+where the axis is with the stage halfway (:func:`station.calibration.axes_of`)."""
 
 
 def _orientations(config: Config) -> None:

@@ -22,6 +22,7 @@ from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.protocols import CameraRanges, Range, TurntableRanges
 from station.config import Config, check_port
+from station.config.devices import device_field
 from station.session.simulated import simulated_devices
 
 
@@ -58,8 +59,8 @@ def open_station(config: Config, *, check: bool = True) -> Iterator[tuple]:
             try:
                 turntable.open()
             except (DriverError, OSError) as exc:
-                raise config.error(
-                    "station.turntable.port",
+                raise config.error(  # the port, or the tilt or shift axis the device lacks
+                    device_field("station.turntable", exc, "station.turntable.port"),
                     f"cannot open the turntable at {config.station.turntable.port!r}: {_one_line(exc)}",
                 ) from None
             try:

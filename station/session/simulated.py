@@ -22,10 +22,12 @@ from typing import Any
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
 from drivers.grbl import GrblTurntable
+from drivers.ranges import UNIT_WORDS
 from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.world import SimWorld
 from drivers.sim.zaber_emulator import start_zaber_emulator
 from station.config import EMULATOR_PORT, Config
+from station.config.devices import device_field, zaber_emulator_options
 
 
 @dataclass
@@ -41,15 +43,22 @@ def _one_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
-GRBL_EMULATOR_KEYS = ("speed_deg_s", "accel_deg_s2", "position_deg", "seed")
+GRBL_EMULATOR_KEYS = ("speed_deg_s", "accel_deg_s2", "position_deg", "seed", "shift_speed_mm_s", "shift_accel_mm_s2")
 """The ``simulation.emulator`` options a GRBL turntable's emulator takes too (the others are the Zaber's)."""
 
 
 def _start_stage_emulator(config: Config, world: SimWorld, overrides: dict[str, Any]) -> Any:
     """The emulator of the configured turntable's controller on a new pty: the GRBL emulator for a ``grbl``
-    turntable (its axis, units per degree and tilt axis the turntable's), the Zaber emulator otherwise."""
+    turntable (its axis, units per degree, tilt and shift axes the turntable's), the Zaber emulator
+    otherwise (with the tilt and shift axes the turntable names)."""
     assert config.simulation is not None
     tt = config.station.turntable
+    try:  # the driver's own reading of its section (axes, units), not opened
+        probe = open_turntable(tt.as_driver_config(port=EMULATOR_PORT))
+    except (ValueError, TypeError, DriverError) as exc:
+        raise config.error(
+            device_field("station.turntable", exc), f"cannot use this turntable: {_one_line(exc)}"
+        ) from None
     opts = {**config.simulation.emulator, **overrides}
     if tt.driver == "grbl":
         other = sorted(set(opts) - set(GRBL_EMULATOR_KEYS))
@@ -59,24 +68,21 @@ def _start_stage_emulator(config: Config, world: SimWorld, overrides: dict[str, 
                 f"{other[0]!r} is a Zaber emulator option; a GRBL turntable's emulator takes "
                 + ", ".join(GRBL_EMULATOR_KEYS),
             )
-        try:  # the driver's own reading of its section (axis, units per degree, tilt axis), not opened
-            probe = GrblTurntable.from_config(tt.as_driver_config(port=EMULATOR_PORT))
-        except (ValueError, TypeError) as exc:
-            raise config.error("station.turntable", f"cannot use this turntable: {_one_line(exc)}") from None
+        assert isinstance(probe, GrblTurntable)
         opts.update(units_per_degree=probe.units_per_degree, axis=probe.axis)
-        if probe.tilt is not None:  # the simulated stage has the tilt axis the turntable names
-            if probe.tilt.units_per_degree != 1.0:
+        # the simulated stage has the tilt and shift axes the turntable names, counting degrees and mm
+        for role, axis, unit in (("tilt", probe.tilt, "degrees"), ("shift", probe.shift, "mm")):
+            if axis is None:
+                continue
+            if axis.units_per_unit != 1.0:
                 raise config.error(
-                    "station.turntable.tilt_units_per_degree",
-                    "the GRBL emulator's tilt axis counts degrees: leave it out (1) for a simulated station",
+                    f"station.turntable.{axis.config_prefix}units_per_{UNIT_WORDS[axis.unit]}",
+                    f"the GRBL emulator's {role} axis counts {unit}: leave it out (1) for a simulated station",
                 )
-            opts["tilt_axis"] = probe.tilt.axis
+            opts[f"{role}_axis"] = axis.axis
         start, name = start_grbl_emulator, "GRBL"
     else:
-        if tt.steps_per_degree is not None:
-            opts.setdefault("microsteps_per_degree", tt.steps_per_degree)
-        if tt.settings.get("tilt_axis") is not None:
-            opts.setdefault("axes", 2)  # the simulated stage has the tilt axis the turntable names
+        opts = {**zaber_emulator_options(config, probe), **overrides}
         start, name = start_zaber_emulator, "Zaber"
     try:
         return start(world=world, **opts)
@@ -98,7 +104,11 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
 
     # the lens on the camera: the unit of the demo lens that carries this serial (simulation.lens_spread)
     unit = lens_unit(config.lens.serial, config.simulation.lens_spread)
-    world = SimWorld(harp_offset_deg=config.simulation.harp_offset_deg, lens_unit=unit)
+    world = SimWorld(
+        harp_offset_deg=config.simulation.harp_offset_deg,
+        lens_unit=unit,
+        shift_direction_deg=config.simulation.shift_direction_deg,
+    )
     handle = _start_stage_emulator(config, world, emulator_overrides)
     tt = config.station.turntable
     stack = contextlib.ExitStack()  # the lens controller's emulator, if any
@@ -117,10 +127,17 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
             camera = open_camera(cam_cfg, world=world)
         except (ValueError, TypeError, DriverError, OSError) as exc:
             raise config.error("station.camera", f"cannot use this camera: {_one_line(exc)}") from None
+        # a shift of the turntable moves the harp in the image by the camera's pixels per mm at the harp: its
+        # string pitch in pixels over the harp's in mm
+        scene = getattr(camera, "scene", None)
+        if scene is not None:
+            world.shift_px_per_mm = scene.spacing_px / config.station.harp.string_spacing_mm
         try:
             turntable = open_turntable(tt.as_driver_config(port=port))
         except (ValueError, TypeError, DriverError, OSError) as exc:
-            raise config.error("station.turntable", f"cannot use this turntable: {_one_line(exc)}") from None
+            raise config.error(
+                device_field("station.turntable", exc), f"cannot use this turntable: {_one_line(exc)}"
+            ) from None
         yield SimulatedStation(camera, turntable, world, handle)
     finally:
         stack.close()

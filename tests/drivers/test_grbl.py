@@ -335,3 +335,55 @@ def test_tilt_axis_on_the_emulator_tilts_the_simulated_board():
         assert world.tilt_at() == pytest.approx(0.0, abs=1e-9) and tt.position() == 0.0
     with pytest.raises(ValueError, match="tilt_axis must be another axis than X"):
         driver("/dev/null", tilt_axis="x")
+
+
+# -- the shift axis (issue 19: a linear stage carries the turntable sideways between groups of shots) ------
+
+
+def test_shift_axis_bytes_and_millimetres():
+    """``shift_axis="Z"``: another axis of the same controller on the same connection, opened like the tilt
+    axis (no second reset); positions in mm (``shift_units_per_mm`` default 1: GRBL counts mm), read from
+    MPos, its configured limits (default 0..100 mm) refuse a move before anything is sent, messages in mm."""
+    script = [
+        (b"\x18", BANNER),
+        (b"$$\n", SETTINGS),
+        (b"?", b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 Z12.500\n", b"ok\r\n"),
+        (b"?", b"<Run|MPos:0.000,0.000,6.250|FS:3000,0>\r\n"),
+        (b"?", b"<Idle|MPos:0.000,0.000,12.500|FS:0,0>\r\n"),
+        (b"G90 G0 Z20.000\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:0.000,0.000,15.000|FS:0,0>\r\n"),
+    ]
+    with ScriptedDevice(script, name="grbl") as dev:
+        with driver(dev.port, shift_axis="Z") as tt:
+            assert tt.tilt is None and tt.shift is not None and tt.shift.name == f"{tt.name} shift axis Z"
+            assert tt.shift.travel_range() == Range(0.0, 100.0, "mm", "configured limits")
+            assert tt.shift.move_to(12.5) == 12.5
+            with pytest.raises(OutOfRange, match=r"shift axis Z: move to 101 mm is outside the range \[0, 100\] mm"):
+                tt.shift.move_to(101.0)
+            with pytest.raises(DeviceFault, match=r"move to 20.0 mm ended idle at 15.000 mm, not at 20.000 mm"):
+                tt.shift.move_to(20.0)
+
+
+def test_shift_axis_on_the_emulator_moves_the_simulated_turntable_sideways():
+    world = SimWorld()
+    with (
+        start_grbl_emulator(world=world, tilt_axis="Y", shift_axis="Z", **FAST) as h,
+        driver(h.port_path, tilt_axis="Y", shift_axis="Z") as tt,
+    ):
+        assert world.shift_at() == 0.0
+        tt.home()
+        assert tt.shift.move_to(12.5) == 12.5 and world.shift_at() == pytest.approx(12.5, abs=1e-9)
+        assert tt.move_to(90.0) == 90.0 and tt.tilt.move_to(10.0) == 10.0
+        assert world.shift_at() == pytest.approx(12.5, abs=1e-9) and world.tilt_at() == pytest.approx(10.0, abs=1e-9)
+        assert tt.shift.position() == 12.5 and tt.settings[132] == 100.0  # the shift's $13x: its travel
+        tt.home()  # $H homes every axis
+        assert world.shift_at() == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(ValueError, match="shift_axis must be another axis than X"):
+        driver("/dev/null", shift_axis="x")
+    with pytest.raises(ValueError, match="shift_axis must be another axis than Y"):
+        driver("/dev/null", tilt_axis="Y", shift_axis="y")
+    with pytest.raises(ValueError, match="shift_units_per_mm must not be 0"):
+        driver("/dev/null", shift_axis="Z", shift_units_per_mm=0)
+    with pytest.raises(ValueError, match="shift_axis must be another of X, Y, Z or A"):
+        GrblEmulator(tilt_axis="Y", shift_axis="Y")

@@ -13,9 +13,10 @@ from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, Dr
 from drivers.protocols import Camera, CameraIdentity, Frame
 from drivers.sim.camera import SimulatedCamera
 from drivers.sim.camera_settings import EXPOSURE_RANGE_US, GAIN_RANGE_DB
-from drivers.sim.lens import lens_for_focus
+from drivers.sim.lens import K2, K4, TANGENTIAL, lens_for_focus
 from drivers.sim.world import SimWorld
-from pipeline.render import true_edge_curves
+from pipeline.lens_population import UnitSpread
+from pipeline.render import HarpScene, true_edge_curves
 from tests.pipeline.scanline_fit import scanline_errors
 
 SMALL = {"width": 480, "height": 360}
@@ -278,3 +279,109 @@ def test_frames_with_the_kept_lens_map_equal_frames_mapped_anew(monkeypatch):
     kept, anew = frames(10**9), frames(0)
     assert all(np.array_equal(a, b) for a, b in zip(kept, anew))
     assert not np.array_equal(kept[0], kept[3])  # the poses differ: the comparison can fail
+
+
+# -- the turntable carried sideways (issue 19: shots about two places of the turntable axis) ---------------
+
+# the unit of the demo lens whose deviations cancel the design at focus 0: a lens-free camera
+LENS_FREE = UnitSpread((-K2[0], -K4[0], 0.0), (0.0, 0.0), (-TANGENTIAL[0], -TANGENTIAL[1]), (0.0,) * 4, False)
+
+
+def pattern_shift(profile: np.ndarray, periods: int, reference: np.ndarray) -> float:
+    """How far (px, towards larger indices) ``profile`` is ``reference`` moved: the phase of their DFT bin
+    at the string pitch (a whole number of ``periods`` in the window), by the shift theorem."""
+    k = np.exp(-2j * np.pi * periods * np.arange(len(profile)) / len(profile))
+    dphi = np.angle(np.sum(profile * k) / np.sum(reference * k))
+    return float(-dphi * len(profile) / (2 * np.pi * periods))
+
+
+def shifted_world(shift_mm: float | None, **kw) -> SimWorld:
+    world = SimWorld(lens_unit=LENS_FREE, shift_direction_deg=30.0, shift_px_per_mm=6.0, **kw)
+    if shift_mm is not None:
+        world.drive_shift(lambda t: shift_mm, "test axis")
+    return world
+
+
+def test_the_harp_turns_about_the_shifted_axis():
+    """Through a lens-free camera (no vignetting, no noise) the string pattern at a shift of 1.5 mm (6 px per
+    mm, at 30 degrees) is the one at 0 moved by exactly 9 px along (cos 30, sin 30): measured by the phase
+    of the string pitch across the strings, along y with the strings along x (stage 0) and along x with
+    them along y (stage 90)."""
+    scene = HarpScene(vignetting=0.0)
+    lens = SimulatedCamera(shifted_world(None), width=240, height=120, scene=scene).lens_at(0.0)
+    pts = np.array([[0.0, 0.0], [239.0, 119.0], [17.5, 90.25]])
+    assert np.abs(lens.distort_points(pts) - pts).max() < 1e-9  # the camera is lens-free: truth is geometry
+    expected = (9.0 * np.cos(np.pi / 6), 9.0 * np.sin(np.pi / 6))
+    moved = []
+    for stage, axis, periods in ((0.0, 1, 2), (90.0, 0, 4)):  # 60 px pitch: 2 periods in 120 rows, 4 in 240 columns
+        profiles = []
+        for shift in (None, 1.5):
+            world = shifted_world(shift)
+            world.set_stage(stage)
+            cam = SimulatedCamera(world, width=240, height=120, bit_depth=16, noise_sigma=0.0, scene=scene)
+            with cam:
+                frame = cam.capture()
+            profiles.append(frame.image.astype(float).mean(axis=axis))
+        moved.append(pattern_shift(profiles[1], periods, profiles[0]))
+        assert frame.extra["sim"]["shift_mm"] == 1.5
+        assert frame.extra["sim"]["axis_offset_px"] == pytest.approx(expected, abs=1e-12)
+    dy, dx = moved
+    print(f"pattern moved ({dx:.5f}, {dy:.5f}) px, expected ({expected[0]:.5f}, {expected[1]:.5f})")
+    assert (dx, dy) == pytest.approx(expected, abs=1e-4)
+
+
+def test_at_shift_zero_the_frames_are_the_ones_without_a_shift_axis():
+    frames = []
+    for world in (SimWorld(harp_offset_deg=5.0), SimWorld(harp_offset_deg=5.0, shift_px_per_mm=6.0)):
+        if world.shift_px_per_mm is not None:
+            world.drive_shift(lambda t: 0.0, "test axis")
+        world.set_stage(33.0)
+        with SimulatedCamera(world, width=96, height=64, seed=4) as cam:
+            frames.append(cam.capture())
+    assert (
+        np.array_equal(frames[0].image, frames[1].image)
+        and frames[0].extra["sim"]["seed"] == frames[1].extra["sim"]["seed"]
+    )
+    assert "shift_mm" not in frames[0].extra["sim"] and frames[1].extra["sim"]["shift_mm"] == 0.0
+
+
+def test_the_stage_and_the_shift_are_taken_at_the_same_instant_of_the_exposure():
+    """Both axes are the world's functions of time, evaluated once at the exposure: a frame taken while the
+    stage turns 10 degrees and the stage slides 0.5 mm per second reports both at one time, and is the
+    render at that angle and that shift (its noise seeded by both)."""
+    world = SimWorld(shift_px_per_mm=6.0)
+    t0 = time.monotonic()
+    world.drive_stage(lambda t: 10.0 * (t - t0), "test stage")
+    world.drive_shift(lambda t: 0.5 * (t - t0), "test axis")
+    with SimulatedCamera(world, width=96, height=64, seed=2) as cam:
+        frame = cam.capture()
+        sim = frame.extra["sim"]
+        assert sim["shift_mm"] > 0 and sim["stage_deg"] / 10.0 == pytest.approx(sim["shift_mm"] / 0.5, rel=1e-12)
+        again = cam.render(index=0, angle_deg=sim["string_angle_deg"], stage_deg=sim["stage_deg"],
+                           shift_mm=sim["shift_mm"])  # fmt: skip
+    assert np.array_equal(frame.image, again.image)
+    with pytest.raises(DriverError, match="turntable is shifted 2 mm but the world has no shift_px_per_mm"):
+        unscaled = SimWorld()
+        unscaled.drive_shift(lambda t: 2.0, "test axis")
+        with SimulatedCamera(unscaled, width=32, height=32) as cam:
+            cam.capture()
+
+
+def test_the_realistic_harp_turns_about_the_shifted_axis():
+    """With the realistic simulator the shifted harp is the harp mounted 9 px along (cos 30, sin 30) from its
+    drawn mount: the same pose and the same edges, bends and all, as a camera whose session puts it there."""
+    import dataclasses
+
+    shots = []
+    for shift, move in ((1.5, (0.0, 0.0)), (None, (9.0 * np.cos(np.pi / 6), 9.0 * np.sin(np.pi / 6)))):
+        world = shifted_world(shift)
+        world.set_stage(40.0)
+        cam = SimulatedCamera(world, width=160, height=120, realism_seed=3)
+        m = cam.realism.mount
+        mount = dataclasses.replace(m, centre=(m.centre[0] + move[0], m.centre[1] + move[1]))
+        cam.realism = dataclasses.replace(cam.realism, mount=mount)
+        with cam:
+            cam.capture()
+        shots.append(cam.last_rendered)
+    assert shots[0].pose == shots[1].pose and shots[0].edges == shots[1].edges and len(shots[0].edges) > 4
+    assert shots[0].seed != shots[1].seed  # the shifted frame's noise is its own

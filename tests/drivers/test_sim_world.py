@@ -46,3 +46,19 @@ def test_one_emulator_per_world_and_no_hand_moves_while_driven():
         ZaberEmulator(world)
     with pytest.raises(ValueError, match="move it through the turntable"):
         world.set_stage(10.0)
+
+
+def test_the_shift_is_a_function_of_time_and_moves_the_axis_along_its_direction():
+    world = SimWorld(shift_direction_deg=90.0, shift_px_per_mm=4.0)
+    assert world.shift_at() is None and world.shift_offset_px() == (0.0, 0.0)  # no linear axis
+    world.drive_shift(lambda t: 0.5 * t, "test axis")  # 0.5 mm per second of monotonic time
+    assert world.shift_at(10.0) == 5.0 and world.shift_offset_px(10.0) == pytest.approx((0.0, 20.0), abs=1e-12)
+    with pytest.raises(ValueError, match="already driven"):
+        world.drive_shift(lambda t: 0.0, "another")
+    unscaled = SimWorld()
+    unscaled.drive_shift(lambda t: 0.0 if t < 1 else 2.0, "test axis")
+    assert unscaled.shift_offset_px(0.0) == (0.0, 0.0)  # at 0: the axis where the scene puts it
+    with pytest.raises(ValueError, match="shifted 2 mm but the world has no shift_px_per_mm"):
+        unscaled.shift_offset_px(5.0)
+    with pytest.raises(ValueError, match="shift_px_per_mm must be a positive number"):
+        SimWorld(shift_px_per_mm=0.0)

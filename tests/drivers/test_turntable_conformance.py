@@ -28,6 +28,27 @@ def test_turntable_conformance(kind):
     assert world.stage_deg == pytest.approx(DEFAULT_ANGLES[-1], abs=1e-3)
 
 
+SHIFT_AXES = {"zaber": ({"axes": 3}, {"shift_axis": 3}), "grbl": ({"shift_axis": "Z"}, {"shift_axis": "Z"})}
+"""Emulator and driver options of a shift axis (issue 19): Zaber axis 3, GRBL Z."""
+
+
+@pytest.mark.parametrize("kind", sorted(TURNTABLES))
+def test_the_shift_axis_passes_the_same_check_in_millimetres(kind):
+    """``turntable.shift`` keeps the Turntable protocol's promises too (positions in mm), on the connection
+    its turntable opened, and moves only the world's shift."""
+    start, cls = TURNTABLES[kind]
+    emulator, options = SHIFT_AXES[kind]
+    world = SimWorld()
+    positions = (0.0, 2.5, 7.0, 1.25)
+    with start(world=world, **emulator, **FAST) as handle, make_driver(cls, handle.port_path, **options) as tt:
+        tt.home()  # GRBL: unlocked; $H homes every axis
+        assert tt.shift.travel_range().unit == "mm"
+        readings = run_turntable_conformance(tt.shift, angles=positions)
+        assert tt.position() == 0.0
+    assert [t for t, _ in readings] == list(positions)
+    assert world.shift_at() == pytest.approx(positions[-1], abs=1e-3) and world.stage_deg == 0.0
+
+
 class _ReturnsBeforeArrival(ZaberTurntable):
     """Broken on purpose: move_to does not wait for the stage."""
 

@@ -339,3 +339,82 @@ def test_a_tilt_axis_the_device_does_not_have_fails_at_open(emu):
         driver(emu.port_path, tilt_axis=2).open()
     with pytest.raises(ValueError, match="tilt_axis must be another axis than axis 1"):
         driver(emu.port_path, tilt_axis=1)
+
+
+# -- the shift axis (issue 19: a linear stage carries the turntable sideways between groups of shots) ------
+
+MSPMM = 1.0 / 0.047625e-3  # Zaber X-LSM: 0.047625 um per microstep
+
+
+def test_shift_axis_bytes_and_millimetres():
+    """``shift_axis=3``: another axis of the same device on the same connection, checked at open like the
+    tilt axis; positions in mm (``shift_microsteps_per_mm``, default an X-LSM's), its configured limits
+    (default 0..100 mm) narrowed to the travel the device reports (here 50 mm), and every message in mm."""
+    script = [
+        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        *LIMITS,
+        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 3 get pos\n", b"@01 3 OK IDLE -- 0\r\n"),
+        (b"/1 3 get limit.min\n", b"@01 3 OK IDLE -- 0\r\n"),
+        (b"/1 3 get limit.max\n", b"@01 3 OK IDLE -- 1049869\r\n"),  # 50.00001 mm
+        (b"/1 3 move abs 209974\n", b"@01 3 OK BUSY -- 0\r\n"),  # 10 mm = 209973.75 microsteps
+        (b"/1 3 get pos\n", b"@01 3 OK BUSY -- 104987\r\n"),
+        (b"/1 3 get pos\n", b"@01 3 OK IDLE -- 209974\r\n"),
+        (b"/1 3 move abs 104987\n", b"@01 3 OK BUSY -- 0\r\n"),  # 5 mm
+        (b"/1 3 get pos\n", b"@01 3 OK IDLE FS 52493\r\n"),  # stalled half-way
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port, shift_axis=3) as tt:
+            assert tt.tilt is None and tt.shift is not None and tt.shift.name == f"{tt.name} shift axis 3"
+            assert tt.shift.travel_range() == Range(0.0, 1049869 / MSPMM, "mm", "configured limits within device "
+                                                    "limit.min/limit.max")  # fmt: skip
+            assert tt.shift.move_to(10.0) == pytest.approx(209974 / MSPMM, abs=1e-12)
+            with pytest.raises(
+                OutOfRange, match=r"shift axis 3: move to 60 mm is outside the range \[0, 50\.00\d+\] mm"
+            ):
+                tt.shift.move_to(60.0)
+            with pytest.raises(DeviceFault, match=r"move to 5.0 mm stopped at 2.5000 mm: warning FS"):
+                tt.shift.move_to(5.0)
+
+
+def test_shift_axis_on_the_emulator_moves_the_simulated_turntable_sideways():
+    """Axis 3 of a three-axis emulator drives the world's shift (mm) as its own motion; the turntable and
+    the tilt axis move independently of it."""
+    world = SimWorld()
+    assert world.shift_at() is None  # no linear axis
+    with (
+        start_zaber_emulator(world=world, axes=3, **FAST) as h,
+        driver(h.port_path, tilt_axis=2, shift_axis=3) as tt,
+    ):
+        assert world.shift_at() == 0.0 and world.tilt_at() == 0.0
+        tt.home()
+        got = tt.shift.move_to(12.5)
+        assert got == pytest.approx(12.5, abs=0.5 / MSPMM) and world.shift_at() == pytest.approx(got, abs=1e-9)
+        assert tt.move_to(90.0) == pytest.approx(90.0, abs=0.5 / MSPD) and tt.tilt.move_to(10.0)
+        assert world.shift_at() == pytest.approx(got, abs=1e-9) and tt.shift.position() == got
+        assert world.stage_deg == pytest.approx(90.0, abs=1e-6) and world.tilt_at() == pytest.approx(
+            10.0, abs=0.5 / MSPD
+        )
+        assert tt.shift.travel_range().maximum == 100.0  # the emulated X-LSM100A's travel: 0..100 mm
+        with pytest.raises(DeviceRejected, match="BADDATA"):  # beyond the device's travel
+            tt.shift._check(tt.shift.command("move abs 999999999"), "move abs")
+    # a shift axis alone (no tilt): the board keeps the camera's wedge
+    world = SimWorld()
+    with (
+        start_zaber_emulator(world=world, axes=3, tilt_axis=None, **FAST) as h,
+        driver(h.port_path, shift_axis=3) as tt,
+    ):
+        assert world.tilt_at() is None and tt.shift.move_to(1.0) == pytest.approx(1.0, abs=0.5 / MSPMM)
+
+
+def test_a_shift_axis_the_device_does_not_have_or_already_used_is_refused(emu):
+    with pytest.raises(DeviceRejected, match="shift axis 3: 'get pos' rejected: BADAXIS"):
+        driver(emu.port_path, shift_axis=3).open()
+    with pytest.raises(ValueError, match="shift_axis must be another axis than axis 1, got 1"):
+        driver(emu.port_path, shift_axis=1)
+    with pytest.raises(ValueError, match="shift_axis must be another axis than axis 2, got 2"):
+        driver(emu.port_path, tilt_axis=2, shift_axis=2)
+    with pytest.raises(ValueError, match="config key 'shift_microsteps_per_mm'"):
+        ZaberTurntable.from_config({"port": "x", "shift_axis": 3, "shift_microsteps_per_mm": 0})
+    with pytest.raises(ValueError, match="tilt_axis and shift_axis must be different axes, both are 2"):
+        ZaberEmulator(axes=2, shift_axis=2)

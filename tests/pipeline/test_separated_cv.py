@@ -79,3 +79,47 @@ def test_with_the_angles_the_folds_compare_the_lenses_not_the_strings():
         joint = fit_harp_shape(shots, turns, W, H, c, plain=r.full_fit)
         err[c] = compare_models(joint.model, lens, W, H, step=25).rms
     assert err[cands[1]] < 0.9 * err[cands[0]]
+
+
+def _two_axes(bends: np.ndarray, turns: tuple[int, ...], seed: int) -> tuple[list, list, np.ndarray]:
+    """The harp's shots about two turntable axes 2 x (150, 75) px apart: shots, each shot's group, the shift."""
+    centre, shift = np.array(LENS.center), np.array([150.0, 75.0])
+    left, _ = turning_harp_point_sets(LENS, W, H, turns, bends, axis=centre - shift, step=40.0, seed=seed)
+    right, _ = turning_harp_point_sets(LENS, W, H, turns, bends, axis=centre + shift, step=40.0, seed=seed + 1)
+    return left + right, ["left"] * len(turns) + ["right"] * len(turns), shift
+
+
+def test_a_held_out_shot_about_a_moved_axis_is_judged_in_its_own_groups_frame():
+    bends = _bends(23, 7)
+    shots, groups, shift = _two_axes(bends, TURNS, seed=8)
+    plain = fit_distortion(shots, W, H, **SPEC.fit_arguments())
+    fit = fit_harp_shape(shots, TURNS + TURNS, W, H, SPEC, plain=plain, axis_groups=groups)
+    assert fit and {g for g, _ in fit.axis_groups} == {"left", "right"}, fit
+    # the held-out shot: the same harp at an angle never fitted, about the right-hand axis (truth: where the
+    # generator drew it, not where the fit placed it)
+    (held,), _ = turning_harp_point_sets(
+        LENS, W, H, (45,), bends, axis=np.array(LENS.center) + shift, step=40.0, seed=9
+    )
+    edges = [p for p in held if len(p) >= 3]
+    own = held_out_without_strings(fit, held, 45.0, "right")
+    assert own.removed >= 0.8 * len(edges) and own.d < 1.2 * NOISE
+    wrong = held_out_without_strings(fit, held, 45.0, "left")  # placed about the other axis: bends misassigned
+    assert wrong.d > 2.0 * own.d
+    unseen = held_out_without_strings(fit, held, 45.0, "elsewhere")  # a group the fit never saw
+    assert unseen.unmatched == len(edges) == len(unseen.counts) and unseen.removed == 0
+    assert unseen.d == pytest.approx(np.sqrt(np.mean(held_out_residuals(fit.model, held) ** 2)), rel=1e-9)
+
+
+def test_the_folds_with_the_strings_separated_take_the_shots_axis_groups():
+    shots, groups, shift = _two_axes(_bends(23, 11), (0, 45, 90, 135), seed=12)
+    turns = (0, 45, 90, 135) * 2
+    shifts = {"left": tuple(-1.02 * shift), "right": tuple(1.02 * shift)}
+    cands = [FitSpec("radial", 2), SPEC]
+    sel = select_model(shots, W, H, cands, turntable_deg=turns, axis_groups=groups, axis_shifts=shifts)
+    assert sel.folds == SEPARATED_FOLDS and sel.choice == SPEC, sel.reason
+    removed, left = sel.table[1].strings_removed  # every held-out edge in its group's frame: its bend removed
+    assert removed >= 0.9 * (removed + left), sel.table[1]
+    plain = select_model(shots, W, H, cands)  # the plain folds: the held-out shots keep their strings' bends
+    assert plain.table[1].cv_d > 1.5 * sel.table[1].cv_d
+    with pytest.raises(ValueError, match="8 shots but 3 axis groups"):
+        select_model(shots, W, H, cands, turntable_deg=turns, axis_groups=groups[:3])

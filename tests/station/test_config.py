@@ -269,3 +269,17 @@ def test_focus_outside_the_simulated_lens(tmp_path):
     d = demo_data()
     d["focus"]["settings"] = [0, 0.5, 7.0]
     assert error_of(tmp_path, d).endswith("focus.settings[2]: expected a focus in [0, 1] (the simulated lens), got 7")
+
+
+def test_two_axis_capture_needs_a_turntable_with_a_linear_stage(tmp_path):
+    d = demo_data()
+    assert load_config(write(tmp_path, d)).capture.shift_positions_mm == ()  # none: one axis place
+    d["capture"]["shift_positions_mm"] = [0, 40]
+    assert error_of(tmp_path, d).endswith(
+        "capture.shift_positions_mm: expected a turntable with a linear stage under it (station.turntable.shift_axis),"
+        " the zaber turntable has none"
+    )
+    d["capture"]["shift_positions_mm"] = [10]
+    assert "capture.shift_positions_mm: expected a list of at least 2 numbers" in error_of(tmp_path, d)
+    d["capture"]["shift_positions_mm"] = [10, 10]
+    assert "without repeats" in error_of(tmp_path, d)

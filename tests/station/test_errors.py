@@ -293,6 +293,7 @@ def test_every_error_class_is_a_harp_error_or_says_why_not():
             "DeviceDisconnected",
             "CaptureError",
             "OutOfRange",
+            "ConfigKeyError",
         ]
     )
 
