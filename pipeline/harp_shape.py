@@ -141,6 +141,11 @@ AXIS_TOLERANCE = 0.125
 AXIS_TIE = 2.0
 """Scores of :func:`_consistency` within this of the best are alike (one string missed in one shot)."""
 
+AXIS_DISAGREE = 0.6
+"""Largest score of :func:`_consistency`, per edge, of a place of the axis that is taken: above it no place makes
+the shots one harp (shots about two axes: about 1 per edge) and the frame is refused. A bootstrap replicate that
+draws each shot's strings with replacement misses about a third of them in every shot (about 0.4 per edge)."""
+
 AXIS_SEEDS = 32
 """Most local minima of the trial axes' grid that :func:`_place_axis` refines (the best first; three shots
 make a lattice of equally good places, about one per square pitch)."""
@@ -427,7 +432,10 @@ def _place_axis(
     :data:`AXIS_TIE`), the one with fewer strings is the harp (about a wrong axis the shots' strings shift by
     whole pitches against each other: more strings, each seen in fewer shots); where they have as many, the
     turntable angles cannot place the axis (three angles never can, for a harp wider than the image:
-    :func:`group_frames`) and the frame is refused rather than guessed.
+    :func:`group_frames`) and the frame is refused rather than guessed. It is refused too where even the best
+    place scores over :data:`AXIS_DISAGREE` per edge (no one axis makes the shots one harp). An axis beyond
+    :data:`AXIS_REACH` whose shots agree as well about a place within it is not seen (four angles 45 degrees
+    apart: a place 1.85 pitches off).
     """
     n = int(np.ceil(AXIS_REACH / AXIS_STEP))
     steps = np.arange(-n, n + 1) * AXIS_STEP * pitch
@@ -462,6 +470,12 @@ def _place_axis(
             v, k = _consistency(oo - nn @ c, shot_of, n_shots, pitch, AXIS_TOLERANCE * pitch)
             places.append((float(v[0]), int(k[0]), c))
     best = min(v for v, _, _ in places)
+    if best > AXIS_DISAGREE * len(oo):
+        return FitFailure(
+            f"the shots' strings do not agree about any one turntable axis within {AXIS_REACH:g} string pitches of "
+            f"the image centre (at best {best:.0f} of {len(oo)} edges off their string or missed): the harp moved "
+            "between shots (give each shot's axis group), or its axis is farther off"
+        )
     alike = sorted(((k, v), i) for i, (v, k, _) in enumerate(places) if v <= best + AXIS_TIE)
     if len(alike) > 1 and alike[0][0][0] == alike[1][0][0]:
         first = places[alike[0][1]][2]
