@@ -144,7 +144,7 @@ AXIS_TIE = 2.0
 AXIS_DISAGREE = 0.6
 """Largest score of :func:`_consistency`, per edge, of a place of the axis that is taken: above it no place makes
 the shots one harp (shots about two axes: about 1 per edge) and the frame is refused. A bootstrap replicate that
-draws each shot's strings with replacement misses about a third of them in every shot (about 0.4 per edge)."""
+draws each shot's strings with replacement misses about a third of them in every shot (about 0.3 per edge)."""
 
 AXIS_SEEDS = 32
 """Most local minima of the trial axes' grid that :func:`_place_axis` refines (the best first; three shots
@@ -426,10 +426,11 @@ def _place_axis(
     along their shots' normals ``nn``) make one harp (:func:`_consistency`), refined by ``refined``.
 
     Every point of a grid :data:`AXIS_STEP` pitches apart is scored on each shot's strings (the mean of the edges
-    of each, with a tolerance of twice the grid's spacing); its best local minima (up to :data:`AXIS_SEEDS`, those scoring within what the grid's placement
-    may cost a place) are refined and scored again (a tolerance of
-    :data:`AXIS_TOLERANCE` pitches). Where two places a quarter pitch apart or more score alike (within
-    :data:`AXIS_TIE`), the one with fewer strings is the harp (about a wrong axis the shots' strings shift by
+    of each, with a tolerance of twice the grid's spacing); its best local minima (up to :data:`AXIS_SEEDS`, those
+    scoring within what the grid's placement may cost a place) are refined and scored again (a tolerance of
+    :data:`AXIS_TOLERANCE` pitches; one refined out of the disc is dropped: with strings missing at random, as in
+    a bootstrap replicate, a refinement may wander off). Where two places a quarter pitch apart or more score
+    alike (within :data:`AXIS_TIE`), the one with fewer strings is the harp (about a wrong axis the shots' strings shift by
     whole pitches against each other: more strings, each seen in fewer shots); where they have as many, the
     turntable angles cannot place the axis (three angles never can, for a harp wider than the image:
     :func:`group_frames`) and the frame is refused rather than guessed. It is refused too where even the best
@@ -466,10 +467,12 @@ def _place_axis(
     minima = minima[coarse[minima] <= coarse[minima[0]] + AXIS_TIE + 0.2 * len(o_s)]
     places: list[tuple[float, int, Floats]] = []
     for c in (refined(grid[j]) for j in minima):
+        if np.hypot(*(c - c0)) > (AXIS_REACH + AXIS_STEP) * pitch:
+            continue  # refined out of the disc searched: a place it does not vouch for
         if all(np.hypot(*(c - p)) > 0.25 * pitch for _, _, p in places):
             v, k = _consistency(oo - nn @ c, shot_of, n_shots, pitch, AXIS_TOLERANCE * pitch)
             places.append((float(v[0]), int(k[0]), c))
-    best = min(v for v, _, _ in places)
+    best = min((v for v, _, _ in places), default=np.inf)
     if best > AXIS_DISAGREE * len(oo):
         return FitFailure(
             f"the shots' strings do not agree about any one turntable axis within {AXIS_REACH:g} string pitches of "
