@@ -385,7 +385,7 @@ def test_two_sessions_write_to_one_store_at_once(tmp_path):
         d["lens"]["serial"] = serial
         d["focus"]["settings"] = [0.5]
         d["capture"].update(orientations_deg=[0, 60, 120], frames_per_orientation=1)
-        d["pipeline"].update(bootstrap=0, workers=1)
+        d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
         d["store"] = {"path": str(store), "sessions_dir": str(tmp_path / f"sessions{k}")}
         cfg = tmp_path / f"c{k}.yaml"
         cfg.write_text(yaml.safe_dump(d))
@@ -511,7 +511,7 @@ def test_full_disk_stops_with_one_line_then_resumes_once_space_is_freed(small_di
     remount("1m")  # 1 MiB: three 300 kB frames and the session's own files
     cfg = small_config(tmp_path, focus=(0.5,))  # the store stays on the roomy disk: its full disk is the store's own
     d = yaml.safe_load(cfg.read_text())
-    d["pipeline"].update(bootstrap=0, workers=1)
+    d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
     cfg.write_text(yaml.safe_dump(d))
     proc = harp("session", "run", cfg, "--out", mnt, "--name", "s", "--quiet", "--no-report")
     out, err = proc.communicate(timeout=300)
@@ -559,7 +559,7 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     d["simulation"].update(shift_direction_deg=30.0, emulator={"speed_deg_s": 3600.0, "accel_deg_s2": 72000.0})
     d["focus"]["settings"] = [0.5]
     d["capture"].update(orientations_deg=[0, 45, 90, 135], frames_per_orientation=1, shift_positions_mm=[0, 40])
-    d["pipeline"].update(bootstrap=0, workers=1)
+    d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     p = tmp_path / "station.yaml"
     p.write_text(yaml.safe_dump(d))
@@ -571,6 +571,7 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     assert all(abs(r["meta"]["shift_mm"] - r["meta"]["commanded_shift_mm"]) < 1e-3 for r in frames)
     (profile,) = profile_fields(tmp_path / "profiles.sqlite").values()
     assert profile.details["shift_positions_mm"] == [0, 40] and profile.details["strings"]["separated"] is True
+    assert profile.details["bootstrap_replicates"] == 2 and profile.merit.field_uncertainty.rms > 0
     axes = profile.details["harp_health"]["axes"]
     assert [(a["position_mm"], a["shots"]) for a in axes["places"]] == [(0, 4), (40, 4)] and axes["misplaced"] == []
     (x0, y0), (x1, y1) = (a["centre_px"] for a in axes["places"])
