@@ -428,6 +428,25 @@ def harp_frame(
     return frame, per_shot
 
 
+def string_pitch(corrected: Sequence[Sequence[Floats]]) -> float:
+    """The distance between neighbouring strings (px) in shots of a harp of uniform pitch, its edges ``corrected``
+    by a lens fit (ideal pixels, a string's two edges listed as :mod:`pipeline.measure` lists them): per shot the
+    edges' offsets across the strings' mean direction, sorted, and the median of every second difference (an edge
+    to the same edge of the next string: a string's width and the gap to the next add up to the pitch); the
+    median over the shots. It needs no turntable axis: what turns a linear stage's travel (mm) into an image
+    shift of the axis (px) for :func:`group_frames`, with the harp's pitch in mm. NaN when no shot has three
+    edges."""
+    per = []
+    for shot in corrected:
+        if len(shot) < 3:
+            continue
+        a = np.radians(_circular_mean_180(np.array([_edge_angle(np.asarray(e, np.float64)) for e in shot]))[0])
+        nrm = np.array([-np.sin(a), np.cos(a)])
+        o = np.sort([float(nrm @ np.asarray(e, np.float64).mean(axis=0)) for e in shot])
+        per.append(float(np.median(o[2:] - o[:-2])))
+    return float(np.median(per)) if per else float("nan")
+
+
 def group_frames(
     corrected: Sequence[Sequence[Floats]],
     turntable_deg: Sequence[float],
@@ -887,7 +906,15 @@ def lens_result(
     )
 
 
-SeparatedJob = tuple[Sequence[Sequence[Floats]], Sequence[float], int, int, FitSpec]
+SeparatedJob = (
+    tuple[Sequence[Sequence[Floats]], Sequence[float], int, int, FitSpec]
+    | tuple[
+        Sequence[Sequence[Floats]], Sequence[float], int, int, FitSpec, Sequence[Hashable] | None,
+        Mapping[Hashable, Sequence[float]] | None,
+    ]
+)  # fmt: skip
+"""``(lines_per_image, turntable_deg, width, height, spec)``, or with ``(axis_groups, axis_shifts)`` after them
+(the harp moved between groups of shots: :func:`fit_harp_shape`)."""
 
 
 def try_fit_harp_shape(
@@ -913,16 +940,23 @@ def try_fit_harp_shape(
         return FitFailure(f"the joint fit failed: {type(exc).__name__}: {exc}")
 
 
+def _job_fit(job: SeparatedJob, **kw: Any) -> HarpShapeFit | FitFailure:
+    lines, angles, width, height, spec = job[:5]
+    groups: Any = job[5] if len(job) > 5 else None
+    shifts: Any = job[6] if len(job) > 6 else None
+    return try_fit_harp_shape(lines, angles, width, height, spec, axis_groups=groups, axis_shifts=shifts, **kw)
+
+
 def separated_job(job: SeparatedJob) -> tuple[DistortionModel | None, str | None]:
-    """One fit of the lens with the strings separated ``(lines_per_image, turntable_deg, width, height, spec)``
+    """One fit of the lens with the strings separated (a :data:`SeparatedJob`)
     -> ``(model, None)`` or ``(None, reason)``; module-level so that a process pool can run it (the
     leave-one-orientation-out folds of a session)."""
-    fit = try_fit_harp_shape(*job)
+    fit = _job_fit(job)
     return (fit.model, None) if fit else (None, fit.reason)
 
 
 def separated_kinks_job(job: SeparatedJob, t: int = DEFAULT_T) -> tuple[DistortionModel | None, str | None]:
     """:func:`separated_job` with each string's kinks found and modelled (``fit_harp_shape(kinks=True)``, the
     points measured with subsampling factor ``t``; ``functools.partial`` of it is what a process pool runs)."""
-    fit = try_fit_harp_shape(*job, kinks=True, kink_t=t)
+    fit = _job_fit(job, kinks=True, kink_t=t)
     return (fit.model, None) if fit else (None, fit.reason)

@@ -42,7 +42,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeAlias
 
@@ -153,6 +153,8 @@ def bootstrap_field_uncertainty(
     map_fn: MapFn = map,
     turntable_deg: Sequence[float] | None = None,
     separated_fn: Callable[[Any], RefitOutcome] | None = None,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
 ) -> FieldUncertainty | FitFailure:
     """Bootstrap the correction fit and map the spread of the fitted field.
 
@@ -189,6 +191,10 @@ def bootstrap_field_uncertainty(
     separated_fn : callable, optional
         The job that fits such a replicate (default :func:`pipeline.harp_shape.separated_job`; e.g.
         :func:`pipeline.harp_shape.separated_kinks_job` to model each string's kinks as well).
+    axis_groups, axis_shifts : optional
+        With ``turntable_deg``, each image's turntable-axis group and the groups' rough image shifts when the
+        harp was moved between groups of shots (:func:`pipeline.harp_shape.fit_harp_shape`): every replicate's
+        images keep their groups.
 
     Returns
     -------
@@ -212,6 +218,7 @@ def bootstrap_field_uncertainty(
     angles = (
         None if turntable_deg is None else [float(a) for a, lines in zip(turntable_deg, data, strict=True) if lines]
     )
+    image_groups = None if axis_groups is None else [g for g, lines in zip(axis_groups, data, strict=True) if lines]
     data = [lines for lines in data if lines]
     # resampling units of "edges": strings, i.e. lines 2k, 2k+1 (pipeline.measure lists a string's
     # two edges next to each other), grouped before dropping so a rejected edge keeps the pairing
@@ -231,22 +238,26 @@ def bootstrap_field_uncertainty(
         if turntable_deg is None
         else [float(a) for a, groups in zip(turntable_deg, strings, strict=True) if groups]
     )
-    strings = [groups for groups in strings if groups]
+    string_groups = None if axis_groups is None else [g for g, gs in zip(axis_groups, strings, strict=True) if gs]
+    strings = [gs for gs in strings if gs]
     rkw = {**kw, "robust": False, "init": full.model}
     rng = np.random.default_rng(seed)
     jobs: list[Any] = []
     for _ in range(int(n_boot)):  # all resampling first: the result does not depend on map_fn
         if resample == "edges":
             sample = [[p for k in rng.integers(0, len(groups), len(groups)) for p in groups[k]] for groups in strings]
-            sample_angles = string_angles
+            sample_angles, sample_groups = string_angles, string_groups
         else:
             picks = rng.integers(0, len(data), len(data))
             sample = [data[k] for k in picks]
             sample_angles = None if angles is None else [angles[k] for k in picks]
+            sample_groups = None if image_groups is None else [image_groups[k] for k in picks]
         if sample_angles is None:
             jobs.append((sample, width, height, rkw))
-        else:
+        elif sample_groups is None:
             jobs.append((sample, sample_angles, width, height, spec or FitSpec()))
+        else:
+            jobs.append((sample, sample_angles, width, height, spec or FitSpec(), sample_groups, axis_shifts))
     models: list[DistortionModel] = []
     failures: list[str] = []
     n_failed = 0

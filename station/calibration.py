@@ -37,17 +37,21 @@ from pipeline.fit import fit_distortion
 from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_KINKS, STRINGS_SEPARATE, FitSpec
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
+    GROUP_AXIS_SEARCH,
     HarpShapeFit,
     fit_harp_shape,
+    harp_frame,
     lens_result,
     separated_job,
     separated_kinks_job,
+    string_pitch,
 )
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
+from station.config.devices import MIN_SEARCHED_ANGLES
 from station.equipment import Identity
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
@@ -179,6 +183,8 @@ def calibrate_shots(
     map_fn: MapFn = map,
     candidates: Sequence[FitSpec] | None = None,
     turntable_deg: Sequence[float] | None = None,
+    axis_groups: Sequence[Any] | None = None,
+    axis_shifts: Mapping[Any, Sequence[float]] | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -197,6 +203,8 @@ def calibrate_shots(
         :data:`pipeline.cross_validation.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     turntable_deg : each shot's turntable angle, when known: the automatic choice cross-validates every
         candidate with the strings separated (:func:`pipeline.select.select_model`'s ``turntable_deg``).
+    axis_groups, axis_shifts : with ``turntable_deg``, a two-axis capture's groups and shifts (:func:`axes_of`) for
+        those folds.
     """
     lines = [list(s) for s in shots]
     selection = None
@@ -204,7 +212,10 @@ def calibrate_shots(
     if spec is None:
         angles = None if turntable_deg is None else [float(a) for a in turntable_deg]
         offered = DEFAULT_CANDIDATES if candidates is None else candidates
-        selection = select_model(lines, width, height, offered, map_fn=map_fn, turntable_deg=angles)
+        selection = select_model(
+            lines, width, height, offered, map_fn=map_fn, turntable_deg=angles,
+            axis_groups=None if angles is None else axis_groups, axis_shifts=None if angles is None else axis_shifts,
+        )  # fmt: skip
         spec = selection.choice
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
@@ -311,6 +322,140 @@ def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG, support: s
     return {"reason": selection.reason, "folds": selection.folds}
 
 
+# ------------------------------------------------------- two turntable-axis places
+@dataclass(frozen=True)
+class AxisPlaces:
+    """Two-axis capture (``capture.shift_positions_mm``): the linear stage that carries the turntable sideways, per
+    shot its position as the plan commanded it (the shot's axis group) and as it read back (mm); how a stage move
+    shows in the image: ``direction_deg`` (``station.harp.shift_direction_deg``, from +x towards +y; None: unknown,
+    each place's axis searched on its own shots, which needs four turntable angles or more there) and the harp's
+    pitch in mm (``station.harp.string_spacing_mm``): the pitch the shots show in px over it is the image scale of
+    the harp's plane, in which the stage moves the axis."""
+
+    commanded_mm: tuple[float, ...]
+    read_mm: tuple[float, ...]
+    direction_deg: float | None
+    spacing_mm: float
+
+
+@dataclass(frozen=True)
+class Axes:
+    """What the joint fit is told of a two-axis capture (:func:`axes_of`): each shot's axis group (its stage
+    position's label, :func:`place_label`), each group's rough image shift of the axis from where the axis is with
+    the stage halfway between its outermost positions (px; None: each group's axis searched), the strings' pitch
+    in the shots (px) and the image scale (px per mm of stage travel)."""
+
+    places: AxisPlaces
+    groups: tuple[str, ...]
+    shifts: dict[str, tuple[float, float]] | None
+    pitch_px: float
+    px_per_mm: float
+
+    def fold(self, k: int) -> tuple[list[str], dict[str, tuple[float, float]] | None]:
+        """``(axis_groups, axis_shifts)`` of the shots without shot ``k`` (a leave-one-orientation-out fold)."""
+        return [g for j, g in enumerate(self.groups) if j != k], self.shifts
+
+
+def place_label(mm: float) -> str:
+    """The axis group of the shots taken with the linear stage at ``mm``."""
+    return f"{mm:g} mm"
+
+
+def axes_of(
+    places: AxisPlaces | None,
+    shots: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    turntable_deg: Sequence[float],
+) -> Axes | None:
+    """The axis groups and rough shifts of a two-axis capture for :func:`pipeline.harp_shape.fit_harp_shape`
+    (None when every shot was taken at one place: nothing changes), from the shots' edges as measured.
+
+    The image scale is the strings' pitch in the shots (:func:`pipeline.harp_shape.string_pitch`; the lens's
+    distortion changes it by its local scale only) over the harp's pitch in mm. Each group's shift is its shots'
+    mean read-back position less the middle of the commanded positions, times the scale, along ``direction_deg``;
+    the axis at that middle is then found, to an eighth of a pitch, on every shot moved back by its group's shift
+    (:func:`pipeline.harp_shape.harp_frame` within :data:`pipeline.harp_shape.GROUP_AXIS_SEARCH` pitches of the
+    image centre; it needs four turntable angles or more, else it is taken at the image centre) and the shifts are
+    given from the image centre to there: :func:`pipeline.harp_shape.group_frames` searches each group's axis
+    within a third of a pitch of where its shift puts it. Without ``direction_deg`` no shift is given (each group's
+    axis searched on its own shots)."""
+    if places is None or len(set(places.commanded_mm)) < 2:
+        return None
+    raw = [[np.asarray(p, np.float64) for p in s] for s in shots]
+    pitch = string_pitch(raw)
+    ppm = pitch / places.spacing_mm
+    groups = tuple(place_label(m) for m in places.commanded_mm)
+    shifts = None
+    if places.direction_deg is not None and np.isfinite(ppm):
+        mid = 0.5 * (min(places.commanded_mm) + max(places.commanded_mm))
+        a = np.radians(places.direction_deg)
+        rel = {}
+        for label in dict.fromkeys(groups):
+            d = (float(np.mean([r for g, r in zip(groups, places.read_mm, strict=True) if g == label])) - mid) * ppm
+            rel[label] = np.array([d * np.cos(a), d * np.sin(a)])
+        ref = np.zeros(2)  # where the axis is with the stage at the middle, from the image centre
+        if distinct_orientations(turntable_deg) >= MIN_SEARCHED_ANGLES:
+            back = [[p - rel[g] for p in s] for s, g in zip(raw, groups, strict=True) if s]
+            framed = harp_frame(
+                back, [float(t) for t, s in zip(turntable_deg, raw, strict=True) if s], width, height,
+                reach=GROUP_AXIS_SEARCH, refine=False,
+            )  # fmt: skip
+            if framed:
+                ref = np.asarray(framed[0].centre) - np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+        shifts = {g: (float(v[0] + ref[0]), float(v[1] + ref[1])) for g, v in rel.items()}
+    return Axes(places, groups, shifts, float(pitch), float(ppm))
+
+
+def axis_record(axes: Axes, fit: HarpShapeFit) -> dict[str, Any]:
+    """Each place's turntable axis as the joint fit found it (``HarpShapeFit.axis_groups``) against where the
+    stage's travel puts it, as a profile keeps it (``harp_health["axes"]``): per place its position (mm, the
+    commanded one), shots, the axis found (ideal px) and how far it is from where the travel puts it relative to
+    the other places (``off_px``: with ``direction_deg`` the difference of the two displacements from their means;
+    without, of the distances from the first place's axis). More than half a pitch (``limit_px``) and the strings
+    were numbered at the wrong place: ``misplaced`` lists those places (QA fails the profile)."""
+    found = {str(g): f for g, f in fit.axis_groups}
+    labels = [g for g in dict.fromkeys(axes.groups) if g in found]
+    mm = {
+        g: float(np.mean([r for h, r in zip(axes.groups, axes.places.read_mm, strict=True) if h == g])) for g in labels
+    }
+    centre = {g: np.asarray(found[g].centre, np.float64) for g in labels}
+    off: dict[str, float] = {}
+    if axes.places.direction_deg is not None:
+        a = np.radians(axes.places.direction_deg)
+        want = {g: mm[g] * axes.px_per_mm * np.array([np.cos(a), np.sin(a)]) for g in labels}
+        mc = np.mean([centre[g] for g in labels], axis=0)
+        mw = np.mean([want[g] for g in labels], axis=0)
+        off = {g: float(np.hypot(*((centre[g] - mc) - (want[g] - mw)))) for g in labels}
+    elif labels:
+        first = labels[0]
+        off = {
+            g: abs(float(np.hypot(*(centre[g] - centre[first]))) - abs(mm[g] - mm[first]) * axes.px_per_mm)
+            for g in labels
+        }
+    limit = 0.5 * axes.pitch_px
+    places = [
+        {
+            "position_mm": float(axes.places.commanded_mm[axes.groups.index(g)]),
+            "shots": axes.groups.count(g),
+            "centre_px": [float(centre[g][0]), float(centre[g][1])],
+            "off_px": finite_or_none(off.get(g, float("nan"))),
+        }
+        for g in labels
+    ]
+    worst = max(off.values()) if off else float("nan")
+    return {
+        "pitch_px": finite_or_none(axes.pitch_px),
+        "px_per_mm": finite_or_none(axes.px_per_mm),
+        "direction_deg": axes.places.direction_deg,
+        "shift_given": axes.shifts is not None,
+        "limit_px": finite_or_none(limit),
+        "places": places,
+        "worst_off_px": finite_or_none(worst),
+        "misplaced": [p["position_mm"] for p, g in zip(places, labels, strict=True) if off.get(g, 0.0) > limit],
+    }
+
+
 OUTLIER_FACTOR = 3.0
 """A string is bent (QA) when its own bend exceeds the limit *and* this many times the median string's.
 A lens term the fitted model lacks bends the fits of many strings at once (a test session of straight
@@ -331,6 +476,7 @@ def harp_health(
     spec: FitSpec,
     *,
     joint: HarpShapeFit | FitFailure | None = None,
+    axes: Axes | None = None,
 ) -> dict[str, Any]:
     """The harp's self-check (issue 19 item 4) as a profile keeps it (``details["harp_health"]``).
 
@@ -340,7 +486,9 @@ def harp_health(
     harp's or a lens term's, not one string's fault) and the standard error (px); the worst string and
     the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, as QA judges them;
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
-    ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens).
+    ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens);
+    ``axes``: the shots' turntable-axis places of a two-axis capture (:func:`axes_of`), each place's axis found
+    and compared with where the stage was sent (``"axes"``: :func:`axis_record`).
     """
 
     if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
@@ -352,7 +500,15 @@ def harp_health(
     hs = (
         joint
         if joint is not None
-        else fit_harp_shape([list(s) for s in shots], list(turntable_deg), width, height, spec)
+        else fit_harp_shape(
+            [list(s) for s in shots],
+            list(turntable_deg),
+            width,
+            height,
+            spec,
+            axis_groups=None if axes is None else axes.groups,
+            axis_shifts=None if axes is None else axes.shifts,
+        )  # fmt: skip
     )
     if not hs:
         return {"limit_px": BEND_LIMIT_PX, "failure": str(getattr(hs, "reason", "the joint fit failed"))}
@@ -380,7 +536,7 @@ def harp_health(
         ],
         "d_with_strings_px": finite_or_none(hs.d_after),
         "d_lens_only_px": finite_or_none(hs.d_lens_only),
-    }
+    } | ({} if axes is None else {"axes": axis_record(axes, hs)})
 
 
 def separate_strings(
@@ -396,6 +552,7 @@ def separate_strings(
     seed: int = 0,
     kinks: bool = False,
     kink_t: int = DEFAULT_T,
+    axes: Axes | None = None,
 ) -> Calibration:
     """``cal`` with its lens replaced by the lens fitted jointly with every string's own deviation (``joint``,
     :func:`pipeline.harp_shape.fit_harp_shape` of the same shots, angles and spec).
@@ -416,7 +573,8 @@ def separate_strings(
     it, so one the fit on all shots does not find is not significant in a fold either; this keeps a session
     whose strings have no kink at the cost of one scan per focus. ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
-    ``cal`` is returned with the reason there and its plain lens."""
+    ``cal`` is returned with the reason there and its plain lens. ``axes``: a two-axis capture's groups and shifts
+    (:func:`axes_of`; ``joint`` fitted with them), which every fold and replicate is fitted with too."""
     spec = cal.spec
     full = cal.fit
     if spec is None or not full:
@@ -438,13 +596,14 @@ def separate_strings(
     kink_job = functools.partial(separated_kinks_job, t=kink_t) if kinks and joint.kinks else None
     hold = cal.merit.holdout
     if hold is not None and hold.scheme == HOLDOUT_LEAVE_ONE_ORIENTATION_OUT:
-        jobs = [
+        jobs: list[Any] = [
             (
                 [ls for j, ls in enumerate(lines) if j != k],
                 [float(a) for j, a in enumerate(turntable_deg) if j != k],
                 width,
                 height,
                 spec,
+                *(() if axes is None else axes.fold(k)),
             )
             for k in range(len(lines))
         ]
@@ -465,7 +624,8 @@ def separate_strings(
     if bootstrap >= 2:
         boot = bootstrap_field_uncertainty(
             lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
-            turntable_deg=turntable_deg, separated_fn=kink_job,
+            turntable_deg=turntable_deg, separated_fn=kink_job, axis_groups=None if axes is None else axes.groups,
+            axis_shifts=None if axes is None else axes.shifts,
         )  # fmt: skip
         if cal.merit.field_uncertainty is not None:
             record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
@@ -494,6 +654,7 @@ def calibrate_focus(
     *,
     map_fn: MapFn = map,
     turntable_deg: Sequence[float] | None = None,
+    axis_places: AxisPlaces | None = None,
 ) -> Calibration:
     """The calibration of one focus setting of a session: its orientations' edges (``shots``, one
     per orientation) fitted by :func:`calibrate_shots` with each orientation held out in turn,
@@ -507,13 +668,18 @@ def calibrate_focus(
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
     choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
     so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
-    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`)."""
+    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`).
+    ``axis_places``: each shot's linear-stage position of a two-axis capture (``capture.shift_positions_mm``);
+    when the shots span two places or more, the joint fit, its folds and its bootstrap replicates find each
+    place's turntable axis (:func:`axes_of`), as do an automatic choice's strings-separated folds, and the harp's
+    self-check reports them (:func:`axis_record`). One place, or None: nothing changes."""
     strings = getattr(pipeline, "strings", STRINGS_KINKS)
     separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
     kinks = separate and strings == STRINGS_KINKS
     kink_t = getattr(pipeline, "t", DEFAULT_T)  # the kinks' template follows the edges' subsampling
     by_strings = getattr(pipeline, "choice_folds", CHOICE_FOLDS_PLAIN) == CHOICE_FOLDS_STRINGS
     known = turntable_deg is not None and len(turntable_deg) == len(shots)
+    axes = axes_of(axis_places, shots, width, height, turntable_deg) if known and turntable_deg is not None else None
     cal = calibrate_shots(
         [list(s) for s in shots],
         width,
@@ -524,6 +690,8 @@ def calibrate_focus(
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
         turntable_deg=turntable_deg if separate and by_strings and known else None,
+        axis_groups=None if axes is None else axes.groups,
+        axis_shifts=None if axes is None else axes.shifts,
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
@@ -531,9 +699,10 @@ def calibrate_focus(
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
             [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
-            kink_t=kink_t,
+            kink_t=kink_t, axis_groups=None if axes is None else axes.groups,
+            axis_shifts=None if axes is None else axes.shifts,
         )  # fmt: skip
-    health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint)
+    health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint, axes=axes)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
     if not separate:
         return cal
@@ -543,7 +712,7 @@ def calibrate_focus(
         return dataclasses.replace(cal, details={**cal.details, "strings": rec})
     return separate_strings(
         cal, shots, turntable_deg, width, height, joint, map_fn=map_fn, bootstrap=pipeline.bootstrap,
-        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=kink_t,
+        seed=pipeline.seed + 1000 * focus_idx, kinks=kinks, kink_t=kink_t, axes=axes,
     )  # fmt: skip
 
 
@@ -582,6 +751,7 @@ def focus_profile(
         details={
             **dict(details or {}),
             "orientations_deg": list(config.capture.orientations_deg),
+            **({"shift_positions_mm": list(shifts)} if (shifts := config.capture.shift_positions_mm) else {}),
             "frames_per_orientation": config.capture.frames_per_orientation,
             "t": config.pipeline.t,
         },

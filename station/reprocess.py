@@ -55,6 +55,7 @@ from station.session.directory import SessionError, read_manifest
 from station.session.frame_files import decode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.processing import average_frames, measure_shot, shot_problems
+from station.session.profile_steps import axis_places
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 from station.store import StoreError
 
@@ -260,7 +261,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
     shots = []
     frame_files: list[Path] = []
     size: tuple[int, int] | None = None
-    for o, commanded in enumerate(cfg.capture.orientations_deg):
+    for o, commanded in enumerate(cfg.capture.angles_deg):
         records = s.frames(f, o)
         if len(records) != n:
             raise ValueError(f"{where}: orientation {o} has {len(records)} of its {n} frames in the manifest")
@@ -280,7 +281,10 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         frame_files += [s.path / r.file for r in records]
     assert size is not None
     w, h = size
-    cal = calibrate_focus(shots, w, h, cfg.pipeline, f, _spec(job, cfg), turntable_deg=cfg.capture.orientations_deg)
+    cal = calibrate_focus(
+        shots, w, h, cfg.pipeline, f, _spec(job, cfg), turntable_deg=cfg.capture.angles_deg,
+        axis_places=axis_places(s, cfg, f),
+    )  # fmt: skip
     if cal.failure or not cal.fit:
         raise ValueError(f"{where}: the fit failed: {cal.failure}")
     old = s.old_profile(f)

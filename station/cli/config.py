@@ -56,7 +56,7 @@ def _check_one(path: Path, as_json: bool) -> dict:
     for w in warnings:
         warn("harp config", w)
     summary = (
-        f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
+        f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations)} orientations x "
         f"{config.capture.frames_per_orientation} frames; camera {config.station.camera.driver}, turntable "
         f"{config.station.turntable.driver}; lens {config.lens.label()}"
     )

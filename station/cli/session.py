@@ -499,7 +499,7 @@ def _plan(args) -> int:
     took = f"{minutes} min {seconds:02d} s" if minutes < 60 else f"{est.seconds / 3600:.1f} h"
     say(
         "harp session",
-        f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations_deg)} orientations x "
+        f"{len(config.focus_settings)} focus settings x {len(config.capture.orientations)} orientations x "
         f"{config.capture.frames_per_orientation} frames{board_views(config)} = {est.frames} frames, {est.moves} moves, "
         f"{est.fits} fits; estimated duration {took}",
     )

@@ -12,7 +12,9 @@
 * ``capture.checks.min_lines`` no more than the string edges the simulated camera's harp can show at
   every orientation (the image's extent across the strings over their spacing, two edges a string);
 * a session with the camera-matrix stage (``intrinsics``) on the turntable has a camera that can be shown the board
-  (:class:`drivers.protocols.BoardScene`: the simulator).
+  (:class:`drivers.protocols.BoardScene`: the simulator);
+* a two-axis capture (``capture.shift_positions_mm``) has a turntable with a linear stage, its positions within
+  the stage's configured travel, and the image direction of a stage move when it has fewer than four angles.
 
 The devices' own ranges are checked once they are open (:func:`station.session.devices.check_against_devices`).
 """
@@ -86,6 +88,7 @@ def check_the_devices(config: Config) -> None:
     """The checks of the module docstring; :class:`ConfigError` naming the field."""
     _orientations(config)
     camera, turntable = created_devices(config)
+    _shift_positions(config, turntable)
     if config.simulation is not None:
         opts = zaber_emulator_options(config, turntable)
         try:
@@ -115,6 +118,48 @@ def check_the_devices(config: Config) -> None:
             f"{config.station.camera.driver} camera: on this station the operator places the board "
             "(intrinsics.placement: operator)",
         )  # fmt: skip
+
+
+def _shift_positions(config: Config, turntable: Any) -> None:
+    """Two-axis capture (``capture.shift_positions_mm``): the turntable has a linear stage (``turntable.shift``,
+    its driver's ``shift_axis``) and every position is within its configured travel; without the image direction
+    of a stage move (``station.harp.shift_direction_deg``) each place's axis is searched on its own shots, which
+    takes four turntable angles or more (:func:`pipeline.harp_shape.group_frames`)."""
+    cap = config.capture
+    if not cap.shift_positions_mm:
+        return
+    shift = getattr(turntable, "shift", None)
+    if shift is None:
+        raise config.error(
+            "capture.shift_positions_mm", "expected a turntable with a linear stage under it "
+            f"(station.turntable.shift_axis), the {config.station.turntable.driver} turntable has none",
+        )  # fmt: skip
+    travel = getattr(shift, "travel_range", None)
+    r = None
+    if travel is not None:
+        try:
+            r = travel()
+        except (DriverError, OSError, ValueError):  # a range known only once open: checked then
+            r = None
+    for i, mm in enumerate(cap.shift_positions_mm):
+        if r is not None and not r.minimum <= mm <= r.maximum:
+            raise config.error(
+                f"capture.shift_positions_mm[{i}]", f"expected a position in [{r.minimum:g}, {r.maximum:g}] mm "
+                f"(station.turntable.shift_limits), got {mm:g}",
+            )  # fmt: skip
+    if config.station.harp.shift_direction_deg is None and len(cap.orientations_deg) < MIN_SEARCHED_ANGLES:
+        raise config.error(
+            "station.harp.shift_direction_deg", "expected the image direction of a positive linear-stage move: "
+            f"with fewer than {MIN_SEARCHED_ANGLES} turntable angles (capture.orientations_deg) a place's turntable "
+            "axis cannot be found without it",
+        )  # fmt: skip
+
+
+MIN_SEARCHED_ANGLES = 4
+"""Turntable angles about which the shots of a place of a two-axis capture place its axis without a lattice of
+equally good points about a pitch apart (three 60 degrees apart have one, :func:`pipeline.harp_shape.group_frames`):
+what a place's axis searched on its own shots needs (no image direction of a stage move given), and the search of
+where the axis is with the stage halfway (:func:`station.calibration.axes_of`)."""
 
 
 def _orientations(config: Config) -> None:

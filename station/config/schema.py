@@ -106,7 +106,10 @@ class HarpConfig:
 
     ``offset_deg`` is the angle of the strings in the image (pipeline angle
     convention) when the turntable is at 0°; ``direction`` is +1 when a
-    positive stage move increases that angle, -1 otherwise.
+    positive stage move increases that angle, -1 otherwise. ``shift_direction_deg``: where the turntable axis
+    moves in the image when a linear stage carrying the turntable moves forward (two-axis capture,
+    ``capture.shift_positions_mm``); the image scale of a stage move is the harp's, the strings' pitch in
+    the image over ``string_spacing_mm`` (:func:`station.calibration.axis_shifts_px`).
     """
 
     string_width_mm: float = setting(doc="the strings' diameter (less than their spacing)", unit="mm", low=0.0,
@@ -115,6 +118,11 @@ class HarpConfig:
                                        high=1000.0, low_open=True)  # fmt: skip
     offset_deg: float = setting(0.0, "the strings' angle in the image at stage 0", "deg", -360.0, 360.0)
     direction: int = setting(1, "+1 when a positive stage move increases the string angle", choices=(1, -1))
+    shift_direction_deg: float | None = setting(None, "two-axis capture (capture.shift_positions_mm): the image "
+                                                "direction in which the turntable axis moves for a positive "
+                                                "linear-stage move, from +x (column) towards +y (row) (null: each "
+                                                "position's axis searched, 4 or more orientations)", "deg", -360.0,
+                                                360.0)  # fmt: skip
 
     def expected_angle(self, stage_deg: float) -> float:
         return (self.offset_deg + self.direction * stage_deg) % 180.0
@@ -163,8 +171,32 @@ class CaptureConfig:
     settle_s: float = setting(0.0, "wait after each move before capturing", "s", 0.0, 60.0)
     timeout_s: float = setting(5.0, "wait for a frame (more than the exposure)", "s", 0.1, 600.0)
     move_timeout_s: float = setting(60.0, "wait for a turntable move", "s", 1.0, 3600.0)
+    shift_positions_mm: tuple[float, ...] = setting((), "two-axis capture: linear-stage positions carrying the "
+                                                    "turntable sideways (station.turntable.shift_axis), every "
+                                                    "orientation taken at each (none: one axis place)", "mm", -1e5,
+                                                    1e5, length=(2, None), unique=True)  # fmt: skip
     checks: CheckConfig = section(CheckConfig, "acceptance of a captured shot")
     retries: RetryConfig = section(RetryConfig, "device commands tried again")
+
+    @functools.cached_property  # (a plan of 100000 orientations asks for one at a time)
+    def orientations(self) -> tuple[tuple[float | None, float], ...]:
+        """Each orientation of the plan, ``(linear-stage position mm or None, turntable angle deg)``: the
+        turntable angles ``orientations_deg`` at each of ``shift_positions_mm`` in turn (the stage moves least),
+        or at the one axis place (position None) without them. An orientation's index in this tuple is the
+        ``orientation_idx`` of the plan, the frames and the manifest."""
+        if not self.shift_positions_mm:
+            return tuple((None, float(a)) for a in self.orientations_deg)
+        return tuple((float(p), float(a)) for p in self.shift_positions_mm for a in self.orientations_deg)
+
+    @functools.cached_property
+    def angles_deg(self) -> tuple[float, ...]:
+        """The turntable angle of each orientation of the plan (:attr:`orientations`)."""
+        return tuple(a for _, a in self.orientations)
+
+    @functools.cached_property
+    def shifts_mm(self) -> tuple[float | None, ...]:
+        """The linear-stage position of each orientation of the plan (:attr:`orientations`; None: no stage)."""
+        return tuple(p for p, _ in self.orientations)
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ class SessionTap:
         self._session, self._live, self._config = session, live, config
         if operator is not None:  # the page's buttons answer the board views asked of the operator
             live.answer_board = operator.attach_page()
-        n_f, n_o = len(config.focus_settings), len(config.capture.orientations_deg)
+        n_f, n_o = len(config.focus_settings), len(config.capture.orientations)
         self._totals = (n_f, n_o, n_f * n_o)
         self._where = (0, 0)
         live.begin_session({"session": str(session.path), "shots_total": n_f * n_o})

@@ -305,7 +305,7 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
     a shot without one is measured now."""
     cfg = session.config
     shots = []
-    for o, deg in enumerate(cfg.capture.orientations_deg):
+    for o, deg in enumerate(cfg.capture.angles_deg):
         records = session.frames(focus_idx, o)
         if not records:
             continue

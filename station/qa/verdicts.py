@@ -46,7 +46,7 @@ A FAIL has one reason per failed check. :func:`qa_verdict` judges one
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -379,12 +379,41 @@ def evaluate(
                 "would carry its bend; straighten or replace the string, then capture again",
             )
 
+    axes = (harp_health or {}).get("axes")
+    if axes and axes.get("places"):
+        _axis_places(axes, add, metrics)
+
     return Verdict(
         FAIL if reasons else PASS,
         tuple(reasons),
         metrics,
         tuple(checks),
         {k: getattr(thresholds, k) for k in THRESHOLD_FIELDS},
+    )
+
+
+def _axis_places(axes: Mapping[str, Any], add: Callable[..., None], metrics: dict[str, Any]) -> None:
+    """The check of a two-axis capture's turntable-axis places (:func:`station.calibration.axis_record`): each
+    place's axis as the joint fit found it, and whether it lies within half a pitch of where the linear stage's
+    travel puts it (further, and the strings were numbered wrongly at that place)."""
+    limit, worst = axes.get("limit_px"), axes.get("worst_off_px")
+    where = ", ".join(
+        f"{p['position_mm']:g} mm at ({p['centre_px'][0]:.1f}, {p['centre_px'][1]:.1f})" for p in axes["places"]
+    )
+    if limit is None or worst is None:
+        add(Check("axis_places", None, "<=", limit, None, f"turntable axis places: {where}: not judged"))
+        return
+    metrics["axis_place_off_px"] = worst
+    bad = list(axes.get("misplaced") or [])
+    text = (
+        f"turntable axis places ({where} px): largest disagreement with the stage's travel {worst:.2f} px "
+        f"{'>' if bad else '<='} {limit:.2f} px (half a pitch): {FAIL if bad else PASS}"
+    )
+    add(
+        Check("axis_places", worst, "<=", limit, not bad, text),
+        f"the turntable axis at stage position {bad[0] if bad else 0:g} mm is {worst:.2f} px from where the "
+        f"linear stage's travel puts it (more than half a pitch): its strings were numbered wrongly; check "
+        "station.harp.shift_direction_deg and the stage, then fit again (harp reprocess)",
     )
 
 
@@ -532,7 +561,7 @@ def session_measurements(session, focus_idx: int) -> Measurements | None:
     """The measured edges a session kept for one focus setting (``measurements/``, the shots'
     current attempts), or None when any orientation lacks its kept measurement."""
     shots = []
-    for o in range(len(session.config.capture.orientations_deg)):
+    for o in range(len(session.config.capture.orientations)):
         m = stored_measurement(session, focus_idx, o)
         if m is None:
             return None

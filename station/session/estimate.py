@@ -57,6 +57,8 @@ TURNTABLE_SPEED_DEG_S = 20.0
 """Assumed speed of a real turntable (deg/s) when the configuration does not simulate one."""
 TURNTABLE_ACCEL_DEG_S2 = 40.0
 """Assumed acceleration of a real turntable (deg/s²)."""
+SHIFT_SPEED_MM_S = 10.0
+"""Assumed speed of the linear stage that carries the turntable (two-axis capture, mm/s)."""
 MOVE_OVERHEAD_S = 0.05
 FOCUS_OVERHEAD_S = 0.2
 FRAME_OVERHEAD_S = 0.05
@@ -142,12 +144,15 @@ def estimate_plan(config: Config) -> PlanEstimate:
         assumptions.append("sensor size not in the configuration: 5 megapixels assumed")
     render = RENDER_S_PER_MPX * mpx if config.station.camera.driver == "sim" else 0.0
     frame_s = cap.exposure_us / 1e6 + FRAME_OVERHEAD_S + render
-    n_o = len(cap.orientations_deg)
+    n_o = len(cap.orientations)
     pc = config.pipeline
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
     first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
     stage = 0.0  # a session homes the turntable first
     tilt = 0.0  # the tilt axis (intrinsics.placement: stage) starts at rest at 0
+    shift: float | None = None  # the linear stage (capture.shift_positions_mm): where it is, unknown at first
+    if cap.shift_positions_mm:
+        assumptions.append(f"linear stage speed assumed {SHIFT_SPEED_MM_S:g} mm/s (not configured)")
     frames = moves = locks = fits = 0
     current: dict[str, float] = {}
     for step in plan_session(dataclasses.replace(config, focus_settings=config.focus_settings[:1])):
@@ -155,11 +160,14 @@ def estimate_plan(config: Config) -> PlanEstimate:
             case LockFocus():
                 locks += 1
                 current["extra"] = current.get("extra", 0.0) + FOCUS_OVERHEAD_S
-            case Move(focus_idx=f, orientation_idx=o, degrees=deg):
+            case Move(focus_idx=f, orientation_idx=o, degrees=deg, shift_mm=mm):
                 moves += 1
                 current = {"f": f, "o": o, "deg": deg, "frames": 0, "s": current.get("extra", 0.0)}
                 current["s"] += MOVE_OVERHEAD_S + move_seconds(deg - stage, speed, accel)
                 stage = deg
+                if mm is not None and mm != shift:  # the linear stage under the turntable (two-axis capture)
+                    current["s"] += MOVE_OVERHEAD_S + abs(mm - (mm if shift is None else shift)) / SHIFT_SPEED_MM_S
+                    shift = mm
             case Settle(seconds=sec):
                 current["s"] = current.get("s", 0.0) + sec
             case Capture():
@@ -172,8 +180,8 @@ def estimate_plan(config: Config) -> PlanEstimate:
                     PlanRow(
                         f,
                         config.focus_settings[f],
-                        "capture + measure",
-                        cap.orientations_deg[o],
+                        "capture + measure" + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm"),
+                        cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),
                     )
@@ -213,7 +221,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                 )
             case Store(focus_idx=f):
                 pass
-    o = cap.orientations_deg
+    o = cap.angles_deg
     back = move_seconds(o[0] - stage, speed, accel) - move_seconds(o[0] - 0.0, speed, accel)  # from the last move
     rows: list[PlanRow] = []
     for f, focus in enumerate(config.focus_settings):
@@ -232,7 +240,7 @@ def plan_summary(config: Config, est: PlanEstimate) -> str:
     """``3 focus settings x 8 orientations x 2 frames = 48 frames, an estimated 37 s``."""
     cap = config.capture
     return (
-        f"{len(config.focus_settings)} focus settings x {len(cap.orientations_deg)} orientations x "
+        f"{len(config.focus_settings)} focus settings x {len(cap.orientations)} orientations x "
         f"{cap.frames_per_orientation} frames{board_views(config)} = {est.frames} frames, an estimated "
         f"{duration(est.seconds)}"
     )

@@ -117,6 +117,9 @@ from station.session.shot_checks import FrameReference, check_shot
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
 POSITION_TOLERANCE_DEG = 0.05
+#: a linear-stage read-back (two-axis capture) further than this (or than its travel range's tolerance) from
+#: the target stops the session (mm)
+POSITION_TOLERANCE_MM = 0.01
 
 PRELOAD = ["station.calibration", "pipeline.fit", "pipeline.uncertainty", "station.qa.report"]
 """Modules the fits' forkserver imports once, so that each worker starts warm (the fits' and the
@@ -200,6 +203,8 @@ class Executor:
         self._profiles: dict[int, Profile] = {}
         self._intrinsics: dict[int, Intrinsics] = {}
         self._stage_deg: float | None = None
+        self._shift_mm: float | None = None  # the linear stage's read-back (two-axis capture)
+        self._shift_target: float | None = None  # where it was sent and went (None: not known, after a fault)
         self._focus: float | None = None
         self._size: tuple[int, int] | None = None
         self._frames = FrameReference(session)  # the frame checks' reference
@@ -368,7 +373,33 @@ class Executor:
             )
 
     def _move(self, step: Move) -> None:
+        if step.shift_mm is not None and step.shift_mm != self._shift_target:  # two-axis capture: the linear stage
+            self._shift_to(step.shift_mm)  # under the turntable first, when it is not there already
         self._move_to(step.degrees, "capture.orientations_deg")
+
+    def _shift_to(self, mm: float) -> None:
+        """Move the linear stage that carries the turntable (``turntable.shift``) to ``mm`` and check where it
+        went (the configuration check makes sure there is one: :func:`station.config.devices.check_the_devices`)."""
+        axis = getattr(self.turntable, "shift", None)
+        if axis is None:
+            raise SessionAborted(
+                "capture.shift_positions_mm: the turntable has no linear stage (station.turntable.shift_axis)"
+            )
+        timeout = self.config.capture.move_timeout_s
+        self._shift_mm = self._shift_target = None
+        got = float(
+            self._retry(
+                f"move the linear stage to {mm:g} mm", lambda: axis.move_to(mm, timeout=timeout), self.turntable
+            )
+        )
+        travel = axis.travel_range() if isinstance(axis, TurntableRanges) else None
+        tol = max(POSITION_TOLERANCE_MM, travel.tolerance() if travel is not None else 0.0)
+        if abs(got - mm) > tol:
+            raise SessionAborted(
+                f"linear stage read back {got:.4f} mm after a move to {mm:g} mm (tolerance {tol:g}): check its "
+                "limits (station.turntable.shift_limits) against capture.shift_positions_mm"
+            )
+        self._shift_mm, self._shift_target = got, mm
 
     def _move_to(self, degrees: float, field: str) -> None:
         """Move the turntable to ``degrees`` (of configuration ``field``) and check where it went."""
@@ -425,10 +456,13 @@ class Executor:
             "counter": frame.counter,
             "camera": [frame.camera.vendor, frame.camera.model, frame.camera.serial],
             "stage_deg": self._stage_deg,
-            "commanded_deg": self.config.capture.orientations_deg[step.orientation_idx],
+            "commanded_deg": self.config.capture.angles_deg[step.orientation_idx],
             "bit_depth": _bit_depth(frame),
             "extra": _jsonable(frame.extra),
         }
+        commanded_mm = self.config.capture.shifts_mm[step.orientation_idx]
+        if commanded_mm is not None:  # two-axis capture: where the linear stage was (read back) and was sent
+            meta.update(shift_mm=self._shift_mm, commanded_shift_mm=commanded_mm)
         saved = self.session.write_frame(
             step.focus_idx, step.orientation_idx, step.frame_idx, np.asarray(frame.image), meta
         )
@@ -449,9 +483,9 @@ class Executor:
 
     def _fit(self, step: Fit) -> None:
         f = step.focus_idx
-        n_o = len(self.config.capture.orientations_deg)
+        n_o = len(self.config.capture.orientations)
         shots = [self._shots[(f, o)].lines for o in range(n_o)]
-        cal = fit_focus(f, self.config, shots, self._image_size(f), self.workers.map)
+        cal = fit_focus(f, self.config, shots, self._image_size(f), self.workers.map, self.session)
         self._calibrations[f] = cal
         if cal.failure or not cal.fit:
             self._emit(FitFailed(f, str(cal.failure)))
@@ -546,7 +580,9 @@ class Executor:
 
     def _recover_turntable(self) -> None:
         """After a stall / limit / alarm: clear it (:class:`~drivers.protocols.Recoverable`) and
-        re-home, since a stepper that stalled no longer knows where it is."""
+        re-home, since a stepper that stalled no longer knows where it is (nor is the linear stage taken to be
+        where it was sent)."""
+        self._shift_target = None
         try:
             if isinstance(self.turntable, Recoverable):
                 cleared = self.turntable.recover()
@@ -556,6 +592,8 @@ class Executor:
             self._note(f"[yellow]turntable recovery failed: {type(exc).__name__}: {exc}")
 
     def _reopen(self, device: Any) -> None:
+        if device is self.turntable:
+            self._shift_target = None
         with contextlib.suppress(Exception):
             device.close()
         try:

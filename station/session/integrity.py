@@ -91,7 +91,7 @@ def _file_problem(path: Path, sha256: str | None) -> str | None:
 def check_session(session) -> list[Damage]:
     """Every damaged file of an open :class:`~station.session.directory.SessionDir` (empty: none)."""
     cfg = session.config
-    n_o = len(cfg.capture.orientations_deg)
+    n_o = len(cfg.capture.orientations)
     stored: set[int] = set()
     last_stored: dict[int, Stored] = {}
     for r in session.typed:
@@ -273,7 +273,7 @@ def repair_session(session, recapture: tuple[int, ...] = ()) -> RepairReport:
     """Supersede or reopen what :func:`check_session` finds in an open session (see the module
     docstring); ``recapture``: focus indices to capture again whole. Appends records only."""
     cfg = session.config
-    n_o = len(cfg.capture.orientations_deg)
+    n_o = len(cfg.capture.orientations)
     report = RepairReport([], [])
     damage = check_session(session)
     reopen: dict[int, str] = {}

@@ -9,6 +9,10 @@ it and :mod:`station.session.executor` can perform it. A resumed session passes 
 keys of what it already has (:func:`frame_key`, :func:`stored_key`) and the
 plan skips them.
 
+An orientation is a turntable angle, or with two-axis capture (``capture.shift_positions_mm``) a pair
+(linear-stage position, turntable angle): every angle at the first position, then every angle at the next
+(:attr:`station.config.schema.CaptureConfig.orientations`), so that the stage moves once per position.
+
 Re-captures are the plan's decision: the executor sends each ``Measure``'s
 :class:`ShotCheck` back into the generator (``plan.send(check)``); a shot that
 failed its checks is captured again (locking its focus first if another one is
@@ -34,9 +38,13 @@ class LockFocus:
 
 @dataclass(frozen=True)
 class Move:
+    """Move to an orientation: the linear stage that carries the turntable to ``shift_mm`` first (two-axis
+    capture, ``capture.shift_positions_mm``; None: no stage move), then the turntable to ``degrees``."""
+
     focus_idx: int
     orientation_idx: int
     degrees: float
+    shift_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -200,7 +208,8 @@ def capture_steps(
 ) -> Iterator[Step]:
     """Move to an orientation, settle, capture and save ``frames`` (default all)."""
     cap = config.capture
-    yield Move(focus_idx, orientation_idx, cap.orientations_deg[orientation_idx])
+    shift_mm, degrees = cap.orientations[orientation_idx]
+    yield Move(focus_idx, orientation_idx, degrees, shift_mm)
     if cap.settle_s > 0:
         yield Settle(cap.settle_s)
     for i in range(cap.frames_per_orientation) if frames is None else frames:
@@ -238,7 +247,7 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
     for f, focus in enumerate(config.focus_settings):
         if stored_key(f) in done:
             continue
-        n_o = len(config.capture.orientations_deg)
+        n_o = len(config.capture.orientations)
         missing = {o: [i for i in range(n) if frame_key(f, o, i) not in done] for o in range(n_o)}
         if any(missing.values()):
             yield LockFocus(f, focus)

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.intrinsics import Intrinsics
-from station.calibration import Calibration, MapFn, calibrate_focus, focus_profile
+from station.calibration import AxisPlaces, Calibration, MapFn, calibrate_focus, focus_profile
 from station.config import Config
 from station.files import sha256_file, write_profile
 from station.profile import Profile
@@ -30,15 +30,35 @@ from station.session.records import ColourMeasured, Fitted, Record, Stored
 from station.store import StoreError
 
 
+def axis_places(reads: Any, config: Config, f: int) -> AxisPlaces | None:
+    """The linear-stage position of each orientation of focus setting ``f`` of a two-axis capture
+    (``capture.shift_positions_mm``; None without one): commanded by the plan, and read back as the frames'
+    records keep it (``shift_mm`` in a frame's metadata, :class:`station.session.records.FrameSaved`; the commanded
+    one where none is recorded). ``reads``: the session directory or an archived one (``frames``; None: none)."""
+    cap = config.capture
+    if not cap.shift_positions_mm:
+        return None
+    commanded = [float(mm) for mm in cap.shifts_mm if mm is not None]
+    read = []
+    for o, mm in enumerate(commanded):
+        records = reads.frames(f, o) if reads is not None else []
+        got = (records[-1].meta or {}).get("shift_mm") if records else None
+        read.append(float(mm if got is None else got))
+    harp = config.station.harp
+    return AxisPlaces(tuple(commanded), tuple(read), harp.shift_direction_deg, float(harp.string_spacing_mm))
+
+
 def fit_focus(
     f: int,
     config: Config,
     shots: Sequence[Sequence[np.ndarray]],
     size: tuple[int, int],
     map_fn: MapFn,
+    reads: Any = None,
 ) -> Calibration:
     """The calibration of focus setting ``f`` from its orientations' edges (``shots``, one per
-    orientation) on frames of ``size`` = (width, height)."""
+    orientation) on frames of ``size`` = (width, height); ``reads``: the session (its frames' records say where a
+    two-axis capture's stage was, :func:`axis_places`; None: where the plan sent it)."""
     w, h = size
     return calibrate_focus(
         [list(lines) for lines in shots],
@@ -48,7 +68,8 @@ def fit_focus(
         f,
         config.pipeline.spec,
         map_fn=map_fn,
-        turntable_deg=config.capture.orientations_deg,
+        turntable_deg=config.capture.angles_deg,
+        axis_places=axis_places(reads, config, f),
     )
 
 
@@ -94,7 +115,7 @@ def store_focus(
     TCA and vignetting are measured first (``colour`` record, emitted); a store that refuses the row
     stops the session (:class:`~station.session.directory.SessionAborted`), frames and fits kept."""
     w, h = size
-    frames = [session.path / r.file for o in range(len(config.capture.orientations_deg)) for r in session.frames(f, o)]
+    frames = [session.path / r.file for o in range(len(config.capture.orientations)) for r in session.frames(f, o)]
     rel = layout.profile_file(f)
     path = session.path / rel
     assert cal.fit is not None  # a failed fit stopped the session

@@ -95,6 +95,6 @@ def check_shot(session: SessionDir, config: Config, f: int, o: int) -> tuple[lis
     m = measure_shot(image, config.pipeline, frames_cfa(records))
     stage = (records[-1].meta or {}).get("stage_deg")
     if stage is None:
-        stage = config.capture.orientations_deg[o]
+        stage = config.capture.angles_deg[o]
     expected = config.station.harp.expected_angle(stage)
     return shot_problems(m, expected, config.capture.checks), m

@@ -218,3 +218,61 @@ def test_kinks_are_the_default_and_a_kink_free_harp_stores_what_separate_stores(
     assert kinked.merit.field_uncertainty is not None and kinked.details["bootstrap_replicates"] == 4
     grid = np.mgrid[0:w:50, 0:h:50].reshape(2, -1).T.astype(float)
     assert np.array_equal(kinked.fit.model.undistort_points(grid), bends.fit.model.undistort_points(grid))
+
+
+def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis():
+    """Issue 19 item 4/5, the station's side: shots about two turntable-axis places (the turntable carried sideways
+    by a linear stage) are fitted with each shot's place (``axis_places``: its axis group, and the rough image shift
+    of the stage's travel through the harp's pitch). Bows growing with the strings' distance from the axis are what
+    a radial correction imitates about one axis; about two the shots tell them apart, so the stored lens is far
+    closer to the exact lens than the one the joint fit gives when it is not told the places. Truth: the
+    generator's exact lens map and the axes it was drawn about. One place: the profile is the one made without
+    places, byte for byte."""
+    from pipeline.compare import compare_models
+    from pipeline.fitspec import FitSpec
+    from pipeline.harp_shape import fit_harp_shape
+    from pipeline.models import RadialModel
+    from station.calibration import AxisPlaces, calibrate_focus
+    from station.config import PipelineConfig
+    from station.profile import Provenance
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 640, 480
+    lens = RadialModel.for_image(
+        w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(328, 234), tangential=(8e-4, -5e-4), prism=(4e-4, 0, -3e-4, 0)
+    )
+    spec = FitSpec("radial", 4, True, True)
+    n = 23
+    bends = np.zeros((n, 3))
+    bends[:, 0] = 0.05 * (np.arange(n) - (n - 1) / 2) * 40.0 / 400.0  # bows growing with the distance from the axis
+    turns = (0, 45, 90, 135)  # four angles: the same at each place, which alone cannot place its axis with three
+    centre, shift = np.array(lens.center), np.array([100.0, 50.0])  # the axis 112 px either side of the middle
+    left, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=centre - shift, spacing=40.0, step=40, seed=5)
+    right, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=centre + shift, spacing=40.0, step=40, seed=6)
+    shots, angles = left + right, turns + turns
+    # the harp's strings 6 mm apart, 40 px in the image: 6.67 px per mm; the stage sent to -/+16.77 mm and read
+    # back a little off, moving the axis 26.57 deg below +x in the image (given as 26.5)
+    travel = float(np.hypot(*shift)) / (40.0 / 6.0)
+    places = AxisPlaces((-travel,) * 4 + (travel,) * 4, (-travel + 0.01,) * 4 + (travel - 0.02,) * 4, 26.5, 6.0)
+    cfg = PipelineConfig(strings="separate")
+    two = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=angles, axis_places=places)
+    assert two.failure is None and two.details["strings"]["separated"] is True, two.details.get("strings")
+    one = fit_harp_shape(shots, angles, w, h, spec)  # the same shots, the places not told
+    assert one, one
+    err_two = compare_models(two.fit.model, lens, w, h, step=20).rms
+    err_one = compare_models(one.model, lens, w, h, step=20).rms
+    assert err_two < 0.6 * err_one, (err_two, err_one)
+    axes = two.details["harp_health"]["axes"]
+    # the scale from the pitch of the edges as measured (the lens's local scale in it: 1.2 % here)
+    assert axes["shift_given"] is True and axes["px_per_mm"] == pytest.approx(40.0 / 6.0, rel=0.03)
+    assert [p["position_mm"] for p in axes["places"]] == [-travel, travel]
+    for p, drawn in zip(axes["places"], (centre - shift, centre + shift), strict=True):  # each place's axis found
+        assert np.hypot(*(np.array(p["centre_px"]) - drawn)) < 2.0 and p["shots"] == 4
+    assert axes["worst_off_px"] < 2.0 and axes["misplaced"] == [] and axes["limit_px"] == pytest.approx(20, rel=0.03)
+    # one place: nothing changes (the profile's model file byte for byte; the harp's self-check made, the lens
+    # fitted alone to keep the test short)
+    same, cfg = AxisPlaces((5.0,) * 4, (5.0,) * 4, 26.5, 6.0), PipelineConfig(strings="ignore")
+    at_one = calibrate_focus(left, w, h, cfg, 0, spec, turntable_deg=turns, axis_places=same)
+    plain = calibrate_focus(left, w, h, cfg, 0, spec, turntable_deg=turns)
+    text = [c.profile(w, h, provenance=Provenance()).to_model_file().text() for c in (at_one, plain)]
+    assert text[0] == text[1] and "axes" not in at_one.details["harp_health"]

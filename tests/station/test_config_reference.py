@@ -51,6 +51,7 @@ def test_the_document_has_the_keys_the_station_reads():
     station = {
         "station.id", "station.camera.driver", "station.turntable.driver", "station.harp.string_width_mm",
         "station.harp.string_spacing_mm", "station.harp.offset_deg", "station.harp.direction",
+        "station.harp.shift_direction_deg", "capture.shift_positions_mm",  # issue 19: two turntable-axis places
         *(f"{part}.{k}" for part in ("lens", "camera_body") for k in ("maker", "model", "serial")),
         "lens.focal_mm", "lens.mount", "camera_body.pixel_pitch_um", "camera_body.sensor_width_mm",
         "camera_body.crop_factor", "focus.settings",

@@ -1,5 +1,6 @@
 """Executor: performs the plan on (fake) devices; retries, re-captures, stops cleanly, resumes."""
 
+import dataclasses
 import json
 from collections import Counter
 from pathlib import Path
@@ -54,6 +55,7 @@ def test_complete_session_stores_a_profile(tmp_path):
         (o, i) for o in range(4) for i in range(2)
     ]
     assert [r["meta"]["stage_deg"] for r in frames] == [0, 0, 45, 45, 90, 90, 135, 135]
+    assert not any("shift_mm" in r["meta"] or "commanded_shift_mm" in r["meta"] for r in frames)  # no linear stage
     assert records[-1]["kind"] == "finished"
     assert result.focus[0].failure is None
     merit = result.focus[0].profile.merit
@@ -405,3 +407,61 @@ def test_a_report_that_cannot_be_written_stops_the_session_never_finished(tmp_pa
     recs = [json.loads(line) for line in (tmp_path / "s" / "manifest.jsonl").read_text().splitlines()]
     assert recs[-1]["kind"] == "finished" and recs[-2]["kind"] == "report" and recs[-2].get("failure") is None
     assert (tmp_path / "s" / "report" / "report.md").is_file()
+
+
+class ShiftingStage(FakeStage):
+    """A turntable on a linear stage (``shift``: moved in mm, read back ``error_mm`` off); every move logged."""
+
+    def __init__(self, error_mm=0.004):
+        super().__init__(offset_deg=5.0)
+        self.log: list[tuple[str, float]] = []
+        stage = self
+
+        class Shift:
+            def move_to(self, mm, timeout=60.0):
+                stage.log.append(("shift", float(mm)))
+                return float(mm) + error_mm
+
+        self.shift = Shift()
+
+    def move_to(self, degrees, timeout=60.0):
+        self.log.append(("turn", float(degrees)))
+        return super().move_to(degrees, timeout)
+
+
+def _two_places(cfg, positions):
+    return dataclasses.replace(cfg, capture=dataclasses.replace(cfg.capture, shift_positions_mm=positions))
+
+
+def test_two_axis_capture_moves_the_linear_stage_first_and_records_where_it_was(tmp_path):
+    from station.session.profile_steps import axis_places
+
+    cfg = _two_places(make_config(tmp_path, orientations=(0, 60, 120)), (0.0, 0.5))
+    cfg = dataclasses.replace(cfg, pipeline=dataclasses.replace(cfg.pipeline, strings="ignore"))  # (a short fit)
+    stage = ShiftingStage()
+    with SessionDir.create(tmp_path, cfg, name="s") as s:
+        run(s, FakeCamera(stage), stage)
+        places = axis_places(s, cfg, 0)
+    # the stage once per place, before the turntable's moves there
+    assert stage.log == [("shift", 0.0), ("turn", 0), ("turn", 60), ("turn", 120)] + [
+        ("shift", 0.5), ("turn", 0), ("turn", 60), ("turn", 120)
+    ]  # fmt: skip
+    frames, _ = frame_records(tmp_path / "s")
+    assert [(r["orientation_idx"], r["meta"]["commanded_shift_mm"], r["meta"]["shift_mm"]) for r in frames] == [
+        (o, mm, mm + 0.004) for o, mm in enumerate((0.0, 0.0, 0.0, 0.5, 0.5, 0.5))
+    ]
+    assert [r["meta"]["stage_deg"] for r in frames] == [0, 60, 120] * 2
+    # what the fit is told: each shot's commanded place and the read-back the frames' records keep
+    assert places.commanded_mm == (0.0, 0.0, 0.0, 0.5, 0.5, 0.5)
+    assert places.read_mm == pytest.approx((0.004, 0.004, 0.004, 0.504, 0.504, 0.504))
+    assert axis_places(s, make_config(tmp_path, orientations=(0, 60, 120)), 0) is None  # no stage: none
+
+
+def test_a_linear_stage_read_back_other_than_commanded_stops_the_session(tmp_path):
+    cfg = _two_places(make_config(tmp_path, orientations=(0, 60, 120)), (0.0, 0.5))
+    stage = ShiftingStage(error_mm=0.3)
+    with SessionDir.create(tmp_path, cfg, name="s") as s:
+        result, _ = run(s, FakeCamera(stage), stage)
+    assert result.exit_code == EXIT_ABORTED and "\n" not in result.message
+    assert "linear stage read back 0.3000 mm after a move to 0 mm (tolerance 0.01)" in result.message
+    assert stage.log == [("shift", 0.0)]  # nothing captured at the wrong place

@@ -1,5 +1,6 @@
 """The capture plan is data: listed without hardware, resumable."""
 
+import dataclasses
 from collections import Counter
 from pathlib import Path
 
@@ -136,3 +137,53 @@ def test_the_intrinsics_stage_takes_the_board_views_after_each_fit():
     ] + [EstimateK(0), Store(0)]  # fmt: skip
     every = {board_key(0, v) for v in range(len(angles))}
     assert LockFocus(0, 0.0) not in list(plan_session(cfg, done | every))  # nothing to capture at focus 0
+
+
+def _two_places(cfg, positions=(-20.0, 20.0)):
+    return dataclasses.replace(cfg, capture=dataclasses.replace(cfg.capture, shift_positions_mm=positions))
+
+
+def test_two_axis_places_take_every_angle_at_each_stage_position_in_turn():
+    cfg = load_config(DEMO)
+    plain = list(plan_session(cfg))
+    assert all(s.shift_mm is None for s in plain if isinstance(s, Move))  # no stage: today's plan, unchanged
+    two = _two_places(cfg)
+    steps = list(plan_session(two))
+    angles = list(cfg.capture.orientations_deg)
+    moves = [s for s in steps if isinstance(s, Move) and s.focus_idx == 0]
+    # every angle at -20 mm, then every angle at +20 mm: the linear stage moves once per position
+    assert [(m.orientation_idx, m.shift_mm, m.degrees) for m in moves] == [
+        (p * 8 + a, mm, deg) for p, mm in enumerate((-20.0, 20.0)) for a, deg in enumerate(angles)
+    ]
+    assert two.capture.orientations[9] == (20.0, 22.5) and len(two.capture.angles_deg) == 16
+    n_i = cfg.capture.frames_per_orientation
+    kinds = Counter(type(s).__name__ for s in steps)
+    assert kinds["Capture"] == 3 * 16 * n_i and kinds["Measure"] == 3 * 16 and kinds["Fit"] == 3
+
+
+def test_a_resumed_two_axis_session_skips_what_it_has():
+    two = _two_places(load_config(DEMO))
+    n_i = two.capture.frames_per_orientation
+    done = {frame_key(0, o, i) for o in range(10) for i in range(n_i)}  # the first place and two of the second
+    steps = list(plan_session(two, done))
+    assert steps[0] == LockFocus(0, 0.0)
+    assert steps[1:11] == [Measure(0, o) for o in range(10)]
+    assert steps[11] == Move(0, 10, 45.0, 20.0)  # the stage goes (back) to the second place first
+    caps = {(s.focus_idx, s.orientation_idx) for s in steps if isinstance(s, Capture)}
+    assert not any(f == 0 and o < 10 for f, o in caps) and (0, 15) in caps
+
+
+def test_the_estimate_of_a_two_axis_plan_names_each_place_and_its_stage_moves():
+    from station.session.estimate import SHIFT_SPEED_MM_S, estimate_plan
+
+    two = _two_places(load_config(DEMO), (0.0, 40.0))
+    one = estimate_plan(load_config(DEMO))
+    est = estimate_plan(two)
+    rows = [r for r in est.rows if r.focus_idx == 0 and r.what.startswith("capture")]
+    assert [r.what for r in rows] == ["capture + measure at 0 mm"] * 8 + ["capture + measure at 40 mm"] * 8
+    assert est.frames == 2 * one.frames and f"linear stage speed assumed {SHIFT_SPEED_MM_S:g} mm/s" in " ".join(
+        est.assumptions
+    )
+    # the stage's 40 mm at its assumed speed, on the first shot at the second place (the turntable's way back to 0
+    # takes the simulated stage well under a second)
+    assert rows[8].seconds - rows[9].seconds > 40.0 / SHIFT_SPEED_MM_S
