@@ -183,6 +183,68 @@ def stored_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
     return out
 
 
+SEPARATED_PLAN = "12 shots, two axes, shift given"
+"""The plan ``--separated-choice`` compares the choices on (each fold keeps five shots of one group)."""
+
+
+def separated_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
+    """The plain-fold and the separated-fold choices on :data:`SEPARATED_PLAN`, each stored with the strings'
+    bends and kinks separated; radial4+tangential+prism the same way (``--separated-choice``)."""
+    seed, shift, cache = args
+    lens, _, start = seed_lens(seed, W, H)
+    store = cached_rendered(seed, shift, cache)
+    out: dict[str, Any] = {"seed": seed, "lens": start["lens"], "strings": start["strings"]}
+    plan, _ = PLANS[SEPARATED_PLAN]
+    lines = [store[shot] for shot in plan]
+    angles = [a for a, _ in plan]
+    groups = [g for _, g in plan]
+    shifts = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)}
+    for name, kw in (
+        ("plain", {}),
+        ("separated", {"turntable_deg": angles, "axis_groups": groups, "axis_shifts": shifts}),
+    ):
+        t0 = time.perf_counter()
+        sel = select_model(lines, W, H, **kw)  # type: ignore[arg-type]
+        specs = (sel.choice, SPEC) if name == "plain" else (sel.choice,)
+        for spec in specs:
+            full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
+            full = full or fit_distortion(lines, W, H, **spec.fit_arguments())
+            sep = (
+                fit_harp_shape(
+                    lines, angles, W, H, spec, plain=full, axis_groups=groups, axis_shifts=shifts, kinks=True
+                )
+                if full
+                else full
+            )
+            key = name if spec is sel.choice else "fixed"
+            out[key] = (spec.label, compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan)
+        out[f"t {name}"] = time.perf_counter() - t0
+    return out
+
+
+def print_separated(results: list[dict[str, Any]]) -> None:
+    print(
+        "| seed | lens | strings | chosen, plain folds: px | chosen, strings separated in the folds: px | radial4+tangential+prism px | s (plain / separated) |"
+    )
+    print("|---:|---|---|---|---|---:|---:|")
+    for r in results:
+        print(
+            f"| {r['seed']} | {r['lens']} | {r['strings']} | {r['plain'][0]} {r['plain'][1]:.4f} | "
+            f"{r['separated'][0]} {r['separated'][1]:.4f} | {r['fixed'][1]:.4f} | {r['t plain']:.0f} / {r['t separated']:.0f} |",
+            flush=True,
+        )
+    print()
+    a, b, f = (np.array([r[k][1] for r in results]) for k in ("plain", "separated", "fixed"))
+    print(
+        f"{SEPARATED_PLAN}: at or below 0.005 px: plain folds {int(np.sum(a <= 0.005))}, strings separated "
+        f"{int(np.sum(b <= 0.005))}, radial4+tangential+prism {int(np.sum(f <= 0.005))} of {len(a)}; median "
+        f"{np.median(a):.4f} / {np.median(b):.4f} / {np.median(f):.4f} px; separated against plain: lower (< 0.95x) "
+        f"for {int(np.sum(b < 0.95 * a))}, higher (> 1.05x) for {int(np.sum(b > 1.05 * a))}, worst "
+        f"{np.nanmax(b / a):.2f}x; over the least of the three: "
+        f"separated worst {np.nanmax(b / np.minimum(a, f)):.2f}x, plain worst {np.nanmax(a / np.minimum(b, f)):.2f}x"
+    )
+
+
 def print_stored(results: list[dict[str, Any]]) -> None:
     print("| seed | lens | strings | " + " | ".join(f"{p}: chosen, px (fixed px)" for p in STORED_PLANS) + " | s |")
     print("|---:|---|---|" + "---|" * len(STORED_PLANS) + "---:|")
@@ -273,6 +335,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--realistic", action="store_true", help="rendered and measured shots instead of exact edges")
     ap.add_argument("--stored", action="store_true", help="what a session stores from each plan (realistic renders)")
     ap.add_argument("--cache", type=Path, default=None, help="--stored: keep the rendered, measured shots here")
+    ap.add_argument(
+        "--separated-choice", action="store_true", help="--stored: plain against strings-separated choice folds"
+    )
     args = ap.parse_args(argv)
     seeds = (
         list(range(args.first_seed, args.first_seed + args.count))
@@ -280,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         else [int(s) for s in args.seeds.split(",")]
     )
     if args.stored:
-        return main_stored(seeds, args.shift, args.workers, args.cache, argv)
+        return main_stored(seeds, args.shift, args.workers, args.cache, argv, args.separated_choice)
     print(
         f"# One turntable axis or two: field error, radial4+tangential+prism alone / strings separated, "
         f"{'realistic renders' if args.realistic else 'exact edges'}, {W}x{H}, axis moved by +-({args.shift:.0f}, {args.shift / 2:.0f}) px ({os.cpu_count()} CPUs, "
@@ -305,7 +370,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def main_stored(seeds: list[int], shift: float, workers: int, cache: Path | None, argv: list[str] | None) -> int:
+def main_stored(
+    seeds: list[int], shift: float, workers: int, cache: Path | None, argv: list[str] | None, separated: bool = False
+) -> int:
     print(
         f"# One turntable axis or two, what a session stores: the chosen model (plain folds) and "
         f"radial4+tangential+prism, strings' bends and kinks separated, field error against the exact lens, "
@@ -316,11 +383,14 @@ def main_stored(seeds: list[int], shift: float, workers: int, cache: Path | None
     print()
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max(1, workers)) as pool:
-        results = list(pool.map(stored_row, [(s, shift, cache) for s in seeds]))
-    print_stored(results)
-    print()
-    for line in stored_summary(results):
-        print(line)
+        results = list(pool.map(separated_row if separated else stored_row, [(s, shift, cache) for s in seeds]))
+    if separated:
+        print_separated(results)
+    else:
+        print_stored(results)
+        print()
+        for line in stored_summary(results):
+            print(line)
     print()
     print(f"({time.perf_counter() - t0:.0f} s, load average at end {os.getloadavg()[0]:.1f})")
     return 0

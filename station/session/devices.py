@@ -87,6 +87,17 @@ def check_against_devices(config: Config, camera: object, turntable: object) -> 
                         f"expected an angle the turntable can reach, {deg:g}° is outside {travel} ({travel.source});"
                         " change the orientation or the turntable's limits",
                     )
+    shift = getattr(turntable, "shift", None)
+    if cap.shift_positions_mm and isinstance(shift, TurntableRanges):  # the linear stage's travel, read at open
+        travel = _range(config, shift.travel_range, "station.turntable")
+        if travel is not None:
+            for i, mm in enumerate(cap.shift_positions_mm):
+                if mm not in travel:
+                    raise config.error(
+                        f"capture.shift_positions_mm[{i}]",
+                        f"expected a position the linear stage can reach, {mm:g} mm is outside {travel} "
+                        f"({travel.source}); change the position or station.turntable.shift_limits",
+                    )
     if isinstance(camera, CameraRanges):
         focus = _range(config, camera.focus_range, "station.camera")
         if focus is not None:

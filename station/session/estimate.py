@@ -180,7 +180,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                     PlanRow(
                         f,
                         config.focus_settings[f],
-                        "capture + measure",
+                        "capture + measure" + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm"),
                         cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),

@@ -18,7 +18,8 @@ Layout (paths relative to the session directory ``DIR``)::
     .reserve                         space held back so that a full disk can still be recorded
 
 ``f``, ``o``, ``a``, ``i`` are indices: of the focus setting in ``focus.settings``, of
-the orientation in ``capture.orientations_deg``, of the capture attempt (the number of
+the orientation in ``capture.orientations_deg`` (with ``capture.shift_positions_mm``, in the plan's orientations:
+every angle at each linear-stage position in turn), of the capture attempt (the number of
 times the shot was rejected before), of the frame in the shot. Every function returns a
 POSIX relative path (as the manifest records it); join it to the session directory.
 """

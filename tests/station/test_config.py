@@ -271,15 +271,43 @@ def test_focus_outside_the_simulated_lens(tmp_path):
     assert error_of(tmp_path, d).endswith("focus.settings[2]: expected a focus in [0, 1] (the simulated lens), got 7")
 
 
-def test_two_axis_capture_needs_a_turntable_with_a_linear_stage(tmp_path):
+def test_two_axis_capture_needs_a_turntable_with_a_linear_stage(tmp_path, capsys):
+    from station.cli import main
+
     d = demo_data()
+    d["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"}
     assert load_config(write(tmp_path, d)).capture.shift_positions_mm == ()  # none: one axis place
     d["capture"]["shift_positions_mm"] = [0, 40]
     assert error_of(tmp_path, d).endswith(
         "capture.shift_positions_mm: expected a turntable with a linear stage under it (station.turntable.shift_axis),"
         " the zaber turntable has none"
     )
+    assert main(["session", "run", str(tmp_path / "station.yaml")]) == 2  # before anything is created
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "capture.shift_positions_mm: expected a turntable with a linear stage" in err
+    assert not (tmp_path / "sessions").exists()
     d["capture"]["shift_positions_mm"] = [10]
     assert "capture.shift_positions_mm: expected a list of at least 2 numbers" in error_of(tmp_path, d)
     d["capture"]["shift_positions_mm"] = [10, 10]
     assert "without repeats" in error_of(tmp_path, d)
+
+
+def test_two_axis_positions_within_the_stage_and_a_direction_for_few_angles(tmp_path):
+    d = demo_data()
+    d["station"]["turntable"]["shift_axis"] = 3
+    d["station"]["harp"]["shift_direction_deg"] = 30
+    d["capture"]["shift_positions_mm"] = [0, 40]
+    cfg = load_config(write(tmp_path, d))
+    assert cfg.capture.orientations[:2] == ((0.0, 0.0), (0.0, 22.5)) and cfg.capture.shifts_mm[8] == 40.0
+    d["capture"]["shift_positions_mm"] = [0, 150]
+    assert error_of(tmp_path, d).endswith(
+        "capture.shift_positions_mm[1]: expected a position in [0, 100] mm (station.turntable.shift_limits), got 150"
+    )
+    d["capture"]["shift_positions_mm"] = [0, 40]
+    d["station"]["harp"]["shift_direction_deg"] = None
+    assert load_config(write(tmp_path, d)).station.harp.shift_direction_deg is None  # 8 angles: each place searched
+    d["capture"]["orientations_deg"] = [0, 60, 120]
+    assert error_of(tmp_path, d).endswith(
+        "station.harp.shift_direction_deg: expected the image direction of a positive linear-stage move: with fewer "
+        "than 4 turntable angles (capture.orientations_deg) a place's turntable axis cannot be found without it"
+    )

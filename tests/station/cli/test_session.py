@@ -10,6 +10,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -384,7 +385,7 @@ def test_two_sessions_write_to_one_store_at_once(tmp_path):
         d["lens"]["serial"] = serial
         d["focus"]["settings"] = [0.5]
         d["capture"].update(orientations_deg=[0, 60, 120], frames_per_orientation=1)
-        d["pipeline"].update(bootstrap=0, workers=1)
+        d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
         d["store"] = {"path": str(store), "sessions_dir": str(tmp_path / f"sessions{k}")}
         cfg = tmp_path / f"c{k}.yaml"
         cfg.write_text(yaml.safe_dump(d))
@@ -510,7 +511,7 @@ def test_full_disk_stops_with_one_line_then_resumes_once_space_is_freed(small_di
     remount("1m")  # 1 MiB: three 300 kB frames and the session's own files
     cfg = small_config(tmp_path, focus=(0.5,))  # the store stays on the roomy disk: its full disk is the store's own
     d = yaml.safe_load(cfg.read_text())
-    d["pipeline"].update(bootstrap=0, workers=1)
+    d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
     cfg.write_text(yaml.safe_dump(d))
     proc = harp("session", "run", cfg, "--out", mnt, "--name", "s", "--quiet", "--no-report")
     out, err = proc.communicate(timeout=300)
@@ -541,3 +542,41 @@ def test_full_disk_stops_with_one_line_then_resumes_once_space_is_freed(small_di
     assert len(keys) == N_ORI * N_FRAMES and set(keys.values()) == {1}
     assert recs[-1]["kind"] == "finished" and not list(session.rglob("*.tmp*"))
     frame_hashes(session)  # every frame file matches its checksum
+
+
+def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
+    """Issue 19 items 4-5 end to end: ``harp session run`` on the simulated station with a Zaber linear stage
+    (axis 3) under the turntable takes every angle at 0 mm, then at 40 mm (the simulated camera renders the harp
+    about the moved axis: 3 px per mm along 30 degrees), records where the stage was, and stores a profile whose
+    harp self-check found the turntable axis at both places, 120 px apart along 30 degrees as the world moved it.
+    Truth: the simulated world's shift (``simulation.shift_direction_deg``, the scene's pitch over the harp's)."""
+    import math
+
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["camera"].update(width=480, height=360, spacing_px=30.0)
+    d["station"]["turntable"]["shift_axis"] = 3
+    d["station"]["harp"]["shift_direction_deg"] = 30.0
+    d["simulation"].update(shift_direction_deg=30.0, emulator={"speed_deg_s": 3600.0, "accel_deg_s2": 72000.0})
+    d["focus"]["settings"] = [0.5]
+    d["capture"].update(orientations_deg=[0, 45, 90, 135], frames_per_orientation=1, shift_positions_mm=[0, 40])
+    d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    p = tmp_path / "station.yaml"
+    p.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(p), "--name", "s", "--quiet", "--no-report"]) == 0
+    frames = [r for r in manifest(tmp_path / "sessions" / "s") if r["kind"] == "frame"]
+    assert [(r["orientation_idx"], r["meta"]["commanded_shift_mm"]) for r in frames] == [
+        (o, 0 if o < 4 else 40) for o in range(8)
+    ]
+    assert all(abs(r["meta"]["shift_mm"] - r["meta"]["commanded_shift_mm"]) < 1e-3 for r in frames)
+    (profile,) = profile_fields(tmp_path / "profiles.sqlite").values()
+    assert profile.details["shift_positions_mm"] == [0, 40] and profile.details["strings"]["separated"] is True
+    assert profile.details["bootstrap_replicates"] == 2 and profile.merit.field_uncertainty.rms > 0
+    axes = profile.details["harp_health"]["axes"]
+    assert [(a["position_mm"], a["shots"]) for a in axes["places"]] == [(0, 4), (40, 4)] and axes["misplaced"] == []
+    (x0, y0), (x1, y1) = (a["centre_px"] for a in axes["places"])
+    moved = 40 * 3.0 * np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
+    assert np.hypot(x1 - x0 - moved[0], y1 - y0 - moved[1]) < 3.0, (x1 - x0, y1 - y0, moved)
+    assert axes["worst_off_px"] < 3.0 and axes["px_per_mm"] == pytest.approx(3.0, rel=0.03)
+    check = {c.name: c for c in profile.qa.checks}["axis_places"]
+    assert check.passed is True and "0 mm at" in check.text and "40 mm at" in check.text

@@ -163,3 +163,32 @@ def test_holdout_recomputed_from_the_measurements(calibrated):
     assert checks["holdout_d"].value == pytest.approx(profile.merit.holdout_d, abs=1e-9)
     assert not v.passed and checks["holdout_d_stored"].passed is False
     assert v.metrics["holdout_d_stored_px"] == 1e-6
+
+
+def test_a_turntable_axis_found_away_from_where_the_stage_put_it_fails_the_profile():
+    """Two-axis capture: each place's axis as the joint fit found it against the stage's travel
+    (:func:`station.calibration.axis_record`: 10 px per mm along 0 degrees, places 0 and 10 mm, pitch 40 px);
+    within half a pitch it passes, beyond it the strings were misnumbered there and QA says so."""
+    from pipeline.harp_shape import HarpFrame, HarpShapeFit
+    from station.calibration import Axes, AxisPlaces, axis_record
+
+    places = AxisPlaces((0.0, 0.0, 10.0, 10.0), (0.0, 0.0, 10.0, 10.0), 0.0, 4.0)
+    axes = Axes(places, ("0 mm", "0 mm", "10 mm", "10 mm"), {"0 mm": (-50.0, 0.0), "10 mm": (50.0, 0.0)}, 40.0, 10.0)
+
+    def judged(second_x):
+        frames = [HarpFrame(20.0, 1, (c, 150.0), 250.0, 37.0) for c in (150.0, second_x)]
+        fit = HarpShapeFit(
+            None, None, frames[0], (), 0.0, 0.0, 0, axis_groups=(("0 mm", frames[0]), ("10 mm", frames[1]))
+        )
+        rec = axis_record(axes, fit)
+        return rec, by_name(evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health={"axes": rec}))
+
+    rec, ok = judged(252.0)  # 102 px for 100: 2 px off, split between the two places
+    assert rec["worst_off_px"] == pytest.approx(1.0) and rec["limit_px"] == 20.0 and rec["misplaced"] == []
+    assert (
+        ok["axis_places"].passed is True and "0 mm at (150.0, 150.0), 10 mm at (252.0, 150.0)" in ok["axis_places"].text
+    )
+    rec, bad = judged(300.0)  # 150 px for 100: 25 px off at each place, beyond half a pitch
+    assert rec["misplaced"] == [0.0, 10.0] and bad["axis_places"].passed is False
+    v = evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health={"axes": rec})
+    assert not v.passed and any("strings were numbered wrongly" in r for r in v.reasons)

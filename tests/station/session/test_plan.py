@@ -171,3 +171,19 @@ def test_a_resumed_two_axis_session_skips_what_it_has():
     assert steps[11] == Move(0, 10, 45.0, 20.0)  # the stage goes (back) to the second place first
     caps = {(s.focus_idx, s.orientation_idx) for s in steps if isinstance(s, Capture)}
     assert not any(f == 0 and o < 10 for f, o in caps) and (0, 15) in caps
+
+
+def test_the_estimate_of_a_two_axis_plan_names_each_place_and_its_stage_moves():
+    from station.session.estimate import SHIFT_SPEED_MM_S, estimate_plan
+
+    two = _two_places(load_config(DEMO), (0.0, 40.0))
+    one = estimate_plan(load_config(DEMO))
+    est = estimate_plan(two)
+    rows = [r for r in est.rows if r.focus_idx == 0 and r.what.startswith("capture")]
+    assert [r.what for r in rows] == ["capture + measure at 0 mm"] * 8 + ["capture + measure at 40 mm"] * 8
+    assert est.frames == 2 * one.frames and f"linear stage speed assumed {SHIFT_SPEED_MM_S:g} mm/s" in " ".join(
+        est.assumptions
+    )
+    # the stage's 40 mm at its assumed speed, on the first shot at the second place (the turntable's way back to 0
+    # takes the simulated stage well under a second)
+    assert rows[8].seconds - rows[9].seconds > 40.0 / SHIFT_SPEED_MM_S
