@@ -280,3 +280,29 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
     plain = calibrate_focus(left, w, h, cfg, 0, spec, turntable_deg=turns)
     text = [c.profile(w, h, provenance=Provenance()).to_model_file().text() for c in (at_one, plain)]
     assert text[0] == text[1] and "axes" not in at_one.details["harp_health"]
+
+
+def test_a_session_whose_angles_cannot_place_the_harps_axis_says_so():
+    """Issue 19 item 4: three turntable angles and a harp wider than the image cannot place the turntable axis
+    (the strings' distances agree about a lattice of places, ``pipeline.harp_shape.harp_frame``): the session keeps
+    the lens alone and records why, in the harp's self-check and in QA's check, rather than numbering the
+    strings wrongly. Truth: the generator's uniform harp (27 strings 50 px apart about a known axis)."""
+    from pipeline.fitspec import FitSpec
+    from pipeline.models import RadialModel
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig, QAConfig
+    from station.qa.verdicts import evaluate
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
+    turns, spec = (0, 60, 120), FitSpec("radial", 4, True, True)
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, np.zeros((27, 3)), axis=(530, 395), spacing=50.0, step=40)
+    cal = calibrate_focus(shots, w, h, PipelineConfig(strings="separate"), 0, spec, turntable_deg=turns)
+    assert cal.failure is None
+    why, health = "the harp's axis is ambiguous with these turntable angles", cal.details["harp_health"]
+    assert why in health["failure"] and "add angles spread over the half turn" in health["failure"]
+    assert cal.details["strings"]["separated"] is False and why in cal.details["strings"]["reason"]
+    checks = evaluate(cal.fit.model, w, h, 0.001, QAConfig(), harp_health=health).checks
+    check = next(c for c in checks if c.name == "string_bend_max")
+    assert check.passed is None and why in check.text  # reported with the verdict, not judged
