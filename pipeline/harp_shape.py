@@ -66,9 +66,16 @@ the points corrected by the lens alone; :func:`separated_job` is one leave-one-o
 a lens fitted alone takes the part of the bends that every orientation shares into the correction.
 
 The strings are identified across shots by their distance from the axis :math:`c`, which is
-found by making those distances agree between shots. For a harp with uniform spacing :math:`p`
-this is ambiguous by whole strings unless the axis is known to within about :math:`p/2`: the
-search assumes the turntable axis within :data:`AXIS_SEARCH` pitches of the image centre.
+found by making those distances agree between shots: about the true axis each string is one string,
+seen with both its edges in every shot whose own strings lie on either side of it
+(:func:`_consistency`). For a harp with uniform spacing :math:`p`, the distances agree modulo
+:math:`p` about other points too: about a lattice of points for three turntable angles (about one
+per square pitch for angles 60 degrees apart), about some points several pitches away for more (the
+shots' strings then shift by whole pitches against each other). The axis is searched within
+:data:`AXIS_REACH` pitches of the image centre; where places agree alike, the one with fewer strings
+is the harp (its ends in view tell); where they have as many (three angles and a harp wider than
+the image), the frame is refused with the reason (add angles spread over the half turn) rather than
+guessed: :func:`harp_frame`, ``benchmarks/harp_frame_population.py``.
 
 References
 ----------
@@ -115,7 +122,33 @@ GAUGE_WEIGHT = 1.0
 (:func:`_radial_gauge`): per point, like the ridge."""
 
 AXIS_SEARCH = 0.6
-"""Half-width, in string pitches, of the search for the turntable axis around the image centre."""
+"""Half-width, in string pitches, of the search for the reference axis of :func:`group_frames` with shifts given
+(about the image centre, all shots moved back by their group's shift)."""
+
+AXIS_REACH = 2.5
+r"""Radius, in string pitches, of the search for the turntable axis around the image centre (or the ``centre``
+given) of :func:`harp_frame` (:func:`_place_axis`). Four angles evenly spread by :math:`\Delta` make the shots
+agree about points :math:`p / (\cos(\Delta/2) - \cos(3\Delta/2))` off the axis (1.85 pitches for 45 degrees,
+2.75 for 36, 3.9 for 30: a fold of five or seven angles leaving one out): beyond this radius for all but 45."""
+
+AXIS_STEP = 1.0 / 6.0
+"""Spacing, in string pitches, of the grid of trial axes of :func:`_place_axis`."""
+
+AXIS_TOLERANCE = 0.125
+"""How far, in string pitches, an edge's distance from the axis may stray from its string's in another shot
+(:func:`_consistency`: the lens correction's and the axis grid's errors)."""
+
+AXIS_TIE = 2.0
+"""Scores of :func:`_consistency` within this of the best are alike (one string missed in one shot)."""
+
+AXIS_DISAGREE = 0.6
+"""Largest score of :func:`_consistency`, per edge, of a place of the axis that is taken: above it no place makes
+the shots one harp (shots about two axes: about 1 per edge) and the frame is refused. A bootstrap replicate that
+draws each shot's strings with replacement misses about a third of them in every shot (about 0.3 per edge)."""
+
+AXIS_SEEDS = 32
+"""Most local minima of the trial axes' grid that :func:`_place_axis` refines (the best first; three shots
+make a lattice of equally good places, about one per square pitch)."""
 
 GROUP_AXIS_SEARCH = 4.0
 """Half-width, in string pitches, of the search for the turntable axis of each axis group of
@@ -339,6 +372,124 @@ def _coarse_axis(offsets: list[Floats], normals: list[Floats], pitch: float, c0:
     return out
 
 
+def _consistency(
+    q: Floats, shot_of: NDArray[np.intp], n_shots: int, pitch: float, tol: float
+) -> tuple[Floats, NDArray[np.intp]]:
+    """How badly the edges' distances ``q`` from trial axes (one row per axis) fail to make one harp:
+    ``(score, strings)`` per row.
+
+    The edges are clustered into strings as :func:`harp_frame` numbers them (a gap over a third of a pitch
+    separates). A string is *missed* by a shot when its distance lies within the range of that shot's own
+    edges (``tol`` inside it) and the shot has no edge in it: a harp's strings are contiguous and the image
+    convex, so between two strings a shot sees it sees every string, each with both its edges. The score is
+    twice the misses (a string has two edges) plus, per edge, its squared distance from its string's mean in
+    units of ``tol``, at most 1. About the true axis it is near 0; about a wrong one the shots' strings
+    interleave (misses) or a string's edges spread, whatever the clustering makes of them: a string split
+    into several, each seen in fewer shots, is missed (what the spread alone cannot see). ``strings``: the
+    number of clusters."""
+    q = np.atleast_2d(q)
+    g, e = q.shape
+    order = np.argsort(q, axis=1, kind="stable")
+    qs = np.take_along_axis(q, order, axis=1)
+    lab = np.zeros((g, e), dtype=np.intp)
+    lab[:, 1:] = np.cumsum(np.diff(qs, axis=1) > pitch / 3.0, axis=1)
+    strings = lab[:, -1] + 1
+    gid = (lab + (np.arange(g) * e)[:, None]).ravel()
+    count = np.bincount(gid, minlength=g * e)
+    means = np.bincount(gid, weights=qs.ravel(), minlength=g * e) / np.maximum(count, 1)
+    spread = np.minimum(((qs.ravel() - means[gid]) / tol) ** 2, 1.0).reshape(g, e).sum(axis=1)
+    seen = np.zeros(g * e * n_shots, dtype=bool)
+    seen[gid * n_shots + shot_of[order].ravel()] = True
+    lo = np.full((g, n_shots), np.inf)
+    hi = np.full((g, n_shots), -np.inf)
+    for i in range(n_shots):
+        mine = shot_of == i
+        if mine.any():
+            lo[:, i], hi[:, i] = q[:, mine].min(axis=1), q[:, mine].max(axis=1)
+    top = int(strings.max())  # cluster slots in use (of e per row)
+    m = means.reshape(g, e)[:, :top, None]
+    inside = (m > lo[:, None, :] + tol) & (m < hi[:, None, :] - tol) & (count.reshape(g, e)[:, :top, None] > 0)
+    misses = np.sum(inside & ~seen.reshape(g, e, n_shots)[:, :top], axis=(1, 2))
+    return spread + 2.0 * misses, strings
+
+
+def _place_axis(
+    oo: Floats,
+    nn: Floats,
+    shot_of: NDArray[np.intp],
+    n_shots: int,
+    pitch: float,
+    c0: Floats,
+    refined: Any,
+) -> Floats | FitFailure:
+    """The turntable axis within :data:`AXIS_REACH` pitches of ``c0`` (a disc) about which the edges (offsets ``oo``
+    along their shots' normals ``nn``) make one harp (:func:`_consistency`), refined by ``refined``.
+
+    Every point of a grid :data:`AXIS_STEP` pitches apart is scored on each shot's strings (the mean of the edges
+    of each, with a tolerance of twice the grid's spacing); its best local minima (up to :data:`AXIS_SEEDS`, those
+    scoring within what the grid's placement may cost a place) are refined and scored again (a tolerance of
+    :data:`AXIS_TOLERANCE` pitches; one refined out of the disc is dropped: with strings missing at random, as in
+    a bootstrap replicate, a refinement may wander off). Where two places a quarter pitch apart or more score
+    alike (within :data:`AXIS_TIE`), the one with fewer strings is the harp (about a wrong axis the shots' strings shift by
+    whole pitches against each other: more strings, each seen in fewer shots); where they have as many, the
+    turntable angles cannot place the axis (three angles never can, for a harp wider than the image:
+    :func:`group_frames`) and the frame is refused rather than guessed. It is refused too where even the best
+    place scores over :data:`AXIS_DISAGREE` per edge (no one axis makes the shots one harp). An axis beyond
+    :data:`AXIS_REACH` whose shots agree as well about a place within it is not seen (four angles 45 degrees
+    apart: a place 1.85 pitches off).
+    """
+    n = int(np.ceil(AXIS_REACH / AXIS_STEP))
+    steps = np.arange(-n, n + 1) * AXIS_STEP * pitch
+    gx, gy = np.meshgrid(steps, steps, indexing="ij")
+    grid = c0 + np.column_stack([gx.ravel(), gy.ravel()])
+    # the grid is scored on each shot's strings (its edges a third of a pitch apart or less, paired), half as many
+    oc, nc, sc = [], [], []
+    for i in range(n_shots):
+        o = oo[shot_of == i]
+        if len(o):
+            lab = _clusters(o, pitch / 3.0)
+            oc.append(np.bincount(lab, weights=o) / np.bincount(lab))
+            nc.append(np.repeat(nn[shot_of == i][:1], len(oc[-1]), axis=0))
+            sc.append(np.full(len(oc[-1]), i))
+    o_s, n_s, s_s = np.concatenate(oc), np.concatenate(nc), np.concatenate(sc)
+    disc = np.hypot(gx, gy).ravel() <= AXIS_REACH * pitch + 1e-9
+    coarse = np.full(len(grid), np.inf)
+    coarse[disc] = _consistency(o_s[None, :] - grid[disc] @ n_s.T, s_s, n_shots, pitch, 2 * AXIS_STEP * pitch)[0]
+    sq = coarse.reshape(2 * n + 1, 2 * n + 1)
+    padded = np.pad(sq, 1, constant_values=np.inf)
+    neighbours = np.min(
+        [padded[1 + dx : 2 * n + 2 + dx, 1 + dy : 2 * n + 2 + dy] for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+         if dx or dy], axis=0,
+    )  # fmt: skip
+    minima = np.flatnonzero((sq <= neighbours).ravel() & disc)
+    minima = minima[np.argsort(coarse[minima], kind="stable")][:AXIS_SEEDS]
+    # the coarse score of a place varies with where the grid falls about it (up to ~0.15 per edge)
+    minima = minima[coarse[minima] <= coarse[minima[0]] + AXIS_TIE + 0.2 * len(o_s)]
+    places: list[tuple[float, int, Floats]] = []
+    for c in (refined(grid[j]) for j in minima):
+        if np.hypot(*(c - c0)) > (AXIS_REACH + AXIS_STEP) * pitch:
+            continue  # refined out of the disc searched: a place it does not vouch for
+        if all(np.hypot(*(c - p)) > 0.25 * pitch for _, _, p in places):
+            v, k = _consistency(oo - nn @ c, shot_of, n_shots, pitch, AXIS_TOLERANCE * pitch)
+            places.append((float(v[0]), int(k[0]), c))
+    best = min((v for v, _, _ in places), default=np.inf)
+    if best > AXIS_DISAGREE * len(oo):
+        return FitFailure(
+            f"the shots' strings do not agree about any one turntable axis within {AXIS_REACH:g} string pitches of "
+            f"the image centre (at best {best:.0f} of {len(oo)} edges off their string or missed): the harp moved "
+            "between shots (give each shot's axis group), or its axis is farther off"
+        )
+    alike = sorted(((k, v), i) for i, (v, k, _) in enumerate(places) if v <= best + AXIS_TIE)
+    if len(alike) > 1 and alike[0][0][0] == alike[1][0][0]:
+        first = places[alike[0][1]][2]
+        far = max(float(np.hypot(*(places[i][2] - first))) for _, i in alike[1:]) / pitch
+        return FitFailure(
+            f"the harp's axis is ambiguous with these turntable angles: {len(alike)} places up to {far:.1f} "
+            "pitches apart make the shots' strings agree; add angles spread over the half turn"
+        )
+    return places[alike[0][1]][2]
+
+
 def harp_frame(
     corrected: Sequence[Sequence[Floats]],
     turntable_deg: Sequence[float],
@@ -355,12 +506,21 @@ def harp_frame(
     turntable 0 and the sense of rotation come from the shots' line directions; the axis from making
     the strings' distances from it agree between shots (module docstring); the strings are the
     clusters of those distances, numbered from the lowest ``q``. The axis is searched within
-    :data:`AXIS_SEARCH` pitches of ``centre`` (default the image centre) by the spread of the distances
-    within their clusters; with ``reach`` (pitches) instead within ``reach`` of ``centre`` by how well the
-    distances fall on one comb, for a harp of uniform pitch (:func:`_coarse_axis`: the spread misleads
-    where a wrong axis splits the strings into clusters of one or two edges, as it may with few shots).
-    Either is then refined with its clusters held (unless not ``refine``: where the shots do not share
-    one axis exactly, the refinement may wander off).
+    :data:`AXIS_REACH` pitches of ``centre`` (default the image centre) by how well its distances make
+    one harp (:func:`_place_axis`, :func:`_consistency`: each string one cluster, seen in every shot
+    whose strings lie on either side of it; the spread of the distances within their clusters alone
+    misleads where a wrong axis splits each string into clusters of fewer shots); with ``reach``
+    (pitches) instead within ``reach`` of ``centre`` by how well the distances fall on one comb
+    (:func:`_coarse_axis`, :func:`group_frames`). Either is then refined with its clusters held (unless
+    not ``refine``: where the shots do not share one axis exactly, the refinement may wander off).
+
+    Returns
+    -------
+    (HarpFrame, list of list of int) or FitFailure
+        The frame and each shot's edges' string numbers; a failure when the angles do not follow the
+        turntable, the strings are too few, or (without ``reach``) two places of the axis a quarter pitch
+        apart or more make the shots agree alike with as many strings ("the harp's axis is ambiguous with
+        these turntable angles": add angles spread over the half turn).
     """
     if len(corrected) != len(turntable_deg):
         return FitFailure(f"{len(corrected)} shots but {len(turntable_deg)} turntable angles")
@@ -399,30 +559,29 @@ def harp_frame(
     if reach is not None:
         c0 = _coarse_axis(offsets, normals, pitch, c0, reach)
 
-    def score(c: Floats) -> tuple[float, NDArray[np.intp]]:
-        q = oo - nn @ c
-        lab = _clusters(q, pitch / 3.0)
-        means = np.bincount(lab, weights=q) / np.bincount(lab)
-        # a cluster holding two edges of one shot more than a string's width apart mixes two strings
-        ss = float(np.sum((q - means[lab]) ** 2))
-        return ss, lab
+    def labels(c: Floats) -> NDArray[np.intp]:
+        return _clusters(oo - nn @ c, pitch / 3.0)
+
+    def refined(c: Floats) -> Floats:
+        # given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
+        for _ in range(3 if refine else 0):
+            lab = labels(c)
+            k = int(lab.max()) + 1
+            a = np.zeros((len(oo), 2 + k))
+            a[:, :2] = nn
+            a[np.arange(len(oo)), 2 + lab] = 1.0
+            sol, *_ = np.linalg.lstsq(a, oo, rcond=None)
+            c = sol[:2]
+        return c
 
     if reach is None:
-        steps = np.linspace(-AXIS_SEARCH, AXIS_SEARCH, 13) * pitch
-        grid = [c0 + np.array([dx, dy]) for dx in steps for dy in steps]
-        c_best = min(grid, key=lambda c: score(c)[0])
+        placed = _place_axis(oo, nn, shot_of, len(corrected), pitch, c0, refined)
+        if isinstance(placed, FitFailure):
+            return placed
+        c_best = placed
     else:
-        c_best = c0
-    # refine: given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
-    for _ in range(3 if refine else 0):
-        lab = score(c_best)[1]
-        k = int(lab.max()) + 1
-        a = np.zeros((len(oo), 2 + k))
-        a[:, :2] = nn
-        a[np.arange(len(oo)), 2 + lab] = 1.0
-        sol, *_ = np.linalg.lstsq(a, oo, rcond=None)
-        c_best = sol[:2]
-    lab = score(c_best)[1]
+        c_best = refined(c0)
+    lab = labels(c_best)
     per_shot: list[list[int]] = [[int(v) for v in lab[shot_of == i]] for i in range(len(corrected))]
     frame = HarpFrame(float(angle0), int(sign), (float(c_best[0]), float(c_best[1])), scale, pitch)
     return frame, per_shot

@@ -126,3 +126,24 @@ def kinked_harp_point_sets(
                 lines.append(p + rng.normal(0.0, noise, p.shape))
         shots.append(lines)
     return shots, offsets
+
+
+def drawn_harp_point_sets(lens, width, height, turntable_deg, harp, mount, *, step=10.0, noise=0.01, seed=0):
+    """Edge point sets of a drawn harp (``pipeline.harp_scene.draw_harp``: bows, kinks, twist) turning on
+    ``mount`` (``pipeline.harp_scene.HarpMount``), with each edge's string number (test helper, exact truth).
+
+    Every edge that reaches the image (``pipeline.realism.shot_edges``) is traced through the exact lens every
+    ``step`` ideal px and clipped to the image (``pipeline.render.visible_edges``: its longest run inside, 50 px
+    or longer), then given Gaussian noise of ``noise`` px. Returns the shots (lists of (M, 2) arrays) and, per
+    shot, the drawn string index of each edge."""
+    from pipeline.realism import shot_edges
+    from pipeline.render import visible_edges
+
+    rng = np.random.default_rng(seed)
+    shots, strings = [], []
+    for theta in turntable_deg:
+        pose = mount.pose(float(theta))
+        curves = visible_edges(shot_edges(lens, harp, pose, width, height), lens, width, height, step=step)
+        shots.append([c + rng.normal(0.0, noise, c.shape) for _, c in curves])
+        strings.append([int(e.string_index) for e, _ in curves])
+    return shots, strings

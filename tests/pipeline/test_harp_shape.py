@@ -8,9 +8,10 @@ import pytest
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_shape import BEND_LIMIT_PX, STRING_RIDGE, fit_harp_shape, legendre
+from pipeline.harp_scene import HarpMount, draw_harp
+from pipeline.harp_shape import BEND_LIMIT_PX, STRING_RIDGE, fit_harp_shape, harp_frame, legendre
 from pipeline.models import RadialModel
-from tests.pipeline.harp_points import turning_harp_point_sets
+from tests.pipeline.harp_points import drawn_harp_point_sets, kinked_harp_point_sets, turning_harp_point_sets
 
 W, H = 1000, 750
 LENS = RadialModel.for_image(
@@ -125,3 +126,72 @@ def test_axis_groups_that_do_not_match_the_shots_are_refused():
     assert not fit and "6 shots but 3 axis groups" in fit.reason
     fit = fit_harp_shape(shots, TURNS, W, H, SPEC, axis_groups=[0, 0, 0, 1, 1, 1], axis_shifts={0: (0.0, 0.0)})
     assert not fit and "no axis shift for axis group 1" in fit.reason
+
+
+# ------------------------------------------------------------------ the harp's frame (harp_frame)
+def _drawn(turns, n_strings, pitch, axis_off, seed=1):
+    """Shots of a drawn harp (bows, kinks, twist) through LENS, corrected by the exact LENS, with the drawn axis
+    (ideal px) and the drawn string of every edge (``pipeline.harp_scene`` geometry, not ``harp_frame``'s)."""
+    axis = ((W - 1) / 2.0 + axis_off[0] * pitch, (H - 1) / 2.0 + axis_off[1] * pitch)
+    harp = draw_harp(seed, n_strings, pitch, 3.0, 1.5 * np.hypot(W, H), material="nylon", visible_px=600.0)
+    shots, strings = drawn_harp_point_sets(LENS, W, H, turns, harp, HarpMount(axis, 20.0), step=20.0, seed=seed)
+    return [[LENS.undistort_points(e) for e in s] for s in shots], strings, np.array(axis)
+
+
+def _one_number_per_string(numbers, strings):
+    pairs = {(t, n) for ts, ns in zip(strings, numbers) for t, n in zip(ts, ns)}
+    return len(pairs) == len({t for t, _ in pairs}) == len({n for _, n in pairs})
+
+
+def test_the_axis_is_found_two_pitches_off_the_image_centre():
+    turns = (0, 30, 60, 90, 120, 150)
+    corrected, strings, axis = _drawn(turns, 13, 45.0, (1.5, -1.2))
+    framed = harp_frame(corrected, turns, W, H)
+    assert framed, framed
+    frame, numbers = framed
+    assert np.hypot(*(np.array(frame.centre) - axis)) < 1.0
+    assert _one_number_per_string(numbers, strings)
+
+
+def test_four_shots_45_degrees_apart_number_every_string_and_find_its_kinks():
+    # the geometry in which the frame was once put a half pitch off (benchmarks/RESULTS-strings.md, "half-pitch
+    # ambiguity"): 9 strings 60 px apart, 0/45/90/135; each string now one string in all four shots, its kink
+    # found where it was drawn with its area (2 h lambda) within 30 %
+    turns = (0, 45, 90, 135)
+    drawn = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0)}
+    shots, offsets = kinked_harp_point_sets(LENS, W, H, turns, 9, drawn, axis=(497, 378), seed=4, noise=0.008)
+    fit = fit_harp_shape(
+        shots, turns, W, H, SPEC, plain=fit_distortion(shots, W, H, **SPEC.fit_arguments()), kinks=True
+    )
+    assert fit, fit
+    assert np.hypot(fit.frame.centre[0] - 497, fit.frame.centre[1] - 378) < 2.0
+    assert [(s.shots, s.edges) for s in fit.strings] == [(4, 8)] * 9
+    assert np.allclose([s.offset_px for s in fit.strings], offsets, atol=2.0)  # the outer ones seen in corners
+    found = {k.string: k for k in fit.kinks}
+    assert sorted(found) == sorted(drawn)
+    for s, (at, h, lam) in drawn.items():
+        assert abs(found[s].at_px - at) < 4.0 and found[s].area_px2 == pytest.approx(2 * h * lam, rel=0.3)
+
+
+def test_three_shots_of_a_harp_wider_than_the_image_cannot_place_the_axis_and_say_so():
+    # three angles: the strings' distances agree about a lattice of points (harp_shape.group_frames), and with
+    # the harp's ends out of view nothing tells them apart: refused with the reason, not numbered wrongly
+    turns = (0, 60, 120)
+    corrected, _, _ = _drawn(turns, 29, 50.0, (0.7, 0.4), seed=2)
+    framed = harp_frame(corrected, turns, W, H)
+    assert not framed and "axis is ambiguous with these turntable angles" in framed.reason
+    shots = [[LENS.distort_points(e) for e in s] for s in corrected]
+    fit = fit_harp_shape(shots, turns, W, H, SPEC, plain=fit_distortion(shots, W, H, **SPEC.fit_arguments()))
+    assert not fit and "add angles spread over the half turn" in fit.reason
+
+
+def test_three_shots_of_a_harp_whose_ends_are_in_view_place_the_axis():
+    # the same three angles, the whole harp in view: about a wrong lattice point the shots' strings shift by
+    # whole pitches against each other, which makes more strings than the harp has
+    turns = (0, 60, 120)
+    corrected, strings, axis = _drawn(turns, 9, 50.0, (0.7, 0.4), seed=2)
+    framed = harp_frame(corrected, turns, W, H)
+    assert framed, framed
+    frame, numbers = framed
+    assert np.hypot(*(np.array(frame.centre) - axis)) < 1.0
+    assert _one_number_per_string(numbers, strings)
