@@ -63,6 +63,15 @@ def pytest_configure(config):
         signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
+    # One BLAS thread per process, as the station's commands and workers run (station.cli, station.reprocess):
+    # two test workers on two cores would otherwise each start a BLAS thread per core, and OpenBLAS's threads
+    # spin waiting for work, so the small solves of the fits ran several times slower on a busy machine.
+    import threadpoolctl
+
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")  # the commands and pools the tests start
+    config._harp_blas_limits = threadpoolctl.threadpool_limits(1)  # this process (numpy may be loaded already)
+
     data_home = tempfile.mkdtemp(prefix="harp-tests-xdg-")
     config._harp_data_home = data_home
     os.environ["XDG_DATA_HOME"] = data_home
