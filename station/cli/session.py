@@ -458,6 +458,7 @@ def _plan(args) -> int:
                     "lens": [config.lens.maker, config.lens.model, config.lens.serial],
                     "focus_settings": list(config.focus_settings),
                     "orientations_deg": list(config.capture.orientations_deg),
+                    "shift_positions_mm": list(config.capture.shift_positions_mm),
                     "frames": est.frames,
                     "moves": est.moves,
                     "focus_locks": est.focus_locks,
@@ -470,6 +471,7 @@ def _plan(args) -> int:
                             "focus": r.focus if math.isfinite(r.focus) else None,
                             "what": r.what,
                             "orientation_deg": r.orientation_deg,
+                            "shift_mm": r.shift_mm,
                             "frames": r.frames,
                             "estimated_seconds": round(r.seconds, 2),
                         }

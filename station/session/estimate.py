@@ -87,6 +87,8 @@ class PlanRow:
     orientation_deg: float | None = None
     frames: int = 0
     seconds: float = 0.0
+    shift_mm: float | None = None
+    """The linear stage's position of a capture row (``capture.shift_positions_mm``); None: no stage."""
 
 
 @dataclass(frozen=True)
@@ -184,6 +186,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                         cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),
+                        cap.shifts_mm[o],
                     )
                 )
                 current = {}
@@ -227,7 +230,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
     for f, focus in enumerate(config.focus_settings):
         for k, r in enumerate(first):
             extra = back if f and k == 0 else 0.0
-            rows.append(PlanRow(f, focus, r.what, r.orientation_deg, r.frames, r.seconds + extra))
+            rows.append(dataclasses.replace(r, focus_idx=f, focus=focus, seconds=r.seconds + extra))
     n_f = len(config.focus_settings)
     frames, moves, locks, fits = frames * n_f, moves * n_f, locks * n_f, fits * n_f
     report_s = REPORT_S_PER_FOCUS * len(config.focus_settings) * mpx / 1.23

@@ -118,6 +118,29 @@ def test_session_plan_touches_nothing_and_counts_the_plan(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.yaml"]  # no session, no store
 
 
+def test_session_plan_lists_each_rows_linear_stage_position(tmp_path, capsys):
+    # two-axis capture: every angle at each position of the stage in turn (truth from the configuration)
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["turntable"]["shift_axis"] = 3
+    d["station"]["harp"]["shift_direction_deg"] = 0.0
+    d["focus"]["settings"] = [0.0]
+    d["capture"].update(orientations_deg=[0, 45, 90, 135, 157.5], shift_positions_mm=[10, 50])
+    cfg = tmp_path / "two.yaml"
+    cfg.write_text(yaml.safe_dump(d))
+    code, out, err = run(capsys, "session", "plan", cfg, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["shift_positions_mm"] == [10, 50]
+    captures = [s for s in doc["steps"] if s["what"].startswith("capture + measure")]
+    assert [(s["shift_mm"], s["orientation_deg"]) for s in captures] == [
+        (mm, a) for mm in (10, 50) for a in (0, 45, 90, 135, 157.5)
+    ]
+    assert all(s["shift_mm"] is None for s in doc["steps"] if not s["what"].startswith("capture"))
+    code, out, err = run(capsys, "session", "plan", demo_copy(tmp_path), "--json")  # no stage: no positions
+    doc = json.loads(out)
+    assert doc["shift_positions_mm"] == [] and all(s["shift_mm"] is None for s in doc["steps"])
+
+
 def session_with(root: Path, config, name: str, records) -> Path:
     with SessionDir.create(root, config, name=name) as s:
         for r in records:
