@@ -30,6 +30,14 @@ class Shot:
     orientation_deg: float
     image: np.ndarray
     measurement: Any  # pipeline.measure.ImageMeasurement
+    shift_mm: float | None = None
+    """Where the linear stage under the turntable was (two-axis capture, ``capture.shift_positions_mm``); None:
+    no stage."""
+
+    @property
+    def place(self) -> str:
+        """Where the shot was taken, for captions: the turntable angle, and the linear stage's position if any."""
+        return f"stage {self.orientation_deg:g} deg" + ("" if self.shift_mm is None else f" at {self.shift_mm:g} mm")
 
 
 def _fig(width: int, height: int, extra_w: float = 1.6):

@@ -284,11 +284,11 @@ def write_report(
             doc.append(Heading(3, "Overlays (edges coloured by their distance to their own line, before correction)"))
             for j, s in enumerate(e.shots):
                 name = f"overlay_f{i}_o{j}.jpg"
-                caption = f"{label}, stage {s.orientation_deg:g} deg"
+                caption = f"{label}, {s.place}"
                 # float32 holds an average of a few 8- or 16-bit frames for display (half the bytes to a worker)
                 image = np.asarray(s.image, np.float32)
                 figures.append(Figure("overlay", (image, s.measurement, out / name), {"title": caption}))
-                doc.append(Image(f"overlay {s.orientation_deg:g} deg", name))
+                doc.append(Image(f"overlay, {s.place}", name))
     draw_figures(figures, workers)
     path = out / REPORT_MD
     path.write_text(render(doc, "md"))
@@ -305,13 +305,14 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
     a shot without one is measured now."""
     cfg = session.config
     shots = []
-    for o, deg in enumerate(cfg.capture.angles_deg):
+    for o, (mm, deg) in enumerate(cfg.capture.orientations):
         records = session.frames(focus_idx, o)
         if not records:
             continue
         image = average_frames([session.read_frame(r) for r in records])
         m = stored_measurement(session, focus_idx, o)
-        shots.append(Shot(float(deg), image, m if m is not None else pipeline.measure.measure_image(image, t=t)))
+        measured = m if m is not None else pipeline.measure.measure_image(image, t=t)
+        shots.append(Shot(float(deg), image, measured, None if mm is None else float(mm)))
     return shots
 
 

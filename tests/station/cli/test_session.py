@@ -580,3 +580,9 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     assert axes["worst_off_px"] < 3.0 and axes["px_per_mm"] == pytest.approx(3.0, rel=0.03)
     check = {c.name: c for c in profile.qa.checks}["axis_places"]
     assert check.passed is True and "0 mm at" in check.text and "40 mm at" in check.text
+    from station.qa.report import session_shots
+
+    with SessionDir.open(tmp_path / "sessions" / "s") as s:  # the report's shots: where each was taken
+        shots = session_shots(s, 0)
+    assert [(sh.shift_mm, sh.orientation_deg) for sh in shots] == [(mm, a) for mm in (0, 40) for a in (0, 45, 90, 135)]
+    assert shots[4].place == "stage 0 deg at 40 mm"
