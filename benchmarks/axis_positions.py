@@ -151,6 +151,32 @@ STORED_PLANS = (
 """The plans ``--stored`` compares (a session's two-axis capture gives the fit the stage's shift)."""
 
 
+Inputs = tuple[list[Any], list[float], list[Hashable] | None, dict[Hashable, tuple[float, float]] | None]
+
+
+def plan_inputs(store: dict[tuple[float, int], list[Any]], name: str, shift: float) -> Inputs:
+    """Plan ``name``'s shots from ``store``: their edges, turntable angles, axis groups and the groups' shifts
+    as a session's stage gives them (:data:`SHIFT_ERROR` off; None for the one-axis plans)."""
+    plan, mode = PLANS[name]
+    lines = [store[shot] for shot in plan]
+    angles = [a for a, _ in plan]
+    groups: list[Hashable] | None = [g for _, g in plan] if mode else None
+    shifts = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)} if mode else None
+    return lines, angles, groups, shifts  # type: ignore[return-value]
+
+
+def stored_field(inputs: Inputs, sel: Any, spec: Any, lens: Any) -> float:
+    """Field error of ``spec`` as a session stores it: its fit of the choice ``sel`` (or fitted now), with the
+    strings' bends and kinks separated about the plan's axis groups."""
+    lines, angles, groups, shifts = inputs
+    full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
+    full = full or fit_distortion(lines, W, H, **spec.fit_arguments())
+    if not full:
+        return float("nan")
+    sep = fit_harp_shape(lines, angles, W, H, spec, plain=full, axis_groups=groups, axis_shifts=shifts, kinks=True)
+    return float(compare_models(sep.model, lens, W, H, step=20).rms) if sep else float("nan")
+
+
 def stored_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
     """Per plan of :data:`STORED_PLANS`: the chosen candidate and the field errors of the chosen and of
     radial4+tangential+prism, each fitted with the strings' bends and kinks separated (``--stored``)."""
@@ -160,25 +186,9 @@ def stored_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
     out: dict[str, Any] = {"seed": seed, "lens": start["lens"], "strings": start["strings"]}
     t0 = time.perf_counter()
     for name in STORED_PLANS:
-        plan, mode = PLANS[name]
-        lines = [store[shot] for shot in plan]
-        angles = [a for a, _ in plan]
-        groups = [g for _, g in plan] if mode else None
-        shifts = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)} if mode else None
-        sel = select_model(lines, W, H)
-        cells = []
-        for spec in (sel.choice, SPEC):
-            full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
-            full = full or fit_distortion(lines, W, H, **spec.fit_arguments())
-            sep = (
-                fit_harp_shape(
-                    lines, angles, W, H, spec, plain=full, axis_groups=groups, axis_shifts=shifts, kinks=True
-                )
-                if full
-                else full
-            )
-            cells.append(compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan)
-        out[name] = (sel.choice.label, *cells)
+        inputs = plan_inputs(store, name, shift)
+        sel = select_model(inputs[0], W, H)
+        out[name] = (sel.choice.label, *(stored_field(inputs, sel, spec, lens) for spec in (sel.choice, SPEC)))
     out["t"] = time.perf_counter() - t0
     return out
 
@@ -194,30 +204,17 @@ def separated_row(args: tuple[int, float, Path | None]) -> dict[str, Any]:
     lens, _, start = seed_lens(seed, W, H)
     store = cached_rendered(seed, shift, cache)
     out: dict[str, Any] = {"seed": seed, "lens": start["lens"], "strings": start["strings"]}
-    plan, _ = PLANS[SEPARATED_PLAN]
-    lines = [store[shot] for shot in plan]
-    angles = [a for a, _ in plan]
-    groups = [g for _, g in plan]
-    shifts = {g: (SHIFT_ERROR * g * shift, SHIFT_ERROR * g * shift / 2) for g in (-1, 1)}
+    inputs = plan_inputs(store, SEPARATED_PLAN, shift)
+    lines, angles, groups, shifts = inputs
     for name, kw in (
         ("plain", {}),
         ("separated", {"turntable_deg": angles, "axis_groups": groups, "axis_shifts": shifts}),
     ):
         t0 = time.perf_counter()
         sel = select_model(lines, W, H, **kw)  # type: ignore[arg-type]
-        specs = (sel.choice, SPEC) if name == "plain" else (sel.choice,)
-        for spec in specs:
-            full = next((r.full_fit for r in sel.table if r.candidate == spec and r.full_fit), None)
-            full = full or fit_distortion(lines, W, H, **spec.fit_arguments())
-            sep = (
-                fit_harp_shape(
-                    lines, angles, W, H, spec, plain=full, axis_groups=groups, axis_shifts=shifts, kinks=True
-                )
-                if full
-                else full
-            )
-            key = name if spec is sel.choice else "fixed"
-            out[key] = (spec.label, compare_models(sep.model, lens, W, H, step=20).rms if sep else np.nan)
+        out[name] = (sel.choice.label, stored_field(inputs, sel, sel.choice, lens))
+        if name == "plain":
+            out["fixed"] = (SPEC.label, stored_field(inputs, sel, SPEC, lens))
         out[f"t {name}"] = time.perf_counter() - t0
     return out
 
