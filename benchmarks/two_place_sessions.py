@@ -1,0 +1,148 @@
+"""Whole simulated sessions, one turntable-axis place against two: the field error of the stored lens.
+
+Usage::
+
+    .venv/bin/python benchmarks/two_place_sessions.py [--seeds 0,1,2,3] [--size 1000x750] [--workers 2]
+
+``benchmarks/axis_positions.py --stored`` emulates what a session stores from shots about two places (the same
+choice and joint fit on rendered shots). This runs the sessions themselves: ``harp session run`` on the simulated
+station of ``configs/demo.yaml`` with the realistic camera (``realism_seed``: bent and kinked strings, field blur,
+back-light, vignetting, noise, Bayer; one frame per orientation), a unit of the demo lens drawn from each serial
+(``simulation.lens_spread: 1``), the automatic model choice (``pipeline.model: auto``, plain folds; and, in
+the last two columns, radial4+tangential+prism fixed) and the strings' bends and kinks separated (the default),
+at one focus setting (0.5). Plans:
+
+* **one place**: twelve turntable angles 0..165 by 15 about one axis;
+* **two places**: six angles 0..150 by 30 at each of two linear-stage positions (``capture.shift_positions_mm``
+  [0, 40] on a Zaber axis 3; the stage moves the axis by 40 mm x the scene's pitch over the harp's spacing,
+  6 px/mm, i.e. 240 px along ``shift_direction_deg`` 26.57 degrees, the (2, 1) direction).
+
+The table gives, per seed (realism seed and lens serial ``TWO-<seed>``), the model each session stored and its
+field error against the exact lens of that unit at that focus (``pipeline.compare.compare_models``, modulo
+homography, 20 px grid), and each session's wall time (a whole process, the machine's other load aside).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from drivers.sim.lens import lens_for_focus, lens_unit  # noqa: E402
+from pipeline.compare import compare_models  # noqa: E402
+from station.store import ProfileStore  # noqa: E402
+
+FOCUS = 0.5
+DIRECTION_DEG = math.degrees(math.atan2(1.0, 2.0))
+ONE = {"orientations_deg": [float(a) for a in range(0, 180, 15)]}
+TWO = {"orientations_deg": [float(a) for a in range(0, 180, 30)], "shift_positions_mm": [0.0, 40.0]}
+FIXED = "radial4+tangential+prism"
+PLANS: dict[str, tuple[dict[str, Any], str]] = {
+    "one place": (ONE, "auto"),
+    "two places": (TWO, "auto"),
+    f"one place, {FIXED}": (ONE, FIXED),
+    f"two places, {FIXED}": (TWO, FIXED),
+}
+
+
+def config(root: Path, seed: int, plan: str, w: int, h: int) -> Path:
+    d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
+    d["station"]["camera"].update(width=w, height=h, realism_seed=seed)
+    d["simulation"]["lens_spread"] = 1.0
+    d["lens"]["serial"] = f"TWO-{seed}"
+    d["focus"]["settings"] = [FOCUS]
+    capture, model = PLANS[plan]
+    d["capture"].update(frames_per_orientation=1, **capture)
+    if "shift_positions_mm" in capture:
+        d["station"]["turntable"]["shift_axis"] = 3
+        d["station"]["harp"]["shift_direction_deg"] = DIRECTION_DEG
+        d["simulation"]["shift_direction_deg"] = DIRECTION_DEG
+    d["pipeline"].update(model=model, bootstrap=0, workers=1)
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    p = root / "station.yaml"
+    p.write_text(yaml.safe_dump(d))
+    return p
+
+
+def run(job: tuple[int, str, int, int]) -> dict[str, Any]:
+    seed, plan, w, h = job
+    with tempfile.TemporaryDirectory(prefix="two-place-") as tmp:
+        root = Path(tmp)
+        cfg = config(root, seed, plan, w, h)
+        t0 = time.perf_counter()
+        done = subprocess.run(
+            [str(REPO / ".venv" / "bin" / "harp"), "session", "run", str(cfg), "--quiet", "--no-report"],
+            capture_output=True, text=True, cwd=root, start_new_session=True, check=False,
+        )  # fmt: skip
+        wall = time.perf_counter() - t0
+        out: dict[str, Any] = {"seed": seed, "plan": plan, "wall": wall, "code": done.returncode}
+        if done.returncode not in (0, 1):  # 1: the session finished with a QA failure, its profile stored
+            out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
+            return out
+        with ProfileStore(root / "profiles.sqlite") as st:
+            (p,) = st.profiles()
+        truth = lens_for_focus(FOCUS, w, h, lens_unit(f"TWO-{seed}", 1.0))
+        out["field"] = float(compare_models(p.model, truth, w, h, step=20).rms)
+        out["model"] = p.spec.label if p.spec is not None else "?"
+        out["separated"] = bool(p.details.get("strings", {}).get("separated"))
+        out["places"] = len((p.details.get("harp_health", {}).get("axes") or {}).get("places", [])) or 1
+        return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0,1,2,3")
+    ap.add_argument("--size", default="1000x750")
+    ap.add_argument("--workers", type=int, default=2, help="sessions run at once")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    seeds = [int(s) for s in args.seeds.split(",")]
+    print(
+        f"# Whole simulated sessions, one place against two: field error of the stored lens, {w}x{h}, focus {FOCUS} "
+        f"({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
+        f"`benchmarks/two_place_sessions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
+    )
+    print()
+    jobs = [(s, plan, w, h) for s in seeds for plan in PLANS]
+    with ThreadPoolExecutor(max(1, args.workers)) as pool:
+        results = list(pool.map(run, jobs))
+    print("| seed | " + " | ".join(f"{plan}: stored model, field px (wall s)" for plan in PLANS) + " |")
+    print("|---:|" + "---|" * len(PLANS))
+    by = {(r["seed"], r["plan"]): r for r in results}
+    for s in seeds:
+        cells = []
+        for plan in PLANS:
+            r = by[(s, plan)]
+            if "error" in r:
+                cells.append(f"failed (exit {r['code']}): {r['error']}")
+            else:
+                sep = "" if r["separated"] else ", strings not separated"
+                sep += f", {r['places']} places found" if r["places"] > 1 else ""
+                cells.append(f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})")
+        print(f"| {s} | " + " | ".join(cells) + " |", flush=True)
+    print()
+    fields = {plan: np.array([by[(s, plan)].get("field", np.nan) for s in seeds]) for plan in PLANS}
+    for plan, f in fields.items():
+        print(
+            f"{plan}: at or below 0.005 px {int(np.sum(f <= 0.005))} of {len(f)}, median {np.nanmedian(f):.4f} px, "
+            f"worst {np.nanmax(f):.4f} px"
+        )
+    print(f"(load average at end {os.getloadavg()[0]:.1f})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
