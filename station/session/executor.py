@@ -385,41 +385,42 @@ class Executor:
             raise SessionAborted(
                 "capture.shift_positions_mm: the turntable has no linear stage (station.turntable.shift_axis)"
             )
-        timeout = self.config.capture.move_timeout_s
         self._shift_mm = self._shift_target = None
-        got = float(
-            self._retry(
-                f"move the linear stage to {mm:g} mm", lambda: axis.move_to(mm, timeout=timeout), self.turntable
-            )
-        )
-        travel = axis.travel_range() if isinstance(axis, TurntableRanges) else None
-        tol = max(POSITION_TOLERANCE_MM, travel.tolerance() if travel is not None else 0.0)
-        if abs(got - mm) > tol:
-            raise SessionAborted(
-                f"linear stage read back {got:.4f} mm after a move to {mm:g} mm (tolerance {tol:g}): check its "
-                "limits (station.turntable.shift_limits) against capture.shift_positions_mm"
-            )
-        self._shift_mm, self._shift_target = got, mm
+        self._shift_mm = self._checked_move(
+            axis, mm, "mm", POSITION_TOLERANCE_MM, "the linear stage", "linear stage",
+            "check its limits (station.turntable.shift_limits) against capture.shift_positions_mm",
+        )  # fmt: skip
+        self._shift_target = mm
 
     def _move_to(self, degrees: float, field: str) -> None:
         """Move the turntable to ``degrees`` (of configuration ``field``) and check where it went."""
-        timeout = self.config.capture.move_timeout_s
-
-        def move() -> float:
-            return float(self.turntable.move_to(degrees, timeout=timeout))
-
         self._stage_deg = None
-        got = self._retry(f"move turntable to {degrees:g} deg", move, self.turntable)
-        travel = self.turntable.travel_range() if isinstance(self.turntable, TurntableRanges) else None
-        tol = max(POSITION_TOLERANCE_DEG, travel.tolerance() if travel is not None else 0.0)
-        if abs(got - degrees) > tol:
-            # the driver reported no fault, yet the stage is elsewhere: a device that clamps or
-            # is configured differently; capturing here would store frames at the wrong angle
-            raise SessionAborted(
-                f"turntable read back {got:.4f} deg after a move to {degrees:g} deg (tolerance {tol:g}): "
-                f"check its limits and steps_per_degree against {field}"
+        # the driver reported no fault, yet the stage is elsewhere: a device that clamps or is configured
+        # differently; capturing there would store frames at the wrong angle
+        self._stage_deg = self._checked_move(
+            self.turntable, degrees, "deg", POSITION_TOLERANCE_DEG, "turntable", "turntable",
+            f"check its limits and steps_per_degree against {field}",
+        )  # fmt: skip
+
+    def _checked_move(
+        self, axis: Any, target: float, unit: str, tolerance: float, moving: str, name: str, hint: str
+    ) -> float:
+        """Move ``axis`` (the turntable or its linear stage) to ``target`` (``unit``), retried as any device
+        command, and return where it read back; :class:`SessionAborted` (naming it ``name``, with ``hint``) when
+        that is further from the target than ``tolerance`` or its travel range's tolerance."""
+        timeout = self.config.capture.move_timeout_s
+        got = float(
+            self._retry(
+                f"move {moving} to {target:g} {unit}", lambda: axis.move_to(target, timeout=timeout), self.turntable
             )
-        self._stage_deg = got
+        )
+        travel = axis.travel_range() if isinstance(axis, TurntableRanges) else None
+        tol = max(tolerance, travel.tolerance() if travel is not None else 0.0)
+        if abs(got - target) > tol:
+            raise SessionAborted(
+                f"{name} read back {got:.4f} {unit} after a move to {target:g} {unit} (tolerance {tol:g}): {hint}"
+            )
+        return got
 
     def _capture(self, step: Capture) -> None:
         timeout = self.config.capture.timeout_s
