@@ -213,8 +213,8 @@ def calibrate_shots(
         angles = None if turntable_deg is None else [float(a) for a in turntable_deg]
         offered = DEFAULT_CANDIDATES if candidates is None else candidates
         selection = select_model(
-            lines, width, height, offered, map_fn=map_fn, turntable_deg=angles,
-            axis_groups=None if angles is None else axis_groups, axis_shifts=None if angles is None else axis_shifts,
+            lines, width, height, offered, map_fn=map_fn, turntable_deg=angles, axis_groups=axis_groups,
+            axis_shifts=axis_shifts,
         )  # fmt: skip
         spec = selection.choice
     kw = spec.fit_arguments()
@@ -351,6 +351,11 @@ class Axes:
     pitch_px: float
     px_per_mm: float
 
+    def fit_arguments(self) -> dict[str, Any]:
+        """``axis_groups`` and ``axis_shifts`` for :func:`pipeline.harp_shape.fit_harp_shape` (and the fits that
+        pass them on)."""
+        return {"axis_groups": self.groups, "axis_shifts": self.shifts}
+
     def fold(self, k: int) -> tuple[list[str], dict[str, tuple[float, float]] | None]:
         """``(axis_groups, axis_shifts)`` of the shots without shot ``k`` (a leave-one-orientation-out fold)."""
         return [g for j, g in enumerate(self.groups) if j != k], self.shifts
@@ -359,6 +364,19 @@ class Axes:
 def place_label(mm: float) -> str:
     """The axis group of the shots taken with the linear stage at ``mm``."""
     return f"{mm:g} mm"
+
+
+def _read_back(places: AxisPlaces, groups: Sequence[str]) -> dict[str, float]:
+    """Each axis group's mean read-back position of the stage (mm), in the order the groups first appear."""
+    return {
+        g: float(np.mean([r for h, r in zip(groups, places.read_mm, strict=True) if h == g]))
+        for g in dict.fromkeys(groups)
+    }
+
+
+def _fit_arguments(axes: Axes | None) -> dict[str, Any]:
+    """:meth:`Axes.fit_arguments`, or none for one axis place."""
+    return {} if axes is None else axes.fit_arguments()
 
 
 def axes_of(
@@ -390,10 +408,7 @@ def axes_of(
     if places.direction_deg is not None and np.isfinite(ppm):
         mid = 0.5 * (min(places.commanded_mm) + max(places.commanded_mm))
         a = np.radians(places.direction_deg)
-        rel = {}
-        for label in dict.fromkeys(groups):
-            d = (float(np.mean([r for g, r in zip(groups, places.read_mm, strict=True) if g == label])) - mid) * ppm
-            rel[label] = np.array([d * np.cos(a), d * np.sin(a)])
+        rel = {g: (mm - mid) * ppm * np.array([np.cos(a), np.sin(a)]) for g, mm in _read_back(places, groups).items()}
         ref = np.zeros(2)  # where the axis is with the stage at the middle, from the image centre
         if distinct_orientations(turntable_deg) >= MIN_SEARCHED_ANGLES:
             back = [[p - rel[g] for p in s] for s, g in zip(raw, groups, strict=True) if s]
@@ -416,9 +431,8 @@ def axis_record(axes: Axes, fit: HarpShapeFit) -> dict[str, Any]:
     were numbered at the wrong place: ``misplaced`` lists those places (QA fails the profile)."""
     found = {str(g): f for g, f in fit.axis_groups}
     labels = [g for g in dict.fromkeys(axes.groups) if g in found]
-    mm = {
-        g: float(np.mean([r for h, r in zip(axes.groups, axes.places.read_mm, strict=True) if h == g])) for g in labels
-    }
+    read = _read_back(axes.places, axes.groups)
+    mm = {g: read[g] for g in labels}
     centre = {g: np.asarray(found[g].centre, np.float64) for g in labels}
     off: dict[str, float] = {}
     if axes.places.direction_deg is not None:
@@ -506,8 +520,7 @@ def harp_health(
             width,
             height,
             spec,
-            axis_groups=None if axes is None else axes.groups,
-            axis_shifts=None if axes is None else axes.shifts,
+            **_fit_arguments(axes),
         )  # fmt: skip
     )
     if not hs:
@@ -624,8 +637,7 @@ def separate_strings(
     if bootstrap >= 2:
         boot = bootstrap_field_uncertainty(
             lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
-            turntable_deg=turntable_deg, separated_fn=kink_job, axis_groups=None if axes is None else axes.groups,
-            axis_shifts=None if axes is None else axes.shifts,
+            turntable_deg=turntable_deg, separated_fn=kink_job, **_fit_arguments(axes),
         )  # fmt: skip
         if cal.merit.field_uncertainty is not None:
             record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
@@ -690,8 +702,7 @@ def calibrate_focus(
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
         turntable_deg=turntable_deg if separate and by_strings and known else None,
-        axis_groups=None if axes is None else axes.groups,
-        axis_shifts=None if axes is None else axes.shifts,
+        **_fit_arguments(axes),
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
@@ -699,8 +710,7 @@ def calibrate_focus(
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
             [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
-            kink_t=kink_t, axis_groups=None if axes is None else axes.groups,
-            axis_shifts=None if axes is None else axes.shifts,
+            kink_t=kink_t, **_fit_arguments(axes),
         )  # fmt: skip
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint, axes=axes)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})
