@@ -11,12 +11,14 @@ leave-one-shot-out table and alternate-string table of every radial candidate ar
 shots and its field error against the exact lens (:func:`pipeline.compare.compare_models`). Then the
 rules are applied to the same tables:
 
-* **now**: the two tiers of :func:`pipeline.select.select_model` (n_se 1, orientation tolerance 0.5,
-  flexible margin 2 SE) — :func:`choose` mirrors them on stored tables; its figures equal
-  ``benchmarks/model_choice.py``'s "two tiers (now)" rows for the same seeds;
-* variants: tier 2 with 0.5 SE, tier 2 by the lowest CV d, tier 1 tolerance 0.2 or 0.1, and ranking by
-  the sum of both CV figures;
-* **fixed** radial4+tangential+prism (no choice);
+* **now**: the two tiers of :func:`pipeline.select.select_model` (tier 1: n_se 1, orientation tolerance 0.5,
+  flexible margin 2 SE; tier 2: the lowest alternate-string CV d, since 2026-12-06) — :func:`choose` mirrors
+  them on stored tables; its figures equal ``benchmarks/model_choice.py``'s "two tiers (now)" rows for the same
+  seeds;
+* **before**: tier 2 by the fewest parameters within one paired standard error (the rule until 2026-12-06);
+* variants: tier 2 within 0.5 SE, the most parameters within 1 SE, tier 1 tolerance 0.2 or 0.1 (tier 2 as
+  before), and ranking by the sum of both CV figures;
+* **fixed** radial4+tangential+prism and radial6+tangential+prism (no choice);
 * **oracle**: the candidate whose correction is nearest the exact lens (least field error), which no rule
   can beat on average: where it is itself more than 5 % worse than the best candidate on the unseen
   shots, the unseen shots' own errors (each shot's field, the strings' bends) decide which candidate
@@ -88,10 +90,11 @@ def _ok(rows: list[CVRow]) -> list[CVRow]:
     return [r for r in rows if np.isfinite(r.cv_d)]
 
 
-def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERANCE, pick: str = "fewest") -> FitSpec:
-    """:func:`pipeline.select.select_model`'s two tiers on stored tables, with tier 2's standard errors
-    ``n_se2``, tier 1's ``tolerance``, and tier 2's pick: 'fewest' parameters within ``n_se2`` SE of the
-    best (now), 'lowest' CV d, or 'sum' (the lowest leave-one-shot-out plus alternate-string CV d)."""
+def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERANCE, pick: str = "lowest") -> FitSpec:
+    """:func:`pipeline.select.select_model`'s two tiers on stored tables, with tier 1's ``tolerance`` and tier 2's
+    pick: the 'lowest' CV d (now, :data:`pipeline.select.TIER2_RULE`), the 'fewest' parameters within ``n_se2``
+    SE of the best (the rule before 2026-12-06), the 'most' parameters within them, or 'sum' (the lowest
+    leave-one-shot-out plus alternate-string CV d)."""
     rows = _ok(t["loso"])
     best = min(rows, key=lambda r: r.cv_d)
     first = min(_within(rows, best, 1.0, 0.0), key=lambda r: (r.n_params, r.cv_d))
@@ -104,6 +107,8 @@ def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERAN
     best2 = min(e, key=lambda r: r.cv_d)
     if pick == "lowest":
         return best2.candidate
+    if pick == "most":
+        return max(_within(e, best2, n_se2, 0.0), key=lambda r: (r.n_params, -r.cv_d)).candidate
     if pick == "sum":
         return min(e, key=lambda r: general[r.candidate].cv_d + r.cv_d).candidate
     return min(_within(e, best2, n_se2, 0.0), key=lambda r: (r.n_params, r.cv_d)).candidate
@@ -114,13 +119,15 @@ def _fixed(label: str) -> Callable[[Tables], FitSpec]:
 
 
 RULES: dict[str, Callable[[Tables], FitSpec]] = {
-    "two tiers (now)": choose,
-    "tier 2 within 0.5 SE": lambda t: choose(t, n_se2=0.5),
-    "tier 2 lowest CV d": lambda t: choose(t, pick="lowest"),
-    "tier 1 tolerance 0.2": lambda t: choose(t, tolerance=0.2),
-    "tier 1 tolerance 0.1": lambda t: choose(t, tolerance=0.1),
+    "two tiers, tier 2 lowest CV d (now)": choose,
+    "tier 2 fewest parameters within 1 SE (before)": lambda t: choose(t, pick="fewest"),
+    "tier 2 within 0.5 SE": lambda t: choose(t, n_se2=0.5, pick="fewest"),
+    "tier 1 tolerance 0.2": lambda t: choose(t, tolerance=0.2, pick="fewest"),
+    "tier 1 tolerance 0.1": lambda t: choose(t, tolerance=0.1, pick="fewest"),
     "sum of both CV d": lambda t: choose(t, pick="sum"),
+    "tier 2 most parameters within 1 SE": lambda t: choose(t, pick="most"),
     "fixed radial4+tangential+prism": _fixed("radial4+tangential+prism"),
+    "fixed radial6+tangential+prism": _fixed("radial6+tangential+prism"),
     "oracle: least field error": lambda t: min(
         (k for k, v in t["field"].items() if np.isfinite(v)), key=t["field"].get
     ),

@@ -33,6 +33,7 @@ from drivers import CAMERA_DRIVERS, TURNTABLE_DRIVERS, driver_settings
 from drivers.settings import REQUIRED, SEED_MAX, Setting, fields_of, setting
 from drivers.sim.zaber_emulator import SETTINGS as EMULATOR_SETTINGS
 from pipeline.fitspec import (
+    AUTO,
     CHOICE_FOLDS,
     CHOICE_FOLDS_PLAIN,
     DEGREE_BOUNDS,
@@ -202,8 +203,8 @@ class CaptureConfig:
 @dataclass(frozen=True)
 class PipelineConfig:
     t: int = setting(DEFAULT_T, "along-edge subsampling: one edge point kept in t (Tang et al. 2012)", "px", 1, 200)
-    model: str = setting("radial", "what to fit: a fit label (radial4+tangential, poly5, ...) or auto (chosen by "
-                         "cross-validation)")  # fmt: skip
+    model: str = setting(AUTO, "what to fit: auto (chosen by cross-validation over the shots) or a fit label "
+                         "(radial6+tangential+prism, radial4+tangential, poly5, ...)")  # fmt: skip
     # each given term sets the label's (older configurations spell the spec so); None: the label's
     degree: int | None = setting(None, "the model's degree (null: the label's; radial 1..10, poly 3..11)", "",
                                  min(b[0] for b in DEGREE_BOUNDS.values()), max(b[1] for b in DEGREE_BOUNDS.values()))  # fmt: skip
