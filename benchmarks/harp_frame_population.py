@@ -22,7 +22,9 @@ radial4+tangential+prism, its rejected edges left out, every kept edge corrected
 fitted lens's ideal pixels), and the drawn string of each edge. "axis off" counts frames whose axis is more
 than a quarter pitch from the truth; "misnumbered" frames in which some string's edges carry two numbers or
 one number holds two strings; "refused" the frames refused (a FitFailure: e.g. an axis that these angles
-cannot place). A refused frame is not counted as off or misnumbered: the session reports its reason.
+cannot place). A refused frame is not counted as off or misnumbered: the session reports its reason. The frame's
+pitch (``HarpFrame.pitch_px``, ``pipeline.harp_shape.harp_pitch``) is compared with the drawn one (the slope of the
+strings' drawn positions, mapped at the axis through the exact lens and back through the fitted one).
 """
 
 from __future__ import annotations
@@ -102,6 +104,12 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
     frame, numbers = framed
     true_axis = plain.model.undistort_points(lens.distort_points(axis[None, :]))[0]
     err = float(np.hypot(*(np.asarray(frame.centre) - true_axis)))
+    # the drawn pitch (the slope of the strings' drawn positions), in the fitted lens's ideal px at the axis
+    k = np.arange(n_str) - (n_str - 1) / 2.0
+    drawn = float(k @ np.array([s.position_px for s in harp.strings]) / (k @ k))
+    step = axis[None, :] + np.array([[0.0, 0.0], drawn * frame.normal(float(turns[0]))])
+    ends = plain.model.undistort_points(lens.distort_points(step))
+    pitch_true = float(np.hypot(*(ends[1] - ends[0])))
     pairs = {(t, n) for ts, ns in zip(truth, numbers, strict=True) for t, n in zip(ts, ns, strict=True)}
     by_true, by_num = defaultdict(set), defaultdict(set)
     for t, n in pairs:
@@ -111,6 +119,7 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
     return row | {
         "result": "framed",
         "axis_err_pitches": err / pitch,
+        "pitch_err_pct": 100.0 * (frame.pitch_px / pitch_true - 1.0),
         "axis_off": err > 0.25 * pitch,
         "misnumbered": bool(wrong),
         "wrong_strings": len(wrong),
@@ -176,6 +185,13 @@ def main() -> None:
     if frame_s:
         print()
         print(f"harp_frame time: median {1e3 * np.median(frame_s):.0f} ms, max {1e3 * max(frame_s):.0f} ms")
+    pitch_err = np.abs([float(r["pitch_err_pct"]) for r in rows if "pitch_err_pct" in r])
+    if len(pitch_err):
+        print(
+            f"frame pitch against the drawn pitch ({len(pitch_err)} framed): median |error| "
+            f"{np.median(pitch_err):.2f} %, 90th percentile {np.percentile(pitch_err, 90):.2f} %, "
+            f"max {pitch_err.max():.2f} %"
+        )
     if args.rows:
         print()
         for r in rows:

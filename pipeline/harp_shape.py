@@ -159,6 +159,16 @@ SHIFT_SEARCH = 0.3
 puts it (:func:`group_frames`): below half the distance to the nearest point about which three shots 60
 degrees apart agree as well (about a pitch)."""
 
+PAIR_RATIO = 2.5
+"""Least ratio of the gaps between strings to a string's width for :func:`shot_pitch` to pair a string's two edges:
+a string narrower than 1/3.5 of the pitch (the drawn and real harps: 2.5-4 px wide, 30-120 px apart). Strings that
+show one edge each with some missing leave gaps of 1, 2, 3 pitches (ratios 2 and 1.5 between neighbours), below it;
+a ratio of 3 or more among them would give a "string" more than two edges, and is not taken either."""
+
+PITCH_FLOOR = 0.3
+"""The first pitch of :func:`shot_pitch` is the smallest gap between the strings' centres of at least this times
+their median gap: a median up to three pitches (two of every three strings missing) still finds one pitch."""
+
 MIN_SPAN = 0.8
 """Shortest stretch of ``u`` (half image diagonals) over which a string must be seen, in all its shots
 together, to get deviation terms: over a shorter one P2..P4 are barely determined and the ridge
@@ -182,7 +192,8 @@ def legendre(u: Floats, degrees: Sequence[int]) -> Floats:
 class HarpFrame:
     """Where the harp is in every shot: strings at ``angle0_deg + sign * turntable`` (degrees, in the
     ideal image), turning about ``centre`` (ideal pixels); harp coordinates along the strings in units
-    of ``scale_px`` (half the image diagonal)."""
+    of ``scale_px`` (half the image diagonal); ``pitch_px`` the distance between neighbouring strings
+    (:func:`harp_pitch`)."""
 
     angle0_deg: float
     sign: int
@@ -348,6 +359,64 @@ def _clusters(q: Floats, gap: float) -> NDArray[np.intp]:
     return labels
 
 
+def shot_pitch(offsets: Floats) -> float:
+    r"""The distance between neighbouring strings (px) of a harp of uniform pitch, from one shot's edge offsets
+    across its strings (px, any order; a string's two edges as :mod:`pipeline.measure` lists them, or one; an
+    edge listed twice, as a bootstrap replicate draws it, counts once).
+
+    * **A string's two edges** are paired: the offsets' gaps are the strings' widths and, at least
+      :data:`PAIR_RATIO` times wider, the gaps between strings. The widest jump between the sorted gaps splits
+      them when it is that large and no string would get more than two edges (else every edge is its own
+      string: a harp whose strings show one edge each, or whose only wide gaps are missing strings).
+    * **Missing strings** (beyond the image's borders, or hidden inside it) leave gaps of whole pitches between
+      the strings' centres :math:`c_j`. A first pitch :math:`p_0` is the smallest gap of at least
+      :data:`PITCH_FLOOR` times the median gap (the strings' gaps are :math:`p` or a few :math:`p`); each gap
+      counts :math:`\max(1, \mathrm{round}(\Delta c / p_0))` strings, which numbers the strings seen
+      :math:`k_j`.
+    * **The pitch** is the least-squares slope of :math:`c_j` against :math:`k_j` over the strings with both
+      edges seen (all strings when fewer than two have): exact for a uniform harp whatever the strings' width
+      (a median gap between edges is the pitch less a width) and whichever strings are missing.
+
+    NaN when fewer than two strings or three edges are seen (two edges may be one string's).
+
+    References
+    ----------
+    .. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision camera distortion
+       measurements with a calibration harp", JOSA A 29(10), 2012 (a harp of equally spaced strings).
+    """
+    o = np.unique(np.asarray(offsets, np.float64)[np.isfinite(offsets)])  # an edge drawn twice (bootstrap) once
+    if len(o) < 3:  # two edges: two strings or one string's two
+        return float("nan")
+    gaps = np.diff(o)
+    lab = np.arange(len(o))
+    g = np.sort(gaps[gaps > 0])
+    if len(g) >= 2:
+        jump = int(np.argmax(g[1:] / np.maximum(g[:-1], 1e-12)))
+        if g[jump + 1] >= PAIR_RATIO * g[jump]:
+            paired = np.concatenate([[0], np.cumsum(gaps > np.sqrt(g[jump] * g[jump + 1]))])
+            if np.bincount(paired).max() <= 2:
+                lab = paired
+    count = np.bincount(lab)
+    centre = np.bincount(lab, weights=o) / count
+    if len(centre) < 2:
+        return float("nan")
+    dc = np.diff(centre)
+    p0 = float(np.min(dc[dc >= PITCH_FLOOR * np.median(dc)]))
+    k = np.concatenate([[0.0], np.cumsum(np.maximum(1.0, np.rint(dc / p0)))])
+    both = count == 2
+    use = both if np.sum(both) >= 2 else np.ones(len(centre), dtype=bool)
+    kk, cc = k[use] - k[use].mean(), centre[use] - centre[use].mean()
+    return float(kk @ cc / (kk @ kk))
+
+
+def harp_pitch(offsets: Sequence[Floats]) -> float:
+    """The harp's pitch (px) from several shots' edge offsets across their strings (one array per shot, each
+    across its own strings' direction): the median of :func:`shot_pitch` over the shots that see two strings or
+    more (robust to a shot whose strings were paired or numbered wrongly); NaN when none does."""
+    per = [p for p in (shot_pitch(o) for o in offsets) if np.isfinite(p)]
+    return float(np.median(per)) if per else float("nan")
+
+
 def _phase_coherence(q: Floats, pitch: Floats | float) -> Floats:
     """How well distances ``q`` (last axis) fall on one comb of period ``pitch``: the squared mean
     resultants of ``q`` modulo ``pitch`` and ``pitch / 2`` summed (2 when every ``q`` is on the comb; the
@@ -358,17 +427,13 @@ def _phase_coherence(q: Floats, pitch: Floats | float) -> Floats:
 def _coarse_axis(offsets: list[Floats], normals: list[Floats], pitch: float, c0: Floats, reach: float) -> Floats:
     """The turntable axis to ``pitch / 8`` within ``reach`` pitches of ``c0``, for a harp of (nearly) uniform
     pitch: the point about which every shot's string distances fall on one comb (:func:`_phase_coherence`);
-    the pitch is refined first, each shot on its own (within 10 %: the median gap :func:`harp_frame` takes
-    is biased by the strings' widths), since a comb of the wrong period dephases over many strings. Six
-    shots 30 degrees apart make a comb again about a point some 8 pitches away: ``reach`` stays well
-    below that."""
-    trial = pitch * np.linspace(0.9, 1.1, 401)
-    p = float(trial[np.argmax(sum(_phase_coherence(o[None, :], trial[:, None]) for o in offsets))])
+    the pitch is :func:`harp_pitch`'s (a comb of the wrong period dephases over many strings). Six shots 30
+    degrees apart make a comb again about a point some 8 pitches away: ``reach`` stays well below that."""
     oo = np.concatenate(offsets)
     nn = np.concatenate([np.repeat(n[None, :], len(o), axis=0) for n, o in zip(normals, offsets, strict=True)])
-    steps = np.linspace(-reach, reach, 2 * int(np.ceil(reach / 0.125)) + 1) * p
+    steps = np.linspace(-reach, reach, 2 * int(np.ceil(reach / 0.125)) + 1) * pitch
     grid = c0 + np.array([(dx, dy) for dx in steps for dy in steps])
-    out: Floats = grid[int(np.argmax(_phase_coherence(oo[None, :] - grid @ nn.T, p)))]
+    out: Floats = grid[int(np.argmax(_phase_coherence(oo[None, :] - grid @ nn.T, pitch)))]
     return out
 
 
@@ -542,16 +607,9 @@ def harp_frame(
     # per edge: its offset along its shot's harp normal, and that normal
     normals = [HarpFrame(angle0, sign, (0.0, 0.0), scale, 1.0).normal(t) for t in theta]
     offsets = [np.array([float(nrm @ e.mean(axis=0)) for e in shot]) for nrm, shot in zip(normals, corrected)]
-    spacing = []
-    for o in offsets:
-        c = np.sort(o)
-        gaps = np.diff(c)
-        gaps = gaps[gaps > 0.25 * (np.max(gaps) if len(gaps) else 0.0)]  # the string widths are not pitches
-        if len(gaps):
-            spacing.append(float(np.median(gaps)))
-    if not spacing:
+    pitch = harp_pitch(offsets)
+    if not np.isfinite(pitch):
         return FitFailure("too few strings to find the harp's pitch")
-    pitch = float(np.median(spacing))
     nn = np.concatenate([np.repeat(nrm[None, :], len(o), axis=0) for nrm, o in zip(normals, offsets)])
     oo = np.concatenate(offsets)
     shot_of = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)])
@@ -589,21 +647,17 @@ def harp_frame(
 
 def string_pitch(corrected: Sequence[Sequence[Floats]]) -> float:
     """The distance between neighbouring strings (px) in shots of a harp of uniform pitch, its edges ``corrected``
-    by a lens fit (ideal pixels, a string's two edges listed as :mod:`pipeline.measure` lists them): per shot the
-    edges' offsets across the strings' mean direction, sorted, and the median of every second difference (an edge
-    to the same edge of the next string: a string's width and the gap to the next add up to the pitch); the
-    median over the shots. It needs no turntable axis: what turns a linear stage's travel (mm) into an image
-    shift of the axis (px) for :func:`group_frames`, with the harp's pitch in mm. NaN when no shot has three
-    edges."""
-    per = []
+    by a lens fit (ideal pixels) or as measured: per shot the edges' offsets across the strings' mean direction,
+    and :func:`harp_pitch` of those (what :func:`harp_frame` takes, across the turntable's directions). It needs no
+    turntable axis or angles: what turns a linear stage's travel (mm) into an image shift of the axis (px) for
+    :func:`group_frames`, with the harp's pitch in mm. NaN when no shot sees two strings."""
+    offsets = []
     for shot in corrected:
-        if len(shot) < 3:
-            continue
-        a = np.radians(_circular_mean_180(np.array([_edge_angle(np.asarray(e, np.float64)) for e in shot]))[0])
-        nrm = np.array([-np.sin(a), np.cos(a)])
-        o = np.sort([float(nrm @ np.asarray(e, np.float64).mean(axis=0)) for e in shot])
-        per.append(float(np.median(o[2:] - o[:-2])))
-    return float(np.median(per)) if per else float("nan")
+        if len(shot):
+            a = np.radians(_circular_mean_180(np.array([_edge_angle(np.asarray(e, np.float64)) for e in shot]))[0])
+            nrm = np.array([-np.sin(a), np.cos(a)])
+            offsets.append(np.array([float(nrm @ np.asarray(e, np.float64).mean(axis=0)) for e in shot]))
+    return harp_pitch(offsets)
 
 
 def group_frames(
