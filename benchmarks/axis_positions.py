@@ -20,8 +20,8 @@ shapes are the only error) are traced for plans of equal shot counts:
 The two-axis plans are fitted twice: with each group's shift given 2 % off (``axis_shifts``, what a linear
 stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
 shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
-``pipeline.harp_shape.group_frames``). "(axis wrong)": a group's axis (or the one axis) was found more
-than a third of a pitch from where it was drawn (its strings misnumbered). A two-axis cell has a third
+``pipeline.harp_shape.group_frames``, which refuses it: "nan (refused)"). "(axis wrong)": a group's axis (or the
+one axis) was found more than a third of a pitch from where it was drawn (its strings misnumbered). A two-axis cell has a third
 figure: the strings separated with a ridge ten times weaker (``LOW_RIDGE``) than the default
 (``pipeline.harp_shape.STRING_RIDGE``, 0.02).
 
@@ -296,7 +296,7 @@ def row(args: tuple[int, float, bool]) -> str:
             np.hypot(f.centre[0] - drawn[g][0], f.centre[1] - drawn[g][1]) > f.pitch_px / 3
             for g, f in (sep.axis_groups or ((0, sep.frame),))
         )
-        cells.append(f"{alone:.4f} / {both}" + (" (axis wrong)" if wrong else ""))
+        cells.append(f"{alone:.4f} / {both}" + (" (axis wrong)" if wrong else "" if sep or not plain else " (refused)"))
     return "| " + " | ".join(cells) + " |"
 
 
@@ -311,13 +311,17 @@ def summary(rows: list[str]) -> list[str]:
     for i, j in ((0, 1), (0, 2), (3, 4), (3, 5)):
         one, two = sep[:, i], sep[:, j]
         ratio = two / one
+        refused = int(np.sum(~np.isfinite(two)))
+        if refused == len(two):
+            out.append(f"{names[j]}: refused for all {len(two)}")
+            continue
         out.append(
             f"{names[j]} against {names[i]}, separated: lower (< 0.95x) for {int(np.sum(ratio < 0.95))}, "
             f"within 5 % for {int(np.sum((ratio >= 0.95) & (ratio <= 1.05)))}, higher for {int(np.sum(ratio > 1.05))} of "
-            f"{len(ratio)}; median ratio {np.median(ratio):.2f}, worst {ratio.max():.2f}; median field "
-            f"{np.median(one):.4f} -> {np.median(two):.4f} px; at or below 0.005 px {int(np.sum(one <= 0.005))} -> "
-            f"{int(np.sum(two <= 0.005))}; lens alone median {np.median(alone[:, i]):.4f} -> "
-            f"{np.median(alone[:, j]):.4f} px"
+            f"{len(ratio)}{f' (refused {refused})' if refused else ''}; median ratio {np.nanmedian(ratio):.2f}, worst "
+            f"{np.nanmax(ratio):.2f}; median field {np.median(one):.4f} -> {np.nanmedian(two):.4f} px; at or below "
+            f"0.005 px {int(np.sum(one <= 0.005))} -> {int(np.sum(two <= 0.005))}; lens alone median "
+            f"{np.median(alone[:, i]):.4f} -> {np.median(alone[:, j]):.4f} px"
         )
     return out
 

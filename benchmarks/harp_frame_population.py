@@ -22,7 +22,9 @@ radial4+tangential+prism, its rejected edges left out, every kept edge corrected
 fitted lens's ideal pixels), and the drawn string of each edge. "axis off" counts frames whose axis is more
 than a quarter pitch from the truth; "misnumbered" frames in which some string's edges carry two numbers or
 one number holds two strings; "refused" the frames refused (a FitFailure: e.g. an axis that these angles
-cannot place). A refused frame is not counted as off or misnumbered: the session reports its reason.
+cannot place). A refused frame is not counted as off or misnumbered: the session reports its reason. The frame's
+pitch (``HarpFrame.pitch_px``, ``pipeline.harp_shape.harp_pitch``) is compared with the drawn one (the slope of the
+strings' drawn positions, mapped at the axis through the exact lens and back through the fitted one).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -42,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import HarpMount, draw_harp
-from pipeline.harp_shape import harp_frame
+from pipeline.harp_shape import group_frames, harp_frame
 from pipeline.lens_population import lens_population
 from tests.pipeline.harp_points import drawn_harp_point_sets
 
@@ -63,9 +66,10 @@ def plan_angles(kind: str, rng: np.random.Generator) -> list[float]:
     return [float(v) for v in np.sort(rng.choice(np.arange(0.0, 180.0, 15.0), n, replace=False))]
 
 
-def one(args: tuple[int, int, int]) -> dict[str, object]:
-    """Seed ``seed``'s geometry, its frame and how it compares with the truth."""
-    seed, w, h = args
+def one(args: tuple[int, int, int, bool]) -> dict[str, object]:
+    """Seed ``seed``'s geometry, its frame and how it compares with the truth (``groups``: two places, module
+    docstring)."""
+    seed, w, h, groups = args
     rng = np.random.default_rng([seed, 0xF4A3E])
     kind = PLANS[seed % len(PLANS)]
     turns = plan_angles(kind, rng)
@@ -80,9 +84,11 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
                      visible_px=0.5 * diag)  # fmt: skip
     mount = HarpMount((float(axis[0]), float(axis[1])), float(rng.uniform(0, 360)), int(rng.choice([-1, 1])))
     lens = lens_population(seed, 1, w, h)[0].model
-    shots, strings = drawn_harp_point_sets(lens, w, h, turns, harp, mount, seed=seed)
     row: dict[str, object] = {"seed": seed, "plan": kind, "shots": len(turns), "strings": n_str, "pitch": pitch}
     row |= {"axis_off_pitches": off / pitch}
+    if groups:
+        return row | placed_groups(rng, lens, harp, mount, turns, pitch, w, h, seed)
+    shots, strings = drawn_harp_point_sets(lens, w, h, turns, harp, mount, seed=seed)
     t0 = time.perf_counter()
     plain = fit_distortion(shots, w, h, **SPEC.fit_arguments())
     if not plain:
@@ -102,20 +108,74 @@ def one(args: tuple[int, int, int]) -> dict[str, object]:
     frame, numbers = framed
     true_axis = plain.model.undistort_points(lens.distort_points(axis[None, :]))[0]
     err = float(np.hypot(*(np.asarray(frame.centre) - true_axis)))
+    # the drawn pitch (the slope of the strings' drawn positions), in the fitted lens's ideal px at the axis
+    k = np.arange(n_str) - (n_str - 1) / 2.0
+    drawn = float(k @ np.array([s.position_px for s in harp.strings]) / (k @ k))
+    step = axis[None, :] + np.array([[0.0, 0.0], drawn * frame.normal(float(turns[0]))])
+    ends = plain.model.undistort_points(lens.distort_points(step))
+    pitch_true = float(np.hypot(*(ends[1] - ends[0])))
+    return (
+        row
+        | {
+            "result": "framed",
+            "axis_err_pitches": err / pitch,
+            "pitch_err_pct": 100.0 * (frame.pitch_px / pitch_true - 1.0),
+            "axis_off": err > 0.25 * pitch,
+        }
+        | numbering(truth, numbers)
+    )
+
+
+def placed_groups(
+    rng: np.random.Generator, lens: Any, harp: Any, mount: HarpMount, turns: list[float], pitch: float, w: int,
+    h: int, seed: int,
+) -> dict[str, object]:  # fmt: skip
+    """``--groups``: the harp moved with its turntable to two places 1-2 pitches either side of the drawn axis (in a
+    random direction), the same angles at each; ``group_frames`` without shifts (what ``fit_harp_shape`` does with
+    ``axis_groups`` and no ``axis_shifts``) against each place's drawn axis and the drawn strings."""
+    step = float(rng.uniform(1.0, 2.0)) * pitch
+    phi = float(rng.uniform(0.0, 2 * math.pi))
+    axes = {g: np.asarray(mount.centre) + g * step * np.array([math.cos(phi), math.sin(phi)]) for g in (-1, 1)}
+    middle = (np.array([w, h], dtype=np.float64) - 1.0) / 2.0
+    out: dict[str, object] = {"axis_off_pitches": max(float(np.hypot(*(a - middle))) for a in axes.values()) / pitch}
+    shots, strings, labels = [], [], []
+    for g in (-1, 1):
+        moved = HarpMount((float(axes[g][0]), float(axes[g][1])), mount.angle0_deg, mount.direction)
+        drawn, drawn_strings = drawn_harp_point_sets(lens, w, h, turns, harp, moved, seed=2 * seed + (g > 0))
+        shots += drawn
+        strings += drawn_strings
+        labels += [g] * len(turns)
+    t0 = time.perf_counter()
+    plain = fit_distortion(shots, w, h, **SPEC.fit_arguments())
+    if not plain:
+        return out | {"result": "plain fit failed"}
+    rejected = {(r.image, r.line) for r in plain.rejected}
+    corrected, truth = [], []
+    for i, (shot, drawn_labels) in enumerate(zip(shots, strings, strict=True)):
+        keep = [j for j in range(len(shot)) if (i, j) not in rejected]
+        corrected.append([plain.model.undistort_points(shot[j]) for j in keep])
+        truth.append([drawn_labels[j] for j in keep])
+    t1 = time.perf_counter()
+    framed = group_frames(corrected, turns + turns, labels, w, h)
+    out |= {"frame_s": time.perf_counter() - t1, "fit_s": t1 - t0}
+    if not framed:
+        return out | {"result": "refused", "reason": framed.reason}
+    frames, numbers = framed
+    drawn_axes = {g: plain.model.undistort_points(lens.distort_points(a[None, :]))[0] for g, a in axes.items()}
+    err = max(float(np.hypot(*(np.asarray(frames[g].centre) - drawn_axes[g]))) for g in (-1, 1))
+    result = {"result": "framed", "axis_err_pitches": err / pitch, "axis_off": err > 0.25 * pitch}
+    return out | result | numbering(truth, numbers)
+
+
+def numbering(truth: list[list[int]], numbers: list[list[int]]) -> dict[str, object]:
+    """Whether some drawn string carries two numbers or some number two drawn strings."""
     pairs = {(t, n) for ts, ns in zip(truth, numbers, strict=True) for t, n in zip(ts, ns, strict=True)}
     by_true, by_num = defaultdict(set), defaultdict(set)
     for t, n in pairs:
         by_true[t].add(n)
         by_num[n].add(t)
     wrong = {t for t, ns in by_true.items() if len(ns) > 1 or any(len(by_num[n]) > 1 for n in ns)}
-    return row | {
-        "result": "framed",
-        "axis_err_pitches": err / pitch,
-        "axis_off": err > 0.25 * pitch,
-        "misnumbered": bool(wrong),
-        "wrong_strings": len(wrong),
-        "seen_strings": len(by_true),
-    }
+    return {"misnumbered": bool(wrong), "wrong_strings": len(wrong), "seen_strings": len(by_true)}
 
 
 def seeds_arg(text: str) -> list[int]:
@@ -132,9 +192,10 @@ def main() -> None:
     ap.add_argument("--size", default="1000x750")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", action="store_true", help="also print every geometry that went wrong")
+    ap.add_argument("--groups", action="store_true", help="two places of the turntable axis, no shifts given")
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.split("x"))
-    jobs = [(s, w, h) for s in seeds_arg(args.seeds)]
+    jobs = [(s, w, h, args.groups) for s in seeds_arg(args.seeds)]
     t0 = time.perf_counter()
     if args.workers > 1:
         with ProcessPoolExecutor(args.workers) as pool:
@@ -154,7 +215,8 @@ def main() -> None:
         pct = (lambda k: f"{100.0 * k / n:5.1f}") if n else (lambda k: "    -")
         return f"| {name:<22} | {n:4d} | {off:4d} ({pct(off)} %) | {mis:4d} ({pct(mis)} %) | {bad:4d} ({pct(bad)} %) | {refused:4d} | {other:3d} |"
 
-    print(f"harp_frame over {len(rows)} geometries ({args.size}), {wall:.0f} s wall with {args.workers} workers")
+    what = "group_frames (two places, no shifts)" if args.groups else "harp_frame"
+    print(f"{what} over {len(rows)} geometries ({args.size}), {wall:.0f} s wall with {args.workers} workers")
     print()
     print(
         "| geometries             |    n | axis > p/4 off   | misnumbered      | either (wrong)   | refused | other |"
@@ -167,7 +229,11 @@ def main() -> None:
         print(line(f"plan {kind}", [r for r in rows if r["plan"] == kind]))
     for lo, hi in ((3, 3), (4, 5), (6, 8), (9, 12)):
         print(line(f"{lo}-{hi} shots" if hi > lo else f"{lo} shots", [r for r in rows if lo <= int(r["shots"]) <= hi]))
-    for lo, hi in ((0.0, 0.5), (0.5, 1.0), (1.0, 1.5), (1.5, 2.0)):
+    for lo, hi in (
+        ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 4.0))
+        if args.groups
+        else ((0.0, 0.5), (0.5, 1.0), (1.0, 1.5), (1.5, 2.0))
+    ):
         sel = [r for r in rows if lo <= float(r["axis_off_pitches"]) < hi]
         print(line(f"axis {lo:.1f}-{hi:.1f} p off centre", sel))
     for lo, hi in ((30, 60), (60, 90), (90, 120)):
@@ -175,7 +241,14 @@ def main() -> None:
     frame_s = [float(r["frame_s"]) for r in rows if "frame_s" in r]
     if frame_s:
         print()
-        print(f"harp_frame time: median {1e3 * np.median(frame_s):.0f} ms, max {1e3 * max(frame_s):.0f} ms")
+        print(f"{what} time: median {1e3 * np.median(frame_s):.0f} ms, max {1e3 * max(frame_s):.0f} ms")
+    pitch_err = np.abs([float(r["pitch_err_pct"]) for r in rows if "pitch_err_pct" in r])
+    if len(pitch_err):
+        print(
+            f"frame pitch against the drawn pitch ({len(pitch_err)} framed): median |error| "
+            f"{np.median(pitch_err):.2f} %, 90th percentile {np.percentile(pitch_err, 90):.2f} %, "
+            f"max {pitch_err.max():.2f} %"
+        )
     if args.rows:
         print()
         for r in rows:

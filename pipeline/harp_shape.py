@@ -101,6 +101,7 @@ from pipeline.fit_solver import solve
 from pipeline.fitspec import FitSpec
 from pipeline.harp_kinks import KINK_Z, Candidate, Kink, end_weights, peak_per_area, scan_string, stretches, template
 from pipeline.models.base import DistortionModel
+from pipeline.orientations import distinct_orientations
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 
@@ -151,13 +152,39 @@ AXIS_SEEDS = 32
 make a lattice of equally good places, about one per square pitch)."""
 
 GROUP_AXIS_SEARCH = 4.0
-"""Half-width, in string pitches, of the search for the turntable axis of each axis group of
-:func:`fit_harp_shape` around the image centre (:func:`_coarse_axis`)."""
+"""Radius, in string pitches, of the search for the turntable axis of each axis group of :func:`fit_harp_shape`
+given no shifts, around the image centre (:func:`_place_groups`); half-width of the comb search of
+``station.calibration.axes_of`` (``harp_frame(reach=)``, :func:`_coarse_axis`)."""
+
+GROUP_AXIS_SEEDS = 64
+"""Most local minima of the trial axes' grid refined per axis group by :func:`_place_groups` (every one that scores
+alike, or the group is refused: three angles make a lattice of some 50 places within :data:`GROUP_AXIS_SEARCH`
+pitches, more than :data:`AXIS_SEEDS`, and a place left out might be the axis)."""
+
+MIN_GROUP_ANGLES = 4
+"""Fewest distinct turntable angles (:func:`pipeline.orientations.distinct_orientations`) of an axis group whose
+axis :func:`group_frames` searches without a shift. Three make the distances from every point of a lattice agree
+(about a pitch apart, 60 degrees apart), and with a string or two left out of some shots (the plain fit's rejected
+edges) a wrong place of the lattice can agree better than the axis (``benchmarks/axis_positions.py``, seed 39)."""
+
+MAX_GROUP_COMBINATIONS = 4096
+"""Most combinations of the axis groups' alike places that :func:`group_frames` without shifts scores together
+(three shots per group leave some 30 places each within :data:`GROUP_AXIS_SEARCH` pitches: two groups 900)."""
 
 SHIFT_SEARCH = 0.3
 """Half-width, in string pitches, of the search for an axis group's turntable axis about where its given shift
 puts it (:func:`group_frames`): below half the distance to the nearest point about which three shots 60
 degrees apart agree as well (about a pitch)."""
+
+PAIR_RATIO = 2.5
+"""Least ratio of the gaps between strings to a string's width for :func:`shot_pitch` to pair a string's two edges:
+a string narrower than 1/3.5 of the pitch (the drawn and real harps: 2.5-4 px wide, 30-120 px apart). Strings that
+show one edge each with some missing leave gaps of 1, 2, 3 pitches (ratios 2 and 1.5 between neighbours), below it;
+a ratio of 3 or more among them would give a "string" more than two edges, and is not taken either."""
+
+PITCH_FLOOR = 0.3
+"""The first pitch of :func:`shot_pitch` is the smallest gap between the strings' centres of at least this times
+their median gap: a median up to three pitches (two of every three strings missing) still finds one pitch."""
 
 MIN_SPAN = 0.8
 """Shortest stretch of ``u`` (half image diagonals) over which a string must be seen, in all its shots
@@ -182,7 +209,8 @@ def legendre(u: Floats, degrees: Sequence[int]) -> Floats:
 class HarpFrame:
     """Where the harp is in every shot: strings at ``angle0_deg + sign * turntable`` (degrees, in the
     ideal image), turning about ``centre`` (ideal pixels); harp coordinates along the strings in units
-    of ``scale_px`` (half the image diagonal)."""
+    of ``scale_px`` (half the image diagonal); ``pitch_px`` the distance between neighbouring strings
+    (:func:`harp_pitch`)."""
 
     angle0_deg: float
     sign: int
@@ -348,6 +376,64 @@ def _clusters(q: Floats, gap: float) -> NDArray[np.intp]:
     return labels
 
 
+def shot_pitch(offsets: Floats) -> float:
+    r"""The distance between neighbouring strings (px) of a harp of uniform pitch, from one shot's edge offsets
+    across its strings (px, any order; a string's two edges as :mod:`pipeline.measure` lists them, or one; an
+    edge listed twice, as a bootstrap replicate draws it, counts once).
+
+    * **A string's two edges** are paired: the offsets' gaps are the strings' widths and, at least
+      :data:`PAIR_RATIO` times wider, the gaps between strings. The widest jump between the sorted gaps splits
+      them when it is that large and no string would get more than two edges (else every edge is its own
+      string: a harp whose strings show one edge each, or whose only wide gaps are missing strings).
+    * **Missing strings** (beyond the image's borders, or hidden inside it) leave gaps of whole pitches between
+      the strings' centres :math:`c_j`. A first pitch :math:`p_0` is the smallest gap of at least
+      :data:`PITCH_FLOOR` times the median gap (the strings' gaps are :math:`p` or a few :math:`p`); each gap
+      counts :math:`\max(1, \mathrm{round}(\Delta c / p_0))` strings, which numbers the strings seen
+      :math:`k_j`.
+    * **The pitch** is the least-squares slope of :math:`c_j` against :math:`k_j` over the strings with both
+      edges seen (all strings when fewer than two have): exact for a uniform harp whatever the strings' width
+      (a median gap between edges is the pitch less a width) and whichever strings are missing.
+
+    NaN when fewer than two strings or three edges are seen (two edges may be one string's).
+
+    References
+    ----------
+    .. [1] Z. Tang, R. Grompone von Gioi, P. Monasse, J.-M. Morel, "High-precision camera distortion
+       measurements with a calibration harp", JOSA A 29(10), 2012 (a harp of equally spaced strings).
+    """
+    o = np.unique(np.asarray(offsets, np.float64)[np.isfinite(offsets)])  # an edge drawn twice (bootstrap) once
+    if len(o) < 3:  # two edges: two strings or one string's two
+        return float("nan")
+    gaps = np.diff(o)
+    lab = np.arange(len(o))
+    g = np.sort(gaps[gaps > 0])
+    if len(g) >= 2:
+        jump = int(np.argmax(g[1:] / np.maximum(g[:-1], 1e-12)))
+        if g[jump + 1] >= PAIR_RATIO * g[jump]:
+            paired = np.concatenate([[0], np.cumsum(gaps > np.sqrt(g[jump] * g[jump + 1]))])
+            if np.bincount(paired).max() <= 2:
+                lab = paired
+    count = np.bincount(lab)
+    centre = np.bincount(lab, weights=o) / count
+    if len(centre) < 2:
+        return float("nan")
+    dc = np.diff(centre)
+    p0 = float(np.min(dc[dc >= PITCH_FLOOR * np.median(dc)]))
+    k = np.concatenate([[0.0], np.cumsum(np.maximum(1.0, np.rint(dc / p0)))])
+    both = count == 2
+    use = both if np.sum(both) >= 2 else np.ones(len(centre), dtype=bool)
+    kk, cc = k[use] - k[use].mean(), centre[use] - centre[use].mean()
+    return float(kk @ cc / (kk @ kk))
+
+
+def harp_pitch(offsets: Sequence[Floats]) -> float:
+    """The harp's pitch (px) from several shots' edge offsets across their strings (one array per shot, each
+    across its own strings' direction): the median of :func:`shot_pitch` over the shots that see two strings or
+    more (robust to a shot whose strings were paired or numbered wrongly); NaN when none does."""
+    per = [p for p in (shot_pitch(o) for o in offsets) if np.isfinite(p)]
+    return float(np.median(per)) if per else float("nan")
+
+
 def _phase_coherence(q: Floats, pitch: Floats | float) -> Floats:
     """How well distances ``q`` (last axis) fall on one comb of period ``pitch``: the squared mean
     resultants of ``q`` modulo ``pitch`` and ``pitch / 2`` summed (2 when every ``q`` is on the comb; the
@@ -358,17 +444,13 @@ def _phase_coherence(q: Floats, pitch: Floats | float) -> Floats:
 def _coarse_axis(offsets: list[Floats], normals: list[Floats], pitch: float, c0: Floats, reach: float) -> Floats:
     """The turntable axis to ``pitch / 8`` within ``reach`` pitches of ``c0``, for a harp of (nearly) uniform
     pitch: the point about which every shot's string distances fall on one comb (:func:`_phase_coherence`);
-    the pitch is refined first, each shot on its own (within 10 %: the median gap :func:`harp_frame` takes
-    is biased by the strings' widths), since a comb of the wrong period dephases over many strings. Six
-    shots 30 degrees apart make a comb again about a point some 8 pitches away: ``reach`` stays well
-    below that."""
-    trial = pitch * np.linspace(0.9, 1.1, 401)
-    p = float(trial[np.argmax(sum(_phase_coherence(o[None, :], trial[:, None]) for o in offsets))])
+    the pitch is :func:`harp_pitch`'s (a comb of the wrong period dephases over many strings). Six shots 30
+    degrees apart make a comb again about a point some 8 pitches away: ``reach`` stays well below that."""
     oo = np.concatenate(offsets)
     nn = np.concatenate([np.repeat(n[None, :], len(o), axis=0) for n, o in zip(normals, offsets, strict=True)])
-    steps = np.linspace(-reach, reach, 2 * int(np.ceil(reach / 0.125)) + 1) * p
+    steps = np.linspace(-reach, reach, 2 * int(np.ceil(reach / 0.125)) + 1) * pitch
     grid = c0 + np.array([(dx, dy) for dx in steps for dy in steps])
-    out: Floats = grid[int(np.argmax(_phase_coherence(oo[None, :] - grid @ nn.T, p)))]
+    out: Floats = grid[int(np.argmax(_phase_coherence(oo[None, :] - grid @ nn.T, pitch)))]
     return out
 
 
@@ -421,9 +503,10 @@ def _place_axis(
     pitch: float,
     c0: Floats,
     refined: Any,
+    reach: float = AXIS_REACH,
 ) -> Floats | FitFailure:
-    """The turntable axis within :data:`AXIS_REACH` pitches of ``c0`` (a disc) about which the edges (offsets ``oo``
-    along their shots' normals ``nn``) make one harp (:func:`_consistency`), refined by ``refined``.
+    """The turntable axis within ``reach`` pitches of ``c0`` (a disc, :data:`AXIS_REACH` by default) about which
+    the edges (offsets ``oo`` along their shots' normals ``nn``) make one harp (:func:`_consistency`), refined by ``refined``.
 
     Every point of a grid :data:`AXIS_STEP` pitches apart is scored on each shot's strings (the mean of the edges
     of each, with a tolerance of twice the grid's spacing); its best local minima (up to :data:`AXIS_SEEDS`, those
@@ -435,10 +518,32 @@ def _place_axis(
     turntable angles cannot place the axis (three angles never can, for a harp wider than the image:
     :func:`group_frames`) and the frame is refused rather than guessed. It is refused too where even the best
     place scores over :data:`AXIS_DISAGREE` per edge (no one axis makes the shots one harp). An axis beyond
-    :data:`AXIS_REACH` whose shots agree as well about a place within it is not seen (four angles 45 degrees
+    ``reach`` whose shots agree as well about a place within it is not seen (four angles 45 degrees
     apart: a place 1.85 pitches off).
     """
-    n = int(np.ceil(AXIS_REACH / AXIS_STEP))
+    alike = _axis_places(oo, nn, shot_of, n_shots, pitch, c0, refined, reach)
+    if isinstance(alike, FitFailure):
+        return alike
+    refused = _ambiguous(alike, pitch)
+    return alike[0][2] if refused is None else refused
+
+
+def _axis_places(
+    oo: Floats,
+    nn: Floats,
+    shot_of: NDArray[np.intp],
+    n_shots: int,
+    pitch: float,
+    c0: Floats,
+    refined: Any,
+    reach: float = AXIS_REACH,
+    seeds: int = AXIS_SEEDS,
+    complete: bool = False,
+) -> list[tuple[float, int, Floats]] | FitFailure:
+    """The places ``(score, strings, centre)`` of :func:`_place_axis` that make the shots one harp alike
+    (:func:`_alike`), or why none does; ``seeds`` local minima refined at most (:data:`AXIS_SEEDS`): with
+    ``complete``, more minima scoring alike than that is refused (a place left out might be the axis)."""
+    n = int(np.ceil(reach / AXIS_STEP))
     steps = np.arange(-n, n + 1) * AXIS_STEP * pitch
     gx, gy = np.meshgrid(steps, steps, indexing="ij")
     grid = c0 + np.column_stack([gx.ravel(), gy.ravel()])
@@ -452,7 +557,7 @@ def _place_axis(
             nc.append(np.repeat(nn[shot_of == i][:1], len(oc[-1]), axis=0))
             sc.append(np.full(len(oc[-1]), i))
     o_s, n_s, s_s = np.concatenate(oc), np.concatenate(nc), np.concatenate(sc)
-    disc = np.hypot(gx, gy).ravel() <= AXIS_REACH * pitch + 1e-9
+    disc = np.hypot(gx, gy).ravel() <= reach * pitch + 1e-9
     coarse = np.full(len(grid), np.inf)
     coarse[disc] = _consistency(o_s[None, :] - grid[disc] @ n_s.T, s_s, n_shots, pitch, 2 * AXIS_STEP * pitch)[0]
     sq = coarse.reshape(2 * n + 1, 2 * n + 1)
@@ -462,12 +567,18 @@ def _place_axis(
          if dx or dy], axis=0,
     )  # fmt: skip
     minima = np.flatnonzero((sq <= neighbours).ravel() & disc)
-    minima = minima[np.argsort(coarse[minima], kind="stable")][:AXIS_SEEDS]
+    minima = minima[np.argsort(coarse[minima], kind="stable")]
     # the coarse score of a place varies with where the grid falls about it (up to ~0.15 per edge)
     minima = minima[coarse[minima] <= coarse[minima[0]] + AXIS_TIE + 0.2 * len(o_s)]
+    if complete and len(minima) > seeds:
+        return FitFailure(
+            f"the harp's axis is ambiguous with these turntable angles: more than {seeds} places within {reach:g} "
+            "pitches make the shots' strings agree; add angles spread over the half turn"
+        )
+    minima = minima[:seeds]
     places: list[tuple[float, int, Floats]] = []
     for c in (refined(grid[j]) for j in minima):
-        if np.hypot(*(c - c0)) > (AXIS_REACH + AXIS_STEP) * pitch:
+        if np.hypot(*(c - c0)) > (reach + AXIS_STEP) * pitch:
             continue  # refined out of the disc searched: a place it does not vouch for
         if all(np.hypot(*(c - p)) > 0.25 * pitch for _, _, p in places):
             v, k = _consistency(oo - nn @ c, shot_of, n_shots, pitch, AXIS_TOLERANCE * pitch)
@@ -475,19 +586,29 @@ def _place_axis(
     best = min((v for v, _, _ in places), default=np.inf)
     if best > AXIS_DISAGREE * len(oo):
         return FitFailure(
-            f"the shots' strings do not agree about any one turntable axis within {AXIS_REACH:g} string pitches of "
+            f"the shots' strings do not agree about any one turntable axis within {reach:g} string pitches of "
             f"the image centre (at best {best:.0f} of {len(oo)} edges off their string or missed): the harp moved "
             "between shots (give each shot's axis group), or its axis is farther off"
         )
-    alike = sorted(((k, v), i) for i, (v, k, _) in enumerate(places) if v <= best + AXIS_TIE)
-    if len(alike) > 1 and alike[0][0][0] == alike[1][0][0]:
-        first = places[alike[0][1]][2]
-        far = max(float(np.hypot(*(places[i][2] - first))) for _, i in alike[1:]) / pitch
-        return FitFailure(
-            f"the harp's axis is ambiguous with these turntable angles: {len(alike)} places up to {far:.1f} "
-            "pitches apart make the shots' strings agree; add angles spread over the half turn"
-        )
-    return places[alike[0][1]][2]
+    return _alike(places)
+
+
+def _alike(places: Sequence[tuple[float, int, Floats]]) -> list[tuple[float, int, Floats]]:
+    """The places ``(score, strings, centre)`` scoring within :data:`AXIS_TIE` of the best, fewest strings first
+    (then the lowest score): the first is the harp's axis unless the second has as many strings."""
+    best = min(v for v, _, _ in places)
+    return sorted((p for p in places if p[0] <= best + AXIS_TIE), key=lambda p: (p[1], p[0]))
+
+
+def _ambiguous(alike: Sequence[tuple[float, int, Floats]], pitch: float, where: str = "") -> FitFailure | None:
+    """The refusal when the first two places of ``alike`` (:func:`_alike`) have as many strings, else None."""
+    if len(alike) < 2 or alike[0][1] != alike[1][1]:
+        return None
+    far = max(float(np.hypot(*(c - alike[0][2]))) for _, _, c in alike[1:]) / pitch
+    return FitFailure(
+        f"the harp's axis is ambiguous with these turntable angles{where}: {len(alike)} places up to {far:.1f} "
+        "pitches apart make the shots' strings agree; add angles spread over the half turn"
+    )
 
 
 def harp_frame(
@@ -499,14 +620,15 @@ def harp_frame(
     centre: Sequence[float] | Floats | None = None,
     reach: float | None = None,
     refine: bool = True,
+    within: float = AXIS_REACH,
 ) -> tuple[HarpFrame, list[list[int]]] | FitFailure:
     """The harp's frame in the shots (:class:`HarpFrame`) and each edge's string number.
 
     ``corrected``: per shot, its edges corrected by a lens fit (ideal pixels). The strings' angle at
     turntable 0 and the sense of rotation come from the shots' line directions; the axis from making
     the strings' distances from it agree between shots (module docstring); the strings are the
-    clusters of those distances, numbered from the lowest ``q``. The axis is searched within
-    :data:`AXIS_REACH` pitches of ``centre`` (default the image centre) by how well its distances make
+    clusters of those distances, numbered from the lowest ``q``. The axis is searched within ``within``
+    pitches (:data:`AXIS_REACH`) of ``centre`` (default the image centre) by how well its distances make
     one harp (:func:`_place_axis`, :func:`_consistency`: each string one cluster, seen in every shot
     whose strings lie on either side of it; the spread of the distances within their clusters alone
     misleads where a wrong axis splits each string into clusters of fewer shots); with ``reach``
@@ -524,6 +646,62 @@ def harp_frame(
     """
     if len(corrected) != len(turntable_deg):
         return FitFailure(f"{len(corrected)} shots but {len(turntable_deg)} turntable angles")
+    across = _across(corrected, turntable_deg, width, height)
+    if isinstance(across, FitFailure):
+        return across
+    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if centre is None else np.asarray(centre, np.float64)
+
+    def refined(c: Floats) -> Floats:
+        return across.refined(c, 3 if refine else 0)
+
+    if reach is not None:
+        return across.framed(refined(_coarse_axis(across.offsets, across.normals, across.pitch, c0, reach)))
+    placed = _place_axis(across.oo, across.nn, across.shot_of, len(corrected), across.pitch, c0, refined, within)
+    return placed if isinstance(placed, FitFailure) else across.framed(placed)
+
+
+@dataclass(frozen=True)
+class _Across:
+    """The shots' edges across their strings, from which :func:`harp_frame` places the axis: the strings' angle at
+    turntable 0 and the sense of turning, the pitch (:func:`harp_pitch`), per shot its harp normal and its edges'
+    offsets along it, and the same per edge (``oo``, ``nn``, ``shot_of``)."""
+
+    angle0: float
+    sign: int
+    scale: float
+    pitch: float
+    normals: list[Floats]
+    offsets: list[Floats]
+    oo: Floats
+    nn: Floats
+    shot_of: NDArray[np.intp]
+
+    def labels(self, c: Floats) -> NDArray[np.intp]:
+        """Each edge's string about the axis ``c``: the clusters of the distances, a third of a pitch apart."""
+        return _clusters(self.oo - self.nn @ c, self.pitch / 3.0)
+
+    def refined(self, c: Floats, rounds: int = 3) -> Floats:
+        """The axis ``c`` refined with the clusters about it held: ``q_e + n_e . c = o_e`` is linear in ``(c, q_k)``."""
+        for _ in range(rounds):
+            lab = self.labels(c)
+            a = np.zeros((len(self.oo), 2 + int(lab.max()) + 1))
+            a[:, :2] = self.nn
+            a[np.arange(len(self.oo)), 2 + lab] = 1.0
+            sol, *_ = np.linalg.lstsq(a, self.oo, rcond=None)
+            c = np.asarray(sol[:2], dtype=np.float64)
+        return c
+
+    def framed(self, c: Floats) -> tuple[HarpFrame, list[list[int]]]:
+        """The frame about the axis ``c`` and each shot's edges' string numbers."""
+        lab = self.labels(c)
+        per_shot = [[int(v) for v in lab[self.shot_of == i]] for i in range(len(self.offsets))]
+        return HarpFrame(self.angle0, self.sign, (float(c[0]), float(c[1])), self.scale, self.pitch), per_shot
+
+
+def _across(
+    corrected: Sequence[Sequence[Floats]], turntable_deg: Sequence[float], width: int, height: int
+) -> _Across | FitFailure:
+    """:class:`_Across` of the shots (:func:`harp_frame`'s first steps), or why the shots have none."""
     angles = np.array([_circular_mean_180(np.array([_edge_angle(e) for e in shot]))[0] for shot in corrected])
     theta = np.asarray(turntable_deg, dtype=np.float64)
     best: tuple[float, int, float] | None = None
@@ -542,68 +720,27 @@ def harp_frame(
     # per edge: its offset along its shot's harp normal, and that normal
     normals = [HarpFrame(angle0, sign, (0.0, 0.0), scale, 1.0).normal(t) for t in theta]
     offsets = [np.array([float(nrm @ e.mean(axis=0)) for e in shot]) for nrm, shot in zip(normals, corrected)]
-    spacing = []
-    for o in offsets:
-        c = np.sort(o)
-        gaps = np.diff(c)
-        gaps = gaps[gaps > 0.25 * (np.max(gaps) if len(gaps) else 0.0)]  # the string widths are not pitches
-        if len(gaps):
-            spacing.append(float(np.median(gaps)))
-    if not spacing:
+    pitch = harp_pitch(offsets)
+    if not np.isfinite(pitch):
         return FitFailure("too few strings to find the harp's pitch")
-    pitch = float(np.median(spacing))
     nn = np.concatenate([np.repeat(nrm[None, :], len(o), axis=0) for nrm, o in zip(normals, offsets)])
-    oo = np.concatenate(offsets)
     shot_of = np.concatenate([np.full(len(o), i) for i, o in enumerate(offsets)])
-    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0]) if centre is None else np.asarray(centre, np.float64)
-    if reach is not None:
-        c0 = _coarse_axis(offsets, normals, pitch, c0, reach)
-
-    def labels(c: Floats) -> NDArray[np.intp]:
-        return _clusters(oo - nn @ c, pitch / 3.0)
-
-    def refined(c: Floats) -> Floats:
-        # given the clusters, q_e + n_e . c = o_e is linear in (c, q_k)
-        for _ in range(3 if refine else 0):
-            lab = labels(c)
-            k = int(lab.max()) + 1
-            a = np.zeros((len(oo), 2 + k))
-            a[:, :2] = nn
-            a[np.arange(len(oo)), 2 + lab] = 1.0
-            sol, *_ = np.linalg.lstsq(a, oo, rcond=None)
-            c = sol[:2]
-        return c
-
-    if reach is None:
-        placed = _place_axis(oo, nn, shot_of, len(corrected), pitch, c0, refined)
-        if isinstance(placed, FitFailure):
-            return placed
-        c_best = placed
-    else:
-        c_best = refined(c0)
-    lab = labels(c_best)
-    per_shot: list[list[int]] = [[int(v) for v in lab[shot_of == i]] for i in range(len(corrected))]
-    frame = HarpFrame(float(angle0), int(sign), (float(c_best[0]), float(c_best[1])), scale, pitch)
-    return frame, per_shot
+    return _Across(float(angle0), int(sign), scale, pitch, normals, offsets, np.concatenate(offsets), nn, shot_of)
 
 
 def string_pitch(corrected: Sequence[Sequence[Floats]]) -> float:
     """The distance between neighbouring strings (px) in shots of a harp of uniform pitch, its edges ``corrected``
-    by a lens fit (ideal pixels, a string's two edges listed as :mod:`pipeline.measure` lists them): per shot the
-    edges' offsets across the strings' mean direction, sorted, and the median of every second difference (an edge
-    to the same edge of the next string: a string's width and the gap to the next add up to the pitch); the
-    median over the shots. It needs no turntable axis: what turns a linear stage's travel (mm) into an image
-    shift of the axis (px) for :func:`group_frames`, with the harp's pitch in mm. NaN when no shot has three
-    edges."""
-    per = []
+    by a lens fit (ideal pixels) or as measured: per shot the edges' offsets across the strings' mean direction,
+    and :func:`harp_pitch` of those (what :func:`harp_frame` takes, across the turntable's directions). It needs no
+    turntable axis or angles: what turns a linear stage's travel (mm) into an image shift of the axis (px) for
+    :func:`group_frames`, with the harp's pitch in mm. NaN when no shot sees two strings."""
+    offsets = []
     for shot in corrected:
-        if len(shot) < 3:
-            continue
-        a = np.radians(_circular_mean_180(np.array([_edge_angle(np.asarray(e, np.float64)) for e in shot]))[0])
-        nrm = np.array([-np.sin(a), np.cos(a)])
-        o = np.sort([float(nrm @ np.asarray(e, np.float64).mean(axis=0)) for e in shot])
-        per.append(float(np.median(o[2:] - o[:-2])))
-    return float(np.median(per)) if per else float("nan")
+        if len(shot):
+            a = np.radians(_circular_mean_180(np.array([_edge_angle(np.asarray(e, np.float64)) for e in shot]))[0])
+            nrm = np.array([-np.sin(a), np.cos(a)])
+            offsets.append(np.array([float(nrm @ np.asarray(e, np.float64).mean(axis=0)) for e in shot]))
+    return harp_pitch(offsets)
 
 
 def group_frames(
@@ -617,7 +754,7 @@ def group_frames(
     """The harp's frame in each axis group of shots (the harp moved with its turntable between groups, by a
     linear stage or by hand) and each edge's string number, one number per string in every group.
 
-    Each group's frame is :func:`harp_frame` on its own shots. Where its axis is searched:
+    Each group's frame is placed on its own shots as :func:`harp_frame` places one. Where its axis is searched:
 
     * ``shifts`` given (per group, the image shift of the axis from a reference place within
       :data:`AXIS_SEARCH` pitches of the image centre, known roughly: a stage's travel times the image
@@ -625,11 +762,13 @@ def group_frames(
       (:func:`harp_frame` with ``reach``, not refined), and each group's own axis is searched within
       :data:`SHIFT_SEARCH` pitches of the reference plus its shift (the shifts' errors a sixth of a pitch
       or less, with as few as three shots in a group);
-    * no ``shifts``: within :data:`GROUP_AXIS_SEARCH` pitches of the image centre (``harp_frame(reach=)``).
-      For a harp of uniform pitch this needs four turntable angles or more per group, spread over the
-      half turn: the distances from any point agree between three shots modulo the pitch on a lattice of
-      points (about a pitch apart for angles 60 degrees apart, 2.7 pitches for 30), so three shots alone
-      cannot place their axis.
+    * no ``shifts``: within :data:`GROUP_AXIS_SEARCH` pitches of the image centre, where each group's shots make
+      one harp as :func:`harp_frame` places one axis (:func:`_axis_places`), and where a group's shots agree
+      alike about several places, the places that make *all* the shots one harp together (:func:`_place_groups`);
+      refused with the reason when that leaves several. For a harp of uniform pitch this needs four turntable
+      angles or more per group, spread over the half turn: the distances from any point agree between three
+      shots modulo the pitch on a lattice of points (about a pitch apart for angles 60 degrees apart, 2.7
+      pitches for 30), so three shots cannot place their axis, alone or with another group of three.
 
     A string's distance ``q`` from the turntable axis is the same in every group, so the strings are the
     clusters of every group's distances together, numbered from the lowest ``q``.
@@ -650,25 +789,104 @@ def group_frames(
         guess = {g: np.asarray(framed[0].centre) + s[g] for g in names}
     frames: dict[Hashable, HarpFrame] = {}
     q: list[Floats] = [np.zeros(0)] * len(corrected)
-    for g in names:
-        idx = [i for i, h in enumerate(axis_groups) if h == g]
-        framed = harp_frame(
-            [corrected[i] for i in idx],
-            [turntable_deg[i] for i in idx],
+    members = {g: [i for i, h in enumerate(axis_groups) if h == g] for g in names}
+    if shifts is None:
+        placed = _place_groups(
+            [[corrected[i] for i in members[g]] for g in names],
+            [[turntable_deg[i] for i in members[g]] for g in names],
+            names,
             width,
             height,
-            centre=guess[g],
-            reach=GROUP_AXIS_SEARCH if shifts is None else SHIFT_SEARCH,
         )
-        if not framed:
-            return FitFailure(f"axis group {g!r}: {framed.reason}")
-        frames[g] = frame = framed[0]
+        if isinstance(placed, FitFailure):
+            return placed
+        frames = dict(zip(names, placed, strict=True))
+    for g in names:
+        idx = members[g]
+        if shifts is not None:
+            shots, turns = [corrected[i] for i in idx], [turntable_deg[i] for i in idx]
+            framed = harp_frame(shots, turns, width, height, centre=guess[g], reach=SHIFT_SEARCH)
+            if not framed:
+                return FitFailure(f"axis group {g!r}: {framed.reason}")
+            frames[g] = framed[0]
+        frame = frames[g]
         for i in idx:
             nrm, c = frame.normal(float(turntable_deg[i])), np.asarray(frame.centre)
             q[i] = np.array([float(nrm @ (e.mean(axis=0) - c)) for e in corrected[i]])
     lab = _clusters(np.concatenate(q), min(f.pitch_px for f in frames.values()) / 3.0)
     ends = np.cumsum([len(v) for v in q])
     return frames, [[int(v) for v in part] for part in np.split(lab, ends[:-1])]
+
+
+def _place_groups(
+    shots: Sequence[Sequence[Sequence[Floats]]],
+    turns: Sequence[Sequence[float]],
+    names: Sequence[Hashable],
+    width: int,
+    height: int,
+) -> list[HarpFrame] | FitFailure:
+    """Each axis group's frame without shifts (:func:`group_frames`): per group the places of its axis within
+    :data:`GROUP_AXIS_SEARCH` pitches of the image centre that make its shots one harp alike (:func:`_axis_places`,
+    as :func:`harp_frame` places one axis); where a group has several, the one combination of places, one per
+    group, that makes *all* the shots one harp (:func:`_consistency` on every group's distances from its own axis:
+    a string keeps its distance from the axis in every group) better than any other by :data:`AXIS_TIE`. Fewer
+    strings do not decide here, alone or together: four angles 45 degrees apart make a harp wider than the image
+    agree about places 1.85 pitches off with a string *fewer* than about its axis, and the places of groups of three
+    angles (a lattice each) combine into harps of fewer strings too (``benchmarks/axis_positions.py``). Refused with
+    the reason when a group's shots agree about no place, when no combination makes all the shots one harp
+    (:data:`AXIS_DISAGREE`), or when several make them agree alike (up to :data:`MAX_GROUP_COMBINATIONS` are
+    scored)."""
+    parts: list[_Across] = []
+    alike: list[list[tuple[float, int, Floats]]] = []
+    c0 = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    for g, group, angles in zip(names, shots, turns, strict=True):
+        if distinct_orientations(angles) < MIN_GROUP_ANGLES:
+            return FitFailure(
+                f"axis group {g!r}: {distinct_orientations(angles)} turntable angles cannot place its axis without a "
+                f"shift (a harp of uniform pitch agrees about a lattice of places); give each group's shift, or "
+                f"{MIN_GROUP_ANGLES} angles or more spread over the half turn"
+            )
+        across = _across(group, angles, width, height)
+        if isinstance(across, FitFailure):
+            return FitFailure(f"axis group {g!r}: {across.reason}")
+        places = _axis_places(
+            across.oo, across.nn, across.shot_of, len(group), across.pitch, c0, across.refined, GROUP_AXIS_SEARCH,
+            GROUP_AXIS_SEEDS, complete=True,
+        )  # fmt: skip
+        if isinstance(places, FitFailure):
+            return FitFailure(f"axis group {g!r}: {places.reason}")
+        parts.append(across)
+        alike.append(places)
+    sizes = [len(a) for a in alike]
+    if max(sizes) > 1:
+        why = (
+            "the harp's axis is ambiguous with these turntable angles in axis group"
+            f"{'s' if sum(n > 1 for n in sizes) > 1 else ''} "
+            + ", ".join(repr(g) for g, n in zip(names, sizes, strict=True) if n > 1)
+        )
+        if int(np.prod(sizes)) > MAX_GROUP_COMBINATIONS:
+            return FitFailure(
+                f"{why}: {int(np.prod(sizes))} combinations of places; add angles spread over the half turn"
+            )
+        combos = np.array(np.meshgrid(*[np.arange(n) for n in sizes], indexing="ij")).reshape(len(sizes), -1).T
+        q = np.hstack(
+            [
+                a.oo[None, :] - np.array([c for _, _, c in places])[combos[:, j]] @ a.nn.T
+                for j, (a, places) in enumerate(zip(parts, alike, strict=True))
+            ]
+        )
+        shot_of = np.concatenate([a.shot_of + sum(len(s) for s in shots[:j]) for j, a in enumerate(parts)])
+        pitch = float(np.median([a.pitch for a in parts]))
+        v = _consistency(q, shot_of, sum(len(s) for s in shots), pitch, AXIS_TOLERANCE * pitch)[0]
+        together = np.flatnonzero(v <= v.min() + AXIS_TIE)
+        if v.min() > AXIS_DISAGREE * q.shape[1] or len(together) > 1:
+            alike_n = len(together) if v.min() <= AXIS_DISAGREE * q.shape[1] else 0
+            return FitFailure(
+                f"{why}: {alike_n} of {len(combos)} combinations of places make all the shots' strings agree"
+                "; add angles spread over the half turn, or give each group's shift"
+            )
+        alike = [[places[int(combos[together[0], j])]] for j, places in enumerate(alike)]
+    return [a.framed(places[0][2])[0] for a, places in zip(parts, alike, strict=True)]
 
 
 # ------------------------------------------------------------------ the joint fit
