@@ -54,7 +54,7 @@ two lines only, and its bend and the lens's terms trade."""
 
 MATCH_PITCHES = 1.0 / 3.0
 """A held-out edge belongs to the fold's string nearest to it across the strings when within this many
-string pitches (the gap that separates two strings in :func:`pipeline.harp_shape.harp_frame`)."""
+string pitches (the distance between neighbouring strings' centres, :func:`pipeline.harp_shape.shot_pitch`)."""
 
 
 @dataclass(frozen=True)

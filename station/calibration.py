@@ -38,6 +38,7 @@ from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_K
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
     GROUP_AXIS_SEARCH,
+    MIN_GROUP_ANGLES,
     HarpShapeFit,
     fit_harp_shape,
     harp_frame,
@@ -51,7 +52,6 @@ from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
-from station.config.devices import MIN_SEARCHED_ANGLES
 from station.equipment import Identity
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
@@ -410,7 +410,7 @@ def axes_of(
         a = np.radians(places.direction_deg)
         rel = {g: (mm - mid) * ppm * np.array([np.cos(a), np.sin(a)]) for g, mm in _read_back(places, groups).items()}
         ref = np.zeros(2)  # where the axis is with the stage at the middle, from the image centre
-        if distinct_orientations(turntable_deg) >= MIN_SEARCHED_ANGLES:
+        if distinct_orientations(turntable_deg) >= MIN_GROUP_ANGLES:
             back = [[p - rel[g] for p in s] for s, g in zip(raw, groups, strict=True) if s]
             framed = harp_frame(
                 back, [float(t) for t, s in zip(turntable_deg, raw, strict=True) if s], width, height,

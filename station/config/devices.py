@@ -128,6 +128,8 @@ def _shift_positions(config: Config, turntable: Any) -> None:
     cap = config.capture
     if not cap.shift_positions_mm:
         return
+    from pipeline.harp_shape import MIN_GROUP_ANGLES  # defers cv2
+
     shift = getattr(turntable, "shift", None)
     if shift is None:
         raise config.error(
@@ -147,19 +149,12 @@ def _shift_positions(config: Config, turntable: Any) -> None:
                 f"capture.shift_positions_mm[{i}]", f"expected a position in [{r.minimum:g}, {r.maximum:g}] mm "
                 f"(station.turntable.shift_limits), got {mm:g}",
             )  # fmt: skip
-    if config.station.harp.shift_direction_deg is None and len(cap.orientations_deg) < MIN_SEARCHED_ANGLES:
+    if config.station.harp.shift_direction_deg is None and len(cap.orientations_deg) < MIN_GROUP_ANGLES:
         raise config.error(
             "station.harp.shift_direction_deg", "expected the image direction of a positive linear-stage move: "
-            f"with fewer than {MIN_SEARCHED_ANGLES} turntable angles (capture.orientations_deg) a place's turntable "
+            f"with fewer than {MIN_GROUP_ANGLES} turntable angles (capture.orientations_deg) a place's turntable "
             "axis cannot be found without it",
         )  # fmt: skip
-
-
-MIN_SEARCHED_ANGLES = 4
-"""Turntable angles about which the shots of a place of a two-axis capture place its axis without a lattice of
-equally good points about a pitch apart (three 60 degrees apart have one, :func:`pipeline.harp_shape.group_frames`):
-what a place's axis searched on its own shots needs (no image direction of a stage move given), and the search of
-where the axis is with the stage halfway (:func:`station.calibration.axes_of`)."""
 
 
 def _orientations(config: Config) -> None:
