@@ -107,7 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0,1,2,3")
     ap.add_argument("--size", default="1000x750")
     ap.add_argument("--workers", type=int, default=2, help="sessions run at once")
+    ap.add_argument("--plans", default=";".join(PLANS), help="the plans to run, by name, separated by ;")
     args = ap.parse_args(argv)
+    plans = [p for p in PLANS if p in args.plans.split(";")]
+    if not plans:
+        ap.error(f"--plans: none of {args.plans!r} is a plan ({', '.join(PLANS)})")
     w, h = (int(v) for v in args.size.split("x"))
     seeds = [int(s) for s in args.seeds.split(",")]
     print(
@@ -116,15 +120,15 @@ def main(argv: list[str] | None = None) -> int:
         f"`benchmarks/two_place_sessions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
     )
     print()
-    jobs = [(s, plan, w, h) for s in seeds for plan in PLANS]
+    jobs = [(s, plan, w, h) for s in seeds for plan in plans]
     with ThreadPoolExecutor(max(1, args.workers)) as pool:
         results = list(pool.map(run, jobs))
-    print("| seed | " + " | ".join(f"{plan}: stored model, field px (wall s)" for plan in PLANS) + " |")
-    print("|---:|" + "---|" * len(PLANS))
+    print("| seed | " + " | ".join(f"{plan}: stored model, field px (wall s)" for plan in plans) + " |")
+    print("|---:|" + "---|" * len(plans))
     by = {(r["seed"], r["plan"]): r for r in results}
     for s in seeds:
         cells = []
-        for plan in PLANS:
+        for plan in plans:
             r = by[(s, plan)]
             if "error" in r:
                 cells.append(f"failed (exit {r['code']}): {r['error']}")
@@ -134,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
                 cells.append(f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})")
         print(f"| {s} | " + " | ".join(cells) + " |", flush=True)
     print()
-    fields = {plan: np.array([by[(s, plan)].get("field", np.nan) for s in seeds]) for plan in PLANS}
+    fields = {plan: np.array([by[(s, plan)].get("field", np.nan) for s in seeds]) for plan in plans}
     for plan, f in fields.items():
         print(
             f"{plan}: at or below 0.005 px {int(np.sum(f <= 0.005))} of {len(f)}, median {np.nanmedian(f):.4f} px, "
