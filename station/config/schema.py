@@ -204,7 +204,8 @@ class CaptureConfig:
 class PipelineConfig:
     t: int = setting(DEFAULT_T, "along-edge subsampling: one edge point kept in t (Tang et al. 2012)", "px", 1, 200)
     model: str = setting(AUTO, "what to fit: auto (chosen by cross-validation over the shots) or a fit label "
-                         "(radial6+tangential+prism, radial4+tangential, poly5, ...)")  # fmt: skip
+                         "(radial6+tangential+prism, radial4+tangential, poly5, ...); not given but degree or a "
+                         "term given: radial, as older configurations spell it")  # fmt: skip
     # each given term sets the label's (older configurations spell the spec so); None: the label's
     degree: int | None = setting(None, "the model's degree (null: the label's; radial 1..10, poly 3..11)", "",
                                  min(b[0] for b in DEGREE_BOUNDS.values()), max(b[1] for b in DEGREE_BOUNDS.values()))  # fmt: skip
@@ -236,6 +237,19 @@ class PipelineConfig:
         if spec.kind == "radial":
             terms.update(tangential=self.tangential, prism=self.prism, center_prior=self.center_prior)
         return replace(spec, **{k: v for k, v in terms.items() if v is not None})
+
+
+SPEC_TERMS = ("degree", "tangential", "prism", "center_prior")
+"""The ``pipeline`` keys that set a fit label's terms (:attr:`PipelineConfig.spec`)."""
+
+
+def with_model(section: Mapping[str, Any]) -> Mapping[str, Any]:
+    """A ``pipeline`` section with the model it means: one that gives a degree or a term (:data:`SPEC_TERMS`)
+    without naming a model is an older configuration's spelling of a radial model (``model: radial`` was the
+    default until 2026-12-06), and keeps that meaning; a section that gives neither is chosen (``auto``)."""
+    if "model" in section or all(section.get(k) is None for k in SPEC_TERMS):
+        return section
+    return {**section, "model": "radial"}
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from station.config.schema import (
     TurntableConfig,
     document,
     unoptional,
+    with_model,
 )
 from station.equipment import Identity, Optics, optics_keys
 from station.store.errors import StoreError
@@ -195,8 +196,10 @@ def _config(data: Mapping[str, Any], path: Path, base: Path) -> Config:
                 optics[name] = _value(fields_of(Optics)[name], v)
     store = data.get("store") or {}
     store_path, store_url = _store_of(store, path, base)
-    sections = {k: build(unoptional(typing.get_type_hints(Config)[k]), data[k])
-                for k in ("capture", "pipeline", "qa", "report", "intrinsics") if data.get(k) is not None}  # fmt: skip
+    given = {k: data[k] for k in ("capture", "pipeline", "qa", "report", "intrinsics") if data.get(k) is not None}
+    if "pipeline" in given:
+        given["pipeline"] = with_model(given["pipeline"])
+    sections = {k: build(unoptional(typing.get_type_hints(Config)[k]), v) for k, v in given.items()}
     zoom = data.get("zoom") or {}
     zoom_values = {f: _value(fields_of(Config)[f], zoom.get(key)) for f, key in
                    (("zoom_settings", "settings"), ("zoom_positions", "positions"), ("focal", "focal"))

@@ -186,7 +186,8 @@ def test_the_keys_a_section_accepts_are_its_dataclass_fields(tmp_path):
 
 def test_the_model_is_a_fit_label_or_auto(tmp_path):
     """Issue 22 item 2: ``pipeline.model`` is read by pipeline.fitspec.parse_choice; the older term keys
-    beside it set the label's terms."""
+    beside it set the label's terms, and without it mean the radial model they meant (the default until
+    2026-12-06); a configuration that names neither is chosen by cross-validation."""
     from pipeline.fitspec import FitSpec
 
     d = demo_data()
@@ -198,6 +199,14 @@ def test_the_model_is_a_fit_label_or_auto(tmp_path):
     assert load_config(write(tmp_path, d)).pipeline.spec == FitSpec("radial", 6, True, True, division=1)
     d["pipeline"]["model"] = "auto"
     assert load_config(write(tmp_path, d)).pipeline.spec is None
+    del d["pipeline"]["model"]  # a term without a model: an older configuration's radial model, as it meant
+    assert load_config(write(tmp_path, d)).pipeline.spec == FitSpec("radial", 4, tangential=True)
+    d["pipeline"].pop("tangential")  # named nowhere: chosen by cross-validation (the default since 2026-12-06)
+    assert load_config(write(tmp_path, d)).pipeline.spec is None
+    del d["pipeline"]
+    assert load_config(write(tmp_path, d)).pipeline.spec is None
+    d["pipeline"] = {"degree": 3}
+    assert load_config(write(tmp_path, d)).pipeline.spec == FitSpec("radial", 3)
     d["pipeline"]["model"] = "radial4+fisheye"
     msg = error_of(tmp_path, d)
     assert "pipeline.model: expected a distortion model name (a fit label, or auto):" in msg and "'fisheye'" in msg
