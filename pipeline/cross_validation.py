@@ -163,7 +163,9 @@ def cross_validate(
     from the full fit by one shot: 2-4 steps reach what a fit from scratch would, the held-out
     figures agree to 1e-5; a fold that does not converge so runs the final pass itself).
     Without it every fold is fitted from scratch. The fit on all shots
-    of every candidate is kept (:attr:`CVRow.full_fit`).
+    of every candidate is kept (:attr:`CVRow.full_fit`); a candidate whose fit on all shots fails (a
+    correction that folds over inside the image, say) fails with that reason and is not cross-validated:
+    its folds could pass, but there would be no correction to store.
     ``stop_factor``: :data:`FALLBACK` (a good model on most lenses), or else the first
     candidate, is cross-validated first and is the reference; any other candidate is stopped,
     and reported with the reason and a lower bound of its CV d, once it cannot be chosen: when
@@ -226,6 +228,8 @@ def _cv_candidate(job: tuple[Any, ...]) -> CVRow:
         full = job[4]
     else:
         full = fit_distortion(lines_per_image, width, height, **cand.fit_arguments(), **fit_kw) if warm_start else None
+    if full is not None and not full:  # no correction from all the shots: nothing to choose, whatever the folds say
+        return CVRow(cand, n_params(cand, width, height), float("nan"), (), (), f"its fit on all shots: {full.reason}")
     outliers: set[int] = set()
     if full:
         outliers = {id(lines_per_image[e.image][e.line]) for e in full.rejected if e.reason.startswith("outlier")}
