@@ -360,10 +360,10 @@ def _execute(config, get_session, args, opened=None, report: bool = True) -> int
             raise
         except HarpError as exc:  # said now; the live page shows how the session ended
             code = _said(exc)
-        say("harp session", "the live page shows the result until Ctrl-C", flush=True)
-        try:
-            import threading
+        import threading
 
+        try:  # said inside: a Ctrl-C as soon as the line is read (a script's) ends the wait, not the run
+            say("harp session", "the live page shows the result until Ctrl-C", flush=True)
             threading.Event().wait()
         except KeyboardInterrupt:
             pass
