@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from typing import Any
 
 from drivers import open_camera, open_turntable
@@ -105,13 +106,7 @@ def check_the_devices(config: Config) -> None:
                 "intrinsics.placement", "stage: expected a turntable with a tilt axis (station.turntable.tilt_axis, "
                 f"zaber), the {config.station.turntable.driver} turntable has none",
             )  # fmt: skip
-        r = tilt.travel_range()
-        for i, t in enumerate(k.tilts_deg):
-            if not r.minimum <= t <= r.maximum:
-                raise config.error(
-                    f"intrinsics.tilts_deg[{i}]", f"expected a tilt in [{r.minimum:g}, {r.maximum:g}] "
-                    f"(station.turntable.tilt_limits), got {t:g}",
-                )  # fmt: skip
+        _in_limits(config, "intrinsics.tilts_deg", k.tilts_deg, tilt.travel_range(), "a tilt", "tilt_limits")
     if k is not None and k.placement == "turntable" and not isinstance(camera, BoardScene):
         raise config.error(
             "intrinsics", f"expected a camera the station can show the board (the simulated one), not the "
@@ -137,24 +132,31 @@ def _shift_positions(config: Config, turntable: Any) -> None:
             f"(station.turntable.shift_axis), the {config.station.turntable.driver} turntable has none",
         )  # fmt: skip
     travel = getattr(shift, "travel_range", None)
-    r = None
-    if travel is not None:
-        try:
-            r = travel()
-        except (DriverError, OSError, ValueError):  # a range known only once open: checked then
-            r = None
-    for i, mm in enumerate(cap.shift_positions_mm):
-        if r is not None and not r.minimum <= mm <= r.maximum:
-            raise config.error(
-                f"capture.shift_positions_mm[{i}]", f"expected a position in [{r.minimum:g}, {r.maximum:g}] mm "
-                f"(station.turntable.shift_limits), got {mm:g}",
-            )  # fmt: skip
+    try:
+        r = None if travel is None else travel()
+    except (DriverError, OSError, ValueError):  # a range known only once open: checked then
+        r = None
+    if r is not None:
+        _in_limits(config, "capture.shift_positions_mm", cap.shift_positions_mm, r, "a position", "shift_limits", " mm")
     if config.station.harp.shift_direction_deg is None and len(cap.orientations_deg) < MIN_GROUP_ANGLES:
         raise config.error(
             "station.harp.shift_direction_deg", "expected the image direction of a positive linear-stage move: "
             f"with fewer than {MIN_GROUP_ANGLES} turntable angles (capture.orientations_deg) a place's turntable "
             "axis cannot be found without it",
         )  # fmt: skip
+
+
+def _in_limits(
+    config: Config, field: str, values: Sequence[float], r: Any, what: str, limits: str, unit: str = ""
+) -> None:
+    """Raise :class:`~station.config.ConfigError` naming ``field[i]`` for the first of ``values`` outside an
+    axis's configured travel ``r`` (``minimum``, ``maximum``; ``station.turntable.<limits>``), inclusive."""
+    for i, v in enumerate(values):
+        if not r.minimum <= v <= r.maximum:
+            raise config.error(
+                f"{field}[{i}]", f"expected {what} in [{r.minimum:g}, {r.maximum:g}]{unit} "
+                f"(station.turntable.{limits}), got {v:g}",
+            )  # fmt: skip
 
 
 def _orientations(config: Config) -> None:

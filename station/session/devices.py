@@ -16,7 +16,7 @@ session directory is created, instead of failing at the first move.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 from drivers import open_camera, open_turntable
 from drivers.errors import DriverError
@@ -79,34 +79,22 @@ def check_against_devices(config: Config, camera: object, turntable: object) -> 
     cap = config.capture
     if isinstance(turntable, TurntableRanges):
         travel = _range(config, turntable.travel_range, "station.turntable")
-        if travel is not None:
-            for i, deg in enumerate(cap.orientations_deg):
-                if deg not in travel:
-                    raise config.error(
-                        f"capture.orientations_deg[{i}]",
-                        f"expected an angle the turntable can reach, {deg:g}° is outside {travel} ({travel.source});"
-                        " change the orientation or the turntable's limits",
-                    )
+        _each_within(config, "capture.orientations_deg", cap.orientations_deg, travel, lambda deg, r: (
+            f"expected an angle the turntable can reach, {deg:g}° is outside {r} ({r.source}); change the "
+            "orientation or the turntable's limits"
+        ))  # fmt: skip
     shift = getattr(turntable, "shift", None)
     if cap.shift_positions_mm and isinstance(shift, TurntableRanges):  # the linear stage's travel, read at open
         travel = _range(config, shift.travel_range, "station.turntable")
-        if travel is not None:
-            for i, mm in enumerate(cap.shift_positions_mm):
-                if mm not in travel:
-                    raise config.error(
-                        f"capture.shift_positions_mm[{i}]",
-                        f"expected a position the linear stage can reach, {mm:g} mm is outside {travel} "
-                        f"({travel.source}); change the position or station.turntable.shift_limits",
-                    )
+        _each_within(config, "capture.shift_positions_mm", cap.shift_positions_mm, travel, lambda mm, r: (
+            f"expected a position the linear stage can reach, {mm:g} mm is outside {r} ({r.source}); change the "
+            "position or station.turntable.shift_limits"
+        ))  # fmt: skip
     if isinstance(camera, CameraRanges):
         focus = _range(config, camera.focus_range, "station.camera")
-        if focus is not None:
-            for i, f in enumerate(config.focus_settings):
-                if f not in focus:
-                    raise config.error(
-                        f"focus.settings[{i}]",
-                        f"expected a focus setting the camera has, {f:g} is outside {focus} ({focus.source})",
-                    )
+        _each_within(config, "focus.settings", config.focus_settings, focus, lambda f, r: (
+            f"expected a focus setting the camera has, {f:g} is outside {r} ({r.source})"
+        ))  # fmt: skip
         for key, value, get in (
             ("exposure_us", cap.exposure_us, camera.exposure_range),
             ("gain_db", cap.gain_db, camera.gain_range),
@@ -116,6 +104,18 @@ def check_against_devices(config: Config, camera: object, turntable: object) -> 
                 raise config.error(
                     f"capture.{key}", f"expected a value the camera accepts, {value:g} is outside {r} ({r.source})"
                 )
+
+
+def _each_within(
+    config: Config, field: str, values: Sequence[float], r: Range | None, said: Callable[[float, Range], str]
+) -> None:
+    """Raise :class:`~station.config.ConfigError` naming ``field[i]`` for the first of ``values`` outside the
+    open device's range ``r`` (None: the device does not say), with the message ``said(value, r)``."""
+    if r is None:
+        return
+    for i, v in enumerate(values):
+        if v not in r:
+            raise config.error(f"{field}[{i}]", said(v, r))
 
 
 def _range(config: Config, get, section: str) -> Range | None:
