@@ -47,19 +47,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from choice_rules import choose
-from lens_limits import FITTED, SPEC, SPEC6, realistic_measured, seed_lens
+from choice_rules import choose, most_within
+from lens_limits import FITTED, SPEC, SPEC6, field, realistic_measured, seed_lens
 
-from pipeline.compare import compare_models
 from pipeline.cross_validation import CVRow
-from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_shape import fit_harp_shape
 from pipeline.select import (
     FLEXIBLE_MARGIN_SE,
     _fewest_within,
     _flexible_margin,
-    _within,
     is_flexible,
     select_model,
 )
@@ -75,13 +71,6 @@ RADIAL4 = FitSpec("radial", 4, False, False)
 """What a session fits when its configuration names no model (``pipeline.model: radial``)."""
 
 
-def stored_field(fitted: list[list], lens: Any, c: FitSpec, fit: Any = None) -> float:
-    """The field error of ``c`` fitted on ``fitted`` as a session stores it (strings and kinks separated)."""
-    fit = fit or fit_distortion(fitted, W, H, **c.fit_arguments())
-    joint = fit_harp_shape(fitted, FITTED, W, H, c, plain=fit, kinks=True) if fit else None
-    return float(compare_models(joint.model, lens, W, H, step=20).rms) if joint else float("nan")
-
-
 def tables(seed: int, cache: Path | None, keep: Path | None) -> dict[str, Any]:
     """Seed ``seed``'s two choices' tables and each candidate's stored field error (module docstring)."""
     f = None if keep is None else keep / f"choice_{seed}.pkl"
@@ -89,7 +78,7 @@ def tables(seed: int, cache: Path | None, keep: Path | None) -> dict[str, Any]:
         t: dict[str, Any] = pickle.loads(f.read_bytes())
         if RADIAL4 not in t["fields"]:  # tables kept before the default model's row was added
             lens, _, _ = seed_lens(seed, W, H)
-            t["fields"][RADIAL4] = stored_field(realistic_measured(seed, W, H, cache)[0], lens, RADIAL4)
+            t["fields"][RADIAL4] = field(realistic_measured(seed, W, H, cache)[0], lens, W, H, RADIAL4, kinks=True)
             f.write_bytes(pickle.dumps(t))
         return t
     lens, _, row = seed_lens(seed, W, H)
@@ -102,7 +91,7 @@ def tables(seed: int, cache: Path | None, keep: Path | None) -> dict[str, Any]:
     t_sep = time.perf_counter() - t0
     full = {r.candidate: r.full_fit for r in (*plain.table, *sep.table) if r.full_fit is not None}
     wanted = {r.candidate for r in (*plain.table, *plain.strings_table, *sep.table) if np.isfinite(r.cv_d)}
-    fields = {c: stored_field(fitted, lens, c, full.get(c)) for c in wanted | {SPEC, RADIAL4}}
+    fields = {c: field(fitted, lens, W, H, c, plain=full.get(c), kinks=True) for c in wanted | {SPEC, RADIAL4}}
     out = {
         **row,
         "plain": plain.choice,
@@ -134,16 +123,6 @@ def separated_pick(table: Sequence[CVRow], n_se: float) -> FitSpec | None:
         if _flexible_margin(pick, best_radial) <= FLEXIBLE_MARGIN_SE:
             pick = _fewest_within(radial, best_radial, n_se)
     return pick.candidate
-
-
-def most_within(rows: Sequence[CVRow], n_se: float) -> FitSpec | None:
-    """Of the radial (not flexible) rows within ``n_se`` paired standard errors of the best radial CV d, the one
-    with the most parameters (ties: the lower CV d): parsimony the other way round."""
-    ok = [r for r in rows if np.isfinite(r.cv_d) and not is_flexible(r.candidate)]
-    if not ok:
-        return None
-    near = _within(ok, min(ok, key=lambda r: r.cv_d), n_se, 0.0)
-    return max(near, key=lambda r: (r.n_params, -r.cv_d)).candidate
 
 
 def plain(t: dict[str, Any], pick: str) -> FitSpec:

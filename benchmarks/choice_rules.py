@@ -90,6 +90,16 @@ def _ok(rows: list[CVRow]) -> list[CVRow]:
     return [r for r in rows if np.isfinite(r.cv_d)]
 
 
+def most_within(rows: list[CVRow], n_se: float) -> FitSpec | None:
+    """Of the radial (not flexible) rows within ``n_se`` paired standard errors of the best radial CV d, the one
+    with the most parameters (ties: the lower CV d): parsimony the other way round."""
+    ok = [r for r in rows if np.isfinite(r.cv_d) and not is_flexible(r.candidate)]
+    if not ok:
+        return None
+    near = _within(ok, min(ok, key=lambda r: r.cv_d), n_se, 0.0)
+    return max(near, key=lambda r: (r.n_params, -r.cv_d)).candidate
+
+
 def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERANCE, pick: str = "lowest") -> FitSpec:
     """:func:`pipeline.select.select_model`'s two tiers on stored tables, with tier 1's ``tolerance`` and tier 2's
     pick: the 'lowest' CV d (now, :data:`pipeline.select.TIER2_RULE`), the 'fewest' parameters within ``n_se2``
@@ -108,7 +118,7 @@ def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERAN
     if pick == "lowest":
         return best2.candidate
     if pick == "most":
-        return max(_within(e, best2, n_se2, 0.0), key=lambda r: (r.n_params, -r.cv_d)).candidate
+        return most_within(e, n_se2) or best2.candidate  # e: radial rows with a finite CV d, never empty
     if pick == "sum":
         return min(e, key=lambda r: general[r.candidate].cv_d + r.cv_d).candidate
     return min(_within(e, best2, n_se2, 0.0), key=lambda r: (r.n_params, r.cv_d)).candidate
