@@ -85,6 +85,16 @@ model's field error closer to the best candidate's on some lenses and farther on
 (``benchmarks/RESULTS-strings.md``: 15 better and 12 worse of 51; on the point populations of
 ``benchmarks/RESULTS-model-choice.md`` not better), at about 7 times the choice's time."""
 
+FIELD_NONE = "none"
+FIELD_AUTO = "auto"
+FIELD_CHOICES: tuple[str, ...] = (FIELD_NONE, FIELD_AUTO)
+"""Whether a session adds a residual field (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`) to
+the radial model it fits: ``none`` (the default) never; ``auto`` when a field holds on unseen orientations
+(:func:`pipeline.select.select_field`: the model, chosen or given, against it with each field of
+:func:`pipeline.select.field_candidates`, each fold fitted with the strings' bends separated when the turntable
+angles are known). A field needs :data:`pipeline.orientations.REQUIRED_ORIENTATIONS_POLY` distinct orientations;
+with fewer the model is kept and the reason says so."""
+
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""
 

@@ -505,6 +505,58 @@ def field_candidates(
     return (base, *(replace(base, field=g, field_penalty=p) for g in grids for p in penalties))
 
 
+def select_field(
+    lines_per_image: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    base: FitSpec,
+    *,
+    grids: Sequence[tuple[int, int]] = FIELD_GRIDS,
+    penalties: Sequence[float] = FIELD_PENALTIES,
+    map_fn: Callable[..., Iterable[Any]] = map,
+    turntable_deg: Sequence[float] | None = None,
+    axis_groups: Sequence[Hashable] | None = None,
+    axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
+    **fit_kw: Any,
+) -> Selection:
+    """Whether a residual field on top of ``base`` holds on unseen orientations (``pipeline.field: auto``).
+
+    ``base`` (the model a session chose or was given) and ``base`` with each field of :func:`field_candidates`
+    (``grids`` x ``penalties``) are cross-validated by :func:`select_model`, leave one shot out; with
+    ``turntable_deg`` each fold is fitted with the strings' own bends separated and its held-out shot judged
+    without them (:mod:`pipeline.separated_cv`). A field is :func:`is_flexible`: it is taken only when it is
+    ahead of ``base`` by more than :data:`FLEXIBLE_MARGIN_SE` paired standard errors. The strings' bends are
+    what a held-out shot's straightness shows besides the lens, and on the realistic simulator they hid the
+    field from the plain folds (a tele lens with a 0.024 px field: CV d 0.0148 px for ``base`` against 0.0139 for
+    the best field, while its field error fell from 0.0186 to 0.0088 px; with the strings separated 0.0115 against
+    0.0102, the field taken; ``benchmarks/choice_realistic.py --lens-field``).
+
+    ``base`` is kept, with the reason, when it cannot carry a field (not radial, or it has one) or when the shots
+    have fewer distinct orientations than a field needs (:func:`pipeline.orientations.required_orientations`): a
+    field fitted on fewer bends to the orientations it sees, and no fold could tell. With just enough, each fold
+    has one orientation fewer than the field needs; the unseen orientation then judges a field that bends to its
+    fold's, which errs towards keeping ``base``. The reason of the returned :class:`Selection` starts with
+    ``"residual field: "``.
+    """
+    if base.kind != "radial" or base.field is not None:
+        what = "it has one" if base.field is not None else "a field applies to the radial model only"
+        return Selection(base, f"residual field: none added to {base.label} ({what})", "none")
+    need = required_orientations(replace(base, field=grids[0]))
+    have = distinct_orientations(shot_orientation(s) for s in lines_per_image)
+    if have < need:
+        return Selection(
+            base,
+            f"residual field: none added to {base.label} (a field needs >= {need} distinct string orientations, "
+            f"the shots have {have}; add shots at other angles)",
+            "none",
+        )
+    sel = select_model(
+        lines_per_image, width, height, field_candidates(base, grids, penalties), map_fn=map_fn,
+        turntable_deg=turntable_deg, axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
+    )  # fmt: skip
+    return replace(sel, reason=f"residual field: {sel.reason}")
+
+
 def _with_support(sel: Selection, lines_per_image: Sequence[Sequence[np.ndarray]]) -> Selection:
     """``sel`` with :func:`support_problem` of its choice in ``support`` and appended to the reason."""
     problem = support_problem(sel.choice, lines_per_image)

@@ -34,7 +34,16 @@ import numpy as np
 from pipeline.cross_validation import DEFAULT_CANDIDATES
 from pipeline.edgeset import FitFailure, FitResult, corrected_straightness, straightness_of
 from pipeline.fit import fit_distortion
-from pipeline.fitspec import CHOICE_FOLDS_PLAIN, CHOICE_FOLDS_STRINGS, STRINGS_KINKS, STRINGS_SEPARATE, FitSpec
+from pipeline.fitspec import (
+    CHOICE_FOLDS_PLAIN,
+    CHOICE_FOLDS_STRINGS,
+    FIELD_AUTO,
+    FIELD_CHOICES,
+    FIELD_NONE,
+    STRINGS_KINKS,
+    STRINGS_SEPARATE,
+    FitSpec,
+)
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
     GROUP_AXIS_SEARCH,
@@ -50,7 +59,7 @@ from pipeline.harp_shape import (
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
-from pipeline.select import select_model
+from pipeline.select import select_field, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
 from station.profile import (
@@ -185,6 +194,8 @@ def calibrate_shots(
     turntable_deg: Sequence[float] | None = None,
     axis_groups: Sequence[Any] | None = None,
     axis_shifts: Mapping[Any, Sequence[float]] | None = None,
+    field: str = FIELD_NONE,
+    field_turntable_deg: Sequence[float] | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -203,9 +214,15 @@ def calibrate_shots(
         :data:`pipeline.cross_validation.DEFAULT_CANDIDATES`; e.g. :func:`pipeline.select.field_candidates`).
     turntable_deg : each shot's turntable angle, when known: the automatic choice cross-validates every
         candidate with the strings separated (:func:`pipeline.select.select_model`'s ``turntable_deg``).
-    axis_groups, axis_shifts : with ``turntable_deg``, a two-axis capture's groups and shifts (:func:`axes_of`) for
-        those folds.
+    axis_groups, axis_shifts : with ``turntable_deg`` or ``field_turntable_deg``, a two-axis capture's groups and
+        shifts (:func:`axes_of`) for those folds.
+    field : ``"auto"``: a residual field added to the model (chosen or given) when it holds on unseen orientations
+        (:func:`pipeline.select.select_field`; :data:`pipeline.fitspec.FIELD_CHOICES`); ``"none"``: never.
+    field_turntable_deg : each shot's turntable angle for the field's folds, fitted with the strings' bends
+        separated (None: the plain folds).
     """
+    if field not in FIELD_CHOICES:
+        raise ValueError(f"unknown field choice {field!r}; known: {', '.join(FIELD_CHOICES)}")
     lines = [list(s) for s in shots]
     selection = None
     support = None if spec is None else support_problem(spec, lines)
@@ -217,10 +234,28 @@ def calibrate_shots(
             axis_shifts=axis_shifts,
         )  # fmt: skip
         spec = selection.choice
+    tables = [] if selection is None else [selection.table]
+    if field == FIELD_AUTO:
+        given = spec
+        on_field = select_field(
+            lines, width, height, spec, map_fn=map_fn,
+            turntable_deg=None if field_turntable_deg is None else [float(a) for a in field_turntable_deg],
+            axis_groups=axis_groups, axis_shifts=axis_shifts,
+        )  # fmt: skip
+        tables.append(on_field.table)
+        spec = on_field.choice
+        if selection is None:  # a given model: the field's selection says why it has one or not
+            note = "" if support is None else f"; {support}"
+            selection = dataclasses.replace(on_field, reason=f"{given.label} given{note}; {on_field.reason}")
+        else:
+            kept = selection.support if spec == given else None  # a field is taken on enough orientations only
+            selection = dataclasses.replace(
+                selection, choice=spec, reason=f"{selection.reason}; {on_field.reason}", support=kept
+            )
     kw = spec.fit_arguments()
     same_size = image_sizes is None or {(int(w), int(h)) for w, h in image_sizes} == {(int(width), int(height))}
     # the cross-validation fitted every candidate on all shots (its folds start there): the same fit
-    cv_fit = next((r.full_fit for r in selection.table if r.candidate == spec), None) if selection else None
+    cv_fit = next((r.full_fit for t in tables for r in t if r.candidate == spec), None)
     full = cv_fit if cv_fit and same_size else fit_distortion(lines, width, height, **kw, image_sizes=image_sizes)
     if not full:
         return Calibration(full, spec, selection, failure=full.reason, support=support)
@@ -684,7 +719,9 @@ def calibrate_focus(
     ``axis_places``: each shot's linear-stage position of a two-axis capture (``capture.shift_positions_mm``);
     when the shots span two places or more, the joint fit, its folds and its bootstrap replicates find each
     place's turntable axis (:func:`axes_of`), as do an automatic choice's strings-separated folds, and the harp's
-    self-check reports them (:func:`axis_record`). One place, or None: nothing changes."""
+    self-check reports them (:func:`axis_record`). One place, or None: nothing changes. ``pipeline.field`` =
+    ``"auto"``: a residual field is added to the model when it holds on unseen orientations
+    (:func:`pipeline.select.select_field`), its folds fitted with the strings separated when they are."""
     strings = getattr(pipeline, "strings", STRINGS_KINKS)
     separate = strings in (STRINGS_SEPARATE, STRINGS_KINKS)
     kinks = separate and strings == STRINGS_KINKS
@@ -702,6 +739,8 @@ def calibrate_focus(
         seed=pipeline.seed + 1000 * focus_idx,
         map_fn=map_fn,
         turntable_deg=turntable_deg if separate and by_strings and known else None,
+        field=getattr(pipeline, "field", FIELD_NONE),
+        field_turntable_deg=turntable_deg if separate and known else None,
         **_fit_arguments(axes),
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:

@@ -14,9 +14,9 @@ says what it chose. ``--model radial`` fits the radial model with free centre
 towards the image centre); ``--model poly`` the bivariate
 polynomial (default degree 5); ``--division M`` adds a division (rational)
 denominator to the radial factor (wide-angle lenses); ``--field 8x6[@PENALTY]`` a residual
-field of 8 x 6 cubic B-spline control points on top of it (:mod:`pipeline.models.radial_field`;
-``--model auto`` does not offer fields), ``--field auto`` the radial model or it with the field
-whose knots and penalty win the cross-validation (:func:`pipeline.select.field_candidates`). ``--holdout`` shots are never used in the
+field of 8 x 6 cubic B-spline control points on top of it (:mod:`pipeline.models.radial_field`),
+``--field auto`` the model (given or chosen) or it with the field whose knots and penalty win the
+cross-validation (:func:`pipeline.select.select_field`: shots of 4 orientations or more). ``--holdout`` shots are never used in the
 fit: they are corrected by the fitted model and measured (the paper's
 protocol). On a machine with two cores or more the shots are measured, and the
 candidates cross-validated, by two worker processes (three shots, or any odd number,
@@ -40,7 +40,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FULL_RADIAL, FitSpec, parse
+from pipeline.fitspec import DEFAULT_DEGREE, DEGREE_BOUNDS, FIELD_AUTO, FIELD_NONE, FULL_RADIAL, FitSpec, parse
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
@@ -100,8 +100,9 @@ def register(subparsers) -> None:
         metavar="NXxNY[@PENALTY]|auto",
         help=(
             "radial: add a residual field of NX x NY cubic B-spline control points and its roughness penalty "
-            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field); auto: the radial model, or it with the "
-            "field whose knots and penalty win the cross-validation (pipeline.select.field_candidates)"
+            "(e.g. 8x6, 12x9@0.0001; pipeline.models.radial_field); auto: the model (given or chosen), or it "
+            "with the field whose knots and penalty win the cross-validation (pipeline.select.select_field; "
+            "shots of 4 orientations or more)"
         ),
     )
     p.add_argument("-o", "--out", required=True, metavar="MODEL", help="model file to write (YAML)")
@@ -152,7 +153,7 @@ def _spec(args) -> FitSpec | None:
             or args.center_prior
             or args.division
             or args.trefoil
-            or field is not None
+            or field not in (None, "auto")
         ):
             raise CalibrateError(
                 "--degree/--no-tangential/--no-prism/--trefoil/--center-prior/--division/--field need "
@@ -194,12 +195,7 @@ def _spec(args) -> FitSpec | None:
 def calibrate(args) -> dict:
     """Do the work; returns the JSON report. Raises InputError / CalibrateError (one line)."""
     cand = _spec(args)
-    cands = None
-    if getattr(args, "field", None) == "auto":  # the field's knots and penalty chosen by cross-validation
-        from pipeline.select import field_candidates  # defers pipeline.select
-
-        assert cand is not None
-        cands, cand = field_candidates(cand), None
+    field_auto = getattr(args, "field", None) == "auto"  # the field's knots and penalty chosen by cross-validation
     out_dir = Path(args.out).parent
     if not out_dir.is_dir():  # before minutes of measuring and fitting, not after
         reason = "not a directory" if out_dir.exists() else "no such directory"
@@ -216,11 +212,11 @@ def calibrate(args) -> dict:
         import station.calibration  # noqa: F401
 
         measured = list(measuring)
-    with _workers(2 if cand is None else 1) as map_fn:  # a given model: one fit, no candidates to share out
-        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn, cands)
+    with _workers(2 if cand is None or field_auto else 1) as map_fn:  # a given model alone: one fit, nothing to share
+        return _calibrate(args, cand, measured[: len(args.images)], measured[len(args.images) :], map_fn, field_auto)
 
 
-def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, cands=None) -> dict:
+def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, field_auto: bool = False) -> dict:
     # defers yaml
     from station.calibration import (
         GIVEN_ON_COMMAND_LINE,
@@ -248,7 +244,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, ca
         held_out=held,
         image_sizes=[(m.width, m.height) for _, m in fit_m],
         map_fn=map_fn,
-        candidates=cands,
+        field=FIELD_AUTO if field_auto else FIELD_NONE,
     )
     res = cal.fit
     if not res:

@@ -306,3 +306,59 @@ def test_a_session_whose_angles_cannot_place_the_harps_axis_says_so():
     checks = evaluate(cal.fit.model, w, h, 0.001, QAConfig(), harp_health=health).checks
     check = next(c for c in checks if c.name == "string_bend_max")
     assert check.passed is None and why in check.text  # reported with the verdict, not judged
+
+
+def test_pipeline_field_auto_stores_a_residual_field_where_the_lens_has_one():
+    """``pipeline.field: auto``: the session's model (given here, then chosen) gets a residual field when it holds
+    on unseen orientations, judged with the strings separated (:func:`pipeline.select.select_field`); the stored
+    lens, fitted with the strings separated, is then closer to the exact lens (a 0.03 px field behind 0.03 px
+    string bows), the record says why, and the model file reads back with the field. ``none`` (the default)
+    stores the radial model. Truth: the exact lens (field error modulo homography over the whole image)."""
+    from dataclasses import replace
+
+    from pipeline.compare import compare_models
+    from pipeline.fitspec import FIELD_AUTO, FIELD_CHOICES, FIELD_NONE, FitSpec
+    from pipeline.lens_population import lens_population
+    from pipeline.model_file import parse_model_text
+    from station.calibration import calibrate_focus, selection_record
+    from station.config import PipelineConfig
+    from station.profile import Profile, Provenance
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    lens = lens_population(2, 1, w, h, field=True, field_rms_px=(0.03, 0.03))[0].model
+    turns = (0, 30, 60, 90, 120, 150)
+    bends = np.random.default_rng(2).normal(0.0, 0.03, (13, 3))
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), step=60.0, seed=2)
+    spec = FitSpec("radial", 4, True, True)
+    assert PipelineConfig().field == FIELD_NONE and set(FIELD_CHOICES) == {"none", "auto"}
+    cfg = PipelineConfig(strings="separate")  # the bends only: no kink scan, which this harp has no use for
+    plain = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=turns)
+    auto = calibrate_focus(shots, w, h, replace(cfg, field=FIELD_AUTO), 0, spec, turntable_deg=turns)
+    assert plain.failure is None and auto.failure is None, auto.failure
+    assert plain.spec == spec and plain.selection is None
+    assert auto.spec.field is not None and auto.spec.label.startswith("radial4+tangential+prism+field")
+    assert auto.details["strings"]["separated"] is True
+    err_plain = compare_models(plain.fit.model, lens, w, h, step=20).rms
+    err_auto = compare_models(auto.fit.model, lens, w, h, step=20).rms
+    assert err_auto < 0.6 * err_plain, (err_auto, err_plain)
+    rec = selection_record(auto.selection)
+    assert (
+        rec["reason"].startswith("radial4+tangential+prism given; residual field: ")
+        and "strings separated" in rec["reason"]
+    )
+    back = Profile.from_model_file(
+        parse_model_text(auto.profile(w, h, provenance=Provenance()).to_model_file().text(), "p.yaml")
+    )
+    assert back.spec == auto.spec
+    p = np.random.default_rng(0).uniform([0, 0], [w - 1, h - 1], (50, 2))
+    assert np.allclose(back.model.undistort_points(p), auto.fit.model.undistort_points(p), atol=1e-9)
+    # an automatic choice first, then the field on top of it
+    few = [FitSpec("radial", 2), spec]
+    from station.calibration import calibrate_shots
+
+    chosen = calibrate_shots(shots, w, h, candidates=few, field=FIELD_AUTO, field_turntable_deg=turns)
+    assert chosen.failure is None and chosen.spec.field is not None and chosen.spec.degree == 4
+    assert "; residual field: " in chosen.selection.reason and chosen.selection.choice == chosen.spec
+    with pytest.raises(ValueError, match="unknown field choice"):
+        calibrate_shots(shots, w, h, spec, field="always")

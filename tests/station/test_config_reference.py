@@ -61,7 +61,7 @@ def test_the_document_has_the_keys_the_station_reads():
                                           "min_dynamic_range", "max_recaptures", "max_edge_width_px")),
         "capture.retries.attempts", "capture.retries.backoff_s",
         *(f"pipeline.{k}" for k in ("t", "model", "degree", "tangential", "prism", "center_prior", "bootstrap",
-                                    "seed", "workers", "strings", "choice_folds")),  # issue 19
+                                    "seed", "workers", "strings", "field", "choice_folds")),  # issue 19
         "qa.max_holdout_d_px", "qa.max_distortion_px", "qa.max_reference_deviation_px", "report.overlays",
         "store.path", "store.url", "store.sessions_dir", "simulation.harp_offset_deg",
         "simulation.lens_spread", "zoom.settings", "zoom.positions", "zoom.focal",  # issues 21 and 23

@@ -250,7 +250,8 @@ def test_field_option(shots, tmp_path, capsys):
 
 def test_field_auto_chooses_knots_and_penalty_by_cross_validation(shots, tmp_path, capsys):
     """``--field auto``: the radial model and it with every field of ``field_candidates`` are
-    cross-validated; on this radial lens the radial model wins and the table lists the fields."""
+    cross-validated; on this radial lens the radial model wins and the table lists the fields. Without
+    ``--model`` the model is chosen first; with fewer than four orientations no field is offered."""
     out_path = tmp_path / "auto-field.yaml"
     four = (shots[3.0], shots[63.0], shots[123.0], shots[93.0])
     code, out, err = _run(capsys, *four, "--model", "radial", "--field", "auto", "--out", out_path, "--json")
@@ -260,7 +261,17 @@ def test_field_auto_chooses_knots_and_penalty_by_cross_validation(shots, tmp_pat
     assert labels[0] == "radial4+tangential+prism" and len(labels) == 7
     assert all("+field" in lab for lab in labels[1:])
     assert rep["choice"]["label"] == "radial4+tangential+prism", rep["choice"]["reason"]
+    assert rep["choice"]["reason"].startswith("radial4+tangential+prism given; residual field: ")
     assert isinstance(load_model(out_path), RadialModel)
+    # with the model chosen too: the choice first, then the field on top of it (pipeline.select.select_field)
+    code, out, err = _run(capsys, *four, "--field", "auto", "--out", out_path, "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert "; residual field: " in rep["choice"]["reason"] and "+field" not in rep["choice"]["label"]
+    # three orientations cannot tell a field: the model is kept and the reason says why
+    code, out, err = _run(capsys, *four[:3], "--model", "radial", "--field", "auto", "--out", out_path, "--json")
+    assert code == 0, err
+    assert "a field needs >= 4 distinct string orientations, the shots have 3" in json.loads(out)["choice"]["reason"]
 
 
 def test_workers_give_the_same_choice_and_figures_as_one_process(shots, tmp_path, capsys, monkeypatch):
