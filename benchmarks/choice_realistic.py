@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/choice_realistic.py [--seeds 0:60] [--workers 2] [--cache DIR] [--tables DIR]
+    .venv/bin/python benchmarks/choice_realistic.py [--seeds 0:60] [--workers 2] [--cache DIR] [--tables DIR] [--lens-field]
 
 For each lens of ``benchmarks/lens_limits.py``'s realistic population (seeds, 1000x750, six shots 30 degrees
 apart, the measured edges of ``lens_limits.realistic_measured``, kept in ``--cache``), the two cross-validation
@@ -24,7 +24,15 @@ tables (``--tables`` keeps them, one pickle per seed):
   (:data:`pipeline.select.FLEXIBLE_MARGIN_SE`);
 * **fixed** radial4+tangential+prism, radial6+tangential+prism, and radial4 (what a session fitted when its configuration named no
   model, before 2026-12-06);
-* **oracle**: the candidate with the least field error, which no rule can beat.
+* **a residual field on top** (``pipeline.field: auto``, :func:`pipeline.select.select_field`): the plain choice's
+  model against it with each field of :func:`pipeline.select.field_candidates`, by the plain folds or by the folds
+  with the strings separated (what a session does);
+* **oracle**: the candidate with the least field error, which no rule can beat, among the parametric candidates
+  or among those and the field stage's.
+
+``--lens-field`` gives every lens the smooth non-parametric field of :mod:`pipeline.lens_population` (RMS drawn in
+0.005-0.04 px; the same parametric lens otherwise, its renders and tables kept apart, ``..._field``): the structure
+a real lens has that no parametric term expresses (``benchmarks/RESULTS-realism.md``).
 
 The issue's target (issue 19 item 5) is a field error at or below 0.005 px RMS.
 """
@@ -53,10 +61,12 @@ from lens_limits import FITTED, SPEC, SPEC6, field, realistic_measured, seed_len
 from pipeline.cross_validation import CVRow
 from pipeline.fitspec import FitSpec
 from pipeline.select import (
+    FIELD_MARGIN_SE,
     FLEXIBLE_MARGIN_SE,
     _fewest_within,
     _flexible_margin,
     is_flexible,
+    select_field,
     select_model,
 )
 
@@ -71,18 +81,62 @@ RADIAL4 = FitSpec("radial", 4, False, False)
 """What a session fits when its configuration names no model (``pipeline.model: radial``)."""
 
 
-def tables(seed: int, cache: Path | None, keep: Path | None) -> dict[str, Any]:
-    """Seed ``seed``'s two choices' tables and each candidate's stored field error (module docstring)."""
-    f = None if keep is None else keep / f"choice_{seed}.pkl"
+def field_stage(t: dict[str, Any], fitted: list[list], lens: Any, separated: bool = False) -> dict[str, Any]:
+    """The residual field chosen on top of the plain choice (``pipeline.field: auto``): the plain two tiers'
+    model (tier 2 by the lowest CV d) and that model with each field of :func:`pipeline.select.field_candidates`,
+    cross-validated by :func:`pipeline.select.select_field` with the plain folds or (``separated``) with the
+    strings' bends separated in each fold (``turntable_deg``); each field candidate's stored field error is added
+    to ``t["fields"]``."""
+    base = plain(t, "lowest")
+    t0 = time.perf_counter()
+    sel = select_field(fitted, W, H, base, turntable_deg=FITTED if separated else None)
+    seconds = time.perf_counter() - t0
+    full = {r.candidate: r.full_fit for r in sel.table if r.full_fit is not None}
+    for r in sel.table[1:]:
+        if r.candidate not in t["fields"]:
+            t["fields"][r.candidate] = field(fitted, lens, W, H, r.candidate, plain=full.get(r.candidate), kinks=True)
+    return {"base": base, "choice": sel.choice, "table": _light(sel.table), "seconds": seconds}
+
+
+def field_pick(stage: dict[str, Any], bar: float) -> FitSpec:
+    """The field stage's choice with the strings separated, a field taken when it is more than ``bar`` paired
+    standard errors ahead of the model (0: the lowest CV d, :data:`pipeline.select.FIELD_MARGIN_SE`), on the stored
+    table (:func:`pipeline.select._select_separated`'s rule)."""
+    ok = [r for r in stage["table"] if np.isfinite(r.cv_d)]
+    base = [r for r in ok if not is_flexible(r.candidate)]
+    if not ok or not base:
+        return stage["choice"]  # type: ignore[no-any-return]
+    best = min(ok, key=lambda r: r.cv_d)
+    if is_flexible(best.candidate) and _flexible_margin(best, base[0]) <= bar:
+        return base[0].candidate
+    return best.candidate
+
+
+def tables(seed: int, cache: Path | None, keep: Path | None, lens_field: bool = False) -> dict[str, Any]:
+    """Seed ``seed``'s two choices' tables, the field stage's (:func:`field_stage`) and each candidate's stored
+    field error (module docstring); ``lens_field``: the lens with its non-parametric field."""
+    f = None if keep is None else keep / f"choice_{seed}{'_field' if lens_field else ''}.pkl"
     if f is not None and f.exists():
         t: dict[str, Any] = pickle.loads(f.read_bytes())
+        changed = False
         if RADIAL4 not in t["fields"]:  # tables kept before the default model's row was added
-            lens, _, _ = seed_lens(seed, W, H)
-            t["fields"][RADIAL4] = field(realistic_measured(seed, W, H, cache)[0], lens, W, H, RADIAL4, kinks=True)
-            f.write_bytes(pickle.dumps(t))
+            lens, _, _ = seed_lens(seed, W, H, lens_field)
+            fitted = realistic_measured(seed, W, H, cache, lens_field)[0]
+            t["fields"][RADIAL4] = field(fitted, lens, W, H, RADIAL4, kinks=True)
+            changed = True
+        for key, separated in (("field_stage", False), ("field_stage_sep", True)):
+            if key not in t:  # tables kept before the field stage was added
+                lens, _, _ = seed_lens(seed, W, H, lens_field)
+                fitted = realistic_measured(seed, W, H, cache, lens_field)[0]
+                t[key] = field_stage(t, fitted, lens, separated)
+                changed = True
+        if changed:
+            tmp = f.with_suffix(".tmp")
+            tmp.write_bytes(pickle.dumps(t))
+            os.replace(tmp, f)
         return t
-    lens, _, row = seed_lens(seed, W, H)
-    fitted, _, _ = realistic_measured(seed, W, H, cache)
+    lens, _, row = seed_lens(seed, W, H, lens_field)
+    fitted, _, _ = realistic_measured(seed, W, H, cache, lens_field)
     t0 = time.perf_counter()
     plain = select_model(fitted, W, H)
     t_plain = time.perf_counter() - t0
@@ -103,6 +157,8 @@ def tables(seed: int, cache: Path | None, keep: Path | None) -> dict[str, Any]:
         "t_plain": t_plain,
         "t_sep": t_sep,
     }
+    out["field_stage"] = field_stage(out, fitted, lens)
+    out["field_stage_sep"] = field_stage(out, fitted, lens, separated=True)
     if f is not None:
         f.parent.mkdir(parents=True, exist_ok=True)
         tmp = f.with_suffix(".tmp")
@@ -143,11 +199,24 @@ RULES: dict[str, Callable[[dict[str, Any]], FitSpec | None]] = {
     f"fixed {SPEC.label}": lambda t: SPEC,
     f"fixed {SPEC6.label}": lambda t: SPEC6,
     "fixed radial4 (a session's model when none was named, before)": lambda t: RADIAL4,
-    "oracle: least field error": lambda t: min(t["fields"], key=lambda c: t["fields"][c]),
+    "plain, then a residual field by the plain folds (2 SE ahead)": lambda t: t["field_stage"]["choice"],
+    f"plain, then a residual field by the strings-separated folds, {FLEXIBLE_MARGIN_SE:g} SE ahead": lambda t: (
+        field_pick(t["field_stage_sep"], FLEXIBLE_MARGIN_SE)
+    ),
+    "plain, then a residual field by the strings-separated folds, 1 SE ahead": lambda t: field_pick(
+        t["field_stage_sep"], 1.0
+    ),
+    "plain, then a residual field by the strings-separated folds, lowest CV d (now; pipeline.field: auto)": lambda t: (
+        field_pick(t["field_stage_sep"], FIELD_MARGIN_SE)
+    ),
+    "oracle: least field error, no residual field": lambda t: min(
+        (c for c in t["fields"] if c.field is None), key=lambda c: t["fields"][c]
+    ),
+    "oracle: least field error, residual fields too": lambda t: min(t["fields"], key=lambda c: t["fields"][c]),
 }
 
 
-def job(args: tuple[int, Path | None, Path | None]) -> dict[str, Any]:
+def job(args: tuple[int, Path | None, Path | None, bool]) -> dict[str, Any]:
     return tables(*args)
 
 
@@ -158,6 +227,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", type=Path, default=None, help="directory keeping the measured edges (npz)")
     ap.add_argument("--tables", type=Path, default=None, help="directory keeping each seed's tables (pickle)")
     ap.add_argument("--rows", action="store_true", help="print each lens's row too")
+    ap.add_argument(
+        "--lens-field", action="store_true", help="each lens with a non-parametric field (0.005-0.04 px RMS)"
+    )
     args = ap.parse_args(argv)
     a, b = (int(v) for v in args.seeds.split(":"))
     cmd = " ".join(argv if argv is not None else sys.argv[1:])
@@ -168,7 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print()
     with ProcessPoolExecutor(max(1, args.workers)) as pool:
-        ts = list(pool.map(job, [(s, args.cache, args.tables) for s in range(a, b)]))
+        ts = list(pool.map(job, [(s, args.cache, args.tables, args.lens_field) for s in range(a, b)]))
     picks = {name: [rule(t) for t in ts] for name, rule in RULES.items()}
     if args.rows:
         names = list(RULES)
@@ -179,10 +251,12 @@ def main(argv: list[str] | None = None) -> int:
             for n in names:
                 c = picks[n][i]
                 cells.append("-" if c is None else f"{c.label} {t['fields'].get(c, float('nan')):.4f}")
-            print(f"| {t['seed']} | {t['lens']} | {t['strings']} | " + " | ".join(cells) + " |")
+            lens = t["lens"] + (f" (field {t['field_rms']:.3f} px)" if "field_rms" in t else "")
+            print(f"| {t['seed']} | {lens} | {t['strings']} | " + " | ".join(cells) + " |")
         print()
     print(
-        f"## {len(ts)} lenses (seeds {a}..{b - 1}): field error of the chosen model, stored with the strings separated"
+        f"## {len(ts)} lenses (seeds {a}..{b - 1}{', each with a non-parametric field' if args.lens_field else ''}): "
+        "field error of the chosen model, stored with the strings separated"
     )
     print()
     print("| rule | at or below 0.005 px | median px | worst px | over the least field error: median | > 1.05 |")
@@ -198,7 +272,10 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(
         f"median choice time plain {np.median([t['t_plain'] for t in ts]):.0f} s, strings separated "
-        f"{np.median([t['t_sep'] for t in ts]):.0f} s ({time.perf_counter() - t0:.0f} s)"
+        f"{np.median([t['t_sep'] for t in ts]):.0f} s, the field stage "
+        f"{np.median([t['field_stage']['seconds'] for t in ts]):.0f} s (plain folds) / "
+        f"{np.median([t['field_stage_sep']['seconds'] for t in ts]):.0f} s (strings separated) "
+        f"({time.perf_counter() - t0:.0f} s)"
     )
     return 0
 

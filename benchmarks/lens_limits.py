@@ -179,32 +179,41 @@ def exact_lines(lens: DistortionModel, harp: Harp, ses: Session, w: int, h: int)
     return out
 
 
-def seed_lens(seed: int, w: int, h: int) -> tuple[DistortionModel, Session, dict[str, object]]:
-    """The population's lens ``seed``, its realistic session and the start of its table row."""
-    member = lens_population(seed, 1, w, h)[0]
+def seed_lens(
+    seed: int, w: int, h: int, lens_field: bool = False
+) -> tuple[DistortionModel, Session, dict[str, object]]:
+    """The population's lens ``seed``, its realistic session and the start of its table row; with ``lens_field``
+    the same lens with a non-parametric field added (``lens_population(field=True)``: its parametric part is the
+    same draw, the field RMS drawn in the documented 0.005-0.04 px)."""
+    member = lens_population(seed, 1, w, h, field=lens_field)[0]
     ses = realistic_session(seed, w, h)
-    return member.model, ses, {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    row: dict[str, object] = {"seed": seed, "lens": member.design, "strings": ses.harp.material}
+    if lens_field:
+        row["field_rms"] = member.field_rms_px
+    return member.model, ses, row
 
 
 UNSEEN = (17.0, 77.0, 137.0)
 
 
 def realistic_measured(
-    seed: int, w: int, h: int, cache: Path | None = None
+    seed: int, w: int, h: int, cache: Path | None = None, lens_field: bool = False
 ) -> tuple[list[list], list[list], list[list]]:
     """Seed ``seed``'s full realistic render measured as ``harp measure`` does: the six fitted shots' edges
     (``FITTED``, the same as :func:`one`'s "full" row: shot ``i`` is seeded by its index), the three unseen
     shots' edges (``UNSEEN``, as in ``benchmarks/strings_separated.py``) and each fitted point's standard
     deviation (``pipeline.measure.point_sigmas``). Kept in ``cache`` (a directory, one ``.npz`` per seed and
-    size) when given, read from there when present (a render takes minutes; the file only saves time)."""
-    path = None if cache is None else cache / f"measured_{seed}_{w}x{h}.npz"
+    size) when given, read from there when present (a render takes minutes; the file only saves time).
+    ``lens_field``: the lens of :func:`seed_lens` with its non-parametric field (kept as ``..._field.npz``)."""
+    name = f"measured_{seed}_{w}x{h}{'_field' if lens_field else ''}.npz"
+    path = None if cache is None else cache / name
     if path is not None and path.exists():
         with np.load(path) as z:
             counts = [int(v) for v in z["counts"]]
             lines = [[z[f"s{i}_{j}"] for j in range(k)] for i, k in enumerate(counts)]
             sigmas = [[z[f"g{i}_{j}"] for j in range(k)] for i, k in enumerate(counts)]
     else:
-        lens, ses, _ = seed_lens(seed, w, h)
+        lens, ses, _ = seed_lens(seed, w, h, lens_field)
         shots = render_shots(lens, ses.harp, ses.mount, FITTED + UNSEEN, w, h, ses.effects, seed=seed)
         ms = [measure_image(s.image) for s in shots]
         lines = [[ln.points for ln in m.lines] for m in ms]

@@ -89,11 +89,12 @@ FIELD_NONE = "none"
 FIELD_AUTO = "auto"
 FIELD_CHOICES: tuple[str, ...] = (FIELD_NONE, FIELD_AUTO)
 """Whether a session adds a residual field (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`) to
-the radial model it fits: ``none`` (the default) never; ``auto`` when a field holds on unseen orientations
+the radial model it fits: ``auto`` (the default) when a field holds on unseen orientations
 (:func:`pipeline.select.select_field`: the model, chosen or given, against it with each field of
 :func:`pipeline.select.field_candidates`, each fold fitted with the strings' bends separated when the turntable
-angles are known). A field needs :data:`pipeline.orientations.REQUIRED_ORIENTATIONS_POLY` distinct orientations;
-with fewer the model is kept and the reason says so."""
+angles are known; :data:`pipeline.select.FIELD_MARGIN_SE`), ``none`` never. A field needs
+:data:`pipeline.orientations.REQUIRED_ORIENTATIONS_POLY` distinct orientations; with fewer the model is kept and the
+reason says so."""
 
 FREE_CENTER_WEIGHT = 1e-5
 """``w_center`` of a radial fit without a centre prior: the centre is practically free."""

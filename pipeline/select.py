@@ -505,6 +505,23 @@ def field_candidates(
     return (base, *(replace(base, field=g, field_penalty=p) for g in grids for p in penalties))
 
 
+FIELD_MARGIN_SE = 0.0
+"""How far ahead of the model a residual field must be in :func:`select_field`'s folds when they are fitted with the
+strings separated: not at all, the lowest CV d (:data:`TIER2_RULE`), where a free polynomial in the plain folds must be
+:data:`FLEXIBLE_MARGIN_SE` ahead. With each held-out shot's strings' bends removed, what is left of a held-out shot
+is the lens and the noise, and a field fitted on five orientations either follows the lens or does not: on realistic
+simulated lenses with a non-parametric field, fields that halved the stored lens's field error won those folds by
+only 0.8-1.9 paired standard errors as often as by more. Measured on what a session stores (field error against
+the exact lens, ``benchmarks/choice_realistic.py``, bars of 0, 0.5, 1, 1.5 and 2 SE applied to the same tables): at
+or below 0.005 px 13 / 9 / 7 of 20 lenses with a field (seeds 0-19, 20-39, 40-59) with no bar, against 10 / 4 / 4
+with 2 SE (the model alone: 4 / 0 / 4); 50 against 48 of 60 lenses without one (the model alone: 49), and on
+seeds 60-89 without one, read after the bar was set, 27 of 30 as the model alone (median 0.0024 -> 0.0028 px, one
+lens 0.0052 -> 0.0140). Per lens, more than 20 % and 0.001 px better or worse: with a field 30 of 60 better and none
+worse; without one 3 of 90 better and 3 worse (``benchmarks/RESULTS-residual-field.md``). The plain folds
+keep :data:`FLEXIBLE_MARGIN_SE`: there the strings' bends hide a field and the winner's curse chooses one (a lower
+bar took 47 of 60 lenses without a field, worst 0.031 px)."""
+
+
 def select_field(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -524,8 +541,9 @@ def select_field(
     ``base`` (the model a session chose or was given) and ``base`` with each field of :func:`field_candidates`
     (``grids`` x ``penalties``) are cross-validated by :func:`select_model`, leave one shot out; with
     ``turntable_deg`` each fold is fitted with the strings' own bends separated and its held-out shot judged
-    without them (:mod:`pipeline.separated_cv`). A field is :func:`is_flexible`: it is taken only when it is
-    ahead of ``base`` by more than :data:`FLEXIBLE_MARGIN_SE` paired standard errors. The strings' bends are
+    without them (:mod:`pipeline.separated_cv`), and a field is taken when its CV d is the lowest
+    (:data:`FIELD_MARGIN_SE`); in the plain folds it must be ahead of ``base`` by more than
+    :data:`FLEXIBLE_MARGIN_SE` paired standard errors (:func:`is_flexible`). The strings' bends are
     what a held-out shot's straightness shows besides the lens, and on the realistic simulator they hid the
     field from the plain folds (a tele lens with a 0.024 px field: CV d 0.0148 px for ``base`` against 0.0139 for
     the best field, while its field error fell from 0.0186 to 0.0088 px; with the strings separated 0.0115 against
@@ -550,10 +568,24 @@ def select_field(
             f"the shots have {have}; add shots at other angles)",
             "none",
         )
+    separated = (
+        turntable_deg is not None
+        and len(turntable_deg) >= 3
+        and _fewest_fold_orientations(turntable_deg) >= MIN_FOLD_ORIENTATIONS
+    )
+    offered = field_candidates(base, grids, penalties)
     sel = select_model(
-        lines_per_image, width, height, field_candidates(base, grids, penalties), map_fn=map_fn,
-        turntable_deg=turntable_deg, axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
+        lines_per_image, width, height, offered, map_fn=map_fn,
+        turntable_deg=turntable_deg, axis_groups=axis_groups, axis_shifts=axis_shifts,
+        flexible_margin_se=FIELD_MARGIN_SE if separated else FLEXIBLE_MARGIN_SE, **fit_kw,
     )  # fmt: skip
+    if sel.choice not in offered:  # nothing could be cross-validated: the model stays, not select_model's fallback
+        why = min((r.failure for r in sel.table if r.failure), default="")
+        how = " with the strings separated" if sel.folds == SEPARATED_FOLDS or separated else ""
+        return replace(
+            sel, choice=base, reason=f"residual field: none added to {base.label} (no candidate could be "
+            f"cross-validated{how}: {why})",
+        )  # fmt: skip
     return replace(sel, reason=f"residual field: {sel.reason}")
 
 

@@ -37,8 +37,8 @@ from pipeline.fitspec import (
     CHOICE_FOLDS,
     CHOICE_FOLDS_PLAIN,
     DEGREE_BOUNDS,
+    FIELD_AUTO,
     FIELD_CHOICES,
-    FIELD_NONE,
     STRINGS_CHOICES,
     STRINGS_KINKS,
     FitSpec,
@@ -222,9 +222,9 @@ class PipelineConfig:
                            "string's own bend separated and each string's kinks found and modelled (separate-kinks), "
                            "with the bends only (separate) or the lens fitted alone (ignore)",
                            choices=STRINGS_CHOICES)  # fmt: skip
-    field: str = setting(FIELD_NONE, "a residual field on top of the radial model: none, or auto (added when it "
-                         "holds on unseen orientations, cross-validated with the strings separated; needs 4 or "
-                         "more string orientations)", choices=FIELD_CHOICES)  # fmt: skip
+    field: str = setting(FIELD_AUTO, "a residual field on top of the radial model: auto (added when it holds on "
+                         "unseen orientations, cross-validated with the strings separated; needs 4 or more string "
+                         "orientations) or none", choices=FIELD_CHOICES)  # fmt: skip
     choice_folds: str = setting(CHOICE_FOLDS_PLAIN, "model auto with turntable angles: the held-out shots judged as "
                                 "they are (plain) or each fold fitted with the strings' bends separated and its "
                                 "held-out shot judged without them (strings-separated)", choices=CHOICE_FOLDS)  # fmt: skip

@@ -59,7 +59,7 @@ def test_a_session_fit_checks_the_harp_and_qa_fails_a_bent_string():
         bends = np.zeros((11, 3))
         bends[4] = (bow, 0.0, 0.0)
         shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), seed=4)
-        cal = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=turns)
+        cal = calibrate_focus(shots, w, h, PipelineConfig(field="none"), 0, spec, turntable_deg=turns)
         health = cal.details["harp_health"]
         verdict = evaluate(cal.fit.model, w, h, 0.001, QAConfig(), harp_health=health)
         results[name] = (health, verdict)
@@ -100,8 +100,9 @@ def test_a_session_stores_the_lens_with_the_strings_separated():
     bends = np.random.default_rng(19).normal(0.0, 0.02, (11, 3))  # every string bowed, as real strings are
     bends[:, 0] += 0.03  # and a bow all of them share (what a lens fitted alone takes for distortion)
     shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), seed=7)
-    sep = calibrate_focus(shots, w, h, PipelineConfig(), 0, spec, turntable_deg=turns)
-    alone = calibrate_focus(shots, w, h, PipelineConfig(strings="ignore"), 0, spec, turntable_deg=turns)
+    # no residual field (pipeline.field): the lens alone would take the strings' shared bow for one
+    sep = calibrate_focus(shots, w, h, PipelineConfig(field="none"), 0, spec, turntable_deg=turns)
+    alone = calibrate_focus(shots, w, h, PipelineConfig(strings="ignore", field="none"), 0, spec, turntable_deg=turns)
     assert sep.failure is None and alone.failure is None
     rec = sep.details["strings"]
     assert rec["separated"] is True and "strings" not in alone.details
@@ -115,7 +116,7 @@ def test_a_session_stores_the_lens_with_the_strings_separated():
     assert sep.merit.holdout.scheme == alone.merit.holdout.scheme and len(sep.merit.holdout.per_orientation_d) == 6
     assert sep.merit.holdout.d != alone.merit.holdout.d
     # the bootstrap, when asked for, is the separated lens's (every replicate fitted with the strings separated)
-    boot = calibrate_focus(shots, w, h, PipelineConfig(bootstrap=2), 0, spec, turntable_deg=turns)
+    boot = calibrate_focus(shots, w, h, PipelineConfig(bootstrap=2, field="none"), 0, spec, turntable_deg=turns)
     assert boot.uncertainty is not None and boot.uncertainty.model is boot.fit.model and boot.uncertainty.n_boot == 2
     assert boot.details["bootstrap_replicates"] == 2 and boot.details["strings"]["field_uncertainty_lens_alone_px"] > 0
     assert boot.merit.field_uncertainty.rms == pytest.approx(boot.uncertainty.rms)
@@ -178,7 +179,9 @@ def test_a_session_can_model_the_strings_kinks():
     spec = FitSpec("radial", 4, True, True)
     drawn = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0)}
     shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, drawn, axis=(497, 378), seed=4, noise=0.008)
-    kinked = calibrate_focus(shots, w, h, PipelineConfig(strings="separate-kinks"), 0, spec, turntable_deg=turns)
+    kinked = calibrate_focus(
+        shots, w, h, PipelineConfig(strings="separate-kinks", field="none"), 0, spec, turntable_deg=turns
+    )
     assert kinked.failure is None and kinked.details["strings"]["separated"] is True
     found = kinked.details["strings"]["kinks"]
     assert sorted(k["string"] for k in found) == sorted(drawn)
@@ -207,7 +210,7 @@ def test_kinks_are_the_default_and_a_kink_free_harp_stores_what_separate_stores(
     spec = FitSpec("radial", 4, True, True)
     shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, {}, axis=(497, 378), seed=4, noise=0.008)
     cals = [
-        calibrate_focus(shots, w, h, PipelineConfig(strings=s, bootstrap=4), 0, spec, turntable_deg=turns)
+        calibrate_focus(shots, w, h, PipelineConfig(strings=s, bootstrap=4, field="none"), 0, spec, turntable_deg=turns)
         for s in ("separate-kinks", "separate")
     ]
     kinked, bends = cals
@@ -256,7 +259,7 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
     # back a little off, moving the axis 26.57 deg below +x in the image (given as 26.5)
     travel = float(np.hypot(*shift)) / (40.0 / 6.0)
     places = AxisPlaces((-travel,) * 4 + (travel,) * 4, (-travel + 0.01,) * 4 + (travel - 0.02,) * 4, 26.5, 6.0)
-    cfg = PipelineConfig(strings="separate")
+    cfg = PipelineConfig(strings="separate", field="none")
     two = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=angles, axis_places=places)
     assert two.failure is None and two.details["strings"]["separated"] is True, two.details.get("strings")
     # the same shots, the places not told: no one axis makes them one harp, and the joint fit says so (the lens
@@ -275,7 +278,7 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
     assert axes["worst_off_px"] < 2.0 and axes["misplaced"] == [] and axes["limit_px"] == pytest.approx(20, rel=0.03)
     # one place: nothing changes (the profile's model file byte for byte; the harp's self-check made, the lens
     # fitted alone to keep the test short)
-    same, cfg = AxisPlaces((5.0,) * 4, (5.0,) * 4, 26.5, 6.0), PipelineConfig(strings="ignore")
+    same, cfg = AxisPlaces((5.0,) * 4, (5.0,) * 4, 26.5, 6.0), PipelineConfig(strings="ignore", field="none")
     at_one = calibrate_focus(left, w, h, cfg, 0, spec, turntable_deg=turns, axis_places=same)
     plain = calibrate_focus(left, w, h, cfg, 0, spec, turntable_deg=turns)
     text = [c.profile(w, h, provenance=Provenance()).to_model_file().text() for c in (at_one, plain)]
@@ -298,7 +301,7 @@ def test_a_session_whose_angles_cannot_place_the_harps_axis_says_so():
     lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
     turns, spec = (0, 60, 120), FitSpec("radial", 4, True, True)
     shots, _ = turning_harp_point_sets(lens, w, h, turns, np.zeros((27, 3)), axis=(530, 395), spacing=50.0, step=40)
-    cal = calibrate_focus(shots, w, h, PipelineConfig(strings="separate"), 0, spec, turntable_deg=turns)
+    cal = calibrate_focus(shots, w, h, PipelineConfig(strings="separate", field="none"), 0, spec, turntable_deg=turns)
     assert cal.failure is None
     why, health = "the harp's axis is ambiguous with these turntable angles", cal.details["harp_health"]
     assert why in health["failure"] and "add angles spread over the half turn" in health["failure"]
@@ -309,11 +312,11 @@ def test_a_session_whose_angles_cannot_place_the_harps_axis_says_so():
 
 
 def test_pipeline_field_auto_stores_a_residual_field_where_the_lens_has_one():
-    """``pipeline.field: auto``: the session's model (given here, then chosen) gets a residual field when it holds
+    """``pipeline.field: auto`` (the default): the session's model (given here, then chosen) gets a residual field when it holds
     on unseen orientations, judged with the strings separated (:func:`pipeline.select.select_field`); the stored
     lens, fitted with the strings separated, is then closer to the exact lens (a 0.03 px field behind 0.03 px
-    string bows), the record says why, and the model file reads back with the field. ``none`` (the default)
-    stores the radial model. Truth: the exact lens (field error modulo homography over the whole image)."""
+    string bows), the record says why, and the model file reads back with the field. ``none`` stores the radial
+    model. Truth: the exact lens (field error modulo homography over the whole image)."""
     from dataclasses import replace
 
     from pipeline.compare import compare_models
@@ -331,10 +334,10 @@ def test_pipeline_field_auto_stores_a_residual_field_where_the_lens_has_one():
     bends = np.random.default_rng(2).normal(0.0, 0.03, (13, 3))
     shots, _ = turning_harp_point_sets(lens, w, h, turns, bends, axis=(497, 378), step=60.0, seed=2)
     spec = FitSpec("radial", 4, True, True)
-    assert PipelineConfig().field == FIELD_NONE and set(FIELD_CHOICES) == {"none", "auto"}
+    assert PipelineConfig().field == FIELD_AUTO and set(FIELD_CHOICES) == {"none", "auto"}
     cfg = PipelineConfig(strings="separate")  # the bends only: no kink scan, which this harp has no use for
-    plain = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=turns)
-    auto = calibrate_focus(shots, w, h, replace(cfg, field=FIELD_AUTO), 0, spec, turntable_deg=turns)
+    plain = calibrate_focus(shots, w, h, replace(cfg, field=FIELD_NONE), 0, spec, turntable_deg=turns)
+    auto = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=turns)
     assert plain.failure is None and auto.failure is None, auto.failure
     assert plain.spec == spec and plain.selection is None
     assert auto.spec.field is not None and auto.spec.label.startswith("radial4+tangential+prism+field")

@@ -164,6 +164,9 @@ def test_model_auto_is_chosen_by_cross_validation(tmp_path):
     # the lowest CV d of those that generalise, pipeline.select.TIER2_RULE, so null decentering terms may come
     # with it), and the stored correction is the exact lens's (truth: its map, modulo homography)
     assert profile.spec.kind == "radial" and profile.spec.degree == 2 and not profile.spec.center_prior
+    # pipeline.field auto (the default): four angles 45 degrees apart cannot place this harp's axis, so no fold
+    # separates the strings, and the chosen model stays (not the fallback of a choice with nothing to choose from)
+    assert profile.spec.field is None and "residual field: none added to radial2" in profile.selection["reason"]
     err = compare_models(profile.model, TRUE_LENS, W, H, step=20).rms
     assert err < 0.002
     assert profile.merit.field_uncertainty.replicates == 4
