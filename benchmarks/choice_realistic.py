@@ -85,14 +85,18 @@ def field_stage(t: dict[str, Any], fitted: list[list], lens: Any, separated: boo
     """The residual field chosen on top of the plain choice (``pipeline.field: auto``): the plain two tiers'
     model (tier 2 by the lowest CV d) and that model with each field of :func:`pipeline.select.field_candidates`,
     cross-validated by :func:`pipeline.select.select_field` with the plain folds or (``separated``) with the
-    strings' bends separated in each fold (``turntable_deg``); each field candidate's stored field error is added
-    to ``t["fields"]``."""
+    strings' bends separated in each fold (``turntable_deg``; a polynomial choice weighed against the plain table's
+    best radial candidate with each field); each candidate's stored field error is added to ``t["fields"]``."""
     base = plain(t, "lowest")
+    radial = [r for r in t["plain_table"] if np.isfinite(r.cv_d) and not is_flexible(r.candidate)]
     t0 = time.perf_counter()
-    sel = select_field(fitted, W, H, base, turntable_deg=FITTED if separated else None)
+    sel = select_field(
+        fitted, W, H, base, turntable_deg=FITTED if separated else None,
+        radial=min(radial, key=lambda r: r.cv_d).candidate if radial else None,
+    )  # fmt: skip
     seconds = time.perf_counter() - t0
     full = {r.candidate: r.full_fit for r in sel.table if r.full_fit is not None}
-    for r in sel.table[1:]:
+    for r in sel.table:
         if r.candidate not in t["fields"]:
             t["fields"][r.candidate] = field(fitted, lens, W, H, r.candidate, plain=full.get(r.candidate), kinks=True)
     return {"base": base, "choice": sel.choice, "table": _light(sel.table), "seconds": seconds}
@@ -125,7 +129,10 @@ def tables(seed: int, cache: Path | None, keep: Path | None, lens_field: bool = 
             t["fields"][RADIAL4] = field(fitted, lens, W, H, RADIAL4, kinks=True)
             changed = True
         for key, separated in (("field_stage", False), ("field_stage_sep", True)):
-            if key not in t:  # tables kept before the field stage was added
+            # kept before the field stage was added, or before a polynomial choice was weighed against the best
+            # radial candidate with a field
+            poly_unweighed = separated and key in t and t[key]["base"].kind == "poly" and not t[key]["table"]
+            if key not in t or poly_unweighed:
                 lens, _, _ = seed_lens(seed, W, H, lens_field)
                 fitted = realistic_measured(seed, W, H, cache, lens_field)[0]
                 t[key] = field_stage(t, fitted, lens, separated)

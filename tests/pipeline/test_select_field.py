@@ -80,3 +80,19 @@ def test_too_few_orientations_or_a_model_that_cannot_carry_a_field_keep_the_mode
     assert "the radial model only" in select_field(shots, W, H, poly).reason
     has = FitSpec("radial", 4, True, True, field=(8, 6), field_penalty=1e-3)
     assert select_field(shots, W, H, has).choice == has and "it has one" in select_field(shots, W, H, has).reason
+
+
+def test_a_polynomial_choice_is_weighed_against_the_best_radial_model_with_a_field():
+    """The choice took a free polynomial (it follows a lens's field better than any radial candidate alone); with
+    the strings separated its folds weigh it against the best radial candidate with each field, and the lowest CV d
+    is stored: here the radial model with a field, closer to the exact lens than the polynomial. Without the
+    turntable angles the polynomial stays, and the reason says why."""
+    lens, shots = _shots(2, True)
+    poly = FitSpec("poly", 7)
+    sel = select_field(shots, W, H, poly, grids=GRIDS, penalties=PENALTIES, turntable_deg=TURNS, radial=SPEC)
+    assert [r.candidate for r in sel.table][:2] == [poly, SPEC] and sel.folds == SEPARATED_FOLDS
+    assert sel.choice.kind == "radial" and sel.choice.field == (8, 6), sel.reason
+    err = _stored_error(sel, shots, lens)
+    assert err[sel.choice] < 0.8 * err[poly], err
+    plain = select_field(shots, W, H, poly, radial=SPEC)
+    assert plain.choice == poly and "a field applies to the radial model only" in plain.reason
