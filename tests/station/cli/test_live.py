@@ -146,11 +146,11 @@ def test_harp_live_serves_the_page_until_ctrl_c(tmp_path):
         assert m, line
         from tests.station.live.support import wait_for
 
-        def state():
+        def state():  # the stage's position is polled apart from the frames: it may come a moment after them
             s = json.load(urllib.request.urlopen(m.group(1) + "api/state", timeout=10))
-            return s if s.get("figures") else None
+            return s if s.get("figures") and (s.get("turntable") or {}).get("position_deg") is not None else None
 
-        s = wait_for(state, 60, "a first assessed frame")
+        s = wait_for(state, 60, "a first assessed frame and the turntable's position")
         assert s["figures"]["strings_found"] >= 3 and s["turntable"]["position_deg"] == pytest.approx(0.0, abs=1e-3)
         page = urllib.request.urlopen(m.group(1), timeout=10).read().decode()
         assert "next orientation" in page
