@@ -66,6 +66,7 @@ from pipeline.select import (
     _fewest_within,
     _flexible_margin,
     is_flexible,
+    lowest_radial,
     select_field,
     select_model,
 )
@@ -88,11 +89,11 @@ def field_stage(t: dict[str, Any], fitted: list[list], lens: Any, separated: boo
     strings' bends separated in each fold (``turntable_deg``; a polynomial choice weighed against the plain table's
     best radial candidate with each field); each candidate's stored field error is added to ``t["fields"]``."""
     base = plain(t, "lowest")
-    radial = [r for r in t["plain_table"] if np.isfinite(r.cv_d) and not is_flexible(r.candidate)]
+    radial = lowest_radial(t["plain_table"])
     t0 = time.perf_counter()
     sel = select_field(
         fitted, W, H, base, turntable_deg=FITTED if separated else None,
-        radial=min(radial, key=lambda r: r.cv_d).candidate if radial else None,
+        radial=None if radial is None else radial.candidate,
     )  # fmt: skip
     seconds = time.perf_counter() - t0
     full = {r.candidate: r.full_fit for r in sel.table if r.full_fit is not None}

@@ -137,6 +137,24 @@ def _fewest_within(rows: Sequence[CVRow], best: CVRow, n_se: float) -> CVRow:
     return min(_within(rows, best, n_se, 0.0), key=lambda r: (r.n_params, r.cv_d))
 
 
+def lowest_radial(rows: Iterable[CVRow]) -> CVRow | None:
+    """The row of ``rows`` with the lowest CV d among the cross-validated radial (not :func:`is_flexible`)
+    candidates, or None: what a flexible candidate is measured against, and what carries a field in place of a free
+    polynomial (:func:`select_field`'s ``radial``)."""
+    radial = [r for r in rows if np.isfinite(r.cv_d) and not is_flexible(r.candidate)]
+    return min(radial, key=lambda r: r.cv_d) if radial else None
+
+
+def _separates_strings(turntable_deg: Sequence[float] | None, n_shots: int, folds: str = "auto") -> bool:
+    """Whether :func:`select_model`'s folds of ``n_shots`` shots at ``turntable_deg`` are fitted with the strings
+    separated: leave-one-shot-out folds whose every fold keeps :data:`MIN_FOLD_ORIENTATIONS` turntable orientations."""
+    return (
+        turntable_deg is not None
+        and fold_mode(folds, n_shots) == "images"
+        and _fewest_fold_orientations(turntable_deg) >= MIN_FOLD_ORIENTATIONS
+    )
+
+
 def _fewest_fold_orientations(angles: Sequence[float]) -> int:
     """The fewest distinct orientations (:func:`distinct_orientations`) any leave-one-shot-out fold of shots at
     ``angles`` keeps."""
@@ -236,19 +254,19 @@ def select_model(
     if turntable_deg is not None and len(turntable_deg) != len(lines_per_image):
         raise ValueError(f"{len(lines_per_image)} shots but {len(turntable_deg)} turntable angles")
     unseparated = ""
-    if turntable_deg is not None and mode_now == "images":
-        fewest = _fewest_fold_orientations(turntable_deg)
-        if fewest < MIN_FOLD_ORIENTATIONS:
-            unseparated = (
-                f"; turntable angles known, but a fold would have {fewest} turntable orientation"
-                f"{'s' if fewest != 1 else ''} (separating the strings needs >= {MIN_FOLD_ORIENTATIONS}): "
-                "strings not separated in the folds"
-            )
-    if turntable_deg is not None and mode_now == "images" and not unseparated:
+    if _separates_strings(turntable_deg, len(lines_per_image), folds):
+        assert turntable_deg is not None
         return _select_separated(
             lines_per_image, turntable_deg, width, height, candidates, flexible_margin_se,
             stop_factor=stop_factor, map_fn=map_fn, axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
         )  # fmt: skip
+    if turntable_deg is not None and mode_now == "images":
+        fewest = _fewest_fold_orientations(turntable_deg)
+        unseparated = (
+            f"; turntable angles known, but a fold would have {fewest} turntable orientation"
+            f"{'s' if fewest != 1 else ''} (separating the strings needs >= {MIN_FOLD_ORIENTATIONS}): "
+            "strings not separated in the folds"
+        )
     candidates, set_aside = _supported_when_unchecked(candidates, lines_per_image, mode_now)
     candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, mode_now)
     set_aside += trefoil_aside
@@ -368,8 +386,7 @@ def _select_separated(
     if not ok:
         return _nothing_cross_validated(table, " with the strings separated")
     best = pick = min(ok, key=lambda r: r.cv_d)
-    radial = [r for r in ok if not is_flexible(r.candidate)]
-    best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
+    best_radial = lowest_radial(ok)
     margin = _flexible_margin(pick, best_radial)
     passed = ""
     if is_flexible(pick.candidate) and best_radial is not None and margin <= flexible_margin_se:
@@ -566,11 +583,7 @@ def select_field(
     every lens checked and lowered the stored lens's field error for most (a tele lens 0.0084 -> 0.0041 px;
     ``benchmarks/RESULTS-residual-field.md``).
     """
-    separated = (
-        turntable_deg is not None
-        and len(turntable_deg) >= 3
-        and _fewest_fold_orientations(turntable_deg) >= MIN_FOLD_ORIENTATIONS
-    )
+    separated = _separates_strings(turntable_deg, len(lines_per_image))
     carrier = base
     if base.kind == "poly" and radial is not None and separated and radial.kind == "radial" and radial.field is None:
         carrier = radial
@@ -596,7 +609,7 @@ def select_field(
     )  # fmt: skip
     if sel.choice not in offered:  # nothing could be cross-validated: the model stays, not select_model's fallback
         why = min((r.failure for r in sel.table if r.failure), default="")
-        how = " with the strings separated" if sel.folds == SEPARATED_FOLDS or separated else ""
+        how = " with the strings separated" if separated else ""
         return replace(
             sel, choice=base, reason=f"residual field: none added to {base.label} (no candidate could be "
             f"cross-validated{how}: {why})",

@@ -59,7 +59,7 @@ from pipeline.harp_shape import (
 from pipeline.orientations import distinct_orientations, support_problem
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
-from pipeline.select import is_flexible, select_field, select_model
+from pipeline.select import lowest_radial, select_field, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
 from station.equipment import Identity
 from station.profile import (
@@ -238,14 +238,12 @@ def calibrate_shots(
     if field == FIELD_AUTO:
         given = spec
         # a polynomial chosen over the radial candidates: the best of them may carry a field instead
-        radial = [
-            r for r in (selection.table if selection else ()) if np.isfinite(r.cv_d) and not is_flexible(r.candidate)
-        ]
+        radial = lowest_radial(selection.table) if selection else None
         on_field = select_field(
             lines, width, height, spec, map_fn=map_fn,
             turntable_deg=None if field_turntable_deg is None else [float(a) for a in field_turntable_deg],
             axis_groups=axis_groups, axis_shifts=axis_shifts,
-            radial=min(radial, key=lambda r: r.cv_d).candidate if radial else None,
+            radial=None if radial is None else radial.candidate,
         )  # fmt: skip
         tables.append(on_field.table)
         spec = on_field.choice
