@@ -97,7 +97,7 @@ from pipeline.edgeset import (
     summarise,
     tls,
 )
-from pipeline.fit_problem import make_parametrisation, residuals_and_jacobian
+from pipeline.fit_problem import Parametrisation, make_parametrisation, residuals_and_jacobian
 from pipeline.fit_solver import solve
 from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, spec_problem
 from pipeline.models.base import DistortionModel
@@ -111,6 +111,16 @@ MIN_EDGES = 4
 FAR_CENTRE = 0.05
 """A free distortion centre farther than this from the image centre (in half image diagonals) is
 checked against the fit started from the centre-prior solution (:func:`fit_distortion`)."""
+
+MIN_CORRECTION_SCALE = 0.8
+"""Least linear scale of a fitted correction over the image (:func:`correction_scale`). The straightness
+of corrected edges is measured in corrected pixels, so a correction that shrinks the whole image makes every
+edge straighter by the same factor: with the distortion centre free (its scale is held to 1 only there) a fit
+can slide that way, moving the centre far outside the image and shrinking the image to a fraction of its size
+(seen to 0.12-0.34 in joint fits of a radial model with a weakly penalised field on realistic renders,
+``pipeline.harp_shape``). A lens's correction is within a few per cent of 1 (0.987-1.036 over 200 lenses of
+:mod:`pipeline.lens_population`; a -20 % pincushion at the corners would be needed for 0.8): below this the fit
+has collapsed and is refused, or, where a continuation exists, the fit with the centre held is taken."""
 
 POINT_ITERATIONS = 5
 """Most reweightings of the per-point robust stage (``fit_distortion(point_loss=...)``)."""
@@ -157,23 +167,59 @@ def _orientation_problem(edges: EdgeSet, min_spread_deg: float) -> str | None:
     return None
 
 
-def fold_problem(model: DistortionModel, width: int, height: int) -> str | None:
-    """None if the correction is locally invertible (orientation-preserving) over the image."""
+def _jacobian_determinants(model: DistortionModel, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(points (N, 2), det (N,))``: the correction's Jacobian determinant on a 25 x 19 grid over the image."""
     xs = np.linspace(-0.5, width - 0.5, 25)
     ys = np.linspace(-0.5, height - 0.5, 19)
     xx, yy = np.meshgrid(xs, ys)
     p = np.stack([xx.ravel(), yy.ravel()], axis=1)
     h = 0.5
-    jx = (model.undistort_points(p + [h, 0]) - model.undistort_points(p - [h, 0])) / (2 * h)
-    jy = (model.undistort_points(p + [0, h]) - model.undistort_points(p - [0, h])) / (2 * h)
-    det = jx[:, 0] * jy[:, 1] - jx[:, 1] * jy[:, 0]
+    with np.errstate(all="ignore"):
+        jx = (model.undistort_points(p + [h, 0]) - model.undistort_points(p - [h, 0])) / (2 * h)
+        jy = (model.undistort_points(p + [0, h]) - model.undistort_points(p - [0, h])) / (2 * h)
+        det = jx[:, 0] * jy[:, 1] - jx[:, 1] * jy[:, 0]
+    return p, det
+
+
+def correction_scale(model: DistortionModel, width: int, height: int) -> float:
+    """The correction's linear scale over the image: the root of its mean Jacobian determinant (1 for the
+    identity; a lens's correction is within a few per cent of 1, more than 1 for barrel distortion; NaN when
+    the correction is not finite over the image)."""
+    _, det = _jacobian_determinants(model, width, height)
+    mean = float(np.mean(det))
+    return float(np.sqrt(mean)) if np.isfinite(mean) and mean > 0 else float("nan")
+
+
+def correction_problem(model: DistortionModel, width: int, height: int) -> str | None:
+    """None if the fitted correction can be a lens's over the image, else the reason: it folds over
+    (not locally invertible and orientation-preserving somewhere), or it has collapsed, shrinking the
+    image below :data:`MIN_CORRECTION_SCALE` (:func:`correction_scale`)."""
+    p, det = _jacobian_determinants(model, width, height)
     if not np.all(np.isfinite(det)) or det.min() <= 0.05:
         k = int(np.nanargmin(det)) if np.any(np.isfinite(det)) else 0
         return (
             f"the fitted correction folds over inside the image near ({p[k, 0]:.0f}, {p[k, 1]:.0f}) "
             f"(Jacobian determinant {det[k]:.3g}); too few orientations or too high a degree"
         )
+    scale = float(np.sqrt(np.mean(det)))
+    if scale < MIN_CORRECTION_SCALE:
+        base = getattr(model, "base", model)
+        centre = getattr(base, "center", None)
+        where = "" if centre is None else f", its distortion centre at ({centre[0]:.0f}, {centre[1]:.0f})"
+        return (
+            f"the fitted correction has collapsed: it shrinks the image to {scale:.2f} of its size{where} "
+            f"(a shrunken image is straighter by the same factor, no lens does this); hold the distortion "
+            f"centre (a centre prior) or fit fewer parameters"
+        )
     return None
+
+
+def collapses(param: Parametrisation, th: np.ndarray, width: int, height: int) -> bool:
+    """Whether ``param``'s correction at ``th`` shrinks the image below :data:`MIN_CORRECTION_SCALE`."""
+    if not np.all(np.isfinite(th)):
+        return False  # not a collapse: the caller's finiteness check says what it is
+    scale = correction_scale(param.model(th), width, height)
+    return bool(np.isfinite(scale) and scale < MIN_CORRECTION_SCALE)
 
 
 # ------------------------------------------------------------------- API
@@ -347,8 +393,17 @@ def fit_distortion(
                 pre = solve(held, edges, th, max_nfev=max_nfev)
                 alt = solve(param, edges, pre.x, max_nfev=max_nfev)
                 n_iter += pre.nfev + alt.nfev
-                if alt.cost < sol.cost:
-                    sol = alt
+                # of the two, the lower cost; a collapsed one (MIN_CORRECTION_SCALE) is not a lens whatever its
+                # cost, and with both collapsed the held fit is kept
+                sane = [s for s in (sol, alt) if not collapses(param, s.x, width, height)]
+                if sane:
+                    sol = min(sane, key=lambda s: s.cost)
+                else:
+                    sol = pre
+                    warnings.append(
+                        "the free distortion centre collapsed the correction (it shrank the image); "
+                        "the fit with the centre held near the image centre is kept"
+                    )
             th = sol.x
             if robust and n_e > MIN_EDGES:
                 r, _ = residuals_and_jacobian(param, edges, th, jac=False)
@@ -418,9 +473,9 @@ def fit_distortion(
     if not np.all(np.isfinite(th)):
         return FitFailure("optimisation diverged (non-finite parameters)")
     fitted = param.model(th)
-    fold = fold_problem(fitted, width, height)
-    if fold:
-        return FitFailure(fold)
+    problem = correction_problem(fitted, width, height)
+    if problem:
+        return FitFailure(problem)
     if sol.status <= 0:
         warnings.append(f"optimiser stopped early: {sol.message}")
     result = summarise(

@@ -55,6 +55,13 @@ What can and cannot be separated
   renders (``benchmarks/axis_positions.py --realistic``, ``benchmarks/RESULTS-strings.md``).
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
+* The straightness of corrected edges is measured in corrected pixels, so a correction that shrinks
+  the image straightens every edge by the same factor. With the distortion centre free (the scale is
+  held to 1 only there), a joint fit, given room by the strings' terms and a weakly penalised field, can
+  slide that way: the centre runs far outside the image while the image shrinks to a fraction of its
+  size, and the held-out shots, corrected by the shrunken lens, look straighter too. Such a fit is made
+  again with the centre held under the centre prior, and says so (:func:`_solve_joint`,
+  :data:`pipeline.fit.MIN_CORRECTION_SCALE`).
 * Without turntable angles (loose photographs) nothing ties a string of one shot to a string of
   another: string deviations cannot be separated from the lens at all, and a bent string shows
   only as residual straightness.
@@ -94,11 +101,11 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.edgeset import FitFailure, FitResult, collect, summarise, tls
-from pipeline.fit import fit_distortion, fold_problem
+from pipeline.edgeset import EdgeSet, FitFailure, FitResult, collect, summarise, tls
+from pipeline.fit import collapses, correction_problem, fit_distortion
 from pipeline.fit_problem import make_parametrisation, normal_equations
 from pipeline.fit_solver import solve
-from pipeline.fitspec import FitSpec
+from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FitSpec
 from pipeline.harp_kinks import KINK_Z, Candidate, Kink, end_weights, peak_per_area, scan_string, stretches, template
 from pipeline.models.base import DistortionModel
 from pipeline.orientations import distinct_orientations
@@ -290,7 +297,9 @@ class HarpShapeFit:
     ``model`` the lens correction fitted jointly, ``plain`` the fit without string terms (its start);
     ``d_after`` the straightness of the points corrected by both, ``d_lens_only`` of the same points
     corrected by ``model`` alone (pixels); ``axis_groups`` each axis group's frame when the harp was moved
-    between groups of shots (``frame`` is then the first group's), empty otherwise."""
+    between groups of shots (``frame`` is then the first group's), empty otherwise; ``warnings`` what the fit
+    had to do that changes the model's meaning (the distortion centre held when it collapsed the correction,
+    :func:`_solve_joint`)."""
 
     model: DistortionModel
     plain: FitResult
@@ -301,6 +310,7 @@ class HarpShapeFit:
     n_params: int
     axis_groups: tuple[tuple[Hashable, HarpFrame], ...] = ()
     kinks: tuple[Kink, ...] = ()
+    warnings: tuple[str, ...] = ()
 
     @property
     def worst(self) -> StringShape | None:
@@ -342,15 +352,19 @@ class HarpShapeFit:
         return True
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "frame": self.frame.to_dict(),
-            "strings": [s.to_dict() for s in self.strings],
-            "d_after": self.d_after,
-            "d_lens_only": self.d_lens_only,
-            "n_params": self.n_params,
-            "kinks": [k.to_dict() for k in self.kinks],
-            "model": self.model.to_dict(),
-        } | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
+        return (
+            {
+                "frame": self.frame.to_dict(),
+                "strings": [s.to_dict() for s in self.strings],
+                "d_after": self.d_after,
+                "d_lens_only": self.d_lens_only,
+                "n_params": self.n_params,
+                "kinks": [k.to_dict() for k in self.kinks],
+                "model": self.model.to_dict(),
+            }
+            | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
+            | ({"warnings": list(self.warnings)} if self.warnings else {})
+        )
 
 
 # ------------------------------------------------------------------ the harp frame
@@ -1012,6 +1026,32 @@ def _radial_gauge(
     return np.array(rows).reshape(-1, n_strings * m)
 
 
+def _solve_joint(
+    param: _WithStrings,
+    held: _WithStrings,
+    edges: EdgeSet,
+    th0: Floats,
+    width: int,
+    height: int,
+    max_nfev: int,
+    warnings: list[str],
+) -> Floats:
+    """The joint fit's solution from ``th0``. The straightness of corrected edges is measured in corrected
+    pixels, and with the distortion centre free a fit can slide into shrinking the image
+    (:data:`pipeline.fit.MIN_CORRECTION_SCALE`): the strings' terms and a weakly penalised field let it, where
+    the plain fit stayed a lens. Then ``held`` (the centre under the centre prior) from ``th0`` is the fit, with
+    a warning (released from there, the centre slid back into the collapse in every case seen, so it is not
+    released)."""
+    sol = solve(param, edges, th0, max_nfev=max_nfev)
+    if not collapses(param, sol.x, width, height):
+        return sol.x
+    warnings.append(
+        "the free distortion centre collapsed the joint fit's correction (it shrank the image); the fit with "
+        "the centre held near the image centre (the centre prior) is kept"
+    )
+    return solve(held, edges, th0, max_nfev=max_nfev).x
+
+
 def fit_harp_shape(
     lines_per_image: Sequence[Sequence[Floats]],
     turntable_deg: Sequence[float],
@@ -1133,14 +1173,21 @@ def fit_harp_shape(
     gauge = None
     if len(groups) < 2:
         gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
-    param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge)
+
+    def joint_param(columns: Floats | None = None, held: bool = False) -> _WithStrings:
+        # held: the distortion centre under the centre prior (the continuation of _solve_joint)
+        w = max(spec.w_center, CENTER_PRIOR_WEIGHT) if held else None
+        part = make_parametrisation(width, height, spec, w_center=w) if held else lens
+        return _WithStrings(part, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)
+
+    param = joint_param()
     th0 = param.theta0(model0)
+    warnings: list[str] = []
     with np.errstate(all="ignore"):
         try:
-            sol = solve(param, edges, th0, max_nfev=max_nfev)
+            th = _solve_joint(param, joint_param(held=True), edges, th0, width, height, max_nfev, warnings)
         except (ValueError, np.linalg.LinAlgError) as exc:
             return FitFailure(f"the joint fit of lens and strings failed: {exc}")
-    th = sol.x
     if not np.all(np.isfinite(th)):
         return FitFailure("the joint fit of lens and strings diverged (non-finite parameters)")
     placed: list[tuple[int, Candidate]] = []  # (string, detection) of each kink modelled
@@ -1150,16 +1197,20 @@ def fit_harp_shape(
             point_shot, stretches(edges.xy, ideal, edges.starts, edges.counts), kink_t, kink_z,
         )  # fmt: skip
         if placed:
-            param = _WithStrings(lens, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)
+            param = joint_param(columns)
+            start = np.concatenate([th, peaks])
             with np.errstate(all="ignore"):
                 try:
-                    sol = solve(param, edges, np.concatenate([th, peaks]), max_nfev=max_nfev)
+                    held = joint_param(columns, held=True)
+                    th = _solve_joint(param, held, edges, start, width, height, max_nfev, warnings)
                 except (ValueError, np.linalg.LinAlgError) as exc:
                     return FitFailure(f"the joint fit of lens, strings and kinks failed: {exc}")
-            th = sol.x
             if not np.all(np.isfinite(th)):
                 return FitFailure("the joint fit of lens, strings and kinks diverged (non-finite parameters)")
     joint = param.model(th)
+    problem = correction_problem(joint, width, height)
+    if problem:
+        return FitFailure(f"the joint fit of lens and strings: {problem}")
     corrected, _ = param.evaluate(edges.xy, th, jac=False)
     r_joint = tls(corrected, edges.starts, edges.counts)[0]
     r_lens = tls(joint.undistort_points(edges.xy), edges.starts, edges.counts)[0]
@@ -1217,6 +1268,7 @@ def fit_harp_shape(
         n_params=param.n,
         axis_groups=tuple(groups.items()),
         kinks=tuple(found),
+        warnings=tuple(dict.fromkeys(warnings)),
     )
 
 
@@ -1267,9 +1319,9 @@ def lens_result(
     edges, _ = collect([[np.asarray(p, np.float64) for p in s] for s in lines_per_image], width, height)
     if not edges:
         return edges
-    fold = fold_problem(fit.model, width, height)
-    if fold:
-        return FitFailure(fold)
+    problem = correction_problem(fit.model, width, height)
+    if problem:
+        return FitFailure(problem)
     out = {(r.image, r.line) for r in fit.plain.rejected}
     keep = np.array([(int(i), int(j)) not in out for i, j in zip(edges.image, edges.line, strict=True)])
     return summarise(
@@ -1279,7 +1331,7 @@ def lens_result(
         fit.plain.rejected,
         message="the lens fitted with every string's own deviation (pipeline.harp_shape)",
         n_params=fit.n_params,
-        warnings=fit.plain.warnings,
+        warnings=(*fit.plain.warnings, *fit.warnings),
     )
 
 

@@ -3,9 +3,10 @@ import pytest
 
 from pipeline.compare import compare_models
 from pipeline.edgeset import FitFailure, FitResult, collect, corrected_straightness, tls
-from pipeline.fit import fit_distortion
+from pipeline.fit import MIN_CORRECTION_SCALE, correction_problem, correction_scale, fit_distortion
 from pipeline.fit_problem import make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import FitSpec, parse
+from pipeline.lens_population import lens_population
 from pipeline.models import PolynomialModel, RadialModel
 from pipeline.select import select_model
 from tests.pipeline.harp_points import harp_point_sets
@@ -172,6 +173,22 @@ def test_radial_scale_is_fixed():
     m = fit_distortion(shots, W, H, model="radial", degree=4, tangential=True).model
     assert m.k[0] == 1.0
     assert np.hypot(m.center[0] - 530, m.center[1] - 355) < 5.0
+
+
+def test_a_correction_that_shrinks_the_image_is_refused_and_no_lens_is():
+    """Straightness is measured in corrected pixels, so a correction that shrinks the image straightens every
+    edge by the same factor: such a fit has collapsed (``pipeline.fit.MIN_CORRECTION_SCALE``). Truth: a
+    correction that is a uniform scale about a far centre (its scale is that factor, by construction), and the
+    exact lens maps of the population (a lens's correction is within a few per cent of 1)."""
+    shrink = RadialModel.for_image(W, H, k=(0.5,), center=(500.0, -600.0))
+    assert correction_scale(shrink, W, H) == pytest.approx(0.5, abs=1e-6)
+    reason = correction_problem(shrink, W, H)
+    assert reason is not None and "collapsed" in reason and "0.50 of its size" in reason and "(500, -600)" in reason
+    assert correction_problem(RadialModel.for_image(W, H, k=(0.9,)), W, H) is None  # 0.9 > MIN_CORRECTION_SCALE
+    assert MIN_CORRECTION_SCALE == pytest.approx(0.8)
+    for member in lens_population(0, 40, W, H, field=True):
+        assert 0.95 < correction_scale(member.model, W, H) < 1.1
+        assert correction_problem(member.model, W, H) is None, member.design
 
 
 def test_result_reports_per_image_and_per_edge():
