@@ -120,7 +120,8 @@ can slide that way, moving the centre far outside the image and shrinking the im
 (seen to 0.12-0.34 in joint fits of a radial model with a weakly penalised field on realistic renders,
 ``pipeline.harp_shape``). A lens's correction is within a few per cent of 1 (0.987-1.036 over 200 lenses of
 :mod:`pipeline.lens_population`; a -20 % pincushion at the corners would be needed for 0.8): below this the fit
-has collapsed and is refused, or, where a continuation exists, the fit with the centre held is taken."""
+has collapsed. :func:`fit_distortion` refuses it (:func:`correction_problem`); the joint fit of lens and strings
+is made again with the centre held (:func:`pipeline.harp_shape.fit_harp_shape`)."""
 
 POINT_ITERATIONS = 5
 """Most reweightings of the per-point robust stage (``fit_distortion(point_loss=...)``)."""
@@ -393,17 +394,8 @@ def fit_distortion(
                 pre = solve(held, edges, th, max_nfev=max_nfev)
                 alt = solve(param, edges, pre.x, max_nfev=max_nfev)
                 n_iter += pre.nfev + alt.nfev
-                # of the two, the lower cost; a collapsed one (MIN_CORRECTION_SCALE) is not a lens whatever its
-                # cost, and with both collapsed the held fit is kept
-                sane = [s for s in (sol, alt) if not collapses(param, s.x, width, height)]
-                if sane:
-                    sol = min(sane, key=lambda s: s.cost)
-                else:
-                    sol = pre
-                    warnings.append(
-                        "the free distortion centre collapsed the correction (it shrank the image); "
-                        "the fit with the centre held near the image centre is kept"
-                    )
+                if alt.cost < sol.cost:
+                    sol = alt
             th = sol.x
             if robust and n_e > MIN_EDGES:
                 r, _ = residuals_and_jacobian(param, edges, th, jac=False)
