@@ -533,8 +533,10 @@ the exact lens, ``benchmarks/choice_realistic.py``, bars of 0, 1 and 2 SE applie
 0.005 px 40 of 60 lenses with a field (seeds 0-59) with no bar, 35 with 1 SE, 29 with 2 SE (the model alone: 8);
 50 against 48 of 60 lenses without one (the model alone: 49), and on seeds 60-89 without one, read after the bar
 was set, 27 of 30 as the model alone (median 0.0024 -> 0.0028 px, one lens 0.0052 -> 0.0140). Per lens, more than
-20 % and 0.001 px better or worse: with a field 47 of 60 better and 1 worse (0.0121 -> 0.0663 px, not understood
-yet); without one 3 of 90 better and 3 worse (``benchmarks/RESULTS-residual-field.md``). The plain folds keep
+20 % and 0.001 px better or worse: with a field 47 of 60 better and 1 worse (0.0121 -> 0.0663 px); without one 3
+of 90 better and 3 worse. That worse lens and the 0.0140 px one were joint fits that had collapsed the image
+(:data:`pipeline.fit.MIN_CORRECTION_SCALE`); with those made with the centre held: 48 better and none worse, 3
+better and 2 worse (``benchmarks/RESULTS-residual-field.md``). The plain folds keep
 :data:`FLEXIBLE_MARGIN_SE`: there the strings' bends hide a field and the winner's curse chooses one (a lower bar
 took 47 of 60 lenses without a field, worst 0.031 px)."""
 
