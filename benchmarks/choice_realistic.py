@@ -182,7 +182,7 @@ def separated_pick(table: Sequence[CVRow], n_se: float) -> FitSpec | None:
         return None
     pick = _fewest_within(ok, min(ok, key=lambda r: r.cv_d), n_se)
     radial = [r for r in ok if not is_flexible(r.candidate)]
-    best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
+    best_radial = lowest_radial(ok)
     if is_flexible(pick.candidate) and best_radial is not None:
         if _flexible_margin(pick, best_radial) <= FLEXIBLE_MARGIN_SE:
             pick = _fewest_within(radial, best_radial, n_se)

@@ -51,7 +51,14 @@ from pipeline.compare import compare_models
 from pipeline.cross_validation import DEFAULT_CANDIDATES, STOP_FACTOR, CVRow, cross_validate
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.select import FLEXIBLE_MARGIN_SE, ORIENTATION_TOLERANCE, _flexible_margin, _within, is_flexible
+from pipeline.select import (
+    FLEXIBLE_MARGIN_SE,
+    ORIENTATION_TOLERANCE,
+    _flexible_margin,
+    _within,
+    is_flexible,
+    lowest_radial,
+)
 
 Tables = dict[str, Any]
 
@@ -109,7 +116,7 @@ def choose(t: Tables, n_se2: float = 1.0, tolerance: float = ORIENTATION_TOLERAN
     best = min(rows, key=lambda r: r.cv_d)
     first = min(_within(rows, best, 1.0, 0.0), key=lambda r: (r.n_params, r.cv_d))
     radial = [r for r in rows if not is_flexible(r.candidate)]
-    best_radial = min(radial, key=lambda r: r.cv_d)
+    best_radial = lowest_radial(rows)
     if is_flexible(first.candidate) and _flexible_margin(first, best_radial) > FLEXIBLE_MARGIN_SE:
         return first.candidate
     general = {r.candidate: r for r in _within(radial, best_radial, 1.0, tolerance)}

@@ -297,7 +297,7 @@ def select_model(
         return _with_support(Selection(pick.candidate, reason, mode, table), lines_per_image)
     first = _fewest_within(ok, best_row, n_se)
     radial = [r for r in ok if not is_flexible(r.candidate)]
-    best_radial = min(radial, key=lambda r: r.cv_d) if radial else None
+    best_radial = lowest_radial(ok)
     margin = _flexible_margin(first, best_radial)
     if is_flexible(first.candidate) and margin > flexible_margin_se:
         # a free polynomial (or field) that wins the folds is judged by them alone: with every
