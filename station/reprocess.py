@@ -75,12 +75,16 @@ class FocusJob:
     """One focus setting of one archived session: what a worker re-processes.
 
     ``spec``: a fit label (:func:`pipeline.fitspec.parse`), ``"auto"`` for the cross-validated
-    choice, or None for what the session's configuration names.
+    choice, or None for what the session's configuration names. ``field``: ``pipeline.field`` instead of the
+    configuration's (:data:`pipeline.fitspec.FIELD_CHOICES`: whether a residual field is added where it holds on
+    unseen orientations), or None for the configuration's (a session recorded before the setting existed: the
+    default, ``auto``).
     """
 
     session_dir: str
     focus_idx: int
     spec: str | None = None
+    field: str | None = None
 
 
 @dataclass(frozen=True)
@@ -193,10 +197,11 @@ class ArchivedSession(ManifestReads):
 
 
 def plan_jobs(
-    session_dirs: Iterable[str | os.PathLike[str]], spec: str | None = None
+    session_dirs: Iterable[str | os.PathLike[str]], spec: str | None = None, field: str | None = None
 ) -> tuple[list[FocusJob], dict[str, str]]:
     """The jobs of some session directories — one per focus setting the session stored a profile
-    for — and ``{session_dir: failure}`` for those that cannot be re-processed at all."""
+    for, each with ``spec`` and ``field`` (:class:`FocusJob`) — and ``{session_dir: failure}`` for those that
+    cannot be re-processed at all."""
     jobs: list[FocusJob] = []
     failed: dict[str, str] = {}
     for d in session_dirs:
@@ -210,7 +215,7 @@ def plan_jobs(
         if not stored:
             failed[path] = f"{path}: the session stored no profile (nothing to re-process)"
             continue
-        jobs += [FocusJob(path, f, spec) for f in sorted(stored)]
+        jobs += [FocusJob(path, f, spec, field) for f in sorted(stored)]
     return jobs, failed
 
 
@@ -252,6 +257,8 @@ def _spec(job: FocusJob, config: Any) -> Any:
 def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
     s = ArchivedSession(job.session_dir)
     cfg = s.config
+    if job.field is not None:  # the profile records the pipeline it was fitted with
+        cfg = replace(cfg, pipeline=replace(cfg.pipeline, field=job.field))
     f = job.focus_idx
     if not 0 <= f < len(cfg.focus_settings):
         raise ValueError(f"{s.path}: no focus setting #{f} in its configuration")

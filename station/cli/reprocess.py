@@ -3,7 +3,10 @@
 Re-measures and re-fits archived sessions with the current pipeline
 (:mod:`station.reprocess`): every focus setting a session stored a profile for, from the frames
 it kept, exactly as the session did (its configuration's measurement, fit, bootstrap and QA
-thresholds; ``--model`` fits another model, ``auto`` the cross-validated choice). The new
+thresholds; ``--model`` fits another model, ``auto`` the cross-validated choice; ``--field none`` or
+``auto`` sets ``pipeline.field`` instead of the configuration: a session recorded before the setting
+existed has the default, ``auto``, which adds a residual field where it holds on unseen orientations and
+costs time). The new
 profiles are stored next to the old ones (``--dry-run``: not stored); each one's provenance
 names the session, the profile it re-processes and the software versions before and now. Then
 a table compares the old and new figures per session and focus setting (off a terminal
@@ -33,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pipeline.fitspec import parse_choice
+from pipeline.fitspec import FIELD_CHOICES, parse_choice
 from pipeline.plain import finite_or_none
 from station.cli.commands import COMMANDS
 from station.cli.say import say
@@ -56,6 +59,12 @@ def register(subparsers: Any) -> None:
         "--workers", type=int, default=None, help="local pool processes (default: the number of CPUs; 1: no pool)"
     )
     p.add_argument("--model", metavar="LABEL", help="fit this model instead of the session's ('auto': cross-validated)")
+    p.add_argument(
+        "--field",
+        choices=FIELD_CHOICES,
+        help="pipeline.field instead of the session's configuration (auto: a residual field where it holds on "
+        "unseen orientations; none: never)",
+    )
     p.add_argument("--dry-run", action="store_true", help="re-process and compare, store nothing")
     p.add_argument("--json", action="store_true", help="print the comparison as one JSON object")
     add_store_options(p)
@@ -93,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler is not None:  # before the store is opened: a typo creates no store
         probe_scheduler(args.scheduler)  # a ReprocessError: one line (station.cli.main)
 
-    jobs, failed = plan_jobs(args.sessions, args.model)
+    jobs, failed = plan_jobs(args.sessions, args.model, args.field)
     for msg in failed.values():
         _error(msg)
     store = None

@@ -288,3 +288,20 @@ def test_ctrl_c_is_one_line_exit_130_and_what_was_stored_is_whole(factory_archiv
         again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert again.returncode == 0, again.stderr
         assert _stored_profiles(store) == 2 * (done + len(sessions))
+
+
+def test_field_sets_the_sessions_pipeline_field(factory_archive, tmp_path):
+    """``--field auto`` runs the residual-field stage the session's configuration (``pipeline.field: none``) did
+    not: each new profile's choice says what it made of a field, where the session's profiles say nothing of one."""
+    root = tmp_path / "archive"
+    shutil.copytree(factory_archive.root, root, symlinks=True)
+    good, store = root / "sessions" / "s1", root / "profiles.sqlite"
+    with ProfileStore(store, create=False) as st:
+        old = list(st.profiles())
+    assert old and all("residual field" not in p.selection.get("reason", "") for p in old)
+    code, out, err = _main(["reprocess", good, "--field", "auto", "--workers", "1", "--store", store, "--json"])
+    assert code == 0 and err == "", err
+    new = _reprocessed(store)
+    assert sorted(new) == sorted(p.focus for p in old)
+    for p in new.values():
+        assert "residual field: " in p.selection["reason"], p.selection
