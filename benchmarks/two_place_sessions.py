@@ -41,7 +41,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from drivers.sim.lens import lens_for_focus, lens_unit  # noqa: E402
+from drivers.sim.lens import lens_field, lens_for_focus, lens_unit, with_field  # noqa: E402
 from pipeline.compare import compare_models  # noqa: E402
 from station.store import ProfileStore  # noqa: E402
 
@@ -58,48 +58,84 @@ PLANS: dict[str, tuple[dict[str, Any], str]] = {
 }
 
 
-def config(root: Path, seed: int, plan: str, w: int, h: int) -> Path:
+def config(
+    root: Path,
+    seed: int,
+    capture: dict[str, Any],
+    pipeline: dict[str, Any],
+    w: int,
+    h: int,
+    *,
+    serial: str,
+    lens_field_px: float = 0.0,
+    defaults: bool = False,
+) -> Path:
+    """The configuration of one session: ``configs/demo.yaml`` with the realistic camera (``realism_seed`` =
+    ``seed``), the unit of the demo lens of ``serial`` (spread 1) with a residual field of ``lens_field_px``, the
+    ``capture`` and ``pipeline`` keys given, one frame per orientation, focus :data:`FOCUS`. ``defaults``: the
+    demo's pipeline keys dropped first, so what is not given is the session's default."""
     d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
     d["station"]["camera"].update(width=w, height=h, realism_seed=seed)
-    d["simulation"]["lens_spread"] = 1.0
-    d["lens"]["serial"] = f"TWO-{seed}"
+    d["simulation"].update(lens_spread=1.0, lens_field_px=float(lens_field_px))
+    d["lens"]["serial"] = serial
     d["focus"]["settings"] = [FOCUS]
-    capture, model = PLANS[plan]
     d["capture"].update(frames_per_orientation=1, **capture)
     if "shift_positions_mm" in capture:
         d["station"]["turntable"]["shift_axis"] = 3
         d["station"]["harp"]["shift_direction_deg"] = DIRECTION_DEG
         d["simulation"]["shift_direction_deg"] = DIRECTION_DEG
-    d["pipeline"].update(model=model, bootstrap=0, workers=1)
+    if defaults:
+        d["pipeline"] = {"t": d["pipeline"]["t"]}
+    d["pipeline"].update(bootstrap=0, workers=1, **pipeline)
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     p = root / "station.yaml"
     p.write_text(yaml.safe_dump(d))
     return p
 
 
-def run(job: tuple[int, str, int, int]) -> dict[str, Any]:
-    seed, plan, w, h = job
-    with tempfile.TemporaryDirectory(prefix="two-place-") as tmp:
+def run_session(
+    seed: int,
+    capture: dict[str, Any],
+    pipeline: dict[str, Any],
+    w: int,
+    h: int,
+    *,
+    serial: str,
+    lens_field_px: float = 0.0,
+    defaults: bool = False,
+) -> dict[str, Any]:
+    """``harp session run`` of :func:`config` in a temporary directory: its wall time and exit code, and, when it
+    stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
+    (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
+    places of the turntable axis found, and the residual field the session's field stage chose (None: none)."""
+    with tempfile.TemporaryDirectory(prefix="sessions-") as tmp:
         root = Path(tmp)
-        cfg = config(root, seed, plan, w, h)
+        cfg = config(root, seed, capture, pipeline, w, h, serial=serial, lens_field_px=lens_field_px, defaults=defaults)
         t0 = time.perf_counter()
         done = subprocess.run(
             [str(REPO / ".venv" / "bin" / "harp"), "session", "run", str(cfg), "--quiet", "--no-report"],
             capture_output=True, text=True, cwd=root, start_new_session=True, check=False,
         )  # fmt: skip
         wall = time.perf_counter() - t0
-        out: dict[str, Any] = {"seed": seed, "plan": plan, "wall": wall, "code": done.returncode}
+        out: dict[str, Any] = {"seed": seed, "wall": wall, "code": done.returncode}
         if done.returncode not in (0, 1):  # 1: the session finished with a QA failure, its profile stored
             out["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
             return out
         with ProfileStore(root / "profiles.sqlite") as st:
             (p,) = st.profiles()
-        truth = lens_for_focus(FOCUS, w, h, lens_unit(f"TWO-{seed}", 1.0))
+        truth = with_field(lens_for_focus(FOCUS, w, h, lens_unit(serial, 1.0)), lens_field(serial, lens_field_px), w, h)
         out["field"] = float(compare_models(p.model, truth, w, h, step=20).rms)
         out["model"] = p.spec.label if p.spec is not None else "?"
+        out["grid"] = p.spec.field if p.spec is not None else None
         out["separated"] = bool(p.details.get("strings", {}).get("separated"))
         out["places"] = len((p.details.get("harp_health", {}).get("axes") or {}).get("places", [])) or 1
         return out
+
+
+def run(job: tuple[int, str, int, int]) -> dict[str, Any]:
+    seed, plan, w, h = job
+    capture, model = PLANS[plan]
+    return {**run_session(seed, capture, {"model": model}, w, h, serial=f"TWO-{seed}"), "plan": plan}
 
 
 def main(argv: list[str] | None = None) -> int:

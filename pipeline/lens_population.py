@@ -268,18 +268,28 @@ def draw_lens(
     model: DistortionModel = base
     rms = 0.0
     if field:
-        target = float(rng.uniform(*field_rms_px))
-        lam = rng.uniform(*RIPPLE_WAVELENGTH, RIPPLE_WAVES)
-        direction = rng.uniform(0, 2 * math.pi, RIPPLE_WAVES)
-        kappa = tuple((2 * math.pi / L * math.cos(t), 2 * math.pi / L * math.sin(t)) for L, t in zip(lam, direction))
-        amps = rng.standard_normal(RIPPLE_WAVES) * lam / (2 * math.pi)  # each wave's displacement ~ N(0, 1) s
-        phases = tuple(float(v) for v in rng.uniform(0, 2 * math.pi, RIPPLE_WAVES))
-        ripple = RippleLens(base, c0, tuple(float(a) for a in amps), kappa, phases)
-        now = float(np.sqrt(np.mean(np.sum(ripple.ripple(_grid(width, height)) ** 2, axis=1))))
-        scale = target / now
-        model = RippleLens(base, c0, tuple(float(a) * scale for a in amps), kappa, phases)
-        rms = target
+        rms = float(rng.uniform(*field_rms_px))
+        model = draw_ripple(rng, base, width, height, rms)
     return PopulationLens(index, design.name, model, base, rms, unit.bad)
+
+
+def draw_ripple(rng: np.random.Generator, base: RadialModel, width: int, height: int, rms_px: float) -> RippleLens:
+    """``base`` plus a non-parametric field drawn from ``rng`` (module docstring: :data:`RIPPLE_WAVES` plane waves
+    of a potential, wavelengths in :data:`RIPPLE_WAVELENGTH` half-diagonals), scaled to an RMS displacement of
+    ``rms_px`` over a ``width`` x ``height`` image (a 20 px grid, corners included). ValueError for an
+    ``rms_px`` that is not a finite number > 0."""
+    if not (math.isfinite(rms_px) and rms_px > 0):
+        raise ValueError(f"a field's RMS must be a finite number > 0 px, got {rms_px!r}")
+    c0 = ((width - 1) / 2.0, (height - 1) / 2.0)
+    lam = rng.uniform(*RIPPLE_WAVELENGTH, RIPPLE_WAVES)
+    direction = rng.uniform(0, 2 * math.pi, RIPPLE_WAVES)
+    kappa = tuple((2 * math.pi / L * math.cos(t), 2 * math.pi / L * math.sin(t)) for L, t in zip(lam, direction))
+    amps = rng.standard_normal(RIPPLE_WAVES) * lam / (2 * math.pi)  # each wave's displacement ~ N(0, 1) s
+    phases = tuple(float(v) for v in rng.uniform(0, 2 * math.pi, RIPPLE_WAVES))
+    ripple = RippleLens(base, c0, tuple(float(a) for a in amps), kappa, phases)
+    now = float(np.sqrt(np.mean(np.sum(ripple.ripple(_grid(width, height)) ** 2, axis=1))))
+    scale = rms_px / now
+    return RippleLens(base, c0, tuple(float(a) * scale for a in amps), kappa, phases)
 
 
 def lens_population(

@@ -129,7 +129,15 @@ from drivers.errors import DeviceDisconnected, DeviceTimeout, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 from drivers.sim.camera_settings import CONFIG_KEYS, EXPOSURE_RANGE_US, GAIN_RANGE_DB, SCENE_SETTINGS, SETTINGS
-from drivers.sim.lens import FOCUS_RANGE, ZOOM_FOCAL_RANGE_MM, ChannelLens, lens_for_focus, vignetting_factor, zoom_lens
+from drivers.sim.lens import (
+    FOCUS_RANGE,
+    ZOOM_FOCAL_RANGE_MM,
+    ChannelLens,
+    lens_for_focus,
+    vignetting_factor,
+    with_field,
+    zoom_lens,
+)
 from drivers.sim.world import SimWorld
 from pipeline.board import parse_board
 from pipeline.board_render import BoardPose, render_board
@@ -535,11 +543,14 @@ class SimulatedCamera:
     def lens_at(self, focus: float) -> Any:
         """The lens the harp is rendered through at ``focus``: the zoom lens at the world's focal length
         (:func:`drivers.sim.lens.zoom_lens`), or the fixed demo lens (:func:`drivers.sim.lens.lens_for_focus`),
-        each the unit ``world.lens_unit`` (its manufacturing deviations; None: the nominal lens)."""
+        each the unit ``world.lens_unit`` (its manufacturing deviations; None: the nominal lens) with its residual
+        field ``world.lens_field`` (:func:`drivers.sim.lens.with_field`; None: none)."""
         w, h = self._size
         if self.world.zoom is not None:
-            return zoom_lens(self.world.zoom, focus, w, h, self.world.lens_unit)
-        return lens_for_focus(focus, w, h, self.world.lens_unit)
+            lens = zoom_lens(self.world.zoom, focus, w, h, self.world.lens_unit)
+        else:
+            lens = lens_for_focus(focus, w, h, self.world.lens_unit)
+        return with_field(lens, self.world.lens_field, w, h)
 
     def blur_at(self, focus: float) -> float:
         """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
@@ -749,7 +760,13 @@ class SimulatedCamera:
         lens = self.lens_at(focus)
         ideal = None
         if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
-            key = ("raw", float(focus), self.world.zoom, self.world.lens_unit)  # apart from the clean renderer's
+            key = (
+                "raw",
+                float(focus),
+                self.world.zoom,
+                self.world.lens_unit,
+                self.world.lens_field,
+            )  # apart from the clean renderer's
             if self._ideal is None or self._ideal[0] != key:
                 self._ideal = (key, raw_ideal_grid(lens, w, h, effects))
             ideal = self._ideal[1]
@@ -761,7 +778,7 @@ class SimulatedCamera:
         w, h = self._size
         if w * h > IDEAL_CACHE_PIXELS:
             return None
-        key = ("clean", float(focus), self.world.zoom, self.world.lens_unit)
+        key = ("clean", float(focus), self.world.zoom, self.world.lens_unit, self.world.lens_field)
         if self._ideal is None or self._ideal[0] != key:
             self._ideal = (key, ideal_grid(lens, w, h))
         return self._ideal[1]

@@ -40,6 +40,13 @@ tilt, terms the demo lens lacks) of :math:`\sigma\cdot(3, 1, 3, 1)\cdot10^{-4}`,
 20 is the odd bad lens, its decentring and tilt 4 times that. The deviations do not depend on focus.
 :math:`\sigma = 0` (the default) is the nominal lens above for every serial.
 
+A residual field (the configuration's ``simulation.lens_field_px``, :func:`lens_field`, :func:`with_field`):
+each unit can also carry a smooth non-parametric field that no radial, tangential or prism term expresses,
+the gradient of a random potential of :mod:`pipeline.lens_population` (:func:`~pipeline.lens_population.draw_ripple`:
+the irregularity of an element's surface, a quarter to half a fringe, moves the image by a few hundredths of a
+pixel), of the configured RMS over the image and of a shape drawn from a hash of the serial. It is the unit's,
+so it does not change with focus or focal length. 0 (the default) is no field.
+
 References
 ----------
 .. [1] D. C. Brown, "Decentering distortion of lenses", Photogrammetric
@@ -52,10 +59,12 @@ from __future__ import annotations
 
 import hashlib
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.lens_population import DESIGNS, UnitSpread, draw_spread
+from pipeline.lens_population import DESIGNS, RippleLens, UnitSpread, draw_ripple, draw_spread
+from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialModel
 
 FOCUS_RANGE = (0.0, 1.0)
@@ -79,6 +88,39 @@ def lens_unit(serial: str, spread: float) -> UnitSpread:
         raise ValueError(f"lens_spread must be a finite number >= 0, got {spread}")
     seed = int.from_bytes(hashlib.sha256(f"harp simulated lens|{serial}".encode()).digest()[:8], "little")
     return draw_spread(np.random.default_rng(seed), DESIGNS["wide"].k_spread, BAD_FRACTION, sp)
+
+
+@dataclass(frozen=True)
+class UnitField:
+    """The residual field of one unit (module docstring): its shape's seed and its RMS over the image, px."""
+
+    seed: int
+    rms_px: float
+
+
+def lens_field(serial: str, rms_px: float) -> UnitField | None:
+    """The residual field of the unit that carries serial number ``serial``, ``rms_px`` px RMS over the image
+    (module docstring): the same serial always gives the same shape. None for ``rms_px = 0`` (no field).
+    ValueError for an ``rms_px`` that is negative or not finite."""
+    rms = float(rms_px)
+    if not (math.isfinite(rms) and rms >= 0):
+        raise ValueError(f"lens_field_px must be a finite number >= 0, got {rms_px}")
+    if rms == 0:
+        return None
+    seed = int.from_bytes(hashlib.sha256(f"harp simulated lens field|{serial}".encode()).digest()[:8], "little")
+    return UnitField(seed, rms)
+
+
+def with_field(lens: RadialModel, unit_field: UnitField | None, width: int, height: int) -> DistortionModel:
+    """``lens`` (:func:`lens_for_focus` or :func:`zoom_lens`) with the residual field ``unit_field`` added
+    (:class:`~pipeline.lens_population.RippleLens`, the field's RMS over the ``width`` x ``height`` image as
+    configured); ``lens`` itself for None."""
+    if unit_field is None:
+        return lens
+    ripple: RippleLens = draw_ripple(
+        np.random.default_rng(unit_field.seed), lens, int(width), int(height), unit_field.rms_px
+    )
+    return ripple
 
 
 def lens_for_focus(focus: float, width: int, height: int, unit: UnitSpread | None = None) -> RadialModel:
@@ -172,7 +214,7 @@ class ChannelLens:
     :math:`\beta` its growth to the corners. :math:`\Delta` is the exact TCA field.
     """
 
-    def __init__(self, green: RadialModel, alpha: float, beta: float, width: int, height: int):
+    def __init__(self, green: DistortionModel, alpha: float, beta: float, width: int, height: int):
         self.green = green
         self.alpha, self.beta = float(alpha), float(beta)
         self.centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])

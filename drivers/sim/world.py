@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from drivers.sim.lens import UnitField
     from pipeline.lens_population import UnitSpread
 
 
@@ -52,6 +53,8 @@ class SimWorld:
     shift_px_per_mm : float or None
         Image pixels per mm of the linear stage's travel, at the harp; None: not known (a camera then
         refuses to render the harp moved off its place, :meth:`shift_offset_px`).
+    lens_field : UnitField or None
+        That unit's residual field (:func:`drivers.sim.lens.lens_field`); None: none.
 
     Thread-safe: the stage function is called under the emulator's own lock,
     ``focus`` and ``harp_offset_deg`` are plain floats.
@@ -65,6 +68,7 @@ class SimWorld:
         lens_unit: UnitSpread | None = None,
         shift_direction_deg: float = 0.0,
         shift_px_per_mm: float | None = None,
+        lens_field: UnitField | None = None,
     ):
         if shift_px_per_mm is not None and not (math.isfinite(shift_px_per_mm) and shift_px_per_mm > 0):
             raise ValueError(f"shift_px_per_mm must be a positive number or None, got {shift_px_per_mm!r}")
@@ -72,6 +76,7 @@ class SimWorld:
         self.focus = float(focus)
         self.harp_offset_deg = float(harp_offset_deg)
         self.lens_unit = lens_unit
+        self.lens_field = lens_field
         self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None

@@ -340,7 +340,8 @@ class SimulationConfig:
     ``lens_spread``: the manufacturing spread of the simulated lens, in units of the population's
     (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
     ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
-    for every serial."""
+    for every serial. ``lens_field_px``: the RMS of a residual field each unit carries besides
+    (:func:`drivers.sim.lens.lens_field`: smooth, non-parametric, its shape drawn from the serial); 0: none."""
 
     harp_offset_deg: float = setting(0.0, "the strings' angle at stage 0 in the simulated world", "deg", -360.0,
                                      360.0)  # fmt: skip
@@ -349,6 +350,9 @@ class SimulationConfig:
     )
     lens_spread: float = setting(0.0, "the simulated lens's manufacturing spread, drawn from lens.serial (0: the "
                                  "nominal demo lens for every serial)", "× the population's spread", 0.0, 5.0)  # fmt: skip
+    lens_field_px: float = setting(0.0, "the RMS over the image of a residual field the simulated lens carries "
+                                   "besides its radial, tangential and prism terms (smooth, no model's; its shape "
+                                   "drawn from lens.serial; 0: none)", "px", 0.0, 1.0)  # fmt: skip
     shift_direction_deg: float = setting(0.0, "the image direction (from +x, the columns, towards +y, the rows) in "
                                          "which a positive move of the turntable's shift axis carries the turntable "
                                          "axis in the simulated world", "deg", -360.0, 360.0)  # fmt: skip

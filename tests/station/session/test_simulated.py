@@ -1,15 +1,18 @@
 """The simulated station's shift axis (issue 19): a turntable with ``shift_axis`` gets an emulator with that
 axis, over the real pty, and moving it moves the turntable axis in the simulated world; a shift axis the
-configuration or the device cannot have is a one-line configuration error naming the field."""
+configuration or the device cannot have is a one-line configuration error naming the field. The simulated lens
+is the unit of its serial with the residual field ``simulation.lens_field_px`` asks for."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
+from drivers.sim.lens import lens_field, lens_for_focus, lens_unit, with_field
 from station.cli import main
 from station.config import ConfigError, load_config
 from station.session.devices import open_station
@@ -100,3 +103,24 @@ def test_a_shift_axis_the_device_does_not_have_is_a_config_error(tmp_path):
     text = str(info.value)
     assert text.startswith(f"{cfg.path}: station.turntable.shift_axis: cannot open the turntable at 'emulator': ")
     assert "shift axis 3: 'get pos' rejected: BADAXIS" in text and "\n" not in text
+
+
+def test_the_simulated_lens_is_the_serials_unit_with_the_configured_field(tmp_path, capsys):
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["camera"].update(width=480, height=360)
+    d["simulation"].update(lens_spread=1.0, lens_field_px=0.02)
+    d["lens"]["serial"] = "FIELD-7"
+    p = tmp_path / "station.yaml"
+    p.write_text(yaml.safe_dump(d))
+    with simulated_devices(load_config(p)) as sim:
+        assert sim.world.lens_field == lens_field("FIELD-7", 0.02) and sim.world.lens_unit == lens_unit("FIELD-7", 1.0)
+        pts = np.stack(np.meshgrid(np.arange(0.0, 480, 40), np.arange(0.0, 360, 40)), -1).reshape(-1, 2)
+        truth = with_field(
+            lens_for_focus(0.5, 480, 360, lens_unit("FIELD-7", 1.0)), lens_field("FIELD-7", 0.02), 480, 360
+        )
+        np.testing.assert_array_equal(sim.camera.lens_at(0.5).undistort_points(pts), truth.undistort_points(pts))
+    d["simulation"]["lens_field_px"] = 2
+    p.write_text(yaml.safe_dump(d))
+    assert main(["config", "check", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{p}: simulation.lens_field_px: expected a number in [0, 1] px, got 2" in err, err
