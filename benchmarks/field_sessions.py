@@ -2,7 +2,8 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/field_sessions.py [--seeds 0,1,2,3] [--size 1000x750] [--workers 2]
+    .venv/bin/python benchmarks/field_sessions.py [--seeds 0,1,2,3] [--size 1000x750] [--workers 2] [--places 2]
+        [--runs "with a field, field auto;..."]
 
 ``benchmarks/choice_realistic.py`` emulates a session's choice and field stage on rendered shots. This runs the
 sessions themselves: ``harp session run`` on the simulated station of ``configs/demo.yaml`` with the realistic
@@ -17,7 +18,9 @@ Per seed (realism seed and lens serial ``FIELD-<seed>``), two lenses, each measu
   of an RMS drawn uniformly in 0.005-0.04 px from the seed (as :mod:`pipeline.lens_population` draws it);
 * **without**: the same unit without it;
 
-each with ``pipeline.field: auto`` (the default) and ``none``. The table gives each session's stored model and its
+each with ``pipeline.field: auto`` (the default) and ``none`` (``--runs``: some of these four). ``--places 2``:
+six angles 0..150 by 30 at each of two linear-stage positions instead (``benchmarks/two_place_sessions.py``'s
+two places, 240 px apart). The table gives each session's stored model and its
 field error against the exact lens (the unit at that focus with its field; ``pipeline.compare.compare_models``,
 modulo homography, 20 px grid) and its wall time (a whole process; two sessions run at once with ``--workers 2``).
 """
@@ -36,9 +39,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from benchmarks.two_place_sessions import run_session  # noqa: E402
+from benchmarks.two_place_sessions import ONE, TWO, run_session  # noqa: E402
 
-ONE = {"orientations_deg": [float(a) for a in range(0, 180, 15)]}
 FIELD_RMS_PX = (0.005, 0.04)
 RUNS = ("with a field, field auto", "with a field, field none", "without, field auto", "without, field none")
 
@@ -48,11 +50,12 @@ def lens_field_px(seed: int) -> float:
     return float(np.random.default_rng([seed, 0xF1E1D]).uniform(*FIELD_RMS_PX))
 
 
-def run(job: tuple[int, str, int, int]) -> dict[str, Any]:
-    seed, name, w, h = job
+def run(job: tuple[int, str, int, int, int]) -> dict[str, Any]:
+    seed, name, w, h, places = job
     rms = lens_field_px(seed) if name.startswith("with a field") else 0.0
     field = name.rsplit(" ", 1)[1]
-    out = run_session(seed, ONE, {"field": field}, w, h, serial=f"FIELD-{seed}", lens_field_px=rms, defaults=True)
+    capture = ONE if places == 1 else TWO
+    out = run_session(seed, capture, {"field": field}, w, h, serial=f"FIELD-{seed}", lens_field_px=rms, defaults=True)
     return {**out, "run": name, "rms": rms}
 
 
@@ -60,6 +63,7 @@ def cell(r: dict[str, Any]) -> str:
     if "error" in r:
         return f"failed (exit {r['code']}): {r['error']}"
     sep = "" if r["separated"] else ", strings not separated"
+    sep += f", {r['places']} places found" if r["places"] > 1 else ""
     return f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})"
 
 
@@ -68,34 +72,42 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0,1,2,3")
     ap.add_argument("--size", default="1000x750")
     ap.add_argument("--workers", type=int, default=2, help="sessions run at once")
+    ap.add_argument("--places", type=int, choices=(1, 2), default=1, help="turntable-axis places (module doc)")
+    ap.add_argument("--runs", default=";".join(RUNS), help="the runs, by name, separated by ;")
     args = ap.parse_args(argv)
+    runs = [r for r in RUNS if r in args.runs.split(";")]
+    if not runs:
+        ap.error(f"--runs: none of {args.runs!r} is a run ({'; '.join(RUNS)})")
     w, h = (int(v) for v in args.size.split("x"))
     seeds = [int(s) for s in args.seeds.split(",")]
+    where = "twelve angles about one place" if args.places == 1 else "six angles at each of two places"
     print(
         f"# Whole simulated sessions, lenses with and without a residual field: field error of the stored lens, "
-        f"{w}x{h}, focus 0.5 ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
+        f"{w}x{h}, focus 0.5, {where} ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; "
         f"`benchmarks/field_sessions.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
     )
     print()
-    jobs = [(s, name, w, h) for s in seeds for name in RUNS]
+    jobs = [(s, name, w, h, args.places) for s in seeds for name in runs]
     with ThreadPoolExecutor(max(1, args.workers)) as pool:
         results = list(pool.map(run, jobs))
     by = {(r["seed"], r["run"]): r for r in results}
-    print("| seed | lens field px | " + " | ".join(f"{name}: stored model, field px (wall s)" for name in RUNS) + " |")
-    print("|---:|---:|" + "---|" * len(RUNS))
+    print("| seed | lens field px | " + " | ".join(f"{name}: stored model, field px (wall s)" for name in runs) + " |")
+    print("|---:|---:|" + "---|" * len(runs))
     for s in seeds:
         print(
-            f"| {s} | {lens_field_px(s):.4f} | " + " | ".join(cell(by[(s, name)]) for name in RUNS) + " |", flush=True
+            f"| {s} | {lens_field_px(s):.4f} | " + " | ".join(cell(by[(s, name)]) for name in runs) + " |", flush=True
         )
     print()
-    f = {name: np.array([by[(s, name)].get("field", np.nan) for s in seeds]) for name in RUNS}
-    for name in RUNS:
+    f = {name: np.array([by[(s, name)].get("field", np.nan) for s in seeds]) for name in runs}
+    for name in runs:
         walls = [by[(s, name)]["wall"] for s in seeds]
         print(
             f"{name}: at or below 0.005 px {int(np.sum(f[name] <= 0.005))} of {len(seeds)}, median "
             f"{np.nanmedian(f[name]):.4f} px, worst {np.nanmax(f[name]):.4f} px; median wall {np.median(walls):.0f} s"
         )
     for lens in ("with a field", "without"):
+        if f"{lens}, field auto" not in f or f"{lens}, field none" not in f:
+            continue
         auto, none = f[f"{lens}, field auto"], f[f"{lens}, field none"]
         apart = (np.abs(auto - none) > 0.2 * none) & (np.abs(auto - none) > 0.001)
         better, worse = int(np.sum(apart & (auto < none))), int(np.sum(apart & (auto > none)))
