@@ -22,7 +22,9 @@ each with ``pipeline.field: auto`` (the default) and ``none`` (``--runs``: some 
 six angles 0..150 by 30 at each of two linear-stage positions instead (``benchmarks/two_place_sessions.py``'s
 two places, 240 px apart). The table gives each session's stored model and its
 field error against the exact lens (the unit at that focus with its field; ``pipeline.compare.compare_models``,
-modulo homography, 20 px grid) and its wall time (a whole process; two sessions run at once with ``--workers 2``).
+modulo homography, 20 px grid) and its wall time (a whole process; two sessions run at once with ``--workers 2``);
+below it, the range of the stored corrections' linear scale over the image against the exact lens's
+(``pipeline.fit.correction_scale``).
 """
 
 from __future__ import annotations
@@ -114,6 +116,12 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"{lens}: field auto against none, more than 20 % and 0.001 px apart: {better} better, {worse} worse "
             f"of {len(seeds)}"
+        )
+    scales = np.array([r["scale"] for r in results if "scale" in r])
+    if len(scales):
+        print(
+            f"stored correction's scale over the image against the exact lens's: {scales.min():.4f} to "
+            f"{scales.max():.4f} ({len(scales)} sessions)"
         )
     print(f"(load average at end {os.getloadavg()[0]:.1f})")
     return 0

@@ -43,6 +43,7 @@ sys.path.insert(0, str(REPO))
 
 from drivers.sim.lens import lens_field, lens_for_focus, lens_unit, with_field  # noqa: E402
 from pipeline.compare import compare_models  # noqa: E402
+from pipeline.fit import correction_scale  # noqa: E402
 from station.store import ProfileStore  # noqa: E402
 
 FOCUS = 0.5
@@ -107,7 +108,10 @@ def run_session(
     """``harp session run`` of :func:`config` in a temporary directory: its wall time and exit code, and, when it
     stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
     (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
-    places of the turntable axis found, and the residual field the session's field stage chose (None: none)."""
+    places of the turntable axis found, the residual field the session's field stage chose (None: none), and the
+    stored correction's linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``: a
+    correction that shrinks the image straightens every edge, and the field error, modulo homography, does not see
+    a uniform scale)."""
     with tempfile.TemporaryDirectory(prefix="sessions-") as tmp:
         root = Path(tmp)
         cfg = config(root, seed, capture, pipeline, w, h, serial=serial, lens_field_px=lens_field_px, defaults=defaults)
@@ -125,6 +129,7 @@ def run_session(
             (p,) = st.profiles()
         truth = with_field(lens_for_focus(FOCUS, w, h, lens_unit(serial, 1.0)), lens_field(serial, lens_field_px), w, h)
         out["field"] = float(compare_models(p.model, truth, w, h, step=20).rms)
+        out["scale"] = correction_scale(p.model, w, h) / correction_scale(truth, w, h)
         out["model"] = p.spec.label if p.spec is not None else "?"
         out["grid"] = p.spec.field if p.spec is not None else None
         out["separated"] = bool(p.details.get("strings", {}).get("separated"))
