@@ -90,15 +90,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     print()
     jobs = [(s, name, w, h, args.places) for s in seeds for name in runs]
-    with ThreadPoolExecutor(max(1, args.workers)) as pool:
-        results = list(pool.map(run, jobs))
-    by = {(r["seed"], r["run"]): r for r in results}
     print("| seed | lens field px | " + " | ".join(f"{name}: stored model, field px (wall s)" for name in runs) + " |")
-    print("|---:|---:|" + "---|" * len(runs))
-    for s in seeds:
-        print(
-            f"| {s} | {lens_field_px(s):.4f} | " + " | ".join(cell(by[(s, name)]) for name in runs) + " |", flush=True
-        )
+    print("|---:|---:|" + "---|" * len(runs), flush=True)
+    results = []
+    with ThreadPoolExecutor(max(1, args.workers)) as pool:
+        for r in pool.map(run, jobs):  # in order: a seed's row as soon as its runs are in
+            results.append(r)
+            if len(results) % len(runs) == 0:
+                row = results[-len(runs) :]
+                print(
+                    f"| {r['seed']} | {lens_field_px(r['seed']):.4f} | " + " | ".join(map(cell, row)) + " |", flush=True
+                )
+    by = {(r["seed"], r["run"]): r for r in results}
     print()
     f = {name: np.array([by[(s, name)].get("field", np.nan) for s in seeds]) for name in runs}
     for name in runs:
