@@ -63,7 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.lens_population import DESIGNS, RippleLens, UnitSpread, draw_ripple, draw_spread
+from pipeline.lens_population import DESIGNS, UnitSpread, draw_ripple, draw_spread
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialModel
 
@@ -117,10 +117,7 @@ def with_field(lens: RadialModel, unit_field: UnitField | None, width: int, heig
     configured); ``lens`` itself for None."""
     if unit_field is None:
         return lens
-    ripple: RippleLens = draw_ripple(
-        np.random.default_rng(unit_field.seed), lens, int(width), int(height), unit_field.rms_px
-    )
-    return ripple
+    return draw_ripple(np.random.default_rng(unit_field.seed), lens, int(width), int(height), unit_field.rms_px)
 
 
 def lens_for_focus(focus: float, width: int, height: int, unit: UnitSpread | None = None) -> RadialModel:
