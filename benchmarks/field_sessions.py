@@ -41,7 +41,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from benchmarks.two_place_sessions import ONE, TWO, run_session  # noqa: E402
+from benchmarks.two_place_sessions import ONE, TWO, cell, run_session  # noqa: E402
 
 FIELD_RMS_PX = (0.005, 0.04)
 RUNS = ("with a field, field auto", "with a field, field none", "without, field auto", "without, field none")
@@ -59,14 +59,6 @@ def run(job: tuple[int, str, int, int, int]) -> dict[str, Any]:
     capture = ONE if places == 1 else TWO
     out = run_session(seed, capture, {"field": field}, w, h, serial=f"FIELD-{seed}", lens_field_px=rms, defaults=True)
     return {**out, "run": name, "rms": rms}
-
-
-def cell(r: dict[str, Any]) -> str:
-    if "error" in r:
-        return f"failed (exit {r['code']}): {r['error']}"
-    sep = "" if r["separated"] else ", strings not separated"
-    sep += f", {r['places']} places found" if r["places"] > 1 else ""
-    return f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})"
 
 
 def main(argv: list[str] | None = None) -> int:

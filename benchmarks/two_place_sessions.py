@@ -137,6 +137,16 @@ def run_session(
         return out
 
 
+def cell(r: dict[str, Any]) -> str:
+    """A table cell of :func:`run_session`'s result: the stored model, its field error and the wall time (and
+    whether the strings were not separated, how many places were found), or why the session failed."""
+    if "error" in r:
+        return f"failed (exit {r['code']}): {r['error']}"
+    sep = "" if r["separated"] else ", strings not separated"
+    sep += f", {r['places']} places found" if r["places"] > 1 else ""
+    return f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})"
+
+
 def run(job: tuple[int, str, int, int]) -> dict[str, Any]:
     seed, plan, w, h = job
     capture, model = PLANS[plan]
@@ -168,16 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---:|" + "---|" * len(plans))
     by = {(r["seed"], r["plan"]): r for r in results}
     for s in seeds:
-        cells = []
-        for plan in plans:
-            r = by[(s, plan)]
-            if "error" in r:
-                cells.append(f"failed (exit {r['code']}): {r['error']}")
-            else:
-                sep = "" if r["separated"] else ", strings not separated"
-                sep += f", {r['places']} places found" if r["places"] > 1 else ""
-                cells.append(f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})")
-        print(f"| {s} | " + " | ".join(cells) + " |", flush=True)
+        print(f"| {s} | " + " | ".join(cell(by[(s, plan)]) for plan in plans) + " |", flush=True)
     print()
     fields = {plan: np.array([by[(s, plan)].get("field", np.nan) for s in seeds]) for plan in plans}
     for plan, f in fields.items():
