@@ -189,6 +189,7 @@ def select_model(
     turntable_deg: Sequence[float] | None = None,
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
+    kink_t: int | None = None,
     **fit_kw: Any,
 ) -> Selection:
     r"""Choose model and degree by cross-validation over the shots.
@@ -242,6 +243,10 @@ def select_model(
     axis_groups, axis_shifts : with ``turntable_deg``, each shot's turntable-axis group and the groups' rough
         image shifts (px) when the harp was moved with its turntable between groups of shots
         (:func:`pipeline.harp_shape.fit_harp_shape`); only the folds with the strings separated use them.
+    kink_t : with ``turntable_deg``, the along-edge subsampling factor the points were measured with when the
+        folds are to find and model every string's kinks as well, as the session's lens is fitted
+        (``pipeline.strings: separate-kinks``; :func:`pipeline.separated_cv.cross_validate_separated`); None:
+        the strings' smooth bends only. The plain folds do not use it.
 
     Returns
     -------
@@ -258,7 +263,8 @@ def select_model(
         assert turntable_deg is not None
         return _select_separated(
             lines_per_image, turntable_deg, width, height, candidates, flexible_margin_se,
-            stop_factor=stop_factor, map_fn=map_fn, axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
+            stop_factor=stop_factor, map_fn=map_fn, axis_groups=axis_groups, axis_shifts=axis_shifts, kink_t=kink_t,
+            **fit_kw,
         )  # fmt: skip
     if turntable_deg is not None and mode_now == "images":
         fewest = _fewest_fold_orientations(turntable_deg)
@@ -374,13 +380,14 @@ def _select_separated(
     map_fn: Callable[..., Iterable[Any]],
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
+    kink_t: int | None = None,
     **fit_kw: Any,
 ) -> Selection:
     """The choice of :func:`select_model` when the turntable angles are known (its docstring)."""
     candidates, trefoil_aside = _trefoil_when_determined(candidates, lines_per_image, "images")
     table = cross_validate_separated(
         lines_per_image, turntable_deg, width, height, candidates, stop_factor=stop_factor, map_fn=map_fn,
-        axis_groups=axis_groups, axis_shifts=axis_shifts, **fit_kw,
+        axis_groups=axis_groups, axis_shifts=axis_shifts, kink_t=kink_t, **fit_kw,
     )  # fmt: skip
     ok = [r for r in table if np.isfinite(r.cv_d)]
     if not ok:
@@ -554,6 +561,7 @@ def select_field(
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
     radial: FitSpec | None = None,
+    kink_t: int | None = None,
     **fit_kw: Any,
 ) -> Selection:
     """Whether a residual field on top of ``base`` holds on unseen orientations (``pipeline.field: auto``).
@@ -584,6 +592,13 @@ def select_field(
     poly7 for 21 of 60 lenses with a field (none of 90 without one), a radial model with a field won those folds for
     every lens checked and lowered the stored lens's field error for most (a tele lens 0.0084 -> 0.0041 px;
     ``benchmarks/RESULTS-residual-field.md``).
+
+    ``kink_t``: with ``turntable_deg``, the folds find and model each string's kinks too, as the session's lens is
+    fitted (``pipeline.strings: separate-kinks``; :func:`select_model`). Folds that model the strings' smooth
+    bends only leave each kink's bump in the held-out shot, and a field takes the part of the bumps that sits in
+    the same place of the image in every shot (kinks near the turntable axis): on twelve realistic shots of a
+    lens without a field and with kinked steel strings it won every fold, and raised the stored lens's field
+    error (``benchmarks/RESULTS-residual-field.md``).
     """
     separated = _separates_strings(turntable_deg, len(lines_per_image))
     carrier = base
@@ -606,7 +621,7 @@ def select_field(
         offered = (base, *offered)
     sel = select_model(
         lines_per_image, width, height, offered, map_fn=map_fn,
-        turntable_deg=turntable_deg, axis_groups=axis_groups, axis_shifts=axis_shifts,
+        turntable_deg=turntable_deg, axis_groups=axis_groups, axis_shifts=axis_shifts, kink_t=kink_t,
         flexible_margin_se=FIELD_MARGIN_SE if separated else FLEXIBLE_MARGIN_SE, **fit_kw,
     )  # fmt: skip
     if sel.choice not in offered:  # nothing could be cross-validated: the model stays, not select_model's fallback

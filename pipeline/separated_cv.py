@@ -43,7 +43,9 @@ from pipeline.cross_validation import FALLBACK, STOP_FACTOR, CVRow, n_params
 from pipeline.edgeset import held_out_edges, tls
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_kinks import stretches, template
 from pipeline.harp_shape import HarpShapeFit, try_fit_harp_shape
+from pipeline.resample import DEFAULT_T
 
 Floats = NDArray[np.float64]
 
@@ -90,7 +92,11 @@ class HeldOutStrings:
 
 
 def held_out_without_strings(
-    fit: HarpShapeFit, lines: Sequence[NDArray[np.float64]], turntable_deg: float, group: Hashable | None = None
+    fit: HarpShapeFit,
+    lines: Sequence[NDArray[np.float64]],
+    turntable_deg: float,
+    group: Hashable | None = None,
+    kink_t: int = DEFAULT_T,
 ) -> HeldOutStrings:
     r"""The residuals of a held-out shot's edges (distorted pixels) corrected by ``fit.model``, each moved
     back by its string's deviation as ``fit`` fitted it (module docstring).
@@ -100,7 +106,10 @@ def held_out_without_strings(
     :func:`pipeline.harp_shape.fit_harp_shape` takes them); an edge's string is the one whose offset
     :math:`q_k` is nearest to the edge's median :math:`q`, within :data:`MATCH_PITCHES` pitches. The
     deviation is evaluated over the stretch of ``u`` where the fold saw the string and held at its end
-    value beyond it (a polynomial is not extrapolated). Every edge's residual is its distance from its own
+    value beyond it (a polynomial is not extrapolated); the kinks the fold found on the string (``fit.kinks``,
+    :func:`pipeline.harp_shape.fit_harp_shape` with ``kinks=True``) are removed with it, each its fitted peak
+    times its template (:func:`pipeline.harp_kinks.template`, the points measured with subsampling factor
+    ``kink_t``) at the point's harp coordinate: a kink is fixed to the harp like the rest of the bend. Every edge's residual is its distance from its own
     total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure. A shot of axis
     group ``group`` (the harp moved with its turntable between groups, ``fit_harp_shape(axis_groups=...)``)
     is placed in that group's frame; a group the fit did not see leaves every edge unmatched.
@@ -114,6 +123,9 @@ def held_out_without_strings(
     d, n = frame.direction(float(turntable_deg)), frame.normal(float(turntable_deg))
     c = np.asarray(frame.centre)
     offsets = np.array([s.offset_px for s in fit.strings])
+    kinks_of: dict[int, list[Any]] = {}
+    for kink in fit.kinks:
+        kinks_of.setdefault(int(kink.string), []).append(kink)
     moved = []
     removed = without = unmatched = 0
     for p in pts:
@@ -128,8 +140,16 @@ def held_out_without_strings(
             without += 1
         else:
             st = fit.strings[k]
-            u = np.clip((rel @ d) / frame.scale_px, st.span[0], st.span[1])
-            corrected = corrected - st.deviation(u)[:, None] * n
+            a_px = rel @ d
+            u = np.clip(a_px / frame.scale_px, st.span[0], st.span[1])
+            dev = st.deviation(u)
+            mine = kinks_of.get(int(st.index), [])
+            if mine:
+                one = np.array([0, len(p)], dtype=np.intp)
+                stretch = stretches(np.asarray(p, np.float64), rel + c, one[:1], one[1:])
+                for kink in mine:
+                    dev = dev + kink.peak_px * template(a_px - kink.at_px, stretch, kink_t, kink.length_px)
+            corrected = corrected - dev[:, None] * n
             removed += 1
         moved.append(corrected)
     counts = np.array([len(p) for p in moved], dtype=np.int64)
@@ -150,17 +170,21 @@ def _unmatched(pts: list[Floats]) -> HeldOutStrings:
 Groups = tuple[tuple[Hashable, ...], dict[Hashable, tuple[float, ...]] | None] | None
 """Each shot's axis group and the groups' rough shifts (``fit_harp_shape(axis_groups=, axis_shifts=)``), or
 None: one turntable axis."""
-Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any], Groups]
+Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any], Groups, int | None]
+"""``(width, height, turntable_deg, stop_factor, fit_kw, groups, kink_t)``: ``kink_t`` the subsampling factor the
+points were measured with when the folds find and model the strings' kinks, None when they do not."""
 
 
 def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> tuple[Any, Any]:
     """A candidate's fit on all shots, alone and with the strings separated (either may be a failure)."""
-    width, height, angles, _, fit_kw, groups = settings
+    width, height, angles, _, fit_kw, groups, kink_t = settings
     plain = fit_distortion(lines, width, height, **cand.fit_arguments(), **fit_kw)
     if not plain:
         return plain, plain
     labels, shifts = groups or (None, None)
-    return plain, try_fit_harp_shape(lines, angles, width, height, cand, plain, axis_groups=labels, axis_shifts=shifts)
+    return plain, try_fit_harp_shape(
+        lines, angles, width, height, cand, plain, kink_t is not None, kink_t or DEFAULT_T, labels, shifts
+    )
 
 
 def _first_pass(job: tuple[FitSpec, list[list[Floats]], Settings, bool]) -> Any:
@@ -176,7 +200,7 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     stopped as :func:`pipeline.cross_validation.cross_validate` stops one (its joint fit on all shots, or its
     held-out residuals so far, already beyond ``stop_factor`` times the reference's CV mean square)."""
     cand, lines, ref_mse, settings, (plain, joint) = job
-    width, height, angles, stop_factor, fit_kw, groups = settings
+    width, height, angles, stop_factor, fit_kw, groups, kink_t = settings
     labels, shifts = groups or (None, None)
     size = n_params(cand, width, height)
     full = plain if plain else None
@@ -204,16 +228,17 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
         train_angles = [a for i, a in enumerate(angles) if i != h]
         train_groups = None if labels is None else [g for i, g in enumerate(labels) if i != h]
         fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
+        kinks = (kink_t is not None, kink_t or DEFAULT_T)
         fold = (
-            try_fit_harp_shape(
-                train, train_angles, width, height, cand, fold_plain, axis_groups=train_groups, axis_shifts=shifts
-            )
+            try_fit_harp_shape(train, train_angles, width, height, cand, fold_plain, *kinks, train_groups, shifts)
             if fold_plain
             else fold_plain
         )
         if not fold:
             return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
-        held = held_out_without_strings(fold, lines[h], angles[h], None if labels is None else labels[h])
+        held = held_out_without_strings(
+            fold, lines[h], angles[h], None if labels is None else labels[h], kink_t or DEFAULT_T
+        )
         removed += held.removed
         left += held.without_terms + held.unmatched
         res.append(held.residuals)
@@ -256,6 +281,7 @@ def cross_validate_separated(
     map_fn: Callable[..., Iterable[Any]] = map,
     axis_groups: Sequence[Hashable] | None = None,
     axis_shifts: Mapping[Hashable, Sequence[float]] | None = None,
+    kink_t: int | None = None,
     **fit_kw: Any,
 ) -> tuple[CVRow, ...]:
     """The CV table of ``candidates``, each fold fitted with the strings separated on all shots but one and
@@ -275,6 +301,10 @@ def cross_validate_separated(
     axis_groups, axis_shifts : each shot's axis group and the groups' rough shifts, px, when the harp was moved
         with its turntable between groups (:func:`pipeline.harp_shape.fit_harp_shape`); each fold and the
         held-out shot are placed in their group's frame.
+    kink_t : the along-edge subsampling factor the points were measured with, when every fold is to find and
+        model each string's kinks as a session's lens is fitted (``pipeline.strings: separate-kinks``,
+        :func:`pipeline.harp_shape.fit_harp_shape` with ``kinks=True``) and the held-out shot's are to be removed
+        with its strings' bends (:func:`held_out_without_strings`); None: bends only.
     fit_kw : passed to :func:`pipeline.fit.fit_distortion`.
 
     Returns
@@ -297,7 +327,9 @@ def cross_validate_separated(
         if axis_groups is None
         else (tuple(axis_groups), None if axis_shifts is None else {g: tuple(v) for g, v in axis_shifts.items()})
     )
-    settings: Settings = (width, height, tuple(float(a) for a in turntable_deg), stop_factor, dict(fit_kw), groups)
+    settings: Settings = (
+        width, height, tuple(float(a) for a in turntable_deg), stop_factor, dict(fit_kw), groups, kink_t
+    )  # fmt: skip
     first = FALLBACK if FALLBACK in candidates else candidates[0]
     order = sorted((c for c in candidates if c != first), key=lambda c: -n_params(c, width, height))
     made = list(map_fn(_first_pass, [(c, lines, settings, c == first) for c in [first, *order]]))

@@ -196,6 +196,7 @@ def calibrate_shots(
     axis_shifts: Mapping[Any, Sequence[float]] | None = None,
     field: str = FIELD_NONE,
     field_turntable_deg: Sequence[float] | None = None,
+    kink_t: int | None = None,
 ) -> Calibration:
     """Calibrate the edges of ``shots`` (see the module docstring).
 
@@ -220,6 +221,9 @@ def calibrate_shots(
         (:func:`pipeline.select.select_field`; :data:`pipeline.fitspec.FIELD_CHOICES`); ``"none"``: never.
     field_turntable_deg : each shot's turntable angle for the field's folds, fitted with the strings' bends
         separated (None: the plain folds).
+    kink_t : the folds with the strings separated (``turntable_deg``, ``field_turntable_deg``) find and model each
+        string's kinks too, the points measured with this subsampling factor, as the lens a session stores is
+        fitted (``pipeline.strings: separate-kinks``; :func:`pipeline.select.select_field`); None: bends only.
     """
     if field not in FIELD_CHOICES:
         raise ValueError(f"unknown field choice {field!r}; known: {', '.join(FIELD_CHOICES)}")
@@ -231,7 +235,7 @@ def calibrate_shots(
         offered = DEFAULT_CANDIDATES if candidates is None else candidates
         selection = select_model(
             lines, width, height, offered, map_fn=map_fn, turntable_deg=angles, axis_groups=axis_groups,
-            axis_shifts=axis_shifts,
+            axis_shifts=axis_shifts, kink_t=None if angles is None else kink_t,
         )  # fmt: skip
         spec = selection.choice
     tables = [] if selection is None else [selection.table]
@@ -244,6 +248,7 @@ def calibrate_shots(
             turntable_deg=None if field_turntable_deg is None else [float(a) for a in field_turntable_deg],
             axis_groups=axis_groups, axis_shifts=axis_shifts,
             radial=None if radial is None else radial.candidate,
+            kink_t=None if field_turntable_deg is None else kink_t,
         )  # fmt: skip
         tables.append(on_field.table)
         spec = on_field.choice
@@ -718,7 +723,9 @@ def calibrate_focus(
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
     choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
     so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
-    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`).
+    removed (:mod:`pipeline.separated_cv`; not the default: :data:`pipeline.fitspec.CHOICE_FOLDS`); with
+    ``"separate-kinks"`` those folds, and the field stage's, find and model each string's kinks as well, as the
+    stored lens is fitted.
     ``axis_places``: each shot's linear-stage position of a two-axis capture (``capture.shift_positions_mm``);
     when the shots span two places or more, the joint fit, its folds and its bootstrap replicates find each
     place's turntable axis (:func:`axes_of`), as do an automatic choice's strings-separated folds, and the harp's
@@ -744,6 +751,7 @@ def calibrate_focus(
         turntable_deg=turntable_deg if separate and by_strings and known else None,
         field=getattr(pipeline, "field", FIELD_NONE),
         field_turntable_deg=turntable_deg if separate and known else None,
+        kink_t=kink_t if kinks else None,
         **_fit_arguments(axes),
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:

@@ -2,6 +2,8 @@
 whose strings are bent by known Legendre terms through an exact lens (truth: the generator's geometry,
 ``tests.pipeline.harp_points.turning_harp_point_sets``, independent of ``pipeline.harp_shape``)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -12,8 +14,8 @@ from pipeline.fitspec import FitSpec
 from pipeline.harp_shape import fit_harp_shape
 from pipeline.models import RadialModel
 from pipeline.select import SEPARATED_FOLDS, select_model
-from pipeline.separated_cv import held_out_without_strings
-from tests.pipeline.harp_points import turning_harp_point_sets
+from pipeline.separated_cv import cross_validate_separated, held_out_without_strings
+from tests.pipeline.harp_points import kinked_harp_point_sets, turning_harp_point_sets
 
 W, H = 1000, 750
 LENS = RadialModel.for_image(
@@ -123,3 +125,38 @@ def test_the_folds_with_the_strings_separated_take_the_shots_axis_groups():
     assert plain.table[1].cv_d > 1.5 * sel.table[1].cv_d
     with pytest.raises(ValueError, match="8 shots but 3 axis groups"):
         select_model(shots, W, H, cands, turntable_deg=turns, axis_groups=groups[:3])
+
+
+KINKS = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0), 8: (40.0, 0.3, 12.0)}
+"""string -> (a_k, h, lambda): cusps drawn on four strings (``tests/pipeline/test_harp_kinks.py``'s)."""
+
+
+def test_a_held_out_shot_is_judged_without_the_kinks_its_fold_found():
+    """A kink is fixed to the harp like the rest of a string's bend: the fold's kinks are removed from a held-out
+    shot at an angle never fitted, which is then as straight as the generator's noise (truth: the noise drawn, and
+    the same shot with the kinks left in)."""
+    noise = 0.008  # as tests/pipeline/test_harp_kinks.py
+    shots, _ = kinked_harp_point_sets(LENS, W, H, TURNS, 11, KINKS, axis=AXIS, seed=4, noise=noise)
+    plain = fit_distortion(shots, W, H, **SPEC.fit_arguments())
+    fit = fit_harp_shape(shots, TURNS, W, H, SPEC, plain=plain, kinks=True)
+    assert fit and len(fit.kinks) == len(KINKS), fit
+    (held,), _ = kinked_harp_point_sets(LENS, W, H, (45,), 11, KINKS, axis=AXIS, seed=5, noise=noise)
+    out = held_out_without_strings(fit, held, 45.0)
+    assert out.removed >= 18 and out.d < 1.2 * noise, out.d
+    left_in = held_out_without_strings(dataclasses.replace(fit, kinks=()), held, 45.0)
+    assert left_in.d > 2.0 * out.d, (left_in.d, out.d)
+    # only the kinked strings' edges (both of each) are judged differently
+    same = out.edge_ss == left_in.edge_ss
+    assert same.sum() == len(same) - 2 * len(KINKS)
+
+
+def test_folds_that_model_the_kinks_judge_the_lens_and_not_the_bumps():
+    """``kink_t``: every fold finds and models the strings' kinks and removes them from its held-out shot. On the
+    kinked harp the CV d falls to about the noise, from twice it when the folds model smooth bends only."""
+    noise = 0.008  # as tests/pipeline/test_harp_kinks.py
+    shots, _ = kinked_harp_point_sets(LENS, W, H, TURNS, 11, KINKS, axis=AXIS, seed=4, noise=noise)
+    (bends,) = cross_validate_separated(shots, TURNS, W, H, [SPEC])
+    (kinks,) = cross_validate_separated(shots, TURNS, W, H, [SPEC], kink_t=30)
+    assert kinks.cv_d < 1.2 * noise and bends.cv_d > 1.6 * kinks.cv_d, (kinks.cv_d, bends.cv_d)
+    sel = select_model(shots, W, H, [SPEC, FitSpec("radial", 2)], turntable_deg=TURNS, kink_t=30)
+    assert sel.table[0].cv_d == pytest.approx(kinks.cv_d, rel=1e-9)
