@@ -22,7 +22,8 @@ each with ``pipeline.field: auto`` (the default) and ``none`` (``--runs``: some 
 six angles 0..150 by 30 at each of two linear-stage positions instead (``benchmarks/two_place_sessions.py``'s
 two places, 240 px apart). The table gives each session's stored model and its
 field error against the exact lens (the unit at that focus with its field; ``pipeline.compare.compare_models``,
-modulo homography, 20 px grid) and its wall time (a whole process; two sessions run at once with ``--workers 2``);
+modulo homography, 20 px grid), for a field the stage took its lead over the model in the folds (paired standard
+errors, ``+x.x SE``; :data:`pipeline.select.FIELD_MARGIN_SE` is the bar) and its wall time (a whole process; two sessions run at once with ``--workers 2``);
 below it, the range of the stored corrections' linear scale over the image against the exact lens's
 (``pipeline.fit.correction_scale``).
 """

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -108,7 +109,8 @@ def run_session(
     """``harp session run`` of :func:`config` in a temporary directory: its wall time and exit code, and, when it
     stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
     (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
-    places of the turntable axis found, the residual field the session's field stage chose (None: none), and the
+    places of the turntable axis found, the residual field the session's field stage chose (None: none) and by how
+    many paired standard errors it was ahead of the model in the folds (``lead``, from the choice's reason), and the
     stored correction's linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``: a
     correction that shrinks the image straightens every edge, and the field error, modulo homography, does not see
     a uniform scale)."""
@@ -134,16 +136,20 @@ def run_session(
         out["grid"] = p.spec.field if p.spec is not None else None
         out["separated"] = bool(p.details.get("strings", {}).get("separated"))
         out["places"] = len((p.details.get("harp_health", {}).get("axes") or {}).get("places", [])) or 1
+        lead = re.search(r"ahead of \S+ by (-?[0-9.]+) paired standard errors", str(p.selection.get("reason", "")))
+        out["lead"] = float(lead.group(1)) if lead and out["grid"] is not None else None
         return out
 
 
 def cell(r: dict[str, Any]) -> str:
     """A table cell of :func:`run_session`'s result: the stored model, its field error and the wall time (and
-    whether the strings were not separated, how many places were found), or why the session failed."""
+    whether the strings were not separated, how many places were found, a field's lead in the folds), or why the
+    session failed."""
     if "error" in r:
         return f"failed (exit {r['code']}): {r['error']}"
     sep = "" if r["separated"] else ", strings not separated"
     sep += f", {r['places']} places found" if r["places"] > 1 else ""
+    sep += f", {r['lead']:+.1f} SE" if r.get("lead") is not None else ""
     return f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})"
 
 

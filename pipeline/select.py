@@ -402,6 +402,8 @@ def _select_separated(
             f"(a flexible model needs more than {flexible_margin_se:g})"
         )
         pick = best_radial
+    elif is_flexible(pick.candidate) and best_radial is not None:
+        passed = f"; ahead of {best_radial.candidate.label} by {margin:.1f} paired standard errors"
     removed, left = pick.strings_removed or (0, 0)
     reason = (
         f"{pick.candidate.label}: strings separated, turntable angles known: leave-one-shot-out CV d "

@@ -54,6 +54,7 @@ def test_with_the_turntable_angles_a_lens_with_a_field_gets_one_the_plain_folds_
     sel = select_field(shots, W, H, SPEC, grids=GRIDS, penalties=PENALTIES, turntable_deg=TURNS)
     assert sel.choice.field == (8, 6) and sel.folds == SEPARATED_FOLDS, sel.reason
     assert sel.reason.startswith("residual field: ") and "strings separated" in sel.reason
+    assert f"ahead of {SPEC.label} by " in sel.reason  # how clearly the field won, in paired standard errors
     err = _stored_error(sel, shots, lens)
     assert err[SPEC] > 0.012 and err[sel.choice] < 0.6 * err[SPEC], err
     plain = select_field(shots, W, H, SPEC, grids=GRIDS, penalties=PENALTIES)
