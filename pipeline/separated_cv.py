@@ -10,7 +10,8 @@ five times the field error of radial4+tangential+prism).
 
 When the turntable angles are known, each fold is fitted with every string's deviation separated
 (:func:`pipeline.harp_shape.fit_harp_shape` on the other shots), and the held-out shot is judged with
-the deviations that fold fitted removed (:func:`held_out_without_strings`): each held-out edge is given
+the deviations that fold fitted removed (:func:`held_out_without_strings`; with ``kink_t``, the kinks it found on
+each string too, as a session with ``pipeline.strings: separate-kinks`` fits its lens): each held-out edge is given
 to the string at its distance from the turntable axis in the fold's ideal image (the rule of
 :func:`pipeline.harp_shape.harp_frame`), and its corrected points are moved back by that string's
 deviation :math:`\delta_k(u)\,n` before its straightness is measured. What is left is the lens's misfit,
@@ -43,7 +44,7 @@ from pipeline.cross_validation import FALLBACK, STOP_FACTOR, CVRow, n_params
 from pipeline.edgeset import held_out_edges, tls
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_kinks import stretches, template
+from pipeline.harp_kinks import Kink, stretches, template
 from pipeline.harp_shape import HarpShapeFit, try_fit_harp_shape
 from pipeline.resample import DEFAULT_T
 
@@ -109,8 +110,8 @@ def held_out_without_strings(
     value beyond it (a polynomial is not extrapolated); the kinks the fold found on the string (``fit.kinks``,
     :func:`pipeline.harp_shape.fit_harp_shape` with ``kinks=True``) are removed with it, each its fitted peak
     times its template (:func:`pipeline.harp_kinks.template`, the points measured with subsampling factor
-    ``kink_t``) at the point's harp coordinate: a kink is fixed to the harp like the rest of the bend. Every edge's residual is its distance from its own
-    total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure. A shot of axis
+    ``kink_t``) at the point's harp coordinate: a kink is fixed to the harp like the rest of the bend. Every
+    edge's residual is its distance from its own total-least-squares line (:func:`pipeline.edgeset.tls`), as for the plain held-out figure. A shot of axis
     group ``group`` (the harp moved with its turntable between groups, ``fit_harp_shape(axis_groups=...)``)
     is placed in that group's frame; a group the fit did not see leaves every edge unmatched.
     """
@@ -123,7 +124,7 @@ def held_out_without_strings(
     d, n = frame.direction(float(turntable_deg)), frame.normal(float(turntable_deg))
     c = np.asarray(frame.centre)
     offsets = np.array([s.offset_px for s in fit.strings])
-    kinks_of: dict[int, list[Any]] = {}
+    kinks_of: dict[int, list[Kink]] = {}
     for kink in fit.kinks:
         kinks_of.setdefault(int(kink.string), []).append(kink)
     moved = []
@@ -223,12 +224,12 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     nn: list[NDArray[np.int64]] = []
     removed = left = 0
     so_far = 0.0
+    kinks = (kink_t is not None, kink_t or DEFAULT_T)  # try_fit_harp_shape's (kinks, kink_t)
     for h in range(len(lines)):
         train = [s for i, s in enumerate(lines) if i != h]
         train_angles = [a for i, a in enumerate(angles) if i != h]
         train_groups = None if labels is None else [g for i, g in enumerate(labels) if i != h]
         fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
-        kinks = (kink_t is not None, kink_t or DEFAULT_T)
         fold = (
             try_fit_harp_shape(train, train_angles, width, height, cand, fold_plain, *kinks, train_groups, shifts)
             if fold_plain
