@@ -108,6 +108,7 @@ from pipeline.fit_solver import solve
 from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FitSpec
 from pipeline.harp_kinks import KINK_Z, Candidate, Kink, end_weights, peak_per_area, scan_string, stretches, template
 from pipeline.models.base import DistortionModel
+from pipeline.models.radial_field import RadialFieldParametrisation
 from pipeline.orientations import distinct_orientations
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
@@ -1169,15 +1170,25 @@ def fit_harp_shape(
     slot = {k: s for s, k in enumerate(with_terms)}
     string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
     basis = legendre(u, degrees)
-    lens = make_parametrisation(width, height, spec)
+    one_axis = len(groups) < 2
+    ax, ay = model0.distort_points(np.asarray([frame.centre], np.float64))[0]
+    axis_d = (float(ax), float(ay))
+
+    def lens_part(w_center: float | None = None) -> Any:
+        # a field's part that turns with the harp about its one axis is a set of string bends: held off the field
+        part = make_parametrisation(width, height, spec, w_center=w_center)
+        if one_axis and isinstance(part, RadialFieldParametrisation) and all(np.isfinite(axis_d)):
+            part = part.with_axis_gauge(axis_d)
+        return part
+
+    lens = lens_part()
     gauge = None
-    if len(groups) < 2:
+    if one_axis:
         gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
 
     def joint_param(columns: Floats | None = None, held: bool = False) -> _WithStrings:
         # held: the distortion centre under the centre prior (the continuation of _solve_joint)
-        w = max(spec.w_center, CENTER_PRIOR_WEIGHT) if held else None
-        part = make_parametrisation(width, height, spec, w_center=w) if held else lens
+        part = lens_part(max(spec.w_center, CENTER_PRIOR_WEIGHT)) if held else lens
         return _WithStrings(part, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)
 
     param = joint_param()

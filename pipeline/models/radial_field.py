@@ -22,6 +22,7 @@ References
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -222,6 +223,39 @@ def roughness_operator(shape: tuple[int, int], hx: float, hy: float) -> np.ndarr
     return np.asarray(rows)
 
 
+def axis_basis(
+    centre: tuple[float, float], bounds: tuple[float, float, float, float], shape: tuple[int, int]
+) -> np.ndarray:
+    r"""Orthonormal columns ``(2 ny nx, m)`` spanning the coefficients ``[c^x, c^y]`` of the fields that turn with a
+    rotation about ``centre`` (pixels, the field's own coordinates): :math:`g(r)\,e_r + h(r)\,e_t`, :math:`r` the
+    distance from ``centre``, :math:`e_r, e_t` the radial and tangential unit vectors, :math:`g, h` piecewise linear
+    in :math:`r` with a node every knot spacing (the smaller of the two). Each control point stands at its basis
+    function's peak (:func:`bspline_weights`: control point ``j`` at ``lo + (j - 1) h``).
+
+    Such a field looks the same in the frame of a harp turning about ``centre`` at every turntable angle: to the
+    joint fit of a lens and its strings' bends (:mod:`pipeline.harp_shape`) it is a set of bends, one per string
+    at its distance from the axis, and no shot of that one axis can tell the two apart."""
+    ny, nx = shape
+    x0, y0, x1, y1 = bounds
+    hx, hy = (x1 - x0) / (nx - 3), (y1 - y0) / (ny - 3)
+    jj, ii = np.mgrid[0:ny, 0:nx].astype(np.float64)
+    px = (x0 + (ii - 1.0) * hx).ravel() - float(centre[0])
+    py = (y0 + (jj - 1.0) * hy).ravel() - float(centre[1])
+    r = np.hypot(px, py)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        er = np.where(r[:, None] > 1e-9, np.stack([px, py], axis=1) / r[:, None], 0.0)
+    et = np.stack([-er[:, 1], er[:, 0]], axis=1)
+    step = min(hx, hy)
+    nodes = np.arange(0.0, float(r.max()) + step, step)
+    hat = np.clip(1.0 - np.abs(r[:, None] - nodes[None, :]) / step, 0.0, None)  # (ny nx, nodes)
+    cols = [np.concatenate([hat * e[:, :1], hat * e[:, 1:]]) for e in (er, et)]
+    a = np.concatenate(cols, axis=1)
+    a = a[:, np.linalg.norm(a, axis=0) > 0]
+    q, rr = np.linalg.qr(a)
+    keep = np.abs(np.diag(rr)) > 1e-9 * max(float(np.abs(np.diag(rr)).max()), 1e-300)
+    return np.asarray(q[:, keep])
+
+
 def affine_basis(shape: tuple[int, int]) -> np.ndarray:
     """Orthonormal columns ``(ny * nx, 3)`` spanning the coefficients of the affine fields (1, i, j)."""
     ny, nx = shape
@@ -277,6 +311,16 @@ class RadialFieldParametrisation:
         hy = (y1 - y0) / (self.shape[0] - 3) / s
         self._rough = roughness_operator(self.shape, hx, hy)
         self._affine = affine_basis(self.shape).T
+        self._axis = np.zeros((0, 2 * self.n_field))  # with_axis_gauge's rows on [c^x, c^y]
+
+    def with_axis_gauge(self, centre: tuple[float, float]) -> RadialFieldParametrisation:
+        """This parametrisation with the field's part that turns with a rotation about ``centre`` (distorted
+        pixels; :func:`axis_basis`) held at zero as well, at the affine gauge's weight: for a joint fit of the lens
+        with the bends of the strings of a harp turning about that one axis, which such a part imitates exactly
+        (:mod:`pipeline.harp_shape`); the strings' terms take it instead."""
+        out = copy.copy(self)
+        out._axis = axis_basis(centre, self.bounds, self.shape).T
+        return out
 
     # the radial part's settings that pipeline.fit reads
     @property
@@ -358,7 +402,7 @@ class RadialFieldParametrisation:
         nr, nf = self.n_radial, self.n_field
         blocks = [self.penalty * w * self._rough, self.gauge * w * self._affine]
         rows_per = sum(b.shape[0] for b in blocks)
-        jac = np.zeros((len(g_r) + 2 * rows_per, self.n))
+        jac = np.zeros((len(g_r) + 2 * rows_per + len(self._axis), self.n))
         jac[: len(g_r), :nr] = j_r
         r0 = len(g_r)
         for comp in range(2):
@@ -366,5 +410,6 @@ class RadialFieldParametrisation:
             for b in blocks:
                 jac[r0 : r0 + b.shape[0], c0 : c0 + nf] = b
                 r0 += b.shape[0]
+        jac[r0:, nr:] = self.gauge * w * self._axis
         g = np.concatenate([g_r, jac[len(g_r) :] @ th])
         return g, jac
