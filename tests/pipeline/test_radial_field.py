@@ -246,3 +246,48 @@ def test_every_other_format_states_its_error_on_a_field_model(name):
 
 def _maps_of(model):
     return model.map_x, model.map_y
+
+
+def test_the_axis_gauge_spans_fields_that_turn_with_a_harp_about_its_axis():
+    """``axis_basis``: a smooth field that turns with a rotation about the axis (radial and tangential parts that
+    depend on the distance from it only; truth from that geometry) has its control-point coefficients in the span,
+    and its B-spline field does turn so (nearly the same polar components at every angle about the axis); a field that
+    does not turn so (a uniform shear) is mostly outside the span. The gauge's rows hold the spanned part of a fit's
+    field at zero."""
+    from pipeline.models.radial_field import axis_basis, field_matrix
+
+    w, h, shape, axis = 1000, 750, (9, 12), (430.0, 402.0)
+    bounds = field_bounds(w, h)
+    q = axis_basis(axis, bounds, shape)
+    ny, nx = shape
+    nf = ny * nx
+    assert q.shape[0] == 2 * nf and np.allclose(q.T @ q, np.eye(q.shape[1]), atol=1e-9)
+
+    def g(r):
+        return 0.1 * np.sin(r / 200.0)
+
+    def hh(r):
+        return 0.05 * np.cos(r / 300.0)
+
+    x0, y0, x1, y1 = bounds
+    jj, ii = np.mgrid[0:ny, 0:nx].astype(float)
+    cp = np.stack([x0 + (ii - 1) * (x1 - x0) / (nx - 3), y0 + (jj - 1) * (y1 - y0) / (ny - 3)], axis=-1).reshape(-1, 2)
+    rel = cp - np.array(axis)
+    r = np.hypot(*rel.T)
+    e_r = rel / r[:, None]
+    field = g(r)[:, None] * e_r + hh(r)[:, None] * np.stack([-e_r[:, 1], e_r[:, 0]], axis=1)
+    c = np.concatenate([field[:, 0], field[:, 1]])
+    assert np.linalg.norm(c - q @ (q.T @ c)) < 0.05 * np.linalg.norm(c)
+    phi = np.radians(np.arange(0.0, 360.0, 7.5))
+    for radius in (150.0, 250.0, 350.0):
+        pts = np.array(axis) + radius * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        b = field_matrix(pts, bounds, shape).T
+        u = np.stack([b @ c[:nf], b @ c[nf:]], axis=1)
+        d = (pts - np.array(axis)) / radius
+        radial = np.einsum("ij,ij->i", u, d)
+        tangential = u[:, 1] * d[:, 0] - u[:, 0] * d[:, 1]
+        for comp, truth in ((radial, g(radius)), (tangential, hh(radius))):
+            assert np.ptp(comp) < 0.15 * abs(comp.mean()), (radius, np.ptp(comp), comp.mean())  # turns with the harp
+            assert comp.mean() == pytest.approx(truth, rel=0.25)  # the spline smooths its control values
+    shear = np.concatenate([cp[:, 1] / 1000.0, np.zeros(nf)])  # u_x = y: no turn about any axis
+    assert np.linalg.norm(q.T @ shear) < 0.7 * np.linalg.norm(shear)
