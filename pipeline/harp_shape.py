@@ -53,6 +53,14 @@ What can and cannot be separated
   part of what two axes see (about half of it for the bends of ``tests/pipeline/test_harp_shape.py``'s
   two-axis case with axes 170 px from the centre), but a ten times weaker one was worse on realistic
   renders (``benchmarks/axis_positions.py --realistic``, ``benchmarks/RESULTS-strings.md``).
+* A residual field (``FitSpec.field``) is fixed on the sensor, but its part that turns with a rotation about the
+  turntable axis (radial and tangential displacements that depend on the distance from the axis only) looks the
+  same in the harp's frame at every angle: it is a set of string deviations, one per string at its distance
+  from the axis, and shots about one axis cannot tell the two apart. With one axis that part is held off the
+  field (:meth:`pipeline.models.radial_field.RadialFieldParametrisation.with_axis_gauge`) and the strings take
+  it; a shrink about the axis is such a part. In whole simulated sessions of twelve shots it had let a field
+  take the strings' bends on lenses without one and win the folds by 3.4 and 5.3 paired standard errors
+  (``benchmarks/RESULTS-residual-field.md``).
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
 * The straightness of corrected edges is measured in corrected pixels, so a correction that shrinks

@@ -242,11 +242,14 @@ def test_two_groups_of_three_angles_cannot_place_their_axes_without_shifts_and_s
     assert not placed and "axis group 'R': 3 turntable angles" in placed.reason
 
 
-def test_a_joint_fit_that_collapses_the_image_is_made_with_the_centre_held():
-    """With a weakly penalised field the free distortion centre can slide far out while the correction shrinks
+def test_a_joint_fit_with_a_weak_field_keeps_the_images_scale():
+    """With a weakly penalised field the free distortion centre could slide far out while the correction shrank
     the image (straighter in corrected pixels): on these shots (a lens with a 0.03 px field, strings bowed a few
-    hundredths, noisy edges) the joint fit shrank the image to 0.16 of its size, 0.32 px off the lens. It is now
-    made with the centre held, and said so. Truth: the exact lens map."""
+    hundredths, noisy edges, one turntable axis) the joint fit shrank the image to 0.16 of its size, 0.32 px off
+    the lens, and was made again with the centre held. The field's part that turns with the harp about its axis
+    is now held off the field (``axis_basis``; a shrink about the axis is such a part), and the fit keeps the
+    lens's scale by itself. Truth: the exact lens map. (The re-fit with the centre held stays for what the gauge
+    does not cover, e.g. two axes; ``tests/pipeline/test_fit.py`` tests the collapse's measure.)"""
     lens = lens_population(3, 1, W, H, field=True, field_rms_px=(0.03, 0.03))[0].model
     bends = np.random.default_rng(3).normal(0.0, 0.03, (13, 3))
     turns = (0, 30, 60, 90, 150)
@@ -258,4 +261,4 @@ def test_a_joint_fit_that_collapses_the_image_is_made_with_the_centre_held():
     assert abs(correction_scale(fit.model, W, H) - correction_scale(lens, W, H)) < 0.01
     err_plain = compare_models(plain.model, lens, W, H, step=25).rms
     assert compare_models(fit.model, lens, W, H, step=25).rms < err_plain
-    assert any("centre held" in w for w in fit.warnings), fit.warnings
+    assert not any("centre held" in w for w in fit.warnings), fit.warnings
