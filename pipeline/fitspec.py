@@ -91,8 +91,8 @@ FIELD_CHOICES: tuple[str, ...] = (FIELD_NONE, FIELD_AUTO)
 """Whether a session adds a residual field (:class:`~pipeline.models.radial_field.RadialFieldParametrisation`) to
 the radial model it fits: ``auto`` (the default) when a field holds on unseen orientations
 (:func:`pipeline.select.select_field`: the model, chosen or given, against it with each field of
-:func:`pipeline.select.field_candidates`, each fold fitted with the strings' bends separated when the turntable
-angles are known; :data:`pipeline.select.FIELD_MARGIN_SE`), ``none`` never. A field needs
+:func:`pipeline.select.field_candidates`, each fold fitted with the strings' bends, and kinks as the session's,
+separated when the turntable angles are known; :data:`pipeline.select.FIELD_MARGIN_SE`), ``none`` never. A field needs
 :data:`pipeline.orientations.REQUIRED_ORIENTATIONS_POLY` distinct orientations; with fewer the model is kept and the
 reason says so."""
 

@@ -542,10 +542,12 @@ without; the folds with the strings' bends and kinks separated; ``benchmarks/RES
 field the folds took led the model by 1.9-8.5 paired standard errors on the nine lenses with a field where one was
 taken (each stored lens better than without the stage, e.g. 0.0053 -> 0.0013 px), and on the lenses without a
 field by 0.0-0.4 on five (four of them worse, e.g. 0.0008 -> 0.0020 px) and 1.6, 3.4 and 5.3 on three (all worse,
-0.0071 -> 0.0123 px the most). With this bar those five keep the model; the three do not (not mended: the part of
-the strings' bends that is the same at every turntable angle, symmetric about the axis, is what a field can take
-and no fold of one axis can tell). With no bar (before, 2026-12-06) all eight took their field; with two, the
-1.9 SE field (0.0053 -> 0.0013 px) is lost. On twelve shots of ``benchmarks/lens_limits.py``'s population
+0.0071 -> 0.0123 px the most). With this bar those five keep the model; of the three, the two that led by 3.4 and
+5.3 take no field since the field's part that turns with the harp about its axis is held off it
+(:meth:`pipeline.models.radial_field.RadialFieldParametrisation.with_axis_gauge`), and one (1.4 SE now, 0.0071 ->
+0.0122 px) still takes its field: with all three changes 9 of 10 lenses without a field store what they store
+without the stage, and the lenses with a field keep every gain. With no bar (before, 2026-12-06) all eight took
+their field; with two, the 1.9 SE field (0.0053 -> 0.0013 px) is lost. On twelve shots of ``benchmarks/lens_limits.py``'s population
 (``benchmarks/field_leads.py``: six seeds with a field, seven without) the fields that lowered the stored lens's
 field error led by 1.3-7.7 paired standard errors, and the one taken without a field (0.0028 -> 0.0032 px) by 0.1.
 The bar was set on these
