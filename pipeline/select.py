@@ -548,9 +548,9 @@ field by 0.0-0.4 on five (four of them worse, e.g. 0.0008 -> 0.0020 px) and 1.6,
 0.0122 px) still takes its field: with all three changes 9 of 10 lenses without a field store what they store
 without the stage, and the lenses with a field keep every gain. With no bar (before, 2026-12-06) all eight took
 their field; with two, the 1.9 SE field (0.0053 -> 0.0013 px) is lost. On twelve shots of ``benchmarks/lens_limits.py``'s population
-(``benchmarks/field_leads.py``: six seeds with a field, seven without) the fields that lowered the stored lens's
-field error led by 1.3-7.7 paired standard errors, and the one taken without a field (0.0028 -> 0.0032 px) by 0.1.
-The bar was set on these
+(``benchmarks/field_leads.py --seeds 2,6,7``) the fields that lowered the stored lens's field error (0.0168 ->
+0.0037, 0.0044 -> 0.0029, 0.0084 -> 0.0007 px) led by 6.0, 1.4 and 3.9 paired standard errors, and without a field
+the lowest CV d was the model's, or a field's 0.2 SE ahead that stores the same 0.0028 px. The bar was set on these
 same sessions, so they do not check it. The six-shot emulation (``benchmarks/choice_realistic.py``, folds without
 the kinks, before this bar) put the cost of one standard error at 40 -> 35 of 60 lenses with a field at or below
 0.005 px (without one: 50 -> 48 of 60); not measured again with the kinks modelled. The plain folds keep
