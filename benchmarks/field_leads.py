@@ -34,12 +34,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from lens_limits import seed_lens
+from lens_limits import field, seed_lens
 
-from pipeline.compare import compare_models
 from pipeline.cross_validation import paired_difference
-from pipeline.fit import fit_distortion
-from pipeline.harp_shape import fit_harp_shape
 from pipeline.measure import measure_image
 from pipeline.realism import render_shots
 from pipeline.resample import DEFAULT_T
@@ -48,16 +45,6 @@ from pipeline.select import is_flexible, lowest_radial, select_field, select_mod
 W, H = 1000, 750
 ANGLES = tuple(float(a) for a in range(0, 180, 15))
 RUNS = ("without", "with a field")
-
-
-def stored_error(lines: list[list], lens: Any, spec: Any, plain: Any = None) -> float:
-    """Field error of ``spec`` fitted as a session stores it (strings' bends and kinks separated)."""
-    if plain is None:
-        plain = fit_distortion(lines, W, H, **spec.fit_arguments())
-    if not plain:
-        return float("nan")
-    joint = fit_harp_shape(lines, list(ANGLES), W, H, spec, plain=plain, kinks=True)
-    return float(compare_models(joint.model, lens, W, H, step=20).rms) if joint else float("nan")
 
 
 def job(args: tuple[int, str, bool, Path | None]) -> dict[str, Any]:
@@ -94,11 +81,15 @@ def job(args: tuple[int, str, bool, Path | None]) -> dict[str, Any]:
                 (r.candidate.label, r.cv_d, delta / se if se > 0 else np.nan, fold.mean() / fold_se, int((fold > 0).sum()), len(fold))
             )  # fmt: skip
         full = {r.candidate: r.full_fit for r in stage.table if r.full_fit is not None}
-        out["model_err"] = stored_error(lines, lens, model.candidate, full.get(model.candidate))
+        out["model_err"] = field(
+            lines, lens, W, H, model.candidate, plain=full.get(model.candidate), kinks=True, angles=ANGLES
+        )
         best = min(rows, key=lambda r: r.cv_d)
         out["best"] = best.candidate.label
         if best is not model:
-            out["best_err"] = stored_error(lines, lens, best.candidate, full.get(best.candidate))
+            out["best_err"] = field(
+                lines, lens, W, H, best.candidate, plain=full.get(best.candidate), kinks=True, angles=ANGLES
+            )
     out["t"] = time.perf_counter() - t0
     return out
 

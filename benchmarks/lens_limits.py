@@ -81,7 +81,7 @@ import dataclasses
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -148,16 +148,18 @@ def field(
     joint: bool = True,
     plain: FitResult | FitFailure | None = None,
     kinks: bool = False,
+    angles: Sequence[float] = FITTED,
 ) -> float:
     """Field error of ``spec`` fitted on ``lines`` (with the strings separated when ``joint``, and their kinks
-    modelled as well with ``kinks``); ``plain``: the fit of ``spec`` on ``lines`` alone when already made."""
+    modelled as well with ``kinks``; the shots at turntable ``angles``); ``plain``: the fit of ``spec`` on ``lines``
+    alone when already made."""
     if plain is None:
         plain = fit_distortion(lines, w, h, **spec.fit_arguments())
     if not plain:
         return float("nan")
     model = plain.model
     if joint:
-        sep = fit_harp_shape(lines, FITTED, w, h, spec, plain=plain, kinks=kinks)
+        sep = fit_harp_shape(lines, list(angles), w, h, spec, plain=plain, kinks=kinks)
         if not sep:
             return float("nan")
         model = sep.model

@@ -130,7 +130,8 @@ def held_out_without_strings(
     moved = []
     removed = without = unmatched = 0
     for p in pts:
-        rel = fit.plain.model.undistort_points(p) - c
+        ideal = fit.plain.model.undistort_points(p)  # the fit's harp coordinates are of these
+        rel = ideal - c
         q = rel @ n
         corrected = fit.model.undistort_points(p)
         qe = float(np.nanmedian(q)) if np.any(np.isfinite(q)) else float("nan")
@@ -146,8 +147,7 @@ def held_out_without_strings(
             dev = st.deviation(u)
             mine = kinks_of.get(int(st.index), [])
             if mine:
-                one = np.array([0, len(p)], dtype=np.intp)
-                stretch = stretches(np.asarray(p, np.float64), rel + c, one[:1], one[1:])
+                stretch = stretches(np.asarray(p, np.float64), ideal, np.array([0]), np.array([len(p)]))
                 for kink in mine:
                     dev = dev + kink.peak_px * template(a_px - kink.at_px, stretch, kink_t, kink.length_px)
             corrected = corrected - dev[:, None] * n

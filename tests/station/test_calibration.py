@@ -161,16 +161,11 @@ def test_an_automatic_choice_with_turntable_angles_can_separate_the_strings():
     assert PipelineConfig().choice_folds == CHOICE_FOLDS_PLAIN and set(CHOICE_FOLDS) == {"plain", "strings-separated"}
 
 
-def test_a_session_can_model_the_strings_kinks():
-    """``pipeline.strings: separate-kinks``: the stored lens is fitted with each string's kinks found and modelled
-    (``pipeline.harp_kinks``), the record lists them where they were drawn, and the lens is closer to the exact
-    lens than with the bends alone separated. Truth: the drawn cusps and the exact lens map."""
-    from pipeline.compare import compare_models
+def _kinked_harp():
+    """A turning harp whose strings carry three cusps drawn at known places, through an exact radial lens
+    (``tests.pipeline.harp_points.kinked_harp_point_sets``): ``(w, h, lens, turns, spec, drawn, shots)``."""
     from pipeline.fitspec import FitSpec
-    from pipeline.harp_shape import fit_harp_shape
     from pipeline.models import RadialModel
-    from station.calibration import calibrate_focus
-    from station.config import PipelineConfig
     from tests.pipeline.harp_points import kinked_harp_point_sets
 
     w, h = 1000, 750
@@ -179,6 +174,19 @@ def test_a_session_can_model_the_strings_kinks():
     spec = FitSpec("radial", 4, True, True)
     drawn = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0)}
     shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, drawn, axis=(497, 378), seed=4, noise=0.008)
+    return w, h, lens, turns, spec, drawn, shots
+
+
+def test_a_session_can_model_the_strings_kinks():
+    """``pipeline.strings: separate-kinks``: the stored lens is fitted with each string's kinks found and modelled
+    (``pipeline.harp_kinks``), the record lists them where they were drawn, and the lens is closer to the exact
+    lens than with the bends alone separated. Truth: the drawn cusps and the exact lens map."""
+    from pipeline.compare import compare_models
+    from pipeline.harp_shape import fit_harp_shape
+    from station.calibration import calibrate_focus
+    from station.config import PipelineConfig
+
+    w, h, lens, turns, spec, drawn, shots = _kinked_harp()
     kinked = calibrate_focus(
         shots, w, h, PipelineConfig(strings="separate-kinks", field="none"), 0, spec, turntable_deg=turns
     )
@@ -197,18 +205,10 @@ def test_a_sessions_field_stage_judges_its_folds_with_the_kinks_modelled():
     stored lens is fitted, and remove them from the held-out shot (``kink_t``): the model's CV d there is about the
     generator's noise, not the bends-only folds' (in which a field took the kinks' bumps near the turntable axis,
     ``benchmarks/RESULTS-residual-field.md``). Truth: the noise drawn."""
-    from pipeline.fitspec import FitSpec
-    from pipeline.models import RadialModel
     from station.calibration import calibrate_focus
     from station.config import PipelineConfig
-    from tests.pipeline.harp_points import kinked_harp_point_sets
 
-    w, h = 1000, 750
-    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4))
-    turns = (0, 30, 60, 90, 120, 150)
-    spec = FitSpec("radial", 4, True, True)
-    drawn = {2: (120.0, 0.3, 10.0), 4: (-200.0, 0.3, 10.0), 6: (-80.0, -0.25, 8.0)}
-    shots, _ = kinked_harp_point_sets(lens, w, h, turns, 11, drawn, axis=(497, 378), seed=4, noise=0.008)
+    w, h, _, turns, spec, _, shots = _kinked_harp()
     cfg = PipelineConfig(strings="separate-kinks", field="auto")
     cal = calibrate_focus(shots, w, h, cfg, 0, spec, turntable_deg=turns)
     assert cal.failure is None and "residual field: " in cal.selection.reason
