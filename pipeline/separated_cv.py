@@ -176,6 +176,11 @@ Settings = tuple[int, int, tuple[float, ...], float | None, dict[str, Any], Grou
 points were measured with when the folds find and model the strings' kinks, None when they do not."""
 
 
+def _kink_arguments(kink_t: int | None) -> tuple[bool, int]:
+    """:func:`pipeline.harp_shape.try_fit_harp_shape`'s ``(kinks, kink_t)`` for a :data:`Settings` ``kink_t``."""
+    return kink_t is not None, kink_t or DEFAULT_T
+
+
 def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> tuple[Any, Any]:
     """A candidate's fit on all shots, alone and with the strings separated (either may be a failure)."""
     width, height, angles, _, fit_kw, groups, kink_t = settings
@@ -184,7 +189,7 @@ def _full_fits(cand: FitSpec, lines: list[list[Floats]], settings: Settings) -> 
         return plain, plain
     labels, shifts = groups or (None, None)
     return plain, try_fit_harp_shape(
-        lines, angles, width, height, cand, plain, kink_t is not None, kink_t or DEFAULT_T, labels, shifts
+        lines, angles, width, height, cand, plain, *_kink_arguments(kink_t), labels, shifts
     )
 
 
@@ -224,7 +229,7 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     nn: list[NDArray[np.int64]] = []
     removed = left = 0
     so_far = 0.0
-    kinks = (kink_t is not None, kink_t or DEFAULT_T)  # try_fit_harp_shape's (kinks, kink_t)
+    kinks = _kink_arguments(kink_t)
     for h in range(len(lines)):
         train = [s for i, s in enumerate(lines) if i != h]
         train_angles = [a for i, a in enumerate(angles) if i != h]
@@ -237,9 +242,7 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
         )
         if not fold:
             return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
-        held = held_out_without_strings(
-            fold, lines[h], angles[h], None if labels is None else labels[h], kink_t or DEFAULT_T
-        )
+        held = held_out_without_strings(fold, lines[h], angles[h], None if labels is None else labels[h], kinks[1])
         removed += held.removed
         left += held.without_terms + held.unmatched
         res.append(held.residuals)

@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 
 from pipeline.compare import compare_models
+from pipeline.edgeset import FitResult
 from pipeline.fit import correction_scale, fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import HarpMount, draw_harp
 from pipeline.harp_shape import BEND_LIMIT_PX, STRING_RIDGE, fit_harp_shape, group_frames, harp_frame, legendre
 from pipeline.lens_population import lens_population
 from pipeline.models import RadialModel
+from pipeline.models.base import DistortionModel
+from pipeline.models.radial_field import RadialFieldParametrisation
 from tests.pipeline.harp_points import drawn_harp_point_sets, kinked_harp_point_sets, turning_harp_point_sets
 
 W, H = 1000, 750
@@ -242,23 +245,45 @@ def test_two_groups_of_three_angles_cannot_place_their_axes_without_shifts_and_s
     assert not placed and "axis group 'R': 3 turntable angles" in placed.reason
 
 
-def test_a_joint_fit_with_a_weak_field_keeps_the_images_scale():
-    """With a weakly penalised field the free distortion centre could slide far out while the correction shrank
-    the image (straighter in corrected pixels): on these shots (a lens with a 0.03 px field, strings bowed a few
-    hundredths, noisy edges, one turntable axis) the joint fit shrank the image to 0.16 of its size, 0.32 px off
-    the lens, and was made again with the centre held. The field's part that turns with the harp about its axis
-    is now held off the field (``axis_basis``; a shrink about the axis is such a part), and the fit keeps the
-    lens's scale by itself. Truth: the exact lens map. (The re-fit with the centre held stays for what the gauge
-    does not cover, e.g. two axes; ``tests/pipeline/test_fit.py`` tests the collapse's measure.)"""
+def _weak_field_shots() -> tuple[DistortionModel, list[list[np.ndarray]], tuple[int, ...], FitSpec, FitResult]:
+    """A lens with a 0.03 px field, strings bowed a few hundredths, noisy edges, one turntable axis: the shots,
+    angles, a spec with a weakly penalised field and its plain fit, on which the joint fit without the axis gauge
+    shrinks the image."""
     lens = lens_population(3, 1, W, H, field=True, field_rms_px=(0.03, 0.03))[0].model
     bends = np.random.default_rng(3).normal(0.0, 0.03, (13, 3))
     turns = (0, 30, 60, 90, 150)
     shots, _ = turning_harp_point_sets(lens, W, H, turns, bends, axis=(497, 378), step=60.0, seed=3, noise=0.03)
     spec = FitSpec("radial", 4, True, True, field=(8, 6), field_penalty=1e-4)
     plain = fit_distortion(shots, W, H, **spec.fit_arguments())
+    assert plain, plain
+    return lens, shots, turns, spec, plain
+
+
+def test_a_joint_fit_with_a_weak_field_keeps_the_images_scale():
+    """With a weakly penalised field the free distortion centre could slide far out while the correction shrank
+    the image (straighter in corrected pixels): on these shots the joint fit shrank the image to 0.16 of its size,
+    0.32 px off the lens, and was made again with the centre held. The field's part that turns with the harp about
+    its axis is now held off the field (``axis_basis``; a shrink about the axis is such a part), and the fit keeps
+    the lens's scale by itself. Truth: the exact lens map. (``tests/pipeline/test_fit.py`` tests the collapse's
+    measure.)"""
+    lens, shots, turns, spec, plain = _weak_field_shots()
     fit = fit_harp_shape(shots, turns, W, H, spec, plain=plain)
     assert fit, fit
     assert abs(correction_scale(fit.model, W, H) - correction_scale(lens, W, H)) < 0.01
     err_plain = compare_models(plain.model, lens, W, H, step=25).rms
     assert compare_models(fit.model, lens, W, H, step=25).rms < err_plain
     assert not any("centre held" in w for w in fit.warnings), fit.warnings
+
+
+def test_a_joint_fit_that_collapses_the_image_is_made_again_with_the_centre_held(monkeypatch):
+    """What the axis gauge does not cover (two axes, a collapse of another kind) falls back on the re-fit with
+    the centre held (``_solve_joint``). Without the gauge these shots collapse the free-centre fit; the fit kept
+    is the held one, says so, keeps the lens's scale and is nearer the exact lens map than the plain fit."""
+    lens, shots, turns, spec, plain = _weak_field_shots()
+    monkeypatch.setattr(RadialFieldParametrisation, "with_axis_gauge", lambda self, centre: self)
+    fit = fit_harp_shape(shots, turns, W, H, spec, plain=plain)
+    assert fit, fit
+    assert any("centre held" in w for w in fit.warnings), fit.warnings
+    assert abs(correction_scale(fit.model, W, H) - correction_scale(lens, W, H)) < 0.01
+    err_plain = compare_models(plain.model, lens, W, H, step=25).rms
+    assert compare_models(fit.model, lens, W, H, step=25).rms < err_plain
