@@ -25,6 +25,7 @@ homography, 20 px grid), and each session's wall time (a whole process, the mach
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import re
@@ -110,7 +111,8 @@ def run_session(
     stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
     (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
     places of the turntable axis found, the residual field the session's field stage chose (None: none) and by how
-    many paired standard errors it was ahead of the model in the folds (``lead``, from the choice's reason), and the
+    many paired standard errors it was ahead of the model in the folds (``lead``, from the choice's reason), the
+    names of the QA checks its focus setting failed (``failed``), and the
     stored correction's linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``: a
     correction that shrinks the image straightens every edge, and the field error, modulo homography, does not see
     a uniform scale)."""
@@ -129,6 +131,9 @@ def run_session(
             return out
         with ProfileStore(root / "profiles.sqlite") as st:
             (p,) = st.profiles()
+        (results,) = root.glob("sessions/*/results.json")
+        checks = json.loads(results.read_text())["focus"][0].get("checks", [])
+        out["failed"] = [c["name"] for c in checks if not c.get("passed", True)]
         truth = with_field(lens_for_focus(FOCUS, w, h, lens_unit(serial, 1.0)), lens_field(serial, lens_field_px), w, h)
         out["field"] = float(compare_models(p.model, truth, w, h, step=20).rms)
         out["scale"] = correction_scale(p.model, w, h) / correction_scale(truth, w, h)
@@ -143,13 +148,14 @@ def run_session(
 
 def cell(r: dict[str, Any]) -> str:
     """A table cell of :func:`run_session`'s result: the stored model, its field error and the wall time (and
-    whether the strings were not separated, how many places were found, a field's lead in the folds), or why the
-    session failed."""
+    whether the strings were not separated, how many places were found, a field's lead in the folds, the QA
+    checks the session failed), or why the session failed."""
     if "error" in r:
         return f"failed (exit {r['code']}): {r['error']}"
     sep = "" if r["separated"] else ", strings not separated"
     sep += f", {r['places']} places found" if r["places"] > 1 else ""
     sep += f", {r['lead']:+.1f} SE" if r.get("lead") is not None else ""
+    sep += f", QA fails {'+'.join(r['failed'])}" if r.get("failed") else ""
     return f"{r['model']} {r['field']:.4f}{sep} ({r['wall']:.0f})"
 
 
