@@ -33,6 +33,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -106,8 +107,10 @@ def run_session(
     serial: str,
     lens_field_px: float = 0.0,
     defaults: bool = False,
+    harp: Sequence[str] = (str(REPO / ".venv" / "bin" / "harp"),),
 ) -> dict[str, Any]:
-    """``harp session run`` of :func:`config` in a temporary directory: its wall time and exit code, and, when it
+    """``harp session run`` of :func:`config` in a temporary directory (``harp``: the command that is ``harp``,
+    e.g. one that changes the simulator first, ``benchmarks/session_ablation.py``): its wall time and exit code, and, when it
     stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
     (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
     places of the turntable axis found, the residual field the session's field stage chose (None: none) and by how
@@ -121,7 +124,7 @@ def run_session(
         cfg = config(root, seed, capture, pipeline, w, h, serial=serial, lens_field_px=lens_field_px, defaults=defaults)
         t0 = time.perf_counter()
         done = subprocess.run(
-            [str(REPO / ".venv" / "bin" / "harp"), "session", "run", str(cfg), "--quiet", "--no-report"],
+            [*harp, "session", "run", str(cfg), "--quiet", "--no-report"],
             capture_output=True, text=True, cwd=root, start_new_session=True, check=False,
         )  # fmt: skip
         wall = time.perf_counter() - t0
