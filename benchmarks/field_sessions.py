@@ -24,9 +24,9 @@ two places, 240 px apart). The table gives each session's stored model and its
 field error against the exact lens (the unit at that focus with its field; ``pipeline.compare.compare_models``,
 modulo homography, 20 px grid), for a field the stage took its lead over the model in the folds (paired standard
 errors, ``+x.x SE``; :data:`pipeline.select.FIELD_MARGIN_SE` is the bar), the QA checks the session failed
-(``QA fails string_bend_max``: the harp's self-check found a string bent beyond its limit) and its wall time (a whole process; two sessions run at once with ``--workers 2``);
-below it, the range of the stored corrections' linear scale over the image against the exact lens's
-(``pipeline.fit.correction_scale``).
+(``QA fails string_bend_max``: the harp's self-check found a string bent beyond its limit) and its wall time (a
+whole process; two sessions run at once with ``--workers 2``); below it, the range of the stored corrections'
+linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``).
 """
 
 from __future__ import annotations

@@ -110,15 +110,15 @@ def run_session(
     harp: Sequence[str] = (str(REPO / ".venv" / "bin" / "harp"),),
 ) -> dict[str, Any]:
     """``harp session run`` of :func:`config` in a temporary directory (``harp``: the command that is ``harp``,
-    e.g. one that changes the simulator first, ``benchmarks/session_ablation.py``): its wall time and exit code, and, when it
-    stored a profile, the profile's model, its field error against the exact lens of the unit at :data:`FOCUS`
-    (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were separated, the
-    places of the turntable axis found, the residual field the session's field stage chose (None: none) and by how
-    many paired standard errors it was ahead of the model in the folds (``lead``, from the choice's reason), the
-    names of the QA checks its focus setting failed (``failed``), and the
-    stored correction's linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``: a
-    correction that shrinks the image straightens every edge, and the field error, modulo homography, does not see
-    a uniform scale)."""
+    e.g. one that changes the simulator first, ``benchmarks/session_ablation.py``): its wall time and exit code,
+    and, when it stored a profile, the profile's model, its field error against the exact lens of the unit at
+    :data:`FOCUS` (``pipeline.compare.compare_models``, modulo homography, 20 px grid), whether the strings were
+    separated, the places of the turntable axis found, the residual field the session's field stage chose (None:
+    none) and by how many paired standard errors it was ahead of the model in the folds (``lead``, from the
+    choice's reason), the names of the QA checks its focus setting failed (``failed``), and the stored
+    correction's linear scale over the image against the exact lens's (``pipeline.fit.correction_scale``: a
+    correction that shrinks the image straightens every edge, and the field error, modulo homography, does not
+    see a uniform scale)."""
     with tempfile.TemporaryDirectory(prefix="sessions-") as tmp:
         root = Path(tmp)
         cfg = config(root, seed, capture, pipeline, w, h, serial=serial, lens_field_px=lens_field_px, defaults=defaults)
