@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import pickle
 import sys
 from pathlib import Path
 
@@ -35,32 +34,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from field_leads import ANGLES, H, W
+from field_leads import ANGLES, H, W, measured
 from lens_limits import seed_lens
 
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_shape import fit_harp_shape
-from pipeline.measure import measure_image
-from pipeline.realism import render_shots
 
 SPEC = FitSpec("radial", 4, True, True)
-
-
-def edges(seed: int, cache: Path | None) -> list[list[np.ndarray]]:
-    """The twelve shots' measured edges of lens ``seed`` without a field (``field_leads``'s, from its cache)."""
-    path = None if cache is None else cache / f"leads_{seed}_without.pkl"
-    if path is not None and path.exists():
-        lines: list[list[np.ndarray]] = pickle.loads(path.read_bytes())
-        return lines
-    lens, ses, _ = seed_lens(seed, W, H, False)
-    shots = render_shots(lens, ses.harp, ses.mount, ANGLES, W, H, ses.effects, seed=seed)
-    lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(pickle.dumps(lines))
-    return lines
 
 
 def against_drawn(fit, ses) -> tuple[list[float], list[float]]:  # type: ignore[no-untyped-def]
@@ -108,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---:|---|" + "---|" * len(tops), flush=True)
     for seed in (int(s) for s in args.seeds.split(",")):
         lens, ses, _ = seed_lens(seed, W, H, False)
-        lines = edges(seed, args.cache)
+        lines = measured(seed, "without", args.cache)
         plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
         cells = []
         for top in tops:

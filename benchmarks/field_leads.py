@@ -47,19 +47,27 @@ ANGLES = tuple(float(a) for a in range(0, 180, 15))
 RUNS = ("without", "with a field")
 
 
-def job(args: tuple[int, str, bool, Path | None]) -> dict[str, Any]:
-    seed, run, kinks, cache = args
-    lens, ses, _ = seed_lens(seed, W, H, run == "with a field")
-    t0 = time.perf_counter()
+def measured(seed: int, run: str, cache: Path | None) -> list[list[np.ndarray]]:
+    """The measured edges of the twelve shots (:data:`ANGLES`) of ``lens_limits``' lens ``seed`` (``run``: "with
+    a field" or "without"), kept in ``cache`` (one pickle per lens) when given and read from there when present."""
     path = None if cache is None else cache / f"leads_{seed}_{run.replace(' ', '_')}.pkl"
     if path is not None and path.exists():
-        lines = pickle.loads(path.read_bytes())
-    else:
-        shots = render_shots(lens, ses.harp, ses.mount, ANGLES, W, H, ses.effects, seed=seed)
-        lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(pickle.dumps(lines))
+        lines: list[list[np.ndarray]] = pickle.loads(path.read_bytes())
+        return lines
+    lens, ses, _ = seed_lens(seed, W, H, run == "with a field")
+    shots = render_shots(lens, ses.harp, ses.mount, ANGLES, W, H, ses.effects, seed=seed)
+    lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(pickle.dumps(lines))
+    return lines
+
+
+def job(args: tuple[int, str, bool, Path | None]) -> dict[str, Any]:
+    seed, run, kinks, cache = args
+    lens, _, _ = seed_lens(seed, W, H, run == "with a field")
+    t0 = time.perf_counter()
+    lines = measured(seed, run, cache)
     sel = select_model(lines, W, H)
     radial = lowest_radial(sel.table)
     stage = select_field(

@@ -229,20 +229,22 @@ def _row(job: tuple[FitSpec, list[list[Floats]], float, Settings, tuple[Any, Any
     nn: list[NDArray[np.int64]] = []
     removed = left = 0
     so_far = 0.0
-    kinks = _kink_arguments(kink_t)
+    find_kinks, template_t = _kink_arguments(kink_t)
     for h in range(len(lines)):
         train = [s for i, s in enumerate(lines) if i != h]
         train_angles = [a for i, a in enumerate(angles) if i != h]
         train_groups = None if labels is None else [g for i, g in enumerate(labels) if i != h]
         fold_plain = fit_distortion(train, width, height, **cand.fit_arguments(), init=plain.model, **fit_kw)
         fold = (
-            try_fit_harp_shape(train, train_angles, width, height, cand, fold_plain, *kinks, train_groups, shifts)
+            try_fit_harp_shape(
+                train, train_angles, width, height, cand, fold_plain, find_kinks, template_t, train_groups, shifts
+            )
             if fold_plain
             else fold_plain
         )
         if not fold:
             return CVRow(cand, size, float("nan"), tuple(fold_d), tuple(fit_d), f"without shot {h}: {fold.reason}", full_fit=full)  # fmt: skip
-        held = held_out_without_strings(fold, lines[h], angles[h], None if labels is None else labels[h], kinks[1])
+        held = held_out_without_strings(fold, lines[h], angles[h], None if labels is None else labels[h], template_t)
         removed += held.removed
         left += held.without_terms + held.unmatched
         res.append(held.residuals)
