@@ -1179,16 +1179,16 @@ def fit_harp_shape(
     string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
     basis = legendre(u, degrees)
     one_axis = len(groups) < 2
-    axis_d = (float("nan"), float("nan"))  # the axis in distorted pixels, where a field lives
-    if one_axis and spec.field is not None:
-        ax, ay = model0.distort_points(np.asarray([frame.centre], np.float64))[0]
-        axis_d = (float(ax), float(ay))
+    axes_d: list[tuple[float, float]] = []  # the axes in distorted pixels, where a field lives
+    if spec.field is not None:
+        centres = np.asarray([f.centre for f in (list(groups.values()) or [frame])], np.float64)
+        axes_d = [(float(x), float(y)) for x, y in model0.distort_points(centres) if np.isfinite(x) and np.isfinite(y)]
 
     def lens_part(w_center: float | None = None) -> Any:
-        # a field's part that turns with the harp about its one axis is a set of string bends: held off the field
+        # a field's part that turns with the harp about an axis is a set of string bends: held off the field
         part = make_parametrisation(width, height, spec, w_center=w_center)
-        if isinstance(part, RadialFieldParametrisation) and all(np.isfinite(axis_d)):
-            part = part.with_axis_gauge(axis_d)
+        if isinstance(part, RadialFieldParametrisation) and axes_d:
+            part = part.with_axis_gauge(*axes_d)
         return part
 
     lens = lens_part()

@@ -47,6 +47,13 @@ def field_bounds(width: int, height: int, margin: float = FIELD_MARGIN) -> tuple
     return (-0.5 - mx, -0.5 - my, width - 0.5 + mx, height - 0.5 + my)
 
 
+def knot_spacing(bounds: tuple[float, float, float, float], shape: tuple[int, int]) -> tuple[float, float]:
+    """``(hx, hy)``: the knot spacing of a ``shape = (ny, nx)`` control grid over ``bounds = (x0, y0, x1, y1)``
+    (pixels): the domain cut into ``n - 3`` intervals per axis (:func:`bspline_weights`)."""
+    x0, y0, x1, y1 = bounds
+    return (x1 - x0) / (shape[1] - 3), (y1 - y0) / (shape[0] - 3)
+
+
 def bspline_weights(x: np.ndarray, lo: float, hi: float, n: int) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     r"""The uniform cubic B-spline basis of ``n`` control points over ``[lo, hi]`` at ``x``.
 
@@ -236,8 +243,8 @@ def axis_basis(
     joint fit of a lens and its strings' bends (:mod:`pipeline.harp_shape`) it is a set of bends, one per string
     at its distance from the axis, and no shot of that one axis can tell the two apart."""
     ny, nx = shape
-    x0, y0, x1, y1 = bounds
-    hx, hy = (x1 - x0) / (nx - 3), (y1 - y0) / (ny - 3)
+    x0, y0 = bounds[0], bounds[1]
+    hx, hy = knot_spacing(bounds, shape)
     jj, ii = np.mgrid[0:ny, 0:nx].astype(np.float64)
     px = (x0 + (ii - 1.0) * hx).ravel() - float(centre[0])
     py = (y0 + (jj - 1.0) * hy).ravel() - float(centre[1])
@@ -250,7 +257,12 @@ def axis_basis(
     hat = np.clip(1.0 - np.abs(r[:, None] - nodes[None, :]) / step, 0.0, None)  # (ny nx, nodes)
     cols = [np.concatenate([hat * e[:, :1], hat * e[:, 1:]]) for e in (er, et)]
     a = np.concatenate(cols, axis=1)
-    a = a[:, np.linalg.norm(a, axis=0) > 0]
+    return orthonormal_columns(a[:, np.linalg.norm(a, axis=0) > 0])
+
+
+def orthonormal_columns(a: np.ndarray) -> np.ndarray:
+    """Orthonormal columns spanning the columns of ``a`` (QR, the columns of rank below 1e-9 of the largest
+    dropped)."""
     q, rr = np.linalg.qr(a)
     keep = np.abs(np.diag(rr)) > 1e-9 * max(float(np.abs(np.diag(rr)).max()), 1e-300)
     return np.asarray(q[:, keep])
@@ -305,21 +317,23 @@ class RadialFieldParametrisation:
         self.n_radial = radial.n
         self.n_field = self.shape[0] * self.shape[1]
         self.n = self.n_radial + 2 * self.n_field
-        x0, y0, x1, y1 = self.bounds
-        s = radial.s
-        hx = (x1 - x0) / (self.shape[1] - 3) / s
-        hy = (y1 - y0) / (self.shape[0] - 3) / s
-        self._rough = roughness_operator(self.shape, hx, hy)
+        hx, hy = knot_spacing(self.bounds, self.shape)
+        self._rough = roughness_operator(self.shape, hx / radial.s, hy / radial.s)
         self._affine = affine_basis(self.shape).T
         self._axis = np.zeros((0, 2 * self.n_field))  # with_axis_gauge's rows on [c^x, c^y]
 
-    def with_axis_gauge(self, centre: tuple[float, float]) -> RadialFieldParametrisation:
-        """This parametrisation with the field's part that turns with a rotation about ``centre`` (distorted
-        pixels; :func:`axis_basis`) held at zero as well, at the affine gauge's weight: for a joint fit of the lens
-        with the bends of the strings of a harp turning about that one axis, which such a part imitates exactly
-        (:mod:`pipeline.harp_shape`); the strings' terms take it instead."""
+    def with_axis_gauge(self, *centres: tuple[float, float]) -> RadialFieldParametrisation:
+        """This parametrisation with the field's parts that turn with a rotation about each of ``centres``
+        (distorted pixels; :func:`axis_basis`, their union) held at zero as well, at the affine gauge's weight: for
+        a joint fit of the lens with the bends of the strings of a harp turning about those axes. About one axis
+        such a part imitates a set of string bends exactly (:mod:`pipeline.harp_shape`); the strings take it
+        instead. About two, each axis's part is a set of bends in its own shots only, and what the other shots see
+        of it is weak where the axes are near each other."""
         out = copy.copy(self)
-        out._axis = axis_basis(centre, self.bounds, self.shape).T
+        if not centres:
+            out._axis = np.zeros((0, 2 * self.n_field))
+            return out
+        out._axis = orthonormal_columns(np.concatenate([axis_basis(c, self.bounds, self.shape) for c in centres], 1)).T
         return out
 
     # the radial part's settings that pipeline.fit reads

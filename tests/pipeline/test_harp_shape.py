@@ -280,7 +280,7 @@ def test_a_joint_fit_that_collapses_the_image_is_made_again_with_the_centre_held
     the centre held (``_solve_joint``). Without the gauge these shots collapse the free-centre fit; the fit kept
     is the held one, says so, keeps the lens's scale and is nearer the exact lens map than the plain fit."""
     lens, shots, turns, spec, plain = _weak_field_shots()
-    monkeypatch.setattr(RadialFieldParametrisation, "with_axis_gauge", lambda self, centre: self)
+    monkeypatch.setattr(RadialFieldParametrisation, "with_axis_gauge", lambda self, *centres: self)
     fit = fit_harp_shape(shots, turns, W, H, spec, plain=plain)
     assert fit, fit
     assert any("centre held" in w for w in fit.warnings), fit.warnings

@@ -291,3 +291,31 @@ def test_the_axis_gauge_spans_fields_that_turn_with_a_harp_about_its_axis():
             assert comp.mean() == pytest.approx(truth, rel=0.25)  # the spline smooths its control values
     shear = np.concatenate([cp[:, 1] / 1000.0, np.zeros(nf)])  # u_x = y: no turn about any axis
     assert np.linalg.norm(q.T @ shear) < 0.7 * np.linalg.norm(shear)
+
+
+def test_the_axis_gauge_about_two_axes_holds_what_turns_about_either():
+    """``with_axis_gauge(a, b)``: the gauge rows are orthonormal and hold at zero every field that turns about
+    ``a`` and every field that turns about ``b`` (each axis's own :func:`axis_basis`, built independently), and
+    they are more than either axis's alone; a field that turns about neither (a ripple) is mostly free."""
+    from pipeline.fit_problem import make_parametrisation
+    from pipeline.fitspec import FitSpec
+    from pipeline.models.radial_field import axis_basis
+
+    w, h, shape = 1000, 750, (9, 12)
+    a, b = (380.0, 330.0), (620.0, 430.0)
+    part = make_parametrisation(w, h, FitSpec("radial", 4, True, True, field=(12, 9), field_penalty=1e-3))
+    nf = shape[0] * shape[1]
+    assert part._axis.shape == (0, 2 * nf)
+    both = part.with_axis_gauge(a, b)._axis
+    assert np.allclose(both @ both.T, np.eye(len(both)), atol=1e-9)
+    one_a, one_b = axis_basis(a, field_bounds(w, h), shape), axis_basis(b, field_bounds(w, h), shape)
+    assert len(both) > max(one_a.shape[1], one_b.shape[1])
+    for q in (one_a, one_b):
+        assert np.allclose(both.T @ (both @ q), q, atol=1e-8)  # every column of either lies in the gauge's span
+    alone = part.with_axis_gauge(a)._axis
+    assert np.allclose(alone.T @ alone, one_a @ one_a.T, atol=1e-9)  # one axis: that axis's span
+    x0, y0, x1, y1 = field_bounds(w, h)
+    jj, ii = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
+    cx, cy = (x0 + (ii.ravel() - 1) * (x1 - x0) / (shape[1] - 3)), (y0 + (jj.ravel() - 1) * (y1 - y0) / (shape[0] - 3))
+    ripple = np.concatenate([np.sin(2 * np.pi * cx / 250) * np.sin(2 * np.pi * cy / 250), np.zeros(nf)])
+    assert np.linalg.norm(both @ ripple) < 0.4 * np.linalg.norm(ripple)  # turns about neither: mostly free
