@@ -56,11 +56,14 @@ What can and cannot be separated
 * A residual field (``FitSpec.field``) is fixed on the sensor, but its part that turns with a rotation about the
   turntable axis (radial and tangential displacements that depend on the distance from the axis only) looks the
   same in the harp's frame at every angle: it is a set of string deviations, one per string at its distance
-  from the axis, and shots about one axis cannot tell the two apart. With one axis that part is held off the
-  field (:meth:`pipeline.models.radial_field.RadialFieldParametrisation.with_axis_gauge`) and the strings take
-  it; a shrink about the axis is such a part. In whole simulated sessions of twelve shots it had let a field
-  take the strings' bends on lenses without one and win the folds by 3.4 and 5.3 paired standard errors
-  (``benchmarks/RESULTS-residual-field.md``).
+  from the axis, and shots about one axis cannot tell the two apart. That part is held off the field
+  (:meth:`pipeline.models.radial_field.RadialFieldParametrisation.with_axis_gauge`) and the strings take it; a
+  shrink about the axis is such a part. In whole simulated sessions of twelve shots it had let a field take the
+  strings' bends on lenses without one and win the folds by 3.4 and 5.3 paired standard errors
+  (``benchmarks/RESULTS-residual-field.md``). About two axes or more, each axis's part is a set of bends in that
+  axis's shots only, and the other axis's shots see little of it when the axes are a few hundred pixels apart:
+  the union of every axis's part is held off the field. Held about one axis of two, a whole session about two
+  places let a field take a lens without one from 0.0020 to 0.0039 px.
 * A sag under gravity is not fixed to the harp (it follows the vertical as the harp turns); a sag
   of equal strings is, to second order, a thin-prism term of the lens, which absorbs it.
 * The straightness of corrected edges is measured in corrected pixels, so a correction that shrinks

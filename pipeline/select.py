@@ -554,12 +554,13 @@ the lowest CV d was the model's, or a field's 0.2 SE ahead that stores the same 
 same sessions, so they do not check it; ten fresh seeds (10..19) do: without a field 10 of 10 took none, with a field
 10 of 10 took one (1.2-9.4 SE ahead, all better, e.g. 1.2 SE: 0.0070 -> 0.0045 px). The one field that rises,
 seed 4's, comes from string bends one turntable axis cannot separate (a braid's twist, one to two periods along a
-string; ``benchmarks/session_ablation.py``), which two axis places do. The six-shot emulation
-(``benchmarks/choice_realistic.py``, folds without the kinks, before this bar) put the cost of one standard error
-at 40 -> 35 of 60 lenses with a field at or below 0.005 px (without one: 50 -> 48 of 60); not measured again with
-the kinks modelled. The plain folds keep
-:data:`FLEXIBLE_MARGIN_SE`: there the strings' bends hide a field and the winner's curse chooses one (a lower bar
-took 47 of 60 lenses without a field, worst 0.031 px)."""
+string; ``benchmarks/session_ablation.py``), which two axis places do: about two places, with the gauge about
+both axes, 20 of 20 lenses without a field (seeds 0..19) took none and 19 of 20 with one stored at or below 0.005
+px. The six-shot emulation (``benchmarks/choice_realistic.py``, folds without the kinks, before this bar) put the
+cost of one standard error at 40 -> 35 of 60 lenses with a field at or below 0.005 px (without one: 50 -> 48 of
+60); not measured again with the kinks modelled. The plain folds keep :data:`FLEXIBLE_MARGIN_SE`: there the
+strings' bends hide a field and the winner's curse chooses one (a lower bar took 47 of 60 lenses without a field,
+worst 0.031 px)."""
 
 
 def select_field(
