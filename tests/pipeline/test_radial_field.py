@@ -248,6 +248,16 @@ def _maps_of(model):
     return model.map_x, model.map_y
 
 
+def _control_points(bounds, shape):
+    """``(ny nx, 2)``: where each control point of a ``shape`` grid over ``bounds`` stands (its basis function's
+    peak: control point ``i`` at ``x0 + (i - 1) h``, ``h`` the domain over ``n - 3``), row by row, written out here."""
+    ny, nx = shape
+    x0, y0, x1, y1 = bounds
+    jj, ii = np.mgrid[0:ny, 0:nx].astype(float)
+    xs, ys = x0 + (ii - 1) * (x1 - x0) / (nx - 3), y0 + (jj - 1) * (y1 - y0) / (ny - 3)
+    return np.stack([xs.ravel(), ys.ravel()], axis=1)
+
+
 def test_the_axis_gauge_spans_fields_that_turn_with_a_harp_about_its_axis():
     """``axis_basis``: a smooth field that turns with a rotation about the axis (radial and tangential parts that
     depend on the distance from it only; truth from that geometry) has its control-point coefficients in the span,
@@ -269,9 +279,7 @@ def test_the_axis_gauge_spans_fields_that_turn_with_a_harp_about_its_axis():
     def hh(r):
         return 0.05 * np.cos(r / 300.0)
 
-    x0, y0, x1, y1 = bounds
-    jj, ii = np.mgrid[0:ny, 0:nx].astype(float)
-    cp = np.stack([x0 + (ii - 1) * (x1 - x0) / (nx - 3), y0 + (jj - 1) * (y1 - y0) / (ny - 3)], axis=-1).reshape(-1, 2)
+    cp = _control_points(bounds, shape)
     rel = cp - np.array(axis)
     r = np.hypot(*rel.T)
     e_r = rel / r[:, None]
@@ -297,8 +305,6 @@ def test_the_axis_gauge_about_two_axes_holds_what_turns_about_either():
     """``with_axis_gauge(a, b)``: the gauge rows are orthonormal and hold at zero every field that turns about
     ``a`` and every field that turns about ``b`` (each axis's own :func:`axis_basis`, built independently), and
     they are more than either axis's alone; a field that turns about neither (a ripple) is mostly free."""
-    from pipeline.fit_problem import make_parametrisation
-    from pipeline.fitspec import FitSpec
     from pipeline.models.radial_field import axis_basis
 
     w, h, shape = 1000, 750, (9, 12)
@@ -314,8 +320,6 @@ def test_the_axis_gauge_about_two_axes_holds_what_turns_about_either():
         assert np.allclose(both.T @ (both @ q), q, atol=1e-8)  # every column of either lies in the gauge's span
     alone = part.with_axis_gauge(a)._axis
     assert np.allclose(alone.T @ alone, one_a @ one_a.T, atol=1e-9)  # one axis: that axis's span
-    x0, y0, x1, y1 = field_bounds(w, h)
-    jj, ii = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
-    cx, cy = (x0 + (ii.ravel() - 1) * (x1 - x0) / (shape[1] - 3)), (y0 + (jj.ravel() - 1) * (y1 - y0) / (shape[0] - 3))
+    cx, cy = _control_points(field_bounds(w, h), shape).T
     ripple = np.concatenate([np.sin(2 * np.pi * cx / 250) * np.sin(2 * np.pi * cy / 250), np.zeros(nf)])
     assert np.linalg.norm(both @ ripple) < 0.4 * np.linalg.norm(ripple)  # turns about neither: mostly free
