@@ -108,6 +108,13 @@ from pipeline.robust_points import POINT_LOSSES, PointLoss, robust_point_weights
 MIN_EDGES = 4
 """A fit needs at least this many usable edges."""
 
+REJECT_FACTOR = 5.0
+"""An edge whose residual RMS exceeds this times the median edge RMS is an outlier (:func:`fit_distortion`;
+the joint fit with the strings applies the same rule, :func:`pipeline.harp_shape.fit_harp_shape`)."""
+
+MAX_REJECT_FRACTION = 0.25
+"""At most this fraction of the edges is rejected as outliers (the worst first)."""
+
 FAR_CENTRE = 0.05
 """A free distortion centre farther than this from the image centre (in half image diagonals) is
 checked against the fit started from the centre-prior solution (:func:`fit_distortion`)."""
@@ -240,8 +247,8 @@ def fit_distortion(
     image_sizes: Sequence[tuple[int, int]] | None = None,
     init: DistortionModel | None = None,
     robust: bool = True,
-    reject_factor: float = 5.0,
-    max_reject_fraction: float = 0.25,
+    reject_factor: float = REJECT_FACTOR,
+    max_reject_fraction: float = MAX_REJECT_FRACTION,
     min_orientation_spread_deg: float = 20.0,
     ridge: float | None = None,
     w_center: float = FREE_CENTER_WEIGHT,

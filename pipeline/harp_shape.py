@@ -83,6 +83,12 @@ The lens of the joint fit, with the strings' deviations left out (:func:`lens_re
 the points corrected by the lens alone; :func:`separated_job` is one leave-one-orientation-out fold of it):
 a lens fitted alone takes the part of the bends that every orientation shares into the correction.
 
+The harp check's figures (each string's coefficients, bend and standard error) come from a second fit of the
+strings alone with that lens held and a weaker ridge (:data:`REPORT_RIDGE`): the joint fit's ridge hands the lens
+a part of every bend, which a held lens cannot take. That fit also measures the edges the plain fit rejected as
+outliers that lie on a string (a bent string's edges, rejected where its bend shows most): the lens is fitted
+without them, as before, and the check sees every string (``fit_harp_shape(readmit=...)``).
+
 The strings are identified across shots by their distance from the axis :math:`c`, which is
 found by making those distances agree between shots: about the true axis each string is one string,
 seen with both its edges in every shot whose own strings lie on either side of it
@@ -112,8 +118,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.edgeset import EdgeSet, FitFailure, FitResult, collect, summarise, tls
-from pipeline.fit import collapses, correction_problem, fit_distortion
+from pipeline.edgeset import EdgeSet, FitFailure, FitResult, RejectedEdge, collect, edge_figures, summarise, tls
+from pipeline.fit import MAX_REJECT_FRACTION, REJECT_FACTOR, collapses, correction_problem, fit_distortion
 from pipeline.fit_problem import make_parametrisation, normal_equations
 from pipeline.fit_solver import solve
 from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FitSpec
@@ -131,8 +137,9 @@ DEVIATION_TERMS: tuple[int, ...] = (2, 3, 4)
 
 STRING_RIDGE = 0.02
 """Weight of the ridge on the deviation coefficients: a coefficient of ``a`` px costs like a residual
-of ``STRING_RIDGE * a`` px on every point (a bend of 0.02 px like 4e-4 px: it fixes what turning the
-harp cannot see and shrinks what it sees by far less than its standard error)."""
+of ``STRING_RIDGE * a`` px on every point (a bend of 0.02 px like 4e-4 px). It fixes what turning the harp
+cannot see, and it hands the lens a part of what it sees: 10-30 % of a single string's bow on exact edges. The
+bends the harp check reports are therefore fitted again with the lens held (:data:`REPORT_RIDGE`)."""
 
 MAX_ANGLE_SPREAD_DEG = 3.0
 """Largest spread of the shots' string angles about ``phi_0 + sigma * theta`` that is accepted."""
@@ -213,6 +220,22 @@ shrinks them to nothing (the outermost strings, seen only in the corners)."""
 BEND_LIMIT_PX = 0.02
 """Default QA limit of a string's bend (largest ``|delta_k|`` over where it was seen)."""
 
+REPORT_RIDGE = 0.25 * STRING_RIDGE
+"""Weight of the ridge on the deviation coefficients when the harp check fits them again with the lens held
+(:func:`fit_harp_shape`: the bends it reports). The joint fit's ridge (:data:`STRING_RIDGE`) steadies the lens, and
+in doing so hands the lens part of every bend: on exact edges a single string bowed by 0.017 px was reported at
+0.012 px. Fitted again with the lens held, a bend cannot leak into the lens; with no ridge at all, though, the
+strings seen over little of their length (the image's corners) swing. ``benchmarks/harp_health.py``, ten realistic
+harps with two strings bowed on purpose (seeds 0..9): within 20 % of the drawn bend 15 of 18 forced bends with this
+ridge and with none, 11 with :data:`STRING_RIDGE`; strings drawn straighter than 0.01 px reported beyond 0.02 px:
+1, 12 and 0 (``benchmarks/RESULTS-harp-health.md``, also on seeds 10..19)."""
+
+REPORT_OUTLIER_FLOOR_PX = 0.1 * BEND_LIMIT_PX
+"""Least residual RMS (px) of an edge that the harp check rejects as an outlier (:func:`_report_outliers`). On
+exact edges the median edge RMS is some 1e-4 px and five times it rejected bowed strings whose Legendre terms
+left 5e-4 px; an edge this straight carries no shape near the bend limit. Measured edges (0.005-0.01 px RMS)
+never come near it."""
+
 
 def legendre(u: Floats, degrees: Sequence[int]) -> Floats:
     """``P_j(u)`` for every degree ``j`` in ``degrees``, rows in that order (Bonnet's recursion)."""
@@ -263,8 +286,9 @@ class StringShape:
 
     ``offset_px``: its distance ``q_k`` from the axis; ``span``: the range of ``u`` where it was seen;
     ``bend_px``: the largest ``|delta_k|`` over that range, ``bend_se_px`` its standard error (from the
-    fit's covariance, at the place of the largest deviation); ``shots``: in how many shots it was seen
-    (deviation terms need two or more: otherwise ``coefficients`` is empty and ``bend_px`` NaN)."""
+    covariance of lens and strings together, at the place of the largest deviation); ``shots``: in how many
+    shots it was seen (deviation terms need two or more: otherwise ``coefficients`` is empty and ``bend_px``
+    NaN). The coefficients are those of the strings fitted again with the lens held (:data:`REPORT_RIDGE`)."""
 
     index: int
     offset_px: float
@@ -311,7 +335,8 @@ class HarpShapeFit:
     corrected by ``model`` alone (pixels); ``axis_groups`` each axis group's frame when the harp was moved
     between groups of shots (``frame`` is then the first group's), empty otherwise; ``warnings`` what the fit
     had to do that changes the model's meaning (the distortion centre held when it collapsed the correction,
-    :func:`_solve_joint`)."""
+    :func:`_solve_joint`); ``rejected`` the edges given back to the harp check (``readmit``) that the strings'
+    fit did not explain either, and why."""
 
     model: DistortionModel
     plain: FitResult
@@ -323,6 +348,7 @@ class HarpShapeFit:
     axis_groups: tuple[tuple[Hashable, HarpFrame], ...] = ()
     kinks: tuple[Kink, ...] = ()
     warnings: tuple[str, ...] = ()
+    rejected: tuple[RejectedEdge, ...] = ()
 
     @property
     def worst(self) -> StringShape | None:
@@ -376,6 +402,11 @@ class HarpShapeFit:
             }
             | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
             | ({"warnings": list(self.warnings)} if self.warnings else {})
+            | (
+                {"rejected": [{"image": r.image, "line": r.line, "reason": r.reason} for r in self.rejected]}
+                if self.rejected
+                else {}
+            )
         )
 
 
@@ -916,6 +947,135 @@ def _place_groups(
 
 
 # ------------------------------------------------------------------ the joint fit
+@dataclass(frozen=True)
+class _Placed:
+    """An edge set placed in the harp's frame: per edge its string (``edge_string``), per point its edge, shot,
+    harp normal, ``u`` along the strings (half image diagonals) and ``q`` across them (px), the ideal points
+    (``ideal``, by the plain fit's lens); the strings seen in each shot (``shots_of``), those with deviation terms
+    (``with_terms``: two shots or more over :data:`MIN_SPAN`), per point its slot among them (``string_of``, -1
+    for none) and the Legendre values (``basis``); ``rank`` the renumbering of the strings, when made."""
+
+    edges: EdgeSet
+    edge_string: NDArray[np.intp]
+    point_edge: NDArray[np.intp]
+    point_shot: NDArray[np.intp]
+    normal: Floats
+    u: Floats
+    q: Floats
+    ideal: Floats
+    shots_of: dict[int, set[int]]
+    with_terms: list[int]
+    string_of: NDArray[np.intp]
+    basis: Floats
+    rank: NDArray[np.intp] | None
+
+    @property
+    def point_string(self) -> NDArray[np.intp]:
+        out: NDArray[np.intp] = self.edge_string[self.point_edge]
+        return out
+
+    @property
+    def stretch(self) -> Floats:
+        """Each point's along-edge stretch (:func:`pipeline.harp_kinks.stretches`)."""
+        return stretches(self.edges.xy, self.ideal, self.edges.starts, self.edges.counts)
+
+
+def _placed(
+    edges: EdgeSet,
+    edge_string: NDArray[np.intp],
+    shot_frame: Sequence[HarpFrame],
+    turntable_deg: Sequence[float],
+    model0: DistortionModel,
+    scale: float,
+    degrees: Sequence[int],
+    renumber: bool = False,
+) -> _Placed:
+    """``edges`` (each edge's string ``edge_string``) in the harp's frame of its shot (:class:`_Placed`); with
+    ``renumber`` the strings numbered again from the lowest ``q`` (a string found among edges given back)."""
+    ideal = model0.undistort_points(edges.xy)
+    point_edge = np.repeat(np.arange(edges.n_edges), edges.counts)
+    point_shot = edges.image[point_edge]
+    normals = np.array([f.normal(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
+    directions = np.array([f.direction(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
+    rel = ideal - np.array([f.centre for f in shot_frame])[point_shot]
+    u = np.einsum("ij,ij->i", rel, directions[point_shot]) / scale
+    q = np.einsum("ij,ij->i", rel, normals[point_shot])
+    rank = None
+    if renumber and edges.n_edges:
+        ks = np.unique(edge_string)
+        order = ks[np.argsort([np.median(q[edge_string[point_edge] == k]) for k in ks])]
+        rank = np.zeros(int(ks.max()) + 1, np.intp)
+        rank[order] = np.arange(len(order))
+        edge_string = rank[edge_string]
+    shots_of = {int(k): {int(edges.image[e]) for e in np.flatnonzero(edge_string == k)} for k in np.unique(edge_string)}
+    point_string = edge_string[point_edge]
+    reach = {k: float(np.ptp(u[point_string == k])) for k in shots_of}
+    with_terms = sorted(k for k, v in shots_of.items() if len(v) >= 2 and reach[k] >= MIN_SPAN)
+    slot = {k: s for s, k in enumerate(with_terms)}
+    string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
+    return _Placed(
+        edges, edge_string, point_edge, point_shot, normals[point_shot], u, q, ideal, shots_of, with_terms,
+        string_of, legendre(u, degrees), rank,
+    )  # fmt: skip
+
+
+def _report_points(
+    wider: tuple[EdgeSet, NDArray[np.intp], dict[tuple[int, int], tuple[int, int]]],
+    shot_frame: Sequence[HarpFrame],
+    turntable_deg: Sequence[float],
+    model0: DistortionModel,
+    scale: float,
+    degrees: Sequence[int],
+    joint: DistortionModel,
+    placed: Sequence[tuple[int, Candidate]],
+    kink_t: int,
+    max_nfev: int,
+) -> tuple[_Placed, dict[int, int], tuple[RejectedEdge, ...]]:
+    """The edges the harp check measures: the lens's and those given back (``wider``: :func:`_with_edges`), in the
+    harp's frame with the strings numbered again; each kink's string in that numbering; and the edges left out by
+    :func:`pipeline.fit.fit_distortion`'s outlier rule on the residuals of the strings fitted with ``joint`` held
+    (:func:`_report_outliers`)."""
+    edges, edge_string, origin = wider
+    rep = _placed(edges, edge_string, shot_frame, turntable_deg, model0, scale, degrees, renumber=True)
+    kink_of = {k: k for k, _ in placed} if rep.rank is None else {k: int(rep.rank[k]) for k, _ in placed}
+    held = _WithStrings(
+        _HeldLens(joint), rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, None,
+        _kink_templates(rep, placed, kink_of, scale, kink_t),
+    )  # fmt: skip
+    with np.errstate(all="ignore"):
+        x = solve(held, edges, held.theta0(None), max_nfev=max_nfev).x
+    r = tls(held.evaluate(edges.xy, x, jac=False)[0], edges.starts, edges.counts)[0]
+    bad = _report_outliers(r, edges) if np.all(np.isfinite(x)) else np.zeros(0, np.intp)
+    if not len(bad):
+        return rep, kink_of, ()
+    rms = edge_figures(r, edges.starts, edges.counts)[0]
+    limit = max(REJECT_FACTOR * float(np.median(rms)), REPORT_OUTLIER_FLOOR_PX)
+    rejected = tuple(
+        RejectedEdge(*origin[(int(edges.image[e]), int(edges.line[e]))],
+                     f"outlier of the strings' fit: residual RMS {rms[e]:.3g} px > {limit:.3g} px")
+        for e in bad
+    )  # fmt: skip
+    keep = np.ones(edges.n_edges, bool)
+    keep[bad] = False
+    left = _placed(edges.subset(keep), rep.edge_string[keep], shot_frame, turntable_deg, model0, scale, degrees)
+    return left, kink_of, rejected
+
+
+def _kink_templates(
+    pts: _Placed, placed: Sequence[tuple[int, Candidate]], kink_of: Mapping[int, int], scale: float, t: int
+) -> Floats:
+    """The templates ``(kinks, N)`` of the kinks ``placed`` (string ``kink_of[k]`` in ``pts``' numbering) over the
+    points of ``pts`` (:func:`pipeline.harp_kinks.template`, as :func:`_kink_columns` makes them)."""
+    out = np.zeros((len(placed), len(pts.edges.xy)))
+    if not placed:
+        return out
+    a_px, stretch, point_string = pts.u * scale, pts.stretch, pts.point_string
+    for row, (k, c) in zip(out, placed, strict=True):
+        idx = np.flatnonzero(point_string == kink_of[k])
+        row[idx] = template(a_px[idx] - c.at_px, stretch[idx], t, c.length_px)
+    return out
+
+
 class _WithStrings:
     """Lens parameters and string deviation coefficients, for :func:`pipeline.fit_solver.solve` on one edge set.
 
@@ -1001,16 +1161,121 @@ class _WithStrings:
         return p_mat, t_mat
 
 
-def _radial_gauge(
-    lens: Any,
-    model0: DistortionModel,
-    xy: Floats,
-    normal: Floats,
-    string_of: NDArray[np.intp],
-    basis: Floats,
-    u: Floats,
-    n_strings: int,
-) -> Floats:
+class _HeldLens:
+    """A lens held fixed: no free parameters (the harp check's fit of the strings, :func:`fit_harp_shape`)."""
+
+    n = 0
+
+    def __init__(self, model: DistortionModel) -> None:
+        self._model = model
+
+    def theta0(self, init: DistortionModel | None) -> Floats:
+        return np.zeros(0)
+
+    def model(self, th: Floats) -> DistortionModel:
+        return self._model
+
+    def evaluate(self, xy: Floats, th: Floats, jac: bool = True) -> tuple[Floats, Any]:
+        out: Floats = self._model.undistort_points(xy)
+        return out, None
+
+    def regularisation(self, th: Floats, n_points: int) -> tuple[Floats, Floats]:
+        return np.zeros(0), np.zeros((0, 0))
+
+    def project(self, xy: Floats, th: Floats, nrm: Floats, tan: Floats) -> tuple[Floats, Floats]:
+        return np.zeros((0, len(xy))), np.zeros((0, len(xy)))
+
+
+def _readmitted(
+    lines: Sequence[Sequence[Floats]],
+    outliers: Sequence[tuple[int, int]],
+    pts: _Placed,
+    shot_frame: Sequence[HarpFrame],
+    turntable_deg: Sequence[float],
+    model: DistortionModel,
+    pitch: float,
+) -> dict[tuple[int, int], int]:
+    """The plain fit's outlier edges ``(shot, line)`` that lie on a string of the harp, with that string: the
+    distance of the edge's middle from its shot's axis within :data:`AXIS_TOLERANCE` pitches of a kept edge's
+    (of any shot), whose string it takes, or of other outlier edges' in other shots (a string the plain fit
+    rejected in every shot, a new string); an edge that lies on no string (a frame's, a shadow's) stays out."""
+    if not outliers:
+        return {}
+    edge_string = pts.edge_string
+    q_kept = np.bincount(pts.point_edge, pts.q, minlength=len(edge_string)) / pts.edges.counts
+    out: dict[tuple[int, int], int] = {}
+    alone: list[tuple[float, tuple[int, int]]] = []
+    for i, j in outliers:
+        f = shot_frame[i]
+        mid = model.undistort_points(np.asarray(lines[i][j], np.float64).reshape(-1, 2)).mean(axis=0)
+        if not np.all(np.isfinite(mid)):
+            continue
+        q = float(f.normal(float(turntable_deg[i])) @ (mid - f.centre))
+        near = int(np.argmin(np.abs(q_kept - q)))
+        if abs(q_kept[near] - q) <= AXIS_TOLERANCE * pitch:
+            out[(i, j)] = int(edge_string[near])
+        else:
+            alone.append((q, (i, j)))
+    # a string the plain fit rejected in every shot: its edges at one distance from the axis in two shots or more
+    if alone:
+        qs = np.array([q for q, _ in alone])
+        lab = _clusters(qs, AXIS_TOLERANCE * pitch)
+        fresh = int(edge_string.max()) + 1 if len(edge_string) else 0
+        for c in np.unique(lab):
+            members = [alone[m][1] for m in np.flatnonzero(lab == c)]
+            if len({i for i, _ in members}) >= 2:
+                out.update({ij: fresh for ij in members})
+                fresh += 1
+    return out
+
+
+def _with_edges(
+    lines: Sequence[Sequence[Floats]],
+    edges: EdgeSet,
+    edge_string: NDArray[np.intp],
+    origin: Mapping[tuple[int, int], tuple[int, int]],
+    back: Mapping[tuple[int, int], int],
+    width: int,
+    height: int,
+) -> tuple[EdgeSet, NDArray[np.intp], dict[tuple[int, int], tuple[int, int]]]:
+    """``edges`` with the edges ``back`` (``(shot, line)`` of ``lines``: its string, :func:`_readmitted`) added to
+    their shots (the points weighed as the median kept point where the kept ones are weighed); every edge's
+    string, and its ``(shot, line)`` in ``lines``."""
+    per_shot: list[list[tuple[Floats, tuple[int, int], Floats | None]]] = [[] for _ in lines]
+    for e, pts in enumerate(edges.lines()):
+        i, jj = int(edges.image[e]), int(edges.line[e])
+        w = None if edges.weights is None else edges.weights[edges.starts[e] : edges.starts[e] + edges.counts[e]]
+        per_shot[i].append((pts, origin[(i, jj)], w))
+    fill = None if edges.weights is None else float(np.median(edges.weights))
+    for i, j in back:
+        pts = np.asarray(lines[i][j], np.float64).reshape(-1, 2)
+        per_shot[i].append((pts, (i, j), None if fill is None else np.full(len(pts), fill)))
+    got, _ = collect([[p for p, _, _ in s] for s in per_shot], width, height)
+    if not got:
+        return edges, edge_string, dict(origin)
+    new_origin = {(int(got.image[e]), int(got.line[e])): per_shot[int(got.image[e])][int(got.line[e])][1]
+                  for e in range(got.n_edges)}  # fmt: skip
+    label = {origin[(int(edges.image[e]), int(edges.line[e]))]: int(edge_string[e]) for e in range(edges.n_edges)}
+    label.update(back)
+    if edges.weights is not None:
+        got = replace(
+            got, weights=np.concatenate([per_shot[int(got.image[e])][int(got.line[e])][2] for e in range(got.n_edges)])
+        )
+    strings = np.array([label[new_origin[(int(got.image[e]), int(got.line[e]))]] for e in range(got.n_edges)], np.intp)
+    return got, strings, new_origin
+
+
+def _report_outliers(r: Floats, edges: EdgeSet) -> NDArray[np.intp]:
+    """The edges whose residual RMS exceeds :data:`REJECT_FACTOR` times the median edge RMS (at most
+    :data:`MAX_REJECT_FRACTION` of the edges, the worst first): :func:`pipeline.fit.fit_distortion`'s rule, and
+    :data:`REPORT_OUTLIER_FLOOR_PX` or more."""
+    rms = edge_figures(r, edges.starts, edges.counts)[0]
+    bad = np.flatnonzero(rms > max(REJECT_FACTOR * float(np.median(rms)), REPORT_OUTLIER_FLOOR_PX))
+    most = int(MAX_REJECT_FRACTION * edges.n_edges)
+    return bad[np.argsort(rms[bad])[::-1][:most]]
+
+
+def _radial_gauge(lens: Any, model0: DistortionModel, xy: Floats, pts: _Placed) -> Floats:
     """The string-deviation directions a radial lens term can imitate, one unit row per radial term.
 
     Each radial coefficient ``k_j`` moves the corrected points along the harp normal by
@@ -1018,6 +1283,7 @@ def _radial_gauge(
     in ``u``, has P2..P4 coefficients ``g_j``: a set of deviations ``a = -g_j dk_j`` and the lens
     change ``dk_j`` leave every edge as it was (exactly so when the turntable axis is the
     distortion centre, module docstring). Holding ``g_j . a = 0`` gives that part to the lens."""
+    normal, string_of, basis, u, n_strings = pts.normal, pts.string_of, pts.basis, pts.u, len(pts.with_terms)
     if not hasattr(lens, "degree") or n_strings == 0:
         return np.zeros((0, n_strings * basis.shape[0]))
     th = lens.theta0(model0)
@@ -1080,6 +1346,7 @@ def fit_harp_shape(
     kinks: bool = False,
     kink_t: int = DEFAULT_T,
     kink_z: float = KINK_Z,
+    readmit: bool = True,
 ) -> HarpShapeFit | FitFailure:
     """Fit the lens ``spec`` and every string's deviation together (module docstring).
 
@@ -1104,6 +1371,12 @@ def fit_harp_shape(
     kink_t : the along-edge subsampling factor the points were measured with (sets the kinks' template:
         the points must have been smoothed as ``harp measure`` does).
     kink_z : least significance of a kink that is modelled (:data:`pipeline.harp_kinks.KINK_Z`).
+    readmit : the harp check also measures the edges the plain fit rejected as outliers that lie on a string
+        (:func:`_readmitted`). A bent string's edges are what a lens alone cannot straighten, and the plain
+        fit's outlier rule rejects them in the shots where the bend shows most, or in all of them: the check
+        would not see the string. The lens is fitted on the plain fit's edges either way; the edges given back
+        that the strings' fit does not explain either are left out (``HarpShapeFit.rejected``). False: the
+        check measures the plain fit's edges only.
 
     Returns
     -------
@@ -1165,22 +1438,7 @@ def fit_harp_shape(
         i = int(edges.image[e])
         edge_string[e] = labels[present.index(i)][cursor[i]]
         cursor[i] += 1
-    ideal = model0.undistort_points(edges.xy)
-    point_edge = np.repeat(np.arange(edges.n_edges), edges.counts)
-    point_shot = edges.image[point_edge]
-    normals = np.array([f.normal(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
-    directions = np.array([f.direction(float(t)) for f, t in zip(shot_frame, turntable_deg, strict=True)])
-    rel = ideal - np.array([f.centre for f in shot_frame])[point_shot]
-    u = np.einsum("ij,ij->i", rel, directions[point_shot]) / frame.scale_px
-    q = np.einsum("ij,ij->i", rel, normals[point_shot])
-    # strings seen in two shots or more, over MIN_SPAN of u or more, get deviation terms
-    shots_of = {int(k): {int(edges.image[e]) for e in np.flatnonzero(edge_string == k)} for k in np.unique(edge_string)}
-    point_string = edge_string[point_edge]
-    reach = {k: float(np.ptp(u[point_string == k])) for k in shots_of}
-    with_terms = sorted(k for k, v in shots_of.items() if len(v) >= 2 and reach[k] >= MIN_SPAN)
-    slot = {k: s for s, k in enumerate(with_terms)}
-    string_of = np.array([slot.get(int(edge_string[e]), -1) for e in point_edge], dtype=np.intp)
-    basis = legendre(u, degrees)
+    hp = _placed(edges, edge_string, shot_frame, turntable_deg, model0, frame.scale_px, degrees)
     one_axis = len(groups) < 2
     axes_d: list[tuple[float, float]] = []  # the axes in distorted pixels, where a field lives
     if spec.field is not None:
@@ -1195,14 +1453,12 @@ def fit_harp_shape(
         return part
 
     lens = lens_part()
-    gauge = None
-    if one_axis:
-        gauge = _radial_gauge(lens, model0, edges.xy, normals[point_shot], string_of, basis, u, len(with_terms))
+    gauge = _radial_gauge(lens, model0, edges.xy, hp) if one_axis else None
 
     def joint_param(columns: Floats | None = None, held: bool = False) -> _WithStrings:
         # held: the distortion centre under the centre prior (the continuation of _solve_joint)
         part = lens_part(max(spec.w_center, CENTER_PRIOR_WEIGHT)) if held else lens
-        return _WithStrings(part, string_of, basis, normals[point_shot], len(with_terms), ridge, gauge, columns)
+        return _WithStrings(part, hp.string_of, hp.basis, hp.normal, len(hp.with_terms), ridge, gauge, columns)
 
     param = joint_param()
     th0 = param.theta0(model0)
@@ -1217,8 +1473,8 @@ def fit_harp_shape(
     placed: list[tuple[int, Candidate]] = []  # (string, detection) of each kink modelled
     if kinks:
         columns, placed, peaks = _kink_columns(
-            param, edges, th, u * frame.scale_px, normals[point_shot], edge_string[point_edge], point_edge,
-            point_shot, stretches(edges.xy, ideal, edges.starts, edges.counts), kink_t, kink_z,
+            param, edges, th, hp.u * frame.scale_px, hp.normal, hp.point_string, hp.point_edge,
+            hp.point_shot, hp.stretch, kink_t, kink_z,
         )  # fmt: skip
         if placed:
             param = joint_param(columns)
@@ -1238,13 +1494,40 @@ def fit_harp_shape(
     corrected, _ = param.evaluate(edges.xy, th, jac=False)
     r_joint = tls(corrected, edges.starts, edges.counts)[0]
     r_lens = tls(joint.undistort_points(edges.xy), edges.starts, edges.counts)[0]
-    # standard errors of the coefficients: (J^T J)^-1 sigma^2 at the solution
-    ata, _, ss = normal_equations(param, edges, th)
-    _, jg = param.regularisation(th, len(edges.xy))
-    dof = max(len(edges.xy) - param.n, 1)
+
+    # the harp check: every string's shape fitted again with the lens held, on the edges given back too
+    rep, kink_of = hp, {k: k for k, _ in placed}
+    rejected: tuple[RejectedEdge, ...] = ()
+    if readmit:
+        source = [(i, j) for i, s in enumerate(lines_per_image) for j in range(len(s)) if (i, j) not in out]
+        origin = {(i, jj): ij for i in range(len(kept)) for jj, ij in enumerate(x for x in source if x[0] == i)}
+        outliers = [(r.image, r.line) for r in plain.rejected if r.reason.startswith("outlier")]
+        back = _readmitted(lines_per_image, outliers, hp, shot_frame, turntable_deg, model0, frame.pitch_px)
+        if back:
+            wider = _with_edges(lines_per_image, edges, edge_string, origin, back, width, height)
+            rep, kink_of, rejected = _report_points(
+                wider, shot_frame, turntable_deg, model0, frame.scale_px, degrees, joint, placed, kink_t, max_nfev
+            )
+    rep_columns = _kink_templates(rep, placed, kink_of, frame.scale_px, kink_t)
+    held = _WithStrings(_HeldLens(joint), rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, None,
+                        rep_columns)  # fmt: skip
+    with np.errstate(all="ignore"):
+        bends = solve(held, rep.edges, held.theta0(None), max_nfev=max_nfev).x
+    if not np.all(np.isfinite(bends)):
+        return FitFailure("the strings' shapes with the lens held diverged (non-finite parameters)")
+    th = np.concatenate([th[: lens.n], bends])
+    # standard errors of the coefficients: (J^T J)^-1 sigma^2 at the solution (lens and strings free)
+    rep_gauge = _radial_gauge(lens, model0, rep.edges.xy, rep) if one_axis else None
+    free = _WithStrings(
+        lens, rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, rep_gauge, rep_columns
+    )
+    ata, _, ss = normal_equations(free, rep.edges, th)
+    _, jg = free.regularisation(th, len(rep.edges.xy))
+    dof = max(len(rep.edges.xy) - free.n, 1)
     cov = np.linalg.pinv(ata[0] + jg.T @ jg) * float(ss[0]) / dof
-    n_dev = len(with_terms) * len(degrees)
-    coefs = th[lens.n : lens.n + n_dev].reshape(len(with_terms), len(degrees))
+    n_dev = len(rep.with_terms) * len(degrees)
+    coefs = th[lens.n : lens.n + n_dev].reshape(len(rep.with_terms), len(degrees))
+    slot = {k: s for s, k in enumerate(rep.with_terms)}
     found = []
     for j, (k, cand) in enumerate(placed):
         c = lens.n + n_dev + j
@@ -1252,15 +1535,16 @@ def fit_harp_shape(
         area = peak / peak_per_area(kink_t, cand.length_px)
         found.append(
             Kink(
-                int(k), cand.at_px / frame.scale_px, cand.at_px, peak, peak_se, area, cand.z, cand.shots, cand.length_px
+                kink_of[k], cand.at_px / frame.scale_px, cand.at_px, peak, peak_se, area, cand.z, cand.shots,
+                cand.length_px,
             )
-        )
+        )  # fmt: skip
     strings = []
-    for k in sorted(shots_of):
-        sel = np.flatnonzero(edge_string == k)
-        pts = np.isin(point_edge, sel)
-        span = (float(u[pts].min()), float(u[pts].max()))
-        offset = float(np.median(q[pts]))
+    for k in sorted(rep.shots_of):
+        sel = np.flatnonzero(rep.edge_string == k)
+        on = np.isin(rep.point_edge, sel)
+        span = (float(rep.u[on].min()), float(rep.u[on].max()))
+        offset = float(np.median(rep.q[on]))
         if k in slot:
             s = slot[k]
             a = coefs[s]
@@ -1278,7 +1562,7 @@ def fit_harp_shape(
             bend, bend_se, se, a_t = float("nan"), float("nan"), (), ()
         strings.append(
             StringShape(
-                int(k), offset, degrees if a_t else (), a_t, se, span, len(shots_of[k]), len(sel), int(pts.sum()),
+                int(k), offset, degrees if a_t else (), a_t, se, span, len(rep.shots_of[k]), len(sel), int(on.sum()),
                 bend, bend_se,
             )
         )  # fmt: skip
@@ -1293,6 +1577,7 @@ def fit_harp_shape(
         axis_groups=tuple(groups.items()),
         kinks=tuple(found),
         warnings=tuple(dict.fromkeys(warnings)),
+        rejected=rejected,
     )
 
 
