@@ -2,17 +2,21 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/harp_health.py [--seeds 8] [--size 1000x750]
+    .venv/bin/python benchmarks/harp_health.py [--seeds 8] [--first-seed 0] [--places 1|2] [--size 1000x750]
 
 Per seed: a lens of the seeded population (``pipeline.lens_population``), a harp drawn with
 physical string shapes and a camera's effects (``pipeline.realism.realistic_session``: field-dependent
 blur, vignetting, an uneven back-light turning with the harp, shot noise, Bayer and demosaicing), two
 interior strings bent on purpose (bow modes of 0.06 and 0.05 px over the span), six shots at turntable
-angles 0..150 degrees, measured as ``harp measure`` does. Fitted: ``radial4+tangential+prism`` alone
+angles 0..150 degrees (``--places 2``: six about each of two places of the turntable axis, :data:`SHIFT`, each
+group's rough shift given), measured as ``harp measure`` does. Fitted: ``radial4+tangential+prism`` alone
 (``fit_distortion``) and with every string's deviation (``pipeline.harp_shape.fit_harp_shape``, the
 turntable angles given). Truth: the exact lens (field error modulo homography over the whole image,
 ``compare_models``) and each string's exact centre line (``Harp.strings[k].deviation``) projected on
-the fitted family (Legendre P2..P4 over the stretch of the string the shots show).
+the fitted family (Legendre P2..P4 over the stretch of the string the shots show), read along the string in the
+direction the fitted frame runs (``harp_along``, from the geometry). The last columns but two: the session's QA
+of the same fit (``station.calibration.harp_health``, ``station.qa.verdicts``: ``string_bend_max``), its verdict
+and the strings it names, each with its drawn bend.
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from lens_limits import widened
 
 from pipeline.compare import compare_models
 from pipeline.fit import fit_distortion
@@ -35,8 +42,14 @@ from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape, legendre
 from pipeline.lens_population import lens_population
 from pipeline.measure import measure_image
 from pipeline.realism import realistic_session, render_shots
+from station.calibration import harp_health
+from station.config import QAConfig
+from station.qa.verdicts import evaluate
 
 TURNS = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
+SHIFT = 150.0
+"""``--places 2``: the turntable axis moved by -+(SHIFT, SHIFT / 2) px between the two groups of six shots (as
+``benchmarks/axis_positions.py``, the harp widened by copies of its strings so that it fills the image)."""
 SPEC = FitSpec("radial", 4, True, True)
 
 
@@ -56,22 +69,32 @@ def true_bend(harp, k: int, span: tuple[float, float], scale: float, along: int)
     return float(np.max(np.abs(c[2:] @ basis[2:])))
 
 
-def one(seed: int, w: int, h: int) -> dict[str, object]:
+def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     lens = lens_population(seed, 1, w, h)[0].model
     ses = realistic_session(seed, w, h, spacing_px=60.0, string_width_px=3.0)
-    strings = list(ses.harp.strings)
+    extra = int(np.hypot(SHIFT, SHIFT / 2) // ses.harp.spacing_px) + 1 if places == 2 else 0
+    strings = list(widened(ses.harp, extra).strings) if extra else list(ses.harp.strings)
     mid = len(strings) // 2
     forced = (mid - 2, mid + 1)
     strings[forced[0]] = dataclasses.replace(strings[forced[0]], bow_px=(0.06, 0.0, 0.0))
     strings[forced[1]] = dataclasses.replace(strings[forced[1]], bow_px=(0.0, 0.05, 0.0))
     harp = dataclasses.replace(ses.harp, strings=tuple(strings))
     t0 = time.perf_counter()
-    shots = render_shots(lens, harp, ses.mount, TURNS, w, h, ses.effects, seed=seed)
+    if places == 1:
+        turns, groups, shifts = TURNS, None, None
+        shots = render_shots(lens, harp, ses.mount, TURNS, w, h, ses.effects, seed=seed)
+    else:  # the harp moved with its turntable by -+(SHIFT, SHIFT / 2) px; each group's shift given 2 % off
+        turns, groups, shots = TURNS + TURNS, [-1] * len(TURNS) + [1] * len(TURNS), []
+        shifts = {g: (1.02 * g * SHIFT, 1.02 * g * SHIFT / 2) for g in (-1, 1)}
+        c = ses.mount.centre
+        for g in (-1, 1):
+            mount = dataclasses.replace(ses.mount, centre=(c[0] + g * SHIFT, c[1] + g * SHIFT / 2))
+            shots += render_shots(lens, harp, mount, TURNS, w, h, ses.effects, seed=3 * seed + g + 1)
     lines = [[ln.points for ln in measure_image(s.image).lines] for s in shots]
     t_render = time.perf_counter() - t0
     plain = fit_distortion(lines, w, h, **SPEC.fit_arguments())
     t0 = time.perf_counter()
-    fit = fit_harp_shape(lines, TURNS, w, h, SPEC, plain=plain)
+    fit = fit_harp_shape(lines, turns, w, h, SPEC, plain=plain, axis_groups=groups, axis_shifts=shifts)
     t_fit = time.perf_counter() - t0
     if not fit:
         return {"seed": seed, "failure": fit.reason}
@@ -84,14 +107,30 @@ def one(seed: int, w: int, h: int) -> dict[str, object]:
         k = int(np.argmin(np.abs(pos - along * s.offset_px)))
         tb = true_bend(harp, k, s.span, fit.frame.scale_px, along)
         pairs.append((tb, s.bend_px, s.bend_se_px, k in forced))
+    # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
+    # strings it names, each with its drawn bend
+    health = harp_health([], turns, w, h, SPEC, joint=fit)
+    check = next(
+        c for c in evaluate(fit.model, w, h, 0.0, QAConfig(), harp_health=health).checks if c.name == "string_bend_max"
+    )
+    true_of = {s.index: true_bend(harp, int(np.argmin(np.abs(pos - along * s.offset_px))), s.span, fit.frame.scale_px, along)
+               for s in fit.strings if np.isfinite(s.bend_px)}  # fmt: skip
+    qa = ("FAIL" if check.passed is False else "PASS" if check.passed else "not judged", [
+        (k, true_of[k], int(np.argmin(np.abs(pos - along * next(s.offset_px for s in fit.strings if s.index == k)))) in forced)
+        for k in health.get("bent_strings", [])
+    ])  # fmt: skip
     return {
         "seed": seed,
+        "qa": qa,
         "field_plain": compare_models(plain.model, lens, w, h, step=20).rms,
         "field_joint": compare_models(fit.model, lens, w, h, step=20).rms,
         "d_plain": plain.d_after,
         "d_joint": fit.d_after,
         "pairs": pairs,
-        "axis_err": float(np.hypot(*(np.asarray(fit.frame.centre) - np.asarray(ses.mount.centre)))),
+        "axis_err": max(
+            float(np.hypot(*(np.asarray(f.centre) - np.asarray(ses.mount.centre) - g * np.array([SHIFT, SHIFT / 2]))))
+            for g, f in (fit.axis_groups or ((0, fit.frame),))
+        ),
         "t_render": t_render,
         "t_fit": t_fit,
         "strings": len(fit.strings),
@@ -103,22 +142,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=8, help="how many seeds")
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--size", default="1000x750")
+    ap.add_argument("--places", type=int, choices=(1, 2), default=1, help="turntable-axis places (2: twelve shots)")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     print(
-        f"# Harp self-check on the realistic simulator, {w}x{h}, 6 turntable angles ({os.cpu_count()} CPUs, "
+        f"# Harp self-check on the realistic simulator, {w}x{h}, 6 turntable angles about {args.places} axis place(s) ({os.cpu_count()} CPUs, "
         f"load {os.getloadavg()[0]:.1f}; `benchmarks/harp_health.py {' '.join(argv if argv is not None else sys.argv[1:])}`)"
     )
     print()
     print(
         "| seed | strings | axis error px | field RMS, lens alone px | field RMS, with strings px | d alone | "
         "d with strings | forced bends: true / fitted px | other strings: largest true / fitted px | "
-        f"flagged > {BEND_LIMIT_PX} px (forced / others) | render+measure s | fit s |"
+        f"flagged > {BEND_LIMIT_PX} px (forced / others) | session QA: verdict, strings named (drawn bend px) | "
+        "render+measure s | fit s |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|---:|---:|")
-    ratios, zs, gains, fp = [], [], [], 0
+    print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|---|---:|---:|")
+    ratios, zs, gains, fp, qa_words, wrong = [], [], [], 0, [], 0
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        r = one(seed, w, h)
+        r = one(seed, w, h, args.places)
         if "failure" in r:
             print(f"| {seed} | failed: {r['failure']} |")
             continue
@@ -132,11 +173,15 @@ def main(argv: list[str] | None = None) -> int:
         flag_o = sum(b > BEND_LIMIT_PX for a, b in others)
         fp += sum(b > BEND_LIMIT_PX and a < 0.5 * BEND_LIMIT_PX for a, b in others)
         big = max(others, key=lambda p: p[0]) if others else (float("nan"), float("nan"))
+        word, named = r["qa"]
+        verdict = word + "".join(f", {k}{' (forced)' if f else ''}: {t:.4f}" for k, t, f in named)
+        qa_words.append(word)
+        wrong += sum(t < BEND_LIMIT_PX for _, t, _ in named)
         print(
             f"| {seed} | {r['strings']} | {r['axis_err']:.2f} | {r['field_plain']:.4f} | {r['field_joint']:.4f} | "
             f"{r['d_plain']:.4f} | {r['d_joint']:.4f} | "
             + ", ".join(f"{a:.4f} / {b:.4f}" for a, b in forced)
-            + f" | {big[0]:.4f} / {big[1]:.4f} | {flag_f} / {flag_o} | {r['t_render']:.0f} | {r['t_fit']:.1f} |"
+            + f" | {big[0]:.4f} / {big[1]:.4f} | {flag_f} / {flag_o} | {verdict} | {r['t_render']:.0f} | {r['t_fit']:.1f} |"
         )
     print()
     if ratios:
@@ -147,7 +192,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{int(np.sum(np.abs(np.array(zs)) <= 2))} of {len(zs)} within two of their standard errors; "
             "field error with strings / alone: "
             f"median {np.median(gains):.2f}, worst {max(gains):.2f}; strings flagged whose true bend is below "
-            f"{0.5 * BEND_LIMIT_PX} px: {fp}"
+            f"{0.5 * BEND_LIMIT_PX} px: {fp}; session QA: {qa_words.count('FAIL')} FAIL, {qa_words.count('PASS')} PASS, "
+            f"{qa_words.count('not judged')} not judged, strings named whose drawn bend is within the limit: {wrong}"
         )
     return 0
 

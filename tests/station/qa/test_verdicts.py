@@ -192,3 +192,49 @@ def test_a_turntable_axis_found_away_from_where_the_stage_put_it_fails_the_profi
     assert rec["misplaced"] == [0.0, 10.0] and bad["axis_places"].passed is False
     v = evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health={"axes": rec})
     assert not v.passed and any("strings were numbered wrongly" in r for r in v.reasons)
+
+
+def _health(strings, typical, **kw):
+    """A harp self-check record as ``station.calibration.harp_health`` writes it (the QA's input)."""
+    own = {s["index"]: s["own_bend_px"] for s in strings}
+    worst = max(own, key=lambda k: own[k])
+    se = {s["index"]: s["bend_se_px"] for s in strings}
+    return {
+        "limit_px": 0.02, "worst_string": worst, "worst_bend_px": own[worst], "worst_bend_se_px": se[worst],
+        "typical_bend_px": typical, "strings": strings, "significance": 2.0, "outlier_factor": 3.0,
+    } | kw  # fmt: skip
+
+
+def _string(k, own, se):
+    return {"index": k, "bend_px": own, "own_bend_px": own, "bend_se_px": se, "shots": 6, "span": [-0.8, 0.8]}
+
+
+def test_the_harp_check_names_the_most_bent_string_and_says_why_a_bend_beyond_the_limit_passes():
+    strings = [_string(k, 0.003, 0.002) for k in range(10)]
+    strings[3], strings[7] = _string(3, 0.025, 0.002), _string(7, 0.04, 0.003)
+    v = evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=_health(strings, 0.003, bent_strings=[3, 7]))
+    check = by_name(v)["string_bend_max"]
+    assert check.passed is False and "(string 7) 0.0400 px > 0.02 px" in check.text
+    assert any("string 7 of the harp is bent by 0.0400 px" in r for r in v.reasons)
+    # beyond the limit, but no more than two standard errors from none: not a finding, and the text says so
+    strings = [_string(k, 0.003, 0.002) for k in range(10)]
+    strings[5] = _string(5, 0.0207, 0.0188)
+    v = evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=_health(strings, 0.003, uncertain_strings=[5]))
+    check = by_name(v)["string_bend_max"]
+    assert check.passed is True and v.passed
+    assert "(string 5) 0.0207 px > 0.02 px, but within 2 standard errors (0.0188 px) of a straight string" in check.text
+    # beyond the limit, but many strings bend alike (below three times the median string's)
+    strings = [_string(k, 0.009, 0.001) for k in range(10)]
+    strings[2] = _string(2, 0.024, 0.001)
+    check = by_name(evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=_health(strings, 0.009)))[
+        "string_bend_max"
+    ]
+    assert (
+        check.passed is True and "(string 2) 0.0240 px > 0.02 px, but below 3x the median string's 0.0090" in check.text
+    )
+    # within the limit
+    strings = [_string(k, 0.003, 0.002) for k in range(10)]
+    check = by_name(evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=_health(strings, 0.003)))[
+        "string_bend_max"
+    ]
+    assert check.passed is True and "0.0030 px <= 0.02 px" in check.text
