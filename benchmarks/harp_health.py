@@ -101,24 +101,21 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     pos = np.array([s.position_px for s in harp.strings])
     along = harp_along(fit.frame, ses.mount)
     pairs = []  # (true bend, fitted bend, its standard error, forced?)
+    drawn: dict[int, tuple[float, bool]] = {}  # fitted string -> (its drawn bend, forced?)
     for s in fit.strings:
         if not np.isfinite(s.bend_px):
             continue
         k = int(np.argmin(np.abs(pos - along * s.offset_px)))
-        tb = true_bend(harp, k, s.span, fit.frame.scale_px, along)
-        pairs.append((tb, s.bend_px, s.bend_se_px, k in forced))
+        drawn[s.index] = (true_bend(harp, k, s.span, fit.frame.scale_px, along), k in forced)
+        pairs.append((drawn[s.index][0], s.bend_px, s.bend_se_px, k in forced))
     # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
     # strings it names, each with its drawn bend
     health = harp_health([], turns, w, h, SPEC, joint=fit)
     check = next(
         c for c in evaluate(fit.model, w, h, 0.0, QAConfig(), harp_health=health).checks if c.name == "string_bend_max"
     )
-    true_of = {s.index: true_bend(harp, int(np.argmin(np.abs(pos - along * s.offset_px))), s.span, fit.frame.scale_px, along)
-               for s in fit.strings if np.isfinite(s.bend_px)}  # fmt: skip
-    qa = ("FAIL" if check.passed is False else "PASS" if check.passed else "not judged", [
-        (k, true_of[k], int(np.argmin(np.abs(pos - along * next(s.offset_px for s in fit.strings if s.index == k)))) in forced)
-        for k in health.get("bent_strings", [])
-    ])  # fmt: skip
+    word = "FAIL" if check.passed is False else "PASS" if check.passed else "not judged"
+    qa = (word, [(k, *drawn[k]) for k in health.get("bent_strings", [])])
     return {
         "seed": seed,
         "qa": qa,

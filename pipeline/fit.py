@@ -231,6 +231,23 @@ def collapses(param: Parametrisation, th: np.ndarray, width: int, height: int) -
 
 
 # ------------------------------------------------------------------- API
+def outlier_edges(
+    rms: np.ndarray,
+    reject_factor: float = REJECT_FACTOR,
+    max_reject_fraction: float = MAX_REJECT_FRACTION,
+    floor: float = 0.0,
+) -> tuple[np.ndarray, float, int]:
+    """The outlier rule on edges whose residual RMS are ``rms`` (px): the edges above ``reject_factor`` times the
+    median (and above ``floor``), at most ``max_reject_fraction`` of them (then the worst, worst first); the
+    threshold; how many were above it."""
+    thresh = max(reject_factor * max(float(np.median(rms)), 1e-6), floor)
+    bad = np.flatnonzero(rms > thresh)
+    most = int(max_reject_fraction * len(rms))
+    if len(bad) > most:
+        return bad[np.argsort(rms[bad])[::-1][:most]], thresh, len(bad)
+    return bad, thresh, len(bad)
+
+
 def fit_distortion(
     lines_per_image: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -416,15 +433,11 @@ def fit_distortion(
                     th = sol.x
                     r, _ = residuals_and_jacobian(param, edges, th, jac=False)
                     rms, _ = edge_figures(r, edges.starts, edges.counts)
-                thresh = reject_factor * max(float(np.median(rms)), 1e-6)
-                bad = np.flatnonzero(rms > thresh)
-                max_bad = int(max_reject_fraction * n_e)
-                if len(bad) > max_bad:
+                bad, thresh, above = outlier_edges(rms, reject_factor, max_reject_fraction)
+                if above > len(bad):
                     warnings.append(
-                        f"{len(bad)} edges above the outlier threshold {thresh:.3g} px; "
-                        f"rejected only the worst {max_bad}"
+                        f"{above} edges above the outlier threshold {thresh:.3g} px; rejected only the worst {len(bad)}"
                     )
-                    bad = bad[np.argsort(rms[bad])[::-1][:max_bad]]
                 if len(bad):
                     keep = np.ones(n_e, bool)
                     keep[bad] = False

@@ -119,7 +119,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.edgeset import EdgeSet, FitFailure, FitResult, RejectedEdge, collect, edge_figures, summarise, tls
-from pipeline.fit import MAX_REJECT_FRACTION, REJECT_FACTOR, collapses, correction_problem, fit_distortion
+from pipeline.fit import collapses, correction_problem, fit_distortion, outlier_edges
 from pipeline.fit_problem import make_parametrisation, normal_equations
 from pipeline.fit_solver import solve
 from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FitSpec
@@ -231,7 +231,7 @@ ridge and with none, 11 with :data:`STRING_RIDGE`; strings drawn straighter than
 1, 12 and 0 (``benchmarks/RESULTS-harp-health.md``, also on seeds 10..19)."""
 
 REPORT_OUTLIER_FLOOR_PX = 0.1 * BEND_LIMIT_PX
-"""Least residual RMS (px) of an edge that the harp check rejects as an outlier (:func:`_report_outliers`). On
+"""Least residual RMS (px) of an edge that the harp check rejects as an outlier (:func:`_report_points`). On
 exact edges the median edge RMS is some 1e-4 px and five times it rejected bowed strings whose Legendre terms
 left 5e-4 px; an edge this straight carries no shape near the bend limit. Measured edges (0.005-0.01 px RMS)
 never come near it."""
@@ -1030,26 +1030,23 @@ def _report_points(
     placed: Sequence[tuple[int, Candidate]],
     kink_t: int,
     max_nfev: int,
-) -> tuple[_Placed, dict[int, int], tuple[RejectedEdge, ...]]:
+) -> tuple[_Placed, dict[int, int], tuple[RejectedEdge, ...], _WithStrings, Floats]:
     """The edges the harp check measures: the lens's and those given back (``wider``: :func:`_with_edges`), in the
-    harp's frame with the strings numbered again; each kink's string in that numbering; and the edges left out by
-    :func:`pipeline.fit.fit_distortion`'s outlier rule on the residuals of the strings fitted with ``joint`` held
-    (:func:`_report_outliers`)."""
+    harp's frame with the strings numbered again; each kink's string in that numbering; the edges left out by
+    :func:`pipeline.fit.fit_distortion`'s outlier rule (:func:`pipeline.fit.outlier_edges`, with
+    :data:`REPORT_OUTLIER_FLOOR_PX`) on the residuals of the strings fitted with ``joint`` held; and that fit on
+    the edges kept (:func:`_held_strings`)."""
     edges, edge_string, origin = wider
     rep = _placed(edges, edge_string, shot_frame, turntable_deg, model0, scale, degrees, renumber=True)
     kink_of = {k: k for k, _ in placed} if rep.rank is None else {k: int(rep.rank[k]) for k, _ in placed}
-    held = _WithStrings(
-        _HeldLens(joint), rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, None,
-        _kink_templates(rep, placed, kink_of, scale, kink_t),
-    )  # fmt: skip
-    with np.errstate(all="ignore"):
-        x = solve(held, edges, held.theta0(None), max_nfev=max_nfev).x
-    r = tls(held.evaluate(edges.xy, x, jac=False)[0], edges.starts, edges.counts)[0]
-    bad = _report_outliers(r, edges) if np.all(np.isfinite(x)) else np.zeros(0, np.intp)
+    held, x = _held_strings(rep, joint, placed, kink_of, scale, kink_t, max_nfev)
+    if not np.all(np.isfinite(x)):
+        return rep, kink_of, (), held, x
+    rms = edge_figures(tls(held.evaluate(edges.xy, x, jac=False)[0], edges.starts, edges.counts)[0], edges.starts,
+                       edges.counts)[0]  # fmt: skip
+    bad, limit, _ = outlier_edges(rms, floor=REPORT_OUTLIER_FLOOR_PX)
     if not len(bad):
-        return rep, kink_of, ()
-    rms = edge_figures(r, edges.starts, edges.counts)[0]
-    limit = max(REJECT_FACTOR * float(np.median(rms)), REPORT_OUTLIER_FLOOR_PX)
+        return rep, kink_of, (), held, x
     rejected = tuple(
         RejectedEdge(*origin[(int(edges.image[e]), int(edges.line[e]))],
                      f"outlier of the strings' fit: residual RMS {rms[e]:.3g} px > {limit:.3g} px")
@@ -1058,7 +1055,27 @@ def _report_points(
     keep = np.ones(edges.n_edges, bool)
     keep[bad] = False
     left = _placed(edges.subset(keep), rep.edge_string[keep], shot_frame, turntable_deg, model0, scale, degrees)
-    return left, kink_of, rejected
+    return (left, kink_of, rejected, *_held_strings(left, joint, placed, kink_of, scale, kink_t, max_nfev))
+
+
+def _held_strings(
+    pts: _Placed,
+    joint: DistortionModel,
+    placed: Sequence[tuple[int, Candidate]],
+    kink_of: Mapping[int, int],
+    scale: float,
+    kink_t: int,
+    max_nfev: int,
+) -> tuple[_WithStrings, Floats]:
+    """The strings' terms and kinks' peaks over ``pts`` fitted with the lens ``joint`` held and the ridge
+    :data:`REPORT_RIDGE` (the bends the harp check reports): the problem and its solution."""
+    held = _WithStrings(
+        _HeldLens(joint), pts.string_of, pts.basis, pts.normal, len(pts.with_terms), REPORT_RIDGE, None,
+        _kink_templates(pts, placed, kink_of, scale, kink_t),
+    )  # fmt: skip
+    with np.errstate(all="ignore"):
+        x = solve(held, pts.edges, held.theta0(None), max_nfev=max_nfev).x
+    return held, x
 
 
 def _kink_templates(
@@ -1263,16 +1280,6 @@ def _with_edges(
         )
     strings = np.array([label[new_origin[(int(got.image[e]), int(got.line[e]))]] for e in range(got.n_edges)], np.intp)
     return got, strings, new_origin
-
-
-def _report_outliers(r: Floats, edges: EdgeSet) -> NDArray[np.intp]:
-    """The edges whose residual RMS exceeds :data:`REJECT_FACTOR` times the median edge RMS (at most
-    :data:`MAX_REJECT_FRACTION` of the edges, the worst first): :func:`pipeline.fit.fit_distortion`'s rule, and
-    :data:`REPORT_OUTLIER_FLOOR_PX` or more."""
-    rms = edge_figures(r, edges.starts, edges.counts)[0]
-    bad = np.flatnonzero(rms > max(REJECT_FACTOR * float(np.median(rms)), REPORT_OUTLIER_FLOOR_PX))
-    most = int(MAX_REJECT_FRACTION * edges.n_edges)
-    return bad[np.argsort(rms[bad])[::-1][:most]]
 
 
 def _radial_gauge(lens: Any, model0: DistortionModel, xy: Floats, pts: _Placed) -> Floats:
@@ -1498,6 +1505,7 @@ def fit_harp_shape(
     # the harp check: every string's shape fitted again with the lens held, on the edges given back too
     rep, kink_of = hp, {k: k for k, _ in placed}
     rejected: tuple[RejectedEdge, ...] = ()
+    check: _WithStrings | None = None
     if readmit:
         source = [(i, j) for i, s in enumerate(lines_per_image) for j in range(len(s)) if (i, j) not in out]
         origin = {(i, jj): ij for i in range(len(kept)) for jj, ij in enumerate(x for x in source if x[0] == i)}
@@ -1505,21 +1513,18 @@ def fit_harp_shape(
         back = _readmitted(lines_per_image, outliers, hp, shot_frame, turntable_deg, model0, frame.pitch_px)
         if back:
             wider = _with_edges(lines_per_image, edges, edge_string, origin, back, width, height)
-            rep, kink_of, rejected = _report_points(
+            rep, kink_of, rejected, check, bends = _report_points(
                 wider, shot_frame, turntable_deg, model0, frame.scale_px, degrees, joint, placed, kink_t, max_nfev
             )
-    rep_columns = _kink_templates(rep, placed, kink_of, frame.scale_px, kink_t)
-    held = _WithStrings(_HeldLens(joint), rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, None,
-                        rep_columns)  # fmt: skip
-    with np.errstate(all="ignore"):
-        bends = solve(held, rep.edges, held.theta0(None), max_nfev=max_nfev).x
+    if check is None:
+        check, bends = _held_strings(rep, joint, placed, kink_of, frame.scale_px, kink_t, max_nfev)
     if not np.all(np.isfinite(bends)):
         return FitFailure("the strings' shapes with the lens held diverged (non-finite parameters)")
     th = np.concatenate([th[: lens.n], bends])
     # standard errors of the coefficients: (J^T J)^-1 sigma^2 at the solution (lens and strings free)
     rep_gauge = _radial_gauge(lens, model0, rep.edges.xy, rep) if one_axis else None
     free = _WithStrings(
-        lens, rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, rep_gauge, rep_columns
+        lens, rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, rep_gauge, check.kinks
     )
     ata, _, ss = normal_equations(free, rep.edges, th)
     _, jg = free.regularisation(th, len(rep.edges.xy))
