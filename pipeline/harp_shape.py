@@ -288,7 +288,9 @@ class StringShape:
     ``bend_px``: the largest ``|delta_k|`` over that range, ``bend_se_px`` its standard error (from the
     covariance of lens and strings together, at the place of the largest deviation); ``shots``: in how many
     shots it was seen (deviation terms need two or more: otherwise ``coefficients`` is empty and ``bend_px``
-    NaN). The coefficients are those of the strings fitted again with the lens held (:data:`REPORT_RIDGE`)."""
+    NaN). The coefficients are those of the strings fitted again with the lens held (:data:`REPORT_RIDGE`).
+    ``seen_twice``: the stretch of ``u`` that two shots or more see (the hull of the overlaps of its shots'
+    stretches, :func:`seen_twice`; NaN, NaN when no two shots overlap)."""
 
     index: int
     offset_px: float
@@ -301,6 +303,7 @@ class StringShape:
     points: int
     bend_px: float
     bend_se_px: float
+    seen_twice: tuple[float, float] = (float("nan"), float("nan"))
 
     def deviation(self, u: Floats) -> Floats:
         """``delta_k(u)`` (pixels); zero where the string has no deviation terms."""
@@ -323,7 +326,60 @@ class StringShape:
             "points": self.points,
             "bend_px": finite_or_none(self.bend_px),
             "bend_se_px": finite_or_none(self.bend_se_px),
+            "seen_twice": [finite_or_none(v) for v in self.seen_twice],
         }
+
+
+def seen_twice(u: Floats, shot: NDArray[np.intp]) -> tuple[float, float]:
+    """The stretch of a string that two shots or more see: the hull of the overlaps of its shots' stretches of
+    ``u`` (each point's ``u`` and shot); NaN, NaN when no two shots' stretches overlap."""
+    ranges = [(float(u[shot == s].min()), float(u[shot == s].max())) for s in np.unique(shot)]
+    lo, hi = np.inf, -np.inf
+    for i, (a0, a1) in enumerate(ranges):
+        for b0, b1 in ranges[i + 1 :]:
+            if max(a0, b0) < min(a1, b1):
+                lo, hi = min(lo, max(a0, b0)), max(hi, min(a1, b1))
+    return (lo, hi) if lo < hi else (float("nan"), float("nan"))
+
+
+def own_bends(strings: Sequence[StringShape], samples: int = 201) -> dict[int, float]:
+    r"""Each string's bend *apart from what all strings share* (pixels): the largest
+    :math:`|\delta_k(u) - \tilde\delta(u)|` where the string is judged, :math:`\tilde\delta` the median of the
+    *other* strings' deviations at :math:`u` (where at least half of them reach). A part common to every string
+    (a whole harp's sag, or a lens term the model lacks, which the fit can only put into the strings) is not one
+    string's fault and cannot be told from the lens; a single bent string stands out of it. Strings without
+    deviation terms are left out.
+
+    **Where a string is judged:** within half the image's diagonal of the axis (:math:`|u| \le 1`), and beyond
+    it where two shots or more see the string (``seen_twice``). About one axis place a string is seen within
+    :math:`|u| \le 1` in shots 30 degrees apart that each see another stretch of it, and a bow is largest at the
+    ends of the stretch the shots see together; beyond it (about a second place, or a harp wider than the image)
+    a stretch one shot sees is the end of one edge, where a bend cannot be told from that edge's noise (a straight
+    string of the demo harp read 0.024 px, three standard errors, at u = -1.22), while a stretch two shots see is
+    where a bend about two places is largest. ``samples``: grid points per unit of ``u`` over [-1, 1], as many
+    per unit beyond."""
+    bent = [st for st in strings if st.coefficients]
+    if not bent:
+        return {}
+    lo = min(-1.0, min(st.span[0] for st in bent))
+    hi = max(1.0, max(st.span[1] for st in bent))
+    u = np.linspace(lo, hi, int(np.ceil((samples - 1) * (hi - lo) / 2.0)) + 1)
+    dev = np.vstack([st.deviation(u) for st in bent])
+    inside = np.vstack([(u >= st.span[0]) & (u <= st.span[1]) for st in bent])
+    twice = np.vstack([(u >= st.seen_twice[0]) & (u <= st.seen_twice[1]) for st in bent])  # False for NaN
+    judged = inside & ((np.abs(u) <= 1.0) | twice)
+    enough = max(3, len(bent) // 2)  # where fewer strings reach, the median is not the others' (none taken)
+    out = {}
+    for i, st in enumerate(bent):
+        others = np.delete(np.arange(len(bent)), i)
+        common = np.zeros(len(u))
+        for j in range(len(u)):
+            reach = others[inside[others, j]]
+            if len(reach) >= enough:
+                common[j] = np.median(dev[reach, j])
+        own = np.abs(dev[i] - common)[judged[i]]
+        out[st.index] = float(own.max()) if own.size else float("nan")
+    return out
 
 
 @dataclass(frozen=True)
@@ -357,30 +413,8 @@ class HarpShapeFit:
         return max(bent, key=lambda s: s.bend_px) if bent else None
 
     def own_bends(self, samples: int = 201) -> dict[int, float]:
-        r"""Each string's bend *apart from what all strings share* (pixels): the largest
-        :math:`|\delta_k(u) - \tilde\delta(u)|` over the string's span, :math:`\tilde\delta` the
-        median of the *other* strings' deviations at :math:`u` (where at least half of them reach). A part common to every string (a whole harp's
-        sag, or a lens term the model lacks, which the fit can only put into the strings) is not one
-        string's fault and cannot be told from the lens; a single bent string stands out of it. Strings
-        without deviation terms are left out."""
-        bent = [st for st in self.strings if st.coefficients]
-        if not bent:
-            return {}
-        u = np.linspace(-1.0, 1.0, samples)
-        dev = np.vstack([st.deviation(u) for st in bent])
-        inside = np.vstack([(u >= st.span[0]) & (u <= st.span[1]) for st in bent])
-        enough = max(3, len(bent) // 2)  # where fewer strings reach, the median is not the others' (none taken)
-        out = {}
-        for i, st in enumerate(bent):
-            others = np.delete(np.arange(len(bent)), i)
-            common = np.zeros(samples)
-            for j in range(samples):
-                reach = others[inside[others, j]]
-                if len(reach) >= enough:
-                    common[j] = np.median(dev[reach, j])
-            own = np.abs(dev[i] - common)[inside[i]]
-            out[st.index] = float(own.max()) if own.size else float("nan")
-        return out
+        """Each string's bend apart from what all strings share (pixels): :func:`own_bends` of :attr:`strings`."""
+        return own_bends(self.strings, samples)
 
     def bent_strings(self, limit_px: float = BEND_LIMIT_PX) -> tuple[StringShape, ...]:
         """The strings bent beyond ``limit_px``."""
@@ -1549,6 +1583,7 @@ def fit_harp_shape(
         sel = np.flatnonzero(rep.edge_string == k)
         on = np.isin(rep.point_edge, sel)
         span = (float(rep.u[on].min()), float(rep.u[on].max()))
+        twice = seen_twice(rep.u[on], rep.point_shot[on])
         offset = float(np.median(rep.q[on]))
         if k in slot:
             s = slot[k]
@@ -1568,7 +1603,7 @@ def fit_harp_shape(
         strings.append(
             StringShape(
                 int(k), offset, degrees if a_t else (), a_t, se, span, len(rep.shots_of[k]), len(sel), int(on.sum()),
-                bend, bend_se,
+                bend, bend_se, twice,
             )
         )  # fmt: skip
     return HarpShapeFit(

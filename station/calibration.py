@@ -549,8 +549,9 @@ def harp_health(
     Every string's own bend fitted beside the lens ``spec`` with the shots' turntable angles
     (:func:`pipeline.harp_shape.fit_harp_shape`): per string its bend, its own bend apart from what
     every string shares (:meth:`pipeline.harp_shape.HarpShapeFit.own_bends`: a common part is a whole
-    harp's or a lens term's, not one string's fault) and the standard error (px); the worst string and
-    the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, :data:`OUTLIER_FACTOR` times the
+    harp's or a lens term's, not one string's fault; judged within half the image's diagonal of the
+    axis and, beyond it, where two shots or more see the string: ``seen_twice``) and the standard error
+    (px); the worst string and the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, :data:`OUTLIER_FACTOR` times the
     median string's and :data:`BEND_SIGNIFICANCE` standard errors, as QA judges them (``bent_strings``), and those
     beyond the limit whose bend cannot be told from none (``uncertain_strings``);
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
@@ -603,6 +604,7 @@ def harp_health(
                 "bend_se_px": finite_or_none(s.bend_se_px),
                 "shots": s.shots,
                 "span": [float(s.span[0]), float(s.span[1])],
+                "seen_twice": [finite_or_none(v) for v in s.seen_twice],
             }
             for s in hs.strings
         ],

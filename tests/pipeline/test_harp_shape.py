@@ -10,7 +10,17 @@ from pipeline.edgeset import FitResult
 from pipeline.fit import correction_scale, fit_distortion
 from pipeline.fitspec import FitSpec
 from pipeline.harp_scene import HarpMount, draw_harp
-from pipeline.harp_shape import BEND_LIMIT_PX, STRING_RIDGE, fit_harp_shape, group_frames, harp_frame, legendre
+from pipeline.harp_shape import (
+    BEND_LIMIT_PX,
+    STRING_RIDGE,
+    StringShape,
+    fit_harp_shape,
+    group_frames,
+    harp_frame,
+    legendre,
+    own_bends,
+    seen_twice,
+)
 from pipeline.lens_population import lens_population
 from pipeline.models import RadialModel
 from pipeline.models.base import DistortionModel
@@ -379,3 +389,39 @@ def test_a_joint_fit_about_two_axes_holds_the_field_off_what_turns_about_either(
         turning = axis_basis(tuple(LENS.distort_points(np.asarray([axis]))[0]), m.bounds, m.shape)
         assert np.linalg.norm(turning.T @ c) < 0.01, axis  # px of coefficients (1.2 gauged about one axis, 5.6-5.8 not)
     assert compare_models(m, LENS, W, H, step=25).rms < 0.6 * compare_models(plain.model, LENS, W, H, step=25).rms
+
+
+def _p4(u):
+    """Legendre P4 written out by hand (not through ``legendre``)."""
+    return (35 * u**4 - 30 * u**2 + 3) / 8
+
+
+def _string(k, p4=0.0, span=(-1.3, 1.3), twice=(-1.3, 1.3)):
+    return StringShape(k, 60.0 * k, (2, 3, 4), (0.0, 0.0, p4), (1e-3,) * 3, span, 6, 6, 600, 0.0, 1e-3, twice)
+
+
+def test_the_stretch_two_shots_see_is_the_hull_of_the_overlaps_of_the_shots_stretches():
+    u = np.concatenate([np.linspace(-1.3, 0.2, 50), np.linspace(-0.5, 0.8, 50), np.linspace(0.6, 1.4, 50)])
+    shot = np.repeat([4, 7, 9], 50)
+    assert seen_twice(u, shot) == pytest.approx(
+        (-0.5, 0.8)
+    )  # shots 4 and 7 overlap on [-0.5, 0.2], 7 and 9 on [0.6, 0.8]
+    assert np.isnan(seen_twice(u[:100], np.repeat([4, 7], 50) * 0)).all()  # one shot: nothing seen twice
+    assert np.isnan(seen_twice(np.r_[u[:50], u[100:]], np.repeat([4, 9], 50))).all()  # two shots apart
+
+
+def test_a_string_is_judged_within_half_the_diagonal_and_beyond_it_only_where_two_shots_see_it():
+    """Three strings with the same P4 term of 0.005 px (0.005 px at u = +-1, 0.0327 px at u = +-1.3: truth from
+    the polynomial written by hand), among five straight ones: seen by two shots out to u = +-1.3 its own bend is
+    the end's; seen twice only over [-0.9, 0.9], or by no two shots, the ends beyond u = +-1 that one shot sees are
+    not judged and the bend is the one at u = +-1; a straight string has none."""
+    a = 0.005
+    strings = [_string(k) for k in range(5)] + [
+        _string(5, a),
+        _string(6, a, twice=(-0.9, 0.9)),
+        _string(7, a, twice=(float("nan"), float("nan"))),
+    ]
+    own = own_bends(strings)
+    assert own[5] == pytest.approx(a * _p4(1.3), rel=1e-9)
+    assert own[6] == pytest.approx(a * _p4(1.0), rel=1e-3) and own[7] == pytest.approx(a * _p4(1.0), rel=1e-3)
+    assert max(own[k] for k in range(5)) == 0.0
