@@ -87,7 +87,9 @@ The harp check's figures (each string's coefficients, bend and standard error) c
 strings alone with that lens held and a weaker ridge (:data:`REPORT_RIDGE`): the joint fit's ridge hands the lens
 a part of every bend, which a held lens cannot take. That fit also measures the edges the plain fit rejected as
 outliers that lie on a string (a bent string's edges, rejected where its bend shows most): the lens is fitted
-without them, as before, and the check sees every string (``fit_harp_shape(readmit=...)``).
+without them, as before, and the check sees every string (``fit_harp_shape(readmit=...)``). A shot measured far
+worse than the others (edges along the pixel rows or columns) is weighed by its noise in that fit
+(:data:`SHOT_NOISE_FACTOR`), and where a string's own bend is judged is set by :func:`own_bends`.
 
 The strings are identified across shots by their distance from the axis :math:`c`, which is
 found by making those distances agree between shots: about the true axis each string is one string,
@@ -235,6 +237,41 @@ REPORT_OUTLIER_FLOOR_PX = 0.1 * BEND_LIMIT_PX
 exact edges the median edge RMS is some 1e-4 px and five times it rejected bowed strings whose Legendre terms
 left 5e-4 px; an edge this straight carries no shape near the bend limit. Measured edges (0.005-0.01 px RMS)
 never come near it."""
+
+SHOT_NOISE_FACTOR = 2.0
+"""A shot whose median edge residual (RMS, px) exceeds this times the median over all edges is weighed by its
+variance in the harp check's fit of the strings (:func:`shot_weights`); the others keep weight 1. Edges that run
+within a degree of the pixel grid are measured worse: their sub-pixel phase drifts slowly along them and the
+detector's phase error (pixel locking) is a wave of a few hundred pixels that the along-edge smoother does not
+remove. On ``benchmarks/harp_health.py``'s seed 11, whose strings lie along the rows and columns at two of the six
+angles, those edges' residuals are 3.5 times the others' and they bent a string drawn straight to 0.039 px
+(0.0436 px own bend, 2.7 standard errors) about two axis places; weighed, 0.007 px. Between ordinary shots the ratio
+stays below 2 (1.0-2.0 on seeds 0..19, one shot at 2.2; seed 11: 3.4 and 3.6). A shot-wide figure does not single
+out a bent or kinked string, which is in every shot: weighing each edge by its own residual did, and hid a kinked
+string (seed 2: 0.054 -> 0.023 px)."""
+
+
+def shot_weights(rms: Floats, image: NDArray[np.intp]) -> tuple[Floats, dict[int, float]]:
+    r"""Per-edge weights from each shot's measurement noise: :math:`(m / m_s)^2` for the edges of a shot ``s``
+    whose median edge residual :math:`m_s` exceeds :data:`SHOT_NOISE_FACTOR` times the median :math:`m` over all
+    edges, 1 for the others; and those shots with :math:`m_s / m`. ``rms``: each edge's residual RMS (px),
+    ``image``: its shot.
+
+    References
+    ----------
+    .. [1] R. J. Carroll, D. Ruppert, *Transformation and Weighting in Regression*, Chapman & Hall, 1988, ch. 3
+       (weights from variances estimated per group of observations).
+    """
+    m = float(np.median(rms))
+    w = np.ones(len(rms))
+    noisy = {}
+    for s in np.unique(image):
+        on = image == s
+        ms = float(np.median(rms[on]))
+        if m > 0 and ms > SHOT_NOISE_FACTOR * m:
+            w[on] = (m / ms) ** 2
+            noisy[int(s)] = ms / m
+    return w, noisy
 
 
 def legendre(u: Floats, degrees: Sequence[int]) -> Floats:
@@ -392,7 +429,8 @@ class HarpShapeFit:
     between groups of shots (``frame`` is then the first group's), empty otherwise; ``warnings`` what the fit
     had to do that changes the model's meaning (the distortion centre held when it collapsed the correction,
     :func:`_solve_joint`); ``rejected`` the edges given back to the harp check (``readmit``) that the strings'
-    fit did not explain either, and why."""
+    fit did not explain either, and why; ``noisy_shots`` the shots the check weighed by their variance
+    (:func:`shot_weights`), each with its median edge residual over the median edge's."""
 
     model: DistortionModel
     plain: FitResult
@@ -405,6 +443,7 @@ class HarpShapeFit:
     kinks: tuple[Kink, ...] = ()
     warnings: tuple[str, ...] = ()
     rejected: tuple[RejectedEdge, ...] = ()
+    noisy_shots: tuple[tuple[int, float], ...] = ()
 
     @property
     def worst(self) -> StringShape | None:
@@ -436,6 +475,7 @@ class HarpShapeFit:
             }
             | ({"axis_groups": {str(g): f.to_dict() for g, f in self.axis_groups}} if self.axis_groups else {})
             | ({"warnings": list(self.warnings)} if self.warnings else {})
+            | ({"noisy_shots": {str(i): r for i, r in self.noisy_shots}} if self.noisy_shots else {})
             | (
                 {"rejected": [{"image": r.image, "line": r.line, "reason": r.reason} for r in self.rejected]}
                 if self.rejected
@@ -1064,7 +1104,7 @@ def _report_points(
     placed: Sequence[tuple[int, Candidate]],
     kink_t: int,
     max_nfev: int,
-) -> tuple[_Placed, dict[int, int], tuple[RejectedEdge, ...], _WithStrings, Floats]:
+) -> tuple[_Placed, dict[int, int], tuple[RejectedEdge, ...], _Held]:
     """The edges the harp check measures: the lens's and those given back (``wider``: :func:`_with_edges`), in the
     harp's frame with the strings numbered again; each kink's string in that numbering; the edges left out by
     :func:`pipeline.fit.fit_distortion`'s outlier rule (:func:`pipeline.fit.outlier_edges`, with
@@ -1073,14 +1113,13 @@ def _report_points(
     edges, edge_string, origin = wider
     rep = _placed(edges, edge_string, shot_frame, turntable_deg, model0, scale, degrees, renumber=True)
     kink_of = {k: k for k, _ in placed} if rep.rank is None else {k: int(rep.rank[k]) for k, _ in placed}
-    held, x = _held_strings(rep, joint, placed, kink_of, scale, kink_t, max_nfev)
-    if not np.all(np.isfinite(x)):
-        return rep, kink_of, (), held, x
-    rms = edge_figures(tls(held.evaluate(edges.xy, x, jac=False)[0], edges.starts, edges.counts)[0], edges.starts,
-                       edges.counts)[0]  # fmt: skip
+    held = _held_strings(rep, joint, placed, kink_of, scale, kink_t, max_nfev)
+    if not np.all(np.isfinite(held.x)):
+        return rep, kink_of, (), held
+    rms = _edge_rms(held.problem, edges, held.x)
     bad, limit, _ = outlier_edges(rms, floor=REPORT_OUTLIER_FLOOR_PX)
     if not len(bad):
-        return rep, kink_of, (), held, x
+        return rep, kink_of, (), held
     rejected = tuple(
         RejectedEdge(*origin[(int(edges.image[e]), int(edges.line[e]))],
                      f"outlier of the strings' fit: residual RMS {rms[e]:.3g} px > {limit:.3g} px")
@@ -1089,7 +1128,7 @@ def _report_points(
     keep = np.ones(edges.n_edges, bool)
     keep[bad] = False
     left = _placed(edges.subset(keep), rep.edge_string[keep], shot_frame, turntable_deg, model0, scale, degrees)
-    return (left, kink_of, rejected, *_held_strings(left, joint, placed, kink_of, scale, kink_t, max_nfev))
+    return left, kink_of, rejected, _held_strings(left, joint, placed, kink_of, scale, kink_t, max_nfev)
 
 
 def _held_strings(
@@ -1100,16 +1139,44 @@ def _held_strings(
     scale: float,
     kink_t: int,
     max_nfev: int,
-) -> tuple[_WithStrings, Floats]:
+) -> _Held:
     """The strings' terms and kinks' peaks over ``pts`` fitted with the lens ``joint`` held and the ridge
-    :data:`REPORT_RIDGE` (the bends the harp check reports): the problem and its solution."""
+    :data:`REPORT_RIDGE` (the bends the harp check reports), then again with the shots measured worse than the
+    others weighed by their variance (:func:`shot_weights`) when there are such."""
     held = _WithStrings(
         _HeldLens(joint), pts.string_of, pts.basis, pts.normal, len(pts.with_terms), REPORT_RIDGE, None,
         _kink_templates(pts, placed, kink_of, scale, kink_t),
     )  # fmt: skip
+    e = pts.edges
     with np.errstate(all="ignore"):
-        x = solve(held, pts.edges, held.theta0(None), max_nfev=max_nfev).x
-    return held, x
+        x = solve(held, e, held.theta0(None), max_nfev=max_nfev).x
+    if not np.all(np.isfinite(x)):
+        return _Held(held, x, None, {})
+    w, noisy = shot_weights(_edge_rms(held, e, x), e.image)
+    if not noisy:
+        return _Held(held, x, None, {})
+    with np.errstate(all="ignore"):
+        x = solve(held, e, x, edge_weights=w, max_nfev=max_nfev).x
+    return _Held(held, x, w, noisy)
+
+
+def _edge_rms(param: _WithStrings, edges: EdgeSet, x: Floats) -> Floats:
+    """Each edge's residual RMS (px) about its line, corrected by ``param`` at ``x``."""
+    r = tls(param.evaluate(edges.xy, x, jac=False)[0], edges.starts, edges.counts)[0]
+    out: Floats = edge_figures(r, edges.starts, edges.counts)[0]
+    return out
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The harp check's fit of the strings with the lens held (:func:`_held_strings`): the problem, its solution,
+    the edges' weights (None: all 1) and the shots weighed, each with its median edge residual over the median
+    edge's."""
+
+    problem: _WithStrings
+    x: Floats
+    edge_weights: Floats | None
+    noisy: dict[int, float]
 
 
 def _kink_templates(
@@ -1539,7 +1606,7 @@ def fit_harp_shape(
     # the harp check: every string's shape fitted again with the lens held, on the edges given back too
     rep, kink_of = hp, {k: k for k, _ in placed}
     rejected: tuple[RejectedEdge, ...] = ()
-    check: _WithStrings | None = None
+    check: _Held | None = None
     if readmit:
         source = [(i, j) for i, s in enumerate(lines_per_image) for j in range(len(s)) if (i, j) not in out]
         origin = {(i, jj): ij for i in range(len(kept)) for jj, ij in enumerate(x for x in source if x[0] == i)}
@@ -1547,20 +1614,22 @@ def fit_harp_shape(
         back = _readmitted(lines_per_image, outliers, hp, shot_frame, turntable_deg, model0, frame.pitch_px)
         if back:
             wider = _with_edges(lines_per_image, edges, edge_string, origin, back, width, height)
-            rep, kink_of, rejected, check, bends = _report_points(
+            rep, kink_of, rejected, check = _report_points(
                 wider, shot_frame, turntable_deg, model0, frame.scale_px, degrees, joint, placed, kink_t, max_nfev
             )
     if check is None:
-        check, bends = _held_strings(rep, joint, placed, kink_of, frame.scale_px, kink_t, max_nfev)
+        check = _held_strings(rep, joint, placed, kink_of, frame.scale_px, kink_t, max_nfev)
+    bends = check.x
     if not np.all(np.isfinite(bends)):
         return FitFailure("the strings' shapes with the lens held diverged (non-finite parameters)")
     th = np.concatenate([th[: lens.n], bends])
-    # standard errors of the coefficients: (J^T J)^-1 sigma^2 at the solution (lens and strings free)
+    # standard errors of the coefficients: (J^T W J)^-1 sigma^2 at the solution (lens and strings free; W the
+    # shots' weights of the check, sigma^2 the variance of a residual of weight 1)
     rep_gauge = _radial_gauge(lens, model0, rep.edges.xy, rep) if one_axis else None
     free = _WithStrings(
-        lens, rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, rep_gauge, check.kinks
+        lens, rep.string_of, rep.basis, rep.normal, len(rep.with_terms), REPORT_RIDGE, rep_gauge, check.problem.kinks
     )
-    ata, _, ss = normal_equations(free, rep.edges, th)
+    ata, _, ss = normal_equations(free, rep.edges, th, edge_weights=check.edge_weights)
     _, jg = free.regularisation(th, len(rep.edges.xy))
     dof = max(len(rep.edges.xy) - free.n, 1)
     cov = np.linalg.pinv(ata[0] + jg.T @ jg) * float(ss[0]) / dof
@@ -1618,6 +1687,7 @@ def fit_harp_shape(
         kinks=tuple(found),
         warnings=tuple(dict.fromkeys(warnings)),
         rejected=rejected,
+        noisy_shots=tuple(sorted(check.noisy.items())),
     )
 
 

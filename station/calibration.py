@@ -553,7 +553,8 @@ def harp_health(
     axis and, beyond it, where two shots or more see the string: ``seen_twice``) and the standard error
     (px); the worst string and the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, :data:`OUTLIER_FACTOR` times the
     median string's and :data:`BEND_SIGNIFICANCE` standard errors, as QA judges them (``bent_strings``), and those
-    beyond the limit whose bend cannot be told from none (``uncertain_strings``);
+    beyond the limit whose bend cannot be told from none (``uncertain_strings``); the shots the check weighed by
+    their noise (``noisy_shots``: :data:`pipeline.harp_shape.SHOT_NOISE_FACTOR`, with each one's turntable angle);
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
     ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens);
     ``axes``: the shots' turntable-axis places of a two-axis capture (:func:`axes_of`), each place's axis found
@@ -607,6 +608,9 @@ def harp_health(
                 "seen_twice": [finite_or_none(v) for v in s.seen_twice],
             }
             for s in hs.strings
+        ],
+        "noisy_shots": [
+            {"shot": i, "turntable_deg": float(turntable_deg[i]), "noise_ratio": r} for i, r in hs.noisy_shots
         ],
         "d_with_strings_px": finite_or_none(hs.d_after),
         "d_lens_only_px": finite_or_none(hs.d_lens_only),

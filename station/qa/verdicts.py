@@ -387,6 +387,14 @@ def evaluate(
                 text = f"harp: largest string bend (string {k}) {worst:.4f} px > {limit:g} px, but {why}: {PASS}"
             else:
                 text = f"harp: largest string bend (string {k}) {worst:.4f} px <= {limit:g} px: {PASS}"
+            noisy = harp_health.get("noisy_shots") or []
+            if noisy:
+                angles = ", ".join(f"{n['turntable_deg']:g}" for n in noisy)
+                ratio = max(n["noise_ratio"] for n in noisy)
+                text += (
+                    f" (shots at {angles} deg measured up to {ratio:.1f}x worse than the others, weighed by their "
+                    "noise: strings along the pixel rows or columns? turn the harp on its mount by a few degrees)"
+                )
             add(
                 Check("string_bend_max", finite_or_none(worst), "<=", limit, not bent, text),
                 f"string {k} of the harp is bent by {bend:.4f} px (limit {limit:g} px): the correction "

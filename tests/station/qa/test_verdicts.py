@@ -238,3 +238,13 @@ def test_the_harp_check_names_the_most_bent_string_and_says_why_a_bend_beyond_th
         "string_bend_max"
     ]
     assert check.passed is True and "0.0030 px <= 0.02 px" in check.text
+    assert "weighed" not in check.text
+    # shots the check weighed by their noise: named by turntable angle, with what to do
+    noisy = [
+        {"shot": 2, "turntable_deg": 60.0, "noise_ratio": 3.4},
+        {"shot": 5, "turntable_deg": 150.0, "noise_ratio": 3.6},
+    ]
+    health = _health(strings, 0.003, noisy_shots=noisy)
+    check = by_name(evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=health))["string_bend_max"]
+    assert check.passed is True and "shots at 60, 150 deg measured up to 3.6x worse than the others" in check.text
+    assert "turn the harp on its mount" in check.text
