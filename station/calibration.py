@@ -526,8 +526,10 @@ BEND_SIGNIFICANCE = 2.0
 length (the image's corners) carry standard errors as large as the limit: on ``benchmarks/harp_health.py``'s
 harps (seeds 0..19, six angles) one session failed on a string drawn at 0.0032 px, reported at 0.0207 +- 0.0188
 px, while the strings named rightly had their own bends 2.4 to 11 standard errors from none (a probe over the same
-fits). It is a statistical rule: about two axis places one session of twenty named a string drawn at 0.0003 px,
-reported at 0.0436 +- 0.0159 px (``benchmarks/RESULTS-harp-health.md``)."""
+fits). About two axis places one session of twenty named a string drawn at 0.0003 px, reported at 0.0436 +- 0.0159
+px: two of its shots' edges lay along the pixel grid and were measured 3.5 times worse than the others, which the
+check now weighs by their noise (:data:`pipeline.harp_shape.SHOT_NOISE_FACTOR`; ``benchmarks/RESULTS-harp-health.md``).
+"""
 
 MIN_HEALTH_ORIENTATIONS = 3
 """Turntable angles the harp's self-check needs: with two, a string's bend and the lens's terms
