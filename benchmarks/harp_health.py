@@ -16,7 +16,9 @@ turntable angles given). Truth: the exact lens (field error modulo homography ov
 the fitted family (Legendre P2..P4 over the stretch of the string the shots show), read along the string in the
 direction the fitted frame runs (``harp_along``, from the geometry). The last columns but two: the session's QA
 of the same fit (``station.calibration.harp_health``, ``station.qa.verdicts``: ``string_bend_max``), its verdict
-and the strings it names, each with its drawn bend.
+and the strings it names, each with its drawn bend. The last line also counts the forced strings drawn beyond the
+limit where the QA judges a string (within half the image diagonal of the axis and, beyond it, where two shots see
+the string: ``pipeline.harp_shape.own_bends``), and how many of them it named.
 """
 
 from __future__ import annotations
@@ -60,13 +62,18 @@ def harp_along(frame, mount) -> int:  # type: ignore[no-untyped-def]
     return 1 if float(frame.direction(0.0) @ np.asarray(mount.pose(0.0).direction)) > 0 else -1
 
 
-def true_bend(harp, k: int, span: tuple[float, float], scale: float, along: int) -> float:
-    """String ``k``'s exact deviation, projected on P2..P4 over ``span`` (the fitted family), at its largest."""
+def true_bend(harp, k: int, span: tuple[float, float], scale: float, along: int, judged=None) -> float:  # type: ignore[no-untyped-def]
+    """String ``k``'s exact deviation, projected on P2..P4 over ``span`` (the fitted family), at its largest; with
+    ``judged`` (the fitted string's ``seen_twice``) only where the QA judges the string: within half the diagonal of
+    the axis and, beyond it, within that stretch (``pipeline.harp_shape.own_bends``)."""
     u = np.linspace(span[0], span[1], 401)
     dev = harp.strings[k].deviation(along * u * scale)
     basis = np.vstack([np.ones_like(u), u, legendre(u, (2, 3, 4))])
     c, *_ = np.linalg.lstsq(basis.T, dev, rcond=None)
-    return float(np.max(np.abs(c[2:] @ basis[2:])))
+    shape = np.abs(c[2:] @ basis[2:])
+    if judged is not None:
+        shape = shape[(np.abs(u) <= 1.0) | ((u >= judged[0]) & (u <= judged[1]))]
+    return float(np.max(shape)) if shape.size else float("nan")
 
 
 def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
@@ -102,11 +109,14 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     along = harp_along(fit.frame, ses.mount)
     pairs = []  # (true bend, fitted bend, its standard error, forced?)
     drawn: dict[int, tuple[float, bool]] = {}  # fitted string -> (its drawn bend, forced?)
+    judged: list[tuple[int, float]] = []  # forced strings: (fitted string, drawn bend where the QA judges it)
     for s in fit.strings:
         if not np.isfinite(s.bend_px):
             continue
         k = int(np.argmin(np.abs(pos - along * s.offset_px)))
         drawn[s.index] = (true_bend(harp, k, s.span, fit.frame.scale_px, along), k in forced)
+        if k in forced:
+            judged.append((s.index, true_bend(harp, k, s.span, fit.frame.scale_px, along, s.seen_twice)))
         pairs.append((drawn[s.index][0], s.bend_px, s.bend_se_px, k in forced))
     # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
     # strings it names, each with its drawn bend
@@ -116,9 +126,13 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     )
     word = "FAIL" if check.passed is False else "PASS" if check.passed else "not judged"
     qa = (word, [(k, *drawn[k]) for k in health.get("bent_strings", [])])
+    # forced strings drawn beyond the limit where the QA judges them, and whether it named them (a session not
+    # judged names none)
+    beyond_judged = [(b, k in health.get("bent_strings", [])) for k, b in judged if b > BEND_LIMIT_PX]
     return {
         "seed": seed,
         "qa": qa,
+        "beyond_judged": beyond_judged,
         "field_plain": compare_models(plain.model, lens, w, h, step=20).rms,
         "field_joint": compare_models(fit.model, lens, w, h, step=20).rms,
         "d_plain": plain.d_after,
@@ -154,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         "render+measure s | fit s |"
     )
     print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|---|---:|---:|")
-    ratios, zs, gains, fp, qa_words, wrong = [], [], [], 0, [], 0
+    ratios, zs, gains, fp, qa_words, wrong, beyond = [], [], [], 0, [], 0, []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         r = one(seed, w, h, args.places)
         if "failure" in r:
@@ -174,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         verdict = word + "".join(f", {k}{' (forced)' if f else ''}: {t:.4f}" for k, t, f in named)
         qa_words.append(word)
         wrong += sum(t < BEND_LIMIT_PX for _, t, _ in named)
+        beyond += r["beyond_judged"]
         print(
             f"| {seed} | {r['strings']} | {r['axis_err']:.2f} | {r['field_plain']:.4f} | {r['field_joint']:.4f} | "
             f"{r['d_plain']:.4f} | {r['d_joint']:.4f} | "
@@ -190,7 +205,9 @@ def main(argv: list[str] | None = None) -> int:
             "field error with strings / alone: "
             f"median {np.median(gains):.2f}, worst {max(gains):.2f}; strings flagged whose true bend is below "
             f"{0.5 * BEND_LIMIT_PX} px: {fp}; session QA: {qa_words.count('FAIL')} FAIL, {qa_words.count('PASS')} PASS, "
-            f"{qa_words.count('not judged')} not judged, strings named whose drawn bend is within the limit: {wrong}"
+            f"{qa_words.count('not judged')} not judged, strings named whose drawn bend is within the limit: {wrong}; "
+            f"forced strings drawn beyond the limit where the QA judges them: {len(beyond)}, named: "
+            f"{sum(n for _, n in beyond)}"
         )
     return 0
 
