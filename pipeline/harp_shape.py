@@ -250,9 +250,10 @@ stays near or below 2: the largest on seeds 0..19 were 1.98 and 2.2 about one pl
 Below the factor every shot keeps weight 1, as before: weighing every shot by its variance moved the forced bends of
 seeds 0..9 (one place) from 15 to 13 of 18 within 20 %. A shot-wide figure does not single out a bent or kinked
 string, which is in every shot: weighing each edge by its own residual did, and hid a kinked string (seed 2: 0.054
--> 0.023 px). Measured through the realistic renderer (``benchmarks/RESULTS-harp-health.md``): an edge's residual
-after the along-edge smoother is 0.03 px at 0.25-1 degree from the pixel grid with a Bayer demosaic (bilinear or
-edge-aware), 0.011 px at 2 degrees, 0.002 px at 8 and beyond; 0.002-0.006 px with a half-size conversion."""
+-> 0.023 px). Measured through the realistic renderer (``benchmarks/grid_angle.py``, ``RESULTS-edges.md``): an
+edge's residual after the along-edge smoother is 0.03 px at 0.25-1 degree from the pixel grid with a Bayer demosaic
+(bilinear or edge-aware), 0.011 px at 2 degrees, 0.002 px at 8 and beyond; 0.002-0.006 px with a half-size
+conversion."""
 
 
 def shot_weights(rms: Floats, image: NDArray[np.intp]) -> tuple[Floats, dict[int, float]]:
