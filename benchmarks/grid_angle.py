@@ -3,6 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/grid_angle.py [--seeds 0,1] [--angles 0,0.25,0.5,1,2,4,8,22] [--no-real]
+        [--lens-seeds 0:90 --cache DIR]
 
 Part 1 (simulator): one realistic shot (``pipeline.realism.realistic_session``, 1000x750, strings 60 px apart and
 3 px wide, an identity lens) with the strings at ``angle`` degrees to the pixel rows, for each demosaic of the raw
@@ -20,6 +21,13 @@ variance it explains, for the edges within 10 degrees of the grid. Then that pha
 photograph's own edges, is taken off their raw points (a self-calibration, as for peak locking in particle image
 velocimetry) and the photographs are measured again: radial4+tangential+prism (free centre) fitted on two,
 straightness ``d`` of the third, as ``pytest tests/pipeline/test_fit.py -k real`` does, with and without.
+
+Part 3 (``--lens-seeds``, the population of ``benchmarks/lens_limits.py``: six shots 30 degrees apart): the seeds
+among those whose strings come within 2 degrees of the grid at some turntable angle; for each, radial4+tangential+prism
+fitted as ``fit_distortion`` does, and again with the shots measured more than twice as noisy as the median weighed
+by their variance (``pipeline.harp_shape.shot_weights`` on the fit's edge residuals, as the harp check weighs them,
+given as ``point_sigma``): field error against the exact lens (modulo homography) and the straightness of the three
+unseen shots. The renders are kept in ``--cache`` (``lens_limits.realistic_measured``).
 """
 
 from __future__ import annotations
@@ -150,16 +158,65 @@ def real(directory: Path) -> None:
         print(f"| {held} | " + " | ".join(cells) + " |", flush=True)
 
 
+def lens_weights(seeds: range, cache: Path | None) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from lens_limits import FITTED, SPEC, realistic_measured, seed_lens
+
+    from pipeline.compare import compare_models
+    from pipeline.harp_shape import shot_weights
+    from pipeline.realism import realistic_session
+
+    print("## Part 3: the lens fit with noisy shots weighed, population seeds near the grid\n")
+    print("| seed | closest angle to the grid deg | shots weighed (noise ratio) | field px | field, weighed px | "
+          "unseen d px | unseen d, weighed px |")  # fmt: skip
+    print("|---:|---:|---|---:|---:|---:|---:|")
+    for seed in seeds:
+        mount = realistic_session(seed, W, H).mount
+        offs = []
+        for t in FITTED:
+            d = np.asarray(mount.pose(t).direction)
+            a = float(np.degrees(np.arctan2(d[1], d[0])) % 90.0)
+            offs.append(min(a, 90.0 - a))
+        if min(offs) >= 2.0:
+            continue
+        lines, unseen, _ = realistic_measured(seed, W, H, cache)
+        lens = seed_lens(seed, W, H)[0]
+        cells = []
+        plain = fit_distortion(lines, W, H, **SPEC.fit_arguments())
+        kept = [e for e in plain.edges if not e.rejected]
+        w, noisy = shot_weights(np.array([e.rms_after for e in kept]), np.array([e.image for e in kept]))
+        fits = [plain]
+        if noisy:
+            sigma = [[np.full(len(p), noisy.get(i, 1.0)) for p in shot] for i, shot in enumerate(lines)]
+            fits.append(fit_distortion(lines, W, H, point_sigma=sigma, **SPEC.fit_arguments()))
+        for f in fits:
+            cells.append(compare_models(f.model, lens, W, H, step=20).rms)
+            cells.append(float(np.sqrt(np.mean([corrected_straightness(f.model, u)[0] ** 2 for u in unseen]))))
+        if not noisy:
+            cells = [cells[0], float("nan"), cells[1], float("nan")]
+        else:
+            cells = [cells[0], cells[2], cells[1], cells[3]]
+        shots = ", ".join(f"{FITTED[i]:g} deg ({r:.2f})" for i, r in sorted(noisy.items())) or "none"
+        print(f"| {seed} | {min(offs):.2f} | {shots} | " + " | ".join(f"{c:.4f}" for c in cells) + " |", flush=True)
+    print()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1")
     ap.add_argument("--angles", default="0,0.25,0.5,1,2,4,8,22")
     ap.add_argument("--no-real", action="store_true")
+    ap.add_argument("--lens-seeds", default="", help="part 3: seeds a:b of the lens population (empty: skipped)")
+    ap.add_argument("--cache", type=Path, default=None, help="part 3: directory of kept renders")
     args = ap.parse_args(argv)
     print(
         f"# Edges along the pixel grid ({os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; "
         f"`benchmarks/grid_angle.py {' '.join(argv if argv is not None else sys.argv[1:])}`)\n"
     )
+    if args.lens_seeds:
+        a, b = (int(v) for v in args.lens_seeds.split(":"))
+        lens_weights(range(a, b), args.cache)
+        return 0
     simulator([int(v) for v in args.seeds.split(",")], [float(v) for v in args.angles.split(",")])
     if not args.no_real:
         if REAL_DIR.is_dir():
