@@ -68,6 +68,7 @@ def test_a_session_fit_checks_the_harp_and_qa_fails_a_bent_string():
     u = np.linspace(*health["strings"][4]["span"], 401)  # where the string was seen (half diagonals)
     lo, hi = health["strings"][4]["seen_twice"]  # where two shots or more saw it: within that
     assert u[0] <= lo < hi <= u[-1]
+    assert health["noisy_shots"] == []  # every shot drawn with the same noise: none weighed
     truth = float(np.max(np.abs(0.05 * 0.5 * (3 * u**2 - 1))))  # the bow's largest |delta| there
     assert health["worst_bend_px"] == pytest.approx(truth, rel=0.2)  # recovered within 20 %
     assert verdict.verdict == "FAIL" and any("string 4 of the harp is bent" in r for r in verdict.reasons)
