@@ -18,7 +18,9 @@ direction the fitted frame runs (``harp_along``, from the geometry). The last co
 of the same fit (``station.calibration.harp_health``, ``station.qa.verdicts``: ``string_bend_max``), its verdict
 and the strings it names, each with its drawn bend. The last line also counts the forced strings drawn beyond the
 limit where the QA judges a string (within half the image diagonal of the axis and, beyond it, where two shots see
-the string: ``pipeline.harp_shape.own_bends``), and how many of them it named.
+the string: ``pipeline.harp_shape.own_bends``), and how many of them it named; and the forced bends within 20 % when
+both the drawn and the fitted bend are taken over that stretch only (the ends beyond half the diagonal that one shot
+sees left out).
 """
 
 from __future__ import annotations
@@ -110,6 +112,7 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     pairs = []  # (true bend, fitted bend, its standard error, forced?)
     drawn: dict[int, tuple[float, bool]] = {}  # fitted string -> (its drawn bend, forced?)
     judged: list[tuple[int, float]] = []  # forced strings: (fitted string, drawn bend where the QA judges it)
+    judged_pairs: list[tuple[float, float]] = []  # forced strings: (drawn, fitted) bend where the QA judges it
     for s in fit.strings:
         if not np.isfinite(s.bend_px):
             continue
@@ -117,6 +120,9 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
         drawn[s.index] = (true_bend(harp, k, s.span, fit.frame.scale_px, along), k in forced)
         if k in forced:
             judged.append((s.index, true_bend(harp, k, s.span, fit.frame.scale_px, along, s.seen_twice)))
+            u = np.linspace(s.span[0], s.span[1], 401)
+            where = (np.abs(u) <= 1.0) | ((u >= s.seen_twice[0]) & (u <= s.seen_twice[1]))
+            judged_pairs.append((judged[-1][1], float(np.max(np.abs(s.deviation(u[where]))))))
         pairs.append((drawn[s.index][0], s.bend_px, s.bend_se_px, k in forced))
     # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
     # strings it names, each with its drawn bend
@@ -133,6 +139,7 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
         "seed": seed,
         "qa": qa,
         "beyond_judged": beyond_judged,
+        "judged_pairs": judged_pairs,
         "field_plain": compare_models(plain.model, lens, w, h, step=20).rms,
         "field_joint": compare_models(fit.model, lens, w, h, step=20).rms,
         "d_plain": plain.d_after,
@@ -168,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         "render+measure s | fit s |"
     )
     print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|---|---:|---:|")
-    ratios, zs, gains, fp, qa_words, wrong, beyond = [], [], [], 0, [], 0, []
+    ratios, zs, gains, fp, qa_words, wrong, beyond, judged_ratios = [], [], [], 0, [], 0, [], []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         r = one(seed, w, h, args.places)
         if "failure" in r:
@@ -178,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         forced = [(a, b) for a, b, _, f in pairs if f]
         others = [(a, b) for a, b, _, f in pairs if not f]
         ratios += [b / a for a, b in forced if a > 0.01]
+        judged_ratios += [b / a for a, b in r["judged_pairs"] if a > 0.01]
         zs += [(b - a) / se for a, b, se, f in pairs if f and a > 0.01 and se > 0]
         gains.append(r["field_joint"] / r["field_plain"])
         flag_f = sum(b > BEND_LIMIT_PX for _, b in forced)
@@ -207,7 +215,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{0.5 * BEND_LIMIT_PX} px: {fp}; session QA: {qa_words.count('FAIL')} FAIL, {qa_words.count('PASS')} PASS, "
             f"{qa_words.count('not judged')} not judged, strings named whose drawn bend is within the limit: {wrong}; "
             f"forced strings drawn beyond the limit where the QA judges them: {len(beyond)}, named: "
-            f"{sum(n for _, n in beyond)}"
+            f"{sum(n for _, n in beyond)}; forced bends within 20 % over the stretch the QA judges: "
+            f"{int(np.sum(np.abs(np.array(judged_ratios) - 1) <= 0.2))} of {len(judged_ratios)}"
         )
     return 0
 
