@@ -553,8 +553,9 @@ def harp_health(
     every string shares (:meth:`pipeline.harp_shape.HarpShapeFit.own_bends`: a common part is a whole
     harp's or a lens term's, not one string's fault; judged within half the image's diagonal of the
     axis and, beyond it, where two shots or more see the string: ``seen_twice``) and the standard error
-    (px); the worst string and the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`, :data:`OUTLIER_FACTOR` times the
-    median string's and :data:`BEND_SIGNIFICANCE` standard errors, as QA judges them (``bent_strings``), and those
+    (px); the worst string and the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`,
+    :data:`OUTLIER_FACTOR` times the median string's and :data:`BEND_SIGNIFICANCE` standard errors, as QA judges
+    them (``bent_strings``), and those
     beyond the limit whose bend cannot be told from none (``uncertain_strings``); the shots the check weighed by
     their noise (``noisy_shots``: :data:`pipeline.harp_shape.SHOT_NOISE_FACTOR`, with each one's turntable angle);
     ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
