@@ -48,12 +48,14 @@ from pipeline.harp_shape import (
     BEND_LIMIT_PX,
     GROUP_AXIS_SEARCH,
     MIN_GROUP_ANGLES,
+    SHOT_NOISE_FACTOR,
     HarpShapeFit,
     fit_harp_shape,
     harp_frame,
     lens_result,
     separated_job,
     separated_kinks_job,
+    shot_weights,
     string_pitch,
 )
 from pipeline.orientations import distinct_orientations, support_problem
@@ -347,6 +349,26 @@ def holdout_warning(held_lines: Sequence[np.ndarray], holdout_d: float | None) -
             f"before, {holdout_d:.4f} px after): it does not generalise to other orientations"
         )
     return None
+
+
+def noisy_shot_warnings(fit: FitResult, names: Sequence[str]) -> list[str]:
+    """A warning per shot whose edges the correction leaves far less straight than the others' (``fit``'s kept edges;
+    ``names[i]`` shot ``i``'s name): its median edge residual beyond
+    :data:`pipeline.harp_shape.SHOT_NOISE_FACTOR` times the median edge's (:func:`pipeline.harp_shape.shot_weights`,
+    the harp check's rule). A dim, blurred or moved shot is, and so are edges within a degree or two of the pixel grid
+    after a Bayer demosaic (``benchmarks/grid_angle.py``). None with fewer than three shots (two shots' median is
+    neither's)."""
+    kept = [e for e in fit.edges if not e.rejected and np.isfinite(e.rms_after)]
+    if len({e.image for e in kept}) < 3:
+        return []
+    _, noisy = shot_weights(np.array([e.rms_after for e in kept]), np.array([e.image for e in kept]))
+    return [
+        f"{names[i]}: its edges stay {r:.1f}x as far from straight as the median edge after the correction (beyond "
+        f"{SHOT_NOISE_FACTOR:g}x: a dim, blurred or moved shot, or strings within a degree or two of the pixel rows or "
+        "columns after a Bayer demosaic): check the shot, turn the harp on its mount by a few degrees if its strings "
+        "lie along the grid, and capture it again"
+        for i, r in sorted(noisy.items())
+    ]
 
 
 # ------------------------------------------------------- a focus setting

@@ -222,6 +222,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         GIVEN_ON_COMMAND_LINE,
         calibrate_shots,
         holdout_warning,
+        noisy_shot_warnings,
         shot_count_problem,
         size_problem,
     )
@@ -284,7 +285,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
             for im in res.images
         ],
         "rejected": rejected,
-        "warnings": list(res.warnings),
+        "warnings": list(res.warnings) + noisy_shot_warnings(res, [str(fit_m[i][0]) for i in range(len(fit_m))]),
     }
     if hold_m:
         per = [

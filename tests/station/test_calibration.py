@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.fitspec import parse
-from station.calibration import holdout_warning, shot_count_problem, size_problem
+from station.calibration import holdout_warning, noisy_shot_warnings, shot_count_problem, size_problem
 
 
 def test_shots_of_different_sizes_are_named():
@@ -412,3 +412,23 @@ def test_pipeline_field_auto_stores_a_residual_field_where_the_lens_has_one():
     assert "; residual field: " in chosen.selection.reason and chosen.selection.choice == chosen.spec
     with pytest.raises(ValueError, match="unknown field choice"):
         calibrate_shots(shots, w, h, spec, field="always")
+
+
+def test_noisy_shot_warnings_name_the_shots_the_correction_leaves_far_less_straight():
+    """Two of six shots carry a 0.05 px wave across every edge over 0.01 px noise (truth: which shots were waved,
+    ``tests.pipeline.test_harp_shape._waved``): both named; the same shots without the wave, or two shots only, none."""
+    from pipeline.fit import fit_distortion
+    from pipeline.models import RadialModel
+    from tests.pipeline.harp_points import turning_harp_point_sets
+    from tests.pipeline.test_harp_shape import _waved
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366))
+    turns = (0, 30, 60, 90, 120, 150)
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, np.zeros((11, 3)), step=10, noise=0.01, seed=3)
+    names = [f"shot{i}.pgm" for i in range(6)]
+    waved = _waved(shots, {2, 5}, 0.05, 300.0, 3)
+    found = noisy_shot_warnings(fit_distortion(waved, w, h, model="radial", degree=4), names)
+    assert [x.split(":")[0] for x in found] == ["shot2.pgm", "shot5.pgm"] and "turn the harp" in found[0]
+    assert noisy_shot_warnings(fit_distortion(shots, w, h, model="radial", degree=4), names) == []
+    assert noisy_shot_warnings(fit_distortion(waved[1:3], w, h, model="radial", degree=4), names[1:3]) == []

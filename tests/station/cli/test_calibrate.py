@@ -28,6 +28,11 @@ def shots(tmp_path_factory):
     same = render_harp(W, H, HarpScene(angle_deg=4.0, spacing_px=40.0, phase_px=20.0), lens=LENS, seed=9).image
     paths["same"] = d / "same_orientation.pgm"
     cv2.imwrite(str(paths["same"]), same)
+    noisy = render_harp(
+        W, H, HarpScene(angle_deg=33.0, spacing_px=40.0, phase_px=3.0), lens=LENS, noise_sigma=7.5, seed=5
+    ).image  # five times the others' noise: a dim or blurred shot
+    paths["noisy"] = d / "noisy.pgm"
+    cv2.imwrite(str(paths["noisy"]), noisy)
     small = render_harp(320, 240, HarpScene(angle_deg=60.0, spacing_px=40.0), lens=None, seed=3).image
     paths["small"] = d / "small.pgm"
     cv2.imwrite(str(paths["small"]), small)
@@ -62,6 +67,7 @@ def test_radial_fit_with_holdout_json(shots, tmp_path, capsys):
     assert rep["before"]["d"] > 0.3 and rep["fit"]["d"] < 0.01 and rep["fit"]["d_max"] < 0.05
     assert rep["holdout"]["d"] < 0.01 and rep["holdout"]["images"][0]["d_before"] > 0.2
     assert len(rep["images"]) == 3
+    assert not any("far from straight" in w for w in rep["warnings"]), rep["warnings"]  # alike shots: none named
     model = load_model(out_path)
     assert compare_models(model, LENS, W, H).rms < 0.01
     text = out_path.read_text()
@@ -366,3 +372,15 @@ def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, 
     while group_members(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert group_members(proc.pid) == []  # the workers ended too
+
+
+def test_a_shot_measured_far_worse_than_the_others_is_named_with_what_to_do(shots, tmp_path, capsys):
+    """One shot drawn with five times the others' noise: the correction leaves its edges far less straight than the
+    median edge, and the warning names that shot (truth: which shot was drawn noisy), not the others."""
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], shots[123.0], shots["noisy"], "--model", "radial", "--out",
+        tmp_path / "lens.yaml", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    named = [w for w in json.loads(out)["warnings"] if "far from straight" in w]
+    assert len(named) == 1 and named[0].startswith(f"{shots['noisy']}: ") and "turn the harp" in named[0], named
