@@ -11,6 +11,9 @@ anything:
   can lock focus on nothing is refused before any device is opened or directory created;
 * **warnings** (true on this machine now, may be fine where the station runs): a turntable
   port that does not exist here, a store or sessions directory that cannot be created.
+
+:func:`grid_warning` (``harp config check``) warns of a plan that puts the strings along the pixel
+grid at some turntable angle.
 """
 
 from __future__ import annotations
@@ -21,6 +24,13 @@ from pathlib import Path
 
 from station.config.errors import ConfigError
 from station.config.schema import Config
+
+GRID_ANGLE_DEG = 2.0
+"""``harp config check`` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
+columns at some turntable angle (:func:`grid_warning`). A harp set there by hand lies within a degree of the grid,
+where an edge's sub-pixel phase drifts slowly along it and the detector's and a Bayer demosaic's phase error stays
+after the along-edge smoother: on the realistic renderer 0.03 px RMS at 0.25-1 degree, 0.011 px at 2, 0.002 px at 8
+and beyond (``benchmarks/grid_angle.py``, ``benchmarks/RESULTS-edges.md``)."""
 
 FOCUS_SETTING = {"aravis": "focus_feature"}
 """Camera drivers that lock focus only through a configured setting: driver -> the setting's key."""
@@ -76,6 +86,26 @@ def check_config(config: Config) -> ConfigCheck:
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
     return ConfigCheck(errors, warnings)
+
+
+def grid_warning(config: Config) -> str | None:
+    """A warning when the plan expects the strings within :data:`GRID_ANGLE_DEG` of the pixel rows or columns at some
+    turntable angle (``station.harp.expected_angle`` of each of ``capture.orientations_deg``), or None."""
+    harp = config.station.harp
+    near = []
+    for stage in config.capture.orientations_deg:
+        angle = harp.expected_angle(stage)
+        if min(angle % 90.0, 90.0 - angle % 90.0) < GRID_ANGLE_DEG:
+            near.append((stage, angle))
+    if not near:
+        return None
+    at = ", ".join(f"{stage:g} deg (strings at {angle:.1f} deg)" for stage, angle in near)
+    return (
+        f"{config.path}: capture.orientations_deg: at turntable {at} the strings lie within {GRID_ANGLE_DEG:g} deg of "
+        f"the pixel rows or columns (station.harp.offset_deg {harp.offset_deg:g}), where edges are measured several "
+        "times worse (benchmarks/grid_angle.py): mount the harp a few degrees off the grid and set "
+        "station.harp.offset_deg, or turn the plan's angles by a few degrees"
+    )
 
 
 def _not_creatable(directory: Path) -> str | None:

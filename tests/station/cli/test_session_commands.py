@@ -56,6 +56,21 @@ def test_config_check(tmp_path, capsys):
     assert not (tmp_path / "sessions").exists() and not (tmp_path / "p.sqlite").exists()
 
 
+def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid(tmp_path, capsys):
+    """The demo's harp set at 0.5 deg instead of 5: at turntable 0 and 90 deg its strings lie at 0.5 and 90.5 deg
+    (the plan's angles plus the offset, by hand), within 2 deg of the rows and columns; one warning naming both, the
+    configuration still usable. At 5 deg (the demo as shipped) none."""
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["harp"]["offset_deg"] = 0.5
+    p = demo_copy(tmp_path, station=d["station"])
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True and len(doc["warnings"]) == 1, doc
+    w = doc["warnings"][0]
+    assert "turntable 0 deg (strings at 0.5 deg), 90 deg (strings at 90.5 deg)" in w and "22.5 deg" not in w
+    assert "station.harp.offset_deg 0.5" in w and err.count("\n") == 1 and "Traceback" not in err
+
+
 @pytest.mark.parametrize("value", ["some", "yes", "[all]"])
 def test_config_check_refuses_a_bad_overlay_retention(tmp_path, capsys, value):
     bad = tmp_path / "bad.yaml"
