@@ -32,6 +32,9 @@ where an edge's sub-pixel phase drifts slowly along it and the detector's and a 
 after the along-edge smoother: on the realistic renderer 0.03 px RMS at 0.25-1 degree, 0.011 px at 2, 0.002 px at 8
 and beyond (``benchmarks/grid_angle.py``, ``benchmarks/RESULTS-edges.md``)."""
 
+GRID_LISTED = 4
+"""Turntable angles :func:`grid_warning` names; beyond, it counts them (one line whatever the plan)."""
+
 FOCUS_SETTING = {"aravis": "focus_feature"}
 """Camera drivers that lock focus only through a configured setting: driver -> the setting's key."""
 
@@ -99,7 +102,9 @@ def grid_warning(config: Config) -> str | None:
             near.append((stage, angle))
     if not near:
         return None
-    at = ", ".join(f"{stage:g} deg (strings at {angle:.1f} deg)" for stage, angle in near)
+    at = ", ".join(f"{stage:g} deg (strings at {angle:.1f} deg)" for stage, angle in near[:GRID_LISTED])
+    if len(near) > GRID_LISTED:
+        at += f" and {len(near) - GRID_LISTED} more of the plan's {len(config.capture.orientations_deg)} angles"
     return (
         f"{config.path}: capture.orientations_deg: at turntable {at} the strings lie within {GRID_ANGLE_DEG:g} deg of "
         f"the pixel rows or columns (station.harp.offset_deg {harp.offset_deg:g}), where edges are measured several "
