@@ -59,7 +59,7 @@ def test_config_check(tmp_path, capsys):
 def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid(tmp_path, capsys):
     """The demo's harp set at 0.5 deg instead of 5: at turntable 0 and 90 deg its strings lie at 0.5 and 90.5 deg
     (the plan's angles plus the offset, by hand), within 2 deg of the rows and columns; one warning naming both, the
-    configuration still usable. At 5 deg (the demo as shipped) none."""
+    configuration still usable, and ``harp session plan`` says the same. At 5 deg (the demo as shipped) none."""
     d = yaml.safe_load(DEMO.read_text())
     d["station"]["harp"]["offset_deg"] = 0.5
     p = demo_copy(tmp_path, station=d["station"])
@@ -69,6 +69,8 @@ def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid
     w = doc["warnings"][0]
     assert "turntable 0 deg (strings at 0.5 deg), 90 deg (strings at 90.5 deg)" in w and "22.5 deg" not in w
     assert "station.harp.offset_deg 0.5" in w and err.count("\n") == 1 and "Traceback" not in err
+    code, out, err = run(capsys, "session", "plan", p)  # the plan's preview says it too
+    assert code == 0 and err.count("pixel rows or columns") == 1 and w in err and not (tmp_path / "sessions").exists()
 
 
 @pytest.mark.parametrize("value", ["some", "yes", "[all]"])
