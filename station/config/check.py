@@ -12,8 +12,8 @@ anything:
 * **warnings** (true on this machine now, may be fine where the station runs): a turntable
   port that does not exist here, a store or sessions directory that cannot be created.
 
-:func:`grid_warning` (``harp config check``) warns of a plan that puts the strings along the pixel
-grid at some turntable angle.
+:func:`grid_warning` (``harp config check``, ``harp session plan``) warns of a plan that puts the
+strings along the pixel grid at some turntable angle.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from station.config.errors import ConfigError
 from station.config.schema import Config
 
 GRID_ANGLE_DEG = 2.0
-"""``harp config check`` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
+"""``harp config check`` and ``harp session plan`` warn of a plan whose strings are expected within this angle (degrees) of the pixel rows or
 columns at some turntable angle (:func:`grid_warning`). A harp set there by hand lies within a degree of the grid,
 where an edge's sub-pixel phase drifts slowly along it and the detector's and a Bayer demosaic's phase error stays
 after the along-edge smoother: on the realistic renderer 0.03 px RMS at 0.25-1 degree, 0.011 px at 2, 0.002 px at 8
