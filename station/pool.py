@@ -38,6 +38,12 @@ from typing import Any
 
 from station.ctrl_c import sigint_blocked, start_forkserver_deaf_to_ctrl_c
 
+TERMINATE_WAIT_S = 5.0
+"""How long :meth:`WorkerPool.stop` waits for a worker to end after its SIGTERM before it kills it. Once, in a
+clean-clone CI run, a forked worker did not end and the pool's manager thread outlived the stop
+(``tests/station/test_pool.py``); its stderr showed a library's crash handler for SIGTERM ("*** Aborted at ...",
+glog's), which in a child forked from a process with threads can hang on a lock no thread of the child holds."""
+
 
 def ignore_ctrl_c() -> None:
     """In a worker: SIGINT ignored (Ctrl-C is the command's to handle)."""
@@ -183,14 +189,18 @@ class WorkerPool:
         self._thaw()
 
     def stop(self) -> None:
-        """Terminate the running workers and drop the jobs not started (Ctrl-C)."""
+        """Terminate the running workers and drop the jobs not started (Ctrl-C); a worker still alive
+        :data:`TERMINATE_WAIT_S` after its SIGTERM is killed."""
         pool, self._pool = self._pool, None
         if pool is not None:
             procs = list((getattr(pool, "_processes", None) or {}).values())
             for proc in procs:
                 proc.terminate()
             for proc in procs:
-                proc.join(5)
+                proc.join(TERMINATE_WAIT_S)
+                if proc.is_alive():  # deaf to SIGTERM, or hung in a handler of it: SIGKILL is neither
+                    proc.kill()
+                    proc.join(TERMINATE_WAIT_S)
             manager = getattr(pool, "_executor_manager_thread", None)  # shutdown forgets it
             pool.shutdown(wait=False, cancel_futures=True)
             if manager is not None:

@@ -79,6 +79,42 @@ def _sleep(seconds: float) -> float:
     return seconds
 
 
+def _deaf_sleep(seconds: float) -> float:
+    import signal
+    import time
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # as a worker hung in a SIGTERM handler: terminate() is not heard
+    time.sleep(seconds)
+    return seconds
+
+
+def test_a_worker_deaf_to_sigterm_is_killed_and_the_stop_leaves_no_manager_thread():
+    """A job that ignores SIGTERM (standing for a worker hung in a library's crash handler after a fork): the stop
+    kills it after :data:`station.pool.TERMINATE_WAIT_S`, well before its job's 60 s, and the executor's manager
+    thread has ended."""
+    import os
+    import threading
+    import time
+
+    import pytest
+
+    from station.pool import TERMINATE_WAIT_S, WorkerPool
+
+    pool = WorkerPool(2, fork=True)
+    futures = pool.submit_all(_deaf_sleep, [60.0, 60.0])
+    while not all(f.running() for f in futures):
+        time.sleep(0.01)
+    time.sleep(0.5)  # the jobs have set their handlers
+    pids = list(pool._pool._processes)
+    t0 = time.monotonic()
+    pool.stop()
+    assert time.monotonic() - t0 < 4 * TERMINATE_WAIT_S
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert not [t for t in threading.enumerate() if type(t).__name__ == "_ExecutorManagerThread" and t.is_alive()]
+
+
 def test_an_exception_leaving_the_pool_stops_its_running_workers():
     """Ctrl-C (any exception) inside ``with WorkerPool``: the running workers are terminated at once,
     not awaited (their jobs would take a minute)."""
