@@ -66,15 +66,14 @@ def harp_along(frame, mount) -> int:  # type: ignore[no-untyped-def]
 
 def true_bend(harp, k: int, span: tuple[float, float], scale: float, along: int, judged=None) -> float:  # type: ignore[no-untyped-def]
     """String ``k``'s exact deviation, projected on P2..P4 over ``span`` (the fitted family), at its largest; with
-    ``judged`` (the fitted string's ``seen_twice``) only where the QA judges the string: within half the diagonal of
-    the axis and, beyond it, within that stretch (``pipeline.harp_shape.own_bends``)."""
+    ``judged`` (the fitted ``StringShape``) only where the QA judges the string (``StringShape.judged``)."""
     u = np.linspace(span[0], span[1], 401)
     dev = harp.strings[k].deviation(along * u * scale)
     basis = np.vstack([np.ones_like(u), u, legendre(u, (2, 3, 4))])
     c, *_ = np.linalg.lstsq(basis.T, dev, rcond=None)
     shape = np.abs(c[2:] @ basis[2:])
     if judged is not None:
-        shape = shape[(np.abs(u) <= 1.0) | ((u >= judged[0]) & (u <= judged[1]))]
+        shape = shape[judged.judged(u)]
     return float(np.max(shape)) if shape.size else float("nan")
 
 
@@ -111,18 +110,16 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     along = harp_along(fit.frame, ses.mount)
     pairs = []  # (true bend, fitted bend, its standard error, forced?)
     drawn: dict[int, tuple[float, bool]] = {}  # fitted string -> (its drawn bend, forced?)
-    judged: list[tuple[int, float]] = []  # forced strings: (fitted string, drawn bend where the QA judges it)
-    judged_pairs: list[tuple[float, float]] = []  # forced strings: (drawn, fitted) bend where the QA judges it
+    judged: list[tuple[int, float, float]] = []  # forced strings: fitted string, drawn and fitted bend where judged
     for s in fit.strings:
         if not np.isfinite(s.bend_px):
             continue
         k = int(np.argmin(np.abs(pos - along * s.offset_px)))
         drawn[s.index] = (true_bend(harp, k, s.span, fit.frame.scale_px, along), k in forced)
         if k in forced:
-            judged.append((s.index, true_bend(harp, k, s.span, fit.frame.scale_px, along, s.seen_twice)))
             u = np.linspace(s.span[0], s.span[1], 401)
-            where = (np.abs(u) <= 1.0) | ((u >= s.seen_twice[0]) & (u <= s.seen_twice[1]))
-            judged_pairs.append((judged[-1][1], float(np.max(np.abs(s.deviation(u[where]))))))
+            fitted = float(np.max(np.abs(s.deviation(u[s.judged(u)]))))
+            judged.append((s.index, true_bend(harp, k, s.span, fit.frame.scale_px, along, s), fitted))
         pairs.append((drawn[s.index][0], s.bend_px, s.bend_se_px, k in forced))
     # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
     # strings it names, each with its drawn bend
@@ -134,12 +131,12 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
     qa = (word, [(k, *drawn[k]) for k in health.get("bent_strings", [])])
     # forced strings drawn beyond the limit where the QA judges them, and whether it named them (a session not
     # judged names none)
-    beyond_judged = [(b, k in health.get("bent_strings", [])) for k, b in judged if b > BEND_LIMIT_PX]
+    beyond_judged = [(b, k in health.get("bent_strings", [])) for k, b, _ in judged if b > BEND_LIMIT_PX]
     return {
         "seed": seed,
         "qa": qa,
         "beyond_judged": beyond_judged,
-        "judged_pairs": judged_pairs,
+        "judged_pairs": [(b, f) for _, b, f in judged],
         "field_plain": compare_models(plain.model, lens, w, h, step=20).rms,
         "field_joint": compare_models(fit.model, lens, w, h, step=20).rms,
         "d_plain": plain.d_after,

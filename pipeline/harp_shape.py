@@ -355,6 +355,16 @@ class StringShape:
         out: Floats = np.asarray(self.coefficients) @ legendre(u.ravel(), self.degrees)
         return out.reshape(u.shape)
 
+    def judged(self, u: Floats) -> NDArray[np.bool_]:
+        """Where the QA judges this string's own bend (:func:`own_bends`): within its span, and there within half
+        the image's diagonal of the axis (:math:`|u| \\le 1`) or where two shots or more see it (``seen_twice``)."""
+        u = np.asarray(u, dtype=np.float64)
+        lo, hi = self.seen_twice  # NaN, NaN: nowhere
+        out: NDArray[np.bool_] = (
+            (u >= self.span[0]) & (u <= self.span[1]) & ((np.abs(u) <= 1.0) | ((u >= lo) & (u <= hi)))
+        )
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "index": self.index,
@@ -408,8 +418,7 @@ def own_bends(strings: Sequence[StringShape], samples: int = 201) -> dict[int, f
     u = np.linspace(lo, hi, int(np.ceil((samples - 1) * (hi - lo) / 2.0)) + 1)
     dev = np.vstack([st.deviation(u) for st in bent])
     inside = np.vstack([(u >= st.span[0]) & (u <= st.span[1]) for st in bent])
-    twice = np.vstack([(u >= st.seen_twice[0]) & (u <= st.seen_twice[1]) for st in bent])  # False for NaN
-    judged = inside & ((np.abs(u) <= 1.0) | twice)
+    judged = np.vstack([st.judged(u) for st in bent])
     enough = max(3, len(bent) // 2)  # where fewer strings reach, the median is not the others' (none taken)
     out = {}
     for i, st in enumerate(bent):
