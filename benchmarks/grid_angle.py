@@ -49,6 +49,7 @@ from pipeline.grouping import Grouping, group_string_edges
 from pipeline.measure import border_px, measure_grouping, measure_image
 from pipeline.models import RadialModel
 from pipeline.realism import realistic_session, render_shots
+from station.config.check import grid_offset_deg
 
 W, H = 1000, 750
 REAL = ("IMG_6931", "IMG_6950", "IMG_6964")
@@ -99,7 +100,7 @@ def phase_error(grouping: Grouping) -> tuple[Grouping, list[str], float]:
         d = (p[-1] - p[0]) / np.hypot(*(p[-1] - p[0]))
         n = np.array([-d[1], d[0]])
         ang = float(np.degrees(np.arctan2(d[1], d[0])) % 180.0)
-        off = min(ang % 90.0, 90.0 - ang % 90.0)
+        off = grid_offset_deg(ang)
         angles.append(off)
         if off > NEAR_DEG:
             continue
@@ -175,8 +176,7 @@ def lens_weights(seeds: range, cache: Path | None) -> None:
         offs = []
         for t in FITTED:
             d = np.asarray(mount.pose(t).direction)
-            a = float(np.degrees(np.arctan2(d[1], d[0])) % 90.0)
-            offs.append(min(a, 90.0 - a))
+            offs.append(grid_offset_deg(float(np.degrees(np.arctan2(d[1], d[0])))))
         if min(offs) >= 2.0:
             continue
         lines, unseen, _ = realistic_measured(seed, W, H, cache)

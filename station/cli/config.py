@@ -4,9 +4,8 @@ Every field is checked against its declaration (:func:`station.config.load_confi
 range, written once beside the field), then what only the whole configuration tells
 (:func:`station.config.check.check_config`: a camera that could lock focus on nothing, a
 sessions_dir that is a file are errors; a turntable port missing on this machine, a store
-directory that cannot be created are warnings), the plan's estimated duration
-(:func:`station.session.estimate.long_plan`: a warning beyond an hour) and its strings' angles
-(:func:`station.config.check.grid_warning`: a warning when they lie along the pixel grid at some turntable angle). Exit 0 when every
+directory that cannot be created, strings along the pixel grid at some turntable angle are warnings) and the plan's
+estimated duration (:func:`station.session.estimate.long_plan`: a warning beyond an hour). Exit 0 when every
 configuration is usable (warnings on stderr), 2 with one line naming the file and field for each
 that is not.
 """
@@ -42,7 +41,7 @@ def _check(args) -> int:
 def _check_one(path: Path, as_json: bool) -> dict:
     """Check one configuration: its lines printed, its JSON document returned."""
     from station.config import ConfigError, load_config  # defers numpy, yaml
-    from station.config.check import check_config, grid_warning  # defers numpy, yaml
+    from station.config.check import check_config  # defers numpy, yaml
     from station.session.estimate import long_plan  # defers numpy, yaml
 
     try:
@@ -53,8 +52,7 @@ def _check_one(path: Path, as_json: bool) -> dict:
     if checked.errors:
         return _fail(path, str(checked.errors[0]), checked.warnings)
     long = long_plan(config)
-    grid = grid_warning(config)
-    warnings = [*checked.warnings, *([long[1]] if long else []), *([grid] if grid else [])]
+    warnings = [*checked.warnings, *([long[1]] if long else [])]
     for w in warnings:
         warn("harp config", w)
     summary = (

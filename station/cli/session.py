@@ -444,12 +444,10 @@ def _plan(args) -> int:
     from station.session.estimate import board_views, estimate_plan  # defers numpy, yaml
 
     config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
-    from station.config.check import grid_warning  # defers numpy, yaml
     from station.session.estimate import long_plan  # defers numpy, yaml
 
     long = long_plan(config)
-    grid = grid_warning(config)
-    for w in [*warnings, *([long[1]] if long else []), *([grid] if grid else [])]:
+    for w in [*warnings, *([long[1]] if long else [])]:
         warn("harp session", w)
     est = long[0] if long else estimate_plan(config)
     if args.json:

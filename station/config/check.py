@@ -10,10 +10,8 @@ anything:
   (:data:`FOCUS_SETTING`: the GenICam driver needs ``focus_feature``); a configuration that
   can lock focus on nothing is refused before any device is opened or directory created;
 * **warnings** (true on this machine now, may be fine where the station runs): a turntable
-  port that does not exist here, a store or sessions directory that cannot be created.
-
-:func:`grid_warning` (``harp config check``, ``harp session plan``) warns of a plan that puts the
-strings along the pixel grid at some turntable angle.
+  port that does not exist here, a store or sessions directory that cannot be created; and a plan
+  that puts the strings along the pixel grid at some turntable angle (:func:`grid_warning`).
 """
 
 from __future__ import annotations
@@ -26,7 +24,7 @@ from station.config.errors import ConfigError
 from station.config.schema import Config
 
 GRID_ANGLE_DEG = 2.0
-"""``harp config check`` and ``harp session plan`` warn of a plan whose strings are expected within this angle (degrees) of the pixel rows or
+""":func:`check_config` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
 columns at some turntable angle (:func:`grid_warning`). A harp set there by hand lies within a degree of the grid,
 where an edge's sub-pixel phase drifts slowly along it and the detector's and a Bayer demosaic's phase error stays
 after the along-edge smoother: on the realistic renderer 0.03 px RMS at 0.25-1 degree, 0.011 px at 2, 0.002 px at 8
@@ -88,7 +86,16 @@ def check_config(config: Config) -> ConfigCheck:
         reason = _not_creatable(Path(directory))
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
+    grid = grid_warning(config)
+    if grid:
+        warnings.append(grid)
     return ConfigCheck(errors, warnings)
+
+
+def grid_offset_deg(angle_deg: float) -> float:
+    """How far a line at ``angle_deg`` (degrees, any) lies from the nearest pixel row or column: 0..45 degrees."""
+    a = angle_deg % 90.0
+    return min(a, 90.0 - a)
 
 
 def grid_warning(config: Config) -> str | None:
@@ -98,7 +105,7 @@ def grid_warning(config: Config) -> str | None:
     near = []
     for stage in config.capture.orientations_deg:
         angle = harp.expected_angle(stage)
-        if min(angle % 90.0, 90.0 - angle % 90.0) < GRID_ANGLE_DEG:
+        if grid_offset_deg(angle) < GRID_ANGLE_DEG:
             near.append((stage, angle))
     if not near:
         return None

@@ -231,7 +231,7 @@ def test_100000_orientations_are_warned_of_and_run_only_with_yes(capsys, tmp_pat
     p = _plan(tmp_path, [0.0, 0.5, 1.0], orientations)
     code, out, err = check(capsys, p)
     assert code == 0 and "100000 orientations" in out
-    line, grid = err.splitlines()  # the plan's length; and a plan of every angle puts the strings along the grid
+    grid, line = err.splitlines()  # a plan of every angle puts the strings along the grid; and the plan's length
     assert "the strings lie within 2 deg of the pixel rows or columns" in grid
     # the demo's harp at 5 deg: the first angle within 2 deg of the columns is 23056 x 0.0036 = 83.0016 (88.0016)
     assert "at turntable 83.0016 deg (strings at 88.0 deg)," in grid and " more of the plan's 100000 angles" in grid
