@@ -432,3 +432,24 @@ def test_noisy_shot_warnings_name_the_shots_the_correction_leaves_far_less_strai
     assert [x.split(":")[0] for x in found] == ["shot2.pgm", "shot5.pgm"] and "turn the harp" in found[0]
     assert noisy_shot_warnings(fit_distortion(shots, w, h, model="radial", degree=4), names) == []
     assert noisy_shot_warnings(fit_distortion(waved[1:3], w, h, model="radial", degree=4), names[1:3]) == []
+
+
+def test_the_harp_check_record_names_the_noisy_shots_by_their_turntable_angle():
+    """The same two waved shots of six (truth: shots 2 and 5, turned to 60 and 150 deg when drawn): the session's
+    harp-check record lists them with those angles and a noise ratio beyond the factor; the unwaved shots, none."""
+    from pipeline.fitspec import FitSpec
+    from pipeline.harp_shape import SHOT_NOISE_FACTOR
+    from pipeline.models import RadialModel
+    from station.calibration import harp_health
+    from tests.pipeline.harp_points import turning_harp_point_sets
+    from tests.pipeline.test_harp_shape import _waved
+
+    w, h = 1000, 750
+    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366))
+    turns = (0, 30, 60, 90, 120, 150)
+    shots, _ = turning_harp_point_sets(lens, w, h, turns, np.zeros((11, 3)), step=10, noise=0.01, seed=3)
+    spec = FitSpec("radial", 4, True, True)
+    noisy = harp_health(_waved(shots, {2, 5}, 0.05, 300.0, 3), turns, w, h, spec)["noisy_shots"]
+    assert [(n["shot"], n["turntable_deg"]) for n in noisy] == [(2, 60.0), (5, 150.0)]
+    assert all(n["noise_ratio"] > SHOT_NOISE_FACTOR for n in noisy)
+    assert harp_health(shots, turns, w, h, spec)["noisy_shots"] == []
