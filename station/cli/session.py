@@ -158,8 +158,10 @@ def _run(args) -> int:
         raise HarpError(
             f"--name {args.name!r}: expected a plain directory name (no '/'); use --out for the parent directory"
         )
-    config, _warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
+    config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
     check_port(config)  # before creating anything
+    for w in warnings:  # what `harp config check` and `harp session plan` warn of, before anything is captured
+        warn("harp session", w)
     refused = _long_plan(config, args.yes)
     if refused is not None:
         raise HarpError(refused)

@@ -586,3 +586,23 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
         shots = session_shots(s, 0)
     assert [(sh.shift_mm, sh.orientation_deg) for sh in shots] == [(mm, a) for mm in (0, 40) for a in (0, 45, 90, 135)]
     assert shots[4].place == "stage 0 deg at 40 mm"
+
+
+def test_run_warns_of_a_plan_along_the_pixel_grid_before_capturing_then_runs_it(tmp_path, capsys):
+    """The harp mounted at 0.5 deg: at turntable 0 and 90 deg its strings lie at 0.5 and 90.5 deg (the plan's angles plus
+    the offset, by hand), within 2 deg of the pixel rows and columns. ``harp session run`` says so on stderr, once,
+    before the session directory exists (what ``harp config check`` says), and still captures every frame."""
+    cfg = small_config(tmp_path, focus=(0.0,), frames=1)
+    d = yaml.safe_load(cfg.read_text())
+    d["station"]["harp"]["offset_deg"] = d["simulation"]["harp_offset_deg"] = 0.5  # mounted so, and said so
+    cfg.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(cfg), "--name", "g", "--quiet", "--no-report"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    grid = [i for i, ln in enumerate(lines) if "pixel rows or columns" in ln]
+    made = [i for i, ln in enumerate(lines) if "session directory:" in ln]
+    assert len(grid) == 1 and len(made) == 1 and grid[0] < made[0], lines
+    w = lines[grid[0]]
+    assert w.startswith("harp session: warning: ") and "station.harp.offset_deg 0.5" in w
+    assert "turntable 0 deg (strings at 0.5 deg), 90 deg (strings at 90.5 deg)" in w and "45 deg" not in w
+    frames = [r for r in manifest(tmp_path / "sessions" / "g") if r["kind"] == "frame"]
+    assert len(frames) == N_ORI
