@@ -120,7 +120,8 @@ def _said(exc: HarpError) -> int:
 
 
 def _load(path: Path):
-    """The configuration at ``path`` with the checks no device is needed for; ConfigError otherwise."""
+    """The configuration at ``path`` and what :func:`station.config.check.check_config` found (its warnings); the
+    first of its errors raised (a ConfigError)."""
     from station.config import load_config  # defers numpy, yaml
     from station.config.check import check_config  # defers numpy, yaml
 
@@ -128,7 +129,7 @@ def _load(path: Path):
     checked = check_config(config)
     if checked.errors:
         raise checked.errors[0]
-    return config, checked.warnings
+    return config, checked
 
 
 def _long_plan(config, yes: bool) -> str | None:
@@ -158,13 +159,13 @@ def _run(args) -> int:
         raise HarpError(
             f"--name {args.name!r}: expected a plain directory name (no '/'); use --out for the parent directory"
         )
-    config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
+    config, checked = _load(args.config)  # a ConfigError: one line (station.cli.main)
     check_port(config)  # before creating anything
-    for w in warnings:  # what `harp config check` and `harp session plan` warn of, before anything is captured
-        warn("harp session", w)
     refused = _long_plan(config, args.yes)
     if refused is not None:
         raise HarpError(refused)
+    for w in checked.plan_warnings:  # `harp config check` says them too; the run, once it starts, before it captures
+        warn("harp session", w)
     root = args.out if args.out is not None else config.sessions_dir
     if config.zoom_settings:
         return _run_zoom(config, root, args)
@@ -445,11 +446,11 @@ def _print_results_of(session_dir: Path) -> None:
 def _plan(args) -> int:
     from station.session.estimate import board_views, estimate_plan  # defers numpy, yaml
 
-    config, warnings = _load(args.config)  # a ConfigError: one line (station.cli.main)
+    config, checked = _load(args.config)  # a ConfigError: one line (station.cli.main)
     from station.session.estimate import long_plan  # defers numpy, yaml
 
     long = long_plan(config)
-    for w in [*warnings, *([long[1]] if long else [])]:
+    for w in [*checked.warnings, *([long[1]] if long else [])]:
         warn("harp session", w)
     est = long[0] if long else estimate_plan(config)
     if args.json:

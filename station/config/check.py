@@ -39,10 +39,14 @@ FOCUS_SETTING = {"aravis": "focus_feature"}
 
 @dataclass(frozen=True)
 class ConfigCheck:
-    """What :func:`check_config` found: ``errors`` (the session cannot run) and ``warnings``."""
+    """What :func:`check_config` found: ``errors`` (the session cannot run) and ``warnings``; ``plan_warnings``
+    those of the warnings about the plan itself (the strings along the pixel grid), which ``harp session run``
+    repeats before it captures; the others (a port or a directory missing here) the run refuses with its own
+    one-line error."""
 
     errors: list[ConfigError] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    plan_warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -87,9 +91,8 @@ def check_config(config: Config) -> ConfigCheck:
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
     grid = grid_warning(config)
-    if grid:
-        warnings.append(grid)
-    return ConfigCheck(errors, warnings)
+    plan = [grid] if grid else []
+    return ConfigCheck(errors, warnings + plan, plan)
 
 
 def grid_offset_deg(angle_deg: float) -> float:

@@ -606,3 +606,19 @@ def test_run_warns_of_a_plan_along_the_pixel_grid_before_capturing_then_runs_it(
     assert "turntable 0 deg (strings at 0.5 deg), 90 deg (strings at 90.5 deg)" in w and "45 deg" not in w
     frames = [r for r in manifest(tmp_path / "sessions" / "g") if r["kind"] == "frame"]
     assert len(frames) == N_ORI
+
+
+@pytest.mark.parametrize("where", ["store.path", "store.sessions_dir"])
+def test_a_store_or_sessions_directory_under_a_file_is_one_line_from_session_run(tmp_path, capsys, where):
+    """``harp config check`` warns of it; ``harp session run`` refuses it with its own line and does not repeat the
+    warning (only the plan's own warnings are repeated before a run)."""
+    cfg = small_config(tmp_path, focus=(0.0,), frames=1)
+    (tmp_path / "blocker").write_text("a file where a directory should be")
+    d = yaml.safe_load(cfg.read_text())
+    d["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"} | {where.split(".")[1]: "blocker/x"}
+    cfg.write_text(yaml.safe_dump(d))
+    assert main(["config", "check", str(cfg)]) == 0
+    assert f"warning: {cfg}: {where}:" in capsys.readouterr().err
+    assert main(["session", "run", str(cfg), "--quiet", "--no-report"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "warning" not in err and "blocker" in err and "Traceback" not in err, err
