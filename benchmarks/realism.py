@@ -191,6 +191,22 @@ def simulated_session(
     bow_px: float = 0.0,
 ) -> tuple[list[dict[str, float]], dict[str, object]]:
     """Render, measure and analyse one simulated session (module docstring)."""
+    ms, info = simulated_measurements(seed, clean, coil_set, field_max, shot_decentre, bow_px)
+    return session_statistics(ms), info
+
+
+def simulated_measurements(
+    seed: int,
+    clean: bool = False,
+    coil_set: float | None = None,
+    field_max: float | None = None,
+    shot_decentre: float = 0.0,
+    bow_px: float = 0.0,
+    centre_sd_px: float = 0.0,
+) -> tuple[list[ImageMeasurement], dict[str, object]]:
+    """Render and measure one simulated session (module docstring): its three shots' measurements and what was
+    drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion centre changed between shots by
+    N(0, these) (:func:`pipeline.lens_population.shot_to_shot`)."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
     from pipeline.lens_population import lens_population, shot_to_shot
     from pipeline.realism import Effects, realistic_session, render_shot, render_shots, shot_seed
@@ -222,11 +238,18 @@ def simulated_session(
         )
         harp = dataclasses.replace(harp, strings=strings)
     turntable = [mount.direction * (a - angles[0]) for a in angles]
-    if shot_decentre > 0:  # sensitivity: the lens's decentering changes between shots
+    if shot_decentre > 0 or centre_sd_px > 0:  # sensitivity: the lens's decentering changes between shots
         jitter = np.random.default_rng([seed, 0x5407])
         shots = tuple(
             render_shot(
-                shot_to_shot(lens.model, jitter, shot_decentre), harp, mount, t, W, H, effects, shot_seed(seed, i)
+                shot_to_shot(lens.model, jitter, shot_decentre, centre_sd_px),
+                harp,
+                mount,
+                t,
+                W,
+                H,
+                effects,
+                shot_seed(seed, i),
             )
             for i, t in enumerate(turntable)
         )
@@ -240,7 +263,7 @@ def simulated_session(
         "demosaic": effects.development.demosaic if effects.sensor.cfa else "none",
         "tone": effects.development.tone,
     }
-    return session_statistics(ms), info
+    return ms, info
 
 
 def _job(
