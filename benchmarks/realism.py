@@ -45,6 +45,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -203,10 +204,12 @@ def simulated_measurements(
     shot_decentre: float = 0.0,
     bow_px: float = 0.0,
     centre_sd_px: float = 0.0,
+    string_angles: Sequence[float] = REAL_ANGLES,
 ) -> tuple[list[ImageMeasurement], dict[str, object]]:
-    """Render and measure one simulated session (module docstring): its three shots' measurements and what was
+    """Render and measure one simulated session (module docstring): its shots' measurements and what was
     drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion centre changed between shots by
-    N(0, these) (:func:`pipeline.lens_population.shot_to_shot`)."""
+    N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``: the shots' string angles (deg,
+    each +- 3), the photographs' by default."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
     from pipeline.lens_population import lens_population, shot_to_shot
     from pipeline.realism import Effects, realistic_session, render_shot, render_shots, shot_seed
@@ -215,7 +218,7 @@ def simulated_measurements(
     fields = (0.005, 0.04 if field_max is None else field_max)
     lens = lens_population(2026, seed + 1, W, H, field=True, field_rms_px=fields)[seed]
     rng = np.random.default_rng([seed, 0xBE7C])
-    angles = [a + float(rng.normal(0.0, 3.0)) for a in REAL_ANGLES]
+    angles = [a + float(rng.normal(0.0, 3.0)) for a in string_angles]
     s = realistic_session(
         seed,
         W,
