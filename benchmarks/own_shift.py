@@ -2,18 +2,19 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/own_shift.py [--seeds 20] [--workers 2] [--real DIR]
+    .venv/bin/python benchmarks/own_shift.py [--seeds 20] [--shots 3] [--workers 2] [--real DIR]
 
-Every 2 + 1 split of three shots: radial4+tangential+prism fitted on two (``pipeline.fit.fit_distortion``), the
-third's held-out d with that correction as it is, and with two parameters of the held-out shot's own fitted on it
-(the correction is otherwise held):
+Every 2 + 1 split of three shots (with ``--shots N``, every shot of N held out in turn): radial4+tangential+prism
+fitted on the others (``pipeline.fit.fit_distortion``), the held-out shot's d with that correction as it is, and
+with two parameters of the held-out shot's own fitted on it (the correction is otherwise held):
 
-* **own axis shift**: the whole correction moved by a vector ``t`` (``U'(p) = U(p - t) + t``), which is what a lens
-  whose distortion centre moved between shots does (an image stabiliser that re-centres, a focus or zoom group with
-  play; :func:`pipeline.lens_population.shot_to_shot`). On one shot's parallel strings it shows mostly as a bow
-  every string shares (the radial term's gradient across the strings), so it also stands for a bow the whole harp
-  shares in that shot, or a lens term that bends each orientation its own way (a three-fold term,
-  ``benchmarks/quadratic_sector.py``): one shot per orientation cannot tell these apart;
+* **own axis shift** (:func:`pipeline.own_shift.own_axis_shift`): the whole correction moved by a vector ``t``
+  (``U'(p) = U(p - t) + t``), which is what a lens whose distortion centre moved between shots does (an image
+  stabiliser that re-centres, a focus or zoom group with play; :func:`pipeline.lens_population.shot_to_shot`). On
+  one shot's parallel strings it shows mostly as a bow every string shares (the radial term's gradient across the
+  strings), so it also stands for a bow the whole harp shares in that shot, or a lens term that bends each
+  orientation its own way (a three-fold term, ``benchmarks/quadratic_sector.py``): one shot per orientation cannot
+  tell these apart;
 * **own k1, k2** (control): the radial terms changed for the held-out shot, which a refocus would do; it bends
   every orientation alike.
 
@@ -46,6 +47,8 @@ from pipeline.edgeset import held_out_residuals
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import parse
 from pipeline.models.base import DistortionModel
+from pipeline.own_shift import own_axis_shift
+from station.calibration import OWN_SHIFT_RATIO
 
 SPEC = "radial4+tangential+prism"
 CONFIGS = (  # (label, largest lens-field RMS px, distortion-centre SD px, p1/p2 SD between shots)
@@ -58,23 +61,10 @@ CONFIGS = (  # (label, largest lens-field RMS px, distortion-centre SD px, p1/p2
 TERMS = ("axis shift", "k1, k2")
 
 
-def _own(model: DistortionModel, term: str, z: np.ndarray, scale: float, centre: np.ndarray):
-    """The correction ``model`` with the held-out shot's own term ``z`` (module docstring)."""
-
-    def undistort(xy: np.ndarray) -> np.ndarray:
-        p = np.asarray(xy, dtype=np.float64)
-        if term == "axis shift":
-            t = scale * z
-            return model.undistort_points(p - t) + t
-        q = (p - centre) / scale
-        r2 = np.sum(q * q, axis=1, keepdims=True)
-        return model.undistort_points(p + scale * q * (z[0] * r2 + z[1] * r2 * r2))
-
-    return undistort
-
-
-def own_term_d(model: DistortionModel, lines: Sequence[np.ndarray], term: str, width: int, height: int) -> float:
-    """Held-out d of ``lines`` under ``model`` with the two parameters of ``term`` fitted on them."""
+def own_k_d(model: DistortionModel, lines: Sequence[np.ndarray], width: int, height: int) -> float:
+    """Held-out d of ``lines`` under ``model`` with the shot's own k1, k2 change fitted on them (the control): the
+    correction applied to ``p + s q (a r^2 + b r^4)``, ``q`` the offset from the image centre over ``s``, half the
+    diagonal."""
     from scipy.optimize import least_squares
 
     scale = 0.5 * float(np.hypot(width, height))
@@ -82,13 +72,19 @@ def own_term_d(model: DistortionModel, lines: Sequence[np.ndarray], term: str, w
 
     class _Model:
         def __init__(self, z: np.ndarray) -> None:
-            self.undistort_points = _own(model, term, z, scale, centre)
+            self.z = z
+
+        def undistort_points(self, xy: np.ndarray) -> np.ndarray:
+            p = np.asarray(xy, dtype=np.float64)
+            q = (p - centre) / scale
+            r2 = np.sum(q * q, axis=1, keepdims=True)
+            return model.undistort_points(p + scale * q * (self.z[0] * r2 + self.z[1] * r2 * r2))
 
     sol = least_squares(
-        lambda z: held_out_residuals(_Model(z), lines),
+        lambda z: held_out_residuals(_Model(z), lines),  # type: ignore[arg-type]
         np.zeros(2),
         x_scale=1e-3,
-        diff_step=1e-4,  # type: ignore[arg-type]
+        diff_step=1e-4,
     )
     return float(np.sqrt(np.mean(sol.fun**2)))
 
@@ -103,9 +99,8 @@ def splits(shots: Sequence[Sequence[np.ndarray]], width: int, height: int) -> li
         if not res:
             out.append(None)
             continue
-        r = held_out_residuals(res.model, shots[h])
-        held = float(np.sqrt(np.mean(r**2)))
-        out.append((res.d_after, held, *(own_term_d(res.model, shots[h], t, width, height) for t in TERMS)))
+        own = own_axis_shift(res.model, shots[h])
+        out.append((res.d_after, own.d_held, own.d_own, own_k_d(res.model, shots[h], width, height)))
     return out
 
 
@@ -224,7 +219,11 @@ def main(argv: list[str] | None = None) -> int:
             every = [r for rows in by for r in rows if r is not None]
             print(f"| {label} | all {args.shots} | {_summary(every, real_worst)} |")
             med = [float(np.median([r[2] / r[1] for r in rows if r is not None])) for rows in by]
-            print(f"| {label} | median per session | {min(med):.2f} .. {max(med):.2f} | | | |")
+            below = sum(m < OWN_SHIFT_RATIO for m in med)
+            print(
+                f"| {label} | median per session | {min(med):.2f} .. {max(med):.2f} | below the station's "
+                f"{OWN_SHIFT_RATIO:g}: {below} of {len(med)} sessions | | |"
+            )
     print()
     print(
         f"({time.perf_counter() - t0:.0f} s; real photographs' largest axis-shift ratio of splits 1-2: "

@@ -183,19 +183,6 @@ def session_statistics(ms: list[ImageMeasurement]) -> list[dict[str, float]]:
 
 
 # ---------------------------------------------------------------- simulated sessions
-def simulated_session(
-    seed: int,
-    clean: bool = False,
-    coil_set: float | None = None,
-    field_max: float | None = None,
-    shot_decentre: float = 0.0,
-    bow_px: float = 0.0,
-) -> tuple[list[dict[str, float]], dict[str, object]]:
-    """Render, measure and analyse one simulated session (module docstring)."""
-    ms, info = simulated_measurements(seed, clean, coil_set, field_max, shot_decentre, bow_px)
-    return session_statistics(ms), info
-
-
 def simulated_measurements(
     seed: int,
     clean: bool = False,
@@ -206,8 +193,8 @@ def simulated_measurements(
     centre_sd_px: float = 0.0,
     string_angles: Sequence[float] = REAL_ANGLES,
 ) -> tuple[list[ImageMeasurement], dict[str, object]]:
-    """Render and measure one simulated session (module docstring): its shots' measurements and what was
-    drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion centre changed between shots by
+    """Render and measure one simulated session (module docstring; :func:`session_statistics` analyses it): its
+    shots' measurements and what was drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion centre changed between shots by
     N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``: the shots' string angles (deg,
     each +- 3), the photographs' by default."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
@@ -276,7 +263,8 @@ def _job(
 
     t0 = time.perf_counter()
     with threadpoolctl.threadpool_limits(1):
-        st, info = simulated_session(*args)
+        ms, info = simulated_measurements(*args)
+        st = session_statistics(ms)
     return args[0], args[1], st, info, time.perf_counter() - t0
 
 

@@ -59,6 +59,7 @@ from pipeline.harp_shape import (
     string_pitch,
 )
 from pipeline.orientations import distinct_orientations, support_problem
+from pipeline.own_shift import OwnShift, own_axis_shift
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import lowest_radial, select_field, select_model
@@ -83,6 +84,43 @@ GIVEN_BY_CONFIG = "pipeline.model of the configuration"
 """The selection reason of a spec the session's configuration names (``pipeline.model``)."""
 GIVEN_ON_COMMAND_LINE = "given on the command line"
 """The selection reason of a spec a command's option names (``harp calibrate --model``, ``harp reprocess --spec``)."""
+
+
+OWN_SHIFT_RATIO = 0.7
+"""A session's held-out orientations are said to carry a term of their own when moving the correction's axis for
+each one alone (:func:`pipeline.own_shift.own_axis_shift`) leaves, in the median over them, less than this part of
+its held-out d. Set on realistic sessions of six shots (``benchmarks/own_shift.py --shots 6``, 20 lenses each,
+radial4+tangential+prism folds): a stable lens's per-session median is 0.91-1.00 (lens field up to 0.04 px RMS) or
+0.78-1.00 (up to 0.1), none below; a lens whose distortion centre moves N(0, 6 px) between shots, or its p1, p2
+N(0, 1e-4), is below for 11 of 20, N(0, 5e-5) for 1 of 20."""
+
+MIN_OWN_SHIFT_ORIENTATIONS = 4
+"""Fewest orientations for the own-shift figure: with three, each fold is fitted on two orientations, which leave a
+quadratic term undetermined that the held-out one then shows (``benchmarks/quadratic_sector.py``); its own shift
+takes that away too, so a stable lens can read as low as 0.54 (``benchmarks/own_shift.py``)."""
+
+
+def own_shift_record(own: Sequence[OwnShift]) -> dict[str, Any]:
+    """The held-out orientations' own axis shifts as a profile keeps them (``details["own_shift"]``): per
+    orientation its held-out d, the d with its own shift and the shift (px); the median ratio; ``moving`` when that
+    median is below :data:`OWN_SHIFT_RATIO` with :data:`MIN_OWN_SHIFT_ORIENTATIONS` orientations or more (the lens's
+    decentering may change between shots: :mod:`pipeline.own_shift`)."""
+    ratios = [o.ratio for o in own if np.isfinite(o.ratio)]
+    median = float(np.median(ratios)) if ratios else float("nan")
+    return {
+        "ratio_median": finite_or_none(median),
+        "limit": OWN_SHIFT_RATIO,
+        "judged": len(ratios) >= MIN_OWN_SHIFT_ORIENTATIONS,
+        "moving": bool(len(ratios) >= MIN_OWN_SHIFT_ORIENTATIONS and median < OWN_SHIFT_RATIO),
+        "per_orientation": [
+            {
+                "d_held_px": finite_or_none(o.d_held),
+                "d_own_px": finite_or_none(o.d_own),
+                "shift_px": [finite_or_none(v) for v in o.shift_px],
+            }
+            for o in own
+        ],
+    }
 
 
 @dataclass(frozen=True)
@@ -156,28 +194,40 @@ def _figures(d: float, d_max: float) -> Figures:
     return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
+@dataclass(frozen=True)
+class _OrientationHoldout:
+    """:func:`_orientation_holdout`'s figure and each held-out orientation's own axis shift."""
+
+    holdout: Holdout
+    own: tuple[OwnShift, ...]
+
+
 def _orientation_holdout(
     lines: Sequence[Sequence[np.ndarray]],
     rejected: Sequence[Any],
     job_fn: Callable[[Any], tuple[Any, str | None]],
     jobs: Sequence[Any],
     map_fn: MapFn,
-) -> Holdout | tuple[int, str]:
+) -> _OrientationHoldout | tuple[int, str]:
     """The leave-one-orientation-out figure: ``job_fn(jobs[k])`` fits without orientation ``k``, and its
     model corrects orientation ``k``'s edges (those the full fit did not reject, ``rejected``); the
-    straightness of all of them together, and per orientation. ``(k, reason)`` for the first fold whose
-    fit failed."""
+    straightness of all of them together, and per orientation; and per orientation the same edges under its fold's
+    model with the model's axis moved for them alone (:func:`pipeline.own_shift.own_axis_shift`).
+    ``(k, reason)`` for the first fold whose fit failed."""
     outliers = {(r.image, r.line) for r in rejected}
     held_lines: list[np.ndarray] = []
     per_o: list[float | None] = []
+    own: list[OwnShift] = []
     for k, (model, reason) in enumerate(map_fn(job_fn, jobs)):
         if model is None:
             return k, str(reason)
         kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
         per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
         held_lines.extend(model.undistort_points(p) for p in kept)
+        own.append(own_axis_shift(model, kept))
     d, d_max = straightness_of(held_lines)
-    return Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+    hold = Holdout(finite_or_none(d), finite_or_none(d_max), HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, tuple(per_o))
+    return _OrientationHoldout(hold, tuple(own))
 
 
 def calibrate_shots(
@@ -285,12 +335,13 @@ def calibrate_shots(
     if holdout == "orientations":
         jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
         loo = _orientation_holdout(lines, full.rejected, refit_job, jobs, map_fn)
-        if not isinstance(loo, Holdout):
+        if not isinstance(loo, _OrientationHoldout):
             return Calibration(
                 full, spec, selection, Merit(fit=fit_figures, before=before), details=details,
                 failure=f"cross-validation without orientation {loo[0]}: {loo[1]}",
             )  # fmt: skip
-        hold = loo
+        hold = loo.holdout
+        details["own_shift"] = own_shift_record(loo.own)
     elif holdout is not None:
         raise ValueError(f"unknown hold-out scheme {holdout!r}; known: 'orientations'")
     if held_out:
@@ -712,9 +763,12 @@ def separate_strings(
         ]
         job_fn = kink_job if kink_job is not None else separated_job
         loo = _orientation_holdout(lines, full.rejected, job_fn, jobs, map_fn)
-        if not isinstance(loo, Holdout):
+        if not isinstance(loo, _OrientationHoldout):
             return kept_plain(f"without orientation {loo[0]} the strings cannot be separated: {loo[1]}")
-        hold = loo
+        hold = loo.holdout
+        own_record: dict[str, Any] | None = own_shift_record(loo.own)
+    else:
+        own_record = None
     record: dict[str, Any] = {
         "separated": True,
         "d_with_strings_px": finite_or_none(joint.d_after),
@@ -723,6 +777,8 @@ def separate_strings(
     if kinks:
         record["kinks"] = [k.to_dict() for k in joint.kinks]
     details: dict[str, Any] = {**cal.details, "n_params": res.n_params}
+    if own_record is not None:  # the stored lens's folds: with the strings separated
+        details["own_shift"] = own_record
     unc, unc_summary = cal.uncertainty, cal.merit.field_uncertainty
     if bootstrap >= 2:
         boot = bootstrap_field_uncertainty(

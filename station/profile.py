@@ -375,6 +375,8 @@ class Profile:
             merit["harp_health"] = plain(dict(self.details["harp_health"]))
         if self.details.get("strings"):  # whether the lens was fitted with the strings' bends separated
             merit["strings"] = plain(dict(self.details["strings"]))
+        if self.details.get("own_shift"):  # the held-out orientations' own axis shifts: QA reports them from the file
+            merit["own_shift"] = plain(dict(self.details["own_shift"]))
         p = self.provenance
         prov: dict[str, Any] = {}
         if p.created_utc is not None:
@@ -423,6 +425,7 @@ class Profile:
         qa_doc = merit_doc.pop("qa", None)
         health = merit_doc.pop("harp_health", None)
         strings = merit_doc.pop("strings", None)
+        own_shift = merit_doc.pop("own_shift", None)
         spec, selection = _spec_of_choice(choice)
         prov = dict(mf.provenance or {})
         return cls(
@@ -443,6 +446,7 @@ class Profile:
             details={
                 **({"harp_health": dict(health)} if isinstance(health, Mapping) else {}),
                 **({"strings": dict(strings)} if isinstance(strings, Mapping) else {}),
+                **({"own_shift": dict(own_shift)} if isinstance(own_shift, Mapping) else {}),
                 **({"colour": dict(mf.colour)} if mf.colour else {}),
             },
             intrinsics=mf.intrinsics,

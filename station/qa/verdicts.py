@@ -207,6 +207,7 @@ def evaluate(
     recomputed_holdout_d: float | None = None,
     recorded: Mapping[str, Any] | None = None,
     harp_health: Mapping[str, Any] | None = None,
+    own_shift: Mapping[str, Any] | None = None,
 ) -> Verdict:
     """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`); see the module docstring.
 
@@ -218,7 +219,9 @@ def evaluate(
     for this image size (None: not compared; said when a threshold is set); ``extra``: figures
     reported with the verdict, not judged (the field uncertainty); ``harp_health``: the harp's
     self-check (:func:`station.calibration.harp_health`): the session fails when a string is bent
-    beyond its limit (the harp, not the lens: the correction would carry the string's bend).
+    beyond its limit (the harp, not the lens: the correction would carry the string's bend); ``own_shift``: the
+    held-out orientations' own axis shifts (:func:`station.calibration.own_shift_record`), reported, with what to do
+    when each orientation wants the correction moved on its own (a lens whose decentering changes between shots).
     """
     checks: list[Check] = []
     reasons: list[str] = []
@@ -404,6 +407,9 @@ def evaluate(
     axes = (harp_health or {}).get("axes")
     if axes and axes.get("places"):
         _axis_places(axes, add, metrics)
+    if own_shift and own_shift.get("judged") and own_shift.get("ratio_median") is not None:
+        add(_own_shift_check(own_shift))
+        metrics["holdout_own_shift_ratio"] = own_shift["ratio_median"]
 
     return Verdict(
         FAIL if reasons else PASS,
@@ -412,6 +418,23 @@ def evaluate(
         tuple(checks),
         {k: getattr(thresholds, k) for k in THRESHOLD_FIELDS},
     )
+
+
+def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
+    """The held-out orientations' own axis shift, reported (:func:`station.calibration.own_shift_record`)."""
+    ratio, limit = float(own_shift["ratio_median"]), float(own_shift.get("limit") or 0.0)
+    text = f"held-out orientations: the correction moved for each alone leaves {ratio:.2f} of its held-out d (median"
+    text += f"; at or above {limit:g}, as a stable lens)" if not own_shift.get("moving") else f" < {limit:g})"
+    if own_shift.get("moving"):
+        shifts = [o.get("shift_px") or [] for o in own_shift.get("per_orientation") or []]
+        sizes = [math.hypot(*v) for v in shifts if len(v) == 2 and None not in v]
+        text += (
+            (f", by up to {max(sizes):.1f} px" if sizes else "")
+            + ": the lens's decentering may change between shots (an image stabiliser, a focus or zoom group with "
+            "play): switch stabilisation off, lock focus and zoom, and capture again; two shots at the same angle "
+            "tell it from a lens term that bends each orientation its own way"
+        )
+    return Check("holdout_own_shift", finite_or_none(ratio), ">=", None, None, f"{text}: reported, not judged")
 
 
 def _axis_places(axes: Mapping[str, Any], add: Callable[..., None], metrics: dict[str, Any]) -> None:
@@ -564,6 +587,7 @@ def qa_verdict(
         recomputed_holdout_d=recomputed,
         recorded=profile.qa.metrics if profile.qa is not None else None,
         harp_health=(profile.details or {}).get("harp_health"),
+        own_shift=(profile.details or {}).get("own_shift"),
     )
 
 

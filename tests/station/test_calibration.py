@@ -453,3 +453,83 @@ def test_the_harp_check_record_names_the_noisy_shots_by_their_turntable_angle():
     assert [(n["shot"], n["turntable_deg"]) for n in noisy] == [(2, 60.0), (5, 150.0)]
     assert all(n["noise_ratio"] > SHOT_NOISE_FACTOR for n in noisy)
     assert harp_health(shots, turns, w, h, spec)["noisy_shots"] == []
+
+
+def _turning_lens_shots(moves_px):
+    """Six shots of a straight harp turning 0..150 deg, each through the same lens with its distortion centre moved
+    by ``moves_px[i]`` (hand-chosen; all zero: a stable lens)."""
+    from pipeline.models import RadialModel
+    from tests.pipeline.harp_points import turning_harp_point_sets
+
+    w, h = 1000, 750
+    shots = []
+    for i, (turn, (mx, my)) in enumerate(zip((0, 30, 60, 90, 120, 150), moves_px)):
+        lens = RadialModel.for_image(
+            w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512 + mx, 366 + my), tangential=(8e-4, -5e-4)
+        )
+        shots += turning_harp_point_sets(lens, w, h, (turn,), np.zeros((11, 3)), axis=(497, 378), seed=10 + i)[0]
+    return shots, w, h
+
+
+def test_a_lens_whose_centre_moves_between_shots_is_told_from_a_stable_one():
+    """The held-out orientations' own axis shift (pipeline.own_shift) in a session's hold-out: a lens whose distortion
+    centre moves by 5-7 px between shots (by hand) leaves each held-out orientation bent by its own move, which moving
+    the fold's correction takes back to the noise: ``moving``, and the QA text says what to do; the same lens held
+    still: nothing of its own (median ratio near 1), no advice."""
+    from station.calibration import OWN_SHIFT_RATIO, calibrate_shots
+    from station.config import QAConfig
+    from station.qa.verdicts import evaluate
+
+    spec = parse("radial4+tangential+prism")
+    got = {}
+    for name, moves in (
+        ("moving", [(0, 0), (6, -4), (-5, 3), (4, 5), (-6, -2), (3, -6)]),
+        ("stable", [(0, 0)] * 6),
+    ):
+        shots, w, h = _turning_lens_shots(moves)
+        cal = calibrate_shots(shots, w, h, spec, holdout="orientations")
+        own = cal.details["own_shift"]
+        v = evaluate(cal.fit.model, w, h, cal.merit.holdout.d, QAConfig(), own_shift=own)
+        got[name] = (own, next(c for c in v.checks if c.name == "holdout_own_shift"), cal)
+    own, check, cal = got["moving"]
+    assert own["judged"] and own["moving"] and own["ratio_median"] < 0.3 and own["limit"] == OWN_SHIFT_RATIO
+    held = [o["d_held_px"] for o in own["per_orientation"]]
+    assert len(held) == 6 and min(held) > 0.01  # every moved shot bent beyond its 0.003 px noise, held out
+    assert all(o["d_own_px"] < 0.008 for o in own["per_orientation"])
+    assert check.passed is None and "switch stabilisation off" in check.text and check.value == own["ratio_median"]
+    # the model file keeps it, and QA judging the file reports it the same
+    from pipeline.model_file import parse_model_text
+    from station.profile import Profile, Provenance
+    from station.qa.verdicts import qa_verdict
+
+    back = Profile.from_model_file(
+        parse_model_text(cal.profile(w, h, provenance=Provenance()).to_model_file().text(), "p.yaml")
+    )
+    assert back.details["own_shift"] == own
+    assert next(c for c in qa_verdict(back).checks if c.name == "holdout_own_shift").text == check.text
+    own, check, _ = got["stable"]
+    assert own["judged"] and not own["moving"] and own["ratio_median"] > 0.95
+    assert check.passed is None and "stabilisation" not in check.text
+
+
+def test_the_own_shift_record_judges_only_with_four_orientations_or_more():
+    from pipeline.models import RadialModel
+    from pipeline.own_shift import OwnShift
+    from station.calibration import MIN_OWN_SHIFT_ORIENTATIONS, own_shift_record
+    from station.config import QAConfig
+    from station.qa.verdicts import evaluate
+
+    low = [OwnShift(0.04, 0.01, (3.0, 4.0), 100)]  # ratio 0.25
+    rec = own_shift_record(low * (MIN_OWN_SHIFT_ORIENTATIONS - 1))
+    assert rec["ratio_median"] == pytest.approx(0.25) and not rec["judged"] and not rec["moving"]
+    rec = own_shift_record(low * MIN_OWN_SHIFT_ORIENTATIONS + [OwnShift(0.02, 0.02, (0.0, 0.0), 100)])
+    assert rec["judged"] and rec["moving"] and rec["per_orientation"][0]["shift_px"] == [3.0, 4.0]
+    v = evaluate(RadialModel.for_image(640, 480), 640, 480, 0.01, QAConfig(), own_shift=rec)
+    check = next(c for c in v.checks if c.name == "holdout_own_shift")
+    assert "by up to 5.0 px" in check.text and v.verdict == "PASS"  # reported, not judged
+    assert not any(
+        c.name == "holdout_own_shift"
+        for c in evaluate(
+            RadialModel.for_image(640, 480), 640, 480, 0.01, QAConfig(), own_shift=own_shift_record(low)
+        ).checks
+    )

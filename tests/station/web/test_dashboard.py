@@ -115,6 +115,7 @@ def test_api_lens_has_every_profile_check_plot_and_download(served):
             "distortion_max",
             "distortion_recorded",
             "string_bend_max",  # the harp's self-check (issue 19 item 4)
+            "holdout_own_shift",  # the held-out orientations' own axis shift (reported)
         }
         assert [d["format"] for d in p["downloads"]] == list(FORMATS)
         assert p["plots"] == {

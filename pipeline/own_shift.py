@@ -1,0 +1,93 @@
+r"""How much of a held-out shot's error is a term of its own: the correction's axis moved for that shot alone.
+
+A correction :math:`U` fitted on other shots corrects a held-out shot's edges to a d of :math:`d_h`. Moving the
+whole correction by a vector :math:`t` fitted on that shot alone,
+
+.. math:: U_t(p) = U(p - t) + t,
+
+leaves :math:`d_t \le d_h`. That is what a lens whose distortion centre (or decentering) moved between shots needs:
+an image stabiliser that re-centres, a focus or zoom group with play, a lens knocked between shots (consumer lenses'
+interior orientation changes between images: Shortis et al. 2006; Sanz-Ablanedo et al. 2010). On one shot's
+parallel strings :math:`t` shows mostly as a bow that every string shares (the radial term's gradient across the
+strings), so a lens term that bends each orientation its own way or a bow the whole harp shares in that shot lowers
+:math:`d_t` as well; two shots at the **same** angle tell them apart (a moving lens bends them differently).
+
+With a stable lens and enough shots the held-out shot has nothing of its own to take, and
+:math:`d_t / d_h` stays near 1; on the three real photographs fitted two at a time it is 0.46-0.63
+(``benchmarks/own_shift.py``, ``benchmarks/RESULTS-realism.md``).
+
+References
+----------
+.. [1] Shortis, Bellman, Robson, Johnston, Johnson, "Stability of zoom and fixed lenses used with digital SLR
+   cameras", IAPRS XXXVI-5, 2006.
+.. [2] Tang, Grompone von Gioi, Monasse, Morel, "High-precision camera distortion measurements with a calibration
+   harp", JOSA A 29(10), 2012: d, the RMS distance to each edge's regression line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.edgeset import held_out_edges, tls
+from pipeline.models.base import DistortionModel
+
+MAX_SHIFT_PX = 50.0
+"""Largest axis shift searched (px): a stabiliser's re-centring or a group's play is a few pixels; beyond this the
+held-out shot is not the lens's problem."""
+
+
+@dataclass(frozen=True)
+class OwnShift:
+    """A held-out shot's own axis shift (:func:`own_axis_shift`).
+
+    ``d_held`` the shot's d under the correction fitted without it, ``d_own`` under the same correction moved by
+    ``shift_px`` (x, y), fitted on the shot alone (px); ``points`` the points of the edges measured."""
+
+    d_held: float
+    d_own: float
+    shift_px: tuple[float, float]
+    points: int
+
+    @property
+    def ratio(self) -> float:
+        """``d_own / d_held``: 1 when the shot has nothing of its own; NaN without a held-out figure."""
+        return self.d_own / self.d_held if self.d_held > 0 else float("nan")
+
+
+def _residuals(model: DistortionModel, pts: NDArray[np.float64], starts: NDArray[np.intp], counts: NDArray[np.intp],
+               t: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    r: NDArray[np.float64] = tls(model.undistort_points(pts - t) + t, starts, counts)[0]
+    return r
+
+
+def own_axis_shift(model: DistortionModel, lines: Sequence[NDArray[np.float64]]) -> OwnShift:
+    """The shift :math:`t` (module docstring) that straightens the edges ``lines`` of one held-out shot best under
+    ``model``, by least squares from :math:`t = 0` within :data:`MAX_SHIFT_PX`; the edges taken are those a held-out
+    figure takes (:func:`pipeline.edgeset.held_out_edges`). NaN figures when no edge has three points or the
+    correction leaves a point non-finite."""
+    from scipy.optimize import least_squares
+
+    edges = held_out_edges(lines)
+    if not edges:
+        return OwnShift(float("nan"), float("nan"), (float("nan"), float("nan")), 0)
+    counts = np.array([len(p) for p in edges], dtype=np.intp)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+    pts = np.concatenate(edges)
+    r0 = _residuals(model, pts, starts, counts, np.zeros(2))
+    d_held = float(np.sqrt(np.mean(r0**2)))
+    if not np.isfinite(d_held):
+        return OwnShift(d_held, float("nan"), (float("nan"), float("nan")), len(pts))
+
+    def fun(t: NDArray[np.float64]) -> NDArray[np.float64]:
+        r = _residuals(model, pts, starts, counts, t)
+        return np.where(np.isfinite(r), r, 1e3)
+
+    sol = least_squares(fun, np.zeros(2), bounds=(-MAX_SHIFT_PX, MAX_SHIFT_PX), x_scale=1.0, diff_step=1e-3)
+    d_own = float(np.sqrt(np.mean(sol.fun**2)))
+    if not d_own <= d_held:  # the search never does worse than not moving
+        return OwnShift(d_held, d_held, (0.0, 0.0), len(pts))
+    return OwnShift(d_held, d_own, (float(sol.x[0]), float(sol.x[1])), len(pts))
