@@ -540,17 +540,33 @@ class SimulatedCamera:
     def get_zoom(self) -> float | None:
         return self.world.zoom
 
-    def lens_at(self, focus: float) -> Any:
+    def lens_at(self, focus: float, pose_seed: int | None = None) -> Any:
         """The lens the harp is rendered through at ``focus``: the zoom lens at the world's focal length
         (:func:`drivers.sim.lens.zoom_lens`), or the fixed demo lens (:func:`drivers.sim.lens.lens_for_focus`),
         each the unit ``world.lens_unit`` (its manufacturing deviations; None: the nominal lens) with its residual
-        field ``world.lens_field`` (:func:`drivers.sim.lens.with_field`; None: none)."""
+        field ``world.lens_field`` (:func:`drivers.sim.lens.with_field`; None: none). With
+        ``world.lens_centre_sd_px`` > 0 and a ``pose_seed`` (one per turntable pose, :meth:`_pose_seed`) its
+        distortion centre is moved by a normal draw of that standard deviation per axis
+        (:func:`pipeline.lens_population.shot_to_shot`): a lens whose decentering changes between poses, as an image
+        stabiliser that re-centres or a focus group with play does; the frames of one pose share it."""
         w, h = self._size
         if self.world.zoom is not None:
             lens = zoom_lens(self.world.zoom, focus, w, h, self.world.lens_unit)
         else:
             lens = lens_for_focus(focus, w, h, self.world.lens_unit)
-        return with_field(lens, self.world.lens_field, w, h)
+        fielded = with_field(lens, self.world.lens_field, w, h)
+        if pose_seed is None or self.world.lens_centre_sd_px == 0:
+            return fielded
+        from pipeline.lens_population import shot_to_shot  # defers pipeline.lens_population
+
+        return shot_to_shot(fielded, np.random.default_rng([pose_seed, 0xCE27]), 0.0, self.world.lens_centre_sd_px)
+
+    def _pose_seed(self, focus: float, angle_deg: float, shift_mm: float | None) -> int | None:
+        """The seed of the lens's move at a pose (:meth:`lens_at`), None for a stable lens: equal poses, equal
+        moves (a resumed session's frames are rendered alike)."""
+        if self.world.lens_centre_sd_px == 0:
+            return None
+        return noise_seed(self.seed, focus, angle_deg, -1, self.world.zoom, shift_mm)
 
     def blur_at(self, focus: float) -> float:
         """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
@@ -668,16 +684,17 @@ class SimulatedCamera:
         index = self._index_at(focus, angle_deg, shift_mm) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
         seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom, shift_mm)
+        pose = self._pose_seed(focus, angle_deg, shift_mm)
         if self.realism is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
-            return self._render_realistic(stage, focus, seed, gain_lin, axis_px)
+            return self._render_realistic(stage, focus, seed, gain_lin, axis_px, pose)
         scene = dataclasses.replace(self.scene, angle_deg=angle_deg)
         if axis_px is not None:  # the strings turn about the moved axis: each moves by the offset along its normal
             nx, ny = scene.normal
             scene = dataclasses.replace(scene, phase_px=scene.phase_px + axis_px[0] * nx + axis_px[1] * ny)
         if self.best_focus is not None and self.defocus_blur_px > 0:
             scene = dataclasses.replace(scene, blur_px=self.blur_at(focus))
-        lens = self.lens_at(focus)
+        lens = self.lens_at(focus, pose)
         if self.cfa is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
             colour: Rendered = self._render_colour(scene, lens, stage + self.world.harp_offset_deg, seed, gain_lin)
@@ -687,7 +704,7 @@ class SimulatedCamera:
             h,
             scene,
             lens=lens,
-            ideal=self._ideal_grid(float(focus), lens),
+            ideal=None if pose is not None else self._ideal_grid(float(focus), lens),  # a moved lens: mapped anew
             noise_sigma=self.noise_sigma,
             shot_noise=self.shot_noise,
             bit_depth=self._bit_depth,
@@ -732,9 +749,16 @@ class SimulatedCamera:
             raise DriverError(f"{self.name}: {exc}") from None
 
     def _render_realistic(
-        self, stage_deg: float, focus: float, seed: int, gain_lin: float, axis_px: tuple[float, float] | None = None
+        self,
+        stage_deg: float,
+        focus: float,
+        seed: int,
+        gain_lin: float,
+        axis_px: tuple[float, float] | None = None,
+        pose_seed: int | None = None,
     ) -> Shot:
-        """One frame of the realistic simulator (module docstring, *Realistic rendering*)."""
+        """One frame of the realistic simulator (module docstring, *Realistic rendering*); ``pose_seed``: the lens's
+        move at this pose (:meth:`lens_at`)."""
         from pipeline.harp_scene import HarpMount  # defers pipeline.harp_scene
         from pipeline.realism import raw_ideal_grid, render_shot  # defers pipeline.realism
         from pipeline.sensor import raw_scale  # defers pipeline.sensor
@@ -757,9 +781,9 @@ class SimulatedCamera:
         m = self.realism.mount
         centre = m.centre if axis_px is None else (m.centre[0] + axis_px[0], m.centre[1] + axis_px[1])
         mount = HarpMount(centre, self.world.harp_offset_deg, 1, m.gravity_deg, m.gravity_in_plane)
-        lens = self.lens_at(focus)
+        lens = self.lens_at(focus, pose_seed)
         ideal = None
-        if w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
+        if pose_seed is None and w * h * raw_scale(sensor, development) ** 2 <= IDEAL_CACHE_PIXELS:
             key = (
                 "raw",
                 float(focus),

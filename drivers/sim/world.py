@@ -55,6 +55,9 @@ class SimWorld:
         refuses to render the harp moved off its place, :meth:`shift_offset_px`).
     lens_field : UnitField or None
         That unit's residual field (:func:`drivers.sim.lens.lens_field`); None: none.
+    lens_centre_sd_px : float
+        How far (standard deviation per axis, px) the lens's distortion centre moves between turntable poses
+        (:meth:`drivers.sim.camera.SimulatedCamera.lens_at`); 0: a stable lens.
 
     Thread-safe: the stage function is called under the emulator's own lock,
     ``focus`` and ``harp_offset_deg`` are plain floats.
@@ -69,6 +72,7 @@ class SimWorld:
         shift_direction_deg: float = 0.0,
         shift_px_per_mm: float | None = None,
         lens_field: UnitField | None = None,
+        lens_centre_sd_px: float = 0.0,
     ):
         if shift_px_per_mm is not None and not (math.isfinite(shift_px_per_mm) and shift_px_per_mm > 0):
             raise ValueError(f"shift_px_per_mm must be a positive number or None, got {shift_px_per_mm!r}")
@@ -77,6 +81,9 @@ class SimWorld:
         self.harp_offset_deg = float(harp_offset_deg)
         self.lens_unit = lens_unit
         self.lens_field = lens_field
+        if not (math.isfinite(lens_centre_sd_px) and lens_centre_sd_px >= 0):
+            raise ValueError(f"lens_centre_sd_px must be a number >= 0, got {lens_centre_sd_px!r}")
+        self.lens_centre_sd_px = float(lens_centre_sd_px)
         self.zoom: float | None = None
         self._drive: Callable[[float], float] | None = None
         self._driver_name: str | None = None

@@ -341,7 +341,9 @@ class SimulationConfig:
     (:func:`drivers.sim.lens.lens_unit`: decentre, tilt, k1 spread, one bad unit in 20), drawn from
     ``lens.serial`` so that every serial is its own reproducible lens; 0 is the nominal demo lens
     for every serial. ``lens_field_px``: the RMS of a residual field each unit carries besides
-    (:func:`drivers.sim.lens.lens_field`: smooth, non-parametric, its shape drawn from the serial); 0: none."""
+    (:func:`drivers.sim.lens.lens_field`: smooth, non-parametric, its shape drawn from the serial); 0: none.
+    ``lens_centre_sd_px``: a lens whose distortion centre moves between turntable poses
+    (:meth:`drivers.sim.camera.SimulatedCamera.lens_at`); 0: a stable lens."""
 
     harp_offset_deg: float = setting(0.0, "the strings' angle at stage 0 in the simulated world", "deg", -360.0,
                                      360.0)  # fmt: skip
@@ -353,6 +355,10 @@ class SimulationConfig:
     lens_field_px: float = setting(0.0, "the RMS over the image of a residual field the simulated lens carries "
                                    "besides its radial, tangential and prism terms (smooth, no model's; its shape "
                                    "drawn from lens.serial; 0: none)", "px", 0.0, 1.0)  # fmt: skip
+    lens_centre_sd_px: float = setting(0.0, "how far the simulated lens's distortion centre moves between turntable "
+                                       "poses, as an image stabiliser or a focus group with play would (a normal "
+                                       "draw per pose and axis, this its standard deviation; 0: a stable lens)",
+                                       "px", 0.0, 50.0)  # fmt: skip
     shift_direction_deg: float = setting(0.0, "the image direction (from +x, the columns, towards +y, the rows) in "
                                          "which a positive move of the turntable's shift axis carries the turntable "
                                          "axis in the simulated world", "deg", -360.0, 360.0)  # fmt: skip

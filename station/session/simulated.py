@@ -103,12 +103,13 @@ def simulated_devices(config: Config, **emulator_overrides) -> Iterator[Simulate
     from drivers.sim.lens import lens_field, lens_unit  # defers cv2
 
     # the lens on the camera: the unit of the demo lens that carries this serial (simulation.lens_spread), with
-    # its residual field (simulation.lens_field_px)
+    # its residual field (simulation.lens_field_px), its centre moving between poses (simulation.lens_centre_sd_px)
     world = SimWorld(
         harp_offset_deg=config.simulation.harp_offset_deg,
         lens_unit=lens_unit(config.lens.serial, config.simulation.lens_spread),
         shift_direction_deg=config.simulation.shift_direction_deg,
         lens_field=lens_field(config.lens.serial, config.simulation.lens_field_px),
+        lens_centre_sd_px=config.simulation.lens_centre_sd_px,
     )
     handle = _start_stage_emulator(config, world, emulator_overrides)
     tt = config.station.turntable

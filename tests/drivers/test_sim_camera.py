@@ -385,3 +385,24 @@ def test_the_realistic_harp_turns_about_the_shifted_axis():
         shots.append(cam.last_rendered)
     assert shots[0].pose == shots[1].pose and shots[0].edges == shots[1].edges and len(shots[0].edges) > 4
     assert shots[0].seed != shots[1].seed  # the shifted frame's noise is its own
+
+
+def test_a_moving_lens_moves_its_distortion_centre_between_poses_and_frames_of_a_pose_agree():
+    """``lens_centre_sd_px``: each turntable pose's lens is the stable one with its distortion centre moved (the same
+    map about the moved centre: k, tangential unchanged); the frames of one pose see the same lens, another pose
+    another; the frames themselves are reproducible (a resumed session renders alike); 0 is the stable lens."""
+    still = SimulatedCamera(SimWorld(), width=320, height=240)
+    moving = SimulatedCamera(SimWorld(lens_centre_sd_px=5.0), width=320, height=240)
+    base = still.lens_at(0.3)
+    seeds = [moving._pose_seed(0.3, a, None) for a in (10.0, 40.0, 10.0)]
+    assert seeds[0] == seeds[2] != seeds[1] and still._pose_seed(0.3, 10.0, None) is None
+    lenses = [moving.lens_at(0.3, s) for s in seeds]
+    moves = [np.subtract(m.center, base.center) for m in lenses]
+    assert np.all(moves[0] == moves[2]) and not np.allclose(moves[0], moves[1])
+    assert all(0 < np.hypot(*m) < 5.0 * 5 for m in moves)  # a normal draw of 5 px per axis, within 5 sigma
+    assert all(m.k == base.k and m.tangential == base.tangential for m in lenses)
+    assert still.lens_at(0.3, seeds[0]).center == base.center  # a stable world ignores the pose
+    a = moving.render(index=0, angle_deg=10.0, focus=0.3).image
+    b = moving.render(index=0, angle_deg=10.0, focus=0.3).image
+    c = still.render(index=0, angle_deg=10.0, focus=0.3).image
+    assert np.array_equal(a, b) and not np.array_equal(a, c)

@@ -622,3 +622,27 @@ def test_a_store_or_sessions_directory_under_a_file_is_one_line_from_session_run
     assert main(["session", "run", str(cfg), "--quiet", "--no-report"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "warning" not in err and "blocker" in err and "Traceback" not in err, err
+
+
+def test_a_lens_whose_centre_moves_between_poses_is_reported_by_the_sessions_qa(tmp_path):
+    """The simulated lens's distortion centre moved between turntable poses (``simulation.lens_centre_sd_px``: 12 px,
+    as an image stabiliser that re-centres would): the session's QA reports that each held-out orientation wants
+    the correction moved on its own, and says what to do; the same station with a stable lens (0) does not. Six
+    orientations, one focus, one frame each. Truth: the world's configured move, not the measurement."""
+    texts = {}
+    for sd in (12.0, 0.0):
+        base = tmp_path / f"sd{sd:g}"
+        cfg = small_config(base, focus=(0.0,), frames=1, orientations_deg=[0, 30, 60, 90, 120, 150])
+        d = yaml.safe_load(cfg.read_text())
+        d["simulation"]["lens_centre_sd_px"] = sd
+        cfg.write_text(yaml.safe_dump(d))
+        assert main(["session", "run", str(cfg), "--name", "m", "--quiet", "--no-report"]) == 0  # not judged
+        with ProfileStore(base / "profiles.sqlite", create=False) as store:
+            (p,) = store.profiles()
+        own = p.details["own_shift"]
+        assert own["judged"] and len(own["per_orientation"]) == 6
+        texts[sd] = (own, next(c.text for c in p.qa.checks if c.name == "holdout_own_shift"))
+    own, text = texts[12.0]
+    assert own["moving"] and own["ratio_median"] < 0.5 and "switch stabilisation off" in text
+    own, text = texts[0.0]
+    assert not own["moving"] and own["ratio_median"] > 0.95 and "stabilisation" not in text
