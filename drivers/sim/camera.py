@@ -144,6 +144,7 @@ from pipeline.board_render import BoardPose, render_board
 from pipeline.board_render import camera_matrix as board_camera_matrix
 from pipeline.board_requests import request_pose
 from pipeline.cfa import check_pattern
+from pipeline.lens_population import shot_to_shot
 from pipeline.render import HarpScene, Rendered, ideal_grid, render_harp
 from pipeline.render_colour import backlit_shading, render_mosaic
 
@@ -557,8 +558,6 @@ class SimulatedCamera:
         fielded = with_field(lens, self.world.lens_field, w, h)
         if pose_seed is None or self.world.lens_centre_sd_px == 0:
             return fielded
-        from pipeline.lens_population import shot_to_shot  # defers pipeline.lens_population
-
         return shot_to_shot(fielded, np.random.default_rng([pose_seed, 0xCE27]), 0.0, self.world.lens_centre_sd_px)
 
     def _pose_seed(self, focus: float, angle_deg: float, shift_mm: float | None) -> int | None:
