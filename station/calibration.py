@@ -100,6 +100,21 @@ quadratic term undetermined that the held-out one then shows (``benchmarks/quadr
 takes that away too, so a stable lens can read as low as 0.54 (``benchmarks/own_shift.py``)."""
 
 
+OWN_SHIFT_ADVICE = (
+    "the lens's decentering may change between shots (an image stabiliser, a focus or zoom group with play): switch "
+    "stabilisation off, lock focus and zoom, and capture again; two shots at the same angle tell it from a lens term "
+    "that bends each orientation its own way"
+)
+"""What QA and ``harp calibrate`` say when the held-out shots carry a term of their own (``moving``)."""
+
+
+def largest_own_shift(record: Mapping[str, Any]) -> float | None:
+    """The largest own axis shift (px) of an own-shift record (:func:`own_shift_record`); None when none is known."""
+    shifts = [o.get("shift_px") or [] for o in record.get("per_orientation") or []]
+    sizes = [float(np.hypot(*v)) for v in shifts if len(v) == 2 and None not in v]
+    return max(sizes) if sizes else None
+
+
 def own_shift_record(own: Sequence[OwnShift]) -> dict[str, Any]:
     """The held-out orientations' own axis shifts as a profile keeps them (``details["own_shift"]``): per
     orientation its held-out d, the d with its own shift and the shift (px); the median ratio; ``moving`` when that
@@ -121,6 +136,40 @@ def own_shift_record(own: Sequence[OwnShift]) -> dict[str, Any]:
             for o in own
         ],
     }
+
+
+def shot_own_shifts(
+    shots: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    spec: FitSpec,
+    rejected: Sequence[Any] = (),
+    map_fn: MapFn = map,
+) -> dict[str, Any] | None:
+    """The own-shift record (:func:`own_shift_record`) of shots without turntable angles (``harp calibrate``): each
+    shot held out in turn, ``spec`` fitted on the others (``map_fn`` maps the fits), its edges but the full fit's
+    ``rejected`` measured under that fit and under it moved for them alone. Two shots at the same angle make the
+    best test: a stable lens corrects the one held out as its twin. None with fewer than
+    :data:`MIN_OWN_SHIFT_ORIENTATIONS` shots or when a fold's fit fails."""
+    if len(shots) < MIN_OWN_SHIFT_ORIENTATIONS:
+        return None
+    kw = spec.fit_arguments()
+    jobs = [([ls for j, ls in enumerate(shots) if j != k], width, height, kw) for k in range(len(shots))]
+    loo = _orientation_holdout(shots, rejected, refit_job, jobs, map_fn)
+    return own_shift_record(loo.own) if isinstance(loo, _OrientationHoldout) else None
+
+
+def own_shift_warning(record: Mapping[str, Any] | None) -> str | None:
+    """``harp calibrate``'s warning when its held-out shots each want the correction moved on their own (the record's
+    ``moving``, :func:`shot_own_shifts`); None otherwise."""
+    if not record or not record.get("moving"):
+        return None
+    size = largest_own_shift(record)
+    return (
+        f"each shot held out wants the correction moved on its own: {record['ratio_median']:.2f} of its held-out d is "
+        f"left (median, below {record['limit']:g})" + (f", by up to {size:.1f} px" if size is not None else "")
+        + f": {OWN_SHIFT_ADVICE}"
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

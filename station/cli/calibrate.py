@@ -25,9 +25,12 @@ it. ``--json`` prints one object::
 
     {"model": path, "choice": {"model", "degree", "tangential", "prism", "label", "reason", ...},
      "before": {"d", "d_max"}, "fit": {"d", "d_max"}, "holdout": {"d", "d_max", "images": [...]},
-     "images": [{"path", "d_before", "d_max_before", "d", "d_max", "n_edges"}], "rejected": [...]}
+     "images": [{"path", "d_before", "d_max_before", "d", "d_max", "n_edges"}], "rejected": [...],
+     "warnings": [...], "own_shift": {"ratio_median", "limit", "judged", "moving", "per_orientation": [...]}}
 
-(``holdout`` only when given; distances in pixels). Bad input (unreadable
+(``holdout`` only when given; ``own_shift`` with four shots or more: each shot held out in turn and the correction
+fitted on the others moved for it alone, :func:`station.calibration.shot_own_shifts`, with a warning when the shots
+each want it moved on their own, as a lens whose decentering changes between shots does; distances in pixels). Bad input (unreadable
 image, no strings, images of different sizes, one orientation only, too few
 edges): one line on stderr, exit 2.
 """
@@ -223,7 +226,9 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         calibrate_shots,
         holdout_warning,
         noisy_shot_warnings,
+        own_shift_warning,
         shot_count_problem,
+        shot_own_shifts,
         size_problem,
     )
     from station.provenance import make_provenance  # defers yaml
@@ -251,6 +256,9 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
     if not res:
         raise CalibrateError(f"cannot fit {cal.spec.label}: {res.reason}")
     rejected = [{"path": str(fit_m[e.image][0]), "line": e.line, "reason": e.reason} for e in res.rejected]
+    assert cal.spec is not None  # a calibration that fitted has its spec
+    # each shot held out, the correction moved for it alone (four shots or more): kept with the profile, as a session's
+    own = shot_own_shifts(shots, width, height, cal.spec, res.rejected, map_fn)
     profile = cal.profile(
         width,
         height,
@@ -262,6 +270,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         ),
         given_by=GIVEN_ON_COMMAND_LINE,
         merit_extra={"rejected_edges": rejected},
+        details=None if own is None else {"own_shift": own},
     )
     merit = profile.merit
     assert merit.before is not None and merit.fit is not None  # a calibration that fitted has both
@@ -287,6 +296,11 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         "rejected": rejected,
         "warnings": list(res.warnings) + noisy_shot_warnings(res, [str(fit_m[i][0]) for i in range(len(fit_m))]),
     }
+    if own is not None:
+        report["own_shift"] = own
+        warning = own_shift_warning(own)
+        if warning:
+            report["warnings"].append(warning)
     if hold_m:
         per = [
             {

@@ -58,7 +58,7 @@ from pipeline.fit import fit_distortion
 from pipeline.model_file import read_model_file
 from pipeline.models.base import IdentityModel
 from pipeline.plain import finite_or_none
-from station.calibration import calibrate_shots
+from station.calibration import OWN_SHIFT_ADVICE, calibrate_shots, largest_own_shift
 from station.config import QAConfig
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
 from station.qa.evidence import stored_measurement
@@ -426,14 +426,8 @@ def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
     text = f"held-out orientations: the correction moved for each alone leaves {ratio:.2f} of its held-out d (median"
     text += f"; at or above {limit:g}, as a stable lens)" if not own_shift.get("moving") else f" < {limit:g})"
     if own_shift.get("moving"):
-        shifts = [o.get("shift_px") or [] for o in own_shift.get("per_orientation") or []]
-        sizes = [math.hypot(*v) for v in shifts if len(v) == 2 and None not in v]
-        text += (
-            (f", by up to {max(sizes):.1f} px" if sizes else "")
-            + ": the lens's decentering may change between shots (an image stabiliser, a focus or zoom group with "
-            "play): switch stabilisation off, lock focus and zoom, and capture again; two shots at the same angle "
-            "tell it from a lens term that bends each orientation its own way"
-        )
+        size = largest_own_shift(own_shift)
+        text += (f", by up to {size:.1f} px" if size is not None else "") + f": {OWN_SHIFT_ADVICE}"
     return Check("holdout_own_shift", finite_or_none(ratio), ">=", None, None, f"{text}: reported, not judged")
 
 

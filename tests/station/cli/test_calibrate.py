@@ -384,3 +384,38 @@ def test_a_shot_measured_far_worse_than_the_others_is_named_with_what_to_do(shot
     assert code == 0, err
     named = [w for w in json.loads(out)["warnings"] if "far from straight" in w]
     assert len(named) == 1 and named[0].startswith(f"{shots['noisy']}: ") and "turn the harp" in named[0], named
+
+
+def test_shots_through_a_lens_whose_centre_moves_are_told_from_a_stable_lens(shots, tmp_path, capsys):
+    """Five shots at five angles through LENS with its distortion centre moved by hand-chosen 6-9 px per shot (what
+    an image stabiliser does between shots): each shot held out is bent by its own move, which moving the others'
+    correction takes away: ``own_shift`` says ``moving`` and a warning says what to do. The module's stable shots
+    (LENS itself, four angles): not moving, no such warning. The profile keeps the record, as a session's."""
+    d = tmp_path / "moving"
+    d.mkdir()
+    paths = []
+    for i, (ang, (mx, my)) in enumerate(
+        zip((3.0, 39.0, 75.0, 111.0, 147.0), ((0, 0), (8, -5), (-7, 4), (5, 7), (-6, -6)))
+    ):
+        moved = RadialModel.for_image(W, H, k=LENS.k, center=(330 + mx, 230 + my), tangential=LENS.tangential)
+        img = render_harp(W, H, HarpScene(angle_deg=ang, spacing_px=40.0, phase_px=5.0 * i), lens=moved, seed=20 + i)
+        paths.append(d / f"m{i}.pgm")
+        assert cv2.imwrite(str(paths[-1]), img.image)
+    code, out, err = _run(capsys, *paths, "--model", "radial", "--out", tmp_path / "m.yaml", "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    own = rep["own_shift"]
+    assert own["judged"] and own["moving"] and own["ratio_median"] < 0.5 and len(own["per_orientation"]) == 5
+    said = [w for w in rep["warnings"] if "wants the correction moved" in w]
+    assert len(said) == 1 and "switch stabilisation off" in said[0], rep["warnings"]
+    from pipeline.model_file import read_model_file
+    from station.profile import Profile
+
+    assert Profile.from_model_file(read_model_file(tmp_path / "m.yaml")).details["own_shift"] == own
+    code, out, err = _run(capsys, shots[3.0], shots[63.0], shots[123.0], shots[93.0], "--model", "radial", "--out",
+                          tmp_path / "s.yaml", "--json")  # fmt: skip
+    rep = json.loads(out)
+    assert code == 0 and rep["own_shift"]["judged"] and not rep["own_shift"]["moving"]
+    assert rep["own_shift"]["ratio_median"] > 0.9 and not any(
+        "wants the correction moved" in w for w in rep["warnings"]
+    )
