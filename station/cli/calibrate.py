@@ -30,9 +30,9 @@ it. ``--json`` prints one object::
 
 (``holdout`` only when given; ``own_shift`` with four shots or more: each shot held out in turn and the correction
 fitted on the others moved for it alone, :func:`station.calibration.shot_own_shifts`, with a warning when the shots
-each want it moved on their own, as a lens whose decentering changes between shots does; distances in pixels). Bad input (unreadable
-image, no strings, images of different sizes, one orientation only, too few
-edges): one line on stderr, exit 2.
+each want it moved on their own, as a lens whose decentering changes between shots does; distances in pixels). Bad
+input (unreadable image, no strings, images of different sizes, one orientation only, too few edges): one line on
+stderr, exit 2.
 """
 
 from __future__ import annotations
