@@ -194,9 +194,9 @@ def simulated_measurements(
     string_angles: Sequence[float] = REAL_ANGLES,
 ) -> tuple[list[ImageMeasurement], dict[str, object]]:
     """Render and measure one simulated session (module docstring; :func:`session_statistics` analyses it): its
-    shots' measurements and what was drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion centre changed between shots by
-    N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``: the shots' string angles (deg,
-    each +- 3), the photographs' by default."""
+    shots' measurements and what was drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion
+    centre changed between shots by N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``:
+    the shots' string angles (deg, each +- 3), the photographs' by default."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
     from pipeline.lens_population import lens_population, shot_to_shot
     from pipeline.realism import Effects, realistic_session, render_shot, render_shots, shot_seed

@@ -58,8 +58,14 @@ class OwnShift:
         return self.d_own / self.d_held if self.d_held > 0 else float("nan")
 
 
-def _residuals(model: DistortionModel, pts: NDArray[np.float64], starts: NDArray[np.intp], counts: NDArray[np.intp],
-               t: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+def _residuals(
+    model: DistortionModel,
+    pts: NDArray[np.float64],
+    starts: NDArray[np.intp],
+    counts: NDArray[np.intp],
+    t: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Each point's distance to its edge's line after ``model`` moved by ``t`` (px)."""
     r: NDArray[np.float64] = tls(model.undistort_points(pts - t) + t, starts, counts)[0]
     return r
 

@@ -153,9 +153,7 @@ def shot_own_shifts(
     :data:`MIN_OWN_SHIFT_ORIENTATIONS` shots or when a fold's fit fails."""
     if len(shots) < MIN_OWN_SHIFT_ORIENTATIONS:
         return None
-    kw = spec.fit_arguments()
-    jobs = [([ls for j, ls in enumerate(shots) if j != k], width, height, kw) for k in range(len(shots))]
-    loo = _orientation_holdout(shots, rejected, refit_job, jobs, map_fn)
+    loo = _refit_holdout(shots, width, height, spec.fit_arguments(), rejected, map_fn)
     return own_shift_record(loo.own) if isinstance(loo, _OrientationHoldout) else None
 
 
@@ -279,6 +277,20 @@ def _orientation_holdout(
     return _OrientationHoldout(hold, tuple(own))
 
 
+def _refit_holdout(
+    lines: Sequence[Sequence[np.ndarray]],
+    width: int,
+    height: int,
+    kw: Mapping[str, Any],
+    rejected: Sequence[Any],
+    map_fn: MapFn,
+) -> _OrientationHoldout | tuple[int, str]:
+    """:func:`_orientation_holdout` with each fold fitted by :func:`pipeline.fit.fit_distortion` (``kw``, a spec's
+    fit arguments) on the other shots."""
+    jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
+    return _orientation_holdout(lines, rejected, refit_job, jobs, map_fn)
+
+
 def calibrate_shots(
     shots: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -382,8 +394,7 @@ def calibrate_shots(
     hold: Holdout | None = None
     per_shot: list[HeldOutShot] = []
     if holdout == "orientations":
-        jobs = [([ls for j, ls in enumerate(lines) if j != k], width, height, kw) for k in range(len(lines))]
-        loo = _orientation_holdout(lines, full.rejected, refit_job, jobs, map_fn)
+        loo = _refit_holdout(lines, width, height, kw, full.rejected, map_fn)
         if not isinstance(loo, _OrientationHoldout):
             return Calibration(
                 full, spec, selection, Merit(fit=fit_figures, before=before), details=details,
