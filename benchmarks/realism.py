@@ -3,6 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/realism.py [--seeds 24] [--clean 6] [--workers 2] [--real DIR]
+        [--field-max PX] [--shot-decentre SD] [--centre-sd PX] [--coil-set V] [--bow PX]
 
 The three shared photographs (``../shared/data/real-harp``: 1761x1174, strings near
 81°, 43° and 178°) are measured (``pipeline.measure.measure_image``, t = 30) and fitted
@@ -257,7 +258,7 @@ def simulated_measurements(
 
 
 def _job(
-    args: tuple[int, bool, float | None, float | None, float, float],
+    args: tuple[int, bool, float | None, float | None, float, float, float],
 ) -> tuple[int, bool, list[dict[str, float]], dict[str, object], float]:
     import threadpoolctl
 
@@ -316,6 +317,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--bow", type=float, default=0.0, help="sensitivity: extra string bows, N(0, this) px per mode")
     ap.add_argument(
+        "--centre-sd",
+        type=float,
+        default=0.0,
+        help="sensitivity: the lens's distortion centre moves by N(0, this) px per axis between shots",
+    )
+    ap.add_argument(
         "--real",
         default=os.environ.get("HARP_REAL_DATA", str(Path(__file__).resolve().parents[2] / "shared/data/real-harp")),
     )
@@ -325,8 +332,11 @@ def main(argv: list[str] | None = None) -> int:
 
     real_ms = [measure_image(read_grey(Path(args.real) / f"{n}.pgm"), t=30) for n in REAL]
     real = session_statistics(real_ms)
-    jobs = [(s, False, args.coil_set, args.field_max, args.shot_decentre, args.bow) for s in range(args.seeds)]
-    jobs += [(s, True, None, args.field_max, 0.0, 0.0) for s in range(args.clean)]
+    jobs = [
+        (s, False, args.coil_set, args.field_max, args.shot_decentre, args.bow, args.centre_sd)
+        for s in range(args.seeds)
+    ]
+    jobs += [(s, True, None, args.field_max, 0.0, 0.0, 0.0) for s in range(args.clean)]
     sim: list[dict[str, float]] = []
     clean: list[dict[str, float]] = []
     infos = []
@@ -351,6 +361,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.field_max if args.field_max is not None else 0.04} px"
         + (f", decentering changing by N(0, {args.shot_decentre:g}) between shots" if args.shot_decentre else "")
         + (f", extra string bows N(0, {args.bow:g}) px per mode" if args.bow else "")
+        + (f", distortion centre moving by N(0, {args.centre_sd:g}) px between shots" if args.centre_sd else "")
         + f"; {os.cpu_count()} CPUs, "
         f"{time.perf_counter() - t0:.0f} s)"
     )
