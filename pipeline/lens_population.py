@@ -338,7 +338,7 @@ def shot_to_shot(
     distortion centre of a :class:`~pipeline.models.radial.RadialModel` (or of a
     :class:`RippleLens`'s radial part): what an image stabiliser that re-centres, a zoom
     or focus group with play, or a lens knocked between shots does (consumer zoom lenses'
-    interior orientation changes between images; Shortis et al., IAPRS XXXVI-5, 2006;
+    interior orientation changes between images; Shortis et al., IAPRS vol. 36 part 5, 2006;
     Sanz-Ablanedo et al., Sensors 10(3), 2010). Off in every population: a sensitivity
     test (``benchmarks/realism.py --shot-decentre``), with no documented default magnitude.
     """

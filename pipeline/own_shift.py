@@ -19,7 +19,7 @@ With a stable lens and enough shots the held-out shot has nothing of its own to 
 References
 ----------
 .. [1] Shortis, Bellman, Robson, Johnston, Johnson, "Stability of zoom and fixed lenses used with digital SLR
-   cameras", IAPRS XXXVI-5, 2006.
+   cameras", IAPRS vol. 36 part 5, 2006.
 .. [2] Tang, Grompone von Gioi, Monasse, Morel, "High-precision camera distortion measurements with a calibration
    harp", JOSA A 29(10), 2012: d, the RMS distance to each edge's regression line.
 """

@@ -107,7 +107,7 @@ def _edges(case: str, angle: float) -> dict[tuple[int, int], tuple[float, float,
         # distance along the ideal normal, positive outwards (to first order: the lens scale is ~1)
         s = te.edge.level(LENS.undistort_points(m.lines[mt.line].points)) * te.edge.side
         out[(te.edge.string_index, te.edge.side)] = (float(np.median(s)), m.d, s - np.median(s))
-    assert len(out) >= 20 and all(te.length < 100 for te in c.missing)  # a corner stub may go unmeasured
+    assert len(out) >= 20 and all(te.length < 100 for te in c.missing)  # a short corner piece may go unmeasured
     return out
 
 
