@@ -195,7 +195,8 @@ def simulated_measurements(
     string_angles: Sequence[float] = REAL_ANGLES,
 ) -> tuple[list[ImageMeasurement], dict[str, object]]:
     """Render and measure one simulated session (module docstring; :func:`session_statistics` analyses it): its
-    shots' measurements and what was drawn. ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion
+    shots' measurements and what was drawn (``info["model"]`` the lens, ``info["shot_models"]`` each shot's, moved when
+    the lens moves between shots). ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion
     centre changed between shots by N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``:
     the shots' string angles (deg, each +- 3), the photographs' by default."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
@@ -229,20 +230,13 @@ def simulated_measurements(
         )
         harp = dataclasses.replace(harp, strings=strings)
     turntable = [mount.direction * (a - angles[0]) for a in angles]
+    shot_models = [lens.model] * len(turntable)
     if shot_decentre > 0 or centre_sd_px > 0:  # sensitivity: the lens's decentering changes between shots
         jitter = np.random.default_rng([seed, 0x5407])
+        shot_models = [shot_to_shot(lens.model, jitter, shot_decentre, centre_sd_px) for _ in turntable]
         shots = tuple(
-            render_shot(
-                shot_to_shot(lens.model, jitter, shot_decentre, centre_sd_px),
-                harp,
-                mount,
-                t,
-                W,
-                H,
-                effects,
-                shot_seed(seed, i),
-            )
-            for i, t in enumerate(turntable)
+            render_shot(m, harp, mount, t, W, H, effects, shot_seed(seed, i))
+            for i, (m, t) in enumerate(zip(shot_models, turntable))
         )
     else:
         shots = render_shots(lens.model, harp, mount, turntable, W, H, effects, seed=seed)
@@ -253,8 +247,15 @@ def simulated_measurements(
         "material": harp.material,
         "demosaic": effects.development.demosaic if effects.sensor.cfa else "none",
         "tone": effects.development.tone,
+        "model": lens.model,
+        "shot_models": shot_models,
     }
     return ms, info
+
+
+def _drawn(info: dict[str, object]) -> dict[str, object]:
+    """What :func:`simulated_measurements` drew, without its models (for a log line)."""
+    return {k: v for k, v in info.items() if k not in ("model", "shot_models")}
 
 
 def _job(
@@ -266,7 +267,7 @@ def _job(
     with threadpoolctl.threadpool_limits(1):
         ms, info = simulated_measurements(*args)
         st = session_statistics(ms)
-    return args[0], args[1], st, info, time.perf_counter() - t0
+    return args[0], args[1], st, _drawn(info), time.perf_counter() - t0
 
 
 # ---------------------------------------------------------------- the table
