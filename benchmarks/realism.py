@@ -193,12 +193,13 @@ def simulated_measurements(
     bow_px: float = 0.0,
     centre_sd_px: float = 0.0,
     string_angles: Sequence[float] = REAL_ANGLES,
+    angle_sd_deg: float = 3.0,
 ) -> tuple[list[ImageMeasurement], dict[str, object]]:
     """Render and measure one simulated session (module docstring; :func:`session_statistics` analyses it): its
     shots' measurements and what was drawn (``info["model"]`` the lens, ``info["shot_models"]`` each shot's, moved when
     the lens moves between shots). ``shot_decentre``, ``centre_sd_px``: the lens's p1, p2 and distortion
     centre changed between shots by N(0, these) (:func:`pipeline.lens_population.shot_to_shot`); ``string_angles``:
-    the shots' string angles (deg, each +- 3), the photographs' by default."""
+    the shots' string angles (deg, each moved by N(0, ``angle_sd_deg``)), the photographs' by default."""
     from pipeline.harp_scene import COIL_SET_VARIATION, Harp, HarpMount
     from pipeline.lens_population import lens_population, shot_to_shot
     from pipeline.realism import Effects, realistic_session, render_shot, render_shots, shot_seed
@@ -207,7 +208,7 @@ def simulated_measurements(
     fields = (0.005, 0.04 if field_max is None else field_max)
     lens = lens_population(2026, seed + 1, W, H, field=True, field_rms_px=fields)[seed]
     rng = np.random.default_rng([seed, 0xBE7C])
-    angles = [a + float(rng.normal(0.0, 3.0)) for a in string_angles]
+    angles = [a + float(rng.normal(0.0, angle_sd_deg)) for a in string_angles]
     s = realistic_session(
         seed,
         W,

@@ -70,6 +70,15 @@ def _residuals(
     return r
 
 
+def _packed(
+    edges: Sequence[NDArray[np.float64]],
+) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
+    """``edges`` as one array of points with each edge's start and count (what :func:`_residuals` takes)."""
+    counts = np.array([len(p) for p in edges], dtype=np.intp)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+    return np.concatenate(edges), starts, counts
+
+
 def own_axis_shift(model: DistortionModel, lines: Sequence[NDArray[np.float64]]) -> OwnShift:
     """The shift :math:`t` (module docstring) that straightens the edges ``lines`` of one held-out shot best under
     ``model``, by least squares from :math:`t = 0` within :data:`MAX_SHIFT_PX`; the edges taken are those a held-out
@@ -80,9 +89,7 @@ def own_axis_shift(model: DistortionModel, lines: Sequence[NDArray[np.float64]])
     edges = held_out_edges(lines)
     if not edges:
         return OwnShift(float("nan"), float("nan"), (float("nan"), float("nan")), 0)
-    counts = np.array([len(p) for p in edges], dtype=np.intp)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
-    pts = np.concatenate(edges)
+    pts, starts, counts = _packed(edges)
     r0 = _residuals(model, pts, starts, counts, np.zeros(2))
     d_held = float(np.sqrt(np.mean(r0**2)))
     if not np.isfinite(d_held):
@@ -97,3 +104,75 @@ def own_axis_shift(model: DistortionModel, lines: Sequence[NDArray[np.float64]])
     if not d_own <= d_held:  # the search never does worse than not moving
         return OwnShift(d_held, d_held, (0.0, 0.0), len(pts))
     return OwnShift(d_held, d_own, (float(sol.x[0]), float(sol.x[1])), len(pts))
+
+
+@dataclass(frozen=True)
+class TwinShift:
+    """Two shots at one angle (twins) under one correction (:func:`twin_shift`).
+
+    ``d_model`` the pair's d under the correction, ``d_common`` under it moved by one shift fitted on both, ``d_each``
+    moved by a shift fitted on each; ``move_px`` the two shifts' difference across the strings (the lens's move
+    between the twins as the strings show it, signed along ``normal``); ``points`` the points measured."""
+
+    d_model: float
+    d_common: float
+    d_each: float
+    move_px: float
+    normal: tuple[float, float]
+    points: int
+
+    @property
+    def ratio(self) -> float:
+        """``d_each / d_common``: 1 when one shift serves both twins (a stable lens, or a term of the lens at that
+        angle); below 1 when each twin wants its own (the lens moved between them); NaN without a figure."""
+        return self.d_each / self.d_common if self.d_common > 0 else float("nan")
+
+
+def twin_shift(
+    model: DistortionModel, lines_a: Sequence[NDArray[np.float64]], lines_b: Sequence[NDArray[np.float64]]
+) -> TwinShift:
+    r"""Whether two shots of the harp at one angle want the correction moved alike.
+
+    One shot per angle cannot tell a lens whose centre moved for that shot from a term of the lens that bends strings
+    at that angle its own way: both show as a shift :math:`t` of its own (module docstring). Two shots at the same
+    angle can: a term of the lens bends them alike, so one shift fitted on both straightens them as well as a shift
+    each (``ratio`` = ``d_each / d_common`` near 1), while a lens that moved between them leaves each its own shift
+    (``ratio`` below 1, ``move_px`` the move across the strings). The correction ``model`` may be fitted with both
+    shots in it. Each shift is found by least squares from 0 within :data:`MAX_SHIFT_PX`; the edges taken are
+    those a held-out figure takes (:func:`pipeline.edgeset.held_out_edges`); NaN figures when a shot has no edge or
+    the correction leaves a point non-finite."""
+    from scipy.optimize import least_squares
+
+    shots = [held_out_edges(lines_a), held_out_edges(lines_b)]
+    nan = float("nan")
+    if not shots[0] or not shots[1]:
+        return TwinShift(nan, nan, nan, nan, (nan, nan), sum(len(p) for s in shots for p in s))
+    packed = [_packed(edges) for edges in shots]
+    points = sum(len(p[0]) for p in packed)
+
+    def res(ts: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+        r = np.concatenate([_residuals(model, *packed[i], ts[i]) for i in range(2)])
+        return np.where(np.isfinite(r), r, 1e3)
+
+    zero = np.zeros(2)
+    r0 = np.concatenate([_residuals(model, *packed[i], zero) for i in range(2)])
+    d_model = float(np.sqrt(np.mean(r0**2)))
+    if not np.isfinite(d_model):
+        return TwinShift(d_model, nan, nan, nan, (nan, nan), points)
+    opts: dict[str, object] = {"x_scale": 1.0, "diff_step": 1e-3}
+    box = (-MAX_SHIFT_PX, MAX_SHIFT_PX)
+    common = least_squares(lambda t: res([t, t]), zero, bounds=box, **opts)
+    d_common = min(float(np.sqrt(np.mean(common.fun**2))), d_model)
+    each = least_squares(lambda t: res([t[:2], t[2:]]), np.concatenate([common.x, common.x]), bounds=box, **opts)
+    d_each = min(float(np.sqrt(np.mean(each.fun**2))), d_common)
+    # the strings' normal: the first shot's edges' mean direction (TLS, sign-aligned), turned a quarter
+    dirs: list[NDArray[np.float64]] = []
+    for p in shots[0]:
+        q = p - p.mean(axis=0)
+        v = np.linalg.eigh(q.T @ q)[1][:, 1]
+        dirs.append(v if not dirs or float(np.dot(v, dirs[0])) >= 0 else -v)
+    d = np.mean(dirs, axis=0)
+    d /= np.linalg.norm(d)
+    normal = np.array([-d[1], d[0]])
+    move = float(np.dot(each.x[2:] - each.x[:2], normal)) if d_each < d_common else 0.0
+    return TwinShift(d_model, d_common, d_each, move, (float(normal[0]), float(normal[1])), points)

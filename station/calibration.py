@@ -58,8 +58,9 @@ from pipeline.harp_shape import (
     shot_weights,
     string_pitch,
 )
-from pipeline.orientations import distinct_orientations, support_problem
-from pipeline.own_shift import OwnShift, own_axis_shift
+from pipeline.models.base import DistortionModel
+from pipeline.orientations import distinct_orientations, shot_orientation, support_problem
+from pipeline.own_shift import OwnShift, own_axis_shift, twin_shift
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import lowest_radial, select_field, select_model
@@ -100,10 +101,15 @@ quadratic term undetermined that the held-out one then shows (``benchmarks/quadr
 takes that away too, so a stable lens can read as low as 0.54 (``benchmarks/own_shift.py``)."""
 
 
-OWN_SHIFT_ADVICE = (
+MOVING_LENS_ADVICE = (
     "the lens's decentering may change between shots (an image stabiliser, a focus or zoom group with play): switch "
-    "stabilisation off, lock focus and zoom, and capture again; two shots at the same angle tell it from a lens term "
-    "that bends each orientation its own way"
+    "stabilisation off, lock focus and zoom, and capture again"
+)
+"""What to do about a lens that moves between shots (QA's and ``harp calibrate``'s warnings)."""
+
+OWN_SHIFT_ADVICE = (
+    f"{MOVING_LENS_ADVICE}; two shots at the same angle tell it from a lens term that bends each orientation its own "
+    "way"
 )
 """What QA and ``harp calibrate`` say when the held-out shots carry a term of their own (``moving``)."""
 
@@ -148,13 +154,73 @@ def shot_own_shifts(
 ) -> dict[str, Any] | None:
     """The own-shift record (:func:`own_shift_record`) of shots without turntable angles (``harp calibrate``): each
     shot held out in turn, ``spec`` fitted on the others (``map_fn`` maps the fits), its edges but the full fit's
-    ``rejected`` measured under that fit and under it moved for them alone. Two shots at the same angle make the
-    best test: a stable lens corrects the one held out as its twin. None with fewer than
+    ``rejected`` measured under that fit and under it moved for them alone (two shots at one angle are compared
+    directly by :func:`twin_record`). None with fewer than
     :data:`MIN_OWN_SHIFT_ORIENTATIONS` shots or when a fold's fit fails."""
     if len(shots) < MIN_OWN_SHIFT_ORIENTATIONS:
         return None
     loo = _refit_holdout(shots, width, height, spec.fit_arguments(), rejected, map_fn)
     return own_shift_record(loo.own) if isinstance(loo, _OrientationHoldout) else None
+
+
+TWIN_ANGLE_DEG = 2.0
+"""Two shots are twins (:func:`twin_record`) when their strings run within this of each other (degrees,
+:func:`pipeline.orientations.shot_orientation`): a harp turned back to an angle by hand comes back within a degree or
+two, and a term of the lens bends strings 2 degrees apart alike."""
+
+TWIN_MOVE_PX = 1.0
+"""The lens is said to have moved between twins when the move across their strings
+(:func:`pipeline.own_shift.twin_shift`) is larger than this (px). Set on realistic twins (``benchmarks/twins.py``,
+the photographs' set-up plus a shot at the first one's angle, 20 lenses per camera): a stable lens reads at most
+0.23 px (40 lenses, fields up to 0.04 and 0.1 px RMS); on lenses whose centre moves N(0, 3 px) or N(0, 6 px) the move
+read is within 0.06-0.15 px RMS of the move drawn (at most 0.35 px off), and every one of the 58 drawn beyond 1 px is
+read beyond it."""
+
+
+def twin_record(
+    model: DistortionModel, shots: Sequence[Sequence[np.ndarray]], names: Sequence[str], rejected: Sequence[Any] = ()
+) -> list[dict[str, Any]]:
+    """Every pair of ``shots`` whose strings run within :data:`TWIN_ANGLE_DEG` of each other, compared under the
+    correction ``model`` (:func:`pipeline.own_shift.twin_shift`; their edges but the fit's ``rejected``): per pair
+    the two ``names``, the strings' angle, d with one shift for both and with a shift each, ``ratio``, the lens's
+    move across the strings (``move_px``) and ``moved`` beyond :data:`TWIN_MOVE_PX`. Two shots at one angle tell a
+    lens that moved between them (a shift each) from a term of the lens at that angle (one shift for both), which
+    one shot per angle cannot (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between
+    them. Empty without such a pair."""
+    outliers = {(r.image, r.line) for r in rejected}
+    kept = [[ln for j, ln in enumerate(lines) if (i, j) not in outliers] for i, lines in enumerate(shots)]
+    angles = [shot_orientation(lines) for lines in kept]
+    out = []
+    for i in range(len(kept)):
+        for j in range(i + 1, len(kept)):
+            gap = abs(angles[i] - angles[j]) % 180.0
+            if not min(gap, 180.0 - gap) <= TWIN_ANGLE_DEG:
+                continue
+            got = twin_shift(model, kept[i], kept[j])
+            out.append(
+                {
+                    "paths": [names[i], names[j]],
+                    "angle_deg": finite_or_none(angles[i]),
+                    "d_common_px": finite_or_none(got.d_common),
+                    "d_each_px": finite_or_none(got.d_each),
+                    "ratio": finite_or_none(got.ratio),
+                    "move_px": finite_or_none(got.move_px),
+                    "limit_px": TWIN_MOVE_PX,
+                    "moved": bool(np.isfinite(got.move_px) and abs(got.move_px) > TWIN_MOVE_PX),
+                }
+            )
+    return out
+
+
+def twin_warnings(records: Sequence[Mapping[str, Any]]) -> list[str]:
+    """``harp calibrate``'s warning for each pair of twins between which the lens moved (:func:`twin_record`)."""
+    return [
+        f"{r['paths'][0]} and {r['paths'][1]} (strings at {r['angle_deg']:.1f} deg): the lens moved "
+        f"{abs(r['move_px']):.1f} px across the strings between these two shots at one angle, beyond "
+        f"{r['limit_px']:g} px; the correction is their mean: {MOVING_LENS_ADVICE}"
+        for r in records
+        if r.get("moved")
+    ]
 
 
 def own_shift_warning(record: Mapping[str, Any] | None) -> str | None:

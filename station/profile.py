@@ -377,6 +377,8 @@ class Profile:
             merit["strings"] = plain(dict(self.details["strings"]))
         if self.details.get("own_shift"):  # the held-out orientations' own axis shifts: QA reports them from the file
             merit["own_shift"] = plain(dict(self.details["own_shift"]))
+        if self.details.get("twins"):  # two shots at one angle compared: did the lens move between them
+            merit["twins"] = plain([dict(t) for t in self.details["twins"]])
         p = self.provenance
         prov: dict[str, Any] = {}
         if p.created_utc is not None:
@@ -426,6 +428,7 @@ class Profile:
         health = merit_doc.pop("harp_health", None)
         strings = merit_doc.pop("strings", None)
         own_shift = merit_doc.pop("own_shift", None)
+        twins = merit_doc.pop("twins", None)
         spec, selection = _spec_of_choice(choice)
         prov = dict(mf.provenance or {})
         return cls(
@@ -447,6 +450,7 @@ class Profile:
                 **({"harp_health": dict(health)} if isinstance(health, Mapping) else {}),
                 **({"strings": dict(strings)} if isinstance(strings, Mapping) else {}),
                 **({"own_shift": dict(own_shift)} if isinstance(own_shift, Mapping) else {}),
+                **({"twins": [dict(t) for t in twins if isinstance(t, Mapping)]} if isinstance(twins, list) else {}),
                 **({"colour": dict(mf.colour)} if mf.colour else {}),
             },
             intrinsics=mf.intrinsics,

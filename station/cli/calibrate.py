@@ -26,11 +26,14 @@ it. ``--json`` prints one object::
     {"model": path, "choice": {"model", "degree", "tangential", "prism", "label", "reason", ...},
      "before": {"d", "d_max"}, "fit": {"d", "d_max"}, "holdout": {"d", "d_max", "images": [...]},
      "images": [{"path", "d_before", "d_max_before", "d", "d_max", "n_edges"}], "rejected": [...],
-     "warnings": [...], "own_shift": {"ratio_median", "limit", "judged", "moving", "per_orientation": [...]}}
+     "warnings": [...], "own_shift": {"ratio_median", "limit", "judged", "moving", "per_orientation": [...]},
+     "twins": [{"paths", "angle_deg", "d_common_px", "d_each_px", "ratio", "move_px", "limit_px", "moved"}]}
 
 (``holdout`` only when given; ``own_shift`` with four shots or more: each shot held out in turn and the correction
 fitted on the others moved for it alone, :func:`station.calibration.shot_own_shifts`, with a warning when the shots
-each want it moved on their own, as a lens whose decentering changes between shots does; distances in pixels). Bad
+each want it moved on their own, as a lens whose decentering changes between shots does; ``twins`` when two shots'
+strings run within 2 degrees of each other: compared under the correction, :func:`station.calibration.twin_record`,
+with a warning when the lens moved between them; distances in pixels). Bad
 input (unreadable image, no strings, images of different sizes, one orientation only, too few edges): one line on
 stderr, exit 2.
 """
@@ -230,6 +233,8 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         shot_count_problem,
         shot_own_shifts,
         size_problem,
+        twin_record,
+        twin_warnings,
     )
     from station.provenance import make_provenance  # defers yaml
 
@@ -259,6 +264,9 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
     assert cal.spec is not None  # a calibration that fitted has its spec
     # each shot held out, the correction moved for it alone (four shots or more): kept with the profile, as a session's
     own = shot_own_shifts(shots, width, height, cal.spec, res.rejected, map_fn)
+    # two shots at one angle: did the lens move between them (under the correction fitted on all)?
+    twins = twin_record(res.model, shots, [str(p) for p, _ in fit_m], res.rejected)
+    details = {**({"own_shift": own} if own is not None else {}), **({"twins": twins} if twins else {})}
     profile = cal.profile(
         width,
         height,
@@ -270,7 +278,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         ),
         given_by=GIVEN_ON_COMMAND_LINE,
         merit_extra={"rejected_edges": rejected},
-        details=None if own is None else {"own_shift": own},
+        details=details or None,
     )
     merit = profile.merit
     assert merit.before is not None and merit.fit is not None  # a calibration that fitted has both
@@ -301,6 +309,9 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         warning = own_shift_warning(own)
         if warning:
             report["warnings"].append(warning)
+    if twins:
+        report["twins"] = twins
+        report["warnings"].extend(twin_warnings(twins))
     if hold_m:
         per = [
             {

@@ -1,10 +1,11 @@
-"""A held-out shot's own axis shift (pipeline.own_shift), against exact lens maps: the shot drawn through the same
-lens with its distortion centre moved by a hand-chosen vector, or through the lens itself."""
+"""A held-out shot's own axis shift and two shots at one angle (pipeline.own_shift), against exact lens maps: the shots
+drawn through the same lens with its distortion centre moved by a hand-chosen vector, through the lens itself, or
+through a lens with a term the correction lacks."""
 
 import numpy as np
 
 from pipeline.models import RadialModel
-from pipeline.own_shift import own_axis_shift
+from pipeline.own_shift import own_axis_shift, twin_shift
 
 W, H = 1200, 800
 LENS = RadialModel((600.0, 400.0), (1.0, -0.08, 0.02), 721.1, tangential=(2e-4, -1e-4))
@@ -51,3 +52,34 @@ def test_a_shot_through_the_same_lens_has_nothing_of_its_own():
 def test_no_edge_is_nan():
     got = own_axis_shift(LENS, [np.zeros((2, 2))])
     assert np.isnan(got.d_held) and np.isnan(got.ratio) and got.points == 0
+
+
+def _moved(move: tuple[float, float]) -> RadialModel:
+    return RadialModel((600.0 + move[0], 400.0 + move[1]), LENS.k, LENS.scale, tangential=LENS.tangential)
+
+
+def test_twins_of_a_lens_that_moved_each_want_their_own_shift():
+    """The second twin through the lens moved by a hand-chosen vector: a shift each straightens both to the noise,
+    one for both cannot, and the move across the strings comes back."""
+    for angle, move in ((20.0, (4.0, -3.0)), (110.0, (-3.0, -2.0))):
+        got = twin_shift(LENS, _shot(LENS, angle, seed=1, noise_px=0.002), _shot(_moved(move), angle, 2, 0.002))
+        assert got.d_common > 0.005 and got.d_each < 0.0022 and got.ratio < 0.4, got
+        assert abs(abs(got.move_px) - abs(float(np.dot(move, got.normal)))) < 0.03 * np.hypot(*move), got
+        a = np.radians(angle)
+        assert abs(abs(float(np.dot(got.normal, (np.cos(a), np.sin(a)))))) < 0.01, got  # across the strings
+
+
+def test_twins_through_a_lens_term_the_correction_lacks_want_one_shift():
+    """Both twins through a lens whose decentering the correction lacks (p1, p2 three times the model's): each twin
+    alone has a term of its own (own_axis_shift takes most of its d), the pair shares it (one shift does as well as
+    two): a term of the lens, not a move."""
+    term = RadialModel(LENS.center, LENS.k, LENS.scale, tangential=(6e-4, -3e-4))
+    a, b = _shot(term, 55.0, seed=4, noise_px=0.002), _shot(term, 55.0, seed=5, noise_px=0.002)
+    assert own_axis_shift(LENS, a).ratio < 0.5 and own_axis_shift(LENS, b).ratio < 0.5
+    got = twin_shift(LENS, a, b)
+    assert got.d_model > 0.01 and got.ratio > 0.97 and abs(got.move_px) < 0.3, got
+
+
+def test_twins_without_an_edge_are_nan():
+    got = twin_shift(LENS, [np.zeros((2, 2))], _shot(LENS, 10.0, seed=1, noise_px=0.002))
+    assert np.isnan(got.ratio) and np.isnan(got.move_px)

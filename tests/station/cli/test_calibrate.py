@@ -419,3 +419,41 @@ def test_shots_through_a_lens_whose_centre_moves_are_told_from_a_stable_lens(sho
     assert rep["own_shift"]["ratio_median"] > 0.9 and not any(
         "wants the correction moved" in w for w in rep["warnings"]
     )
+
+
+def test_two_shots_at_one_angle_tell_whether_the_lens_moved_between_them(shots, tmp_path, capsys):
+    """A fourth shot at the first one's angle, the harp not moved (same angle, same string phase): through LENS with
+    its distortion centre moved by (8, -5) px (by hand), ``twins`` reads the move across the strings (at 3 degrees:
+    (8, -5) . (-sin 3, cos 3) = -5.41 px) and a warning names both shots; through LENS itself, no move and no
+    warning. The profile keeps the record."""
+    d = tmp_path / "twins"
+    d.mkdir()
+    scene = HarpScene(angle_deg=3.0, spacing_px=40.0, phase_px=0.0)  # shots[3.0]'s harp
+    moved = RadialModel.for_image(W, H, k=LENS.k, center=(338, 225), tangential=LENS.tangential)
+    for name, lens, seed in (("moved", moved, 30), ("still", LENS, 31)):
+        path = d / f"{name}.pgm"
+        assert cv2.imwrite(str(path), render_harp(W, H, scene, lens=lens, noise_sigma=1.5, seed=seed).image)
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], shots[123.0], d / "moved.pgm", "--model", "radial", "--out",
+        tmp_path / "m.yaml", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rep = json.loads(out)
+    (pair,) = rep["twins"]
+    assert pair["paths"] == [str(shots[3.0]), str(d / "moved.pgm")] and pair["moved"], pair
+    assert abs(abs(pair["move_px"]) - 5.41) < 0.1 * 5.41 and pair["ratio"] < 0.8, pair
+    said = [w for w in rep["warnings"] if "between these two shots at one angle" in w]
+    assert len(said) == 1 and said[0].startswith(f"{shots[3.0]} and {d / 'moved.pgm'} ") and "switch" in said[0]
+    from pipeline.model_file import read_model_file
+    from station.profile import Profile
+
+    assert Profile.from_model_file(read_model_file(tmp_path / "m.yaml")).details["twins"] == rep["twins"]
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], shots[123.0], d / "still.pgm", "--model", "radial", "--out",
+        tmp_path / "s.yaml", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rep = json.loads(out)
+    (pair,) = rep["twins"]
+    assert not pair["moved"] and abs(pair["move_px"]) < 0.5 and pair["ratio"] > 0.95, pair
+    assert not any("at one angle" in w for w in rep["warnings"]), rep["warnings"]
