@@ -338,7 +338,8 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
 
 def _print(report: dict) -> None:
     """The choice, the cross-validation and straightness tables, the rejected edges and warnings
-    (:mod:`station.tables`: off a terminal tab-separated tables, nothing cut short or wrapped)."""
+    (:mod:`station.tables`: off a terminal tab-separated tables, nothing cut short or wrapped), and a line per pair of
+    twins (two shots at one angle) with the lens's move between them."""
     con = console()
 
     def say(text: str) -> None:
@@ -388,6 +389,12 @@ def _print(report: dict) -> None:
     gap()
     print_table(columns, rows, title="straightness", right=columns[1:])
     gap()
+    for t in report.get("twins", []):  # two shots at one angle: did the lens move between them
+        a, b = (label(p) for p in t["paths"])
+        move = "-" if t["move_px"] is None else f"{abs(t['move_px']):.2f} px"
+        angle = "-" if t["angle_deg"] is None else f"{t['angle_deg']:.1f}"
+        say(f"twins: {a} and {b} (strings at {angle} deg): lens move across the strings {move} "
+            f"(limit {t['limit_px']:g} px)")  # fmt: skip
     for r in report["rejected"]:
         say(f"rejected edge: {r['path']} line {r['line']}: {r['reason']}")
     for w in report["warnings"]:

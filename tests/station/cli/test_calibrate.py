@@ -457,3 +457,11 @@ def test_two_shots_at_one_angle_tell_whether_the_lens_moved_between_them(shots, 
     (pair,) = rep["twins"]
     assert not pair["moved"] and abs(pair["move_px"]) < 0.5 and pair["ratio"] > 0.95, pair
     assert not any("at one angle" in w for w in rep["warnings"]), rep["warnings"]
+    code, out, err = _run(
+        capsys, shots[3.0], shots[63.0], shots[123.0], d / "still.pgm", "--model", "radial", "--out",
+        tmp_path / "s.yaml",
+    )  # fmt: skip
+    assert code == 0, err
+    (line,) = [ln for ln in out.splitlines() if ln.startswith("twins: ")]
+    assert line.startswith(f"twins: {shots[3.0].name} and still.pgm (strings at ") and "(limit 1 px)" in line, line
+    assert f"{abs(pair['move_px']):.2f} px" in line, line
