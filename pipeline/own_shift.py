@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from pipeline.edgeset import held_out_edges, tls
 from pipeline.models.base import DistortionModel
+from pipeline.orientations import shot_orientation
 
 MAX_SHIFT_PX = 50.0
 """Largest axis shift searched (px): a stabiliser's re-centring or a group's play is a few pixels; beyond this the
@@ -108,11 +109,13 @@ def own_axis_shift(model: DistortionModel, lines: Sequence[NDArray[np.float64]])
 
 @dataclass(frozen=True)
 class TwinShift:
-    """Two shots at one angle (twins) under one correction (:func:`twin_shift`).
+    r"""Two shots at one angle (twins) under one correction (:func:`twin_shift`).
 
     ``d_model`` the pair's d under the correction, ``d_common`` under it moved by one shift fitted on both, ``d_each``
     moved by a shift fitted on each; ``move_px`` the two shifts' difference across the strings (the lens's move
-    between the twins as the strings show it, signed along ``normal``); ``points`` the points measured."""
+    between the twins as the strings show it, signed along ``normal``: :math:`(-\sin\theta, \cos\theta)` of the
+    first shot's string direction :math:`\theta` in [0, 180) deg, :func:`pipeline.orientations.shot_orientation`);
+    ``points`` the points measured."""
 
     d_model: float
     d_common: float
@@ -165,14 +168,8 @@ def twin_shift(
     d_common = min(float(np.sqrt(np.mean(common.fun**2))), d_model)
     each = least_squares(lambda t: res([t[:2], t[2:]]), np.concatenate([common.x, common.x]), bounds=box, **opts)
     d_each = min(float(np.sqrt(np.mean(each.fun**2))), d_common)
-    # the strings' normal: the first shot's edges' mean direction (TLS, sign-aligned), turned a quarter
-    dirs: list[NDArray[np.float64]] = []
-    for p in shots[0]:
-        q = p - p.mean(axis=0)
-        v = np.linalg.eigh(q.T @ q)[1][:, 1]
-        dirs.append(v if not dirs or float(np.dot(v, dirs[0])) >= 0 else -v)
-    d = np.mean(dirs, axis=0)
-    d /= np.linalg.norm(d)
-    normal = np.array([-d[1], d[0]])
+    # the strings' normal: (-sin, cos) of the first shot's strings' direction in [0, 180)
+    a = np.radians(shot_orientation(shots[0]))
+    normal = np.array([-np.sin(a), np.cos(a)])
     move = float(np.dot(each.x[2:] - each.x[:2], normal)) if d_each < d_common else 0.0
     return TwinShift(d_model, d_common, d_each, move, (float(normal[0]), float(normal[1])), points)

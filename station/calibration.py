@@ -173,7 +173,7 @@ TWIN_MOVE_PX = 1.0
 (:func:`pipeline.own_shift.twin_shift`) is larger than this (px). Set on realistic twins (``benchmarks/twins.py``,
 the photographs' set-up plus a shot at the first one's angle, 20 lenses per camera): a stable lens reads at most
 0.23 px (40 lenses, fields up to 0.04 and 0.1 px RMS); on lenses whose centre moves N(0, 3 px) or N(0, 6 px) the move
-read is within 0.06-0.15 px RMS of the move drawn (at most 0.35 px off), and every one of the 58 drawn beyond 1 px is
+read is within 0.06-0.15 px RMS of the move drawn (at most 0.36 px off), and every one of the 58 drawn beyond 1 px is
 read beyond it."""
 
 
@@ -187,8 +187,7 @@ def twin_record(
     lens that moved between them (a shift each) from a term of the lens at that angle (one shift for both), which
     one shot per angle cannot (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between
     them. Empty without such a pair."""
-    outliers = {(r.image, r.line) for r in rejected}
-    kept = [[ln for j, ln in enumerate(lines) if (i, j) not in outliers] for i, lines in enumerate(shots)]
+    kept = _kept_edges(shots, rejected)
     angles = [shot_orientation(lines) for lines in kept]
     out = []
     for i in range(len(kept)):
@@ -307,6 +306,13 @@ def _figures(d: float, d_max: float) -> Figures:
     return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
+def _kept_edges(lines: Sequence[Sequence[np.ndarray]], rejected: Sequence[Any]) -> list[list[np.ndarray]]:
+    """Per shot, its edges of 3 points or more that the full fit did not reject (``rejected``: its rejected edges,
+    by image and line): what the hold-out and the twins measure."""
+    outliers = {(r.image, r.line) for r in rejected}
+    return [[p for j, p in enumerate(shot) if (i, j) not in outliers and len(p) >= 3] for i, shot in enumerate(lines)]
+
+
 @dataclass(frozen=True)
 class _OrientationHoldout:
     """:func:`_orientation_holdout`'s figure and each held-out orientation's own axis shift."""
@@ -327,14 +333,14 @@ def _orientation_holdout(
     straightness of all of them together, and per orientation; and per orientation the same edges under its fold's
     model with the model's axis moved for them alone (:func:`pipeline.own_shift.own_axis_shift`).
     ``(k, reason)`` for the first fold whose fit failed."""
-    outliers = {(r.image, r.line) for r in rejected}
+    kept_all = _kept_edges(lines, rejected)
     held_lines: list[np.ndarray] = []
     per_o: list[float | None] = []
     own: list[OwnShift] = []
     for k, (model, reason) in enumerate(map_fn(job_fn, jobs)):
         if model is None:
             return k, str(reason)
-        kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
+        kept = kept_all[k]
         per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
         held_lines.extend(model.undistort_points(p) for p in kept)
         own.append(own_axis_shift(model, kept))

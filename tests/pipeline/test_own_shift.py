@@ -66,7 +66,7 @@ def test_twins_of_a_lens_that_moved_each_want_their_own_shift():
         assert got.d_common > 0.005 and got.d_each < 0.0022 and got.ratio < 0.4, got
         assert abs(abs(got.move_px) - abs(float(np.dot(move, got.normal)))) < 0.03 * np.hypot(*move), got
         a = np.radians(angle)
-        assert abs(abs(float(np.dot(got.normal, (np.cos(a), np.sin(a)))))) < 0.01, got  # across the strings
+        assert abs(float(np.dot(got.normal, (np.cos(a), np.sin(a))))) < 0.01, got  # across the strings
 
 
 def test_twins_through_a_lens_term_the_correction_lacks_want_one_shift():
