@@ -193,8 +193,9 @@ class IndexedCapture(Protocol):
     session receives the same frames as an uninterrupted one; real cameras need not.
     """
 
-    def set_capture_index(self, index: int) -> None:
-        """The next capture is frame ``index`` of this shot (``attempt * frames_per_orientation + frame``)."""
+    def set_capture_index(self, index: int, visit: int = 0) -> None:
+        """The next capture is frame ``index`` of this shot (``attempt * frames_per_orientation + frame``), on the
+        plan's ``visit``-th time at its pose (0: the first; a twin, ``capture.twin_deg``, returns: 1)."""
         ...
 
 

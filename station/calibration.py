@@ -193,22 +193,44 @@ def twin_record(
     for i in range(len(kept)):
         for j in range(i + 1, len(kept)):
             gap = abs(angles[i] - angles[j]) % 180.0
-            if not min(gap, 180.0 - gap) <= TWIN_ANGLE_DEG:
-                continue
-            got = twin_shift(model, kept[i], kept[j])
-            out.append(
-                {
-                    "paths": [names[i], names[j]],
-                    "angle_deg": finite_or_none(angles[i]),
-                    "d_common_px": finite_or_none(got.d_common),
-                    "d_each_px": finite_or_none(got.d_each),
-                    "ratio": finite_or_none(got.ratio),
-                    "move_px": finite_or_none(got.move_px),
-                    "limit_px": TWIN_MOVE_PX,
-                    "moved": bool(np.isfinite(got.move_px) and abs(got.move_px) > TWIN_MOVE_PX),
-                }
-            )
+            if min(gap, 180.0 - gap) <= TWIN_ANGLE_DEG:
+                out.append(_twin_entry(model, kept[i], kept[j], (names[i], names[j]), angles[i]))
     return out
+
+
+def session_twin_record(
+    model: DistortionModel,
+    fitted: Sequence[Sequence[np.ndarray]],
+    first: int,
+    twin: Sequence[np.ndarray],
+    names: tuple[str, str],
+    rejected: Sequence[Any] = (),
+) -> dict[str, Any]:
+    """A session's twin (``capture.twin_deg``: the shot ``twin`` taken again, after the others and not fitted, at
+    the angle of ``fitted[first]``) compared with that shot under the correction ``model`` fitted on the shots
+    ``fitted``, as :func:`twin_record` compares a pair (the first shot's edges but the fit's ``rejected``; the
+    twin's all), with ``twin_d_px``: the twin's straightness under the correction, a shot it was not fitted on."""
+    a = _kept_edges(fitted, rejected)[first]
+    b = _kept_edges([twin], ())[0]
+    entry = _twin_entry(model, a, b, names, shot_orientation(a))
+    return {**entry, "twin_d_px": finite_or_none(corrected_straightness(model, b)[0])}
+
+
+def _twin_entry(
+    model: DistortionModel, a: Sequence[np.ndarray], b: Sequence[np.ndarray], names: tuple[str, str], angle: float
+) -> dict[str, Any]:
+    """One pair of twins' record (:func:`twin_record`)."""
+    got = twin_shift(model, a, b)
+    return {
+        "paths": list(names),
+        "angle_deg": finite_or_none(angle),
+        "d_common_px": finite_or_none(got.d_common),
+        "d_each_px": finite_or_none(got.d_each),
+        "ratio": finite_or_none(got.ratio),
+        "move_px": finite_or_none(got.move_px),
+        "limit_px": TWIN_MOVE_PX,
+        "moved": bool(np.isfinite(got.move_px) and abs(got.move_px) > TWIN_MOVE_PX),
+    }
 
 
 def twin_warnings(records: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -1046,6 +1068,7 @@ def focus_profile(
         details={
             **dict(details or {}),
             "orientations_deg": list(config.capture.orientations_deg),
+            **({"twin_deg": config.capture.twin_deg} if config.capture.twin_deg is not None else {}),
             **({"shift_positions_mm": list(shifts)} if (shifts := config.capture.shift_positions_mm) else {}),
             "frames_per_orientation": config.capture.frames_per_orientation,
             "t": config.pipeline.t,

@@ -6,8 +6,8 @@ re-does one focus setting of one archived session directory exactly as the execu
 (:mod:`station.session.executor`): the frames of each orientation's accepted attempt averaged
 (checked against the manifest's SHA-256), measured (:func:`station.session.processing.measure_shot`
 with the session's ``pipeline.t``) and checked (strings found at the expected angle), fitted by
-:func:`station.calibration.calibrate_focus` (leave one orientation out, the session's bootstrap
-and seed), and judged against the session's ``qa`` thresholds. It only *reads* the session
+:func:`station.session.profile_steps.fit_focus` (leave one orientation out, the session's bootstrap
+and seed; a twin compared, not fitted), and judged against the session's ``qa`` thresholds. It only *reads* the session
 directory (no lock, nothing written), so an archive can be read-only, and it never raises for
 a bad session: a :class:`FocusResult` carries the new profile or a one-line ``failure``.
 
@@ -41,7 +41,7 @@ from typing import Any
 from pipeline.fitspec import parse_choice
 from pipeline.model_file import read_model_file
 from station import SOFTWARE, __version__
-from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, calibrate_focus, focus_profile
+from station.calibration import GIVEN_BY_CONFIG, GIVEN_ON_COMMAND_LINE, focus_profile
 from station.config import ConfigError, load_config
 from station.errors import HarpError
 from station.pool import WorkerPool
@@ -55,7 +55,7 @@ from station.session.directory import SessionError, read_manifest
 from station.session.frame_files import decode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.processing import average_frames, measure_shot, shot_problems
-from station.session.profile_steps import axis_places
+from station.session.profile_steps import fit_focus
 from station.session.records import FrameSaved, ManifestReads, QARecorded, parse
 from station.store import StoreError
 
@@ -288,12 +288,10 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
         frame_files += [s.path / r.file for r in records]
     assert size is not None
     w, h = size
-    cal = calibrate_focus(
-        shots, w, h, cfg.pipeline, f, _spec(job, cfg), turntable_deg=cfg.capture.angles_deg,
-        axis_places=axis_places(s, cfg, f),
-    )  # fmt: skip
+    cal = fit_focus(f, cfg, shots, (w, h), map, s, spec=_spec(job, cfg))
     if cal.failure or not cal.fit:
         raise ValueError(f"{where}: the fit failed: {cal.failure}")
+    fitted = [shots[o] for o in cfg.capture.fitted]  # what the fit took (a twin is compared, not fitted)
     old = s.old_profile(f)
     colour = session_colour(s, f, cal.fit.model, cfg)  # a colour camera's TCA and vignetting, made again
     profile = focus_profile(
@@ -309,7 +307,7 @@ def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
             **({COLOUR: colour} if colour is not None else {}),
         },
         judge=lambda p: qa_verdict(
-            p, cfg.qa, measurements=Measurements(shots, f"{s.path.name}, re-measured, focus index {f}")
+            p, cfg.qa, measurements=Measurements(fitted, f"{s.path.name}, re-measured, focus index {f}")
         ),
     )
     return focus, profile, old

@@ -24,7 +24,9 @@ pose differ, and reopening replays them). A client that knows which frame it is 
 executor, which may capture only the frames missing from an interrupted
 session — can say so with the optional hook :meth:`SimulatedCamera.set_capture_index`
 before capturing; a resumed session then receives bit-identical frames to an
-uninterrupted run. The hook is *not* part of :class:`drivers.protocols.Camera`:
+uninterrupted run. The hook also says on which of the plan's visits of the pose the frame is taken (a twin,
+``capture.twin_deg``, returns to a pose): a return's frames have their own noise and, on a lens that moves
+between poses, its own move. The hook is *not* part of :class:`drivers.protocols.Camera`:
 real cameras have no use for it, and callers look it up with ``getattr``.
 
 Brightness: the rendered intensities are multiplied by the exposure scale
@@ -182,14 +184,21 @@ _SCENE_KEYS = tuple(SCENE_SETTINGS)
 
 
 def noise_seed(
-    seed: int, focus: float, angle_deg: float, index: int, zoom: float | None = None, shift_mm: float | None = None
+    seed: int,
+    focus: float,
+    angle_deg: float,
+    index: int,
+    zoom: float | None = None,
+    shift_mm: float | None = None,
+    visit: int = 0,
 ) -> int:
-    """Noise seed of the ``index``-th capture at a pose (focus, string angle).
+    """Noise seed of the ``index``-th capture at a pose (focus, string angle) on the ``visit``-th time there.
 
     A 64-bit hash of ``seed``, ``focus`` (to 1e-6), the string angle (to
     1e-3 degree, modulo 180) and ``index``: equal physical situations give
     equal seeds whatever happened before (reopen, resume), different ones
-    give unrelated seeds.
+    give unrelated seeds. ``visit`` (0: the first) numbers a plan's returns to a pose (a twin,
+    ``capture.twin_deg``): a return is another physical situation, so its frames are other frames.
     """
     angle = round(float(angle_deg) % 180.0, 3) % 180.0
     key = f"{int(seed)}|{round(float(focus), 6):.6f}|{angle:.3f}|{int(index)}".encode()
@@ -197,6 +206,8 @@ def noise_seed(
         key += f"|z{round(float(zoom), 6):.6f}".encode()
     if shift_mm:  # so do frames with the turntable carried sideways (at 0 mm: unchanged)
         key += f"|s{round(float(shift_mm), 6):.6f}".encode()
+    if visit:  # so do a return's (the first visit: unchanged)
+        key += f"|v{int(visit)}".encode()
     return int.from_bytes(hashlib.sha256(key).digest()[:8], "little")
 
 
@@ -337,6 +348,7 @@ class SimulatedCamera:
         self._counter = 0
         self._pose_counts: dict[tuple[float, ...], int] = {}
         self._next_index: int | None = None
+        self._next_visit = 0
         self._faults: deque[str] = deque()
         #: the :class:`pipeline.render.Rendered` (clean) or :class:`pipeline.realism.Shot` (realistic)
         #: behind the last frame (exact truth), or None
@@ -418,7 +430,7 @@ class SimulatedCamera:
         self._open = True
         self._counter = 0
         self._pose_counts = {}
-        self._next_index = None
+        self._next_index, self._next_visit = None, 0
 
     def close(self) -> None:
         self._open = False
@@ -560,12 +572,12 @@ class SimulatedCamera:
             return fielded
         return shot_to_shot(fielded, np.random.default_rng([pose_seed, 0xCE27]), 0.0, self.world.lens_centre_sd_px)
 
-    def _pose_seed(self, focus: float, angle_deg: float, shift_mm: float | None) -> int | None:
-        """The seed of the lens's move at a pose (:meth:`lens_at`), None for a stable lens: equal poses, equal
-        moves (a resumed session's frames are rendered alike)."""
+    def _pose_seed(self, focus: float, angle_deg: float, shift_mm: float | None, visit: int = 0) -> int | None:
+        """The seed of the lens's move at a pose on its ``visit``-th visit (:meth:`lens_at`), None for a stable
+        lens: equal poses and visits, equal moves (a resumed session's frames are rendered alike)."""
         if self.world.lens_centre_sd_px == 0:
             return None
-        return noise_seed(self.seed, focus, angle_deg, -1, self.world.zoom, shift_mm)
+        return noise_seed(self.seed, focus, angle_deg, -1, self.world.zoom, shift_mm, visit)
 
     def blur_at(self, focus: float) -> float:
         """The PSF standard deviation (px) the harp is rendered with at ``focus`` (module doc: *Defocus*)."""
@@ -633,19 +645,24 @@ class SimulatedCamera:
         self.board_placed = None if label is None else placed
 
     # ------------------------------------------------------------ capture
-    def set_capture_index(self, index: int) -> None:
+    def set_capture_index(self, index: int, visit: int = 0) -> None:
         """Optional hook (not in the Camera protocol): the next frame returned is
-        capture number ``index`` (>= 0) at the current pose.
+        capture number ``index`` (>= 0) at the current pose, on the plan's ``visit``-th time there (0: the first;
+        a twin, ``capture.twin_deg``, is a return: 1).
 
         Selects that frame's noise (module doc: *Noise seeds*) instead of the
-        count of frames already taken at this pose. Applies to the next
+        count of frames already taken at this pose, and on a return the lens's move there (:meth:`lens_at`) is
+        drawn anew: a lens that moves between poses moves between visits of one pose too. Applies to the next
         capture that returns a frame (a timeout or disconnect does not use it
         up); later captures go back to counting, from ``index + 1`` on at this
-        pose (or further, if more frames were taken there already).
+        pose (or further, if more frames were taken there already), on the first visit.
         """
         if isinstance(index, bool) or int(index) != index or index < 0:
             raise ValueError(f"capture index must be a non-negative integer, got {index!r}")
+        if isinstance(visit, bool) or int(visit) != visit or visit < 0:
+            raise ValueError(f"visit must be a non-negative integer, got {visit!r}")
         self._next_index = int(index)
+        self._next_visit = int(visit)
 
     def _index_at(self, focus: float, angle_deg: float, shift_mm: float | None = None) -> int:
         if self._next_index is not None:
@@ -659,6 +676,7 @@ class SimulatedCamera:
         focus: float | None = None,
         stage_deg: float | None = None,
         shift_mm: float | None = None,
+        visit: int | None = None,
     ) -> Rendered | Shot:
         """Render what the camera sees (no fault, no counter change).
 
@@ -668,6 +686,7 @@ class SimulatedCamera:
         camera (``realism_seed``) renders the harp at stage angle ``stage_deg``
         (default: ``angle_deg`` minus the harp offset, or the world's stage now).
         ``shift_mm``: the linear stage's position (module doc; default: the world's now, None without one).
+        ``visit``: the plan's visit of the pose (:meth:`set_capture_index`; default: the next capture's).
         """
         w, h = self._size
         now = time.monotonic()
@@ -682,8 +701,9 @@ class SimulatedCamera:
         focus = self.world.focus if focus is None else focus
         index = self._index_at(focus, angle_deg, shift_mm) if index is None else int(index)
         gain_lin = 10.0 ** (self._gain / 20.0)
-        seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom, shift_mm)
-        pose = self._pose_seed(focus, angle_deg, shift_mm)
+        visit = self._next_visit if visit is None else int(visit)
+        seed = noise_seed(self.seed, focus, angle_deg, index, self.world.zoom, shift_mm, visit)
+        pose = self._pose_seed(focus, angle_deg, shift_mm, visit)
         if self.realism is not None:
             stage = float(angle_deg) - self.world.harp_offset_deg if stage_deg is None else float(stage_deg)
             return self._render_realistic(stage, focus, seed, gain_lin, axis_px, pose)
@@ -824,11 +844,11 @@ class SimulatedCamera:
         stage, shift = self.world.stage_at(now), self.world.shift_at(now)
         offset, focus = self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
-        index = self._index_at(focus, angle, shift)
-        seed = noise_seed(self.seed, focus, angle, index, shift_mm=shift)
+        index, visit = self._index_at(focus, angle, shift), self._next_visit
+        seed = noise_seed(self.seed, focus, angle, index, shift_mm=shift, visit=visit)
         if self.board is not None:
             return self._board_frame(stage, focus, index, seed, stamp, self.world.tilt_at(now))
-        r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage, shift_mm=shift)
+        r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage, shift_mm=shift, visit=visit)
         self.last_rendered = r
         image = r.image
         lens_doc = cast(Any, r).lenses["G"].to_dict() if self.cfa is not None else r.lens.to_dict()
@@ -839,6 +859,7 @@ class SimulatedCamera:
             "lens": lens_doc,
             "seed": seed,
             "pose_index": index,
+            **({"visit": visit} if visit else {}),
             "blur_px": cast(Any, r).effects.blur.sigma_px if self.realism is not None else cast(Any, r).scene.blur_px,
             "exposure_scale": self.exposure_scale(),
         }
@@ -870,6 +891,7 @@ class SimulatedCamera:
         )
         self._counter += 1
         pose = _pose(focus, angle, shift)
-        self._pose_counts[pose] = max(self._pose_counts.get(pose, 0), index + 1)
-        self._next_index = None
+        if not visit:  # a return's frames are counted apart (set_capture_index)
+            self._pose_counts[pose] = max(self._pose_counts.get(pose, 0), index + 1)
+        self._next_index, self._next_visit = None, 0
         return frame

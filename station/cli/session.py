@@ -461,6 +461,7 @@ def _plan(args) -> int:
                     "lens": [config.lens.maker, config.lens.model, config.lens.serial],
                     "focus_settings": list(config.focus_settings),
                     "orientations_deg": list(config.capture.orientations_deg),
+                    "twin_deg": config.capture.twin_deg,
                     "shift_positions_mm": list(config.capture.shift_positions_mm),
                     "frames": est.frames,
                     "moves": est.moves,

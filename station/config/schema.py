@@ -178,6 +178,10 @@ class CaptureConfig:
                                                     "turntable sideways (station.turntable.shift_axis), every "
                                                     "orientation taken at each (none: one axis place)", "mm", -1e5,
                                                     1e5, length=(2, None), unique=True)  # fmt: skip
+    twin_deg: float | None = setting(None, "a twin: after the other orientations the turntable returns to this "
+                                     "one of orientations_deg (at the first of shift_positions_mm) and takes it "
+                                     "again, not fitted; the two shots tell a lens that moved between shots from a "
+                                     "term of the lens (QA check twin_move; null: none)", "deg", -3600.0, 3600.0)  # fmt: skip
     checks: CheckConfig = section(CheckConfig, "acceptance of a captured shot")
     retries: RetryConfig = section(RetryConfig, "device commands tried again")
 
@@ -185,11 +189,39 @@ class CaptureConfig:
     def orientations(self) -> tuple[tuple[float | None, float], ...]:
         """Each orientation of the plan, ``(linear-stage position mm or None, turntable angle deg)``: the
         turntable angles ``orientations_deg`` at each of ``shift_positions_mm`` in turn (the stage moves least),
-        or at the one axis place (position None) without them. An orientation's index in this tuple is the
-        ``orientation_idx`` of the plan, the frames and the manifest."""
+        or at the one axis place (position None) without them; then the twin (``twin_deg`` at the first place),
+        if any. An orientation's index in this tuple is the ``orientation_idx`` of the plan, the frames and the
+        manifest."""
         if not self.shift_positions_mm:
-            return tuple((None, float(a)) for a in self.orientations_deg)
-        return tuple((float(p), float(a)) for p in self.shift_positions_mm for a in self.orientations_deg)
+            plan = tuple((None, float(a)) for a in self.orientations_deg)
+        else:
+            plan = tuple((float(p), float(a)) for p in self.shift_positions_mm for a in self.orientations_deg)
+        return plan if self.twin_deg is None else (*plan, (plan[0][0], float(self.twin_deg)))
+
+    @functools.cached_property
+    def twin(self) -> tuple[int, int] | None:
+        """``(first, twin)``: the indices in :attr:`orientations` of the twin's orientation taken first and of the
+        twin (the last), None without a twin (or with a ``twin_deg`` that is none of the plan's angles, which the
+        configuration check refuses)."""
+        if self.twin_deg is None:
+            return None
+        last = len(self.orientations) - 1
+        first = next((o for o in range(last) if self.orientations[o] == self.orientations[last]), None)
+        return None if first is None else (first, last)
+
+    @functools.cached_property
+    def fitted(self) -> tuple[int, ...]:
+        """The indices in :attr:`orientations` of the shots the fit takes: every one but the twin (:attr:`twin`),
+        which checks the fit instead."""
+        n = len(self.orientations)
+        return tuple(range(n - 1 if self.twin_deg is not None else n))
+
+    @functools.cached_property
+    def visits(self) -> tuple[int, ...]:
+        """Per orientation of :attr:`orientations`, the plan's visit of its pose: 0 the first time, 1 the twin's
+        return (a simulated camera renders a return's frames anew, :class:`drivers.protocols.IndexedCapture`)."""
+        return tuple(int(o == len(self.orientations) - 1 and self.twin_deg is not None) for o in
+                     range(len(self.orientations)))  # fmt: skip
 
     @functools.cached_property
     def angles_deg(self) -> tuple[float, ...]:

@@ -278,6 +278,11 @@ def check_across(config: Config) -> None:
             f"expected more than the exposure (capture.exposure_us {plain(cap.exposure_us)} µs = "
             f"{plain(cap.exposure_us / 1e6)} s), got {plain(cap.timeout_s)}",
         )
+    if cap.twin_deg is not None and cap.twin is None:
+        raise config.error(
+            "capture.twin_deg", f"expected one of capture.orientations_deg ({', '.join(plain(a) for a in cap.orientations_deg)}), "
+            f"got {plain(cap.twin_deg)}",
+        )  # fmt: skip
     tt = config.station.turntable
     if config.simulation is None and tt.port == EMULATOR_PORT:
         raise config.error(

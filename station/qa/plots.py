@@ -33,11 +33,14 @@ class Shot:
     shift_mm: float | None = None
     """Where the linear stage under the turntable was (two-axis capture, ``capture.shift_positions_mm``); None:
     no stage."""
+    twin: bool = False
+    """The session's twin (``capture.twin_deg``): an angle taken again after the others, compared, not fitted."""
 
     @property
     def place(self) -> str:
         """Where the shot was taken, for captions: the turntable angle, and the linear stage's position if any."""
-        return f"stage {self.orientation_deg:g} deg" + ("" if self.shift_mm is None else f" at {self.shift_mm:g} mm")
+        at = "" if self.shift_mm is None else f" at {self.shift_mm:g} mm"
+        return f"stage {self.orientation_deg:g} deg{at}" + (" (the twin, not fitted)" if self.twin else "")
 
 
 def _fig(width: int, height: int, extra_w: float = 1.6):

@@ -312,7 +312,8 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
         image = average_frames([session.read_frame(r) for r in records])
         m = stored_measurement(session, focus_idx, o)
         measured = m if m is not None else pipeline.measure.measure_image(image, t=t)
-        shots.append(Shot(float(deg), image, measured, None if mm is None else float(mm)))
+        twin = cfg.capture.twin is not None and o == cfg.capture.twin[1]
+        shots.append(Shot(float(deg), image, measured, None if mm is None else float(mm), twin))
     return shots
 
 
@@ -347,7 +348,12 @@ def session_evidence(
             e.uncertainty_note = "not available: the profile does not record which model was fitted"
         else:
             e.uncertainty, e.uncertainty_note = shot_uncertainty(
-                e.shots, profile.width, profile.height, spec, n_boot=bootstrap_if_missing, seed=cfg.pipeline.seed
+                [s for s in e.shots if not s.twin],
+                profile.width,
+                profile.height,
+                spec,
+                n_boot=bootstrap_if_missing,
+                seed=cfg.pipeline.seed,
             )
     return e
 

@@ -37,7 +37,11 @@ no threshold`` for a figure that is shown but not judged. The checks, in order:
 ``reference_deviation_max``
     (a golden reference is given) the largest field difference, modulo the best
     homography, from the reference (:func:`pipeline.compare.compare_models`) must
-    not exceed ``max_reference_deviation_px``.
+    not exceed ``max_reference_deviation_px``;
+``twin_move``
+    (two shots at one angle: a session's twin, ``capture.twin_deg``, or twins given to ``harp calibrate``) the
+    lens's move across the strings between them must not exceed the record's limit
+    (:data:`station.calibration.TWIN_MOVE_PX`): a lens that moved between shots has no one correction.
 
 A FAIL has one reason per failed check. :func:`qa_verdict` judges one
 :class:`station.profile.Profile`; :func:`evaluate` the same on a bare model.
@@ -58,7 +62,13 @@ from pipeline.fit import fit_distortion
 from pipeline.model_file import read_model_file
 from pipeline.models.base import IdentityModel
 from pipeline.plain import finite_or_none
-from station.calibration import OWN_SHIFT_ADVICE, calibrate_shots, largest_own_shift
+from station.calibration import (
+    MOVING_LENS_ADVICE,
+    OWN_SHIFT_ADVICE,
+    TWIN_MOVE_PX,
+    calibrate_shots,
+    largest_own_shift,
+)
 from station.config import QAConfig
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
 from station.qa.evidence import stored_measurement
@@ -208,6 +218,7 @@ def evaluate(
     recorded: Mapping[str, Any] | None = None,
     harp_health: Mapping[str, Any] | None = None,
     own_shift: Mapping[str, Any] | None = None,
+    twins: Sequence[Mapping[str, Any]] | None = None,
 ) -> Verdict:
     """Judge one correction (a :class:`~pipeline.models.base.DistortionModel`); see the module docstring.
 
@@ -221,7 +232,10 @@ def evaluate(
     self-check (:func:`station.calibration.harp_health`): the session fails when a string is bent
     beyond its limit (the harp, not the lens: the correction would carry the string's bend); ``own_shift``: the
     held-out orientations' own axis shifts (:func:`station.calibration.own_shift_record`), reported, with what to do
-    when each orientation wants the correction moved on its own (a lens whose decentering changes between shots).
+    when each orientation wants the correction moved on its own (a lens whose decentering changes between shots);
+    ``twins``: two shots at one angle compared (:func:`station.calibration.twin_record`, a session's twin
+    :func:`station.calibration.session_twin_record`): the profile fails when the lens moved between them beyond the
+    record's limit (the correction is the mean of a lens that did not hold still).
     """
     checks: list[Check] = []
     reasons: list[str] = []
@@ -410,6 +424,13 @@ def evaluate(
     if own_shift and own_shift.get("judged") and own_shift.get("ratio_median") is not None:
         add(_own_shift_check(own_shift))
         metrics["holdout_own_shift_ratio"] = own_shift["ratio_median"]
+    read = [t for t in twins or () if t.get("move_px") is not None]
+    if read:
+        worst = max(read, key=lambda t: abs(float(t["move_px"])))
+        metrics["twin_move_px"] = abs(float(worst["move_px"]))
+        if worst.get("twin_d_px") is not None:
+            metrics["twin_d_px"] = worst["twin_d_px"]
+        add(*_twin_check(worst))
 
     return Verdict(
         FAIL if reasons else PASS,
@@ -418,6 +439,20 @@ def evaluate(
         tuple(checks),
         {k: getattr(thresholds, k) for k in THRESHOLD_FIELDS},
     )
+
+
+def _twin_check(twin: Mapping[str, Any]) -> tuple[Check, str]:
+    """The lens's move between two shots at one angle (the pair that moved most), judged against the record's limit
+    (:data:`station.calibration.TWIN_MOVE_PX`), and why it fails."""
+    move, limit = abs(float(twin["move_px"])), float(twin.get("limit_px") or TWIN_MOVE_PX)
+    a, b = twin.get("paths") or ("?", "?")
+    ok = move <= limit
+    text = f"twins {a} and {b}: the lens moved {move:.2f} px across the strings between them"
+    if twin.get("twin_d_px") is not None:
+        text += f" (the twin, not fitted: d {float(twin['twin_d_px']):.4f} px)"
+    text += f" {'<=' if ok else '>'} {limit:g} px: {PASS if ok else FAIL}"
+    why = f"the lens moved between two shots at one angle; the correction is their mean: {MOVING_LENS_ADVICE}"
+    return Check("twin_move", finite_or_none(move), "<=", limit, ok, text), why
 
 
 def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
@@ -582,6 +617,7 @@ def qa_verdict(
         recorded=profile.qa.metrics if profile.qa is not None else None,
         harp_health=(profile.details or {}).get("harp_health"),
         own_shift=(profile.details or {}).get("own_shift"),
+        twins=(profile.details or {}).get("twins"),
     )
 
 
@@ -601,7 +637,7 @@ def session_measurements(session, focus_idx: int) -> Measurements | None:
     """The measured edges a session kept for one focus setting (``measurements/``, the shots'
     current attempts), or None when any orientation lacks its kept measurement."""
     shots = []
-    for o in range(len(session.config.capture.orientations)):
+    for o in session.config.capture.fitted:  # the shots the fit took (a twin is compared, not fitted)
         m = stored_measurement(session, focus_idx, o)
         if m is None:
             return None

@@ -120,12 +120,13 @@ def session_colour(session: Any, focus_idx: int, model: DistortionModel, config:
     frames averaged, its angle the stage's read-back (else the commanded one); ``model`` the focus setting's
     fitted distortion; ``config`` the session's.
     """
-    records = [session.frames(focus_idx, o) for o in range(len(config.capture.orientations))]
+    fitted = config.capture.fitted  # the shots the distortion was fitted on (a twin is compared, not fitted)
+    records = [session.frames(focus_idx, o) for o in fitted]
     pattern = frames_cfa([r for rs in records for r in rs])
     if pattern is None:
         return None
     mosaics, angles, names = [], [], []
-    for rs, commanded in zip(records, config.capture.angles_deg):
+    for rs, commanded in zip(records, [config.capture.angles_deg[o] for o in fitted]):
         mosaics.append(average_frames([session.read_frame(r) for r in rs]))
         stage = (rs[-1].meta or {}).get("stage_deg")
         angles.append(float(commanded if stage is None else stage))

@@ -10,13 +10,15 @@ writes the setting's profile, model file and store row from the same :class:`sta
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
+from pipeline.fitspec import FitSpec
 from pipeline.intrinsics import Intrinsics
-from station.calibration import AxisPlaces, Calibration, MapFn, calibrate_focus, focus_profile
+from station.calibration import AxisPlaces, Calibration, MapFn, calibrate_focus, focus_profile, session_twin_record
 from station.config import Config
 from station.files import sha256_file, write_profile
 from station.profile import Profile
@@ -38,11 +40,12 @@ def axis_places(reads: Any, config: Config, f: int) -> AxisPlaces | None:
     cap = config.capture
     if not cap.shift_positions_mm:
         return None
-    commanded = [float(mm) for mm in cap.shifts_mm if mm is not None]
-    read = []
-    for o, mm in enumerate(commanded):
+    commanded, read = [], []
+    for o in cap.fitted:  # the shots the fit takes (a twin is compared, not fitted)
+        mm = float(cast(float, cap.shifts_mm[o]))
         records = reads.frames(f, o) if reads is not None else []
         got = (records[-1].meta or {}).get("shift_mm") if records else None
+        commanded.append(mm)
         read.append(float(mm if got is None else got))
     harp = config.station.harp
     return AxisPlaces(tuple(commanded), tuple(read), harp.shift_direction_deg, float(harp.string_spacing_mm))
@@ -55,22 +58,44 @@ def fit_focus(
     size: tuple[int, int],
     map_fn: MapFn,
     reads: Any = None,
+    spec: FitSpec | None | str = "config",
 ) -> Calibration:
     """The calibration of focus setting ``f`` from its orientations' edges (``shots``, one per
-    orientation) on frames of ``size`` = (width, height); ``reads``: the session (its frames' records say where a
-    two-axis capture's stage was, :func:`axis_places`; None: where the plan sent it)."""
+    orientation of the plan) on frames of ``size`` = (width, height); ``reads``: the session (its frames' records
+    say where a two-axis capture's stage was, :func:`axis_places`; None: where the plan sent it); ``spec``: what to
+    fit (``"config"``: ``pipeline.model``'s; None: chosen). The executor and ``harp reprocess`` both call this.
+
+    The fit takes every shot but a twin (``capture.twin_deg``; :attr:`~station.config.schema.CaptureConfig.fitted`);
+    the twin is compared with its first shot under the fitted correction
+    (:func:`station.calibration.session_twin_record`, kept in ``details["twins"]``; QA judges the lens's move)."""
     w, h = size
-    return calibrate_focus(
-        [list(lines) for lines in shots],
+    cap = config.capture
+    fitted = [list(shots[o]) for o in cap.fitted]
+    cal = calibrate_focus(
+        fitted,
         w,
         h,
         config.pipeline,
         f,
-        config.pipeline.spec,
+        config.pipeline.spec if spec == "config" else cast("FitSpec | None", spec),
         map_fn=map_fn,
-        turntable_deg=config.capture.angles_deg,
+        turntable_deg=[cap.angles_deg[o] for o in cap.fitted],
         axis_places=axis_places(reads, config, f),
     )
+    if cap.twin is None or cal.failure is not None or not cal.fit:
+        return cal
+    first, twin = cap.twin
+    names = (orientation_name(config, first), orientation_name(config, twin))
+    record = session_twin_record(cal.fit.model, fitted, cap.fitted.index(first), shots[twin], names, cal.fit.rejected)
+    return dataclasses.replace(cal, details={**cal.details, "twins": [record]})
+
+
+def orientation_name(config: Config, o: int) -> str:
+    """How the session names orientation ``o`` of its plan (its turntable angle; the twin said)."""
+    cap = config.capture
+    mm = cap.shifts_mm[o]
+    where = f"{cap.angles_deg[o]:g} deg" + ("" if mm is None else f" at {mm:g} mm")
+    return f"orientation {o} ({where}{', the twin' if cap.twin is not None and o == cap.twin[1] else ''})"
 
 
 def fitted_record(f: int, cal: Calibration, session: SessionDir) -> Fitted:

@@ -406,3 +406,32 @@ def test_a_moving_lens_moves_its_distortion_centre_between_poses_and_frames_of_a
     b = moving.render(index=0, angle_deg=10.0, focus=0.3).image
     c = still.render(index=0, angle_deg=10.0, focus=0.3).image
     assert np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def test_a_return_to_a_pose_is_another_visit_with_its_own_frames_and_lens_move():
+    """A plan's return to a pose (a twin, ``capture.twin_deg``: ``set_capture_index(index, visit=1)``) renders
+    other frames than the first visit's (its own noise; on a lens that moves between poses, its own move), the same
+    ones each time it is rendered (a resumed session's twin is bit-identical), and the first visit's are unchanged by
+    the hook (visit 0 is the frames of old). The lens of a visit is read from the frame's own record."""
+    world = SimWorld(harp_offset_deg=5.0, lens_centre_sd_px=5.0)
+    cam = SimulatedCamera.from_config({"width": 96, "height": 64, "seed": 3}, world=world)
+
+    def shoot(index, visit=None):
+        world.set_stage(30.0)
+        cam.lock_focus(0.5)
+        cam.set_capture_index(index) if visit is None else cam.set_capture_index(index, visit)
+        f = cam.capture()
+        return f.image, f.extra["sim"]["lens"]["center"], f.extra["sim"].get("visit", 0)
+
+    with cam:
+        first, c_first, v_first = shoot(0)
+        twin, c_twin, v_twin = shoot(0, 1)
+        again, c_again, _ = shoot(0, 1)
+        first_again, c_first_again, _ = shoot(0, 0)
+        after = shoot(1)[0]  # the hook is used up: the next visit-0 frame is frame 1 of the first visit
+    assert (v_first, v_twin) == (0, 1)
+    assert not np.array_equal(first, twin) and np.array_equal(twin, again) and np.array_equal(first, first_again)
+    assert c_first == c_first_again and c_twin == c_again and not np.allclose(c_first, c_twin)
+    assert not np.array_equal(after, first) and not np.array_equal(after, twin)
+    with pytest.raises(ValueError, match="visit must be a non-negative integer"):
+        cam.set_capture_index(0, -1)

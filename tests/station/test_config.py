@@ -320,3 +320,34 @@ def test_two_axis_positions_within_the_stage_and_a_direction_for_few_angles(tmp_
         "station.harp.shift_direction_deg: expected the image direction of a positive linear-stage move: with fewer "
         "than 4 turntable angles (capture.orientations_deg) a place's turntable axis cannot be found without it"
     )
+
+
+def test_a_twin_returns_to_one_of_the_plans_angles_after_the_others(tmp_path, capsys):
+    """``capture.twin_deg`` (issue 19 item 5): one more orientation at the end of the plan, at one of its angles
+    (on a two-axis capture at the first place), taken on a second visit and not fitted; an angle the plan does not
+    take is one line naming the field, before anything is created."""
+    from station.cli import main
+
+    d = demo_data()
+    d["store"] = {"path": "p.sqlite", "sessions_dir": "sessions"}
+    cap = load_config(write(tmp_path, d)).capture
+    assert cap.twin is None and cap.fitted == tuple(range(8)) and cap.visits == (0,) * 8
+    d["capture"]["twin_deg"] = 45
+    cap = load_config(write(tmp_path, d)).capture
+    assert len(cap.orientations) == 9 and cap.orientations[8] == (None, 45.0) and cap.angles_deg[2] == 45.0
+    assert cap.twin == (2, 8) and cap.fitted == tuple(range(8)) and cap.visits == (0,) * 8 + (1,)
+    d["station"]["turntable"]["shift_axis"] = 3
+    d["station"]["harp"]["shift_direction_deg"] = 30
+    d["capture"]["shift_positions_mm"] = [10, 40]
+    cap = load_config(write(tmp_path, d)).capture
+    assert len(cap.orientations) == 17 and cap.orientations[16] == (10.0, 45.0) and cap.twin == (2, 16)
+    assert cap.fitted == tuple(range(16)) and cap.visits[16] == 1 and sum(cap.visits) == 1
+    del d["capture"]["shift_positions_mm"]
+    d["capture"]["twin_deg"] = 30
+    assert error_of(tmp_path, d).endswith(
+        "capture.twin_deg: expected one of capture.orientations_deg (0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5), got 30"
+    )
+    assert main(["session", "run", str(tmp_path / "station.yaml")]) == 2  # before anything is created
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "capture.twin_deg: expected one of" in err and "Traceback" not in err
+    assert not (tmp_path / "sessions").exists()

@@ -70,6 +70,7 @@ def test_the_document_has_the_keys_the_station_reads():
         "simulation.shift_direction_deg",  # issue 19: the shift axis
         "simulation.lens_field_px",  # issue 19: whole sessions on lenses with a residual field
         "simulation.lens_centre_sd_px",  # issue 19: a lens whose decentering moves between poses
+        "capture.twin_deg",  # issue 19: an angle taken again, to tell a lens that moved
     }  # fmt: skip
     leaves = {p for p, _ in document().leaves() if not p.startswith("simulation.emulator.")}
     assert leaves == station

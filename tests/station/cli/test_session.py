@@ -646,3 +646,48 @@ def test_a_lens_whose_centre_moves_between_poses_is_reported_by_the_sessions_qa(
     assert own["moving"] and own["ratio_median"] < 0.5 and "switch stabilisation off" in text
     own, text = texts[0.0]
     assert not own["moving"] and own["ratio_median"] > 0.95 and "stabilisation" not in text
+
+
+def test_a_twin_tells_a_lens_that_moved_between_two_shots_at_one_angle(tmp_path):
+    """``capture.twin_deg`` (issue 19 item 5): after its six orientations the session returns to 30 degrees and
+    takes it again, compares that twin with the first shot at 30 degrees under the fitted correction and does not fit
+    it. A lens whose distortion centre moves between poses (``simulation.lens_centre_sd_px``: 12 px) fails QA's
+    ``twin_move`` with what to do (exit 1); the same station with a stable lens passes it (exit 0). Truth: the
+    distortion centres the simulator recorded in the two frames, their difference across the strings at the
+    recorded string angle, never the measurement. ``harp reprocess`` of the session reads the same twin."""
+    from station.reprocess import FocusJob, reprocess_focus
+
+    for sd in (12.0, 0.0):
+        base = tmp_path / f"sd{sd:g}"
+        cfg = small_config(base, focus=(0.0,), frames=1, orientations_deg=[0, 30, 60, 90, 120, 150], twin_deg=30)
+        d = yaml.safe_load(cfg.read_text())
+        d["simulation"]["lens_centre_sd_px"] = sd
+        cfg.write_text(yaml.safe_dump(d))
+        assert main(["session", "run", str(cfg), "--name", "m", "--quiet", "--no-report"]) == (1 if sd else 0)
+        frames = {r["orientation_idx"]: r["meta"] for r in manifest(base / "sessions" / "m") if r["kind"] == "frame"}
+        assert sorted(frames) == list(range(7)) and frames[6]["commanded_deg"] == frames[1]["commanded_deg"] == 30
+        sims = [frames[o]["extra"]["sim"] for o in (1, 6)]
+        assert sims[1]["visit"] == 1 and "visit" not in sims[0]
+        theta = np.radians(sims[0]["string_angle_deg"])
+        drawn = float(np.dot(np.subtract(sims[1]["lens"]["center"], sims[0]["lens"]["center"]),
+                             [-np.sin(theta), np.cos(theta)]))  # fmt: skip
+        with ProfileStore(base / "profiles.sqlite", create=False) as store:
+            (p,) = store.profiles()
+        (twin,) = p.details["twins"]
+        assert twin["paths"] == ["orientation 1 (30 deg)", "orientation 6 (30 deg, the twin)"]
+        assert abs(abs(twin["move_px"]) - abs(drawn)) < 0.02 * abs(drawn) + 0.15, (twin, drawn)
+        assert len(p.details["own_shift"]["per_orientation"]) == 6  # the twin is not fitted
+        assert len(p.merit.holdout.per_orientation_d) == 6
+        check = next(c for c in p.qa.checks if c.name == "twin_move")
+        corrected = next(c for c in p.qa.checks if c.name == "corrected_d")
+        assert "d of the 6 measured shots" in corrected.text
+        again = reprocess_focus(FocusJob(str(base / "sessions" / "m"), 0))
+        assert again.failure is None and again.profile is not None
+        (twin_again,) = again.profile.details["twins"]
+        assert twin_again["move_px"] == pytest.approx(twin["move_px"], rel=1e-6, abs=1e-9)
+        if sd:
+            assert abs(drawn) > 5.0 and twin["moved"] and check.passed is False and p.qa.verdict == "FAIL"
+            assert "switch stabilisation off" in " ".join(p.qa.reasons), p.qa.reasons
+        else:
+            assert drawn == 0.0 and not twin["moved"] and abs(twin["move_px"]) < 0.15 and check.passed
+            assert twin["twin_d_px"] < 0.02 and p.qa.verdict == "PASS"

@@ -248,3 +248,23 @@ def test_the_harp_check_names_the_most_bent_string_and_says_why_a_bend_beyond_th
     check = by_name(evaluate(IdentityModel(), W, H, 0.01, QAConfig(), harp_health=health))["string_bend_max"]
     assert check.passed is True and "shots at 60, 150 deg measured up to 3.6x worse than the others" in check.text
     assert "turn the harp on its mount" in check.text
+
+
+def test_twins_fail_the_profile_when_the_lens_moved_between_them_beyond_the_records_limit(calibrated):
+    """``twin_move``: of the pairs of twins a profile records (``harp calibrate``'s, without a twin d; a session's,
+    with one), the one whose lens moved most is judged against its record's limit; a profile without twins has no
+    such check. The records are written by hand here: what is judged is the verdict, not the twin reading."""
+    profile, m, _ = calibrated
+    pair = {"paths": ["a.pgm", "b.pgm"], "angle_deg": 3.0, "limit_px": 1.0, "moved": False}
+    still, moved = {**pair, "move_px": -0.2}, {**pair, "paths": ["a.pgm", "c.pgm"], "move_px": -1.6, "moved": True}
+    assert "twin_move" not in by_name(qa_verdict(profile, QAConfig(), measurements=m))
+    v = qa_verdict(profile.with_(details={"twins": [still, moved]}), QAConfig(), measurements=m)
+    c = by_name(v)["twin_move"]
+    assert not v.passed and c.passed is False and c.value == pytest.approx(1.6) and c.limit == 1.0
+    assert c.text.startswith("twins a.pgm and c.pgm: the lens moved 1.60 px") and c.text.endswith("> 1 px: FAIL")
+    assert any("the lens moved between two shots at one angle" in r for r in v.reasons)
+    session = {**still, "paths": ["orientation 1 (30 deg)", "orientation 6 (30 deg, the twin)"], "twin_d_px": 0.004}
+    v = qa_verdict(profile.with_(details={"twins": [session]}), QAConfig(), measurements=m)
+    c = by_name(v)["twin_move"]
+    assert v.passed and c.passed and "(the twin, not fitted: d 0.0040 px) <= 1 px: PASS" in c.text
+    assert v.metrics["twin_move_px"] == pytest.approx(0.2) and v.metrics["twin_d_px"] == 0.004
