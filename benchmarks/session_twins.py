@@ -7,7 +7,7 @@ Usage::
 
 ``benchmarks/twins.py`` compares twins on rendered shots fitted as ``harp calibrate`` fits four photographs. This
 runs the sessions themselves: ``harp session run`` on the simulated station of ``configs/demo.yaml`` with the
-realistic camera (``realism_seed``: bent and kinked strings, field blur, back-light, vignetting, noise, Bayer; one
+realistic camera (``realism_seed`` and the camera's ``seed`` 1000 + seed: bent and kinked strings, field blur, back-light, vignetting, noise, Bayer; one
 frame per orientation), a unit of the demo lens drawn from each serial (``simulation.lens_spread: 1``), the session's
 own defaults for everything the pipeline does (``model: auto``, ``strings: separate-kinks``, ``field: auto``) but the
 bootstrap (0), at one focus setting (0.5): six turntable angles 0..150 by 30 and the twin ``capture.twin_deg: 30``,
@@ -68,6 +68,7 @@ def run(job: tuple[int, float, int, int]) -> dict[str, Any]:
         cfg = config(root, seed, CAPTURE, {}, w, h, serial=f"TWIN-{seed}", defaults=True)
         d = yaml.safe_load(cfg.read_text())
         d["simulation"]["lens_centre_sd_px"] = sd
+        d["station"]["camera"]["seed"] = 1000 + seed  # the noise and each pose's lens move (the demo's: 7)
         cfg.write_text(yaml.safe_dump(d))
         t0 = time.perf_counter()
         done = subprocess.run(

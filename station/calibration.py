@@ -178,16 +178,18 @@ read beyond it."""
 
 
 def twin_record(
-    model: DistortionModel, shots: Sequence[Sequence[np.ndarray]], names: Sequence[str], rejected: Sequence[Any] = ()
+    model: DistortionModel, shots: Sequence[Sequence[np.ndarray]], names: Sequence[str]
 ) -> list[dict[str, Any]]:
     """Every pair of ``shots`` whose strings run within :data:`TWIN_ANGLE_DEG` of each other, compared under the
-    correction ``model`` (:func:`pipeline.own_shift.twin_shift`; their edges but the fit's ``rejected``): per pair
-    the two ``names``, the strings' angle, d with one shift for both and with a shift each, ``ratio``, the lens's
-    move across the strings (``move_px``) and ``moved`` beyond :data:`TWIN_MOVE_PX`. Two shots at one angle tell a
-    lens that moved between them (a shift each) from a term of the lens at that angle (one shift for both), which
-    one shot per angle cannot (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between
-    them. Empty without such a pair."""
-    kept = _kept_edges(shots, rejected)
+    correction ``model`` (:func:`pipeline.own_shift.twin_shift`): per pair the two ``names``, the strings' angle, d
+    with one shift for both and with a shift each, ``ratio``, the lens's move across the strings (``move_px``) and
+    ``moved`` beyond :data:`TWIN_MOVE_PX`. Two shots at one angle tell a lens that moved between them (a shift each)
+    from a term of the lens at that angle (one shift for both), which one shot per angle cannot
+    (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between them. Every edge of both twins
+    is compared, those a fit rejected too: the twins see the same strings, and an edge dropped from one twin but
+    not from the other reads as a move (a session's twin, fitted on none, read 15 % short that way). Empty without
+    such a pair."""
+    kept = _kept_edges(shots, ())
     angles = [shot_orientation(lines) for lines in kept]
     out = []
     for i in range(len(kept)):
@@ -199,19 +201,13 @@ def twin_record(
 
 
 def session_twin_record(
-    model: DistortionModel,
-    fitted: Sequence[Sequence[np.ndarray]],
-    first: int,
-    twin: Sequence[np.ndarray],
-    names: tuple[str, str],
-    rejected: Sequence[Any] = (),
+    model: DistortionModel, first: Sequence[np.ndarray], twin: Sequence[np.ndarray], names: tuple[str, str]
 ) -> dict[str, Any]:
     """A session's twin (``capture.twin_deg``: the shot ``twin`` taken again, after the others and not fitted, at
-    the angle of ``fitted[first]``) compared with that shot under the correction ``model`` fitted on the shots
-    ``fitted``, as :func:`twin_record` compares a pair (the first shot's edges but the fit's ``rejected``; the
-    twin's all), with ``twin_d_px``: the twin's straightness under the correction, a shot it was not fitted on."""
-    a = _kept_edges(fitted, rejected)[first]
-    b = _kept_edges([twin], ())[0]
+    the angle of the shot ``first``) compared with that shot under the session's correction ``model``, as
+    :func:`twin_record` compares a pair (every edge of both), with ``twin_d_px``: the twin's straightness under the
+    correction, a shot it was not fitted on."""
+    a, b = _kept_edges([first, twin], ())
     entry = _twin_entry(model, a, b, names, shot_orientation(a))
     return {**entry, "twin_d_px": finite_or_none(corrected_straightness(model, b)[0])}
 
@@ -330,7 +326,7 @@ def _figures(d: float, d_max: float) -> Figures:
 
 def _kept_edges(lines: Sequence[Sequence[np.ndarray]], rejected: Sequence[Any]) -> list[list[np.ndarray]]:
     """Per shot, its edges of 3 points or more that the full fit did not reject (``rejected``: its rejected edges,
-    by image and line): what the hold-out and the twins measure."""
+    by image and line; none: every edge, what the twins compare): what the hold-out measures."""
     outliers = {(r.image, r.line) for r in rejected}
     return [[p for j, p in enumerate(shot) if (i, j) not in outliers and len(p) >= 3] for i, shot in enumerate(lines)]
 

@@ -265,7 +265,7 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
     # each shot held out, the correction moved for it alone (four shots or more): kept with the profile, as a session's
     own = shot_own_shifts(shots, width, height, cal.spec, res.rejected, map_fn)
     # two shots at one angle: did the lens move between them (under the correction fitted on all)?
-    twins = twin_record(res.model, shots, [str(p) for p, _ in fit_m], res.rejected)
+    twins = twin_record(res.model, shots, [str(p) for p, _ in fit_m])
     details = {**({"own_shift": own} if own is not None else {}), **({"twins": twins} if twins else {})}
     profile = cal.profile(
         width,

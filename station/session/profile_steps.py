@@ -86,7 +86,7 @@ def fit_focus(
         return cal
     first, twin = cap.twin
     names = (orientation_name(config, first), orientation_name(config, twin))
-    record = session_twin_record(cal.fit.model, fitted, cap.fitted.index(first), shots[twin], names, cal.fit.rejected)
+    record = session_twin_record(cal.fit.model, shots[first], shots[twin], names)
     return dataclasses.replace(cal, details={**cal.details, "twins": [record]})
 
 
