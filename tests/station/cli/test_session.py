@@ -544,12 +544,19 @@ def test_full_disk_stops_with_one_line_then_resumes_once_space_is_freed(small_di
     frame_hashes(session)  # every frame file matches its checksum
 
 
+def check_of(profile, name: str):
+    """The QA check ``name`` of a stored profile's verdict."""
+    return next(c for c in profile.qa.checks if c.name == name)
+
+
 def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     """Issue 19 items 4-5 end to end: ``harp session run`` on the simulated station with a Zaber linear stage
     (axis 3) under the turntable takes every angle at 0 mm, then at 40 mm (the simulated camera renders the harp
     about the moved axis: 3 px per mm along 30 degrees), records where the stage was, and stores a profile whose
     harp self-check found the turntable axis at both places, 120 px apart along 30 degrees as the world moved it.
-    Truth: the simulated world's shift (``simulation.shift_direction_deg``, the scene's pitch over the harp's)."""
+    Truth: the simulated world's shift (``simulation.shift_direction_deg``, the scene's pitch over the harp's).
+    With a twin (``capture.twin_deg`` 45): the stage goes back to the first place for it last, the fit leaves it
+    out (four shots at each place), and the lens, which does not move here, is read not to have moved."""
     import math
 
     d = yaml.safe_load(DEMO.read_text())
@@ -559,6 +566,7 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     d["simulation"].update(shift_direction_deg=30.0, emulator={"speed_deg_s": 3600.0, "accel_deg_s2": 72000.0})
     d["focus"]["settings"] = [0.5]
     d["capture"].update(orientations_deg=[0, 45, 90, 135], frames_per_orientation=1, shift_positions_mm=[0, 40])
+    d["capture"]["twin_deg"] = 45
     d["pipeline"].update(bootstrap=2, workers=1)  # every bootstrap replicate fitted about both places too
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     p = tmp_path / "station.yaml"
@@ -567,7 +575,7 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     frames = [r for r in manifest(tmp_path / "sessions" / "s") if r["kind"] == "frame"]
     assert [(r["orientation_idx"], r["meta"]["commanded_shift_mm"]) for r in frames] == [
         (o, 0 if o < 4 else 40) for o in range(8)
-    ]
+    ] + [(8, 0)]
     assert all(abs(r["meta"]["shift_mm"] - r["meta"]["commanded_shift_mm"]) < 1e-3 for r in frames)
     (profile,) = profile_fields(tmp_path / "profiles.sqlite").values()
     assert profile.details["shift_positions_mm"] == [0, 40] and profile.details["strings"]["separated"] is True
@@ -578,14 +586,19 @@ def test_a_two_axis_session_stores_a_profile_fitted_about_both_places(tmp_path):
     moved = 40 * 3.0 * np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
     assert np.hypot(x1 - x0 - moved[0], y1 - y0 - moved[1]) < 3.0, (x1 - x0, y1 - y0, moved)
     assert axes["worst_off_px"] < 3.0 and axes["px_per_mm"] == pytest.approx(3.0, rel=0.03)
-    check = {c.name: c for c in profile.qa.checks}["axis_places"]
+    check = check_of(profile, "axis_places")
     assert check.passed is True and "0 mm at" in check.text and "40 mm at" in check.text
+    (twin,) = profile.details["twins"]
+    assert twin["paths"] == ["orientation 1 (45 deg at 0 mm)", "orientation 8 (45 deg at 0 mm, the twin)"]
+    assert abs(twin["move_px"]) < 0.15 and not twin["moved"] and check_of(profile, "twin_move").passed
     from station.qa.report import session_shots
 
     with SessionDir.open(tmp_path / "sessions" / "s") as s:  # the report's shots: where each was taken
         shots = session_shots(s, 0)
-    assert [(sh.shift_mm, sh.orientation_deg) for sh in shots] == [(mm, a) for mm in (0, 40) for a in (0, 45, 90, 135)]
-    assert shots[4].place == "stage 0 deg at 40 mm"
+    assert [(sh.shift_mm, sh.orientation_deg) for sh in shots] == [
+        (mm, a) for mm in (0, 40) for a in (0, 45, 90, 135)
+    ] + [(0, 45)]
+    assert shots[4].place == "stage 0 deg at 40 mm" and shots[8].place == "stage 45 deg at 0 mm (the twin, not fitted)"
 
 
 def test_run_warns_of_a_plan_along_the_pixel_grid_before_capturing_then_runs_it(tmp_path, capsys):
@@ -678,8 +691,7 @@ def test_a_twin_tells_a_lens_that_moved_between_two_shots_at_one_angle(tmp_path)
         assert abs(abs(twin["move_px"]) - abs(drawn)) < 0.02 * abs(drawn) + 0.15, (twin, drawn)
         assert len(p.details["own_shift"]["per_orientation"]) == 6  # the twin is not fitted
         assert len(p.merit.holdout.per_orientation_d) == 6
-        check = next(c for c in p.qa.checks if c.name == "twin_move")
-        corrected = next(c for c in p.qa.checks if c.name == "corrected_d")
+        check, corrected = check_of(p, "twin_move"), check_of(p, "corrected_d")
         assert "d of the 6 measured shots" in corrected.text
         again = reprocess_focus(FocusJob(str(base / "sessions" / "m"), 0))
         assert again.failure is None and again.profile is not None
