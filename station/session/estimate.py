@@ -146,7 +146,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
         assumptions.append("sensor size not in the configuration: 5 megapixels assumed")
     render = RENDER_S_PER_MPX * mpx if config.station.camera.driver == "sim" else 0.0
     frame_s = cap.exposure_us / 1e6 + FRAME_OVERHEAD_S + render
-    n_o = len(cap.orientations)
+    n_o = len(cap.fitted)  # the fit's shots (a twin is compared, not fitted)
     pc = config.pipeline
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
     first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
@@ -182,7 +182,9 @@ def estimate_plan(config: Config) -> PlanEstimate:
                     PlanRow(
                         f,
                         config.focus_settings[f],
-                        "capture + measure" + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm"),
+                        "capture + measure"
+                        + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm")
+                        + (" (the twin: compared, not fitted)" if cap.twin is not None and o == cap.twin[1] else ""),
                         cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),

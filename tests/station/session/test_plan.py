@@ -187,3 +187,26 @@ def test_the_estimate_of_a_two_axis_plan_names_each_place_and_its_stage_moves():
     # the stage's 40 mm at its assumed speed, on the first shot at the second place (the turntable's way back to 0
     # takes the simulated stage well under a second)
     assert rows[8].seconds - rows[9].seconds > 40.0 / SHIFT_SPEED_MM_S
+
+
+def test_a_twin_is_the_last_shot_of_each_focus_setting_and_the_estimate_says_so():
+    """``capture.twin_deg``: after every other orientation of a focus setting the turntable goes back to the twin's
+    angle, captures and measures it, then the setting is fitted; the estimate names the twin's row and the fit holds
+    out the fitted orientations only."""
+    from station.session.estimate import estimate_plan
+
+    cfg = load_config(DEMO)
+    twin = dataclasses.replace(cfg, capture=dataclasses.replace(cfg.capture, twin_deg=45.0))
+    steps = list(plan_session(twin))
+    moves = [s for s in steps if isinstance(s, Move) and s.focus_idx == 0]
+    assert [(m.orientation_idx, m.degrees) for m in moves] == [
+        *enumerate(cfg.capture.orientations_deg),
+        (8, 45.0),
+    ]
+    first = steps[: steps.index(Fit(0))]
+    assert first[-1] == Measure(0, 8) and sum(isinstance(s, Capture) for s in first) == 9 * 2
+    rows = [r for r in estimate_plan(twin).rows if r.focus_idx == 0]
+    assert [r.what for r in rows if r.what.startswith("capture")] == ["capture + measure"] * 8 + [
+        "capture + measure (the twin: compared, not fitted)"
+    ]
+    assert rows[-1].what.startswith("fit (8 orientations held out in turn")
