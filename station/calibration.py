@@ -189,8 +189,8 @@ def twin_record(
     from a term of the lens at that angle (one shift for both), which one shot per angle cannot
     (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between them. Every edge of both twins
     is compared, those a fit rejected too: the twins see the same strings, and an edge dropped from one twin but
-    not from the other reads as a move (a session's twin, fitted on none, read 15 % short that way). Empty without
-    such a pair."""
+    not from the other reads as a move (a session's twin compared with its first shot less the fit's rejected edges
+    read the move 15 % short, ``benchmarks/RESULTS-realism.md``). Empty without such a pair."""
     kept = _kept_edges(shots, ())
     angles = [shot_orientation(lines) for lines in kept]
     out = []

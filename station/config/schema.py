@@ -220,8 +220,8 @@ class CaptureConfig:
     def visits(self) -> tuple[int, ...]:
         """Per orientation of :attr:`orientations`, the plan's visit of its pose: 0 the first time, 1 the twin's
         return (a simulated camera renders a return's frames anew, :class:`drivers.protocols.IndexedCapture`)."""
-        return tuple(int(o == len(self.orientations) - 1 and self.twin_deg is not None) for o in
-                     range(len(self.orientations)))  # fmt: skip
+        n = len(self.orientations)
+        return tuple(int(self.twin_deg is not None and o == n - 1) for o in range(n))
 
     @functools.cached_property
     def angles_deg(self) -> tuple[float, ...]:

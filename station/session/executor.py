@@ -432,9 +432,12 @@ class Executor:
         )
 
         def grab() -> Frame:
-            if isinstance(self.camera, IndexedCapture):  # a twin's return to a pose says so (its own frames)
+            if isinstance(self.camera, IndexedCapture):
                 visit = self.config.capture.visits[step.orientation_idx]
-                self.camera.set_capture_index(index, visit) if visit else self.camera.set_capture_index(index)
+                if visit:  # a twin's return to a pose: frames of their own
+                    self.camera.set_capture_index(index, visit)
+                else:
+                    self.camera.set_capture_index(index)
             frame = self.camera.capture(timeout=timeout)
             img = np.asarray(frame.image)
             if img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
-from typing import Any, cast
+from typing import Any, Literal
 
 import numpy as np
 
@@ -42,7 +42,8 @@ def axis_places(reads: Any, config: Config, f: int) -> AxisPlaces | None:
         return None
     commanded, read = [], []
     for o in cap.fitted:  # the shots the fit takes (a twin is compared, not fitted)
-        mm = float(cast(float, cap.shifts_mm[o]))
+        mm = cap.shifts_mm[o]
+        assert mm is not None  # a two-axis capture: every orientation has its place
         records = reads.frames(f, o) if reads is not None else []
         got = (records[-1].meta or {}).get("shift_mm") if records else None
         commanded.append(mm)
@@ -58,7 +59,7 @@ def fit_focus(
     size: tuple[int, int],
     map_fn: MapFn,
     reads: Any = None,
-    spec: FitSpec | None | str = "config",
+    spec: FitSpec | None | Literal["config"] = "config",
 ) -> Calibration:
     """The calibration of focus setting ``f`` from its orientations' edges (``shots``, one per
     orientation of the plan) on frames of ``size`` = (width, height); ``reads``: the session (its frames' records
@@ -77,7 +78,7 @@ def fit_focus(
         h,
         config.pipeline,
         f,
-        config.pipeline.spec if spec == "config" else cast("FitSpec | None", spec),
+        config.pipeline.spec if isinstance(spec, str) else spec,
         map_fn=map_fn,
         turntable_deg=[cap.angles_deg[o] for o in cap.fitted],
         axis_places=axis_places(reads, config, f),
