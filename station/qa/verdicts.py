@@ -49,6 +49,7 @@ A FAIL has one reason per failed check. :func:`qa_verdict` judges one
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -59,6 +60,7 @@ import numpy as np
 from pipeline.compare import compare_models
 from pipeline.edgeset import EdgeSet, collect, edge_figures, straightness_of, tls
 from pipeline.fit import fit_distortion
+from pipeline.fitspec import FIELD_NONE, STRINGS_KINKS, STRINGS_SEPARATE
 from pipeline.model_file import read_model_file
 from pipeline.models.base import IdentityModel
 from pipeline.plain import finite_or_none
@@ -66,6 +68,7 @@ from station.calibration import (
     MOVING_LENS_ADVICE,
     OWN_SHIFT_ADVICE,
     TWIN_MOVE_PX,
+    calibrate_focus,
     calibrate_shots,
     largest_own_shift,
 )
@@ -192,12 +195,26 @@ def _holds(value: float, comparison: str, limit: float) -> bool:
 
 
 @dataclass(frozen=True)
+class FittedAs:
+    """How a session fitted its shots (:func:`station.session.profile_steps.fit_focus`): its ``pipeline``
+    configuration, the focus index (its bootstrap seed), each shot's turntable angle and a two-axis capture's
+    places (:class:`station.calibration.AxisPlaces`, None: one place)."""
+
+    pipeline: Any
+    focus_idx: int
+    turntable_deg: tuple[float, ...]
+    axis_places: Any = None
+
+
+@dataclass(frozen=True)
 class Measurements:
     """The measured edges a profile was fitted on: per shot (orientation), its edges as (M, 2)
-    arrays of distorted pixels, and where they come from (said in the check texts)."""
+    arrays of distorted pixels, and where they come from (said in the check texts); ``fitted_as``: how the session
+    fitted them (None: not a session's, or not known), so that its holdout is recomputed the same way."""
 
     shots: Sequence[Sequence[np.ndarray]]
     source: str
+    fitted_as: FittedAs | None = None
 
     @property
     def n_edges(self) -> int:
@@ -536,7 +553,9 @@ def reported_figures(profile: Profile) -> dict[str, float | None]:
 
 def recompute_holdout(profile: Profile, measurements: Measurements, map_fn=map) -> tuple[float | None, str]:
     """(holdout d, note): the leave-one-orientation-out holdout d of ``profile`` recomputed from
-    ``measurements`` by refitting its spec exactly as a session does
+    ``measurements`` by refitting its spec exactly as it was fitted: a profile whose lens was fitted with the
+    strings' bends separated (``details["strings"]``), from a session's measurements (``fitted_as``), with every fold
+    fitted so too (:func:`station.calibration.calibrate_focus`, as the session did); any other with the lens alone
     (:func:`station.calibration.calibrate_shots`); (None, why) when it cannot be."""
     hold = profile.merit.holdout
     if profile.spec is None:
@@ -545,14 +564,24 @@ def recompute_holdout(profile: Profile, measurements: Measurements, map_fn=map) 
         return None, f"not recomputed: its holdout comes from {hold.scheme}, not from these measurements"
     if len(measurements.shots) < 2:
         return None, "not recomputed: fewer than 2 measured shots"
-    cal = calibrate_shots(
-        [list(s) for s in measurements.shots],
-        profile.width,
-        profile.height,
-        profile.spec,
-        holdout="orientations",
-        map_fn=map_fn,
-    )
+    shots = [list(s) for s in measurements.shots]
+    strings = (profile.details or {}).get("strings") or {}
+    how = measurements.fitted_as
+    if how is not None and strings.get("separated"):  # its holdout's folds were fitted with the strings separated
+        pipe = dataclasses.replace(
+            how.pipeline,
+            bootstrap=0,
+            field=FIELD_NONE,
+            strings=STRINGS_KINKS if "kinks" in strings else STRINGS_SEPARATE,
+        )  # the spec carries the field the session chose; the bootstrap does not change the holdout
+        cal = calibrate_focus(
+            shots, profile.width, profile.height, pipe, how.focus_idx, profile.spec, map_fn=map_fn,
+            turntable_deg=how.turntable_deg, axis_places=how.axis_places,
+        )  # fmt: skip
+        if not (cal.details.get("strings") or {}).get("separated"):
+            return None, "not recomputed: the strings could not be separated again"
+    else:
+        cal = calibrate_shots(shots, profile.width, profile.height, profile.spec, holdout="orientations", map_fn=map_fn)
     if cal.failure is not None or cal.merit.holdout is None or cal.merit.holdout.d is None:
         return None, f"not recomputed: {cal.failure or 'no holdout figure'}"
     return float(cal.merit.holdout.d), ""
@@ -636,13 +665,22 @@ def session_profiles(session_path) -> list[tuple[int, Profile]]:
 def session_measurements(session, focus_idx: int) -> Measurements | None:
     """The measured edges a session kept for one focus setting (``measurements/``, the shots'
     current attempts), or None when any orientation lacks its kept measurement."""
+    from station.session.profile_steps import axis_places  # defers the session's fit
+
+    cap = session.config.capture
     shots = []
-    for o in session.config.capture.fitted:  # the shots the fit took (a twin is compared, not fitted)
+    for o in cap.fitted:  # the shots the fit took (a twin is compared, not fitted)
         m = stored_measurement(session, focus_idx, o)
         if m is None:
             return None
         shots.append([np.asarray(ln.points, np.float64) for ln in m.lines])
-    return Measurements(shots, f"{session.path.name}/measurements, focus index {focus_idx}")
+    how = FittedAs(
+        session.config.pipeline,
+        focus_idx,
+        tuple(cap.angles_deg[o] for o in cap.fitted),
+        axis_places(session, session.config, focus_idx),
+    )
+    return Measurements(shots, f"{session.path.name}/measurements, focus index {focus_idx}", how)
 
 
 def interpolation_error(models_by_focus: dict, width: int, height: int):
