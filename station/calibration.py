@@ -108,8 +108,8 @@ MOVING_LENS_ADVICE = (
 """What to do about a lens that moves between shots (QA's and ``harp calibrate``'s warnings)."""
 
 OWN_SHIFT_ADVICE = (
-    f"{MOVING_LENS_ADVICE}; two shots at the same angle tell it from a lens term that bends each orientation its own "
-    "way"
+    f"{MOVING_LENS_ADVICE}; two shots at the same angle (a session's capture.twin_deg) tell it from a lens term that "
+    "bends each orientation its own way"
 )
 """What QA and ``harp calibrate`` say when the held-out shots carry a term of their own (``moving``)."""
 
