@@ -191,14 +191,13 @@ def twin_record(
     is compared, those a fit rejected too: the twins see the same strings, and an edge dropped from one twin but
     not from the other reads as a move (a session's twin compared with its first shot less the fit's rejected edges
     read the move 15 % short, ``benchmarks/RESULTS-realism.md``). Empty without such a pair."""
-    kept = _kept_edges(shots, ())
-    angles = [shot_orientation(lines) for lines in kept]
+    angles = [shot_orientation(lines) for lines in shots]
     out = []
-    for i in range(len(kept)):
-        for j in range(i + 1, len(kept)):
+    for i in range(len(shots)):
+        for j in range(i + 1, len(shots)):
             gap = abs(angles[i] - angles[j]) % 180.0
             if min(gap, 180.0 - gap) <= TWIN_ANGLE_DEG:
-                out.append(_twin_entry(model, kept[i], kept[j], (names[i], names[j]), angles[i]))
+                out.append(_twin_entry(model, shots[i], shots[j], (names[i], names[j]), angles[i]))
     return out
 
 
@@ -209,9 +208,8 @@ def session_twin_record(
     the angle of the shot ``first``) compared with that shot under the session's correction ``model``, as
     :func:`twin_record` compares a pair (every edge of both), with ``twin_d_px``: the twin's straightness under the
     correction, a shot it was not fitted on."""
-    a, b = _kept_edges([first, twin], ())
-    entry = _twin_entry(model, a, b, names, shot_orientation(a))
-    return {**entry, "twin_d_px": finite_or_none(corrected_straightness(model, b)[0])}
+    entry = _twin_entry(model, first, twin, names, shot_orientation(first))
+    return {**entry, "twin_d_px": finite_or_none(corrected_straightness(model, twin)[0])}
 
 
 def _twin_entry(
@@ -326,13 +324,6 @@ def _figures(d: float, d_max: float) -> Figures:
     return Figures(finite_or_none(d), finite_or_none(d_max))
 
 
-def _kept_edges(lines: Sequence[Sequence[np.ndarray]], rejected: Sequence[Any]) -> list[list[np.ndarray]]:
-    """Per shot, its edges of 3 points or more that the full fit did not reject (``rejected``: its rejected edges,
-    by image and line; none: every edge, what the twins compare): what the hold-out measures."""
-    outliers = {(r.image, r.line) for r in rejected}
-    return [[p for j, p in enumerate(shot) if (i, j) not in outliers and len(p) >= 3] for i, shot in enumerate(lines)]
-
-
 @dataclass(frozen=True)
 class _OrientationHoldout:
     """:func:`_orientation_holdout`'s figure and each held-out orientation's own axis shift."""
@@ -353,14 +344,14 @@ def _orientation_holdout(
     straightness of all of them together, and per orientation; and per orientation the same edges under its fold's
     model with the model's axis moved for them alone (:func:`pipeline.own_shift.own_axis_shift`).
     ``(k, reason)`` for the first fold whose fit failed."""
-    kept_all = _kept_edges(lines, rejected)
+    outliers = {(r.image, r.line) for r in rejected}
     held_lines: list[np.ndarray] = []
     per_o: list[float | None] = []
     own: list[OwnShift] = []
     for k, (model, reason) in enumerate(map_fn(job_fn, jobs)):
         if model is None:
             return k, str(reason)
-        kept = kept_all[k]
+        kept = [p for i, p in enumerate(lines[k]) if (k, i) not in outliers and len(p) >= 3]
         per_o.append(finite_or_none(corrected_straightness(model, kept)[0]))
         held_lines.extend(model.undistort_points(p) for p in kept)
         own.append(own_axis_shift(model, kept))

@@ -217,11 +217,15 @@ class CaptureConfig:
         return tuple(range(n - 1 if self.twin_deg is not None else n))
 
     @functools.cached_property
+    def fitted_angles_deg(self) -> tuple[float, ...]:
+        """The turntable angle of each fitted shot (:attr:`fitted`), in order."""
+        return tuple(self.angles_deg[o] for o in self.fitted)
+
+    @functools.cached_property
     def visits(self) -> tuple[int, ...]:
         """Per orientation of :attr:`orientations`, the plan's visit of its pose: 0 the first time, 1 the twin's
         return (a simulated camera renders a return's frames anew, :class:`drivers.protocols.IndexedCapture`)."""
-        n = len(self.orientations)
-        return tuple(int(self.twin_deg is not None and o == n - 1) for o in range(n))
+        return tuple(int(o not in self.fitted) for o in range(len(self.orientations)))
 
     @functools.cached_property
     def angles_deg(self) -> tuple[float, ...]:

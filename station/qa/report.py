@@ -312,7 +312,7 @@ def session_shots(session, focus_idx: int, t: int = DEFAULT_T) -> list[Shot]:
         image = average_frames([session.read_frame(r) for r in records])
         m = stored_measurement(session, focus_idx, o)
         measured = m if m is not None else pipeline.measure.measure_image(image, t=t)
-        twin = cfg.capture.twin is not None and o == cfg.capture.twin[1]
+        twin = o not in cfg.capture.fitted  # the twin: compared, not fitted
         shots.append(Shot(float(deg), image, measured, None if mm is None else float(mm), twin))
     return shots
 

@@ -677,7 +677,7 @@ def session_measurements(session, focus_idx: int) -> Measurements | None:
     how = FittedAs(
         session.config.pipeline,
         focus_idx,
-        tuple(cap.angles_deg[o] for o in cap.fitted),
+        cap.fitted_angles_deg,
         axis_places(session, session.config, focus_idx),
     )
     return Measurements(shots, f"{session.path.name}/measurements, focus index {focus_idx}", how)

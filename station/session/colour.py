@@ -126,7 +126,7 @@ def session_colour(session: Any, focus_idx: int, model: DistortionModel, config:
     if pattern is None:
         return None
     mosaics, angles, names = [], [], []
-    for rs, commanded in zip(records, [config.capture.angles_deg[o] for o in fitted]):
+    for rs, commanded in zip(records, config.capture.fitted_angles_deg):
         mosaics.append(average_frames([session.read_frame(r) for r in rs]))
         stage = (rs[-1].meta or {}).get("stage_deg")
         angles.append(float(commanded if stage is None else stage))

@@ -184,7 +184,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                         config.focus_settings[f],
                         "capture + measure"
                         + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm")
-                        + (" (the twin: compared, not fitted)" if cap.twin is not None and o == cap.twin[1] else ""),
+                        + ("" if o in cap.fitted else " (the twin: compared, not fitted)"),
                         cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),

@@ -490,7 +490,8 @@ class Executor:
         f = step.focus_idx
         n_o = len(self.config.capture.orientations)
         shots = [self._shots[(f, o)].lines for o in range(n_o)]
-        cal = fit_focus(f, self.config, shots, self._image_size(f), self.workers.map, self.session)
+        size = self._image_size(f)
+        cal = fit_focus(f, self.config, shots, size, self.workers.map, self.session, spec=self.config.pipeline.spec)
         self._calibrations[f] = cal
         if cal.failure or not cal.fit:
             self._emit(FitFailed(f, str(cal.failure)))

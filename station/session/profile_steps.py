@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
@@ -59,12 +59,13 @@ def fit_focus(
     size: tuple[int, int],
     map_fn: MapFn,
     reads: Any = None,
-    spec: FitSpec | None | Literal["config"] = "config",
+    *,
+    spec: FitSpec | None,
 ) -> Calibration:
     """The calibration of focus setting ``f`` from its orientations' edges (``shots``, one per
     orientation of the plan) on frames of ``size`` = (width, height); ``reads``: the session (its frames' records
     say where a two-axis capture's stage was, :func:`axis_places`; None: where the plan sent it); ``spec``: what to
-    fit (``"config"``: ``pipeline.model``'s; None: chosen). The executor and ``harp reprocess`` both call this.
+    fit (None: chosen by cross-validation). The executor and ``harp reprocess`` both call this.
 
     The fit takes every shot but a twin (``capture.twin_deg``; :attr:`~station.config.schema.CaptureConfig.fitted`);
     the twin is compared with its first shot under the fitted correction
@@ -78,9 +79,9 @@ def fit_focus(
         h,
         config.pipeline,
         f,
-        config.pipeline.spec if isinstance(spec, str) else spec,
+        spec,
         map_fn=map_fn,
-        turntable_deg=[cap.angles_deg[o] for o in cap.fitted],
+        turntable_deg=cap.fitted_angles_deg,
         axis_places=axis_places(reads, config, f),
     )
     if cap.twin is None or cal.failure is not None or not cal.fit:
@@ -96,7 +97,7 @@ def orientation_name(config: Config, o: int) -> str:
     cap = config.capture
     mm = cap.shifts_mm[o]
     where = f"{cap.angles_deg[o]:g} deg" + ("" if mm is None else f" at {mm:g} mm")
-    return f"orientation {o} ({where}{', the twin' if cap.twin is not None and o == cap.twin[1] else ''})"
+    return f"orientation {o} ({where}{'' if o in cap.fitted else ', the twin'})"
 
 
 def fitted_record(f: int, cal: Calibration, session: SessionDir) -> Fitted:
