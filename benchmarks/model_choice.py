@@ -70,7 +70,7 @@ def old_rule(table: Sequence[CVRow]) -> FitSpec:
 
 # ------------------------------------------------------------------------ real photographs
 def real_part(directory: Path) -> None:
-    from point_weights import real_points
+    from real_photos import real_points
 
     measured = real_points(directory)
     if measured is None:

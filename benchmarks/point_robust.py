@@ -35,7 +35,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # point_weights' harness, model_choice's population
 
-from point_weights import harness_arguments, point_rows, ratio_cells, real_measurements, real_splits
+from point_weights import harness_arguments, point_rows, ratio_cells, real_splits
+from real_photos import real_measurements
 
 from pipeline.fit import fit_distortion
 from pipeline.measure import point_sigmas

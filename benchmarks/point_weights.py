@@ -56,7 +56,9 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # model_choice's point-set population
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # model_choice's point-set population, real_photos
+
+from real_photos import Measured, real_measurements
 
 from pipeline.compare import compare_models
 from pipeline.edgeset import FitResult, corrected_straightness
@@ -128,43 +130,9 @@ def fit_variant(lines, ms, v, w, h, spec, plain=None):  # type: ignore[no-untype
 
 
 # ------------------------------------------------------------------------ real photographs
-Measured = tuple[str, list[str], dict[str, Any], dict[str, list[np.ndarray]], tuple[int, int]]
 FitVariant = Callable[..., Any]
 """``fit(lines, measurements, variant, width, height, spec, plain)``: the fit of ``lines`` (the ``measurements``
 they come from, ``pipeline.measure``'s) by ``variant``; ``plain`` the base variant's fit of the same lines."""
-
-
-def real_measurements(directory: Path) -> Measured | None:
-    """The photographs in ``directory`` measured as ``harp measure`` does (the measurements: whole strings,
-    point sigmas) and interior only (``smoothing="gaussian"``, points), the folder's and their names and the
-    size; None, and a line
-    saying so, when there are fewer than three."""
-    import cv2
-
-    names = sorted(p.name for p in directory.glob("*.pgm"))
-    if len(names) < 3:
-        print(f"(no real photographs in {directory}: part skipped)")
-        return None
-    whole, interior = {}, {}
-    size = (0, 0)
-    for n in names:
-        img = cv2.imread(str(directory / n), cv2.IMREAD_UNCHANGED)
-        size = (img.shape[1], img.shape[0])
-        whole[n] = measure_image(img)
-        interior[n] = [ln.points for ln in measure_image(img, smoothing="gaussian").lines]
-    return directory.name, names, whole, interior, size
-
-
-def real_points(
-    directory: Path,
-) -> tuple[list[str], dict[str, list[np.ndarray]], dict[str, list[np.ndarray]], tuple[int, int]] | None:
-    """:func:`real_measurements` as edge points only: the names, each photograph's edges (whole strings)
-    and interior-only edges by name, and the size; None (and the line saying so) as there."""
-    measured = real_measurements(directory)
-    if measured is None:
-        return None
-    _, names, whole, interior, size = measured
-    return names, {n: [ln.points for ln in m.lines] for n, m in whole.items()}, interior, size
 
 
 def real_splits(

@@ -338,7 +338,7 @@ def population_part(seeds: range, fit_counts: Sequence[int], workers: int, cache
 
 # ------------------------------------------------------------------------ real photographs
 def real_part(directory: Path) -> None:
-    from point_weights import real_points
+    from real_photos import real_points
 
     measured = real_points(directory)
     if measured is None:
