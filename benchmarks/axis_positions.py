@@ -20,7 +20,7 @@ shapes are the only error) are traced for plans of equal shot counts:
 The two-axis plans are fitted twice: with each group's shift given 2 % off (``axis_shifts``, what a linear
 stage's travel and a rough image scale tell) and with each group's axis searched on its own shots (no
 shift given; three shots 60 degrees apart cannot place an axis for a harp of uniform pitch, see
-``pipeline.harp_shape.group_frames``, which refuses it: "nan (refused)"). "(axis wrong)": a group's axis (or the
+``pipeline.harp_frame.group_frames``, which refuses it: "nan (refused)"). "(axis wrong)": a group's axis (or the
 one axis) was found more than a third of a pitch from where it was drawn (its strings misnumbered). A two-axis cell has a third
 figure: the strings separated with a ridge ten times weaker (``LOW_RIDGE``) than the default
 (``pipeline.harp_shape.STRING_RIDGE``, 0.02).

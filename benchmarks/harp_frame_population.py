@@ -1,5 +1,5 @@
 """How often the harp's frame is wrong: the turntable axis and each string's number across shots
-(issue 19 item 4, ``pipeline.harp_shape.harp_frame``) over seeded geometries a user could have.
+(issue 19 item 4, ``pipeline.harp_frame.harp_frame``) over seeded geometries a user could have.
 
 Run::
 
@@ -23,7 +23,7 @@ fitted lens's ideal pixels), and the drawn string of each edge. "axis off" count
 than a quarter pitch from the truth; "misnumbered" frames in which some string's edges carry two numbers or
 one number holds two strings; "refused" the frames refused (a FitFailure: e.g. an axis that these angles
 cannot place). A refused frame is not counted as off or misnumbered: the session reports its reason. The frame's
-pitch (``HarpFrame.pitch_px``, ``pipeline.harp_shape.harp_pitch``) is compared with the drawn one (the slope of the
+pitch (``HarpFrame.pitch_px``, ``pipeline.harp_frame.harp_pitch``) is compared with the drawn one (the slope of the
 strings' drawn positions, mapped at the axis through the exact lens and back through the fitted one).
 """
 
@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline.fit import fit_distortion
 from pipeline.fitspec import FitSpec
+from pipeline.harp_frame import group_frames, harp_frame
 from pipeline.harp_scene import HarpMount, draw_harp
-from pipeline.harp_shape import group_frames, harp_frame
 from pipeline.lens_population import lens_population
 from tests.pipeline.harp_points import drawn_harp_point_sets
 

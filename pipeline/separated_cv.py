@@ -13,7 +13,7 @@ When the turntable angles are known, each fold is fitted with every string's dev
 the deviations that fold fitted removed (:func:`held_out_without_strings`; with ``kink_t``, the kinks it found on
 each string too, as a session with ``pipeline.strings: separate-kinks`` fits its lens): each held-out edge is given
 to the string at its distance from the turntable axis in the fold's ideal image (the rule of
-:func:`pipeline.harp_shape.harp_frame`), and its corrected points are moved back by that string's
+:func:`pipeline.harp_frame.harp_frame`), and its corrected points are moved back by that string's
 deviation :math:`\delta_k(u)\,n` before its straightness is measured. What is left is the lens's misfit,
 the measurement's noise and what the fold could not learn of the strings (a string seen in fewer than two
 of the fold's shots gets no deviation: its edges are left as they are and counted).
@@ -57,7 +57,7 @@ two lines only, and its bend and the lens's terms trade."""
 
 MATCH_PITCHES = 1.0 / 3.0
 """A held-out edge belongs to the fold's string nearest to it across the strings when within this many
-string pitches (the distance between neighbouring strings' centres, :func:`pipeline.harp_shape.shot_pitch`)."""
+string pitches (the distance between neighbouring strings' centres, :func:`pipeline.harp_frame.shot_pitch`)."""
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ def held_out_without_strings(
     r"""The residuals of a held-out shot's edges (distorted pixels) corrected by ``fit.model``, each moved
     back by its string's deviation as ``fit`` fitted it (module docstring).
 
-    The harp coordinates of a point are those of the fit (:class:`pipeline.harp_shape.HarpFrame` at the
+    The harp coordinates of a point are those of the fit (:class:`pipeline.harp_frame.HarpFrame` at the
     shot's ``turntable_deg``, from the points corrected by the fit's start ``fit.plain.model``, as
     :func:`pipeline.harp_shape.fit_harp_shape` takes them); an edge's string is the one whose offset
     :math:`q_k` is nearest to the edge's median :math:`q`, within :data:`MATCH_PITCHES` pitches. The

@@ -44,19 +44,16 @@ from pipeline.fitspec import (
     STRINGS_SEPARATE,
     FitSpec,
 )
+from pipeline.harp_frame import GROUP_AXIS_SEARCH, MIN_GROUP_ANGLES, harp_frame, string_pitch
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
-    GROUP_AXIS_SEARCH,
-    MIN_GROUP_ANGLES,
     SHOT_NOISE_FACTOR,
     HarpShapeFit,
     fit_harp_shape,
-    harp_frame,
     lens_result,
     separated_job,
     separated_kinks_job,
     shot_weights,
-    string_pitch,
 )
 from pipeline.models.base import DistortionModel
 from pipeline.orientations import distinct_orientations, shot_orientation, support_problem
@@ -648,13 +645,13 @@ def axes_of(
     """The axis groups and rough shifts of a two-axis capture for :func:`pipeline.harp_shape.fit_harp_shape`
     (None when every shot was taken at one place: nothing changes), from the shots' edges as measured.
 
-    The image scale is the strings' pitch in the shots (:func:`pipeline.harp_shape.string_pitch`; the lens's
+    The image scale is the strings' pitch in the shots (:func:`pipeline.harp_frame.string_pitch`; the lens's
     distortion changes it by its local scale only) over the harp's pitch in mm. Each group's shift is its shots'
     mean read-back position less the middle of the commanded positions, times the scale, along ``direction_deg``;
     the axis at that middle is then found, to an eighth of a pitch, on every shot moved back by its group's shift
-    (:func:`pipeline.harp_shape.harp_frame` within :data:`pipeline.harp_shape.GROUP_AXIS_SEARCH` pitches of the
+    (:func:`pipeline.harp_frame.harp_frame` within :data:`pipeline.harp_frame.GROUP_AXIS_SEARCH` pitches of the
     image centre; it needs four turntable angles or more, else it is taken at the image centre) and the shifts are
-    given from the image centre to there: :func:`pipeline.harp_shape.group_frames` searches each group's axis
+    given from the image centre to there: :func:`pipeline.harp_frame.group_frames` searches each group's axis
     within a third of a pitch of where its shift puts it. Without ``direction_deg`` no shift is given (each group's
     axis searched on its own shots)."""
     if places is None or len(set(places.commanded_mm)) < 2:

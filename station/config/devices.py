@@ -119,11 +119,11 @@ def _shift_positions(config: Config, turntable: Any) -> None:
     """Two-axis capture (``capture.shift_positions_mm``): the turntable has a linear stage (``turntable.shift``,
     its driver's ``shift_axis``) and every position is within its configured travel; without the image direction
     of a stage move (``station.harp.shift_direction_deg``) each place's axis is searched on its own shots, which
-    takes four turntable angles or more (:func:`pipeline.harp_shape.group_frames`)."""
+    takes four turntable angles or more (:func:`pipeline.harp_frame.group_frames`)."""
     cap = config.capture
     if not cap.shift_positions_mm:
         return
-    from pipeline.harp_shape import MIN_GROUP_ANGLES  # defers cv2
+    from pipeline.harp_frame import MIN_GROUP_ANGLES  # defers cv2
 
     shift = getattr(turntable, "shift", None)
     if shift is None:

@@ -9,28 +9,21 @@ from pipeline.compare import compare_models
 from pipeline.edgeset import FitResult
 from pipeline.fit import correction_scale, fit_distortion
 from pipeline.fitspec import FitSpec
-from pipeline.harp_scene import HarpMount, draw_harp
 from pipeline.harp_shape import (
     BEND_LIMIT_PX,
     STRING_RIDGE,
     StringShape,
     fit_harp_shape,
-    group_frames,
-    harp_frame,
     legendre,
     own_bends,
     seen_twice,
 )
 from pipeline.lens_population import lens_population
-from pipeline.models import RadialModel
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial_field import RadialFieldParametrisation
-from tests.pipeline.harp_points import drawn_harp_point_sets, kinked_harp_point_sets, turning_harp_point_sets
+from tests.pipeline.harp_points import kinked_harp_point_sets, turning_harp_point_sets
+from tests.pipeline.harp_support import LENS, H, W, drawn_corrected
 
-W, H = 1000, 750
-LENS = RadialModel.for_image(
-    W, H, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366), tangential=(8e-4, -5e-4), prism=(4e-4, 0.0, -3e-4, 0.0)
-)
 SPEC = FitSpec("radial", 4, True, True)
 TURNS = (0, 30, 60, 90, 120, 150)
 
@@ -204,31 +197,7 @@ def test_axis_groups_that_do_not_match_the_shots_are_refused():
     assert not fit and "no axis shift for axis group 1" in fit.reason
 
 
-# ------------------------------------------------------------------ the harp's frame (harp_frame)
-def _drawn(turns, n_strings, pitch, axis_off, seed=1):
-    """Shots of a drawn harp (bows, kinks, twist) through LENS, corrected by the exact LENS, with the drawn axis
-    (ideal px) and the drawn string of every edge (``pipeline.harp_scene`` geometry, not ``harp_frame``'s)."""
-    axis = ((W - 1) / 2.0 + axis_off[0] * pitch, (H - 1) / 2.0 + axis_off[1] * pitch)
-    harp = draw_harp(seed, n_strings, pitch, 3.0, 1.5 * np.hypot(W, H), material="nylon", visible_px=600.0)
-    shots, strings = drawn_harp_point_sets(LENS, W, H, turns, harp, HarpMount(axis, 20.0), step=20.0, seed=seed)
-    return [[LENS.undistort_points(e) for e in s] for s in shots], strings, np.array(axis)
-
-
-def _one_number_per_string(numbers, strings):
-    pairs = {(t, n) for ts, ns in zip(strings, numbers) for t, n in zip(ts, ns)}
-    return len(pairs) == len({t for t, _ in pairs}) == len({n for _, n in pairs})
-
-
-def test_the_axis_is_found_two_pitches_off_the_image_centre():
-    turns = (0, 30, 60, 90, 120, 150)
-    corrected, strings, axis = _drawn(turns, 13, 45.0, (1.5, -1.2))
-    framed = harp_frame(corrected, turns, W, H)
-    assert framed, framed
-    frame, numbers = framed
-    assert np.hypot(*(np.array(frame.centre) - axis)) < 1.0
-    assert _one_number_per_string(numbers, strings)
-
-
+# ------------------------------------------------------------------ the harp's frame in the joint fit
 def test_four_shots_45_degrees_apart_number_every_string_and_find_its_kinks():
     # the geometry in which the frame was once put a half pitch off (benchmarks/RESULTS-strings.md, "half-pitch
     # ambiguity"): 9 strings 60 px apart, 0/45/90/135; each string now one string in all four shots, its kink
@@ -249,72 +218,14 @@ def test_four_shots_45_degrees_apart_number_every_string_and_find_its_kinks():
         assert abs(found[s].at_px - at) < 4.0 and found[s].area_px2 == pytest.approx(2 * h * lam, rel=0.3)
 
 
-def test_three_shots_of_a_harp_wider_than_the_image_cannot_place_the_axis_and_say_so():
-    # three angles: the strings' distances agree about a lattice of points (harp_shape.group_frames), and with
-    # the harp's ends out of view nothing tells them apart: refused with the reason, not numbered wrongly
+def test_a_frame_the_turntable_angles_cannot_place_refuses_the_fit_with_the_reason():
+    # three shots of a harp wider than the image (tests/pipeline/test_harp_frame.py): harp_frame refuses the frame,
+    # and the joint fit says why instead of numbering the strings wrongly
     turns = (0, 60, 120)
-    corrected, _, _ = _drawn(turns, 29, 50.0, (0.7, 0.4), seed=2)
-    framed = harp_frame(corrected, turns, W, H)
-    assert not framed and "axis is ambiguous with these turntable angles" in framed.reason
+    corrected, _, _ = drawn_corrected(turns, 29, 50.0, (0.7, 0.4), seed=2)
     shots = [[LENS.distort_points(e) for e in s] for s in corrected]
     fit = fit_harp_shape(shots, turns, W, H, SPEC, plain=fit_distortion(shots, W, H, **SPEC.fit_arguments()))
     assert not fit and "add angles spread over the half turn" in fit.reason
-
-
-def test_three_shots_of_a_harp_whose_ends_are_in_view_place_the_axis():
-    # the same three angles, the whole harp in view: about a wrong lattice point the shots' strings shift by
-    # whole pitches against each other, which makes more strings than the harp has
-    turns = (0, 60, 120)
-    corrected, strings, axis = _drawn(turns, 9, 50.0, (0.7, 0.4), seed=2)
-    framed = harp_frame(corrected, turns, W, H)
-    assert framed, framed
-    frame, numbers = framed
-    assert np.hypot(*(np.array(frame.centre) - axis)) < 1.0
-    assert _one_number_per_string(numbers, strings)
-
-
-# ------------------------------------------------------------------ axis groups without shifts (group_frames)
-def _two_places(left_turns, right_turns, n=23):
-    """Shots of a 23-string harp 60 px apart (wider than the image) about two axes 168 px either side of the
-    distortion centre, corrected by the exact LENS, with the drawn axes and each edge's drawn string (its offset
-    from its own drawn axis in the generator's frame, nearest drawn offset)."""
-    centre, shift = np.array(LENS.center), np.array([150.0, 75.0])
-    shots, strings, turns = [], [], []
-    for axis, angles, seed in ((centre - shift, left_turns, 5), (centre + shift, right_turns, 6)):
-        drawn, offsets = turning_harp_point_sets(LENS, W, H, angles, np.zeros((n, 3)), axis=axis, step=40, seed=seed)
-        for t, shot in zip(angles, drawn):
-            a = np.radians(20.0 + t)
-            nrm = np.array([-np.sin(a), np.cos(a)])
-            corrected = [LENS.undistort_points(e) for e in shot]
-            shots.append(corrected)
-            strings.append([int(np.argmin(np.abs(offsets - np.mean((e - axis) @ nrm)))) for e in corrected])
-            turns.append(t)
-    return shots, strings, turns, (centre - shift, centre + shift)
-
-
-def test_two_groups_of_four_angles_45_degrees_apart_place_each_other_without_shifts():
-    # each group alone agrees as well about places 1.85 pitches off its axis, some with a string fewer (a harp wider
-    # than the image): about two axes only the drawn pair makes all the shots one harp. On the comb search each
-    # group's axis was put 5.5 pitches off and the 23 strings numbered as 37.
-    turns = (0, 45, 90, 135)
-    shots, strings, angles, axes = _two_places(turns, turns)
-    placed = group_frames(shots, angles, ["L"] * 4 + ["R"] * 4, W, H)
-    assert placed, placed
-    frames, numbers = placed
-    for g, drawn in zip("LR", axes, strict=True):
-        assert np.hypot(*(np.array(frames[g].centre) - drawn)) < 1.0
-    assert _one_number_per_string(numbers, strings)
-
-
-def test_two_groups_of_three_angles_cannot_place_their_axes_without_shifts_and_say_so():
-    # three angles: the distances agree about a lattice of places about each axis (and pairs of them about both),
-    # and with a string left out of a shot a wrong one can agree better than the axis: refused, not numbered wrongly
-    shots, _, angles, _ = _two_places((0, 60, 120), (30, 90, 150))
-    placed = group_frames(shots, angles, ["L"] * 3 + ["R"] * 3, W, H)
-    assert not placed and "axis group 'L': 3 turntable angles cannot place its axis without a shift" in placed.reason
-    shots, _, angles, _ = _two_places((0, 45, 90, 135), (0, 60, 120))
-    placed = group_frames(shots, angles, ["L"] * 4 + ["R"] * 3, W, H)
-    assert not placed and "axis group 'R': 3 turntable angles" in placed.reason
 
 
 def _weak_field_shots() -> tuple[DistortionModel, list[list[np.ndarray]], tuple[int, ...], FitSpec, FitResult]:

@@ -87,7 +87,8 @@ def test_the_harp_check_names_a_string_only_when_its_bend_is_beyond_its_standard
     """``station.calibration.harp_health`` on a joint fit given (strings made by hand, so the truth is their
     construction): string 4 bows by 0.03 px measured to 0.002 px, string 7 by 0.025 px measured to 0.02 px (seen
     over little of its length); both beyond the limit and the median string's, only string 4 is a finding."""
-    from pipeline.harp_shape import HarpFrame, HarpShapeFit, StringShape, legendre
+    from pipeline.harp_frame import HarpFrame
+    from pipeline.harp_shape import HarpShapeFit, StringShape, legendre
     from station.calibration import harp_health
 
     def string(k, p2, se):
@@ -334,7 +335,7 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
 
 def test_a_session_whose_angles_cannot_place_the_harps_axis_says_so():
     """Issue 19 item 4: three turntable angles and a harp wider than the image cannot place the turntable axis
-    (the strings' distances agree about a lattice of places, ``pipeline.harp_shape.harp_frame``): the session keeps
+    (the strings' distances agree about a lattice of places, ``pipeline.harp_frame.harp_frame``): the session keeps
     the lens alone and records why, in the harp's self-check and in QA's check, rather than numbering the
     strings wrongly. Truth: the generator's uniform harp (27 strings 50 px apart about a known axis)."""
     from pipeline.fitspec import FitSpec

@@ -169,7 +169,8 @@ def test_a_turntable_axis_found_away_from_where_the_stage_put_it_fails_the_profi
     """Two-axis capture: each place's axis as the joint fit found it against the stage's travel
     (:func:`station.calibration.axis_record`: 10 px per mm along 0 degrees, places 0 and 10 mm, pitch 40 px);
     within half a pitch it passes, beyond it the strings were misnumbered there and QA says so."""
-    from pipeline.harp_shape import HarpFrame, HarpShapeFit
+    from pipeline.harp_frame import HarpFrame
+    from pipeline.harp_shape import HarpShapeFit
     from station.calibration import Axes, AxisPlaces, axis_record
 
     places = AxisPlaces((0.0, 0.0, 10.0, 10.0), (0.0, 0.0, 10.0, 10.0), 0.0, 4.0)

@@ -64,7 +64,7 @@ def test_a_lens_page_shows_its_plots_and_its_downloads_load_in_opencv(page, dash
     names.append("holdout_own_shift")  # the held-out orientations' own axis shift: reported, not judged
     assert checks.evaluate_all("rs => rs.map(r => r.dataset.check)") == names
     # the small station's four angles 45 degrees apart cannot place the axis of a harp wider than its image
-    # (pipeline.harp_shape.harp_frame: ambiguous), so the harp's self-check is reported with why, not judged
+    # (pipeline.harp_frame.harp_frame: ambiguous), so the harp's self-check is reported with why, not judged
     assert page.locator("article.profile").first.locator("tr.check.passed").count() == len(names) - 2
     bend = page.locator("article.profile").first.locator('tr.check[data-check="string_bend_max"]')
     assert bend.get_attribute("class") == "check reported"

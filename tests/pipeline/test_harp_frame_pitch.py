@@ -1,4 +1,4 @@
-"""The harp's string pitch from the shots' edge offsets (``pipeline.harp_shape.shot_pitch``, one estimator for
+"""The harp's string pitch from the shots' edge offsets (``pipeline.harp_frame.shot_pitch``, one estimator for
 the station's mm -> px scale, ``string_pitch``, and for the harp's frame, ``harp_frame``). Truth: the generator's
 exact geometry (``tests.pipeline.harp_points.turning_harp_point_sets``: strings a known spacing apart about a known
 axis, both edges of each) through a known lens, and that lens's exact maps."""
@@ -6,7 +6,7 @@ axis, both edges of each) through a known lens, and that lens's exact maps."""
 import numpy as np
 import pytest
 
-from pipeline.harp_shape import harp_frame, harp_pitch, shot_pitch, string_pitch
+from pipeline.harp_frame import harp_frame, harp_pitch, shot_pitch, string_pitch
 from pipeline.models import RadialModel
 from tests.pipeline.harp_points import turning_harp_point_sets
 
