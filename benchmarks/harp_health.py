@@ -15,7 +15,7 @@ turntable angles given). Truth: the exact lens (field error modulo homography ov
 ``compare_models``) and each string's exact centre line (``Harp.strings[k].deviation``) projected on
 the fitted family (Legendre P2..P4 over the stretch of the string the shots show), read along the string in the
 direction the fitted frame runs (``harp_along``, from the geometry). The last columns but two: the session's QA
-of the same fit (``station.calibration.harp_health``, ``station.qa.verdicts``: ``string_bend_max``), its verdict
+of the same fit (``station.harp_health.harp_health``, ``station.qa.verdicts``: ``string_bend_max``), its verdict
 and the strings it names, each with its drawn bend. The last line also counts the forced strings drawn beyond the
 limit where the QA judges a string (within half the image diagonal of the axis and, beyond it, where two shots see
 the string: ``pipeline.harp_shape.own_bends``), and how many of them it named; and the forced bends within 20 % when
@@ -46,8 +46,8 @@ from pipeline.harp_shape import BEND_LIMIT_PX, fit_harp_shape, legendre
 from pipeline.lens_population import lens_population
 from pipeline.measure import measure_image
 from pipeline.realism import realistic_session, render_shots
-from station.calibration import harp_health
 from station.config import QAConfig
+from station.harp_health import harp_health
 from station.qa.verdicts import evaluate
 
 TURNS = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
@@ -121,7 +121,7 @@ def one(seed: int, w: int, h: int, places: int = 1) -> dict[str, object]:
             fitted = float(np.max(np.abs(s.deviation(u[s.judged(u)]))))
             judged.append((s.index, true_bend(harp, k, s.span, fit.frame.scale_px, along, s), fitted))
         pairs.append((drawn[s.index][0], s.bend_px, s.bend_se_px, k in forced))
-    # the session's QA of the same fit (station.calibration.harp_health, station.qa.verdicts): its verdict and the
+    # the session's QA of the same fit (station.harp_health.harp_health, station.qa.verdicts): its verdict and the
     # strings it names, each with its drawn bend
     health = harp_health([], turns, w, h, SPEC, joint=fit)
     check = next(

@@ -48,7 +48,7 @@ from pipeline.fit import fit_distortion
 from pipeline.fitspec import parse
 from pipeline.models.base import DistortionModel
 from pipeline.own_shift import own_axis_shift
-from station.calibration import OWN_SHIFT_RATIO
+from station.moving_lens import OWN_SHIFT_RATIO
 
 SPEC = "radial4+tangential+prism"
 CONFIGS = (  # (label, largest lens-field RMS px, distortion-centre SD px, p1/p2 SD between shots)

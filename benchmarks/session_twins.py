@@ -16,7 +16,7 @@ taken last and not fitted.
 Cameras: the lens's distortion centre moves between poses by N(0, SD) per axis (``simulation.lens_centre_sd_px``;
 0: a stable lens); a return to a pose is another pose (:meth:`drivers.sim.camera.SimulatedCamera.set_capture_index`'s
 ``visit``). Per camera the table gives how often QA's ``twin_move`` failed the session (the move read beyond
-:data:`station.calibration.TWIN_MOVE_PX`) against how often the move drawn is beyond it, the error of the move read
+:data:`station.moving_lens.TWIN_MOVE_PX`) against how often the move drawn is beyond it, the error of the move read
 against the move drawn (truth: the distortion centres the simulator recorded in the two frames, their difference
 across the strings at the recorded string angle), the largest move read on a stable lens, the twin's d under the
 stored correction (a shot it was not fitted on) and the sessions' wall time (whole processes, two at once with
@@ -43,7 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from benchmarks.two_place_sessions import config  # noqa: E402
-from station.calibration import TWIN_MOVE_PX  # noqa: E402
+from station.moving_lens import TWIN_MOVE_PX  # noqa: E402
 from station.store import ProfileStore  # noqa: E402
 
 CAPTURE = {"orientations_deg": [0.0, 30.0, 60.0, 90.0, 120.0, 150.0], "twin_deg": 30.0}

@@ -94,7 +94,7 @@ make a lattice of equally good places, about one per square pitch)."""
 GROUP_AXIS_SEARCH = 4.0
 """Radius, in string pitches, of the search for the turntable axis of each axis group of :func:`pipeline.harp_shape.fit_harp_shape`
 given no shifts, around the image centre (:func:`_place_groups`); half-width of the comb search of
-``station.calibration.axes_of`` (``harp_frame(reach=)``, :func:`_coarse_axis`)."""
+``station.axis_places.axes_of`` (``harp_frame(reach=)``, :func:`_coarse_axis`)."""
 
 GROUP_AXIS_SEEDS = 64
 """Most local minima of the trial axes' grid refined per axis group by :func:`_place_groups` (every one that scores

@@ -44,9 +44,7 @@ from pipeline.fitspec import (
     STRINGS_SEPARATE,
     FitSpec,
 )
-from pipeline.harp_frame import GROUP_AXIS_SEARCH, MIN_GROUP_ANGLES, harp_frame, string_pitch
 from pipeline.harp_shape import (
-    BEND_LIMIT_PX,
     SHOT_NOISE_FACTOR,
     HarpShapeFit,
     fit_harp_shape,
@@ -55,14 +53,16 @@ from pipeline.harp_shape import (
     separated_kinks_job,
     shot_weights,
 )
-from pipeline.models.base import DistortionModel
-from pipeline.orientations import distinct_orientations, shot_orientation, support_problem
-from pipeline.own_shift import OwnShift, own_axis_shift, twin_shift
+from pipeline.orientations import distinct_orientations, support_problem
+from pipeline.own_shift import OwnShift, own_axis_shift
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from pipeline.select import lowest_radial, select_field, select_model
 from pipeline.uncertainty import bootstrap_field_uncertainty, refit_job
+from station.axis_places import Axes, AxisPlaces, axes_of, axis_fit_arguments
 from station.equipment import Identity
+from station.harp_health import MIN_HEALTH_ORIENTATIONS, harp_health
+from station.moving_lens import MIN_OWN_SHIFT_ORIENTATIONS, own_shift_record
 from station.profile import (
     HOLDOUT_LEAVE_ONE_ORIENTATION_OUT,
     HOLDOUT_SHOTS,
@@ -84,63 +84,6 @@ GIVEN_ON_COMMAND_LINE = "given on the command line"
 """The selection reason of a spec a command's option names (``harp calibrate --model``, ``harp reprocess --spec``)."""
 
 
-OWN_SHIFT_RATIO = 0.7
-"""A session's held-out orientations are said to carry a term of their own when moving the correction's axis for
-each one alone (:func:`pipeline.own_shift.own_axis_shift`) leaves, in the median over them, less than this part of
-its held-out d. Set on realistic sessions of six shots (``benchmarks/own_shift.py --shots 6``, 20 lenses each,
-radial4+tangential+prism folds): a stable lens's per-session median is 0.91-1.00 (lens field up to 0.04 px RMS) or
-0.78-1.00 (up to 0.1), none below; a lens whose distortion centre moves N(0, 6 px) between shots, or its p1, p2
-N(0, 1e-4), is below for 11 of 20, N(0, 5e-5) for 1 of 20."""
-
-MIN_OWN_SHIFT_ORIENTATIONS = 4
-"""Fewest orientations for the own-shift figure: with three, each fold is fitted on two orientations, which leave a
-quadratic term undetermined that the held-out one then shows (``benchmarks/quadratic_sector.py``); its own shift
-takes that away too, so a stable lens can read as low as 0.54 (``benchmarks/own_shift.py``)."""
-
-
-MOVING_LENS_ADVICE = (
-    "the lens's decentering may change between shots (an image stabiliser, a focus or zoom group with play): switch "
-    "stabilisation off, lock focus and zoom, and capture again"
-)
-"""What to do about a lens that moves between shots (QA's and ``harp calibrate``'s warnings)."""
-
-OWN_SHIFT_ADVICE = (
-    f"{MOVING_LENS_ADVICE}; two shots at the same angle (a session's capture.twin_deg) tell it from a lens term that "
-    "bends each orientation its own way"
-)
-"""What QA and ``harp calibrate`` say when the held-out shots carry a term of their own (``moving``)."""
-
-
-def largest_own_shift(record: Mapping[str, Any]) -> float | None:
-    """The largest own axis shift (px) of an own-shift record (:func:`own_shift_record`); None when none is known."""
-    shifts = [o.get("shift_px") or [] for o in record.get("per_orientation") or []]
-    sizes = [float(np.hypot(*v)) for v in shifts if len(v) == 2 and None not in v]
-    return max(sizes) if sizes else None
-
-
-def own_shift_record(own: Sequence[OwnShift]) -> dict[str, Any]:
-    """The held-out orientations' own axis shifts as a profile keeps them (``details["own_shift"]``): per
-    orientation its held-out d, the d with its own shift and the shift (px); the median ratio; ``moving`` when that
-    median is below :data:`OWN_SHIFT_RATIO` with :data:`MIN_OWN_SHIFT_ORIENTATIONS` orientations or more (the lens's
-    decentering may change between shots: :mod:`pipeline.own_shift`)."""
-    ratios = [o.ratio for o in own if np.isfinite(o.ratio)]
-    median = float(np.median(ratios)) if ratios else float("nan")
-    return {
-        "ratio_median": finite_or_none(median),
-        "limit": OWN_SHIFT_RATIO,
-        "judged": len(ratios) >= MIN_OWN_SHIFT_ORIENTATIONS,
-        "moving": bool(len(ratios) >= MIN_OWN_SHIFT_ORIENTATIONS and median < OWN_SHIFT_RATIO),
-        "per_orientation": [
-            {
-                "d_held_px": finite_or_none(o.d_held),
-                "d_own_px": finite_or_none(o.d_own),
-                "shift_px": [finite_or_none(v) for v in o.shift_px],
-            }
-            for o in own
-        ],
-    }
-
-
 def shot_own_shifts(
     shots: Sequence[Sequence[np.ndarray]],
     width: int,
@@ -149,105 +92,15 @@ def shot_own_shifts(
     rejected: Sequence[Any] = (),
     map_fn: MapFn = map,
 ) -> dict[str, Any] | None:
-    """The own-shift record (:func:`own_shift_record`) of shots without turntable angles (``harp calibrate``): each
+    """The own-shift record (:func:`station.moving_lens.own_shift_record`) of shots without turntable angles (``harp calibrate``): each
     shot held out in turn, ``spec`` fitted on the others (``map_fn`` maps the fits), its edges but the full fit's
     ``rejected`` measured under that fit and under it moved for them alone (two shots at one angle are compared
-    directly by :func:`twin_record`). None with fewer than
-    :data:`MIN_OWN_SHIFT_ORIENTATIONS` shots or when a fold's fit fails."""
+    directly by :func:`station.moving_lens.twin_record`). None with fewer than
+    :data:`station.moving_lens.MIN_OWN_SHIFT_ORIENTATIONS` shots or when a fold's fit fails."""
     if len(shots) < MIN_OWN_SHIFT_ORIENTATIONS:
         return None
     loo = _refit_holdout(shots, width, height, spec.fit_arguments(), rejected, map_fn)
     return own_shift_record(loo.own) if isinstance(loo, _OrientationHoldout) else None
-
-
-TWIN_ANGLE_DEG = 2.0
-"""Two shots are twins (:func:`twin_record`) when their strings run within this of each other (degrees,
-:func:`pipeline.orientations.shot_orientation`): a harp turned back to an angle by hand comes back within a degree or
-two, and a term of the lens bends strings 2 degrees apart alike."""
-
-TWIN_MOVE_PX = 1.0
-"""The lens is said to have moved between twins when the move across their strings
-(:func:`pipeline.own_shift.twin_shift`) is larger than this (px). Set on realistic twins (``benchmarks/twins.py``,
-the photographs' set-up plus a shot at the first one's angle, 20 lenses per camera): a stable lens reads at most
-0.23 px (40 lenses, fields up to 0.04 and 0.1 px RMS); on lenses whose centre moves N(0, 3 px) or N(0, 6 px) the move
-read is within 0.06-0.15 px RMS of the move drawn (at most 0.36 px off), and every one of the 58 drawn beyond 1 px is
-read beyond it. Whole realistic sessions with a twin (``benchmarks/session_twins.py``, six angles and the twin, 30
-sessions): stable lenses read at most 0.10 px, moves are read within 0.04 px RMS, and all 17 drawn beyond 1 px are
-read beyond it."""
-
-
-def twin_record(
-    model: DistortionModel, shots: Sequence[Sequence[np.ndarray]], names: Sequence[str]
-) -> list[dict[str, Any]]:
-    """Every pair of ``shots`` whose strings run within :data:`TWIN_ANGLE_DEG` of each other, compared under the
-    correction ``model`` (:func:`pipeline.own_shift.twin_shift`): per pair the two ``names``, the strings' angle, d
-    with one shift for both and with a shift each, ``ratio``, the lens's move across the strings (``move_px``) and
-    ``moved`` beyond :data:`TWIN_MOVE_PX`. Two shots at one angle tell a lens that moved between them (a shift each)
-    from a term of the lens at that angle (one shift for both), which one shot per angle cannot
-    (:mod:`pipeline.own_shift`); the harp must not have been moved otherwise between them. Every edge of both twins
-    is compared, those a fit rejected too: the twins see the same strings, and an edge dropped from one twin but
-    not from the other reads as a move (a session's twin compared with its first shot less the fit's rejected edges
-    read the move 15 % short, ``benchmarks/RESULTS-realism.md``). Empty without such a pair."""
-    angles = [shot_orientation(lines) for lines in shots]
-    out = []
-    for i in range(len(shots)):
-        for j in range(i + 1, len(shots)):
-            gap = abs(angles[i] - angles[j]) % 180.0
-            if min(gap, 180.0 - gap) <= TWIN_ANGLE_DEG:
-                out.append(_twin_entry(model, shots[i], shots[j], (names[i], names[j]), angles[i]))
-    return out
-
-
-def session_twin_record(
-    model: DistortionModel, first: Sequence[np.ndarray], twin: Sequence[np.ndarray], names: tuple[str, str]
-) -> dict[str, Any]:
-    """A session's twin (``capture.twin_deg``: the shot ``twin`` taken again, after the others and not fitted, at
-    the angle of the shot ``first``) compared with that shot under the session's correction ``model``, as
-    :func:`twin_record` compares a pair (every edge of both), with ``twin_d_px``: the twin's straightness under the
-    correction, a shot it was not fitted on."""
-    entry = _twin_entry(model, first, twin, names, shot_orientation(first))
-    return {**entry, "twin_d_px": finite_or_none(corrected_straightness(model, twin)[0])}
-
-
-def _twin_entry(
-    model: DistortionModel, a: Sequence[np.ndarray], b: Sequence[np.ndarray], names: tuple[str, str], angle: float
-) -> dict[str, Any]:
-    """One pair of twins' record (:func:`twin_record`)."""
-    got = twin_shift(model, a, b)
-    return {
-        "paths": list(names),
-        "angle_deg": finite_or_none(angle),
-        "d_common_px": finite_or_none(got.d_common),
-        "d_each_px": finite_or_none(got.d_each),
-        "ratio": finite_or_none(got.ratio),
-        "move_px": finite_or_none(got.move_px),
-        "limit_px": TWIN_MOVE_PX,
-        "moved": bool(np.isfinite(got.move_px) and abs(got.move_px) > TWIN_MOVE_PX),
-    }
-
-
-def twin_warnings(records: Sequence[Mapping[str, Any]]) -> list[str]:
-    """``harp calibrate``'s warning for each pair of twins between which the lens moved (:func:`twin_record`)."""
-    return [
-        f"{r['paths'][0]} and {r['paths'][1]} (strings at {r['angle_deg']:.1f} deg): the lens moved "
-        f"{abs(r['move_px']):.1f} px across the strings between these two shots at one angle, beyond "
-        f"{r['limit_px']:g} px; the correction is their mean: {MOVING_LENS_ADVICE}"
-        for r in records
-        if r.get("moved")
-    ]
-
-
-def own_shift_warning(record: Mapping[str, Any] | None) -> str | None:
-    """``harp calibrate``'s warning when its held-out shots each want the correction moved on their own (the record's
-    ``moving``, :func:`shot_own_shifts`); None otherwise."""
-    if not record or not record.get("moving"):
-        return None
-    size = largest_own_shift(record)
-    return (
-        f"each shot held out wants the correction moved on its own: {record['ratio_median']:.2f} of its held-out d is "
-        f"left (median, below {record['limit']:g})" + (f", by up to {size:.1f} px" if size is not None else "")
-        + f": {OWN_SHIFT_ADVICE}"
-    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -409,7 +262,7 @@ def calibrate_shots(
     turntable_deg : each shot's turntable angle, when known: the automatic choice cross-validates every
         candidate with the strings separated (:func:`pipeline.select.select_model`'s ``turntable_deg``).
     axis_groups, axis_shifts : with ``turntable_deg`` or ``field_turntable_deg``, a two-axis capture's groups and
-        shifts (:func:`axes_of`) for those folds.
+        shifts (:func:`station.axis_places.axes_of`) for those folds.
     field : ``"auto"``: a residual field added to the model (chosen or given) when it holds on unseen orientations
         (:func:`pipeline.select.select_field`; :data:`pipeline.fitspec.FIELD_CHOICES`); ``"none"``: never.
     field_turntable_deg : each shot's turntable angle for the field's folds, fitted with the strings' bends
@@ -578,261 +431,6 @@ def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG, support: s
     return {"reason": selection.reason, "folds": selection.folds}
 
 
-# ------------------------------------------------------- two turntable-axis places
-@dataclass(frozen=True)
-class AxisPlaces:
-    """Two-axis capture (``capture.shift_positions_mm``): the linear stage that carries the turntable sideways, per
-    shot its position as the plan commanded it (the shot's axis group) and as it read back (mm); how a stage move
-    shows in the image: ``direction_deg`` (``station.harp.shift_direction_deg``, from +x towards +y; None: unknown,
-    each place's axis searched on its own shots, which needs four turntable angles or more there) and the harp's
-    pitch in mm (``station.harp.string_spacing_mm``): the pitch the shots show in px over it is the image scale of
-    the harp's plane, in which the stage moves the axis."""
-
-    commanded_mm: tuple[float, ...]
-    read_mm: tuple[float, ...]
-    direction_deg: float | None
-    spacing_mm: float
-
-
-@dataclass(frozen=True)
-class Axes:
-    """What the joint fit is told of a two-axis capture (:func:`axes_of`): each shot's axis group (its stage
-    position's label, :func:`place_label`), each group's rough image shift of the axis from where the axis is with
-    the stage halfway between its outermost positions (px; None: each group's axis searched), the strings' pitch
-    in the shots (px) and the image scale (px per mm of stage travel)."""
-
-    places: AxisPlaces
-    groups: tuple[str, ...]
-    shifts: dict[str, tuple[float, float]] | None
-    pitch_px: float
-    px_per_mm: float
-
-    def fit_arguments(self) -> dict[str, Any]:
-        """``axis_groups`` and ``axis_shifts`` for :func:`pipeline.harp_shape.fit_harp_shape` (and the fits that
-        pass them on)."""
-        return {"axis_groups": self.groups, "axis_shifts": self.shifts}
-
-    def fold(self, k: int) -> tuple[list[str], dict[str, tuple[float, float]] | None]:
-        """``(axis_groups, axis_shifts)`` of the shots without shot ``k`` (a leave-one-orientation-out fold)."""
-        return [g for j, g in enumerate(self.groups) if j != k], self.shifts
-
-
-def place_label(mm: float) -> str:
-    """The axis group of the shots taken with the linear stage at ``mm``."""
-    return f"{mm:g} mm"
-
-
-def _read_back(places: AxisPlaces, groups: Sequence[str]) -> dict[str, float]:
-    """Each axis group's mean read-back position of the stage (mm), in the order the groups first appear."""
-    return {
-        g: float(np.mean([r for h, r in zip(groups, places.read_mm, strict=True) if h == g]))
-        for g in dict.fromkeys(groups)
-    }
-
-
-def _fit_arguments(axes: Axes | None) -> dict[str, Any]:
-    """:meth:`Axes.fit_arguments`, or none for one axis place."""
-    return {} if axes is None else axes.fit_arguments()
-
-
-def axes_of(
-    places: AxisPlaces | None,
-    shots: Sequence[Sequence[np.ndarray]],
-    width: int,
-    height: int,
-    turntable_deg: Sequence[float],
-) -> Axes | None:
-    """The axis groups and rough shifts of a two-axis capture for :func:`pipeline.harp_shape.fit_harp_shape`
-    (None when every shot was taken at one place: nothing changes), from the shots' edges as measured.
-
-    The image scale is the strings' pitch in the shots (:func:`pipeline.harp_frame.string_pitch`; the lens's
-    distortion changes it by its local scale only) over the harp's pitch in mm. Each group's shift is its shots'
-    mean read-back position less the middle of the commanded positions, times the scale, along ``direction_deg``;
-    the axis at that middle is then found, to an eighth of a pitch, on every shot moved back by its group's shift
-    (:func:`pipeline.harp_frame.harp_frame` within :data:`pipeline.harp_frame.GROUP_AXIS_SEARCH` pitches of the
-    image centre; it needs four turntable angles or more, else it is taken at the image centre) and the shifts are
-    given from the image centre to there: :func:`pipeline.harp_frame.group_frames` searches each group's axis
-    within a third of a pitch of where its shift puts it. Without ``direction_deg`` no shift is given (each group's
-    axis searched on its own shots)."""
-    if places is None or len(set(places.commanded_mm)) < 2:
-        return None
-    raw = [[np.asarray(p, np.float64) for p in s] for s in shots]
-    pitch = string_pitch(raw)
-    ppm = pitch / places.spacing_mm
-    groups = tuple(place_label(m) for m in places.commanded_mm)
-    shifts = None
-    if places.direction_deg is not None and np.isfinite(ppm):
-        mid = 0.5 * (min(places.commanded_mm) + max(places.commanded_mm))
-        a = np.radians(places.direction_deg)
-        rel = {g: (mm - mid) * ppm * np.array([np.cos(a), np.sin(a)]) for g, mm in _read_back(places, groups).items()}
-        ref = np.zeros(2)  # where the axis is with the stage at the middle, from the image centre
-        if distinct_orientations(turntable_deg) >= MIN_GROUP_ANGLES:
-            back = [[p - rel[g] for p in s] for s, g in zip(raw, groups, strict=True) if s]
-            framed = harp_frame(
-                back, [float(t) for t, s in zip(turntable_deg, raw, strict=True) if s], width, height,
-                reach=GROUP_AXIS_SEARCH, refine=False,
-            )  # fmt: skip
-            if framed:
-                ref = np.asarray(framed[0].centre) - np.array([(width - 1) / 2.0, (height - 1) / 2.0])
-        shifts = {g: (float(v[0] + ref[0]), float(v[1] + ref[1])) for g, v in rel.items()}
-    return Axes(places, groups, shifts, float(pitch), float(ppm))
-
-
-def axis_record(axes: Axes, fit: HarpShapeFit) -> dict[str, Any]:
-    """Each place's turntable axis as the joint fit found it (``HarpShapeFit.axis_groups``) against where the
-    stage's travel puts it, as a profile keeps it (``harp_health["axes"]``): per place its position (mm, the
-    commanded one), shots, the axis found (ideal px) and how far it is from where the travel puts it relative to
-    the other places (``off_px``: with ``direction_deg`` the difference of the two displacements from their means;
-    without, of the distances from the first place's axis). More than half a pitch (``limit_px``) and the strings
-    were numbered at the wrong place: ``misplaced`` lists those places (QA fails the profile)."""
-    found = {str(g): f for g, f in fit.axis_groups}
-    labels = [g for g in dict.fromkeys(axes.groups) if g in found]
-    read = _read_back(axes.places, axes.groups)
-    mm = {g: read[g] for g in labels}
-    centre = {g: np.asarray(found[g].centre, np.float64) for g in labels}
-    off: dict[str, float] = {}
-    if axes.places.direction_deg is not None:
-        a = np.radians(axes.places.direction_deg)
-        want = {g: mm[g] * axes.px_per_mm * np.array([np.cos(a), np.sin(a)]) for g in labels}
-        mc = np.mean([centre[g] for g in labels], axis=0)
-        mw = np.mean([want[g] for g in labels], axis=0)
-        off = {g: float(np.hypot(*((centre[g] - mc) - (want[g] - mw)))) for g in labels}
-    elif labels:
-        first = labels[0]
-        off = {
-            g: abs(float(np.hypot(*(centre[g] - centre[first]))) - abs(mm[g] - mm[first]) * axes.px_per_mm)
-            for g in labels
-        }
-    limit = 0.5 * axes.pitch_px
-    places = [
-        {
-            "position_mm": float(axes.places.commanded_mm[axes.groups.index(g)]),
-            "shots": axes.groups.count(g),
-            "centre_px": [float(centre[g][0]), float(centre[g][1])],
-            "off_px": finite_or_none(off.get(g, float("nan"))),
-        }
-        for g in labels
-    ]
-    worst = max(off.values()) if off else float("nan")
-    return {
-        "pitch_px": finite_or_none(axes.pitch_px),
-        "px_per_mm": finite_or_none(axes.px_per_mm),
-        "direction_deg": axes.places.direction_deg,
-        "shift_given": axes.shifts is not None,
-        "limit_px": finite_or_none(limit),
-        "places": places,
-        "worst_off_px": finite_or_none(worst),
-        "misplaced": [p["position_mm"] for p, g in zip(places, labels, strict=True) if off.get(g, 0.0) > limit],
-    }
-
-
-OUTLIER_FACTOR = 3.0
-"""A string is bent (QA) when its own bend exceeds the limit *and* this many times the median string's.
-A lens term the fitted model lacks bends the fits of many strings at once (a test session of straight
-strings whose model left d = 0.019 px showed own bends of 0.05-0.06 px on several strings); one bent
-string stands out of the others. When the median string itself is beyond the limit the harp cannot be
-told from the lens and QA says so without judging."""
-
-BEND_SIGNIFICANCE = 2.0
-"""A string is named bent (QA) only when its own bend is also this many standard errors or more
-(``bend_se_px``): a bend that cannot be told from none is not a finding. The strings seen over little of their
-length (the image's corners) carry standard errors as large as the limit: on ``benchmarks/harp_health.py``'s
-harps (seeds 0..19, six angles) one session failed on a string drawn at 0.0032 px, reported at 0.0207 +- 0.0188
-px, while the strings named rightly had their own bends 2.4 to 11 standard errors from none (a probe over the same
-fits). About two axis places one session of twenty named a string drawn at 0.0003 px, reported at 0.0436 +- 0.0159
-px: two of its shots' edges lay along the pixel grid and were measured 3.5 times worse than the others, which the
-check now weighs by their noise (:data:`pipeline.harp_shape.SHOT_NOISE_FACTOR`; ``benchmarks/RESULTS-harp-health.md``).
-"""
-
-MIN_HEALTH_ORIENTATIONS = 3
-"""Turntable angles the harp's self-check needs: with two, a string's bend and the lens's terms
-trade (each string is seen along two lines only), and the bends found are not the strings'."""
-
-
-def harp_health(
-    shots: Sequence[Sequence[np.ndarray]],
-    turntable_deg: Sequence[float],
-    width: int,
-    height: int,
-    spec: FitSpec,
-    *,
-    joint: HarpShapeFit | FitFailure | None = None,
-    axes: Axes | None = None,
-) -> dict[str, Any]:
-    """The harp's self-check (issue 19 item 4) as a profile keeps it (``details["harp_health"]``).
-
-    Every string's own bend fitted beside the lens ``spec`` with the shots' turntable angles
-    (:func:`pipeline.harp_shape.fit_harp_shape`): per string its bend, its own bend apart from what
-    every string shares (:meth:`pipeline.harp_shape.HarpShapeFit.own_bends`: a common part is a whole
-    harp's or a lens term's, not one string's fault; judged within half the image's diagonal of the
-    axis and, beyond it, where two shots or more see the string: ``seen_twice``) and the standard error
-    (px); the worst string and the strings whose own bend exceeds :data:`pipeline.harp_shape.BEND_LIMIT_PX`,
-    :data:`OUTLIER_FACTOR` times the median string's and :data:`BEND_SIGNIFICANCE` standard errors, as QA judges
-    them (``bent_strings``), and those
-    beyond the limit whose bend cannot be told from none (``uncertain_strings``); the shots the check weighed by
-    their noise (``noisy_shots``: :data:`pipeline.harp_shape.SHOT_NOISE_FACTOR`, with each one's turntable angle);
-    ``d`` with and without the strings' terms; ``{"failure": reason}`` when the joint fit cannot be made.
-    ``joint``: that fit when already made (:func:`calibrate_focus` makes it once for this and the lens);
-    ``axes``: the shots' turntable-axis places of a two-axis capture (:func:`axes_of`), each place's axis found
-    and compared with where the stage was sent (``"axes"``: :func:`axis_record`).
-    """
-
-    if distinct_orientations(turntable_deg) < MIN_HEALTH_ORIENTATIONS:
-        return {
-            "limit_px": BEND_LIMIT_PX,
-            "failure": f"needs >= {MIN_HEALTH_ORIENTATIONS} turntable angles 10 deg apart to tell a string's bend "
-            f"from the lens (the plan has {distinct_orientations(turntable_deg)})",
-        }
-    hs = (
-        joint
-        if joint is not None
-        else fit_harp_shape(
-            [list(s) for s in shots],
-            list(turntable_deg),
-            width,
-            height,
-            spec,
-            **_fit_arguments(axes),
-        )  # fmt: skip
-    )
-    if not hs:
-        return {"limit_px": BEND_LIMIT_PX, "failure": str(getattr(hs, "reason", "the joint fit failed"))}
-    own = {k: v for k, v in hs.own_bends().items() if np.isfinite(v)}
-    worst = max(own, key=lambda k: own[k]) if own else None
-    typical = float(np.median(list(own.values()))) if own else float("nan")
-    by_index = {s.index: s for s in hs.strings}
-    se = {k: float(by_index[k].bend_se_px) for k in own}
-    beyond = {k: v for k, v in own.items() if v > BEND_LIMIT_PX and v > OUTLIER_FACTOR * typical}
-    return {
-        "limit_px": BEND_LIMIT_PX,
-        "worst_string": worst,
-        "worst_bend_px": None if worst is None else own[worst],
-        "worst_bend_se_px": None if worst is None else finite_or_none(by_index[worst].bend_se_px),
-        "bent_strings": sorted(k for k, v in beyond.items() if v >= BEND_SIGNIFICANCE * se[k]),
-        "uncertain_strings": sorted(k for k, v in beyond.items() if not v >= BEND_SIGNIFICANCE * se[k]),
-        "significance": BEND_SIGNIFICANCE,
-        "outlier_factor": OUTLIER_FACTOR,
-        "typical_bend_px": typical,
-        "strings": [
-            {
-                "index": s.index,
-                "bend_px": finite_or_none(s.bend_px),
-                "own_bend_px": own.get(s.index),
-                "bend_se_px": finite_or_none(s.bend_se_px),
-                "shots": s.shots,
-                "span": [float(s.span[0]), float(s.span[1])],
-                "seen_twice": [finite_or_none(v) for v in s.seen_twice],
-            }
-            for s in hs.strings
-        ],
-        "noisy_shots": [
-            {"shot": i, "turntable_deg": float(turntable_deg[i]), "noise_ratio": r} for i, r in hs.noisy_shots
-        ],
-        "d_with_strings_px": finite_or_none(hs.d_after),
-        "d_lens_only_px": finite_or_none(hs.d_lens_only),
-    } | ({} if axes is None else {"axes": axis_record(axes, hs)})
-
-
 def separate_strings(
     cal: Calibration,
     shots: Sequence[Sequence[np.ndarray]],
@@ -868,7 +466,7 @@ def separate_strings(
     whose strings have no kink at the cost of one scan per focus. ``details["strings"]`` records what
     was done and the lens-alone figures; when the lens cannot be separated (a fold fails, the lens folds)
     ``cal`` is returned with the reason there and its plain lens. ``axes``: a two-axis capture's groups and shifts
-    (:func:`axes_of`; ``joint`` fitted with them), which every fold and replicate is fitted with too."""
+    (:func:`station.axis_places.axes_of`; ``joint`` fitted with them), which every fold and replicate is fitted with too."""
     spec = cal.spec
     full = cal.fit
     if spec is None or not full:
@@ -923,7 +521,7 @@ def separate_strings(
     if bootstrap >= 2:
         boot = bootstrap_field_uncertainty(
             lines, width, height, spec, n_boot=bootstrap, seed=seed, full_fit=res, map_fn=map_fn,
-            turntable_deg=turntable_deg, separated_fn=kink_job, **_fit_arguments(axes),
+            turntable_deg=turntable_deg, separated_fn=kink_job, **axis_fit_arguments(axes),
         )  # fmt: skip
         if cal.merit.field_uncertainty is not None:
             record["field_uncertainty_lens_alone_px"] = cal.merit.field_uncertainty.rms
@@ -960,9 +558,9 @@ def calibrate_focus(
     focus_idx``). ``spec``: what to fit (None: chosen by cross-validation). The executor and
     ``harp reprocess`` both call this, so re-processing fits what the session fitted.
     ``turntable_deg``: each shot's turntable angle; given, the harp checks itself
-    (:func:`harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
+    (:func:`station.harp_health.harp_health`, kept in ``details["harp_health"]``) and, with ``pipeline.strings`` =
     ``"separate-kinks"`` (the default: each string's kinks found and modelled as well) or ``"separate"`` and
-    :data:`MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
+    :data:`station.harp_health.MIN_HEALTH_ORIENTATIONS` or more orientations, the profile's
     lens is the one fitted with the strings' own bends separated (:func:`separate_strings`), and an automatic
     choice (``spec`` None) with ``pipeline.choice_folds`` = ``"strings-separated"`` cross-validates every candidate
     so too: each fold fitted with the strings separated, each held-out shot judged with its strings' fitted bends
@@ -971,8 +569,8 @@ def calibrate_focus(
     stored lens is fitted.
     ``axis_places``: each shot's linear-stage position of a two-axis capture (``capture.shift_positions_mm``);
     when the shots span two places or more, the joint fit, its folds and its bootstrap replicates find each
-    place's turntable axis (:func:`axes_of`), as do an automatic choice's strings-separated folds, and the harp's
-    self-check reports them (:func:`axis_record`). One place, or None: nothing changes. ``pipeline.field`` =
+    place's turntable axis (:func:`station.axis_places.axes_of`), as do an automatic choice's strings-separated folds, and the harp's
+    self-check reports them (:func:`station.axis_places.axis_record`). One place, or None: nothing changes. ``pipeline.field`` =
     ``"auto"``: a residual field is added to the model when it holds on unseen orientations
     (:func:`pipeline.select.select_field`), its folds fitted with the strings separated when they are."""
     strings = getattr(pipeline, "strings", STRINGS_KINKS)
@@ -995,7 +593,7 @@ def calibrate_focus(
         field=getattr(pipeline, "field", FIELD_NONE),
         field_turntable_deg=turntable_deg if separate and known else None,
         kink_t=kink_t if kinks else None,
-        **_fit_arguments(axes),
+        **axis_fit_arguments(axes),
     )
     if turntable_deg is None or cal.failure is not None or cal.spec is None:
         return cal
@@ -1003,7 +601,7 @@ def calibrate_focus(
     if distinct_orientations(turntable_deg) >= MIN_HEALTH_ORIENTATIONS and cal.fit:
         joint = fit_harp_shape(
             [list(s) for s in shots], list(turntable_deg), width, height, cal.spec, plain=cal.fit, kinks=kinks,
-            kink_t=kink_t, **_fit_arguments(axes),
+            kink_t=kink_t, **axis_fit_arguments(axes),
         )  # fmt: skip
     health = harp_health(shots, turntable_deg, width, height, cal.spec, joint=joint, axes=axes)
     cal = dataclasses.replace(cal, details={**cal.details, "harp_health": health})

@@ -32,7 +32,7 @@ it. ``--json`` prints one object::
 (``holdout`` only when given; ``own_shift`` with four shots or more: each shot held out in turn and the correction
 fitted on the others moved for it alone, :func:`station.calibration.shot_own_shifts`, with a warning when the shots
 each want it moved on their own, as a lens whose decentering changes between shots does; ``twins`` when two shots'
-strings run within 2 degrees of each other: compared under the correction, :func:`station.calibration.twin_record`,
+strings run within 2 degrees of each other: compared under the correction, :func:`station.moving_lens.twin_record`,
 with a warning when the lens moved between them; distances in pixels). Bad
 input (unreadable image, no strings, images of different sizes, one orientation only, too few edges): one line on
 stderr, exit 2.
@@ -229,13 +229,11 @@ def _calibrate(args, cand: FitSpec | None, fit_m: list, hold_m: list, map_fn, fi
         calibrate_shots,
         holdout_warning,
         noisy_shot_warnings,
-        own_shift_warning,
         shot_count_problem,
         shot_own_shifts,
         size_problem,
-        twin_record,
-        twin_warnings,
     )
+    from station.moving_lens import own_shift_warning, twin_record, twin_warnings  # defers pipeline.own_shift
     from station.provenance import make_provenance  # defers yaml
 
     problem = size_problem([(str(p), m.width, m.height) for p, m in fit_m + hold_m])

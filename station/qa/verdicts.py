@@ -41,7 +41,7 @@ no threshold`` for a figure that is shown but not judged. The checks, in order:
 ``twin_move``
     (two shots at one angle: a session's twin, ``capture.twin_deg``, or twins given to ``harp calibrate``) the
     lens's move across the strings between them must not exceed the record's limit
-    (:data:`station.calibration.TWIN_MOVE_PX`): a lens that moved between shots has no one correction.
+    (:data:`station.moving_lens.TWIN_MOVE_PX`): a lens that moved between shots has no one correction.
 
 A FAIL has one reason per failed check. :func:`qa_verdict` judges one
 :class:`station.profile.Profile`; :func:`evaluate` the same on a bare model.
@@ -64,15 +64,9 @@ from pipeline.fitspec import FIELD_NONE, STRINGS_KINKS, STRINGS_SEPARATE
 from pipeline.model_file import read_model_file
 from pipeline.models.base import IdentityModel
 from pipeline.plain import finite_or_none
-from station.calibration import (
-    MOVING_LENS_ADVICE,
-    OWN_SHIFT_ADVICE,
-    TWIN_MOVE_PX,
-    calibrate_focus,
-    calibrate_shots,
-    largest_own_shift,
-)
+from station.calibration import calibrate_focus, calibrate_shots
 from station.config import QAConfig
+from station.moving_lens import MOVING_LENS_ADVICE, OWN_SHIFT_ADVICE, TWIN_MOVE_PX, largest_own_shift
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
 from station.qa.evidence import stored_measurement
 from station.session import layout
@@ -198,7 +192,7 @@ def _holds(value: float, comparison: str, limit: float) -> bool:
 class FittedAs:
     """How a session fitted its shots (:func:`station.session.profile_steps.fit_focus`): its ``pipeline``
     configuration, the focus index (its bootstrap seed), each shot's turntable angle and a two-axis capture's
-    places (:class:`station.calibration.AxisPlaces`, None: one place)."""
+    places (:class:`station.axis_places.AxisPlaces`, None: one place)."""
 
     pipeline: Any
     focus_idx: int
@@ -246,12 +240,12 @@ def evaluate(
     ``distortion_recorded`` check); ``reference``: the golden correction of the same lens model
     for this image size (None: not compared; said when a threshold is set); ``extra``: figures
     reported with the verdict, not judged (the field uncertainty); ``harp_health``: the harp's
-    self-check (:func:`station.calibration.harp_health`): the session fails when a string is bent
+    self-check (:func:`station.harp_health.harp_health`): the session fails when a string is bent
     beyond its limit (the harp, not the lens: the correction would carry the string's bend); ``own_shift``: the
-    held-out orientations' own axis shifts (:func:`station.calibration.own_shift_record`), reported, with what to do
+    held-out orientations' own axis shifts (:func:`station.moving_lens.own_shift_record`), reported, with what to do
     when each orientation wants the correction moved on its own (a lens whose decentering changes between shots);
-    ``twins``: two shots at one angle compared (:func:`station.calibration.twin_record`, a session's twin
-    :func:`station.calibration.session_twin_record`): the profile fails when the lens moved between them beyond the
+    ``twins``: two shots at one angle compared (:func:`station.moving_lens.twin_record`, a session's twin
+    :func:`station.moving_lens.session_twin_record`): the profile fails when the lens moved between them beyond the
     record's limit (the correction is the mean of a lens that did not hold still).
     """
     checks: list[Check] = []
@@ -460,7 +454,7 @@ def evaluate(
 
 def _twin_check(twin: Mapping[str, Any]) -> tuple[Check, str]:
     """The lens's move between two shots at one angle (the pair that moved most), judged against the record's limit
-    (:data:`station.calibration.TWIN_MOVE_PX`), and why it fails."""
+    (:data:`station.moving_lens.TWIN_MOVE_PX`), and why it fails."""
     move, limit = abs(float(twin["move_px"])), float(twin.get("limit_px") or TWIN_MOVE_PX)
     a, b = twin.get("paths") or ("?", "?")
     ok = move <= limit
@@ -473,7 +467,7 @@ def _twin_check(twin: Mapping[str, Any]) -> tuple[Check, str]:
 
 
 def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
-    """The held-out orientations' own axis shift, reported (:func:`station.calibration.own_shift_record`)."""
+    """The held-out orientations' own axis shift, reported (:func:`station.moving_lens.own_shift_record`)."""
     ratio, limit = float(own_shift["ratio_median"]), float(own_shift.get("limit") or 0.0)
     text = f"held-out orientations: the correction moved for each alone leaves {ratio:.2f} of its held-out d (median"
     text += f"; at or above {limit:g}, as a stable lens)" if not own_shift.get("moving") else f" < {limit:g})"
@@ -484,7 +478,7 @@ def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
 
 
 def _axis_places(axes: Mapping[str, Any], add: Callable[..., None], metrics: dict[str, Any]) -> None:
-    """The check of a two-axis capture's turntable-axis places (:func:`station.calibration.axis_record`): each
+    """The check of a two-axis capture's turntable-axis places (:func:`station.axis_places.axis_record`): each
     place's axis as the joint fit found it, and whether it lies within half a pitch of where the linear stage's
     travel puts it (further, and the strings were numbered wrongly at that place)."""
     limit, worst = axes.get("limit_px"), axes.get("worst_off_px")

@@ -18,9 +18,11 @@ import numpy as np
 
 from pipeline.fitspec import FitSpec
 from pipeline.intrinsics import Intrinsics
-from station.calibration import AxisPlaces, Calibration, MapFn, calibrate_focus, focus_profile, session_twin_record
+from station.axis_places import AxisPlaces
+from station.calibration import Calibration, MapFn, calibrate_focus, focus_profile
 from station.config import Config
 from station.files import sha256_file, write_profile
+from station.moving_lens import session_twin_record
 from station.profile import Profile
 from station.provenance import make_provenance
 from station.session import layout
@@ -69,7 +71,7 @@ def fit_focus(
 
     The fit takes every shot but a twin (``capture.twin_deg``; :attr:`~station.config.schema.CaptureConfig.fitted`);
     the twin is compared with its first shot under the fitted correction
-    (:func:`station.calibration.session_twin_record`, kept in ``details["twins"]``; QA judges the lens's move)."""
+    (:func:`station.moving_lens.session_twin_record`, kept in ``details["twins"]``; QA judges the lens's move)."""
     w, h = size
     cap = config.capture
     fitted = [list(shots[o]) for o in cap.fitted]

@@ -83,27 +83,6 @@ def test_a_session_fit_checks_the_harp_and_qa_fails_a_bent_string():
     assert "harp_health" not in calibrate_focus(shots, w, h, PipelineConfig(), 0, spec).details
 
 
-def test_the_harp_check_names_a_string_only_when_its_bend_is_beyond_its_standard_errors():
-    """``station.calibration.harp_health`` on a joint fit given (strings made by hand, so the truth is their
-    construction): string 4 bows by 0.03 px measured to 0.002 px, string 7 by 0.025 px measured to 0.02 px (seen
-    over little of its length); both beyond the limit and the median string's, only string 4 is a finding."""
-    from pipeline.harp_frame import HarpFrame
-    from pipeline.harp_shape import HarpShapeFit, StringShape, legendre
-    from station.calibration import harp_health
-
-    def string(k, p2, se):
-        span = (-0.8, 0.8)
-        bend = float(np.max(np.abs(p2 * legendre(np.linspace(*span, 201), (2,))[0])))
-        return StringShape(k, 60.0 * (k - 5), (2, 3, 4), (p2, 0.0, 0.0), (se, se, se), span, 6, 12, 400, bend, se)
-
-    strings = tuple(string(k, {4: 0.06, 7: 0.05}.get(k, 0.001 * (-1) ** k), {7: 0.02}.get(k, 0.002)) for k in range(11))
-    frame = HarpFrame(0.0, 1, (500.0, 375.0), 625.0, 60.0)
-    joint = HarpShapeFit(None, None, frame, strings, 0.01, 0.012, 20)  # type: ignore[arg-type]
-    health = harp_health([], (0, 30, 60, 90, 120, 150), 1000, 750, None, joint=joint)  # type: ignore[arg-type]
-    assert health["bent_strings"] == [4] and health["uncertain_strings"] == [7]
-    assert health["worst_string"] == 4 and health["significance"] == 2.0
-
-
 def test_a_session_stores_the_lens_with_the_strings_separated():
     """Issue 19 items 4-5 in the station: with turntable angles, the profile's lens is fitted with every
     string's own bend separated, and it is closer to the exact lens than the lens fitted alone (which takes
@@ -285,7 +264,8 @@ def test_a_two_axis_capture_hands_the_joint_fit_each_place_of_the_turntable_axis
     from pipeline.fitspec import FitSpec
     from pipeline.harp_shape import fit_harp_shape
     from pipeline.models import RadialModel
-    from station.calibration import AxisPlaces, calibrate_focus
+    from station.axis_places import AxisPlaces
+    from station.calibration import calibrate_focus
     from station.config import PipelineConfig
     from station.profile import Provenance
     from tests.pipeline.harp_points import turning_harp_point_sets
@@ -435,27 +415,6 @@ def test_noisy_shot_warnings_name_the_shots_the_correction_leaves_far_less_strai
     assert noisy_shot_warnings(fit_distortion(waved[1:3], w, h, model="radial", degree=4), names[1:3]) == []
 
 
-def test_the_harp_check_record_names_the_noisy_shots_by_their_turntable_angle():
-    """The same two waved shots of six (truth: shots 2 and 5, turned to 60 and 150 deg when drawn): the session's
-    harp-check record lists them with those angles and a noise ratio beyond the factor; the unwaved shots, none."""
-    from pipeline.fitspec import FitSpec
-    from pipeline.harp_shape import SHOT_NOISE_FACTOR
-    from pipeline.models import RadialModel
-    from station.calibration import harp_health
-    from tests.pipeline.harp_points import turning_harp_point_sets
-    from tests.pipeline.test_harp_shape import _waved
-
-    w, h = 1000, 750
-    lens = RadialModel.for_image(w, h, k=(1.0, 0.0, 0.03, 0.0, 0.004), center=(512, 366))
-    turns = (0, 30, 60, 90, 120, 150)
-    shots, _ = turning_harp_point_sets(lens, w, h, turns, np.zeros((11, 3)), step=10, noise=0.01, seed=3)
-    spec = FitSpec("radial", 4, True, True)
-    noisy = harp_health(_waved(shots, {2, 5}, 0.05, 300.0, 3), turns, w, h, spec)["noisy_shots"]
-    assert [(n["shot"], n["turntable_deg"]) for n in noisy] == [(2, 60.0), (5, 150.0)]
-    assert all(n["noise_ratio"] > SHOT_NOISE_FACTOR for n in noisy)
-    assert harp_health(shots, turns, w, h, spec)["noisy_shots"] == []
-
-
 def _turning_lens_shots(moves_px):
     """Six shots of a straight harp turning 0..150 deg, each through the same lens with its distortion centre moved
     by ``moves_px[i]`` (hand-chosen; all zero: a stable lens)."""
@@ -477,8 +436,9 @@ def test_a_lens_whose_centre_moves_between_shots_is_told_from_a_stable_one():
     centre moves by 5-7 px between shots (by hand) leaves each held-out orientation bent by its own move, which moving
     the fold's correction takes back to the noise: ``moving``, and the QA text says what to do; the same lens held
     still: nothing of its own (median ratio near 1), no advice."""
-    from station.calibration import OWN_SHIFT_RATIO, calibrate_shots
+    from station.calibration import calibrate_shots
     from station.config import QAConfig
+    from station.moving_lens import OWN_SHIFT_RATIO
     from station.qa.verdicts import evaluate
 
     spec = parse("radial4+tangential+prism")
@@ -511,26 +471,3 @@ def test_a_lens_whose_centre_moves_between_shots_is_told_from_a_stable_one():
     own, check, _ = got["stable"]
     assert own["judged"] and not own["moving"] and own["ratio_median"] > 0.95
     assert check.passed is None and "stabilisation" not in check.text
-
-
-def test_the_own_shift_record_judges_only_with_four_orientations_or_more():
-    from pipeline.models import RadialModel
-    from pipeline.own_shift import OwnShift
-    from station.calibration import MIN_OWN_SHIFT_ORIENTATIONS, own_shift_record
-    from station.config import QAConfig
-    from station.qa.verdicts import evaluate
-
-    low = [OwnShift(0.04, 0.01, (3.0, 4.0), 100)]  # ratio 0.25
-    rec = own_shift_record(low * (MIN_OWN_SHIFT_ORIENTATIONS - 1))
-    assert rec["ratio_median"] == pytest.approx(0.25) and not rec["judged"] and not rec["moving"]
-    rec = own_shift_record(low * MIN_OWN_SHIFT_ORIENTATIONS + [OwnShift(0.02, 0.02, (0.0, 0.0), 100)])
-    assert rec["judged"] and rec["moving"] and rec["per_orientation"][0]["shift_px"] == [3.0, 4.0]
-    v = evaluate(RadialModel.for_image(640, 480), 640, 480, 0.01, QAConfig(), own_shift=rec)
-    check = next(c for c in v.checks if c.name == "holdout_own_shift")
-    assert "by up to 5.0 px" in check.text and v.verdict == "PASS"  # reported, not judged
-    assert not any(
-        c.name == "holdout_own_shift"
-        for c in evaluate(
-            RadialModel.for_image(640, 480), 640, 480, 0.01, QAConfig(), own_shift=own_shift_record(low)
-        ).checks
-    )

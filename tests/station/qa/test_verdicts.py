@@ -167,11 +167,11 @@ def test_holdout_recomputed_from_the_measurements(calibrated):
 
 def test_a_turntable_axis_found_away_from_where_the_stage_put_it_fails_the_profile():
     """Two-axis capture: each place's axis as the joint fit found it against the stage's travel
-    (:func:`station.calibration.axis_record`: 10 px per mm along 0 degrees, places 0 and 10 mm, pitch 40 px);
+    (:func:`station.axis_places.axis_record`: 10 px per mm along 0 degrees, places 0 and 10 mm, pitch 40 px);
     within half a pitch it passes, beyond it the strings were misnumbered there and QA says so."""
     from pipeline.harp_frame import HarpFrame
     from pipeline.harp_shape import HarpShapeFit
-    from station.calibration import Axes, AxisPlaces, axis_record
+    from station.axis_places import Axes, AxisPlaces, axis_record
 
     places = AxisPlaces((0.0, 0.0, 10.0, 10.0), (0.0, 0.0, 10.0, 10.0), 0.0, 4.0)
     axes = Axes(places, ("0 mm", "0 mm", "10 mm", "10 mm"), {"0 mm": (-50.0, 0.0), "10 mm": (50.0, 0.0)}, 40.0, 10.0)
@@ -196,7 +196,7 @@ def test_a_turntable_axis_found_away_from_where_the_stage_put_it_fails_the_profi
 
 
 def _health(strings, typical, **kw):
-    """A harp self-check record as ``station.calibration.harp_health`` writes it (the QA's input)."""
+    """A harp self-check record as ``station.harp_health.harp_health`` writes it (the QA's input)."""
     own = {s["index"]: s["own_bend_px"] for s in strings}
     worst = max(own, key=lambda k: own[k])
     se = {s["index"]: s["bend_se_px"] for s in strings}
