@@ -5,8 +5,9 @@ code   meaning
 =====  ==============================================================================
 0      success; for a command that judges (``harp qa``, ``harp session run`` /
        ``resume``), the verdict is PASS
-1      the QA verdict is FAIL (``harp qa``, ``harp session run`` / ``resume``), or
-       ``harp profile export`` refused a profile that failed QA
+1      the QA verdict is FAIL (``harp qa``, ``harp session run`` / ``resume``);
+       ``harp profile export`` / ``show --focus`` refused a profile that failed QA;
+       ``harp live CONFIG --once``: the shot would be refused
 2      bad input or an error: one line on stderr naming the file, field or device;
        a session that stopped (its frames are kept; the line says how to go on)
 130    interrupted (Ctrl-C); a session prints the resume command

@@ -12,7 +12,7 @@ COMMANDS: dict[str, str] = {
     "calibrate": "fit a lens distortion model from harp shots",
     "undistort": "correct images with a fitted model",
     "evaluate": "measure the residual distortion left by any correction",
-    "export": "export a fitted model to OpenCV, ROS, lensfun, mrcal, maps, STMap or JSON",
+    "export": "export a fitted model to OpenCV, ROS, lensfun, mrcal, COLMAP, Kalibr, LCP, Basalt, Metashape, maps, STMap or JSON",
     "session": "run, resume, plan or list calibration sessions",
     "profile": "list, show and export stored lens profiles",
     "qa": "factory QA verdict of a session or a stored lens",
