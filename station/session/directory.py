@@ -120,6 +120,37 @@ def read_records(path: Path) -> list[Record]:
     return parse(read_manifest(path)[0])
 
 
+def lost_manifest(path: Path) -> str | None:
+    """The one line for a session whose manifest is missing or holds no record while its directories
+    hold files (frames, measurements, profiles, board views) that only a manifest records, else None.
+
+    A session records its ``start`` before it writes any of them, so this is damage (a manifest deleted,
+    emptied or replaced), never a kill. Without the manifest the files cannot be checked against their
+    checksums, and a resume would capture the whole plan again over the frames of the same names."""
+    path = Path(path)
+    written = {
+        sub: n
+        for sub in layout.ATOMIC_DIRS
+        if (n := sum(1 for p in _listing(path / sub) if not p.name.startswith(".")))
+    }
+    if not written:
+        return None
+    state = "missing" if not (path / MANIFEST).exists() else "empty"
+    held = ", ".join(f"{sub}/ {n} file{'s' if n != 1 else ''}" for sub, n in written.items())
+    return (
+        f"{path / MANIFEST}: {state}, but the session holds what it recorded ({held}); without it "
+        f"they cannot be checked and a resume would capture over them: restore {MANIFEST} from a backup "
+        "(nothing was changed), or start a new session with harp session run"
+    )
+
+
+def _listing(directory: Path) -> list[Path]:
+    try:
+        return list(directory.iterdir())
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+
+
 class SessionDir(ManifestReads):
     """One session's directory. Create with :meth:`create`, reopen with :meth:`open`.
 
@@ -233,11 +264,16 @@ class SessionDir(ManifestReads):
 
     @classmethod
     def open(cls, path: Path) -> SessionDir:
-        """Reopen an existing session (for resume); reloads and validates its config."""
+        """Reopen an existing session (for resume); reloads and validates its config. A manifest
+        missing or empty while the session holds files it recorded is a :class:`SessionError`
+        (:func:`lost_manifest`): nothing is opened, created or captured over."""
         path = Path(path)
         if not (path / SESSION_FILE).is_file():
             raise SessionError(f"{path}: not a session directory (no {SESSION_FILE})")
         records, good = read_manifest(path / MANIFEST)
+        lost = lost_manifest(path) if not records else None
+        if lost is not None:
+            raise SessionError(lost)
         s = cls(path, records, good)
         try:
             s.config = load_config(path / CONFIG_COPY, base_dir=s.meta["base_dir"])

@@ -190,3 +190,29 @@ def test_garbled_profile_of_an_unfinished_session_is_found_before_capture(made, 
     assert recs[-1]["kind"] == "finished"
     assert sorted(r["focus_idx"] for r in recs if r["kind"] == "qa") == [0, 1]
     assert yaml.safe_load((s / "profiles" / "focus0.yaml").read_text())["format"] == "harp-distortion-model"
+
+
+@pytest.mark.parametrize("name", ["done", "stopped"])
+@pytest.mark.parametrize("damage", ["deleted", "emptied"])
+def test_lost_manifest_is_refused_by_resume_repair_and_qa_nothing_captured_over(made, tmp_path, capsys, name, damage):
+    # resume of a session whose manifest.jsonl was deleted or emptied captured the whole plan again over
+    # the frames of the same names (and said "session finished"); repair said "nothing to repair"
+    s = copy(made, tmp_path, name)
+    manifest = s / "manifest.jsonl"
+    if damage == "deleted":
+        manifest.unlink()
+    else:
+        manifest.write_bytes(b"")
+    before = {p: p.read_bytes() for p in s.rglob("*") if p.is_file() and p.name != ".lock"}
+    frames = len(list((s / "frames").iterdir()))
+    state = "missing" if damage == "deleted" else "empty"
+    expected = f"{manifest}: {state}, but the session holds what it recorded (frames/ {frames} files, measurements/ "
+    for argv in (["session", "resume", str(s)], ["session", "repair", str(s)], ["qa", str(s), "--no-record"]):
+        assert main(argv) == 2, argv
+        line = one_line(capsys)
+        assert line.startswith(f"harp {argv[0]}: {expected}"), line
+        assert line.endswith(
+            "restore manifest.jsonl from a backup (nothing was changed), or start a new session with harp session run"
+        )
+    after = {p: p.read_bytes() for p in s.rglob("*") if p.is_file() and p.name != ".lock"}
+    assert after == before and manifest.exists() == (damage == "emptied")  # nothing captured over, nothing made
