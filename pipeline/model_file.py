@@ -28,10 +28,12 @@ the reason.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from pipeline.intrinsics import Intrinsics
@@ -134,6 +136,9 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     except (TypeError, KeyError, ValueError):
         raise ValueError(f"{name}: missing or invalid image size (image: {{width, height}})") from None
     mdoc = doc.get("model")
+    bad = _not_finite(mdoc, "model")
+    if bad is not None:
+        raise ValueError(f"{name}: {bad[0]} is {bad[1]}; every parameter of the model must be a finite number")
     try:
         model = model_from_dict(mdoc)
     except ValueError as exc:
@@ -170,6 +175,30 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
         intrinsics=intrinsics,
         colour=colour,
     )
+
+
+def _not_finite(node: Any, where: str) -> tuple[str, float] | None:
+    """The first number in ``node`` (the model's mapping as read) that is NaN or infinite, with where it
+    is (``model.k[1]``), else None."""
+    if isinstance(node, float):
+        return None if math.isfinite(node) else (where, node)
+    if isinstance(node, dict):
+        for key, value in node.items():
+            found = _not_finite(value, f"{where}.{key}")
+            if found is not None:
+                return found
+    elif isinstance(node, list):
+        try:  # a long list of numbers (a map, a grid) at once
+            values = np.asarray(node, dtype=np.float64)
+        except (TypeError, ValueError):
+            values = None
+        if values is not None and values.dtype == np.float64 and np.isfinite(values).all():
+            return None
+        for i, value in enumerate(node):
+            found = _not_finite(value, f"{where}[{i}]")
+            if found is not None:
+                return found
+    return None
 
 
 def _foreign_format(text: str) -> str | None:

@@ -108,6 +108,8 @@ class PolynomialModel(DistortionModel):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", tuple(float(v) for v in self.center))
+        if len(self.center) != 2:
+            raise ValueError(f"PolynomialModel center needs (x, y), got {len(self.center)} values")
         object.__setattr__(self, "degree", int(self.degree))
         object.__setattr__(self, "a", tuple(float(v) for v in self.a))
         object.__setattr__(self, "b", tuple(float(v) for v in self.b))

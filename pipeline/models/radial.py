@@ -154,11 +154,17 @@ class RadialModel(DistortionModel):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", tuple(float(v) for v in self.center))
+        if len(self.center) != 2:
+            raise ValueError(f"RadialModel center needs (x, y), got {len(self.center)} values")
         object.__setattr__(self, "k", tuple(float(v) for v in self.k))
         if self.tangential is not None:
             object.__setattr__(self, "tangential", tuple(float(v) for v in self.tangential))
+            if len(self.tangential) != 2:
+                raise ValueError(f"RadialModel tangential needs (p1, p2), got {len(self.tangential)} values")
         if self.prism is not None:
             object.__setattr__(self, "prism", tuple(float(v) for v in self.prism))
+            if len(self.prism) != 4:
+                raise ValueError(f"RadialModel prism needs (s1, s2, s3, s4), got {len(self.prism)} values")
         if self.trefoil is not None:
             object.__setattr__(self, "trefoil", tuple(float(v) for v in self.trefoil))
             if len(self.trefoil) != 2:

@@ -668,6 +668,40 @@ def test_bad_model_exit_2(tmp_path, content, reason):
     assert code == 2 and err.startswith(f"harp export: {p}: ") and reason in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize(
+    "field, value, reason",
+    [
+        ("center", [600.0], "invalid parameters for model 'radial' (RadialModel center needs (x, y), got 1 values)"),
+        ("tangential", [1e-4, 2e-4, 3e-4], "RadialModel tangential needs (p1, p2), got 3 values"),
+        ("prism", [1e-4], "RadialModel prism needs (s1, s2, s3, s4), got 1 values"),
+        ("k", [1.0, float("nan")], "model.k[1] is nan; every parameter of the model must be a finite number"),
+        ("center", [float("inf"), 300.0], "model.center[0] is inf; every parameter of the model must be a finite"),
+    ],
+)
+def test_a_model_parameter_damaged_by_hand_is_one_line_naming_the_file(tmp_path, field, value, reason):
+    # a centre of one value was "internal error: IndexError: tuple index out of range"; three tangential
+    # terms "zip() argument 2 is shorter than argument 1" (no file named); a NaN "our correction is
+    # undefined over much of the image" (export) or "the correction is not defined at the image corners"
+    model = tmp_path / "lens.yaml"
+    lens = RadialModel(center=(599.5, 449.5), k=(1.0, 0.02), scale=750.0, tangential=(1e-4, 2e-4), prism=(0,) * 4)
+    write_model_file(model, lens, width=1200, height=900)
+    doc = yaml.safe_load(model.read_text())
+    doc["model"][field] = value
+    model.write_text(yaml.safe_dump(doc))
+    image = tmp_path / "shot.png"
+    cv2.imwrite(str(image), np.full((900, 1200), 128, np.uint8))
+    out = tmp_path / "out"
+    for argv in (
+        ["export", model, "--format", "opencv", "-o", out / "lens.yml"],
+        ["undistort", model, image, "-o", out],
+        ["evaluate", model, image],
+    ):
+        code, stdout, stderr = run_main(*argv)
+        assert code == 2 and stdout == "" and stderr.count("\n") == 1, (argv, stderr)
+        assert stderr.startswith(f"harp {argv[0]}: {model}: ") and reason in stderr, (argv, stderr)
+    assert not out.exists()
+
+
 def test_profile_export_errors_are_one_line(session_source):
     _, store = session_source
     code, _, err = run_main("profile", "export", "DEMO-0001", "--focus", "1.5", "--format", "ros", "--store", store)
