@@ -118,7 +118,10 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         say("harp", "interrupted")
         return EXIT_INTERRUPTED
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # named by the sub-command they were given to (argparse would say "harp: ...")
+        say(_prog(args), f"unrecognized arguments: {' '.join(extra)} (see {_prog(args)} --help)")
+        return EXIT_ERROR
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return EXIT_ERROR

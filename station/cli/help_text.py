@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import functools
 import re
-from typing import Any
+from typing import Any, NoReturn
+
+from station.exit_codes import EXIT_ERROR
 
 _POINTER = re.compile(r"(?:[ \t]*\n)?[ \t]*\(:[\w:.-]+:`[^`]*`\)")
 """A parenthesis holding nothing but a role: a pointer for developers, dropped."""
@@ -83,7 +85,14 @@ def plain_formatter(formatter: type[argparse.HelpFormatter]) -> type[argparse.He
 
 class HarpParser(argparse.ArgumentParser):
     """The parser of ``harp`` and, by argparse's inheritance of the parser class, of every
-    sub-command and sub-sub-command: its help is plain text whichever formatter it is given."""
+    sub-command and sub-sub-command: its help is plain text whichever formatter it is given, and a
+    usage error is one line (:meth:`error`)."""
 
     def __init__(self, *args: Any, formatter_class: type[argparse.HelpFormatter] = argparse.HelpFormatter, **kw: Any):
         super().__init__(*args, formatter_class=plain_formatter(formatter_class), **kw)
+
+    def error(self, message: str) -> NoReturn:
+        """A usage error (an option's bad value, a missing argument, an unknown option) as one line on
+        stderr, ``PROG: message (see PROG --help)``, exit 2, as every other error of ``harp``; argparse's
+        own prints the usage block first, several lines."""
+        self.exit(EXIT_ERROR, f"{self.prog}: {' '.join(message.split())} (see {self.prog} --help)\n")

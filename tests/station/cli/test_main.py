@@ -79,3 +79,24 @@ def test_a_harp_error_carries_its_exit_code_and_is_one_line(monkeypatch, capsys)
     monkeypatch.setattr(station.cli.export, "run", _raising(Odd("no")))
     assert main(["export", "lens.yaml", "--format", "json"]) == 3
     assert capsys.readouterr().err == "harp export: no\n"
+
+
+@pytest.mark.parametrize(
+    "argv, line",
+    [
+        (["profile", "show", "--id", "abc"], "harp profile show: argument --id: invalid int value: 'abc'"),
+        (["measure"], "harp measure: the following arguments are required: IMAGE"),
+        (["export", "lens.yaml"], "harp export: the following arguments are required: --format"),
+        (["qa", "s", "--max-holdout-d", "-3"], "harp qa: argument --max-holdout-d: expected a positive number"),
+        (["session", "frob"], "harp session: argument ACTION: invalid choice: 'frob' (choose from 'run', "),
+        (["measure", "x.png", "--bogus"], "harp measure: unrecognized arguments: --bogus (see harp measure --help)"),
+    ],
+)
+def test_a_usage_error_is_one_line_naming_the_option_exit_2(argv, line, capsys):
+    # argparse printed its usage block first: two to five lines, and "harp: unrecognized arguments"
+    with pytest.raises(SystemExit) as exc:
+        code = main(argv)
+        raise SystemExit(code)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1 and err.startswith(line), err
+    assert "usage:" not in err and err.rstrip().endswith("--help)")
