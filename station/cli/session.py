@@ -26,6 +26,7 @@ from pathlib import Path
 
 from station import __version__
 from station.cli.commands import COMMANDS
+from station.cli.inputs import port_number
 from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, store_location
 from station.errors import HarpError, Interrupted, one_line
@@ -93,7 +94,9 @@ def register(subparsers) -> None:
             action="store_true",
             help="show the session on the live page (http://127.0.0.1:8013/; it stays until Ctrl-C after the end)",
         )
-        action.add_argument("--live-port", type=int, default=8013, help="port of the live page (0: any free port)")
+        action.add_argument(
+            "--live-port", type=port_number, default=8013, help="port of the live page (0: any free port)"
+        )
     plan = sub.add_parser("plan", help="the capture plan and its estimated duration (touches no device)")
     plan.add_argument("config", type=Path, help="station configuration (YAML)")
     plan.add_argument("--json", action="store_true", help="print one JSON object instead of a table")

@@ -13,6 +13,8 @@ import time
 import urllib.error
 import urllib.request
 
+import pytest
+
 from station.cli import main
 
 REPO_ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -72,3 +74,18 @@ def test_a_store_that_is_not_there_is_one_line_and_is_not_created(tmp_path, caps
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "127.0.0.1" in err and "Traceback" not in err
     assert time.time() - started < 30
+
+
+def test_a_port_out_of_range_is_one_line_naming_the_option(tmp_path, capsys):
+    # was "internal error: OverflowError: bind(): port must be 0-65535." (harp serve, harp live, session --live)
+    for argv, option in (
+        (["serve", "--store", str(tmp_path / "none.sqlite"), "--port", "99999"], "--port"),
+        (["live", str(tmp_path / "station.yaml"), "--port", "-1"], "--port"),
+        (["session", "run", str(tmp_path / "station.yaml"), "--live", "--live-port", "70000"], "--live-port"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and err.count("\n") == 1, err
+        assert f"argument {option}: expected a port number in 0..65535 (0: any free port), got {argv[-1]}" in err
+    assert list(tmp_path.iterdir()) == []  # nothing created
