@@ -51,7 +51,7 @@ from station.qa.verdicts import Measurements, qa_verdict
 from station.session import layout
 from station.session.colour import KEY as COLOUR
 from station.session.colour import frames_cfa, session_colour
-from station.session.directory import SessionError, read_manifest
+from station.session.directory import SessionError, lost_manifest, read_manifest
 from station.session.frame_files import decode_frame
 from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.processing import average_frames, measure_shot, shot_problems
@@ -213,7 +213,8 @@ def plan_jobs(
             continue
         stored = s.stored_focus()
         if not stored:
-            failed[path] = f"{path}: the session stored no profile (nothing to re-process)"
+            lost = lost_manifest(Path(path)) if not s.lines else None
+            failed[path] = lost or f"{path}: the session stored no profile (nothing to re-process)"
             continue
         jobs += [FocusJob(path, f, spec, field) for f in sorted(stored)]
     return jobs, failed

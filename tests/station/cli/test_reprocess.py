@@ -209,6 +209,17 @@ def test_what_is_not_a_session_is_reported_and_nothing_is_stored(tmp_path):
     assert code == 2 and "no such session directory" in err
 
 
+def test_a_session_whose_manifest_is_lost_is_named_so_and_nothing_is_stored(factory_archive, tmp_path):
+    # was "the session stored no profile (nothing to re-process)" of a session holding three profiles
+    s = tmp_path / "s"
+    shutil.copytree(factory_archive.session, s)
+    (s / "manifest.jsonl").unlink()
+    code, out, err = _main(["reprocess", s, "--store", tmp_path / "st.sqlite", "--workers", "1"])
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith(f"harp reprocess: {s / 'manifest.jsonl'}: missing, but the session holds what it recorded")
+    assert "restore manifest.jsonl from a backup" in err and not (tmp_path / "st.sqlite").exists()
+
+
 @pytest.mark.parametrize(
     ("address", "needle"),
     [
