@@ -28,7 +28,7 @@ from station import __version__
 from station.cli.commands import COMMANDS
 from station.cli.inputs import port_number
 from station.cli.say import say, warn
-from station.cli.store_options import add_store_options, store_location
+from station.cli.store_options import add_store_options, load_env_config, store_location
 from station.errors import HarpError, Interrupted, one_line
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
@@ -525,8 +525,9 @@ def _list(args) -> int:
         raise HarpError("give a directory or --config, not both")
     config_path = args.config
     if config_path is None and args.directory is None and os.environ.get("HARP_CONFIG"):
-        config_path = Path(os.environ["HARP_CONFIG"])  # the station's configuration, wherever the command runs
-    if config_path is not None:
+        # the station's configuration, wherever the command runs
+        root = load_env_config("a directory or --config").sessions_dir
+    elif config_path is not None:
         root = load_config(config_path).sessions_dir  # a ConfigError: one line (station.cli.main)
     else:
         root = args.directory if args.directory is not None else Path("sessions")

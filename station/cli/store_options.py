@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from station.errors import HarpError
 from station.store.errors import StoreError
 from station.store.location import DEFAULT_STORE, SQLITE, StoreLocation, default_store, parse_store, user_store_path
 
@@ -58,8 +59,8 @@ def store_location(
     (a bad store name) or ConfigError (a bad configuration)."""
     if store is not None:
         return parse_store(store)
-    if config is None and config_path is None and not os.environ.get("HARP_STORE"):
-        config_path = os.environ.get("HARP_CONFIG") or None
+    if config is None and config_path is None and not os.environ.get("HARP_STORE") and os.environ.get("HARP_CONFIG"):
+        config = load_env_config("--store or --config")
     if config is None and config_path is not None:
         from station.config import load_config  # defers numpy, yaml
 
@@ -67,6 +68,20 @@ def store_location(
     if config is not None:
         return config.store
     return default_store()
+
+
+def load_env_config(instead: str) -> Config:
+    """The configuration ``$HARP_CONFIG`` names, loaded; one that cannot be is a HarpError whose line says
+    where the file came from (the user gave no path) and what to do: correct it, unset the variable or give
+    ``instead`` (the command's own options)."""
+    from station.config import ConfigError, load_config  # defers numpy, yaml
+
+    try:
+        return load_config(os.environ["HARP_CONFIG"])
+    except ConfigError as exc:
+        raise HarpError(
+            f"{exc} (the configuration $HARP_CONFIG names: correct it, unset HARP_CONFIG or give {instead})"
+        ) from None
 
 
 def location_from_args(args: argparse.Namespace, config: Config | None = None) -> StoreLocation:

@@ -90,3 +90,25 @@ def test_a_store_left_in_the_old_default_place_is_named_when_the_per_user_one_is
     assert code == 2 and out == "" and err.count("\n") == 1, err
     assert "no profile store here (the per-user default)" in err
     assert "there is one at profiles/harp-profiles.sqlite: --store profiles/harp-profiles.sqlite" in err
+
+
+def test_a_bad_configuration_named_by_harp_config_says_where_it_came_from(tmp_path):
+    # the line named only the file ("/srv/station.yaml: (file): no such file"), which the user never typed
+    bad = tmp_path / "station.yaml"
+    d = yaml.safe_load(DEMO.read_text())
+    d["capture"]["twin_deg"] = "abc"
+    bad.write_text(yaml.safe_dump(d))
+    for config, problem in ((tmp_path / "missing.yaml", "(file): no such file"), (bad, "capture.twin_deg: expected")):
+        env = _env(tmp_path, HARP_CONFIG=str(config))
+        for argv, instead in (
+            (["profile", "list"], "--store or --config"),
+            (["qa", "DEMO-0001"], "--store or --config"),
+            (["session", "list"], "a directory or --config"),
+        ):
+            code, out, err = harp(*argv, cwd=tmp_path, env=env)
+            assert code == 2 and out == "" and err.count("\n") == 1, (argv, err)
+            assert err.startswith(f"harp {argv[0]}: {config}: {problem}"), err
+            assert err.endswith(
+                f"(the configuration $HARP_CONFIG names: correct it, unset HARP_CONFIG or give {instead})\n"
+            ), err
+    assert not (tmp_path / "data").exists()  # no store created
