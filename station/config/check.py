@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from station.config.errors import ConfigError
-from station.config.schema import Config
+from station.config.schema import EMULATOR_PORT, Config
 
 GRID_ANGLE_DEG = 2.0
 """:func:`check_config` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
@@ -70,7 +70,8 @@ def check_config(config: Config) -> ConfigCheck:
             )
         )
     port = config.station.turntable.port
-    if config.simulation is None and "://" not in port and not os.path.exists(port):
+    emulated = port == EMULATOR_PORT and config.simulation is not None  # as station.config.devices.check_port
+    if not emulated and "://" not in port and not os.path.exists(port):
         warnings.append(
             f"{config.path}: station.turntable.port: {port!r} does not exist on this machine "
             f"(plug the turntable in, or see `harp devices` for the ports found)"

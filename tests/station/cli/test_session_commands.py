@@ -73,6 +73,26 @@ def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid
     assert code == 0 and err.count("pixel rows or columns") == 1 and w in err and not (tmp_path / "sessions").exists()
 
 
+def test_config_check_warns_of_a_missing_port_that_session_run_refuses_also_with_a_simulation(tmp_path, capsys):
+    # a simulated station whose turntable is a real port (simulation section kept, port no longer "emulator"):
+    # harp config check said OK without a warning, harp session run refused it
+    d = yaml.safe_load(DEMO.read_text())
+    d["station"]["turntable"]["port"] = str(tmp_path / "ttyUSB9")
+    p = demo_copy(tmp_path, station=d["station"])
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True and err.count("\n") == 1, err
+    assert doc["warnings"] == [
+        f"{p}: station.turntable.port: '{tmp_path / 'ttyUSB9'}' does not exist on this machine "
+        "(plug the turntable in, or see `harp devices` for the ports found)"
+    ]
+    code, out, err = run(capsys, "session", "run", p)
+    assert code == 2 and err.count("\n") == 1 and "station.turntable.port: expected a reachable serial port" in err
+    assert not (tmp_path / "sessions").exists()
+    code, out, err = run(capsys, "config", "check", demo_copy(tmp_path))  # the emulator's port: no warning
+    assert code == 0 and err == ""
+
+
 @pytest.mark.parametrize("value", ["some", "yes", "[all]"])
 def test_config_check_refuses_a_bad_overlay_retention(tmp_path, capsys, value):
     bad = tmp_path / "bad.yaml"
