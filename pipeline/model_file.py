@@ -136,7 +136,7 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     except (TypeError, KeyError, ValueError):
         raise ValueError(f"{name}: missing or invalid image size (image: {{width, height}})") from None
     mdoc = doc.get("model")
-    bad = _not_finite(mdoc, "model")
+    bad = not_finite(mdoc, "model")
     if bad is not None:
         raise ValueError(f"{name}: {bad[0]} is {bad[1]}; every parameter of the model must be a finite number")
     try:
@@ -177,14 +177,19 @@ def parse_model_text(text: str, name: str = "<text>") -> ModelFile:
     )
 
 
-def _not_finite(node: Any, where: str) -> tuple[str, float] | None:
-    """The first number in ``node`` (the model's mapping as read) that is NaN or infinite, with where it
-    is (``model.k[1]``), else None."""
-    if isinstance(node, float):
-        return None if math.isfinite(node) else (where, node)
+def not_finite(node: Any, where: str = "") -> tuple[str, float] | None:
+    """The first number in ``node`` (plain data: a model's mapping as read) that is NaN or infinite, with
+    where it is (``model.k[1]``), else None. Text a float is made from counts (``nan``, ``inf``: what a
+    model's ``float()`` would take)."""
+    if isinstance(node, (float, str)) and not isinstance(node, bool):
+        try:
+            value = float(node)
+        except ValueError:
+            return None
+        return None if math.isfinite(value) else (where, value)
     if isinstance(node, dict):
         for key, value in node.items():
-            found = _not_finite(value, f"{where}.{key}")
+            found = not_finite(value, f"{where}.{key}" if where else str(key))
             if found is not None:
                 return found
     elif isinstance(node, list):
@@ -192,10 +197,10 @@ def _not_finite(node: Any, where: str) -> tuple[str, float] | None:
             values = np.asarray(node, dtype=np.float64)
         except (TypeError, ValueError):
             values = None
-        if values is not None and values.dtype == np.float64 and np.isfinite(values).all():
+        if values is not None and np.isfinite(values).all():
             return None
         for i, value in enumerate(node):
-            found = _not_finite(value, f"{where}[{i}]")
+            found = not_finite(value, f"{where}[{i}]")
             if found is not None:
                 return found
     return None

@@ -29,6 +29,7 @@ from pipeline.normalise import corner_homography
 from pipeline.resample import DEFAULT_T
 from pipeline.shared_bend import shared_bend
 from pipeline.straightness import straightness
+from station.imageio import quiet_codecs
 from station.inputs import NO_STRINGS, InputError, measure_grey, read_image
 
 
@@ -59,7 +60,10 @@ def load_correction(
     except OSError as exc:
         raise EvaluateError(f"{p}: cannot read correction file ({exc.strerror or type(exc).__name__})") from None
     try:
-        c = read_correction(data, str(p), width, height, focal=focal, lens_name=lens_name)
+        # what OpenCV's FileStorage and OpenEXR print of a damaged file (OpenEXR on stdout too): the line says it;
+        # nothing is printed before the correction is read
+        with quiet_codecs(stdout=True):
+            c = read_correction(data, str(p), width, height, focal=focal, lens_name=lens_name)
     except ValueError as exc:
         raise EvaluateError(str(exc)) from None
     return c.model, c.kind

@@ -28,6 +28,7 @@ could be (:func:`max_file_bytes`) is refused without reading it all.
 
 from __future__ import annotations
 
+import io
 import os
 import struct
 import sys
@@ -155,7 +156,7 @@ def read_unchanged(path, *, max_pixels: int | None = None) -> np.ndarray:
         raise ImageReadError(p, "truncated image data")
     buf = np.frombuffer(data, np.uint8)
     try:
-        with _quiet_opencv():
+        with quiet_codecs():
             img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     except cv2.error:  # OpenCV's own size limit, or a decoder that gave up
         raise ImageReadError(p, "not a readable image (corrupt, or larger than the decoder allows)") from None
@@ -273,25 +274,36 @@ def read_grey(path, *, max_pixels: int | None = None) -> np.ndarray:
     return _to_grey(read_unchanged(path, max_pixels=max_pixels), Path(path))
 
 
-class _quiet_opencv:
+class quiet_codecs:
     """Silence OpenCV's own log lines and what its codecs print straight to the C-level
     stderr ("libpng error: ...", "Corrupt JPEG data: ...") while decoding: our one-line error
     says it all. (File descriptor 2 points at /dev/null meanwhile, for the whole process: the
-    ``harp`` commands decode in their main thread.)"""
+    ``harp`` commands decode in their main thread.) ``stdout=True`` silences file descriptor 1 and
+    Python's ``sys.stdout`` too, for a decoder that prints there (OpenEXR's "Warning: Exception raised
+    reading pixel data ..." of a damaged file); what the command printed before is flushed first."""
+
+    def __init__(self, *, stdout: bool = False) -> None:
+        self._fds = (1, 2) if stdout else (2,)
 
     def __enter__(self):
-        self._saved_fd = None
-        try:
-            sys.stderr.flush()
-            saved = os.dup(2)
-            null = os.open(os.devnull, os.O_WRONLY)
+        self._saved: list[tuple[int, int]] = []
+        for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
+            if fd not in self._fds:
+                continue
             try:
-                os.dup2(null, 2)
-            finally:
-                os.close(null)
-            self._saved_fd = saved
-        except (OSError, ValueError, AttributeError):  # no fd 2 to redirect: leave it
-            pass
+                stream.flush()
+                saved = os.dup(fd)
+                null = os.open(os.devnull, os.O_WRONLY)
+                try:
+                    os.dup2(null, fd)
+                finally:
+                    os.close(null)
+                self._saved.append((fd, saved))
+            except (OSError, ValueError, AttributeError):  # no such descriptor to redirect: leave it
+                pass
+        self._stdout = sys.stdout
+        if 1 in self._fds:  # and what a decoder writes through Python's sys.stdout
+            sys.stdout = io.StringIO()
         self._lg = getattr(getattr(cv2, "utils", None), "logging", None)
         self._old = None
         if self._lg is not None:
@@ -305,9 +317,10 @@ class _quiet_opencv:
     def __exit__(self, *exc):
         if self._lg is not None and self._old is not None:
             self._lg.setLogLevel(self._old)
-        if self._saved_fd is not None:
-            os.dup2(self._saved_fd, 2)
-            os.close(self._saved_fd)
+        sys.stdout = self._stdout
+        for fd, saved in self._saved:
+            os.dup2(saved, fd)
+            os.close(saved)
         return False
 
 

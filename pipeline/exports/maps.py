@@ -275,16 +275,15 @@ def _exr_channels(data: bytes, name: str) -> tuple[Array, Array, str]:
     import OpenEXR
 
     try:
-        with OpenEXR.File(io.BytesIO(data), separate_channels=True) as f:
+        with OpenEXR.File(io.BytesIO(data), separate_channels=True) as f:  # the pixels are read while it is open
             ch = f.channels()
-            if "R" not in ch or "G" not in ch:
-                raise ValueError(f"{name}: EXR without R and G channels (not an STMap)")
-            r = np.asarray(ch["R"].pixels, dtype=np.float64)
-            g = np.asarray(ch["G"].pixels, dtype=np.float64)
+            rg = [np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G") if c in ch]
             comments = f.header().get("comments", "")
-    except (RuntimeError, OSError) as exc:
+    except (RuntimeError, OSError, ValueError) as exc:  # ValueError: a truncated file ("file has 0 parts")
         raise ValueError(f"{name}: not a readable OpenEXR file ({str(exc).splitlines()[0][:120]})") from None
-    return r, g, str(comments)
+    if len(rg) != 2:
+        raise ValueError(f"{name}: EXR without R and G channels (not an STMap)")
+    return rg[0], rg[1], str(comments)
 
 
 def stmap_kind(data: bytes) -> str:

@@ -29,6 +29,7 @@ References
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 
 import cv2
@@ -130,23 +131,9 @@ def read_opencv_text(
     try:
         if not fs.isOpened():
             raise ValueError(f"{name}: not an OpenCV FileStorage file")
-        k = next(
-            (fs.getNode(n).mat() for n in CAMERA_MATRIX_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()),
-            None,
-        )
-        d = next((fs.getNode(n).mat() for n in DIST_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
-        if k is None or d is None:
-            raise ValueError(f"{name}: OpenCV file without camera_matrix and distortion_coefficients matrices")
-        dm = fs.getNode("distortion_model")
-        fisheye = (not dm.empty()) and dm.isString() and dm.string().strip().lower() == "fisheye"
-        size = None
-        wn, hn = fs.getNode("image_width"), fs.getNode("image_height")
-        if not wn.empty() and not hn.empty():
-            size = (int(wn.real()), int(hn.real()))
-        else:
-            sn = fs.getNode("image_size")  # e.g. [w, h] sequences written by some tools
-            if not sn.empty() and sn.isSeq() and sn.size() == 2:
-                size = (int(sn.at(0).real()), int(sn.at(1).real()))
+        k, d, fisheye, size = _opencv_nodes(fs, name)
+    except cv2.error as exc:  # a matrix whose data is not numbers ("readRawData can only be used ...")
+        raise ValueError(f"{name}: not a readable OpenCV FileStorage file ({_cv2_reason(exc)})") from None
     finally:
         fs.release()
     try:
@@ -155,3 +142,32 @@ def read_opencv_text(
         return OpenCVModel.from_matrices(k, d), size
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
+
+
+def _cv2_reason(exc: Exception) -> str:
+    """OpenCV's own reason in an error's text (its last line, without the source file and function)."""
+    text = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+    m = re.search(r"error: \(-?\d+:[^)]*\) (.*?)(?: in function '[^']*')?$", text)
+    return m.group(1) if m else text
+
+
+def _opencv_nodes(fs: cv2.FileStorage, name: str) -> tuple[np.ndarray, np.ndarray, bool, tuple[int, int] | None]:
+    """``(camera matrix, coefficients, fisheye, size or None)`` of an open FileStorage."""
+    k = next(
+        (fs.getNode(n).mat() for n in CAMERA_MATRIX_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()),
+        None,
+    )
+    d = next((fs.getNode(n).mat() for n in DIST_NAMES if not fs.getNode(n).empty() and fs.getNode(n).isMap()), None)
+    if k is None or d is None:
+        raise ValueError(f"{name}: OpenCV file without camera_matrix and distortion_coefficients matrices")
+    dm = fs.getNode("distortion_model")
+    fisheye = (not dm.empty()) and dm.isString() and dm.string().strip().lower() == "fisheye"
+    size = None
+    wn, hn = fs.getNode("image_width"), fs.getNode("image_height")
+    if not wn.empty() and not hn.empty():
+        size = (int(wn.real()), int(hn.real()))
+    else:
+        sn = fs.getNode("image_size")  # e.g. [w, h] sequences written by some tools
+        if not sn.empty() and sn.isSeq() and sn.size() == 2:
+            size = (int(sn.at(0).real()), int(sn.at(1).real()))
+    return k, d, fisheye, size

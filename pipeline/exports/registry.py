@@ -61,6 +61,8 @@ from pipeline.exports.readers import (
     sniff_ros,
 )
 from pipeline.exports.source import Export, ExportOptions, ExportSource
+from pipeline.model_file import not_finite
+from pipeline.models.remap_model import CorrectionMapModel, RemapModel
 
 
 @dataclass(frozen=True)
@@ -284,7 +286,20 @@ def read_correction(
     fmt = sniff_format(data)
     if fmt is None:
         raise ValueError(f"{name}: not a recognised correction ({RECOGNISED})")
-    c = fmt.read(data, ReadRequest(name=name, width=width, height=height, focal=focal, lens_name=lens_name))
+    try:
+        c = fmt.read(data, ReadRequest(name=name, width=width, height=height, focal=focal, lens_name=lens_name))
+    except ValueError as exc:  # every reader's line names the file
+        text = " ".join(str(exc).split())
+        if text.startswith(f"{name}:"):
+            raise
+        raise ValueError(f"{name}: {text}") from None
+    if not isinstance(c.model, (RemapModel, CorrectionMapModel)):  # the maps check their own values
+        bad = not_finite(c.model.to_dict())
+        if bad is not None:
+            raise ValueError(
+                f"{name}: a parameter is {bad[1]} (the {c.model.name} model's {bad[0]} as read from this {fmt.name} "
+                "file); every parameter must be a finite number"
+            )
     if c.size is not None and tuple(c.size) != (width, height):
         what = "model" if c.kind.startswith("harp:") else "calibration"
         raise ValueError(f"{name}: {what} is for {c.size[0]}x{c.size[1]} images, the shots are {width}x{height}")

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -131,6 +132,55 @@ def test_bad_correction_files_exit_2_with_one_line(tmp_path, shots, capsys, cont
     assert main(["evaluate", str(p), shots[0]]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("harp evaluate: ") and message in err and "\n" not in err
+
+
+def _first_number_replaced(text: str, after: str, by: str) -> str:
+    """``text`` with the first number after the first ``after`` replaced by ``by``."""
+    at = text.index(after) + len(after)
+    head, tail = text[:at], text[at:]
+    return head + re.sub(r"-?\d+\.\d+(?:e[-+]?\d+)?", by, tail, count=1)
+
+
+@pytest.mark.parametrize(
+    "fmt, name, damage, message",
+    [
+        # was "internal error: error: OpenCV(5.1.0) .../persistence.cpp:2884: error: (-2:Unspecified error) readRawData ..."
+        (
+            "opencv",
+            "lens.yml",
+            lambda t: _first_number_replaced(t, "camera_matrix", "abc").encode(),
+            "not a readable OpenCV FileStorage file (readRawData can only be used to read plain sequences of numbers)",
+        ),
+        # were numpy's RuntimeWarnings (four lines with the source) before the one line
+        (
+            "kalibr",
+            "camchain.yaml",
+            lambda t: _first_number_replaced(t, "distortion_coeffs", "inf").encode(),
+            "model's distortion_coefficients[0] as read from this kalibr file); every parameter must be a finite number",
+        ),
+        # was "harp evaluate: lensfun coord_scale must be > 0, got nan" (no file)
+        (
+            "lensfun",
+            "lens.xml",
+            lambda t: _first_number_replaced(t, "<aspect-ratio>", "nan").encode(),
+            "lensfun coord_scale must be > 0, got nan",
+        ),
+        # was OpenEXR's own line on the C stderr, then "harp evaluate: Invalid part index '0': file has 0 parts."
+        ("stmap", "lens.exr", None, "not a readable OpenEXR file (Invalid part index '0': file has 0 parts.)"),
+    ],
+)
+def test_a_damaged_export_is_one_line_naming_the_file(tmp_path, shots, capfd, fmt, name, damage, message):
+    model = tmp_path / "lens.yaml"
+    write_model_file(model, LENS, width=W, height=H)
+    exported = tmp_path / name
+    assert main(["export", str(model), "--format", fmt, "--crop", "1", "--focal-mm", "8", "-o", str(exported)]) == 0
+    data = exported.read_bytes()
+    exported.write_bytes(damage(data.decode()) if damage else data[: len(data) // 2])
+    capfd.readouterr()
+    assert main(["evaluate", str(exported), shots[0]]) == 2
+    out, err = capfd.readouterr()  # the file descriptors: what a codec prints there too
+    assert out == "" and err.count("\n") == 1, err
+    assert err.startswith(f"harp evaluate: {exported}: ") and message in err, err
 
 
 def test_size_mismatch_and_missing_image_exit_2(tmp_path, shots, capsys):
