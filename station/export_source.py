@@ -116,8 +116,11 @@ def _same(a: Any, b: float) -> bool:
 
 
 # --------------------------------------------------------------- photographs
-def measured_edges(paths: Iterable[str | os.PathLike], t: int) -> FittingEdges:
-    """Measure the harp shots at ``paths`` (``t``: along-edge subsampling); ValueError naming a bad one."""
+def measured_edges(
+    paths: Iterable[str | os.PathLike], t: int, size: tuple[int, int] | None = None, model: str = "the model"
+) -> FittingEdges:
+    """Measure the harp shots at ``paths`` (``t``: along-edge subsampling); ValueError naming a bad one, or
+    one of another size than ``size`` (the model's width and height, named ``model``), when given."""
     edges: list[np.ndarray] = []
     names = []
     for p in paths:
@@ -125,6 +128,11 @@ def measured_edges(paths: Iterable[str | os.PathLike], t: int) -> FittingEdges:
             img = read_grey(p)
         except ImageReadError as exc:
             raise ValueError(str(exc)) from None
+        if size is not None and (img.shape[1], img.shape[0]) != tuple(size):
+            raise ValueError(
+                f"{p}: image is {img.shape[1]}x{img.shape[0]} but {model} is for {size[0]}x{size[1]} images: "
+                "give the shots the model was fitted on"
+            )
         try:
             m = measure_image(img, t=t)
         except (ValueError, MemoryError) as exc:
@@ -158,7 +166,7 @@ def provenance_edges(profile: Profile, model_dir: str | os.PathLike | None = Non
             return FittingEdges(None, f"fitting shot {hit}: cannot read ({exc.strerror or exc})")
         found.append(hit)
     try:
-        return measured_edges(found, prov.t or DEFAULT_T)
+        return measured_edges(found, prov.t or DEFAULT_T, (profile.width, profile.height))
     except ValueError as exc:
         return FittingEdges(None, str(exc))
 

@@ -426,7 +426,8 @@ def _fitting_edges(args, profile, model_dir, known):
         return FittingEdges(None, "not measured (--no-shots)")
     if args.shots:
         try:
-            return measured_edges(args.shots, profile.provenance.t or DEFAULT_T)
+            model = f"the model {args.model}" if getattr(args, "model", None) else "the profile"
+            return measured_edges(args.shots, profile.provenance.t or DEFAULT_T, (profile.width, profile.height), model)
         except ValueError as exc:
             raise ExportError(str(exc)) from None
     return fitting_edges(profile, model_dir)

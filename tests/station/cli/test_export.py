@@ -597,6 +597,21 @@ def test_bad_options_exit_2_with_one_line_and_nothing_written(model_source, tmp_
     assert stderr.startswith("harp export: ") and message in stderr and stderr.count("\n") == 1, stderr
 
 
+def test_shots_of_another_size_than_the_model_exit_2_nothing_written(model_source, tmp_path):
+    # a shot of another camera (or a crop) was measured and its residual d stated as the fitting shots'
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), cv2.imread(str(model_source.model_file.parent / "shot0.pgm"), cv2.IMREAD_UNCHANGED)[:200])
+    out = tmp_path / "out.yml"
+    code, stdout, stderr = run_main(
+        "export", model_source.model_file, "--format", "opencv", "--shots", small, "-o", out
+    )
+    assert code == 2 and stdout == "" and not out.exists() and stderr.count("\n") == 1, stderr
+    assert stderr == (
+        f"harp export: {small}: image is {W}x200 but the model {model_source.model_file} is for {W}x{H} images: "
+        "give the shots the model was fitted on\n"
+    )
+
+
 def test_coeffs_5_on_a_wide_lens_names_the_export_family_exit_2_nothing_written(tmp_path):
     model = tmp_path / "wide.yaml"
     write_model_file(model, wide_radial(150.0, 1200, 900), width=1200, height=900)
