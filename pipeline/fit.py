@@ -103,6 +103,7 @@ from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FREE_CENTER_WEIGHT, FitSpec, s
 from pipeline.models.base import DistortionModel
 from pipeline.models.radial import RadialParametrisation
 from pipeline.models.radial_field import RadialFieldParametrisation
+from pipeline.orientations import MIN_ORIENTATION_SPREAD_DEG
 from pipeline.robust_points import POINT_LOSSES, PointLoss, robust_point_weights
 
 MIN_EDGES = 4
@@ -266,7 +267,7 @@ def fit_distortion(
     robust: bool = True,
     reject_factor: float = REJECT_FACTOR,
     max_reject_fraction: float = MAX_REJECT_FRACTION,
-    min_orientation_spread_deg: float = 20.0,
+    min_orientation_spread_deg: float = MIN_ORIENTATION_SPREAD_DEG,
     ridge: float | None = None,
     w_center: float = FREE_CENTER_WEIGHT,
     max_nfev: int = 200,

@@ -37,6 +37,42 @@ the shots straight with terms an unseen orientation sees bent."""
 ORIENTATION_SEPARATION_DEG = 10.0
 """Two shots whose strings differ in direction by less than this are one orientation."""
 
+MIN_ORIENTATION_SPREAD_DEG = 20.0
+"""A fit needs strings at two directions at least this far apart (:func:`pipeline.fit.fit_distortion`'s default):
+one direction cannot constrain the distortion along the strings."""
+
+
+def holdout_problem(angles_deg: Sequence[float], spread_deg: float = MIN_ORIENTATION_SPREAD_DEG) -> str | None:
+    """Why a leave-one-orientation-out of shots whose strings turn with ``angles_deg`` (a turntable's angles, one per
+    fitted orientation) cannot be fitted, else None: some fold keeps its string directions (modulo 180 degrees)
+    within an arc narrower than ``spread_deg``. A session fits every fold, so such a plan never gives a profile.
+
+    Linear in the number of directions (a plan may have 100000): the directions sorted on the 180-degree circle,
+    the widest gap between neighbours when each one in turn is left out (its two gaps merged)."""
+    a = np.asarray(angles_deg, dtype=np.float64) % 180.0
+    if a.size == 0:
+        return None
+    u, counts = np.unique(a, return_counts=True)
+    m = len(u)
+    if m == 1:
+        lonely = 0  # one direction: every fold keeps it alone (or nothing)
+    else:
+        gaps = np.diff(np.append(u, u[0] + 180.0))  # gaps[i]: from u[i] to the next direction, round the circle
+        before = np.roll(np.arange(m), 1)  # the gap ending at u[i]
+        top = np.argsort(gaps)[::-1][:3]  # the widest gaps: one of them is neither of a left-out direction's two
+        other = np.full(m, 0.0)
+        for j in top[::-1]:
+            other = np.where((before != j) & (np.arange(m) != j), gaps[j], other)
+        widest = np.maximum(gaps[before] + gaps, other) if m > 2 else np.full(m, 180.0)
+        fails = (180.0 - widest <= spread_deg) & (counts == 1)  # a direction another shot repeats leaves none out
+        if not fails.any():
+            return None
+        lonely = int(np.flatnonzero(fails)[0])
+    return (
+        f"without the shot at {u[lonely]:g} deg the others keep no two string directions more than {spread_deg:g} "
+        "deg apart (modulo 180), and the holdout fits every shot's fold"
+    )
+
 
 def shot_orientation(lines: Sequence[np.ndarray]) -> float:
     """Direction of a shot's strings, degrees in [0, 180): the length-weighted mean (on doubled angles)

@@ -31,6 +31,7 @@ import yaml
 from drivers.settings import REQUIRED, Setting, describe, fields_of, plain, problem, shown, split_item
 from pipeline.board import parse_board
 from pipeline.fitspec import AUTO, parse_choice
+from pipeline.orientations import holdout_problem
 from station.config.devices import check_the_devices
 from station.config.errors import ConfigError
 from station.config.reader import ConfigReadError, load_yaml, read_config_text
@@ -290,6 +291,14 @@ def check_across(config: Config) -> None:
             f"section), got {tt.port!r}",
         )  # fmt: skip
     check_the_devices(config)
+    # after the devices' own ranges (an angle out of them is named first)
+    problem = holdout_problem(cap.fitted_angles_deg)
+    if problem is not None:  # captured whole, then stopped at its first fit, every time it is resumed
+        fitted = "" if cap.twin is None else " besides the twin (capture.twin_deg)"
+        raise config.error(
+            "capture.orientations_deg", f"expected turntable angles{fitted} a session can fit and hold out: {problem}; "
+            f"add angles (three or more, e.g. 0, 60, 120), got {shown(list(cap.orientations_deg))}",
+        )  # fmt: skip
 
 
 def _zoom(config: Config) -> None:

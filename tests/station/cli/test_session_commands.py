@@ -93,6 +93,33 @@ def test_config_check_warns_of_a_missing_port_that_session_run_refuses_also_with
     assert code == 0 and err == ""
 
 
+@pytest.mark.parametrize(
+    "capture, without",
+    [
+        ({"orientations_deg": [0, 90]}, 0),  # two orientations: each fold keeps one
+        ({"orientations_deg": [0, 90, 180]}, 90),  # 0 and 180: the same string direction
+        ({"orientations_deg": [0, 5, 90]}, 90),
+        ({"orientations_deg": [0, 90], "twin_deg": 90}, 0),  # the twin is not fitted
+    ],
+)
+def test_a_plan_no_session_can_fit_is_refused_before_anything_is_captured(tmp_path, capsys, capture, without):
+    # such a plan passed harp config check; harp session run captured every shot, then stopped at the first fit
+    # ("cross-validation without orientation 0: all 22 edges lie within 0.4 deg of one orientation"), and again at
+    # every resume: a session that could never finish
+    d = yaml.safe_load(DEMO.read_text())
+    d["capture"].update(capture)
+    p = demo_copy(tmp_path, capture=d["capture"])
+    for argv in (("config", "check", p), ("session", "plan", p), ("session", "run", p)):
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and err.count("\n") == 1, (argv, err)
+        assert f"{p}: capture.orientations_deg: expected turntable angles" in err, err
+        assert (
+            f"without the shot at {without:g} deg the others keep no two string directions more than 20 deg apart"
+            in err
+        )
+    assert not (tmp_path / "sessions").exists() and not (tmp_path / "p.sqlite").exists()
+
+
 @pytest.mark.parametrize("value", ["some", "yes", "[all]"])
 def test_config_check_refuses_a_bad_overlay_retention(tmp_path, capsys, value):
     bad = tmp_path / "bad.yaml"
