@@ -111,7 +111,7 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     import datetime as _dt
     import json
 
-    from station.session.directory import SessionError, read_manifest  # defers cv2, numpy, yaml
+    from station.session.directory import SessionError, lost_manifest, read_manifest  # defers cv2, numpy, yaml
 
     path = Path(session_dir)
     try:
@@ -121,6 +121,9 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     except (OSError, ValueError) as exc:
         raise SessionError(f"{path / SESSION_FILE}: cannot be read ({exc})") from None
     lines, _ = read_manifest(path / MANIFEST)
+    lost = None if lines else lost_manifest(path)
+    if lost is not None:  # not "interrupted, 0 frames": what it recorded is there, the record of it is not
+        raise SessionError(lost)
     records = parse(lines)
     state = RUNNING if in_use(path) else session_state(records)
     verdicts = [r.verdict for r in records if isinstance(r, SessionVerdict)]

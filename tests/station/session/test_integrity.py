@@ -216,3 +216,11 @@ def test_lost_manifest_is_refused_by_resume_repair_and_qa_nothing_captured_over(
         )
     after = {p: p.read_bytes() for p in s.rglob("*") if p.is_file() and p.name != ".lock"}
     assert after == before and manifest.exists() == (damage == "emptied")  # nothing captured over, nothing made
+    # harp session list listed it "interrupted", 0 frames: now the same line, as a warning, and not listed
+    assert main(["session", "list", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    warning, listed = err.splitlines()
+    assert (
+        warning.startswith(f"harp session: warning: {expected}")
+        and listed == f"harp session: no sessions in {tmp_path}"
+    )
