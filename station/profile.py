@@ -46,7 +46,7 @@ from typing import Any
 from pipeline.exports.lens import LensInfo
 from pipeline.fitspec import FitSpec, parse
 from pipeline.intrinsics import Intrinsics
-from pipeline.model_file import ModelFile
+from pipeline.model_file import ModelFile, not_finite
 from pipeline.models import model_from_dict
 from pipeline.models.base import DistortionModel
 from pipeline.plain import finite_or_none, plain
@@ -561,8 +561,12 @@ class Profile:
         qa_json = row.get("qa_json")
         intr_json = row.get("intrinsics_json")
         lens, camera = row.get("lens"), row.get("camera")
+        model_doc = json.loads(row["model_json"])
+        bad = not_finite(model_doc, "model")
+        if bad is not None:  # JSON keeps NaN and Infinity: a model that would be exported and applied as such
+            raise ValueError(f"{bad[0]} is {bad[1]}")
         return cls(
-            model=model_from_dict(json.loads(row["model_json"])),
+            model=model_from_dict(model_doc),
             width=int(row["width"]),
             height=int(row["height"]),
             spec=spec,

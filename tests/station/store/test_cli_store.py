@@ -166,3 +166,24 @@ def test_session_run_into_the_store_named_on_the_command_line(postgres, tmp_path
         assert p.lens.serial == "CLI-1" and p.qa is not None
         assert [r["origin"] for r in st.qa_results()] == ["session"]
     assert not (tmp_path / "config-store.sqlite").exists()
+
+
+def test_a_stored_model_with_a_nan_parameter_is_a_damaged_row_for_every_reading_command(tmp_path, capsys):
+    # was shown (profile show --id, exit 0), judged and, on export, "our correction is undefined over much of the image"
+    store = tmp_path / "p.sqlite"
+    with ProfileStore(store) as st:
+        bad = put(st, session="a")
+        put(st, session="b", lens=("B", "b", "GOOD-1"))
+        doc = json.loads(
+            st.engine.connect().exec_driver_sql(f"SELECT model_json FROM profiles WHERE id = {bad}").scalar()
+        )
+        doc["k"][-1] = float("nan")
+        tamper(st.engine, f"UPDATE profiles SET model_json = '{json.dumps(doc)}' WHERE id = {bad}")
+    for argv in (["profile", "show", "--id", str(bad)], ["profile", "export", "--id", str(bad), "--format", "json"]):
+        assert main([*argv, "--store", str(store)]) == 2, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1, err
+        assert f"profile #{bad} (lens S1, focus 0.5) cannot be read (model.k[{len(doc['k']) - 1}] is nan)" in err
+    assert main(["profile", "list", "--store", str(store)]) == 2
+    out, err = capsys.readouterr()
+    assert "GOOD-1" in out and err.count("\n") == 1 and f"profile #{bad}" in err
