@@ -133,6 +133,8 @@ def run(args) -> int:
                 config = config or session.config
             elif target.exists() and target.is_dir():
                 raise QAInputError(f"{target}: not a session directory (no {layout.SESSION_FILE})")
+            elif target.exists() and _looks_like_path(args.target):  # a file: not a lens the store lacks either
+                raise QAInputError(f"{target}: a file, not a session directory (give a session directory or a lens)")
             elif not target.exists() and _looks_like_path(args.target):
                 raise QAInputError(
                     f"{target}: no such session directory (check the path; `harp session list` lists the sessions)"

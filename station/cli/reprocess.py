@@ -95,9 +95,10 @@ def run(args: argparse.Namespace) -> int:
             parse_choice(args.model)
         except ValueError as exc:
             raise HarpError(f"--model {args.model}: {exc}") from None
-    missing = [str(s) for s in args.sessions if not s.is_dir()]
+    missing = [s for s in args.sessions if not s.is_dir()]
     if missing:
-        raise HarpError(f"{missing[0]}: no such session directory")
+        what = "a file, not a session directory" if missing[0].exists() else "no such session directory"
+        raise HarpError(f"{missing[0]}: {what}")
 
     if args.scheduler is not None:  # before the store is opened: a typo creates no store
         probe_scheduler(args.scheduler)  # a ReprocessError: one line (station.cli.main)

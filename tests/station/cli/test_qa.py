@@ -106,6 +106,10 @@ def test_lens_in_store_with_reference_lens(session, tmp_path, capsys):
         # issue 21 item 4: a path that does not exist is a missing path, not a lens the store lacks
         (["{tmp}/sessions/nothere", "--store", "{store}"], "no such session directory"),
         (["./nothere", "--store", "{store}"], "no such session directory"),
+        # a file given for the session: was "no lens matching '.../other-size.yaml'" (or, without a store, "no
+        # profile store here")
+        (["{ref}", "--store", "{store}"], "other-size.yaml: a file, not a session directory (give a session"),
+        (["{ref}", "--store", "{tmp}/none.sqlite"], "other-size.yaml: a file, not a session directory"),
         (["SIM 50mm f/1.8", "--store", "{store}"], "no lens matching"),
         (["{session}", "--reference", "{ref}"], "--reference needs a threshold"),
         (["{session}", "--reference", "{ref}", "--max-reference-deviation", "1"], "is for 640x480 images"),

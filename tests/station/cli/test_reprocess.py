@@ -207,6 +207,9 @@ def test_what_is_not_a_session_is_reported_and_nothing_is_stored(tmp_path):
     assert not (tmp_path / "st.sqlite").exists()
     code, _out, err = _main(["reprocess", tmp_path / "missing"])
     assert code == 2 and "no such session directory" in err
+    (tmp_path / "a.png").write_bytes(b"")  # was "no such session directory" of a file that is there
+    code, _out, err = _main(["reprocess", tmp_path / "a.png"])
+    assert code == 2 and err == f"harp reprocess: {tmp_path / 'a.png'}: a file, not a session directory\n"
 
 
 def test_a_session_whose_manifest_is_lost_is_named_so_and_nothing_is_stored(factory_archive, tmp_path):
