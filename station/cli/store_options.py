@@ -104,6 +104,11 @@ def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool =
     try:
         return ProfileStore(loc, create=write)
     except StoreError as exc:
+        env = os.environ.get("HARP_STORE")
+        if exc.kind == "missing" and env and _given(where) is None and parse_store(env) == loc:
+            raise StoreError(  # the user typed no path: say where it came from
+                f"{exc} (this store is named by $HARP_STORE: correct it or unset it)", "missing"
+            ) from None
         old = Path("profiles") / "harp-profiles.sqlite"  # where stores were found before the per-user default
         if exc.kind != "missing" or loc.backend != SQLITE or loc.path != user_store_path() or not old.is_file():
             raise
@@ -112,3 +117,10 @@ def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool =
             f"--store {old}, or set HARP_STORE",
             "missing",
         ) from None
+
+
+def _given(where: StoreLocation | argparse.Namespace | Any) -> str | None:
+    """The ``--store`` or ``--config`` a command was given (None for a location, or neither option)."""
+    if isinstance(where, StoreLocation):
+        return None
+    return getattr(where, "store", None) or getattr(where, "config", None)

@@ -112,3 +112,17 @@ def test_a_bad_configuration_named_by_harp_config_says_where_it_came_from(tmp_pa
                 f"(the configuration $HARP_CONFIG names: correct it, unset HARP_CONFIG or give {instead})\n"
             ), err
     assert not (tmp_path / "data").exists()  # no store created
+
+
+def test_a_missing_store_named_by_harp_store_says_where_it_came_from(tmp_path):
+    # the line named a path the user never typed; given with --store, the same path says nothing of the variable
+    missing = tmp_path / "nowhere" / "profiles.sqlite"
+    env = _env(tmp_path, HARP_STORE=str(missing))
+    for argv in (["profile", "list"], ["qa", "DEMO-0001"]):
+        code, out, err = harp(*argv, cwd=tmp_path, env=env)
+        assert code == 2 and out == "" and err.count("\n") == 1, (argv, err)
+        assert err.startswith(f"harp {argv[0]}: {missing}: no profile store here"), err
+        assert err.endswith("(this store is named by $HARP_STORE: correct it or unset it)\n"), err
+    code, out, err = harp("profile", "list", "--store", str(missing), cwd=tmp_path, env=env)
+    assert code == 2 and err.count("\n") == 1 and "HARP_STORE" not in err, err
+    assert not missing.parent.exists()  # nothing created
