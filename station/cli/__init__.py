@@ -120,7 +120,7 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_INTERRUPTED
     args, extra = parser.parse_known_args(argv)
     if extra:  # named by the sub-command they were given to (argparse would say "harp: ...")
-        say(_prog(args), f"unrecognized arguments: {' '.join(extra)} (see {_prog(args)} --help)")
+        say(_help_prog(args), f"unrecognized arguments: {' '.join(extra)} (see {_help_prog(args)} --help)")
         return EXIT_ERROR
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
@@ -190,6 +190,13 @@ def _caused_by_ctrl_c(exc: BaseException) -> bool:
 
 def _prog(args: argparse.Namespace) -> str:
     return f"harp {args.command}" if getattr(args, "command", None) else "harp"
+
+
+def _help_prog(args: argparse.Namespace) -> str:
+    """The command whose ``--help`` lists what ``args`` could take, as argparse names it in its own usage errors:
+    ``harp COMMAND``, or with an action ``harp COMMAND ACTION`` (``harp profile show``)."""
+    action = getattr(args, f"{getattr(args, 'command', None)}_command", None)
+    return f"{_prog(args)} {action}" if action else _prog(args)
 
 
 def _stdout_is_devnull() -> bool:

@@ -90,6 +90,10 @@ def test_a_harp_error_carries_its_exit_code_and_is_one_line(monkeypatch, capsys)
         (["qa", "s", "--max-holdout-d", "-3"], "harp qa: argument --max-holdout-d: expected a positive number"),
         (["session", "frob"], "harp session: argument ACTION: invalid choice: 'frob' (choose from 'run', "),
         (["measure", "x.png", "--bogus"], "harp measure: unrecognized arguments: --bogus (see harp measure --help)"),
+        (
+            ["profile", "show", "--id", "1", "--bogus"],
+            "harp profile show: unrecognized arguments: --bogus (see harp profile show --help)",
+        ),
     ],
 )
 def test_a_usage_error_is_one_line_naming_the_option_exit_2(argv, line, capsys):
