@@ -55,6 +55,7 @@ import re
 import threading
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Self, TypedDict
 
 from drivers.config_keys import check_config_keys
@@ -170,6 +171,15 @@ class GrblStatus(TypedDict):
     raw: str
 
 
+@dataclass
+class _Controller:
+    """What the axes on one controller's connection share (the turntable's, its tilt's, its shift's): the
+    alarm the controller raised, whichever axis read it, so that the turntable's :meth:`GrblAxis.recover`
+    clears it for all of them."""
+
+    last_alarm: int | None = None
+
+
 def error_text(code: int) -> str:
     return f"error:{code} ({ERROR_CODES.get(code, 'unknown error')})"
 
@@ -262,7 +272,7 @@ class GrblAxis:
         self.transport = SerialTransport(port, baudrate, name=self.name)
         self.messages: list[str] = []  # [MSG:...] and other feedback lines seen
         self.version: str | None = None
-        self.last_alarm: int | None = None
+        self._controller = _Controller()
         self._lock = threading.RLock()
         self._target: float | None = None
         self._shared = False  # an axis on another axis's connection (the tilt, the shift axis): opened and closed by it
@@ -287,8 +297,19 @@ class GrblAxis:
             name=f"{self.name} {role} axis {str(letter).upper()}",
         )  # fmt: skip
         axis.transport, axis._lock, axis._shared = self.transport, self._lock, True
+        axis._controller = self._controller
         self._others.append(axis)
         return axis
+
+    @property
+    def last_alarm(self) -> int | None:
+        """The alarm code the controller raised (``ALARM:N``) and nobody cleared yet (one for every axis on
+        its connection)."""
+        return self._controller.last_alarm
+
+    @last_alarm.setter
+    def last_alarm(self, code: int | None) -> None:
+        self._controller.last_alarm = code
 
     # -- life cycle --------------------------------------------------------------
     def open(self) -> None:
@@ -589,7 +610,8 @@ class GrblAxis:
         self.send("$X")
 
     def recover(self) -> list[str]:
-        """Leave an alarm: soft reset if GRBL waits for one, then ``$X``.
+        """Leave an alarm: soft reset if GRBL waits for one, then ``$X`` (for every axis of the controller:
+        whichever of them read the alarm).
 
         Returns the alarm descriptions that were cleared. After a hard-limit
         alarm the position is lost: call :meth:`home` before moving.

@@ -37,7 +37,9 @@ sideways, in mm (1 unit = 1 mm: ``G90 G0 Z12.500``; ``$13x`` = :data:`SHIFT_TRAV
 Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 ``"no_reply"``, ``"garbage"``, ``"alarm"`` (hard limit ``ALARM:1`` at
 fraction ``at`` of the next move: motion stops, ``[MSG:Reset to continue]``,
-every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``.
+every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``; both motion faults
+wait for a move of the turntable's axis, or of the axis ``axis`` names (``axis="Z"``: the
+linear stage's).
 """
 
 from __future__ import annotations
@@ -407,13 +409,16 @@ class GrblEmulator(LineEmulator):
 
     # -- motion -------------------------------------------------------------------
     def update(self, now: float) -> None:
-        move = self.axis.move
-        if move is not None:
-            armed = self.motion_fault()
-            if armed is not None and move.fraction(now) >= armed[1]["at"]:
+        armed = self.motion_fault()
+        # the axis whose move the armed fault waits for: the turntable's, or the one its ``axis`` names
+        faulty = self._axes.get(str(armed[1].get("axis", self.axis_letter)).upper()) if armed else None
+        move = faulty.move if faulty is not None else None
+        if armed is not None and faulty is not None and move is not None:
+            if move.fraction(now) >= armed[1]["at"]:
                 name, spec = armed
                 self.consume(name)
-                self.axis.halt(now)
+                for a in self._axes.values():
+                    a.halt(now)
                 if name == "vanish":
                     self.vanish()
                     return

@@ -218,6 +218,25 @@ def test_hard_limit_alarm_mid_move_then_recover_and_rehome(emu):
         assert tt.move_to(90.0) == 90.0
 
 
+def test_an_alarm_the_linear_stage_read_is_cleared_by_the_turntables_recover(emu):
+    """The controller's alarm is one for all its axes: read while the shift axis moved, the turntable's
+    recover() (what a session calls) clears it, and the shift axis moves again. Before, each axis kept its
+    own: recover() cleared nothing and the shift axis refused every move until the driver was reopened."""
+    with start_grbl_emulator(shift_axis="Z", **FAST) as h, driver(h.port_path, shift_axis="Z") as tt:
+        tt.home()
+        h.emulator.inject("alarm", at=0.5, code=1, axis="Z")  # the linear stage runs into a limit switch
+        with pytest.raises(DeviceFault, match=r"shift axis Z: .*ALARM:1 \(hard limit triggered"):
+            tt.shift.move_to(50.0)
+        assert tt.last_alarm == 1
+        with pytest.raises(DeviceFault, match=r"cannot move, controller in ALARM:1"):
+            tt.move_to(90.0)
+        assert tt.recover() == [
+            "ALARM:1 (hard limit triggered; machine position is likely lost, re-homing is recommended)"
+        ]
+        tt.home()
+        assert tt.shift.move_to(50.0) == 50.0 and tt.move_to(90.0) == 90.0
+
+
 def test_soft_limit_alarm_when_the_travel_shrinks_behind_the_drivers_back():
     """The driver refuses what the travel read at open excludes; if $130 is changed afterwards
     the controller's own ALARM:2 is a DeviceFault, and reopening reads the new travel."""
