@@ -38,7 +38,9 @@ mm; ``G90 G0 Z12.500``).
 Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
 ``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
 meaning (recover with :meth:`recover`: soft reset if needed, then ``$X``;
-re-home after a hard-limit alarm, position is lost); no answer ->
+re-home after a hard-limit alarm, position is lost); the controller's banner
+unasked (it restarted: a power dip, a USB reset; its position counts from 0
+again) -> :class:`DeviceFault` until :meth:`recover` and :meth:`home`; no answer ->
 :class:`DeviceTimeout`; unparsable line -> :class:`ProtocolError`; port gone
 -> :class:`DeviceDisconnected`.
 
@@ -174,10 +176,11 @@ class GrblStatus(TypedDict):
 @dataclass
 class _Controller:
     """What the axes on one controller's connection share (the turntable's, its tilt's, its shift's): the
-    alarm the controller raised, whichever axis read it, so that the turntable's :meth:`GrblAxis.recover`
-    clears it for all of them."""
+    alarm the controller raised and whether it restarted unasked, whichever axis read it, so that the
+    turntable's :meth:`GrblAxis.recover` clears it for all of them."""
 
     last_alarm: int | None = None
+    restarted: bool = False
 
 
 def error_text(code: int) -> str:
@@ -311,6 +314,19 @@ class GrblAxis:
     def last_alarm(self, code: int | None) -> None:
         self._controller.last_alarm = code
 
+    @property
+    def restarted(self) -> bool:
+        """The controller printed its banner unasked since it was last homed or recovered: it started again
+        (a power dip, a USB reset that rebooted the board) and counts its position from 0 wherever the axes
+        stand; every move is refused (:class:`DeviceFault`) until :meth:`recover` and :meth:`home`."""
+        return self._controller.restarted
+
+    def _restart_fault(self) -> DeviceFault:
+        return DeviceFault(
+            f"{self.name}: the controller restarted (its banner came unasked: a power dip or a USB reset),"
+            " its position is lost; use recover(), then home()"
+        )
+
     # -- life cycle --------------------------------------------------------------
     def open(self) -> None:
         """Open the port, soft-reset GRBL (Ctrl-X) and wait for its banner (the tilt, the shift axis: the same
@@ -324,6 +340,7 @@ class GrblAxis:
         try:
             with self._lock:
                 self.last_alarm = None  # the controller's state after the reset is what counts
+                self._controller.restarted = False
                 self._target = None
                 self.transport.pending()
                 self.transport.write(b"\x18")
@@ -379,9 +396,10 @@ class GrblAxis:
         if text.startswith("[") and text.endswith("]"):
             self.messages.append(text)
             return
-        if text.startswith("Grbl "):
-            self.messages.append(text)  # an unexpected reset
-            return
+        if text.startswith("Grbl "):  # a banner nobody asked for: the controller started again
+            self.messages.append(text)
+            self._controller.restarted = True
+            raise self._restart_fault()
         m = _ALARM.match(text)
         if m:
             self.last_alarm = int(m.group(1))
@@ -393,6 +411,8 @@ class GrblAxis:
             text = line.decode("ascii", "replace").strip()
             if _ALARM.match(text):
                 self.last_alarm = int(text[6:])
+            elif text.startswith("Grbl "):  # it started again while nobody was listening
+                self._controller.restarted = True
 
     def send(self, line: str, timeout: float | None = None) -> list[str]:
         """Send one line and wait for ``ok``; returns the feedback lines before it.
@@ -434,7 +454,7 @@ class GrblAxis:
                 if remaining <= 0:
                     raise DeviceTimeout(f"{self.name}: no status report within {self.reply_timeout:.2f} s")
                 text = self._decode(self.transport.readline(remaining, "status report", total=self.reply_timeout))
-                if not text or text == "ok":
+                if not text or text == "ok" or _ERROR.match(text):  # a late reply to an earlier line
                     continue
                 if text.startswith("<"):
                     return self._parse_status(text)
@@ -526,12 +546,14 @@ class GrblAxis:
             warnings.append(alarm_text(self.last_alarm) if self.last_alarm else "Alarm (locked: home or unlock)")
         elif st["state"] in ("Hold", "Door"):
             warnings.append(f"{st['state']}:{st['substate']}")
+        if self.restarted:
+            warnings.append("restarted: position lost (home it)")
         return {
             "busy": st["state"] in ("Run", "Home", "Jog"),
             "warnings": warnings,
             "state": st["state"],
             "position": st["position"],
-            "fault": st["state"] == "Alarm",
+            "fault": st["state"] == "Alarm" or self.restarted,
         }
 
     def home(self, timeout: float | None = None) -> None:
@@ -540,18 +562,23 @@ class GrblAxis:
             self._target = None
             self.send("$H", timeout=timeout)  # GRBL answers ok when the cycle is over
             self.last_alarm = None
+            self._controller.restarted = False  # homed: the position is known again
             self._wait_idle(timeout, "home", None)
 
     def start_move(self, position: float) -> float:
         """Queue the move (``ok`` = buffered) and return without waiting."""
         self._travel.check(self.name, "move to", position)
-        if self.last_alarm is not None:
-            raise DeviceFault(
-                f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)}; call recover() (then home())"
-            )
         units = position * self.units_per_unit
         cmd = f"G90 G0 {self.axis}{units:.3f}" if self.feed is None else f"G90 G1 {self.axis}{units:.3f} F{self.feed:g}"
         with self._lock:
+            self._drain()  # an alarm or a restart said while nobody was listening
+            if self.restarted:
+                raise self._restart_fault()
+            if self.last_alarm is not None:
+                raise DeviceFault(
+                    f"{self.name}: cannot move, controller in {alarm_text(self.last_alarm)};"
+                    " call recover() (then home())"
+                )
             self.send(cmd)
             self._target = round(units, 3) / self.units_per_unit
         return self._target
@@ -572,6 +599,8 @@ class GrblAxis:
         while True:
             st = self.query_status()
             state, pos = st["state"], st["position"]
+            if self.restarted:  # its position counts from 0 again: wherever it says it is, it is not known
+                raise self._restart_fault()
             if state == "Alarm":
                 cause = alarm_text(self.last_alarm) if self.last_alarm else "alarm state"
                 raise DeviceFault(f"{self.name}: {what} failed at {self._show(pos)}: {cause}; use recover()")
@@ -614,11 +643,14 @@ class GrblAxis:
         whichever of them read the alarm).
 
         Returns the alarm descriptions that were cleared. After a hard-limit
-        alarm the position is lost: call :meth:`home` before moving.
+        alarm the position is lost: call :meth:`home` before moving (after a restart of the controller,
+        :attr:`restarted`, moves are refused until then).
         """
         with self._lock:
-            cleared = [alarm_text(self.last_alarm)] if self.last_alarm else []
             self._drain()
+            cleared = [alarm_text(self.last_alarm)] if self.last_alarm else []
+            if self.restarted:
+                cleared.append("restart (position lost: home it)")
             self.transport.write(b"\x18")
             self._wait_banner(self.startup_timeout)
             st = self.query_status()

@@ -39,7 +39,7 @@ Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 fraction ``at`` of the next move: motion stops, ``[MSG:Reset to continue]``,
 every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``; both motion faults
 wait for a move of the turntable's axis, or of the axis ``axis`` names (``axis="Z"``: the
-linear stage's).
+linear stage's). :meth:`GrblEmulator.restart` starts the controller again as at power-up.
 """
 
 from __future__ import annotations
@@ -259,6 +259,25 @@ class GrblEmulator(LineEmulator):
         self.write(BANNER)
         if self.state == "Alarm":
             self.write(UNLOCK_MSG)
+
+    def restart(self) -> None:
+        """Start again as at power-up (a brown-out, a USB reset that reboots the board, a watchdog): the
+        planner and any motion are dropped, the machine position counts from 0 again (this emulator has no
+        home switch apart from machine 0: the stage is taken to be there), with homing on the controller
+        waits in ``Alarm`` for ``$H`` or ``$X``; it says so with its banner, as at power-up, and nothing
+        else (no ``ALARM:`` line)."""
+        with self._lock:
+            for a in self._axes.values():
+                a.set_position(0.0)
+            self.queue.clear()
+            self._homing = False
+            self._held = None
+            self._inbuf.clear()
+            self.critical = False
+            self.state = "Alarm" if self.homing_enabled else "Idle"
+            self.write(BANNER)
+            if self.state == "Alarm":
+                self.write(UNLOCK_MSG)
 
     # -- lines --------------------------------------------------------------------
     def reject(self, line: bytes, spec: dict[str, Any], now: float) -> None:

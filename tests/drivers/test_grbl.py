@@ -237,6 +237,60 @@ def test_an_alarm_the_linear_stage_read_is_cleared_by_the_turntables_recover(emu
         assert tt.shift.move_to(50.0) == 50.0 and tt.move_to(90.0) == 90.0
 
 
+def test_a_controller_that_restarted_unasked_refuses_moves_until_recovered_and_homed():
+    """A power dip or a USB reset reboots the board: GRBL prints its banner unasked and counts from 0
+    where it stands, in Alarm (homing on). That is a DeviceFault naming the restart, moves are refused
+    before anything is sent until recover() and home(). Before, the banner was filed as a message and the
+    next move was refused with error:9, a DeviceRejected that stopped a session at once."""
+    unlock = b"[MSG:'$H'|'$X' to unlock]\r\n"
+    script = [
+        (b"\x18", BANNER + unlock),
+        (b"$$\n", settings_listing(homing=1)),
+        (b"$H\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 X45.000\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:45.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 X90.000\n", BANNER + unlock),  # the line is lost: the board restarts
+        (b"\x18", BANNER + unlock),  # recover(): reset, still locked, unlock
+        (b"?", b"<Alarm|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"$X\n", b"[MSG:Caution: Unlocked]\r\nok\r\n"),
+        (b"$H\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        (b"G90 G0 X90.000\n", b"ok\r\n"),
+        (b"?", b"<Idle|MPos:90.000,0.000,0.000|FS:0,0>\r\n"),
+    ]
+    restarted = (
+        r"the controller restarted \(its banner came unasked: a power dip or a USB reset\), its position is lost"
+    )
+    with ScriptedDevice(script, name="grbl") as dev:
+        with driver(dev.port) as tt:
+            tt.home()
+            assert tt.move_to(45.0) == 45.0
+            with pytest.raises(DeviceFault, match=restarted):
+                tt.move_to(90.0)
+            assert tt.restarted
+            with pytest.raises(DeviceFault, match=restarted):
+                tt.move_to(90.0)  # refused: nothing sent
+            assert tt.recover() == ["restart (position lost: home it)"]
+            with pytest.raises(DeviceFault, match=restarted):
+                tt.move_to(90.0)  # not homed yet: still refused
+            tt.home()
+            assert not tt.restarted and tt.move_to(90.0) == 90.0
+
+
+def test_the_emulated_controller_restarts_like_grbl_at_power_up(emu):
+    with driver(emu.port_path) as tt:
+        tt.home()
+        assert tt.move_to(120.0) == 120.0
+        emu.emulator.restart()
+        with pytest.raises(DeviceFault, match="the controller restarted"):
+            tt.move_to(45.0)
+        assert tt.status()["fault"] and tt.status()["state"] == "Alarm" and tt.position() == 0.0
+        tt.recover()
+        tt.home()
+        assert tt.move_to(45.0) == 45.0
+
+
 def test_soft_limit_alarm_when_the_travel_shrinks_behind_the_drivers_back():
     """The driver refuses what the travel read at open excludes; if $130 is changed afterwards
     the controller's own ALARM:2 is a DeviceFault, and reopening reads the new travel."""

@@ -325,6 +325,35 @@ def test_emulator_and_camera_faults_are_retried(tmp_path):
     assert n_frames == N_ORI
 
 
+def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_path):
+    """The GRBL board restarts between two moves (a power dip, a USB reset): the driver reads its banner as a
+    DeviceFault, the session recovers the controller, homes it and goes on; every shot taken at its angle.
+    Before, the next move was refused with error:9 and the session stopped ('device refused')."""
+    path = small_config(tmp_path, focus=(0.5,), frames=1)
+    d = yaml.safe_load(path.read_text())
+    d["station"]["turntable"] = {"driver": "grbl", "port": "emulator"}
+    path.write_text(yaml.safe_dump(d))
+    cfg = load_config(path)
+    with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="g") as s:
+        sim.camera.open()
+        sim.turntable.open()
+        move_to, restarts = sim.turntable.move_to, []
+
+        def restarting_before_90(degrees, timeout=None):
+            if degrees == 90 and not restarts:
+                restarts.append(degrees)
+                sim.emulator.emulator.restart()
+            return move_to(degrees, timeout=timeout)
+
+        sim.turntable.move_to = restarting_before_90
+        result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+        faults = [(r.what, r.error) for r in s.of_type(Fault)]
+        stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
+    assert result.exit_code == EXIT_OK, result.message
+    assert faults == [("move turntable to 90 deg", "DeviceFault")]
+    assert stages == [0.0, 45.0, 90.0, 135.0]
+
+
 def test_unplugged_turntable_stops_cleanly(tmp_path):
     cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1))
     with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="u") as s:
