@@ -11,11 +11,17 @@ low-level failure into one of the driver errors of :mod:`drivers.errors`:
   writing (port closed, cable pulled, pty master gone) ->
   :class:`~drivers.errors.DeviceDisconnected`
 - the port cannot be opened -> :class:`~drivers.errors.DeviceDisconnected`
+
+A device port (not a URL) is opened for this process alone (pyserial's ``exclusive``: an ``flock``):
+another program that opens it so too -- a second ``harp session run`` or ``harp live`` of the station,
+``harp devices --probe`` -- is told the port is in use instead of taking the replies the first one waits
+for.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import termios
 import threading
 import time
@@ -77,10 +83,17 @@ class SerialTransport:
             ser.baudrate = self.baudrate
             ser.timeout = _POLL
             ser.write_timeout = 2.0
+            if "://" not in self.port:
+                ser.exclusive = True  # the device's replies are this process's alone (see the module docstring)
             for key, value in self.serial_options.items():
                 setattr(ser, key, value)
             ser.open()
         except _OPEN_ERRORS as exc:
+            if getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+                raise DeviceDisconnected(
+                    f"{self.name}: cannot open {self.port}: it is in use by another program (another harp session"
+                    " or live view, harp devices --probe, a serial terminal); close that one first"
+                ) from exc
             raise DeviceDisconnected(f"{self.name}: cannot open {self.port}: {exc}") from exc
         self._ser = ser
         self._buf.clear()

@@ -14,6 +14,7 @@ import pytest
 
 import drivers
 from drivers.discovery import FoundDevice, discover, list_aravis_cameras, list_serial_ports, list_v4l2_devices
+from drivers.errors import DeviceDisconnected
 from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.pty_server import PtyServer
 from drivers.sim.zaber_emulator import start_zaber_emulator
@@ -117,6 +118,31 @@ def test_a_silent_port_gets_exactly_the_two_probes_and_a_vanished_one_its_error(
     nowhere = "/dev/pts/does-not-exist"
     (gone,) = [f for f in list_serial_ports(extra=[nowhere], probe=True, timeout=0.05) if f.device == nowhere]
     assert gone.problem.startswith("serial port /dev/pts/does-not-exist: cannot open")
+
+
+def test_a_port_a_turntable_holds_is_in_use_for_a_probe_and_for_another_driver():
+    """A device port is this process's alone while a driver holds it (an flock, pyserial's exclusive): a
+    probe or another driver is told it is in use and writes nothing. Before, ``harp devices --probe`` run
+    beside a session wrote to its turntable and took replies the session waited for (a DeviceTimeout for
+    the session's 'get pos'), and a second session on the same port could run at once."""
+    with start_zaber_emulator(**FAST) as handle:
+        port = handle.port_path
+        with drivers.open_turntable({"driver": "zaber", "port": port, "poll_interval": 0.005}) as tt:
+            tt.home()
+            sent = list(handle.emulator.received)
+            (busy,) = [f for f in list_serial_ports(extra=[port], probe=True, timeout=0.05) if f.device == port]
+            with pytest.raises(DeviceDisconnected) as other:
+                drivers.open_turntable({"driver": "zaber", "port": port}).open()
+            assert handle.emulator.received == sent  # neither wrote a byte
+            in_use = (
+                f"cannot open {port}: it is in use by another program (another harp session or live view,"
+                " harp devices --probe, a serial terminal); close that one first"
+            )
+            assert busy.driver is None and busy.problem == f"serial port {port}: {in_use}"
+            assert str(other.value) == f"zaber {port} device 1 axis 1: {in_use}"
+            assert tt.move_to(30.0) == pytest.approx(30.0, abs=1e-3)
+        (free,) = [f for f in list_serial_ports(extra=[port], probe=True) if f.device == port]
+        assert free.driver == "zaber"  # closed: the port is free again
 
 
 def test_discover_runs_every_listing(tmp_path):
