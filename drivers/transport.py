@@ -10,7 +10,9 @@ low-level failure into one of the driver errors of :mod:`drivers.errors`:
 - EOF, ``OSError`` or a pyserial ``SerialException`` while reading or
   writing (port closed, cable pulled, pty master gone) ->
   :class:`~drivers.errors.DeviceDisconnected`
-- the port cannot be opened -> :class:`~drivers.errors.DeviceDisconnected`
+- the port cannot be opened -> :class:`~drivers.errors.DeviceDisconnected`; a ``socket://``,
+  ``rfc2217://`` or ``loop://`` URL that is malformed says what is wrong with it (:func:`url_problem`),
+  before pyserial, whose own checks answer some with a ``KeyError`` or an unrelated text
 
 A device port (not a URL) is opened for this process alone (pyserial's ``exclusive``: an ``flock``):
 another program that opens it so too -- a second ``harp session run`` or ``harp live`` of the station,
@@ -26,6 +28,7 @@ import termios
 import threading
 import time
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import serial
 
@@ -39,6 +42,39 @@ _POLL = 0.02
 _IO_ERRORS: tuple[type[Exception], ...] = (serial.SerialException, OSError, termios.error)
 # ... and what opening a port raises besides (a malformed URL)
 _OPEN_ERRORS: tuple[type[Exception], ...] = (*_IO_ERRORS, ValueError)
+
+
+_URL_OPTIONS = {
+    "socket": ("logging",),
+    "loop": ("logging",),
+    "rfc2217": ("logging", "ign_set_control", "poll_modem", "timeout"),
+}
+"""The options each of pyserial's URL handlers takes (``serial/urlhandler``, ``serial/rfc2217.py``)."""
+_LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+def url_problem(port: str) -> str | None:
+    """What is wrong with ``port`` as a ``socket://``, ``rfc2217://`` or ``loop://`` URL (None: nothing, or
+    another kind of port, left to pyserial). pyserial's own checks of these formats the message with the
+    URL's pattern and fails on its braces: a ``KeyError`` out of ``open()`` (``loop://?logging=bogus``),
+    or the text ``'debug|info|warning|error'`` for ``socket://host:http``."""
+    scheme = port.partition("://")[0].lower() if "://" in port else ""
+    if scheme not in _URL_OPTIONS:
+        return None
+    form = "loop://[?logging=LEVEL]" if scheme == "loop" else f"{scheme}://HOST:PORT (PORT a number from 0 to 65535)"
+    try:
+        parts = urlsplit(port)
+        number = parts.port
+    except ValueError:  # a port that is not a number or beyond 65535, a broken IPv6 address
+        return f"expected {form}"
+    if scheme != "loop" and number is None:  # (no host: pyserial connects to this machine)
+        return f"expected {form}"
+    for option, values in parse_qs(parts.query, keep_blank_values=True).items():
+        if option not in _URL_OPTIONS[scheme]:
+            return f"unknown option {option!r}; a {scheme}:// URL takes {', '.join(_URL_OPTIONS[scheme])}"
+        if option == "logging" and values[0] not in _LOG_LEVELS:
+            return f"logging={values[0]!r}: expected one of {', '.join(_LOG_LEVELS)}"
+    return None
 
 
 class SerialTransport:
@@ -78,6 +114,9 @@ class SerialTransport:
     def open(self) -> None:
         if self.is_open:
             return
+        problem = url_problem(self.port)
+        if problem is not None:
+            raise DeviceDisconnected(f"{self.name}: cannot open {self.port}: not a valid URL: {problem}")
         try:
             ser = serial.serial_for_url(self.port, do_not_open=True)
             ser.baudrate = self.baudrate

@@ -269,6 +269,26 @@ def test_unopenable_port_and_url_ports():
         driver("loop://").open()
 
 
+@pytest.mark.parametrize(
+    "url, problem",
+    [
+        ("loop://?logging=bogus", "logging='bogus': expected one of debug, info, warning, error"),
+        ("socket://localhost:http", "expected socket://HOST:PORT (PORT a number from 0 to 65535)"),
+        ("socket://localhost", "expected socket://HOST:PORT (PORT a number from 0 to 65535)"),
+        ("socket://localhost:70000", "expected socket://HOST:PORT (PORT a number from 0 to 65535)"),
+        ("rfc2217://[::1:4000", "expected rfc2217://HOST:PORT (PORT a number from 0 to 65535)"),
+        ("socket://localhost:4000?speed=9600", "unknown option 'speed'; a socket:// URL takes logging"),
+    ],
+)
+def test_a_malformed_url_port_says_what_is_wrong_with_it(url, problem):
+    """Before, pyserial's own check of these URLs failed formatting its message: loop://?logging=bogus was a
+    KeyError out of open() (harp: 'internal error'), socket://localhost:http said only
+    ''debug|info|warning|error''."""
+    with pytest.raises(DeviceDisconnected) as err:
+        ZaberTurntable(url).open()
+    assert str(err.value) == f"zaber {url} device 1 axis 1: cannot open {url}: not a valid URL: {problem}"
+
+
 def test_emulator_fault_names_are_checked():
     with pytest.raises(ValueError, match="unknown fault 'explode'"):
         ZaberEmulator().inject("explode")

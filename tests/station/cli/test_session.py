@@ -390,6 +390,19 @@ def test_unreachable_port_is_one_line_exit_2(tmp_path, capsys):
     assert not (tmp_path / "sessions").exists()  # nothing created
 
 
+def test_a_malformed_port_url_is_one_line_exit_2(tmp_path, capsys):
+    """Before: 'harp session: internal error: KeyError: 'bogus'' (pyserial's own check of the URL failed)."""
+    path = small_config(tmp_path, focus=(0.5,), frames=1)
+    d = yaml.safe_load(path.read_text())
+    d["station"]["turntable"]["port"] = "loop://?logging=bogus"
+    path.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "station.turntable.port" in err
+    assert "loop://?logging=bogus: not a valid URL: logging='bogus': expected one of debug, info" in err
+    assert not (tmp_path / "sessions").exists()  # nothing created
+
+
 def test_resume_of_a_non_session_is_exit_2(tmp_path, capsys):
     assert main(["session", "resume", str(tmp_path)]) == 2
     assert "not a session directory" in capsys.readouterr().err
