@@ -14,8 +14,9 @@ the ``FAILED QA`` stamp every format states first (:func:`station.profile_choice
 
 1. a session's profile (``provenance.session_dir``): the measurements the executor
    kept for the profile's focus setting (``measurements/*.npz``,
-   :mod:`station.session.evidence`; the current attempt of every orientation,
-   checked against the manifest's SHA-256) — the very edges the fit used. The
+   :mod:`station.session.evidence`; the current attempt of every orientation the fit took — a twin,
+   ``capture.twin_deg``, is compared, not fitted — checked against the manifest's SHA-256) — the very
+   edges the fit used. The
    session is only read (no lock, nothing written), so a session still running or
    being resumed is not disturbed;
 2. otherwise the provenance images of the model file (``harp calibrate``), when
@@ -43,12 +44,13 @@ import numpy as np
 from pipeline.exports.source import ExportSource
 from pipeline.measure import measure_image
 from pipeline.resample import DEFAULT_T
+from station.config import ConfigError, load_config
 from station.imageio import ImageReadError, read_grey
 from station.profile import Profile
 from station.profile_choice import failed_stamp
 from station.session.directory import read_records
 from station.session.evidence import measurement_from_arrays
-from station.session.layout import MANIFEST
+from station.session.layout import CONFIG_COPY, MANIFEST
 from station.session.records import FocusLocked, ShotMeasured, ShotRejected
 
 
@@ -84,13 +86,19 @@ def session_edges(session_dir: str | os.PathLike, focus: float) -> FittingEdges:
     if len(idx) != 1:
         return FittingEdges(None, f"session {root}: no focus setting {focus:g} in its manifest")
     (f,) = idx
+    try:  # the session's own configuration says which shots the fit took (not a twin: capture.twin_deg)
+        fitted = set(load_config(root / CONFIG_COPY).capture.fitted)
+    except ConfigError as exc:
+        return FittingEdges(None, f"session {root}: cannot tell the shots it fitted ({exc})")
     rejects: dict[int, int] = {}
     for r in records:
         if isinstance(r, ShotRejected) and r.focus_idx == f:
             rejects[r.orientation_idx] = rejects.get(r.orientation_idx, 0) + 1
     kept: dict[int, ShotMeasured] = {}
-    for r in records:  # the measurement of each orientation's current attempt (the last one written)
-        if isinstance(r, ShotMeasured) and r.focus_idx == f and r.attempt == rejects.get(r.orientation_idx, 0):
+    for r in records:  # the measurement of each fitted orientation's current attempt (the last one written)
+        if not isinstance(r, ShotMeasured) or r.focus_idx != f or r.orientation_idx not in fitted:
+            continue
+        if r.attempt == rejects.get(r.orientation_idx, 0):
             kept[r.orientation_idx] = r
     if not kept:
         return FittingEdges(None, f"session {root}: no stored measurement at focus {focus:g}")

@@ -793,6 +793,40 @@ def test_fitting_shots_from_a_session_only_with_the_manifests_checksums(session_
     assert got.edges is None and got.source == f"{victim}: checksum does not match the session manifest"
 
 
+def test_a_sessions_twin_is_not_among_its_fitting_shots(tmp_path):
+    """A session's twin (``capture.twin_deg``) is compared, not fitted: the residual an export states on the
+    fitting shots is on the four shots the fit took. Before, the twin's edges were among them ("the session's stored
+    measurements (5 shots at focus 0)"), a shot the correction never saw (on a lens that moves between poses the
+    stated figure was then up to 12 % off the fit's). Truth: the manifest's ``measure`` records, one per shot with
+    its edge count, and the plan's orientations (the twin is the fifth)."""
+    from station.export_source import session_edges
+
+    d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
+    d["station"]["camera"].update(width=SW, height=SH, spacing_px=28.0)
+    d["focus"]["settings"] = [0.0]
+    d["capture"].update(orientations_deg=[0, 45, 90, 135], frames_per_orientation=1, twin_deg=45)
+    d["pipeline"].update(bootstrap=0, workers=1)
+    d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
+    cfg = tmp_path / "station.yaml"
+    cfg.write_text(yaml.safe_dump(d))
+    code, _, err = run_main("session", "run", cfg, "--name", "s", "--quiet", "--no-report")
+    assert code == 0, err
+    session = tmp_path / "sessions" / "s"
+    records = [json.loads(ln) for ln in (session / "manifest.jsonl").read_text().splitlines()]
+    lines = {r["orientation_idx"]: r["n_lines"] for r in records if r["kind"] == "measure"}
+    assert sorted(lines) == [0, 1, 2, 3, 4]  # orientation 4: the twin, measured too
+    got = session_edges(session, 0.0)
+    assert got.n_shots == 4 and got.source == "the session's stored measurements (4 shots at focus 0)"
+    assert got.edges is not None and len(got.edges) == sum(lines[o] for o in range(4))
+    out = tmp_path / "lens.yml"
+    code, stdout, err = run_main(
+        "export", session / "profiles" / "focus0.yaml", "--format", "opencv", "-o", out, "--json"
+    )
+    assert code == 0, err
+    fitting = json.loads(stdout)["fitting_shots"]
+    assert fitting["n_shots"] == 4 and fitting["source"] == got.source
+
+
 def test_ros_equidistant_file_and_export_state_which_ros_consumers_read_it(model_source, tmp_path):
     """ROS 1's Python image_geometry ignores distortion_model (checked below in Debian's own package):
     the file says so in its header and the export warns on stderr."""
