@@ -43,13 +43,13 @@ from station.session.layout import CONFIG_COPY, MANIFEST, SESSION_FILE
 from station.session.plan import board_key, board_unchecked_key, frame_key, stored_key
 from station.session.records import (
     BoardAccepted,
-    Finished,
     FrameSaved,
     ManifestReads,
     Record,
     Reopened,
     ShotRejected,
     Stored,
+    finished_in,
     from_json,
     parse,
 )
@@ -400,4 +400,5 @@ class SessionDir(ManifestReads):
 
     @property
     def finished(self) -> bool:
-        return any(isinstance(r, Finished) for r in self.typed)
+        """Finished, and nothing taken back since (:func:`station.session.records.finished_in`)."""
+        return finished_in(self.typed)

@@ -386,6 +386,19 @@ def from_json(d: Mapping[str, Any]) -> Record | None:
     return cls(**values, t=float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) else None)
 
 
+def finished_in(records: Iterable[Record]) -> bool:
+    """Whether a session's records (in order) end finished: a ``finished`` record that nothing taken back since
+    follows (``harp session repair``'s ``reopened``, ``reject`` and ``board-reject``: a setting to fit or shots and
+    views to capture again, which the next resume does)."""
+    done = False
+    for r in records:
+        if isinstance(r, Finished):
+            done = True
+        elif isinstance(r, (Reopened, ShotRejected, BoardRejected)):
+            done = False
+    return done
+
+
 def parse(lines: Iterable[Mapping[str, Any]]) -> list[Record]:
     """The typed records of manifest lines, in order (lines of unknown kinds left out)."""
     return [r for r in map(from_json, lines) if r is not None]

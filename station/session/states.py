@@ -24,13 +24,13 @@ from typing import Any
 from station.session.layout import MANIFEST, SESSION_FILE
 from station.session.records import (
     Aborted,
-    Finished,
     FrameSaved,
     Record,
     Resumed,
     SessionVerdict,
     Started,
     Stored,
+    finished_in,
     parse,
 )
 
@@ -43,10 +43,11 @@ USER_INTERRUPT = "interrupted by the user"
 
 def session_state(records: Iterable[Record]) -> str:
     """``complete``, ``failed`` or ``interrupted`` from a session's manifest records (in order)."""
+    records = list(records)
+    if finished_in(records):  # finished, nothing taken back since (a repair's setting to capture again)
+        return COMPLETE
     last_stop: Aborted | None = None
     for r in records:
-        if isinstance(r, Finished):
-            return COMPLETE
         if isinstance(r, Aborted):
             last_stop = r
         elif isinstance(r, (Started, Resumed)):

@@ -753,3 +753,29 @@ def test_a_twin_tells_a_lens_that_moved_between_two_shots_at_one_angle(tmp_path,
         else:
             assert drawn == 0.0 and not twin["moved"] and abs(twin["move_px"]) < 0.15 and check.passed
             assert twin["twin_d_px"] < 0.02 and p.qa.verdict == "PASS"
+
+
+def test_a_finished_twin_session_repaired_with_recapture_is_captured_again_by_resume(tmp_path, capsys):
+    """A frame of a finished session lost: ``harp session repair --recapture 0`` says the setting will be captured
+    again by ``harp session resume``, and resume does so, the twin too, then judges, reports and finishes the session
+    again. Before, resume said 'already finished (QA verdict PASS), nothing to do' (the first ``finished`` record
+    counted, not the repair's records after it) and nothing was ever captured again; ``harp session list`` called
+    such a session complete. Truth: the manifest's frame records (every orientation of the plan, the twin's
+    included, at attempt 1) and its last record."""
+    cfg = small_config(tmp_path, focus=(0.0,), frames=1, twin_deg=45)
+    s = tmp_path / "sessions" / "r"
+    assert main(["session", "run", str(cfg), "--name", "r", "--quiet", "--no-report"]) == 0
+    frame = next(r["file"] for r in manifest(s) if r["kind"] == "frame" and r["orientation_idx"] == 4)
+    (s / frame).unlink()  # the twin's frame
+    assert main(["session", "repair", str(s), "--recapture", "0"]) == 0
+    assert f"then: harp session resume {s}" in capsys.readouterr().err
+    assert main(["session", "list", str(tmp_path / "sessions")]) == 0
+    assert "\tinterrupted\t" in capsys.readouterr().out
+    assert main(["session", "resume", str(s), "--quiet", "--no-report"]) == 0
+    assert "already finished" not in capsys.readouterr().err
+    records = manifest(s)
+    again = sorted(r["orientation_idx"] for r in records if r["kind"] == "frame" and r["attempt"] == 1)
+    assert again == [0, 1, 2, 3, 4] and records[-1]["kind"] == "finished"
+    assert (s / frame.replace("_a0_", "_a1_")).is_file()
+    assert main(["session", "resume", str(s)]) == 0
+    assert "already finished (QA verdict PASS), nothing to do" in capsys.readouterr().err
