@@ -432,10 +432,10 @@ def evaluate(
     axes = (harp_health or {}).get("axes")
     if axes and axes.get("places"):
         _axis_places(axes, add, metrics)
-    if own_shift and own_shift.get("judged") and own_shift.get("ratio_median") is not None:
-        add(_own_shift_check(own_shift))
-        metrics["holdout_own_shift_ratio"] = own_shift["ratio_median"]
     read = [t for t in twins or () if t.get("move_px") is not None]
+    if own_shift and own_shift.get("judged") and own_shift.get("ratio_median") is not None:
+        add(_own_shift_check(own_shift, twinned=bool(read)))
+        metrics["holdout_own_shift_ratio"] = own_shift["ratio_median"]
     if read:
         worst = max(read, key=lambda t: abs(float(t["move_px"])))
         metrics["twin_move_px"] = abs(float(worst["move_px"]))
@@ -466,14 +466,20 @@ def _twin_check(twin: Mapping[str, Any]) -> tuple[Check, str]:
     return Check("twin_move", finite_or_none(move), "<=", limit, ok, text), why
 
 
-def _own_shift_check(own_shift: Mapping[str, Any]) -> Check:
-    """The held-out orientations' own axis shift, reported (:func:`station.moving_lens.own_shift_record`)."""
+TWINNED_ADVICE = "the twin (check twin_move) tells it from a lens term that bends each orientation its own way"
+"""The own-shift check's advice when the session took a twin: look at its check, not take one."""
+
+
+def _own_shift_check(own_shift: Mapping[str, Any], twinned: bool = False) -> Check:
+    """The held-out orientations' own axis shift, reported (:func:`station.moving_lens.own_shift_record`); its
+    advice points at the twin's check when the profile has a twin read (``twinned``), else at taking one."""
     ratio, limit = float(own_shift["ratio_median"]), float(own_shift.get("limit") or 0.0)
     text = f"held-out orientations: the correction moved for each alone leaves {ratio:.2f} of its held-out d (median"
     text += f"; at or above {limit:g}, as a stable lens)" if not own_shift.get("moving") else f" < {limit:g})"
     if own_shift.get("moving"):
         size = largest_own_shift(own_shift)
-        text += (f", by up to {size:.1f} px" if size is not None else "") + f": {OWN_SHIFT_ADVICE}"
+        advice = OWN_SHIFT_ADVICE if not twinned else f"{MOVING_LENS_ADVICE}; {TWINNED_ADVICE}"
+        text += (f", by up to {size:.1f} px" if size is not None else "") + f": {advice}"
     return Check("holdout_own_shift", finite_or_none(ratio), ">=", None, None, f"{text}: reported, not judged")
 
 
