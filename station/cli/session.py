@@ -479,6 +479,7 @@ def _plan(args) -> int:
                             "what": r.what,
                             "orientation_deg": r.orientation_deg,
                             "shift_mm": r.shift_mm,
+                            "twin": r.twin,
                             "frames": r.frames,
                             "estimated_seconds": round(r.seconds, 2),
                         }

@@ -89,6 +89,8 @@ class PlanRow:
     seconds: float = 0.0
     shift_mm: float | None = None
     """The linear stage's position of a capture row (``capture.shift_positions_mm``); None: no stage."""
+    twin: bool = False
+    """A capture row of the twin (``capture.twin_deg``): compared with the first shot at its angle, not fitted."""
 
 
 @dataclass(frozen=True)
@@ -189,6 +191,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
                         int(current.get("frames", 0)),
                         float(current["s"]),
                         cap.shifts_mm[o],
+                        o not in cap.fitted,
                     )
                 )
                 current = {}

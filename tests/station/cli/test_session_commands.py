@@ -205,6 +205,21 @@ def test_session_plan_lists_each_rows_linear_stage_position(tmp_path, capsys):
     assert doc["shift_positions_mm"] == [] and all(s["shift_mm"] is None for s in doc["steps"])
 
 
+def test_session_plan_json_flags_the_twins_steps(tmp_path, capsys):
+    # capture.twin_deg: a script tells the twin's step by its flag, not by the text (truth from the configuration)
+    d = yaml.safe_load(DEMO.read_text())
+    d["focus"]["settings"] = [0.0, 1.0]
+    d["capture"].update(orientations_deg=[0, 45, 90, 135], twin_deg=45)
+    cfg = tmp_path / "twin.yaml"
+    cfg.write_text(yaml.safe_dump(d))
+    code, out, err = run(capsys, "session", "plan", cfg, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    twins = [(s["focus"], s["orientation_deg"]) for s in doc["steps"] if s["twin"]]
+    assert twins == [(0.0, 45), (1.0, 45)] and doc["twin_deg"] == 45
+    assert sum(1 for s in doc["steps"] if s["what"].startswith("capture + measure") and not s["twin"]) == 8
+
+
 def session_with(root: Path, config, name: str, records) -> Path:
     with SessionDir.create(root, config, name=name) as s:
         for r in records:

@@ -210,3 +210,4 @@ def test_a_twin_is_the_last_shot_of_each_focus_setting_and_the_estimate_says_so(
         "capture + measure (the twin: compared, not fitted)"
     ]
     assert rows[-1].what.startswith("fit (8 orientations held out in turn")
+    assert [r.twin for r in rows if r.what.startswith("capture")] == [False] * 8 + [True]
