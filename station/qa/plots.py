@@ -42,6 +42,13 @@ class Shot:
         at = "" if self.shift_mm is None else f" at {self.shift_mm:g} mm"
         return f"stage {self.orientation_deg:g} deg{at}" + (" (the twin, not fitted)" if self.twin else "")
 
+    @property
+    def group(self) -> str:
+        """The shot's short label over its edges in the residual plot: the angle, the stage position if any, and
+        ``twin`` for the twin (whose angle another shot has too)."""
+        at = "" if self.shift_mm is None else f" {self.shift_mm:g} mm"
+        return f"{self.orientation_deg:g}°{at}" + (" twin" if self.twin else "")
+
 
 def _fig(width: int, height: int, extra_w: float = 1.6):
     aspect = height / width
@@ -124,12 +131,12 @@ def edge_residual_table(shots: Sequence[Shot], model) -> list[tuple[int, int, fl
 
 
 def plot_edge_residuals(
-    rows: Sequence[tuple[int, int, float, float]], orientations_deg: Sequence[float], path, title: str = ""
+    rows: Sequence[tuple[int, int, float, float]], groups: Sequence[str], path, title: str = ""
 ) -> Path:
-    """Per-edge RMS residual before / after correction, grouped by orientation (log scale).
+    """Per-edge RMS residual before / after correction, grouped by shot (log scale).
 
-    ``rows``: :func:`edge_residual_table` of the shots; ``orientations_deg``: the stage angle of
-    each shot (the labels of the groups)."""
+    ``rows``: :func:`edge_residual_table` of the shots; ``groups``: each shot's label over its edges
+    (:attr:`Shot.group`: the stage angle, the stage position, the twin)."""
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     if rows:
         before = np.array([r[2] for r in rows])
@@ -147,7 +154,7 @@ def plot_edge_residuals(
             ax.text(
                 idx.mean(),
                 1.02,
-                f"{orientations_deg[o]:g}°",
+                groups[o],
                 transform=ax.get_xaxis_transform(),
                 ha="center",
                 fontsize=8,
@@ -160,7 +167,7 @@ def plot_edge_residuals(
     else:
         ax.text(0.5, 0.5, "no measured edges", ha="center", va="center", transform=ax.transAxes)
         sub = "no measured edges"
-    ax.set_xlabel("edge (grouped by stage orientation)")
+    ax.set_xlabel("edge (grouped by shot: stage orientation)")
     ax.set_ylabel("RMS distance to the edge's line (px)")
     ax.set_title(_title(title, sub), fontsize=10, loc="left", pad=16)
     return _save(fig, path)

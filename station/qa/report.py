@@ -260,8 +260,8 @@ def write_report(
         if e.shots:
             name = f"residuals_f{i}.png"
             rows = edge_residual_table(e.shots, e.model)
-            angles = [s.orientation_deg for s in e.shots]
-            figures.append(Figure("residuals", (rows, angles, out / name), {"title": f"{title}, {label}"}))
+            groups = [s.group for s in e.shots]
+            figures.append(Figure("residuals", (rows, groups, out / name), {"title": f"{title}, {label}"}))
             doc += [Heading(3, "Residual per edge"), Image("residual per edge", name)]
         if e.uncertainty is not None:
             name = f"uncertainty_f{i}.png"

@@ -129,7 +129,7 @@ def test_figures_drawn_in_worker_processes_are_the_ones_drawn_here(session, tmp_
     def figures(out):
         out.mkdir()
         figs = [Figure("field", (prof.model, prof.width, prof.height, out / "field.png"), {"title": "t"})]
-        figs.append(Figure("residuals", (rows, [sh.orientation_deg for sh in shots], out / "res.png"), {}))
+        figs.append(Figure("residuals", (rows, [sh.group for sh in shots], out / "res.png"), {}))
         for k in range(3):  # enough figures for the workers to be used
             figs += [
                 Figure("overlay", (sh.image, sh.measurement, out / f"o{k}_{j}.png"), {}) for j, sh in enumerate(shots)
