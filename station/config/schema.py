@@ -221,6 +221,13 @@ class CaptureConfig:
         """The turntable angle of each fitted shot (:attr:`fitted`), in order."""
         return tuple(self.angles_deg[o] for o in self.fitted)
 
+    def orientation_name(self, o: int) -> str:
+        """How a session names orientation ``o`` of its plan to the user: its index, turntable angle, stage position
+        (two-axis capture) and whether it is the twin."""
+        mm = self.shifts_mm[o]
+        where = f"{self.angles_deg[o]:g} deg" + ("" if mm is None else f" at {mm:g} mm")
+        return f"orientation {o} ({where}{'' if o in self.fitted else ', the twin'})"
+
     @functools.cached_property
     def visits(self) -> tuple[int, ...]:
         """Per orientation of :attr:`orientations`, the plan's visit of its pose: 0 the first time, 1 the twin's

@@ -261,8 +261,8 @@ def plan_session(config: Config, already_done: Iterable[tuple] = frozenset()) ->
                     break
                 if check.attempt >= max_recaptures:
                     yield Stop(
-                        f"shot focus {f} orientation {o} failed its checks {check.attempt + 1} times: "
-                        + "; ".join(check.problems)
+                        f"shot focus {f} {config.capture.orientation_name(o)} failed its checks {check.attempt + 1} "
+                        "times: " + "; ".join(check.problems)
                     )
                     return
                 if locked != f:

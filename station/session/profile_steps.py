@@ -89,17 +89,9 @@ def fit_focus(
     if cap.twin is None or cal.failure is not None or not cal.fit:
         return cal
     first, twin = cap.twin
-    names = (orientation_name(config, first), orientation_name(config, twin))
+    names = (cap.orientation_name(first), cap.orientation_name(twin))
     record = session_twin_record(cal.fit.model, shots[first], shots[twin], names)
     return dataclasses.replace(cal, details={**cal.details, "twins": [record]})
-
-
-def orientation_name(config: Config, o: int) -> str:
-    """How the session names orientation ``o`` of its plan (its turntable angle; the twin said)."""
-    cap = config.capture
-    mm = cap.shifts_mm[o]
-    where = f"{cap.angles_deg[o]:g} deg" + ("" if mm is None else f" at {mm:g} mm")
-    return f"orientation {o} ({where}{'' if o in cap.fitted else ', the twin'})"
 
 
 def fitted_record(f: int, cal: Calibration, session: SessionDir) -> Fitted:

@@ -336,12 +336,16 @@ def test_a_twin_returns_to_one_of_the_plans_angles_after_the_others(tmp_path, ca
     cap = load_config(write(tmp_path, d)).capture
     assert len(cap.orientations) == 9 and cap.orientations[8] == (None, 45.0) and cap.angles_deg[2] == 45.0
     assert cap.twin == (2, 8) and cap.fitted == tuple(range(8)) and cap.visits == (0,) * 8 + (1,)
+    assert cap.orientation_name(2) == "orientation 2 (45 deg)"
+    assert cap.orientation_name(8) == "orientation 8 (45 deg, the twin)"
     d["station"]["turntable"]["shift_axis"] = 3
     d["station"]["harp"]["shift_direction_deg"] = 30
     d["capture"]["shift_positions_mm"] = [10, 40]
     cap = load_config(write(tmp_path, d)).capture
     assert len(cap.orientations) == 17 and cap.orientations[16] == (10.0, 45.0) and cap.twin == (2, 16)
     assert cap.fitted == tuple(range(16)) and cap.visits[16] == 1 and sum(cap.visits) == 1
+    assert cap.orientation_name(9) == "orientation 9 (22.5 deg at 40 mm)"
+    assert cap.orientation_name(16) == "orientation 16 (45 deg at 10 mm, the twin)"
     del d["capture"]["shift_positions_mm"]
     d["capture"]["twin_deg"] = 30
     assert error_of(tmp_path, d).endswith(

@@ -143,7 +143,7 @@ def test_wrong_string_angle_stops_after_max_recaptures(tmp_path):
     with SessionDir.create(tmp_path, cfg, name="s") as s:
         result, _ = run(s, FakeCamera(stage), stage)
     assert result.exit_code == EXIT_ABORTED
-    assert "orientation 0 failed its checks 2 times" in result.message
+    assert f"orientation 0 ({cfg.capture.orientations_deg[0]:g} deg) failed its checks 2 times" in result.message
     # 25.1: the mean angle of the whole edges' regression lines through the lens (the whole-edge truth of
     # tests/pipeline/_harp_truth.py gives 25.103 deg for this shot; the ideal strings are at 25.0 deg)
     assert "strings at 25.1 deg, expected 5.0 deg" in result.message

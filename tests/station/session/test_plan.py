@@ -93,7 +93,8 @@ def test_a_rejected_shot_is_captured_again_then_the_plan_stops():
         assert again == list(capture_steps(cfg, 0, 1)) and step == Measure(0, 1)
     stop = plan.send(ShotCheck(0, 1, 2, ("over-exposed", "only 2 string edges found (need 4)")))
     assert stop == Stop(
-        "shot focus 0 orientation 1 failed its checks 3 times: over-exposed; only 2 string edges found (need 4)"
+        f"shot focus 0 orientation 1 ({cfg.capture.orientations_deg[1]:g} deg) failed its checks 3 times: "
+        "over-exposed; only 2 string edges found (need 4)"
     )
     assert list(plan) == []  # nothing after a stop
 
