@@ -845,7 +845,7 @@ class SimulatedCamera:
         offset, focus = self.world.harp_offset_deg, self.world.focus
         angle = (stage + offset) % 180.0
         index, visit = self._index_at(focus, angle, shift), self._next_visit
-        seed = noise_seed(self.seed, focus, angle, index, shift_mm=shift, visit=visit)
+        seed = noise_seed(self.seed, focus, angle, index, self.world.zoom, shift, visit)  # as render() seeds it
         if self.board is not None:
             return self._board_frame(stage, focus, index, seed, stamp, self.world.tilt_at(now))
         r = self.render(index=index, angle_deg=angle, focus=focus, stage_deg=stage, shift_mm=shift, visit=visit)

@@ -435,3 +435,20 @@ def test_a_return_to_a_pose_is_another_visit_with_its_own_frames_and_lens_move()
     assert not np.array_equal(after, first) and not np.array_equal(after, twin)
     with pytest.raises(ValueError, match="visit must be a non-negative integer"):
         cam.set_capture_index(0, -1)
+
+
+def test_a_zoom_cameras_frames_record_the_seed_their_noise_was_drawn_with():
+    # the frame's record named a seed without the focal length while its noise was drawn with it: the first frame
+    # at one pose recorded one seed at every focal length (truth: a render at the same pose draws the frame's noise,
+    # and different focal lengths are different physical situations)
+    seeds = []
+    for mm in (12.0, 36.0, None):
+        world = SimWorld(harp_offset_deg=5.0)
+        world.zoom = mm
+        world.set_stage(33.0)
+        with SimulatedCamera(world, width=96, height=64, seed=4) as cam:
+            frame = cam.capture()
+            again = cam.render(index=frame.extra["sim"]["pose_index"], stage_deg=33.0)
+        assert np.array_equal(frame.image, again.image)
+        seeds.append(frame.extra["sim"]["seed"])
+    assert len(set(seeds)) == 3
