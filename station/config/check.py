@@ -20,8 +20,9 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from station.config.devices import port_missing
 from station.config.errors import ConfigError
-from station.config.schema import EMULATOR_PORT, Config
+from station.config.schema import Config
 
 GRID_ANGLE_DEG = 2.0
 """:func:`check_config` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
@@ -69,9 +70,8 @@ def check_config(config: Config) -> ConfigCheck:
                 f"Name the vendor's focus feature (see `harp devices`)",
             )
         )
-    port = config.station.turntable.port
-    emulated = port == EMULATOR_PORT and config.simulation is not None  # as station.config.devices.check_port
-    if not emulated and "://" not in port and not os.path.exists(port):
+    if port_missing(config):  # what harp session run refuses (station.config.devices.check_port)
+        port = config.station.turntable.port
         warnings.append(
             f"{config.path}: station.turntable.port: {port!r} does not exist on this machine "
             f"(plug the turntable in, or see `harp devices` for the ports found)"

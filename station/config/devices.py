@@ -211,16 +211,17 @@ def _simulated_lens_and_harp(config: Config, camera: Any) -> None:
             )
 
 
-def check_port(config: Config) -> None:
-    """Fail early, naming the field, when the turntable port cannot be reached.
-
-    A device path (``/dev/...`` or any absolute path) must exist; a URL
-    (``socket://``, ``rfc2217://``, ``loop://``...) is left to the driver.
-    """
+def port_missing(config: Config) -> bool:
+    """Whether the turntable port is a device path that does not exist on this machine: a device path
+    (``/dev/...`` or any absolute path) must exist; a URL (``socket://``, ``rfc2217://``, ``loop://``...) is left
+    to the driver, and the simulator's emulated port (``EMULATOR_PORT`` with a ``simulation`` section) is made."""
     port = config.station.turntable.port
-    if port == EMULATOR_PORT and config.simulation is not None:
-        return
-    if "://" in port:
-        return
-    if not os.path.exists(port):
+    emulated = port == EMULATOR_PORT and config.simulation is not None
+    return not emulated and "://" not in port and not os.path.exists(port)
+
+
+def check_port(config: Config) -> None:
+    """Fail early, naming the field, when the turntable port cannot be reached (:func:`port_missing`)."""
+    if port_missing(config):
+        port = config.station.turntable.port
         raise config.error("station.turntable.port", f"expected a reachable serial port, {port!r} does not exist")
