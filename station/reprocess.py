@@ -213,7 +213,7 @@ def plan_jobs(
             continue
         stored = s.stored_focus()
         if not stored:
-            lost = lost_manifest(Path(path)) if not s.lines else None
+            lost = lost_manifest(Path(path), s.lines)
             failed[path] = lost or f"{path}: the session stored no profile (nothing to re-process)"
             continue
         jobs += [FocusJob(path, f, spec, field) for f in sorted(stored)]

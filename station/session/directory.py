@@ -27,7 +27,7 @@ import io
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,13 +120,16 @@ def read_records(path: Path) -> list[Record]:
     return parse(read_manifest(path)[0])
 
 
-def lost_manifest(path: Path) -> str | None:
-    """The one line for a session whose manifest is missing or holds no record while its directories
-    hold files (frames, measurements, profiles, board views) that only a manifest records, else None.
+def lost_manifest(path: Path, lines: Sequence[Any]) -> str | None:
+    """The one line for a session whose manifest is missing or holds no record (``lines``: what was read of it)
+    while its directories hold files (frames, measurements, profiles, board views) that only a manifest records,
+    else None.
 
     A session records its ``start`` before it writes any of them, so this is damage (a manifest deleted,
     emptied or replaced), never a kill. Without the manifest the files cannot be checked against their
     checksums, and a resume would capture the whole plan again over the frames of the same names."""
+    if lines:
+        return None
     path = Path(path)
     written = {
         sub: n
@@ -271,7 +274,7 @@ class SessionDir(ManifestReads):
         if not (path / SESSION_FILE).is_file():
             raise SessionError(f"{path}: not a session directory (no {SESSION_FILE})")
         records, good = read_manifest(path / MANIFEST)
-        lost = lost_manifest(path) if not records else None
+        lost = lost_manifest(path, records)
         if lost is not None:
             raise SessionError(lost)
         s = cls(path, records, good)

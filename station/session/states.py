@@ -122,7 +122,7 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     except (OSError, ValueError) as exc:
         raise SessionError(f"{path / SESSION_FILE}: cannot be read ({exc})") from None
     lines, _ = read_manifest(path / MANIFEST)
-    lost = None if lines else lost_manifest(path)
+    lost = lost_manifest(path, lines)
     if lost is not None:  # not "interrupted, 0 frames": what it recorded is there, the record of it is not
         raise SessionError(lost)
     records = parse(lines)
