@@ -57,6 +57,10 @@ OWN_SHIFT_ADVICE = (
 )
 """What QA and ``harp calibrate`` say when the held-out shots carry a term of their own (``moving``)."""
 
+TWINNED_ADVICE = "the twin (check twin_move) tells it from a lens term that bends each orientation its own way"
+"""What QA says instead of :data:`OWN_SHIFT_ADVICE`'s second half when the session took a twin: look at its check,
+not take one."""
+
 
 def largest_own_shift(record: Mapping[str, Any]) -> float | None:
     """The largest own axis shift (px) of an own-shift record (:func:`own_shift_record`); None when none is known."""

@@ -66,7 +66,13 @@ from pipeline.models.base import IdentityModel
 from pipeline.plain import finite_or_none
 from station.calibration import calibrate_focus, calibrate_shots
 from station.config import QAConfig
-from station.moving_lens import MOVING_LENS_ADVICE, OWN_SHIFT_ADVICE, TWIN_MOVE_PX, largest_own_shift
+from station.moving_lens import (
+    MOVING_LENS_ADVICE,
+    OWN_SHIFT_ADVICE,
+    TWIN_MOVE_PX,
+    TWINNED_ADVICE,
+    largest_own_shift,
+)
 from station.profile import HOLDOUT_LEAVE_ONE_ORIENTATION_OUT, Check, Profile, Verdict
 from station.qa.evidence import stored_measurement
 from station.session import layout
@@ -464,10 +470,6 @@ def _twin_check(twin: Mapping[str, Any]) -> tuple[Check, str]:
     text += f" {'<=' if ok else '>'} {limit:g} px: {PASS if ok else FAIL}"
     why = f"the lens moved between two shots at one angle; the correction is their mean: {MOVING_LENS_ADVICE}"
     return Check("twin_move", finite_or_none(move), "<=", limit, ok, text), why
-
-
-TWINNED_ADVICE = "the twin (check twin_move) tells it from a lens term that bends each orientation its own way"
-"""The own-shift check's advice when the session took a twin: look at its check, not take one."""
 
 
 def _own_shift_check(own_shift: Mapping[str, Any], twinned: bool = False) -> Check:
