@@ -246,18 +246,21 @@ class GrblEmulator(LineEmulator):
         moving = self._busy(now) and self.state in ("Run", "Home")
         for a in self._axes.values():
             a.halt(now)
+        if moving:
+            self._line("ALARM:3")  # reset while in motion: position lost
+        self._start_over("Alarm" if moving or self.state == "Alarm" else "Idle")
+
+    def _start_over(self, state: str) -> None:
+        """What a soft reset (Ctrl-X) and a restart share: the planner, a homing cycle, a feed hold and the line
+        being received dropped; then ``state`` and the banner (with the unlock message in ``Alarm``)."""
         self.queue.clear()
         self._homing = False
         self._held = None
         self._inbuf.clear()
-        if moving:
-            self._line("ALARM:3")  # reset while in motion: position lost
-            self.state = "Alarm"
-        elif self.state != "Alarm":
-            self.state = "Idle"
         self.critical = False
+        self.state = state
         self.write(BANNER)
-        if self.state == "Alarm":
+        if state == "Alarm":
             self.write(UNLOCK_MSG)
 
     def restart(self) -> None:
@@ -269,15 +272,7 @@ class GrblEmulator(LineEmulator):
         with self._lock:
             for a in self._axes.values():
                 a.set_position(0.0)
-            self.queue.clear()
-            self._homing = False
-            self._held = None
-            self._inbuf.clear()
-            self.critical = False
-            self.state = "Alarm" if self.homing_enabled else "Idle"
-            self.write(BANNER)
-            if self.state == "Alarm":
-                self.write(UNLOCK_MSG)
+            self._start_over("Alarm" if self.homing_enabled else "Idle")
 
     # -- lines --------------------------------------------------------------------
     def reject(self, line: bytes, spec: dict[str, Any], now: float) -> None:
