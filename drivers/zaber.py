@@ -2,16 +2,20 @@
 
 Bytes on the wire (``\\n`` ends a command, ``\\r\\n`` a reply)::
 
-    /1                      @01 0 OK IDLE -- 0
-    /1 1 home               @01 1 OK BUSY WR 0
-    /1 1 move abs 192000    @01 1 OK BUSY -- 0
-    /1 1 get pos            @01 1 OK BUSY -- 96117      (while moving)
-    /1 warnings             @01 0 OK IDLE FS 01 FS
-    /1 warnings clear       @01 0 OK IDLE FS 01 FS
+    /1 0 0                  @01 0 00 OK IDLE -- 0
+    /1 1 1 home             @01 1 01 OK BUSY WR 0
+    /1 1 2 move abs 192000  @01 1 02 OK BUSY -- 0
+    /1 1 3 get pos          @01 1 03 OK BUSY -- 96117      (while moving)
+    /1 0 4 warnings         @01 0 04 OK IDLE FS 01 FS
+    /1 0 5 warnings clear   @01 0 05 OK IDLE FS 01 FS
 
-A reply is ``@`` device axis [message id] flag (``OK``/``RJ``) status
+Every command carries a message id (the number after the axis, 0..99, counting up per connection and
+starting again at 0 after 99; a command to the whole device names axis 0), which the device repeats in
+its reply. A reply is ``@`` device axis [message id] flag (``OK``/``RJ``) status
 (``IDLE``/``BUSY``) warning (``--`` or the most severe flag) data, optionally
-followed by ``:XX`` (LRC checksum, verified here). Info lines (``#...``) and
+followed by ``:XX`` (LRC checksum, verified here). Only the reply with the command's id answers it: a
+reply with another id, or none, is a late answer to an earlier command (one that arrived after its
+reply timeout) and is dropped, never taken for this command's answer. Info lines (``#...``) and
 alerts (``!01 1 IDLE --``, sent when a move ends if ``comm.alert`` is on) are
 read and set aside while waiting for a reply.
 
@@ -22,8 +26,8 @@ then polls ``get pos`` until the axis is ``IDLE`` at the target.
 Travel: ``open()`` reads the axis settings ``limit.min`` and ``limit.max``
 (microsteps)::
 
-    /1 1 get limit.min      @01 1 OK IDLE -- 0
-    /1 1 get limit.max      @01 1 OK IDLE -- 1536000
+    /1 1 1 get limit.min    @01 1 01 OK IDLE -- 0
+    /1 1 2 get limit.max    @01 1 02 OK IDLE -- 1536000
 
 :meth:`ZaberTurntable.travel_range` is the configured ``limits`` within that
 travel; a target outside raises :class:`~drivers.errors.OutOfRange` before
@@ -32,11 +36,12 @@ rejects the settings (``RJ``) reports no travel: the configured limits apply.
 
 A second axis of the same device may tilt the calibration board (``tilt_axis``, e.g. 2 on a two-axis
 controller): :attr:`ZaberTurntable.tilt` is that axis, a :class:`ZaberAxis` of its own on the same
-connection (``/1 2 move abs N``, ``/1 2 get pos``; its travel read at ``open()`` as the first axis's).
+connection (``/1 2 ID move abs N``, ``/1 2 ID get pos``, ID the message id; its travel read at ``open()`` as the first axis's).
 Another may be a linear stage that carries the turntable sideways (``shift_axis``, e.g. 3), so that a
 session takes its shots about two places of the turntable axis in the image: :attr:`ZaberTurntable.shift`,
 the same kind of axis with its positions in millimetres (``shift_microsteps_per_mm``; default
-:data:`X_LSM_MICROSTEPS_PER_MM`, ``/1 3 move abs 209974`` for 10 mm).
+:data:`X_LSM_MICROSTEPS_PER_MM`, ``/1 3 ID move abs 209974`` for 10 mm). The axes of one connection
+share its message ids.
 
 Errors: ``RJ`` -> :class:`DeviceRejected` (with the reason, e.g. BADDATA);
 a fault flag (``F*``) or an unexpected-limit ``WL`` -> :class:`DeviceFault`
@@ -106,6 +111,9 @@ WARNING_FLAGS = {
     "NJ": "joystick calibrating",
 }
 
+MAX_MESSAGE_ID = 99
+"""Message ids run 0..MAX_MESSAGE_ID (the Zaber ASCII protocol's range), then from 0 again."""
+
 # Flags that stop a move: every fault, and an unexpected limit switch.
 FATAL_WARNINGS = ("WL",)
 
@@ -171,6 +179,20 @@ def strip_checksum(text: str, source: str) -> str:
     if (sum(body.encode("ascii")) + int(m.group(1), 16)) & 0xFF:
         raise ProtocolError(f"{source}: bad checksum in {text!r}")
     return text[: m.start()]
+
+
+class MessageIds:
+    """The message ids of one connection's commands, 0, 1, ..., :data:`MAX_MESSAGE_ID`, 0, ...: shared by the
+    axes on it, so that a late reply to one axis's command is not taken for another's answer."""
+
+    def __init__(self) -> None:
+        self._next = 0
+
+    def take(self) -> int:
+        """The id for the next command."""
+        n = self._next
+        self._next = (n + 1) % (MAX_MESSAGE_ID + 1)
+        return n
 
 
 @dataclass(frozen=True)
@@ -265,6 +287,8 @@ class ZaberAxis:
         self.transport = SerialTransport(port, baudrate, name=self.name)
         self.alerts: list[str] = []  # alert lines seen (most recent last)
         self.infos: list[str] = []
+        self.dropped: list[str] = []  # replies that answered no command waiting (late ones), most recent last
+        self._ids = MessageIds()
         self._lock = threading.RLock()
         self._target: int | None = None
         self._shared = False  # an axis on another axis's connection (the tilt, the shift axis): opened and closed by it
@@ -287,7 +311,7 @@ class ZaberAxis:
             move_timeout=self.move_timeout, home_timeout=self.home_timeout, tolerance_microsteps=self.tolerance,
             name=f"{self.name} {role} axis {number}",
         )  # fmt: skip
-        axis.transport, axis._lock, axis._shared = self.transport, self._lock, True
+        axis.transport, axis._lock, axis._shared, axis._ids = self.transport, self._lock, True, self._ids
         self._others.append(axis)
         return axis
 
@@ -296,7 +320,7 @@ class ZaberAxis:
         if not self._shared:
             self.transport.open()
         try:
-            reply = self.command("", axis_scope=False)  # "/1": is the device there?
+            reply = self.command("", axis_scope=False)  # "/1 0 ID": is the device there?
             if not reply.ok:  # warnings do not stop opening: recover() needs an open port
                 raise DeviceRejected(f"{self.name}: status request rejected: {reply.raw!r}")
             self._target = None
@@ -327,10 +351,9 @@ class ZaberAxis:
         self.close()
 
     # -- wire level ------------------------------------------------------------
-    def _format(self, command: str, axis_scope: bool) -> bytes:
-        parts = [f"/{self.device}"]
-        if axis_scope:
-            parts.append(str(self.axis_number))
+    def _format(self, command: str, axis_scope: bool, message_id: int) -> bytes:
+        """``/1 1 7 get pos``: device, axis (0: the whole device), message id, command."""
+        parts = [f"/{self.device}", str(self.axis_number if axis_scope else 0), str(message_id)]
         if command:
             parts.append(command)
         return (" ".join(parts) + "\n").encode("ascii")
@@ -363,22 +386,27 @@ class ZaberAxis:
         raise ProtocolError(f"{self.name}: not a Zaber ASCII message: {line!r}")
 
     def command(self, command: str, axis_scope: bool = True) -> ZaberReply:
-        """Send one command (``"get pos"``, ``"warnings"``, ...) and return its reply.
+        """Send one command (``"get pos"``, ``"warnings"``, ...) with the next message id and return the
+        reply that repeats that id.
 
-        ``axis_scope=False`` addresses the device (``/1 warnings``) rather
-        than the axis (``/1 1 get pos``). An ``RJ`` reply is returned, not
-        raised; see :meth:`_check`.
+        ``axis_scope=False`` addresses the device (``/1 0 7 warnings``) rather
+        than the axis (``/1 1 7 get pos``). An ``RJ`` reply is returned, not
+        raised; see :meth:`_check`. A reply with another id (or none) is late, an earlier command's: it is
+        recorded in :attr:`dropped` and the wait goes on.
         """
-        data = self._format(command, axis_scope)
-        what = f"reply to {data.decode().strip()!r}"
         with self._lock:
+            message_id = self._ids.take()
+            data = self._format(command, axis_scope, message_id)
+            what = f"reply to {data.decode().strip()!r}"
             stale = self.transport.pending()
             for line in stale.splitlines():
                 if line.strip():
                     try:
-                        self.parse_line(line)
+                        late = self.parse_line(line)
                     except ProtocolError:
-                        pass  # leftovers of an earlier failure
+                        continue  # leftovers of an earlier failure
+                    if late is not None:
+                        self.dropped.append(late.raw)
             self.transport.write(data)
             deadline = time.monotonic() + self.reply_timeout
             while True:
@@ -395,6 +423,9 @@ class ZaberAxis:
                     raise ProtocolError(
                         f"{self.name}: reply from device {reply.device}, expected {self.device}: {reply.raw!r}"
                     )
+                if reply.message_id != message_id:  # a late reply to an earlier command
+                    self.dropped.append(reply.raw)
+                    continue
                 return reply
 
     def _check(self, reply: ZaberReply, what: str, fault: bool = True) -> ZaberReply:

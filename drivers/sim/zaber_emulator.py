@@ -37,7 +37,9 @@ reply, as on a daisy chain where that device is absent.
 Faults (:meth:`inject`): ``"reject"`` (``RJ ... BADDATA``), ``"no_reply"``,
 ``"garbage"``, ``"stall"`` (stops mid-move and raises flag ``flag``, default
 ``FS``; use ``flag="WL"`` for an unexpected limit, ``"FQ"`` encoder error),
-``"vanish"``.
+``"vanish"``, ``"late_reply"`` (the reply to the next command held back and sent just before the reply
+to the command after it: a reply that missed the driver's timeout, arriving while the next command waits;
+its message id, if any, is the earlier command's).
 """
 
 from __future__ import annotations
@@ -134,6 +136,7 @@ def zaber_checksum(body: bytes) -> int:
 
 class ZaberEmulator(LineEmulator):
     NAME = "Zaber emulator"
+    COUNTED = (*LineEmulator.COUNTED, "late_reply")
 
     def __init__(
         self,
@@ -172,6 +175,8 @@ class ZaberEmulator(LineEmulator):
         self.flags: list[str] = [] if homed else ["WR"]
         self._homing = False
         self._was_busy = False
+        self._late: list[bytes] = []  # replies held back by the "late_reply" fault
+        self._holding = False  # the reply being made is held back
         # the axes beyond the first, each at rest at 0: the tilt (degrees), the shift (mm), others
         self.shift_mspmm = float(shift_microsteps_per_mm)
         self.others: dict[int, OtherAxis] = {}
@@ -214,7 +219,10 @@ class ZaberEmulator(LineEmulator):
         raw = body.encode("ascii")
         if self.checksums:
             raw += b":%02X" % zaber_checksum(raw)
-        self.write(kind.encode() + raw + b"\r\n")
+        if self._holding:
+            self._late.append(kind.encode() + raw + b"\r\n")
+        else:
+            self.write(kind.encode() + raw + b"\r\n")
 
     def _reply(self, axis: int, msg_id: str | None, ok: bool, data: str, now: float, flag: str | None = None) -> None:
         other = self.others.get(axis)
@@ -265,6 +273,16 @@ class ZaberEmulator(LineEmulator):
         device, axis, msg_id, words = parsed
         if device not in (0, self.address):
             return
+        late, self._late = self._late, []
+        for reply in late:  # an earlier command's reply, held back: it arrives now, before this one's
+            self.write(reply)
+        self._holding = self._take_counted("late_reply") is not None
+        try:
+            self._answer(axis, msg_id, words, now)
+        finally:
+            self._holding = False
+
+    def _answer(self, axis: int, msg_id: str | None, words: list[str], now: float) -> None:
         if axis not in (0, 1) and axis not in self.others:
             self._reply(axis, msg_id, False, "BADAXIS", now)
             return

@@ -79,16 +79,16 @@ def test_mismatch_wins_over_the_driver_timeout_it_causes():
     # The script expects a different target; the driver's own DeviceTimeout
     # is replaced by the precise mismatch report (and chained to it).
     script = [
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
-        (b"/1 1 get limit.min\n", b"@01 1 OK IDLE -- 0\r\n"),
-        (b"/1 1 get limit.max\n", b"@01 1 OK IDLE -- 1536000\r\n"),
-        (b"/1 1 move abs 192001\n", b"@01 1 OK BUSY -- 0\r\n"),
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
+        (b"/1 1 1 get limit.min\n", b"@01 1 01 OK IDLE -- 0\r\n"),
+        (b"/1 1 2 get limit.max\n", b"@01 1 02 OK IDLE -- 1536000\r\n"),
+        (b"/1 1 3 move abs 192001\n", b"@01 1 03 OK BUSY -- 0\r\n"),
     ]
     with pytest.raises(AssertionError) as err:
         with expect_exchange(script, name="zaber") as dev:
             with ZaberTurntable(dev.port, reply_timeout=0.3) as tt:
                 tt.move_to(45.0)
-    assert "step 4/4" in str(err.value) and "first difference at byte 19" in str(err.value)
+    assert "step 4/4" in str(err.value) and "first difference at byte 21" in str(err.value)
     assert isinstance(err.value.__cause__, DeviceTimeout)
 
 

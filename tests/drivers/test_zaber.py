@@ -17,8 +17,8 @@ from tests.drivers.turntables import FAST, make_driver
 MSPD = 1536000 / 360.0  # X-RSW60 microsteps per degree
 # what open() reads after the status request: the axis travel, in microsteps
 LIMITS = [
-    (b"/1 1 get limit.min\n", b"@01 1 OK IDLE -- 0\r\n"),
-    (b"/1 1 get limit.max\n", b"@01 1 OK IDLE -- 1536000\r\n"),
+    (b"/1 1 1 get limit.min\n", b"@01 1 01 OK IDLE -- 0\r\n"),
+    (b"/1 1 2 get limit.max\n", b"@01 1 02 OK IDLE -- 1536000\r\n"),
 ]
 
 
@@ -38,18 +38,18 @@ def driver(port, **kw):
 
 def test_home_move_and_position_bytes():
     script = [
-        (b"/1\n", b"@01 0 OK IDLE WR 0\r\n"),
-        (b"/1 1 get limit.min\n", b"@01 1 OK IDLE WR 0\r\n"),
-        (b"/1 1 get limit.max\n", b"@01 1 OK IDLE WR 1536000\r\n"),
-        (b"/1 1 home\n", b"@01 1 OK BUSY WR 0\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK BUSY WR 51200\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 0\r\n"),
-        (b"/1 1 move abs 192000\n", b"@01 1 OK BUSY -- 0\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK BUSY -- 96117\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
-        (b"/1 1 stop\n", b"@01 1 OK IDLE -- 0\r\n"),
-        (b"/1 warnings clear\n", b"@01 0 OK IDLE FS 01 FS\r\n"),
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE WR 0\r\n"),
+        (b"/1 1 1 get limit.min\n", b"@01 1 01 OK IDLE WR 0\r\n"),
+        (b"/1 1 2 get limit.max\n", b"@01 1 02 OK IDLE WR 1536000\r\n"),
+        (b"/1 1 3 home\n", b"@01 1 03 OK BUSY WR 0\r\n"),
+        (b"/1 1 4 get pos\n", b"@01 1 04 OK BUSY WR 51200\r\n"),
+        (b"/1 1 5 get pos\n", b"@01 1 05 OK IDLE -- 0\r\n"),
+        (b"/1 1 6 move abs 192000\n", b"@01 1 06 OK BUSY -- 0\r\n"),
+        (b"/1 1 7 get pos\n", b"@01 1 07 OK BUSY -- 96117\r\n"),
+        (b"/1 1 8 get pos\n", b"@01 1 08 OK IDLE -- 192000\r\n"),
+        (b"/1 1 9 get pos\n", b"@01 1 09 OK IDLE -- 192000\r\n"),
+        (b"/1 1 10 stop\n", b"@01 1 10 OK IDLE -- 0\r\n"),
+        (b"/1 0 11 warnings clear\n", b"@01 0 11 OK IDLE FS 01 FS\r\n"),
     ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port) as tt:
@@ -61,12 +61,12 @@ def test_home_move_and_position_bytes():
 
 
 def test_checksummed_replies_and_info_and_alert_lines_are_understood():
-    body = b"01 1 OK IDLE -- 4267"
+    body = b"01 1 03 OK IDLE -- 4267"
     reply = b"@" + body + b":%02X\r\n" % zaber_checksum(body)
     script = [
-        (b"/1\n", b"#01 0 an info line\r\n!01 1 IDLE --\r\n@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 0 0\n", b"#01 0 an info line\r\n!01 1 IDLE --\r\n@01 0 00 OK IDLE -- 0\r\n"),
         *LIMITS,
-        (b"/1 1 get pos\n", reply),
+        (b"/1 1 3 get pos\n", reply),
     ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port) as tt:
@@ -75,18 +75,47 @@ def test_checksummed_replies_and_info_and_alert_lines_are_understood():
 
 
 def test_bad_checksum_is_a_protocol_error():
-    script = [(b"/1\n", b"@01 0 OK IDLE -- 0\r\n"), *LIMITS, (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 4267:00\r\n")]
+    script = [
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
+        *LIMITS,
+        (b"/1 1 3 get pos\n", b"@01 1 03 OK IDLE -- 4267:00\r\n"),
+    ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port) as tt:
-            with pytest.raises(ProtocolError, match="bad checksum in '@01 1 OK IDLE -- 4267:00'"):
+            with pytest.raises(ProtocolError, match="bad checksum in '@01 1 03 OK IDLE -- 4267:00'"):
                 tt.position()
 
 
 def test_reply_from_another_device_is_a_protocol_error():
-    script = [(b"/1\n", b"@02 0 OK IDLE -- 0\r\n")]
+    script = [(b"/1 0 0\n", b"@02 0 00 OK IDLE -- 0\r\n")]
     with ScriptedDevice(script, name="zaber") as dev:
         with pytest.raises(ProtocolError, match="reply from device 2, expected 1"):
             driver(dev.port).open()
+
+
+def test_a_reply_with_another_message_id_or_none_is_dropped_not_returned():
+    """A late reply to an earlier command (its id, 02) and a reply without an id arrive before the reply to
+    ``get pos`` (id 03): both are set aside in ``dropped``, and the position is the one ``03`` answered."""
+    script = [
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
+        *LIMITS,
+        (b"/1 1 3 get pos\n", b"@01 1 02 OK IDLE -- 1536000\r\n@01 1 OK IDLE -- 999\r\n@01 1 03 OK IDLE -- 4267\r\n"),
+    ]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port) as tt:
+            assert tt.position() == pytest.approx(4267 / MSPD)
+            assert tt.dropped == ["@01 1 02 OK IDLE -- 1536000", "@01 1 OK IDLE -- 999"]
+
+
+def test_the_emulator_repeats_the_message_id_in_its_reply():
+    sent = bytearray()
+    emu = ZaberEmulator()
+    emu.server = type("Wire", (), {"write": staticmethod(sent.extend)})()
+    for line in (b"/1 1 12 get pos\n", b"/1 0 7\n", b"/1 0 99 warnings\n", b"/1 1 get pos\n"):
+        emu.on_bytes(line, time.monotonic())
+    assert bytes(sent) == (
+        b"@01 1 12 OK IDLE WR 0\r\n@01 0 07 OK IDLE WR 0\r\n@01 0 99 OK IDLE WR 01 WR\r\n@01 1 OK IDLE WR 0\r\n"
+    )
 
 
 # -- against the emulator --------------------------------------------------
@@ -104,6 +133,38 @@ def test_moves_around_the_circle_read_back_and_drive_the_world():
             assert tt.position() == got
             assert world.stage_deg == pytest.approx(got, abs=1e-9)
         assert h.emulator.position_steps(time.monotonic()) == round(315 * MSPD)
+
+
+def test_a_late_reply_arriving_while_the_next_command_waits_is_not_its_answer(emu):
+    """The reply to ``get limit.max`` misses its timeout and arrives while ``get pos`` waits (the emulator
+    holds it back until the next command): it is dropped, and the position read is the stage's (0°), not
+    limit.max (1536000 microsteps, 360°)."""
+    with driver(emu.port_path, reply_timeout=0.3) as tt:
+        emu.emulator.inject("late_reply")
+        with pytest.raises(DeviceTimeout, match=r"no reply to '/1 1 3 get limit.max' within 0.30 s"):
+            tt.command("get limit.max")
+        assert tt.position() == 0.0
+        assert tt.dropped == ["@01 1 03 OK IDLE WR 1536000"]
+        assert tt.move_to(90.0) == 90.0  # and every later command is answered by its own reply
+
+
+def test_message_ids_count_to_99_then_start_again_on_every_axis_of_the_connection():
+    with start_zaber_emulator(axes=2, **FAST) as h, driver(h.port_path, tilt_axis=2) as tt:
+        # open: /1 0 0, limit.min 1, limit.max 2; the tilt axis: /1 0 3, get pos 4, limits 5, 6
+        for _ in range(93):
+            tt.position()
+        tt.tilt.position()  # id 0 again
+        tt.position()
+        assert h.emulator.received[:7] == [
+            b"/1 0 0", b"/1 1 1 get limit.min", b"/1 1 2 get limit.max",
+            b"/1 0 3", b"/1 2 4 get pos", b"/1 2 5 get limit.min", b"/1 2 6 get limit.max",
+        ]  # fmt: skip
+        assert h.emulator.received[98:] == [
+            b"/1 1 98 get pos",
+            b"/1 1 99 get pos",
+            b"/1 2 0 get pos",
+            b"/1 1 1 get pos",
+        ]
 
 
 def test_rejected_command_raises_and_the_next_one_works(emu):
@@ -159,8 +220,8 @@ def test_limits_outside_the_device_travel_fail_at_open():
 
 def test_a_device_without_limit_settings_keeps_the_configured_limits():
     script = [
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
-        (b"/1 1 get limit.min\n", b"@01 1 RJ IDLE -- BADCOMMAND\r\n"),
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
+        (b"/1 1 1 get limit.min\n", b"@01 1 01 RJ IDLE -- BADCOMMAND\r\n"),
     ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port, limits=(-10.0, 370.0)) as tt:
@@ -219,7 +280,7 @@ def test_alerts_and_checksums_from_the_emulator_do_not_disturb_the_driver():
 
 
 def test_emulator_ignores_other_addresses_and_refuses_other_axes(emu):
-    with pytest.raises(DeviceTimeout, match="no reply to '/2'"):
+    with pytest.raises(DeviceTimeout, match="no reply to '/2 0 0'"):
         driver(emu.port_path, reply_timeout=0.2, device=2).open()
     with driver(emu.port_path, axis=2) as tt:
         with pytest.raises(DeviceRejected, match="BADAXIS"):
@@ -265,7 +326,7 @@ def test_unopenable_port_and_url_ports():
     with pytest.raises(DeviceDisconnected, match="cannot open /nonexistent/tty"):
         ZaberTurntable("/nonexistent/tty").open()
     # any pyserial URL opens; loop:// echoes the command, which is no Zaber reply
-    with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'/1'"):
+    with pytest.raises(ProtocolError, match=r"not a Zaber ASCII message: b'/1 0 0'"):
         driver("loop://").open()
 
 
@@ -319,17 +380,17 @@ def test_tilt_axis_bytes():
     position, its travel) and moved like the first; its configured limits (default 0..60°) refuse a
     move before anything is sent."""
     script = [
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
         *LIMITS,
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
-        (b"/1 2 get pos\n", b"@01 2 OK IDLE -- 0\r\n"),
-        (b"/1 2 get limit.min\n", b"@01 2 OK IDLE -- 0\r\n"),
-        (b"/1 2 get limit.max\n", b"@01 2 OK IDLE -- 384000\r\n"),
-        (b"/1 2 move abs 128000\n", b"@01 2 OK BUSY -- 0\r\n"),
-        (b"/1 2 get pos\n", b"@01 2 OK BUSY -- 64000\r\n"),
-        (b"/1 2 get pos\n", b"@01 2 OK IDLE -- 128000\r\n"),
-        (b"/1 1 move abs 192000\n", b"@01 1 OK BUSY -- 0\r\n"),
-        (b"/1 1 get pos\n", b"@01 1 OK IDLE -- 192000\r\n"),
+        (b"/1 0 3\n", b"@01 0 03 OK IDLE -- 0\r\n"),
+        (b"/1 2 4 get pos\n", b"@01 2 04 OK IDLE -- 0\r\n"),
+        (b"/1 2 5 get limit.min\n", b"@01 2 05 OK IDLE -- 0\r\n"),
+        (b"/1 2 6 get limit.max\n", b"@01 2 06 OK IDLE -- 384000\r\n"),
+        (b"/1 2 7 move abs 128000\n", b"@01 2 07 OK BUSY -- 0\r\n"),
+        (b"/1 2 8 get pos\n", b"@01 2 08 OK BUSY -- 64000\r\n"),
+        (b"/1 2 9 get pos\n", b"@01 2 09 OK IDLE -- 128000\r\n"),
+        (b"/1 1 10 move abs 192000\n", b"@01 1 10 OK BUSY -- 0\r\n"),
+        (b"/1 1 11 get pos\n", b"@01 1 11 OK IDLE -- 192000\r\n"),
     ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port, tilt_axis=2) as tt:
@@ -371,17 +432,17 @@ def test_shift_axis_bytes_and_millimetres():
     tilt axis; positions in mm (``shift_microsteps_per_mm``, default an X-LSM's), its configured limits
     (default 0..100 mm) narrowed to the travel the device reports (here 50 mm), and every message in mm."""
     script = [
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
+        (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
         *LIMITS,
-        (b"/1\n", b"@01 0 OK IDLE -- 0\r\n"),
-        (b"/1 3 get pos\n", b"@01 3 OK IDLE -- 0\r\n"),
-        (b"/1 3 get limit.min\n", b"@01 3 OK IDLE -- 0\r\n"),
-        (b"/1 3 get limit.max\n", b"@01 3 OK IDLE -- 1049869\r\n"),  # 50.00001 mm
-        (b"/1 3 move abs 209974\n", b"@01 3 OK BUSY -- 0\r\n"),  # 10 mm = 209973.75 microsteps
-        (b"/1 3 get pos\n", b"@01 3 OK BUSY -- 104987\r\n"),
-        (b"/1 3 get pos\n", b"@01 3 OK IDLE -- 209974\r\n"),
-        (b"/1 3 move abs 104987\n", b"@01 3 OK BUSY -- 0\r\n"),  # 5 mm
-        (b"/1 3 get pos\n", b"@01 3 OK IDLE FS 52493\r\n"),  # stalled half-way
+        (b"/1 0 3\n", b"@01 0 03 OK IDLE -- 0\r\n"),
+        (b"/1 3 4 get pos\n", b"@01 3 04 OK IDLE -- 0\r\n"),
+        (b"/1 3 5 get limit.min\n", b"@01 3 05 OK IDLE -- 0\r\n"),
+        (b"/1 3 6 get limit.max\n", b"@01 3 06 OK IDLE -- 1049869\r\n"),  # 50.00001 mm
+        (b"/1 3 7 move abs 209974\n", b"@01 3 07 OK BUSY -- 0\r\n"),  # 10 mm = 209973.75 microsteps
+        (b"/1 3 8 get pos\n", b"@01 3 08 OK BUSY -- 104987\r\n"),
+        (b"/1 3 9 get pos\n", b"@01 3 09 OK IDLE -- 209974\r\n"),
+        (b"/1 3 10 move abs 104987\n", b"@01 3 10 OK BUSY -- 0\r\n"),  # 5 mm
+        (b"/1 3 11 get pos\n", b"@01 3 11 OK IDLE FS 52493\r\n"),  # stalled half-way
     ]
     with ScriptedDevice(script, name="zaber") as dev:
         with driver(dev.port, shift_axis=3) as tt:
