@@ -44,6 +44,16 @@ again) -> :class:`DeviceFault` until :meth:`recover` and :meth:`home`; no answer
 :class:`DeviceTimeout`; unparsable line -> :class:`ProtocolError`; port gone
 -> :class:`DeviceDisconnected`.
 
+Suspended moves: state ``Door`` (the safety door opened; ``Door:1`` still ajar, ``Door:0`` shut again and
+waiting for cycle start) while a move or homing is awaited -> :class:`DeviceFault` at once ("close it and
+resume the session"; the door during homing is GRBL's ``ALARM:7``); nothing is sent to the controller, whose
+cycle start is the operator's to give. A feed hold (``Hold:1`` stopping, ``Hold:0`` stopped: someone pressed
+the controller's feed-hold button) is waited out for ``hold_timeout`` seconds: cycle start (``~``) within
+that time and the move finishes; after it the move is cancelled as :meth:`GrblAxis.stop` does (the hold
+kept, then a soft reset flushes the planner; position kept) and :class:`DeviceFault` says so. A session
+retries either after ``recover()`` (a soft reset) and homing, and stops with the one-line message if the
+door stays open. Before, both waited out ``move_timeout`` and ended in a :class:`DeviceTimeout`.
+
 References
 ----------
 gnea/grbl, "Grbl v1.1 Interface" and "Grbl v1.1 Commands" (doc/markdown),
@@ -145,6 +155,8 @@ SETTINGS: dict[str, Setting] = {
     "move_timeout": Setting("longest move", "number", "s", 0.0, 3600.0, low_open=True),
     "home_timeout": Setting("longest homing", "number", "s", 0.0, 3600.0, low_open=True),
     "startup_timeout": Setting("wait for the banner after a reset", "number", "s", 0.0, 60.0, low_open=True),
+    "hold_timeout": Setting("longest feed hold a move waits out for cycle start before it is cancelled", "number",
+                            "s", 0.0, 3600.0, low_open=True),
     "tolerance_deg": Setting("how far from the target an idle axis may be", "number", "deg", 0.0, 10.0),
     "name": Setting("how messages name the stage", "text"),
     "tilt_axis": Setting("a second GRBL axis that tilts the calibration board (the session's intrinsics.placement: "
@@ -218,6 +230,8 @@ class GrblAxis:
         soft-limit travel (:class:`~drivers.errors.OutOfRange` outside).
     reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
         Seconds.
+    hold_timeout : float
+        Seconds a move waits out a feed hold (``Hold``) for cycle start before it is cancelled.
     tolerance : float
         How far from the target an idle axis may be, in ``unit`` (status has 3 decimals).
     """
@@ -238,6 +252,7 @@ class GrblAxis:
         move_timeout: float = 60.0,
         home_timeout: float = 120.0,
         startup_timeout: float = 3.0,
+        hold_timeout: float = 10.0,
         tolerance: float = 0.002,
         name: str | None = None,
     ):
@@ -270,6 +285,7 @@ class GrblAxis:
         self.move_timeout = float(move_timeout)
         self.home_timeout = float(home_timeout)
         self.startup_timeout = float(startup_timeout)
+        self.hold_timeout = float(hold_timeout)
         self.tolerance = float(tolerance)
         self.name = name or f"grbl {port} axis {axis}"
         self.transport = SerialTransport(port, baudrate, name=self.name)
@@ -296,8 +312,8 @@ class GrblAxis:
             self.transport.port, baudrate=self.transport.baudrate, axis=str(letter), units_per_unit=units_per_unit,
             unit=unit, config_prefix=f"{role}_", feed=self.feed, limits=tuple(limits),  # type: ignore[arg-type]
             reply_timeout=self.reply_timeout, poll_interval=self.poll_interval, move_timeout=self.move_timeout,
-            home_timeout=self.home_timeout, startup_timeout=self.startup_timeout, tolerance=self.tolerance,
-            name=f"{self.name} {role} axis {str(letter).upper()}",
+            home_timeout=self.home_timeout, startup_timeout=self.startup_timeout, hold_timeout=self.hold_timeout,
+            tolerance=self.tolerance, name=f"{self.name} {role} axis {str(letter).upper()}",
         )  # fmt: skip
         axis.transport, axis._lock, axis._shared = self.transport, self._lock, True
         axis._controller = self._controller
@@ -544,8 +560,10 @@ class GrblAxis:
         warnings = []
         if st["state"] == "Alarm":
             warnings.append(alarm_text(self.last_alarm) if self.last_alarm else "Alarm (locked: home or unlock)")
-        elif st["state"] in ("Hold", "Door"):
-            warnings.append(f"{st['state']}:{st['substate']}")
+        elif st["state"] == "Hold":
+            warnings.append(f"Hold:{st['substate']} (feed hold: cycle start ~ resumes)")
+        elif st["state"] == "Door":
+            warnings.append(f"Door:{st['substate']} (safety door opened)")
         if self.restarted:
             warnings.append("restarted: position lost (home it)")
         return {
@@ -553,7 +571,7 @@ class GrblAxis:
             "warnings": warnings,
             "state": st["state"],
             "position": st["position"],
-            "fault": st["state"] == "Alarm" or self.restarted,
+            "fault": st["state"] in ("Alarm", "Door") or self.restarted,
         }
 
     def home(self, timeout: float | None = None) -> None:
@@ -596,6 +614,7 @@ class GrblAxis:
 
     def _wait_idle(self, timeout: float, what: str, target: float | None) -> float:
         deadline = time.monotonic() + timeout
+        held_since: float | None = None  # when the feed hold that keeps the move waiting was first seen
         while True:
             st = self.query_status()
             state, pos = st["state"], st["position"]
@@ -604,6 +623,25 @@ class GrblAxis:
             if state == "Alarm":
                 cause = alarm_text(self.last_alarm) if self.last_alarm else "alarm state"
                 raise DeviceFault(f"{self.name}: {what} failed at {self._show(pos)}: {cause}; use recover()")
+            if state == "Door":  # nothing moves until the door is shut and cycle start pressed: not a wait
+                raise DeviceFault(
+                    f"{self.name}: {what} stopped at {self._show(pos)}: safety door opened (Door:{st['substate']});"
+                    " close it and resume the session"
+                )
+            if state == "Hold":  # a feed hold (the controller's button, or '!'): cycle start ('~') lets it go on
+                now = time.monotonic()
+                held_since = now if held_since is None else held_since
+                if now - held_since >= self.hold_timeout:
+                    try:
+                        self.stop()  # the planner flushed: nothing moves behind the caller's back
+                    finally:
+                        raise DeviceFault(
+                            f"{self.name}: {what} held by a feed hold (Hold:{st['substate']}) at {self._show(pos)}"
+                            f" for {self.hold_timeout:g} s without cycle start (~); move cancelled, position kept:"
+                            " resume the session"
+                        )
+            else:
+                held_since = None
             if state == "Idle":
                 if target is not None and abs(pos - target) > self.tolerance:
                     raise DeviceFault(
@@ -683,6 +721,8 @@ class GrblTurntable(GrblAxis):
         soft-limit travel (:class:`~drivers.errors.OutOfRange` outside).
     reply_timeout, poll_interval, move_timeout, home_timeout, startup_timeout : float
         Seconds.
+    hold_timeout : float
+        Seconds a move waits out a feed hold (``Hold``) for cycle start before it is cancelled.
     tolerance_deg : float
         How far from the target an idle axis may be (status has 3 decimals).
     """
@@ -706,6 +746,7 @@ class GrblTurntable(GrblAxis):
         move_timeout: float = 60.0,
         home_timeout: float = 120.0,
         startup_timeout: float = 3.0,
+        hold_timeout: float = 10.0,
         tolerance_deg: float = 0.002,
         name: str | None = None,
         tilt_axis: str | None = None,
@@ -718,7 +759,8 @@ class GrblTurntable(GrblAxis):
         super().__init__(
             port, baudrate=baudrate, axis=axis, units_per_unit=units_per_degree, unit="°", feed=feed, limits=limits,
             reply_timeout=reply_timeout, poll_interval=poll_interval, move_timeout=move_timeout,
-            home_timeout=home_timeout, startup_timeout=startup_timeout, tolerance=tolerance_deg, name=name,
+            home_timeout=home_timeout, startup_timeout=startup_timeout, hold_timeout=hold_timeout,
+            tolerance=tolerance_deg, name=name,
         )  # fmt: skip
         self.tilt: GrblAxis | None = None
         """The tilt axis (``tilt_axis``): another axis of this controller, on this connection, which tilts the

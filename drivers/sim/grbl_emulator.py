@@ -2,9 +2,15 @@
 
 Realtime bytes (no line end, no ``ok``): ``?`` status report
 ``<Idle|MPos:45.000,0.000,0.000|FS:0,0>`` (``Run`` while moving, ``Home``
-while homing, ``Hold:0`` after ``!``, ``Alarm``), ``!`` feed hold, ``~``
-cycle start (resume), Ctrl-X (0x18) soft reset, answered by the banner
-``\\r\\nGrbl 1.1h ['$' for help]\\r\\n``.
+while homing, ``Hold:0`` after ``!``, ``Door:1``/``Door:0`` with the safety door open/shut again,
+``Alarm``), ``!`` feed hold (moving or idle; ignored while homing, as GRBL's homing cycle does), ``~``
+cycle start (resumes a hold, or a door state once the door is shut: ``Door:0``), 0x84 safety door (as
+the door switch opening; with the door itself shut the state is ``Door:0``), Ctrl-X (0x18) soft reset,
+answered by the banner ``\\r\\nGrbl 1.1h ['$' for help]\\r\\n`` (with the door still open, GRBL
+enters ``Door:1`` again once idle). The motion stops at once (the deceleration states ``Hold:1`` and
+``Door:2`` pass within a tick). :meth:`GrblEmulator.open_door` / :meth:`GrblEmulator.close_door` are the
+safety-door switch (``ENABLE_SAFETY_DOOR_INPUT_PIN``; opened during homing: ``ALARM:7``),
+:meth:`GrblEmulator.feed_hold` / :meth:`GrblEmulator.cycle_start` the controller's buttons.
 
 Lines (ended by ``\\n`` or ``\\r``), each answered by ``ok`` or ``error:N``:
 ``$H`` homing (``ok`` only when the cycle is over), ``$X`` unlock
@@ -37,14 +43,17 @@ sideways, in mm (1 unit = 1 mm: ``G90 G0 Z12.500``; ``$13x`` = :data:`SHIFT_TRAV
 Faults (:meth:`inject`): ``"reject"`` (``error:N``, ``code`` default 20),
 ``"no_reply"``, ``"garbage"``, ``"alarm"`` (hard limit ``ALARM:1`` at
 fraction ``at`` of the next move: motion stops, ``[MSG:Reset to continue]``,
-every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``; both motion faults
-wait for a move of the turntable's axis, or of the axis ``axis`` names (``axis="Z"``: the
-linear stage's). :meth:`GrblEmulator.restart` starts the controller again as at power-up.
+every line is ignored until Ctrl-X; then ``$X`` or ``$H``), ``"vanish"``, ``"door"`` (the safety door
+opens at fraction ``at`` of the next move and stays open until :meth:`GrblEmulator.close_door`),
+``"hold"`` (the feed-hold button pressed at fraction ``at``; :meth:`GrblEmulator.cycle_start` or ``~``
+resumes); the motion faults wait for a move of the turntable's axis, or of the axis ``axis`` names
+(``axis="Z"``: the linear stage's). :meth:`GrblEmulator.restart` starts the controller again as at power-up.
 """
 
 from __future__ import annotations
 
 import re
+import time
 from typing import TYPE_CHECKING, Any
 
 from drivers.sim.line_emulator import LineEmulator
@@ -93,7 +102,7 @@ def _format_setting(n: int, value: float) -> str:
 
 class GrblEmulator(LineEmulator):
     NAME = "GRBL emulator"
-    MOTION = ("alarm", "vanish")
+    MOTION = ("alarm", "vanish", "door", "hold")
 
     def __init__(
         self,
@@ -151,6 +160,7 @@ class GrblEmulator(LineEmulator):
         self.queue: list[tuple[str, float]] = []  # (axis letter, target): blocks run one after another
         self._homing = False
         self._held: tuple[str, float] | None = None
+        self.door_open = False  # the safety-door switch
         # the tilt axis (tilt_axis): the calibration board's tilt, in degrees (1 unit = 1 degree), at 0;
         # the shift axis (shift_axis): the linear stage under the turntable, in mm (1 unit = 1 mm), at 0
         self.tilt_letter, self.shift_letter = tilt_letter, shift_letter
@@ -209,25 +219,79 @@ class GrblEmulator(LineEmulator):
             self._status(now)
             return True
         if byte == b"!":
-            if self.state in ("Run", "Home"):
-                self._held = None
-                for letter, a in self._axes.items():
-                    if a.move is not None and a.busy(now):
-                        self._held = (letter, a.move.target)
-                    a.halt(now)
-                self.state = "Hold:0"
+            if self.state in ("Run", "Idle"):  # GRBL: IDLE, CYCLE, JOG (not during the homing cycle)
+                self._suspend("Hold:0", now)
             return True
         if byte == b"~":
-            if self.state.startswith("Hold") and self._held is not None:
-                letter, target = self._held
-                self._axes[letter].start_move(target, now)
-                self._held = None
-                self.state = "Run"
+            if self.state.startswith("Hold") or self.state == "Door:0":
+                self._resume(now)
+            return True
+        if byte == b"\x84":  # safety door, as the switch opening: stopped, "ajar" as the switch reads
+            self._door(now)
             return True
         if byte == b"\x18":
             self._reset(now)
             return True
         return False
+
+    def _suspend(self, state: str, now: float) -> None:
+        """Stop every axis (the move under way kept, to resume) and enter ``state`` (``Hold:0``, ``Door:1``...)."""
+        if not self.state.startswith(("Hold", "Door")):
+            self._held = None
+            for letter, a in self._axes.items():
+                if a.move is not None and a.busy(now):
+                    self._held = (letter, a.move.target)
+        for a in self._axes.values():
+            a.halt(now)
+        self.state = state
+
+    def _resume(self, now: float) -> None:
+        """Cycle start: the held move goes on (the queued blocks after it); nothing held: idle."""
+        if self._held is not None:
+            letter, target = self._held
+            self._axes[letter].start_move(target, now)
+            self._held = None
+            self.state = "Run"
+        else:
+            self.state = "Idle"  # update() starts the queued blocks
+
+    def _door(self, now: float) -> None:
+        """The safety door opened (or 0x84): homing fails with ``ALARM:7``; an alarm stays; else the motion
+        stops in ``Door:1`` (``Door:0`` if the switch reads shut)."""
+        if self.state == "Alarm":
+            return
+        if self.state == "Home":
+            for a in self._axes.values():
+                a.halt(now)
+            self.queue.clear()
+            self._homing = False
+            self.state = "Alarm"
+            self._line("ALARM:7")
+            return
+        self._suspend("Door:1" if self.door_open else "Door:0", now)
+
+    def open_door(self) -> None:
+        """The safety door opens (the door switch): see :meth:`_door`."""
+        with self._lock:
+            self.door_open = True
+            self._door(time.monotonic())
+
+    def close_door(self) -> None:
+        """The safety door is shut again: ``Door:1`` becomes ``Door:0`` (cycle start resumes)."""
+        with self._lock:
+            self.door_open = False
+            if self.state.startswith("Door"):
+                self.state = "Door:0"
+
+    def feed_hold(self) -> None:
+        """The controller's feed-hold button (GRBL's pin): the same as ``!``."""
+        with self._lock:
+            self.handle_realtime(b"!", time.monotonic())
+
+    def cycle_start(self) -> None:
+        """The controller's cycle-start button (GRBL's pin): the same as ``~``."""
+        with self._lock:
+            self.handle_realtime(b"~", time.monotonic())
 
     def _status(self, now: float) -> None:
         self.update(now)
@@ -262,6 +326,8 @@ class GrblEmulator(LineEmulator):
         self.write(BANNER)
         if state == "Alarm":
             self.write(UNLOCK_MSG)
+        elif self.door_open:  # GRBL checks the door at start: still open, it enters the door state
+            self.state = "Door:1"
 
     def restart(self) -> None:
         """Start again as at power-up (a brown-out, a USB reset that reboots the board, a watchdog): the
@@ -302,6 +368,9 @@ class GrblEmulator(LineEmulator):
             if self.state not in ("Idle", "Alarm"):
                 self._line("error:8")
                 return
+            if self.door_open:  # GRBL: blocked while the safety door is ajar
+                self._line("error:13")
+                return
             self.state = "Home"
             self._homing = True
             for a in self._axes.values():  # every axis to its home switch (machine 0)
@@ -314,7 +383,7 @@ class GrblEmulator(LineEmulator):
             self._line("ok")
             return
         if text == "$$":
-            if self.state in ("Run", "Home") or self.state.startswith("Hold"):
+            if self.state in ("Run", "Home") or self.state.startswith("Hold"):  # GRBL: CYCLE, HOLD
                 self._line("error:8")
                 return
             for n, value in sorted(self.settings.items()):
@@ -329,7 +398,7 @@ class GrblEmulator(LineEmulator):
 
     def _write_setting(self, n: int, text: str) -> str:
         """``$N=value``: the reply (``ok`` or ``error:N``), as GRBL's settings_store_global_setting."""
-        if self.state in ("Run", "Home") or self.state.startswith("Hold"):
+        if self.state in ("Run", "Home") or self.state.startswith(("Hold", "Door")):
             return "error:8"
         if n not in self.settings:
             return "error:3"
@@ -431,6 +500,13 @@ class GrblEmulator(LineEmulator):
             if move.fraction(now) >= armed[1]["at"]:
                 name, spec = armed
                 self.consume(name)
+                if name == "door":  # someone opens the safety door (it stays open until close_door())
+                    self.door_open = True
+                    self._door(now)
+                    return
+                if name == "hold":  # someone presses the feed-hold button
+                    self._suspend("Hold:0", now)
+                    return
                 for a in self._axes.values():
                     a.halt(now)
                 if name == "vanish":
@@ -443,7 +519,7 @@ class GrblEmulator(LineEmulator):
                 self._line(f"ALARM:{spec.get('code', 1)}")
                 self._line("[MSG:Reset to continue]")
                 return
-        if self.state.startswith("Hold") or self.state == "Alarm":
+        if self.state.startswith(("Hold", "Door")) or self.state == "Alarm":
             return
         if not self._busy(now):
             if self._homing:

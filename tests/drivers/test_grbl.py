@@ -1,6 +1,8 @@
 """GRBL driver: byte-exact command sequences, and the real driver over a real
 pty against the GRBL emulator (homing lock, motion, alarms, faults, recovery)."""
 
+import re
+import threading
 import time
 
 import pytest
@@ -460,3 +462,120 @@ def test_shift_axis_on_the_emulator_moves_the_simulated_turntable_sideways():
         driver("/dev/null", shift_axis="Z", shift_units_per_mm=0)
     with pytest.raises(ValueError, match="shift_axis must be another of X, Y, Z or A"):
         GrblEmulator(tilt_axis="Y", shift_axis="Y")
+
+
+# -- a feed hold, the safety door (GRBL's suspended states) ----------------------------------------------
+
+SLOW = dict(speed_deg_s=90.0, accel_deg_s2=900.0)  # 270° in about 3 s: the fault comes well within the move
+
+
+def test_the_safety_door_opened_mid_move_is_a_fault_at_once_not_a_wait_for_the_move_timeout():
+    """``Door:1`` while the move is awaited: a DeviceFault naming the device and what to do, long before the
+    60 s move timeout (before: the driver polled the door state for 60 s, then said the move timed out).
+    Nothing is sent to resume it; a reset after the door is shut, and the move goes through."""
+    with start_grbl_emulator(**SLOW) as h, driver(h.port_path, move_timeout=60.0) as tt:
+        tt.home()
+        h.emulator.inject("door", at=0.3)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceFault) as err:
+            tt.move_to(270.0)
+        assert time.monotonic() - t0 < 20.0  # well before move_timeout (60 s)
+        assert re.fullmatch(
+            rf"{re.escape(tt.name)}: move to 270.0° stopped at \d+\.\d{{3}}°: safety door opened \(Door:1\);"
+            r" close it and resume the session",
+            str(err.value),
+        ), str(err.value)
+        st = tt.status()
+        assert st["state"] == "Door" and st["fault"] and 0.0 < st["position"] < 270.0
+        assert st["warnings"] == ["Door:1 (safety door opened)"]
+        assert b"~" not in h.emulator.received  # cycle start is the operator's, not the driver's
+        tt.recover()  # a reset with the door still open: GRBL enters the door state again
+        with pytest.raises(DeviceFault, match=r"safety door opened \(Door:1\); close it and resume the session"):
+            tt.move_to(270.0)
+        h.emulator.close_door()
+        assert tt.status()["warnings"] == ["Door:0 (safety door opened)"]
+        tt.recover()
+        assert tt.status()["state"] == "Idle"
+        assert tt.move_to(270.0) == 270.0
+
+
+def test_a_feed_hold_released_in_time_lets_the_move_finish():
+    """Someone presses feed hold mid-move, then cycle start while the driver still waits: the move
+    finishes at its target (the hold is waited out, hold_timeout 60 s)."""
+    with start_grbl_emulator(**SLOW) as h, driver(h.port_path, move_timeout=60.0, hold_timeout=60.0) as tt:
+        tt.home()
+        h.emulator.inject("hold", at=0.3)
+        released = threading.Event()
+
+        def release_once_the_driver_saw_the_hold():
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline and not h.emulator.state.startswith("Hold"):
+                time.sleep(0.005)
+            polls = h.emulator.received.count(b"?")
+            while time.monotonic() < deadline and h.emulator.received.count(b"?") < polls + 3:
+                time.sleep(0.005)  # the driver polled the held controller three more times
+            h.emulator.cycle_start()
+            released.set()
+
+        helper = threading.Thread(target=release_once_the_driver_saw_the_hold, daemon=True)
+        n = len(h.emulator.received)
+        helper.start()
+        try:
+            assert tt.move_to(270.0) == 270.0
+        finally:
+            helper.join(30.0)
+        assert released.is_set()
+        assert b"\x18" not in h.emulator.received[n:] and b"~" not in h.emulator.received[n:]  # no reset, no resume
+
+
+def test_a_feed_hold_longer_than_hold_timeout_cancels_the_move_and_is_a_fault():
+    """Nobody presses cycle start: after hold_timeout the move is cancelled (the hold kept, a soft reset
+    flushes the planner, position kept, no alarm) and a DeviceFault says what happened and what to do;
+    well before the 60 s move timeout. A cycle start pressed later moves nothing."""
+    with start_grbl_emulator(**SLOW) as h, driver(h.port_path, move_timeout=60.0, hold_timeout=0.5) as tt:
+        tt.home()
+        h.emulator.inject("hold", at=0.3)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceFault) as err:
+            tt.move_to(270.0)
+        assert time.monotonic() - t0 < 20.0
+        assert re.fullmatch(
+            rf"{re.escape(tt.name)}: move to 270.0° held by a feed hold \(Hold:0\) at \d+\.\d{{3}}° for 0.5 s"
+            r" without cycle start \(~\); move cancelled, position kept: resume the session",
+            str(err.value),
+        ), str(err.value)
+        st = tt.status()
+        assert st["state"] == "Idle" and not st["fault"] and 0.0 < st["position"] < 270.0
+        assert tt.last_alarm is None
+        h.emulator.cycle_start()
+        assert tt.status() == st
+        assert tt.move_to(90.0) == 90.0
+
+
+def test_the_emulated_door_and_hold_speak_like_grbl():
+    """Status reports and replies while held or with the door open, as GRBL 1.1 gives them."""
+    sent = bytearray()
+    wire = type("Wire", (), {"write": staticmethod(sent.extend)})()
+    emu, homing = GrblEmulator(homing=False, **FAST), GrblEmulator(**FAST)
+    emu.server = homing.server = wire
+
+    def exchange(data: bytes, to: GrblEmulator = emu) -> bytes:
+        sent.clear()
+        to.on_bytes(data, time.monotonic())
+        return bytes(sent)
+
+    assert exchange(b"!?") == b"<Hold:0|MPos:0.000,0.000,0.000|FS:0,0>\r\n"  # a hold while idle too
+    assert exchange(b"$$\n") == b"error:8\r\n"
+    assert exchange(b"~?") == b"<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
+    emu.open_door()
+    assert exchange(b"?") == b"<Door:1|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
+    assert exchange(b"~?$1=30\n") == b"<Door:1|MPos:0.000,0.000,0.000|FS:0,0>\r\nerror:8\r\n"  # ajar: no resume
+    assert exchange(b"\x18?") == BANNER + b"<Door:1|MPos:0.000,0.000,0.000|FS:0,0>\r\n"  # still open after reset
+    emu.close_door()
+    assert exchange(b"?~?") == (b"<Door:0|MPos:0.000,0.000,0.000|FS:0,0>\r\n<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n")
+    assert exchange(b"\x84?") == b"<Door:0|MPos:0.000,0.000,0.000|FS:0,0>\r\n"  # 0x84 with the door shut
+    exchange(b"$H\n", homing)
+    sent.clear()
+    homing.open_door()
+    assert bytes(sent) == b"ALARM:7\r\n"  # homing fail: safety door was opened during homing
+    assert exchange(b"$H\n", homing) == b"error:13\r\n"  # blocked while the door is ajar

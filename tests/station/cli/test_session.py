@@ -354,6 +354,48 @@ def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_
     assert stages == [0.0, 45.0, 90.0, 135.0]
 
 
+def test_a_grbl_safety_door_left_open_stops_the_session_with_one_line_then_it_resumes(tmp_path):
+    """The safety door opens during the move to 90° and stays open: each try is a DeviceFault at once (not a
+    wait for the move timeout), the session recovers the controller and tries again, then stops with one line
+    saying to close the door and resume; shut, the resumed session (the driver opened again, as by
+    ``harp session resume``) takes the rest, every shot at its angle."""
+    path = small_config(tmp_path, focus=(0.5,), frames=1, move_timeout_s=20.0)
+    d = yaml.safe_load(path.read_text())
+    d["station"]["turntable"] = {"driver": "grbl", "port": "emulator"}
+    path.write_text(yaml.safe_dump(d))
+    cfg = load_config(path)
+    with simulated_devices(cfg) as sim:
+        sim.camera.open()
+        sim.turntable.open()
+        move_to, opened = sim.turntable.move_to, []
+
+        def door_opening_on_the_way_to_90(degrees, timeout=None):
+            if degrees == 90 and not opened:
+                opened.append(degrees)
+                sim.emulator.emulator.inject("door", at=0.5)
+            return move_to(degrees, timeout=timeout)
+
+        sim.turntable.move_to = door_opening_on_the_way_to_90
+        t0 = time.monotonic()
+        with SessionDir.create(tmp_path, cfg, name="d") as s:
+            result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+            faults = [(r.what, r.error) for r in s.of_type(Fault)]
+            session = s.path
+        assert time.monotonic() - t0 < 40.0  # three tries, none waiting out the 20 s move timeout
+        assert result.exit_code == EXIT_ABORTED and "\n" not in result.message
+        assert "DeviceFault: grbl " in result.message, result.message
+        assert "safety door opened (Door:1); close it and resume the session; " in result.message, result.message
+        assert faults == [("move turntable to 90 deg", "DeviceFault")] * 3
+        sim.emulator.emulator.close_door()
+        sim.turntable.close()
+        sim.turntable.open()  # what harp session resume does: a new process opens the port (a soft reset)
+        with SessionDir.open(session) as s:
+            result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+            stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
+    assert result.exit_code == EXIT_OK, result.message
+    assert stages == [0.0, 45.0, 90.0, 135.0]
+
+
 def test_unplugged_turntable_stops_cleanly(tmp_path):
     cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1))
     with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="u") as s:
