@@ -96,7 +96,8 @@ def _driver(kind, port, **kw):
 @pytest.mark.parametrize("kind", sorted(TURNTABLES))
 def test_position_is_reported_while_moving(kind):
     start = TURNTABLES[kind][0]
-    with start(speed_deg_s=600.0, accel_deg_s2=6000.0) as h, _driver(kind, h.port_path) as tt:
+    # 300 degrees at 150 deg/s: 2 s of travel, so that a loaded machine still polls it often
+    with start(speed_deg_s=150.0, accel_deg_s2=1500.0) as h, _driver(kind, h.port_path) as tt:
         tt.home()
         tt.start_move(300.0)
         seen = []
@@ -117,13 +118,15 @@ def test_position_is_reported_while_moving(kind):
 @pytest.mark.parametrize("kind", sorted(TURNTABLES))
 def test_no_reply_times_out_within_the_reply_timeout_then_recovers(kind):
     start = TURNTABLES[kind][0]
-    with start(**FAST) as h, _driver(kind, h.port_path, reply_timeout=0.3) as tt:
+    # the reply timeout is long enough that a loaded machine's scheduling (tenths of a second) stays below
+    # the margin, which is less than one more reply timeout (a wait of two would fail)
+    with start(**FAST) as h, _driver(kind, h.port_path, reply_timeout=1.5) as tt:
         tt.home()
         h.emulator.inject("no_reply")
         t0 = time.monotonic()
-        with pytest.raises(DeviceTimeout, match=rf"no reply to '{NO_REPLY_COMMAND[kind]}' within 0.30 s"):
+        with pytest.raises(DeviceTimeout, match=rf"no reply to '{NO_REPLY_COMMAND[kind]}' within 1.50 s"):
             tt.move_to(45.0)
-        assert 0.29 <= time.monotonic() - t0 < 0.6
+        assert 1.49 <= time.monotonic() - t0 < 2.9
         assert tt.move_to(45.0) == 45.0
 
 
@@ -146,7 +149,7 @@ def test_device_vanishing_mid_move_is_a_disconnect_within_the_timeout(kind):
         h.emulator.inject("vanish", at=0.3)
         t0 = time.monotonic()
         with pytest.raises(DeviceDisconnected, match="device gone"):
-            tt.move_to(270.0, timeout=5.0)
-        assert time.monotonic() - t0 < 1.0
+            tt.move_to(270.0, timeout=60.0)
+        assert time.monotonic() - t0 < 20.0  # at once, not at the move's timeout
         with pytest.raises(DeviceDisconnected):
             tt.position()

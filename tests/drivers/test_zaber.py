@@ -247,8 +247,8 @@ def test_fault_flag_raises_and_clearing_warnings_recovers(emu, flag, meaning):
         emu.emulator.inject("stall", at=0.4, flag=flag)
         t0 = time.monotonic()
         with pytest.raises(DeviceFault, match=rf"move to 180.0° stopped at .*warning {flag} \({meaning}\)"):
-            tt.move_to(180.0, timeout=2.0)
-        assert time.monotonic() - t0 < 1.0
+            tt.move_to(180.0, timeout=60.0)
+        assert time.monotonic() - t0 < 20.0  # at the stall, not at the move's timeout
         stopped = tt.position()
         assert 0.0 < stopped < 180.0
         assert tt.status()["warnings"] == [flag] and tt.status()["fault"]
@@ -266,7 +266,7 @@ def test_move_that_does_not_finish_times_out_and_stops_the_stage():
         t0 = time.monotonic()
         with pytest.raises(DeviceTimeout, match=r"move to 270.0° not finished within 0.30 s .*stage stopped"):
             tt.move_to(270.0, timeout=0.3)
-        assert time.monotonic() - t0 < 0.8
+        assert time.monotonic() - t0 < 2.5  # the move itself takes over 3 s
         st = tt.status()
         assert not st["busy"] and 0.0 < st["position"] < 270.0
 
