@@ -139,9 +139,9 @@ def test_a_late_reply_arriving_while_the_next_command_waits_is_not_its_answer(em
     """The reply to ``get limit.max`` misses its timeout and arrives while ``get pos`` waits (the emulator
     holds it back until the next command): it is dropped, and the position read is the stage's (0°), not
     limit.max (1536000 microsteps, 360°)."""
-    with driver(emu.port_path, reply_timeout=0.3) as tt:
+    with driver(emu.port_path, reply_timeout=1.0) as tt:
         emu.emulator.inject("late_reply")
-        with pytest.raises(DeviceTimeout, match=r"no reply to '/1 1 3 get limit.max' within 0.30 s"):
+        with pytest.raises(DeviceTimeout, match=r"no reply to '/1 1 3 get limit.max' within 1.00 s"):
             tt.command("get limit.max")
         assert tt.position() == 0.0
         assert tt.dropped == ["@01 1 03 OK IDLE WR 1536000"]
