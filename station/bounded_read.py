@@ -17,7 +17,7 @@ class BoundedReadError(OSError):
 
     Not a HarpError: each reader says what the file was meant to be, so each turns it into its own
     HarpError with the ``reason`` (:class:`station.imageio.ImageReadError`,
-    :class:`station.config.ConfigError`, the TCA file's :class:`station.inputs.InputError`)."""
+    :class:`station.config.ConfigError`, the TCA file's :class:`station.errors.InputError`)."""
 
     def __init__(self, path: str | os.PathLike, reason: str):
         self.path = str(path)

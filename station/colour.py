@@ -4,7 +4,7 @@ A camera RAW file (:func:`station.raw.is_raw_path`) is read by LibRaw and measur
 CFA plane on its mosaic (:func:`pipeline.cfa.measure_mosaic`: no demosaicing); an 8- or
 16-bit colour PNG/TIFF/PPM/JPEG per channel (:func:`pipeline.cfa.measure_channels`). A
 grey image is refused: it has no colour channels (a monochrome camera has no lateral
-chromatic aberration to measure). Every failure is an :class:`~station.inputs.InputError`
+chromatic aberration to measure). Every failure is an :class:`~station.errors.InputError`
 naming the file.
 """
 
@@ -20,8 +20,9 @@ from pipeline.models.tca_model import TcaField
 from pipeline.resample import DEFAULT_T
 from pipeline.tca import DEFAULT_TCA_DEGREE, LensfunTcaFit, TcaFit, channel_pairs, fit_tca, lensfun_tca
 from station.bounded_read import BoundedReadError, read_regular_file
+from station.errors import InputError
 from station.imageio import ImageReadError
-from station.inputs import NO_STRINGS, InputError, read_image
+from station.inputs import NO_STRINGS, read_image
 from station.raw import is_raw_path, read_raw
 
 MONO = "a grey image has one channel: TCA needs a colour image or a camera RAW file (a monochrome camera has no TCA)"
@@ -95,7 +96,7 @@ def read_document(path, fmt: str, what: str, command: str) -> dict[str, Any]:
     """A harp result file (YAML or JSON by the suffix) whose ``format`` is ``fmt``.
 
     ``what`` names it (``"a harp TCA file"``), ``command`` writes it (``"harp tca --out"``);
-    an :class:`~station.inputs.InputError` naming the file when it cannot be read or is not one.
+    an :class:`~station.errors.InputError` naming the file when it cannot be read or is not one.
     """
     import json
 
@@ -117,7 +118,7 @@ def read_document(path, fmt: str, what: str, command: str) -> dict[str, Any]:
 def read_tca_file(path, width: int, height: int) -> dict[str, Any]:
     """The red and blue :class:`~pipeline.models.tca_model.TcaField` of a ``harp tca --out`` file.
 
-    Returns ``{"R": field, "B": field}``; an :class:`~station.inputs.InputError` naming the file when
+    Returns ``{"R": field, "B": field}``; an :class:`~station.errors.InputError` naming the file when
     it is not a harp TCA file (YAML or JSON), lacks a channel, or is for another image size.
     """
     p = Path(path)

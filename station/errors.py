@@ -1,6 +1,6 @@
 """The one error base of every ``harp`` command: :class:`HarpError` carries its exit code.
 
-A command raises a :class:`HarpError` (or one of its subclasses: :class:`station.inputs.InputError`,
+A command raises a :class:`HarpError` (or one of its subclasses: :class:`InputError`,
 :class:`station.config.ConfigError`, :class:`station.store.StoreError`, ...) with a one-line
 message naming the file, field or device and what to do; the entry point
 (:func:`station.cli.main`) prints it once as ``harp COMMAND: message`` on stderr and exits with the
@@ -17,6 +17,10 @@ class HarpError(Exception):
     """An error for the user: ``str()`` is one line, :attr:`exit_code` the command's exit code."""
 
     exit_code: int = EXIT_ERROR
+
+
+class InputError(HarpError):
+    """Bad input; ``str(exc)`` is a one-line message for the user, naming the file."""
 
 
 class Interrupted(HarpError):

@@ -29,8 +29,9 @@ from pipeline.normalise import corner_homography
 from pipeline.resample import DEFAULT_T
 from pipeline.shared_bend import shared_bend
 from pipeline.straightness import straightness
+from station.errors import InputError
 from station.imageio import quiet_codecs
-from station.inputs import NO_STRINGS, InputError, measure_grey, read_image
+from station.inputs import NO_STRINGS, measure_grey, read_image
 
 
 class EvaluateError(InputError):

@@ -1,10 +1,9 @@
-"""Bad input, and harp photographs read and measured with one-line errors.
+"""Harp photographs read and measured with one-line errors.
 
-:class:`InputError` is the one-line "bad input" error every ``harp`` command prints
-as ``harp <command>: <message>`` before exiting with code 2; :func:`read_image` and
-:func:`measure_file` read a harp photograph (:func:`station.imageio.read_grey`) and
+:func:`read_image` and :func:`measure_file` read a harp photograph (:func:`station.imageio.read_grey`) and
 measure its strings (:func:`pipeline.measure.measure_image`), turning every failure
-into an :class:`InputError` that names the file.
+into an :class:`~station.errors.InputError` (the one-line "bad input" error every ``harp``
+command prints before exiting with code 2) that names the file.
 """
 
 from __future__ import annotations
@@ -13,13 +12,9 @@ import numpy as np
 
 from pipeline.measure import MIN_SMOOTHED_POINTS, ImageMeasurement, measure_image
 from station import imageio
-from station.errors import HarpError
+from station.errors import InputError
 
 NO_STRINGS = "no strings found (no pair of long straight edges a string width apart)"
-
-
-class InputError(HarpError):
-    """Bad input; ``str(exc)`` is a one-line message for the user, naming the file."""
 
 
 def read_image(path, *, grey: bool = True) -> np.ndarray:

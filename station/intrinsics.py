@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from pipeline.board import MAX_EDGE_WIDTH_PX, MIN_CORNERS, BoardRejected, BoardSpec, BoardView, detect_board
 from pipeline.intrinsics import Intrinsics, IntrinsicsFailure, fit_intrinsics
 from pipeline.models.base import DistortionModel
-from station.inputs import InputError, read_image
+from station.errors import InputError
+from station.inputs import read_image
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ through a distortion model file when one is given. The result: :func:`vignetting
 
 The images must be linear (a RAW conversion without tone curve, or a camera's linear output):
 a gamma or tone curve bends the relative illumination. Every failure is an
-:class:`~station.inputs.InputError` naming the file or the option and what to do.
+:class:`~station.errors.InputError` naming the file or the option and what to do.
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ from pipeline.vignetting import (
     lensfun_radius,
 )
 from station.colour import read_document
+from station.errors import InputError
 from station.imageio import ImageReadError
-from station.inputs import NO_STRINGS, InputError, measure_file
+from station.inputs import NO_STRINGS, measure_file
 from station.raw import is_raw_path, read_raw
 
 MAX_SATURATED_FRACTION = 0.01
@@ -314,7 +315,7 @@ def vignetting_of(
 def read_vignetting_file(path, width: int, height: int) -> tuple[VignettingFit, float | None, float | None]:
     """The fit of a ``harp vignetting --out`` file and the aperture and distance it was filed under, if any.
 
-    An :class:`~station.inputs.InputError` naming the file when it is not a harp vignetting file,
+    An :class:`~station.errors.InputError` naming the file when it is not a harp vignetting file,
     its fit is malformed, or it is for another image size than ``width`` x ``height``.
     """
     doc = read_document(path, "harp-vignetting", "a harp vignetting file", "harp vignetting --out")

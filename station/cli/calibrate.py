@@ -51,9 +51,10 @@ from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.errors import InputError
 from station.exit_codes import EXIT_OK
 from station.files import sha256_file, write_profile
-from station.inputs import InputError, measure_file
+from station.inputs import measure_file
 from station.pool import WorkerPool
 from station.tables import console, is_terminal, print_table
 

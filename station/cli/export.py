@@ -71,9 +71,9 @@ from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
 from station.cli.say import warn
 from station.equipment import optic_problem
+from station.errors import InputError
 from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes
-from station.inputs import InputError
 from station.lensfun_databases import installed_databases
 
 LENSFUN_TYPE_CHOICES = ("auto", "rectilinear", "fisheye", "equisolid", "stereographic", "orthographic", "fisheye_thoby")

@@ -8,9 +8,12 @@ One set of options for every command that writes or describes a corrected image
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
-from pipeline.corrected_frame import FrameChoice
-from station.inputs import InputError
+from station.errors import InputError
+
+if TYPE_CHECKING:
+    from pipeline.corrected_frame import FrameChoice
 
 
 def add_frame_options(p) -> None:
@@ -41,7 +44,7 @@ def add_frame_options(p) -> None:
     )
 
 
-def frame_choice(args):
+def frame_choice(args) -> FrameChoice:
     """The :class:`~pipeline.corrected_frame.FrameChoice` of the parsed options (InputError, one line, if bad)."""
     size = None
     raw = getattr(args, "size", None)
@@ -50,6 +53,8 @@ def frame_choice(args):
         if m is None:
             raise InputError(f"--size: expected WIDTHxHEIGHT in pixels, e.g. 1920x1080, got {raw!r}")
         size = (int(m.group(1)), int(m.group(2)))
+    from pipeline.corrected_frame import FrameChoice  # defers cv2 (the models): the parser's options do not load them
+
     try:
         return FrameChoice(
             size=size,

@@ -1,4 +1,4 @@
-"""The ``argparse`` types the ``harp`` sub-commands share (their errors: :class:`station.inputs.InputError`)."""
+"""The ``argparse`` types the ``harp`` sub-commands share (their errors: :class:`station.errors.InputError`)."""
 
 from __future__ import annotations
 

@@ -46,9 +46,10 @@ from pipeline.straightness import straightness
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
 from station.cli.say import say
+from station.errors import InputError
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
-from station.inputs import InputError, measure_file
+from station.inputs import measure_file
 from station.qa.overlay import write_overlay
 from station.tables import is_terminal, print_table
 

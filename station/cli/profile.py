@@ -34,9 +34,8 @@ from station.cli.commands import COMMANDS
 from station.cli.export import ExportError, add_export_options, export_profile, formats_epilog, report, write_output
 from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, open_store
-from station.errors import HarpError
+from station.errors import HarpError, InputError
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
-from station.inputs import InputError
 from station.profile_choice import (
     at_focus,
     at_setting,
@@ -52,7 +51,6 @@ from station.profile_choice import (
     setting_text,
     verdict_text,
 )
-from station.session.colour import colour_summary
 from station.store import StoreError
 from station.tables import console as text_console
 from station.tables import is_terminal, print_table
@@ -442,6 +440,9 @@ def _print_profiles(args, lens, profiles, left_out, *, detail: bool = False) -> 
         if p.intrinsics is not None:
             print(p.intrinsics.statement())
         if p.details.get("colour"):
+            # defers pipeline.cfa, pipeline.vignetting: only a colour profile loads them
+            from station.session.colour import colour_summary
+
             for what, cell in colour_summary(p.details["colour"]).items():
                 print(f"{what}: {cell}")
         print(json.dumps(plain(p.model.to_dict())))

@@ -36,9 +36,10 @@ from station.cli.commands import COMMANDS
 from station.cli.frame_options import add_frame_options, frame_choice
 from station.cli.say import say
 from station.colour import read_tca_file
+from station.errors import InputError
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.files import atomic_write_bytes
-from station.inputs import InputError, read_image
+from station.inputs import read_image
 
 INTERPOLATIONS = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC, "lanczos": cv2.INTER_LANCZOS4}
 WRITABLE = (".pgm", ".ppm", ".pnm", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")

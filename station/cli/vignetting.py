@@ -26,9 +26,9 @@ from pathlib import Path
 from pipeline.resample import DEFAULT_T
 from station.cli.commands import COMMANDS
 from station.cli.inputs import positive_int
+from station.errors import InputError
 from station.exit_codes import EXIT_OK
 from station.files import atomic_write_bytes, atomic_write_text
-from station.inputs import InputError
 from station.tables import is_terminal, print_table
 from station.vignetting import flat_field_tiff, vignetting_document, vignetting_of
 

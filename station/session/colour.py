@@ -36,7 +36,7 @@ from pipeline.cfa import measure_mosaic
 from pipeline.models.base import DistortionModel
 from pipeline.vignetting import lensfun_pa
 from station.colour import fit_channels, tca_document
-from station.inputs import InputError
+from station.errors import InputError
 from station.session.processing import average_frames, full_scale
 from station.vignetting import (
     MAX_SATURATED_FRACTION,

@@ -171,8 +171,8 @@ def test_no_command_prints_an_error_and_returns_a_code():
 
 def test_the_station_errors_are_harp_errors_with_their_exit_codes():
     from station.config import ConfigError
+    from station.errors import InputError
     from station.imageio import ImageReadError
-    from station.inputs import InputError
     from station.profile_choice import ChoiceError, FailedQA
     from station.qa.targets import QAInputError
     from station.reprocess import ReprocessError

@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from station.inputs import NO_STRINGS, InputError, measure_file, measure_grey, read_image
+from station.errors import InputError
+from station.inputs import NO_STRINGS, measure_file, measure_grey, read_image
 
 
 def test_an_unreadable_photo_is_one_line_naming_it(tmp_path):
