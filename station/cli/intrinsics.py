@@ -105,7 +105,7 @@ def run(args) -> int:
             where = model_path
         else:
             shots = list(args.inputs)
-            store = open_store(args)
+            store = open_store(args, prog="harp intrinsics")
             profile = store.profile(args.id)
             if profile is None:
                 raise HarpError(f"{store.location}: no profile #{args.id}; harp profile list shows the stored ones")

@@ -117,7 +117,7 @@ def _warn(msg: str) -> None:
 
 
 def _open(args):
-    return open_store(args)  # for reading: never creates a store
+    return open_store(args, prog="harp profile")  # for reading: never creates a store
 
 
 def _num(v, nd=4) -> str:

@@ -108,7 +108,7 @@ def register(subparsers) -> None:
 def _store(args, config, create=False):
     """The store (:mod:`station.cli.store_options`): ``--store``, else that of ``config`` (``--config``,
     or the session's), else ``$HARP_STORE``, else the default. For reading unless ``create``."""
-    return open_store(store_location(args.store, config), write=create)
+    return open_store(store_location(args.store, config), write=create, prog="harp qa")
 
 
 def _looks_like_path(text: str) -> bool:

@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.dry_run and jobs:  # a StoreError or ConfigError: one line (station.cli.main)
             first = ArchivedSession(jobs[0].session_dir).config
             loc = location_from_args(args, first)
-            store = open_store(loc, write=True)
+            store = open_store(loc, write=True, prog="harp reprocess")
 
         def say_failure(outcome: Any) -> None:
             if not outcome.ok:

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from station.web.serve import check_bind  # defers jinja2, starlette, markupsafe
 
     check_bind(args.host, args.token)  # a ServeError, StoreError or ConfigError: one line (station.cli.main)
-    store = open_store(args)
+    store = open_store(args, prog="harp serve")
     from station.web import serve  # defers jinja2, starlette, markupsafe
     from station.web.dashboard import dashboard_app  # defers cv2, jinja2, starlette, numpy
 

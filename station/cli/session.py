@@ -28,7 +28,7 @@ from station import __version__
 from station.cli.commands import COMMANDS
 from station.cli.inputs import port_number
 from station.cli.say import say, warn
-from station.cli.store_options import add_store_options, load_env_config, store_location
+from station.cli.store_options import add_store_options, load_env_config, store_location, waiting_note
 from station.errors import HarpError, Interrupted, one_line
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
@@ -332,7 +332,7 @@ def _refit(session, store_name=None) -> None:
     from station.session_run import run_session  # defers cv2, numpy, yaml
     from station.store import ProfileStore  # defers sqlalchemy
 
-    with ProfileStore(store_location(store_name, session.config)) as store:
+    with ProfileStore(store_location(store_name, session.config), on_wait=waiting_note("harp session")) as store:
         result = run_session(session, None, None, store=store, console=None)
     if result.exit_code:
         raise HarpError(result.message)
@@ -436,7 +436,7 @@ def _open_store(config, store_name=None):
     """The store the session writes (``--store``, else the configuration's; :mod:`station.cli.store_options`)."""
     from station.store import ProfileStore  # defers sqlalchemy
 
-    return ProfileStore(store_location(store_name, config))
+    return ProfileStore(store_location(store_name, config), on_wait=waiting_note("harp session"))
 
 
 def _print_results_of(session_dir: Path) -> None:

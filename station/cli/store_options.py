@@ -14,16 +14,19 @@ sets it once for every command run on it), then the per-user default store
 ``~/.local/share/harp-station/harp-profiles.sqlite`` (:data:`~station.store.location.DEFAULT_STORE`).
 None of them depends on the working directory (a relative path in a configuration is relative to
 that file). Opening for reading never creates a store: a command that only reads fails with one
-line naming the store it looked for.
+line naming the store it looked for. A write that waits for other writers (another station, another
+``harp`` storing into the same file) says so on stderr after a moment, once (:func:`waiting_note`).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from station.cli.say import say
 from station.errors import HarpError
 from station.store.errors import StoreError
 from station.store.location import DEFAULT_STORE, SQLITE, StoreLocation, default_store, parse_store, user_store_path
@@ -94,15 +97,25 @@ def location_from_args(args: argparse.Namespace, config: Config | None = None) -
     return store_location(store, config)
 
 
-def open_store(where: StoreLocation | argparse.Namespace | Any, *, write: bool = False) -> ProfileStore:
+def waiting_note(prog: str) -> Callable[[str], None]:
+    """What ``prog`` (``harp qa``, ...) says when its store makes a write wait for other writers
+    (:func:`station.store.engine.write`): ``PROG: waiting for the store …`` on stderr, at once (never on
+    stdout: ``--json`` stays clean; with ``--quiet`` too — it is why the command seems to hang)."""
+    return lambda text: say(prog, text, flush=True)
+
+
+def open_store(
+    where: StoreLocation | argparse.Namespace | Any, *, write: bool = False, prog: str = "harp"
+) -> ProfileStore:
     """Open the store at ``where`` (a location, or parsed arguments with ``--store`` / ``--config``):
     for reading by default (it must exist), for writing with ``write=True`` (created, migrated and
-    checked before anything is written)."""
+    checked before anything is written). ``prog`` names the command in the line a waiting write says
+    (:func:`waiting_note`)."""
     from station.store.database import ProfileStore  # defers sqlalchemy
 
     loc = where if isinstance(where, StoreLocation) else location_from_args(where)
     try:
-        return ProfileStore(loc, create=write)
+        return ProfileStore(loc, create=write, on_wait=waiting_note(prog))
     except StoreError as exc:
         env = os.environ.get("HARP_STORE")
         if exc.kind == "missing" and env and _given(where) is None and parse_store(env) == loc:

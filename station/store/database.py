@@ -8,6 +8,8 @@ Opening
     anything is written. ``create=False`` opens for **reading**: a store that is not there is an
     error (``StoreError``, ``kind="missing"``), never an empty store created as a side effect.
     ``where`` is a path, a URL or a :class:`~station.store.location.StoreLocation`.
+    ``on_wait`` is told one line when a write (a migration on opening included) has waited a moment
+    for other writers (:func:`station.store.engine.write`): the command says it; the store prints nothing.
 
 Writing — each call is one transaction, all or nothing, retried while other writers hold the
 store (:func:`station.store.engine.write`)
@@ -119,8 +121,16 @@ def _insert(backend: str):
 class ProfileStore:
     """A connection to the profile store at ``where`` (see the module docstring)."""
 
-    def __init__(self, where: str | os.PathLike[str] | StoreLocation, *, create: bool = True):
+    def __init__(
+        self,
+        where: str | os.PathLike[str] | StoreLocation,
+        *,
+        create: bool = True,
+        on_wait: Callable[[str], None] | None = None,
+    ):
         self.location = where if isinstance(where, StoreLocation) else parse_store(where)
+        self.on_wait = on_wait
+        """Told when a write waits for other writers (the module docstring)."""
         loc = self.location
         self.path: Path | str = loc.path if loc.backend == SQLITE and loc.path is not None else str(loc)
         """The file of a SQLite store; the URL (without password) of a PostgreSQL one."""
@@ -143,7 +153,7 @@ class ProfileStore:
                     raise StoreError(f"{loc.path}: cannot open profile store: {exc.strerror or exc}") from None
         self.engine = make_engine(loc)
         try:
-            ensure_schema(self.engine, loc, create=create)
+            ensure_schema(self.engine, loc, create=create, on_wait=on_wait)
             if create:
                 check_integrity(self.engine, loc)
         except StoreError:
@@ -171,7 +181,7 @@ class ProfileStore:
         return read(self.engine, self.location, what, fn)
 
     def _write(self, what: str, fn: Callable[[sa.Connection], Any]) -> Any:
-        return write(self.engine, self.location, what, fn)
+        return write(self.engine, self.location, what, fn, on_wait=self.on_wait)
 
     # ============================================================ writes
     def _ident(self, conn: sa.Connection, table: sa.Table, ident: tuple[str, str, str]) -> int:

@@ -4,12 +4,17 @@ and database errors turned into one-line :class:`~station.store.errors.StoreErro
 SQLite: WAL journal, ``synchronous = FULL``, foreign keys on, a busy timeout; the Python driver's
 own transaction handling is switched off and every transaction is begun explicitly — a write with
 ``BEGIN IMMEDIATE`` (the write lock is taken at the start, so two writers never deadlock on a
-lock upgrade), a read with ``BEGIN``. PostgreSQL (psycopg 3): every write transaction runs at
-``SERIALIZABLE`` isolation; a serialisation failure or deadlock is retried.
+lock upgrade) and a busy timeout of :data:`WRITE_TRY_MS` per try, a read with ``BEGIN`` and
+:data:`BUSY_TIMEOUT_MS` (in WAL a reader does not wait for a writer). PostgreSQL (psycopg 3): every
+write transaction runs at ``SERIALIZABLE`` isolation with a ``lock_timeout`` of :data:`WRITE_TRY_MS`;
+a serialisation failure, a deadlock or a lock not granted in that time is retried.
 
 :func:`write` runs a function in one write transaction, retrying it while the database is locked
-(SQLite) or the transaction could not be serialised (PostgreSQL), with jittered exponential back-off
-up to :data:`RETRY_SECONDS`: other stations writing at the same time make a write wait, never fail.
+(SQLite), a lock is held by another writer or the transaction could not be serialised
+(PostgreSQL), with jittered exponential back-off up to :data:`RETRY_SECONDS`: other stations
+writing at the same time make a write wait, never fail. A write still waiting after
+:data:`WAIT_NOTICE_S` says so, once, through its ``on_wait`` callback (the command prints the line:
+the store itself prints nothing).
 Set ``$HARP_STORE_TIMINGS`` to a file to have every write appended to it as one JSON line
 (``op``, ``seconds``, ``retries``, ``backend``, ``pid``) — what ``benchmarks/store_load.py`` reads.
 """
@@ -32,12 +37,21 @@ from station.store.errors import StoreError
 from station.store.location import POSTGRESQL, SQLITE, StoreLocation
 
 BUSY_TIMEOUT_MS = 30000
-"""How long SQLite waits for another writer's lock before a write is retried."""
+"""How long a SQLite read (and the opening of a new file) waits for a lock (in WAL a reader waits
+only in rare moments: a checkpoint restarting the log, a crashed writer's log recovered)."""
+
+WRITE_TRY_MS = 1000
+"""How long one try of a write waits for another writer's lock (SQLite's busy timeout, PostgreSQL's
+``lock_timeout``) before :func:`write` tries again: the retry loop does the waiting, so that it can
+say it is waiting (:data:`WAIT_NOTICE_S`) and give up after :data:`RETRY_SECONDS`."""
 
 RETRY_SECONDS = 300.0
 """How long a write is retried (locked / not serialisable) before it gives up with a StoreError."""
 
-_RETRY_SQLSTATES = ("40001", "40P01")  # serialization_failure, deadlock_detected
+WAIT_NOTICE_S = 2.0
+"""A write still waiting for other writers this long after it began says so (``on_wait``), once."""
+
+_RETRY_SQLSTATES = ("40001", "40P01", "55P03")  # serialization_failure, deadlock_detected, lock_not_available
 
 T = TypeVar("T")
 
@@ -75,7 +89,12 @@ def _sqlite_connect(dbapi: sqlite3.Connection, _record: Any) -> None:
 
 
 def _sqlite_begin(conn: sa.Connection) -> None:
-    conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("harp_write") else "BEGIN")
+    if conn.get_execution_options().get("harp_write"):  # one try: the retry loop of write() waits
+        conn.exec_driver_sql(f"PRAGMA busy_timeout = {WRITE_TRY_MS}")
+        conn.exec_driver_sql("BEGIN IMMEDIATE")
+    else:
+        conn.exec_driver_sql(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+        conn.exec_driver_sql("BEGIN")
 
 
 def write_connection(engine: sa.Engine, loc: StoreLocation, *, serializable: bool = True) -> sa.Connection:
@@ -97,28 +116,52 @@ def retryable(exc: BaseException) -> bool:
     return getattr(orig, "sqlstate", None) in _RETRY_SQLSTATES
 
 
+def waiting_text(loc: StoreLocation) -> str:
+    """What a write that waits for other writers says (:data:`WAIT_NOTICE_S`), once."""
+    return (
+        f"waiting for the store {loc}: another program is writing to it "
+        f"(up to {RETRY_SECONDS:.0f} s; Ctrl-C to stop, nothing is lost)"
+    )
+
+
 def write(
-    engine: sa.Engine, loc: StoreLocation, what: str, fn: Callable[[sa.Connection], T], *, serializable: bool = True
+    engine: sa.Engine,
+    loc: StoreLocation,
+    what: str,
+    fn: Callable[[sa.Connection], T],
+    *,
+    serializable: bool = True,
+    on_wait: Callable[[str], None] | None = None,
 ) -> T:
     """``fn(conn)`` in one write transaction, all or nothing, retried on lock / serialisation conflicts.
 
-    ``what`` names the write in messages (``"storing the profile"``). Raises StoreError.
+    ``what`` names the write in messages (``"storing the profile"``). ``on_wait`` is told
+    :func:`waiting_text`, once, when the write has waited :data:`WAIT_NOTICE_S` for other writers.
+    Raises StoreError.
     """
     start = time.monotonic()
     deadline = start + RETRY_SECONDS
     retries = 0
     delay = 0.01
+    max_delay = 0.1 if loc.backend == SQLITE else 1.0  # SQLite's busy timeout already waited WRITE_TRY_MS
+    told = False
     while True:
         try:
             with write_connection(engine, loc, serializable=serializable) as conn, conn.begin():
+                if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
+                    conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
                 result = fn(conn)
             _log_timing(what, time.monotonic() - start, retries, loc)
             return result
         except (sa.exc.DBAPIError, sqlite3.Error) as exc:
-            if retryable(exc) and time.monotonic() < deadline:
+            now = time.monotonic()
+            if retryable(exc) and now < deadline:
                 retries += 1
+                if on_wait is not None and not told and now - start >= WAIT_NOTICE_S:
+                    told = True
+                    on_wait(waiting_text(loc))
                 time.sleep(delay * (0.5 + random.random()))
-                delay = min(delay * 2, 1.0)
+                delay = min(delay * 2, max_delay)
                 continue
             if retryable(exc):
                 raise StoreError(

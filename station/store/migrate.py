@@ -19,6 +19,7 @@ is refused with a one-line message. The migration scripts ship inside the packag
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -61,8 +62,11 @@ def _newer(loc: StoreLocation, what: str) -> StoreError:
     )
 
 
-def ensure_schema(engine: sa.Engine, loc: StoreLocation, *, create: bool) -> None:
-    """Migrate the store to :data:`HEAD` if it is not there (see the module docstring).
+def ensure_schema(
+    engine: sa.Engine, loc: StoreLocation, *, create: bool, on_wait: Callable[[str], None] | None = None
+) -> None:
+    """Migrate the store to :data:`HEAD` if it is not there (see the module docstring); ``on_wait``: as
+    :func:`station.store.engine.write`'s (another process migrating, or writing, makes it wait).
 
     ``create=False`` (opening for reading) never creates tables in a store that has none:
     it raises StoreError (``kind="missing"``) instead. An existing older store is upgraded either way.
@@ -98,7 +102,7 @@ def ensure_schema(engine: sa.Engine, loc: StoreLocation, *, create: bool) -> Non
             )
         command.upgrade(cfg, "head")
 
-    write(engine, loc, "upgrading the store's schema", migrate, serializable=False)
+    write(engine, loc, "upgrading the store's schema", migrate, serializable=False, on_wait=on_wait)
 
 
 def check_integrity(engine: sa.Engine, loc: StoreLocation) -> None:

@@ -17,7 +17,7 @@ from tests.station.store.test_database import put, verdict
 def test_sqlite_locked_past_the_busy_timeout_is_retried(tmp_path, monkeypatch):
     import station.store.engine as engine
 
-    monkeypatch.setattr(engine, "BUSY_TIMEOUT_MS", 50)  # give up waiting quickly: the retry loop takes over
+    monkeypatch.setattr(engine, "WRITE_TRY_MS", 50)  # give up waiting quickly: the retry loop takes over
     timings = tmp_path / "timings.jsonl"
     monkeypatch.setenv("HARP_STORE_TIMINGS", str(timings))
     path = tmp_path / "p.sqlite"
