@@ -484,18 +484,20 @@ def finish_session(session_dir: str, results: Sequence[FocusResult], store: Any 
 
 class SessionCollector:
     """Gathers the focus results of each session as they arrive (any order, from any worker) and,
-    when a session's last one arrives, finishes it (:func:`finish_session`) and stores its new
-    profiles in ``store`` (None: a dry run). ``outcomes`` holds every session finished so far;
-    ``on_outcome`` is told each one. A store error while storing is the session's failure (the
-    profiles stored before it stay)."""
+    when a session's last one arrives, finishes it (:func:`finish_session`: ``store`` names the old
+    profiles it holds) and stores its new profiles in ``store`` — not with ``dry_run`` (nor without a
+    store). ``outcomes`` holds every session finished so far; ``on_outcome`` is told each one. A store
+    error while storing is the session's failure (the profiles stored before it stay)."""
 
     def __init__(
         self,
         jobs: Sequence[FocusJob],
         store: Any = None,
         on_outcome: Callable[[SessionOutcome], None] = lambda _o: None,
+        *,
+        dry_run: bool = False,
     ) -> None:
-        self.store, self.on_outcome = store, on_outcome
+        self.store, self.on_outcome, self.dry_run = store, on_outcome, dry_run
         self.expected: dict[str, int] = {}
         for j in jobs:
             self.expected[j.session_dir] = self.expected.get(j.session_dir, 0) + 1
@@ -509,7 +511,7 @@ class SessionCollector:
             return
         got.sort(key=lambda x: x.job.focus_idx)
         outcome = finish_session(r.job.session_dir, got, self.store)
-        if outcome.ok and self.store is not None:
+        if outcome.ok and self.store is not None and not self.dry_run:
             try:
                 for p in outcome.profiles:
                     outcome.new_ids.append(self.store.put_profile(p))

@@ -7,7 +7,8 @@ thresholds; ``--model`` fits another model, ``auto`` the cross-validated choice;
 ``auto`` sets ``pipeline.field`` instead of the configuration: a session recorded before the setting
 existed has the default, ``auto``, which adds a residual field where it holds on unseen orientations and
 costs time). The new
-profiles are stored next to the old ones (``--dry-run``: not stored); each one's provenance
+profiles are stored next to the old ones (``--dry-run``: not stored; the store is only read, to name
+the old profiles, and neither created nor upgraded); each one's provenance
 names the session, the profile it re-processes and the software versions before and now. Then
 a table compares the old and new figures per session and focus setting (off a terminal
 tab-separated, an old and a new column per figure: :mod:`station.tables`; ``--json``: one JSON
@@ -19,7 +20,9 @@ must run this software and read the session directories at the same paths). One 
 focus setting of one session; the figures do not depend on where it ran.
 
 Store: ``--store PATH|URL`` or ``--config CONFIG``; else the store the first session's
-configuration names (else ``$HARP_STORE``, else the default).
+configuration names (else ``$HARP_STORE``, else the default). With ``--dry-run`` a store that is not
+there, or was written by an older harp station, is a warning (the old profile ids are then not
+shown), and the comparison goes on.
 
 Exit codes: 0 every session was re-processed (and stored); 2 an error — bad arguments, a store
 or scheduler that cannot be used, or a session that could not be re-processed (one line each on
@@ -39,10 +42,11 @@ from typing import Any
 from pipeline.fitspec import FIELD_CHOICES, parse_choice
 from pipeline.plain import finite_or_none
 from station.cli.commands import COMMANDS
-from station.cli.say import say
+from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, location_from_args, open_store
 from station.errors import HarpError, Interrupted
 from station.exit_codes import EXIT_ERROR, EXIT_OK
+from station.store.errors import StoreError
 from station.tables import console, is_terminal, print_table
 
 
@@ -109,16 +113,15 @@ def run(args: argparse.Namespace) -> int:
     store = None
     outcomes: dict[str, Any] = {}
     try:  # Ctrl-C from the store's opening on: the line says what was stored before it
-        if not args.dry_run and jobs:  # a StoreError or ConfigError: one line (station.cli.main)
+        if jobs:  # a StoreError or ConfigError: one line (station.cli.main)
             first = ArchivedSession(jobs[0].session_dir).config
-            loc = location_from_args(args, first)
-            store = open_store(loc, write=True, prog="harp reprocess")
+            store = _open(location_from_args(args, first), args.dry_run)
 
         def say_failure(outcome: Any) -> None:
             if not outcome.ok:
                 _error(outcome.failure or "failed")
 
-        collect = SessionCollector(jobs, store, on_outcome=say_failure)
+        collect = SessionCollector(jobs, store, on_outcome=say_failure, dry_run=args.dry_run)
         outcomes = collect.outcomes
         t0 = time.perf_counter()
 
@@ -136,11 +139,27 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     order = [str(Path(s).resolve()) for s in args.sessions]
     doc = _document(order, outcomes, failed, wall, args)
+    doc["store"] = str(store.location) if store is not None else None
     if args.json:
         print(json.dumps(doc, allow_nan=False))
     else:
         _print_table(doc)
     return EXIT_OK if not doc["failed"] else EXIT_ERROR
+
+
+def _open(loc: Any, dry_run: bool) -> Any:
+    """The store the new profiles go to (created or upgraded if need be); with ``dry_run`` the store
+    read for the old profiles' ids only — never created nor upgraded: None, with a warning, when it is
+    not there or is older (a damaged or unreachable store is an error either way)."""
+    if not dry_run:
+        return open_store(loc, write=True, prog="harp reprocess")
+    try:
+        return open_store(loc, prog="harp reprocess", upgrade=False)
+    except StoreError as exc:
+        if exc.kind not in ("missing", "older"):
+            raise
+        warn("harp reprocess", f"{exc} (--dry-run: the old profiles' store ids are not shown)")
+        return None
 
 
 # ----------------------------------------------------------------- output

@@ -105,17 +105,18 @@ def waiting_note(prog: str) -> Callable[[str], None]:
 
 
 def open_store(
-    where: StoreLocation | argparse.Namespace | Any, *, write: bool = False, prog: str = "harp"
+    where: StoreLocation | argparse.Namespace | Any, *, write: bool = False, prog: str = "harp", upgrade: bool = True
 ) -> ProfileStore:
     """Open the store at ``where`` (a location, or parsed arguments with ``--store`` / ``--config``):
     for reading by default (it must exist), for writing with ``write=True`` (created, migrated and
     checked before anything is written). ``prog`` names the command in the line a waiting write says
-    (:func:`waiting_note`)."""
+    (:func:`waiting_note`); ``upgrade=False``: an older store is refused (``kind="older"``), not upgraded
+    (:class:`~station.store.database.ProfileStore`)."""
     from station.store.database import ProfileStore  # defers sqlalchemy
 
     loc = where if isinstance(where, StoreLocation) else location_from_args(where)
     try:
-        return ProfileStore(loc, create=write, on_wait=waiting_note(prog))
+        return ProfileStore(loc, create=write, on_wait=waiting_note(prog), upgrade=upgrade)
     except StoreError as exc:
         env = os.environ.get("HARP_STORE")
         if exc.kind == "missing" and env and _given(where) is None and parse_store(env) == loc:

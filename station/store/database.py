@@ -10,6 +10,8 @@ Opening
     ``where`` is a path, a URL or a :class:`~station.store.location.StoreLocation`.
     ``on_wait`` is told one line when a write (a migration on opening included) has waited a moment
     for other writers (:func:`station.store.engine.write`): the command says it; the store prints nothing.
+    ``upgrade=False`` (with ``create=False``: what must write nothing, ``harp reprocess --dry-run``)
+    refuses an older store (``kind="older"``) instead of upgrading it.
 
 Writing — each call is one transaction, all or nothing, retried while other writers hold the
 store (:func:`station.store.engine.write`)
@@ -127,6 +129,7 @@ class ProfileStore:
         *,
         create: bool = True,
         on_wait: Callable[[str], None] | None = None,
+        upgrade: bool = True,
     ):
         self.location = where if isinstance(where, StoreLocation) else parse_store(where)
         self.on_wait = on_wait
@@ -153,7 +156,7 @@ class ProfileStore:
                     raise StoreError(f"{loc.path}: cannot open profile store: {exc.strerror or exc}") from None
         self.engine = make_engine(loc)
         try:
-            ensure_schema(self.engine, loc, create=create, on_wait=on_wait)
+            ensure_schema(self.engine, loc, create=create, on_wait=on_wait, upgrade=upgrade)
             if create:
                 check_integrity(self.engine, loc)
         except StoreError:

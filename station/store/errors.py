@@ -12,8 +12,8 @@ class StoreError(HarpError, RuntimeError):
     ``kind`` says what went wrong, for callers that act on it: ``"missing"`` (no store
     there), ``"damaged"`` (the store or a row cannot be read), ``"full"`` (no space left
     while writing), ``"busy"`` (other writers held it past the retry deadline),
-    ``"unreachable"`` (cannot connect), ``"schema"`` (written by newer software), or
-    ``"error"``.
+    ``"unreachable"`` (cannot connect), ``"schema"`` (written by newer software), ``"older"``
+    (written by older software, and opened with ``upgrade=False``: not upgraded), or ``"error"``.
     """
 
     def __init__(self, message: str, kind: str = "error"):

@@ -63,13 +63,20 @@ def _newer(loc: StoreLocation, what: str) -> StoreError:
 
 
 def ensure_schema(
-    engine: sa.Engine, loc: StoreLocation, *, create: bool, on_wait: Callable[[str], None] | None = None
+    engine: sa.Engine,
+    loc: StoreLocation,
+    *,
+    create: bool,
+    on_wait: Callable[[str], None] | None = None,
+    upgrade: bool = True,
 ) -> None:
     """Migrate the store to :data:`HEAD` if it is not there (see the module docstring); ``on_wait``: as
     :func:`station.store.engine.write`'s (another process migrating, or writing, makes it wait).
 
     ``create=False`` (opening for reading) never creates tables in a store that has none:
-    it raises StoreError (``kind="missing"``) instead. An existing older store is upgraded either way.
+    it raises StoreError (``kind="missing"``) instead. An existing older store is upgraded either way,
+    unless ``upgrade=False`` (what only looks, writing nothing: ``harp reprocess --dry-run``): then it
+    raises StoreError (``kind="older"``; a newer store: ``kind="schema"``) and writes nothing.
     """
     rev, legacy, tables = read(engine, loc, "reading the schema", state)
     if rev == HEAD:
@@ -77,6 +84,17 @@ def ensure_schema(
     if rev is None and legacy is None and not (tables & set(TABLES)) and not create:
         raise StoreError(
             f"{loc}: not a profile store (no harp tables); name another with --store or --config", "missing"
+        )
+    if not upgrade:
+        if rev is not None and rev not in REVISIONS:
+            raise _newer(loc, f"revision {rev}")
+        if rev is None and legacy is not None and legacy not in LEGACY_VERSIONS:
+            raise _newer(loc, f"schema version {legacy}")
+        which = f"revision {rev}" if rev is not None else f"schema version {legacy}"
+        raise StoreError(
+            f"{loc}: written by older software ({which}; this one writes {HEAD}); not upgraded here: "
+            "any command that writes the store upgrades it",
+            "older",
         )
 
     def migrate(conn: sa.Connection) -> None:

@@ -319,3 +319,58 @@ def test_field_sets_the_sessions_pipeline_field(factory_archive, tmp_path):
     assert sorted(new) == sorted(p.focus for p in old)
     for p in new.values():
         assert "residual field: " in p.selection["reason"], p.selection
+
+
+# ------------------------------------------------------------------ --dry-run: the store only read
+def _archive_copy(factory_archive, tmp_path):
+    root = tmp_path / "archive"
+    shutil.copytree(factory_archive.root, root, symlinks=True)
+    return root / "sessions" / "s1", root / "profiles.sqlite"
+
+
+def test_dry_run_names_the_stored_profile_each_result_would_replace_and_writes_nothing(factory_archive, tmp_path):
+    # was: the dry run never opened the store, and its "profile old" column was empty
+    good, store = _archive_copy(factory_archive, tmp_path)
+    with ProfileStore(store, create=False) as st:
+        before = {p.focus: p for p in st.profiles()}
+    data = store.read_bytes()
+    code, out, err = _main(["reprocess", good, "--dry-run", "--workers", "1", "--store", store])
+    assert code == 0 and err == "", err
+    header, *lines = out.split("\n\n")[0].splitlines()
+    rows = [dict(zip(header.split("\t"), l.split("\t"))) for l in lines]
+    assert sorted(r["focus"] for r in rows) == ["0", "1"]
+    for r in rows:
+        assert (r["profile old"], r["profile new"]) == (f"#{before[float(r['focus'])].id}", "")
+    assert "new profiles not stored (--dry-run)" in out
+    assert store.read_bytes() == data  # nothing written, nothing upgraded
+    with ProfileStore(store, create=False) as st:
+        assert {p.id for p in st.profiles()} == {p.id for p in before.values()}
+
+
+def test_dry_run_without_a_store_or_with_an_older_one_says_so_and_neither_creates_nor_upgrades_it(
+    factory_archive, tmp_path
+):
+    import sqlite3
+
+    good, store = _archive_copy(factory_archive, tmp_path)
+    missing = tmp_path / "none" / "store.sqlite"
+    code, out, err = _main(["reprocess", good, "--dry-run", "--workers", "1", "--store", missing, "--json"])
+    assert code == 0, err
+    assert err == (
+        f"harp reprocess: warning: {missing}: no profile store here; name one with --store or --config "
+        "(--dry-run: the old profiles' store ids are not shown)\n"
+    )
+    assert not missing.parent.exists()  # neither the file nor its directory made
+    doc = json.loads(out)
+    assert doc["store"] is None and doc["stored"] is False and doc["reprocessed"] == 1
+    assert [e["old"]["profile_id"] for s in doc["sessions"] for e in s["focus"]] == [None, None]
+
+    with contextlib.closing(sqlite3.connect(store)) as con, con:  # as a store an older harp wrote looks
+        con.execute("UPDATE alembic_version SET version_num = '0005'")
+    code, out, err = _main(["reprocess", good, "--dry-run", "--workers", "1", "--store", store, "--json"])
+    assert code == 0, err
+    assert err.startswith(f"harp reprocess: warning: {store}: written by older software (revision 0005; ")
+    assert err.endswith("(--dry-run: the old profiles' store ids are not shown)\n") and err.count("\n") == 1
+    with contextlib.closing(sqlite3.connect(store)) as con:
+        assert con.execute("SELECT version_num FROM alembic_version").fetchone() == ("0005",)  # not upgraded
+    assert json.loads(out)["store"] is None
