@@ -632,14 +632,14 @@ class GrblAxis:
                 now = time.monotonic()
                 held_since = now if held_since is None else held_since
                 if now - held_since >= self.hold_timeout:
-                    try:
-                        self.stop()  # the planner flushed: nothing moves behind the caller's back
-                    finally:
-                        raise DeviceFault(
-                            f"{self.name}: {what} held by a feed hold (Hold:{st['substate']}) at {self._show(pos)}"
-                            f" for {self.hold_timeout:g} s without cycle start (~); move cancelled, position kept:"
-                            " resume the session"
-                        )
+                    # the planner flushed: nothing moves behind the caller's back (a stop that fails raises its
+                    # own error, e.g. the port gone, instead of a fault saying the move was cancelled)
+                    self.stop()
+                    raise DeviceFault(
+                        f"{self.name}: {what} held by a feed hold (Hold:{st['substate']}) at {self._show(pos)}"
+                        f" for {self.hold_timeout:g} s without cycle start (~); move cancelled, position kept:"
+                        " resume the session"
+                    )
             else:
                 held_since = None
             if state == "Idle":
