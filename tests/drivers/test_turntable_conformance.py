@@ -110,8 +110,11 @@ def test_position_is_reported_while_moving(kind):
             seen.append(st["position"])
             time.sleep(0.03)
         assert len(seen) >= 5
-        assert all(0.0 <= p < 300.0 for p in seen)
-        assert all(b > a for a, b in zip(seen, seen[1:])), seen
+        # a controller may report the target while its state still says moving (GRBL's state follows its
+        # planner a moment later): at the target, but never beyond it, and rising until there
+        assert all(0.0 <= p <= 300.0 for p in seen), seen
+        on_the_way = [p for p in seen if p < 300.0]
+        assert len(on_the_way) >= 5 and all(b > a for a, b in zip(on_the_way, on_the_way[1:])), seen
         assert abs(tt.wait_idle(timeout=2.0) - 300.0) <= ARRIVAL_TOL_DEG[kind]
 
 
