@@ -11,7 +11,11 @@ GenICam features used, chosen by what the device's XML declares:
   (older float name); ``ExposureAuto`` is switched ``Off`` when present;
 * gain: ``Gain`` (SFNC, float, dB) else ``GainRaw`` (integer device units,
   converted with ``gain_db_per_raw`` dB per unit); ``GainAuto`` -> ``Off``;
-* pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``);
+* pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``), or a colour sensor's raw
+  Bayer mosaic (``BayerRG8``, ``BayerGR12``, ... ``BayerBG16``, :data:`drivers.frames.BAYER_FORMATS`):
+  the frame is the mosaic as the sensor gave it (nothing demosaiced) with its pattern in
+  ``extra["cfa"]`` (``"RGGB"`` ...), read from each buffer's own pixel format, which the colour
+  pipeline measures (lateral chromatic aberration, vignetting per channel);
 * trigger: ``software`` (``TriggerSource=Software`` + ``TriggerSoftware``),
   ``off`` (free running; frames older than the ``capture()`` call are
   dropped) or any other ``TriggerSource`` name such as ``Line0`` (capture
@@ -72,14 +76,16 @@ from drivers.errors import (
     DeviceTimeout,
     DriverError,
 )
-from drivers.frames import to_grey
+from drivers.frames import BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
 #: GenICam XML for Aravis' fake camera with SFNC exposure/gain names and focus features
 FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
 
-PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
+GREY_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
+PIXEL_FORMATS = (*GREY_PIXEL_FORMATS, *BAYER_FORMATS)
+"""The pixel formats a frame is read in: grey, or a raw Bayer mosaic (GenICam PFNC names)."""
 EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
 GAIN_FEATURES = ("Gain", "GainRaw")
 
@@ -88,6 +94,14 @@ T = TypeVar("T")
 
 _ARAVIS: Any = None  # the gi.repository.Aravis module, once imported
 _FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
+
+
+def aravis_pixel_format(Aravis: Any, name: str) -> int:
+    """Aravis' constant of a PFNC pixel format name (``"Mono12"`` -> ``PIXEL_FORMAT_MONO_12``, ``"BayerGR8"`` ->
+    ``PIXEL_FORMAT_BAYER_GR_8``)."""
+    if name.startswith("Bayer"):
+        return int(getattr(Aravis, f"PIXEL_FORMAT_BAYER_{name[5:7].upper()}_{name[7:]}"))
+    return int(getattr(Aravis, f"PIXEL_FORMAT_MONO_{name[4:]}"))
 
 
 def aravis_module() -> Any:
@@ -164,7 +178,9 @@ class AravisCamera(CameraBase):
     device : str or None
         Aravis device id (``"Fake_1"``, ``"192.168.1.20"``,
         ``"Basler-acA1300-12345678"``); None opens the first device found.
-    pixel_format : {"Mono8", "Mono16", "Mono10", "Mono12"}
+    pixel_format : str
+        ``"Mono8"``, ``"Mono16"``, ``"Mono10"``, ``"Mono12"``, or a raw Bayer format such as ``"BayerRG8"``
+        (:data:`PIXEL_FORMATS`).
     exposure_us, gain_db, focus : float, optional
         Applied at ``open()`` (focus via :meth:`lock_focus`).
     trigger : str
@@ -249,6 +265,8 @@ class AravisCamera(CameraBase):
             if len(xywh) != 4 or xywh[2] <= 0 or xywh[3] <= 0 or xywh[0] < 0 or xywh[1] < 0:
                 raise ValueError(f"roi {xywh!r}: expected [x, y, width, height] with positive size")
             roi = (xywh[0], xywh[1], xywh[2], xywh[3])
+        if pixel_format in BAYER_FORMATS and roi is not None and (roi[2] % 2 or roi[3] % 2):
+            raise ValueError(f"roi {list(roi)!r}: a raw Bayer format ({pixel_format}) needs an even width and height")
         if int(buffers) < 1:
             raise ValueError(f"buffers {buffers!r}: expected >= 1")
         if not (gain_db_per_raw > 0):
@@ -362,7 +380,7 @@ class AravisCamera(CameraBase):
         self._ranges = self._read_ranges()
 
         # image format: pixel format, region (full sensor unless configured)
-        pf = getattr(Aravis, f"PIXEL_FORMAT_{self._pixel_format.upper().replace('MONO', 'MONO_')}")
+        pf = aravis_pixel_format(Aravis, self._pixel_format)
         self._call(f"PixelFormat={self._pixel_format}", cam.set_pixel_format, pf)
         got = cam.get_pixel_format_as_string()
         if got != self._pixel_format:
@@ -663,12 +681,15 @@ class AravisCamera(CameraBase):
                 stream.push_buffer(buf)  # free-running frame exposed before the call
                 continue
             try:
-                image = self._to_array(Aravis, buf)
-                extra = {
+                image, fmt = self._to_array(Aravis, buf)
+                extra: dict[str, Any] = {
                     "frame_id": int(buf.get_frame_id()),
                     "device_timestamp_ns": int(buf.get_timestamp()),
-                    "pixel_format": self._pixel_format,
+                    "pixel_format": fmt,
                 }
+                pattern = bayer_pattern(fmt)
+                if pattern is not None:  # a colour sensor's raw mosaic: the colour pipeline reads its pattern here
+                    extra["cfa"] = pattern
             finally:
                 stream.push_buffer(buf)
             break
@@ -676,10 +697,14 @@ class AravisCamera(CameraBase):
             image, (sys_ts / 1e9) if sys_ts else time.time(), self.get_exposure(), self.get_gain(), extra
         )
 
-    def _to_array(self, Aravis: Any, buf: Any) -> np.ndarray:
+    def _to_array(self, Aravis: Any, buf: Any) -> tuple[np.ndarray, str]:
+        """The buffer's image (grey, or a raw Bayer mosaic) and the PFNC name of its pixel format."""
         w, h = buf.get_image_width(), buf.get_image_height()
         pf = buf.get_image_pixel_format()
-        names = {getattr(Aravis, f"PIXEL_FORMAT_{n.upper().replace('MONO', 'MONO_')}"): n for n in PIXEL_FORMATS}
+        names = {aravis_pixel_format(Aravis, n): n for n in PIXEL_FORMATS}
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
-        return to_grey(buf.get_data(), names[pf], w, h)
+        fmt = names[pf]
+        if fmt in BAYER_FORMATS:
+            return raw_mosaic(buf.get_data(), fmt, w, h), fmt
+        return to_grey(buf.get_data(), fmt, w, h), fmt

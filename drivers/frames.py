@@ -1,10 +1,21 @@
-"""Raw camera buffers -> 2-D grey ``numpy`` arrays (``image[y, x]``).
+"""Raw camera buffers -> 2-D grey ``numpy`` arrays (``image[y, x]``), or raw Bayer mosaics.
 
 One function per wire format, plus :func:`to_grey` that dispatches on the
 format name. Names are the V4L2 fourcc (``GREY``, ``Y16``, ``YUYV``,
 ``MJPG``) or the GenICam PFNC name (``Mono8``, ``Mono10``, ``Mono12``,
 ``Mono16``). Every function copies: the result never aliases a driver
 buffer that will be re-queued.
+
+A colour sensor's raw frame (GenICam ``BayerRG8`` ... ``BayerBG16``, :data:`BAYER_FORMATS`) is kept as
+it is: :func:`raw_mosaic` gives the mosaic, nothing interpolated or demosaiced, and :func:`bayer_pattern`
+its colour filter pattern in :data:`pipeline.cfa.CFA_PATTERNS`' names (``BayerGR8`` -> ``"GRBG"``: the
+PFNC name gives the first two pixels of the first row, then the second row follows). The colour
+pipeline (:mod:`pipeline.cfa`) takes the mosaic with its pattern in the frame's ``extra["cfa"]``.
+
+References
+----------
+EMVA, "GenICam Pixel Format Naming Convention (PFNC)", version 2.x: Bayer formats ``Bayer<first two
+colours of the first row><bits>``; unpacked 10/12-bit formats one little-endian 16-bit word per pixel.
 
 ``bytes_per_line`` is the row stride in bytes (V4L2 ``bytesperline``); rows
 may be padded beyond ``width * bytes_per_pixel``. ``0``/``None`` means
@@ -21,7 +32,10 @@ import numpy as np
 from drivers.errors import CaptureError
 
 __all__ = [
+    "BAYER_FORMATS",
     "GREY_FORMATS",
+    "bayer_pattern",
+    "raw_mosaic",
     "grey8",
     "grey16",
     "yuyv_luma",
@@ -42,6 +56,13 @@ _PACKED = {
     "YUYV": ("u1", 2),
 }
 GREY_FORMATS = tuple(_PACKED) + ("MJPG",)
+
+_BAYER_ORDER = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}
+#: GenICam PFNC Bayer format -> its colour filter pattern (row by row from the top-left pixel); 8 bits one
+#: byte per pixel, 10/12/16 bits one little-endian 16-bit word per pixel (unpacked)
+BAYER_FORMATS: dict[str, str] = {
+    f"Bayer{first}{bits}": pattern for first, pattern in _BAYER_ORDER.items() for bits in (8, 10, 12, 16)
+}
 
 #: what a driver hands over: the bytes of one frame as the device delivered them
 RawFrame: TypeAlias = bytes | bytearray | memoryview | mmap.mmap
@@ -111,6 +132,23 @@ def mjpeg_grey(data: RawFrame, width: int | None = None, height: int | None = No
     if width is not None and height is not None and img.shape != (height, width):
         raise CaptureError(f"MJPG frame decodes to {img.shape[1]}x{img.shape[0]}, expected {width}x{height}")
     return img
+
+
+def bayer_pattern(fmt: str) -> str | None:
+    """The colour filter pattern of a raw Bayer format (``"BayerGR8"`` -> ``"GRBG"``); None: not a Bayer one."""
+    return BAYER_FORMATS.get(fmt)
+
+
+def raw_mosaic(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
+    """A raw Bayer frame (:data:`BAYER_FORMATS`) -> its mosaic, ``uint8`` (8 bits) or ``uint16``, a copy:
+    every pixel the value its photosite gave, nothing interpolated."""
+    if fmt not in BAYER_FORMATS:
+        raise CaptureError(f"pixel format {fmt!r} is not a raw Bayer one; supported: {', '.join(BAYER_FORMATS)}")
+    if width % 2 or height % 2:
+        raise CaptureError(f"{fmt} frame has an odd size {width}x{height}: not a whole Bayer mosaic")
+    if fmt.endswith("8"):
+        return grey8(data, width, height, bytes_per_line)
+    return grey16(data, width, height, bytes_per_line)
 
 
 def to_grey(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:

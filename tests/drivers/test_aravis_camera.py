@@ -265,3 +265,54 @@ def test_packaged_fake_xml_is_shipped():
     text = FAKE_FOCUS_XML.read_text()
     for feature in ("ExposureTime", "Gain", "FocusPosition", "FocusDistance", "FocusAuto"):
         assert f'Name="{feature}"' in text
+
+
+def aravis_rendering(frame_id: int, fmt: str, exposure_us: int, gain_raw: int) -> np.ndarray:
+    """Frame ``frame_id`` as Aravis' own fake renders it (a second, standalone ``Aravis.FakeCamera`` with the
+    same registers, filled until its frame counter reaches ``frame_id``): the bytes the camera sent,
+    independent of the driver's reading of them."""
+    from drivers.aravis_camera import aravis_module
+
+    Aravis = aravis_module()
+    ref = Aravis.FakeCamera.new("REFERENCE")
+    for register, value in (
+        (Aravis.FAKE_CAMERA_REGISTER_WIDTH, W),
+        (Aravis.FAKE_CAMERA_REGISTER_HEIGHT, H),
+        (Aravis.FAKE_CAMERA_REGISTER_PIXEL_FORMAT, getattr(Aravis, f"PIXEL_FORMAT_BAYER_{fmt[5:7]}_8")),
+        (Aravis.FAKE_CAMERA_REGISTER_EXPOSURE_TIME_US, exposure_us),
+        (Aravis.FAKE_CAMERA_REGISTER_GAIN_RAW, gain_raw),
+    ):
+        assert ref.write_register(register, value)
+    buf = Aravis.Buffer.new_allocate(ref.get_payload())
+    for _ in range(70_000):  # the counter is 16 bits
+        ref.fill_buffer(buf)
+        if buf.get_frame_id() == frame_id:
+            return np.frombuffer(buf.get_data(), np.uint8)[: W * H].reshape(H, W).copy()
+    raise AssertionError(f"the reference fake never reached frame {frame_id}")
+
+
+@pytest.mark.parametrize(
+    "fmt, pattern", [("BayerRG8", "RGGB"), ("BayerGR8", "GRBG"), ("BayerGB8", "GBRG"), ("BayerBG8", "BGGR")]
+)
+def test_a_bayer_camera_delivers_its_raw_mosaic_with_the_pattern_named(fmt, pattern):
+    """A colour GenICam camera (Aravis' fake offers the four 8-bit Bayer formats): the frame is the raw mosaic
+    exactly as the camera sent it (nothing demosaiced, nothing converted to grey), and ``extra["cfa"]`` names
+    its pattern as the PFNC name says (what the colour pipeline reads)."""
+    with fake(pixel_format=fmt, exposure_us=10_000, gain_db=0) as cam:
+        assert cam.pixel_format == fmt
+        f = cam.capture(timeout=2.0)
+    assert f.image.dtype == np.uint8 and f.image.shape == (H, W)
+    assert f.extra["cfa"] == pattern and f.extra["pixel_format"] == fmt
+    assert np.array_equal(f.image, aravis_rendering(f.extra["frame_id"], fmt, 10_000, 0))
+
+
+def test_a_grey_camera_frame_names_no_pattern_and_a_bayer_format_the_camera_lacks_is_refused():
+    with fake() as cam:
+        assert "cfa" not in cam.capture(timeout=2.0).extra
+    with pytest.raises(DriverError) as err:
+        fake(pixel_format="BayerRG16").open()
+    assert "\n" not in str(err.value) and "BayerRG16" in str(err.value), err.value
+    with pytest.raises(ValueError, match=r"a raw Bayer format \(BayerGR8\) needs an even width and height"):
+        AravisCamera.from_config(
+            {"driver": "aravis", "device": "Fake_1", "pixel_format": "BayerGR8", "roi": [0, 0, 63, 48]}
+        )

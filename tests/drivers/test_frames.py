@@ -1,4 +1,4 @@
-"""Raw buffer -> grey array conversions (drivers/frames.py), including bad input."""
+"""Raw buffer -> grey array and raw Bayer mosaic conversions (drivers/frames.py), including bad input."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drivers.errors import CaptureError
-from drivers.frames import to_grey
+from drivers.frames import bayer_pattern, raw_mosaic, to_grey
 
 
 def test_grey8_with_stride_padding_drops_the_padding():
@@ -51,3 +51,22 @@ def test_bad_buffers_raise_capture_error(raw, fmt, w, h, match):
     else:
         with pytest.raises(CaptureError, match=match):
             to_grey(raw, fmt, w, h)
+
+
+def test_a_raw_bayer_frame_is_kept_as_its_mosaic_and_named_by_the_pfnc_pattern():
+    """GenICam PFNC: ``Bayer<first two colours of the first row><bits>``, the second row the other two;
+    8 bits one byte per pixel, 10/12/16 bits one little-endian word (unpacked)."""
+    assert {f: bayer_pattern(f) for f in ("BayerRG8", "BayerGR10", "BayerGB12", "BayerBG16")} == {
+        "BayerRG8": "RGGB", "BayerGR10": "GRBG", "BayerGB12": "GBRG", "BayerBG16": "BGGR",
+    }  # fmt: skip
+    assert bayer_pattern("Mono8") is None and bayer_pattern("RGGB") is None
+    raw8 = bytes([10, 200, 11, 201, 0, 0, 202, 30, 203, 31, 0, 0])  # 4x2, rows padded to 6 bytes
+    m8 = raw_mosaic(raw8, "BayerRG8", 4, 2, bytes_per_line=6)
+    assert m8.dtype == np.uint8 and m8.tolist() == [[10, 200, 11, 201], [202, 30, 203, 31]]
+    raw12 = bytes([0x34, 0x02, 0xFF, 0x0F, 0x00, 0x00, 0x01, 0x00])  # 2x2 words: 0x234, 0xFFF, 0, 1
+    m12 = raw_mosaic(raw12, "BayerGB12", 2, 2)
+    assert m12.dtype == np.uint16 and m12.tolist() == [[0x234, 0xFFF], [0, 1]]
+    with pytest.raises(CaptureError, match="odd size 3x2"):
+        raw_mosaic(bytes(6), "BayerRG8", 3, 2)
+    with pytest.raises(CaptureError, match="'Mono8' is not a raw Bayer one"):
+        raw_mosaic(bytes(4), "Mono8", 2, 2)
