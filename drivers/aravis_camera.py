@@ -12,7 +12,7 @@ GenICam features used, chosen by what the device's XML declares:
 * gain: ``Gain`` (SFNC, float, dB) else ``GainRaw`` (integer device units,
   converted with ``gain_db_per_raw`` dB per unit); ``GainAuto`` -> ``Off``;
 * pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``), or a colour sensor's raw
-  Bayer mosaic (``BayerRG8``, ``BayerGR12``, ... ``BayerBG16``, :data:`drivers.frames.BAYER_FORMATS`):
+  Bayer mosaic (``BayerRG8``, ``BayerGR12``, ... ``BayerBG16``, :data:`drivers.frames.GENICAM_BAYER_FORMATS`):
   the frame is the mosaic as the sensor gave it (nothing demosaiced) with its pattern in
   ``extra["cfa"]`` (``"RGGB"`` ...), read from each buffer's own pixel format, which the colour
   pipeline measures (lateral chromatic aberration, vignetting per channel);
@@ -76,7 +76,7 @@ from drivers.errors import (
     DeviceTimeout,
     DriverError,
 )
-from drivers.frames import BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
+from drivers.frames import BAYER_FORMATS, GENICAM_BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
@@ -84,7 +84,7 @@ from drivers.settings import Setting
 FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
 
 GREY_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
-PIXEL_FORMATS = (*GREY_PIXEL_FORMATS, *BAYER_FORMATS)
+PIXEL_FORMATS = (*GREY_PIXEL_FORMATS, *GENICAM_BAYER_FORMATS)
 """The pixel formats a frame is read in: grey, or a raw Bayer mosaic (GenICam PFNC names)."""
 EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
 GAIN_FEATURES = ("Gain", "GainRaw")

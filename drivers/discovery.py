@@ -36,10 +36,13 @@ from typing import Any
 
 from drivers.aravis_camera import aravis_module
 from drivers.errors import DriverError
+from drivers.frames import V4L2_BAYER_FORMATS
 from drivers.v4l2_camera import fourcc_name
 
 #: grey formats in the order a discovered V4L2 camera's snippet prefers them (no conversion loss first)
-V4L2_FORMAT_PREFERENCE = ("GREY", "Y16", "YUYV", "MJPG")
+V4L2_FORMAT_PREFERENCE = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_BAYER_FORMATS)
+"""The V4L2 formats a found camera's configuration snippet may name, best first: grey, then a raw Bayer mosaic
+(a colour sensor that offers nothing else)."""
 PROBE_BAUDRATE = 115200
 
 _ZABER_REPLY = re.compile(rb"^@(\d+) (\d+)(?: \d+)? (OK|RJ) (IDLE|BUSY) ")
@@ -130,7 +133,10 @@ def _describe_v4l2(path: str) -> FoundDevice | None:
         if usable:
             config.update(pixel_format=usable[0], width=width, height=height)
         else:
-            problem = f"offers no grey-convertible format ({details['formats']}); supported: GREY, Y16, YUYV, MJPG"
+            problem = (
+                f"offers no format harp station reads ({details['formats']}); supported: "
+                f"{', '.join(V4L2_FORMAT_PREFERENCE)}"
+            )
         return FoundDevice("camera", "v4l2", path, f"{info.card} ({info.bus_info})", config, details, problem)
     except OSError as exc:
         problem = f"not a V4L2 device (VIDIOC_QUERYCAP: {exc.strerror or exc})"

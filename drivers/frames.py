@@ -6,8 +6,8 @@ format name. Names are the V4L2 fourcc (``GREY``, ``Y16``, ``YUYV``,
 ``Mono16``). Every function copies: the result never aliases a driver
 buffer that will be re-queued.
 
-A colour sensor's raw frame (GenICam ``BayerRG8`` ... ``BayerBG16``, :data:`BAYER_FORMATS`) is kept as
-it is: :func:`raw_mosaic` gives the mosaic, nothing interpolated or demosaiced, and :func:`bayer_pattern`
+A colour sensor's raw frame (GenICam ``BayerRG8`` ... ``BayerBG16``, V4L2 ``RGGB`` ... ``BYR2``,
+:data:`BAYER_FORMATS`) is kept as it is: :func:`raw_mosaic` gives the mosaic, nothing interpolated or demosaiced, and :func:`bayer_pattern`
 its colour filter pattern in :data:`pipeline.cfa.CFA_PATTERNS`' names (``BayerGR8`` -> ``"GRBG"``: the
 PFNC name gives the first two pixels of the first row, then the second row follows). The colour
 pipeline (:mod:`pipeline.cfa`) takes the mosaic with its pattern in the frame's ``extra["cfa"]``.
@@ -16,6 +16,9 @@ References
 ----------
 EMVA, "GenICam Pixel Format Naming Convention (PFNC)", version 2.x: Bayer formats ``Bayer<first two
 colours of the first row><bits>``; unpacked 10/12-bit formats one little-endian 16-bit word per pixel.
+Linux kernel documentation, "V4L2 pixel formats: Bayer formats" (``V4L2_PIX_FMT_SRGGB8`` ``RGGB``,
+``SGRBG8`` ``GRBG``, ``SGBRG8`` ``GBRG``, ``SBGGR8`` ``BA81``; the 10/12-bit ones one little-endian 16-bit
+word per sample, high bits zero; ``SBGGR16`` ``BYR2``).
 
 ``bytes_per_line`` is the row stride in bytes (V4L2 ``bytesperline``); rows
 may be padded beyond ``width * bytes_per_pixel``. ``0``/``None`` means
@@ -58,11 +61,24 @@ _PACKED = {
 GREY_FORMATS = tuple(_PACKED) + ("MJPG",)
 
 _BAYER_ORDER = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}
-#: GenICam PFNC Bayer format -> its colour filter pattern (row by row from the top-left pixel); 8 bits one
-#: byte per pixel, 10/12/16 bits one little-endian 16-bit word per pixel (unpacked)
-BAYER_FORMATS: dict[str, str] = {
-    f"Bayer{first}{bits}": pattern for first, pattern in _BAYER_ORDER.items() for bits in (8, 10, 12, 16)
+_V4L2_BAYER = {  # V4L2 fourcc -> (pattern, bits): V4L2_PIX_FMT_SRGGB8 ... SBGGR16
+    **{p: (p, 8) for p in ("RGGB", "GRBG", "GBRG")}, "BA81": ("BGGR", 8),
+    "RG10": ("RGGB", 10), "BA10": ("GRBG", 10), "GB10": ("GBRG", 10), "BG10": ("BGGR", 10),
+    "RG12": ("RGGB", 12), "BA12": ("GRBG", 12), "GB12": ("GBRG", 12), "BG12": ("BGGR", 12),
+    "RG16": ("RGGB", 16), "GR16": ("GRBG", 16), "GB16": ("GBRG", 16), "BYR2": ("BGGR", 16),
+}  # fmt: skip
+_BAYER: dict[str, tuple[str, int]] = {
+    **{f"Bayer{first}{bits}": (pattern, bits) for first, pattern in _BAYER_ORDER.items() for bits in (8, 10, 12, 16)},
+    **_V4L2_BAYER,
 }
+#: raw Bayer format -> its colour filter pattern (row by row from the top-left pixel): the GenICam PFNC names
+#: (``BayerRG8`` ... ``BayerBG16``) and the V4L2 fourccs (``RGGB``, ``BA81``, ``RG10``, ``BYR2``, ...); 8 bits
+#: one byte per pixel, 10/12/16 bits one little-endian 16-bit word per pixel (unpacked)
+BAYER_FORMATS: dict[str, str] = {name: pattern for name, (pattern, _bits) in _BAYER.items()}
+V4L2_BAYER_FORMATS = tuple(_V4L2_BAYER)
+"""The V4L2 fourccs of raw Bayer formats (:data:`BAYER_FORMATS`)."""
+GENICAM_BAYER_FORMATS = tuple(n for n in _BAYER if n.startswith("Bayer"))
+"""The GenICam PFNC names of raw Bayer formats (:data:`BAYER_FORMATS`)."""
 
 #: what a driver hands over: the bytes of one frame as the device delivered them
 RawFrame: TypeAlias = bytes | bytearray | memoryview | mmap.mmap
@@ -146,7 +162,7 @@ def raw_mosaic(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line
         raise CaptureError(f"pixel format {fmt!r} is not a raw Bayer one; supported: {', '.join(BAYER_FORMATS)}")
     if width % 2 or height % 2:
         raise CaptureError(f"{fmt} frame has an odd size {width}x{height}: not a whole Bayer mosaic")
-    if fmt.endswith("8"):
+    if _BAYER[fmt][1] == 8:
         return grey8(data, width, height, bytes_per_line)
     return grey16(data, width, height, bytes_per_line)
 

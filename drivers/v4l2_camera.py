@@ -7,7 +7,10 @@ camera raises :class:`~drivers.errors.DeviceTimeout` instead of hanging).
 
 * Format: ``GREY`` (8 bit), ``Y16`` (16 bit little endian), ``YUYV`` (luma
   plane kept) or ``MJPG`` (decoded to grey) -> 2-D array, see
-  :mod:`drivers.frames`. The format the driver actually accepted (``G_FMT``)
+  :mod:`drivers.frames`; or a colour sensor's raw Bayer mosaic (``RGGB``, ``GRBG``, ``GBRG``, ``BA81``
+  8 bit, ``RG10`` ... ``BG12`` unpacked, ``RG16`` ... ``BYR2`` 16 bit:
+  :data:`drivers.frames.V4L2_BAYER_FORMATS`), kept as it is with its pattern in ``extra["cfa"]``, which
+  the colour pipeline reads. The format the driver actually accepted (``G_FMT``)
   is read back; a substituted pixel format is an error, an adjusted size is
   reported by :attr:`V4L2Camera.sensor_size`.
 * Controls are found by their standard V4L2 control id (names changed
@@ -63,11 +66,12 @@ from drivers.errors import (
     DeviceTimeout,
     DriverError,
 )
-from drivers.frames import to_grey
+from drivers.frames import V4L2_BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
-PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG")
+PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_BAYER_FORMATS)
+"""The pixel formats (V4L2 fourccs) a frame is read in: grey, or a raw Bayer mosaic."""
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
 _MANUAL_EXPOSURE = 1  # V4L2_EXPOSURE_MANUAL
 
@@ -316,7 +320,7 @@ class V4L2Camera(CameraBase):
 
     @property
     def pixel_format(self) -> str:
-        """The V4L2 fourcc name (``GREY``, ``Y16``, ``YUYV`` or ``MJPG``)."""
+        """The V4L2 fourcc name (``GREY``, ``Y16``, ``YUYV``, ``MJPG`` or a raw Bayer one such as ``RGGB``)."""
         return self._fourcc
 
     # -- controls -------------------------------------------------------------------
@@ -427,13 +431,22 @@ class V4L2Camera(CameraBase):
         fmt = self._format
         if raw.buff.bytesused == 0:
             raise CaptureError(f"{self.name}: empty buffer (sequence {raw.frame_nb})")
-        image = to_grey(bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height), int(fmt.bytes_per_line) or None)
+        buffer = (bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height), int(fmt.bytes_per_line) or None)
+        pattern = bayer_pattern(self._fourcc)
+        image = to_grey(*buffer) if pattern is None else raw_mosaic(*buffer)
+        extra: dict[str, Any] = {
+            "sequence": int(raw.frame_nb),
+            "device_timestamp": float(raw.timestamp),
+            "pixel_format": self._fourcc,
+        }
+        if pattern is not None:  # a colour sensor's raw mosaic: the colour pipeline reads its pattern here
+            extra["cfa"] = pattern
         return self._frame(
             np.asarray(image),
             now,
             self.get_exposure() if self._ctrl.get("exposure") is not None else float("nan"),
             self.get_gain() if self._ctrl.get("gain") is not None else float("nan"),
-            {"sequence": int(raw.frame_nb), "device_timestamp": float(raw.timestamp), "pixel_format": self._fourcc},
+            extra,
         )
 
 

@@ -45,7 +45,14 @@ FOURCC = {
     "Y16": raw.PixelFormat.Y16,
     "YUYV": raw.PixelFormat.YUYV,
     "MJPG": raw.PixelFormat.MJPEG,
+    # raw Bayer mosaics (a colour sensor): 8 bits, 10 bits in 16-bit words, 16 bits
+    "RGGB": raw.PixelFormat.SRGGB8,
+    "BA81": raw.PixelFormat.SBGGR8,
+    "BA10": raw.PixelFormat.SGRBG10,
+    "BYR2": raw.PixelFormat.SBGGR16,
 }
+BAYER_BITS = {"RGGB": 8, "BA81": 8, "BA10": 10, "BYR2": 16}
+"""The fake's raw Bayer formats and their sample bits (10: the low bits of a little-endian word)."""
 _NAME = {int(v): k for k, v in FOURCC.items()}
 NEXT_FLAGS = int(raw.ControlFlag.NEXT_CTRL | raw.ControlFlag.NEXT_COMPOUND)
 CID = raw.ControlID
@@ -156,6 +163,9 @@ class FakeV4L2Camera:
         width = max(2, min(int(width), self.max_size[0])) & ~1
         height = max(1, min(int(height), self.max_size[1]))
         bpp = {raw.PixelFormat.GREY: 1, raw.PixelFormat.Y16: 2, raw.PixelFormat.YUYV: 2}.get(fourcc)
+        if _NAME.get(int(fourcc)) in BAYER_BITS:
+            bpp = 1 if BAYER_BITS[_NAME[int(fourcc)]] == 8 else 2
+            height = max(2, height) & ~1  # a whole mosaic
         if bpp is None:  # MJPG: compressed, worst case size
             return width, height, 0, width * height * 2
         bpl = width * bpp + self.stride_padding
@@ -163,11 +173,12 @@ class FakeV4L2Camera:
 
     @staticmethod
     def scene(seq: int, width: int, height: int, bits: int = 8) -> np.ndarray:
-        """The image of frame ``seq``: a diagonal ramp shifted by the sequence number."""
+        """The image of frame ``seq``: a diagonal ramp shifted by the sequence number (``bits`` 10 or 12: the
+        16-bit one's top bits, in the low bits of the word)."""
         y, x = np.mgrid[0:height, 0:width]
         if bits == 8:
             return ((3 * x + 5 * y + seq) % 256).astype(np.uint8)
-        return ((257 * x + 1031 * y + 17 * seq) % 65536).astype(np.uint16)
+        return (((257 * x + 1031 * y + 17 * seq) % 65536) >> (16 - bits)).astype(np.uint16)
 
     def smooth_scene(self, seq: int, width: int, height: int) -> np.ndarray:
         """A band-limited image for MJPG (JPEG is lossy; smooth content decodes closely)."""
@@ -185,8 +196,10 @@ class FakeV4L2Camera:
             ok, jpg = cv2.imencode(".jpg", self.smooth_scene(seq, w, h), [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
             assert ok
             return jpg.tobytes()
-        if fmt == "GREY":
+        if fmt == "GREY" or BAYER_BITS.get(fmt) == 8:
             rows = self.scene(seq, w, h)
+        elif fmt in BAYER_BITS:
+            rows = self.scene(seq, w, h, bits=BAYER_BITS[fmt]).astype("<u2").view(np.uint8).reshape(h, 2 * w)
         elif fmt == "Y16":
             rows = self.scene(seq, w, h, bits=16).astype("<u2").view(np.uint8).reshape(h, 2 * w)
         else:  # YUYV: Y0 U Y1 V, chroma constant 128

@@ -51,6 +51,16 @@ def test_v4l2_formats_are_preferred_grey_first_and_an_empty_pattern_finds_nothin
     assert list_v4l2_devices(str(tmp_path / "nothing*")) == []
 
 
+def test_a_colour_sensor_offering_only_raw_bayer_is_listed_with_a_snippet_that_opens_it(tmp_path):
+    """A camera that offers only raw Bayer mosaics is usable (the colour pipeline reads them); the snippet names
+    its format and opens it, the frame carrying its pattern."""
+    with FakeV4L2Camera(tmp_path / "video0", formats=("BA81",)):
+        (cam,) = list_v4l2_devices(str(tmp_path / "video*"))
+        assert cam.problem is None and cam.config["pixel_format"] == "BA81"
+        with drivers.open_camera(cam.config) as opened:
+            assert opened.capture(timeout=1.0).extra["cfa"] == "BGGR"
+
+
 def test_aravis_fake_is_listed_only_when_asked_and_opens():
     assert all(f.details["protocol"] != "Fake" for f in list_aravis_cameras())
     (fake,) = [f for f in list_aravis_cameras(include_fake=True) if f.details["protocol"] == "Fake"]

@@ -59,7 +59,11 @@ def test_a_raw_bayer_frame_is_kept_as_its_mosaic_and_named_by_the_pfnc_pattern()
     assert {f: bayer_pattern(f) for f in ("BayerRG8", "BayerGR10", "BayerGB12", "BayerBG16")} == {
         "BayerRG8": "RGGB", "BayerGR10": "GRBG", "BayerGB12": "GBRG", "BayerBG16": "BGGR",
     }  # fmt: skip
-    assert bayer_pattern("Mono8") is None and bayer_pattern("RGGB") is None
+    assert {f: bayer_pattern(f) for f in ("RGGB", "BA81", "BA10", "GB12", "BYR2")} == {  # V4L2 fourccs
+        "RGGB": "RGGB", "BA81": "BGGR", "BA10": "GRBG", "GB12": "GBRG", "BYR2": "BGGR",
+    }  # fmt: skip
+    assert bayer_pattern("Mono8") is None and bayer_pattern("GREY") is None
+    assert raw_mosaic(bytes([1, 2, 3, 4]), "BA81", 2, 2).dtype == np.uint8  # 8 bits, though its name ends in 1
     raw8 = bytes([10, 200, 11, 201, 0, 0, 202, 30, 203, 31, 0, 0])  # 4x2, rows padded to 6 bytes
     m8 = raw_mosaic(raw8, "BayerRG8", 4, 2, bytes_per_line=6)
     assert m8.dtype == np.uint8 and m8.tolist() == [[10, 200, 11, 201], [202, 30, 203, 31]]

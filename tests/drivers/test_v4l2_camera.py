@@ -53,6 +53,29 @@ def test_uncompressed_formats_give_the_exact_grey_image(node, fmt, padding, bits
         assert f.extra["pixel_format"] == fmt
 
 
+@pytest.mark.parametrize(
+    "fmt, pattern, bits, padding",
+    [("RGGB", "RGGB", 8, 0), ("BA81", "BGGR", 8, 6), ("BA10", "GRBG", 10, 4), ("BYR2", "BGGR", 16, 0)],
+)
+def test_a_bayer_sensor_delivers_its_raw_mosaic_with_the_pattern_named(node, fmt, pattern, bits, padding):
+    """A colour sensor's raw Bayer format: the frame is the mosaic the device wrote (row padding dropped,
+    nothing demosaiced or greyed) and ``extra["cfa"]`` names its pattern as the V4L2 fourcc says."""
+    with (
+        FakeV4L2Camera(node, formats=("GREY", fmt), stride_padding=padding) as hw,
+        camera(node, pixel_format=fmt) as cam,
+    ):
+        f = cam.capture(timeout=1.0)
+    assert f.image.dtype == (np.uint8 if bits == 8 else np.uint16) and f.image.shape == (H, W)
+    assert np.array_equal(f.image, hw.scene(f.extra["sequence"], W, H, bits=bits))
+    assert f.extra["cfa"] == pattern and f.extra["pixel_format"] == fmt
+
+
+def test_a_grey_frame_names_no_pattern(node):
+    with FakeV4L2Camera(node) as hw, camera(node, pixel_format="GREY") as cam:
+        f = cam.capture(timeout=1.0)
+    assert "cfa" not in f.extra and np.array_equal(f.image, hw.scene(f.extra["sequence"], W, H))
+
+
 def test_mjpg_frame_is_decoded_to_grey(node):
     with FakeV4L2Camera(node) as hw, camera(node, pixel_format="MJPG") as cam:
         f = cam.capture(timeout=1.0)
