@@ -75,16 +75,17 @@ def parse_store(text: str | os.PathLike[str], base: Path | None = None) -> Store
     if not s:
         raise StoreError("empty store name: give a file path or a postgresql:// URL")
     scheme = s.split("://", 1)[0].lower() if "://" in s else ""
+    shown = _without_password(s)  # how the messages name it
     if scheme in _PG_SCHEMES:
         parts = urlsplit(s)
         if not parts.hostname and "host=" not in parts.query:
-            raise StoreError(f"{s}: a PostgreSQL store URL needs a host: postgresql://user@host:port/database")
+            raise StoreError(f"{shown}: a PostgreSQL store URL needs a host: postgresql://user@host:port/database")
         if not parts.path.strip("/"):
-            raise StoreError(f"{s}: a PostgreSQL store URL needs a database: postgresql://user@host:port/database")
+            raise StoreError(f"{shown}: a PostgreSQL store URL needs a database: postgresql://user@host:port/database")
         try:
             parts.port  # noqa: B018  (validates the port)
         except ValueError:
-            raise StoreError(f"{s}: bad port in the store URL") from None
+            raise StoreError(f"{shown}: bad port in the store URL") from None
         return StoreLocation(POSTGRESQL, url=urlunsplit(("postgresql", *parts[1:])))
     if scheme == "sqlite":
         rest = s[len("sqlite://") :]
@@ -96,12 +97,28 @@ def parse_store(text: str | os.PathLike[str], base: Path | None = None) -> Store
         s = rest
     elif scheme:
         raise StoreError(
-            f"{s}: unknown store URL scheme {scheme!r} (expected a file path, sqlite:/// or postgresql://)"
+            f"{shown}: unknown store URL scheme {scheme!r} (expected a file path, sqlite:/// or postgresql://)"
         )
     path = Path(os.path.expanduser(s))
     if not path.is_absolute():
         path = (base if base is not None else Path.cwd()) / path
     return StoreLocation(SQLITE, path=Path(os.path.normpath(path)))
+
+
+def _without_password(url: str) -> str:
+    """``url`` with its password, if it has one, written ``***`` (``postgresql://harp:***@host/db``): a
+    message names a store the user gave without printing the password in it."""
+    if "://" not in url:
+        return url
+    scheme, rest = url.split("://", 1)
+    end = min((i for i in (rest.find(c) for c in "/?#") if i >= 0), default=len(rest))
+    netloc = rest[:end]
+    if "@" not in netloc:
+        return url
+    user, host = netloc.rsplit("@", 1)
+    if ":" not in user:
+        return url
+    return f"{scheme}://{user.split(':', 1)[0]}:***@{host}{rest[end:]}"
 
 
 def user_store_path() -> Path:

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 from station.cli import main
@@ -187,3 +188,24 @@ def test_a_stored_model_with_a_nan_parameter_is_a_damaged_row_for_every_reading_
     assert main(["profile", "list", "--store", str(store)]) == 2
     out, err = capsys.readouterr()
     assert "GOOD-1" in out and err.count("\n") == 1 and f"profile #{bad}" in err
+
+
+_PASSWORD = "s3cret-pw"
+
+
+@pytest.mark.parametrize(
+    "store",
+    [
+        f"postgresql://harp:{_PASSWORD}@127.0.0.1:99999/harp",  # bad port
+        f"postgresql://harp:{_PASSWORD}@127.0.0.1:5432/",  # no database
+        f"postgresql://harp:{_PASSWORD}@:5432/harp",  # no host
+        f"mysql://harp:{_PASSWORD}@127.0.0.1/harp",  # another scheme
+    ],
+)
+def test_a_store_url_the_command_refuses_is_named_without_its_password(store, capsys):
+    for argv in (["profile", "list", "--store", store], ["qa", "DEMO-0001", "--store", store]):
+        capsys.readouterr()
+        assert main(argv) == 2
+        out, err = capsys.readouterr()
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+        assert "harp:***@" in err and _PASSWORD not in err + out, err
