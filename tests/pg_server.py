@@ -85,8 +85,35 @@ class PostgresServer:
         psql = shutil.which("psql") or str(self.bindir / "psql")
         self._cmd(psql, "-h", "127.0.0.1", "-p", str(self.port), "-U", "harp", "-d", "postgres", "-c", sql)
 
-    def stop(self) -> None:
-        self._cmd(str(self.bindir / "pg_ctl"), "-D", str(self.data_dir), "-m", "immediate", "-w", "stop", check=False)
+    def start(self) -> None:
+        """Start the server (again, after :meth:`stop`: the same data, port and URL); waits until it takes connections."""
+        opts = f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
+        try:
+            self._cmd(
+                str(self.bindir / "pg_ctl"),
+                "-D",
+                str(self.data_dir),
+                "-o",
+                opts,
+                "-l",
+                str(self.root / "server.log"),
+                "-w",
+                "-t",
+                "60",
+                "start",
+            )
+        except subprocess.CalledProcessError as exc:
+            log = (self.root / "server.log").read_text(errors="replace") if (self.root / "server.log").exists() else ""
+            raise RuntimeError(f"PostgreSQL did not start: {exc.stderr.strip()} {log[-2000:]}") from None
+
+    def running(self) -> bool:
+        return self._cmd(str(self.bindir / "pg_ctl"), "-D", str(self.data_dir), "status", check=False).returncode == 0
+
+    def stop(self, mode: str = "immediate") -> None:
+        """Stop the server: ``immediate`` (as a crash or a power cut: every connection dropped at once, recovery
+        on the next start) or ``fast`` (an administrator's restart: each backend ends its connection with
+        ``terminating connection due to administrator command``)."""
+        self._cmd(str(self.bindir / "pg_ctl"), "-D", str(self.data_dir), "-m", mode, "-w", "stop", check=False)
 
 
 @contextlib.contextmanager
@@ -103,24 +130,7 @@ def postgres_server() -> Iterator[PostgresServer]:
         server._cmd(
             str(bindir / "initdb"), "-D", str(server.data_dir), "-U", "harp", "--auth=trust", "-E", "UTF8", "--no-sync"
         )
-        opts = f"-p {server.port} -k {root} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
-        try:
-            server._cmd(
-                str(bindir / "pg_ctl"),
-                "-D",
-                str(server.data_dir),
-                "-o",
-                opts,
-                "-l",
-                str(root / "server.log"),
-                "-w",
-                "-t",
-                "60",
-                "start",
-            )
-        except subprocess.CalledProcessError as exc:
-            log = (root / "server.log").read_text(errors="replace") if (root / "server.log").exists() else ""
-            raise RuntimeError(f"PostgreSQL did not start: {exc.stderr.strip()} {log[-2000:]}") from None
+        server.start()
         server._psql("CREATE DATABASE harp")
         yield server
     finally:

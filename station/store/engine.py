@@ -12,7 +12,11 @@ a serialisation failure, a deadlock or a lock not granted in that time is retrie
 :func:`write` runs a function in one write transaction, retrying it while the database is locked
 (SQLite), a lock is held by another writer or the transaction could not be serialised
 (PostgreSQL), with jittered exponential back-off up to :data:`RETRY_SECONDS`: other stations
-writing at the same time make a write wait, never fail. A write still waiting after
+writing at the same time make a write wait, never fail. A transaction whose connection is lost
+before its commit (the server restarted or ended the connection; the server rolled it back) is
+tried again once on a new connection (:data:`LOST_TRIES`; the engine's ``pool_pre_ping`` replaces
+connections that died idle in the pool); one lost at its commit may have been committed, and says
+so. A write still waiting after
 :data:`WAIT_NOTICE_S` says so, once, through its ``on_wait`` callback (the command prints the line:
 the store itself prints nothing).
 Set ``$HARP_STORE_TIMINGS`` to a file to have every write appended to it as one JSON line
@@ -52,6 +56,17 @@ WAIT_NOTICE_S = 2.0
 """A write still waiting for other writers this long after it began says so (``on_wait``), once."""
 
 _RETRY_SQLSTATES = ("40001", "40P01", "55P03")  # serialization_failure, deadlock_detected, lock_not_available
+
+_NOT_SERVING = (
+    "57P01",
+    "57P02",
+    "57P03",
+)  # admin_shutdown, crash_shutdown, cannot_connect_now (starting up / shutting down)
+
+LOST_TRIES = 1
+"""How often a transaction whose connection was lost before its commit (the server restarted, an
+administrator ended the connection, a network blip) is tried again on a new connection: once —
+a server that is down then fails to connect at once, with its one line."""
 
 T = TypeVar("T")
 
@@ -145,15 +160,34 @@ def write(
     delay = 0.01
     max_delay = 0.1 if loc.backend == SQLITE else 1.0  # SQLite's busy timeout already waited WRITE_TRY_MS
     told = False
+    lost = 0
     while True:
+        committing = False
         try:
             with write_connection(engine, loc, serializable=serializable) as conn, conn.begin():
                 if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
                     conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
                 result = fn(conn)
+                committing = True
             _log_timing(what, time.monotonic() - start, retries, loc)
             return result
         except (sa.exc.DBAPIError, sqlite3.Error) as exc:
+            if connection_lost(exc):
+                if committing:  # the server may have committed before the connection went: not tried again
+                    raise StoreError(
+                        f"{loc}: {what}: the connection to the store was lost while committing "
+                        f"({_first_line(exc)}), so it may or may not have been written; "
+                        "check that the server is running, then run again",
+                        "unreachable",
+                    ) from None
+                if lost < LOST_TRIES:  # rolled back by the server: nothing of it was written; again
+                    lost += 1
+                    continue
+                raise StoreError(
+                    f"{loc}: {what}: the connection to the store was lost ({_first_line(exc)}); nothing of it "
+                    "was written: check that the server is running, then run again",
+                    "unreachable",
+                ) from None
             now = time.monotonic()
             if retryable(exc) and now < deadline:
                 retries += 1
@@ -175,12 +209,30 @@ def write(
 
 
 def read(engine: sa.Engine, loc: StoreLocation, what: str, fn: Callable[[sa.Connection], T]) -> T:
-    """``fn(conn)`` in one read transaction (a consistent snapshot). Raises StoreError."""
-    try:
-        with engine.connect() as conn, conn.begin():
-            return fn(conn)
-    except (sa.exc.DBAPIError, sqlite3.Error, OSError) as exc:
-        raise translate(exc, loc, what) from None
+    """``fn(conn)`` in one read transaction (a consistent snapshot), tried again on a new connection when
+    its connection is lost (:data:`LOST_TRIES`). Raises StoreError."""
+    lost = 0
+    while True:
+        try:
+            with engine.connect() as conn, conn.begin():
+                return fn(conn)
+        except (sa.exc.DBAPIError, sqlite3.Error, OSError) as exc:
+            if connection_lost(exc) and lost < LOST_TRIES:
+                lost += 1
+                continue
+            raise translate(exc, loc, what) from None
+
+
+def connection_lost(exc: BaseException) -> bool:
+    """An open connection to the server went away (SQLAlchemy found it broken and dropped it from the
+    pool: the server restarted or ended it, the network failed); not a connection that could not be made."""
+    return isinstance(exc, sa.exc.DBAPIError) and exc.connection_invalidated
+
+
+def _first_line(exc: BaseException) -> str:
+    orig = getattr(exc, "orig", None) or exc
+    text = str(orig).strip()
+    return text.splitlines()[0].strip() if text else type(orig).__name__
 
 
 def _log_timing(what: str, seconds: float, retries: int, loc: StoreLocation) -> None:
@@ -233,9 +285,16 @@ def translate(exc: BaseException, loc: StoreLocation, what: str) -> StoreError:
     if loc.backend == POSTGRESQL:
         if sqlstate.startswith("XX") or sqlstate == "42P01":
             return StoreError(f"{loc}: the store is damaged ({text}); {damaged_hint(loc)}", "damaged")
-        if isinstance(exc, sa.exc.OperationalError) and not sqlstate:
-            first = str(orig).strip().splitlines()[0] if str(orig).strip() else type(orig).__name__
-            return StoreError(f"{loc}: cannot connect to the store ({first}); is the server running?", "unreachable")
+        if connection_lost(exc):
+            return StoreError(
+                f"{loc}: {what}: the connection to the store was lost ({_first_line(exc)}); "
+                "check that the server is running, then run again",
+                "unreachable",
+            )
+        if isinstance(exc, sa.exc.OperationalError) and (not sqlstate or sqlstate in _NOT_SERVING):
+            return StoreError(
+                f"{loc}: cannot connect to the store ({_first_line(exc)}); is the server running?", "unreachable"
+            )
     if isinstance(orig, OSError):
         return StoreError(f"{loc}: {what}: {orig.strerror or text}", "error")
     return StoreError(f"{loc}: {what}: {text}", "error")
