@@ -16,7 +16,8 @@ or a lens in the store (its profile at the same focus, interpolated between its
 calibrated focus settings when needed). ``--report DIR`` writes a Markdown report with
 plots and its ``index.html``; ``--overlays all|failed|none`` says which focus settings keep their
 per-orientation overlays in it (default: a session's ``report.overlays``, else all). Each result is recorded in the store's QA history (unless
-``--no-record``); it does not change the verdict a profile was calibrated with.
+``--no-record``); it does not change the verdict a profile was calibrated with. A session's result
+the store cannot take (a server that is down) is warned of, with what to do; its verdict stands.
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 
 What is judged, with which thresholds and reference, and the report's evidence:
@@ -223,7 +224,8 @@ def _record(args, config, session, items, results) -> None:
                     focus=it.focus,
                 )
     except StoreError as exc:
-        warn("harp qa", f"result not recorded: {exc}")
+        # the verdict (and its exit code) stands; its row of QA history is what is missing: say how to add it
+        warn("harp qa", f"result not recorded: {exc}; the verdict stands: run harp qa {args.target} again to record it")
 
 
 def _print_checks(items, judged, report) -> None:

@@ -107,7 +107,7 @@ def _in_thread(fn):
 
 # ----------------------------------------------------------- a session, and the commands, while it is down
 def test_a_session_whose_server_stops_at_its_store_step_keeps_its_frames_and_resumes_storing_each_once(
-    pg, url, tmp_path, capsys
+    pg, url, admin, tmp_path, capsys
 ):
     import yaml
 
@@ -165,6 +165,19 @@ def test_a_session_whose_server_stops_at_its_store_step_keeps_its_frames_and_res
     out, err = capsys.readouterr()
     _one_line(err)
     assert PASSWORD not in out and str(loc) in err and "is the server running?" in err, err
+
+    # harp qa of the session judges it from its files: the verdict stands, its history row is said to be missing
+    capsys.readouterr()
+    code = main(["qa", str(session)])
+    assert code in (0, 1)  # PASS / FAIL, as judged
+    out, err = capsys.readouterr()
+    warned = [line for line in err.splitlines() if "result not recorded" in line]
+    assert len(warned) == 1 and PASSWORD not in out + err and "Traceback" not in err, err
+    assert str(loc) in warned[0] and f"run harp qa {session} again to record it" in warned[0], warned
+    pg.start()
+    assert main(["qa", str(session)]) == code  # run again: recorded
+    with admin.connect() as c:
+        assert c.exec_driver_sql("SELECT count(*) FROM qa_results WHERE origin = 'command'").scalar_one() == 2
 
 
 # ------------------------------------------------------------------- a process that keeps its store open
