@@ -30,6 +30,7 @@ instead of adding another.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import os
 import time
@@ -326,8 +327,11 @@ def run_jobs(
 
     ``scheduler`` (``tcp://HOST:PORT``): on that Dask cluster; else on a local process pool of
     ``workers`` processes (``workers <= 1``: in this process). ``on_result`` is called as each
-    result arrives (in the order they finish). A worker that dies is that job's failure; a
-    scheduler that cannot be reached raises :class:`ReprocessError`.
+    result arrives (in the order they finish). A local worker that dies is that job's failure, as a job every
+    Dask worker that ran it died of is (Dask runs a killed worker's jobs again elsewhere first). A scheduler
+    that cannot be reached, is not one, has no worker or a worker without this version of harp station raises
+    :class:`ReprocessError` before any job is sent; the scheduler lost, or every worker gone, mid-run
+    :class:`ClusterLost` (the results told ``on_result`` before it stand).
     """
     if not jobs:
         return []
@@ -364,7 +368,9 @@ def _run_pool(jobs: Sequence[FocusJob], workers: int, on_result: Callable[[Focus
 
 def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:
     """Refuse at once (:class:`ReprocessError`, one line) a scheduler address that is not
-    ``tcp://HOST:PORT`` or where nothing listens, instead of Dask's retries until its timeout."""
+    ``tcp://HOST:PORT`` or where nothing listens, instead of Dask's retries until its timeout; and, within
+    ``timeout``, one where something else listens (a Dask scheduler speaks first, its handshake: Dask's client
+    waits for it forever, e.g. at the scheduler's dashboard port)."""
     import socket
     from urllib.parse import urlsplit
 
@@ -376,36 +382,154 @@ def probe_scheduler(scheduler: str, timeout: float = 10.0) -> None:
     if u.scheme != "tcp" or not host or port is None:
         raise ReprocessError(f"--scheduler {scheduler}: give the Dask scheduler's address as tcp://HOST:PORT")
     try:
-        socket.create_connection((host, port), timeout=timeout).close()
+        sock = socket.create_connection((host, port), timeout=timeout)
     except OSError as exc:
         raise ReprocessError(f"cannot reach the Dask scheduler at {scheduler}: {exc.strerror or exc}") from None
+    with sock:
+        try:
+            spoke = bool(sock.recv(1))
+        except OSError:  # the timeout, a reset
+            spoke = False
+    if not spoke:
+        raise ReprocessError(
+            f"{scheduler} is not a Dask scheduler (something listens there, but it sent no Dask handshake in "
+            f"{timeout:g} s); give the scheduler's port (8786 unless it was started with another; 8787 is its dashboard)"
+        )
+
+
+NO_WORKERS_S = 60.0
+"""How long :func:`run_jobs` waits on a Dask cluster without a worker (none at the start, or every one gone
+mid-run and none back) before it stops: a scheduler waits for workers forever."""
+
+_WORKER_CHECK = "__import__('station.reprocess').__version__"
+"""Evaluated on each Dask worker before the jobs are sent (a string, so that a worker without harp station
+can run it): the version of harp station it runs, or the ImportError it meets (a job sent to such a worker
+fails to unpickle, and the worker dies of it, again and again)."""
+
+
+class ClusterLost(ReprocessError):
+    """The Dask cluster went away mid-run (its scheduler killed, every worker gone): the jobs not finished are
+    lost. ``what`` happened and what ``to_do`` before running the command again for them."""
+
+    def __init__(self, what: str, to_do: str) -> None:
+        super().__init__(f"{what}; {to_do}, then run harp reprocess again for the sessions not stored")
+        self.what, self.to_do = what, to_do
+
+
+def _killed(job: FocusJob, exc: Any) -> str:
+    last = getattr(getattr(exc, "last_worker", None), "address", "?")
+    tried = getattr(exc, "allowed_failures", 0) + 1
+    return (
+        f"{job.session_dir}: focus setting #{job.focus_idx}: every Dask worker that ran it died ({tried} tried, "
+        f"the last {last}: killed, or out of memory?); see that worker's log, then run harp reprocess again "
+        "for this session"
+    )
+
+
+def _check_workers(client: Any, scheduler: str) -> None:
+    """Refuse (:class:`ReprocessError`, one line) a cluster with no worker after :data:`NO_WORKERS_S`, or a
+    worker that cannot import harp station or runs another version of it."""
+    try:
+        client.wait_for_workers(1, timeout=NO_WORKERS_S)
+    except TimeoutError:
+        raise ReprocessError(
+            f"the Dask scheduler at {scheduler} has no worker (none joined in {NO_WORKERS_S:g} s); "
+            f"start some: dask worker {scheduler} --nthreads 1"
+        ) from None
+    seen = client.run(eval, _WORKER_CHECK, on_error="return")
+    for addr, got in sorted(seen.items()):
+        if isinstance(got, BaseException):
+            raise ReprocessError(
+                f"Dask worker {addr} cannot import harp station ({type(got).__name__}: {_one_line(got)}); "
+                f"run every worker with harp station {__version__} installed, as this command"
+            )
+        if got != __version__:
+            raise ReprocessError(
+                f"Dask worker {addr} runs harp station {got}, this command {__version__}; "
+                "run the same version on every worker (its profiles would be another version's)"
+            )
 
 
 def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
     probe_scheduler(scheduler)
-    from dask.distributed import Client, as_completed
+    from dask.distributed import Client
 
+    _silence_distributed()
     try:
         client = Client(scheduler, timeout="10s", set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         raise ReprocessError(f"cannot reach the Dask scheduler at {scheduler}: {_one_line(exc)}") from None
     try:
-        futures = client.map(reprocess_focus, list(jobs), pure=False, retries=0)
-        index = {fut.key: i for i, fut in enumerate(futures)}
-        results: dict[int, FocusResult] = {}
-        for fut in as_completed(futures, loop=client.loop):
+        _check_workers(client, scheduler)
+        return _gather(client, jobs, scheduler, on_result)
+    finally:
+        client.close(timeout=10)
+
+
+def _silence_distributed() -> None:
+    """Dask's loggers silent in this process from now on: its client logs a lost scheduler as tracebacks (the
+    ``distributed.client`` logger, which has a level of its own), also from its own thread after it is closed;
+    :func:`run_jobs` says each fault in a line."""
+    names = [n for n in logging.root.manager.loggerDict if n == "distributed" or n.startswith("distributed.")]
+    for name in {"distributed", *names}:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def _gather(
+    client: Any,
+    jobs: Sequence[FocusJob],
+    scheduler: str,
+    on_result: Callable[[FocusResult], None],
+) -> list[FocusResult]:
+    """The jobs' results, each told ``on_result`` as it arrives (:func:`run_jobs`); :class:`ClusterLost` when
+    the scheduler goes away or every worker is gone for :data:`NO_WORKERS_S`."""
+    from distributed import KilledWorker, as_completed
+    from distributed.client import FutureCancelledError
+
+    lost = ClusterLost(
+        f"lost the Dask scheduler at {scheduler} mid-run (killed, or its machine down?)", "start it again"
+    )
+    futures = client.map(reprocess_focus, list(jobs), pure=False, retries=0)
+    index = {fut.key: i for i, fut in enumerate(futures)}
+    results: dict[int, FocusResult] = {}
+    pending = as_completed(futures, loop=client.loop)
+    alone_since: float | None = None
+    asked = 0.0
+    while not pending.is_empty():
+        done = pending.next_batch(block=False)
+        if not done:
+            if client.status not in ("running", "connecting"):
+                raise lost
+            if time.monotonic() - asked > 1.0:  # the scheduler asked about its workers once a second
+                asked = time.monotonic()
+                if client.scheduler_info(n_workers=-1).get("workers"):
+                    alone_since = None
+                elif alone_since is None:
+                    alone_since = asked
+                elif asked - alone_since > NO_WORKERS_S:
+                    raise ClusterLost(
+                        f"every Dask worker of {scheduler} is gone, and none came back in {NO_WORKERS_S:g} s",
+                        f"start some (dask worker {scheduler} --nthreads 1)",
+                    )
+            time.sleep(0.1)
+            continue
+        for fut in done:
             i = index[fut.key]
             try:
                 r = fut.result()
-            except Exception as exc:  # KilledWorker, a worker that cannot import the station, ...
+            except FutureCancelledError as exc:
+                if getattr(exc, "reason", "") == "scheduler-connection-lost" or client.status != "running":
+                    raise lost from None
+                r = FocusResult(jobs[i], None, None, None, f"Dask cancelled the job: {_one_line(exc)}")
+            except KilledWorker as exc:
+                r = FocusResult(jobs[i], None, None, None, _killed(jobs[i], exc))
+            except Exception as exc:  # any other fault of the cluster: the job's failure, in a line
                 r = FocusResult(
                     jobs[i], None, None, None, f"Dask worker failed: {type(exc).__name__}: {_one_line(exc)}"
                 )
             results[i] = r
             on_result(r)
-        return [results[i] for i in range(len(jobs))]
-    finally:
-        client.close()
+    return [results[i] for i in range(len(jobs))]
 
 
 # ------------------------------------------------- results to the store

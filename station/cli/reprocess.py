@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     # defers cv2, numpy, yaml
     from station.reprocess import (
         ArchivedSession,
+        ClusterLost,
         SessionCollector,
         plan_jobs,
         probe_scheduler,
@@ -128,10 +129,13 @@ def run(args: argparse.Namespace) -> int:
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
         run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)  # a ReprocessError: one line
     except KeyboardInterrupt:
-        done = sum(1 for o in outcomes.values() if o.ok)
-        kept = "re-processed and stored" if not args.dry_run else "re-processed"
         raise Interrupted(
-            f"interrupted: {done} session(s) {kept} before Ctrl-C; the others are not (run it again for them)"
+            f"interrupted: {_kept(outcomes, args.dry_run)} before Ctrl-C; the others are not (run it again for them)"
+        ) from None
+    except ClusterLost as exc:  # the scheduler killed, every worker gone
+        raise HarpError(
+            f"{exc.what}: {_kept(outcomes, args.dry_run)} before it; {exc.to_do}, then run the same command for "
+            "the others"
         ) from None
     finally:
         if store is not None:
@@ -145,6 +149,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_table(doc)
     return EXIT_OK if not doc["failed"] else EXIT_ERROR
+
+
+def _kept(outcomes: dict[str, Any], dry_run: bool) -> str:
+    """``N session(s) re-processed and stored``: what a run stopped midway (Ctrl-C, a lost scheduler) kept."""
+    done = sum(1 for o in outcomes.values() if o.ok)
+    return f"{done} session(s) {'re-processed and stored' if not dry_run else 're-processed'}"
 
 
 def _open(loc: Any, dry_run: bool) -> Any:

@@ -1,0 +1,320 @@
+"""``harp reprocess --scheduler`` when the Dask cluster fails under it: real ``dask scheduler`` and ``dask worker``
+processes, each started in its own process group and killed with it whatever the test does; ``harp reprocess``
+run as a process into a real SQLite file, whose rows are counted.
+
+A worker killed mid-job is replaced and its job run again; every worker that ran a job dying is one line naming
+the session; the scheduler killed mid-run is one line saying what was stored; a worker that cannot import harp
+station is one line before any job is sent (it was a hang: each job it was sent killed it), as a port where
+something else listens is (a hang in Dask's client). In each case what was stored is whole, and running the
+command again stores the rest, each session once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.station.archive import REPO
+
+pytestmark = pytest.mark.filterwarnings("ignore")  # the test's own Dask client on a cluster killed under it
+
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])}
+"""Every process of these tests imports this checkout (the scheduler unpickles nothing of it, the workers do)."""
+
+NO_HARP = """
+import importlib.util, sys
+from pathlib import Path
+sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in str(getattr(f, "__module__", ""))]
+sys.path[:] = [p for p in sys.path if not (Path(p or ".") / "station").is_dir()]
+assert importlib.util.find_spec("station") is None
+from distributed.cli.dask_worker import main
+sys.argv[0] = "dask worker"
+main()
+"""
+"""A worker process that cannot import harp station (``python -c NO_HARP ADDRESS --no-nanny ...``): its editable
+install and any directory holding ``station`` taken off its path."""
+
+
+class Cluster:
+    """A Dask scheduler and its workers as separate process groups; :meth:`close` kills every group."""
+
+    def __init__(self, tmp: Path, env: dict[str, str] | None = None) -> None:
+        self.tmp, self.procs = tmp, []
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            self.port = s.getsockname()[1]
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.scheduler = self._start(
+            ["-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(self.port)],
+            "scheduler",
+            {**ENV, **(env or {})},
+        )
+        deadline = time.monotonic() + 120
+        while True:
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", self.port), timeout=1):
+                break
+            assert time.monotonic() < deadline and self.scheduler.poll() is None, self.log("scheduler")
+            time.sleep(0.2)
+
+    def _start(self, args: list[str], name: str, env: dict[str, str]) -> subprocess.Popen:
+        with open(self.tmp / f"{name}.log", "wb") as log:
+            p = subprocess.Popen(
+                [sys.executable, *args, "--no-dashboard"],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
+                cwd=self.tmp,
+                start_new_session=True,
+            )
+        self.procs.append(p)
+        return p
+
+    def log(self, name: str) -> str:
+        return (self.tmp / f"{name}.log").read_text(errors="replace")[-3000:]
+
+    def add_workers(self, n: int, *, harp: bool = True) -> None:
+        have = len(self.client().scheduler_info()["workers"])
+        started = []
+        for _ in range(n):
+            k = len(self.procs)
+            if harp:
+                args = ["-m", "distributed.cli.dask_worker", self.address, "--nthreads", "1"]
+                started.append((self._start(args, f"w{k}", ENV), f"w{k}"))
+            else:
+                env = {k: v for k, v in ENV.items() if k != "PYTHONPATH"}
+                args = ["-c", NO_HARP, self.address, "--nthreads", "1", "--no-nanny"]
+                started.append((self._start(args, f"w{k}", env), f"w{k}"))
+        deadline = time.monotonic() + 180
+        while len(self.client().scheduler_info(n_workers=-1)["workers"]) < have + n:
+            for p, name in started:
+                assert p.poll() is None, self.log(name)
+            assert time.monotonic() < deadline, "the workers did not join in 180 s"
+            time.sleep(0.2)
+
+    def client(self):
+        from dask.distributed import Client
+
+        if getattr(self, "_client", None) is None:
+            self._client = Client(self.address, timeout="60s", set_as_default=False)
+        return self._client
+
+    def busy_worker_pid(self, timeout: float = 120) -> int:
+        """The pid of a worker process running a job now (its nanny restarts it when it is killed)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            busy = [addr for addr, keys in self.client().processing().items() if keys]
+            if busy:
+                return self.client().run(os.getpid, workers=busy[:1])[busy[0]]
+            time.sleep(0.05)
+        raise AssertionError("no worker was running a job")
+
+    def close(self) -> None:
+        client, self._client = getattr(self, "_client", None), None
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close(timeout=5)
+        for p in self.procs:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.fixture
+def clusters(tmp_path):
+    """``make(env=None)``: a new :class:`Cluster`; every one made is killed, group by group, on every exit path."""
+    made: list[Cluster] = []
+
+    def make(env: dict[str, str] | None = None) -> Cluster:
+        d = tmp_path / f"cluster{len(made)}"
+        d.mkdir()
+        made.append(Cluster(d, env))
+        return made[-1]
+
+    try:
+        yield make
+    finally:
+        for c in made:
+            c.close()
+
+
+def _sessions(factory_archive, tmp_path, n: int) -> list[Path]:
+    out = []
+    for k in range(n):
+        shutil.copytree(factory_archive.session, tmp_path / f"s{k}")
+        out.append(tmp_path / f"s{k}")
+    return out
+
+
+def _rows(store: Path) -> tuple[int, int]:
+    """(profiles, distinct session and focus) in the SQLite store as another process writes it."""
+    try:
+        with contextlib.closing(sqlite3.connect(f"file:{store}?mode=ro", uri=True, timeout=0.1)) as con:
+            n, distinct = con.execute(
+                "SELECT count(*), count(DISTINCT session_dir || '@' || focus) FROM profiles"
+            ).fetchone()
+            return int(n), int(distinct)
+    except sqlite3.Error:
+        return 0, 0
+
+
+def _reprocess(sessions, address: str, store: Path) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "station.cli",
+        "reprocess",
+        *map(str, sessions),
+        "--scheduler",
+        address,
+        "--store",
+        str(store),
+    ]
+
+
+@contextlib.contextmanager
+def _started(argv: list[str]):
+    """``harp reprocess`` as a process in its own group, killed with its group however the test ends."""
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, start_new_session=True
+    )
+    try:
+        yield proc
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def _wait_stored(proc, store: Path, n: int, timeout: float = 180) -> None:
+    deadline = time.monotonic() + timeout
+    while _rows(store)[0] < n and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert proc.poll() is None, "harp reprocess ended before the fault could be made"
+    assert _rows(store)[0] >= n
+
+
+def _run(argv: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
+    with _started(argv) as proc:
+        out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def test_a_worker_killed_mid_job_is_replaced_and_every_session_is_stored_once(factory_archive, tmp_path, clusters):
+    cluster = clusters()
+    cluster.add_workers(2)
+    sessions, store = _sessions(factory_archive, tmp_path, 4), tmp_path / "st.sqlite"
+    with _started(_reprocess(sessions, cluster.address, store)) as proc:
+        _wait_stored(proc, store, 2)  # one session stored, three to go
+        os.kill(cluster.busy_worker_pid(), signal.SIGKILL)
+        out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0 and err == "", err
+    assert "4 session(s) re-processed, 0 failed" in out
+    assert _rows(store) == (8, 8)  # each session's two focus settings, once
+
+
+def test_every_worker_dying_on_a_job_is_one_line_naming_the_session_and_a_second_run_stores_the_rest(
+    factory_archive, tmp_path, clusters
+):
+    # was: "harp reprocess: Dask worker failed: KilledWorker: Attempted to run task 'reprocess_focus-8f…-4' on 1
+    # different workers, …" twice in a line, naming no session
+    cluster = clusters(env={"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "0"})  # the first death is the last
+    cluster.add_workers(1)
+    sessions, store = _sessions(factory_archive, tmp_path, 4), tmp_path / "st.sqlite"
+    argv = _reprocess(sessions, cluster.address, store)
+    with _started(argv) as proc:
+        _wait_stored(proc, store, 2)
+        os.kill(cluster.busy_worker_pid(), signal.SIGKILL)
+        out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2, (out, err)
+    assert "Traceback" not in err and "reprocess_focus-" not in err
+    lines = err.splitlines()
+    assert lines, out
+    named = set()
+    for line in lines:
+        m = re.match(r"harp reprocess: (\S+): focus setting #\d: every Dask worker that ran it died \(1 tried, ", line)
+        assert m, line
+        assert "run harp reprocess again for this session" in line
+        named.add(m.group(1))
+    assert named <= {str(s.resolve()) for s in sessions}
+    n, distinct = _rows(store)
+    assert n == distinct == 2 * (len(sessions) - len(named))  # the others stored whole, each once
+    again = _run(argv)  # the worker's nanny started it again
+    assert again.returncode == 0 and again.stderr == "", again.stderr
+    assert _rows(store) == (8, 8)
+
+
+def test_the_scheduler_killed_mid_run_is_one_line_saying_what_was_stored(factory_archive, tmp_path, clusters):
+    # was: a line per session of "Dask worker failed: FutureCancelledError: reprocess_focus-… cancelled for reason:
+    # scheduler-connection-lost. …", then the Dask client's logged traceback
+    cluster = clusters()
+    cluster.add_workers(2)
+    sessions, store = _sessions(factory_archive, tmp_path, 6), tmp_path / "st.sqlite"
+    with _started(_reprocess(sessions, cluster.address, store)) as proc:
+        _wait_stored(proc, store, 2)
+        os.killpg(cluster.scheduler.pid, signal.SIGKILL)
+        out, err = proc.communicate(timeout=180)  # bounded: not a wait for a scheduler that will not come back
+    assert proc.returncode == 2, (out, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    m = re.match(
+        rf"harp reprocess: lost the Dask scheduler at {cluster.address} mid-run \(killed, or its machine down\?\): "
+        r"(\d+) session\(s\) re-processed and stored before it; start it again, then run the same command for the "
+        r"others$",
+        err.strip(),
+    )
+    assert m, err
+    assert _rows(store) == (2 * int(m.group(1)),) * 2 and int(m.group(1)) >= 1
+    other = clusters()
+    other.add_workers(2)
+    again = _run(_reprocess(sessions, other.address, store))
+    assert again.returncode == 0 and again.stderr == "", again.stderr
+    assert _rows(store) == (12, 12)
+
+
+def test_a_worker_without_harp_station_is_one_line_before_any_job(factory_archive, tmp_path, clusters):
+    # was: a hang (each job sent killed the worker as it unpickled it, "No module named 'station'" in its log only)
+    cluster = clusters()
+    cluster.add_workers(1, harp=False)
+    store = tmp_path / "st.sqlite"
+    with _started(_reprocess([factory_archive.session], cluster.address, store)) as proc:
+        out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2, (out, err)
+    assert re.fullmatch(
+        r"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ cannot import harp station \(ModuleNotFoundError: No "
+        r"module named 'station'\); run every worker with harp station \S+ installed, as this command\n",
+        err,
+    ), err
+    assert _rows(store) == (0, 0)
+
+
+def test_a_port_where_something_else_listens_is_one_line_in_bounded_time_and_creates_no_store(
+    factory_archive, tmp_path
+):
+    # was: a hang in Dask's Client, which waits for the scheduler's handshake forever (here: a socket that accepts
+    # and says nothing, as an HTTP server does, e.g. the scheduler's dashboard at 8787 given for 8786)
+    store = tmp_path / "st.sqlite"
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        t0 = time.monotonic()
+        done = _run(_reprocess([factory_archive.session], address, store), timeout=120)
+        took = time.monotonic() - t0
+    assert done.returncode == 2 and done.stdout == "", done
+    assert done.stderr == (
+        f"harp reprocess: {address} is not a Dask scheduler (something listens there, but it sent no Dask handshake "
+        "in 10 s); give the scheduler's port (8786 unless it was started with another; 8787 is its dashboard)\n"
+    )
+    assert took < 100
+    assert not store.exists()
