@@ -242,7 +242,7 @@ def reprocess_focus(job: FocusJob) -> FocusResult:
     worker = f"{socket.gethostname()}:{os.getpid()}"
     try:
         with _one_thread():
-            focus, profile, old = _reprocess(job)
+            focus, profile, old = _reprocess(job, worker)
     except ValueError as exc:
         return FocusResult(job, None, None, None, _one_line(exc), time.perf_counter() - t0, worker)
     except Exception as exc:  # a bug or an unforeseen fault: said in one line, the other jobs go on
@@ -256,7 +256,12 @@ def _spec(job: FocusJob, config: Any) -> Any:
     return config.pipeline.spec if job.spec is None else parse_choice(job.spec)
 
 
-def _reprocess(job: FocusJob) -> tuple[float, Profile, OldProfile]:
+def _reprocess(job: FocusJob, worker: str) -> tuple[float, Profile, OldProfile]:
+    if not os.path.isdir(job.session_dir):  # it was there when the jobs were planned, where the command runs
+        raise ValueError(
+            f"{job.session_dir}: no such directory where the job ran ({worker}); every worker must see the "
+            "session directories at the same path (a shared file system) until harp reprocess ends"
+        )
     s = ArchivedSession(job.session_dir)
     cfg = s.config
     if job.field is not None:  # the profile records the pipeline it was fitted with
@@ -578,7 +583,7 @@ def finish_session(session_dir: str, results: Sequence[FocusResult], store: Any 
     with the provenance of module docstring; ``store``: where the old profiles are looked up."""
     failures = [r.failure for r in results if r.failure is not None]
     if failures:
-        return SessionOutcome(session_dir, tuple(results), "; ".join(failures))
+        return SessionOutcome(session_dir, tuple(results), "; ".join(dict.fromkeys(failures)))  # each once
     versions = _software_versions()
     profiles = []
     old_ids = []

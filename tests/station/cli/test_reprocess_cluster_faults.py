@@ -5,8 +5,9 @@ run as a process into a real SQLite file, whose rows are counted.
 A worker killed mid-job is replaced and its job run again; every worker that ran a job dying is one line naming
 the session; the scheduler killed mid-run is one line saying what was stored; a worker that cannot import harp
 station is one line before any job is sent (it was a hang: each job it was sent killed it), as a port where
-something else listens is (a hang in Dask's client). In each case what was stored is whole, and running the
-command again stores the rest, each session once.
+something else listens is (a hang in Dask's client); a session directory gone before its job ran is one line
+saying that the workers must see it. In each case what was stored is whole, and running the command again
+stores the rest, each session once.
 """
 
 from __future__ import annotations
@@ -296,6 +297,26 @@ def test_a_worker_without_harp_station_is_one_line_before_any_job(factory_archiv
         err,
     ), err
     assert _rows(store) == (0, 0)
+
+
+def test_a_session_directory_gone_before_its_job_ran_is_one_line_and_the_others_are_stored(
+    factory_archive, tmp_path, clusters
+):
+    # was: "harp reprocess: DIR: not a session directory (no session.json)" of a session the command had planned
+    cluster = clusters()
+    cluster.add_workers(1)  # one worker, one thread: the jobs run in the order given, the last session's last
+    sessions, store = _sessions(factory_archive, tmp_path, 5), tmp_path / "st.sqlite"
+    gone = sessions[-1].resolve()
+    with _started(_reprocess(sessions, cluster.address, store)) as proc:
+        _wait_stored(proc, store, 2)
+        gone.rename(tmp_path / "elsewhere")  # as a directory the workers' file system does not hold
+        out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2, (out, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"harp reprocess: {gone}: no such directory where the job ran (")
+    assert "every worker must see the session directories at the same path (a shared file system)" in err
+    assert "4 session(s) re-processed, 1 failed" in out
+    assert _rows(store) == (8, 8)
 
 
 def test_a_port_where_something_else_listens_is_one_line_in_bounded_time_and_creates_no_store(
