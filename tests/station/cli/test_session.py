@@ -32,9 +32,12 @@ W, H = 640, 480
 N_FOCUS, N_ORI, N_FRAMES = 2, 4, 2
 
 
-def small_config(dirpath: Path, focus=(0.0, 1.0), frames=N_FRAMES, **capture) -> Path:
-    """The demo station at test size: 2 focus x 4 orientations x 2 frames, 640x480."""
+def small_config(dirpath: Path, focus=(0.0, 1.0), frames=N_FRAMES, turntable: dict | None = None, **capture) -> Path:
+    """The demo station at test size: 2 focus x 4 orientations x 2 frames, 640x480; ``turntable`` replaces its
+    turntable section (e.g. the GRBL emulator's)."""
     d = yaml.safe_load(DEMO.read_text())
+    if turntable is not None:
+        d["station"]["turntable"] = turntable
     d["station"]["camera"].update(width=W, height=H, spacing_px=40.0)
     d["focus"]["settings"] = list(focus)
     d["capture"]["orientations_deg"] = [0, 45, 90, 135]
@@ -325,27 +328,33 @@ def test_emulator_and_camera_faults_are_retried(tmp_path):
     assert n_frames == N_ORI
 
 
+GRBL_EMULATOR = {"driver": "grbl", "port": "emulator"}
+"""A station's turntable section: the GRBL emulator on a pty."""
+
+
+def before_the_first_move_to(turntable, degrees: float, action) -> None:
+    """Do ``action()`` once, just before ``turntable``'s first move to ``degrees`` (a fault the emulator meets on
+    that move)."""
+    move_to, done = turntable.move_to, []
+
+    def moving(target, timeout=None):
+        if target == degrees and not done:
+            done.append(target)
+            action()
+        return move_to(target, timeout=timeout)
+
+    turntable.move_to = moving
+
+
 def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_path):
     """The GRBL board restarts between two moves (a power dip, a USB reset): the driver reads its banner as a
     DeviceFault, the session recovers the controller, homes it and goes on; every shot taken at its angle.
     Before, the next move was refused with error:9 and the session stopped ('device refused')."""
-    path = small_config(tmp_path, focus=(0.5,), frames=1)
-    d = yaml.safe_load(path.read_text())
-    d["station"]["turntable"] = {"driver": "grbl", "port": "emulator"}
-    path.write_text(yaml.safe_dump(d))
-    cfg = load_config(path)
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1, turntable=GRBL_EMULATOR))
     with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="g") as s:
         sim.camera.open()
         sim.turntable.open()
-        move_to, restarts = sim.turntable.move_to, []
-
-        def restarting_before_90(degrees, timeout=None):
-            if degrees == 90 and not restarts:
-                restarts.append(degrees)
-                sim.emulator.emulator.restart()
-            return move_to(degrees, timeout=timeout)
-
-        sim.turntable.move_to = restarting_before_90
+        before_the_first_move_to(sim.turntable, 90, sim.emulator.emulator.restart)
         result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
         faults = [(r.what, r.error) for r in s.of_type(Fault)]
         stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
@@ -359,23 +368,11 @@ def test_a_grbl_safety_door_left_open_stops_the_session_with_one_line_then_it_re
     wait for the move timeout), the session recovers the controller and tries again, then stops with one line
     saying to close the door and resume; shut, the resumed session (the driver opened again, as by
     ``harp session resume``) takes the rest, every shot at its angle."""
-    path = small_config(tmp_path, focus=(0.5,), frames=1, move_timeout_s=60.0)
-    d = yaml.safe_load(path.read_text())
-    d["station"]["turntable"] = {"driver": "grbl", "port": "emulator"}
-    path.write_text(yaml.safe_dump(d))
-    cfg = load_config(path)
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1, turntable=GRBL_EMULATOR, move_timeout_s=60.0))
     with simulated_devices(cfg) as sim:
         sim.camera.open()
         sim.turntable.open()
-        move_to, opened = sim.turntable.move_to, []
-
-        def door_opening_on_the_way_to_90(degrees, timeout=None):
-            if degrees == 90 and not opened:
-                opened.append(degrees)
-                sim.emulator.emulator.inject("door", at=0.5)
-            return move_to(degrees, timeout=timeout)
-
-        sim.turntable.move_to = door_opening_on_the_way_to_90
+        before_the_first_move_to(sim.turntable, 90, lambda: sim.emulator.emulator.inject("door", at=0.5))
         t0 = time.monotonic()
         with SessionDir.create(tmp_path, cfg, name="d") as s:
             result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
