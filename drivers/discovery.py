@@ -36,13 +36,9 @@ from typing import Any
 
 from drivers.aravis_camera import aravis_module
 from drivers.errors import DriverError
-from drivers.frames import V4L2_BAYER_FORMATS
+from drivers.v4l2_camera import PIXEL_FORMATS as V4L2_FORMATS
 from drivers.v4l2_camera import fourcc_name
 
-#: grey formats in the order a discovered V4L2 camera's snippet prefers them (no conversion loss first)
-V4L2_FORMAT_PREFERENCE = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_BAYER_FORMATS)
-"""The V4L2 formats a found camera's configuration snippet may name, best first: grey, then a raw Bayer mosaic
-(a colour sensor that offers nothing else)."""
 PROBE_BAUDRATE = 115200
 
 _ZABER_REPLY = re.compile(rb"^@(\d+) (\d+)(?: \d+)? (OK|RJ) (IDLE|BUSY) ")
@@ -113,7 +109,7 @@ def _describe_v4l2(path: str) -> FoundDevice | None:
         if Capability.VIDEO_CAPTURE not in caps or Capability.STREAMING not in caps:
             return None  # a metadata or output node, not a camera
         offered = [fourcc_name(int(f.pixel_format)) for f in info.formats if f.type == BufferType.VIDEO_CAPTURE]
-        usable = [f for f in V4L2_FORMAT_PREFERENCE if f in offered]
+        usable = [f for f in V4L2_FORMATS if f in offered]
         fmt = dev.get_format(BufferType.VIDEO_CAPTURE)
         width, height = int(fmt.width), int(fmt.height)
         try:
@@ -134,8 +130,7 @@ def _describe_v4l2(path: str) -> FoundDevice | None:
             config.update(pixel_format=usable[0], width=width, height=height)
         else:
             problem = (
-                f"offers no format harp station reads ({details['formats']}); supported: "
-                f"{', '.join(V4L2_FORMAT_PREFERENCE)}"
+                f"offers no format harp station reads ({details['formats']}); supported: {', '.join(V4L2_FORMATS)}"
             )
         return FoundDevice("camera", "v4l2", path, f"{info.card} ({info.bus_info})", config, details, problem)
     except OSError as exc:

@@ -71,7 +71,8 @@ from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
 PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_BAYER_FORMATS)
-"""The pixel formats (V4L2 fourccs) a frame is read in: grey, or a raw Bayer mosaic."""
+"""The pixel formats (V4L2 fourccs) a frame is read in, best first (what ``harp devices`` proposes): grey, then a
+raw Bayer mosaic (a colour sensor that offers nothing else)."""
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
 _MANUAL_EXPOSURE = 1  # V4L2_EXPOSURE_MANUAL
 
