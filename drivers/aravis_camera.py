@@ -58,7 +58,9 @@ Unknown keys raise ``ValueError`` naming the key.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import os
 import tempfile
 import threading
 import time
@@ -143,6 +145,11 @@ def _release_in_background(doomed: list[Any]) -> None:
     threading.Thread(target=doomed.clear, name="aravis-release", daemon=True).start()
 
 
+def _remove_quietly(path: str) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
 def _select_fake_xml(Aravis: Any, path: str | None) -> None:
     """Make the next ``Fake_*`` device use ``path`` (or Aravis' embedded XML when None).
 
@@ -160,6 +167,7 @@ def _select_fake_xml(Aravis: Any, path: str | None) -> None:
             with tempfile.NamedTemporaryFile("wb", prefix="harp-arv-fake-", suffix=".xml", delete=False) as fh:
                 fh.write(data)
             _FAKE_XML_STATE["embedded"] = fh.name
+            atexit.register(_remove_quietly, fh.name)  # one per process, gone when it ends
         path = _FAKE_XML_STATE["embedded"]
     else:
         path = str(Path(path).resolve())

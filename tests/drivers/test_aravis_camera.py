@@ -19,8 +19,10 @@ reaching the sensor) exactly.
 from __future__ import annotations
 
 import math
+import os
 import time
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -316,3 +318,31 @@ def test_a_grey_camera_frame_names_no_pattern_and_a_bayer_format_the_camera_lack
         AravisCamera.from_config(
             {"driver": "aravis", "device": "Fake_1", "pixel_format": "BayerGR8", "roi": [0, 0, 63, 48]}
         )
+
+
+def test_the_embedded_xml_written_to_switch_back_is_removed_when_the_process_ends(tmp_path):
+    """Going back from our XML to Aravis' embedded one writes the embedded XML to a temporary file (Aravis
+    cannot be reset to it otherwise); the process that wrote it removes it when it ends: a test suite or a
+    station that opens both kinds of fake leaves nothing in the temporary directory."""
+    import subprocess
+    import sys
+
+    script = (
+        "from drivers.aravis_camera import AravisCamera, FAKE_FOCUS_XML\n"
+        "import glob, tempfile\n"
+        "for xml in (str(FAKE_FOCUS_XML), None):\n"
+        "    cfg = {'driver': 'aravis', 'device': 'Fake_1', 'roi': [0, 0, 64, 48]}\n"
+        "    cfg.update({'fake_genicam_xml': xml} if xml else {})\n"
+        "    with AravisCamera.from_config(cfg) as cam:\n"
+        "        cam.capture(timeout=2.0)\n"
+        "        print(cam.exposure_feature)\n"
+        "print(len(glob.glob(tempfile.gettempdir() + '/harp-arv-fake-*.xml')))\n"
+    )
+    root = str(Path(drivers.__file__).resolve().parents[1])
+    env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": root}
+    out = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=60, check=True
+    ).stdout.split()
+    # our XML's SFNC name, then the embedded XML's older one: the switch back really happened, from one file
+    assert out == ["ExposureTime", "ExposureTimeAbs", "1"]
+    assert list(tmp_path.glob("harp-arv-fake-*.xml")) == []
