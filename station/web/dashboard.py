@@ -60,9 +60,35 @@ def _page_error(request: Request, status: int, message: str) -> Response:
     return render(request, "dashboard_error.html", status_code=status, message=" ".join(message.split()))
 
 
+STORE_ANSWER_S = 30.0
+"""How long a page waits for the store's answer before it says so (503): a server that stopped answering
+without closing its connections (frozen, or cut off by the network) would otherwise hold the request, and
+the thread under it, until it answers again."""
+
+
 async def _call(fn: Any, *args: Any) -> Any:
-    """Run a store read on a worker thread (the store's calls block)."""
+    """Run ``fn(*args)`` on a worker thread (a plot or an export)."""
     return await run_in_threadpool(fn, *args)
+
+
+async def _read(request: Request, fn: Any, *args: Any) -> Any:
+    """``fn(store, *args)``, a read of the request's store, on a worker thread (the store's calls block); a
+    :class:`~station.store.StoreError` (503) when it does not answer within :data:`STORE_ANSWER_S` (the thread
+    is left to finish, or to fail, when the server answers again)."""
+    import anyio.to_thread
+
+    store = _store(request)
+    with anyio.move_on_after(STORE_ANSWER_S):
+        return await anyio.to_thread.run_sync(fn, store, *args, abandon_on_cancel=True)
+    raise StoreError(
+        f"{store.location}: the store did not answer within {STORE_ANSWER_S:g} s (its server stopped answering, "
+        "or the network to it is down?); the dashboard serves again once it answers",
+        kind="unreachable",
+    )
+
+
+def _profile(store: Any, profile_id: int) -> Any:
+    return store.profile(profile_id)
 
 
 def _lens_args(request: Request) -> tuple[str, str | None, str | None]:
@@ -81,7 +107,7 @@ def _store_error(exc: Exception) -> str | None:
 # ------------------------------------------------------------------- JSON
 async def _lenses(request: Request) -> dict[str, Any]:
     """The lens list of the request's filters (``?from=&to=&station=``); BadQuery for a bad one."""
-    return dict(await _call(data.lenses_doc, _store(request), data.window_of(request.query_params)))
+    return dict(await _read(request, data.lenses_doc, data.window_of(request.query_params)))
 
 
 async def api_lenses(request: Request) -> Response:
@@ -107,14 +133,14 @@ async def lenses_csv(request: Request) -> Response:
 
 async def api_lens(request: Request) -> Response:
     try:
-        return JSONResponse(await _call(data.lens_doc, _store(request), *_lens_args(request)))
+        return JSONResponse(await _read(request, data.lens_doc, *_lens_args(request)))
     except LookupError as exc:
         return _err(_lookup_status(exc), str(exc))
 
 
 async def api_profile(request: Request) -> Response:
     try:
-        return JSONResponse(await _call(data.profile_doc, _store(request), request.path_params["profile_id"]))
+        return JSONResponse(await _read(request, data.profile_doc, request.path_params["profile_id"]))
     except LookupError as exc:
         return _err(_lookup_status(exc), str(exc))
 
@@ -124,7 +150,7 @@ async def api_model(request: Request) -> Response:
     if not q.get("maker") or not q.get("model"):
         return _err(400, "give the lens model as ?maker=...&model=...")
     try:
-        return JSONResponse(await _call(data.model_doc, _store(request), q["maker"], q["model"]))
+        return JSONResponse(await _read(request, data.model_doc, q["maker"], q["model"]))
     except LookupError as exc:
         return _err(404, str(exc))
 
@@ -150,7 +176,7 @@ async def index(request: Request) -> Response:
 
 async def lens_page(request: Request) -> Response:
     try:
-        doc = await _call(data.lens_doc, _store(request), *_lens_args(request))
+        doc = await _read(request, data.lens_doc, *_lens_args(request))
     except LookupError as exc:
         return _page_error(request, _lookup_status(exc), str(exc))
     return render(request, "dashboard_lens.html", doc=doc)
@@ -191,7 +217,7 @@ async def model_page(request: Request) -> Response:
     if not q.get("maker") or not q.get("model"):
         return _page_error(request, 400, "give the lens model as ?maker=...&model=...")
     try:
-        doc = await _call(data.model_doc, _store(request), q["maker"], q["model"])
+        doc = await _read(request, data.model_doc, q["maker"], q["model"])
     except LookupError as exc:
         return _page_error(request, 404, str(exc))
     bars = verdict_bars([(d["day"], d["passed"], d["failed"], d["unjudged"]) for d in doc["days"]])
@@ -231,10 +257,9 @@ def _export_refused(request: Request, profile: Any) -> Response | None:
 
 def _file_endpoint(what: str) -> Any:
     async def endpoint(request: Request) -> Response:
-        store = _store(request)
         files: ProfileFiles = request.app.state.files
         pid = request.path_params["profile_id"]
-        profile = await _call(store.profile, pid)
+        profile = await _read(request, _profile, pid)
         if profile is None:
             return _err(404, f"no profile #{pid} in the store")
         try:

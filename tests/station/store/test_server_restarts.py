@@ -227,6 +227,33 @@ def test_the_dashboard_says_the_store_is_down_and_serves_again_once_it_is_back(p
         assert status == 200 and len(__import__("json").loads(body)["lenses"]) == 1
 
 
+def test_the_dashboard_says_a_store_that_stopped_answering_does_not_answer_and_serves_again_after(pg, url, monkeypatch):
+    """A server that stops answering without closing its connections (frozen; a machine cut off by the network
+    looks the same to the dashboard): each page says so (503) within the dashboard's bound instead of hanging,
+    and the dashboard serves again once the server answers."""
+    import json
+
+    from station.web import dashboard, start
+    from station.web.dashboard import dashboard_app
+
+    monkeypatch.setattr(dashboard, "STORE_ANSWER_S", 2.0)
+    with ProfileStore(url) as st:
+        put(st, session="a")
+    with ProfileStore(url, create=False) as st, start(dashboard_app(st)) as srv:
+        base = srv.base.rstrip("/")
+        status, body, _ = _get(base + "/api/lenses")
+        assert status == 200 and len(json.loads(body)["lenses"]) == 1
+        pid = st.profiles()[0].id
+        with pg.frozen():
+            for path in ("/api/lenses", "/", f"/api/profiles/{pid}", f"/profiles/{pid}/export/opencv"):
+                status, body, took = _get(base + path)
+                assert status == 503 and took < 10.0, (path, status, took, body[:300])
+                assert str(st.location) in body and "did not answer within 2 s" in body and PASSWORD not in body
+                assert "Traceback" not in body
+        status, body, _ = _get(base + "/api/lenses")
+        assert status == 200 and len(json.loads(body)["lenses"]) == 1
+
+
 # -------------------------------------------------------------- the connection lost during a write
 def test_a_write_whose_connection_is_ended_while_it_waits_is_tried_again_and_stored_once(url, admin, monkeypatch):
     monkeypatch.setattr(store_engine, "WRITE_TRY_MS", 60000)  # one long lock wait: the backend ended in it
