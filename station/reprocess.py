@@ -29,12 +29,13 @@ instead of adding another.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -325,13 +326,13 @@ def run_jobs(
     jobs: Sequence[FocusJob],
     *,
     workers: int = 1,
-    scheduler: str | None = None,
+    scheduler: str | DaskCluster | None = None,
     on_result: Callable[[FocusResult], None] = lambda _r: None,
 ) -> list[FocusResult]:
     """Run ``jobs`` and return their results in the jobs' order.
 
-    ``scheduler`` (``tcp://HOST:PORT``): on that Dask cluster; else on a local process pool of
-    ``workers`` processes (``workers <= 1``: in this process). ``on_result`` is called as each
+    ``scheduler`` (``tcp://HOST:PORT``, or a cluster :func:`dask_cluster` connected and checked): on that Dask
+    cluster; else on a local process pool of ``workers`` processes (``workers <= 1``: in this process). ``on_result`` is called as each
     result arrives (in the order they finish). A local worker that dies is that job's failure, as a job every
     Dask worker that ran it died of is (Dask runs a killed worker's jobs again elsewhere first). A scheduler
     that cannot be reached, is not one, has no worker or a worker without this version of harp station raises
@@ -340,8 +341,11 @@ def run_jobs(
     """
     if not jobs:
         return []
+    if isinstance(scheduler, DaskCluster):
+        return _gather(scheduler.client, jobs, scheduler.scheduler, on_result)
     if scheduler is not None:
-        return _run_dask(jobs, scheduler, on_result)
+        with dask_cluster(scheduler) as cluster:
+            return _gather(cluster.client, jobs, scheduler, on_result)
     if workers <= 1:
         out = []
         for j in jobs:
@@ -455,7 +459,20 @@ def _check_workers(client: Any, scheduler: str) -> None:
             )
 
 
-def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[FocusResult], None]) -> list[FocusResult]:
+@dataclass(frozen=True)
+class DaskCluster:
+    """A connected Dask ``client`` of the scheduler at ``scheduler``, its workers checked (:func:`dask_cluster`)."""
+
+    client: Any
+    scheduler: str
+
+
+@contextlib.contextmanager
+def dask_cluster(scheduler: str) -> Iterator[DaskCluster]:
+    """Connect to the Dask scheduler at ``scheduler`` (``tcp://HOST:PORT``) and check it can run the jobs; the
+    client is closed when the block ends. Refused (:class:`ReprocessError`, one line, before any job is sent,
+    so that a command can ask before it opens its store): a scheduler that cannot be reached or is not one, none
+    of whose workers joins within :data:`NO_WORKERS_S`, or a worker without this version of harp station."""
     probe_scheduler(scheduler)
     from dask.distributed import Client
 
@@ -466,7 +483,7 @@ def _run_dask(jobs: Sequence[FocusJob], scheduler: str, on_result: Callable[[Foc
         raise ReprocessError(f"cannot reach the Dask scheduler at {scheduler}: {_one_line(exc)}") from None
     try:
         _check_workers(client, scheduler)
-        return _gather(client, jobs, scheduler, on_result)
+        yield DaskCluster(client, scheduler)
     finally:
         client.close(timeout=10)
 

@@ -33,6 +33,7 @@ reported are stored).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import time
@@ -82,14 +83,7 @@ def _error(msg: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # defers cv2, numpy, yaml
-    from station.reprocess import (
-        ArchivedSession,
-        ClusterLost,
-        SessionCollector,
-        plan_jobs,
-        probe_scheduler,
-        run_jobs,
-    )
+    from station.reprocess import dask_cluster
 
     if args.workers is not None and args.workers < 1:
         raise HarpError("--workers must be at least 1")
@@ -105,8 +99,16 @@ def run(args: argparse.Namespace) -> int:
         what = "a file, not a session directory" if missing[0].exists() else "no such session directory"
         raise HarpError(f"{missing[0]}: {what}")
 
-    if args.scheduler is not None:  # before the store is opened: a typo creates no store
-        probe_scheduler(args.scheduler)  # a ReprocessError: one line (station.cli.main)
+    with contextlib.ExitStack() as stack:
+        # the cluster connected and its workers checked before the store is opened: a typo, a cluster without
+        # workers or with other ones create no store (a ReprocessError: one line, station.cli.main)
+        cluster = stack.enter_context(dask_cluster(args.scheduler)) if args.scheduler is not None else None
+        return _run(args, cluster)
+
+
+def _run(args: argparse.Namespace, cluster: Any) -> int:
+    # defers cv2, numpy, yaml
+    from station.reprocess import ArchivedSession, ClusterLost, SessionCollector, plan_jobs, run_jobs
 
     jobs, failed = plan_jobs(args.sessions, args.model, args.field)
     for msg in failed.values():
@@ -127,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
 
         workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-        run_jobs(jobs, workers=workers, scheduler=args.scheduler, on_result=collect)  # a ReprocessError: one line
+        run_jobs(jobs, workers=workers, scheduler=cluster, on_result=collect)  # a ReprocessError: one line
     except KeyboardInterrupt:
         raise Interrupted(
             f"interrupted: {_kept(outcomes, args.dry_run)} before Ctrl-C; the others are not (run it again for them)"
