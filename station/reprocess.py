@@ -416,6 +416,33 @@ can run it): the version of harp station it runs, or the ImportError it meets (a
 fails to unpickle, and the worker dies of it, again and again)."""
 
 
+_DIGEST_CHECK = "__import__('station.reprocess', fromlist=['code_digest']).code_digest()"
+"""Evaluated on each Dask worker that runs this version: :func:`code_digest` of the code it runs."""
+
+CODE_PACKAGES = ("pipeline", "station", "drivers")
+"""The packages whose files make the code a profile is computed by (:func:`code_digest`)."""
+
+
+def code_digest() -> str:
+    """The SHA-256 (hex) of the Python files of :data:`CODE_PACKAGES` as this process runs them (their paths inside
+    the package and their bytes): two processes with the same digest compute the same profiles, whether they run
+    a checkout or an installed wheel of it (data files, which a wheel may hold fewer of, are left out). A checkout
+    changed but not released keeps its version number, not its digest (some 20 ms)."""
+    import hashlib
+    import importlib.util
+
+    h = hashlib.sha256()
+    for name in CODE_PACKAGES:
+        spec = importlib.util.find_spec(name)
+        tops = spec.submodule_search_locations if spec is not None else None
+        for top in tops or ():
+            root = Path(top)
+            for path in sorted(root.rglob("*.py")):
+                h.update(f"{name}/{path.relative_to(root).as_posix()}".encode() + b"\0")
+                h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 class ClusterLost(ReprocessError):
     """The Dask cluster went away mid-run (its scheduler killed, every worker gone): the jobs not finished are
     lost. ``what`` happened and what ``to_do`` before running the command again for them."""
@@ -456,6 +483,15 @@ def _check_workers(client: Any, scheduler: str) -> None:
             raise ReprocessError(
                 f"Dask worker {addr} runs harp station {got}, this command {__version__}; "
                 "run the same version on every worker (its profiles would be another version's)"
+            )
+    ours = code_digest()
+    digests = client.run(eval, _DIGEST_CHECK, on_error="return")
+    for addr, got in sorted(digests.items()):
+        if got != ours:
+            raise ReprocessError(
+                f"Dask worker {addr} runs other code than this command under the same version {__version__} (its "
+                "files of harp station differ: another checkout, or one changed since); run every worker with the "
+                "same code as this command (its profiles would not be this code's)"
             )
 
 

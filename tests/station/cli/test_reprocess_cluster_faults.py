@@ -85,14 +85,17 @@ class Cluster:
     def log(self, name: str) -> str:
         return (self.tmp / f"{name}.log").read_text(errors="replace")[-3000:]
 
-    def add_workers(self, n: int, *, harp: bool = True) -> None:
+    def add_workers(self, n: int, *, harp: bool = True, code: Path | None = None) -> None:
+        """``n`` workers: with this checkout on their path, without harp station (``harp=False``), or with the
+        packages under ``code`` first on their path."""
         have = len(self.client().scheduler_info()["workers"])
         started = []
         for _ in range(n):
             k = len(self.procs)
             if harp:
                 args = ["-m", "distributed.cli.dask_worker", self.address, "--nthreads", "1"]
-                started.append((self._start(args, f"w{k}", ENV), f"w{k}"))
+                env = ENV if code is None else {**ENV, "PYTHONPATH": os.pathsep.join([str(code), ENV["PYTHONPATH"]])}
+                started.append((self._start(args, f"w{k}", env), f"w{k}"))
             else:
                 env = {k: v for k, v in ENV.items() if k != "PYTHONPATH"}
                 args = ["-c", NO_HARP, self.address, "--nthreads", "1", "--no-nanny"]
@@ -297,6 +300,33 @@ def test_a_worker_without_harp_station_is_one_line_before_any_job(factory_archiv
         err,
     ), err
     assert not store.exists()  # refused before the store was opened: no empty store left behind
+
+
+def test_a_worker_running_other_code_under_the_same_version_is_one_line_before_any_job(
+    factory_archive, tmp_path, clusters
+):
+    # was: undetected (the worker check compared version numbers only): the profiles stored would have been
+    # another checkout's, under this one's version
+    other = tmp_path / "other-checkout"
+    for package in ("pipeline", "station", "drivers"):
+        shutil.copytree(REPO / package, other / package, ignore=shutil.ignore_patterns("__pycache__"))
+    with open(other / "pipeline" / "fit.py", "a") as fh:
+        fh.write("\nCHANGED_SINCE = True  # a checkout changed after the release\n")
+    cluster = clusters()
+    cluster.add_workers(1, code=other)
+    assert cluster.client().run(eval, "__import__('pipeline.fit', fromlist=['x']).__file__").popitem()[1] == str(
+        other / "pipeline" / "fit.py"
+    )  # the worker does run the copy
+    store = tmp_path / "st.sqlite"
+    done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
+    assert done.returncode == 2 and done.stdout == "", done
+    assert re.fullmatch(
+        r"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ runs other code than this command under the same "
+        r"version \S+ \(its files of harp station differ: another checkout, or one changed since\); run every "
+        r"worker with the same code as this command \(its profiles would not be this code's\)\n",
+        done.stderr,
+    ), done.stderr
+    assert not store.exists()
 
 
 def test_a_session_directory_gone_before_its_job_ran_is_one_line_and_the_others_are_stored(
