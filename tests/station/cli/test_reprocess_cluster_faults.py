@@ -4,7 +4,8 @@ run as a process into a real SQLite file, whose rows are counted.
 
 A worker killed mid-job is replaced and its job run again; every worker that ran a job dying is one line naming
 the session; the scheduler killed mid-run is one line saying what was stored; a worker that cannot import harp
-station is one line before any job is sent (it was a hang: each job it was sent killed it), as a port where
+station, or runs other code under the same version, is one line before any job is sent and before the store is
+opened (it was a hang: each job it was sent killed it; other code went undetected), as a port where
 something else listens is (a hang in Dask's client); a session directory gone before its job ran is one line
 saying that the workers must see it. In each case what was stored is whole, and running the command again
 stores the rest, each session once.
