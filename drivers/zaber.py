@@ -162,6 +162,16 @@ SETTINGS: dict[str, Setting] = {
 _CONFIG_KEYS = {"driver", *SETTINGS}
 
 
+KEPT_LINES = 100
+"""How many alert lines, info lines and late replies a :class:`ZaberAxis` keeps of each (the most recent): a
+connection held for weeks does not grow without bound."""
+
+
+def _keep(lines: list[str], text: str) -> None:
+    lines.append(text)
+    del lines[:-KEPT_LINES]
+
+
 def describe_flag(flag: str) -> str:
     return f"{flag} ({WARNING_FLAGS.get(flag, 'unknown warning')})"
 
@@ -285,9 +295,11 @@ class ZaberAxis:
         self.tolerance = int(tolerance_microsteps)
         self.name = name or f"zaber {port} device {device} axis {axis}"
         self.transport = SerialTransport(port, baudrate, name=self.name)
-        self.alerts: list[str] = []  # alert lines seen (most recent last)
+        # the last KEPT_LINES of each, most recent last: alert lines, info lines, and replies that answered no
+        # command waiting (late ones)
+        self.alerts: list[str] = []
         self.infos: list[str] = []
-        self.dropped: list[str] = []  # replies that answered no command waiting (late ones), most recent last
+        self.dropped: list[str] = []
         self._ids = MessageIds()
         self._lock = threading.RLock()
         self._target: int | None = None
@@ -378,10 +390,10 @@ class ZaberAxis:
                 text,
             )
         if _ALERT.match(text):
-            self.alerts.append(text)
+            _keep(self.alerts, text)
             return None
         if _INFO.match(text):
-            self.infos.append(text)
+            _keep(self.infos, text)
             return None
         raise ProtocolError(f"{self.name}: not a Zaber ASCII message: {line!r}")
 
@@ -406,7 +418,7 @@ class ZaberAxis:
                     except ProtocolError:
                         continue  # leftovers of an earlier failure
                     if late is not None:
-                        self.dropped.append(late.raw)
+                        _keep(self.dropped, late.raw)
             self.transport.write(data)
             deadline = time.monotonic() + self.reply_timeout
             while True:
@@ -424,7 +436,7 @@ class ZaberAxis:
                         f"{self.name}: reply from device {reply.device}, expected {self.device}: {reply.raw!r}"
                     )
                 if reply.message_id != message_id:  # a late reply to an earlier command
-                    self.dropped.append(reply.raw)
+                    _keep(self.dropped, reply.raw)
                     continue
                 return reply
 

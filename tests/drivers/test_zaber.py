@@ -74,6 +74,20 @@ def test_checksummed_replies_and_info_and_alert_lines_are_understood():
             assert tt.alerts == ["!01 1 IDLE --"] and tt.infos == ["#01 0 an info line"]
 
 
+def test_a_long_connection_keeps_only_the_most_recent_alert_and_info_lines_and_late_replies():
+    from drivers.zaber import KEPT_LINES
+
+    script = [(b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"), *LIMITS]
+    with ScriptedDevice(script, name="zaber") as dev:
+        with driver(dev.port) as tt:
+            for k in range(KEPT_LINES + 150):
+                assert tt.parse_line(f"!01 1 IDLE -- {k}".encode()) is None
+                assert tt.parse_line(f"#01 0 info {k}".encode()) is None
+            assert len(tt.alerts) == len(tt.infos) == KEPT_LINES == 100
+            assert tt.alerts[0] == "!01 1 IDLE -- 150" and tt.alerts[-1] == f"!01 1 IDLE -- {KEPT_LINES + 149}"
+            assert tt.infos[-1] == f"#01 0 info {KEPT_LINES + 149}"
+
+
 def test_bad_checksum_is_a_protocol_error():
     script = [
         (b"/1 0 0\n", b"@01 0 00 OK IDLE -- 0\r\n"),
