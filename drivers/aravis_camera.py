@@ -11,8 +11,11 @@ GenICam features used, chosen by what the device's XML declares:
   (older float name); ``ExposureAuto`` is switched ``Off`` when present;
 * gain: ``Gain`` (SFNC, float, dB) else ``GainRaw`` (integer device units,
   converted with ``gain_db_per_raw`` dB per unit); ``GainAuto`` -> ``Off``;
-* pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``), or a colour sensor's raw
-  Bayer mosaic (``BayerRG8``, ``BayerGR12``, ... ``BayerBG16``, :data:`drivers.frames.GENICAM_BAYER_FORMATS`):
+* pixel format ``Mono8`` / ``Mono16`` (also unpacked ``Mono10`` / ``Mono12``; packed PFNC ``Mono10p`` /
+  ``Mono12p`` and GigE Vision ``Mono10Packed`` / ``Mono12Packed``, unpacked to ``uint16`` with the 10/12-bit
+  values sent, :func:`drivers.frames.unpack`), or a colour sensor's raw Bayer mosaic (``BayerRG8``,
+  ``BayerGR12``, ... ``BayerBG16``, packed ``BayerRG10p`` ... ``BayerBG12p`` and ``BayerRG10Packed`` ...
+  ``BayerBG12Packed``, :data:`drivers.frames.GENICAM_BAYER_FORMATS`):
   the frame is the mosaic as the sensor gave it (nothing demosaiced) with its pattern in
   ``extra["cfa"]`` (``"RGGB"`` ...), read from each buffer's own pixel format, which the colour
   pipeline measures (lateral chromatic aberration, vignetting per channel);
@@ -78,16 +81,28 @@ from drivers.errors import (
     DeviceTimeout,
     DriverError,
 )
-from drivers.frames import BAYER_FORMATS, GENICAM_BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
+from drivers.frames import (
+    BAYER_FORMATS,
+    GENICAM_BAYER_FORMATS,
+    GENICAM_PACKED_MONO_FORMATS,
+    bayer_pattern,
+    raw_mosaic,
+    to_grey,
+)
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
 #: GenICam XML for Aravis' fake camera with SFNC exposure/gain names and focus features
 FAKE_FOCUS_XML = Path(__file__).resolve().parent / "data" / "fake-focus.xml"
 
-GREY_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16")
+GREY_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16", *GENICAM_PACKED_MONO_FORMATS)
 PIXEL_FORMATS = (*GREY_PIXEL_FORMATS, *GENICAM_BAYER_FORMATS)
-"""The pixel formats a frame is read in: grey, or a raw Bayer mosaic (GenICam PFNC names)."""
+"""The pixel formats a frame is read in: grey, or a raw Bayer mosaic (GenICam PFNC names, and the GigE Vision
+``...Packed`` ones); in each kind the unpacked ones first, then the packed (PFNC ``Mono10p`` ... ``BayerBG12p``,
+then GigE Vision ``Mono10Packed`` ... ``BayerBG12Packed``), which the camera sends in fewer bytes and the
+driver unpacks (:func:`drivers.frames.unpack`)."""
+#: PFNC codes of the packed formats Aravis 0.8 has no constant for (PFNC value list: ``Mono10p``, ``Mono12p``)
+PFNC_CODES = {"Mono10p": 0x010A0046, "Mono12p": 0x010C0047}
 EXPOSURE_FEATURES = ("ExposureTime", "ExposureTimeAbs")
 GAIN_FEATURES = ("Gain", "GainRaw")
 
@@ -100,10 +115,16 @@ _FAKE_XML_STATE: dict[str, str | None] = {"current": None, "embedded": None}
 
 def aravis_pixel_format(Aravis: Any, name: str) -> int:
     """Aravis' constant of a PFNC pixel format name (``"Mono12"`` -> ``PIXEL_FORMAT_MONO_12``, ``"BayerGR8"`` ->
-    ``PIXEL_FORMAT_BAYER_GR_8``)."""
-    if name.startswith("Bayer"):
-        return int(getattr(Aravis, f"PIXEL_FORMAT_BAYER_{name[5:7].upper()}_{name[7:]}"))
-    return int(getattr(Aravis, f"PIXEL_FORMAT_MONO_{name[4:]}"))
+    ``PIXEL_FORMAT_BAYER_GR_8``, ``"BayerRG12p"`` -> ``PIXEL_FORMAT_BAYER_RG_12P``, ``"Mono12Packed"`` ->
+    ``PIXEL_FORMAT_MONO_12_PACKED``); the PFNC code itself (:data:`PFNC_CODES`) where Aravis has none."""
+    kind, rest = ("BAYER_" + name[5:7].upper(), name[7:]) if name.startswith("Bayer") else ("MONO", name[4:])
+    rest = rest.replace("Packed", "_PACKED").upper()
+    constant = getattr(Aravis, f"PIXEL_FORMAT_{kind}_{rest}", None)
+    if constant is None and name in PFNC_CODES:
+        return PFNC_CODES[name]
+    if constant is None:
+        raise ValueError(f"Aravis has no pixel format {name!r} (PIXEL_FORMAT_{kind}_{rest})")
+    return int(constant)
 
 
 def aravis_module() -> Any:
@@ -187,8 +208,8 @@ class AravisCamera(CameraBase):
         Aravis device id (``"Fake_1"``, ``"192.168.1.20"``,
         ``"Basler-acA1300-12345678"``); None opens the first device found.
     pixel_format : str
-        ``"Mono8"``, ``"Mono16"``, ``"Mono10"``, ``"Mono12"``, or a raw Bayer format such as ``"BayerRG8"``
-        (:data:`PIXEL_FORMATS`).
+        ``"Mono8"``, ``"Mono16"``, ``"Mono10"``, ``"Mono12"``, a packed ``"Mono12p"`` or ``"Mono12Packed"``,
+        or a raw Bayer format such as ``"BayerRG8"`` or ``"BayerRG12p"`` (:data:`PIXEL_FORMATS`).
     exposure_us, gain_db, focus : float, optional
         Applied at ``open()`` (focus via :meth:`lock_focus`).
     trigger : str
@@ -713,6 +734,9 @@ class AravisCamera(CameraBase):
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
         fmt = names[pf]
-        if fmt in BAYER_FORMATS:
-            return raw_mosaic(buf.get_data(), fmt, w, h), fmt
-        return to_grey(buf.get_data(), fmt, w, h), fmt
+        try:
+            if fmt in BAYER_FORMATS:
+                return raw_mosaic(buf.get_data(), fmt, w, h), fmt
+            return to_grey(buf.get_data(), fmt, w, h), fmt
+        except CaptureError as exc:  # a buffer that does not hold the frame its format and size say
+            raise CaptureError(f"{self.name}: {exc}") from None

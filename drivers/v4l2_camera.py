@@ -8,9 +8,11 @@ camera raises :class:`~drivers.errors.DeviceTimeout` instead of hanging).
 * Format: ``GREY`` (8 bit), ``Y16`` (16 bit little endian), ``YUYV`` (luma
   plane kept) or ``MJPG`` (decoded to grey) -> 2-D array, see
   :mod:`drivers.frames`; or a colour sensor's raw Bayer mosaic (``RGGB``, ``GRBG``, ``GBRG``, ``BA81``
-  8 bit, ``RG10`` ... ``BG12`` unpacked, ``RG16`` ... ``BYR2`` 16 bit:
+  8 bit, ``RG10`` ... ``BG12`` unpacked, ``RG16`` ... ``BYR2`` 16 bit, MIPI CSI-2 packed ``pRAA``
+  ``pgAA`` ``pGAA`` ``pBAA`` 10 bit and ``pRCC`` ``pgCC`` ``pGCC`` ``pBCC`` 12 bit:
   :data:`drivers.frames.V4L2_BAYER_FORMATS`), kept as it is with its pattern in ``extra["cfa"]``, which
-  the colour pipeline reads. The format the driver actually accepted (``G_FMT``)
+  the colour pipeline reads; a packed one (also the grey ``Y10P``, ``Y12P``) unpacked to ``uint16`` holding
+  the 10/12-bit values sent (:func:`drivers.frames.unpack`; rows padded to ``bytesperline`` are fine). The format the driver actually accepted (``G_FMT``)
   is read back; a substituted pixel format is an error, an adjusted size is
   reported by :attr:`V4L2Camera.sensor_size`.
 * Controls are found by their standard V4L2 control id (names changed
@@ -37,7 +39,7 @@ Configuration (``drivers.open_camera``), e.g.::
     camera:
       driver: v4l2
       device: /dev/video2
-      pixel_format: YUYV      # GREY, Y16, YUYV or MJPG
+      pixel_format: YUYV      # GREY, Y16, YUYV, MJPG, Y10P, Y12P or a raw Bayer one (RGGB, pRAA, ...)
       width: 1920
       height: 1080
       exposure_us: 10000      # stored in 100 µs units
@@ -66,13 +68,14 @@ from drivers.errors import (
     DeviceTimeout,
     DriverError,
 )
-from drivers.frames import V4L2_BAYER_FORMATS, bayer_pattern, raw_mosaic, to_grey
+from drivers.frames import V4L2_BAYER_FORMATS, V4L2_PACKED_GREY_FORMATS, bayer_pattern, raw_mosaic, to_grey
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
-PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_BAYER_FORMATS)
-"""The pixel formats (V4L2 fourccs) a frame is read in, best first (what ``harp devices`` proposes): grey, then a
-raw Bayer mosaic (a colour sensor that offers nothing else)."""
+PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_PACKED_GREY_FORMATS, *V4L2_BAYER_FORMATS)
+"""The pixel formats (V4L2 fourccs) a frame is read in, best first (what ``harp devices`` proposes): grey (the
+MIPI CSI-2 packed ``Y10P`` / ``Y12P`` last), then a raw Bayer mosaic (a colour sensor that offers nothing else),
+the unpacked ones before the packed ``pRAA`` ... ``pBCC``, which cost an unpacking."""
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
 _MANUAL_EXPOSURE = 1  # V4L2_EXPOSURE_MANUAL
 
@@ -102,7 +105,9 @@ class V4L2Camera(CameraBase):
     ----------
     device : str
         Device node, e.g. ``"/dev/video0"``.
-    pixel_format : {"GREY", "Y16", "YUYV", "MJPG"}
+    pixel_format : str
+        A V4L2 fourcc of :data:`PIXEL_FORMATS`: ``"GREY"``, ``"Y16"``, ``"YUYV"``, ``"MJPG"``, the packed grey
+        ``"Y10P"``/``"Y12P"``, or a raw Bayer one (``"RGGB"``, ``"RG10"``, ``"pRAA"``, ``"pRCC"``, ...).
     width, height : int, optional
         Requested frame size; default the device's current size.
     exposure_us, gain_db, focus : float, optional
@@ -321,7 +326,8 @@ class V4L2Camera(CameraBase):
 
     @property
     def pixel_format(self) -> str:
-        """The V4L2 fourcc name (``GREY``, ``Y16``, ``YUYV``, ``MJPG`` or a raw Bayer one such as ``RGGB``)."""
+        """The V4L2 fourcc name (``GREY``, ``Y16``, ``YUYV``, ``MJPG``, ``Y10P`` or a raw Bayer one such as ``RGGB``
+        or ``pRAA``)."""
         return self._fourcc
 
     # -- controls -------------------------------------------------------------------
@@ -434,7 +440,10 @@ class V4L2Camera(CameraBase):
             raise CaptureError(f"{self.name}: empty buffer (sequence {raw.frame_nb})")
         buffer = (bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height), int(fmt.bytes_per_line) or None)
         pattern = bayer_pattern(self._fourcc)
-        image = to_grey(*buffer) if pattern is None else raw_mosaic(*buffer)
+        try:
+            image = to_grey(*buffer) if pattern is None else raw_mosaic(*buffer)
+        except CaptureError as exc:  # a buffer that does not hold the frame its format and size say
+            raise CaptureError(f"{self.name}: {exc}") from None
         extra: dict[str, Any] = {
             "sequence": int(raw.frame_nb),
             "device_timestamp": float(raw.timestamp),

@@ -39,6 +39,8 @@ from unittest import mock
 import numpy as np
 from linuxpy.video import raw
 
+from tests.drivers import packing
+
 IOC = raw.IOC
 FOURCC = {
     "GREY": raw.PixelFormat.GREY,
@@ -50,9 +52,23 @@ FOURCC = {
     "BA81": raw.PixelFormat.SBGGR8,
     "BA10": raw.PixelFormat.SGRBG10,
     "BYR2": raw.PixelFormat.SBGGR16,
+    # MIPI CSI-2 packed (V4L2_PIX_FMT_SRGGB10P ...): a Raspberry Pi camera's raw formats
+    "pRAA": raw.PixelFormat.SRGGB10P,
+    "pgAA": raw.PixelFormat.SGRBG10P,
+    "pGAA": raw.PixelFormat.SGBRG10P,
+    "pBAA": raw.PixelFormat.SBGGR10P,
+    "pRCC": raw.PixelFormat.SRGGB12P,
+    "pgCC": raw.PixelFormat.SGRBG12P,
+    "pGCC": raw.PixelFormat.SGBRG12P,
+    "pBCC": raw.PixelFormat.SBGGR12P,
+    "Y10P": raw.PixelFormat.Y10P,
+    "Y12P": raw.PixelFormat.Y12P,
 }
 BAYER_BITS = {"RGGB": 8, "BA81": 8, "BA10": 10, "BYR2": 16}
 """The fake's raw Bayer formats and their sample bits (10: the low bits of a little-endian word)."""
+PACKED_BITS = {f: 10 if f.endswith(("AA", "10P")) else 12 for f in FOURCC if f.startswith("p") or f[-1] == "P"}
+"""The fake's MIPI CSI-2 packed formats (Bayer ``p...``, grey ``Y10P``/``Y12P``) and their bits: each row of the
+scene packed by the independent packer (tests/drivers/packing.py), then the stride padding."""
 _NAME = {int(v): k for k, v in FOURCC.items()}
 NEXT_FLAGS = int(raw.ControlFlag.NEXT_CTRL | raw.ControlFlag.NEXT_COMPOUND)
 CID = raw.ControlID
@@ -166,6 +182,13 @@ class FakeV4L2Camera:
         if _NAME.get(int(fourcc)) in BAYER_BITS:
             bpp = 1 if BAYER_BITS[_NAME[int(fourcc)]] == 8 else 2
             height = max(2, height) & ~1  # a whole mosaic
+        if _NAME.get(int(fourcc)) in PACKED_BITS:  # whole groups (4 pixels in 5 bytes, 2 in 3), a whole mosaic
+            bits = PACKED_BITS[_NAME[int(fourcc)]]
+            width = max(4, width) & ~3 if bits == 10 else width
+            if _NAME[int(fourcc)].startswith("p"):
+                height = max(2, height) & ~1
+            bpl = width * bits // 8 + self.stride_padding
+            return width, height, bpl, bpl * height
         if bpp is None:  # MJPG: compressed, worst case size
             return width, height, 0, width * height * 2
         bpl = width * bpp + self.stride_padding
@@ -196,7 +219,12 @@ class FakeV4L2Camera:
             ok, jpg = cv2.imencode(".jpg", self.smooth_scene(seq, w, h), [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
             assert ok
             return jpg.tobytes()
-        if fmt == "GREY" or BAYER_BITS.get(fmt) == 8:
+        if fmt in PACKED_BITS:
+            rows = np.frombuffer(
+                b"".join(packing.pack(r, *packing.FORMATS[fmt]) for r in self.scene(seq, w, h, bits=PACKED_BITS[fmt])),
+                np.uint8,
+            ).reshape(h, -1)
+        elif fmt == "GREY" or BAYER_BITS.get(fmt) == 8:
             rows = self.scene(seq, w, h)
         elif fmt in BAYER_BITS:
             rows = self.scene(seq, w, h, bits=BAYER_BITS[fmt]).astype("<u2").view(np.uint8).reshape(h, 2 * w)

@@ -29,7 +29,7 @@ import pytest
 
 import drivers
 from drivers.aravis_camera import FAKE_FOCUS_XML, AravisCamera
-from drivers.errors import DeviceRejected, DeviceTimeout, DriverError, OutOfRange
+from drivers.errors import CaptureError, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
 from drivers.protocols import CameraRanges, Range
 from tests.drivers.aravis_fakes import FOCUS_CFG, gige_fake_camera
 
@@ -346,3 +346,61 @@ def test_the_embedded_xml_written_to_switch_back_is_removed_when_the_process_end
     # our XML's SFNC name, then the embedded XML's older one: the switch back really happened, from one file
     assert out == ["ExposureTime", "ExposureTimeAbs", "1"]
     assert list(tmp_path.glob("harp-arv-fake-*.xml")) == []
+
+
+# The codes of the packed formats, copied from the standards' value lists (not from Aravis): the PFNC value list
+# (PFNC.h, 2020-10-14) for the "p" formats, GigE Vision 2.x for the "Packed" ones
+PACKED_CODES = {
+    "Mono10p": 0x010A0046, "Mono12p": 0x010C0047,
+    "BayerBG10p": 0x010A0052, "BayerGB10p": 0x010A0054, "BayerGR10p": 0x010A0056, "BayerRG10p": 0x010A0058,
+    "BayerBG12p": 0x010C0053, "BayerGB12p": 0x010C0055, "BayerGR12p": 0x010C0057, "BayerRG12p": 0x010C0059,
+    "Mono10Packed": 0x010C0004, "Mono12Packed": 0x010C0006,
+    "BayerGR10Packed": 0x010C0026, "BayerRG10Packed": 0x010C0027, "BayerGB10Packed": 0x010C0028,
+    "BayerBG10Packed": 0x010C0029,
+    "BayerGR12Packed": 0x010C002A, "BayerRG12Packed": 0x010C002B, "BayerGB12Packed": 0x010C002C,
+    "BayerBG12Packed": 0x010C002D,
+}  # fmt: skip
+
+
+def test_packed_formats_are_offered_after_the_unpacked_with_their_standard_codes():
+    from drivers.aravis_camera import PIXEL_FORMATS, aravis_module, aravis_pixel_format
+
+    Aravis = aravis_module()
+    packed = [f for f in PIXEL_FORMATS if f.endswith(("p", "Packed"))]
+    assert sorted(packed) == sorted(PACKED_CODES)
+    assert {f: aravis_pixel_format(Aravis, f) for f in packed} == PACKED_CODES
+    # grey first, then Bayer; in each, every unpacked format before the packed ones
+    assert PIXEL_FORMATS.index("Mono16") < PIXEL_FORMATS.index("Mono10p") < PIXEL_FORMATS.index("Mono10Packed")
+    assert PIXEL_FORMATS.index("BayerBG16") < PIXEL_FORMATS.index("BayerRG10p") < PIXEL_FORMATS.index("BayerRG10Packed")
+    assert max(PIXEL_FORMATS.index(f) for f in PIXEL_FORMATS if f.startswith("Mono")) < PIXEL_FORMATS.index("BayerRG8")
+
+
+def packed_fake_xml(tmp_path, formats) -> str:
+    """Our fake XML whose PixelFormat also offers ``formats`` (name -> PFNC code)."""
+    entries = "".join(f'<EnumEntry Name="{n}" NameSpace="Standard"><Value>{v}</Value></EnumEntry>' for n, v in formats)
+    text = FAKE_FOCUS_XML.read_text().replace(
+        "<pValue>PixelFormatRegister</pValue>", entries + "<pValue>PixelFormatRegister</pValue>", 1
+    )
+    path = tmp_path / "fake-packed.xml"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    "fmt, bits", [("BayerRG12p", 12), ("Mono10p", 10), ("BayerGB10Packed", 12), ("Mono12Packed", 12)]
+)
+def test_a_packed_format_reaches_the_camera_and_its_buffers_are_named_by_it(tmp_path, fmt, bits):
+    """Through real libaravis: the packed format is set on the camera and read back, and the buffers come back
+    carrying its code, which the driver names (Mono10p: a code Aravis 0.8 has no constant for). Aravis' Fake
+    camera renders nothing in a packed format (its fill pattern knows Mono8, Mono16, the 8-bit Bayer and RGB8
+    only: the buffer arrives empty), so the pixels cannot be checked through it (tests/drivers/test_frames.py
+    checks the unpacking); the empty buffer is one line naming the format and the sizes."""
+    xml = packed_fake_xml(tmp_path, [(fmt, PACKED_CODES[fmt])])
+    with fake(pixel_format=fmt, fake_genicam_xml=xml) as cam:
+        assert cam.pixel_format == fmt
+        with pytest.raises(CaptureError) as err:
+            cam.capture(timeout=2.0)
+    assert str(err.value) == (
+        f"aravis camera Fake_1: {fmt} frame truncated: 0 bytes for {W}x{H} ({W * H} pixels, {bits} bits each on the wire) "
+        f"needs {W * H * bits // 8}"
+    )

@@ -61,6 +61,23 @@ def test_a_colour_sensor_offering_only_raw_bayer_is_listed_with_a_snippet_that_o
             assert opened.capture(timeout=1.0).extra["cfa"] == "BGGR"
 
 
+@pytest.mark.parametrize(
+    "offered, proposed",
+    [(("pBAA", "BA10"), "BA10"), (("pRCC", "BA81"), "BA81"), (("Y10P", "GREY"), "GREY"), (("pgAA",), "pgAA")],
+)
+def test_packed_raw_formats_come_after_the_unpacked_ones(tmp_path, offered, proposed):
+    """``harp devices`` proposes the driver's PIXEL_FORMATS best first: an unpacked format (no unpacking) before
+    a MIPI CSI-2 packed one; a camera offering only a packed one (a Raspberry Pi camera's ``pgAA``) is usable,
+    its snippet opening it to 10-bit frames with their pattern."""
+    with FakeV4L2Camera(tmp_path / "video0", formats=offered):
+        (cam,) = list_v4l2_devices(str(tmp_path / "video*"))
+        assert cam.problem is None and cam.config["pixel_format"] == proposed
+        if proposed == "pgAA":
+            with drivers.open_camera(cam.config) as opened:
+                f = opened.capture(timeout=1.0)
+            assert f.extra["cfa"] == "GRBG" and f.image.dtype == np.uint16 and 0 < f.image.max() < 1024
+
+
 def test_aravis_fake_is_listed_only_when_asked_and_opens():
     assert all(f.details["protocol"] != "Fake" for f in list_aravis_cameras())
     (fake,) = [f for f in list_aravis_cameras(include_fake=True) if f.details["protocol"] == "Fake"]

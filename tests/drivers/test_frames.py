@@ -6,8 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
+from drivers import frames
 from drivers.errors import CaptureError
 from drivers.frames import bayer_pattern, raw_mosaic, to_grey
+from tests.drivers import packing
 
 
 def test_grey8_with_stride_padding_drops_the_padding():
@@ -74,3 +76,140 @@ def test_a_raw_bayer_frame_is_kept_as_its_mosaic_and_named_by_the_pfnc_pattern()
         raw_mosaic(bytes(6), "BayerRG8", 3, 2)
     with pytest.raises(CaptureError, match="'Mono8' is not a raw Bayer one"):
         raw_mosaic(bytes(4), "Mono8", 2, 2)
+
+
+# -- packed 10/12-bit formats ------------------------------------------------------------------------------------
+# Hand-worked from the standards' byte tables (tests/drivers/packing.py cites them), pixel values
+# 0x3FF 0x000 0x155 0x2AA (10 bits) and 0xABC 0x123 (12 bits):
+#   PFNC Mono10p, one lsb-first stream: 0x3FF | 0x000 << 10 | 0x155 << 20 | 0x2AA << 30 = 0xAA955003FF,
+#     little-endian FF 03 50 95 AA
+#   MIPI CSI-2 RAW10 (V4L2 Y10P, pRAA): the high bytes 3FF>>2=FF 0 155>>2=55 2AA>>2=AA, then the low bit
+#     pairs P3 P2 P1 P0 = 10 01 00 11 = 0x93
+#   GigE Vision Mono10Packed (0x3FF, 0x155): 3FF>>2=FF, then --01--11 = 0x13, then 155>>2=55
+#   PFNC Mono12p: 0xABC | 0x123 << 12 = 0x123ABC, little-endian BC 3A 12
+#   GigE Vision Mono12Packed: AB, then P1[3:0] P0[3:0] = 3C, then 12
+#   MIPI CSI-2 RAW12 (Y12P, pRCC): AB 12, then P1[3:0] P0[3:0] = 3C
+HAND_WORKED = [
+    ("Mono10p", bytes([0xFF, 0x03, 0x50, 0x95, 0xAA]), [0x3FF, 0x000, 0x155, 0x2AA]),
+    ("Y10P", bytes([0xFF, 0x00, 0x55, 0xAA, 0x93]), [0x3FF, 0x000, 0x155, 0x2AA]),
+    ("Mono10Packed", bytes([0xFF, 0x13, 0x55]), [0x3FF, 0x155]),
+    ("Mono12p", bytes([0xBC, 0x3A, 0x12]), [0xABC, 0x123]),
+    ("Mono12Packed", bytes([0xAB, 0x3C, 0x12]), [0xABC, 0x123]),
+    ("Y12P", bytes([0xAB, 0x12, 0x3C]), [0xABC, 0x123]),
+]
+
+
+@pytest.mark.parametrize("fmt, raw, values", HAND_WORKED, ids=[c[0] for c in HAND_WORKED])
+def test_packed_grey_bytes_worked_by_hand_from_the_standards(fmt, raw, values):
+    """One group of each packing, its bytes worked out by hand: the frame is ``uint16`` holding the values
+    sent (not scaled, as the unpacked Mono10/Mono12/RG10 words are read). The independent packer of the other
+    tests gives the same bytes (its tables are right too)."""
+    out = to_grey(raw, fmt, len(values), 1)
+    assert out.dtype == np.uint16 and out.tolist() == [values]
+    assert packing.pack(np.array(values), *packing.FORMATS[fmt]) == raw
+
+
+def test_packed_bayer_formats_name_their_pattern_and_keep_the_mosaic():
+    """Bayer<xy>10p/12p (PFNC) and Bayer<xy>10Packed/12Packed (GigE Vision) name the pattern as the unpacked
+    Bayer<xy>10 do; the V4L2 fourccs as the kernel's V4L2_PIX_FMT_S<pattern>10P/12P."""
+    expected = {
+        **{f"Bayer{xy}{b}{p}": pat for xy, pat in (("RG", "RGGB"), ("GR", "GRBG"), ("GB", "GBRG"), ("BG", "BGGR"))
+           for b in (10, 12) for p in ("p", "Packed")},
+        "pRAA": "RGGB", "pgAA": "GRBG", "pGAA": "GBRG", "pBAA": "BGGR",
+        "pRCC": "RGGB", "pgCC": "GRBG", "pGCC": "GBRG", "pBCC": "BGGR",
+    }  # fmt: skip
+    assert {f: bayer_pattern(f) for f in expected} == expected
+    assert {f: bayer_pattern(f) for f in ("Mono10p", "Mono12Packed", "Y10P", "Y12P")} == dict.fromkeys(
+        ("Mono10p", "Mono12Packed", "Y10P", "Y12P")
+    )
+    assert set(frames.PACKED_FORMATS) == set(packing.FORMATS)
+    raw = bytes([0xAB, 0x12, 0x3C, 0xFF, 0x00, 0x0F])  # pRCC 2x2: AB<<4|C, 12<<4|3; FF<<4|F, 0
+    m = raw_mosaic(raw, "pRCC", 2, 2, bytes_per_line=3)
+    assert m.dtype == np.uint16 and m.tolist() == [[0xABC, 0x123], [0xFFF, 0x000]]
+
+
+GENICAM_CASES = [
+    (fmt, w, h)
+    for fmt in sorted(f for f in packing.FORMATS if not packing.FORMATS[f][0].startswith("csi"))
+    for w, h in [(2, 2), (6, 3), (7, 5), (33, 4), (64, 48)]
+    if not (fmt.startswith("Bayer") and (w % 2 or h % 2))  # a Bayer mosaic has an even size
+]
+
+
+@pytest.mark.parametrize("fmt, width, height", GENICAM_CASES)
+def test_genicam_packed_frames_unpack_exactly_whatever_the_width(fmt, width, height):
+    """Seeded random 10/12-bit images packed by the independent packer as one stream over the frame (odd widths:
+    a row starts inside a group, as the GigE Vision spec says) unpack to exactly those values."""
+    bits = packing.FORMATS[fmt][1]
+    image = np.random.default_rng(width * 100 + height).integers(0, 1 << bits, (height, width), dtype=np.uint16)
+    image[0, :2] = (1 << bits) - 1, 0  # the extremes
+    raw = packing.pack_stream(image, fmt)
+    out = raw_mosaic(raw, fmt, width, height) if fmt.startswith("Bayer") else to_grey(raw, fmt, width, height)
+    assert out.dtype == np.uint16 and out.shape == (height, width) and out.flags.c_contiguous
+    assert np.array_equal(out, image)
+    with pytest.raises(CaptureError) as err:  # one byte short: one line naming the format and the sizes
+        to_grey(raw[:-1], fmt, width, height) if fmt.startswith("Mono") else raw_mosaic(raw[:-1], fmt, width, height)
+    assert str(err.value) == (
+        f"{fmt} frame truncated: {len(raw) - 1} bytes for {width}x{height} ({width * height} pixels, "
+        f"{10 if fmt.endswith('10p') else 12} bits each on the wire) needs {len(raw)}"
+    )
+
+
+@pytest.mark.parametrize("fmt", ["Mono10p", "Mono12Packed", "BayerGB10Packed", "BayerBG12p"])
+def test_a_genicam_packed_frame_with_a_stride_is_a_stream_per_row(fmt):
+    bits = packing.FORMATS[fmt][1]
+    width, height, stride = 6, 4, 16
+    image = np.random.default_rng(7).integers(0, 1 << bits, (height, width), dtype=np.uint16)
+    raw = b"".join(packing.pack_stream(row, fmt).ljust(stride, b"\xee") for row in image)
+    out = (
+        raw_mosaic(raw, fmt, width, height, stride)
+        if fmt.startswith("Bayer")
+        else to_grey(raw, fmt, width, height, stride)
+    )
+    assert np.array_equal(out, image)
+
+
+@pytest.mark.parametrize("fmt", sorted(f for f in packing.FORMATS if packing.FORMATS[f][0].startswith("csi")))
+@pytest.mark.parametrize("width, height, padding", [(4, 2, 0), (12, 6, 3), (64, 48, 32), (636, 2, 1)])
+def test_v4l2_csi2_packed_frames_unpack_exactly_with_row_padding(fmt, width, height, padding):
+    """Seeded random values, each row packed by the independent packer and padded to ``bytesperline`` with 0xEE
+    bytes that must never reach the image."""
+    bits = packing.FORMATS[fmt][1]
+    image = np.random.default_rng(width + padding).integers(0, 1 << bits, (height, width), dtype=np.uint16)
+    image[-1, -2:] = 0, (1 << bits) - 1
+    raw, stride = packing.pack_rows(image, fmt, padding)
+    out = (
+        raw_mosaic(raw, fmt, width, height, stride) if fmt.startswith("p") else to_grey(raw, fmt, width, height, stride)
+    )
+    assert out.dtype == np.uint16 and np.array_equal(out, image)
+    short = raw[: stride * (height - 1) + stride - padding - 1]
+    with pytest.raises(CaptureError, match=rf"^{fmt} frame truncated: {len(short)} bytes for {width}x{height} "
+                       rf"\(stride {stride}\) needs {len(short) + 1}$"):  # fmt: skip
+        to_grey(short, fmt, width, height, stride) if fmt.startswith("Y") else raw_mosaic(
+            short, fmt, width, height, stride
+        )
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: to_grey(bytes(8), "Y10P", 6, 1),
+            "Y10P frame width 6 is not a multiple of 4: MIPI CSI-2 RAW10 packs 4 pixels in 5 bytes",
+        ),
+        (
+            lambda: raw_mosaic(bytes(30), "pRAA", 8, 2, bytes_per_line=9),
+            r"pRAA frame: bytes_per_line 9 < width 8 "
+            r"packed in 10 bytes = 10",
+        ),
+        (lambda: raw_mosaic(bytes(30), "BayerRG12p", 3, 2), "BayerRG12p frame has an odd size 3x2"),
+        (lambda: to_grey(bytes(30), "Mono10p", 0, 2), "Mono10p frame has invalid size 0x2"),
+        (lambda: to_grey(bytes(30), "pRAA", 4, 2), "'pRAA' cannot be converted to grey"),
+        (lambda: frames.unpack(bytes(30), "Mono14p", 4, 2), "'Mono14p' is not a packed one; supported: Mono10p, "),
+        (lambda: to_grey(bytes(3), "Mono12", 2, 1), r"Mono12 frame truncated: 3 bytes for 2x1 \(stride 4\) needs 4"),
+    ],
+)
+def test_bad_packed_input_is_one_line_naming_the_format_and_sizes(call, message):
+    with pytest.raises(CaptureError, match=message) as err:
+        call()
+    assert "\n" not in str(err.value)

@@ -42,10 +42,16 @@ def camera(node, **cfg) -> V4L2Camera:
         ("Y16", 8, 16),
         ("YUYV", 0, 8),
         ("YUYV", 4, 8),
+        ("Y10P", 0, 10),
+        ("Y10P", 3, 10),
+        ("Y12P", 7, 12),
     ],
 )
 def test_uncompressed_formats_give_the_exact_grey_image(node, fmt, padding, bits):
-    with FakeV4L2Camera(node, stride_padding=padding) as hw, camera(node, pixel_format=fmt) as cam:
+    """The grey formats; MIPI CSI-2 packed ``Y10P``/``Y12P`` (a mono Raspberry Pi camera) unpacked to the 10/12-bit
+    values the scene holds, which the fake packs with the independent packer of tests/drivers/packing.py."""
+    offered = {"formats": ("GREY", fmt)} if fmt in ("Y10P", "Y12P") else {}
+    with FakeV4L2Camera(node, stride_padding=padding, **offered) as hw, camera(node, pixel_format=fmt) as cam:
         assert cam.pixel_format == fmt and cam.sensor_size == (W, H)
         f = cam.capture(timeout=1.0)
         assert f.image.dtype == (np.uint8 if bits == 8 else np.uint16)
@@ -55,11 +61,18 @@ def test_uncompressed_formats_give_the_exact_grey_image(node, fmt, padding, bits
 
 @pytest.mark.parametrize(
     "fmt, pattern, bits, padding",
-    [("RGGB", "RGGB", 8, 0), ("BA81", "BGGR", 8, 6), ("BA10", "GRBG", 10, 4), ("BYR2", "BGGR", 16, 0)],
-)
+    [
+        ("RGGB", "RGGB", 8, 0), ("BA81", "BGGR", 8, 6), ("BA10", "GRBG", 10, 4), ("BYR2", "BGGR", 16, 0),
+        # MIPI CSI-2 packed, rows padded beyond the packed row (bytesperline)
+        ("pRAA", "RGGB", 10, 0), ("pgAA", "GRBG", 10, 3), ("pGAA", "GBRG", 10, 16), ("pBAA", "BGGR", 10, 1),
+        ("pRCC", "RGGB", 12, 0), ("pgCC", "GRBG", 12, 5), ("pGCC", "GBRG", 12, 2), ("pBCC", "BGGR", 12, 32),
+    ],
+)  # fmt: skip
 def test_a_bayer_sensor_delivers_its_raw_mosaic_with_the_pattern_named(node, fmt, pattern, bits, padding):
     """A colour sensor's raw Bayer format: the frame is the mosaic the device wrote (row padding dropped,
-    nothing demosaiced or greyed) and ``extra["cfa"]`` names its pattern as the V4L2 fourcc says."""
+    nothing demosaiced or greyed; a packed one unpacked to the 10/12-bit values the scene holds, which the fake
+    packs with the independent packer of tests/drivers/packing.py) and ``extra["cfa"]`` names its pattern as the
+    V4L2 fourcc says."""
     with (
         FakeV4L2Camera(node, formats=("GREY", fmt), stride_padding=padding) as hw,
         camera(node, pixel_format=fmt) as cam,
