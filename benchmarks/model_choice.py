@@ -16,7 +16,9 @@ Two parts (issue 19 items 2 and 5):
   the held-out shot. Then the choice on all three shots (leave-one-shot-out and alternate-string tables).
 * **A seeded population of lenses**: for each lens, ``n`` shots to fit and three unseen shots at other
   orientations; the choice made on the ``n`` shots against the best candidate on the unseen ones
-  (held-out d, whole strings) and the old rule (leave-one-shot-out alone, one standard error). With
+  (held-out d, whole strings) and the old rule (leave-one-shot-out alone, one standard error); then the same
+  on twelve unseen shots (the three and :data:`EXTRA_UNSEEN` more at seeded random angles), where each unseen
+  shot's own field and bends weigh less in which candidate looks best. With
   ``--population points`` the shots are point sets: ideal strings of a harp of 15 strings 125 px
   apart on 1761x1174 mapped through an exact lens (radial k1..k3, decentering, thin prism, centre up to
   30 px off), each string bent by its own Legendre P2..P4 terms (harp-fixed, 0.015 px each) plus a
@@ -208,40 +210,62 @@ def point_session(
     return lens, fs, ts
 
 
+EXTRA_UNSEEN = 9
+"""Unseen shots added to each lens's three (at seeded random angles) for the second measure of the population:
+the held-out d on twelve unseen shots, where each shot's own field and bends weigh less in which candidate
+looks best."""
+
+
+def extra_unseen(seed: int, lens: RadialModel, n: int = EXTRA_UNSEEN) -> list[list[np.ndarray]]:
+    """``n`` more unseen shots of lens ``seed``'s harp (:func:`point_session`'s harp and shots, other angles)."""
+    harp, _, _ = point_angles(seed, 3)  # the harp does not depend on the number of fitted shots
+    angles = np.random.default_rng(seed + 1000).uniform(0, 180, n)
+    return [point_shot(lens, harp, float(a), seed * 100 + 53 + i) for i, a in enumerate(angles)]
+
+
 def population_part(n_lenses: int, fit_counts: Sequence[int], first_seed: int = 0, separated: bool = False) -> None:
     print(
-        "## Population (point sets): chosen model's held-out d on 3 unseen shots over the best candidate's "
-        f"({n_lenses} seeded lenses per row, seeds {first_seed}..{first_seed + n_lenses - 1})"
+        "## Population (point sets): chosen model's held-out d on unseen shots over the best candidate's "
+        f"({n_lenses} seeded lenses per row, seeds {first_seed}..{first_seed + n_lenses - 1}): on each lens's 3 "
+        f"unseen shots, and on those and {EXTRA_UNSEEN} more at random angles"
     )
     print()
-    print("| shots fitted | rule | worst ratio | mean ratio | lenses > 1.05 | median best held-out d px |")
-    print("|---:|---|---:|---:|---:|---:|")
+    print(
+        "| shots fitted | rule | worst ratio | mean ratio | lenses > 1.05 | median best held-out d px "
+        f"| {3 + EXTRA_UNSEEN} unseen: worst ratio | mean ratio | lenses > 1.05 |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     sep_rows: list[tuple[int, dict[str, list[float]]]] = []
     for nfit in fit_counts:
         sep: dict[str, list[float]] = {}
         sep_rows.append((nfit, sep))
-        ratios: dict[str, list[float]] = {"two tiers (now)": [], "leave-one-shot-out alone (before)": []}
+        rules = ("two tiers (now)", "leave-one-shot-out alone (before)")
+        ratios: dict[str, list[float]] = {rule: [] for rule in rules}
+        ratios12: dict[str, list[float]] = {rule: [] for rule in rules}
         bests = []
         for seed in range(first_seed, first_seed + n_lenses):
             lens, fs, ts = point_session(seed, nfit)
+            ts12 = ts + extra_unseen(seed, lens)
             sel = select_model(fs, W_PT, H_PT)
-            unseen = {}
+            unseen, unseen12 = {}, {}
             for r in sel.table:
                 f = r.full_fit or fit_distortion(fs, W_PT, H_PT, **r.candidate.fit_arguments())
                 if f:
                     unseen[r.candidate] = held_d(f.model, [p for s in ts for p in s])
-            best = min(unseen.values())
+                    unseen12[r.candidate] = held_d(f.model, [p for s in ts12 for p in s])
+            best, best12 = min(unseen.values()), min(unseen12.values())
             bests.append(best)
-            ratios["two tiers (now)"].append(unseen[sel.choice] / best)
-            ratios["leave-one-shot-out alone (before)"].append(unseen[old_rule(sel.table)] / best)
+            for rule, spec in zip(rules, (sel.choice, old_rule(sel.table)), strict=True):
+                ratios[rule].append(unseen[spec] / best)
+                ratios12[rule].append(unseen12[spec] / best12)
             if separated:
                 for k, v in separated_ratios(seed, nfit, lens, fs, ts, sel.choice).items():
                     sep.setdefault(k, []).append(v)
         for rule, v in ratios.items():
-            a = np.array(v)
+            a, b = np.array(v), np.array(ratios12[rule])
             print(
                 f"| {nfit} | {rule} | {a.max():.3f} | {a.mean():.3f} | {int(np.sum(a > 1.05))} / {len(a)} | "
-                f"{np.median(bests):.4f} |"
+                f"{np.median(bests):.4f} | {b.max():.3f} | {b.mean():.3f} | {int(np.sum(b > 1.05))} / {len(b)} |"
             )
     print()
     if separated:
