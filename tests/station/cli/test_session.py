@@ -357,9 +357,10 @@ def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_
         before_the_first_move_to(sim.turntable, 90, sim.emulator.emulator.restart)
         result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
         faults = [(r.what, r.error) for r in s.of_type(Fault)]
+        said = [r.message for r in s.of_type(Fault)]  # what each try met: the message if it fails
         stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
-    assert result.exit_code == EXIT_OK, result.message
-    assert faults == [("move turntable to 90 deg", "DeviceFault")]
+    assert result.exit_code == EXIT_OK, (result.message, said)
+    assert faults == [("move turntable to 90 deg", "DeviceFault")], said
     assert stages == [0.0, 45.0, 90.0, 135.0]
 
 
