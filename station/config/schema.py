@@ -232,7 +232,8 @@ class CaptureConfig:
     def visits(self) -> tuple[int, ...]:
         """Per orientation of :attr:`orientations`, the plan's visit of its pose: 0 the first time, 1 the twin's
         return (a simulated camera renders a return's frames anew, :class:`drivers.protocols.IndexedCapture`)."""
-        return tuple(int(o not in self.fitted) for o in range(len(self.orientations)))
+        fitted = frozenset(self.fitted)  # one look-up per orientation, not a scan of the tuple
+        return tuple(int(o not in fitted) for o in range(len(self.orientations)))
 
     @functools.cached_property
     def angles_deg(self) -> tuple[float, ...]:

@@ -149,6 +149,7 @@ def estimate_plan(config: Config) -> PlanEstimate:
     render = RENDER_S_PER_MPX * mpx if config.station.camera.driver == "sim" else 0.0
     frame_s = cap.exposure_us / 1e6 + FRAME_OVERHEAD_S + render
     n_o = len(cap.fitted)  # the fit's shots (a twin is compared, not fitted)
+    fitted = frozenset(cap.fitted)  # asked of every row: a tuple would make a long plan quadratic
     pc = config.pipeline
     fit_s = FIT_S_PER_ORIENTATION * mpx / 1.23 * ((n_o + 1) + pc.bootstrap / max(1, pc.workers))
     first: list[PlanRow] = []  # the first focus setting's rows; the others repeat them
@@ -186,12 +187,12 @@ def estimate_plan(config: Config) -> PlanEstimate:
                         config.focus_settings[f],
                         "capture + measure"
                         + ("" if cap.shifts_mm[o] is None else f" at {cap.shifts_mm[o]:g} mm")
-                        + ("" if o in cap.fitted else " (the twin: compared, not fitted)"),
+                        + ("" if o in fitted else " (the twin: compared, not fitted)"),
                         cap.angles_deg[o],
                         int(current.get("frames", 0)),
                         float(current["s"]),
                         cap.shifts_mm[o],
-                        o not in cap.fitted,
+                        o not in fitted,
                     )
                 )
                 current = {}
