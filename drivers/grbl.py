@@ -35,7 +35,9 @@ session takes its shots about two places of the turntable axis in the image: :at
 the same kind of axis with its positions in millimetres (``shift_units_per_mm``, default 1: GRBL counts
 mm; ``G90 G0 Z12.500``).
 
-Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``;
+Errors: ``error:N`` -> :class:`DeviceRejected` with the meaning of ``N``, but ``error:9`` (G-code locked out in
+Alarm: the controller's state, not the line; e.g. a restart whose banner came after the line was sent) ->
+:class:`DeviceFault` (recover, then home);
 ``ALARM:N`` or state ``Alarm`` during a move -> :class:`DeviceFault` with the
 meaning (recover with :meth:`recover`: soft reset if needed, then ``$X``;
 re-home after a hard-limit alarm, position is lost); the controller's banner
@@ -193,6 +195,10 @@ class _Controller:
 
     last_alarm: int | None = None
     restarted: bool = False
+
+
+ALARM_LOCK_ERROR = 9
+"""GRBL's ``error:9``: G-code locked out while the controller is in Alarm (or jogging): a :class:`DeviceFault`."""
 
 
 def error_text(code: int) -> str:
@@ -433,8 +439,8 @@ class GrblAxis:
     def send(self, line: str, timeout: float | None = None) -> list[str]:
         """Send one line and wait for ``ok``; returns the feedback lines before it.
 
-        Raises :class:`DeviceRejected` on ``error:N`` and :class:`DeviceFault`
-        on ``ALARM:N``.
+        Raises :class:`DeviceRejected` on ``error:N`` (:class:`DeviceFault` on ``error:9``, the Alarm lock) and
+        :class:`DeviceFault` on ``ALARM:N``.
         """
         timeout = self.reply_timeout if timeout is None else timeout
         what = f"reply to {line!r}"
@@ -454,7 +460,12 @@ class GrblAxis:
                     return feedback
                 m = _ERROR.match(text)
                 if m:
-                    raise DeviceRejected(f"{self.name}: {line!r} rejected: {error_text(int(m.group(1)))}")
+                    code = int(m.group(1))
+                    if code == ALARM_LOCK_ERROR:  # not the line's fault: the controller waits in Alarm
+                        raise DeviceFault(
+                            f"{self.name}: {line!r} refused: {error_text(code)}; use recover(), then home()"
+                        )
+                    raise DeviceRejected(f"{self.name}: {line!r} rejected: {error_text(code)}")
                 n_messages = len(self.messages)
                 self._classify(text)
                 feedback.extend(self.messages[n_messages:])

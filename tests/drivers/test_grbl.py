@@ -159,7 +159,10 @@ def test_locked_until_homed_then_moves_around_the_circle():
     with start_grbl_emulator(world=world, **FAST) as h, driver(h.port_path) as tt:
         st = tt.status()
         assert st["state"] == "Alarm" and st["fault"]
-        with pytest.raises(DeviceRejected, match=r"error:9 \(G-code locked out during alarm or jog state\)"):
+        # the controller's state, not the line: a fault the session recovers from (recover, home), not a refusal
+        with pytest.raises(
+            DeviceFault, match=r"error:9 \(G-code locked out during alarm or jog state\); use recover\(\), then home"
+        ):
             tt.move_to(10.0)
         tt.home()
         assert tt.status()["state"] == "Idle"

@@ -364,6 +364,31 @@ def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_
     assert stages == [0.0, 45.0, 90.0, 135.0]
 
 
+def test_a_grbl_controller_found_locked_in_alarm_at_a_move_is_recovered_and_homed(tmp_path):
+    """The controller waits in Alarm and the driver did not hear it go there (a restart whose banner came after the
+    move was sent, an ALARM line lost): the move's error:9 is a DeviceFault, the session recovers the controller,
+    homes it and goes on, every shot at its angle. Before, error:9 was a refusal that stopped the session."""
+    cfg = load_config(small_config(tmp_path, focus=(0.5,), frames=1, turntable=GRBL_EMULATOR))
+    with simulated_devices(cfg) as sim, SessionDir.create(tmp_path, cfg, name="g") as s:
+        sim.camera.open()
+        sim.turntable.open()
+        grbl = sim.emulator.emulator
+
+        def lock() -> None:
+            with grbl._lock:
+                grbl.state = "Alarm"  # silently: no banner, no ALARM line
+
+        before_the_first_move_to(sim.turntable, 90, lock)
+        result = Executor(s, sim.camera, sim.turntable, sleep=lambda _s: None).run()
+        faults = [(r.what, r.error) for r in s.of_type(Fault)]
+        said = [r.message for r in s.of_type(Fault)]
+        stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
+    assert result.exit_code == EXIT_OK, (result.message, said)
+    assert faults == [("move turntable to 90 deg", "DeviceFault")], said
+    assert "error:9 (G-code locked out during alarm or jog state)" in said[0]
+    assert stages == [0.0, 45.0, 90.0, 135.0]
+
+
 def test_a_grbl_safety_door_left_open_stops_the_session_with_one_line_then_it_resumes(tmp_path):
     """The safety door opens during the move to 90° and stays open: each try is a DeviceFault at once (not a
     wait for the move timeout), the session recovers the controller and tries again, then stops with one line
