@@ -360,7 +360,10 @@ def test_a_grbl_controller_that_restarts_mid_session_is_recovered_and_homed(tmp_
         said = [r.message for r in s.of_type(Fault)]  # what each try met: the message if it fails
         stages = [r.meta["stage_deg"] for r in s.of_type(FrameSaved)]
     assert result.exit_code == EXIT_OK, (result.message, said)
-    assert faults == [("move turntable to 90 deg", "DeviceFault")], said
+    # one fault, or more when the restart's banner reaches the driver only after a later line was sent (a race of
+    # the real controller too, met once under load: that line's error:9 is one more fault, recovered the same way)
+    assert faults and set(faults) == {("move turntable to 90 deg", "DeviceFault")}, said
+    assert "the controller restarted" in said[0] or "error:9" in said[0], said
     assert stages == [0.0, 45.0, 90.0, 135.0]
 
 
