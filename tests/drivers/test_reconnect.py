@@ -8,6 +8,7 @@ device keeps its state across the unplug, as a stage keeps its position.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 
@@ -18,7 +19,7 @@ from drivers.errors import DeviceDisconnected, DriverError
 from drivers.sim.grbl_emulator import start_grbl_emulator
 from drivers.sim.pty_server import serve
 from drivers.sim.zaber_emulator import start_zaber_emulator
-from tests.drivers.aravis_fakes import gige_fake_camera
+from tests.drivers.aravis_fakes import gige_fake_camera, gige_port
 from tests.drivers.fake_v4l2 import FakeV4L2Camera
 from tests.drivers.turntables import FAST
 
@@ -108,7 +109,9 @@ def test_aravis_gige_camera_reopens_after_it_comes_back():
     """A GigE camera that stops answering is DeviceDisconnected (not "rejected"); close() returns at
     once instead of waiting out Aravis' network timeouts; the camera back on the network reopens."""
     cam = drivers.open_camera({"driver": "aravis", "device": "127.0.0.1", "roi": [0, 0, 32, 24]})
-    try:
+    with contextlib.ExitStack() as stack:
+        stack.callback(cam.close)
+        stack.enter_context(gige_port())  # no other test's fake on the port while this one is gone
         with gige_fake_camera("HARPRECO"):
             cam.open()
             cam.capture(timeout=2.0)
@@ -122,5 +125,3 @@ def test_aravis_gige_camera_reopens_after_it_comes_back():
             cam.open()
             assert cam.capture(timeout=2.0).counter == 0 and cam.identity.serial == "HARPRECO"
             cam.close()
-    finally:
-        cam.close()
