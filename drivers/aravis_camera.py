@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import os
 import tempfile
 import threading
@@ -125,6 +126,12 @@ def aravis_pixel_format(Aravis: Any, name: str) -> int:
     if constant is None:
         raise ValueError(f"Aravis has no pixel format {name!r} (PIXEL_FORMAT_{kind}_{rest})")
     return int(constant)
+
+
+@functools.cache
+def _format_names(Aravis: Any) -> dict[int, str]:
+    """Aravis' pixel format code -> the name of :data:`PIXEL_FORMATS` (built once: every buffer asks)."""
+    return {aravis_pixel_format(Aravis, n): n for n in PIXEL_FORMATS}
 
 
 def aravis_module() -> Any:
@@ -730,7 +737,7 @@ class AravisCamera(CameraBase):
         """The buffer's image (grey, or a raw Bayer mosaic) and the PFNC name of its pixel format."""
         w, h = buf.get_image_width(), buf.get_image_height()
         pf = buf.get_image_pixel_format()
-        names = {aravis_pixel_format(Aravis, n): n for n in PIXEL_FORMATS}
+        names = _format_names(Aravis)
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
         fmt = names[pf]

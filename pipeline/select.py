@@ -343,7 +343,8 @@ def select_model(
             f"{best_row.cv_d:.4f} px (no radial candidate)"
         )
         return _with_support(Selection(first.candidate, reason + notes, mode, table), lines_per_image)
-    general = _with_free_twins(_within(radial, best_radial, n_se, orientation_tolerance), radial)
+    within = _within(radial, best_radial, n_se, orientation_tolerance)
+    general = _with_free_twins(within, radial)
     fits = {r.candidate: r.full_fit for r in general if r.full_fit is not None}
     strings, _ = cross_validate(
         lines_per_image,
@@ -377,13 +378,8 @@ def select_model(
             f"; {first.candidate.label} won the folds by only {margin:.1f} paired standard errors "
             f"(a flexible model needs more than {flexible_margin_se:g})"
         )
-    twin = _prior_twin(choice)
-    if (
-        not choice.center_prior
-        and twin in loso
-        and not _within([loso[choice]], best_radial, n_se, orientation_tolerance)
-    ):
-        # in tier 2 by its centre-prior twin (_with_free_twins)
+    if choice not in {r.candidate for r in within}:  # in tier 2 by its centre-prior twin (_with_free_twins)
+        twin = _prior_twin(choice)
         general_text = (
             f"generalises to an unseen orientation as its twin {twin.label} does (leave-one-shot-out CV d "
             f"{loso[twin].cv_d:.4f} px, within {se_text} or {tol} of the best radial model's {best_radial.cv_d:.4f} "

@@ -428,7 +428,6 @@ def code_digest() -> str:
     the package and their bytes): two processes with the same digest compute the same profiles, whether they run
     a checkout or an installed wheel of it (data files, which a wheel may hold fewer of, are left out). A checkout
     changed but not released keeps its version number, not its digest (some 20 ms)."""
-    import hashlib
     import importlib.util
 
     h = hashlib.sha256()
@@ -464,7 +463,8 @@ def _killed(job: FocusJob, exc: Any) -> str:
 
 def _check_workers(client: Any, scheduler: str) -> None:
     """Refuse (:class:`ReprocessError`, one line) a cluster with no worker after :data:`NO_WORKERS_S`, or a
-    worker that cannot import harp station or runs another version of it."""
+    worker that cannot import harp station, runs another version of it, or other code under this version
+    (:func:`code_digest`)."""
     try:
         client.wait_for_workers(1, timeout=NO_WORKERS_S)
     except TimeoutError:
@@ -508,7 +508,8 @@ def dask_cluster(scheduler: str) -> Iterator[DaskCluster]:
     """Connect to the Dask scheduler at ``scheduler`` (``tcp://HOST:PORT``) and check it can run the jobs; the
     client is closed when the block ends. Refused (:class:`ReprocessError`, one line, before any job is sent,
     so that a command can ask before it opens its store): a scheduler that cannot be reached or is not one, none
-    of whose workers joins within :data:`NO_WORKERS_S`, or a worker without this version of harp station."""
+    of whose workers joins within :data:`NO_WORKERS_S`, or a worker without this version and code of harp station
+    (:func:`_check_workers`)."""
     probe_scheduler(scheduler)
     from dask.distributed import Client
 
