@@ -52,7 +52,8 @@ def page(browser):
 def pytest_configure(config):
     """The per-user directories the commands default to (the profile store, lensfun's user
     databases) are a temporary directory for the whole run, never the user's own; the variables a
-    station sets for its commands are unset; Ctrl-C has its default disposition."""
+    station sets for its commands are unset; Ctrl-C has its default disposition; SIGTERM interrupts the run
+    as Ctrl-C does (:func:`_sigterm_is_an_interrupt`)."""
     import signal
     import tempfile
 
@@ -62,6 +63,7 @@ def pytest_configure(config):
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    _sigterm_is_an_interrupt()
 
     # One BLAS thread per process, as the station's commands and workers run (station.cli, station.reprocess):
     # two test workers on two cores would otherwise each start a BLAS thread per core, and OpenBLAS's threads
@@ -77,6 +79,36 @@ def pytest_configure(config):
     os.environ["XDG_DATA_HOME"] = data_home
     for name in ("HARP_STORE", "HARP_CONFIG", "HARP_LENSFUN_DIRS"):
         os.environ.pop(name, None)
+
+
+def _sigterm_is_an_interrupt() -> None:
+    """SIGTERM (a CI job cancelled, ``timeout``, ``kill``) ends this run as Ctrl-C does — a KeyboardInterrupt,
+    so that pytest's finalizers run — in the main process and in each xdist worker (this hook runs in both):
+    by default it would end the process at once, and the servers a fixture started outside the run's process
+    group (PostgreSQL, daemonised by ``pg_ctl``: tests/pg_server.py) would stay. A process forked from this one
+    (a pool worker) takes SIGTERM as before: it dies of it. Left alone when something set SIGTERM's disposition."""
+    import contextlib
+    import signal
+
+    if signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        return
+    owner = os.getpid()
+
+    def interrupt(signum, _frame):
+        if os.getpid() != owner:  # a forked child: SIGTERM's default, death by the signal
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        raise KeyboardInterrupt(f"signal {signum} (SIGTERM)")
+
+    def default_in_child():
+        if signal.getsignal(signal.SIGTERM) is interrupt:
+            with contextlib.suppress(ValueError):  # not the main thread: interrupt() hands it on
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    signal.signal(signal.SIGTERM, interrupt)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM})
+    os.register_at_fork(after_in_child=default_in_child)
 
 
 def pytest_unconfigure(config):

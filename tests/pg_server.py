@@ -9,12 +9,18 @@ other user it runs as that user. It listens on 127.0.0.1 on a free port, with
 ``fsync=off`` (a test server: speed over durability). The server is stopped and
 its directory removed when the :class:`PostgresServer` context ends.
 
+``pg_ctl`` daemonises the server out of the test run's process group, so nothing that ends the run's
+processes ends it: every server this process started and has not stopped is also stopped (``immediate``) and
+its directory removed by an ``atexit`` hook, :func:`stop_all` — reached when the run ends by an exception
+(a SIGTERM turned into KeyboardInterrupt by tests/conftest.py) without its finalizers having stopped it.
+
 No mock and no skip: when the binaries are missing, :func:`postgres_bin_dir`
 raises with the command that installs them.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import glob
 import os
@@ -23,6 +29,7 @@ import shutil
 import socket
 import subprocess
 import tempfile
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,13 +152,46 @@ def _children(pid: int) -> list[int]:
     return found
 
 
+_started: dict[Path, PostgresServer] = {}
+"""The servers this process started and has not yet stopped and removed (by their directory)."""
+_started_lock = threading.Lock()
+_owner = os.getpid()
+
+
+def _discard(server: PostgresServer) -> None:
+    """Stop ``server`` and remove its directory (whatever state it is in), and forget it; interrupted (a
+    second SIGTERM), the server is still known to :func:`stop_all` and its directory still there."""
+    if server.data_dir.exists():  # running, starting, or left by a crash: pg_ctl stop says which
+        server.stop()
+    shutil.rmtree(server.root, ignore_errors=True)
+    with _started_lock:
+        _started.pop(server.root, None)
+
+
+def stop_all() -> None:
+    """Stop every server this process started and has not stopped, and remove its directory (``atexit``:
+    a run that ended without its finalizers). Not in a forked child: the servers are its parent's."""
+    if os.getpid() != _owner:
+        return
+    with _started_lock:
+        left = list(_started.values())
+    for server in left:
+        with contextlib.suppress(Exception):
+            _discard(server)
+
+
+atexit.register(stop_all)
+
+
 @contextlib.contextmanager
 def postgres_server() -> Iterator[PostgresServer]:
-    """Start a throw-away PostgreSQL server; stop and delete it afterwards."""
+    """Start a throw-away PostgreSQL server; stop and delete it afterwards (and at exit: :func:`stop_all`)."""
     bindir = postgres_bin_dir()
     run_as = "postgres" if os.geteuid() == 0 else None
     root = Path(tempfile.mkdtemp(prefix="harp-pg-"))
     server = PostgresServer(root=root, port=free_port(), bindir=bindir, run_as=run_as)
+    with _started_lock:
+        _started[root] = server
     try:
         if run_as:
             pw = pwd.getpwnam(run_as)
@@ -163,5 +203,4 @@ def postgres_server() -> Iterator[PostgresServer]:
         server._psql("CREATE DATABASE harp")
         yield server
     finally:
-        server.stop()
-        shutil.rmtree(root, ignore_errors=True)
+        _discard(server)
