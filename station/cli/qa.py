@@ -17,7 +17,9 @@ calibrated focus settings when needed). ``--report DIR`` writes a Markdown repor
 plots and its ``index.html``; ``--overlays all|failed|none`` says which focus settings keep their
 per-orientation overlays in it (default: a session's ``report.overlays``, else all). Each result is recorded in the store's QA history (unless
 ``--no-record``); it does not change the verdict a profile was calibrated with. A session's result
-the store cannot take (a server that is down) is warned of, with what to do; its verdict stands.
+the store cannot take (a server that is down) is warned of, with what to do; its verdict stands. Run
+again with the same results after that (a commit that may or may not have been written), it is
+recorded once: the rows keep the failed run's key.
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 
 What is judged, with which thresholds and reference, and the report's evidence:
@@ -26,9 +28,13 @@ What is judged, with which thresholds and reference, and the report's evidence:
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
 import math
+import os
 import sys
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +49,7 @@ from station.qa.targets import QAInputError, judge_targets, lens_targets, sessio
 from station.session import layout
 from station.session.directory import SessionDir
 from station.store import DEFAULT_STORE, StoreError
+from station.store.location import user_store_path
 from station.tables import cell, is_terminal, print_table
 
 
@@ -211,21 +218,87 @@ def run(args) -> int:
 
 
 def _record(args, config, session, items, results) -> None:
-    """One row of QA history per judged profile (the verdict a profile was calibrated with is not changed)."""
+    """One row of QA history per judged profile (the verdict a profile was calibrated with is not changed).
+
+    The rows of a run carry its key (``record_key``: the run's key and the row's index). A run whose
+    recording failed — a commit that may or may not have been written among them — leaves its key in a
+    pending file (:func:`_pending_file`, named by the store and what was judged); ``harp qa`` run again
+    with the same results (the same verdicts, checks, figures and thresholds, of the same profiles, into
+    the same store) takes that key, so that the rows already written are not written twice. Any other run
+    (the first recorded one, or one whose results differ) has a new key and adds its rows."""
+    session_dir = str(session.path.resolve()) if session else None
+    rows = [(it, v, plain({**v.metrics, "focus": it.focus})) for it, v in zip(items, results)]
+    pending = None
+    key = uuid.uuid4().hex
     try:
+        pending = _pending_file(store_location(args.store, config), session_dir, rows)
+        key = _pending_key(pending) or key
         with _store(args, config, create=True) as store:
-            for it, v in zip(items, results):
-                metrics = plain({**v.metrics, "focus": it.focus})
+            for i, (it, v, metrics) in enumerate(rows):
                 store.put_qa_result(
                     verdict=v,
                     metrics=metrics,
                     profile_id=it.profile_id,
-                    session_dir=str(session.path.resolve()) if session else None,
+                    session_dir=session_dir,
                     focus=it.focus,
+                    key=f"{key}/{i}",
                 )
     except StoreError as exc:
+        _keep_pending(pending, key, args.target)
         # the verdict (and its exit code) stands; its row of QA history is what is missing: say how to add it
         warn("harp qa", f"result not recorded: {exc}; the verdict stands: run harp qa {args.target} again to record it")
+        return
+    except BaseException:  # Ctrl-C while recording: some rows may be written; a run again adds the others
+        _keep_pending(pending, key, args.target)
+        raise
+    if pending is not None:
+        with contextlib.suppress(OSError):
+            pending.unlink(missing_ok=True)
+
+
+PENDING_DAYS = 30
+"""A pending QA record's key (:func:`_pending_file`) older than this is dropped when another is kept."""
+
+
+def _pending_file(loc, session_dir: str | None, rows) -> Path:
+    """Where a run whose recording failed keeps its key: ``$XDG_DATA_HOME/harp-station/qa-pending/``, a file
+    named by the digest of the store (as messages name it: no password) and of every row's content
+    (profile, session, focus, verdict with reasons, checks, thresholds and figures)."""
+    what = [
+        str(loc),
+        session_dir,
+        [[it.profile_id, it.focus, v.to_record(), metrics] for it, v, metrics in rows],
+    ]
+    digest = hashlib.sha256(json.dumps(plain(what), sort_keys=True).encode()).hexdigest()
+    return user_store_path().parent / "qa-pending" / f"{digest[:32]}.json"
+
+
+def _pending_key(pending: Path) -> str | None:
+    """The key a pending file keeps (None: none there, or unreadable)."""
+    try:
+        key = json.loads(pending.read_text(encoding="utf-8"))["key"]
+    except (OSError, ValueError, TypeError, KeyError):
+        return None
+    return key if isinstance(key, str) and key else None
+
+
+def _keep_pending(pending: Path | None, key: str, target: str) -> None:
+    """Keep ``key`` in ``pending`` for a run again (atomically; nothing when it cannot be written: that run
+    then adds its rows anew, as before), and drop pending files older than :data:`PENDING_DAYS`."""
+    if pending is None:
+        return
+    import time
+
+    with contextlib.suppress(OSError):
+        pending.parent.mkdir(parents=True, exist_ok=True)
+        tmp = pending.with_name(f".{pending.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"key": key, "target": str(target)}), encoding="utf-8")
+        os.replace(tmp, pending)
+        old = time.time() - PENDING_DAYS * 86400
+        for f in pending.parent.glob("*.json"):
+            with contextlib.suppress(OSError):
+                if f.stat().st_mtime < old:
+                    f.unlink()
 
 
 def _print_checks(items, judged, report) -> None:

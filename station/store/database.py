@@ -20,7 +20,7 @@ store (:func:`station.store.engine.write`)
     the session's ``qa_results`` row — together or not at all. :meth:`record_verdict` keeps the
     verdict of a profile already stored (and replaces the session's ``qa_results`` row: once per
     profile, however often a session is resumed). :meth:`put_qa_result` adds one row of QA
-    history (a run of ``harp qa``).
+    history (a run of ``harp qa``), once per ``key``: the same run recorded again adds nothing.
 
 Reading (for the commands)
     :meth:`profile` (by id), :meth:`profiles` (every profile, failed ones included: listings),
@@ -309,11 +309,16 @@ class ProfileStore:
         profile_id: int | None = None,
         session_dir: str | None = None,
         focus: float | None = None,
+        key: str | None = None,
     ) -> int:
         """Add one row of QA history (``origin = 'command'``: a run of ``harp qa``); returns its id.
         ``verdict`` is a :class:`~station.profile.Verdict` (its checks and thresholds are kept) or
         ``"PASS"`` / ``"FAIL"`` with ``reasons`` and ``metrics``. Does not change which profile is
-        current: that is :meth:`record_verdict`'s."""
+        current: that is :meth:`record_verdict`'s.
+
+        ``key`` (``record_key``, unique) names the row: when a row with that key is there already — the
+        same result recorded again, after a commit that may or may not have been written — nothing is
+        added and that row's id is returned. Without a key every call adds a row."""
         from station.profile import Verdict  # defers cv2, numpy, yaml
 
         v = (
@@ -328,6 +333,7 @@ class ProfileStore:
             "session_dir": session_dir,
             "origin": "command",
             "created_at": _now(),
+            "record_key": key,
             **_qa_values(v, focus),
         }
         if reasons is not None:
@@ -336,7 +342,14 @@ class ProfileStore:
             values["metrics_json"] = json.dumps(plain(dict(metrics)))
 
         def tx(conn: sa.Connection) -> int:
-            return int(conn.execute(sa.insert(qa_results).values(values).returning(qa_results.c.id)).scalar_one())
+            if key is None:
+                return int(conn.execute(sa.insert(qa_results).values(values).returning(qa_results.c.id)).scalar_one())
+            stmt = _insert(self.backend)(qa_results).values(values)
+            stmt = stmt.on_conflict_do_nothing(index_elements=["record_key"]).returning(qa_results.c.id)
+            got = conn.execute(stmt).scalar()
+            if got is None:  # recorded before: that row
+                got = conn.execute(sa.select(qa_results.c.id).where(qa_results.c.record_key == key)).scalar_one()
+            return int(got)
 
         return int(self._write("recording the QA result", tx))
 

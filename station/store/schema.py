@@ -12,7 +12,10 @@
   ``focal`` the focal length setting of a zoom lens, mm (NULL: a fixed lens).
 * ``qa_results``: QA verdicts as judged, with the checks and thresholds: ``origin = 'session'``
   is the session's own verdict of its profile (at most one per profile: a resumed session replaces
-  it), ``origin = 'command'`` one per run of ``harp qa``.
+  it), ``origin = 'command'`` one per run of ``harp qa`` and judged profile. ``record_key`` (unique; NULL:
+  none, every row written before revision 0007 and every session verdict) names a command's row, so that
+  the same run recorded again — ``harp qa`` run again after a commit that may or may not have been
+  written — adds nothing (:meth:`~station.store.database.ProfileStore.put_qa_result`).
 * ``schema_version``: kept for software older than the Alembic migrations, which reads it and
   refuses a store newer than itself; ``alembic_version`` holds the revision.
 
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import sqlalchemy as sa
 
-REVISIONS = ("0001", "0002", "0003", "0004", "0005", "0006")
+REVISIONS = ("0001", "0002", "0003", "0004", "0005", "0006", "0007")
 """Every migration revision, oldest first (a test checks them against the migration scripts)."""
 
 HEAD = REVISIONS[-1]
@@ -34,7 +37,7 @@ HEAD = REVISIONS[-1]
 LEGACY_VERSIONS = {1: "0001", 2: "0002", 3: "0003"}
 """``schema_version`` of a store written before the Alembic migrations -> the revision it equals."""
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 """What ``schema_version`` holds at :data:`HEAD` (greater than any version older software knows)."""
 
 metadata = sa.MetaData()
@@ -112,6 +115,7 @@ qa_results = sa.Table(
     sa.Column("checks_json", sa.Text),
     sa.Column("thresholds_json", sa.Text),
     sa.Column("origin", sa.Text, nullable=False, server_default="command"),
+    sa.Column("record_key", sa.Text),
     sa.CheckConstraint("verdict IN ('PASS', 'FAIL')", name="qa_results_verdict"),
     sa.CheckConstraint("origin IN ('session', 'command')", name="qa_results_origin"),
 )
@@ -122,6 +126,7 @@ sa.Index(
     sqlite_where=qa_results.c.origin == "session",
     postgresql_where=qa_results.c.origin == "session",
 )
+sa.Index("qa_results_record_key", qa_results.c.record_key, unique=True)
 
 schema_version = sa.Table("schema_version", metadata, sa.Column("version", sa.Integer, nullable=False))
 

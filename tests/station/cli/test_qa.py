@@ -155,3 +155,69 @@ def test_corrupt_reference_file_is_named_once(session, tmp_path, capsys):
     code, out, err = qa(capsys, session, "--reference", ref, "--max-reference-deviation", "1", "--no-record")
     assert code == 2 and err.startswith(f"harp qa: reference {ref}: not a valid YAML model file")
     assert err.count(str(ref)) == 1 and err.count("\n") == 1, err
+
+
+@pytest.fixture
+def cut_first_qa_commit(monkeypatch):
+    """The first commit of a ``harp qa`` history row is written, and then its connection is lost before the
+    command hears so (the server or the network gone at that moment): the store says it may or may not
+    have been written. Returns the list of what happened ("cut" once it did)."""
+    import sqlite3
+
+    import sqlalchemy as sa
+
+    happened = []
+    armed = []
+    commit = sa.engine.default.DefaultDialect.do_commit
+    put = ProfileStore.put_qa_result
+
+    def do_commit(self, dbapi_connection):
+        commit(self, dbapi_connection)
+        if armed and not happened:
+            happened.append("cut")
+            if self.name == "sqlite":  # what the driver then finds: a closed connection
+                dbapi_connection.close()
+                raise sqlite3.ProgrammingError("Cannot operate on a closed database.")
+            # the server ends the connection (as an administrator's pg_terminate_backend or a restart would)
+            dbapi_connection.execute("SELECT pg_terminate_backend(pg_backend_pid())")
+
+    def put_qa_result(self, **kw):
+        armed.append(1)
+        try:
+            return put(self, **kw)
+        finally:
+            armed.pop()
+
+    monkeypatch.setattr(sa.engine.default.DefaultDialect, "do_commit", do_commit)
+    monkeypatch.setattr(ProfileStore, "put_qa_result", put_qa_result)
+    return happened
+
+
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_qa_run_again_after_a_commit_that_may_not_be_written_records_each_row_once(
+    backend, session, tmp_path, capsys, request, cut_first_qa_commit
+):
+    if backend == "sqlite":
+        store = str(tmp_path / "store.sqlite")
+    else:
+        store = request.getfixturevalue("postgres").create_database(f"qa_{tmp_path.name[-20:].lower()}")
+
+    def command_rows():
+        with ProfileStore(store, create=False) as st:
+            return [(r["focus"], r["verdict"]) for r in st.qa_results() if r["origin"] == "command"]
+
+    code, _, err = qa(capsys, session, "--store", store)
+    assert cut_first_qa_commit == ["cut"]
+    warned = [line for line in err.splitlines() if "result not recorded" in line]
+    assert len(warned) == 1 and "may or may not have been written" in warned[0], err
+    assert f"run harp qa {session} again to record it" in warned[0]
+    assert command_rows() == [(0.0, "PASS")]  # the first row was written after all
+
+    assert qa(capsys, session, "--store", store)[0] == code  # run again, as the warning says
+    assert command_rows() == [(0.0, "PASS"), (0.5, "PASS"), (1.0, "PASS")]  # each focus once
+
+    # a later run, and a run under other thresholds, are QA runs of their own: rows of their own
+    assert qa(capsys, session, "--store", store)[0] == code
+    assert qa(capsys, session, "--store", store, "--max-distortion", "0.01")[0] == 1
+    rows = command_rows()
+    assert len(rows) == 9 and rows[3:6] == rows[:3] and [v for _f, v in rows[6:]] == ["FAIL"] * 3

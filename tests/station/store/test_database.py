@@ -150,6 +150,21 @@ def test_session_verdict_is_kept_once_per_profile(store_url):
         assert [r["origin"] for r in st.qa_results(profile_id=pid)] == ["command", "command"]
 
 
+def test_a_qa_result_recorded_again_under_its_key_is_one_row(store_url):
+    """``harp qa`` run again after a commit that may or may not have been written records the same rows
+    under the same keys: a row already there is not added again; other keys, and no key, add rows."""
+    with ProfileStore(store_url) as st:
+        pid = put(st)
+        first = st.put_qa_result(verdict=verdict(0.2), profile_id=pid, focus=0.5, key="run-a/0")
+        again = st.put_qa_result(verdict=verdict(0.2), profile_id=pid, focus=0.5, key="run-a/0")
+        assert again == first
+        assert [r["record_key"] for r in st.qa_results(profile_id=pid)] == ["run-a/0"]
+        st.put_qa_result(verdict=verdict(0.2), profile_id=pid, focus=0.5, key="run-b/0")  # a later run
+        st.put_qa_result(verdict=verdict(0.2), profile_id=pid, focus=0.5)  # no key: a row each time
+        st.put_qa_result(verdict=verdict(0.2), profile_id=pid, focus=0.5)
+        assert [r["record_key"] for r in st.qa_results(profile_id=pid)] == ["run-a/0", "run-b/0", None, None]
+
+
 def test_record_verdict_of_no_profile_is_an_error(store_url):
     with ProfileStore(store_url) as st, pytest.raises(StoreError, match="no profile #42"):
         st.record_verdict(42, verdict(0.01))
@@ -225,7 +240,7 @@ def test_open_for_writing_creates_at_head(store_url, raw):
     ProfileStore(store_url).close()
     with raw.connect() as conn:
         assert conn.execute(sa.text("SELECT version_num FROM alembic_version")).scalar() == HEAD
-        assert conn.execute(sa.text("SELECT version FROM schema_version")).scalar() == 6
+        assert conn.execute(sa.text("SELECT version FROM schema_version")).scalar() == 7
     with ProfileStore(store_url, create=False) as st:
         assert st.profiles() == []
 

@@ -40,7 +40,45 @@ def test_migrations_build_the_tables_the_queries_use(store_url, raw):
         got = {c["name"] for c in insp.get_columns(table.name)}
         assert got == {c.name for c in table.columns}, table.name
     unique = {tuple(ix["column_names"]) for ix in insp.get_indexes("qa_results") if ix["unique"]}
-    assert ("profile_id",) in unique
+    assert ("profile_id",) in unique and ("record_key",) in unique
+
+
+def test_a_store_at_revision_0006_opens_and_its_qa_history_gains_keys(store_url, raw):
+    """A store the previous software left (revision 0006, a ``harp qa`` row without a key) is upgraded
+    when opened: its row is kept, keyless, and rows recorded again under one key are one row."""
+    from alembic import command
+
+    from station.store.engine import make_engine
+    from station.store.location import parse_store
+    from station.store.migrate import _alembic_config
+
+    loc = parse_store(store_url)
+    if loc.path is not None:
+        loc.path.parent.mkdir(parents=True)
+    engine = make_engine(loc)
+    with engine.begin() as conn:
+        command.upgrade(_alembic_config(conn), "0006")
+        conn.execute(
+            sa.text(
+                "INSERT INTO qa_results (session_dir, verdict, reasons_json, metrics_json, created_at, focus, origin)"
+                " VALUES ('/s', 'PASS', '[]', '{}', '2026-01-01T00:00:00+00:00', 0.5, 'command')"
+            )
+        )
+    engine.dispose()
+    with raw.connect() as conn:
+        assert conn.execute(sa.text("SELECT version_num FROM alembic_version")).scalar() == "0006"
+
+    with ProfileStore(store_url, create=False) as st:
+        (old,) = st.qa_results()
+        assert old["record_key"] is None and old["session_dir"] == "/s" and old["focus"] == 0.5
+        check_integrity(st.engine, st.location)
+        for _ in range(2):
+            st.put_qa_result(verdict=verdict(0.01), session_dir="/s", focus=0.5, key="run/0")
+        st.put_qa_result(verdict=verdict(0.01), session_dir="/s", focus=0.5)
+        assert [r["record_key"] for r in st.qa_results()] == [None, "run/0", None]
+    with raw.connect() as conn:
+        assert conn.execute(sa.text("SELECT version_num FROM alembic_version")).scalar() == HEAD
+        assert conn.execute(sa.text("SELECT version FROM schema_version")).scalar() == 7
 
 
 def test_schema3_store_written_by_the_old_code_migrates_in_place(tmp_path):
@@ -79,7 +117,7 @@ def test_schema3_store_written_by_the_old_code_migrates_in_place(tmp_path):
         pid = put(st, session="new", qa=verdict(0.01))
         assert st.profile(pid).qa == verdict(0.01)
     db = sqlite3.connect(path)
-    assert db.execute("SELECT version FROM schema_version").fetchone()[0] == 6  # old software now refuses it
+    assert db.execute("SELECT version FROM schema_version").fetchone()[0] == 7  # old software now refuses it
     db.close()
 
 
