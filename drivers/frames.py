@@ -1,7 +1,7 @@
 """Raw camera buffers -> 2-D grey ``numpy`` arrays (``image[y, x]``), or raw Bayer mosaics.
 
 One function per wire format, plus :func:`to_grey` that dispatches on the
-format name. Names are the V4L2 fourcc (``GREY``, ``Y16``, ``YUYV``,
+format name. Names are the V4L2 fourcc (``GREY``, ``Y10``, ``Y12``, ``Y16``, ``YUYV``,
 ``MJPG``) or the GenICam PFNC name (``Mono8``, ``Mono10``, ``Mono12``,
 ``Mono16``). Every function copies: the result never aliases a driver
 buffer that will be re-queued.
@@ -13,7 +13,7 @@ PFNC name gives the first two pixels of the first row, then the second row follo
 pipeline (:mod:`pipeline.cfa`) takes the mosaic with its pattern in the frame's ``extra["cfa"]``.
 
 Packed 10/12-bit raw formats (:data:`PACKED_FORMATS`) are unpacked to ``uint16`` holding the values the
-sensor sent (0..1023, 0..4095: not scaled, as the unpacked ``Mono10``/``RG10`` words are), a Bayer one kept
+sensor sent (0..1023, 0..4095: not scaled, as the unpacked ``Mono10``/``Y10``/``RG10`` words are), a Bayer one kept
 as its mosaic with its pattern (:func:`bayer_pattern`), a mono one a grey frame. Three packings:
 
 * GenICam PFNC ``Mono10p``, ``Mono12p``, ``Bayer<xy>10p``, ``Bayer<xy>12p``: the pixels' bits one
@@ -49,6 +49,8 @@ the RAW10 and RAW12 data types.
 Linux kernel documentation, "V4L2 pixel formats: Bayer formats" (``V4L2_PIX_FMT_SRGGB8`` ``RGGB``,
 ``SGRBG8`` ``GRBG``, ``SGBRG8`` ``GBRG``, ``SBGGR8`` ``BA81``; the 10/12-bit ones one little-endian 16-bit
 word per sample, high bits zero; ``SBGGR16`` ``BYR2``).
+Linux kernel documentation, ``V4L2_PIX_FMT_Y10`` ('Y10 ') and ``V4L2_PIX_FMT_Y12`` ('Y12 '), grey: pixels stored
+in 16-bit words, the unused high bits zero, the least significant byte first (little-endian).
 
 ``bytes_per_line`` is the row stride in bytes (V4L2 ``bytesperline``); rows
 may be padded beyond ``width * bytes_per_pixel`` (a packed format: beyond the packed row).
@@ -94,6 +96,9 @@ _FIXED = {
     # GenICam unpacked Mono10/Mono12: one little-endian 16-bit word per pixel
     "Mono10": ("<u2", 2),
     "Mono12": ("<u2", 2),
+    # V4L2 unpacked Y10/Y12 (V4L2_PIX_FMT_Y10 'Y10 ', Y12 'Y12 '): the same, the value in the low bits
+    "Y10": ("<u2", 2),
+    "Y12": ("<u2", 2),
     "YUYV": ("u1", 2),
 }
 
@@ -302,8 +307,8 @@ def grey8(data: RawFrame, width: int, height: int, bytes_per_line: int | None = 
 
 
 def grey16(data: RawFrame, width: int, height: int, bytes_per_line: int | None = None, fmt: str = "Y16") -> np.ndarray:
-    """16-bit little-endian grey (``Y16``, ``Mono16``, unpacked ``Mono10/12``) -> ``uint16``, the words as they are
-    (a 10-bit value stays 0..1023); ``fmt`` names the format in an error."""
+    """16-bit little-endian grey (``Y16``, ``Mono16``, unpacked ``Mono10/12``, ``Y10/12``) -> ``uint16``, the words as
+    they are (a 10-bit value stays 0..1023); ``fmt`` names the format in an error."""
     rows = np.ascontiguousarray(_rows(data, width, height, 2, bytes_per_line, fmt))
     return rows.view("<u2").astype(np.uint16, copy=False).reshape(height, width)
 
@@ -361,7 +366,7 @@ def to_grey(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line: i
     mono one (``Mono12p``, ``Mono12Packed``, ``Y10P``, ...) unpacked by :func:`unpack` to ``uint16``."""
     if fmt in ("GREY", "Mono8"):
         return grey8(data, width, height, bytes_per_line, fmt)
-    if fmt in ("Y16", "Mono16", "Mono10", "Mono12"):
+    if fmt in ("Y16", "Mono16", "Mono10", "Mono12", "Y10", "Y12"):
         return grey16(data, width, height, bytes_per_line, fmt)
     if fmt in GENICAM_PACKED_MONO_FORMATS or fmt in V4L2_PACKED_GREY_FORMATS:
         return unpack(data, fmt, width, height, bytes_per_line)

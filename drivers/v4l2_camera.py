@@ -5,8 +5,9 @@ top of ``linuxpy.video.device.Device`` (memory-mapped streaming I/O, a
 non-blocking file descriptor and ``select`` with a timeout, so a stalled
 camera raises :class:`~drivers.errors.DeviceTimeout` instead of hanging).
 
-* Format: ``GREY`` (8 bit), ``Y16`` (16 bit little endian), ``YUYV`` (luma
-  plane kept) or ``MJPG`` (decoded to grey) -> 2-D array, see
+* Format: ``GREY`` (8 bit), ``Y10`` / ``Y12`` (10/12 bits in the low bits of a little-endian 16-bit word,
+  read as the words are, 0..1023 / 0..4095, like the unpacked Bayer ``RG10``), ``Y16`` (16 bit little endian),
+  ``YUYV`` (luma plane kept) or ``MJPG`` (decoded to grey) -> 2-D array, see
   :mod:`drivers.frames`; or a colour sensor's raw Bayer mosaic (``RGGB``, ``GRBG``, ``GBRG``, ``BA81``
   8 bit, ``RG10`` ... ``BG12`` unpacked, ``RG16`` ... ``BYR2`` 16 bit, MIPI CSI-2 packed ``pRAA``
   ``pgAA`` ``pGAA`` ``pBAA`` 10 bit and ``pRCC`` ``pgCC`` ``pGCC`` ``pBCC`` 12 bit:
@@ -39,7 +40,7 @@ Configuration (``drivers.open_camera``), e.g.::
     camera:
       driver: v4l2
       device: /dev/video2
-      pixel_format: YUYV      # GREY, Y16, YUYV, MJPG, Y10P, Y12P or a raw Bayer one (RGGB, pRAA, ...)
+      pixel_format: YUYV      # GREY, Y10, Y12, Y16, YUYV, MJPG, Y10P, Y12P or a raw Bayer one (RGGB, pRAA, ...)
       width: 1920
       height: 1080
       exposure_us: 10000      # stored in 100 µs units
@@ -72,8 +73,9 @@ from drivers.frames import V4L2_BAYER_FORMATS, V4L2_PACKED_GREY_FORMATS, bayer_p
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
-PIXEL_FORMATS = ("GREY", "Y16", "YUYV", "MJPG", *V4L2_PACKED_GREY_FORMATS, *V4L2_BAYER_FORMATS)
-"""The pixel formats (V4L2 fourccs) a frame is read in, best first (what ``harp devices`` proposes): grey (the
+PIXEL_FORMATS = ("GREY", "Y10", "Y12", "Y16", "YUYV", "MJPG", *V4L2_PACKED_GREY_FORMATS, *V4L2_BAYER_FORMATS)
+"""The pixel formats (V4L2 fourccs) a frame is read in, best first (what ``harp devices`` proposes): grey (8 bits,
+then the unpacked 10, 12 and 16 bits as the Aravis driver's ``Mono8`` ... ``Mono16``, then ``YUYV``, ``MJPG``, the
 MIPI CSI-2 packed ``Y10P`` / ``Y12P`` last), then a raw Bayer mosaic (a colour sensor that offers nothing else),
 the unpacked ones before the packed ``pRAA`` ... ``pBCC``, which cost an unpacking."""
 EXPOSURE_UNIT_US = 100.0  # V4L2_CID_EXPOSURE_ABSOLUTE is in 100 µs units
@@ -106,8 +108,8 @@ class V4L2Camera(CameraBase):
     device : str
         Device node, e.g. ``"/dev/video0"``.
     pixel_format : str
-        A V4L2 fourcc of :data:`PIXEL_FORMATS`: ``"GREY"``, ``"Y16"``, ``"YUYV"``, ``"MJPG"``, the packed grey
-        ``"Y10P"``/``"Y12P"``, or a raw Bayer one (``"RGGB"``, ``"RG10"``, ``"pRAA"``, ``"pRCC"``, ...).
+        A V4L2 fourcc of :data:`PIXEL_FORMATS`: ``"GREY"``, ``"Y10"``, ``"Y12"``, ``"Y16"``, ``"YUYV"``, ``"MJPG"``,
+        the packed grey ``"Y10P"``/``"Y12P"``, or a raw Bayer one (``"RGGB"``, ``"RG10"``, ``"pRAA"``, ``"pRCC"``, ...).
     width, height : int, optional
         Requested frame size; default the device's current size.
     exposure_us, gain_db, focus : float, optional
@@ -326,8 +328,8 @@ class V4L2Camera(CameraBase):
 
     @property
     def pixel_format(self) -> str:
-        """The V4L2 fourcc name (``GREY``, ``Y16``, ``YUYV``, ``MJPG``, ``Y10P`` or a raw Bayer one such as ``RGGB``
-        or ``pRAA``)."""
+        """The V4L2 fourcc name (``GREY``, ``Y10``, ``Y16``, ``YUYV``, ``MJPG``, ``Y10P`` or a raw Bayer one such as
+        ``RGGB`` or ``pRAA``)."""
         return self._fourcc
 
     # -- controls -------------------------------------------------------------------

@@ -12,7 +12,7 @@ fake signals "a buffer is done" by writing one byte into the FIFO, and
 real driver (a stalled camera really times out).
 
 The device models a UVC-like camera (``uvcvideo``): formats GREY / Y16 /
-YUYV / MJPG, controls ``auto_exposure`` (menu: 1 manual, 3 aperture
+YUYV / MJPG (and, offered on request, Y10 / Y12, raw Bayer and MIPI CSI-2 packed ones), controls ``auto_exposure`` (menu: 1 manual, 3 aperture
 priority), ``exposure_time_absolute`` (100 µs units, inactive while auto
 exposure is on: writing it then fails with ``EACCES``), ``gain``,
 ``focus_absolute`` (inactive while ``focus_automatic_continuous`` is on) and
@@ -45,6 +45,9 @@ IOC = raw.IOC
 FOURCC = {
     "GREY": raw.PixelFormat.GREY,
     "Y16": raw.PixelFormat.Y16,
+    # 10/12 bits in the low bits of a little-endian 16-bit word, the high bits zero (V4L2_PIX_FMT_Y10, Y12)
+    "Y10": raw.PixelFormat.Y10,
+    "Y12": raw.PixelFormat.Y12,
     "YUYV": raw.PixelFormat.YUYV,
     "MJPG": raw.PixelFormat.MJPEG,
     # raw Bayer mosaics (a colour sensor): 8 bits, 10 bits in 16-bit words, 16 bits
@@ -64,6 +67,8 @@ FOURCC = {
     "Y10P": raw.PixelFormat.Y10P,
     "Y12P": raw.PixelFormat.Y12P,
 }
+WORD_GREY_BITS = {"Y10": 10, "Y12": 12}
+"""The fake's unpacked 10/12-bit grey formats: the scene's values written as little-endian 16-bit words."""
 BAYER_BITS = {"RGGB": 8, "BA81": 8, "BA10": 10, "BYR2": 16}
 """The fake's raw Bayer formats and their sample bits (10: the low bits of a little-endian word)."""
 PACKED_BITS = {f: 10 if f.endswith(("AA", "10P")) else 12 for f in FOURCC if f.startswith("p") or f[-1] == "P"}
@@ -179,6 +184,8 @@ class FakeV4L2Camera:
         width = max(2, min(int(width), self.max_size[0])) & ~1
         height = max(1, min(int(height), self.max_size[1]))
         bpp = {raw.PixelFormat.GREY: 1, raw.PixelFormat.Y16: 2, raw.PixelFormat.YUYV: 2}.get(fourcc)
+        if _NAME.get(int(fourcc)) in WORD_GREY_BITS:
+            bpp = 2
         if _NAME.get(int(fourcc)) in BAYER_BITS:
             bpp = 1 if BAYER_BITS[_NAME[int(fourcc)]] == 8 else 2
             height = max(2, height) & ~1  # a whole mosaic
@@ -228,6 +235,8 @@ class FakeV4L2Camera:
             rows = self.scene(seq, w, h)
         elif fmt in BAYER_BITS:
             rows = self.scene(seq, w, h, bits=BAYER_BITS[fmt]).astype("<u2").view(np.uint8).reshape(h, 2 * w)
+        elif fmt in WORD_GREY_BITS:
+            rows = self.scene(seq, w, h, bits=WORD_GREY_BITS[fmt]).astype("<u2").view(np.uint8).reshape(h, 2 * w)
         elif fmt == "Y16":
             rows = self.scene(seq, w, h, bits=16).astype("<u2").view(np.uint8).reshape(h, 2 * w)
         else:  # YUYV: Y0 U Y1 V, chroma constant 128

@@ -63,7 +63,13 @@ def test_a_colour_sensor_offering_only_raw_bayer_is_listed_with_a_snippet_that_o
 
 @pytest.mark.parametrize(
     "offered, proposed",
-    [(("pBAA", "BA10"), "BA10"), (("pRCC", "BA81"), "BA81"), (("Y10P", "GREY"), "GREY"), (("pgAA",), "pgAA")],
+    [
+        (("pBAA", "BA10"), "BA10"),
+        (("pRCC", "BA81"), "BA81"),
+        (("Y10P", "GREY"), "GREY"),
+        (("pgAA",), "pgAA"),
+        (("Y12P", "YUYV", "Y12"), "Y12"),
+    ],
 )
 def test_packed_raw_formats_come_after_the_unpacked_ones(tmp_path, offered, proposed):
     """``harp devices`` proposes the driver's PIXEL_FORMATS best first: an unpacked format (no unpacking) before

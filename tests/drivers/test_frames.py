@@ -213,3 +213,14 @@ def test_bad_packed_input_is_one_line_naming_the_format_and_sizes(call, message)
     with pytest.raises(CaptureError, match=message) as err:
         call()
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("fmt, top", [("Y10", 0x3FF), ("Y12", 0xFFF)])
+def test_v4l2_y10_y12_are_little_endian_words_read_as_they_are(fmt, top):
+    """V4L2_PIX_FMT_Y10 / Y12 (kernel documentation): one 16-bit word per pixel, least significant byte first, the
+    value in the low bits; read as the words are (not scaled), as the unpacked Mono10/Mono12 and RG10 are. Bytes
+    worked out by hand, rows padded to the stride with 0xEE."""
+    low, high = top & 0xFF, top >> 8
+    raw = bytes([low, high, 0x01, 0x00, 0xEE, 0xEE, 0x00, 0x02, 0x34, 0x01, 0xEE, 0xEE])
+    out = to_grey(raw, fmt, 2, 2, bytes_per_line=6)
+    assert out.dtype == np.uint16 and out.tolist() == [[top, 1], [0x200, 0x134]]

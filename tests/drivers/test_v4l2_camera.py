@@ -42,15 +42,20 @@ def camera(node, **cfg) -> V4L2Camera:
         ("Y16", 8, 16),
         ("YUYV", 0, 8),
         ("YUYV", 4, 8),
+        ("Y10", 0, 10),
+        ("Y10", 6, 10),
+        ("Y12", 10, 12),
         ("Y10P", 0, 10),
         ("Y10P", 3, 10),
         ("Y12P", 7, 12),
     ],
 )
 def test_uncompressed_formats_give_the_exact_grey_image(node, fmt, padding, bits):
-    """The grey formats; MIPI CSI-2 packed ``Y10P``/``Y12P`` (a mono Raspberry Pi camera) unpacked to the 10/12-bit
-    values the scene holds, which the fake packs with the independent packer of tests/drivers/packing.py."""
-    offered = {"formats": ("GREY", fmt)} if fmt in ("Y10P", "Y12P") else {}
+    """The grey formats; ``Y10``/``Y12`` (the values in the low bits of little-endian 16-bit words) read as the words
+    are, 0..1023 / 0..4095 (as the unpacked Bayer ``BA10``); MIPI CSI-2 packed ``Y10P``/``Y12P`` (a mono Raspberry
+    Pi camera) unpacked to the 10/12-bit values the scene holds, which the fake packs with the independent packer of
+    tests/drivers/packing.py. Rows padded to ``bytesperline`` with 0xEE bytes that must not reach the image."""
+    offered = {"formats": ("GREY", fmt)} if fmt in ("Y10", "Y12", "Y10P", "Y12P") else {}
     with FakeV4L2Camera(node, stride_padding=padding, **offered) as hw, camera(node, pixel_format=fmt) as cam:
         assert cam.pixel_format == fmt and cam.sensor_size == (W, H)
         f = cam.capture(timeout=1.0)
