@@ -18,7 +18,8 @@ GenICam features used, chosen by what the device's XML declares:
   ``BayerBG12Packed``, :data:`drivers.frames.GENICAM_BAYER_FORMATS`):
   the frame is the mosaic as the sensor gave it (nothing demosaiced) with its pattern in
   ``extra["cfa"]`` (``"RGGB"`` ...), read from each buffer's own pixel format, which the colour
-  pipeline measures (lateral chromatic aberration, vignetting per channel);
+  pipeline measures (lateral chromatic aberration, vignetting per channel); a camera that pads its rows
+  (``PaddingX``) is read with the stride its buffer's size tells (:func:`drivers.frames.genicam_stride`);
 * trigger: ``software`` (``TriggerSource=Software`` + ``TriggerSoftware``),
   ``off`` (free running; frames older than the ``capture()`` call are
   dropped) or any other ``TriggerSource`` name such as ``Line0`` (capture
@@ -87,8 +88,7 @@ from drivers.frames import (
     GENICAM_BAYER_FORMATS,
     GENICAM_PACKED_MONO_FORMATS,
     bayer_pattern,
-    raw_mosaic,
-    to_grey,
+    genicam_image,
 )
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
@@ -741,9 +741,7 @@ class AravisCamera(CameraBase):
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
         fmt = names[pf]
-        try:
-            if fmt in BAYER_FORMATS:
-                return raw_mosaic(buf.get_data(), fmt, w, h), fmt
-            return to_grey(buf.get_data(), fmt, w, h), fmt
+        try:  # rows padded (PaddingX): the buffer's size tells the stride (drivers.frames.genicam_stride)
+            return genicam_image(buf.get_data(), fmt, w, h), fmt
         except CaptureError as exc:  # a buffer that does not hold the frame its format and size say
             raise CaptureError(f"{self.name}: {exc}") from None

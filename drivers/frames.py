@@ -32,7 +32,9 @@ as its mosaic with its pattern (:func:`bayer_pattern`), a mono one a grey frame.
 
 A GenICam frame is one stream over the whole image, as the camera sends it: with an odd width a row may
 start inside a group (GigE Vision: "the first pixel of the second line will not start on a 3-byte
-boundary"). A V4L2 frame is rows of whole groups, ``bytes_per_line`` apart.
+boundary"); unless its rows are padded (GenICam ``PaddingX``, the GigE Vision leader's ``padding_x``: bytes
+after each line), when each row is a stream of its own, the stride apart (:func:`genicam_image` finds the
+stride from the buffer's size). A V4L2 frame is rows of whole groups, ``bytes_per_line`` apart.
 
 References
 ----------
@@ -84,6 +86,8 @@ __all__ = [
     "mjpeg_grey",
     "to_grey",
     "bytes_per_pixel",
+    "genicam_stride",
+    "genicam_image",
 ]
 
 #: format name -> (numpy dtype, bytes per pixel) of the formats with a whole number of bytes per pixel;
@@ -359,6 +363,49 @@ def raw_mosaic(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line
     if _BAYER[fmt][1] == 8:
         return grey8(data, width, height, bytes_per_line, fmt)
     return grey16(data, width, height, bytes_per_line, fmt)
+
+
+def _genicam_sizes(fmt: str, width: int, height: int) -> tuple[int, int] | None:
+    """(bytes of one unpadded row, bytes of the unpadded frame) of a GenICam format; None: not one with a fixed
+    size per pixel. A packed row or frame ends on the byte its last pixel's bits reach."""
+    if fmt in _PACKED_INFO:
+        size, pixels = _GROUPS[_PACKED_INFO[fmt][0]]
+        wire_bits = 8 * size // pixels
+        return -(-width * wire_bits // 8), -(-width * height * wire_bits // 8)
+    if fmt in _FIXED:
+        bpp = _FIXED[fmt][1]
+    elif fmt in _BAYER:
+        bpp = 1 if _BAYER[fmt][1] == 8 else 2
+    else:
+        return None
+    return width * bpp, width * height * bpp
+
+
+def genicam_stride(fmt: str, width: int, height: int, size: int) -> int | None:
+    """The row stride of a GenICam buffer of ``size`` bytes whose rows are padded, or None: read it unpadded.
+
+    Padded (GenICam ``PaddingX``: bytes after each row, which the buffer's size includes): ``size`` is not the
+    unpadded frame's but ``height`` whole rows of ``size // height`` bytes, at least one unpadded row each. Any
+    other size is read unpadded, as a frame without padding is (one stream over the frame for a packed format;
+    fewer bytes than it needs: the one-line truncation error).
+    """
+    sizes = _genicam_sizes(fmt, width, height)
+    if sizes is None or width <= 0 or height <= 0:
+        return None
+    row, frame = sizes
+    if size == frame or size % height or size // height < row:
+        return None
+    return size // height
+
+
+def genicam_image(data: RawFrame, fmt: str, width: int, height: int) -> np.ndarray:
+    """A GenICam buffer (one image, as the camera sent it) -> its grey image (:func:`to_grey`) or, a raw Bayer
+    format, its mosaic (:func:`raw_mosaic`), a copy; rows padded beyond the pixels read with the stride
+    :func:`genicam_stride` finds from the buffer's size."""
+    stride = genicam_stride(fmt, width, height, memoryview(data).nbytes)
+    if fmt in BAYER_FORMATS:
+        return raw_mosaic(data, fmt, width, height, stride)
+    return to_grey(data, fmt, width, height, stride)
 
 
 def to_grey(data: RawFrame, fmt: str, width: int, height: int, bytes_per_line: int | None = None) -> np.ndarray:
