@@ -741,7 +741,5 @@ class AravisCamera(CameraBase):
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
         fmt = names[pf]
-        try:  # rows padded (PaddingX): the buffer's size tells the stride (drivers.frames.genicam_stride)
-            return genicam_image(buf.get_data(), fmt, w, h), fmt
-        except CaptureError as exc:  # a buffer that does not hold the frame its format and size say
-            raise CaptureError(f"{self.name}: {exc}") from None
+        # rows padded (PaddingX): the buffer's size tells the stride (drivers.frames.genicam_stride)
+        return self._converted(genicam_image, buf.get_data(), fmt, w, h), fmt

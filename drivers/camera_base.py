@@ -14,7 +14,8 @@ device by ``open`` before the initial settings are applied).
 
 The base gives :class:`drivers.protocols.CameraRanges` from ``self._ranges``
 and :meth:`CameraBase._in_range`, the check every setter makes before it
-writes to the device.
+writes to the device, and :meth:`CameraBase._converted`, a buffer's
+conversion (:mod:`drivers.frames`) whose error names the camera.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import Any, Self
 import numpy as np
 
 from drivers.config_keys import check_config_keys
-from drivers.errors import DeviceRejected, DriverError
+from drivers.errors import CaptureError, DeviceRejected, DriverError
 from drivers.protocols import CameraIdentity, Frame, Range
 from drivers.settings import Setting
 
@@ -157,6 +158,14 @@ class CameraBase(abc.ABC):
         if not math.isfinite(v):
             raise ValueError(f"{self.name}: {what} must be finite, got {value!r}")
         return v
+
+    def _converted(self, convert: Callable[..., np.ndarray], *args: Any) -> np.ndarray:
+        """``convert(*args)``: a buffer's conversion (:mod:`drivers.frames`); its :class:`CaptureError` (a buffer
+        that does not hold the frame its format and size say) raised again, one line, with the camera's name first."""
+        try:
+            return convert(*args)
+        except CaptureError as exc:
+            raise CaptureError(f"{self.name}: {exc}") from None
 
     def _frame(
         self, image: np.ndarray, timestamp: float, exposure_us: float, gain_db: float, extra: dict[str, Any]

@@ -442,10 +442,7 @@ class V4L2Camera(CameraBase):
             raise CaptureError(f"{self.name}: empty buffer (sequence {raw.frame_nb})")
         buffer = (bytes(raw.data), self._fourcc, int(fmt.width), int(fmt.height), int(fmt.bytes_per_line) or None)
         pattern = bayer_pattern(self._fourcc)
-        try:
-            image = to_grey(*buffer) if pattern is None else raw_mosaic(*buffer)
-        except CaptureError as exc:  # a buffer that does not hold the frame its format and size say
-            raise CaptureError(f"{self.name}: {exc}") from None
+        image = self._converted(to_grey if pattern is None else raw_mosaic, *buffer)
         extra: dict[str, Any] = {
             "sequence": int(raw.frame_nb),
             "device_timestamp": float(raw.timestamp),

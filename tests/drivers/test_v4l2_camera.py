@@ -16,7 +16,7 @@ import pytest
 from linuxpy.video.device import ControlID
 
 import drivers
-from drivers.errors import DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
+from drivers.errors import CaptureError, DeviceDisconnected, DeviceRejected, DeviceTimeout, DriverError, OutOfRange
 from drivers.protocols import CameraRanges, Range
 from drivers.v4l2_camera import V4L2Camera
 from tests.drivers.fake_v4l2 import FakeV4L2Camera
@@ -267,3 +267,15 @@ def test_from_config_rejects_unknown_key_and_registry_opens_it(node):
         V4L2Camera.from_config({"driver": "v4l2", "pixel_format": "RGB3"})
     cam = drivers.open_camera({"driver": "v4l2", "device": str(node)})
     assert isinstance(cam, V4L2Camera) and not cam.is_open
+
+
+def test_a_buffer_that_does_not_hold_its_frame_is_one_line_naming_the_camera(node):
+    """The device shrinks its frames behind the driver's back (half the rows it set at S_FMT): the capture fails
+    with one line naming the camera, the format and the bytes missing, not a traceback from numpy."""
+    with FakeV4L2Camera(node) as hw, camera(node, pixel_format="GREY") as cam:
+        hw.height = H // 2
+        with pytest.raises(CaptureError) as err:
+            cam.capture(timeout=1.0)
+    assert str(err.value) == (
+        f"v4l2 camera {node}: GREY frame truncated: {W * H // 2} bytes for {W}x{H} (stride {W}) needs {W * H}"
+    )
