@@ -19,7 +19,8 @@ GenICam features used, chosen by what the device's XML declares:
   the frame is the mosaic as the sensor gave it (nothing demosaiced) with its pattern in
   ``extra["cfa"]`` (``"RGGB"`` ...), read from each buffer's own pixel format, which the colour
   pipeline measures (lateral chromatic aberration, vignetting per channel); a camera that pads its rows
-  (``PaddingX``) is read with the stride its buffer's size tells (:func:`drivers.frames.genicam_stride`);
+  (``PaddingX``) is read with the stride its buffer's leader states (``padding_x``;
+  :func:`drivers.frames.genicam_stride`);
 * trigger: ``software`` (``TriggerSource=Software`` + ``TriggerSoftware``),
   ``off`` (free running; frames older than the ``capture()`` call are
   dropped) or any other ``TriggerSource`` name such as ``Line0`` (capture
@@ -741,5 +742,8 @@ class AravisCamera(CameraBase):
         if pf not in names:
             raise CaptureError(f"{self.name}: buffer pixel format 0x{pf:08x} is not one of {', '.join(PIXEL_FORMATS)}")
         fmt = names[pf]
-        # rows padded (PaddingX): the buffer's size tells the stride (drivers.frames.genicam_stride)
-        return self._converted(genicam_image, buf.get_data(), fmt, w, h), fmt
+        # rows padded (PaddingX): the leader's padding_x tells the stride (drivers.frames.genicam_stride), else
+        # (an Aravis without arv_buffer_get_image_padding) the buffer's size
+        get_padding = getattr(buf, "get_image_padding", None)
+        padding_x = None if get_padding is None else int(get_padding()[0])
+        return self._converted(genicam_image, buf.get_data(), fmt, w, h, padding_x), fmt

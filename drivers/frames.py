@@ -381,28 +381,32 @@ def _genicam_sizes(fmt: str, width: int, height: int) -> tuple[int, int] | None:
     return width * bpp, width * height * bpp
 
 
-def genicam_stride(fmt: str, width: int, height: int, size: int) -> int | None:
+def genicam_stride(fmt: str, width: int, height: int, size: int, padding_x: int | None = None) -> int | None:
     """The row stride of a GenICam buffer of ``size`` bytes whose rows are padded, or None: read it unpadded.
 
-    Padded (GenICam ``PaddingX``: bytes after each row, which the buffer's size includes): ``size`` is not the
-    unpadded frame's but ``height`` whole rows of ``size // height`` bytes, at least one unpadded row each. Any
-    other size is read unpadded, as a frame without padding is (one stream over the frame for a packed format;
+    ``padding_x``: the bytes after each row that the buffer's leader states (GigE Vision's ``padding_x``, U3V's
+    ``padding_x``; Aravis ``arv_buffer_get_image_padding``): the stride is one unpadded row and that, 0 unpadded,
+    whatever the size (a buffer may carry chunk data after the image). None (not stated): padded when ``size`` is
+    not the unpadded frame's but ``height`` whole rows of ``size // height`` bytes, at least one unpadded row each.
+    Any other size is read unpadded, as a frame without padding is (one stream over the frame for a packed format;
     fewer bytes than it needs: the one-line truncation error).
     """
     sizes = _genicam_sizes(fmt, width, height)
     if sizes is None or width <= 0 or height <= 0:
         return None
     row, frame = sizes
+    if padding_x is not None:
+        return row + padding_x if padding_x > 0 else None
     if size == frame or size % height or size // height < row:
         return None
     return size // height
 
 
-def genicam_image(data: RawFrame, fmt: str, width: int, height: int) -> np.ndarray:
+def genicam_image(data: RawFrame, fmt: str, width: int, height: int, padding_x: int | None = None) -> np.ndarray:
     """A GenICam buffer (one image, as the camera sent it) -> its grey image (:func:`to_grey`) or, a raw Bayer
     format, its mosaic (:func:`raw_mosaic`), a copy; rows padded beyond the pixels read with the stride
-    :func:`genicam_stride` finds from the buffer's size."""
-    stride = genicam_stride(fmt, width, height, memoryview(data).nbytes)
+    :func:`genicam_stride` finds from the leader's ``padding_x`` or, not stated, from the buffer's size."""
+    stride = genicam_stride(fmt, width, height, memoryview(data).nbytes, padding_x)
     if fmt in BAYER_FORMATS:
         return raw_mosaic(data, fmt, width, height, stride)
     return to_grey(data, fmt, width, height, stride)

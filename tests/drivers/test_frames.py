@@ -285,3 +285,25 @@ def test_an_unpadded_genicam_buffer_is_one_stream_even_when_its_size_is_whole_ro
     raw = packing.pack_stream(image, fmt)
     assert frames.genicam_stride(fmt, width, height, len(raw)) is None
     assert np.array_equal(frames.genicam_image(raw, fmt, width, height), image)
+
+
+@pytest.mark.parametrize(
+    "fmt, width, height, padding", [("Mono12p", 6, 4, 3), ("Mono8", 6, 4, 2), ("BayerRG10p", 8, 2, 4)]
+)
+def test_the_padding_the_leader_states_decides_the_stride_whatever_the_size(fmt, width, height, padding):
+    """The padding a buffer's leader states (Aravis ``get_image_padding``) is the stride's, not the size's guess:
+    padded rows with padding_x read right; an unpadded frame followed by whole rows' worth of other bytes (chunk data
+    after the image) with padding_x 0 read as one stream, where the size alone would take it for padded rows."""
+    bits = packing.FORMATS[fmt][1] if fmt in packing.FORMATS else 8
+    image = np.random.default_rng(padding).integers(0, 1 << bits, (height, width), dtype=np.uint16)
+    if fmt == "Mono8":
+        rows = [row.astype(np.uint8).tobytes() for row in image]
+        stream = image.astype(np.uint8).tobytes()
+    else:
+        rows = [packing.pack_stream(row, fmt) for row in image]
+        stream = packing.pack_stream(image, fmt)
+    padded = b"".join(r + b"\xee" * padding for r in rows)
+    assert np.array_equal(frames.genicam_image(padded, fmt, width, height, padding_x=padding), image)
+    chunk = b"\xcc" * (height * (len(rows[0]) + padding) - len(stream))  # the size of padded rows, exactly
+    assert frames.genicam_stride(fmt, width, height, len(stream + chunk)) is not None  # the size's guess: padded
+    assert np.array_equal(frames.genicam_image(stream + chunk, fmt, width, height, padding_x=0), image)
