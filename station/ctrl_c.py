@@ -26,11 +26,18 @@ kept said); this module holds the pieces that make that hold where CPython alone
   ends the process by SIGINT instead of with its exit code (dataclasses and namedtuples are made
   that way: a Ctrl-C while a module defining one was imported made ``harp calibrate`` print its
   "interrupted" line and then die by SIGINT, -2 for a Python caller, instead of exiting 130).
+* :func:`stop_signals_as_ctrl_c`: SIGTERM (``systemctl stop``, ``docker stop``, ``timeout``, a
+  ``kill``) and SIGHUP (the terminal or the SSH connection closed) are answered as a Ctrl-C is: the
+  command's own line (``stopped by SIGTERM`` where a Ctrl-C says ``interrupted``), what was kept
+  kept, a session's resume line, its workers stopped, exit ``128 + signal`` (143, 129). Before,
+  either killed the process where it stood: no line, no session record of the stop, and
+  multiprocessing's "leaked semaphore objects" warning on stderr.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -109,3 +116,95 @@ def forget_handled_ctrl_c() -> None:
     except (ValueError, AttributeError):  # not this interpreter's symbol (another version or build)
         return
     flag.value = 0
+
+
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGHUP)
+"""The signals that ask a command to stop, answered as a Ctrl-C (:func:`stop_signals_as_ctrl_c`)."""
+
+
+class Stopped(KeyboardInterrupt):
+    """A :data:`STOP_SIGNALS` signal arrived: a ``KeyboardInterrupt``, so that every command's
+    Ctrl-C handling (what was kept, a session's resume line, workers stopped) answers it too."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+_stopped_by: int | None = None
+"""The signal that stopped the command (None: none, or a Ctrl-C): one command per process."""
+_installed: dict[int, Any] = {}
+"""The handlers :func:`stop_signals_as_ctrl_c` replaced, by signal (SIG_DFL each): restored in forked children."""
+
+
+def stop_signal() -> int | None:
+    """The :data:`STOP_SIGNALS` signal that stopped the command; None for a Ctrl-C (or nothing)."""
+    return _stopped_by
+
+
+def stopper() -> str:
+    """What stopped the command, for its line: ``"Ctrl-C"``, or the signal's name (``"SIGTERM"``)."""
+    return "Ctrl-C" if _stopped_by is None else signal.Signals(_stopped_by).name
+
+
+def stopped_text() -> str:
+    """The first word(s) of the command's line: ``"interrupted"`` (Ctrl-C) or ``"stopped by SIGTERM"``."""
+    return "interrupted" if _stopped_by is None else f"stopped by {stopper()}"
+
+
+def stopped_exit_code() -> int:
+    """130 after a Ctrl-C, ``128 + signal`` after a stop signal (143 SIGTERM, 129 SIGHUP), as a shell
+    reports a process its signal ended (:mod:`station.exit_codes`)."""
+    from station.exit_codes import EXIT_INTERRUPTED
+
+    return EXIT_INTERRUPTED if _stopped_by is None else 128 + _stopped_by
+
+
+def _raise_stopped(signum: int, _frame: Any) -> None:
+    global _stopped_by
+    if _stopped_by is not None:  # asked again while stopping: the signal's own action, now
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
+    _stopped_by = signum
+    raise Stopped(signum)
+
+
+def _default_in_child() -> None:
+    """In a process forked from this one (``harp calibrate``'s workers): the stop signals' own action
+    again, so that a worker a pool stops with SIGTERM ends at once and never runs the command's handler."""
+    for signum, previous in _installed.items():
+        with contextlib.suppress(ValueError, OSError):
+            if signal.getsignal(signum) is _raise_stopped:
+                signal.signal(signum, previous)
+
+
+_at_fork = False
+
+
+@contextlib.contextmanager
+def stop_signals_as_ctrl_c() -> Iterator[None]:
+    """Inside the block, each of :data:`STOP_SIGNALS` whose action is the default raises :class:`Stopped` in
+    the main thread (a second one while stopping ends the process as before); a signal the caller ignores
+    (``nohup``: SIGHUP) or handles stays so. The handlers are restored when the block ends, and processes
+    forked inside it get the default action back (:func:`_default_in_child`). Outside the main thread it
+    does nothing (signals are the main thread's)."""
+    global _stopped_by, _at_fork
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _stopped_by = None
+    mine = {}
+    for signum in STOP_SIGNALS:
+        if signal.getsignal(signum) is signal.SIG_DFL:
+            mine[signum] = signal.signal(signum, _raise_stopped)
+    _installed.update(mine)
+    if not _at_fork:
+        os.register_at_fork(after_in_child=_default_in_child)
+        _at_fork = True
+    try:
+        yield
+    finally:
+        for signum, previous in mine.items():
+            signal.signal(signum, previous)
+            _installed.pop(signum, None)

@@ -24,9 +24,16 @@ class InputError(HarpError):
 
 
 class Interrupted(HarpError):
-    """Ctrl-C stopped the command; the line says what was kept and how to go on (exit 130)."""
+    """Ctrl-C stopped the command; the line says what was kept and how to go on (exit 130); a stop signal
+    (SIGTERM, SIGHUP: :func:`station.ctrl_c.stop_signals_as_ctrl_c`), exit ``128 + signal``."""
 
     exit_code = EXIT_INTERRUPTED
+
+    def __init__(self, *args: object) -> None:
+        from station.ctrl_c import stopped_exit_code
+
+        super().__init__(*args)
+        self.exit_code = stopped_exit_code()
 
 
 def one_line(message: object) -> str:

@@ -11,6 +11,9 @@ code   meaning
 2      bad input or an error: one line on stderr naming the file, field or device;
        a session that stopped (its frames are kept; the line says how to go on)
 130    interrupted (Ctrl-C); a session prints the resume command
+143    stopped by SIGTERM (``systemctl stop``, ``docker stop``, ``kill``), 129 by SIGHUP (the
+       terminal or SSH connection closed): answered as a Ctrl-C, the line says
+       ``stopped by SIGTERM``; ignored signals (``nohup``) stay ignored
 141    standard output closed early (e.g. piped into ``head``)
 =====  ==============================================================================
 """

@@ -33,9 +33,15 @@ from typing import Any
 from station.cli.commands import COMMANDS, module_of, unknown_command
 from station.cli.help_text import HarpParser
 from station.cli.say import say
-from station.ctrl_c import deliver_dropped_ctrl_c, forget_handled_ctrl_c
+from station.ctrl_c import (
+    deliver_dropped_ctrl_c,
+    forget_handled_ctrl_c,
+    stop_signals_as_ctrl_c,
+    stopped_exit_code,
+    stopped_text,
+)
 from station.errors import HarpError, one_line
-from station.exit_codes import EXIT_BROKEN_PIPE, EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK
+from station.exit_codes import EXIT_BROKEN_PIPE, EXIT_ERROR, EXIT_OK
 
 
 def first_word(argv: Sequence[str]) -> str | None:
@@ -96,7 +102,8 @@ class _Version(argparse.Action):
 def main(argv: list[str] | None = None) -> int:
     """Run the ``harp`` command ``argv`` (default ``sys.argv[1:]``); returns its exit code."""
     try:
-        return _main(argv)
+        with stop_signals_as_ctrl_c():  # SIGTERM, SIGHUP: answered as a Ctrl-C (exit 143, 129)
+            return _main(argv)
     finally:
         # every Ctrl-C reached a command's handler and its exit code says so: not a death by SIGINT
         forget_handled_ctrl_c()
@@ -116,8 +123,8 @@ def _main(argv: list[str] | None) -> int:
     try:  # Ctrl-C while the sub-command's module imports numpy/scipy/OpenCV: no traceback either
         parser = build_parser(argv)
     except KeyboardInterrupt:
-        say("harp", "interrupted")
-        return EXIT_INTERRUPTED
+        say("harp", stopped_text())
+        return stopped_exit_code()
     args, extra = parser.parse_known_args(argv)
     if extra:  # named by the sub-command they were given to (argparse would say "harp: ...")
         say(_help_prog(args), f"unrecognized arguments: {' '.join(extra)} (see {_help_prog(args)} --help)")
@@ -132,8 +139,8 @@ def _main(argv: list[str] | None) -> int:
         say(_prog(args), one_line(exc))
         return exc.exit_code
     except KeyboardInterrupt:
-        say("harp", "interrupted")
-        return EXIT_INTERRUPTED
+        say("harp", stopped_text())
+        return stopped_exit_code()
     except BrokenPipeError:
         # stdout closed early (``harp measure --json ... | head``): not an error of
         # ours, and no traceback; point stdout at devnull so the interpreter's
@@ -158,8 +165,8 @@ def _main(argv: list[str] | None) -> int:
         return EXIT_ERROR
     except Exception as exc:  # a bug: still one line and exit 2 (never 1, which means QA FAIL)
         if _caused_by_ctrl_c(exc):  # a Ctrl-C that Python wrapped (raised while a class was made)
-            say("harp", "interrupted")
-            return EXIT_INTERRUPTED
+            say("harp", stopped_text())
+            return stopped_exit_code()
         if os.environ.get(DEBUG_ENV):
             raise
         text = " ".join(str(exc).split()) or "(no message)"

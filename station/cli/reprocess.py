@@ -45,6 +45,7 @@ from pipeline.plain import finite_or_none
 from station.cli.commands import COMMANDS
 from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, location_from_args, open_store
+from station.ctrl_c import stopped_text, stopper
 from station.errors import HarpError, Interrupted
 from station.exit_codes import EXIT_ERROR, EXIT_OK
 from station.store.errors import StoreError
@@ -132,7 +133,8 @@ def _run(args: argparse.Namespace, cluster: Any) -> int:
         run_jobs(jobs, workers=workers, scheduler=cluster, on_result=collect)  # a ReprocessError: one line
     except KeyboardInterrupt:
         raise Interrupted(
-            f"interrupted: {_kept(outcomes, args.dry_run)} before Ctrl-C; the others are not (run it again for them)"
+            f"{stopped_text()}: {_kept(outcomes, args.dry_run)} before {stopper()}; the others are not (run it again "
+            "for them)"
         ) from None
     except ClusterLost as exc:  # the scheduler killed, every worker gone
         raise HarpError(

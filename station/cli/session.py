@@ -29,6 +29,7 @@ from station.cli.commands import COMMANDS
 from station.cli.inputs import port_number
 from station.cli.say import say, warn
 from station.cli.store_options import add_store_options, load_env_config, store_location, waiting_note
+from station.ctrl_c import stopped_text
 from station.errors import HarpError, Interrupted, one_line
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
@@ -401,13 +402,13 @@ def _execute_session(config, get_session, args, opened=None, report: bool = True
                 result = run_session(
                     session, camera, turntable, store=store, console=console, report=report, operator=desk
                 )
-    except KeyboardInterrupt:  # Ctrl-C: say where the frames are and how to go on
+    except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, SIGHUP): say where the frames are and how to go on
         if not started:
-            raise Interrupted("interrupted before the session started; nothing was captured") from None
+            raise Interrupted(f"{stopped_text()} before the session started; nothing was captured") from None
         if args.json:
             _print_results_of(started[0])
         raise Interrupted(
-            f"interrupted; every frame captured so far is kept in {started[0]}; "
+            f"{stopped_text()}; every frame captured so far is kept in {started[0]}; "
             f"continue with: harp session resume {started[0]}"
         ) from None
     finally:

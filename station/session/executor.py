@@ -113,6 +113,7 @@ from station.session.records import (
     Started,
 )
 from station.session.shot_checks import FrameReference, check_shot
+from station.session.states import stop_reason
 
 #: a stage read-back further than this (or than the travel range's tolerance) from the target
 #: stops the session (degrees)
@@ -236,7 +237,7 @@ class Executor:
                     except StopIteration:
                         step = None
             except KeyboardInterrupt:
-                self._emit(Aborted("interrupted by the user"))
+                self._emit(Aborted(stop_reason()))
                 self._finish(interrupted=True)
                 raise
             except SessionAborted as exc:

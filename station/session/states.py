@@ -39,6 +39,22 @@ STATES = (COMPLETE, FAILED, INTERRUPTED, RUNNING)
 
 USER_INTERRUPT = "interrupted by the user"
 """The reason of the ``aborted`` record a Ctrl-C leaves (:mod:`station.session.executor`)."""
+STOPPED_BY = "stopped by "
+"""How the reason of the ``aborted`` record a stop signal leaves starts (``stopped by SIGTERM``,
+:func:`station.ctrl_c.stop_signals_as_ctrl_c`): an interruption, as a Ctrl-C."""
+
+
+def stop_reason() -> str:
+    """The reason of the ``aborted`` record the command's interruption leaves: :data:`USER_INTERRUPT` after a
+    Ctrl-C, ``stopped by SIGTERM`` (SIGHUP) after a stop signal."""
+    from station.ctrl_c import stop_signal, stopper
+
+    return USER_INTERRUPT if stop_signal() is None else f"{STOPPED_BY}{stopper()}"
+
+
+def is_interruption(reason: str) -> bool:
+    """Whether an ``aborted`` record's reason is an interruption (:func:`stop_reason`), not a failure."""
+    return reason == USER_INTERRUPT or reason.startswith(STOPPED_BY)
 
 
 def session_state(records: Iterable[Record]) -> str:
@@ -52,7 +68,7 @@ def session_state(records: Iterable[Record]) -> str:
             last_stop = r
         elif isinstance(r, (Started, Resumed)):
             last_stop = None  # a later run: its own stop (or none, if killed) counts
-    if last_stop is not None and last_stop.reason != USER_INTERRUPT:
+    if last_stop is not None and not is_interruption(last_stop.reason):
         return FAILED
     return INTERRUPTED
 

@@ -140,3 +140,69 @@ def test_a_handled_ctrl_c_is_not_turned_into_a_death_by_sigint(process):
         return
     assert proc.returncode == 0, proc.stderr  # the script's own end: main's 130 was printed, not lost
     assert proc.stderr == "harp: interrupted\n"
+
+
+# SIGTERM and SIGHUP are answered as a Ctrl-C while a command runs (station.ctrl_c.stop_signals_as_ctrl_c), and
+# only then: the process's own handlers before and after, an ignored signal left ignored, forked children
+# with the signal's own action.
+STOP_SIGNALS = """
+import os, signal, sys, time
+from station.ctrl_c import Stopped, stop_signals_as_ctrl_c, stopped_exit_code, stopped_text
+
+def mine(*_):
+    pass
+
+signal.signal(signal.SIGHUP, signal.SIG_IGN if sys.argv[1] == "nohup" else mine)
+with stop_signals_as_ctrl_c():
+    print("SIGHUP kept:", signal.getsignal(signal.SIGHUP) is (signal.SIG_IGN if sys.argv[1] == "nohup" else mine))
+    pid = os.fork()
+    if pid == 0:  # a forked worker: SIGTERM's own action (death), never the command's handler
+        ok = signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+        os._exit(0 if ok else 3)
+    print("child had the default:", os.waitpid(pid, 0)[1] == 0)
+    print("before:", stopped_text(), stopped_exit_code())
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+        print("lost")
+    except Stopped as exc:
+        print("stopped:", isinstance(exc, KeyboardInterrupt), stopped_text(), stopped_exit_code())
+print("restored:", signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)
+"""
+
+
+@pytest.mark.parametrize("sighup", ["handled", "nohup"])
+def test_stop_signals_are_answered_as_a_ctrl_c_inside_the_command_only(sighup):
+    proc = subprocess.run(
+        [sys.executable, "-c", STOP_SIGNALS, sighup], capture_output=True, text=True, timeout=60, start_new_session=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines() == [
+        "SIGHUP kept: True",
+        "child had the default: True",
+        "before: interrupted 130",
+        "stopped: True stopped by SIGTERM 143",
+        "restored: True",
+    ], proc.stderr
+    assert proc.stderr == ""
+
+
+def test_a_second_sigterm_while_stopping_ends_the_process_by_sigterm():
+    """Asked again while it stops (a cleanup that hangs): the signal's own action, as before."""
+    script = """
+import os, signal, time
+from station.ctrl_c import Stopped, stop_signals_as_ctrl_c
+with stop_signals_as_ctrl_c():
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    except Stopped:
+        print("stopping", flush=True)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+        print("not ended")
+"""
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, start_new_session=True
+    )
+    assert proc.returncode == -15 and proc.stdout == "stopping\n", (proc.returncode, proc.stdout, proc.stderr)

@@ -1,3 +1,4 @@
+import contextlib
 import json
 from pathlib import Path
 
@@ -372,6 +373,87 @@ def test_ctrl_c_is_one_line_exit_130_and_no_model_file(real_harp_dir, tmp_path, 
     while group_members(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert group_members(proc.pid) == []  # the workers ended too
+
+
+@pytest.mark.parametrize(
+    "sig, whom",
+    [
+        ("SIGTERM", "group"),  # systemctl stop (KillMode=control-group), docker stop of a container's processes
+        ("SIGTERM", "command"),  # kill PID, timeout(1)
+        ("SIGHUP", "group"),  # the terminal or SSH connection closed
+    ],
+)
+def test_a_stop_signal_is_answered_as_a_ctrl_c(real_harp_dir, tmp_path, sig, whom):
+    """SIGTERM or SIGHUP while the workers measure, to the whole process group or to the command alone: the
+    command's one line naming the signal, exit 128 + signal, no traceback or warning from a worker or from
+    multiprocessing (before: the process died where it stood, "leaked semaphore objects" on stderr), no model
+    file, no worker left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    signum = getattr(signal, sig)
+    out_path = tmp_path / "lens.yaml"
+    photos = sorted(real_harp_dir.glob("*.pgm"))
+    cmd = [sys.executable, "-m", "station.cli", "calibrate", *map(str, photos * 2), "--out", str(out_path)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not _children(proc.pid) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.001)
+        time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        if whom == "group":
+            os.killpg(proc.pid, signum)
+        else:
+            os.kill(proc.pid, signum)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 128 + signum, (out, err)
+        assert err == f"harp: stopped by {sig}\n"
+        assert not out_path.exists() and list(tmp_path.iterdir()) == []
+        deadline = time.monotonic() + 10
+        while group_members(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert group_members(proc.pid) == []  # the workers ended too
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+
+
+def test_a_sighup_the_caller_ignores_stays_ignored(real_harp_dir, tmp_path):
+    """Under nohup (SIGHUP ignored) a closed terminal does not stop the command: it fits and writes its model."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out_path = tmp_path / "lens.yaml"
+    photos = sorted(real_harp_dir.glob("*.pgm"))
+    cmd = [sys.executable, "-m", "station.cli", "calibrate", *map(str, photos), "--out", str(out_path)]
+
+    def nohup() -> None:
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=nohup
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not _children(proc.pid) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.001)
+        assert proc.poll() is None, proc.communicate()
+        os.killpg(proc.pid, signal.SIGHUP)
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, (out, err)
+        assert out_path.is_file()
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
 
 
 def test_a_shot_measured_far_worse_than_the_others_is_named_with_what_to_do(shots, tmp_path, capsys):

@@ -31,7 +31,10 @@ def _get(url, token=None):
         return e.code, e.read()
 
 
-def test_serve_off_localhost_needs_the_token_and_stops_on_ctrl_c(factory_archive):
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_serve_off_localhost_needs_the_token_and_stops_on_ctrl_c(factory_archive, sig):
+    """Stopped by Ctrl-C (exit 130) or by ``systemctl stop`` (SIGTERM, exit 143): the same line, after uvicorn's
+    own shutdown (before, SIGTERM ended the process by the signal once uvicorn had shut down)."""
     cmd = [sys.executable, "-m", "station.cli", "serve", "--config", str(factory_archive.config)]
     cmd += ["--host", "0.0.0.0", "--port", "0", "--token", "t0ken-for-the-test"]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, env=REPO_ENV)
@@ -46,7 +49,7 @@ def test_serve_off_localhost_needs_the_token_and_stops_on_ctrl_c(factory_archive
         assert status == 200
         assert [l["serial"] for l in json.loads(body)["lenses"]] == [factory_archive.serial]
     finally:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(getattr(signal, sig))
         try:
             code = proc.wait(timeout=30)
         finally:
@@ -54,7 +57,7 @@ def test_serve_off_localhost_needs_the_token_and_stops_on_ctrl_c(factory_archive
                 proc.kill()
     rest = proc.stderr.read()
     proc.stderr.close()
-    assert code == 130 and rest.strip() == "harp serve: stopped"
+    assert code == (130 if sig == "SIGINT" else 143) and rest.strip() == "harp serve: stopped"
 
 
 def test_any_other_address_without_a_token_is_refused(factory_archive, capsys):

@@ -1,6 +1,7 @@
 """harp session run/resume and harp profile, on the real simulated station
 (SimulatedCamera + ZaberTurntable over pyserial on the Zaber emulator's pty)."""
 
+import contextlib
 import json
 import os
 import signal
@@ -23,6 +24,7 @@ from station.session.directory import SessionDir
 from station.session.executor import EXIT_ABORTED, EXIT_OK, Executor
 from station.session.records import Fault, FrameSaved
 from station.session.simulated import simulated_devices
+from station.session.states import sessions_in
 from station.store import ProfileStore
 from tests.station.processes import group_members
 
@@ -197,6 +199,56 @@ def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
         f"harp session: interrupted; every frame captured so far is kept in {session}; "
         f"continue with: harp session resume {session}"
     ), err
+    kept = [r for r in manifest(session) if r["kind"] == "frame"]
+    assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
+    assert all((session / r["file"]).is_file() for r in kept)
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
+    keys = Counter(
+        (r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in manifest(session) if r["kind"] == "frame"
+    )
+    assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
+
+
+@pytest.mark.parametrize("sig, whom", [("SIGTERM", "group"), ("SIGHUP", "command")])
+def test_a_stop_signal_mid_session_is_answered_as_a_ctrl_c_then_resume(tmp_path, sig, whom):
+    """``systemctl stop`` of a station (SIGTERM to every process of the unit) or a closed SSH connection (SIGHUP
+    to the command): the session's own line with its resume command, exit 128 + signal, the stop recorded as an
+    interruption (``harp session list``: interrupted, not failed), no worker left, every frame kept, and the
+    resumed session ends with every frame once. Before, the process died where it stood: no line, no record."""
+    signum = getattr(signal, sig)
+    cfg = small_config(tmp_path)
+    session = tmp_path / "sessions" / "t"
+    proc = harp("session", "run", cfg, "--name", "t", "--quiet", "--no-report")
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (session / "manifest.jsonl").exists():
+                n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
+                if n >= N_ORI * N_FRAMES + 1:  # the fit pool of the 1st focus exists
+                    break
+            time.sleep(0.005)
+        assert proc.poll() is None, proc.communicate()
+        if whom == "group":
+            os.killpg(proc.pid, signum)
+        else:
+            os.kill(proc.pid, signum)
+        out, err = proc.communicate(timeout=60)
+        deadline = time.monotonic() + 10
+        while group_members(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert group_members(proc.pid) == []
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+    assert proc.returncode == 128 + signum, err
+    assert "Traceback" not in err and "warn" not in err.lower(), err
+    assert err.strip().splitlines()[-1] == (
+        f"harp session: stopped by {sig}; every frame captured so far is kept in {session}; "
+        f"continue with: harp session resume {session}"
+    ), err
+    assert manifest(session)[-1] == {**manifest(session)[-1], "kind": "aborted", "reason": f"stopped by {sig}"}
+    assert [s.state for s in sessions_in(tmp_path / "sessions")[0]] == ["interrupted"]
     kept = [r for r in manifest(session) if r["kind"] == "frame"]
     assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
     assert all((session / r["file"]).is_file() for r in kept)
