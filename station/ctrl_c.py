@@ -44,6 +44,8 @@ import threading
 from collections.abc import Iterator
 from typing import Any
 
+from station.exit_codes import EXIT_INTERRUPTED
+
 
 def deliver_dropped_ctrl_c() -> None:
     """Install (once per process) the ``sys.unraisablehook`` that delivers again a Ctrl-C that
@@ -123,7 +125,7 @@ STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGHUP)
 
 
 class Stopped(KeyboardInterrupt):
-    """A :data:`STOP_SIGNALS` signal arrived: a ``KeyboardInterrupt``, so that every command's
+    """Not a HarpError: a ``KeyboardInterrupt`` (a :data:`STOP_SIGNALS` signal arrived), so that every command's
     Ctrl-C handling (what was kept, a session's resume line, workers stopped) answers it too."""
 
     def __init__(self, signum: int) -> None:
@@ -155,8 +157,6 @@ def stopped_text() -> str:
 def stopped_exit_code() -> int:
     """130 after a Ctrl-C, ``128 + signal`` after a stop signal (143 SIGTERM, 129 SIGHUP), as a shell
     reports a process its signal ended (:mod:`station.exit_codes`)."""
-    from station.exit_codes import EXIT_INTERRUPTED
-
     return EXIT_INTERRUPTED if _stopped_by is None else 128 + _stopped_by
 
 

@@ -10,6 +10,7 @@ otherwise). No command prints an error and returns a code itself.
 
 from __future__ import annotations
 
+from station.ctrl_c import stopped_exit_code
 from station.exit_codes import EXIT_ERROR, EXIT_INTERRUPTED
 
 
@@ -30,8 +31,6 @@ class Interrupted(HarpError):
     exit_code = EXIT_INTERRUPTED
 
     def __init__(self, *args: object) -> None:
-        from station.ctrl_c import stopped_exit_code
-
         super().__init__(*args)
         self.exit_code = stopped_exit_code()
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from station.ctrl_c import stop_signal, stopper
 from station.session.layout import MANIFEST, SESSION_FILE
 from station.session.records import (
     Aborted,
@@ -47,8 +48,6 @@ STOPPED_BY = "stopped by "
 def stop_reason() -> str:
     """The reason of the ``aborted`` record the command's interruption leaves: :data:`USER_INTERRUPT` after a
     Ctrl-C, ``stopped by SIGTERM`` (SIGHUP) after a stop signal."""
-    from station.ctrl_c import stop_signal, stopper
-
     return USER_INTERRUPT if stop_signal() is None else f"{STOPPED_BY}{stopper()}"
 
 

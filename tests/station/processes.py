@@ -36,3 +36,11 @@ def run_process(argv: list[str], timeout: float, **kwargs) -> subprocess.Complet
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+def default_stop_signals() -> None:
+    """A child's ``preexec_fn``: SIGTERM and SIGHUP with their default action, as a command started from a terminal
+    or by a service manager has them, whatever started the tests (``nohup`` ignores SIGHUP, and an ignored signal
+    stays ignored across exec)."""
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)

@@ -274,7 +274,7 @@ def test_every_error_class_is_a_harp_error_or_says_why_not():
     unexplained, explained = errors_outside_harp_error(sources)
     assert unexplained == [], f"derive from station.errors.HarpError or say in the docstring: {NOT_HARP} ..."
     # the classes that say why (issue 22): the drivers' family, the session's control flow, the web's HTTP
-    # answers and the bounded reader's, which each reader turns into its own HarpError
+    # answers and the bounded reader's, which each reader turns into its own HarpError; a stop signal's interrupt
     names = sorted(e.rsplit(": ", 1)[1] for e in explained)
     assert names == sorted(
         [
@@ -294,6 +294,7 @@ def test_every_error_class_is_a_harp_error_or_says_why_not():
             "CaptureError",
             "OutOfRange",
             "ConfigKeyError",
+            "Stopped",
         ]
     )
 

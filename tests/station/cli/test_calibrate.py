@@ -10,7 +10,7 @@ from pipeline.compare import compare_models
 from pipeline.models import RadialFieldModel, RadialModel
 from pipeline.render import HarpScene, render_harp
 from station.cli import main
-from tests.station.processes import group_members
+from tests.station.processes import default_stop_signals, group_members
 
 W, H = 640, 480
 LENS = RadialModel.for_image(W, H, k=(1.0, 0.0, 0.03, 0.0, 0.005), center=(330, 230), tangential=(0.001, 0.0))
@@ -398,7 +398,14 @@ def test_a_stop_signal_is_answered_as_a_ctrl_c(real_harp_dir, tmp_path, sig, who
     out_path = tmp_path / "lens.yaml"
     photos = sorted(real_harp_dir.glob("*.pgm"))
     cmd = [sys.executable, "-m", "station.cli", "calibrate", *map(str, photos * 2), "--out", str(out_path)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=default_stop_signals,  # as from a terminal or a service manager, whatever started the tests
+    )
     try:
         deadline = time.monotonic() + 60
         while not _children(proc.pid) and time.monotonic() < deadline and proc.poll() is None:

@@ -26,7 +26,7 @@ from station.session.records import Fault, FrameSaved
 from station.session.simulated import simulated_devices
 from station.session.states import sessions_in
 from station.store import ProfileStore
-from tests.station.processes import group_members
+from tests.station.processes import default_stop_signals, group_members
 
 REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs" / "demo.yaml"
@@ -54,7 +54,7 @@ def small_config(dirpath: Path, focus=(0.0, 1.0), frames=N_FRAMES, turntable: di
     return p
 
 
-def harp(*args) -> subprocess.Popen:
+def harp(*args, preexec_fn=None) -> subprocess.Popen:
     """``harp ARGS`` in a new session (process group = its pid, shared by its worker processes)."""
     return subprocess.Popen(
         [sys.executable, "-m", "station.cli", *map(str, args)],
@@ -63,6 +63,7 @@ def harp(*args) -> subprocess.Popen:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=preexec_fn,
     )
 
 
@@ -218,7 +219,7 @@ def test_a_stop_signal_mid_session_is_answered_as_a_ctrl_c_then_resume(tmp_path,
     signum = getattr(signal, sig)
     cfg = small_config(tmp_path)
     session = tmp_path / "sessions" / "t"
-    proc = harp("session", "run", cfg, "--name", "t", "--quiet", "--no-report")
+    proc = harp("session", "run", cfg, "--name", "t", "--quiet", "--no-report", preexec_fn=default_stop_signals)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and proc.poll() is None:
