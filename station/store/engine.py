@@ -14,9 +14,12 @@ a serialisation failure, a deadlock or a lock not granted in that time is retrie
 (PostgreSQL), with jittered exponential back-off up to :data:`RETRY_SECONDS`: other stations
 writing at the same time make a write wait, never fail. A transaction whose connection is lost
 before its commit (the server restarted or ended the connection; the server rolled it back) is
-tried again once on a new connection (:data:`LOST_TRIES`; the engine's ``pool_pre_ping`` replaces
-connections that died idle in the pool); one lost at its commit may have been committed, and says
-so. A write still waiting after
+tried again once on a new connection (:data:`LOST_TRIES`; a connection that died idle in the pool is
+found so, at its try's first statement); one lost at its commit may have been committed, and says
+so. A PostgreSQL server that stops answering while a read or write waits for it (its machine hung or
+paused, the network to it cut: nothing comes back, nothing closes the connection) is given up after
+:data:`STORE_ANSWER_S` of silence (:class:`_AnswerWatch`), with one line, instead of waiting for TCP to give
+up (a quarter of an hour) or for ever. A write still waiting after
 :data:`WAIT_NOTICE_S` says so, once, through its ``on_wait`` callback (the command prints the line:
 the store itself prints nothing).
 Set ``$HARP_STORE_TIMINGS`` to a file to have every write appended to it as one JSON line
@@ -29,7 +32,10 @@ import errno
 import json
 import os
 import random
+import socket
 import sqlite3
+import struct
+import threading
 import time
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -68,7 +74,83 @@ LOST_TRIES = 1
 administrator ended the connection, a network blip) is tried again on a new connection: once —
 a server that is down then fails to connect at once, with its one line."""
 
+STORE_ANSWER_S = 30.0
+"""How long a PostgreSQL server may send nothing while a read or write waits for it before the command gives up
+on it (:class:`_AnswerWatch`): every statement of the station's is answered in milliseconds, a lock wait ends
+after :data:`WRITE_TRY_MS`, and a large answer keeps arriving; silence this long is a server that stopped
+answering (a hung or paused machine, a network cut) and would otherwise hang the command until TCP gives up
+(``tcp_retries2``: about 15 minutes) or, a frozen server whose machine still acknowledges, for ever."""
+
+_TCP_INFO_LAST_DATA_RECV = 52
+"""Byte offset of ``tcpi_last_data_recv`` (ms since data last arrived) in Linux's ``struct tcp_info``: eight
+one-byte fields, then ``tcpi_rto`` ... (``include/uapi/linux/tcp.h``; the layout is the kernel's ABI)."""
+
 T = TypeVar("T")
+
+
+class _AnswerWatch:
+    """While a try of :func:`read` or :func:`write` runs on a PostgreSQL connection over TCP: a thread that cuts
+    the connection (``shutdown`` of its socket, which wakes the driver's wait with the connection lost) once the
+    try has lasted :data:`STORE_ANSWER_S` and the server has sent nothing for as long (``TCP_INFO``'s
+    ``tcpi_last_data_recv``). :attr:`fired` says it did. A Unix-socket connection (a server on this machine) and
+    a platform without ``TCP_INFO`` are not watched."""
+
+    def __init__(self, conn: sa.Connection) -> None:
+        self.fired = False
+        self._done = threading.Event()
+        self._sock: socket.socket | None = None
+        fd = getattr(getattr(getattr(conn.connection, "dbapi_connection", None), "pgconn", None), "socket", None)
+        if not isinstance(fd, int) or fd < 0 or not hasattr(socket, "TCP_INFO"):
+            return
+        try:
+            sock = socket.socket(fileno=os.dup(fd))  # the same socket: shut down, it ends the driver's wait too
+        except OSError:
+            return
+        if sock.family not in (socket.AF_INET, socket.AF_INET6):
+            sock.close()
+            return
+        self._sock = sock
+        self._started = time.monotonic()
+        threading.Thread(target=self._run, name="harp-store-answer-watch", daemon=True).start()
+
+    def _silent_s(self, sock: socket.socket) -> float:
+        info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 104)
+        return float(struct.unpack_from("I", info, _TCP_INFO_LAST_DATA_RECV)[0]) / 1000.0
+
+    def _run(self) -> None:
+        sock = self._sock
+        assert sock is not None
+        try:
+            while not self._done.wait(min(1.0, STORE_ANSWER_S / 4)):
+                if time.monotonic() - self._started < STORE_ANSWER_S:
+                    continue
+                try:
+                    if self._silent_s(sock) < STORE_ANSWER_S:
+                        continue
+                    self.fired = True
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:  # the driver closed it meanwhile
+                    pass
+                return
+        finally:
+            sock.close()
+
+    def stop(self) -> None:
+        self._done.set()
+
+
+def _watched(conn: sa.Connection, loc: StoreLocation) -> _AnswerWatch | None:
+    """An :class:`_AnswerWatch` on ``conn`` (PostgreSQL), else None."""
+    return _AnswerWatch(conn) if loc.backend == POSTGRESQL else None
+
+
+def _silent(what: str, loc: StoreLocation, written: str) -> StoreError:
+    """The StoreError of a try cut by :class:`_AnswerWatch`; ``written``: what became of the write, or ""."""
+    return StoreError(
+        f"{loc}: {what}: the store did not answer for {STORE_ANSWER_S:g} s (its server stopped answering, or the "
+        f"network to it is cut){written}: check the server and the network, then run again",
+        "unreachable",
+    )
 
 
 def make_engine(loc: StoreLocation) -> sa.Engine:
@@ -78,10 +160,12 @@ def make_engine(loc: StoreLocation) -> sa.Engine:
         event.listen(engine, "connect", _sqlite_connect)
         event.listen(engine, "begin", _sqlite_begin)
         return engine
+    # no pool_pre_ping: its ping at checkout, before any try is watched (_AnswerWatch), would wait for a server
+    # that stopped answering for ever; a connection that died idle in the pool fails at its try's first statement
+    # instead, and the try runs again on a new connection (LOST_TRIES; SQLAlchemy then drops the pool's others)
     return sa.create_engine(
         loc.sqlalchemy_url,
         connect_args={"connect_timeout": 10, "application_name": "harp-station"},
-        pool_pre_ping=True,
     )
 
 
@@ -163,15 +247,25 @@ def write(
     lost = 0
     while True:
         committing = False
+        watch: _AnswerWatch | None = None
         try:
-            with write_connection(engine, loc, serializable=serializable) as conn, conn.begin():
-                if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
-                    conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
-                result = fn(conn)
-                committing = True
+            with write_connection(engine, loc, serializable=serializable) as conn:
+                watch = _watched(conn, loc)
+                try:
+                    with conn.begin():
+                        if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
+                            conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
+                        result = fn(conn)
+                        committing = True
+                finally:
+                    if watch is not None:
+                        watch.stop()
             _log_timing(what, time.monotonic() - start, retries, loc)
             return result
         except (sa.exc.DBAPIError, sqlite3.Error) as exc:
+            if watch is not None and watch.fired:
+                written = "; it may or may not have been written" if committing else "; nothing of it was written"
+                raise _silent(what, loc, written) from None
             if connection_lost(exc):
                 if committing:  # the server may have committed before the connection went: not tried again
                     raise StoreError(
@@ -213,10 +307,19 @@ def read(engine: sa.Engine, loc: StoreLocation, what: str, fn: Callable[[sa.Conn
     its connection is lost (:data:`LOST_TRIES`). Raises StoreError."""
     lost = 0
     while True:
+        watch: _AnswerWatch | None = None
         try:
-            with engine.connect() as conn, conn.begin():
-                return fn(conn)
+            with engine.connect() as conn:
+                watch = _watched(conn, loc)
+                try:
+                    with conn.begin():
+                        return fn(conn)
+                finally:
+                    if watch is not None:
+                        watch.stop()
         except (sa.exc.DBAPIError, sqlite3.Error, OSError) as exc:
+            if watch is not None and watch.fired:
+                raise _silent(what, loc, "") from None
             if connection_lost(exc) and lost < LOST_TRIES:
                 lost += 1
                 continue

@@ -41,6 +41,7 @@ from starlette.routing import Route
 
 from station.profile_choice import export_refusal, failed_line, lens_row
 from station.store import StoreError
+from station.store.engine import STORE_ANSWER_S as STORE_SILENCE_S
 from station.web import create_app, render
 from station.web import dashboard_data as data
 from station.web.app import log
@@ -60,10 +61,10 @@ def _page_error(request: Request, status: int, message: str) -> Response:
     return render(request, "dashboard_error.html", status_code=status, message=" ".join(message.split()))
 
 
-STORE_ANSWER_S = 30.0
-"""How long a page waits for the store's answer before it says so (503): a server that stopped answering
-without closing its connections (frozen, or cut off by the network) would otherwise hold the request, and
-the thread under it, until it answers again."""
+STORE_ANSWER_S = STORE_SILENCE_S
+"""How long a page waits for the store's answer before it says so (503): the store's own bound of silence
+(:data:`station.store.engine.STORE_ANSWER_S`), after which the read under it gives up and frees its thread and
+connection; the page does not wait for that (a read waiting for a new connection adds its connect timeout)."""
 
 
 async def _call(fn: Any, *args: Any) -> Any:

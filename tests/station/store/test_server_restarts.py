@@ -254,6 +254,85 @@ def test_the_dashboard_says_a_store_that_stopped_answering_does_not_answer_and_s
         assert status == 200 and len(json.loads(body)["lenses"]) == 1
 
 
+# -------------------------------------------------- a server that stops answering while a command waits for it
+def test_a_write_or_read_that_the_server_stops_answering_is_given_up_after_the_bound_then_done_once(
+    pg, url, admin, monkeypatch
+):
+    """A server that stops answering without closing its connections (frozen: a hung or paused machine looks the
+    same; a network cut too, where not even TCP answers): the write and the read on a connection kept from
+    before (the pool's) end with one line after the store's bound of silence (engine.STORE_ANSWER_S), naming the
+    store (not its password) and saying that nothing of the write was written; before, they waited for the
+    server for ever. Once the server answers again, the write run again is stored, once."""
+    monkeypatch.setattr(store_engine, "STORE_ANSWER_S", 2.0)
+    with ProfileStore(url) as st:
+        put(st, session="before")
+        for call, what in (
+            (lambda: put(st, session="x"), "storing the profile"),
+            (st.profiles, "reading the profiles"),
+        ):
+            assert len(st.profiles()) == 1  # a connection answered, now idle in the pool: the one the call takes
+            with pg.frozen():
+                t0 = time.monotonic()
+                with pytest.raises(StoreError) as exc:
+                    call()
+                took = time.monotonic() - t0
+            text = str(exc.value)
+            _one_line(text)
+            assert 2.0 <= took < 2.0 + 5.0, (what, took)
+            assert exc.value.kind == "unreachable" and PASSWORD not in text
+            assert text.startswith(f"{st.location}: {what}: the store did not answer for 2 s "), text
+            if what == "storing the profile":
+                assert "nothing of it was written" in text
+        put(st, session="x")  # run again once it answers
+        assert len(st.profiles()) == 2
+    with admin.connect() as c:
+        assert c.exec_driver_sql("SELECT count(*) FROM profiles").scalar_one() == 2
+
+
+def test_a_session_whose_server_stops_answering_at_its_store_step_stops_in_bounded_time_and_resumes(
+    pg, url, tmp_path, monkeypatch
+):
+    """The server stops answering (frozen) just as a session stores its first profile: the session stops within
+    the bound of silence with its one line (the store, what to do, the resume command), every frame kept; resumed
+    once the server answers, each profile is stored once. Before, the session waited for the server for ever."""
+    import yaml
+
+    from station.config import load_config
+
+    monkeypatch.setattr(store_engine, "STORE_ANSWER_S", 2.0)
+    cfg = make_config(tmp_path, focus=(0.0, 1.0))
+    d = yaml.safe_load(cfg.path.read_text())
+    d["store"] = {"url": url, "sessions_dir": "sessions"}
+    cfg.path.write_text(yaml.safe_dump(d))
+    cfg = load_config(cfg.path)
+    stage = FakeStage(offset_deg=5.0)
+    with ProfileStore(url) as store, SessionDir.create(tmp_path / "sessions", cfg, name="s") as s:
+        assert store.profiles() == []  # the session's store has a connection from before, idle in its pool
+        put_profile = store.put_profile
+        freezing = pg.frozen()
+
+        def freeze_then_store(*args, **kwargs):  # the moment: the first store step
+            freezing.__enter__()
+            return put_profile(*args, **kwargs)
+
+        monkeypatch.setattr(store, "put_profile", freeze_then_store)
+        t0 = time.monotonic()
+        try:
+            result = run_session(s, FakeCamera(stage), stage, store=store, sleep=lambda _s: None, report=False)
+        finally:
+            freezing.__exit__(None, None, None)
+        assert time.monotonic() - t0 < BOUND_S
+        assert result.exit_code == EXIT_ABORTED
+        _one_line(result.message)
+        assert str(store.location) in result.message and "did not answer for 2 s" in result.message
+        assert f"harp session resume {s.path}" in result.message and PASSWORD not in result.message
+        assert len(list(s.of_type(FrameSaved))) == 4  # every frame of focus 0 kept
+    session = tmp_path / "sessions" / "s"
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == EXIT_OK
+    with ProfileStore(url, create=False) as store:
+        assert sorted(p.focus for p in store.profiles()) == [0.0, 1.0]  # once each
+
+
 # -------------------------------------------------------------- the connection lost during a write
 def test_a_write_whose_connection_is_ended_while_it_waits_is_tried_again_and_stored_once(url, admin, monkeypatch):
     monkeypatch.setattr(store_engine, "WRITE_TRY_MS", 60000)  # one long lock wait: the backend ended in it
