@@ -86,15 +86,16 @@ class Cluster:
     def log(self, name: str) -> str:
         return (self.tmp / f"{name}.log").read_text(errors="replace")[-3000:]
 
-    def add_workers(self, n: int, *, harp: bool = True, code: Path | None = None) -> None:
+    def add_workers(self, n: int, *, harp: bool = True, code: Path | None = None, nanny: bool = True) -> None:
         """``n`` workers: with this checkout on their path, without harp station (``harp=False``), or with the
-        packages under ``code`` first on their path."""
+        packages under ``code`` first on their path; ``nanny=False``: a worker killed stays dead."""
         have = len(self.client().scheduler_info()["workers"])
         started = []
         for _ in range(n):
             k = len(self.procs)
             if harp:
                 args = ["-m", "distributed.cli.dask_worker", self.address, "--nthreads", "1"]
+                args += [] if nanny else ["--no-nanny"]
                 env = ENV if code is None else {**ENV, "PYTHONPATH": os.pathsep.join([str(code), ENV["PYTHONPATH"]])}
                 started.append((self._start(args, f"w{k}", env), f"w{k}"))
             else:
@@ -174,11 +175,21 @@ def _rows(store: Path) -> tuple[int, int]:
         return 0, 0
 
 
-def _reprocess(sessions, address: str, store: Path) -> list[str]:
+BOUNDED = """
+import sys
+import station.reprocess
+station.reprocess.NO_WORKERS_S = float(sys.argv.pop(1))
+from station.cli import main
+raise SystemExit(main())
+"""
+"""``harp reprocess`` with :data:`station.reprocess.NO_WORKERS_S` given as the first argument (a test does not wait a
+minute for the bound it checks)."""
+
+
+def _reprocess(sessions, address: str, store: Path, no_workers_s: float | None = None) -> list[str]:
     return [
         sys.executable,
-        "-m",
-        "station.cli",
+        *(["-m", "station.cli"] if no_workers_s is None else ["-c", BOUNDED, str(no_workers_s)]),
         "reprocess",
         *map(str, sessions),
         "--scheduler",
@@ -370,3 +381,57 @@ def test_a_port_where_something_else_listens_is_one_line_in_bounded_time_and_cre
     )
     assert took < 100
     assert not store.exists()
+
+
+def test_a_scheduler_without_a_worker_is_one_line_after_the_bound_and_creates_no_store(
+    factory_archive, tmp_path, clusters
+):
+    """A scheduler no worker has joined (none started yet, or all on a machine that is down): one line after
+    :data:`station.reprocess.NO_WORKERS_S` (3 s here) saying to start some, before the store is opened."""
+    cluster = clusters()  # no worker
+    store = tmp_path / "st.sqlite"
+    t0 = time.monotonic()
+    done = _run(_reprocess([factory_archive.session], cluster.address, store, no_workers_s=3), timeout=120)
+    took = time.monotonic() - t0
+    assert done.returncode == 2 and done.stdout == "", done
+    assert done.stderr == (
+        f"harp reprocess: the Dask scheduler at {cluster.address} has no worker (none joined in 3 s); start some: "
+        f"dask worker {cluster.address} --nthreads 1\n"
+    )
+    assert 3 <= took < 60
+    assert not store.exists()
+
+
+def test_every_worker_gone_mid_run_and_none_back_is_one_line_saying_what_was_stored(
+    factory_archive, tmp_path, clusters
+):
+    """The only worker killed mid-run and not started again (no nanny; its machine down): its job waits for a
+    worker; after :data:`station.reprocess.NO_WORKERS_S` (3 s here) without one, one line saying how many sessions
+    were stored before and to start workers; what was stored is whole, and run again with a worker, the command
+    stores the rest, each session once."""
+    cluster = clusters()
+    cluster.add_workers(1, nanny=False)
+    sessions, store = _sessions(factory_archive, tmp_path, 4), tmp_path / "st.sqlite"
+    with _started(_reprocess(sessions, cluster.address, store, no_workers_s=3)) as proc:
+        _wait_stored(proc, store, 2)
+        worker = cluster.busy_worker_pid()
+        os.kill(worker, signal.SIGKILL)
+        t0 = time.monotonic()
+        out, err = proc.communicate(timeout=120)
+        took = time.monotonic() - t0
+    assert proc.returncode == 2, (out, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    m = re.match(
+        rf"harp reprocess: every Dask worker of {cluster.address} is gone, and none came back in 3 s: (\d+) "
+        rf"session\(s\) re-processed and stored before it; start some \(dask worker {cluster.address} --nthreads 1\), "
+        r"then run the same command for the others$",
+        err.strip(),
+    )
+    assert m, err
+    assert 3 <= took < 60
+    stored = int(m.group(1))
+    assert 1 <= stored < len(sessions) and _rows(store) == (2 * stored, 2 * stored)
+    cluster.add_workers(1)
+    again = _run(_reprocess(sessions, cluster.address, store))
+    assert again.returncode == 0 and again.stderr == "", again.stderr
+    assert _rows(store) == (8, 8)
