@@ -419,16 +419,21 @@ def noisy_shot_warnings(fit: FitResult, names: Sequence[str]) -> list[str]:
 
 
 def selection_record(selection: Any, given_by: str = GIVEN_BY_CONFIG, support: str | None = None) -> dict[str, Any]:
-    """How the spec was chosen, as a profile keeps it: ``{"reason", "folds"}``.
+    """How the spec was chosen, as a profile keeps it: ``{"reason", "folds"}``, and ``"support"`` when the shots
+    do not support it well (:func:`pipeline.orientations.support_problem`: too few string orientations; the QA
+    report shows it as a warning).
 
-    ``selection``: the :class:`pipeline.select.Selection` of an automatic choice (its reason and
-    folds), or None for a given spec (``given_by``: :data:`GIVEN_BY_CONFIG` or
+    ``selection``: the :class:`pipeline.select.Selection` of an automatic choice (its reason, which says it, its
+    folds and support), or None for a given spec (``given_by``: :data:`GIVEN_BY_CONFIG` or
     :data:`GIVEN_ON_COMMAND_LINE`, followed by ``support``, why the shots do not support that spec well,
     when they do not; folds ``"none"``). The one place a selection reason is written.
     """
     if selection is None:
-        return {"reason": given_by if support is None else f"{given_by}; {support}", "folds": "none"}
-    return {"reason": selection.reason, "folds": selection.folds}
+        rec = {"reason": given_by if support is None else f"{given_by}; {support}", "folds": "none"}
+    else:
+        rec = {"reason": selection.reason, "folds": selection.folds}
+        support = selection.support
+    return rec if support is None else {**rec, "support": support}
 
 
 def separate_strings(

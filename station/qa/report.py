@@ -74,6 +74,29 @@ class FocusEvidence:
     uncertainty: Any = None  # pipeline.uncertainty.FieldUncertainty, or None
     uncertainty_note: str = ""
     colour: Any = None  # a colour camera's TCA and vignetting (station.session.colour), or None
+    choice: str = ""
+    """The model fitted (its label, ``radial4+tangential+prism``), as the profile records it; "" when it does not."""
+    choice_reason: str = ""
+    """How it was chosen (the profile's selection reason: the cross-validation's, or the configuration's name)."""
+    support: str | None = None
+    """Why the shots do not support that model well (too few string orientations), or None: a warning."""
+
+
+def focus_evidence(profile: Profile, focus: float, verdict: Verdict, source: str = "") -> FocusEvidence:
+    """A focus setting's evidence from its profile alone (the model, its choice and support, the verdict):
+    :func:`session_evidence` adds the session's shots and uncertainty map."""
+    sel = dict(profile.selection or {})
+    return FocusEvidence(
+        focus=focus,
+        model=profile.model,
+        width=profile.width,
+        height=profile.height,
+        verdict=verdict,
+        source=source,
+        choice=profile.spec.label if profile.spec is not None else "",
+        choice_reason=str(sel.get("reason") or ""),
+        support=sel.get("support") or None,
+    )
 
 
 def _colour_blocks(colour: Any) -> list[Block]:
@@ -186,6 +209,11 @@ def write_report(
     written = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     doc.append(Table(("", ""), ("left", "left"), (("report written", written), *((k, v) for k, v in context))))
     doc += [Quote(w, label="warning") for w in warnings]
+    doc += [
+        Quote(f"focus {e.focus:g}, {e.choice or 'the model'}: {e.support}", label="warning")
+        for e in evidence
+        if e.support
+    ]
     if thresholds is not None:
         doc.append(
             Paragraph(
@@ -252,6 +280,13 @@ def write_report(
         doc += [VerdictLine(e.verdict.verdict, focus=f"{e.focus:g}"), _check_table(e.verdict)]
         if e.verdict.reasons:
             doc += [Paragraph("Reasons for FAIL:"), Bullets(tuple(e.verdict.reasons))]
+        if e.choice or e.choice_reason:
+            # the reason ends with the support problem when there is one (station.calibration.selection_record,
+            # pipeline.select): said once, as the warning under it
+            why = e.choice_reason.replace(f"; {e.support}", "") if e.support else e.choice_reason
+            doc += [Heading(3, "Model"), Paragraph(f"`{e.choice or '?'}`: {why or 'no reason recorded'}")]
+            if e.support:
+                doc.append(Quote(e.support, label="warning"))
         name = f"field_f{i}.png"
         figures.append(Figure("field", (e.model, e.width, e.height, out / name), {"title": f"{title}, {label}"}))
         doc += [Heading(3, "Distortion field"), Image("distortion field", name)]
@@ -334,9 +369,7 @@ def session_evidence(
     not available), refitting exactly the spec the profile records (an older
     profile that records none: the configuration's, when it names one)."""
     cfg = session.config
-    e = FocusEvidence(
-        focus=focus, model=profile.model, width=profile.width, height=profile.height, verdict=verdict, source=source
-    )
+    e = focus_evidence(profile, focus, verdict, source)
     e.colour = profile.details.get("colour")
     e.shots = session_shots(session, focus_idx, t=cfg.pipeline.t)
     e.uncertainty = stored_uncertainty(session, focus_idx, profile.model)

@@ -267,7 +267,7 @@ def write_qa_report(
     ``overlays``: which focus settings keep their overlays (None: a session's ``report.overlays``,
     else all)."""
     # defers matplotlib, PIL, jinja2
-    from station.qa.report import FocusEvidence, session_context, session_evidence, write_report
+    from station.qa.report import focus_evidence, session_context, session_evidence, write_report
 
     evidence = []
     for t, v in zip(targets, judged.verdicts):
@@ -283,9 +283,7 @@ def write_qa_report(
             )
         else:
             prof = t.profile
-            e = FocusEvidence(
-                focus=t.focus, model=prof.model, width=prof.width, height=prof.height, verdict=v, source=t.source
-            )
+            e = focus_evidence(prof, t.focus, v, t.source)
             unc = prof.merit.field_uncertainty
             e.uncertainty_note = (
                 "stored: RMS {} px, max {} px (no per-pixel map without the session's "

@@ -30,13 +30,15 @@ ANGLES = (0.0, 45.0, 90.0, 135.0)
 HARP_OFFSET = 5.0
 
 
-def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES) -> Path:
+def write_config(
+    root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, pipeline: dict | None = None
+) -> Path:
     d = yaml.safe_load((REPO / "configs" / "demo.yaml").read_text())
     d["station"]["camera"].update(width=W, height=H)
     d["focus"]["settings"] = list(focus)
     d["capture"]["orientations_deg"] = list(angles)
     d["capture"]["frames_per_orientation"] = 1
-    d["pipeline"].update(degree=4, bootstrap=4, workers=1)
+    d["pipeline"].update({"degree": 4, "bootstrap": 4, "workers": 1, **(pipeline or {})})
     d["qa"] = qa if qa is not None else {"max_holdout_d_px": 0.05, "max_distortion_px": 10.0}
     d["store"] = {"path": "profiles.sqlite", "sessions_dir": "sessions"}
     root.mkdir(parents=True, exist_ok=True)
@@ -45,9 +47,12 @@ def write_config(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGL
     return path
 
 
-def build_session(root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1") -> Path:
-    """A finished session under ``root/sessions/name``; returns its path."""
-    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles))
+def build_session(
+    root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1", pipeline: dict | None = None
+) -> Path:
+    """A finished session under ``root/sessions/name``; returns its path. ``pipeline``: keys of the
+    configuration's ``pipeline`` section set."""
+    config = load_config(write_config(root, qa=qa, focus=focus, angles=angles, pipeline=pipeline))
     s = SessionDir.create(config.sessions_dir, config, name=name)
     with s:
         for fi, f in enumerate(config.focus_settings):

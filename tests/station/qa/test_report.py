@@ -220,3 +220,33 @@ def test_overlay_retention_bad_value_is_one_line(session, tmp_path, capsys):
         main(["qa", str(session), "--report", str(tmp_path / "r"), "--overlays", "some"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "--overlays" in err and "Traceback" not in err
+
+
+def test_the_report_says_which_model_was_fitted_and_warns_when_the_shots_do_not_support_it(session, tmp_path, capsys):
+    """Each focus setting's model and how it was chosen; a model the shots do not support well (here named by the
+    configuration: a free polynomial needs four string orientations, the session has three) is a warning at the top
+    of the report and under the model, in the Markdown and the page (issue 19: "says so in the reason and the QA
+    report"). Truth: the orientations drawn (three) against what the model needs, not the fit's own words."""
+    out = tmp_path / "ok"
+    assert main(["qa", str(session), "--report", str(out), "--no-record"]) == 0
+    md = (out / "report.md").read_text()
+    assert "### Model" in md and "`radial4+tangential`: pipeline.model of the configuration" in md
+    assert "not well supported" not in md
+
+    two = build_session(
+        tmp_path / "three", focus=(0.3,), angles=(0.0, 60.0, 120.0), pipeline={"model": "poly5", "degree": 5}
+    )
+    out = tmp_path / "two-report"
+    main(["qa", str(two), "--report", str(out), "--no-record"])
+    capsys.readouterr()
+    md = (out / "report.md").read_text()
+    warning = (
+        "not well supported: poly5 needs >= 4 distinct string orientations (>= 10 deg apart), "
+        "the shots have 3; add shots at other angles"
+    )
+    assert md.count(warning) == 2, md  # at the top, and under the focus setting's model
+    top, below = md.split("## focus 0.3", 1)
+    assert f"focus 0.3, poly5: {warning}" in top and "**warning**" in top
+    assert "`poly5`: pipeline.model of the configuration" in below
+    page = (out / "index.html").read_text()
+    assert page.count("not well supported: poly5 needs &gt;= 4") == 2
