@@ -177,20 +177,26 @@ def test_sigkill_mid_capture_then_resume(uninterrupted, tmp_path):
     assert len(manifest(session)) == len(recs)
 
 
+def _wait_past_the_first_focus(proc: subprocess.Popen, session: Path) -> None:
+    """Until the running session ``proc`` has saved a frame of its second focus setting (the fit pool of the first
+    exists then); it must still be running."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (session / "manifest.jsonl").exists():
+            n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
+            if n >= N_ORI * N_FRAMES + 1:
+                break
+        time.sleep(0.005)
+    assert proc.poll() is None, proc.communicate()
+
+
 def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
     # Ctrl-C in a terminal signals the whole process group: the session process and its
     # fit workers (and their forkserver); only the session process may speak
     cfg = small_config(tmp_path)
     session = tmp_path / "sessions" / "c"
     proc = harp("session", "run", cfg, "--name", "c", "--quiet", "--no-report")
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and proc.poll() is None:
-        if (session / "manifest.jsonl").exists():
-            n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
-            if n >= N_ORI * N_FRAMES + 1:  # the fit pool of the 1st focus exists
-                break
-        time.sleep(0.005)
-    assert proc.poll() is None, proc.communicate()
+    _wait_past_the_first_focus(proc, session)
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130
@@ -221,14 +227,7 @@ def test_a_stop_signal_mid_session_is_answered_as_a_ctrl_c_then_resume(tmp_path,
     session = tmp_path / "sessions" / "t"
     proc = harp("session", "run", cfg, "--name", "t", "--quiet", "--no-report", preexec_fn=default_stop_signals)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (session / "manifest.jsonl").exists():
-                n = (session / "manifest.jsonl").read_bytes().count(b'"kind":"frame"')
-                if n >= N_ORI * N_FRAMES + 1:  # the fit pool of the 1st focus exists
-                    break
-            time.sleep(0.005)
-        assert proc.poll() is None, proc.communicate()
+        _wait_past_the_first_focus(proc, session)
         if whom == "group":
             os.killpg(proc.pid, signum)
         else:
