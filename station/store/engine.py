@@ -99,7 +99,10 @@ class _AnswerWatch:
         self.fired = False
         self._done = threading.Event()
         self._sock: socket.socket | None = None
-        fd = getattr(getattr(getattr(conn.connection, "dbapi_connection", None), "pgconn", None), "socket", None)
+        try:
+            fd = conn.connection.dbapi_connection.pgconn.socket  # type: ignore[union-attr]
+        except Exception:  # not psycopg's, or a connection already bad: its try fails by itself
+            return
         if not isinstance(fd, int) or fd < 0 or not hasattr(socket, "TCP_INFO"):
             return
         try:
