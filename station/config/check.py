@@ -11,7 +11,8 @@ anything:
   can lock focus on nothing is refused before any device is opened or directory created;
 * **warnings** (true on this machine now, may be fine where the station runs): a turntable
   port that does not exist here, a store or sessions directory that cannot be created; and a plan
-  that puts the strings along the pixel grid at some turntable angle (:func:`grid_warning`).
+  that puts the strings along the pixel grid at some turntable angle (:func:`grid_warning`), or whose
+  fitted shots give fewer string orientations than the model it names needs (:func:`support_warning`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pipeline.orientations import ORIENTATION_SEPARATION_DEG, distinct_orientations, required_orientations
 from station.config.devices import port_missing
 from station.config.errors import ConfigError
 from station.config.schema import Config
@@ -91,8 +93,7 @@ def check_config(config: Config) -> ConfigCheck:
         reason = _not_creatable(Path(directory))
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
-    grid = grid_warning(config)
-    plan = [grid] if grid else []
+    plan = [w for w in (grid_warning(config), support_warning(config)) if w]
     return ConfigCheck(errors, warnings + plan, plan)
 
 
@@ -121,6 +122,30 @@ def grid_warning(config: Config) -> str | None:
         f"the pixel rows or columns (station.harp.offset_deg {harp.offset_deg:g}), where edges are measured several "
         "times worse (benchmarks/grid_angle.py): mount the harp a few degrees off the grid and set "
         "station.harp.offset_deg, or turn the plan's angles by a few degrees"
+    )
+
+
+def support_warning(config: Config) -> str | None:
+    """A warning when the configuration names a model (``pipeline.model``, not ``auto``) that the plan's fitted shots
+    cannot support well: fewer distinct string directions (``station.harp.expected_angle`` of each fitted turntable
+    angle) than its terms need (:func:`pipeline.orientations.required_orientations`), which the session's profile
+    and QA report would say after the session ("not well supported"); None otherwise."""
+    try:
+        spec = config.pipeline.spec
+    except ValueError:  # a label the fit does not allow: load_config refuses it
+        return None
+    if spec is None:
+        return None
+    harp = config.station.harp
+    have = distinct_orientations(harp.expected_angle(a) for a in config.capture.fitted_angles_deg)
+    need = required_orientations(spec)
+    if have >= need:
+        return None
+    return (
+        f"{config.path}: pipeline.model: {spec.label} needs >= {need} distinct string orientations "
+        f"(>= {ORIENTATION_SEPARATION_DEG:g} deg apart) and the fitted shots of capture.orientations_deg give {have}: "
+        "its fit would not be well supported (the profile and the QA report would say so); add turntable angles, or "
+        "name a model with fewer terms (or auto)"
     )
 
 

@@ -73,6 +73,38 @@ def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid
     assert code == 0 and err.count("pixel rows or columns") == 1 and w in err and not (tmp_path / "sessions").exists()
 
 
+def test_config_check_warns_of_a_named_model_the_plan_cannot_support(tmp_path, capsys):
+    """poly5 named with three turntable angles (0, 60, 120: three string directions): a free polynomial needs four,
+    so the session's profile would be "not well supported"; one warning naming pipeline.model, the configuration
+    still usable, and ``harp session plan`` says it before anything runs. With four angles, or model auto, none."""
+    d = yaml.safe_load(DEMO.read_text())
+    d["pipeline"].update(model="poly5", degree=5)
+    capture = {**d["capture"], "orientations_deg": [0, 60, 120]}
+    p = demo_copy(tmp_path, pipeline=d["pipeline"], capture=capture)
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True, doc
+    assert doc["warnings"] == [
+        f"{p}: pipeline.model: poly5 needs >= 4 distinct string orientations (>= 10 deg apart) and the fitted shots "
+        "of capture.orientations_deg give 3: its fit would not be well supported (the profile and the QA report "
+        "would say so); add turntable angles, or name a model with fewer terms (or auto)"
+    ]
+    code, out, err = run(capsys, "session", "plan", p)
+    assert code == 0 and doc["warnings"][0] in err and not (tmp_path / "sessions").exists()
+    for changed in (
+        {"capture": {**capture, "orientations_deg": [0, 45, 90, 135]}},
+        {"pipeline": {**d["pipeline"], "model": "auto"}},
+    ):
+        code, out, err = run(
+            capsys,
+            "config",
+            "check",
+            demo_copy(tmp_path, **{"pipeline": d["pipeline"], "capture": capture, **changed}),
+            "--json",
+        )
+        assert code == 0 and json.loads(out)["warnings"] == [], out
+
+
 def test_config_check_warns_of_a_missing_port_that_session_run_refuses_also_with_a_simulation(tmp_path, capsys):
     # a simulated station whose turntable is a real port (simulation section kept, port no longer "emulator"):
     # harp config check said OK without a warning, harp session run refused it
