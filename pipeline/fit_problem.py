@@ -29,7 +29,7 @@ from pipeline.fitspec import FitSpec
 from pipeline.models.base import DistortionModel
 from pipeline.models.polynomial import PolynomialParametrisation
 from pipeline.models.radial import RadialParametrisation
-from pipeline.models.radial_field import RadialFieldParametrisation
+from pipeline.models.radial_field import FieldRows, ProjectedRows, RadialFieldParametrisation
 
 
 class Parametrisation(Protocol):
@@ -158,7 +158,16 @@ def normal_equations(
     ``S = sum a Pc`` and ``J^T r = P^T r - mean P sum r - dphi sum a r`` (the last two terms zero to
     rounding). A Gauss-Newton or Levenberg-Marquardt step needs only these (``n x n``), not the
     ``N x n`` Jacobian."""
-    r, a, p_mat, t_mat = _projected(param, edges, th, True)
+    project_rows = getattr(param, "project_rows", None)
+    if project_rows is not None and groups is None:
+        u, _ = param.evaluate(edges.xy, th, jac=False)
+        r, a, nrm, tan, _ = tls(u, edges.starts, edges.counts, edges.weights)
+        rows = project_rows(edges.xy, th, nrm, tan)
+        if rows.field is not None:
+            return _field_normal_equations(rows, rows.field, edges, r, a, nrm, tan, edge_weights)
+        p_mat, t_mat = rows.p, rows.t  # every row dense, in order
+    else:
+        r, a, p_mat, t_mat = _projected(param, edges, th, True)
     assert p_mat is not None and t_mat is not None
     st = edges.starts
     q = edges.weights
@@ -195,3 +204,84 @@ def normal_equations(
         atb[g] = pw @ rg - mp @ (sum_r[e0:e1] * we) - dp @ (sum_ar[e0:e1] * we)
         ss[g] = rw @ rg
     return ata, atb, ss
+
+
+def _field_normal_equations(
+    rows: ProjectedRows,
+    f: FieldRows,
+    edges: EdgeSet,
+    r: np.ndarray,
+    a: np.ndarray,
+    nrm: np.ndarray,
+    tan: np.ndarray,
+    edge_weights: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`normal_equations` (one group) with a B-spline field's rows of ``P`` and ``T`` kept sparse
+    (:class:`~pipeline.models.radial_field.ProjectedRows`): the same sums, each field row's over the points whose
+    basis touches it only. Per edge, ``sum q P``, ``sum q a P`` and ``sum q r T`` of a field row by
+    ``np.bincount``; ``P^T W P`` of the dense rows one product, of the field rows (and across dense and field rows)
+    a product per cell of the grid (its points' 16 basis values per component), added into place. The dense path
+    does the same arithmetic on the zeros too: the results agree to rounding."""
+    st, ct, q = edges.starts, edges.counts, edges.weights
+    n, n_e, m = rows.n, edges.n_edges, f.m
+    rd = rows.rows
+    pd, td = rows.p, rows.t
+    # per edge: sums of q P, q a P, q r T (every row), the line's turn d phi
+    aq, rq = (a, r) if q is None else (a * q, r * q)
+    pq = pd if q is None else pd * q
+    sum_p, sum_ap, sum_rt = np.empty((n, n_e)), np.empty((n, n_e)), np.empty((n, n_e))
+    sum_p[rd] = np.add.reduceat(pq, st, axis=1)
+    sum_ap[rd] = np.add.reduceat(pq * a, st, axis=1)
+    sum_rt[rd] = np.add.reduceat(td * rq, st, axis=1)
+    den = np.add.reduceat(aq * a - rq * r, st)
+    key = (np.repeat(np.arange(n_e), ct)[:, None] * m + f.idx).ravel()
+    qv = f.val if q is None else f.val * q[:, None]
+    for c, row in ((0, f.row_x), (1, f.row_y)):
+        for out, per_point in ((sum_p, nrm[:, c]), (sum_ap, a * nrm[:, c]), (sum_rt, r * tan[:, c])):
+            s = np.bincount(key, (qv * per_point[:, None]).ravel(), minlength=n_e * m)
+            out[row : row + m] = s.reshape(n_e, m).T
+    dphi = (sum_ap + sum_rt) / np.where(np.abs(den) > 1e-300, den, 1e-300)
+    # P W P^T and P W r
+    w_pt = edges.point_weights(edge_weights)
+    pw = pd if w_pt is None else pd * w_pt
+    rw = r if w_pt is None else r * w_pt
+    ata = np.zeros((n, n))
+    ata[np.ix_(rd, rd)] = pw @ pd.T
+    n_cells, k, nd = len(f.cell_idx), f.idx.shape[1], len(rd)
+    assert f.row_y == f.row_x + m, "the field's y rows follow its x rows"
+    fr = slice(f.row_x, f.row_x + 2 * m)
+    no = nrm[f.order]
+    local = np.zeros((n_cells * f.size, 2 * k))  # per cell, its points' field values (x then y), zero-padded
+    local[f.place, :k] = f.val_sorted * no[:, :1]
+    local[f.place, k:] = f.val_sorted * no[:, 1:]
+    dense = np.zeros((n_cells * f.size, nd))  # per cell, its points' weighted dense rows, zero-padded
+    dense[f.place] = pw.T[f.order]
+    weighted = local
+    if w_pt is not None:
+        weighted = local * np.bincount(f.place, w_pt[f.order], minlength=n_cells * f.size)[:, None]
+    local3 = local.reshape(n_cells, f.size, 2 * k)
+    ff = np.matmul(weighted.reshape(n_cells, f.size, 2 * k).transpose(0, 2, 1), local3)  # (cells, 2k, 2k)
+    df = np.matmul(dense.reshape(n_cells, f.size, nd).transpose(0, 2, 1), local3)  # (cells, dense rows, 2k)
+    ata[fr, fr] = np.bincount(f.keys.ravel(), ff.ravel(), minlength=4 * m * m).reshape(2 * m, 2 * m)
+    both = np.concatenate([f.cell_idx, m + f.cell_idx], axis=1)
+    keys = np.arange(nd)[None, :, None] * (2 * m) + both[:, None, :]
+    dfm = np.bincount(keys.ravel(), df.ravel(), minlength=nd * 2 * m).reshape(nd, 2 * m)
+    ata[rd, fr] = dfm
+    ata[fr, rd] = dfm.T
+    atb = np.empty(n)
+    atb[rd] = pw @ r
+    for c, row in ((0, f.row_x), (1, f.row_y)):
+        atb[row : row + m] = np.bincount(f.idx.ravel(), (f.val * (rw * nrm[:, c])[:, None]).ravel(), minlength=m)
+    # the lines' motion (as normal_equations)
+    sum_q = _weight_sums(edges)
+    mean_p = sum_p / sum_q
+    sum_r = np.add.reduceat(rq, st)
+    sum_a = np.add.reduceat(aq, st)
+    sum_aa = np.add.reduceat(aq * a, st)
+    sum_ar = np.add.reduceat(aq * r, st)
+    s_ap = sum_ap - mean_p * sum_a
+    we = np.ones(n_e) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    cross = (s_ap * we) @ dphi.T
+    ata += -((mean_p * (sum_q * we)) @ mean_p.T) - cross - cross.T + (dphi * (sum_aa * we)) @ dphi.T
+    atb += -(mean_p @ (sum_r * we)) - dphi @ (sum_ar * we)
+    return ata[None], atb[None], np.array([rw @ r])

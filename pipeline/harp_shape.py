@@ -116,7 +116,7 @@ from pipeline.fitspec import CENTER_PRIOR_WEIGHT, FitSpec
 from pipeline.harp_frame import AXIS_TOLERANCE, HarpFrame, gap_clusters, group_frames, harp_frame
 from pipeline.harp_kinks import KINK_Z, Candidate, Kink, end_weights, peak_per_area, scan_string, stretches, template
 from pipeline.models.base import DistortionModel
-from pipeline.models.radial_field import RadialFieldParametrisation
+from pipeline.models.radial_field import ProjectedRows, RadialFieldParametrisation
 from pipeline.plain import finite_or_none
 from pipeline.resample import DEFAULT_T
 
@@ -633,16 +633,35 @@ class _WithStrings:
         p_mat = np.zeros((self.n, len(xy)))
         t_mat = np.zeros((self.n, len(xy)))
         p_mat[: self.lens.n], t_mat[: self.lens.n] = p_l, t_l
+        self._own_rows(nrm, tan, p_mat, t_mat, self.lens.n)
+        return p_mat, t_mat
+
+    def project_rows(self, xy: Floats, th: Floats, nrm: Floats, tan: Floats) -> ProjectedRows:
+        """:meth:`project` with a residual field's rows kept sparse (:class:`ProjectedRows`), the lens's when it
+        has them (:meth:`RadialFieldParametrisation.project_rows`); else every row dense."""
+        if not isinstance(self.lens, RadialFieldParametrisation):
+            p_mat, t_mat = self.project(xy, th, nrm, tan)
+            return ProjectedRows(self.n, np.arange(self.n), p_mat, t_mat, None)
+        lens = self.lens.project_rows(xy, th[: self.lens.n], nrm, tan)
+        n_l, n_own = len(lens.rows), self.n - self.lens.n
+        p_mat = np.zeros((n_l + n_own, len(xy)))
+        t_mat = np.zeros((n_l + n_own, len(xy)))
+        p_mat[:n_l], t_mat[:n_l] = lens.p, lens.t
+        self._own_rows(nrm, tan, p_mat, t_mat, n_l)
+        rows = np.concatenate([lens.rows, np.arange(self.lens.n, self.n)])
+        return ProjectedRows(self.n, rows, p_mat, t_mat, lens.field)
+
+    def _own_rows(self, nrm: Floats, tan: Floats, p_mat: Floats, t_mat: Floats, at: int) -> None:
+        """The strings' and kinks' rows of ``P`` and ``T`` written from row ``at`` on (zeros beforehand)."""
         dn = -np.einsum("ij,ij->i", self.normal, nrm)  # d(point)/d(delta) projected: -n_harp . n_line
         dt = -np.einsum("ij,ij->i", self.normal, tan)
         for s, idx in enumerate(self._cols):
-            r0 = self.lens.n + s * self.m
+            r0 = at + s * self.m
             p_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dn[idx]
             t_mat[r0 : r0 + self.m, idx] = self.basis[:, idx] * dt[idx]
-        r0 = self.lens.n + self.k * self.m
+        r0 = at + self.k * self.m
         p_mat[r0:] = self.kinks * dn
         t_mat[r0:] = self.kinks * dt
-        return p_mat, t_mat
 
 
 class _HeldLens:

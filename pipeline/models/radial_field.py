@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -100,10 +100,70 @@ def field_basis(
 def field_matrix(xy: np.ndarray, bounds: tuple[float, float, float, float], shape: tuple[int, int]) -> np.ndarray:
     """The dense basis matrix ``(ny * nx, N)``: column ``i`` holds every control point's basis value at point ``i``."""
     idx, val = field_basis(xy, bounds, shape)
-    out = np.zeros((shape[0] * shape[1], len(xy)))
-    cols = np.broadcast_to(np.arange(len(xy))[:, None], idx.shape)
+    return _basis_matrix(idx, val, shape[0] * shape[1])
+
+
+def _basis_matrix(idx: NDArray[np.intp], val: NDArray[np.float64], n_field: int) -> np.ndarray:
+    """:func:`field_matrix` from :func:`field_basis`'s ``(idx, val)``."""
+    out = np.zeros((n_field, len(idx)))
+    cols = np.broadcast_to(np.arange(len(idx))[:, None], idx.shape)
     np.add.at(out, (idx.ravel(), cols.ravel()), val.ravel())
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class FieldRows:
+    """The rows of a fit's projected Jacobian (:func:`pipeline.fit_problem.normal_equations`) that are a B-spline
+    field's coefficients, kept sparse: the x coefficients are rows ``row_x + j``, the y coefficients ``row_y + j``
+    (``j < m``); at point ``i`` the rows ``idx[i]`` hold ``val[i]`` times the x (resp. y) component of the unit
+    vector projected on, the others zero (:func:`field_basis`). The points grouped by the cell of the grid they
+    lie in (all of a cell's points have the same 16 rows): ``order`` sorts them by cell, ``place`` gives each
+    sorted point's place ``cell * size + slot`` in a zero-padded ``(cells, size)`` layout, ``cell_idx``
+    ``(cells, 16)`` each cell's rows, ``size`` the most points of a cell, ``val_sorted`` the values in that order
+    and ``keys`` ``(cells, 32, 32)`` where each cell's products of its x and y rows go in the ``(2m, 2m)`` block
+    of both components (flattened)."""
+
+    row_x: int
+    row_y: int
+    m: int
+    idx: NDArray[np.intp]
+    val: NDArray[np.float64]
+    order: NDArray[np.intp]
+    place: NDArray[np.intp]
+    cell_idx: NDArray[np.intp]
+    size: int
+    val_sorted: NDArray[np.float64]
+    keys: NDArray[np.intp]
+
+    @classmethod
+    def of(cls, row_x: int, row_y: int, m: int, idx: NDArray[np.intp], val: NDArray[np.float64]) -> FieldRows:
+        order = np.argsort(idx[:, 0], kind="stable").astype(np.intp)
+        first = idx[order, 0]
+        new = np.flatnonzero(np.r_[True, first[1:] != first[:-1]]) if len(first) else np.zeros(0, np.intp)
+        counts = np.diff(np.r_[new, len(first)])
+        size = int(counts.max(initial=0))
+        place = (np.arange(len(first)) + np.repeat(np.arange(len(new)) * size - new, counts)).astype(np.intp)
+        cell_idx = idx[order[new]]
+        both = np.concatenate([cell_idx, m + cell_idx], axis=1)
+        keys = (both[:, :, None] * (2 * m) + both[:, None, :]).astype(np.intp)
+        return cls(row_x, row_y, m, idx, val, order, place, cell_idx, size, val[order], keys)
+
+    def shifted(self, by: int) -> FieldRows:
+        """The same rows ``by`` further down (a parametrisation that puts parameters before these)."""
+        return replace(self, row_x=self.row_x + by, row_y=self.row_y + by)
+
+
+@dataclass(frozen=True, eq=False)
+class ProjectedRows:
+    """A fit's projected Jacobian ``P`` and ``T`` (:meth:`RadialFieldParametrisation.project`), its field rows kept
+    sparse (:class:`FieldRows`): the dense rows ``rows`` (indices among the ``n`` parameters) hold ``p`` and ``t``
+    ``(len(rows), N)``, the rows of ``field`` the rest."""
+
+    n: int
+    rows: NDArray[np.intp]
+    p: np.ndarray
+    t: np.ndarray
+    field: FieldRows | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -321,6 +381,28 @@ class RadialFieldParametrisation:
         self._rough = roughness_operator(self.shape, hx / radial.s, hy / radial.s)
         self._affine = affine_basis(self.shape).T
         self._axis = np.zeros((0, 2 * self.n_field))  # with_axis_gauge's rows on [c^x, c^y]
+        self._basis: tuple[np.ndarray, NDArray[np.intp], NDArray[np.float64], np.ndarray, FieldRows] | None = None
+
+    def _field_basis(self, xy: np.ndarray) -> tuple[NDArray[np.intp], NDArray[np.float64], np.ndarray, FieldRows]:
+        """:func:`field_basis` and :func:`field_matrix` at ``xy``, kept for the last points asked: a fit evaluates the
+        field at the same distorted points at every iteration (the basis depends on them only). The points are
+        compared by value, so a changed array is never served a stale basis. With them the field's rows of the
+        projected Jacobian (:class:`FieldRows`, :meth:`project_rows`)."""
+        kept = self._basis
+        if kept is not None and kept[0].shape == xy.shape and np.array_equal(kept[0], xy):
+            return kept[1], kept[2], kept[3], kept[4]
+        idx, val = field_basis(xy, self.bounds, self.shape)
+        mat = _basis_matrix(idx, val, self.n_field)
+        for a in (idx, val, mat):
+            a.setflags(write=False)
+        rows = FieldRows.of(self.n_radial, self.n_radial + self.n_field, self.n_field, idx, val)
+        self._basis = (np.array(xy, dtype=np.float64, copy=True), idx, val, mat, rows)
+        return idx, val, mat, rows
+
+    def project_rows(self, xy: np.ndarray, th: np.ndarray, nrm: np.ndarray, tan: np.ndarray) -> ProjectedRows:
+        """:meth:`project` with the field's rows kept sparse (:class:`ProjectedRows`): the radial rows dense."""
+        pr, tr = self.radial.project(xy, th[: self.n_radial], nrm, tan)
+        return ProjectedRows(self.n, np.arange(self.n_radial), pr, tr, self._field_basis(xy)[3])
 
     def with_axis_gauge(self, *centres: tuple[float, float]) -> RadialFieldParametrisation:
         """This parametrisation with the field's parts that turn with a rotation about each of ``centres``
@@ -376,7 +458,7 @@ class RadialFieldParametrisation:
     def evaluate(self, xy: np.ndarray, th: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Corrected points ``(N, 2)`` and, with ``jac``, their Jacobian ``(N, 2, n)``."""
         u, d = self.radial.evaluate(xy, th[: self.n_radial], jac)
-        idx, val = field_basis(xy, self.bounds, self.shape)
+        idx, val, b, _ = self._field_basis(xy)
         f = th[self.n_radial :]
         u = u + np.stack(
             [np.sum(f[: self.n_field][idx] * val, axis=1), np.sum(f[self.n_field :][idx] * val, axis=1)], axis=1
@@ -386,9 +468,8 @@ class RadialFieldParametrisation:
         assert d is not None
         full = np.zeros((len(xy), 2, self.n))
         full[:, :, : self.n_radial] = d
-        b = field_matrix(xy, self.bounds, self.shape).T
-        full[:, 0, self.n_radial : self.n_radial + self.n_field] = b
-        full[:, 1, self.n_radial + self.n_field :] = b
+        full[:, 0, self.n_radial : self.n_radial + self.n_field] = b.T
+        full[:, 1, self.n_radial + self.n_field :] = b.T
         return u, full
 
     def project(
@@ -398,7 +479,7 @@ class RadialFieldParametrisation:
         the radial rows (:meth:`RadialParametrisation.project`), then the basis values times each
         component of the unit vectors."""
         pr, tr = self.radial.project(xy, th[: self.n_radial], nrm, tan)
-        b = field_matrix(xy, self.bounds, self.shape)
+        _, _, b, _ = self._field_basis(xy)
         nr, nf = self.n_radial, self.n_field
         p_mat = np.empty((self.n, len(xy)))
         t_mat = np.empty((self.n, len(xy)))

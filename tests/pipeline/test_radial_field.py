@@ -19,8 +19,9 @@ from pipeline.exports.maps import map_accuracy
 from pipeline.exports.registry import FORMATS, read_correction, write_export
 from pipeline.exports.source import ExportOptions, ExportSource
 from pipeline.fit import fit_distortion
-from pipeline.fit_problem import make_parametrisation, residuals_and_jacobian
+from pipeline.fit_problem import make_parametrisation, normal_equations, residuals_and_jacobian
 from pipeline.fitspec import DEFAULT_FIELD_PENALTY, FitSpec, parse
+from pipeline.harp_shape import _WithStrings
 from pipeline.lens_population import lens_population
 from pipeline.model_file import model_file_text, parse_model_text
 from pipeline.models import RadialFieldModel, RadialModel, model_from_dict
@@ -99,6 +100,59 @@ def test_the_fit_jacobian_with_a_field_is_the_finite_difference_one():
         rm, _ = residuals_and_jacobian(par, edges, th - e, jac=False)
         num[:, i] = (rp - rm) / 2e-6
     assert np.abs(jac - num).max() < 1e-5 * np.abs(jac).max()
+
+
+def _explicit_normal_equations(par, edges, th, edge_weights):
+    """``J^T W J``, ``J^T W r``, ``r^T W r`` from the explicit Jacobian (:func:`residuals_and_jacobian`, dense)."""
+    r, j = residuals_and_jacobian(par, edges, th)
+    wp = edges.point_weights(edge_weights)
+    jw = j * wp[:, None]
+    return jw.T @ j, jw.T @ r, float((r * wp) @ r)
+
+
+@pytest.mark.parametrize("strings", [False, True])
+def test_the_normal_equations_with_a_field_are_those_of_the_explicit_jacobian(strings):
+    """:func:`normal_equations` keeps a field's rows sparse (a product per cell of the grid): its results are
+    those of the explicit dense Jacobian, with point and edge weights, for the lens alone and for the joint fit
+    of lens and string bends (:mod:`pipeline.harp_shape`)."""
+    lens, shots = _shots(True, 3)
+    rng = np.random.default_rng(7)
+    sig = [[rng.uniform(0.5, 3.0, len(p)) for p in s] for s in shots]
+    edges, _ = collect(shots, W, H, point_sigma=sig)
+    par = make_parametrisation(W, H, FitSpec("radial", 4, True, True, field=(12, 9)))
+    th = rng.normal(0, 1e-3, par.n)
+    th[par.n_radial :] = rng.normal(0, 0.1, 2 * par.n_field)
+    if strings:
+        n_pts, m, k = len(edges.xy), 3, 5
+        string_of = np.repeat(rng.integers(-1, k, edges.n_edges), edges.counts)
+        nrm = rng.normal(size=(n_pts, 2))
+        kinks = rng.normal(size=(2, n_pts)) * (string_of == 1)
+        par = _WithStrings(
+            par, string_of, rng.normal(size=(m, n_pts)), nrm / np.hypot(*nrm.T)[:, None], k, 1e-3, None, kinks
+        )
+        th = np.concatenate([th, rng.normal(0, 0.01, par.n - len(th))])
+    ew = rng.uniform(0.3, 1.0, edges.n_edges)
+    ata, atb, ss = normal_equations(par, edges, th, edge_weights=ew)
+    a_ref, b_ref, ss_ref = _explicit_normal_equations(par, edges, th, ew)
+    assert np.allclose(ata[0], a_ref, rtol=1e-9, atol=1e-10 * np.abs(a_ref).max())
+    assert np.allclose(atb[0], b_ref, rtol=1e-7, atol=1e-9 * np.abs(a_ref).max() ** 0.5)
+    assert ss[0] == pytest.approx(ss_ref, rel=1e-12)
+
+
+def test_the_field_basis_kept_between_evaluations_follows_the_points():
+    """The parametrisation keeps the field's basis of the last points evaluated; points changed in place, or
+    other points, get their own (as a new parametrisation computes it)."""
+    _, shots = _shots(True, 3)
+    edges, _ = collect(shots, W, H)
+    spec = FitSpec("radial", 4, True, True, field=(8, 6))
+    par = make_parametrisation(W, H, spec)
+    th = np.random.default_rng(1).normal(0, 0.05, par.n)
+    xy = edges.xy.copy()
+    first, _ = par.evaluate(xy, th, jac=False)
+    xy[::7] += 40.0
+    moved, _ = par.evaluate(xy, th, jac=False)
+    fresh, _ = make_parametrisation(W, H, spec).evaluate(xy, th, jac=False)
+    assert np.array_equal(moved, fresh) and not np.allclose(moved, first)
 
 
 # ------------------------------------------------------------------- the spec
