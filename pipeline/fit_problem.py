@@ -281,7 +281,9 @@ def _field_normal_equations(
     sum_ar = np.add.reduceat(aq * r, st)
     s_ap = sum_ap - mean_p * sum_a
     we = np.ones(n_e) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
-    cross = (s_ap * we) @ dphi.T
-    ata += -((mean_p * (sum_q * we)) @ mean_p.T) - cross - cross.T + (dphi * (sum_aa * we)) @ dphi.T
+    # mean P (sum q) mean P^T + S dphi^T + dphi S^T - (sum a^2) dphi dphi^T (each edge weighted) in one product
+    left = np.concatenate([mean_p, s_ap, dphi], axis=1)
+    right = np.concatenate([mean_p * (sum_q * we), dphi * we, s_ap * we - dphi * (sum_aa * we)], axis=1)
+    ata -= left @ right.T
     atb += -(mean_p @ (sum_r * we)) - dphi @ (sum_ar * we)
     return ata[None], atb[None], np.array([rw @ r])
