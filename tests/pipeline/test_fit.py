@@ -521,3 +521,30 @@ def test_point_sigma_of_the_wrong_shape_fails_clearly():
     zero = [[np.zeros(len(p)) for p in s] for s in shots]
     assert "> 0" in fit_distortion(shots, W, H, point_sigma=zero).reason
     assert "one per image" in fit_distortion(shots, W, H, point_sigma=ones[:1]).reason
+
+
+def test_the_gauss_newton_step_by_cholesky_is_the_eigen_decompositions():
+    """The Levenberg-Marquardt step (:func:`pipeline.fit_solver._lm_step`) takes the Gauss-Newton step from a
+    Cholesky factor when the scaled matrix is well conditioned: the same step as the solve of the system, and as
+    the eigen-decomposition gives it; an ill-conditioned matrix, or a step beyond the region, is left to the
+    eigen-decomposition (par > 0 there when the step is too long)."""
+    from pipeline.fit_solver import GN_RCOND, _gauss_newton, _lm_step
+
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(300, 60))
+    a = x.T @ x
+    b = rng.normal(size=60)
+    diag = rng.uniform(0.5, 2.0, 60)
+    h, par = _lm_step(a, b, diag, 1e12)
+    assert par == 0.0
+    assert np.allclose(h, np.linalg.solve(a, -b), rtol=1e-10, atol=1e-12 * np.abs(h).max())
+    scaled = a / np.outer(diag, diag)
+    assert _gauss_newton(scaled, b / diag, 1e12) is not None
+    bad = scaled.copy()
+    bad[0] *= 1e-9
+    bad[:, 0] *= 1e-9
+    assert 1.0 / np.linalg.cond(bad, 1) < GN_RCOND and _gauss_newton(bad, b / diag, 1e12) is None
+    short = 0.1 * float(np.linalg.norm(np.linalg.solve(scaled, b / diag)))
+    assert _gauss_newton(scaled, b / diag, short) is None
+    h, par = _lm_step(a, b, diag, short)
+    assert par > 0 and float(np.linalg.norm(diag * h)) == pytest.approx(short, rel=0.1)
