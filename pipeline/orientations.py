@@ -95,14 +95,21 @@ def shot_orientation(lines: Sequence[np.ndarray]) -> float:
 
 
 def distinct_orientations(angles_deg: Iterable[float], separation_deg: float = ORIENTATION_SEPARATION_DEG) -> int:
-    """Number of distinct orientations among line directions (degrees, modulo 180): directions closer
-    than ``separation_deg`` (single linkage, around the circle) count once."""
+    """Number of distinct orientations among line directions (degrees, modulo 180): the most of them that lie
+    pairwise at least ``separation_deg`` apart around the circle (taken greedily from the smallest; directions
+    closer than that to one taken count with it). A dense sweep counts as many orientations as fit in it (36
+    directions 5 deg apart: 18), not as one: linking every direction to its neighbour within ``separation_deg``
+    (as this function did before 2026-12-07) made such a sweep a single orientation."""
     a = np.sort(np.array([v % 180.0 for v in angles_deg if np.isfinite(v)]))
     if not len(a):
         return 0
-    gaps = np.diff(np.append(a, a[0] + 180.0))
-    n = int(np.sum(gaps >= separation_deg))
-    return max(n, 1)
+    taken = [float(a[0])]
+    for v in a[1:]:
+        if v - taken[-1] >= separation_deg:
+            taken.append(float(v))
+    if len(taken) > 1 and taken[0] + 180.0 - taken[-1] < separation_deg:  # the last one is the first, around
+        taken.pop()
+    return len(taken)
 
 
 def required_orientations(spec: FitSpec) -> int:

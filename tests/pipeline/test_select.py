@@ -202,6 +202,12 @@ def test_too_few_orientations_for_the_choice_are_said():
     shots = harp_point_sets(DECENTRED, W, H, (0, 90), noise=0.005, seed=5)
     assert [round(shot_orientation(s)) % 180 for s in shots] == [0, 90]
     assert distinct_orientations([1.0, 179.0, 45.0, 50.0, 90.0]) == 3  # 1 and 179 are 2 deg apart
+    assert distinct_orientations([0.0, 8.0, 16.0]) == 2  # 0 and 16 are distinct, 8 is near both
+    assert distinct_orientations(5.0 * i for i in range(36)) == 18  # a sweep 5 deg apart: 0, 10, ..., 170
+    # every angle of a turntable in 0.0036 deg steps: 10 deg is no whole number of steps, so no 18 directions lie
+    # pairwise 10 deg apart (their 18 gaps would each be exactly 10); 17 do
+    assert distinct_orientations(0.0036 * i for i in range(100000)) == 17
+    assert distinct_orientations([30.0, 30.0, 210.0]) == 1 and distinct_orientations([]) == 0
     assert required_orientations(FitSpec("radial", 4, True, True)) == 3
     assert required_orientations(FitSpec("radial", 4)) == 2
     sel = select_model(shots, W, H, candidates=(FitSpec("radial", 4, True),))
