@@ -28,6 +28,7 @@ Set ``$HARP_STORE_TIMINGS`` to a file to have every write appended to it as one 
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -37,7 +38,7 @@ import sqlite3
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
 import sqlalchemy as sa
@@ -89,62 +90,61 @@ T = TypeVar("T")
 
 
 class _AnswerWatch:
-    """While a try of :func:`read` or :func:`write` runs on a PostgreSQL connection over TCP: a thread that cuts
-    the connection (``shutdown`` of its socket, which wakes the driver's wait with the connection lost) once the
-    try has lasted :data:`STORE_ANSWER_S` and the server has sent nothing for as long (``TCP_INFO``'s
-    ``tcpi_last_data_recv``). :attr:`fired` says it did. A Unix-socket connection (a server on this machine) and
-    a platform without ``TCP_INFO`` are not watched."""
+    """Whether a try of :func:`read` or :func:`write` was cut for silence (:attr:`fired`). While the try runs on a
+    PostgreSQL connection over TCP (:meth:`on`), a thread cuts the connection (``shutdown`` of its socket, which
+    wakes the driver's wait with the connection lost) once the try has lasted :data:`STORE_ANSWER_S` and the
+    server has sent nothing for as long (``TCP_INFO``'s ``tcpi_last_data_recv``). SQLite, a Unix-socket connection
+    (a server on this machine) and a platform without ``TCP_INFO`` are not watched."""
 
-    def __init__(self, conn: sa.Connection) -> None:
+    def __init__(self) -> None:
         self.fired = False
-        self._done = threading.Event()
-        self._sock: socket.socket | None = None
-        try:
-            fd = conn.connection.dbapi_connection.pgconn.socket  # type: ignore[union-attr]
-        except Exception:  # not psycopg's, or a connection already bad: its try fails by itself
-            return
-        if not isinstance(fd, int) or fd < 0 or not hasattr(socket, "TCP_INFO"):
-            return
-        try:
-            sock = socket.socket(fileno=os.dup(fd))  # the same socket: shut down, it ends the driver's wait too
-        except OSError:
-            return
-        if sock.family not in (socket.AF_INET, socket.AF_INET6):
-            sock.close()
-            return
-        self._sock = sock
-        self._started = time.monotonic()
-        threading.Thread(target=self._run, name="harp-store-answer-watch", daemon=True).start()
 
-    def _silent_s(self, sock: socket.socket) -> float:
-        info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 104)
-        return float(struct.unpack_from("I", info, _TCP_INFO_LAST_DATA_RECV)[0]) / 1000.0
-
-    def _run(self) -> None:
-        sock = self._sock
-        assert sock is not None
+    @contextlib.contextmanager
+    def on(self, conn: sa.Connection, loc: StoreLocation) -> Iterator[None]:
+        """Watch ``conn`` inside the block (see the class)."""
+        sock = _tcp_socket(conn) if loc.backend == POSTGRESQL else None
+        if sock is None:
+            yield
+            return
+        done = threading.Event()
+        threading.Thread(
+            target=self._run, args=(sock, done, time.monotonic()), name="harp-store-answer-watch", daemon=True
+        ).start()
         try:
-            while not self._done.wait(min(1.0, STORE_ANSWER_S / 4)):
-                if time.monotonic() - self._started < STORE_ANSWER_S:
+            yield
+        finally:
+            done.set()
+
+    def _run(self, sock: socket.socket, done: threading.Event, started: float) -> None:
+        try:
+            while not done.wait(min(1.0, STORE_ANSWER_S / 4)):
+                if time.monotonic() - started < STORE_ANSWER_S:
                     continue
-                try:
-                    if self._silent_s(sock) < STORE_ANSWER_S:
+                with contextlib.suppress(OSError):  # the driver closed it meanwhile
+                    info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 104)
+                    if struct.unpack_from("I", info, _TCP_INFO_LAST_DATA_RECV)[0] / 1000.0 < STORE_ANSWER_S:
                         continue
-                    self.fired = True
+                    self.fired = True  # before the cut: the try's error is read as this
                     sock.shutdown(socket.SHUT_RDWR)
-                except OSError:  # the driver closed it meanwhile
-                    pass
                 return
         finally:
             sock.close()
 
-    def stop(self) -> None:
-        self._done.set()
 
-
-def _watched(conn: sa.Connection, loc: StoreLocation) -> _AnswerWatch | None:
-    """An :class:`_AnswerWatch` on ``conn`` (PostgreSQL), else None."""
-    return _AnswerWatch(conn) if loc.backend == POSTGRESQL else None
+def _tcp_socket(conn: sa.Connection) -> socket.socket | None:
+    """A socket object on ``conn``'s own TCP socket (a duplicate descriptor: shut down, it ends the driver's wait
+    too), or None: not psycopg's, already bad (its try fails by itself), not TCP, or no ``TCP_INFO`` here."""
+    if not hasattr(socket, "TCP_INFO"):
+        return None
+    try:
+        fd = conn.connection.dbapi_connection.pgconn.socket  # type: ignore[union-attr]
+        sock = socket.socket(fileno=os.dup(fd))
+    except Exception:
+        return None
+    if sock.family not in (socket.AF_INET, socket.AF_INET6):
+        sock.close()
+        return None
+    return sock
 
 
 def _silent(what: str, loc: StoreLocation, written: str) -> StoreError:
@@ -250,23 +250,17 @@ def write(
     lost = 0
     while True:
         committing = False
-        watch: _AnswerWatch | None = None
+        watch = _AnswerWatch()
         try:
-            with write_connection(engine, loc, serializable=serializable) as conn:
-                watch = _watched(conn, loc)
-                try:
-                    with conn.begin():
-                        if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
-                            conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
-                        result = fn(conn)
-                        committing = True
-                finally:
-                    if watch is not None:
-                        watch.stop()
+            with write_connection(engine, loc, serializable=serializable) as conn, watch.on(conn, loc), conn.begin():
+                if loc.backend == POSTGRESQL:  # a lock wait ends after one try, and is retried
+                    conn.exec_driver_sql(f"SET LOCAL lock_timeout = {WRITE_TRY_MS}")
+                result = fn(conn)
+                committing = True
             _log_timing(what, time.monotonic() - start, retries, loc)
             return result
         except (sa.exc.DBAPIError, sqlite3.Error) as exc:
-            if watch is not None and watch.fired:
+            if watch.fired:
                 written = "; it may or may not have been written" if committing else "; nothing of it was written"
                 raise _silent(what, loc, written) from None
             if connection_lost(exc):
@@ -310,18 +304,12 @@ def read(engine: sa.Engine, loc: StoreLocation, what: str, fn: Callable[[sa.Conn
     its connection is lost (:data:`LOST_TRIES`). Raises StoreError."""
     lost = 0
     while True:
-        watch: _AnswerWatch | None = None
+        watch = _AnswerWatch()
         try:
-            with engine.connect() as conn:
-                watch = _watched(conn, loc)
-                try:
-                    with conn.begin():
-                        return fn(conn)
-                finally:
-                    if watch is not None:
-                        watch.stop()
+            with engine.connect() as conn, watch.on(conn, loc), conn.begin():
+                return fn(conn)
         except (sa.exc.DBAPIError, sqlite3.Error, OSError) as exc:
-            if watch is not None and watch.fired:
+            if watch.fired:
                 raise _silent(what, loc, "") from None
             if connection_lost(exc) and lost < LOST_TRIES:
                 lost += 1
