@@ -190,6 +190,19 @@ def _wait_past_the_first_focus(proc: subprocess.Popen, session: Path) -> None:
     assert proc.poll() is None, proc.communicate()
 
 
+def _frames_kept_then_resumed_once(session: Path) -> None:
+    """The stopped session kept every frame it recorded (more than the first focus setting's, fewer than all), and
+    resumed, it ends with every frame of the plan exactly once."""
+    kept = [r for r in manifest(session) if r["kind"] == "frame"]
+    assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
+    assert all((session / r["file"]).is_file() for r in kept)
+    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
+    keys = Counter(
+        (r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in manifest(session) if r["kind"] == "frame"
+    )
+    assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
+
+
 def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
     # Ctrl-C in a terminal signals the whole process group: the session process and its
     # fit workers (and their forkserver); only the session process may speak
@@ -206,14 +219,7 @@ def test_ctrl_c_mid_session_is_one_clean_message_then_resume(tmp_path):
         f"harp session: interrupted; every frame captured so far is kept in {session}; "
         f"continue with: harp session resume {session}"
     ), err
-    kept = [r for r in manifest(session) if r["kind"] == "frame"]
-    assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
-    assert all((session / r["file"]).is_file() for r in kept)
-    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
-    keys = Counter(
-        (r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in manifest(session) if r["kind"] == "frame"
-    )
-    assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
+    _frames_kept_then_resumed_once(session)
 
 
 @pytest.mark.parametrize("sig, whom", [("SIGTERM", "group"), ("SIGHUP", "command")])
@@ -249,14 +255,7 @@ def test_a_stop_signal_mid_session_is_answered_as_a_ctrl_c_then_resume(tmp_path,
     ), err
     assert manifest(session)[-1] == {**manifest(session)[-1], "kind": "aborted", "reason": f"stopped by {sig}"}
     assert [s.state for s in sessions_in(tmp_path / "sessions")[0]] == ["interrupted"]
-    kept = [r for r in manifest(session) if r["kind"] == "frame"]
-    assert N_ORI * N_FRAMES < len(kept) < N_FOCUS * N_ORI * N_FRAMES
-    assert all((session / r["file"]).is_file() for r in kept)
-    assert main(["session", "resume", str(session), "--quiet", "--no-report"]) == 0
-    keys = Counter(
-        (r["focus_idx"], r["orientation_idx"], r["frame_idx"]) for r in manifest(session) if r["kind"] == "frame"
-    )
-    assert len(keys) == N_FOCUS * N_ORI * N_FRAMES and set(keys.values()) == {1}
+    _frames_kept_then_resumed_once(session)
 
 
 def test_session_report_from_kept_measurements(uninterrupted, tmp_path, monkeypatch, capsys):
