@@ -32,8 +32,8 @@ import contextlib
 import hashlib
 import json
 import math
-import os
 import sys
+import time
 import uuid
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ from station.cli.store_options import open_store, store_location
 from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
 from station.exit_codes import verdict_exit_code
+from station.files import atomic_write_text
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
 from station.session import layout
 from station.session.directory import SessionDir
@@ -287,13 +288,9 @@ def _keep_pending(pending: Path | None, key: str, target: str) -> None:
     then adds its rows anew, as before), and drop pending files older than :data:`PENDING_DAYS`."""
     if pending is None:
         return
-    import time
-
     with contextlib.suppress(OSError):
         pending.parent.mkdir(parents=True, exist_ok=True)
-        tmp = pending.with_name(f".{pending.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({"key": key, "target": str(target)}), encoding="utf-8")
-        os.replace(tmp, pending)
+        atomic_write_text(pending, json.dumps({"key": key, "target": str(target)}))
         old = time.time() - PENDING_DAYS * 86400
         for f in pending.parent.glob("*.json"):
             with contextlib.suppress(OSError):
