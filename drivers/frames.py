@@ -33,8 +33,8 @@ as its mosaic with its pattern (:func:`bayer_pattern`), a mono one a grey frame.
 A GenICam frame is one stream over the whole image, as the camera sends it: with an odd width a row may
 start inside a group (GigE Vision: "the first pixel of the second line will not start on a 3-byte
 boundary"); unless its rows are padded (GenICam ``PaddingX``, the GigE Vision leader's ``padding_x``: bytes
-after each line), when each row is a stream of its own, the stride apart (:func:`genicam_image` finds the
-stride from the buffer's size). A V4L2 frame is rows of whole groups, ``bytes_per_line`` apart.
+after each line), when each row is a stream of its own, the stride apart (:func:`genicam_image` takes the
+stride from the leader's ``padding_x``, else from the buffer's size). A V4L2 frame is rows of whole groups, ``bytes_per_line`` apart.
 
 References
 ----------
