@@ -172,15 +172,7 @@ def normal_equations(
     st = edges.starts
     q = edges.weights
     sum_p, sum_ap, dphi = _line_turn(p_mat, t_mat, r, a, st, q)
-    sum_q = _weight_sums(edges)
-    mean_p = sum_p / sum_q
-    aq, rq = (a, r) if q is None else (a * q, r * q)
-    sum_a = np.add.reduceat(aq, st)
-    sum_r = np.add.reduceat(rq, st)
-    sum_aa = np.add.reduceat(aq * a, st)
-    sum_ar = np.add.reduceat(aq * r, st)
-    s_ap = sum_ap - mean_p * sum_a  # sum q a Pc
-    w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    sum_q, mean_p, sum_r, sum_aa, sum_ar, s_ap, w = _edge_terms(edges, a, r, sum_p, sum_ap, edge_weights)
     w_pt = edges.point_weights(edge_weights)
     bounds = [0] if groups is None else [int(g) for g in groups]
     bounds.append(edges.n_edges)
@@ -204,6 +196,30 @@ def normal_equations(
         atb[g] = pw @ rg - mp @ (sum_r[e0:e1] * we) - dp @ (sum_ar[e0:e1] * we)
         ss[g] = rw @ rg
     return ata, atb, ss
+
+
+def _edge_terms(
+    edges: EdgeSet,
+    a: np.ndarray,
+    r: np.ndarray,
+    sum_p: np.ndarray,
+    sum_ap: np.ndarray,
+    edge_weights: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per edge, what the lines' motion adds to :func:`normal_equations` besides ``d phi``: ``sum q``, ``mean P``,
+    ``sum q r``, ``sum q a^2``, ``sum q a r``, ``S = sum q a Pc`` and the edge weights (1 by default), from the
+    (``q``-weighted) sums ``sum_p`` and ``sum_ap`` of :func:`_line_turn`."""
+    st, q = edges.starts, edges.weights
+    sum_q = _weight_sums(edges)
+    mean_p = sum_p / sum_q
+    aq, rq = (a, r) if q is None else (a * q, r * q)
+    sum_a = np.add.reduceat(aq, st)
+    sum_r = np.add.reduceat(rq, st)
+    sum_aa = np.add.reduceat(aq * a, st)
+    sum_ar = np.add.reduceat(aq * r, st)
+    s_ap = sum_ap - mean_p * sum_a  # sum q a Pc
+    w = np.ones(edges.n_edges) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    return sum_q, mean_p, sum_r, sum_aa, sum_ar, s_ap, w
 
 
 def _field_normal_equations(
@@ -273,14 +289,7 @@ def _field_normal_equations(
     for c, row in ((0, f.row_x), (1, f.row_y)):
         atb[row : row + m] = np.bincount(f.idx.ravel(), (f.val * (rw * nrm[:, c])[:, None]).ravel(), minlength=m)
     # the lines' motion (as normal_equations)
-    sum_q = _weight_sums(edges)
-    mean_p = sum_p / sum_q
-    sum_r = np.add.reduceat(rq, st)
-    sum_a = np.add.reduceat(aq, st)
-    sum_aa = np.add.reduceat(aq * a, st)
-    sum_ar = np.add.reduceat(aq * r, st)
-    s_ap = sum_ap - mean_p * sum_a
-    we = np.ones(n_e) if edge_weights is None else np.asarray(edge_weights, dtype=np.float64)
+    sum_q, mean_p, sum_r, sum_aa, sum_ar, s_ap, we = _edge_terms(edges, a, r, sum_p, sum_ap, edge_weights)
     # mean P (sum q) mean P^T + S dphi^T + dphi S^T - (sum a^2) dphi dphi^T (each edge weighted) in one product
     left = np.concatenate([mean_p, s_ap, dphi], axis=1)
     right = np.concatenate([mean_p * (sum_q * we), dphi * we, s_ap * we - dphi * (sum_aa * we)], axis=1)
