@@ -135,8 +135,6 @@ class Stopped(KeyboardInterrupt):
 
 _stopped_by: int | None = None
 """The signal that stopped the command (None: none, or a Ctrl-C): one command per process."""
-_installed: dict[int, Any] = {}
-"""The handlers :func:`stop_signals_as_ctrl_c` replaced, by signal (SIG_DFL each): restored in forked children."""
 
 
 def stop_signal() -> int | None:
@@ -173,10 +171,10 @@ def _raise_stopped(signum: int, _frame: Any) -> None:
 def _default_in_child() -> None:
     """In a process forked from this one (``harp calibrate``'s workers): the stop signals' own action
     again, so that a worker a pool stops with SIGTERM ends at once and never runs the command's handler."""
-    for signum, previous in _installed.items():
+    for signum in STOP_SIGNALS:  # the handler is installed only over the default action
         with contextlib.suppress(ValueError, OSError):
             if signal.getsignal(signum) is _raise_stopped:
-                signal.signal(signum, previous)
+                signal.signal(signum, signal.SIG_DFL)
 
 
 _at_fork = False
@@ -198,7 +196,6 @@ def stop_signals_as_ctrl_c() -> Iterator[None]:
     for signum in STOP_SIGNALS:
         if signal.getsignal(signum) is signal.SIG_DFL:
             mine[signum] = signal.signal(signum, _raise_stopped)
-    _installed.update(mine)
     if not _at_fork:
         os.register_at_fork(after_in_child=_default_in_child)
         _at_fork = True
@@ -207,4 +204,3 @@ def stop_signals_as_ctrl_c() -> Iterator[None]:
     finally:
         for signum, previous in mine.items():
             signal.signal(signum, previous)
-            _installed.pop(signum, None)
