@@ -125,12 +125,20 @@ def required_orientations(spec: FitSpec) -> int:
     return 2
 
 
+def orientation_shortfall(spec: FitSpec, angles_deg: Iterable[float]) -> tuple[int, int] | None:
+    """``(need, have)`` when line directions ``angles_deg`` (degrees) give fewer distinct orientations
+    (:func:`distinct_orientations`) than ``spec`` needs (:func:`required_orientations`), else None."""
+    have = distinct_orientations(angles_deg)
+    need = required_orientations(spec)
+    return None if have >= need else (need, have)
+
+
 def support_problem(spec: FitSpec, lines_per_image: Sequence[Sequence[np.ndarray]]) -> str | None:
     """Why the shots do not support ``spec`` well (too few distinct orientations), or None."""
-    have = distinct_orientations(shot_orientation(s) for s in lines_per_image)
-    need = required_orientations(spec)
-    if have >= need:
+    short = orientation_shortfall(spec, (shot_orientation(s) for s in lines_per_image))
+    if short is None:
         return None
+    need, have = short
     return (
         f"not well supported: {spec.label} needs >= {need} distinct string orientations "
         f"(>= {ORIENTATION_SEPARATION_DEG:g} deg apart), the shots have {have}; add shots at other angles"

@@ -21,7 +21,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.orientations import ORIENTATION_SEPARATION_DEG, distinct_orientations, required_orientations
+from pipeline.orientations import ORIENTATION_SEPARATION_DEG, orientation_shortfall
 from station.config.devices import port_missing
 from station.config.errors import ConfigError
 from station.config.schema import Config
@@ -137,10 +137,10 @@ def support_warning(config: Config) -> str | None:
     if spec is None:
         return None
     harp = config.station.harp
-    have = distinct_orientations(harp.expected_angle(a) for a in config.capture.fitted_angles_deg)
-    need = required_orientations(spec)
-    if have >= need:
+    short = orientation_shortfall(spec, (harp.expected_angle(a) for a in config.capture.fitted_angles_deg))
+    if short is None:
         return None
+    need, have = short
     return (
         f"{config.path}: pipeline.model: {spec.label} needs >= {need} distinct string orientations "
         f"(>= {ORIENTATION_SEPARATION_DEG:g} deg apart) and the fitted shots of capture.orientations_deg give {have}: "
