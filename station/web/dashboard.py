@@ -41,7 +41,7 @@ from starlette.routing import Route
 
 from station.profile_choice import export_refusal, failed_line, lens_row
 from station.store import StoreError
-from station.store.engine import STORE_ANSWER_S as STORE_SILENCE_S
+from station.store.engine import STORE_ANSWER_S
 from station.web import create_app, render
 from station.web import dashboard_data as data
 from station.web.app import log
@@ -61,12 +61,6 @@ def _page_error(request: Request, status: int, message: str) -> Response:
     return render(request, "dashboard_error.html", status_code=status, message=" ".join(message.split()))
 
 
-STORE_ANSWER_S = STORE_SILENCE_S
-"""How long a page waits for the store's answer before it says so (503): the store's own bound of silence
-(:data:`station.store.engine.STORE_ANSWER_S`), after which the read under it gives up and frees its thread and
-connection; the page does not wait for that (a read waiting for a new connection adds its connect timeout)."""
-
-
 async def _call(fn: Any, *args: Any) -> Any:
     """Run ``fn(*args)`` on a worker thread (a plot or an export)."""
     return await run_in_threadpool(fn, *args)
@@ -74,8 +68,9 @@ async def _call(fn: Any, *args: Any) -> Any:
 
 async def _read(request: Request, fn: Any, *args: Any) -> Any:
     """``fn(store, *args)``, a read of the request's store, on a worker thread (the store's calls block); a
-    :class:`~station.store.StoreError` (503) when it does not answer within :data:`STORE_ANSWER_S` (the thread
-    is left to finish, or to fail, when the server answers again)."""
+    :class:`~station.store.StoreError` (503) when it does not answer within the store's own bound of silence
+    (:data:`station.store.engine.STORE_ANSWER_S`; the read under it then gives up and frees its thread and
+    connection, the page does not wait for that: a read waiting for a new connection adds its connect timeout)."""
     import anyio.to_thread
 
     store = _store(request)
