@@ -221,12 +221,14 @@ def run(args) -> int:
 def _record(args, config, session, items, results) -> None:
     """One row of QA history per judged profile (the verdict a profile was calibrated with is not changed).
 
-    The rows of a run carry its key (``record_key``: the run's key and the row's index). A run whose
-    recording failed — a commit that may or may not have been written among them — leaves its key in a
-    pending file (:func:`_pending_file`, named by the store and what was judged); ``harp qa`` run again
-    with the same results (the same verdicts, checks, figures and thresholds, of the same profiles, into
-    the same store) takes that key, so that the rows already written are not written twice. Any other run
-    (the first recorded one, or one whose results differ) has a new key and adds its rows."""
+    The rows of a run carry its key (``record_key``: the run's key and the row's index). The key is kept in a
+    pending file (:func:`_pending_file`, named by the store and what was judged) before the first row is
+    written, and the file removed once every row is: a run whose recording failed — a commit that may or may
+    not have been written among them, a Ctrl-C, or a process killed (SIGKILL, power) after a commit — leaves
+    it, and ``harp qa`` run again with the same results (the same verdicts, checks, figures and thresholds,
+    of the same profiles, into the same store) takes that key, so that the rows already written are not
+    written twice. Any other run (the first recorded one, or one whose results differ) has a new key and adds
+    its rows."""
     session_dir = str(session.path.resolve()) if session else None
     rows = [(it, v, plain({**v.metrics, "focus": it.focus})) for it, v in zip(items, results)]
     pending = None
@@ -234,6 +236,7 @@ def _record(args, config, session, items, results) -> None:
     try:
         pending = _pending_file(store_location(args.store, config), session_dir, rows)
         key = _pending_key(pending) or key
+        _keep_pending(pending, key, args.target)  # before any row: a process killed after a commit leaves it
         with _store(args, config, create=True) as store:
             for i, (it, v, metrics) in enumerate(rows):
                 store.put_qa_result(
@@ -244,14 +247,10 @@ def _record(args, config, session, items, results) -> None:
                     focus=it.focus,
                     key=f"{key}/{i}",
                 )
-    except StoreError as exc:
-        _keep_pending(pending, key, args.target)
+    except StoreError as exc:  # the pending file stays (so does it on a Ctrl-C): a run again adds the others
         # the verdict (and its exit code) stands; its row of QA history is what is missing: say how to add it
         warn("harp qa", f"result not recorded: {exc}; the verdict stands: run harp qa {args.target} again to record it")
         return
-    except BaseException:  # Ctrl-C while recording: some rows may be written; a run again adds the others
-        _keep_pending(pending, key, args.target)
-        raise
     if pending is not None:
         with contextlib.suppress(OSError):
             pending.unlink(missing_ok=True)
@@ -284,8 +283,8 @@ def _pending_key(pending: Path) -> str | None:
 
 
 def _keep_pending(pending: Path | None, key: str, target: str) -> None:
-    """Keep ``key`` in ``pending`` for a run again (atomically; nothing when it cannot be written: that run
-    then adds its rows anew, as before), and drop pending files older than :data:`PENDING_DAYS`."""
+    """Keep ``key`` in ``pending`` for a run again (atomically; nothing when it cannot be written: a run again
+    then adds its rows anew), and drop pending files older than :data:`PENDING_DAYS`."""
     if pending is None:
         return
     with contextlib.suppress(OSError):

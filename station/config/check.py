@@ -12,7 +12,10 @@ anything:
 * **warnings** (true on this machine now, may be fine where the station runs): a turntable
   port that does not exist here, a store or sessions directory that cannot be created; and a plan
   that puts the strings along the pixel grid at some turntable angle (:func:`grid_warning`), or whose
-  fitted shots give fewer string orientations than the model it names needs (:func:`support_warning`).
+  fitted shots give fewer string orientations than the model it names needs (:func:`support_warning`) or than a
+  residual field needs when ``pipeline.field`` is ``auto`` (:func:`field_warning`: the session would add none);
+  and a store URL that holds a password, which every session directory's copy of the configuration would keep
+  (:func:`password_warning`).
 """
 
 from __future__ import annotations
@@ -21,10 +24,18 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.orientations import ORIENTATION_SEPARATION_DEG, orientation_shortfall
+from pipeline.fitspec import FIELD_AUTO
+from pipeline.orientations import (
+    ORIENTATION_SEPARATION_DEG,
+    REQUIRED_ORIENTATIONS_POLY,
+    distinct_orientations,
+    orientation_shortfall,
+)
 from station.config.devices import port_missing
 from station.config.errors import ConfigError
 from station.config.schema import Config
+from station.store.errors import StoreError
+from station.store.location import without_password
 
 GRID_ANGLE_DEG = 2.0
 """:func:`check_config` warns of a plan whose strings are expected within this angle (degrees) of the pixel rows or
@@ -43,8 +54,9 @@ FOCUS_SETTING = {"aravis": "focus_feature"}
 @dataclass(frozen=True)
 class ConfigCheck:
     """What :func:`check_config` found: ``errors`` (the session cannot run) and ``warnings``; ``plan_warnings``
-    those of the warnings about the plan itself (the strings along the pixel grid), which ``harp session run``
-    repeats before it captures; the others (a port or a directory missing here) the run refuses with its own
+    those of the warnings about what the session would do (the plan: strings along the pixel grid, a model or a
+    field the shots cannot support; a store password its copy of the configuration would keep), which ``harp
+    session run`` repeats before it captures; the others (a port or a directory missing here) the run refuses with its own
     one-line error."""
 
     errors: list[ConfigError] = field(default_factory=list)
@@ -93,7 +105,9 @@ def check_config(config: Config) -> ConfigCheck:
         reason = _not_creatable(Path(directory))
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
-    plan = [w for w in (grid_warning(config), support_warning(config)) if w]
+    plan = [
+        w for w in (grid_warning(config), support_warning(config), field_warning(config), password_warning(config)) if w
+    ]
     return ConfigCheck(errors, warnings + plan, plan)
 
 
@@ -146,6 +160,45 @@ def support_warning(config: Config) -> str | None:
         f"(>= {ORIENTATION_SEPARATION_DEG:g} deg apart) and the fitted shots of capture.orientations_deg give {have}: "
         "its fit would not be well supported (the profile and the QA report would say so); add turntable angles, or "
         "name a model with fewer terms (or auto)"
+    )
+
+
+def field_warning(config: Config) -> str | None:
+    """A warning when ``pipeline.field`` is ``auto`` and the plan's fitted shots give fewer distinct string
+    directions (``station.harp.expected_angle`` of each fitted turntable angle) than a residual field needs
+    (:data:`pipeline.orientations.REQUIRED_ORIENTATIONS_POLY`): the session would then never add one, and say so only
+    in the profile's reason after the session; None otherwise (``field: none`` says no field is wanted)."""
+    if config.pipeline.field != FIELD_AUTO:
+        return None
+    harp = config.station.harp
+    have = distinct_orientations(harp.expected_angle(a) for a in config.capture.fitted_angles_deg)
+    if have >= REQUIRED_ORIENTATIONS_POLY:
+        return None
+    return (
+        f"{config.path}: pipeline.field: auto adds a residual field only with >= {REQUIRED_ORIENTATIONS_POLY} distinct "
+        f"string orientations (>= {ORIENTATION_SEPARATION_DEG:g} deg apart) and the fitted shots of "
+        f"capture.orientations_deg give {have}: the session would fit no field; add turntable angles, or set "
+        "pipeline.field: none"
+    )
+
+
+def password_warning(config: Config) -> str | None:
+    """A warning when ``store.url`` holds a password: a session keeps a verbatim copy of its configuration
+    (``config.yaml`` in its directory, read by anyone who can read the session), so the password would be
+    copied into every session directory; psycopg reads it from ``~/.pgpass`` or ``$PGPASSWORD`` when
+    the URL has none. The warning names the store without the password. None otherwise."""
+    if config.store_url is None:
+        return None
+    try:
+        loc = config.store
+    except StoreError:  # load_config refuses a URL that is not one
+        return None
+    if not loc.has_password:
+        return None
+    return (
+        f"{config.path}: store.url: {without_password(config.store_url)} holds a password, and every session directory keeps a copy of this "
+        "configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass (or $PGPASSWORD), "
+        "which the store's driver reads when the URL has none"
     )
 
 

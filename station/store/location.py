@@ -55,6 +55,11 @@ class StoreLocation:
         parts = urlsplit(self.url)
         return urlunsplit(("postgresql+psycopg", *parts[1:]))
 
+    @property
+    def has_password(self) -> bool:
+        """Whether the URL carries a password (``postgresql://user:password@host/db``)."""
+        return self.url is not None and urlsplit(self.url).password is not None
+
     def __str__(self) -> str:
         """How messages name the store: the file path, or the URL without its password."""
         if self.backend == SQLITE:
@@ -75,7 +80,7 @@ def parse_store(text: str | os.PathLike[str], base: Path | None = None) -> Store
     if not s:
         raise StoreError("empty store name: give a file path or a postgresql:// URL")
     scheme = s.split("://", 1)[0].lower() if "://" in s else ""
-    shown = _without_password(s)  # how the messages name it
+    shown = without_password(s)  # how the messages name it
     if scheme in _PG_SCHEMES:
         parts = urlsplit(s)
         if not parts.hostname and "host=" not in parts.query:
@@ -105,7 +110,7 @@ def parse_store(text: str | os.PathLike[str], base: Path | None = None) -> Store
     return StoreLocation(SQLITE, path=Path(os.path.normpath(path)))
 
 
-def _without_password(url: str) -> str:
+def without_password(url: str) -> str:
     """``url`` with its password, if it has one, written ``***`` (``postgresql://harp:***@host/db``): a
     message names a store the user gave without printing the password in it."""
     if "://" not in url:

@@ -2,6 +2,8 @@
 
 import json
 import shutil
+import sys
+import textwrap
 
 import pytest
 
@@ -12,6 +14,7 @@ from station.files import write_model_file
 from station.profile import Holdout, Merit, Profile, Provenance
 from station.qa.verdicts import session_profiles
 from station.store import ProfileStore
+from tests.station.processes import run_process
 from tests.station.qa_session import H, W, build_session
 
 
@@ -221,3 +224,49 @@ def test_qa_run_again_after_a_commit_that_may_not_be_written_records_each_row_on
     assert qa(capsys, session, "--store", store, "--max-distortion", "0.01")[0] == 1
     rows = command_rows()
     assert len(rows) == 9 and rows[3:6] == rows[:3] and [v for _f, v in rows[6:]] == ["FAIL"] * 3
+
+
+KILLED_AFTER_COMMIT = textwrap.dedent(
+    """
+    import os, signal, sys
+    from station.cli import main
+    from station.store import ProfileStore
+
+    after = int(sys.argv[1])  # killed (SIGKILL: no handler, no finally) once this many rows are committed
+    put = ProfileStore.put_qa_result
+    done = []
+
+    def put_qa_result(self, **kw):
+        got = put(self, **kw)  # its transaction committed
+        done.append(1)
+        if len(done) == after:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return got
+
+    ProfileStore.put_qa_result = put_qa_result
+    sys.exit(main(sys.argv[2:]))
+    """
+)
+
+
+@pytest.mark.parametrize("after", [1, 3])
+def test_qa_killed_right_after_a_commit_then_run_again_records_each_row_once(after, session, tmp_path, capsys):
+    """``harp qa`` killed by SIGKILL (or a power cut) right after the commit of its first row, or of its last one
+    (before it could say so): nothing of it ran after the commit. Run again with the same results, each focus
+    setting's row is in the QA history once; a later run adds rows of its own."""
+    store = str(tmp_path / "store.sqlite")
+    code = qa(capsys, session, "--store", store, "--no-record")[0]  # the verdict, nothing recorded
+    done = run_process(
+        [sys.executable, "-c", KILLED_AFTER_COMMIT, str(after), "qa", str(session), "--store", store], timeout=240
+    )
+    assert done.returncode == -9, done.stderr
+
+    def command_rows():
+        with ProfileStore(store, create=False) as st:
+            return [(r["focus"], r["verdict"]) for r in st.qa_results() if r["origin"] == "command"]
+
+    assert command_rows() == [(0.0, "PASS"), (0.5, "PASS"), (1.0, "PASS")][:after]  # what the commits wrote
+    assert qa(capsys, session, "--store", store)[0] == code  # run again
+    assert command_rows() == [(0.0, "PASS"), (0.5, "PASS"), (1.0, "PASS")]  # each focus once
+    assert qa(capsys, session, "--store", store)[0] == code  # a later run: rows of its own
+    assert len(command_rows()) == 6

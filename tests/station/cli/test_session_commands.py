@@ -105,6 +105,59 @@ def test_config_check_warns_of_a_named_model_the_plan_cannot_support(tmp_path, c
         assert code == 0 and json.loads(out)["warnings"] == [], out
 
 
+def test_config_check_warns_when_field_auto_cannot_add_a_field_with_the_plan(tmp_path, capsys):
+    """pipeline.field: auto (the default) with three turntable angles (0, 60, 120: three string directions): a
+    residual field needs four, so the session would never add one and said so only in the profile's reason. One
+    warning naming pipeline.field, repeated by ``harp session plan``; none with four directions, or field none."""
+    d = yaml.safe_load(DEMO.read_text())
+    pipeline = {**d["pipeline"], "field": "auto"}
+    capture = {**d["capture"], "orientations_deg": [0, 60, 120]}
+    p = demo_copy(tmp_path, pipeline=pipeline, capture=capture)
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True, doc
+    assert doc["warnings"] == [
+        f"{p}: pipeline.field: auto adds a residual field only with >= 4 distinct string orientations (>= 10 deg "
+        "apart) and the fitted shots of capture.orientations_deg give 3: the session would fit no field; add "
+        "turntable angles, or set pipeline.field: none"
+    ]
+    code, out, err = run(capsys, "session", "plan", p)
+    assert code == 0 and doc["warnings"][0] in err and not (tmp_path / "sessions").exists()
+    for changed in (
+        {"capture": {**capture, "orientations_deg": [0, 45, 90, 135]}},
+        {"capture": {**capture, "orientations_deg": [0, 5, 60, 120]}},  # 0 and 5 are one direction: still 3
+        {"pipeline": {**pipeline, "field": "none"}},
+    ):
+        code, out, err = run(
+            capsys, "config", "check", demo_copy(tmp_path, **{"pipeline": pipeline, "capture": capture, **changed}),
+            "--json",
+        )  # fmt: skip
+        assert code == 0, out
+        expected = 1 if changed.get("capture", {}).get("orientations_deg") == [0, 5, 60, 120] else 0
+        assert len(json.loads(out)["warnings"]) == expected, out
+
+
+def test_config_check_warns_of_a_store_url_password_the_session_copies_would_keep(tmp_path, capsys):
+    """store.url with a password: every session directory keeps a verbatim copy of the configuration, so the
+    password would be copied into each; one warning naming store.url, the store named without the password (the
+    password printed nowhere), repeated by ``harp session plan``. None without a password (~/.pgpass)."""
+    p = demo_copy(tmp_path, store={"url": "postgresql://harp:s3cret-pw@db.example:5432/harp"})
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True, doc
+    assert doc["warnings"] == [
+        f"{p}: store.url: postgresql://harp:***@db.example:5432/harp holds a password, and every session directory "
+        "keeps a copy of this configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass "
+        "(or $PGPASSWORD), which the store's driver reads when the URL has none"
+    ]
+    assert "s3cret" not in out + err
+    code, out, err = run(capsys, "session", "plan", p)
+    assert code == 0 and doc["warnings"][0] in err and "s3cret" not in out + err
+    for url in ("postgresql://harp@db.example:5432/harp", f"sqlite:///{tmp_path / 'store.sqlite'}"):
+        code, out, err = run(capsys, "config", "check", demo_copy(tmp_path, store={"url": url}), "--json")
+        assert code == 0 and json.loads(out)["warnings"] == [], out
+
+
 def test_config_check_warns_of_a_missing_port_that_session_run_refuses_also_with_a_simulation(tmp_path, capsys):
     # a simulated station whose turntable is a real port (simulation section kept, port no longer "emulator"):
     # harp config check said OK without a warning, harp session run refused it
