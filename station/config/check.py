@@ -56,8 +56,8 @@ class ConfigCheck:
     """What :func:`check_config` found: ``errors`` (the session cannot run) and ``warnings``; ``plan_warnings``
     those of the warnings about what the session would do (the plan: strings along the pixel grid, a model or a
     field the shots cannot support; a store password its copy of the configuration would keep), which ``harp
-    session run`` repeats before it captures; the others (a port or a directory missing here) the run refuses with its own
-    one-line error."""
+    session run`` repeats before it captures; the others (a port or a directory missing here) the run refuses with
+    its own one-line error."""
 
     errors: list[ConfigError] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -105,9 +105,8 @@ def check_config(config: Config) -> ConfigCheck:
         reason = _not_creatable(Path(directory))
         if reason:
             warnings.append(f"{config.path}: {where}: {directory}: {reason}")
-    plan = [
-        w for w in (grid_warning(config), support_warning(config), field_warning(config), password_warning(config)) if w
-    ]
+    checks = (grid_warning, support_warning, field_warning, password_warning)
+    plan = [w for w in (check(config) for check in checks) if w]
     return ConfigCheck(errors, warnings + plan, plan)
 
 
@@ -196,8 +195,8 @@ def password_warning(config: Config) -> str | None:
     if not loc.has_password:
         return None
     return (
-        f"{config.path}: store.url: {without_password(config.store_url)} holds a password, and every session directory keeps a copy of this "
-        "configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass (or $PGPASSWORD), "
+        f"{config.path}: store.url: {without_password(config.store_url)} holds a password, and every session "
+        "directory keeps a copy of this configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass (or $PGPASSWORD), "
         "which the store's driver reads when the URL has none"
     )
 
