@@ -3,6 +3,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.grouping import pytest_collection_modifyitems  # noqa: F401  (a hook: pytest finds it by name)
+
 REPO = Path(__file__).resolve().parents[1]
 REAL_HARP = Path(os.environ.get("HARP_REAL_DATA", REPO.parent / "shared" / "data" / "real-harp"))
 
@@ -117,18 +119,3 @@ def pytest_unconfigure(config):
     data_home = getattr(config, "_harp_data_home", None)
     if data_home:
         shutil.rmtree(data_home, ignore_errors=True)
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config, items):
-    """Under ``--dist loadgroup`` (pyproject's addopts), a test that uses a module-scoped fixture runs on the same
-    xdist worker as the module's other such tests, so that the fixture (a rendered or simulated session, an export
-    of every format, a server) is built once per run rather than once per worker; every other test is distributed
-    one by one as ``--dist load`` does. Which worker runs a test changes nothing it asserts."""
-    for item in items:
-        info = getattr(item, "_fixtureinfo", None)
-        if info is None or item.get_closest_marker("xdist_group") is not None:
-            continue
-        scopes = {d.scope for name in info.names_closure for d in info.name2fixturedefs.get(name, ())}
-        if scopes & {"module", "package", "class"}:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
