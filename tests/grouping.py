@@ -2,7 +2,8 @@
 
 Imported by ``tests/conftest.py`` (its hook) and loaded by ``tests/test_support_grouping.py`` as a plugin, which
 checks that the installed pytest and pytest-xdist really honour it (pytest 9.2 with pytest-xdist 3.8 silently do
-not: pytest-dev/pytest-xdist#1386; every worker then built every module fixture: the whole run took 782 s against 711 s with the groups).
+not: pytest-dev/pytest-xdist#1386; every worker then built every module fixture: the whole run took 782 s
+against 711 s with the groups).
 """
 
 from __future__ import annotations
