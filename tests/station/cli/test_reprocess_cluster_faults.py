@@ -27,6 +27,7 @@ from pathlib import Path
 
 import pytest
 
+from station import __version__
 from tests.station.archive import REPO
 
 pytestmark = pytest.mark.filterwarnings("ignore")  # the test's own Dask client on a cluster killed under it
@@ -314,21 +315,31 @@ def test_a_worker_without_harp_station_is_one_line_before_any_job(factory_archiv
     assert not store.exists()  # refused before the store was opened: no empty store left behind
 
 
+def _worker_running_a_copy(tmp_path, clusters, change):
+    """A cluster of one worker that runs a copy of the packages with ``change(copy_root)`` applied (another
+    checkout), checked to be the code it imports."""
+    other = tmp_path / "other-checkout"
+    for package in ("pipeline", "station", "drivers"):
+        shutil.copytree(REPO / package, other / package, ignore=shutil.ignore_patterns("__pycache__"))
+    change(other)
+    cluster = clusters()
+    cluster.add_workers(1, code=other)
+    assert cluster.client().run(eval, "__import__('station').__file__").popitem()[1] == str(
+        other / "station" / "__init__.py"
+    )  # the worker does run the copy
+    return cluster
+
+
 def test_a_worker_running_other_code_under_the_same_version_is_one_line_before_any_job(
     factory_archive, tmp_path, clusters
 ):
     # was: undetected (the worker check compared version numbers only): the profiles stored would have been
     # another checkout's, under this one's version
-    other = tmp_path / "other-checkout"
-    for package in ("pipeline", "station", "drivers"):
-        shutil.copytree(REPO / package, other / package, ignore=shutil.ignore_patterns("__pycache__"))
-    with open(other / "pipeline" / "fit.py", "a") as fh:
-        fh.write("\nCHANGED_SINCE = True  # a checkout changed after the release\n")
-    cluster = clusters()
-    cluster.add_workers(1, code=other)
-    assert cluster.client().run(eval, "__import__('pipeline.fit', fromlist=['x']).__file__").popitem()[1] == str(
-        other / "pipeline" / "fit.py"
-    )  # the worker does run the copy
+    def changed_since(other):
+        with open(other / "pipeline" / "fit.py", "a") as fh:
+            fh.write("\nCHANGED_SINCE = True  # a checkout changed after the release\n")
+
+    cluster = _worker_running_a_copy(tmp_path, clusters, changed_since)
     store = tmp_path / "st.sqlite"
     done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
     assert done.returncode == 2 and done.stdout == "", done
@@ -336,6 +347,30 @@ def test_a_worker_running_other_code_under_the_same_version_is_one_line_before_a
         r"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ runs other code than this command under the same "
         r"version \S+ \(its files of harp station differ: another checkout, or one changed since\); run every "
         r"worker with the same code as this command \(its profiles would not be this code's\)\n",
+        done.stderr,
+    ), done.stderr
+    assert not store.exists()
+
+
+def test_a_worker_running_another_version_is_one_line_before_any_job(factory_archive, tmp_path, clusters):
+    """A worker whose harp station says another version (an older release installed there): refused by its
+    version before any job is sent, no store created."""
+
+    def older_release(other):
+        init = other / "station" / "__init__.py"
+        text = init.read_text()
+        assert '        v = version("harp-station")\n' in text
+        init.write_text(text.replace('        v = version("harp-station")\n', '        v = "0.0.9"\n'))
+
+    cluster = _worker_running_a_copy(tmp_path, clusters, older_release)
+    assert cluster.client().run(eval, "__import__('station').__version__").popitem()[1] == "0.0.9"
+    store = tmp_path / "st.sqlite"
+    done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
+    assert done.returncode == 2 and done.stdout == "", done
+    assert re.fullmatch(
+        rf"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ runs harp station 0\.0\.9, this command "
+        rf"{re.escape(__version__)}; run the same version on every worker \(its profiles would be another "
+        r"version's\)\n",
         done.stderr,
     ), done.stderr
     assert not store.exists()
