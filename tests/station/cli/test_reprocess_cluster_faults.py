@@ -330,6 +330,16 @@ def _worker_running_a_copy(tmp_path, clusters, change):
     return cluster
 
 
+def _refused_before_any_job(factory_archive, tmp_path, cluster, pattern: str) -> None:
+    """``harp reprocess`` on ``cluster``: exit 2, nothing on stdout, stderr one line matching ``pattern``, no
+    store created."""
+    store = tmp_path / "st.sqlite"
+    done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
+    assert done.returncode == 2 and done.stdout == "", done
+    assert re.fullmatch(pattern, done.stderr), done.stderr
+    assert not store.exists()
+
+
 def test_a_worker_running_other_code_under_the_same_version_is_one_line_before_any_job(
     factory_archive, tmp_path, clusters
 ):
@@ -339,17 +349,14 @@ def test_a_worker_running_other_code_under_the_same_version_is_one_line_before_a
         with open(other / "pipeline" / "fit.py", "a") as fh:
             fh.write("\nCHANGED_SINCE = True  # a checkout changed after the release\n")
 
-    cluster = _worker_running_a_copy(tmp_path, clusters, changed_since)
-    store = tmp_path / "st.sqlite"
-    done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
-    assert done.returncode == 2 and done.stdout == "", done
-    assert re.fullmatch(
+    _refused_before_any_job(
+        factory_archive,
+        tmp_path,
+        _worker_running_a_copy(tmp_path, clusters, changed_since),
         r"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ runs other code than this command under the same "
         r"version \S+ \(its files of harp station differ: another checkout, or one changed since\); run every "
         r"worker with the same code as this command \(its profiles would not be this code's\)\n",
-        done.stderr,
-    ), done.stderr
-    assert not store.exists()
+    )
 
 
 def test_a_worker_running_another_version_is_one_line_before_any_job(factory_archive, tmp_path, clusters):
@@ -364,16 +371,14 @@ def test_a_worker_running_another_version_is_one_line_before_any_job(factory_arc
 
     cluster = _worker_running_a_copy(tmp_path, clusters, older_release)
     assert cluster.client().run(eval, "__import__('station').__version__").popitem()[1] == "0.0.9"
-    store = tmp_path / "st.sqlite"
-    done = _run(_reprocess([factory_archive.session], cluster.address, store), timeout=120)
-    assert done.returncode == 2 and done.stdout == "", done
-    assert re.fullmatch(
+    _refused_before_any_job(
+        factory_archive,
+        tmp_path,
+        cluster,
         rf"harp reprocess: Dask worker tcp://127\.0\.0\.1:\d+ runs harp station 0\.0\.9, this command "
         rf"{re.escape(__version__)}; run the same version on every worker \(its profiles would be another "
         r"version's\)\n",
-        done.stderr,
-    ), done.stderr
-    assert not store.exists()
+    )
 
 
 def test_a_session_directory_gone_before_its_job_ran_is_one_line_and_the_others_are_stored(

@@ -73,89 +73,83 @@ def test_config_check_warns_of_a_plan_that_puts_the_strings_along_the_pixel_grid
     assert code == 0 and err.count("pixel rows or columns") == 1 and w in err and not (tmp_path / "sessions").exists()
 
 
+def warned_before_the_session(capsys, tmp_path, warning, changes, quiet=()) -> str:
+    """The demo configuration with ``changes``: ``harp config check`` usable with exactly ``warning`` (``{p}``: the
+    file), ``harp session plan`` saying it and creating nothing; with each of ``quiet`` applied over ``changes``, no
+    warning. Returns what both commands printed."""
+    p = demo_copy(tmp_path, **changes)
+    code, out, err = run(capsys, "config", "check", p, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["ok"] is True, doc
+    assert doc["warnings"] == [warning.format(p=p)]
+    code, plan_out, plan_err = run(capsys, "session", "plan", p)
+    assert code == 0 and doc["warnings"][0] in plan_err and not (tmp_path / "sessions").exists()
+    for q in quiet:
+        code, q_out, _ = run(capsys, "config", "check", demo_copy(tmp_path, **{**changes, **q}), "--json")
+        assert code == 0 and json.loads(q_out)["warnings"] == [], q_out
+    return out + err + plan_out + plan_err
+
+
 def test_config_check_warns_of_a_named_model_the_plan_cannot_support(tmp_path, capsys):
     """poly5 named with three turntable angles (0, 60, 120: three string directions): a free polynomial needs four,
     so the session's profile would be "not well supported"; one warning naming pipeline.model, the configuration
     still usable, and ``harp session plan`` says it before anything runs. With four angles, or model auto, none."""
     d = yaml.safe_load(DEMO.read_text())
-    d["pipeline"].update(model="poly5", degree=5)
+    pipeline = {**d["pipeline"], "model": "poly5", "degree": 5}
     capture = {**d["capture"], "orientations_deg": [0, 60, 120]}
-    p = demo_copy(tmp_path, pipeline=d["pipeline"], capture=capture)
-    code, out, err = run(capsys, "config", "check", p, "--json")
-    doc = json.loads(out)
-    assert code == 0 and doc["ok"] is True, doc
-    assert doc["warnings"] == [
-        f"{p}: pipeline.model: poly5 needs >= 4 distinct string orientations (>= 10 deg apart) and the fitted shots "
+    warned_before_the_session(
+        capsys,
+        tmp_path,
+        "{p}: pipeline.model: poly5 needs >= 4 distinct string orientations (>= 10 deg apart) and the fitted shots "
         "of capture.orientations_deg give 3: its fit would not be well supported (the profile and the QA report "
-        "would say so); add turntable angles, or name a model with fewer terms (or auto)"
-    ]
-    code, out, err = run(capsys, "session", "plan", p)
-    assert code == 0 and doc["warnings"][0] in err and not (tmp_path / "sessions").exists()
-    for changed in (
-        {"capture": {**capture, "orientations_deg": [0, 45, 90, 135]}},
-        {"pipeline": {**d["pipeline"], "model": "auto"}},
-    ):
-        code, out, err = run(
-            capsys,
-            "config",
-            "check",
-            demo_copy(tmp_path, **{"pipeline": d["pipeline"], "capture": capture, **changed}),
-            "--json",
-        )
-        assert code == 0 and json.loads(out)["warnings"] == [], out
+        "would say so); add turntable angles, or name a model with fewer terms (or auto)",
+        {"pipeline": pipeline, "capture": capture},
+        quiet=(
+            {"capture": {**capture, "orientations_deg": [0, 45, 90, 135]}},
+            {"pipeline": {**pipeline, "model": "auto"}},
+        ),
+    )
 
 
 def test_config_check_warns_when_field_auto_cannot_add_a_field_with_the_plan(tmp_path, capsys):
     """pipeline.field: auto (the default) with three turntable angles (0, 60, 120: three string directions): a
     residual field needs four, so the session would never add one and said so only in the profile's reason. One
-    warning naming pipeline.field, repeated by ``harp session plan``; none with four directions, or field none."""
+    warning naming pipeline.field, repeated by ``harp session plan``; none with four directions, or field none;
+    still one with 0 and 5 deg among four angles (one direction)."""
     d = yaml.safe_load(DEMO.read_text())
     pipeline = {**d["pipeline"], "field": "auto"}
     capture = {**d["capture"], "orientations_deg": [0, 60, 120]}
-    p = demo_copy(tmp_path, pipeline=pipeline, capture=capture)
-    code, out, err = run(capsys, "config", "check", p, "--json")
-    doc = json.loads(out)
-    assert code == 0 and doc["ok"] is True, doc
-    assert doc["warnings"] == [
-        f"{p}: pipeline.field: auto adds a residual field only with >= 4 distinct string orientations (>= 10 deg "
+    warning = (
+        "{p}: pipeline.field: auto adds a residual field only with >= 4 distinct string orientations (>= 10 deg "
         "apart) and the fitted shots of capture.orientations_deg give 3: the session would fit no field; add "
         "turntable angles, or set pipeline.field: none"
-    ]
-    code, out, err = run(capsys, "session", "plan", p)
-    assert code == 0 and doc["warnings"][0] in err and not (tmp_path / "sessions").exists()
-    for changed in (
+    )
+    quiet = (
         {"capture": {**capture, "orientations_deg": [0, 45, 90, 135]}},
-        {"capture": {**capture, "orientations_deg": [0, 5, 60, 120]}},  # 0 and 5 are one direction: still 3
         {"pipeline": {**pipeline, "field": "none"}},
-    ):
-        code, out, err = run(
-            capsys, "config", "check", demo_copy(tmp_path, **{"pipeline": pipeline, "capture": capture, **changed}),
-            "--json",
-        )  # fmt: skip
-        assert code == 0, out
-        expected = 1 if changed.get("capture", {}).get("orientations_deg") == [0, 5, 60, 120] else 0
-        assert len(json.loads(out)["warnings"]) == expected, out
+    )
+    warned_before_the_session(capsys, tmp_path, warning, {"pipeline": pipeline, "capture": capture}, quiet)
+    close = {**capture, "orientations_deg": [0, 5, 60, 120]}
+    warned_before_the_session(capsys, tmp_path, warning, {"pipeline": pipeline, "capture": close})
 
 
 def test_config_check_warns_of_a_store_url_password_the_session_copies_would_keep(tmp_path, capsys):
     """store.url with a password: every session directory keeps a verbatim copy of the configuration, so the
     password would be copied into each; one warning naming store.url, the store named without the password (the
     password printed nowhere), repeated by ``harp session plan``. None without a password (~/.pgpass)."""
-    p = demo_copy(tmp_path, store={"url": "postgresql://harp:s3cret-pw@db.example:5432/harp"})
-    code, out, err = run(capsys, "config", "check", p, "--json")
-    doc = json.loads(out)
-    assert code == 0 and doc["ok"] is True, doc
-    assert doc["warnings"] == [
-        f"{p}: store.url: postgresql://harp:***@db.example:5432/harp holds a password, and every session directory "
+    said = warned_before_the_session(
+        capsys,
+        tmp_path,
+        "{p}: store.url: postgresql://harp:***@db.example:5432/harp holds a password, and every session directory "
         "keeps a copy of this configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass "
-        "(or $PGPASSWORD), which the store's driver reads when the URL has none"
-    ]
-    assert "s3cret" not in out + err
-    code, out, err = run(capsys, "session", "plan", p)
-    assert code == 0 and doc["warnings"][0] in err and "s3cret" not in out + err
-    for url in ("postgresql://harp@db.example:5432/harp", f"sqlite:///{tmp_path / 'store.sqlite'}"):
-        code, out, err = run(capsys, "config", "check", demo_copy(tmp_path, store={"url": url}), "--json")
-        assert code == 0 and json.loads(out)["warnings"] == [], out
+        "(or $PGPASSWORD), which the store's driver reads when the URL has none",
+        {"store": {"url": "postgresql://harp:s3cret-pw@db.example:5432/harp"}},
+        quiet=(
+            {"store": {"url": "postgresql://harp@db.example:5432/harp"}},
+            {"store": {"url": f"sqlite:///{tmp_path / 'store.sqlite'}"}},
+        ),
+    )
+    assert "s3cret" not in said
 
 
 def test_config_check_warns_of_a_missing_port_that_session_run_refuses_also_with_a_simulation(tmp_path, capsys):
