@@ -118,7 +118,7 @@ def _cluster_rows(sessions: list[Path], tmp: Path, args: argparse.Namespace, ref
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ": environ}),
         LocalCluster(
-            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=":0", host="127.0.0.1"
         ) as cluster,
     ):
         start = time.perf_counter() - t

@@ -61,7 +61,7 @@ def runs(factory_archive, tmp_path_factory, postgres):
 
     pg = postgres.create_database(f"reprocess_{uuid.uuid4().hex[:12]}")
     with LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", host="127.0.0.1"
     ) as cluster:
         dask = _main(["reprocess", good, "--scheduler", cluster.scheduler_address, "--store", pg, "--json"])
     return {
