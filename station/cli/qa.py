@@ -18,8 +18,8 @@ plots and its ``index.html``; ``--overlays all|failed|none`` says which focus se
 per-orientation overlays in it (default: a session's ``report.overlays``, else all). Each result is recorded in the store's QA history (unless
 ``--no-record``); it does not change the verdict a profile was calibrated with. A session's result
 the store cannot take (a server that is down) is warned of, with what to do; its verdict stands. Run
-again with the same results after that (a commit that may or may not have been written), it is
-recorded once: the rows keep the failed run's key.
+again with the same results after a run whose recording failed, was interrupted or was killed (a
+commit that may or may not have been written), it is recorded once: the rows keep that run's key.
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 
 What is judged, with which thresholds and reference, and the report's evidence:
