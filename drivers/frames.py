@@ -34,7 +34,8 @@ A GenICam frame is one stream over the whole image, as the camera sends it: with
 start inside a group (GigE Vision: "the first pixel of the second line will not start on a 3-byte
 boundary"); unless its rows are padded (GenICam ``PaddingX``, the GigE Vision leader's ``padding_x``: bytes
 after each line), when each row is a stream of its own, the stride apart (:func:`genicam_image` takes the
-stride from the leader's ``padding_x``, else from the buffer's size). A V4L2 frame is rows of whole groups, ``bytes_per_line`` apart.
+stride from the leader's ``padding_x``, else from the buffer's size). A V4L2 frame is rows of whole groups,
+``bytes_per_line`` apart.
 
 References
 ----------

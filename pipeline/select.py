@@ -52,7 +52,13 @@ from pipeline.cross_validation import (
     paired_difference,
 )
 from pipeline.fitspec import FitSpec
-from pipeline.orientations import distinct_orientations, required_orientations, shot_orientation, support_problem
+from pipeline.orientations import (
+    distinct_orientations,
+    orientation_shortfall,
+    required_orientations,
+    shot_orientation,
+    support_problem,
+)
 from pipeline.separated_cv import MIN_FOLD_ORIENTATIONS, cross_validate_separated
 
 
@@ -653,9 +659,9 @@ def select_field(
     if carrier.kind != "radial" or carrier.field is not None:
         what = "it has one" if base.field is not None else "a field applies to the radial model only"
         return Selection(base, f"residual field: none added to {base.label} ({what})", "none")
-    need = required_orientations(replace(carrier, field=grids[0]))
-    have = distinct_orientations(shot_orientation(s) for s in lines_per_image)
-    if have < need:
+    short = orientation_shortfall(replace(carrier, field=grids[0]), (shot_orientation(s) for s in lines_per_image))
+    if short is not None:
+        need, have = short
         return Selection(
             base,
             f"residual field: none added to {base.label} (a field needs >= {need} distinct string orientations, "

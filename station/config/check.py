@@ -138,6 +138,13 @@ def grid_warning(config: Config) -> str | None:
     )
 
 
+def _fitted_directions(config: Config) -> list[float]:
+    """The string directions (degrees) the plan's fitted shots are expected to give: ``station.harp.expected_angle``
+    of each fitted turntable angle."""
+    harp = config.station.harp
+    return [harp.expected_angle(a) for a in config.capture.fitted_angles_deg]
+
+
 def support_warning(config: Config) -> str | None:
     """A warning when the configuration names a model (``pipeline.model``, not ``auto``) that the plan's fitted shots
     cannot support well: fewer distinct string directions (``station.harp.expected_angle`` of each fitted turntable
@@ -149,8 +156,7 @@ def support_warning(config: Config) -> str | None:
         return None
     if spec is None:
         return None
-    harp = config.station.harp
-    short = orientation_shortfall(spec, (harp.expected_angle(a) for a in config.capture.fitted_angles_deg))
+    short = orientation_shortfall(spec, _fitted_directions(config))
     if short is None:
         return None
     need, have = short
@@ -169,8 +175,7 @@ def field_warning(config: Config) -> str | None:
     in the profile's reason after the session; None otherwise (``field: none`` says no field is wanted)."""
     if config.pipeline.field != FIELD_AUTO:
         return None
-    harp = config.station.harp
-    have = distinct_orientations(harp.expected_angle(a) for a in config.capture.fitted_angles_deg)
+    have = distinct_orientations(_fitted_directions(config))
     if have >= REQUIRED_ORIENTATIONS_POLY:
         return None
     return (
@@ -196,8 +201,8 @@ def password_warning(config: Config) -> str | None:
         return None
     return (
         f"{config.path}: store.url: {without_password(config.store_url)} holds a password, and every session "
-        "directory keeps a copy of this configuration (config.yaml) with it: take it out of the URL and put it in ~/.pgpass (or $PGPASSWORD), "
-        "which the store's driver reads when the URL has none"
+        "directory keeps a copy of this configuration (config.yaml) with it: take it out of the URL and put it in "
+        "~/.pgpass (or $PGPASSWORD), which the store's driver reads when the URL has none"
     )
 
 
