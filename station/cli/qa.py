@@ -45,7 +45,7 @@ from station.cli.store_options import open_store, store_location
 from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
 from station.exit_codes import verdict_exit_code
-from station.files import atomic_write_text
+from station.files import atomic_write_text, describe_os_error
 from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
 from station.session import layout
 from station.session.directory import SessionDir
@@ -138,7 +138,7 @@ def run(args) -> int:
             config = cli_config
             target = Path(args.target)
             if (target / layout.SESSION_FILE).is_file():
-                session = SessionDir.open(target)
+                session = SessionDir.open(target, read_only=True)  # judged, never written: an archive may be read-only
                 config = config or session.config
             elif target.exists() and target.is_dir():
                 raise QAInputError(f"{target}: not a session directory (no {layout.SESSION_FILE})")
@@ -180,7 +180,9 @@ def run(args) -> int:
                     ) from None
         except HarpError:  # ConfigError, SessionError, StoreError, QAInputError: one line (station.cli.main)
             raise
-        except (ValueError, OSError) as exc:
+        except OSError as exc:
+            raise QAInputError(describe_os_error(exc)) from None
+        except ValueError as exc:
             raise QAInputError(str(exc)) from None
     finally:
         if session is not None:

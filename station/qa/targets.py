@@ -114,7 +114,7 @@ def attach_session_measurements(target: Target, opened: dict[str, Any]) -> None:
         return
     if where not in opened:
         try:
-            opened[where] = SessionDir.open(Path(where))
+            opened[where] = SessionDir.open(Path(where), read_only=True)
         except (SessionError, ConfigError, OSError, ValueError) as exc:
             opened[where] = None
             target.notes.append(f"its session {where} cannot be read ({exc}): judged without its measurements")

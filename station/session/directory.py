@@ -158,18 +158,38 @@ class SessionDir(ManifestReads):
     """One session's directory. Create with :meth:`create`, reopen with :meth:`open`.
 
     Holds an exclusive ``flock`` on the directory while open, so two processes
-    cannot resume the same session at once.
+    cannot resume the same session at once. Opened ``read_only`` (:meth:`open`, for ``harp qa``) it
+    holds a shared one where the lock file can be read (several readers at once, none while a
+    session runs in it) and writes nothing: no torn line cut, no temporary removed, no space held
+    back, :meth:`append` refused; a session on a read-only file system, or one another user's
+    station wrote, can be judged.
     """
 
-    def __init__(self, path: Path, records: list[dict], good_len: int):
+    def __init__(self, path: Path, records: list[dict], good_len: int, *, read_only: bool = False):
         self.path = Path(path)
         self.meta = read_session_file(self.path)
-        self._lock_fh = open(self.path / layout.LOCK, "a+")
-        try:
-            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self._lock_fh.close()
-            raise SessionError(f"{self.path}: session is in use by another process") from None
+        self.read_only = read_only
+        self._lock_fh = None
+        self._manifest = None
+        if read_only:
+            with contextlib.suppress(OSError):  # no lock file, or one this user cannot read: nothing to share
+                self._lock_fh = open(self.path / layout.LOCK, "rb")
+        else:
+            self._lock_fh = open(self.path / layout.LOCK, "a+")
+        if self._lock_fh is not None:
+            try:
+                fcntl.flock(self._lock_fh, (fcntl.LOCK_SH if read_only else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+            except BlockingIOError:
+                self._lock_fh.close()
+                raise SessionError(
+                    f"{self.path}: session is in use by another process (a session running in it, or another harp "
+                    "command using it); wait until it ends, then run again"
+                ) from None
+        self.lines = records
+        self.typed = parse(records)
+        self.config: Config | None = None
+        if read_only:
+            return
         manifest = self.path / MANIFEST
         if manifest.exists() and manifest.stat().st_size != good_len:
             with open(manifest, "r+b") as fh:  # cut a torn last line
@@ -178,14 +198,11 @@ class SessionDir(ManifestReads):
                 os.fsync(fh.fileno())
         self._manifest = open(manifest, "ab", buffering=0)  # unbuffered: a failed append is cut back whole
         self._manifest_size = good_len
-        self.lines = records
-        self.typed = parse(records)
         # temporary files of writes a kill interrupted (never renamed into place)
         for sub in layout.ATOMIC_DIRS:
             if (self.path / sub).is_dir():
                 for tmp in (self.path / sub).glob(".*.tmp*"):
                     tmp.unlink(missing_ok=True)
-        self.config: Config | None = None
         try:
             self.hold_reserve()
         except SessionError:
@@ -266,10 +283,11 @@ class SessionDir(ManifestReads):
         return s
 
     @classmethod
-    def open(cls, path: Path) -> SessionDir:
-        """Reopen an existing session (for resume); reloads and validates its config. A manifest
-        missing or empty while the session holds files it recorded is a :class:`SessionError`
-        (:func:`lost_manifest`): nothing is opened, created or captured over."""
+    def open(cls, path: Path, *, read_only: bool = False) -> SessionDir:
+        """Reopen an existing session (for resume; ``read_only``: to judge it, nothing written, see the
+        class); reloads and validates its config. A manifest missing or empty while the session holds
+        files it recorded is a :class:`SessionError` (:func:`lost_manifest`): nothing is opened,
+        created or captured over."""
         path = Path(path)
         if not (path / SESSION_FILE).is_file():
             raise SessionError(f"{path}: not a session directory (no {SESSION_FILE})")
@@ -277,7 +295,7 @@ class SessionDir(ManifestReads):
         lost = lost_manifest(path, records)
         if lost is not None:
             raise SessionError(lost)
-        s = cls(path, records, good)
+        s = cls(path, records, good, read_only=read_only)
         try:
             s.config = load_config(path / CONFIG_COPY, base_dir=s.meta["base_dir"])
         except ConfigError as exc:
@@ -304,6 +322,8 @@ class SessionDir(ManifestReads):
     # --------------------------------------------------------------- writes
     def append(self, record: Record | Mapping[str, Any]) -> dict:
         """Append one record to the manifest, durably (flush + fsync); returns the line's mapping."""
+        if self._manifest is None:
+            raise SessionError(f"{self.path}: opened read-only; nothing can be recorded in it")
         data = record.to_json() if isinstance(record, Record) else dict(record)
         record = {"t": round(_dt.datetime.now(_dt.UTC).timestamp(), 3), **data}
         line = (json.dumps(record, separators=(",", ":"), default=json_default) + "\n").encode()

@@ -270,3 +270,79 @@ def test_qa_killed_right_after_a_commit_then_run_again_records_each_row_once(aft
     assert command_rows() == [(0.0, "PASS"), (0.5, "PASS"), (1.0, "PASS")]  # each focus once
     assert qa(capsys, session, "--store", store)[0] == code  # a later run: rows of its own
     assert len(command_rows()) == 6
+
+
+def _tree(root):
+    """Every file under ``root`` (hidden ones too) with its bytes, by relative path."""
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_qa_of_a_session_writes_nothing_into_it(session, tmp_path, capsys):
+    """``harp qa DIR`` judges a session: before, it opened it as a resume does, cutting a torn last manifest
+    line, removing temporaries and holding the disk reserve in it."""
+    copy = tmp_path / "s1"
+    shutil.copytree(session, copy)
+    (copy / "manifest.jsonl").open("a").write('{"kind": "fra')  # a torn last line, as a kill leaves it
+    (copy / "frames" / ".f0_o0_a0_i0.png.tmp1").write_bytes(b"partial")  # a write a kill interrupted
+    (copy / ".reserve").unlink()
+    before = _tree(copy)
+    code, out, err = qa_json(capsys, copy, "--no-record")
+    assert code == 0 and out["verdict"] == "PASS", err
+    assert _tree(copy) == before
+
+
+def test_two_harp_qa_of_one_session_at_once_both_judge_it(session, tmp_path, capsys):
+    """Another reader holding the session (a second ``harp qa`` of it) does not refuse this one; a session
+    running in it (its exclusive lock) still does, saying what to do. Before, the second ``harp qa`` was
+    refused with `session is in use by another process`, exit 2."""
+    import fcntl
+
+    from station.session.directory import SessionDir, SessionError
+
+    with open(session / ".lock", "rb") as reader:  # another harp qa, judging it: its shared lock
+        fcntl.flock(reader, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        code, out, err = qa_json(capsys, session, "--no-record")
+        assert code == 0 and out["verdict"] == "PASS", err
+    with SessionDir.open(session, read_only=True):
+        with pytest.raises(SessionError, match="in use by another process"):
+            SessionDir.open(session)  # a resume waits for the readers
+    with open(session / ".lock", "a+") as held:  # a session running in it
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        code, out, err = qa(capsys, session, "--no-record")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        f"harp qa: {session}: session is in use by another process (a session running in it, or another harp "
+        "command using it); wait until it ends, then run again"
+    ], err
+
+
+@pytest.fixture
+def read_only_copy(session, tmp_path):
+    """The session under a read-only bind mount (an archive, a share this user cannot write; root only)."""
+    import os
+    import subprocess
+
+    if os.geteuid() != 0:
+        pytest.skip("a read-only bind mount needs root (CI runs as root)")
+    mnt = tmp_path / "archive"
+    mnt.mkdir()
+    subprocess.run(["mount", "--bind", str(session.parent), str(mnt)], check=True)
+    try:
+        subprocess.run(["mount", "-o", "remount,bind,ro", str(mnt)], check=True)
+        yield mnt / session.name
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def test_qa_of_a_session_on_a_read_only_file_system(session, read_only_copy, capsys):
+    """Before: `harp qa: [Errno 30] Read-only file system: '…/.lock'`, exit 2 — a session in a read-only
+    archive could not be judged again."""
+    with pytest.raises(OSError):
+        (read_only_copy / "probe").write_text("")  # really read-only
+    code, out, err = qa_json(capsys, read_only_copy, "--no-record")
+    assert code == 0, err
+    code_rw, out_rw, err_rw = qa_json(capsys, session, "--no-record")
+    assert code_rw == 0, err_rw
+    assert [(p["focus"], p["verdict"], p["figures"]) for p in out["profiles"]] == [
+        (p["focus"], p["verdict"], p["figures"]) for p in out_rw["profiles"]
+    ]
