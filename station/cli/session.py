@@ -28,7 +28,13 @@ from station import __version__
 from station.cli.commands import COMMANDS
 from station.cli.inputs import port_number
 from station.cli.say import say, warn
-from station.cli.store_options import add_store_options, load_env_config, store_location, waiting_note
+from station.cli.store_options import (
+    CONFIGURED_STORE_HELP,
+    add_store_options,
+    load_env_config,
+    store_location,
+    waiting_note,
+)
 from station.ctrl_c import stopped_text
 from station.errors import HarpError, Interrupted, one_line
 from station.exit_codes import EXIT_ERROR, EXIT_FAIL, EXIT_OK
@@ -80,8 +86,13 @@ def register(subparsers) -> None:
         help="capture focus setting F (its index) again whole at the next resume (repeatable)",
     )  # fmt: skip
     rep.set_defaults(func=_repair)
-    for action in (run, res, rep):
-        add_store_options(action, config=False)  # --store PATH|URL instead of the configuration's store
+    for action, whose in (
+        (run, "the configuration's"),
+        (res, "the session's configuration's"),
+        (rep, "the session's configuration's"),
+    ):
+        # --store PATH|URL instead of the configuration's store
+        add_store_options(action, config=False, store_help=CONFIGURED_STORE_HELP.format(whose=whose))
     for action in (run, res):
         action.add_argument("--quiet", action="store_true", help="no progress bars or summary")
         action.add_argument("--no-report", action="store_true", help="do not write DIR/report at the end")

@@ -40,13 +40,23 @@ STORE_HELP = (
     f"(default: $HARP_STORE, else $HARP_CONFIG's store, else {DEFAULT_STORE})"
 )
 CONFIG_HELP = "station configuration whose store to use (its store.path or store.url)"
+CONFIGURED_STORE_HELP = (
+    "profile store: a SQLite file or postgresql://user@host:port/db instead of {whose} store (default: its "
+    f"store.path or store.url, else {DEFAULT_STORE}; $HARP_STORE is not used)"
+)
+"""``--store`` of a command that has a station configuration (``harp session run CONFIG``, a session's
+own for ``resume`` and ``repair``): :func:`store_location` takes that configuration's store before
+``$HARP_STORE``, and a configuration that names none has the per-user default."""
 
 
-def add_store_options(parser: argparse.ArgumentParser, *, suppress: bool = False, config: bool = True) -> None:
+def add_store_options(
+    parser: argparse.ArgumentParser, *, suppress: bool = False, config: bool = True, store_help: str = STORE_HELP
+) -> None:
     """Add ``--store PATH|URL`` (and ``--config CONFIG``) to a parser. ``suppress=True`` leaves the
-    attributes unset when not given (for an option repeated on a sub-command)."""
+    attributes unset when not given (for an option repeated on a sub-command); ``store_help``: the
+    ``--store`` help (:data:`CONFIGURED_STORE_HELP` for a command that has a configuration)."""
     default = argparse.SUPPRESS if suppress else None
-    parser.add_argument("--store", metavar="PATH|URL", default=default, help=STORE_HELP)
+    parser.add_argument("--store", metavar="PATH|URL", default=default, help=store_help)
     if config:
         parser.add_argument("--config", metavar="CONFIG", type=Path, default=default, help=CONFIG_HELP)
 

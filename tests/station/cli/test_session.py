@@ -898,3 +898,22 @@ def test_a_finished_twin_session_repaired_with_recapture_is_captured_again_by_re
     assert (s / frame.replace("_a0_", "_a1_")).is_file()
     assert main(["session", "resume", str(s)]) == 0
     assert "already finished (QA verdict PASS), nothing to do" in capsys.readouterr().err
+
+
+def test_session_store_is_the_configurations_not_harp_store_as_its_help_says(tmp_path, monkeypatch, capsys):
+    """``harp session run|resume|repair --help`` said the default store was ``$HARP_STORE``; a session stores into
+    its configuration's store (``store.path``; README, the configuration reference) and leaves ``$HARP_STORE`` alone:
+    a station setting ``HARP_STORE`` for its commands looked for the profiles in the wrong store."""
+    env_store = tmp_path / "env.sqlite"
+    monkeypatch.setenv("HARP_STORE", str(env_store))
+    cfg = small_config(tmp_path, focus=(0.0,))
+    assert main(["session", "run", str(cfg), "--name", "s", "--quiet"]) == 0
+    assert not env_store.exists()
+    assert [p.focus for p in profile_fields(tmp_path / "profiles.sqlite").values()] == [0.0]
+    for action in ("run", "resume", "repair"):
+        with pytest.raises(SystemExit):
+            main(["session", action, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        store = text[text.index("--store PATH|URL profile store") :]
+        assert "default: $HARP_STORE" not in store and "$HARP_STORE is not used" in store, store
+        assert "configuration's store (default: its store.path or store.url" in store, store
