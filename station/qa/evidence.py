@@ -51,6 +51,29 @@ def stored_measurement(session, focus_idx: int, orientation_idx: int):
     return m
 
 
+def measurement_problem(session, focus_idx: int, orientations) -> str | None:
+    """Why a kept measurement of one of ``orientations`` (indices) at ``focus_idx`` cannot be read, as one
+    line naming the file (``DIR/measurements/f0_o1_a0.npz: checksum does not match the manifest``), or None
+    when none was recorded as kept that cannot be read (the session kept none, or they all read back)."""
+    from station.session.directory import SessionError  # defers cv2, numpy, yaml
+    from station.session.evidence import measurement_from_arrays  # defers numpy
+
+    for o in orientations:
+        rec = session.last(ShotMeasured, focus_idx=focus_idx, orientation_idx=o)
+        if rec is None or not rec.file or rec.attempt != session.attempt(focus_idx, o):
+            continue
+        path = session.path / rec.file
+        try:
+            measurement_from_arrays(session.read_arrays(rec.file, rec.sha256))
+        except SessionError as exc:
+            return str(exc)
+        except OSError as exc:
+            return f"{path}: {exc.strerror or type(exc).__name__}"
+        except (ValueError, KeyError) as exc:
+            return f"{path}: cannot be read ({' '.join(str(exc).split()) or type(exc).__name__})"
+    return None
+
+
 def stored_uncertainty(session, focus_idx: int, model):
     """The bootstrap uncertainty map the executor kept for a focus setting, or None."""
     from station.session.directory import SessionError  # defers cv2, numpy, yaml

@@ -33,6 +33,7 @@ from pipeline.model_file import read_model_file
 from station.config import ConfigError
 from station.errors import HarpError
 from station.profile import Profile, Verdict
+from station.qa.evidence import measurement_problem
 from station.qa.verdicts import (
     calibrated_thresholds,
     combine,
@@ -87,7 +88,7 @@ def session_targets(session: Any) -> list[Target]:
             measurements=session_measurements(session, f),
         )
         if target.measurements is None:
-            target.notes.append("the session kept no measurements for this focus setting: stored figures judged")
+            target.notes.append(_no_measurements(session, f))
         targets.append(target)
     return targets
 
@@ -129,7 +130,24 @@ def attach_session_measurements(target: Target, opened: dict[str, Any]) -> None:
     target.focus_idx = hits[0]
     target.measurements = session_measurements(session, hits[0])
     if target.measurements is None:
-        target.notes.append(f"its session {where} kept no measurements at focus {target.focus:g}")
+        problem = measurement_problem(session, hits[0], session.config.capture.fitted)
+        target.notes.append(
+            f"its session {where} kept no measurements at focus {target.focus:g}"
+            if problem is None
+            else f"{problem}: the model is judged without its session's measurements; run: harp session repair {where}"
+        )
+
+
+def _no_measurements(session: Any, focus_idx: int) -> str:
+    """The note of a session's focus setting judged without its measurements: which kept file cannot be read
+    and what to do, or that the session kept none."""
+    problem = measurement_problem(session, focus_idx, session.config.capture.fitted)
+    if problem is None:
+        return "the session kept no measurements for this focus setting: stored figures judged"
+    return (
+        f"{problem}: stored figures judged, the holdout d not recomputed; run: harp session repair {session.path} "
+        "(it fits the focus setting again from its frames)"
+    )
 
 
 # ------------------------------------------------------------- thresholds

@@ -346,3 +346,32 @@ def test_qa_of_a_session_on_a_read_only_file_system(session, read_only_copy, cap
     assert [(p["focus"], p["verdict"], p["figures"]) for p in out["profiles"]] == [
         (p["focus"], p["verdict"], p["figures"]) for p in out_rw["profiles"]
     ]
+
+
+def test_a_damaged_kept_measurement_is_named_with_what_to_do(tmp_path, capsys):
+    """A measurement file the session kept, damaged since: ``harp qa DIR`` judges the stored figures and says which
+    file and ``harp session repair``; before, it said `the session kept no measurements for this focus setting`."""
+    from tests.station.cli.test_session import small_config
+
+    cfg = small_config(tmp_path, focus=(0.0,))
+    assert main(["session", "run", str(cfg), "--name", "s", "--quiet", "--no-report"]) == 0
+    capsys.readouterr()
+    sdir = tmp_path / "sessions" / "s"
+    kept = [json.loads(line) for line in (sdir / "manifest.jsonl").read_text().splitlines()]
+    (measured,) = [r["file"] for r in kept if r["kind"] == "measure" and r.get("orientation_idx") == 1]
+    code, out, err = qa_json(capsys, sdir, "--no-record")
+    assert code == 0 and out["profiles"][0]["measurements"] is not None, err  # recomputed while whole
+    data = bytearray((sdir / measured).read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    (sdir / measured).write_bytes(bytes(data))
+    code, out, err = qa_json(capsys, sdir, "--no-record")
+    assert code == 0 and out["profiles"][0]["measurements"] is None, err
+    (note,) = out["profiles"][0]["notes"]
+    assert note.startswith(f"{sdir / measured}: checksum does not match the manifest: stored figures judged"), note
+    assert note.endswith(f"run: harp session repair {sdir} (it fits the focus setting again from its frames)"), note
+    # the lens judged from the store: the session its profile names is at hand, its measurement damaged
+    code, out, err = qa_json(capsys, "DEMO-0001", "--store", tmp_path / "profiles.sqlite", "--no-record")
+    assert code == 0 and out["profiles"][0]["measurements"] is None, err
+    assert any(
+        n.startswith(f"{sdir / measured}: checksum does not match the manifest") for n in out["profiles"][0]["notes"]
+    )
