@@ -462,3 +462,25 @@ def test_a_lensfun_download_under_the_name_of_an_installed_lens_is_refused(sqlit
     monkeypatch.setenv("HARP_LENSFUN_DIRS", str(tmp_path / "none"))
     status, _h, body = _get(srv, f"/profiles/{p.id}/export/lensfun")
     assert status == 200 and b"<lensdatabase" in body
+
+
+def test_a_lens_whose_serial_holds_a_slash_opens_from_its_link(tmp_path):
+    """A serial with a '/' (`SN 12/345`, allowed by the configuration) is linked as %2F; its page and API answered
+    404 `Not Found` (the route matched one path segment), so the dashboard's own link to the lens was dead."""
+    from tests.station.store.test_database import profile, verdict
+
+    serial = 'SN 12/345 ../ü "x" #1'
+    with ProfileStore(tmp_path / "p.sqlite") as st:
+        pid = st.put_profile(profile(lens=("Mk", "Md", serial), qa=verdict(0.012)))
+    with ProfileStore(tmp_path / "p.sqlite", create=False) as st, start(dashboard_app(st)) as srv:
+        status, lenses = _json(srv, "/api/lenses")
+        assert status == 200
+        (lens,) = lenses["lenses"]
+        assert lens["serial"] == serial
+        status, _h, body = _get(srv, lens["api"])
+        assert status == 200, body
+        doc = json.loads(body)
+        assert doc["serial"] == serial and [p["id"] for f in doc["focus"] for p in f["profiles"]] == [pid]
+        status, _h, body = _get(srv, lens["href"])
+        assert status == 200 and "SN 12/345" in body.decode()
+        assert _json(srv, "/api/lenses/SN%2012%2F999")[0] == 404  # another serial: not found, as before
