@@ -209,3 +209,19 @@ def test_a_store_url_the_command_refuses_is_named_without_its_password(store, ca
         out, err = capsys.readouterr()
         assert err.count("\n") == 1 and "Traceback" not in err, err
         assert "harp:***@" in err and _PASSWORD not in err + out, err
+
+
+@pytest.mark.parametrize("pid", [2**31, 2**63, 10**20, -(2**63) - 1])
+def test_a_profile_id_no_row_can_have_is_not_found(store_url, pid, capsys):
+    """An id beyond the id column's integer (SQLite 64-bit, PostgreSQL 32-bit): `no profile #N in STORE`, exit 2, as
+    any id not in the store; before: `internal error: OverflowError: Python int too large to convert to SQLite
+    INTEGER` (PostgreSQL: `integer out of range`)."""
+    with ProfileStore(store_url) as st:
+        put(st)
+        where = str(st.location)
+    for args in (["profile", "--store", store_url, "show", "--id", str(pid)],
+                 ["profile", "--store", store_url, "export", "--id", str(pid), "--format", "opencv"]):  # fmt: skip
+        capsys.readouterr()
+        assert main(args) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err == f"harp profile: no profile #{pid} in {where}\n", err
