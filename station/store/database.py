@@ -112,6 +112,11 @@ def _iso_utc(text: str) -> str:
     return t.isoformat(timespec="seconds")
 
 
+_ID_LIMIT = {SQLITE: 2**63, POSTGRESQL: 2**31}
+"""The ids a row can have are within ``[-limit, limit)``: SQLite's 64-bit integers, PostgreSQL's ``integer``
+(``sa.Integer``, :mod:`station.store.schema`)."""
+
+
 def _insert(backend: str):
     if backend == POSTGRESQL:
         from sqlalchemy.dialects.postgresql import insert
@@ -420,7 +425,10 @@ class ProfileStore:
         return self._profiles(rows, errors)
 
     def profile(self, profile_id: int) -> Profile | None:
-        """The profile with this id (whatever its verdict), or None."""
+        """The profile with this id (whatever its verdict), or None (also for an id no row can have: beyond
+        the id column's integer, whose driver would raise instead of finding nothing)."""
+        if not -_ID_LIMIT[self.backend] <= int(profile_id) < _ID_LIMIT[self.backend]:
+            return None
         q = self._select().where(profiles.c.id == int(profile_id))
         row = self._read("reading the profile", lambda conn: conn.execute(q).first())
         return self._profile(row) if row is not None else None

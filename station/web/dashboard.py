@@ -289,10 +289,10 @@ def dashboard_app(store: Any, *, title: str = "harp QA dashboard") -> Starlette:
         [
             Route("/", index),
             Route("/lenses.csv", lenses_csv),
-            Route("/lenses/{serial}", lens_page),
+            Route("/lenses/{serial:path}", lens_page),  # a serial may hold a '/' (sent as %2F)
             Route("/model", model_page),
             Route("/api/lenses", api_lenses),
-            Route("/api/lenses/{serial}", api_lens),
+            Route("/api/lenses/{serial:path}", api_lens),
             Route("/api/profiles/{profile_id:int}", api_profile),
             Route("/api/model", api_model),
             Route("/profiles/{profile_id:int}/field.png", _file_endpoint("field")),
