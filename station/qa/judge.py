@@ -87,7 +87,8 @@ def judge_session(
         if store is not None:
             session_dir = str(session.path.resolve())
             if pid is not None:  # the profile's own verdict, once per profile however often resumed
-                store.record_verdict(pid, v, session_dir=session_dir)
+                # checked to be this profile's row: an id recorded in another store is another lens's in this one
+                store.record_verdict(pid, v, session_dir=session_dir, stored_as=(p.provenance.session_dir, focus))
             elif not _in_store(store, session_dir, focus):  # no stored profile: one history row, once
                 store.put_qa_result(verdict=v, session_dir=session_dir, focus=focus)
         note(

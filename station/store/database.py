@@ -112,6 +112,12 @@ def _iso_utc(text: str) -> str:
     return t.isoformat(timespec="seconds")
 
 
+_OTHER_STORE = (
+    " (the session stored its profiles in another store: give that one with --store, or leave --store out for "
+    "its configuration's)"
+)
+"""What to do when a session's recorded profile id is not its profile in this store (:meth:`ProfileStore.record_verdict`)."""
+
 _ID_LIMIT = {SQLITE: 2**63, POSTGRESQL: 2**31}
 """The ids a row can have are within ``[-limit, limit)``: SQLite's 64-bit integers, PostgreSQL's ``integer``
 (``sa.Integer``, :mod:`station.store.schema`)."""
@@ -264,18 +270,39 @@ class ProfileStore:
         )
         conn.execute(stmt)
 
-    def record_verdict(self, profile_id: int, verdict: Verdict, *, session_dir: str | None = None) -> None:
+    def record_verdict(
+        self,
+        profile_id: int,
+        verdict: Verdict,
+        *,
+        session_dir: str | None = None,
+        stored_as: tuple[str | None, float] | None = None,
+    ) -> None:
         """Keep ``verdict`` (thresholds and every check) as the verdict of a stored profile — the
         one that decides whether it can be current — and as its session's ``qa_results`` row
         (replaced, not added: once per profile). One transaction. ``session_dir`` defaults to the
-        profile's own. Raises StoreError when there is no such profile."""
+        profile's own. ``stored_as``: the session directory (None: not known) and focus the profile was
+        stored with, checked against the row, so that an id a session recorded in another store is never
+        taken for another profile of this one. Raises StoreError when there is no such profile, or it is not
+        the one ``stored_as`` names (nothing written)."""
 
         def tx(conn: sa.Connection) -> None:
             got = conn.execute(
                 sa.select(profiles.c.session_dir, profiles.c.focus).where(profiles.c.id == int(profile_id))
             ).first()
             if got is None:
-                raise StoreError(f"{self.location}: no profile #{profile_id} to record a verdict for")
+                raise StoreError(
+                    f"{self.location}: no profile #{profile_id} to record a verdict for"
+                    + (_OTHER_STORE if stored_as is not None else "")
+                )
+            if stored_as is not None and (
+                (stored_as[0] is not None and got[0] != stored_as[0]) or not math.isclose(got[1], stored_as[1])
+            ):
+                raise StoreError(
+                    f"{self.location}: profile #{profile_id} is the profile of session {got[0]} at focus {got[1]:g}, "
+                    f"not of {stored_as[0] or 'this session'} at focus {stored_as[1]:g}; nothing was written"
+                    + _OTHER_STORE
+                )
             conn.execute(
                 sa.update(profiles)
                 .where(profiles.c.id == int(profile_id))

@@ -110,3 +110,53 @@ def _with_store(cfg, store_path: Path):
     d["store"]["path"] = str(store_path)
     cfg.path.write_text(yaml.safe_dump(d))
     return load_config(cfg.path)
+
+
+def test_a_session_repaired_into_another_store_never_judges_that_stores_profiles(tmp_path, capsys):
+    """A session whose manifest records the store ids of its profiles (#1, #2 in its store), repaired with
+    ``--store`` naming another station's store, where #1 and #2 are another lens's failed profiles: before, its QA
+    recorded its PASS as those profiles' verdicts (the other lens's failed profile #2 became PASS, current and
+    exportable; its session row pointed at this session), exit 0. Now the session stops in QA with one line naming
+    the store and what to do, and the other lens's rows are as they were."""
+    import json
+    import sqlite3
+
+    import yaml
+
+    from tests.station.cli.test_session import small_config
+
+    mine = small_config(tmp_path / "mine")
+    assert main(["session", "run", str(mine), "--name", "a", "--quiet", "--no-report"]) == 0
+    theirs = small_config(tmp_path / "theirs")
+    d = yaml.safe_load(theirs.read_text())
+    d["lens"]["serial"] = "OTHER-9"
+    d["qa"]["max_holdout_d_px"] = 0.0001  # every profile of this lens fails
+    theirs.write_text(yaml.safe_dump(d))
+    assert main(["session", "run", str(theirs), "--name", "b", "--quiet", "--no-report"]) == 1
+    capsys.readouterr()
+    other = tmp_path / "theirs" / "profiles.sqlite"
+
+    def rows():
+        with contextlib.closing(sqlite3.connect(other)) as db:
+            return (
+                db.execute("SELECT id, lens_id, verdict, qa_json, session_dir FROM profiles ORDER BY id").fetchall(),
+                db.execute("SELECT * FROM qa_results ORDER BY id").fetchall(),
+            )
+
+    before = rows()
+    assert [r[2] for r in before[0]] == ["FAIL", "FAIL"]
+    session = tmp_path / "mine" / "sessions" / "a"
+    kept = [json.loads(line) for line in (session / "manifest.jsonl").read_text().splitlines()]
+    assert sorted(r["profile_id"] for r in kept if r["kind"] == "stored") == [1, 2]  # the ids of its own store
+    measured = next(r["file"] for r in kept if r["kind"] == "measure" and r["focus_idx"] == 0)
+    (session / measured).write_bytes(b"damaged")  # repair fits focus setting 0 again, then judges both
+
+    code = main(["session", "repair", str(session), "--store", str(other)])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    (line,) = [l for l in err.splitlines() if "session stopped" in l]
+    assert f"{other}: profile #2 is the profile of session {tmp_path / 'theirs' / 'sessions' / 'b'} at focus 1" in line
+    assert "give that one with --store" in line
+    after = rows()
+    assert after[0][:2] == before[0]  # the other lens's profiles and verdicts untouched
+    assert after[1][: len(before[1])] == before[1]  # and their session rows
