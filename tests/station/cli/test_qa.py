@@ -326,7 +326,8 @@ def read_only_copy(session, tmp_path):
         pytest.skip("a read-only bind mount needs root (CI runs as root)")
     mnt = tmp_path / "archive"
     mnt.mkdir()
-    subprocess.run(["mount", "--bind", str(session.parent), str(mnt)], check=True)
+    if subprocess.run(["mount", "--bind", str(session.parent), str(mnt)], capture_output=True).returncode != 0:
+        pytest.skip("no bind mount here (a container without CAP_SYS_ADMIN); the writes-nothing test still runs")
     try:
         subprocess.run(["mount", "-o", "remount,bind,ro", str(mnt)], check=True)
         yield mnt / session.name
