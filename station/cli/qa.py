@@ -20,6 +20,9 @@ per-orientation overlays in it (default: a session's ``report.overlays``, else a
 the store cannot take (a server that is down) is warned of, with what to do; its verdict stands. Run
 again with the same results after a run whose recording failed, was interrupted or was killed (a
 commit that may or may not have been written), it is recorded once: the rows keep that run's key.
+A session that is not finished (a focus setting of its plan without a profile: interrupted, or its fit
+failed) gets no verdict: one line naming what it lacks and ``harp session resume``, exit 2; ``--partial``
+judges the profiles it has and names the others.
 Exit 0 PASS, 1 FAIL, 2 error — for production-line scripts.
 
 What is judged, with which thresholds and reference, and the report's evidence:
@@ -46,7 +49,15 @@ from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
 from station.exit_codes import verdict_exit_code
 from station.files import atomic_write_text, describe_os_error
-from station.qa.targets import QAInputError, judge_targets, lens_targets, session_targets, write_qa_report
+from station.qa.targets import (
+    QAInputError,
+    judge_targets,
+    lens_targets,
+    session_targets,
+    unfinished,
+    unfinished_error,
+    write_qa_report,
+)
 from station.session import layout
 from station.session.directory import SessionDir
 from station.store import DEFAULT_STORE, StoreError
@@ -109,6 +120,12 @@ def register(subparsers) -> None:
         help="which focus settings keep their overlays in the report: all, failed (only those that failed QA), "
         "none (default: the session configuration's report.overlays, else all)",
     )
+    p.add_argument(
+        "--partial",
+        action="store_true",
+        help="judge a session that is not finished on the profiles it has (the verdict says nothing of the focus "
+        "settings it lacks, which are named); without it such a session is an error (exit 2)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--no-record", action="store_true", help="do not record the result in the store's QA history")
     p.set_defaults(func=run)
@@ -131,6 +148,7 @@ def _looks_like_path(text: str) -> bool:
 
 def run(args) -> int:
     session = None
+    missing: list[str] = []  # a session's focus settings without a profile (judged with --partial only)
     opened: dict[str, Any] = {}
     try:
         try:
@@ -149,6 +167,9 @@ def run(args) -> int:
                     f"{target}: no such session directory (check the path; `harp session list` lists the sessions)"
                 )
             if session is not None:
+                missing = unfinished(session)
+                if missing and not args.partial:
+                    raise unfinished_error(session, missing)
                 items = session_targets(session)
             else:
                 with _store(args, config) as store:
@@ -213,10 +234,13 @@ def run(args) -> int:
             ],
             "interpolation": [{"focus": r.focus, "rms_px": r.rms_px, "max_px": r.max_px} for r in judged.interpolation],
             "report": str(report) if report else None,
+            "unfinished": missing,
         }
         print(json.dumps(plain(out), indent=1))
     else:
         _print_checks(items, judged, report)
+    for m in missing:
+        print(f"{m}: not judged (--partial)", file=sys.stderr)
     return verdict_exit_code(judged.overall)
 
 

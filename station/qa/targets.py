@@ -2,6 +2,8 @@
 
 * :func:`session_targets` — every fitted profile of a session directory, each with the
   measurements the session kept for its focus setting;
+* :func:`unfinished` — the focus settings of a session's plan that have no profile (why each, and what to
+  do): ``harp qa`` gives no verdict for such a session unless asked for the profiles it has;
 * :func:`lens_targets` — the newest profile of each focus setting of a stored lens, failed ones
   included (QA judges them all);
 * :func:`attach_session_measurements` — for a stored profile, the measurements of the session
@@ -45,6 +47,7 @@ from station.qa.verdicts import (
 )
 from station.session import layout
 from station.session.directory import SessionDir, SessionError
+from station.session.records import FitFailed, Fitted
 
 REPORT_BOOTSTRAP = 20
 """Bootstrap replicates of the report's uncertainty map when the configuration sets none."""
@@ -91,6 +94,30 @@ def session_targets(session: Any) -> list[Target]:
             target.notes.append(_no_measurements(session, f))
         targets.append(target)
     return targets
+
+
+def unfinished(session: Any) -> list[str]:
+    """One phrase per focus setting of the session's plan (``focus_settings``) that has no profile file: why
+    (its last fit failed, with the reason; else the session stopped before fitting or storing it). Empty for a
+    session whose every focus setting has its profile."""
+    have = {f for f, _path in layout.profile_files(session.path)}
+    out = []
+    for f, focus in enumerate(session.config.focus_settings):
+        if f in have:
+            continue
+        fit = session.last((Fitted, FitFailed), focus_idx=f)
+        why = f"its fit failed ({fit.failure})" if isinstance(fit, FitFailed) else "not fitted and stored yet"
+        out.append(f"focus {focus:g} has no profile: {why}")
+    return out
+
+
+def unfinished_error(session: Any, missing: list[str]) -> QAInputError:
+    """The one line ``harp qa`` gives for a session that is not finished (:func:`unfinished`): no verdict, since a
+    PASS of the focus settings fitted so far would pass a lens calibrated at fewer than its plan's."""
+    return QAInputError(
+        f"{session.path}: the session is not finished ({'; '.join(missing)}): run harp session resume "
+        f"{session.path} to finish it, then harp qa again (--partial judges the profiles it has)"
+    )
 
 
 def lens_targets(store: Any, lens_text: str) -> list[Target]:

@@ -48,14 +48,22 @@ def write_config(
 
 
 def build_session(
-    root: Path, *, qa: dict | None = None, focus=FOCUS, angles=ANGLES, name: str = "s1", pipeline: dict | None = None
+    root: Path,
+    *,
+    qa: dict | None = None,
+    focus=FOCUS,
+    angles=ANGLES,
+    name: str = "s1",
+    pipeline: dict | None = None,
+    fitted: int | None = None,
 ) -> Path:
     """A finished session under ``root/sessions/name``; returns its path. ``pipeline``: keys of the
-    configuration's ``pipeline`` section set."""
+    configuration's ``pipeline`` section set. ``fitted``: only the first so many focus settings captured and
+    fitted (a session stopped there, not finished)."""
     config = load_config(write_config(root, qa=qa, focus=focus, angles=angles, pipeline=pipeline))
     s = SessionDir.create(config.sessions_dir, config, name=name)
     with s:
-        for fi, f in enumerate(config.focus_settings):
+        for fi, f in enumerate(config.focus_settings[:fitted]):
             lens = lens_for_focus(f, W, H)
             shots = []
             for oi, a in enumerate(config.capture.orientations_deg):
@@ -69,5 +77,6 @@ def build_session(
                 s.path / "profiles" / f"focus{fi}.yaml",
                 cal.profile(W, H, provenance=Provenance(), focus=f, lens=config.lens, camera=config.camera_body),
             )
-        s.append({"kind": "finished"})
+        if fitted is None:
+            s.append({"kind": "finished"})
     return s.path

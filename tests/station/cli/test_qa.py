@@ -136,6 +136,8 @@ def test_session_without_profiles_and_bad_threshold(session, tmp_path, capsys):
     for p in (empty / "profiles").iterdir():
         p.unlink()
     code, _, err = qa(capsys, empty, "--no-record")
+    assert code == 2 and "the session is not finished (focus 0 has no profile" in err and "focus 1 has no" in err
+    code, _, err = qa(capsys, empty, "--no-record", "--partial")
     assert code == 2 and "no fitted profile" in err
     with pytest.raises(SystemExit) as exc:
         main(["qa", str(session), "--max-holdout-d", "-3"])
@@ -376,3 +378,32 @@ def test_a_damaged_kept_measurement_is_named_with_what_to_do(tmp_path, capsys):
     assert any(
         n.startswith(f"{sdir / measured}: checksum does not match the manifest") for n in out["profiles"][0]["notes"]
     )
+
+
+def test_qa_of_an_unfinished_session_gives_no_verdict_unless_partial(tmp_path, capsys):
+    """A session whose plan has three focus settings, stopped after two: ``harp qa DIR`` says which focus setting
+    has no profile and what to do, exit 2, nothing recorded; ``--partial`` judges the two (PASS) and names the
+    third. Then the third's fit recorded as failed: the line gives its reason. Before, the two were judged and
+    the session passed, exit 0, as if the lens had been calibrated at every focus setting of its plan."""
+    from station.session.directory import SessionDir
+    from station.session.records import FitFailed
+
+    sdir = build_session(tmp_path, fitted=2)  # the plan's focus settings: 0, 0.5, 1
+    code, out, err = qa(capsys, sdir)
+    assert (code, out) == (2, "")
+    assert err.strip().splitlines() == [
+        f"harp qa: {sdir}: the session is not finished (focus 1 has no profile: not fitted and stored yet): run harp "
+        f"session resume {sdir} to finish it, then harp qa again (--partial judges the profiles it has)"
+    ], err
+    assert not (tmp_path / "profiles.sqlite").exists()  # no QA history row of a verdict not given
+
+    code, out, err = qa_json(capsys, sdir, "--partial", "--no-record")
+    assert code == 0 and out["verdict"] == "PASS", err
+    assert [p["focus"] for p in out["profiles"]] == [0.0, 0.5]
+    assert out["unfinished"] == ["focus 1 has no profile: not fitted and stored yet"]
+    assert "focus 1 has no profile: not fitted and stored yet: not judged (--partial)" in err.splitlines()
+
+    with SessionDir.open(sdir) as s:
+        s.append(FitFailed(2, "too few edges in two directions"))
+    code, out, err = qa(capsys, sdir, "--no-record")
+    assert code == 2 and "(focus 1 has no profile: its fit failed (too few edges in two directions))" in err, err
