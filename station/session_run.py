@@ -36,7 +36,7 @@ from drivers.protocols import Camera, Turntable
 from station.errors import HarpError
 from station.exit_codes import EXIT_ABORTED, EXIT_FAIL, EXIT_OK
 from station.files import describe_os_error
-from station.qa.judge import judge_session
+from station.qa.judge import foreign_store_problem, judge_session
 from station.qa.results import session_results, write_results
 from station.qa.verdicts import qa_verdict, session_measurements
 from station.session import layout
@@ -67,6 +67,10 @@ def run_session(
     ``report``: write ``DIR/report`` once the plan is done; ``operator``: asked for the board views placed by
     hand (:class:`station.session.operator.OperatorDesk`).
     """
+    if store is not None:  # another store's ids are other lenses' rows there: refused before anything is done
+        problem = foreign_store_problem(session, store)
+        if problem is not None:
+            raise HarpError(problem)
     executor = Executor(
         session, camera, turntable, store=store, judge=judge_focus(session), sleep=sleep, operator=operator
     )

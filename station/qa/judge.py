@@ -22,9 +22,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import station.qa.verdicts
+from pipeline.model_file import read_model_file
 from pipeline.plain import json_default
 from station.profile import Profile, Verdict
 from station.qa.verdicts import combine, interpolation_error, qa_verdict, session_measurements
+from station.session import layout
 from station.session.records import InterpolationError, QARecorded, Reopened, SessionVerdict, Stored
 
 
@@ -60,6 +62,30 @@ def _in_store(store: Any, session_dir: str, focus: float) -> bool:
     return any(
         r.get("profile_id") is None and r.get("focus") == focus for r in store.qa_results(session_dir=session_dir)
     )
+
+
+def foreign_store_problem(session: Any, store: Any) -> str | None:
+    """Why ``store`` is not the store a session stored its profiles in, before it is resumed or repaired into it:
+    the first focus setting whose recorded store id is not its profile there (another store's ids are another
+    lens's rows here, whose verdicts :func:`judge_session` would otherwise take), as one line with what to do;
+    None when every stored profile the session holds is its own row there. A profile file that cannot be read
+    (damaged: a repair re-derives it) is not asked."""
+    stored = session.stored_ids()
+    for f, path in layout.profile_files(session.path):
+        pid = stored.get(f)
+        if pid is None:
+            continue
+        try:
+            p = Profile.from_model_file(read_model_file(path))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        focus = p.focus if p.focus is not None else session.config.focus_settings[f]
+        problem = store.stored_as_problem(
+            pid, (p.provenance.session_dir, focus), "nothing was captured, fitted or stored"
+        )
+        if problem is not None:
+            return problem
+    return None
 
 
 def judge_session(

@@ -295,14 +295,10 @@ class ProfileStore:
                     f"{self.location}: no profile #{profile_id} to record a verdict for"
                     + (_OTHER_STORE if stored_as is not None else "")
                 )
-            if stored_as is not None and (
-                (stored_as[0] is not None and got[0] != stored_as[0]) or not math.isclose(got[1], stored_as[1])
-            ):
-                raise StoreError(
-                    f"{self.location}: profile #{profile_id} is the profile of session {got[0]} at focus {got[1]:g}, "
-                    f"not of {stored_as[0] or 'this session'} at focus {stored_as[1]:g}; nothing was written"
-                    + _OTHER_STORE
-                )
+            if stored_as is not None:
+                problem = self._not_stored_as(profile_id, stored_as, got, "nothing was written")
+                if problem is not None:
+                    raise StoreError(problem)
             conn.execute(
                 sa.update(profiles)
                 .where(profiles.c.id == int(profile_id))
@@ -316,6 +312,30 @@ class ProfileStore:
             self._session_verdict(conn, int(profile_id), verdict, session_dir or got[0], float(got[1]))
 
         self._write("recording the verdict", tx)
+
+    def stored_as_problem(self, profile_id: int, stored_as: tuple[str | None, float], then: str) -> str | None:
+        """Why profile ``profile_id`` of this store is not the one a session stored as ``stored_as`` (its session
+        directory, None: not known, and focus), as one line ending with ``then`` and what to do; None when it is.
+        What :meth:`record_verdict` checks, asked before a session resumed or repaired into this store captures,
+        fits or stores anything."""
+        q = sa.select(profiles.c.session_dir, profiles.c.focus).where(profiles.c.id == int(profile_id))
+        got = (
+            self._read("reading the profile", lambda conn: conn.execute(q).first())
+            if -_ID_LIMIT[self.backend] <= int(profile_id) < _ID_LIMIT[self.backend]
+            else None
+        )
+        if got is None:
+            return f"{self.location}: no profile #{profile_id}, which the session stored; {then}" + _OTHER_STORE
+        return self._not_stored_as(profile_id, stored_as, got, then)
+
+    def _not_stored_as(self, profile_id: int, stored_as: tuple[str | None, float], got: Any, then: str) -> str | None:
+        """The line of :meth:`stored_as_problem` for the row ``got`` (its session directory and focus)."""
+        if (stored_as[0] is None or got[0] == stored_as[0]) and math.isclose(got[1], stored_as[1]):
+            return None
+        return (
+            f"{self.location}: profile #{profile_id} is the profile of session {got[0]} at focus {got[1]:g}, "
+            f"not of {stored_as[0] or 'this session'} at focus {stored_as[1]:g}; {then}" + _OTHER_STORE
+        )
 
     def set_intrinsics(self, profile_id: int, intrinsics: Intrinsics) -> None:
         """Keep the camera matrix measured with a stored profile's distortion (``harp intrinsics --id``),

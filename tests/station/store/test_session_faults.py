@@ -116,8 +116,9 @@ def test_a_session_repaired_into_another_store_never_judges_that_stores_profiles
     """A session whose manifest records the store ids of its profiles (#1, #2 in its store), repaired with
     ``--store`` naming another station's store, where #1 and #2 are another lens's failed profiles: before, its QA
     recorded its PASS as those profiles' verdicts (the other lens's failed profile #2 became PASS, current and
-    exportable; its session row pointed at this session), exit 0. Now the session stops in QA with one line naming
-    the store and what to do, and the other lens's rows are as they were."""
+    exportable; its session row pointed at this session), exit 0. Now it is refused before anything is fitted or
+    stored, with one line naming the store and what to do, and the other store is as it was (no row changed or
+    added); QA checks the same when it records a verdict."""
     import json
     import sqlite3
 
@@ -154,9 +155,18 @@ def test_a_session_repaired_into_another_store_never_judges_that_stores_profiles
     code = main(["session", "repair", str(session), "--store", str(other)])
     err = capsys.readouterr().err
     assert code == 2, err
-    (line,) = [l for l in err.splitlines() if "session stopped" in l]
-    assert f"{other}: profile #2 is the profile of session {tmp_path / 'theirs' / 'sessions' / 'b'} at focus 1" in line
-    assert "give that one with --store" in line
-    after = rows()
-    assert after[0][:2] == before[0]  # the other lens's profiles and verdicts untouched
-    assert after[1][: len(before[1])] == before[1]  # and their session rows
+    assert err.strip().splitlines()[-1] == (
+        f"harp session: {other}: profile #1 is the profile of session {tmp_path / 'theirs' / 'sessions' / 'b'} at "
+        f"focus 0, not of {session} at focus 0; nothing was captured, fitted or stored (the session stored its "
+        "profiles in another store: give that one with --store, or leave --store out for its configuration's)"
+    ), err
+    assert rows() == before  # the other lens's profiles, verdicts and session rows untouched, and nothing added
+    # the same refusal when the session's verdicts are recorded (QA), for a store whose ids are checked only then
+    from station.qa.judge import judge_session
+    from station.store.errors import StoreError
+
+    with SessionDir.open(session) as s, ProfileStore(str(other)) as store, pytest.raises(StoreError, match=" is the "):
+        judge_session(s, store=store)
+    assert rows() == before
+    # its own store: repaired, QA PASS
+    assert main(["session", "repair", str(session)]) == 0, capsys.readouterr().err
