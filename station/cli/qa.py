@@ -43,7 +43,7 @@ from typing import Any
 
 from pipeline.plain import plain
 from station.cli.commands import COMMANDS
-from station.cli.say import warn
+from station.cli.say import say, warn
 from station.cli.store_options import open_store, store_location
 from station.config import OVERLAY_RETENTION, load_config
 from station.errors import HarpError
@@ -240,7 +240,7 @@ def run(args) -> int:
     else:
         _print_checks(items, judged, report)
     for m in missing:
-        print(f"{m}: not judged (--partial)", file=sys.stderr)
+        say("harp qa", f"{m}: not judged (--partial)")
     return verdict_exit_code(judged.overall)
 
 

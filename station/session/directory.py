@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.plain import json_default
+from station import __version__
 from station.config import Config, ConfigError, load_config
 from station.errors import HarpError
 from station.files import atomic_write_bytes, describe_os_error
@@ -78,7 +79,19 @@ def read_session_file(path: Path) -> dict:
     except (ValueError, UnicodeDecodeError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise SessionError(f"{f}: damaged ({reason}); run: harp session repair {path}") from None
+    fmt = meta.get("format", layout.SESSION_FORMAT)
+    if fmt != layout.SESSION_FORMAT:
+        raise SessionFormatError(
+            f"{f}: session format {fmt!r}, but harp station {__version__} reads format {layout.SESSION_FORMAT}"
+            f"{' (written by a newer version)' if isinstance(fmt, int) and fmt > layout.SESSION_FORMAT else ''}: "
+            "open it with the version that wrote it (its software_version); nothing was changed"
+        )
     return meta
+
+
+class SessionFormatError(SessionError):
+    """A ``session.json`` of a format this version does not read (:data:`layout.SESSION_FORMAT`): not damage,
+    so a repair leaves it as it is."""
 
 
 # --------------------------------------------------------------- manifest
@@ -268,7 +281,7 @@ class SessionDir(ManifestReads):
         config_bytes = config.path.read_bytes()
         atomic_write_bytes(path / CONFIG_COPY, config_bytes)
         meta = {
-            "format": 1,
+            "format": layout.SESSION_FORMAT,
             "created": now.isoformat(timespec="seconds"),
             "config_source": str(config.path),
             "base_dir": str(config.base_dir),

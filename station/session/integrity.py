@@ -176,7 +176,12 @@ class RepairReport:
 def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
     """Repairs that come before the session can be opened: ``session.json``, ``config.yaml`` and
     damaged manifest lines. Returns what was done; raises :class:`SessionError` for what cannot be."""
-    from station.session.directory import SessionError, read_manifest, read_session_file  # defers cv2, numpy, yaml
+    from station.session.directory import (  # defers cv2, numpy, yaml
+        SessionError,
+        SessionFormatError,
+        read_manifest,
+        read_session_file,
+    )
 
     path = Path(path)
     done: list[str] = []
@@ -213,6 +218,8 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
     meta = None
     try:
         meta = read_session_file(path)
+    except SessionFormatError:
+        raise  # another version's session: not damage, left as it is
     except SessionError:
         meta = None
     if meta is None:
@@ -226,7 +233,7 @@ def repair_files(path: Path, *, base_dir: str | None = None) -> list[str]:
         created = _dt.datetime.fromtimestamp(float(start.t or 0) if start is not None else 0.0, _dt.UTC)
         text = (path / layout.CONFIG_COPY).read_bytes()
         meta = {
-            "format": 1,
+            "format": layout.SESSION_FORMAT,
             "created": created.isoformat(timespec="seconds"),
             "config_source": "",
             "base_dir": guess,

@@ -31,6 +31,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 SESSION_FILE = "session.json"
+SESSION_FORMAT = 1
+"""The ``format`` of ``session.json`` (and of the directory it describes) this version writes and reads; one
+without a ``format`` is read as this one."""
 CONFIG_COPY = "config.yaml"
 MANIFEST = "manifest.jsonl"
 FRAMES = "frames"

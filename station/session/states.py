@@ -125,16 +125,18 @@ def summarise(session_dir: str | Path) -> SessionSummary:
     """The :class:`SessionSummary` of a session directory, read without locking it (a session may be
     running in it). Raises SessionError (one line) for a directory that is not a readable session."""
     import datetime as _dt
-    import json
 
-    from station.session.directory import SessionError, lost_manifest, read_manifest  # defers cv2, numpy, yaml
+    from station.session.directory import (  # defers cv2, numpy, yaml
+        SessionError,
+        lost_manifest,
+        read_manifest,
+        read_session_file,
+    )
 
     path = Path(session_dir)
     try:
-        meta = json.loads((path / SESSION_FILE).read_text(encoding="utf-8"))
-        if not isinstance(meta, dict):
-            raise ValueError("not a JSON object")
-    except (OSError, ValueError) as exc:
+        meta = read_session_file(path)  # damaged, or a format this version does not read: one line
+    except OSError as exc:
         raise SessionError(f"{path / SESSION_FILE}: cannot be read ({exc})") from None
     lines, _ = read_manifest(path / MANIFEST)
     lost = lost_manifest(path, lines)
@@ -171,12 +173,13 @@ def summarise(session_dir: str | Path) -> SessionSummary:
 
 
 def sessions_in(root: str | Path) -> tuple[list[SessionSummary], list[str]]:
-    """Every session directory directly under ``root``, oldest first, and one line per
-    directory that looks like a session but cannot be read."""
+    """Every session directory directly under ``root`` (or ``root`` itself when it is one), oldest first, and one
+    line per directory that looks like a session but cannot be read."""
     from station.session.directory import SessionError  # defers cv2, numpy, yaml
 
     found, problems = [], []
-    for d in sorted(Path(root).iterdir()):
+    root = Path(root)
+    for d in [root] if (root / SESSION_FILE).is_file() else sorted(root.iterdir()):
         if not (d / SESSION_FILE).is_file():
             continue
         try:

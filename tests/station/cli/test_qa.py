@@ -401,7 +401,7 @@ def test_qa_of_an_unfinished_session_gives_no_verdict_unless_partial(tmp_path, c
     assert code == 0 and out["verdict"] == "PASS", err
     assert [p["focus"] for p in out["profiles"]] == [0.0, 0.5]
     assert out["unfinished"] == ["focus 1 has no profile: not fitted and stored yet"]
-    assert "focus 1 has no profile: not fitted and stored yet: not judged (--partial)" in err.splitlines()
+    assert "harp qa: focus 1 has no profile: not fitted and stored yet: not judged (--partial)" in err.splitlines()
 
     with SessionDir.open(sdir) as s:
         s.append(FitFailed(2, "too few edges in two directions"))

@@ -337,6 +337,15 @@ def test_session_list_states_and_verdicts(tmp_path, capsys):
     rows = tsv(tsv_out)
     assert rows[0][:3] == ["session", "state", "verdict"] and len(rows) == 7
     assert run(capsys, "session", "list", tmp_path / "absent")[0] == 2
+    # one session's own directory lists it (before: "no sessions in DIR")
+    code, out, err = run(capsys, "session", "list", root / "b-failed", "--json")
+    assert code == 0 and [(s["name"], s["state"]) for s in json.loads(out)["sessions"]] == [("b-failed", "failed")]
+    # a session of a format this version does not read is named with it, not listed as if it were its own
+    meta = json.loads((root / "a-complete" / "session.json").read_text())
+    (root / "a-complete" / "session.json").write_text(json.dumps({**meta, "format": 2}))
+    code, out, err = run(capsys, "session", "list", root, "--json")
+    assert code == 0 and "a-complete" not in {s["name"] for s in json.loads(out)["sessions"]}
+    assert f"harp session: warning: {root / 'a-complete' / 'session.json'}: session format 2, but harp station" in err
 
 
 def test_devices_lists_the_fakes_with_snippets(tmp_path, capsys):

@@ -64,6 +64,31 @@ def test_garbled_session_json_says_repair_which_rederives_it(made, tmp_path, cap
     assert "already finished" in capsys.readouterr().err
 
 
+def test_a_session_of_another_format_is_refused_by_resume_repair_and_qa_and_left_as_it_is(made, tmp_path, capsys):
+    """A ``session.json`` whose format this version does not read (a newer version's session): before, resume, QA
+    and repair read it as their own format, and a repair of it re-derived nothing it could not read. Now each says
+    which format and what to do, exit 2, and the directory is left byte for byte."""
+    from station import __version__
+
+    s = copy(made, tmp_path, "stopped")
+    meta = json.loads((s / "session.json").read_text())
+    assert meta["format"] == 1
+    (s / "session.json").write_text(json.dumps({**meta, "format": 2}))
+    before = {p: p.read_bytes() for p in sorted(s.rglob("*")) if p.is_file() and p.name != ".lock"}
+    want = (
+        f"{s}/session.json: session format 2, but harp station {__version__} reads format 1 (written by a newer "
+        "version): open it with the version that wrote it (its software_version); nothing was changed"
+    )
+    for argv, prog in (
+        (["session", "resume", str(s)], "harp session"),
+        (["session", "repair", str(s)], "harp session"),
+        (["qa", str(s), "--no-record"], "harp qa"),
+    ):
+        assert main(argv) == 2
+        assert one_line(capsys) == f"{prog}: {want}"
+    assert {p: p.read_bytes() for p in sorted(s.rglob("*")) if p.is_file() and p.name != ".lock"} == before
+
+
 def test_garbled_profile_is_reported_then_fitted_again_the_same(made, tmp_path, capsys):
     # a garbled profiles/focus0.yaml made every resume fail at QA: the session could never finish
     s = copy(made, tmp_path, "done")
