@@ -313,6 +313,11 @@ class ProfileStore:
 
         self._write("recording the verdict", tx)
 
+    def _id_possible(self, profile_id: int) -> bool:
+        """Whether a row can have this id (:data:`_ID_LIMIT`): the driver raises for one beyond the id column's
+        integer instead of finding nothing."""
+        return -_ID_LIMIT[self.backend] <= int(profile_id) < _ID_LIMIT[self.backend]
+
     def stored_as_problem(self, profile_id: int, stored_as: tuple[str | None, float], then: str) -> str | None:
         """Why profile ``profile_id`` of this store is not the one a session stored as ``stored_as`` (its session
         directory, None: not known, and focus), as one line ending with ``then`` and what to do; None when it is.
@@ -321,7 +326,7 @@ class ProfileStore:
         q = sa.select(profiles.c.session_dir, profiles.c.focus).where(profiles.c.id == int(profile_id))
         got = (
             self._read("reading the profile", lambda conn: conn.execute(q).first())
-            if -_ID_LIMIT[self.backend] <= int(profile_id) < _ID_LIMIT[self.backend]
+            if self._id_possible(profile_id)
             else None
         )
         if got is None:
@@ -474,7 +479,7 @@ class ProfileStore:
     def profile(self, profile_id: int) -> Profile | None:
         """The profile with this id (whatever its verdict), or None (also for an id no row can have: beyond
         the id column's integer, whose driver would raise instead of finding nothing)."""
-        if not -_ID_LIMIT[self.backend] <= int(profile_id) < _ID_LIMIT[self.backend]:
+        if not self._id_possible(profile_id):
             return None
         q = self._select().where(profiles.c.id == int(profile_id))
         row = self._read("reading the profile", lambda conn: conn.execute(q).first())
